@@ -1,0 +1,201 @@
+"""Viewpoints and perspective projections.
+
+A viewpoint is the tuple of Swan, Arango & Nakshatrala (2002, §3.1):
+``(x, y, z, o)`` where ``(x, y, z)`` is an orthonormal, right-handed set of
+axes giving the orientation and ``o`` is the eye position.  We follow the
+OpenGL eye-space convention: ``x`` points right on the screen, ``y`` up on the
+screen and the camera looks along ``-z``.
+
+World space is right-handed with ``+z`` up; all lengths are metres, all
+angles given to public functions are degrees unless a name ends in ``_rad``.
+Matrices are ``(4, 4) float64`` numpy arrays in the mathematical (row-major)
+layout, acting on column vectors: ``clip = P @ V @ [x, y, z, 1]``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from lodsprite.errors import InputError
+
+DEFAULT_FOV_Y_DEG = 45.0
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    n = float(np.linalg.norm(v))
+    if n == 0.0 or not math.isfinite(n):
+        raise InputError("cannot normalise a zero or non-finite vector")
+    return v / n
+
+
+@dataclass(frozen=True)
+class Viewpoint:
+    """Orientation axes ``x, y, z`` (unit, orthonormal) and eye ``o`` (metres), each ``(3,)``."""
+
+    x: np.ndarray
+    y: np.ndarray
+    z: np.ndarray
+    o: np.ndarray
+
+    def __post_init__(self) -> None:
+        for name in ("x", "y", "z", "o"):
+            v = np.asarray(getattr(self, name), dtype=np.float64).reshape(3)
+            if not np.all(np.isfinite(v)):
+                raise InputError(f"viewpoint {name} is not finite: {v}")
+            object.__setattr__(self, name, v)
+        axes = np.stack([self.x, self.y, self.z])
+        if not np.allclose(axes @ axes.T, np.eye(3), atol=1e-6):
+            raise InputError("viewpoint axes x, y, z must be orthonormal")
+        if np.linalg.det(axes) < 0:
+            raise InputError("viewpoint axes x, y, z must be right-handed")
+
+    @property
+    def forward(self) -> np.ndarray:
+        """Viewing direction, ``-z`` (unit, ``(3,)``)."""
+        return -self.z
+
+    def view_matrix(self) -> np.ndarray:
+        """World-to-eye matrix ``(4, 4) float64``."""
+        m = np.eye(4)
+        m[0, :3], m[1, :3], m[2, :3] = self.x, self.y, self.z
+        m[:3, 3] = -m[:3, :3] @ self.o
+        return m
+
+    def to_dict(self) -> dict[str, list[float]]:
+        return {k: [float(c) for c in getattr(self, k)] for k in ("x", "y", "z", "o")}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> Viewpoint:
+        try:
+            return cls(*(np.asarray(d[k], dtype=np.float64) for k in ("x", "y", "z", "o")))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise InputError(f"malformed viewpoint {d!r}: {exc}") from exc
+
+
+def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> Viewpoint:
+    """Viewpoint at ``eye`` looking at ``target`` with ``up`` as the screen-up hint.
+
+    ``up`` need not be orthogonal to the view direction but must not be parallel
+    to it (raises :class:`InputError`).
+    """
+    eye = np.asarray(eye, dtype=np.float64)
+    z = _unit(eye - np.asarray(target, dtype=np.float64))
+    x = np.cross(np.asarray(up, dtype=np.float64), z)
+    if np.linalg.norm(x) < 1e-9:
+        raise InputError("look_at: up vector is parallel to the viewing direction")
+    x = _unit(x)
+    y = np.cross(z, x)
+    return Viewpoint(x, y, z, eye)
+
+
+def perspective(fov_y_deg: float, aspect: float, near: float, far: float) -> np.ndarray:
+    """OpenGL perspective matrix ``(4, 4) float64`` (NDC depth in [-1, 1])."""
+    if not (0.0 < fov_y_deg < 180.0):
+        raise InputError(f"field of view must be in (0, 180) degrees, got {fov_y_deg}")
+    if not (0.0 < near < far) or aspect <= 0.0:
+        raise InputError(f"need 0 < near < far and aspect > 0, got {near}, {far}, {aspect}")
+    f = 1.0 / math.tan(math.radians(fov_y_deg) / 2.0)
+    m = np.zeros((4, 4))
+    m[0, 0] = f / aspect
+    m[1, 1] = f
+    m[2, 2] = (far + near) / (near - far)
+    m[2, 3] = 2.0 * far * near / (near - far)
+    m[3, 2] = -1.0
+    return m
+
+
+@dataclass(frozen=True)
+class Projection:
+    """Perspective projection: vertical field of view (degrees), aspect (w/h), near/far (metres)."""
+
+    fov_y_deg: float
+    aspect: float
+    near: float
+    far: float
+
+    def matrix(self) -> np.ndarray:
+        return perspective(self.fov_y_deg, self.aspect, self.near, self.far)
+
+    def pixel_angle_rad(self, height_px: int) -> float:
+        """Angle subtended by one pixel, β = fov / image height (radians), Chen et al. Eq. 1."""
+        return math.radians(self.fov_y_deg) / float(height_px)
+
+
+def fit_near_far(
+    viewpoint: Viewpoint,
+    bounds_min,
+    bounds_max,
+    clearance: float | None = None,
+    max_ratio: float = 1.0e4,
+) -> tuple[float, float]:
+    """Near and far planes (metres) that enclose an axis-aligned box with good depth precision.
+
+    ``far`` reaches the farthest box corner along the view direction (plus 1 %).
+    ``near`` is the nearest box depth when the eye is outside the box in front of
+    it; otherwise half of ``clearance`` (the eye's height above the surface
+    below it), never less than ``far / max_ratio``, which bounds the loss of
+    precision of a 24-bit depth buffer.
+    """
+    lo = np.asarray(bounds_min, dtype=np.float64)
+    hi = np.asarray(bounds_max, dtype=np.float64)
+    corners = np.array([[a, b, c] for a in (lo[0], hi[0]) for b in (lo[1], hi[1])
+                        for c in (lo[2], hi[2])])
+    depth = (corners - viewpoint.o) @ viewpoint.forward
+    far = max(float(depth.max()) * 1.01, 1e-3)
+    # Distance from the eye to the box: 0 when the eye is inside it.
+    gap = float(np.linalg.norm(np.maximum(0.0, np.maximum(lo - viewpoint.o, viewpoint.o - hi))))
+    if gap > 0.0:
+        near = gap * 0.99
+    elif clearance is not None and clearance > 0.0:
+        near = 0.5 * clearance
+    else:
+        near = 0.0
+    near = max(near, far / max_ratio)
+    if near >= far:
+        near = far / max_ratio
+    return near, far
+
+
+def frustum_planes(view_proj: np.ndarray) -> np.ndarray:
+    """The six clip planes ``(6, 4)`` of ``P @ V`` as ``a x + b y + c z + d >= 0`` inside.
+
+    Gribb & Hartmann's extraction; planes are normalised so ``d`` is a distance in metres.
+    """
+    m = np.asarray(view_proj, dtype=np.float64)
+    planes = np.stack([m[3] + m[0], m[3] - m[0], m[3] + m[1], m[3] - m[1],
+                       m[3] + m[2], m[3] - m[2]])
+    return planes / np.linalg.norm(planes[:, :3], axis=1, keepdims=True)
+
+
+def boxes_in_frustum(planes: np.ndarray, mins: np.ndarray, maxs: np.ndarray) -> np.ndarray:
+    """Conservative test of ``K`` axis-aligned boxes ``(K, 3)`` against frustum planes.
+
+    Returns a ``(K,) bool`` mask, False only for boxes entirely outside one plane.
+    """
+    mins = np.asarray(mins, dtype=np.float64)
+    maxs = np.asarray(maxs, dtype=np.float64)
+    n = planes[:, :3]
+    # The box corner farthest along each plane normal (the "positive vertex").
+    pos = np.where(n[None, :, :] >= 0, maxs[:, None, :], mins[:, None, :])
+    dist = np.einsum("kpi,pi->kp", pos, n) + planes[None, :, 3]
+    return np.all(dist >= 0.0, axis=1)
+
+
+def project_points(points: np.ndarray, view_proj: np.ndarray, width: int, height: int
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Project world points ``(N, 3)`` to pixels.
+
+    Returns ``(px (N, 2) float64, ndc_depth (N,), w (N,))``; pixel (0, 0) is the
+    top-left corner of the image (rows grow downwards), as in the arrays the
+    renderer returns.  Points with ``w <= 0`` lie behind the eye.
+    """
+    p = np.asarray(points, dtype=np.float64)
+    clip = np.c_[p, np.ones(len(p))] @ np.asarray(view_proj, dtype=np.float64).T
+    w = clip[:, 3]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ndc = clip[:, :3] / w[:, None]
+    px = np.c_[(ndc[:, 0] + 1.0) * 0.5 * width, (1.0 - ndc[:, 1]) * 0.5 * height]
+    return px, ndc[:, 2], w
