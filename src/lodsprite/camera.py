@@ -31,7 +31,7 @@ def _unit(v: np.ndarray) -> np.ndarray:
     return v / n
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Viewpoint:
     """Orientation axes ``x, y, z`` (unit, orthonormal) and eye ``o`` (metres), each ``(3,)``."""
 
@@ -134,8 +134,8 @@ def fit_near_far(
     """Near and far planes (metres) that enclose an axis-aligned box with good depth precision.
 
     ``far`` reaches the farthest box corner along the view direction (plus 1 %).
-    ``near`` is the nearest box depth when the eye is outside the box in front of
-    it; otherwise half of ``clearance`` (the eye's height above the surface
+    ``near`` is the nearest box depth when the whole box lies in front of the
+    eye; otherwise half of ``clearance`` (the eye's height above the surface
     below it), never less than ``far / max_ratio``, which bounds the loss of
     precision of a 24-bit depth buffer.
     """
@@ -145,10 +145,9 @@ def fit_near_far(
                         for c in (lo[2], hi[2])])
     depth = (corners - viewpoint.o) @ viewpoint.forward
     far = max(float(depth.max()) * 1.01, 1e-3)
-    # Distance from the eye to the box: 0 when the eye is inside it.
-    gap = float(np.linalg.norm(np.maximum(0.0, np.maximum(lo - viewpoint.o, viewpoint.o - hi))))
-    if gap > 0.0:
-        near = gap * 0.99
+    nearest = float(depth.min())  # depth is linear, so the box's minimum is at a corner
+    if nearest > 0.0:
+        near = nearest * 0.99
     elif clearance is not None and clearance > 0.0:
         near = 0.5 * clearance
     else:

@@ -1,0 +1,54 @@
+"""Offscreen render targets: a framebuffer with colour and depth textures."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from lodsprite.gl.context import GLContext
+
+
+class RenderTarget:
+    """``width x height`` RGBA8 colour texture plus 24-bit depth texture, bound as one framebuffer.
+
+    The colour texture can be sampled by later draws (a keyframe's sprite), so
+    rendering into a target never needs a copy.
+    """
+
+    def __init__(self, ctx: GLContext, width: int, height: int) -> None:
+        mgl = ctx.mgl
+        self.ctx = ctx
+        self.size = (int(width), int(height))
+        self.color = mgl.texture(self.size, 4)
+        self.color.repeat_x = self.color.repeat_y = False
+        self.depth = mgl.depth_texture(self.size)
+        self.depth.repeat_x = self.depth.repeat_y = False
+        self.fbo = mgl.framebuffer(color_attachments=[self.color], depth_attachment=self.depth)
+
+    @property
+    def width(self) -> int:
+        return self.size[0]
+
+    @property
+    def height(self) -> int:
+        return self.size[1]
+
+    def use(self, clear_rgb: tuple[float, float, float]) -> None:
+        self.fbo.use()
+        self.fbo.clear(*clear_rgb, 1.0, depth=1.0)
+
+    def read_color(self) -> np.ndarray:
+        """Colour ``(height, width, 3) uint8``, row 0 at the top of the image."""
+        data = self.fbo.read(components=3, alignment=1)
+        return np.frombuffer(data, np.uint8).reshape(self.height, self.width, 3)[::-1].copy()
+
+    def read_depth(self) -> np.ndarray:
+        """Window depth ``(height, width) float32`` in [0, 1] (1 = far plane / background)."""
+        data = self.depth.read(alignment=1)
+        return np.frombuffer(data, np.float32).reshape(self.height, self.width)[::-1].copy()
+
+    def release(self) -> None:
+        if self.ctx.mgl.fbo is self.fbo:
+            # moderngl re-binds the current framebuffer after creating others: never a dead one.
+            self.ctx.default_fbo.use()
+        for obj in (self.fbo, self.color, self.depth):
+            obj.release()

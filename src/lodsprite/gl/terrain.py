@@ -1,0 +1,176 @@
+"""Terrain renderer: full-resolution and uniform coarse levels, offscreen, with chunk culling.
+
+GPU objects (height texture, colour texture, one grid mesh per chunk size, the
+instance buffer and the programs) are created once and reused for every frame;
+a frame only uploads the origins of the chunks that survive frustum culling.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import moderngl
+import numpy as np
+
+from lodsprite.camera import Projection, Viewpoint, boxes_in_frustum, fit_near_far, frustum_planes
+from lodsprite.errors import InputError
+from lodsprite.gl.context import GLContext
+from lodsprite.gl.shaders import TERRAIN_FS, TERRAIN_VS
+from lodsprite.gl.target import RenderTarget
+from lodsprite.terrain.heightfield import HeightField
+from lodsprite.terrain.lod import DEFAULT_CHUNK, ChunkLayout, chunk_layout, grid_mesh
+
+SKY_RGB = (0.62, 0.74, 0.86)
+
+
+@dataclass(frozen=True)
+class FrameStats:
+    """What one draw did: triangles submitted, chunks drawn, and the projection used."""
+
+    triangles: int
+    chunks: int
+    projection: Projection
+
+
+class TerrainGeometry:
+    """GPU-resident terrain: height texture, colour texture and shared chunk meshes."""
+
+    def __init__(self, ctx: GLContext, hf: HeightField, texture_rgb: np.ndarray,
+                 chunk_quads: int = DEFAULT_CHUNK) -> None:
+        max_tex = ctx.info.max_texture_size
+        if max(hf.rows, hf.cols) > max_tex:
+            raise InputError(f"height field {hf.cols}x{hf.rows} exceeds this GL driver's "
+                             f"maximum texture size {max_tex}")
+        if texture_rgb.ndim != 3 or texture_rgb.shape[2] != 3 or texture_rgb.dtype != np.uint8:
+            raise InputError("terrain texture must be an (H, W, 3) uint8 array")
+        th, tw = texture_rgb.shape[:2]
+        if max(th, tw) > max_tex:
+            raise InputError(f"texture {tw}x{th} exceeds the maximum texture size {max_tex}")
+        mgl = ctx.mgl
+        self.ctx = ctx
+        self.hf = hf
+        self.chunk_quads = chunk_quads
+        self.height_tex = mgl.texture((hf.cols, hf.rows), 1, hf.heights.tobytes(), dtype="f4")
+        self.height_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        self.height_tex.repeat_x = self.height_tex.repeat_y = False
+        self.color_tex = mgl.texture((tw, th), 3, np.ascontiguousarray(texture_rgb).tobytes(),
+                                     alignment=1)
+        self.color_tex.repeat_x = self.color_tex.repeat_y = False
+        self.color_tex.build_mipmaps()
+        self.color_tex.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+        self._meshes: dict[int, tuple[moderngl.Buffer, moderngl.Buffer, int]] = {}
+        self._layouts: dict[int, ChunkLayout] = {}
+        max_chunks = (hf.quads // min(chunk_quads, hf.quads)) ** 2
+        self.instances = mgl.buffer(reserve=max_chunks * 8)
+
+    def layout(self, level_quads: int) -> ChunkLayout:
+        if level_quads not in self._layouts:
+            self._layouts[level_quads] = chunk_layout(self.hf, level_quads, self.chunk_quads)
+        return self._layouts[level_quads]
+
+    def mesh(self, chunk_quads: int) -> tuple[moderngl.Buffer, moderngl.Buffer, int]:
+        """(vertex buffer, index buffer, index count) of the shared ``C x C`` grid."""
+        if chunk_quads not in self._meshes:
+            verts, tris = grid_mesh(chunk_quads)
+            mgl = self.ctx.mgl
+            self._meshes[chunk_quads] = (mgl.buffer(verts.tobytes()), mgl.buffer(tris.tobytes()),
+                                         tris.size)
+        return self._meshes[chunk_quads]
+
+    def set_uniforms(self, prog: moderngl.Program, step: int) -> None:
+        hf = self.hf
+        prog["u_step"].value = step
+        prog["u_corner"].value = (-hf.width / 2, hf.depth / 2)
+        prog["u_spacing"].value = (hf.dx, hf.dy)
+        prog["u_uv_scale"].value = (1.0 / (hf.cols - 1), 1.0 / (hf.rows - 1))
+
+    def visible_chunks(self, layout: ChunkLayout, view_proj: np.ndarray) -> int:
+        """Cull ``layout``'s chunks against the frustum; upload survivors' origins; return count."""
+        mask = boxes_in_frustum(frustum_planes(view_proj), layout.mins, layout.maxs)
+        visible = layout.origins[mask]
+        if len(visible):
+            self.instances.write(np.ascontiguousarray(visible).tobytes())
+        return len(visible)
+
+    def release(self) -> None:
+        for vbo, ibo, _ in self._meshes.values():
+            vbo.release()
+            ibo.release()
+        self._meshes.clear()
+        for obj in (self.height_tex, self.color_tex, self.instances):
+            obj.release()
+
+
+def mat_bytes(m: np.ndarray) -> bytes:
+    """A row-major ``(4, 4)`` matrix as the column-major float32 bytes GLSL expects."""
+    return np.asarray(m, dtype=np.float32).T.tobytes()
+
+
+class TerrainRenderer:
+    """Renders a terrain at full resolution or at any uniform level into a render target.
+
+    ``render`` issues the GL work and returns at once; call ``ctx.finish()``
+    before stopping a clock, and ``target.read_color()`` / ``read_depth()`` for
+    the pixels.
+    """
+
+    def __init__(self, ctx: GLContext, geometry: TerrainGeometry, width: int = 512,
+                 height: int = 512, fov_y_deg: float = 45.0) -> None:
+        self.ctx = ctx
+        self.geometry = geometry
+        self.fov_y_deg = fov_y_deg
+        self.target = RenderTarget(ctx, width, height)
+        self.program = ctx.mgl.program(vertex_shader=TERRAIN_VS, fragment_shader=TERRAIN_FS)
+        self._vaos: dict[int, moderngl.VertexArray] = {}
+
+    def vao(self, program: moderngl.Program, chunk_quads: int,
+            cache: dict[int, moderngl.VertexArray]) -> moderngl.VertexArray:
+        if chunk_quads not in cache:
+            vbo, ibo, _ = self.geometry.mesh(chunk_quads)
+            cache[chunk_quads] = self.ctx.mgl.vertex_array(
+                program,
+                [(vbo, "2i", "in_local"), (self.geometry.instances, "2i/i", "in_origin")],
+                index_buffer=ibo, index_element_size=4)
+        return cache[chunk_quads]
+
+    def projection(self, viewpoint: Viewpoint) -> Projection:
+        """Projection with near/far fitted to the terrain's box and the eye's ground clearance."""
+        hf = self.geometry.hf
+        lo, hi = hf.bounds()
+        clearance = float(viewpoint.o[2] - hf.height_at(viewpoint.o[0], viewpoint.o[1]))
+        near, far = fit_near_far(viewpoint, lo, hi, clearance=clearance)
+        return Projection(self.fov_y_deg, self.target.width / self.target.height, near, far)
+
+    def draw(self, program: moderngl.Program, cache: dict[int, moderngl.VertexArray],
+             viewpoint: Viewpoint, projection: Projection, level_quads: int) -> FrameStats:
+        """Draw one level with ``program`` (uniforms other than geometry's already set)."""
+        layout = self.geometry.layout(level_quads)
+        view_proj = projection.matrix() @ viewpoint.view_matrix()
+        chunks = self.geometry.visible_chunks(layout, view_proj)
+        self.geometry.set_uniforms(program, layout.step)
+        program["u_mvp"].write(mat_bytes(view_proj))
+        if chunks:
+            self.vao(program, layout.chunk_quads, cache).render(moderngl.TRIANGLES,
+                                                                 instances=chunks)
+        return FrameStats(chunks * layout.triangles_per_chunk, chunks, projection)
+
+    def render(self, viewpoint: Viewpoint, level_quads: int | None = None,
+               projection: Projection | None = None) -> FrameStats:
+        """Render the terrain textured with its colour texture; ``level_quads`` None = full."""
+        level = self.geometry.hf.quads if level_quads is None else level_quads
+        projection = projection or self.projection(viewpoint)
+        mgl = self.ctx.mgl
+        self.target.use(SKY_RGB)
+        mgl.enable(moderngl.DEPTH_TEST)
+        self.geometry.color_tex.use(0)
+        self.geometry.height_tex.use(1)
+        self.program["u_color"].value = 0
+        self.program["u_height"].value = 1
+        return self.draw(self.program, self._vaos, viewpoint, projection, level)
+
+    def release(self) -> None:
+        for vao in self._vaos.values():
+            vao.release()
+        self._vaos.clear()
+        self.program.release()
+        self.target.release()

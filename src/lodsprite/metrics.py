@@ -1,0 +1,48 @@
+"""Image metrics between a test image and a reference (ground truth).
+
+All functions take ``(H, W, 3) uint8`` (or equally shaped numeric) arrays; the
+data range is fixed at 255 so results are comparable across images.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+DATA_RANGE = 255.0
+
+
+def _check(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    if a.shape != b.shape:
+        raise ValueError(f"image shapes differ: {a.shape} vs {b.shape}")
+    return a, b
+
+
+def rmse(image: np.ndarray, reference: np.ndarray) -> float:
+    """Root-mean-square error over all pixels and channels, in grey levels (0..255)."""
+    a, b = _check(image, reference)
+    return float(np.sqrt(np.mean((a - b) ** 2)))
+
+
+def psnr(image: np.ndarray, reference: np.ndarray) -> float:
+    """Peak signal-to-noise ratio in dB for data range 255; ``inf`` for identical images."""
+    e = rmse(image, reference)
+    return math.inf if e == 0.0 else 20.0 * math.log10(DATA_RANGE / e)
+
+
+def ssim(image: np.ndarray, reference: np.ndarray) -> float:
+    """Mean structural similarity (scikit-image, ``data_range=255``, over colour channels)."""
+    from skimage.metrics import structural_similarity
+
+    a, b = _check(image, reference)
+    return float(structural_similarity(a, b, data_range=DATA_RANGE, channel_axis=-1))
+
+
+def difference_image(image: np.ndarray, reference: np.ndarray, gain: float = 4.0) -> np.ndarray:
+    """Absolute difference ``(H, W) uint8`` (mean over channels, scaled by ``gain``) to look at."""
+    a, b = _check(image, reference)
+    d = np.abs(a - b).mean(axis=-1) * gain
+    return np.clip(d, 0, 255).astype(np.uint8)

@@ -1,0 +1,52 @@
+"""Shared fixtures.  As in moderngl's own test suite: one standalone context for the
+whole session, a GL error check after every test that used it, and GL state reset
+between tests."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lodsprite.terrain.heightfield import HeightField
+
+
+@pytest.fixture(scope="session")
+def gl_session():
+    from lodsprite.gl.context import GLContext
+
+    ctx = GLContext()
+    yield ctx
+    ctx.release()
+
+
+@pytest.fixture
+def gl(gl_session):
+    """The session's GL context; fails the test if it leaves a GL error behind."""
+    import moderngl
+
+    mgl = gl_session.mgl
+    _ = mgl.error  # clear any stale flag
+    yield gl_session
+    gl_session.check_error("test")
+    mgl.disable(moderngl.DEPTH_TEST | moderngl.BLEND | moderngl.CULL_FACE)
+    gl_session.default_fbo.use()
+
+
+def make_field(n: int = 64, relief: float = 200.0, spacing: float = 30.0,
+               kind: str = "bump") -> HeightField:
+    """Synthetic working field of ``(n+1)^2`` samples: flat, a central bump, or ridges."""
+    r, c = np.meshgrid(np.linspace(-1, 1, n + 1), np.linspace(-1, 1, n + 1), indexing="ij")
+    if kind == "flat":
+        h = np.zeros_like(r)
+    elif kind == "bump":
+        h = relief * np.exp(-(r**2 + c**2) / 0.1)
+    elif kind == "ridges":
+        h = relief * (0.5 + 0.5 * np.sin(9 * np.pi * c) * np.cos(7 * np.pi * r))
+    else:
+        raise ValueError(kind)
+    return HeightField(h.astype(np.float32), spacing, spacing, kind)
+
+
+@pytest.fixture
+def bump_field() -> HeightField:
+    return make_field()
