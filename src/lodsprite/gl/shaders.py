@@ -46,3 +46,100 @@ void main() {
     f_color = vec4(texture(u_color, v_uv).rgb, 1.0);
 }
 """
+
+# LOD-sprite spriteframe (Chen et al. 1999 §3.1, §3.3; Swan et al. 2002 Figures 2-3 and 5):
+# the coarse level, textured from the keyframe by projective texture mapping
+# (texture matrix = bias * P_key * V_key, divide by w), or from the terrain
+# texture where the keyframe did not see the surface.
+_LINEAR_DEPTH = """
+uniform vec2 u_key_near_far;  // keyframe near, far (metres)
+float linear_depth(float window_z) {
+    float n = u_key_near_far.x, f = u_key_near_far.y;
+    return 2.0 * n * f / (f + n - (2.0 * window_z - 1.0) * (f - n));
+}
+// 1 if world point with keyframe clip coordinates k is inside the keyframe frustum and not
+// behind the keyframe z-buffer by more than tol (relative to its depth), else 0.
+float seen_by_keyframe(vec4 k, sampler2D key_depth, float tol) {
+    if (k.w <= 0.0) return 0.0;
+    vec3 ndc = k.xyz / k.w;
+    if (any(greaterThan(abs(ndc), vec3(1.0)))) return 0.0;
+    float zb = textureLod(key_depth, ndc.xy * 0.5 + 0.5, 0.0).r;
+    return linear_depth(ndc.z * 0.5 + 0.5) <= linear_depth(zb) * (1.0 + tol) ? 1.0 : 0.0;
+}
+"""
+
+SPRITE_VS = (
+    "#version 330\n"
+    + TERRAIN_VERTEX_COMMON
+    + _LINEAR_DEPTH
+    + """
+uniform mat4 u_mvp;
+uniform mat4 u_key_mvp;
+uniform sampler2D u_key_depth;
+uniform float u_vertex_tol;
+out vec2 vs_uv;
+out vec4 vs_key;
+out float vs_seen;
+void main() {
+    vec3 p = terrain_position(vs_uv);
+    gl_Position = u_mvp * vec4(p, 1.0);
+    vs_key = u_key_mvp * vec4(p, 1.0);
+    vs_seen = seen_by_keyframe(vs_key, u_key_depth, u_vertex_tol);
+}
+"""
+)
+
+# Per-triangle rule of the paper: a triangle takes the sprite only if all three vertices
+# were seen by the keyframe.
+SPRITE_GS = """#version 330
+layout(triangles) in;
+layout(triangle_strip, max_vertices = 3) out;
+in vec2 vs_uv[];
+in vec4 vs_key[];
+in float vs_seen[];
+out vec2 g_uv;
+out vec4 g_key;
+flat out int g_sprite;
+void main() {
+    int s = (vs_seen[0] > 0.5 && vs_seen[1] > 0.5 && vs_seen[2] > 0.5) ? 1 : 0;
+    for (int i = 0; i < 3; ++i) {
+        gl_Position = gl_in[i].gl_Position;
+        g_uv = vs_uv[i];
+        g_key = vs_key[i];
+        g_sprite = s;
+        EmitVertex();
+    }
+    EndPrimitive();
+}
+"""
+
+SPRITE_FS = (
+    "#version 330\n"
+    + _LINEAR_DEPTH
+    + """
+uniform sampler2D u_color;      // terrain texture
+uniform sampler2D u_sprite;     // keyframe colour
+uniform sampler2D u_key_depth;  // keyframe z-buffer (full resolution)
+uniform sampler2D u_key_coarse; // keyframe's z-buffer of the coarse level
+uniform int u_visibility;       // 0: per triangle (paper), 1: per fragment, 2: coarse occlusion
+uniform float u_fragment_tol;
+uniform float u_coarse_tol;
+in vec2 g_uv;
+in vec4 g_key;
+flat in int g_sprite;
+out vec4 f_color;
+void main() {
+    bool sprite;
+    if (u_visibility == 0) {
+        sprite = g_sprite == 1;
+    } else if (u_visibility == 1) {
+        sprite = seen_by_keyframe(g_key, u_key_depth, u_fragment_tol) > 0.5;
+    } else {
+        sprite = seen_by_keyframe(g_key, u_key_coarse, u_coarse_tol) > 0.5;
+    }
+    vec3 rgb = sprite ? textureProj(u_sprite, vec3(g_key.xy * 0.5 + 0.5 * g_key.w, g_key.w)).rgb
+                      : texture(u_color, g_uv).rgb;
+    f_color = vec4(rgb, 1.0);
+}
+"""
+)

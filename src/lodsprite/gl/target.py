@@ -8,21 +8,24 @@ from lodsprite.gl.context import GLContext
 
 
 class RenderTarget:
-    """``width x height`` RGBA8 colour texture plus 24-bit depth texture, bound as one framebuffer.
+    """``width x height`` RGBA8 colour texture (unless ``color=False``) plus depth texture,
+    bound as one framebuffer.
 
     The colour texture can be sampled by later draws (a keyframe's sprite), so
     rendering into a target never needs a copy.
     """
 
-    def __init__(self, ctx: GLContext, width: int, height: int) -> None:
+    def __init__(self, ctx: GLContext, width: int, height: int, color: bool = True) -> None:
         mgl = ctx.mgl
         self.ctx = ctx
         self.size = (int(width), int(height))
-        self.color = mgl.texture(self.size, 4)
-        self.color.repeat_x = self.color.repeat_y = False
+        self.color = mgl.texture(self.size, 4) if color else None
+        if self.color is not None:
+            self.color.repeat_x = self.color.repeat_y = False
         self.depth = mgl.depth_texture(self.size)
         self.depth.repeat_x = self.depth.repeat_y = False
-        self.fbo = mgl.framebuffer(color_attachments=[self.color], depth_attachment=self.depth)
+        self.fbo = mgl.framebuffer(color_attachments=[self.color] if color else [],
+                                   depth_attachment=self.depth)
 
     @property
     def width(self) -> int:
@@ -51,4 +54,5 @@ class RenderTarget:
             # moderngl re-binds the current framebuffer after creating others: never a dead one.
             self.ctx.default_fbo.use()
         for obj in (self.fbo, self.color, self.depth):
-            obj.release()
+            if obj is not None:
+                obj.release()

@@ -155,12 +155,14 @@ class TerrainRenderer:
         return FrameStats(chunks * layout.triangles_per_chunk, chunks, projection)
 
     def render(self, viewpoint: Viewpoint, level_quads: int | None = None,
-               projection: Projection | None = None) -> FrameStats:
-        """Render the terrain textured with its colour texture; ``level_quads`` None = full."""
+               projection: Projection | None = None,
+               target: RenderTarget | None = None) -> FrameStats:
+        """Render the terrain textured with its colour texture into ``target`` (default: this
+        renderer's own); ``level_quads`` None means full resolution."""
         level = self.geometry.hf.quads if level_quads is None else level_quads
         projection = projection or self.projection(viewpoint)
         mgl = self.ctx.mgl
-        self.target.use(SKY_RGB)
+        (target or self.target).use(SKY_RGB)
         mgl.enable(moderngl.DEPTH_TEST)
         self.geometry.color_tex.use(0)
         self.geometry.height_tex.use(1)

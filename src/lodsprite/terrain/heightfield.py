@@ -22,7 +22,7 @@ import numpy as np
 from lodsprite.errors import TerrainError
 
 DEFAULT_GRID = 512
-DEFAULT_EXAGGERATION = 2.0
+DEFAULT_EXAGGERATION = 1.0
 
 
 def is_power_of_two(n: int) -> bool:

@@ -1,0 +1,302 @@
+"""Rendering a camera path with timings: the engine behind ``lodsprite render``.
+
+Per-frame time covers issuing the frame's GL work and waiting for it to finish
+(``ctx.finish()``) — the view-frustum culling, uniform and instance uploads
+included.  Reading pixels back (for saving frames) happens after the clock
+stops, for every mode alike.  One untimed warm-up frame precedes the timed ones
+so that shader compilation and first-use driver work are not charged to frame 0.
+"""
+
+from __future__ import annotations
+
+import platform
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from lodsprite.errors import InputError
+from lodsprite.gl.context import GLContext
+from lodsprite.gl.sprite import DEFAULT_VISIBILITY, VISIBILITY_MODES, SpriteRenderer
+from lodsprite.gl.terrain import TerrainGeometry, TerrainRenderer
+from lodsprite.paths import CameraPath, get_path
+from lodsprite.report.io import write_csv, write_json, write_png
+from lodsprite.scene import Scene, load_scene
+from lodsprite.sprite.engine import DEFAULT_EPSILON_PX, FRAME_TYPES, LodSpriteEngine
+from lodsprite.terrain import DEFAULT_EXAGGERATION
+from lodsprite.terrain.lod import DEFAULT_COARSE, level_step
+
+MODES = ("full", "lod", "sprite")
+FRAME_COLUMNS = ["frame", "mode", "ms", "triangles"]
+SPRITE_COLUMNS = ["type", "error_px"]
+QUALITY_COLUMNS = ["rmse_sprite", "psnr_sprite", "ssim_sprite", "rmse_lod", "psnr_lod", "ssim_lod"]
+
+Progress = Callable[[int, int], None]
+
+
+@dataclass(frozen=True)
+class RenderConfig:
+    """What to render: terrain, texture and path specs, mode, level, image size, frames."""
+
+    terrain: str = "jacksboro"
+    texture: str = "terrain"
+    path: str = "chen1999"
+    mode: str = "full"
+    lod: int = DEFAULT_COARSE
+    size: tuple[int, int] = (512, 512)
+    frames: int | None = None
+    grid: int | None = None
+    exaggeration: float = DEFAULT_EXAGGERATION
+    fov_y_deg: float = 45.0
+    save_frames: bool = False
+    epsilon: float = DEFAULT_EPSILON_PX
+    ground_truth: bool = False
+    visibility: str = DEFAULT_VISIBILITY
+
+    def validate(self) -> None:
+        if self.mode not in MODES:
+            raise InputError(f"unknown mode '{self.mode}': use one of {', '.join(MODES)}")
+        w, h = self.size
+        if not (16 <= w <= 8192 and 16 <= h <= 8192):
+            raise InputError(f"image size must be between 16 and 8192 pixels, got {w}x{h}")
+        if self.frames is not None and self.frames < 2:
+            raise InputError(f"--frames must be at least 2, got {self.frames}")
+        if not self.epsilon > 0:
+            raise InputError(f"--epsilon must be > 0 pixels, got {self.epsilon}")
+        if self.visibility not in VISIBILITY_MODES:
+            raise InputError(f"unknown visibility '{self.visibility}': use one of "
+                             f"{', '.join(VISIBILITY_MODES)}")
+        if self.ground_truth and self.mode != "sprite":
+            raise InputError("--ground-truth needs --mode sprite")
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    """``'WxH'`` or ``'N'`` to ``(width, height)`` pixels."""
+    parts = text.lower().split("x")
+    try:
+        vals = [int(p) for p in parts]
+    except ValueError:
+        vals = []
+    if len(vals) == 1:
+        vals = vals * 2
+    if len(vals) != 2:
+        raise InputError(f"size must look like 512x512, got '{text}'")
+    return vals[0], vals[1]
+
+
+class PathRenderer:
+    """GL state for one scene: context, geometry and renderer, created once, released once."""
+
+    def __init__(self, scene: Scene, size: tuple[int, int], fov_y_deg: float = 45.0,
+                 ctx: GLContext | None = None) -> None:
+        self.own_ctx = ctx is None
+        self.ctx = ctx or GLContext()
+        self.geometry = TerrainGeometry(self.ctx, scene.hf, scene.texture)
+        self.renderer = TerrainRenderer(self.ctx, self.geometry, size[0], size[1], fov_y_deg)
+
+    def timed(self, viewpoint, level: int | None) -> tuple[float, int]:
+        """Render one frame; (milliseconds including ``ctx.finish()``, triangles)."""
+        t0 = time.perf_counter()
+        stats = self.renderer.render(viewpoint, level)
+        self.ctx.finish()
+        return (time.perf_counter() - t0) * 1e3, stats.triangles
+
+    def release(self) -> None:
+        self.renderer.release()
+        self.geometry.release()
+        if self.own_ctx:
+            self.ctx.release()
+
+    def __enter__(self) -> PathRenderer:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
+
+
+def timing_summary(ms: np.ndarray) -> dict:
+    """Median, mean, standard deviation, p95 (ms) and total (s) of per-frame times."""
+    ms = np.asarray(ms, dtype=np.float64)
+    return {"median_ms": float(np.median(ms)), "mean_ms": float(ms.mean()),
+            "std_ms": float(ms.std()), "p95_ms": float(np.percentile(ms, 95)),
+            "total_s": float(ms.sum() / 1e3)}
+
+
+def prepare(config: RenderConfig) -> tuple[Scene, CameraPath]:
+    """Validate the config and load scene and path (all user errors surface here)."""
+    config.validate()
+    scene = load_scene(config.terrain, config.texture, config.grid, config.exaggeration)
+    if config.mode != "full":
+        level_step(scene.hf.quads, config.lod)
+    return scene, get_path(config.path, scene.hf, config.frames)
+
+
+def _quality(image: np.ndarray, lod: np.ndarray, truth: np.ndarray) -> dict:
+    from lodsprite.metrics import psnr, rmse, ssim
+
+    return {"rmse_sprite": rmse(image, truth), "psnr_sprite": psnr(image, truth),
+            "ssim_sprite": ssim(image, truth), "rmse_lod": rmse(lod, truth),
+            "psnr_lod": psnr(lod, truth), "ssim_lod": ssim(lod, truth)}
+
+
+def quality_summary(rows: list[dict]) -> dict:
+    """Mean RMSE / SSIM over frames; PSNR from the mean squared error over frames (a
+    keyframe equals its ground truth, whose per-frame PSNR would be infinite)."""
+    out = {}
+    for kind in ("sprite", "lod"):
+        r = np.array([row[f"rmse_{kind}"] for row in rows])
+        mse = float(np.mean(r**2))
+        out[f"rmse_{kind}_mean"] = float(r.mean())
+        out[f"psnr_{kind}_mean"] = float("inf") if mse == 0 else 10 * np.log10(255.0**2 / mse)
+        out[f"ssim_{kind}_mean"] = float(np.mean([row[f"ssim_{kind}"] for row in rows]))
+    out["rmse_ratio"] = (out["rmse_sprite_mean"] / out["rmse_lod_mean"]
+                         if out["rmse_lod_mean"] > 0 else float("nan"))
+    return out
+
+
+def sprite_summary(rows: list[dict]) -> dict:
+    """Keyframe count and mean time per frame type (ms)."""
+    out: dict = {"keyframes": sum(r["type"] == "keyframe" for r in rows)}
+    for t in FRAME_TYPES:
+        ms = [r["ms"] for r in rows if r["type"] == t]
+        out[f"mean_ms_{t}"] = float(np.mean(ms)) if ms else float("nan")
+    out["keyframe_fraction"] = out["keyframes"] / len(rows)
+    out["mean_error_px"] = float(np.mean([r["error_px"] for r in rows]))
+    return out
+
+
+def sprite_frames(pr: PathRenderer, path: CameraPath, config: RenderConfig,
+                  progress: Progress | None = None, on_frame=None) -> list[dict]:
+    """Run LOD-sprite along ``path``; rows with type, error_px, ms, triangles (and quality
+    against an untimed full-resolution ground truth when ``config.ground_truth``)."""
+    sprite = SpriteRenderer(pr.renderer, config.lod, config.visibility)
+    try:
+        vp0 = path.viewpoints[0]
+        sprite.render_keyframe(vp0, 0.0)  # warm-up (shader compilation), untimed
+        sprite.render_spriteframe(vp0)
+        pr.ctx.finish()
+        engine = LodSpriteEngine(sprite, config.epsilon)
+        rows = []
+        for i, vp in enumerate(path.viewpoints):
+            f = engine.frame(vp)
+            row = {"frame": i, "mode": "sprite", "ms": f.ms, "triangles": f.triangles,
+                   "type": f.type, "error_px": f.error_px}
+            if config.ground_truth or on_frame:
+                image = engine.image_target.read_color()
+                if on_frame:
+                    on_frame(i, image)
+                if config.ground_truth:
+                    pr.renderer.render(vp, None)
+                    truth = pr.renderer.target.read_color()
+                    pr.renderer.render(vp, config.lod)
+                    row.update(_quality(image, pr.renderer.target.read_color(), truth))
+            rows.append(row)
+            if progress:
+                progress(i + 1, len(path))
+        return rows
+    finally:
+        sprite.release()
+
+
+def render_path(config: RenderConfig, out_dir: Path, progress: Progress | None = None) -> dict:
+    """Render ``config``'s path; write ``frames.csv``, ``summary.json`` and optionally PNG
+    frames to ``out_dir``; return the summary."""
+    scene, path = prepare(config)
+    out_dir = Path(out_dir)
+
+    def save(i: int, image: np.ndarray) -> None:
+        write_png(out_dir / "frames" / f"frame_{i:05d}.png", image)
+
+    with PathRenderer(scene, config.size, config.fov_y_deg) as pr:
+        if config.mode == "sprite":
+            rows = sprite_frames(pr, path, config, progress,
+                                 save if config.save_frames else None)
+        else:
+            rows = plain_frames(pr, path, config, progress, save if config.save_frames else None)
+        info = pr.ctx.info
+        pr.ctx.check_error("render_path")
+    ms = np.array([r["ms"] for r in rows])
+    summary = {
+        "frames": len(rows), "mode": config.mode, "terrain": config.terrain,
+        "texture": config.texture, "path": config.path,
+        "size": list(config.size), "grid": scene.hf.quads,
+        "lod": config.lod if config.mode != "full" else scene.hf.quads,
+        "exaggeration": config.exaggeration,
+        **timing_summary(ms),
+        "triangles_mean": float(np.mean([r["triangles"] for r in rows])),
+        "gl_renderer": info.renderer, "gl_version": info.version,
+        "machine": platform.machine(), "python": platform.python_version(),
+        "config": asdict(config),
+    }
+    columns = list(FRAME_COLUMNS)
+    if config.mode == "sprite":
+        summary.update({"epsilon": config.epsilon, "visibility": config.visibility,
+                        **sprite_summary(rows)})
+        columns += SPRITE_COLUMNS
+        if config.ground_truth:
+            summary.update(quality_summary(rows))
+            columns += QUALITY_COLUMNS
+    write_csv(out_dir / "frames.csv", rows, columns)
+    write_json(out_dir / "summary.json", summary)
+    return summary
+
+
+def plain_frames(pr: PathRenderer, path: CameraPath, config: RenderConfig,
+                 progress: Progress | None = None, on_frame=None) -> list[dict]:
+    """Full-resolution or uniform-level frames along ``path`` (one untimed warm-up first)."""
+    level = None if config.mode == "full" else config.lod
+    pr.timed(path.viewpoints[0], level)
+    rows = []
+    for i, vp in enumerate(path.viewpoints):
+        ms, tris = pr.timed(vp, level)
+        rows.append({"frame": i, "mode": config.mode, "ms": ms, "triangles": tris})
+        if on_frame:
+            on_frame(i, pr.renderer.target.read_color())
+        if progress:
+            progress(i + 1, len(path))
+    return rows
+
+
+COMPARE_COLUMNS = ["frame", "full_ms", "lod_ms", "full_triangles", "lod_triangles", "rmse", "psnr"]
+
+
+def compare_full_lod(config: RenderConfig, out_dir: Path, progress: Progress | None = None
+                     ) -> dict:
+    """Render every frame at full resolution and at level ``config.lod``; time both and
+    measure the coarse image's RMSE/PSNR against the full one.  Writes ``frames.csv``
+    and ``summary.json`` to ``out_dir``; returns the summary."""
+    from lodsprite.metrics import psnr, rmse
+
+    scene, path = prepare(config)
+    level_step(scene.hf.quads, config.lod)
+    rows = []
+    with PathRenderer(scene, config.size, config.fov_y_deg) as pr:
+        pr.timed(path.viewpoints[0], None)
+        for i, vp in enumerate(path.viewpoints):
+            full_ms, full_tris = pr.timed(vp, None)
+            full = pr.renderer.target.read_color()
+            lod_ms, lod_tris = pr.timed(vp, config.lod)
+            coarse = pr.renderer.target.read_color()
+            rows.append({"frame": i, "full_ms": full_ms, "lod_ms": lod_ms,
+                         "full_triangles": full_tris, "lod_triangles": lod_tris,
+                         "rmse": rmse(coarse, full), "psnr": psnr(coarse, full)})
+            if progress:
+                progress(i + 1, len(path))
+        info = pr.ctx.info
+    full = timing_summary([r["full_ms"] for r in rows])
+    lod = timing_summary([r["lod_ms"] for r in rows])
+    finite_psnr = [r["psnr"] for r in rows if np.isfinite(r["psnr"])]
+    summary = {
+        "frames": len(rows), "terrain": config.terrain, "path": config.path,
+        "size": list(config.size), "grid": scene.hf.quads, "lod": config.lod,
+        "full": full, "lod_level": lod,
+        "speedup_median": full["median_ms"] / lod["median_ms"],
+        "rmse_mean": float(np.mean([r["rmse"] for r in rows])),
+        "psnr_mean": float(np.mean(finite_psnr)) if finite_psnr else float("inf"),
+        "gl_renderer": info.renderer,
+    }
+    write_csv(out_dir / "frames.csv", rows, COMPARE_COLUMNS)
+    write_json(out_dir / "summary.json", summary)
+    return summary
