@@ -125,36 +125,79 @@ def render(
               f"{out_dir / 'summary.json'}")
 
 
+def _run_reproduction(cfg, out_dir: Path) -> dict:
+    from lodsprite.report.chen1999 import write_plots, write_report
+    from lodsprite.sprite.reproduce import reproduce_chen1999
+
+    with progress_bar("reproduce chen1999") as update:
+        results = reproduce_chen1999(cfg, out_dir, update)
+    report = write_report(results, out_dir, write_plots(results, out_dir))
+    _print_reproduction(results, report)
+    return results
+
+
+def _print_reproduction(r: dict, report: Path) -> None:
+    t = Table(title=f"Chen et al. 1999 reproduced: {r['terrain']} {r['grid']}², "
+                    f"{r['lod']}² LOD, {r['frames']} frames, ε = {r['epsilon']} px, "
+                    f"{r['size'][0]}² px")
+    t.add_column("")
+    t.add_column("this run", justify="right")
+    t.add_column("paper (1999)", justify="right")
+    rows = [
+        ("keyframes", f"{r['keyframes']} ({100 * r['keyframe_fraction']:.1f} %)", "28 (6.1 %)"),
+        ("keyframe ms", f"{r['mean_ms_keyframe']:.1f}", "830"),
+        ("first spriteframe ms", f"{r['mean_ms_first_sprite']:.1f}", "36"),
+        ("spriteframe ms", f"{r['mean_ms_sprite']:.1f}", "15"),
+        ("full resolution total s", f"{r['total_s_full']:.2f}", "383.2"),
+        ("LOD-sprite total s", f"{r['total_s_sprite']:.2f}", "31.1"),
+        ("speedup", f"{r['speedup']:.2f}x", "12.32x"),
+        ("RMSE LOD-sprite / plain LOD", f"{r['rmse_sprite_mean']:.2f} / {r['rmse_lod_mean']:.2f}",
+         "(Figs 13-14)"),
+    ]
+    for row in rows:
+        t.add_row(*row)
+    out.print(t)
+    out.print(f"GL: {r['gl_renderer']}   report: {report}")
+
+
+@app.command()
+def reproduce(
+    experiment: Annotated[str, typer.Argument(help="chen1999")],
+    out_dir: Annotated[Path, typer.Option("--out", help="output folder")] = Path("out/chen1999"),
+    terrain: TerrainOpt = "jacksboro",
+    size: Annotated[int, typer.Option("--size", help="image size in pixels (square)")] = 512,
+    quick: Annotated[bool, typer.Option("--quick", help="a short run: 256², 115 frames, "
+                                                        "fewer sweep points")] = False,
+    grid: GridOpt = None,
+    epsilon: EpsOpt = 1.0,
+    visibility: VisOpt = "coarse",
+    full_sample: Annotated[int | None, typer.Option(
+        "--full-sample", help="time full resolution on this many evenly spaced frames "
+                              "(>= 46) and scale; default all frames up to 1024², else 46")] = None,
+    sweeps: Annotated[bool, typer.Option(
+        "--sweeps/--no-sweeps", help="run the Fig. 10-12 sweeps")] = True,
+) -> None:
+    """Run a paper's experiment; write DIR/results.json, PNG plots and DIR/report.md."""
+    from lodsprite.errors import InputError
+    from lodsprite.sprite.reproduce import ReproduceConfig
+
+    if experiment != "chen1999":
+        raise InputError(f"unknown experiment '{experiment}': available: chen1999")
+    kw = {"terrain": terrain, "grid": grid, "epsilon": epsilon, "visibility": visibility,
+          "full_sample": full_sample, "sweeps": sweeps}
+    cfg = ReproduceConfig.quick(**kw) if quick else ReproduceConfig(size=size, **kw)
+    _run_reproduction(cfg, out_dir)
+
+
 @app.command()
 def demo(
-    terrain: TerrainOpt = "jacksboro",
-    path: PathOpt = "chen1999",
-    frames: FramesOpt = None,
-    lod: LodOpt = 16,
-    size: SizeOpt = "512x512",
     out_dir: Annotated[Path, typer.Option("--out", help="output folder")] = Path("out/demo"),
+    quick: Annotated[bool, typer.Option("--quick", help="a short run")] = False,
 ) -> None:
-    """Render the default terrain along the default path at full resolution and at 16x16."""
-    from lodsprite.run import RenderConfig, compare_full_lod, parse_size
+    """Reproduce Chen et al. 1999 on the real Jacksboro DEM at 512² (a few minutes)."""
+    from lodsprite.sprite.reproduce import ReproduceConfig
 
-    config = RenderConfig(terrain=terrain, path=path, frames=frames, lod=lod,
-                          size=parse_size(size))
-    with progress_bar("full vs coarse") as update:
-        s = compare_full_lod(config, out_dir, update)
-    t = Table(title=f"{s['terrain']} {s['grid']}², path {s['path']}, {s['frames']} frames, "
-                    f"{s['size'][0]}x{s['size'][1]} px")
-    for col in ("model", "triangles", "median ms", "mean ms", "p95 ms"):
-        t.add_column(col, justify="right")
-    t.add_row(f"full {s['grid']}²", f"{2 * s['grid'] ** 2}", f"{s['full']['median_ms']:.2f}",
-              f"{s['full']['mean_ms']:.2f}", f"{s['full']['p95_ms']:.2f}")
-    t.add_row(f"coarse {s['lod']}²", f"{2 * s['lod'] ** 2}", f"{s['lod_level']['median_ms']:.2f}",
-              f"{s['lod_level']['mean_ms']:.2f}", f"{s['lod_level']['p95_ms']:.2f}")
-    out.print(t)
-    out.print(f"coarse vs full image difference: RMSE {s['rmse_mean']:.2f} grey levels, "
-              f"PSNR {s['psnr_mean']:.2f} dB (mean over frames); median speedup "
-              f"{s['speedup_median']:.1f}x")
-    out.print(f"GL: {s['gl_renderer']}   wrote {out_dir / 'frames.csv'}, "
-              f"{out_dir / 'summary.json'}")
+    _run_reproduction(ReproduceConfig.quick() if quick else ReproduceConfig(), out_dir)
 
 
 def _one_line(message: str, code: int) -> None:

@@ -53,6 +53,7 @@ class RenderConfig:
     save_frames: bool = False
     epsilon: float = DEFAULT_EPSILON_PX
     ground_truth: bool = False
+    quality_stride: int = 1
     visibility: str = DEFAULT_VISIBILITY
 
     def validate(self) -> None:
@@ -68,6 +69,8 @@ class RenderConfig:
         if self.visibility not in VISIBILITY_MODES:
             raise InputError(f"unknown visibility '{self.visibility}': use one of "
                              f"{', '.join(VISIBILITY_MODES)}")
+        if self.quality_stride < 1:
+            raise InputError(f"quality stride must be >= 1, got {self.quality_stride}")
         if self.ground_truth and self.mode != "sprite":
             raise InputError("--ground-truth needs --mode sprite")
 
@@ -187,7 +190,7 @@ def sprite_frames(pr: PathRenderer, path: CameraPath, config: RenderConfig,
                 image = engine.image_target.read_color()
                 if on_frame:
                     on_frame(i, image)
-                if config.ground_truth:
+                if config.ground_truth and i % config.quality_stride == 0:
                     pr.renderer.render(vp, None)
                     truth = pr.renderer.target.read_color()
                     pr.renderer.render(vp, config.lod)
@@ -257,46 +260,3 @@ def plain_frames(pr: PathRenderer, path: CameraPath, config: RenderConfig,
         if progress:
             progress(i + 1, len(path))
     return rows
-
-
-COMPARE_COLUMNS = ["frame", "full_ms", "lod_ms", "full_triangles", "lod_triangles", "rmse", "psnr"]
-
-
-def compare_full_lod(config: RenderConfig, out_dir: Path, progress: Progress | None = None
-                     ) -> dict:
-    """Render every frame at full resolution and at level ``config.lod``; time both and
-    measure the coarse image's RMSE/PSNR against the full one.  Writes ``frames.csv``
-    and ``summary.json`` to ``out_dir``; returns the summary."""
-    from lodsprite.metrics import psnr, rmse
-
-    scene, path = prepare(config)
-    level_step(scene.hf.quads, config.lod)
-    rows = []
-    with PathRenderer(scene, config.size, config.fov_y_deg) as pr:
-        pr.timed(path.viewpoints[0], None)
-        for i, vp in enumerate(path.viewpoints):
-            full_ms, full_tris = pr.timed(vp, None)
-            full = pr.renderer.target.read_color()
-            lod_ms, lod_tris = pr.timed(vp, config.lod)
-            coarse = pr.renderer.target.read_color()
-            rows.append({"frame": i, "full_ms": full_ms, "lod_ms": lod_ms,
-                         "full_triangles": full_tris, "lod_triangles": lod_tris,
-                         "rmse": rmse(coarse, full), "psnr": psnr(coarse, full)})
-            if progress:
-                progress(i + 1, len(path))
-        info = pr.ctx.info
-    full = timing_summary([r["full_ms"] for r in rows])
-    lod = timing_summary([r["lod_ms"] for r in rows])
-    finite_psnr = [r["psnr"] for r in rows if np.isfinite(r["psnr"])]
-    summary = {
-        "frames": len(rows), "terrain": config.terrain, "path": config.path,
-        "size": list(config.size), "grid": scene.hf.quads, "lod": config.lod,
-        "full": full, "lod_level": lod,
-        "speedup_median": full["median_ms"] / lod["median_ms"],
-        "rmse_mean": float(np.mean([r["rmse"] for r in rows])),
-        "psnr_mean": float(np.mean(finite_psnr)) if finite_psnr else float("inf"),
-        "gl_renderer": info.renderer,
-    }
-    write_csv(out_dir / "frames.csv", rows, COMPARE_COLUMNS)
-    write_json(out_dir / "summary.json", summary)
-    return summary

@@ -41,11 +41,6 @@ class TerrainGeometry:
         if max(hf.rows, hf.cols) > max_tex:
             raise InputError(f"height field {hf.cols}x{hf.rows} exceeds this GL driver's "
                              f"maximum texture size {max_tex}")
-        if texture_rgb.ndim != 3 or texture_rgb.shape[2] != 3 or texture_rgb.dtype != np.uint8:
-            raise InputError("terrain texture must be an (H, W, 3) uint8 array")
-        th, tw = texture_rgb.shape[:2]
-        if max(th, tw) > max_tex:
-            raise InputError(f"texture {tw}x{th} exceeds the maximum texture size {max_tex}")
         mgl = ctx.mgl
         self.ctx = ctx
         self.hf = hf
@@ -53,15 +48,29 @@ class TerrainGeometry:
         self.height_tex = mgl.texture((hf.cols, hf.rows), 1, hf.heights.tobytes(), dtype="f4")
         self.height_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self.height_tex.repeat_x = self.height_tex.repeat_y = False
-        self.color_tex = mgl.texture((tw, th), 3, np.ascontiguousarray(texture_rgb).tobytes(),
-                                     alignment=1)
-        self.color_tex.repeat_x = self.color_tex.repeat_y = False
-        self.color_tex.build_mipmaps()
-        self.color_tex.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+        self.color_tex = None
+        self.set_texture(texture_rgb)
         self._meshes: dict[int, tuple[moderngl.Buffer, moderngl.Buffer, int]] = {}
         self._layouts: dict[int, ChunkLayout] = {}
         max_chunks = (hf.quads // min(chunk_quads, hf.quads)) ** 2
         self.instances = mgl.buffer(reserve=max_chunks * 8)
+
+    def set_texture(self, texture_rgb: np.ndarray) -> None:
+        """Replace the terrain's colour texture, an ``(H, W, 3) uint8`` image (mipmapped)."""
+        if texture_rgb.ndim != 3 or texture_rgb.shape[2] != 3 or texture_rgb.dtype != np.uint8:
+            raise InputError("terrain texture must be an (H, W, 3) uint8 array")
+        th, tw = texture_rgb.shape[:2]
+        max_tex = self.ctx.info.max_texture_size
+        if max(th, tw) > max_tex:
+            raise InputError(f"texture {tw}x{th} exceeds the maximum texture size {max_tex}")
+        if self.color_tex is not None:
+            self.color_tex.release()
+        tex = self.ctx.mgl.texture((tw, th), 3, np.ascontiguousarray(texture_rgb).tobytes(),
+                                   alignment=1)
+        tex.repeat_x = tex.repeat_y = False
+        tex.build_mipmaps()
+        tex.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+        self.color_tex = tex
 
     def layout(self, level_quads: int) -> ChunkLayout:
         if level_quads not in self._layouts:

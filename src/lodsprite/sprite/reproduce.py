@@ -1,0 +1,244 @@
+"""Reproduction of Chen, Swan & Kaufman (1999) §4: Figures 8-14 measured side by side.
+
+Everything in ``results.json`` is measured in one run on one machine:
+
+* full resolution, the plain coarse level and LOD-sprite are timed over the same
+  frames of the same path (``speedup = total_s_full / total_s_sprite``);
+* for large fields the full-resolution time may be measured on an even sample of
+  frames (at least 46) and scaled to the whole path (``full_sampled``);
+* image quality compares each LOD-sprite frame and the plain coarse frame with an
+  untimed full-resolution render of the same viewpoint (optionally every k-th frame).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from lodsprite.errors import InputError
+from lodsprite.gl.sprite import DEFAULT_VISIBILITY, SpriteRenderer
+from lodsprite.metrics import difference_image
+from lodsprite.paths import chen1999
+from lodsprite.report.io import write_json, write_png
+from lodsprite.run import PathRenderer, RenderConfig, quality_summary, sprite_frames
+from lodsprite.scene import Scene, load_scene
+from lodsprite.sprite.engine import KEYFRAME
+from lodsprite.terrain import make_texture
+
+Progress = Callable[[int, int], None]
+
+FIG10_FRAMES = (115, 230, 460, 920, 1840)
+FIG11_EPSILON = (0.25, 0.5, 1.0, 2.0, 4.0)
+MIN_FULL_SAMPLE = 46
+
+
+@dataclass(frozen=True)
+class ReproduceConfig:
+    """Parameters of the reproduction; defaults are the paper's (512², 16², 460 frames, 1 px)."""
+
+    terrain: str = "jacksboro"
+    grid: int | None = None
+    size: int = 512
+    frames: int = 460
+    epsilon: float = 1.0
+    lod: int = 16
+    visibility: str = DEFAULT_VISIBILITY
+    fig10_frames: tuple[int, ...] = FIG10_FRAMES
+    fig11_epsilon: tuple[float, ...] = FIG11_EPSILON
+    full_sample: int | None = None      # None: every frame up to 1024², else 46 frames
+    quality_stride: int | None = None   # None: every frame up to 1024², else frames // 46
+    sweeps: bool = True
+
+    @classmethod
+    def quick(cls, **kw) -> ReproduceConfig:
+        """A short run (about a tenth of the work) for smoke tests and first looks."""
+        base = {"size": 256, "frames": 115, "fig10_frames": (58, 115, 230),
+                "fig11_epsilon": (0.5, 1.0, 2.0)}
+        return cls(**{**base, **kw})
+
+    def render_config(self, **kw) -> RenderConfig:
+        base = {"terrain": self.terrain, "texture": "terrain", "path": "chen1999",
+                "mode": "sprite", "lod": self.lod, "size": (self.size, self.size),
+                "frames": self.frames, "grid": self.grid, "epsilon": self.epsilon,
+                "visibility": self.visibility}
+        return RenderConfig(**{**base, **kw})
+
+
+@dataclass
+class _Work:
+    """Counts frames done across the experiment's phases for one progress bar."""
+
+    total: int
+    progress: Progress | None
+    done: int = 0
+    phase: list = field(default_factory=list)
+
+    def step(self, _i: int = 0, _n: int = 0) -> None:
+        self.done += 1
+        if self.progress:
+            self.progress(self.done, self.total)
+
+
+def _sample_indices(frames: int, sample: int) -> np.ndarray:
+    return np.unique(np.linspace(0, frames - 1, min(sample, frames)).round().astype(int))
+
+
+def _timed_level(pr: PathRenderer, path, level: int | None, indices, work: _Work) -> np.ndarray:
+    """Per-frame ms at ``level`` (None = full) for ``indices``; NaN elsewhere."""
+    ms = np.full(len(path), np.nan)
+    pr.timed(path.viewpoints[int(indices[0])], level)  # warm-up
+    for i in indices:
+        ms[i], _ = pr.timed(path.viewpoints[int(i)], level)
+        work.step()
+    return ms
+
+
+def _sweep(pr: PathRenderer, scene: Scene, cfg: ReproduceConfig, work: _Work,
+           total_s_full: float) -> dict:
+    """Figures 10-12: keyframe fraction vs frames and vs ε; speedup vs ε."""
+    fig10 = {"frames": [], "keyframes": [], "keyframe_fraction": []}
+    for n in cfg.fig10_frames:
+        rows = sprite_frames(pr, chen1999(scene.hf, n), cfg.render_config(frames=n), work.step)
+        k = sum(r["type"] == KEYFRAME for r in rows)
+        fig10["frames"].append(n)
+        fig10["keyframes"].append(k)
+        fig10["keyframe_fraction"].append(k / n)
+    fig11 = {"epsilon": [], "keyframes": [], "keyframe_fraction": []}
+    fig12 = {"epsilon": [], "total_s_sprite": [], "speedup": []}
+    path = chen1999(scene.hf, cfg.frames)
+    for eps in cfg.fig11_epsilon:
+        rows = sprite_frames(pr, path, cfg.render_config(epsilon=eps), work.step)
+        k = sum(r["type"] == KEYFRAME for r in rows)
+        total = sum(r["ms"] for r in rows) / 1e3
+        fig11["epsilon"].append(eps)
+        fig11["keyframes"].append(k)
+        fig11["keyframe_fraction"].append(k / len(rows))
+        fig12["epsilon"].append(eps)
+        fig12["total_s_sprite"].append(total)
+        fig12["speedup"].append(total_s_full / total)
+    return {"fig10": fig10, "fig11": fig11, "fig12": fig12}
+
+
+def _pick_frame(rows: list[dict]) -> tuple[int, int]:
+    """(frame, its keyframe) for Figures 13-14: the spriteframe with the largest error in the
+    middle half of the path, i.e. LOD-sprite at its worst just before a new keyframe."""
+    n = len(rows)
+    key = 0
+    best = (-1.0, n // 2, 0)
+    for i, r in enumerate(rows):
+        if r["type"] == KEYFRAME:
+            key = i
+        elif n // 4 <= i < 3 * n // 4 and r["error_px"] > best[0]:
+            best = (r["error_px"], i, key)
+    return best[1], best[2]
+
+
+def _figure_images(pr: PathRenderer, scene: Scene, cfg: ReproduceConfig, path, frame: int,
+                   key: int, out_dir: Path) -> dict:
+    """Figures 13 (checker texture) and 14 (terrain texture): full, coarse, LOD-sprite."""
+    images = {}
+    vp, key_vp = path.viewpoints[frame], path.viewpoints[key]
+    for fig, texture in (("fig13", make_texture("checker", scene.hf)), ("fig14", None)):
+        if texture is not None:
+            pr.geometry.set_texture(texture)
+        r = pr.renderer
+        r.render(vp)
+        full = r.target.read_color()
+        r.render(vp, cfg.lod)
+        lod = r.target.read_color()
+        sprite = SpriteRenderer(r, cfg.lod, cfg.visibility)
+        try:
+            sprite.render_keyframe(key_vp, 0.0)
+            sprite.render_spriteframe(vp)
+            lsp = sprite.target.read_color()
+        finally:
+            sprite.release()
+        entry = {"frame": frame, "keyframe": key}
+        for name, img in (("full", full), ("lod", lod), ("sprite", lsp)):
+            write_png(out_dir / f"{fig}_{name}.png", img)
+            entry[name] = f"{fig}_{name}.png"
+        if fig == "fig14":
+            for name, img in (("diff_lod", lod), ("diff_sprite", lsp)):
+                write_png(out_dir / f"{fig}_{name}.png", difference_image(img, full))
+                entry[name] = f"{fig}_{name}.png"
+        images[fig] = entry
+        if texture is not None:
+            pr.geometry.set_texture(scene.texture)
+    return images
+
+
+def reproduce_chen1999(cfg: ReproduceConfig, out_dir: Path,
+                       progress: Progress | None = None) -> dict:
+    """Run the experiment; write PNG images, ``results.json``; return the results dict.
+
+    Plots and ``report.md`` are written by :mod:`lodsprite.report.chen1999`.
+    """
+    if cfg.frames < 2 or cfg.size < 16:
+        raise InputError("reproduce needs at least 2 frames and 16-pixel images")
+    cfg.render_config().validate()
+    scene = load_scene(cfg.terrain, "terrain", cfg.grid)
+    path = chen1999(scene.hf, cfg.frames)
+    large = scene.hf.quads > 1024
+    sample = cfg.full_sample or (MIN_FULL_SAMPLE if large else cfg.frames)
+    if sample < min(MIN_FULL_SAMPLE, cfg.frames):
+        raise InputError(f"full-resolution sample must be at least {MIN_FULL_SAMPLE} frames")
+    stride = cfg.quality_stride or (max(1, cfg.frames // MIN_FULL_SAMPLE) if large else 1)
+    full_idx = _sample_indices(cfg.frames, sample)
+    sweep_frames = (sum(cfg.fig10_frames) + cfg.frames * len(cfg.fig11_epsilon)
+                    if cfg.sweeps else 0)
+    work = _Work(len(full_idx) + 2 * cfg.frames + sweep_frames, progress)
+    out_dir = Path(out_dir)
+    with PathRenderer(scene, (cfg.size, cfg.size)) as pr:
+        ms_full = _timed_level(pr, path, None, full_idx, work)
+        ms_lod = _timed_level(pr, path, cfg.lod, np.arange(cfg.frames), work)
+        total_s_full = float(np.nanmean(ms_full)) * cfg.frames / 1e3
+        main = sprite_frames(pr, path, cfg.render_config(ground_truth=True,
+                                                         quality_stride=stride), work.step)
+        frame, key = _pick_frame(main)
+        images = _figure_images(pr, scene, cfg, path, frame, key, out_dir)
+        sweeps = _sweep(pr, scene, cfg, work, total_s_full) if cfg.sweeps else {}
+        info = pr.ctx.info
+        pr.ctx.check_error("reproduce")
+    return _results(cfg, scene, main, ms_full, ms_lod, full_idx, stride, total_s_full,
+                    images, sweeps, info, out_dir)
+
+
+def _results(cfg, scene, main, ms_full, ms_lod, full_idx, stride, total_s_full, images, sweeps,
+             info, out_dir) -> dict:
+    import platform
+
+    from lodsprite.run import sprite_summary
+
+    quality_rows = [r for r in main if "rmse_sprite" in r]
+    total_s_sprite = sum(r["ms"] for r in main) / 1e3
+    results = {
+        "experiment": "chen1999", "terrain": cfg.terrain, "grid": scene.hf.quads,
+        "lod": cfg.lod, "size": [cfg.size, cfg.size], "frames": cfg.frames,
+        "epsilon": cfg.epsilon, "visibility": cfg.visibility,
+        "gl_renderer": info.renderer, "gl_version": info.version,
+        "machine": f"{platform.machine()}, {platform.system()}, python {platform.python_version()}",
+        **sprite_summary(main),
+        "total_s_full": total_s_full, "total_s_sprite": total_s_sprite,
+        "total_s_lod": float(np.sum(ms_lod)) / 1e3,
+        "speedup": total_s_full / total_s_sprite,
+        "full_sampled": len(full_idx) < cfg.frames, "full_sample_frames": len(full_idx),
+        "quality_stride": stride, "quality_frames": len(quality_rows),
+        **quality_summary(quality_rows),
+        "per_frame": {
+            "type": [r["type"] for r in main],
+            "error_px": [r["error_px"] for r in main],
+            "ms_sprite": [r["ms"] for r in main],
+            "ms_full": [None if np.isnan(v) else float(v) for v in ms_full],
+            "ms_lod": [float(v) for v in ms_lod],
+            "rmse_sprite": [r.get("rmse_sprite") for r in main],
+            "rmse_lod": [r.get("rmse_lod") for r in main],
+        },
+        **sweeps,
+        "images": images,
+        "config": asdict(cfg),
+    }
+    write_json(out_dir / "results.json", results)
+    return results

@@ -1,0 +1,117 @@
+"""The command line, run as a user runs it: a real process, real exit codes."""
+
+import csv
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+SMALL = ["--terrain", "fractal:64:3", "--size", "64x64"]
+
+
+def lodsprite(*args, cwd=None):
+    return subprocess.run([sys.executable, "-c", "from lodsprite.cli import main; main()", *args],
+                          capture_output=True, text=True, cwd=cwd, timeout=300)
+
+
+def assert_user_error(proc, fragment):
+    assert proc.returncode == 2, proc.stderr
+    lines = [ln for ln in proc.stderr.strip().splitlines() if ln.strip()]
+    assert len(lines) == 1, proc.stderr
+    assert "Traceback" not in proc.stderr
+    assert fragment in lines[0]
+
+
+def test_info_prints_renderer_and_texture_size():
+    proc = lodsprite("info")
+    assert proc.returncode == 0, proc.stderr
+    assert "renderer" in proc.stdout and "max texture size" in proc.stdout
+
+
+@pytest.mark.parametrize("mode", ["full", "lod", "sprite"])
+def test_render_writes_one_row_per_frame(tmp_path, mode):
+    out = tmp_path / "o"
+    proc = lodsprite("render", *SMALL, "--mode", mode, "--lod", "8", "--frames", "7",
+                     "--out", str(out), "--save-frames")
+    assert proc.returncode == 0, proc.stderr
+    rows = list(csv.DictReader((out / "frames.csv").open()))
+    assert [int(r["frame"]) for r in rows] == list(range(7))
+    assert {"frame", "mode", "ms", "triangles"} <= set(rows[0])
+    assert all(float(r["ms"]) > 0 for r in rows)
+    summary = json.loads((out / "summary.json").read_text())
+    for key in ("frames", "mode", "terrain", "size", "median_ms", "mean_ms", "total_s",
+                "gl_renderer"):
+        assert key in summary
+    assert summary["frames"] == 7 and summary["mode"] == mode
+    assert len(list((out / "frames").glob("frame_*.png"))) == 7
+    if mode == "full":
+        assert max(int(r["triangles"]) for r in rows) == 2 * 64 * 64
+    if mode == "lod":
+        assert max(int(r["triangles"]) for r in rows) <= 2 * 8 * 8
+
+
+def test_sprite_mode_with_ground_truth_reports_quality(tmp_path):
+    out = tmp_path / "s"
+    proc = lodsprite("render", *SMALL, "--mode", "sprite", "--lod", "8", "--frames", "12",
+                     "--ground-truth", "--epsilon", "0.5", "--out", str(out))
+    assert proc.returncode == 0, proc.stderr
+    rows = list(csv.DictReader((out / "frames.csv").open()))
+    assert rows[0]["type"] == "keyframe"
+    assert {r["type"] for r in rows} <= {"keyframe", "first_sprite", "sprite"}
+    for key in ("error_px", "rmse_sprite", "psnr_sprite", "ssim_sprite", "rmse_lod"):
+        assert key in rows[0]
+    keyframes = [r for r in rows if r["type"] == "keyframe"]
+    assert all(float(r["rmse_sprite"]) == 0.0 for r in keyframes)
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["keyframes"] == len(keyframes)
+    for key in ("rmse_sprite_mean", "rmse_lod_mean", "psnr_sprite_mean", "psnr_lod_mean",
+                "ssim_sprite_mean", "ssim_lod_mean"):
+        assert np.isfinite(summary[key])
+
+
+@pytest.mark.parametrize(("args", "fragment"), [
+    (["render", "--terrain", "/no/such.tif"], "/no/such.tif"),
+    (["render", *SMALL, "--mode", "warp"], "mode"),
+    (["render", *SMALL, "--mode", "lod", "--lod", "12"], "power of two"),
+    (["render", *SMALL, "--path", "nowhere"], "nowhere"),
+    (["render", "--terrain", "fractal:64", "--size", "wide"], "size"),
+    (["render", *SMALL, "--frames", "1"], "frames"),
+    (["render", *SMALL, "--texture", "/no/image.png"], "/no/image.png"),
+    (["render", *SMALL, "--mode", "sprite", "--epsilon", "0"], "epsilon"),
+    (["render", *SMALL, "--ground-truth"], "sprite"),
+    (["render", "--no-such-option"], "no-such-option"),
+    (["reproduce", "nobody2000"], "nobody2000"),
+])
+def test_bad_input_exits_2_with_one_line_and_writes_nothing(tmp_path, args, fragment):
+    out = tmp_path / "never"
+    proc = lodsprite(*args, "--out", str(out)) if args[0] == "render" and "--no-such-option" \
+        not in args else lodsprite(*args)
+    assert_user_error(proc, fragment)
+    assert not out.exists()
+
+
+def test_malformed_geotiff_exits_2(tmp_path):
+    bad = tmp_path / "broken.tif"
+    bad.write_bytes(b"II*\x00 this is not a tiff")
+    assert_user_error(lodsprite("render", "--terrain", str(bad), "--out", str(tmp_path / "o")),
+                      "broken.tif")
+
+
+def test_reproduce_quick_writes_results_plots_and_report(tmp_path):
+    out = tmp_path / "r"
+    proc = lodsprite("reproduce", "chen1999", "--quick", "--terrain", "fractal:64:1",
+                     "--out", str(out))
+    assert proc.returncode == 0, proc.stderr
+    results = json.loads((out / "results.json").read_text())
+    for key in ("frames", "keyframes", "epsilon", "mean_ms_keyframe", "mean_ms_first_sprite",
+                "mean_ms_sprite", "total_s_full", "total_s_sprite", "speedup",
+                "rmse_sprite_mean", "rmse_lod_mean", "psnr_sprite_mean", "psnr_lod_mean",
+                "fig10", "fig11", "fig12"):
+        assert key in results
+    assert results["speedup"] == pytest.approx(results["total_s_full"] / results["total_s_sprite"])
+    report = (out / "report.md").read_text()
+    assert "12.32" in report
+    for png in ("fig08_error.png", "fig09_time.png", "fig13.png", "fig14.png"):
+        assert (out / png).stat().st_size > 1000
