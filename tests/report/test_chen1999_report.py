@@ -123,7 +123,8 @@ def test_no_sampling_note_when_full_not_sampled(results: dict, tmp_path: Path) -
 def test_missing_optional_sections_are_skipped(results: dict, tmp_path: Path) -> None:
     for key in ("fig10", "fig11"):
         del results[key]
-    del results["images"]["fig13"]
+    results["images"] = {"fig14": results["images"]["fig14"]}  # no fig13 key
+    results["images"]["fig14"]["full"] = "no_such_file.png"  # a missing panel stays blank
     plots = write_plots(results, tmp_path)
     names = {p.name for p in plots}
     assert names == set(ALL_PLOTS) - {

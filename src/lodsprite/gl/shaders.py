@@ -89,6 +89,25 @@ void main() {
 """
 )
 
+# Per-fragment rules need no per-vertex visibility and no geometry shader.
+SPRITE_VS_FRAGMENT = (
+    "#version 330\n"
+    + TERRAIN_VERTEX_COMMON
+    + """
+uniform mat4 u_mvp;
+uniform mat4 u_key_mvp;
+out vec2 g_uv;
+out vec4 g_key;
+flat out int g_sprite;
+void main() {
+    vec3 p = terrain_position(g_uv);
+    gl_Position = u_mvp * vec4(p, 1.0);
+    g_key = u_key_mvp * vec4(p, 1.0);
+    g_sprite = 0;
+}
+"""
+)
+
 # Per-triangle rule of the paper: a triangle takes the sprite only if all three vertices
 # were seen by the keyframe.
 SPRITE_GS = """#version 330

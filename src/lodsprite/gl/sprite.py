@@ -17,7 +17,7 @@ import numpy as np
 from lodsprite.camera import Projection, Viewpoint
 from lodsprite.errors import InputError
 from lodsprite.gl.context import GLContext
-from lodsprite.gl.shaders import SPRITE_FS, SPRITE_GS, SPRITE_VS
+from lodsprite.gl.shaders import SPRITE_FS, SPRITE_GS, SPRITE_VS, SPRITE_VS_FRAGMENT
 from lodsprite.gl.target import RenderTarget
 from lodsprite.gl.terrain import SKY_RGB, FrameStats, TerrainRenderer, mat_bytes
 
@@ -75,12 +75,17 @@ class SpriteRenderer:
         self.coarse_quads = coarse_quads
         self.visibility = visibility
         mgl = self.ctx.mgl
-        self.program = mgl.program(vertex_shader=SPRITE_VS, geometry_shader=SPRITE_GS,
-                                   fragment_shader=SPRITE_FS)
+        if visibility == "triangle":
+            self.program = mgl.program(vertex_shader=SPRITE_VS, geometry_shader=SPRITE_GS,
+                                       fragment_shader=SPRITE_FS)
+            self.program["u_vertex_tol"].value = vertex_tol
+        else:
+            self.program = mgl.program(vertex_shader=SPRITE_VS_FRAGMENT,
+                                       fragment_shader=SPRITE_FS)
         self.program["u_visibility"].value = VISIBILITY_MODES[visibility]
-        self.program["u_vertex_tol"].value = vertex_tol
-        self.program["u_fragment_tol"].value = fragment_tol
-        self.program["u_coarse_tol"].value = coarse_tol
+        for name, value in (("u_fragment_tol", fragment_tol), ("u_coarse_tol", coarse_tol)):
+            if name in self.program:
+                self.program[name].value = value
         w, h = terrain.target.size
         self.key_targets = [RenderTarget(self.ctx, w, h), RenderTarget(self.ctx, w, h)]
         self.coarse_targets = [RenderTarget(self.ctx, w, h, color=False),
@@ -128,8 +133,9 @@ class SpriteRenderer:
         key.coarse.depth.use(4)
         prog = self.program
         prog["u_color"].value, prog["u_height"].value = 0, 1
-        prog["u_sprite"].value, prog["u_key_depth"].value = 2, 3
-        prog["u_key_coarse"].value = 4
+        for name, unit in (("u_sprite", 2), ("u_key_depth", 3), ("u_key_coarse", 4)):
+            if name in prog:
+                prog[name].value = unit
         prog["u_key_mvp"].write(mat_bytes(key.view_proj))
         prog["u_key_near_far"].value = (key.projection.near, key.projection.far)
         return self.terrain.draw(prog, self._vaos, viewpoint, projection, self.coarse_quads)

@@ -25,6 +25,7 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
+from matplotlib.ticker import LogFormatter
 from PIL import Image
 
 from lodsprite.report.io import _atomic_write_bytes
@@ -238,6 +239,8 @@ def _plot_fig09(results: dict, out_dir: Path) -> Path | None:
     drawn = _plot_frame_types(ax, results, np.arange(ms.size), ms) or drawn
     if drawn:
         ax.set_yscale("log")
+        ax.yaxis.set_major_formatter(LogFormatter(labelOnlyBase=False))
+        ax.yaxis.set_minor_formatter(LogFormatter(labelOnlyBase=False))
         ax.legend(loc="best", fontsize=8)
     ax.set(xlabel="frame number", ylabel="render time per frame (ms, log scale)",
            title="Fig. 9 — render time per frame")
@@ -351,11 +354,11 @@ def _draw_panel(ax: Axes, image: tuple[np.ndarray, bool] | None, title: str) -> 
         return
     pixels, grey = image
     if grey and pixels.dtype == np.uint8:
-        ax.imshow(pixels, cmap="gray", vmin=0, vmax=255, interpolation="nearest")
+        ax.imshow(pixels, cmap="gray", vmin=0, vmax=255)
     elif grey:
-        ax.imshow(pixels, cmap="gray", interpolation="nearest")
+        ax.imshow(pixels, cmap="gray")
     else:
-        ax.imshow(pixels, interpolation="nearest")
+        ax.imshow(pixels)
     ax.set_title(title, fontsize=9)
 
 
@@ -425,11 +428,15 @@ def _table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
     return lines + [""]
 
 
+def _path_phrase(path: Any) -> str:
+    return "the camera path" if _text(path) == DASH else f"the `{_text(path)}` camera path"
+
+
 def _description(r: dict) -> str:
     return (
         f"Experiment `{_text(r.get('experiment'))}`: the `{_text(r.get('terrain'))}` terrain "
         f"({_square(r.get('grid'))} height field, {_square(r.get('lod'))} LOD mesh for "
-        f"spriteframes) rendered along the `{_text(r.get('path'))}` camera path for "
+        f"spriteframes) rendered along {_path_phrase(r.get('path'))} for "
         f"{_int(r.get('frames'))} frames at {_size(r.get('size'))}, with error threshold "
         f"ε = {_g(r.get('epsilon'))} px and the `{_text(r.get('visibility'))}` visibility "
         f"rule. GL renderer: {_text(r.get('gl_renderer'))}; machine: {_text(r.get('machine'))}."
@@ -495,7 +502,7 @@ def _comparison_rows(r: dict) -> list[list[str]]:
         ["keyframe fraction", _fixed(r.get("keyframe_fraction"), 3),
          _fixed(_paper_fraction(), 3), ""],
         ["first spriteframes", _int(_sprite_count(r, "first_sprite_frames", "first_sprite")),
-         _int(p["first_sprite_frames"]), "one per keyframe"],
+         _int(p["first_sprite_frames"]), "paper: one per keyframe"],
         ["spriteframes", _int(_sprite_count(r, "sprite_frames", "sprite")),
          _int(p["sprite_frames"]), ""],
     ]
@@ -516,6 +523,12 @@ def _comparison_notes(r: dict) -> list[str]:
         f"{_fixed(1000 * p['total_s_full'] / p['frames'], 1)} ms per frame, which is why its "
         f"'microseconds' are read as milliseconds.",
     ]
+    if _num(r.get("quality_frames")) is not None:
+        stride = _int(r.get("quality_stride"))
+        notes.append(
+            f"RMSE, PSNR and SSIM are means over {_int(r.get('quality_frames'))} frames "
+            f"(stride {stride}) against the full-resolution rendering of the same view."
+        )
     if r.get("full_sampled"):
         notes.append(
             f"Full-resolution time was measured on {_int(r.get('full_sample_frames'))} evenly "
@@ -554,7 +567,10 @@ def _fig12_table(r: dict) -> list[str]:
 
 def _frame_of(r: dict, name: str) -> str:
     spec = (r.get("images") or {}).get(name)
-    return _text(spec.get("frame")) if isinstance(spec, dict) else DASH
+    if not isinstance(spec, dict):
+        return DASH
+    key = _num(spec.get("keyframe"))
+    return _text(spec.get("frame")) + ("" if key is None else f" (keyframe {key:.0f})")
 
 
 def _captions(r: dict) -> dict[str, tuple[str, str]]:
