@@ -10,7 +10,7 @@ With ``predict=True`` (the default) a due keyframe is rendered from a viewpoint
 extrapolated ahead of the viewer (the paper's §5 proposal, :mod:`lodsprite.sprite.predict`):
 candidate look-aheads of 1, 3/4, 1/2 and 1/4 of the previous keyframe interval are
 tried, largest first, and the first whose keyframe would show the current frame with an
-error under ``PREDICT_MARGIN`` ε (computed on the CPU from ``C'`` before any rendering) is
+error under ``PREDICT_MARGIN`` ε (0.9 ε) (computed on the CPU from ``C'`` before any rendering) is
 rendered; the current frame is then a spriteframe from it.  When no candidate passes,
 the keyframe is rendered at the current viewpoint as in the paper.
 
@@ -33,7 +33,7 @@ from lodsprite.sprite.predict import extrapolate
 KEYFRAME, FIRST_SPRITE, SPRITE = "keyframe", "first_sprite", "sprite"
 FRAME_TYPES = (KEYFRAME, FIRST_SPRITE, SPRITE)
 DEFAULT_EPSILON_PX = 1.0
-PREDICT_MARGIN = 0.6
+PREDICT_MARGIN = 0.9
 LOOKAHEAD_FRACTIONS = (1.0, 0.75, 0.5, 0.25)
 
 
