@@ -555,7 +555,10 @@ def _fig10_table(r: dict) -> list[str]:
 def _fig11_table(r: dict) -> list[str]:
     return _series_table(_section(r, "fig11"), [
         ("ε (px)", "epsilon", _g), ("keyframes", "keyframes", _int),
-        ("keyframe fraction", "keyframe_fraction", lambda v: _fixed(v, 3))])
+        ("keyframe fraction", "keyframe_fraction", lambda v: _fixed(v, 3)),
+        ("RMSE LOD-sprite", "rmse_sprite", lambda v: _fixed(v, 2)),
+        ("RMSE plain LOD", "rmse_lod", lambda v: _fixed(v, 2)),
+        ("ratio", "rmse_ratio", lambda v: _fixed(v, 3))])
 
 
 def _fig12_table(r: dict) -> list[str]:

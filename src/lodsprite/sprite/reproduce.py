@@ -33,6 +33,7 @@ Progress = Callable[[int, int], None]
 FIG10_FRAMES = (115, 230, 460, 920, 1840)
 FIG11_EPSILON = (0.25, 0.5, 1.0, 2.0, 4.0)
 MIN_FULL_SAMPLE = 46
+QUALITY_SWEEP_STRIDE = 5
 
 
 @dataclass(frozen=True)
@@ -119,6 +120,14 @@ def _sweep(pr: PathRenderer, scene: Scene, cfg: ReproduceConfig, work: _Work,
         fig12["epsilon"].append(eps)
         fig12["total_s_sprite"].append(total)
         fig12["speedup"].append(total_s_full / total)
+        # Quality at this ε on an untimed second pass (every QUALITY_SWEEP_STRIDE-th frame).
+        q = quality_summary([r for r in sprite_frames(
+            pr, path, cfg.render_config(epsilon=eps, ground_truth=True,
+                                        quality_stride=QUALITY_SWEEP_STRIDE), work.step)
+            if "rmse_sprite" in r])
+        for key in ("rmse_sprite", "rmse_lod"):
+            fig11.setdefault(key, []).append(q[f"{key}_mean"])
+        fig11.setdefault("rmse_ratio", []).append(q["rmse_ratio"])
     return {"fig10": fig10, "fig11": fig11, "fig12": fig12}
 
 
@@ -187,7 +196,7 @@ def reproduce_chen1999(cfg: ReproduceConfig, out_dir: Path,
         raise InputError(f"full-resolution sample must be at least {MIN_FULL_SAMPLE} frames")
     stride = cfg.quality_stride or (max(1, cfg.frames // MIN_FULL_SAMPLE) if large else 1)
     full_idx = _sample_indices(cfg.frames, sample)
-    sweep_frames = (sum(cfg.fig10_frames) + cfg.frames * len(cfg.fig11_epsilon)
+    sweep_frames = (sum(cfg.fig10_frames) + 2 * cfg.frames * len(cfg.fig11_epsilon)
                     if cfg.sweeps else 0)
     work = _Work(len(full_idx) + 3 * cfg.frames + sweep_frames, progress)
     out_dir = Path(out_dir)

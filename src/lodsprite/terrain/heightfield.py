@@ -16,6 +16,7 @@ Conventions used throughout lodsprite:
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 
@@ -84,7 +85,12 @@ class HeightField:
         return self.cols - 1
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """World-space bounding box ``(min (3,), max (3,))`` in metres."""
+        """World-space bounding box ``(min (3,), max (3,))`` in metres (copies)."""
+        lo, hi = self._bounds
+        return lo.copy(), hi.copy()
+
+    @cached_property
+    def _bounds(self) -> tuple[np.ndarray, np.ndarray]:
         lo = np.array([-self.width / 2, -self.depth / 2, float(self.heights.min())])
         hi = np.array([self.width / 2, self.depth / 2, float(self.heights.max())])
         return lo, hi
