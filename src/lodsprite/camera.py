@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -58,10 +59,15 @@ class Viewpoint:
         return -self.z
 
     def view_matrix(self) -> np.ndarray:
-        """World-to-eye matrix ``(4, 4) float64``."""
+        """World-to-eye matrix ``(4, 4) float64`` (read-only; computed once)."""
+        return self._view
+
+    @cached_property
+    def _view(self) -> np.ndarray:
         m = np.eye(4)
         m[0, :3], m[1, :3], m[2, :3] = self.x, self.y, self.z
         m[:3, 3] = -m[:3, :3] @ self.o
+        m.flags.writeable = False
         return m
 
     def to_dict(self) -> dict[str, list[float]]:
@@ -117,7 +123,14 @@ class Projection:
     far: float
 
     def matrix(self) -> np.ndarray:
-        return perspective(self.fov_y_deg, self.aspect, self.near, self.far)
+        """The perspective matrix ``(4, 4) float64`` (read-only; computed once)."""
+        return self._matrix
+
+    @cached_property
+    def _matrix(self) -> np.ndarray:
+        m = perspective(self.fov_y_deg, self.aspect, self.near, self.far)
+        m.flags.writeable = False
+        return m
 
     def pixel_angle_rad(self, height_px: int) -> float:
         """Angle subtended by one pixel, β = fov / image height (radians), Chen et al. Eq. 1."""
@@ -141,11 +154,11 @@ def fit_near_far(
     """
     lo = np.asarray(bounds_min, dtype=np.float64)
     hi = np.asarray(bounds_max, dtype=np.float64)
-    corners = np.array([[a, b, c] for a in (lo[0], hi[0]) for b in (lo[1], hi[1])
-                        for c in (lo[2], hi[2])])
-    depth = (corners - viewpoint.o) @ viewpoint.forward
-    far = max(float(depth.max()) * 1.01, 1e-3)
-    nearest = float(depth.min())  # depth is linear, so the box's minimum is at a corner
+    f = viewpoint.forward
+    # Depth is linear in the point, so its extremes over the box are per-axis extremes.
+    base = float(viewpoint.o @ f)
+    far = max((float(np.maximum(lo * f, hi * f).sum()) - base) * 1.01, 1e-3)
+    nearest = float(np.minimum(lo * f, hi * f).sum()) - base
     if nearest > 0.0:
         near = nearest * 0.99
     elif clearance is not None and clearance > 0.0:

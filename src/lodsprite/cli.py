@@ -169,6 +169,7 @@ def reproduce(
     quick: Annotated[bool, typer.Option("--quick", help="a short run: 256², 115 frames, "
                                                         "fewer sweep points")] = False,
     grid: GridOpt = None,
+    lod: LodOpt = 16,
     epsilon: EpsOpt = 1.0,
     visibility: VisOpt = "coarse",
     full_sample: Annotated[int | None, typer.Option(
@@ -183,7 +184,8 @@ def reproduce(
 
     if experiment != "chen1999":
         raise InputError(f"unknown experiment '{experiment}': available: chen1999")
-    kw = {"terrain": terrain, "grid": grid, "epsilon": epsilon, "visibility": visibility,
+    kw = {"terrain": terrain, "grid": grid, "lod": lod, "epsilon": epsilon,
+          "visibility": visibility,
           "full_sample": full_sample, "sweeps": sweeps}
     cfg = ReproduceConfig.quick(**kw) if quick else ReproduceConfig(size=size, **kw)
     _run_reproduction(cfg, out_dir)

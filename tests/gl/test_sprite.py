@@ -175,3 +175,18 @@ def test_keyframe_fraction_falls_as_epsilon_grows(build):
         counts.append(types.count(KEYFRAME))
     assert all(b <= a for a, b in zip(counts, counts[1:], strict=False))
     assert counts[-1] < counts[0]
+
+
+def test_keyframes_ahead_of_the_viewer_need_fewer_keyframes(build):
+    hf = make_field(64, kind="ridges", relief=150.0)
+    sp = build(hf, make_texture("terrain", hf), size=(96, 96))
+    path = orbit(90)
+    counts = {}
+    for predict in (False, True):
+        engine = LodSpriteEngine(sp, 0.5, predict=predict)
+        frames = [engine.frame(vp) for vp in path]
+        assert all(f.error_px < 0.5 for f in frames)
+        counts[predict] = sum(f.type == KEYFRAME for f in frames)
+        if predict:
+            assert engine.predicted_keyframes > 0
+    assert counts[True] < counts[False]

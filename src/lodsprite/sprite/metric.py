@@ -22,6 +22,7 @@ coarse triangle.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -116,15 +117,17 @@ def reprojected_centres(squares: CoarseSquares, key_eye: np.ndarray) -> np.ndarr
 
 def angles_at_eye(eye: np.ndarray, p: np.ndarray, q: np.ndarray) -> np.ndarray:
     """Angles (radians) at ``eye (3,)`` between points ``p (K, 3)`` and ``q (K, 3)``."""
-    a = p - eye
-    b = q - eye
-    cross = np.linalg.norm(np.cross(a, b), axis=1)
-    return np.arctan2(cross, np.einsum("kj,kj->k", a, b))
+    a = (p - eye).T
+    b = (q - eye).T
+    cx = a[1] * b[2] - a[2] * b[1]
+    cy = a[2] * b[0] - a[0] * b[2]
+    cz = a[0] * b[1] - a[1] * b[0]
+    return np.arctan2(np.sqrt(cx * cx + cy * cy + cz * cz), (a * b).sum(axis=0))
 
 
-def in_view(points: np.ndarray, view_proj: np.ndarray) -> np.ndarray:
-    """``(K,) bool``: points inside the view frustum of ``view_proj``."""
-    clip = np.c_[points, np.ones(len(points))] @ view_proj.T
+def in_view(points_h: np.ndarray, view_proj: np.ndarray) -> np.ndarray:
+    """``(K,) bool``: homogeneous points ``(K, 4)`` inside the view frustum of ``view_proj``."""
+    clip = points_h @ view_proj.T
     w = clip[:, 3:4]
     return (w[:, 0] > 0) & np.all(np.abs(clip[:, :3]) <= w, axis=1)
 
@@ -139,6 +142,11 @@ class ErrorMetric:
 
     squares: CoarseSquares
 
+    @cached_property
+    def _centres_h(self) -> np.ndarray:
+        c = self.squares.centres
+        return np.c_[c, np.ones(len(c))]
+
     @classmethod
     def for_level(cls, hf: HeightField, level_quads: int) -> ErrorMetric:
         return cls(coarse_squares(hf, level_quads))
@@ -149,7 +157,7 @@ class ErrorMetric:
 
     def theta(self, c_prime: np.ndarray, eye: np.ndarray, view_proj: np.ndarray) -> np.ndarray:
         """θ (radians) of the squares whose centre ``C`` is in the current view."""
-        vis = in_view(self.squares.centres, view_proj)
+        vis = in_view(self._centres_h, view_proj)
         return angles_at_eye(np.asarray(eye, dtype=np.float64), self.squares.centres[vis],
                              c_prime[vis])
 

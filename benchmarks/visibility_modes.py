@@ -1,0 +1,71 @@
+"""Benchmark: the three spriteframe visibility rules side by side, with and without
+keyframes rendered ahead of the viewer.
+
+For each rule (paper's per-triangle, per-fragment, coarse occlusion) and keyframe policy,
+runs LOD-sprite along chen1999 on Jacksboro 512² at 512×512 px, ε = 1 px: a timed pass,
+then an untimed pass measuring every 5th frame against full resolution.
+
+    python benchmarks/visibility_modes.py [--terrain SPEC] [--frames N]
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+from lodsprite.gl.sprite import VISIBILITY_MODES, SpriteRenderer
+from lodsprite.metrics import rmse
+from lodsprite.run import PathRenderer, RenderConfig, prepare
+from lodsprite.sprite.engine import KEYFRAME, LodSpriteEngine
+
+
+def run(pr: PathRenderer, path, visibility: str, predict: bool) -> dict:
+    sprite = SpriteRenderer(pr.renderer, 16, visibility)
+    try:
+        vp0 = path.viewpoints[0]
+        sprite.render_keyframe(vp0, 0.0)
+        sprite.render_spriteframe(vp0)
+        pr.ctx.finish()
+        engine = LodSpriteEngine(sprite, 1.0, predict=predict)
+        frames = [engine.frame(vp) for vp in path.viewpoints]
+        engine = LodSpriteEngine(sprite, 1.0, predict=predict)
+        err_sprite, err_lod = [], []
+        for i, vp in enumerate(path.viewpoints):
+            engine.frame(vp)
+            if i % 5:
+                continue
+            image = engine.image_target.read_color()
+            pr.renderer.render(vp)
+            truth = pr.renderer.target.read_color()
+            pr.renderer.render(vp, 16)
+            err_sprite.append(rmse(image, truth))
+            err_lod.append(rmse(pr.renderer.target.read_color(), truth))
+    finally:
+        sprite.release()
+    sprites = [f.ms for f in frames if f.type != KEYFRAME]
+    return {"keyframes": sum(f.type == KEYFRAME for f in frames),
+            "sprite_ms": float(np.mean(sprites)), "total_s": sum(f.ms for f in frames) / 1e3,
+            "rmse_sprite": float(np.mean(err_sprite)), "rmse_lod": float(np.mean(err_lod))}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--terrain", default="jacksboro")
+    ap.add_argument("--frames", type=int, default=460)
+    args = ap.parse_args()
+    scene, path = prepare(RenderConfig(terrain=args.terrain, frames=args.frames, mode="sprite"))
+    print(f"{'visibility':10s} {'ahead':>5s} {'keyframes':>9s} {'sprite ms':>9s} "
+          f"{'total s':>8s} {'RMSE sprite':>11s} {'RMSE 16²':>9s} {'ratio':>6s}")
+    with PathRenderer(scene, (512, 512)) as pr:
+        for visibility in VISIBILITY_MODES:
+            for predict in (False, True):
+                r = run(pr, path, visibility, predict)
+                print(f"{visibility:10s} {predict!s:>5s} {r['keyframes']:9d} "
+                      f"{r['sprite_ms']:9.2f} {r['total_s']:8.2f} {r['rmse_sprite']:11.2f} "
+                      f"{r['rmse_lod']:9.2f} {r['rmse_sprite'] / r['rmse_lod']:6.3f}",
+                      flush=True)
+
+
+if __name__ == "__main__":
+    main()

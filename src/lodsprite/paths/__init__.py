@@ -1,0 +1,83 @@
+"""Camera paths: the fly-throughs of the LOD-sprite papers and a JSON path format.
+
+Two built-in paths reproduce the animations of the papers:
+
+* :func:`chen1999` -- Chen, Swan & Kaufman (1999), "Multi-resolution Image-based
+  Rendering for Time-critical Applications" (the LOD-sprite paper), **Figure 7**:
+  a 460-frame orbit around the centre of the terrain that comes down from the
+  zenith, circles it and closes in.  The paper's **Figure 10** renders the same
+  path with 115, 230, 460, 920 and 1840 frames; ``chen1999(hf, frames=N)`` keeps
+  the geometric curve fixed and only changes how densely it is sampled.
+* :func:`swan2002` -- Swan, Arango & Nakshatrala (2002), "Interactive,
+  Distributed, Hardware-Accelerated LOD-Sprite Terrain Rendering with Stable
+  Frame Rates", whose 600-frame path "starts away from the terrain, zooms in,
+  flies over a plain, and then over a mountain range and onto the plain
+  beyond".  The paper does not give coordinates, so the plain and the range are
+  found in the height field (see the function's docstring).
+
+A :class:`CameraPath` is a sequence of :class:`~lodsprite.camera.Viewpoint`
+(OpenGL convention: ``x`` screen-right, ``y`` screen-up, the camera looks along
+``-z``) plus a vertical field of view.  World space is that of
+:class:`~lodsprite.terrain.heightfield.HeightField`: metres, ``+x`` east,
+``+y`` north, ``+z`` up, the terrain's horizontal centre at the origin.
+
+The JSON file format is documented in :mod:`lodsprite.paths.core`.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from lodsprite.errors import PathError
+from lodsprite.paths.core import (
+    BUILTIN_PATHS,
+    CHEN1999_FRAMES,
+    PATH_FORMAT,
+    PATH_VERSION,
+    SWAN2002_FRAMES,
+    CameraPath,
+    _check_frames,
+    load_path_json,
+)
+from lodsprite.paths.papers import chen1999, swan2002
+from lodsprite.terrain.heightfield import HeightField
+
+__all__ = [
+    "BUILTIN_PATHS",
+    "CHEN1999_FRAMES",
+    "PATH_FORMAT",
+    "PATH_VERSION",
+    "SWAN2002_FRAMES",
+    "CameraPath",
+    "chen1999",
+    "get_path",
+    "load_path_json",
+    "swan2002",
+]
+
+
+# --------------------------------------------------------------------------- lookup
+
+
+def get_path(spec: str | os.PathLike, hf: HeightField, frames: int | None = None
+             ) -> CameraPath:
+    """A camera path by name or file.
+
+    ``spec`` is ``"chen1999"`` (default 460 frames), ``"swan2002"`` (default
+    600 frames) or a JSON path file (module docstring), which is resampled to
+    ``frames`` when given (:meth:`CameraPath.resampled`).  A spec ending in
+    ``.json`` that does not exist reports the missing file; any other unknown
+    spec raises :class:`PathError`.
+    """
+    if frames is not None:
+        frames = _check_frames(frames)
+    key = os.fspath(spec)
+    if key.strip().lower() == "chen1999":
+        return chen1999(hf, CHEN1999_FRAMES if frames is None else frames)
+    if key.strip().lower() == "swan2002":
+        return swan2002(hf, SWAN2002_FRAMES if frames is None else frames)
+    if Path(key).is_file() or key.lower().endswith(".json"):
+        path = load_path_json(key)
+        return path if frames is None else path.resampled(frames)
+    raise PathError(f"unknown path '{key}': use chen1999, swan2002 or a .json file")
