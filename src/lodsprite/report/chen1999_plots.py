@@ -144,63 +144,69 @@ def _paper_point(ax: Axes, x: float, y: float, label: str) -> None:
     ax.plot([x], [y], "*", color="tab:red", ms=13, ls="none", label=label, zorder=5)
 
 
-def _plot_fig10(results: dict, out_dir: Path) -> Path | None:
-    sec = section(results, "fig10")
-    x, y = _xy(sec, "frames", "keyframe_fraction", positive_x=True) if sec else ((), ())
+def _curve(results: dict, key: str, xkey: str, ykey: str) -> tuple[Figure, Axes] | None:
+    """A figure with this run's ``ykey`` over ``xkey`` from section ``key``; None if empty."""
+    sec = section(results, key)
+    x, y = _xy(sec, xkey, ykey) if sec else ((), ())
     if len(x) == 0:
         return None
     fig, ax = _figure()
     ax.plot(x, y, "o-", color="tab:blue", label="this run")
+    return fig, ax
+
+
+def _finish_curve(fig: Figure, ax: Axes, path: Path, xlabel: str, ylabel: str,
+                  title: str) -> Path:
+    ax.set(xlabel=xlabel, ylabel=ylabel, title=title)
+    ax.set_ylim(bottom=0)
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    return _save(fig, path)
+
+
+def _plot_fig10(results: dict, out_dir: Path) -> Path | None:
+    made = _curve(results, "fig10", "frames", "keyframe_fraction")
+    if made is None:
+        return None
+    fig, ax = made
     _paper_point(ax, PAPER["frames"], PAPER_KEYFRAME_FRACTION,
                  f"paper ({PAPER['keyframes']:.0f} of {PAPER['frames']:.0f}, ε = 1 px)")
+    x = _xy(section(results, "fig10"), "frames", "keyframe_fraction")[0]
     ax.set_xscale("log")
     ax.set_xticks(x, [f"{v:g}" for v in x])
     ax.minorticks_off()
-    ax.set(xlabel="total frames rendered over the path (log scale)",
-           ylabel="keyframe fraction (keyframes / frames)",
-           title="Fig. 10 — keyframe fraction vs frames")
-    ax.set_ylim(bottom=0)
-    ax.legend(fontsize=8)
-    ax.grid(alpha=0.3)
-    return _save(fig, out_dir / "fig10_keyframes_vs_frames.png")
+    return _finish_curve(fig, ax, out_dir / "fig10_keyframes_vs_frames.png",
+                         "total frames rendered over the path (log scale)",
+                         "keyframe fraction (keyframes / frames)",
+                         "Fig. 10 — keyframe fraction vs frames")
 
 
 def _plot_fig11(results: dict, out_dir: Path) -> Path | None:
-    sec = section(results, "fig11")
-    x, y = _xy(sec, "epsilon", "keyframe_fraction") if sec else ((), ())
-    if len(x) == 0:
+    made = _curve(results, "fig11", "epsilon", "keyframe_fraction")
+    if made is None:
         return None
-    fig, ax = _figure()
-    ax.plot(x, y, "o-", color="tab:blue", label="this run")
+    fig, ax = made
     _paper_point(ax, PAPER["epsilon"], PAPER_KEYFRAME_FRACTION,
                  f"paper ({PAPER['keyframes']:.0f} of {PAPER['frames']:.0f} frames)")
-    ax.set(xlabel="error threshold ε (px)", ylabel="keyframe fraction (keyframes / frames)",
-           title="Fig. 11 — keyframe fraction vs error threshold")
-    ax.set_ylim(bottom=0)
-    ax.legend(fontsize=8)
-    ax.grid(alpha=0.3)
-    return _save(fig, out_dir / "fig11_keyframes_vs_epsilon.png")
+    return _finish_curve(fig, ax, out_dir / "fig11_keyframes_vs_epsilon.png",
+                         "error threshold ε (px)", "keyframe fraction (keyframes / frames)",
+                         "Fig. 11 — keyframe fraction vs error threshold")
 
 
 def _plot_fig12(results: dict, out_dir: Path) -> Path | None:
-    sec = section(results, "fig12")
-    x, y = _xy(sec, "epsilon", "speedup") if sec else ((), ())
-    if len(x) == 0:
+    made = _curve(results, "fig12", "epsilon", "speedup")
+    if made is None:
         return None
-    fig, ax = _figure()
-    ax.plot(x, y, "o-", color="tab:blue", label="this run")
+    fig, ax = made
     _paper_point(ax, PAPER["epsilon"], PAPER["speedup"], "paper (SGI IR, 1999)")
     ax.annotate(f"paper (SGI IR, 1999): {PAPER['speedup']:.2f}",
                 (PAPER["epsilon"], PAPER["speedup"]), textcoords="offset points",
                 xytext=(8, -4), fontsize=8, color="tab:red")
     ax.axhline(1.0, color="grey", ls=":", lw=1)
-    ax.set(xlabel="error threshold ε (px)",
-           ylabel="speedup (full-res time / LOD-sprite time, ×)",
-           title="Fig. 12 — speedup vs error threshold")
-    ax.set_ylim(bottom=0)
-    ax.legend(fontsize=8)
-    ax.grid(alpha=0.3)
-    return _save(fig, out_dir / "fig12_speedup_vs_epsilon.png")
+    return _finish_curve(fig, ax, out_dir / "fig12_speedup_vs_epsilon.png",
+                         "error threshold ε (px)",
+                         "speedup (full-res time / LOD-sprite time, ×)",
+                         "Fig. 12 — speedup vs error threshold")
 
 
 # --------------------------------------------------------------------------- image panels

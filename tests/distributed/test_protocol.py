@@ -1,0 +1,94 @@
+import msgpack
+import numpy as np
+import pytest
+
+from lodsprite.camera import Projection, look_at
+from lodsprite.distributed.protocol import (
+    PROTOCOL_VERSION,
+    Keyframe,
+    ProtocolError,
+    decode,
+    decode_keyframe,
+    encode,
+    encode_keyframe,
+)
+
+
+def keyframe(seq=7, h=24, w=32) -> Keyframe:
+    rng = np.random.default_rng(seq)
+    return Keyframe(seq, 123.25, look_at((10.0, -500.0, 300.0), (0.0, 0.0, 0.0)),
+                    Projection(45.0, w / h, 2.5, 9000.0),
+                    rng.integers(0, 256, (h, w, 3), dtype=np.uint8),
+                    rng.random((h, w), dtype=np.float32))
+
+
+@pytest.mark.parametrize("codec", ["raw", "zlib"])
+def test_keyframe_round_trip_keeps_every_field(codec):
+    kf = keyframe()
+    back = decode_keyframe(encode_keyframe(kf, codec))
+    assert back.seq == kf.seq and back.t0 == kf.t0
+    for k in "xyzo":
+        np.testing.assert_array_equal(getattr(back.viewpoint, k), getattr(kf.viewpoint, k))
+    assert back.projection == kf.projection
+    np.testing.assert_array_equal(back.color, kf.color)
+    np.testing.assert_array_equal(back.depth, kf.depth)
+    header, buffers = decode(encode_keyframe(kf, codec))
+    np.testing.assert_allclose(np.reshape(header["view"], (4, 4)), kf.viewpoint.view_matrix())
+    np.testing.assert_allclose(np.reshape(header["proj"], (4, 4)), kf.projection.matrix())
+    assert len(buffers) == 2
+
+
+def test_images_travel_raw_not_pickled():
+    kf = keyframe()
+    frames = encode_keyframe(kf, "raw")
+    assert frames[1] == kf.color.tobytes() and frames[2] == kf.depth.tobytes()
+    assert b"pickle" not in frames[0]
+
+
+def corrupt(frames, **changes):
+    header = msgpack.unpackb(frames[0], raw=False)
+    for k, v in changes.items():
+        if v is None:
+            header.pop(k, None)
+        else:
+            header[k] = v
+    return [msgpack.packb(header, use_bin_type=True), *frames[1:]]
+
+
+@pytest.mark.parametrize("frames", [
+    [],
+    [b"\xc1 not msgpack"],
+    [msgpack.packb([1, 2, 3])],
+    encode({"kind": "nonsense", "seq": 1}),
+    encode({"kind": "ack", "seq": -1}),
+    encode({"kind": "ack", "seq": True}),
+    corrupt(encode({"kind": "ack", "seq": 1}), v=PROTOCOL_VERSION + 1),
+    corrupt(encode({"kind": "ack", "seq": 1}), v=None),
+])
+def test_malformed_and_wrong_version_messages_are_rejected(frames):
+    with pytest.raises(ProtocolError):
+        decode(frames)
+
+
+def test_malformed_keyframes_are_rejected():
+    good = encode_keyframe(keyframe())
+    bad = [
+        good[:2],                                    # depth buffer missing
+        [good[0], good[1][:-1], good[2]],            # truncated colour
+        [good[0], good[1], good[2] + b"\x00"],       # oversized depth
+        corrupt(good, viewpoint={"x": [1, 0, 0]}),    # viewpoint incomplete
+        corrupt(good, viewpoint={"x": [1, 0, 0], "y": [1, 0, 0], "z": [0, 0, 1],
+                                 "o": [0, 0, 0]}),   # axes not orthonormal
+        corrupt(good, near=None),
+        corrupt(good, near=5.0, far=1.0),
+        corrupt(good, t0="yesterday"),
+        corrupt(good, color={"shape": [24, 32, 3], "dtype": "float64", "codec": "raw"}),
+        corrupt(good, color={"shape": [24, 32], "dtype": "uint8", "codec": "raw"}),
+        corrupt(good, depth={"shape": [24, 32], "dtype": "float32", "codec": "lz4"}),
+        corrupt(good, depth={"shape": [24, 31], "dtype": "float32", "codec": "raw"}),
+        [corrupt(good, color={"shape": [24, 32, 3], "dtype": "uint8", "codec": "zlib"})[0],
+         b"not zlib", good[2]],
+    ]
+    for frames in bad:
+        with pytest.raises(ProtocolError):
+            decode_keyframe(frames)
