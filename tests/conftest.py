@@ -25,11 +25,14 @@ def gl(gl_session):
     import moderngl
 
     mgl = gl_session.mgl
-    _ = mgl.error  # clear any stale flag
-    yield gl_session
-    gl_session.check_error("test")
-    mgl.disable(moderngl.DEPTH_TEST | moderngl.BLEND | moderngl.CULL_FACE)
-    gl_session.default_fbo.use()
+    # Make the session's context current: tests of other components (the distributed
+    # client) create contexts of their own on this thread.
+    with mgl:
+        _ = mgl.error  # clear any stale flag
+        yield gl_session
+        gl_session.check_error("test")
+        mgl.disable(moderngl.DEPTH_TEST | moderngl.BLEND | moderngl.CULL_FACE)
+        gl_session.default_fbo.use()
 
 
 def make_field(n: int = 64, relief: float = 200.0, spacing: float = 30.0,

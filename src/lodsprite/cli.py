@@ -85,7 +85,8 @@ def render(
     terrain: TerrainOpt = "jacksboro",
     texture: TextureOpt = "terrain",
     path: PathOpt = "chen1999",
-    mode: Annotated[str, typer.Option("--mode", help="full | lod | sprite")] = "full",
+    mode: Annotated[str, typer.Option(
+        "--mode", help="full | lod | sprite | distributed (starts a local LOD server)")] = "full",
     lod: LodOpt = 16,
     size: SizeOpt = "512x512",
     frames: FramesOpt = None,
@@ -114,6 +115,10 @@ def render(
     t.add_row(f"{s['median_ms']:.2f}", f"{s['mean_ms']:.2f}", f"{s['p95_ms']:.2f}",
               f"{s['total_s']:.2f}", f"{s['triangles_mean']:.0f}")
     out.print(t)
+    if s["mode"] == "distributed":
+        out.print(f"keyframes received: {s['keyframes_received']}, σ {s['std_ms']:.2f} ms, "
+                  f"p99 {s['p99_ms']:.2f} ms; server δt {s['delta_t_ms_mean']:.0f} ms, "
+                  f"keyframe render {s['render_ms_mean']:.0f} ms")
     if s["mode"] == "sprite":
         out.print(f"keyframes: {s['keyframes']} of {s['frames']}; mean ms keyframe "
                   f"{s['mean_ms_keyframe']:.1f}, first spriteframe "
@@ -200,6 +205,68 @@ def demo(
     from lodsprite.sprite.reproduce import ReproduceConfig
 
     _run_reproduction(ReproduceConfig.quick() if quick else ReproduceConfig(), out_dir)
+
+
+@app.command()
+def serve(
+    bind: Annotated[str, typer.Option("--bind", help="HOST:PORT; the three connections use "
+                                                     "PORT, PORT+1, PORT+2")] = "127.0.0.1:5555",
+    predictor: Annotated[str, typer.Option("--predictor", help="linear | kalman")] = "linear",
+    codec: Annotated[str, typer.Option("--codec", help="raw | zlib (keyframe images)")] = "raw",
+    allow_remote: Annotated[bool, typer.Option(
+        "--allow-remote", help="allow binding an address other than loopback")] = False,
+) -> None:
+    """The LOD server: renders keyframes for LOD clients; driven entirely by messages."""
+    import logging
+
+    from lodsprite.distributed.protocol import CODECS
+    from lodsprite.distributed.server import PREDICTORS, LodServer
+    from lodsprite.errors import InputError
+
+    host = bind.rpartition(":")[0]
+    if host not in ("127.0.0.1", "localhost", "::1", "[::1]") and not allow_remote:
+        raise InputError(f"binding {bind} exposes the server beyond this machine: "
+                         "add --allow-remote")
+    if predictor not in PREDICTORS:
+        raise InputError(f"unknown predictor '{predictor}': use {', '.join(PREDICTORS)}")
+    if codec not in CODECS:
+        raise InputError(f"unknown codec '{codec}': use {', '.join(CODECS)}")
+    logging.basicConfig(level=logging.INFO, format="lodsprite serve: %(message)s")
+    LodServer(bind, predictor, codec).run()
+
+
+@app.command()
+def client(
+    server: Annotated[list[str] | None, typer.Option(
+        "--server", help="HOST:PORT of a LOD server (default 127.0.0.1:5555); repeat for "
+                         "several")] = None,
+    terrain: TerrainOpt = "jacksboro",
+    texture: TextureOpt = "terrain",
+    path: PathOpt = "swan2002",
+    frames: FramesOpt = None,
+    size: SizeOpt = "512x512",
+    lod: LodOpt = 16,
+    out_dir: Annotated[Path, typer.Option("--out", help="output folder")] = Path("out/client"),
+    grid: GridOpt = None,
+    exaggeration: ExagOpt = DEFAULT_EXAGGERATION,
+    visibility: VisOpt = "coarse",
+) -> None:
+    """The LOD client: draws a scripted path with keyframes from LOD servers."""
+    import logging
+
+    from lodsprite.distributed.run import run_client
+    from lodsprite.run import RenderConfig, parse_size
+
+    logging.basicConfig(level=logging.WARNING, format="lodsprite client: %(message)s")
+    config = RenderConfig(terrain=terrain, texture=texture, path=path, mode="distributed",
+                          lod=lod, size=parse_size(size), frames=frames, grid=grid,
+                          exaggeration=exaggeration, visibility=visibility)
+    with progress_bar("client") as update:
+        s = run_client(config, list(server or ["127.0.0.1:5555"]), out_dir, update)
+    out.print(f"{s['frames']} frames: median {s['median_ms']:.2f} ms, mean {s['mean_ms']:.2f}, "
+              f"σ {s['std_ms']:.2f}, p99 {s['p99_ms']:.2f}; {s['keyframes_received']} keyframes "
+              f"received; δt {s['delta_t_ms_mean']:.0f} ms")
+    out.print(f"wrote {out_dir / 'frames.csv'}, {out_dir / 'summary.json'}")
 
 
 def _one_line(message: str, code: int) -> None:

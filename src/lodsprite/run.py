@@ -28,7 +28,7 @@ from lodsprite.sprite.engine import DEFAULT_EPSILON_PX, FRAME_TYPES, LodSpriteEn
 from lodsprite.terrain import DEFAULT_EXAGGERATION
 from lodsprite.terrain.lod import DEFAULT_COARSE, level_step
 
-MODES = ("full", "lod", "sprite")
+MODES = ("full", "lod", "sprite", "distributed")
 FRAME_COLUMNS = ["frame", "mode", "ms", "triangles"]
 SPRITE_COLUMNS = ["type", "error_px"]
 QUALITY_COLUMNS = ["rmse_sprite", "psnr_sprite", "ssim_sprite", "rmse_lod", "psnr_lod", "ssim_lod"]
@@ -206,6 +206,12 @@ def sprite_frames(pr: PathRenderer, path: CameraPath, config: RenderConfig,
 def render_path(config: RenderConfig, out_dir: Path, progress: Progress | None = None) -> dict:
     """Render ``config``'s path; write ``frames.csv``, ``summary.json`` and optionally PNG
     frames to ``out_dir``; return the summary."""
+    if config.mode == "distributed":
+        from lodsprite.distributed.run import local_server, run_client
+
+        prepare(config)  # report input errors before starting a server
+        with local_server() as address:
+            return run_client(config, [address], Path(out_dir), progress)
     scene, path = prepare(config)
     out_dir = Path(out_dir)
 

@@ -115,6 +115,29 @@ class SpriteRenderer:
                                    projection.matrix() @ viewpoint.view_matrix(), t0)
         return stats
 
+    def upload_keyframe(self, viewpoint: Viewpoint, projection: Projection, color: np.ndarray,
+                        depth: np.ndarray, t0: float) -> None:
+        """Make a keyframe rendered elsewhere (the distributed server) the current one.
+
+        ``color (H, W, 3) uint8`` and ``depth (H, W) float32`` (window depth), row 0 at
+        the top, must match this renderer's image size.  The coarse z-buffer of the
+        ``coarse`` visibility rule is rendered here from the keyframe's viewpoint.
+        """
+        w, h = self.target.size
+        if color.shape != (h, w, 3) or depth.shape != (h, w):
+            raise InputError(f"keyframe images must be {w}x{h}, got colour {color.shape}, "
+                             f"depth {depth.shape}")
+        target, coarse = self.key_targets[self._next], self.coarse_targets[self._next]
+        self._next ^= 1
+        rgba = np.full((h, w, 4), 255, np.uint8)
+        rgba[..., :3] = color
+        target.color.write(np.ascontiguousarray(rgba[::-1]).tobytes())
+        target.depth.write(np.ascontiguousarray(depth[::-1], dtype=np.float32).tobytes())
+        if self.visibility == "coarse":
+            self.terrain.render(viewpoint, self.coarse_quads, projection, coarse)
+        self.keyframe = GLKeyframe(target, coarse, viewpoint, projection,
+                                   projection.matrix() @ viewpoint.view_matrix(), t0)
+
     def render_spriteframe(self, viewpoint: Viewpoint,
                            projection: Projection | None = None) -> FrameStats:
         """Render the coarse level textured from the current keyframe into :attr:`target`."""

@@ -7,12 +7,14 @@ step 3  otherwise render the coarse level texture-mapped with the sprite;
 step 4  go to step 2.
 
 With ``predict=True`` (the default) a due keyframe is rendered from a viewpoint
-extrapolated ahead of the viewer (the paper's §5 proposal, :mod:`lodsprite.sprite.predict`):
-candidate look-aheads of 1, 3/4, 1/2 and 1/4 of the previous keyframe interval are
-tried, largest first, and the first whose keyframe would show the current frame with an
-error under ``PREDICT_MARGIN`` ε (0.9 ε) (computed on the CPU from ``C'`` before any rendering) is
-rendered; the current frame is then a spriteframe from it.  When no candidate passes,
-the keyframe is rendered at the current viewpoint as in the paper.
+extrapolated ahead of the viewer (the paper's §5 proposal, :mod:`lodsprite.sprite.predict`).
+Look-aheads of 1, 3/4, 1/2 and 1/4 of the previous keyframe interval are tried, largest
+first; a candidate is taken when (a) the current frame's error against it, computed on
+the CPU from ``C'`` before any rendering, is under ``PREDICT_MARGIN`` ε (0.9 ε), and
+(b) every coarse square in the current view is also in the candidate's view (otherwise
+the current frame would fall back to the terrain texture along the borders).  The
+current frame is then a spriteframe from it.  When no candidate passes, the keyframe is
+rendered at the current viewpoint, as in the paper.
 
 A frame's time covers everything it costs: choosing the projection, the error
 metric, culling, the GL work, ``C'`` for a new keyframe, and ``ctx.finish()``.
@@ -90,6 +92,9 @@ class LodSpriteEngine:
                 continue
             ahead = extrapolate(self._prev, viewpoint, steps)
             if ahead.o[2] <= float(hf.height_at(ahead.o[0], ahead.o[1])):
+                continue
+            key_proj = self.sprite.terrain.projection(ahead)
+            if not self.metric.covers(viewpoint, projection, ahead, key_proj):
                 continue
             c_prime = self.metric.reproject(ahead.o)
             err = self._error(c_prime, viewpoint, projection)

@@ -29,6 +29,8 @@ import numpy as np
 from lodsprite.terrain.heightfield import HeightField
 from lodsprite.terrain.lod import level_indices, level_step
 
+SEARCH_RADII = (3, 8, 1 << 30)
+
 
 @dataclass(frozen=True)
 class CoarseSquares:
@@ -99,20 +101,42 @@ def _nearest_to_c(t: np.ndarray) -> np.ndarray:
 def reprojected_centres(squares: CoarseSquares, key_eye: np.ndarray) -> np.ndarray:
     """``C'`` for every square ``(n*n, 3)``: the ray ``key_eye -> C`` meeting the coarse surface.
 
-    Of all hits, the one nearest to ``C`` along the ray is kept.  Rays missing the 3x3
-    neighbourhood of their square are tested against every coarse triangle; a ray that
+    Of the hits in the first neighbourhood that has any, the one nearest to ``C`` along
+    the ray is kept.  Rays missing the 3x3
+    neighbourhood of their square are tested against wider neighbourhoods
+    (``SEARCH_RADII`` squares) and finally against every coarse triangle; a ray that
     meets no coarse triangle at all (``C`` stands above the coarse silhouette, so its
     sprite texel is mapped nowhere) gives NaN and is left out of the mean.
     """
     key_eye = np.asarray(key_eye, dtype=np.float64)
     d = squares.centres - key_eye  # C at t = 1
     t_best = _nearest_to_c(ray_triangle_t(key_eye, d, squares.tris))
-    missing = np.flatnonzero(np.isnan(t_best))
-    if missing.size:
-        every = squares.own.reshape(1, -1, 3, 3)
-        all_tris = np.broadcast_to(every, (missing.size, *every.shape[1:]))
-        t_best[missing] = _nearest_to_c(ray_triangle_t(key_eye, d[missing], all_tris))
+    n = squares.level_quads
+    for radius in SEARCH_RADII:
+        missing = np.flatnonzero(np.isnan(t_best))
+        if missing.size == 0:
+            break
+        if radius >= n:  # the whole level
+            every = squares.own.reshape(1, -1, 3, 3)
+            tris = np.broadcast_to(every, (missing.size, *every.shape[1:]))
+        else:
+            tris = _neighbourhood(squares, missing, radius)
+        t_best[missing] = _nearest_to_c(ray_triangle_t(key_eye, d[missing], tris))
+        if radius >= n:
+            break
     return key_eye + t_best[:, None] * d
+
+
+def _neighbourhood(squares: CoarseSquares, index: np.ndarray, radius: int) -> np.ndarray:
+    """Triangles ``(K, 2 (2r+1)^2, 3, 3)`` of the squares within ``radius`` of each square
+    in ``index`` (clamped at the borders, so some repeat)."""
+    n = squares.level_quads
+    r, c = np.divmod(index, n)
+    off = np.arange(-radius, radius + 1)
+    rr = np.clip(r[:, None, None] + off[None, :, None], 0, n - 1)
+    cc = np.clip(c[:, None, None] + off[None, None, :], 0, n - 1)
+    sq = (rr * n + cc).reshape(len(index), -1)
+    return squares.own[sq].reshape(len(index), -1, 3, 3)
 
 
 def angles_at_eye(eye: np.ndarray, p: np.ndarray, q: np.ndarray) -> np.ndarray:
@@ -160,6 +184,12 @@ class ErrorMetric:
         vis = in_view(self._centres_h, view_proj)
         return angles_at_eye(np.asarray(eye, dtype=np.float64), self.squares.centres[vis],
                              c_prime[vis])
+
+    def covers(self, viewpoint, projection, key_viewpoint, key_projection) -> bool:
+        """Whether every square centre in the current view is also in the keyframe's view."""
+        cur = in_view(self._centres_h, projection.matrix() @ viewpoint.view_matrix())
+        key = in_view(self._centres_h, key_projection.matrix() @ key_viewpoint.view_matrix())
+        return bool(np.all(key[cur]))
 
     def error_px(self, c_prime: np.ndarray, eye: np.ndarray, view_proj: np.ndarray,
                  pixel_angle_rad: float) -> float:

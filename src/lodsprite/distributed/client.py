@@ -1,0 +1,234 @@
+"""The LOD client (Swan et al. 2002, §3.2, Figure 5): spriteframes from server keyframes.
+
+SPRITEFRAME-RENDERER (:meth:`LodClient.frame`, on the caller's thread, which owns the GL
+context): send the viewpoint (never blocks; the server keeps only the newest), drain
+the CLIENT-KEYFRAME-QUEUE to its newest keyframe, render the coarse level textured from
+it with the LOD-sprite visibility rules.  It never waits for a keyframe: with none yet
+(no server, or a server that died before sending one) it renders keyframes itself with
+the 1999 algorithm.
+
+KEYFRAME-RECEIVER (a thread): receives keyframes from every server, acknowledges them,
+drops any not newer than the last one from the same server, and queues the rest.
+CLIENT-CONTROL (a thread): loads the scene on each server and starts it, pings every
+second and loads again when a server comes back after a restart.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+import threading
+import time
+from dataclasses import dataclass
+
+import zmq
+
+from lodsprite.distributed.protocol import (
+    Keyframe,
+    ProtocolError,
+    decode,
+    decode_keyframe,
+    encode,
+    viewpoint_to_wire,
+)
+from lodsprite.distributed.queue import KeyframeQueue
+from lodsprite.distributed.server import endpoints
+from lodsprite.gl.sprite import SpriteRenderer
+from lodsprite.run import PathRenderer
+from lodsprite.scene import Scene
+from lodsprite.sprite.engine import LodSpriteEngine
+
+log = logging.getLogger("lodsprite.client")
+
+CONTROL_TIMEOUT_MS = 1000
+SILENCE_S = 3.0  # no keyframe for this long while a server should be sending: say so
+
+
+@dataclass(frozen=True)
+class ClientFrame:
+    """One client frame: ``type`` is ``keyframe`` (a server keyframe was taken this frame),
+    ``sprite``, or ``local_keyframe`` / ``local_sprite`` (drawn without any server
+    keyframe); wall time in ms; triangles drawn."""
+
+    type: str
+    ms: float
+    triangles: int
+    keyframe_seq: int
+
+
+class _Server:
+    """The client's three sockets to one server."""
+
+    def __init__(self, ctx: zmq.Context, address: str) -> None:
+        self.address = address
+        self.control_ep, self.viewpoint_ep, self.keyframe_ep = endpoints(address, bind=False)
+        self.ctx = ctx
+        self.viewpoint = ctx.socket(zmq.PUB)
+        self.viewpoint.setsockopt(zmq.SNDHWM, 1)
+        self.viewpoint.connect(self.viewpoint_ep)
+        self.keyframes = ctx.socket(zmq.DEALER)
+        self.keyframes.connect(self.keyframe_ep)
+        self.control: zmq.Socket | None = None
+        self.last_seq = 0
+        self.loaded = False
+        self.lock = threading.Lock()  # the control socket moves between threads
+
+    def request(self, header: dict) -> dict | None:
+        """Send a control message; the reply header, or None if the server did not answer
+        (the REQ socket is then replaced, as a REQ cannot send twice in a row)."""
+        with self.lock:
+            return self._request(header)
+
+    def _request(self, header: dict) -> dict | None:
+        if self.control is None:
+            self.control = self.ctx.socket(zmq.REQ)
+            self.control.setsockopt(zmq.LINGER, 0)
+            self.control.connect(self.control_ep)
+        self.control.send_multipart(encode(header))
+        if self.control.poll(CONTROL_TIMEOUT_MS):
+            try:
+                return decode(self.control.recv_multipart())[0]
+            except ProtocolError as exc:
+                log.warning("rejected control reply from %s: %s", self.address, exc)
+                return None
+        self.control.close(linger=0)
+        self.control = None
+        return None
+
+    def close(self) -> None:
+        for s in (self.viewpoint, self.keyframes, self.control):
+            if s is not None:
+                s.close(linger=0)
+
+
+class LodClient:
+    """Spriteframes along any viewpoint stream, keyframes from one or more LOD servers."""
+
+    def __init__(self, scene: Scene, scene_args: dict, servers: list[str],
+                 size: tuple[int, int] = (512, 512), lod: int = 16,
+                 visibility: str = "coarse", epsilon: float = 1.0) -> None:
+        self.scene_args = scene_args
+        self.paths = PathRenderer(scene, size, float(scene_args.get("fov_y_deg", 45.0)))
+        self.sprite = SpriteRenderer(self.paths.renderer, lod, visibility)
+        self.local = LodSpriteEngine(self.sprite, epsilon)
+        self.queue: KeyframeQueue[tuple[str, Keyframe]] = KeyframeQueue(2)
+        self._zmq = zmq.Context()
+        self._servers = [_Server(self._zmq, a) for a in servers]
+        self._stop = threading.Event()
+        self._counter = itertools.count(1)
+        self._current: Keyframe | None = None
+        self._last_arrival = time.perf_counter()
+        self._silent = False
+        self.rejected_messages = 0
+        self._threads = [threading.Thread(target=self._receive, daemon=True),
+                         threading.Thread(target=self._control, daemon=True)]
+        for t in self._threads:
+            t.start()
+
+    # ------------------------------------------------------------------ CLIENT-CONTROL
+
+    def _ctl(self, server: _Server, op: str, args: dict | None = None) -> dict | None:
+        return server.request({"kind": "control", "seq": next(self._counter), "op": op,
+                               "args": args or {}})
+
+    def _control(self) -> None:
+        while not self._stop.is_set():
+            for s in self._servers:
+                reply = self._ctl(s, "ping")
+                if reply is None:
+                    s.loaded = False
+                    continue
+                if not s.loaded or not reply.get("data", {}).get("running"):
+                    s.last_seq = 0  # a restarted server counts from 1 again
+                    for op, args in (("load", self.scene_args), ("start", {})):
+                        self._ctl(s, op, args)
+                    s.loaded = True
+            self._stop.wait(1.0)
+
+    # ---------------------------------------------------------------- KEYFRAME-RECEIVER
+
+    def _receive(self) -> None:
+        poller = zmq.Poller()
+        for s in self._servers:
+            poller.register(s.keyframes, zmq.POLLIN)
+        by_socket = {s.keyframes: s for s in self._servers}
+        while not self._stop.is_set():
+            for sock, _ in poller.poll(50):
+                s = by_socket[sock]
+                frames = sock.recv_multipart()
+                try:
+                    kf = decode_keyframe(frames)
+                except ProtocolError as exc:
+                    self.rejected_messages += 1
+                    log.warning("rejected keyframe from %s: %s", s.address, exc)
+                    continue
+                sock.send_multipart(encode({"kind": "ack", "seq": kf.seq,
+                                            "t": time.perf_counter()}))
+                if kf.seq <= s.last_seq:
+                    continue  # older than one already taken from this server
+                s.last_seq = kf.seq
+                if not self.queue.put((s.address, kf), timeout=0):
+                    self.queue.drain()  # full: newest wins
+                    self.queue.put((s.address, kf), timeout=0)
+
+    # ------------------------------------------------------------ SPRITEFRAME-RENDERER
+
+    def frame(self, viewpoint) -> ClientFrame:
+        """Draw one frame for ``viewpoint``; returns once its GL work has finished."""
+        t0 = time.perf_counter()
+        msg = encode({"kind": "viewpoint", "seq": next(self._counter), "t": t0,
+                      "viewpoint": viewpoint_to_wire(viewpoint)})
+        for s in self._servers:
+            try:
+                s.viewpoint.send_multipart(msg, flags=zmq.NOBLOCK)
+            except zmq.Again:
+                pass
+        newest = self.queue.drain()
+        kind = "sprite"
+        if newest is not None:
+            _, kf = newest
+            self.sprite.upload_keyframe(kf.viewpoint, kf.projection, kf.color, kf.depth, kf.t0)
+            self._current, kind = kf, "keyframe"
+            self._last_arrival = t0
+            if self._silent:
+                log.warning("keyframes arrive again")
+                self._silent = False
+        if self._current is None:
+            f = self.local.frame(viewpoint)
+            kind = "local_keyframe" if f.type == "keyframe" else "local_sprite"
+            triangles = f.triangles
+        else:
+            triangles = self.sprite.render_spriteframe(viewpoint).triangles
+            self.paths.ctx.finish()
+            if t0 - self._last_arrival > SILENCE_S and not self._silent:
+                log.warning("no keyframe for %.0f s: drawing from the last one", SILENCE_S)
+                self._silent = True
+        seq = self._current.seq if self._current is not None else 0
+        return ClientFrame(kind, (time.perf_counter() - t0) * 1e3, triangles, seq)
+
+    def image(self):
+        """The last frame's image, ``(H, W, 3) uint8``."""
+        if self._current is None:
+            return self.local.image_target.read_color()
+        return self.sprite.target.read_color()
+
+    def server_stats(self) -> list[dict]:
+        out = []
+        for s in self._servers:
+            reply = self._ctl(s, "stats")
+            out.append(reply.get("data", {}) if reply else {})
+        return out
+
+    def close(self, shutdown_servers: bool = False) -> None:
+        if shutdown_servers:
+            for s in self._servers:
+                self._ctl(s, "shutdown")
+        self._stop.set()
+        self.queue.close()
+        for t in self._threads:
+            t.join(timeout=3.0)
+        for s in self._servers:
+            s.close()
+        self._zmq.term()
+        self.sprite.release()
+        self.paths.release()

@@ -1,0 +1,135 @@
+"""Running the distributed programs: a client along a scripted path, a local server.
+
+``lodsprite client`` and ``lodsprite render --mode distributed`` call :func:`run_client`,
+which writes ``frames.csv`` and ``summary.json`` like ``lodsprite render``; the latter
+first starts a server process on free loopback ports (:func:`local_server`).
+"""
+
+from __future__ import annotations
+
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from contextlib import contextmanager
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from lodsprite.distributed.client import LodClient
+from lodsprite.distributed.render import scene_args
+from lodsprite.errors import LodspriteError
+from lodsprite.report.io import write_csv, write_json
+from lodsprite.run import RenderConfig, prepare, timing_summary
+
+FRAME_COLUMNS = ["frame", "mode", "ms", "triangles", "type", "keyframe_seq"]
+
+
+def free_ports(count: int = 3, host: str = "127.0.0.1") -> int:
+    """A base port with ``count`` consecutive free TCP ports on ``host``."""
+    for _ in range(50):
+        with socket.socket() as s:
+            s.bind((host, 0))
+            base = s.getsockname()[1]
+        if base + count >= 65535:
+            continue
+        try:
+            socks = []
+            for i in range(count):
+                t = socket.socket()
+                socks.append(t)
+                t.bind((host, base + i))
+            return base
+        except OSError:
+            continue
+        finally:
+            for t in socks:
+                t.close()
+    raise LodspriteError("found no free consecutive ports on the loopback interface")
+
+
+@contextmanager
+def local_server(predictor: str = "linear"):
+    """A LOD server process on free loopback ports; yields its ``HOST:PORT``."""
+    port = free_ports()
+    address = f"127.0.0.1:{port}"
+    proc = subprocess.Popen([sys.executable, "-c", "from lodsprite.cli import main; main()",
+                             "serve", "--bind", address, "--predictor", predictor],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    try:
+        yield address
+    finally:
+        if proc.poll() is None:
+            proc.terminate()
+        try:
+            proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+        if proc.stderr is not None:
+            proc.stderr.close()
+
+
+def run_client(config: RenderConfig, servers: list[str], out_dir: Path,
+               progress: Callable[[int, int], None] | None = None,
+               warmup_s: float = 10.0) -> dict:
+    """Draw ``config``'s path with keyframes from ``servers``; write outputs; return summary.
+
+    Before the timed frames the client waits (up to ``warmup_s``) for a first keyframe,
+    so that server start-up is not counted as frames drawn without one.
+    """
+    scene, path = prepare(replace(config, mode="sprite"))
+    args = scene_args(config.terrain, config.texture, config.grid, config.exaggeration,
+                      config.size, config.fov_y_deg)
+    client = LodClient(scene, args, servers, config.size, config.lod, config.visibility,
+                       config.epsilon)
+    rows = []
+    try:
+        deadline = time.perf_counter() + warmup_s
+        while time.perf_counter() < deadline:
+            if client.frame(path.viewpoints[0]).type == "keyframe":
+                break
+            time.sleep(0.02)
+        for i, vp in enumerate(path.viewpoints):
+            f = client.frame(vp)
+            rows.append({"frame": i, "mode": "distributed", "ms": f.ms,
+                         "triangles": f.triangles, "type": f.type,
+                         "keyframe_seq": f.keyframe_seq})
+            if progress:
+                progress(i + 1, len(path))
+        stats = client.server_stats()
+        info = client.paths.ctx.info
+    finally:
+        client.close()
+    summary = _summary(config, rows, stats, info.renderer, servers)
+    summary.update(grid=scene.hf.quads, lod=config.lod,
+                   triangles_mean=float(np.mean([r["triangles"] for r in rows])))
+    write_csv(out_dir / "frames.csv", rows, FRAME_COLUMNS)
+    write_json(out_dir / "summary.json", summary)
+    return summary
+
+
+def _mean(values) -> float:
+    return float(np.mean(values)) if len(values) else float("nan")
+
+
+def _summary(config: RenderConfig, rows: list[dict], stats: list[dict], renderer: str,
+             servers: list[str]) -> dict:
+    ms = np.array([r["ms"] for r in rows])
+    received = sum(r["type"] == "keyframe" for r in rows)
+    server = {k: _mean([v for s in stats for v in s.get(k, [])])
+              for k in ("production_ms", "viewpoint_wait_ms", "render_ms", "queue_insert_ms",
+                        "delta_t_ms", "queue_retrieve_ms", "transmission_ms")}
+    return {
+        "frames": len(rows), "mode": "distributed", "terrain": config.terrain,
+        "path": config.path, "size": list(config.size), "servers": servers,
+        **timing_summary(ms),
+        "p99_ms": float(np.percentile(ms, 99)),
+        "keyframes_received": received,
+        "sprites_per_keyframe": (len(rows) - received) / received if received else None,
+        "local_frames": sum(r["type"].startswith("local") for r in rows),
+        **{f"{k.removesuffix('_ms')}_ms_mean": v for k, v in server.items()},
+        "gl_renderer": renderer,
+    }

@@ -1,0 +1,260 @@
+"""The LOD server (Swan, Arango & Nakshatrala 2002, §3.3, Figures 6-7): renders keyframes.
+
+No user interface: it is driven by messages on three connections, bound to consecutive
+ports ``port``, ``port + 1``, ``port + 2`` (the paper's Figure 4):
+
+* control (REP): ``ping``, ``load`` (terrain, texture, grid, exaggeration, size, fov),
+  ``start``, ``stop``, ``stats``, ``shutdown``;
+* viewpoint (SUB, conflated: the newest viewpoint wins);
+* keyframe (DEALER): keyframes out, acknowledgements back.
+
+Modules, each a thread: SERVER-CONTROL, the viewpoint receiver feeding the
+VIEWPOINT-PREDICTOR, KEYFRAME-RENDERER (owns the GL context), SERVER-KEYFRAME-QUEUE
+(capacity 2) and KEYFRAME-TRANSMITTER, which measures ``δt = t1 - t0``.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from dataclasses import dataclass, field
+
+import zmq
+
+from lodsprite.distributed.predictors import DecayLinearPredictor, KalmanPredictor
+from lodsprite.distributed.protocol import (
+    Keyframe,
+    ProtocolError,
+    decode,
+    encode,
+    encode_keyframe,
+    viewpoint_from_wire,
+)
+from lodsprite.distributed.queue import Closed, KeyframeQueue
+from lodsprite.errors import LodspriteError
+
+log = logging.getLogger("lodsprite.server")
+
+DEFAULT_BIND = "127.0.0.1:5555"
+ACK_TIMEOUT_S = 5.0
+PREDICTORS = {"linear": DecayLinearPredictor, "kalman": KalmanPredictor}
+
+
+def endpoints(address: str, bind: bool) -> tuple[str, str, str]:
+    """ZeroMQ endpoints of the three connections from ``HOST:PORT`` (consecutive ports)."""
+    host, _, port = address.rpartition(":")
+    if not host or not port.isdigit() or not 0 < int(port) < 65534:
+        raise LodspriteError(f"address must look like HOST:PORT, got '{address}'")
+    p = int(port)
+    host = "*" if bind and host in ("0.0.0.0", "*") else host
+    return tuple(f"tcp://{host}:{p + i}" for i in range(3))  # type: ignore[return-value]
+
+
+@dataclass
+class ServerStats:
+    """Per-keyframe timings (ms) of Figures 11-12."""
+
+    production_ms: list = field(default_factory=list)
+    viewpoint_wait_ms: list = field(default_factory=list)
+    render_ms: list = field(default_factory=list)
+    queue_insert_ms: list = field(default_factory=list)
+    delta_t_ms: list = field(default_factory=list)
+    queue_retrieve_ms: list = field(default_factory=list)
+    transmission_ms: list = field(default_factory=list)
+    rejected_messages: int = 0
+
+    def as_dict(self) -> dict:
+        return {k: list(v) if isinstance(v, list) else v for k, v in self.__dict__.items()}
+
+
+class LodServer:
+    """A keyframe server; :meth:`run` blocks until a ``shutdown`` message."""
+
+    def __init__(self, bind: str = DEFAULT_BIND, predictor: str = "linear",
+                 codec: str = "raw") -> None:
+        self.addresses = endpoints(bind, bind=True)
+        self.predictor_name = predictor
+        self.codec = codec
+        self.stats = ServerStats()
+        self.queue: KeyframeQueue[Keyframe] = KeyframeQueue(2)
+        self._ctx = zmq.Context()
+        self._stop = threading.Event()
+        self._running = threading.Event()
+        self._scene_lock = threading.Lock()
+        self._scene_request: dict | None = None
+        self._latest_lock = threading.Lock()
+        self._predictor = PREDICTORS[predictor]()
+        self._have_viewpoint = threading.Event()
+        self._delta_t = 0.5  # seconds, until the transmitter has measured one
+        self._seq = 0
+
+    # ----------------------------------------------------------------- SERVER-CONTROL
+
+    def run(self) -> None:
+        control = self._ctx.socket(zmq.REP)
+        control.bind(self.addresses[0])
+        threads = [threading.Thread(target=f, daemon=True, name=f.__name__)
+                   for f in (self._receive_viewpoints, self._render_keyframes,
+                             self._transmit_keyframes)]
+        for t in threads:
+            t.start()
+        log.info("LOD server on %s", ", ".join(self.addresses))
+        try:
+            while not self._stop.is_set():
+                if not control.poll(100):
+                    continue
+                frames = control.recv_multipart()
+                control.send_multipart(encode(self._control(frames)))
+        finally:
+            self._stop.set()
+            self.queue.close()
+            for t in threads:
+                t.join(timeout=5.0)
+            control.close(linger=0)
+            self._ctx.term()
+
+    def _control(self, frames: list[bytes]) -> dict:
+        try:
+            header, _ = decode(frames)
+        except ProtocolError as exc:
+            self.stats.rejected_messages += 1
+            log.warning("rejected control message: %s", exc)
+            return {"kind": "reply", "seq": 0, "ok": False, "error": str(exc)}
+        op, seq = header.get("op"), header["seq"]
+        reply = {"kind": "reply", "seq": seq, "ok": True, "error": "", "data": {}}
+        if header["kind"] != "control":
+            return {**reply, "ok": False, "error": "expected a control message"}
+        if op == "ping":
+            reply["data"] = {"running": self._running.is_set()}
+        elif op == "load":
+            with self._scene_lock:
+                self._scene_request = dict(header.get("args") or {})
+        elif op == "start":
+            self._running.set()
+        elif op == "stop":
+            self._running.clear()
+        elif op == "stats":
+            reply["data"] = self.stats.as_dict()
+        elif op == "shutdown":
+            self._stop.set()
+        else:
+            reply.update(ok=False, error=f"unknown control op {op!r}")
+        return reply
+
+    # ------------------------------------------------------ viewpoints and prediction
+
+    def _receive_viewpoints(self) -> None:
+        sock = self._ctx.socket(zmq.SUB)
+        sock.setsockopt(zmq.CONFLATE, 1)
+        sock.setsockopt(zmq.SUBSCRIBE, b"")
+        sock.bind(self.addresses[1])
+        try:
+            while not self._stop.is_set():
+                if not sock.poll(50):
+                    continue
+                frames = sock.recv_multipart()
+                try:
+                    header, _ = decode(frames)
+                    if header["kind"] != "viewpoint":
+                        raise ProtocolError("expected a viewpoint message")
+                    vp = viewpoint_from_wire(header.get("viewpoint"))
+                except ProtocolError as exc:
+                    self.stats.rejected_messages += 1
+                    log.warning("rejected viewpoint message: %s", exc)
+                    continue
+                with self._latest_lock:
+                    self._predictor.observe(time.perf_counter(), vp)
+                self._have_viewpoint.set()
+        finally:
+            sock.close(linger=0)
+
+    def _predicted_viewpoint(self):
+        with self._latest_lock:
+            return self._predictor.predict(self._delta_t)
+
+    # -------------------------------------------------------------- KEYFRAME-RENDERER
+
+    def _render_keyframes(self) -> None:
+        from lodsprite.distributed.render import KeyframeRenderer
+
+        renderer: KeyframeRenderer | None = None
+        try:
+            while not self._stop.is_set():
+                with self._scene_lock:
+                    request, self._scene_request = self._scene_request, None
+                if request is not None:
+                    if renderer is not None:
+                        renderer.release()
+                    renderer = KeyframeRenderer(request)
+                if renderer is None or not self._running.is_set():
+                    time.sleep(0.01)
+                    continue
+                self._produce(renderer)
+        except Closed:
+            pass
+        finally:
+            if renderer is not None:
+                renderer.release()
+
+    def _produce(self, renderer) -> None:
+        t0 = time.perf_counter()
+        if not self._have_viewpoint.wait(0.1):
+            return
+        vp = self._predicted_viewpoint()
+        t1 = time.perf_counter()
+        self._seq += 1
+        kf = renderer.render(vp, self._seq, t0)
+        t2 = time.perf_counter()
+        while not self.queue.put(kf, timeout=0.1):
+            if self._stop.is_set() or not self._running.is_set():
+                return
+        t3 = time.perf_counter()
+        s = self.stats
+        s.viewpoint_wait_ms.append((t1 - t0) * 1e3)
+        s.render_ms.append((t2 - t1) * 1e3)
+        s.queue_insert_ms.append((t3 - t2) * 1e3)
+        s.production_ms.append((t3 - t0) * 1e3)
+
+    # ----------------------------------------------------------- KEYFRAME-TRANSMITTER
+
+    def _transmit_keyframes(self) -> None:
+        sock = self._ctx.socket(zmq.DEALER)
+        sock.setsockopt(zmq.SNDHWM, 2)
+        sock.bind(self.addresses[2])
+        try:
+            while not self._stop.is_set():
+                t_wait = time.perf_counter()
+                kf = self.queue.get(timeout=0.1)
+                if kf is None:
+                    continue
+                t_send = time.perf_counter()
+                sock.send_multipart(encode_keyframe(kf, self.codec), copy=False)
+                if not self._await_ack(sock, kf.seq):
+                    log.warning("no acknowledgement for keyframe %d", kf.seq)
+                    continue
+                t1 = time.perf_counter()
+                self._delta_t = t1 - kf.t0
+                s = self.stats
+                s.queue_retrieve_ms.append((t_send - t_wait) * 1e3)
+                s.transmission_ms.append((t1 - t_send) * 1e3)
+                s.delta_t_ms.append(self._delta_t * 1e3)
+        except Closed:
+            pass
+        finally:
+            sock.close(linger=0)
+
+    def _await_ack(self, sock, seq: int) -> bool:
+        deadline = time.perf_counter() + ACK_TIMEOUT_S
+        while not self._stop.is_set() and time.perf_counter() < deadline:
+            if not sock.poll(50):
+                continue
+            try:
+                header, _ = decode(sock.recv_multipart())
+            except ProtocolError as exc:
+                self.stats.rejected_messages += 1
+                log.warning("rejected acknowledgement: %s", exc)
+                continue
+            if header["kind"] == "ack" and header["seq"] == seq:
+                return True
+        return False

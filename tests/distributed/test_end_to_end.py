@@ -1,0 +1,132 @@
+"""Server and client over loopback, as separate processes, with faults."""
+
+import csv
+import json
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from lodsprite.distributed.client import LodClient
+from lodsprite.distributed.render import scene_args
+from lodsprite.distributed.run import free_ports
+from lodsprite.run import RenderConfig, prepare
+
+SMALL = RenderConfig(terrain="fractal:64:2", size=(64, 64), lod=8, frames=40,
+                     path="chen1999", mode="sprite")
+
+
+def start_server(address):
+    return subprocess.Popen([sys.executable, "-c", "from lodsprite.cli import main; main()",
+                             "serve", "--bind", address],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+
+def stop(proc):
+    if proc.poll() is None:
+        proc.kill()
+    proc.wait(timeout=10)
+
+
+def wait_for(client, vp, kind="keyframe", timeout=20.0):
+    deadline = time.perf_counter() + timeout
+    while time.perf_counter() < deadline:
+        if client.frame(vp).type == kind:
+            return True
+        time.sleep(0.02)
+    return False
+
+
+def test_render_mode_distributed_writes_frames_and_server_statistics(tmp_path):
+    out = tmp_path / "d"
+    proc = subprocess.run([sys.executable, "-c", "from lodsprite.cli import main; main()",
+                           "render", "--mode", "distributed", "--terrain", "fractal:64:2",
+                           "--size", "64x64", "--lod", "8", "--frames", "30", "--out", str(out)],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    rows = list(csv.DictReader((out / "frames.csv").open()))
+    assert len(rows) == 30
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["keyframes_received"] >= 1
+    assert summary["delta_t_ms_mean"] > 0 and summary["render_ms_mean"] > 0
+
+
+@pytest.fixture
+def scene():
+    return prepare(SMALL)
+
+
+def test_client_keeps_drawing_when_the_server_dies_and_resumes_when_it_returns(scene):
+    sc, path = scene
+    address = f"127.0.0.1:{free_ports()}"
+    server = start_server(address)
+    args = scene_args(SMALL.terrain, SMALL.texture, None, SMALL.exaggeration, SMALL.size)
+    client = LodClient(sc, args, [address], SMALL.size, SMALL.lod)
+    try:
+        assert wait_for(client, path.viewpoints[0])
+        stop(server)
+        frames = [client.frame(vp) for vp in path.viewpoints]
+        # Every frame is drawn: from keyframes still queued, then from the last one.
+        assert {f.type for f in frames} <= {"keyframe", "sprite"}
+        assert all(f.type == "sprite" for f in frames[5:])
+        assert not np.all(client.image() == client.image()[0, 0])
+        server = start_server(address)
+        assert wait_for(client, path.viewpoints[5], timeout=30.0)
+    finally:
+        client.close(shutdown_servers=True)
+        stop(server)
+
+
+def test_client_without_any_server_renders_keyframes_itself(scene):
+    sc, path = scene
+    address = f"127.0.0.1:{free_ports()}"
+    args = scene_args(SMALL.terrain, SMALL.texture, None, SMALL.exaggeration, SMALL.size)
+    client = LodClient(sc, args, [address], SMALL.size, SMALL.lod)
+    try:
+        frames = [client.frame(vp) for vp in path.viewpoints[:10]]
+    finally:
+        client.close()
+    assert frames[0].type == "local_keyframe"
+    assert {f.type for f in frames} <= {"local_keyframe", "local_sprite"}
+
+
+def test_server_rejects_garbage_and_keeps_serving(scene):
+    import zmq
+
+    from lodsprite.distributed.protocol import decode, encode
+    from lodsprite.distributed.server import endpoints
+
+    address = f"127.0.0.1:{free_ports()}"
+    server = start_server(address)
+    ctx = zmq.Context()
+    try:
+        control = ctx.socket(zmq.REQ)
+        control.setsockopt(zmq.RCVTIMEO, 10000)
+        control.connect(endpoints(address, bind=False)[0])
+        control.send_multipart([b"\x00garbage"])
+        header, _ = decode(control.recv_multipart())
+        assert header["ok"] is False
+        control.send_multipart(encode({"kind": "control", "seq": 1, "op": "ping"}))
+        header, _ = decode(control.recv_multipart())
+        assert header["ok"] is True
+        control.send_multipart(encode({"kind": "control", "seq": 2, "op": "stats"}))
+        header, _ = decode(control.recv_multipart())
+        assert header["data"]["rejected_messages"] == 1
+        control.send_multipart(encode({"kind": "control", "seq": 3, "op": "shutdown"}))
+        decode(control.recv_multipart())
+        assert server.wait(timeout=10) == 0
+        control.close(linger=0)
+    finally:
+        ctx.term()
+        stop(server)
+
+
+def test_serve_refuses_non_loopback_without_flag():
+    proc = subprocess.run([sys.executable, "-c", "from lodsprite.cli import main; main()",
+                           "serve", "--bind", "0.0.0.0:5999"], capture_output=True, text=True,
+                          timeout=60)
+    assert proc.returncode == 2 and "--allow-remote" in proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1
+
