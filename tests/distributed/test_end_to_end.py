@@ -130,3 +130,29 @@ def test_serve_refuses_non_loopback_without_flag():
     assert proc.returncode == 2 and "--allow-remote" in proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1
 
+
+
+def test_interrupted_client_writes_complete_statistics(tmp_path):
+    import signal
+
+    address = f"127.0.0.1:{free_ports()}"
+    server = start_server(address)
+    out = tmp_path / "c"
+    client = subprocess.Popen([sys.executable, "-c", "from lodsprite.cli import main; main()",
+                               "client", "--server", address, "--terrain", "fractal:64:2",
+                               "--size", "256x256", "--lod", "8", "--path", "chen1999",
+                               "--frames", "30000", "--out", str(out)],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        time.sleep(10.0)  # start-up, path, first keyframe, then some frames
+        client.send_signal(signal.SIGINT)
+        _, err = client.communicate(timeout=60)
+    finally:
+        stop(server)
+        if client.poll() is None:
+            client.kill()
+    assert client.returncode == 130, err
+    assert "Traceback" not in err
+    rows = list(csv.DictReader((out / "frames.csv").open()))
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["interrupted"] is True and summary["frames"] == len(rows) > 0

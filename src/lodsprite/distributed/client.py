@@ -31,7 +31,7 @@ from lodsprite.distributed.protocol import (
     encode,
     viewpoint_to_wire,
 )
-from lodsprite.distributed.queue import KeyframeQueue
+from lodsprite.distributed.queue import Closed, KeyframeQueue
 from lodsprite.distributed.server import endpoints
 from lodsprite.gl.sprite import SpriteRenderer
 from lodsprite.run import PathRenderer
@@ -167,9 +167,12 @@ class LodClient:
                 if kf.seq <= s.last_seq:
                     continue  # older than one already taken from this server
                 s.last_seq = kf.seq
-                if not self.queue.put((s.address, kf), timeout=0):
-                    self.queue.drain()  # full: newest wins
-                    self.queue.put((s.address, kf), timeout=0)
+                try:
+                    if not self.queue.put((s.address, kf), timeout=0):
+                        self.queue.drain()  # full: newest wins
+                        self.queue.put((s.address, kf), timeout=0)
+                except Closed:
+                    return  # the client is closing
 
     # ------------------------------------------------------------ SPRITEFRAME-RENDERER
 

@@ -85,13 +85,12 @@ def run_client(config: RenderConfig, servers: list[str], out_dir: Path,
                       config.size, config.fov_y_deg)
     client = LodClient(scene, args, servers, config.size, config.lod, config.visibility,
                        config.epsilon)
-    rows = []
+    rows: list[dict] = []
+    interrupted = False
+    stats: list[dict] = []
+    summary: dict = {}
     try:
-        deadline = time.perf_counter() + warmup_s
-        while time.perf_counter() < deadline:
-            if client.frame(path.viewpoints[0]).type == "keyframe":
-                break
-            time.sleep(0.02)
+        _wait_for_first_keyframe(client, path.viewpoints[0], warmup_s)
         for i, vp in enumerate(path.viewpoints):
             f = client.frame(vp)
             rows.append({"frame": i, "mode": "distributed", "ms": f.ms,
@@ -99,16 +98,30 @@ def run_client(config: RenderConfig, servers: list[str], out_dir: Path,
                          "keyframe_seq": f.keyframe_seq})
             if progress:
                 progress(i + 1, len(path))
-        stats = client.server_stats()
-        info = client.paths.ctx.info
+    except KeyboardInterrupt:
+        interrupted = True  # write what was measured, completely, then stop
     finally:
+        if rows:
+            stats = client.server_stats()
+        info = client.paths.ctx.info
         client.close()
-    summary = _summary(config, rows, stats, info.renderer, servers)
-    summary.update(grid=scene.hf.quads, lod=config.lod,
-                   triangles_mean=float(np.mean([r["triangles"] for r in rows])))
-    write_csv(out_dir / "frames.csv", rows, FRAME_COLUMNS)
-    write_json(out_dir / "summary.json", summary)
+    if rows:
+        summary = _summary(config, rows, stats, info.renderer, servers)
+        summary.update(grid=scene.hf.quads, lod=config.lod, interrupted=interrupted,
+                       triangles_mean=float(np.mean([r["triangles"] for r in rows])))
+        write_csv(out_dir / "frames.csv", rows, FRAME_COLUMNS)
+        write_json(out_dir / "summary.json", summary)
+    if interrupted:
+        raise KeyboardInterrupt
     return summary
+
+
+def _wait_for_first_keyframe(client: LodClient, viewpoint, timeout_s: float) -> None:
+    deadline = time.perf_counter() + timeout_s
+    while time.perf_counter() < deadline:
+        if client.frame(viewpoint).type == "keyframe":
+            return
+        time.sleep(0.02)
 
 
 def _mean(values) -> float:
