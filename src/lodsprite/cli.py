@@ -165,9 +165,38 @@ def _print_reproduction(r: dict, report: Path) -> None:
     out.print(f"GL: {r['gl_renderer']}   report: {report}")
 
 
+def _run_swan2002(out_dir: Path, terrain: str, quick: bool, size: int, lod: int) -> None:
+    from lodsprite.distributed.reproduce import SwanConfig, reproduce_swan2002
+    from lodsprite.report.swan2002 import write_plots, write_report
+
+    if out_dir == Path("out/chen1999"):
+        out_dir = Path("out/swan2002")
+    kw = {"terrain": terrain, "lod": lod}
+    cfg = SwanConfig.quick(**kw) if quick else SwanConfig(size=size, **kw)
+    with progress_bar("reproduce swan2002 (set-ups)") as update:
+        r = reproduce_swan2002(cfg, out_dir, update)
+    report = write_report(r, out_dir, write_plots(r, out_dir))
+    t = Table(title=f"Swan et al. 2002 reproduced: {cfg.terrain}, {cfg.frames} frames")
+    for col in ("set-up", "client mean ms", "σ ms", "p99 ms", "sprites/keyframe", "δt ms"):
+        t.add_column(col, justify="right")
+    for s in ("inline", "same_cores", "separate"):
+        x = r.get(s, {})
+        if "skipped" in x:
+            t.add_row(s, "skipped", "", "", "", "")
+            continue
+        spk, dt = x.get("sprites_per_keyframe"), x.get("delta_t_ms_mean")
+        t.add_row(s, f"{x['client_ms_mean']:.2f}", f"{x['client_ms_std']:.2f}",
+                  f"{x['client_ms_p99']:.2f}", "—" if spk is None else f"{spk:.1f}",
+                  "—" if dt is None else f"{dt:.0f}")
+    t.add_row("paper distributed", "61.9", "14.8", "", "34.3", "8940")
+    t.add_row("paper non-distributed", "256", "225", "", "", "")
+    out.print(t)
+    out.print(f"report: {report}")
+
+
 @app.command()
 def reproduce(
-    experiment: Annotated[str, typer.Argument(help="chen1999")],
+    experiment: Annotated[str, typer.Argument(help="chen1999 | swan2002")],
     out_dir: Annotated[Path, typer.Option("--out", help="output folder")] = Path("out/chen1999"),
     terrain: TerrainOpt = "jacksboro",
     size: Annotated[int, typer.Option("--size", help="image size in pixels (square)")] = 512,
@@ -187,8 +216,11 @@ def reproduce(
     from lodsprite.errors import InputError
     from lodsprite.sprite.reproduce import ReproduceConfig
 
+    if experiment == "swan2002":
+        _run_swan2002(out_dir, terrain, quick, size, lod)
+        return
     if experiment != "chen1999":
-        raise InputError(f"unknown experiment '{experiment}': available: chen1999")
+        raise InputError(f"unknown experiment '{experiment}': available: chen1999, swan2002")
     kw = {"terrain": terrain, "grid": grid, "lod": lod, "epsilon": epsilon,
           "visibility": visibility,
           "full_sample": full_sample, "sweeps": sweeps}
@@ -219,8 +251,9 @@ def serve(
     """The LOD server: renders keyframes for LOD clients; driven entirely by messages."""
     import logging
 
+    from lodsprite.distributed.predictors import PREDICTORS
     from lodsprite.distributed.protocol import CODECS
-    from lodsprite.distributed.server import PREDICTORS, LodServer
+    from lodsprite.distributed.server import LodServer
     from lodsprite.errors import InputError
 
     host = bind.rpartition(":")[0]

@@ -156,3 +156,23 @@ def test_interrupted_client_writes_complete_statistics(tmp_path):
     rows = list(csv.DictReader((out / "frames.csv").open()))
     summary = json.loads((out / "summary.json").read_text())
     assert summary["interrupted"] is True and summary["frames"] == len(rows) > 0
+
+
+def test_reproduce_swan2002_quick_writes_all_setups(tmp_path):
+    out = tmp_path / "s"
+    proc = subprocess.run([sys.executable, "-c", "from lodsprite.cli import main; main()",
+                           "reproduce", "swan2002", "--quick", "--terrain", "fractal:64:2",
+                           "--out", str(out)], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    results = json.loads((out / "results.json").read_text())
+    for setup in ("inline", "same_cores", "separate"):
+        r = results[setup]
+        if "skipped" in r:
+            continue
+        for key in ("client_ms_mean", "client_ms_std", "client_ms_p99", "client_ms_median",
+                    "sprites_per_keyframe"):
+            assert key in r
+        if setup != "inline":
+            assert r["delta_t_ms_mean"] > 0 and r["production_ms_mean"] > 0
+    assert "linear" in results["prediction"] and "kalman" in results["prediction"]
+    assert (out / "report.md").read_text().count("61.9") >= 1

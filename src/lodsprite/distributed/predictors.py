@@ -105,6 +105,9 @@ class KalmanPredictor:
         return _with(rotation, eye)
 
 
+PREDICTORS = {"linear": DecayLinearPredictor, "kalman": KalmanPredictor}
+
+
 def prediction_error(predictor, times: np.ndarray, viewpoints: list[Viewpoint],
                      lead: int) -> dict:
     """Eye error (metres) and orientation error (degrees) of predicting ``lead`` samples

@@ -7,6 +7,7 @@ first starts a server process on free loopback ports (:func:`local_server`).
 
 from __future__ import annotations
 
+import os
 import socket
 import subprocess
 import sys
@@ -50,14 +51,29 @@ def free_ports(count: int = 3, host: str = "127.0.0.1") -> int:
     raise LodspriteError("found no free consecutive ports on the loopback interface")
 
 
+def lodsprite_command(*args: str) -> list[str]:
+    """The command line running ``lodsprite ARGS`` with this interpreter."""
+    return [sys.executable, "-c", "from lodsprite.cli import main; main()", *args]
+
+
+def pinned(cpus: set[int] | None):
+    """A ``preexec_fn`` restricting a child process to ``cpus`` (None: no restriction)."""
+    if cpus is None:
+        return None
+    return lambda: os.sched_setaffinity(0, cpus)
+
+
 @contextmanager
-def local_server(predictor: str = "linear"):
-    """A LOD server process on free loopback ports; yields its ``HOST:PORT``."""
+def local_server(predictor: str = "linear", cpus: set[int] | None = None,
+                 env: dict | None = None):
+    """A LOD server process on free loopback ports, optionally pinned to ``cpus`` and with
+    extra environment variables; yields its ``HOST:PORT``."""
     port = free_ports()
     address = f"127.0.0.1:{port}"
-    proc = subprocess.Popen([sys.executable, "-c", "from lodsprite.cli import main; main()",
-                             "serve", "--bind", address, "--predictor", predictor],
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    proc = subprocess.Popen(lodsprite_command("serve", "--bind", address,
+                                              "--predictor", predictor),
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            env={**os.environ, **(env or {})}, preexec_fn=pinned(cpus))
     try:
         yield address
     finally:
@@ -110,6 +126,7 @@ def run_client(config: RenderConfig, servers: list[str], out_dir: Path,
         summary.update(grid=scene.hf.quads, lod=config.lod, interrupted=interrupted,
                        triangles_mean=float(np.mean([r["triangles"] for r in rows])))
         write_csv(out_dir / "frames.csv", rows, FRAME_COLUMNS)
+        write_json(out_dir / "server_stats.json", {"servers": servers, "stats": stats})
         write_json(out_dir / "summary.json", summary)
     if interrupted:
         raise KeyboardInterrupt

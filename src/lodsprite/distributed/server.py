@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 
 import zmq
 
-from lodsprite.distributed.predictors import DecayLinearPredictor, KalmanPredictor
+from lodsprite.distributed.predictors import PREDICTORS
 from lodsprite.distributed.protocol import (
     Keyframe,
     ProtocolError,
@@ -38,7 +38,6 @@ log = logging.getLogger("lodsprite.server")
 
 DEFAULT_BIND = "127.0.0.1:5555"
 ACK_TIMEOUT_S = 5.0
-PREDICTORS = {"linear": DecayLinearPredictor, "kalman": KalmanPredictor}
 
 
 def endpoints(address: str, bind: bool) -> tuple[str, str, str]:
