@@ -165,13 +165,14 @@ def _print_reproduction(r: dict, report: Path) -> None:
     out.print(f"GL: {r['gl_renderer']}   report: {report}")
 
 
-def _run_swan2002(out_dir: Path, terrain: str, quick: bool, size: int, lod: int) -> None:
+def _run_swan2002(out_dir: Path, terrain: str, quick: bool, size: int, lod: int,
+                  adopt: str) -> None:
     from lodsprite.distributed.reproduce import SwanConfig, reproduce_swan2002
     from lodsprite.report.swan2002 import write_plots, write_report
 
     if out_dir == Path("out/chen1999"):
         out_dir = Path("out/swan2002")
-    kw = {"terrain": terrain, "lod": lod}
+    kw = {"terrain": terrain, "lod": lod, "adopt": adopt}
     cfg = SwanConfig.quick(**kw) if quick else SwanConfig(size=size, **kw)
     with progress_bar("reproduce swan2002 (set-ups)") as update:
         r = reproduce_swan2002(cfg, out_dir, update)
@@ -211,13 +212,16 @@ def reproduce(
                               "(>= 46) and scale; default all frames up to 1024², else 46")] = None,
     sweeps: Annotated[bool, typer.Option(
         "--sweeps/--no-sweeps", help="run the Fig. 10-12 sweeps")] = True,
+    adopt: Annotated[str, typer.Option(
+        "--adopt", help="swan2002: when the client takes a newer keyframe: needed | newest")
+    ] = "newest",
 ) -> None:
     """Run a paper's experiment; write DIR/results.json, PNG plots and DIR/report.md."""
     from lodsprite.errors import InputError
     from lodsprite.sprite.reproduce import ReproduceConfig
 
     if experiment == "swan2002":
-        _run_swan2002(out_dir, terrain, quick, size, lod)
+        _run_swan2002(out_dir, terrain, quick, size, lod, adopt)
         return
     if experiment != "chen1999":
         raise InputError(f"unknown experiment '{experiment}': available: chen1999, swan2002")
@@ -283,6 +287,9 @@ def client(
     grid: GridOpt = None,
     exaggeration: ExagOpt = DEFAULT_EXAGGERATION,
     visibility: VisOpt = "coarse",
+    adopt: Annotated[str, typer.Option(
+        "--adopt", help="needed: take a newer keyframe when the error metric reaches ε/2; "
+                        "newest: take every newer keyframe (the paper)")] = "newest",
 ) -> None:
     """The LOD client: draws a scripted path with keyframes from LOD servers."""
     import logging
@@ -295,7 +302,8 @@ def client(
                           lod=lod, size=parse_size(size), frames=frames, grid=grid,
                           exaggeration=exaggeration, visibility=visibility)
     with progress_bar("client") as update:
-        s = run_client(config, list(server or ["127.0.0.1:5555"]), out_dir, update)
+        s = run_client(config, list(server or ["127.0.0.1:5555"]), out_dir, update,
+                       adopt=adopt)
     out.print(f"{s['frames']} frames: median {s['median_ms']:.2f} ms, mean {s['mean_ms']:.2f}, "
               f"σ {s['std_ms']:.2f}, p99 {s['p99_ms']:.2f}; {s['keyframes_received']} keyframes "
               f"received; δt {s['delta_t_ms_mean']:.0f} ms")

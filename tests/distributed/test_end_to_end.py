@@ -68,9 +68,10 @@ def test_client_keeps_drawing_when_the_server_dies_and_resumes_when_it_returns(s
         assert wait_for(client, path.viewpoints[0])
         stop(server)
         frames = [client.frame(vp) for vp in path.viewpoints]
-        # Every frame is drawn: from keyframes still queued, then from the last one.
+        # Every frame is drawn, from the last keyframe (one received just before the kill
+        # may still be taken).
         assert {f.type for f in frames} <= {"keyframe", "sprite"}
-        assert all(f.type == "sprite" for f in frames[5:])
+        assert sum(f.type == "keyframe" for f in frames) <= 1
         assert not np.all(client.image() == client.image()[0, 0])
         server = start_server(address)
         assert wait_for(client, path.viewpoints[5], timeout=30.0)

@@ -44,6 +44,7 @@ class SwanConfig:
     size: int = 512
     lod: int = 16
     predictor: str = "linear"
+    adopt: str = "newest"
 
     @classmethod
     def quick(cls, **kw) -> SwanConfig:
@@ -67,14 +68,14 @@ def _setup(cfg: SwanConfig, setup: str, out: Path, cpus: list[int]) -> dict | No
         _run(lodsprite_command("render", "--mode", "sprite", *cfg.args(), "--out", str(out)))
     elif setup == "same_cores":
         with local_server(cfg.predictor) as address:
-            _run(lodsprite_command("client", "--server", address, *cfg.args(), "--out",
-                                   str(out)))
+            _run(lodsprite_command("client", "--server", address, *cfg.args(), "--adopt",
+                                   cfg.adopt, "--out", str(out)))
     else:
         if len(cpus) < 2:
             return None
         with local_server(cfg.predictor, {cpus[1]}, ONE_THREAD) as address:
-            _run(lodsprite_command("client", "--server", address, *cfg.args(), "--out",
-                                   str(out)), {cpus[0]}, ONE_THREAD)
+            _run(lodsprite_command("client", "--server", address, *cfg.args(), "--adopt",
+                                   cfg.adopt, "--out", str(out)), {cpus[0]}, ONE_THREAD)
     return _collect(setup, out)
 
 

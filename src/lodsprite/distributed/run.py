@@ -90,7 +90,7 @@ def local_server(predictor: str = "linear", cpus: set[int] | None = None,
 
 def run_client(config: RenderConfig, servers: list[str], out_dir: Path,
                progress: Callable[[int, int], None] | None = None,
-               warmup_s: float = 10.0) -> dict:
+               warmup_s: float = 10.0, adopt: str = "newest") -> dict:
     """Draw ``config``'s path with keyframes from ``servers``; write outputs; return summary.
 
     Before the timed frames the client waits (up to ``warmup_s``) for a first keyframe,
@@ -100,7 +100,7 @@ def run_client(config: RenderConfig, servers: list[str], out_dir: Path,
     args = scene_args(config.terrain, config.texture, config.grid, config.exaggeration,
                       config.size, config.fov_y_deg)
     client = LodClient(scene, args, servers, config.size, config.lod, config.visibility,
-                       config.epsilon)
+                       config.epsilon, adopt)
     rows: list[dict] = []
     interrupted = False
     stats: list[dict] = []
@@ -123,7 +123,7 @@ def run_client(config: RenderConfig, servers: list[str], out_dir: Path,
         client.close()
     if rows:
         summary = _summary(config, rows, stats, info.renderer, servers)
-        summary.update(grid=scene.hf.quads, lod=config.lod, interrupted=interrupted,
+        summary.update(grid=scene.hf.quads, lod=config.lod, interrupted=interrupted, adopt=adopt,
                        triangles_mean=float(np.mean([r["triangles"] for r in rows])))
         write_csv(out_dir / "frames.csv", rows, FRAME_COLUMNS)
         write_json(out_dir / "server_stats.json", {"servers": servers, "stats": stats})
