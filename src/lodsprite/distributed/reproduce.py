@@ -7,7 +7,11 @@ the same run:
 * ``same_cores`` - LOD server and LOD client sharing all cores (the paper's
   non-distributed Figures 9-10);
 * ``separate`` - server and client pinned to different cores, one llvmpipe thread each
-  (the paper's two machines); skipped with fewer than two cores.
+  (the paper's two machines); skipped with fewer than two cores;
+* ``separate_10mbit``, ``separate_100mbit``, ``separate_unlimited`` - the same, with server
+  and client on two hosts (network namespaces joined by a veth pair, rate-limited with
+  tc's token bucket: the paper's 10BASE-T and its proposed 100BASE-T); skipped where
+  this process may not create namespaces (:mod:`lodsprite.distributed.netns`).
 
 Each set-up's folder holds the client's ``frames.csv``, ``summary.json`` and the
 server's per-keyframe statistics; ``results.json`` gathers them with the prediction
@@ -26,14 +30,17 @@ from pathlib import Path
 
 import numpy as np
 
+from lodsprite.distributed.netns import RATES, SERVER_IP, available, two_hosts
 from lodsprite.distributed.predictors import PREDICTORS, prediction_error
-from lodsprite.distributed.run import local_server, lodsprite_command, pinned
+from lodsprite.distributed.run import local_server, lodsprite_command, pinned, server_process
 from lodsprite.errors import LodspriteError
 from lodsprite.paths import swan2002
 from lodsprite.report.io import write_json
 from lodsprite.terrain import load_terrain
 
 SETUPS = ("inline", "same_cores", "separate")
+LINK_SETUPS = tuple(f"separate_{name}" for name in RATES)
+NS_PORT = 5555
 ONE_THREAD = {"LP_NUM_THREADS": "1"}
 
 
@@ -45,6 +52,7 @@ class SwanConfig:
     lod: int = 16
     predictor: str = "linear"
     adopt: str = "newest"
+    links: bool = True
 
     @classmethod
     def quick(cls, **kw) -> SwanConfig:
@@ -70,6 +78,10 @@ def _setup(cfg: SwanConfig, setup: str, out: Path, cpus: list[int]) -> dict | No
         with local_server(cfg.predictor) as address:
             _run(lodsprite_command("client", "--server", address, *cfg.args(), "--adopt",
                                    cfg.adopt, "--out", str(out)))
+    elif setup in LINK_SETUPS:
+        if len(cpus) < 2:
+            return None
+        _two_hosts(cfg, RATES[setup.removeprefix("separate_")], out, cpus)
     else:
         if len(cpus) < 2:
             return None
@@ -77,6 +89,18 @@ def _setup(cfg: SwanConfig, setup: str, out: Path, cpus: list[int]) -> dict | No
             _run(lodsprite_command("client", "--server", address, *cfg.args(), "--adopt",
                                    cfg.adopt, "--out", str(out)), {cpus[0]}, ONE_THREAD)
     return _collect(setup, out)
+
+
+def _two_hosts(cfg: SwanConfig, rate: str | None, out: Path, cpus: list[int]) -> None:
+    """Server and client in two network namespaces joined by a (rate-limited) veth."""
+    address = f"{SERVER_IP}:{NS_PORT}"
+    with two_hosts(rate) as hosts:
+        serve = hosts.server(lodsprite_command("serve", "--bind", address, "--allow-remote",
+                                               "--predictor", cfg.predictor))
+        with server_process(serve, {cpus[1]}, ONE_THREAD):
+            _run(hosts.client(lodsprite_command("client", "--server", address, *cfg.args(),
+                                                "--adopt", cfg.adopt, "--out", str(out))),
+                 {cpus[0]}, ONE_THREAD)
 
 
 def _collect(setup: str, out: Path) -> dict:
@@ -124,14 +148,19 @@ def reproduce_swan2002(cfg: SwanConfig, out_dir: Path,
     out_dir = Path(out_dir)
     cpus = sorted(os.sched_getaffinity(0))
     results: dict = {"experiment": "swan2002", "config": asdict(cfg), "cpus": len(cpus)}
-    for i, setup in enumerate(SETUPS):
+    no_netns = available() if cfg.links else "not asked for (--no-links)"
+    setups = SETUPS + LINK_SETUPS
+    for i, setup in enumerate(setups):
+        if setup in LINK_SETUPS and no_netns:
+            results[setup] = {"skipped": f"two hosts on one machine: {no_netns}"}
+            continue
         res = _setup(cfg, setup, out_dir / setup, cpus)
         results[setup] = res if res is not None else {
             "skipped": "needs at least two cores to pin server and client apart"}
         if progress:
-            progress(i + 1, len(SETUPS) + 1)
+            progress(i + 1, len(setups) + 1)
     results["prediction"] = _prediction(cfg, results)
     if progress:
-        progress(len(SETUPS) + 1, len(SETUPS) + 1)
+        progress(len(setups) + 1, len(setups) + 1)
     write_json(out_dir / "results.json", results)
     return results

@@ -68,14 +68,19 @@ def local_server(predictor: str = "linear", cpus: set[int] | None = None,
                  env: dict | None = None):
     """A LOD server process on free loopback ports, optionally pinned to ``cpus`` and with
     extra environment variables; yields its ``HOST:PORT``."""
-    port = free_ports()
-    address = f"127.0.0.1:{port}"
-    proc = subprocess.Popen(lodsprite_command("serve", "--bind", address,
-                                              "--predictor", predictor),
-                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+    address = f"127.0.0.1:{free_ports()}"
+    with server_process(lodsprite_command("serve", "--bind", address, "--predictor",
+                                          predictor), cpus, env):
+        yield address
+
+
+@contextmanager
+def server_process(cmd: list[str], cpus: set[int] | None = None, env: dict | None = None):
+    """Run ``cmd`` (a server) for the duration of the block; stopped on exit."""
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
                             env={**os.environ, **(env or {})}, preexec_fn=pinned(cpus))
     try:
-        yield address
+        yield proc
     finally:
         if proc.poll() is None:
             proc.terminate()

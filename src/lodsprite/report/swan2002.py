@@ -26,7 +26,10 @@ PAPER_2002 = {
 }
 LABELS = {"inline": "inline (1999, keyframes in the frame loop)",
           "same_cores": "client and server on the same cores",
-          "separate": "client and server on separate cores"}
+          "separate": "client and server on separate cores",
+          "separate_10mbit": "two hosts, 10 Mbit/s link",
+          "separate_100mbit": "two hosts, 100 Mbit/s link",
+          "separate_unlimited": "two hosts, unlimited link"}
 
 
 def _save(fig: Figure, path: Path) -> Path:
@@ -81,6 +84,8 @@ def write_plots(results: dict, out_dir: Path) -> list[Path]:
                      "Fig. 8 — distributed client time per frame (dots: keyframe received)"),
         _client_plot(results, ["inline", "same_cores", "separate"],
                      out_dir / "fig09_setups.png", "Fig. 9 — client time per frame by set-up"),
+        _client_plot(results, ["separate_10mbit", "separate_100mbit", "separate_unlimited"],
+                     out_dir / "fig10_links.png", "Client time per frame by link speed"),
         _server_plot(results, ["production", "viewpoint_wait", "render", "queue_insert"],
                      out_dir / "fig11_renderer.png", "Fig. 11 — KEYFRAME-RENDERER timings"),
         _server_plot(results, ["delta_t", "production", "queue_retrieve", "transmission"],
@@ -101,19 +106,20 @@ ROWS = [("client ms, mean", "client_ms_mean"), ("client ms, σ", "client_ms_std"
 def write_report(results: dict, out_dir: Path, plots: list[Path]) -> Path:
     out_dir = Path(out_dir)
     cfg = results.get("config", {})
+    present = [s for s in ALL_SETUPS if s in results and "skipped" not in results[s]]
     lines = ["# Swan, Arango & Nakshatrala (2002) distributed LOD-sprite — swan2002", "",
              f"`{cfg.get('terrain')}` terrain, swan2002 path, {cfg.get('frames')} frames at "
              f"{cfg.get('size')}² px, {cfg.get('lod')}² coarse level, predictor "
              f"`{cfg.get('predictor')}`, {results.get('cpus')} CPU cores. Server and client "
              "are separate processes on this machine talking over loopback TCP.", "",
-             "| quantity | " + " | ".join(SETUPS_TITLES) + " | paper distributed | "
-             "paper non-distributed |", "|---" * 6 + "|"]
+             "| quantity | " + " | ".join(s.replace("_", " ") for s in present)
+             + " | paper distributed | paper non-distributed |",
+             "|---" * (len(present) + 3) + "|"]
     for title, key in ROWS:
-        cells = [fmt_fixed(results.get(s, {}).get(key), 2) for s in ("inline", "same_cores",
-                                                                      "separate")]
+        cells = [fmt_fixed(results[s].get(key), 2) for s in present]
         paper = [fmt_fixed(PAPER_2002[s].get(key), 2) for s in ("separate", "same_cores")]
         lines.append(f"| {title} | " + " | ".join(cells + paper) + " |")
-    for s in ("inline", "same_cores", "separate"):
+    for s in ALL_SETUPS:
         if "skipped" in results.get(s, {}):
             lines += ["", f"- `{s}` skipped: {results[s]['skipped']}."]
     sep, same = results.get("separate", {}), results.get("same_cores", {})
@@ -141,4 +147,5 @@ def write_report(results: dict, out_dir: Path, plots: list[Path]) -> Path:
     return path
 
 
-SETUPS_TITLES = ["inline", "same cores", "separate cores"]
+ALL_SETUPS = ("inline", "same_cores", "separate", "separate_10mbit", "separate_100mbit",
+              "separate_unlimited")
