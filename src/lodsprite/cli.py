@@ -252,6 +252,9 @@ def serve(
     codec: Annotated[str, typer.Option("--codec", help="raw | zlib (keyframe images)")] = "raw",
     allow_remote: Annotated[bool, typer.Option(
         "--allow-remote", help="allow binding an address other than loopback")] = False,
+    keys: Annotated[Path | None, typer.Option(
+        "--keys", help="folder from `lodsprite keys`: encrypt with CURVE and accept only "
+                       "clients whose public key is there")] = None,
 ) -> None:
     """The LOD server: renders keyframes for LOD clients; driven entirely by messages."""
     import logging
@@ -269,8 +272,25 @@ def serve(
         raise InputError(f"unknown predictor '{predictor}': use {', '.join(PREDICTORS)}")
     if codec not in CODECS:
         raise InputError(f"unknown codec '{codec}': use {', '.join(CODECS)}")
+    from lodsprite.distributed.keys import ServerKeys
+
+    server_keys = ServerKeys.load(keys) if keys is not None else None
     logging.basicConfig(level=logging.INFO, format="lodsprite serve: %(message)s")
-    LodServer(bind, predictor, codec).run()
+    if server_keys is None and allow_remote:
+        logging.warning("serving beyond loopback without --keys: anyone who can reach "
+                        "the port can drive this server")
+    LodServer(bind, predictor, codec, server_keys).run()
+
+
+@app.command(name="keys")
+def keys_command(
+    out_dir: Annotated[Path, typer.Option("--out", help="output folder")] = Path("keys"),
+) -> None:
+    """Make CURVE key pairs for a LOD server and a client (server.key*, client.key*)."""
+    from lodsprite.distributed.keys import make_keys
+
+    for path in make_keys(out_dir):
+        out.print(str(path))
 
 
 @app.command()
@@ -291,10 +311,13 @@ def client(
     adopt: Annotated[str, typer.Option(
         "--adopt", help="needed: take a newer keyframe when the error metric reaches ε/2; "
                         "newest: take every newer keyframe (the paper)")] = "newest",
+    keys: Annotated[Path | None, typer.Option(
+        "--keys", help="folder holding client.key_secret and server.key (CURVE)")] = None,
 ) -> None:
     """The LOD client: draws a scripted path with keyframes from LOD servers."""
     import logging
 
+    from lodsprite.distributed.keys import ClientKeys
     from lodsprite.distributed.run import run_client
     from lodsprite.run import RenderConfig, parse_size
 
@@ -304,7 +327,7 @@ def client(
                           exaggeration=exaggeration, visibility=visibility)
     with progress_bar("client") as update:
         s = run_client(config, list(server or ["127.0.0.1:5555"]), out_dir, update,
-                       adopt=adopt)
+                       adopt=adopt, keys=ClientKeys.load(keys) if keys is not None else None)
     out.print(f"{s['frames']} frames: median {s['median_ms']:.2f} ms, mean {s['mean_ms']:.2f}, "
               f"σ {s['std_ms']:.2f}, p99 {s['p99_ms']:.2f}; {s['keyframes_received']} keyframes "
               f"received; δt {s['delta_t_ms_mean']:.0f} ms")

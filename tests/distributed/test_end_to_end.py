@@ -177,3 +177,35 @@ def test_reproduce_swan2002_quick_writes_all_setups(tmp_path):
             assert r["delta_t_ms_mean"] > 0 and r["production_ms_mean"] > 0
     assert "linear" in results["prediction"] and "kalman" in results["prediction"]
     assert (out / "report.md").read_text().count("61.9") >= 1
+
+
+def test_curve_keys_admit_the_right_client_and_refuse_a_wrong_one(scene, tmp_path):
+    from lodsprite.distributed.keys import ClientKeys, make_keys
+
+    sc, path = scene
+    make_keys(tmp_path / "good")
+    make_keys(tmp_path / "other")
+    address = f"127.0.0.1:{free_ports()}"
+    server = subprocess.Popen([sys.executable, "-c", "from lodsprite.cli import main; main()",
+                               "serve", "--bind", address, "--keys", str(tmp_path / "good")],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    args = scene_args(SMALL.terrain, SMALL.texture, None, SMALL.exaggeration, SMALL.size)
+    try:
+        good = LodClient(sc, args, [address], SMALL.size, SMALL.lod,
+                         keys=ClientKeys.load(tmp_path / "good"))
+        try:
+            assert wait_for(good, path.viewpoints[0])
+        finally:
+            good.close()
+        # A client key the server does not know: the handshake is refused, no keyframes.
+        wrong = ClientKeys.load(tmp_path / "other")
+        wrong = ClientKeys(wrong.public, wrong.secret, ClientKeys.load(tmp_path / "good")
+                           .server_public)
+        bad = LodClient(sc, args, [address], SMALL.size, SMALL.lod, keys=wrong)
+        try:
+            assert not wait_for(bad, path.viewpoints[0], timeout=4.0)
+            assert bad.frame(path.viewpoints[1]).type.startswith("local")
+        finally:
+            bad.close()
+    finally:
+        stop(server)

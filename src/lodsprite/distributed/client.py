@@ -28,6 +28,7 @@ from dataclasses import dataclass
 
 import zmq
 
+from lodsprite.distributed.keys import ClientKeys
 from lodsprite.distributed.protocol import (
     Keyframe,
     ProtocolError,
@@ -67,19 +68,26 @@ class ClientFrame:
 class _Server:
     """The client's three sockets to one server."""
 
-    def __init__(self, ctx: zmq.Context, address: str) -> None:
+    def __init__(self, ctx: zmq.Context, address: str, keys: ClientKeys | None = None) -> None:
         self.address = address
+        self.keys = keys
         self.control_ep, self.viewpoint_ep, self.keyframe_ep = endpoints(address, bind=False)
         self.ctx = ctx
-        self.viewpoint = ctx.socket(zmq.PUB)
+        self.viewpoint = self._socket(zmq.PUB)
         self.viewpoint.setsockopt(zmq.SNDHWM, 1)
         self.viewpoint.connect(self.viewpoint_ep)
-        self.keyframes = ctx.socket(zmq.DEALER)
+        self.keyframes = self._socket(zmq.DEALER)
         self.keyframes.connect(self.keyframe_ep)
         self.control: zmq.Socket | None = None
         self.last_seq = 0
         self.loaded = False
         self.lock = threading.Lock()  # the control socket moves between threads
+
+    def _socket(self, kind: int) -> zmq.Socket:
+        sock = self.ctx.socket(kind)
+        if self.keys is not None:
+            self.keys.apply(sock)
+        return sock
 
     def request(self, header: dict) -> dict | None:
         """Send a control message; the reply header, or None if the server did not answer
@@ -89,7 +97,7 @@ class _Server:
 
     def _request(self, header: dict) -> dict | None:
         if self.control is None:
-            self.control = self.ctx.socket(zmq.REQ)
+            self.control = self._socket(zmq.REQ)
             self.control.setsockopt(zmq.LINGER, 0)
             self.control.connect(self.control_ep)
         self.control.send_multipart(encode(header))
@@ -115,7 +123,7 @@ class LodClient:
     def __init__(self, scene: Scene, scene_args: dict, servers: list[str],
                  size: tuple[int, int] = (512, 512), lod: int = 16,
                  visibility: str = "coarse", epsilon: float = 1.0,
-                 adopt: str = "newest") -> None:
+                 adopt: str = "newest", keys: ClientKeys | None = None) -> None:
         if adopt not in ADOPT_MODES:
             raise InputError(f"adopt must be one of {', '.join(ADOPT_MODES)}, got {adopt!r}")
         self.adopt = adopt
@@ -127,7 +135,7 @@ class LodClient:
         self.local = LodSpriteEngine(self.sprite, epsilon)
         self.queue: KeyframeQueue[tuple[str, Keyframe]] = KeyframeQueue(2)
         self._zmq = zmq.Context()
-        self._servers = [_Server(self._zmq, a) for a in servers]
+        self._servers = [_Server(self._zmq, a, keys) for a in servers]
         self._stop = threading.Event()
         self._counter = itertools.count(1)
         self._current: Keyframe | None = None

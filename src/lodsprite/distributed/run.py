@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from lodsprite.distributed.client import LodClient
+from lodsprite.distributed.keys import ClientKeys
 from lodsprite.distributed.render import scene_args
 from lodsprite.errors import LodspriteError
 from lodsprite.report.io import write_csv, write_json
@@ -95,7 +96,8 @@ def server_process(cmd: list[str], cpus: set[int] | None = None, env: dict | Non
 
 def run_client(config: RenderConfig, servers: list[str], out_dir: Path,
                progress: Callable[[int, int], None] | None = None,
-               warmup_s: float = 10.0, adopt: str = "newest") -> dict:
+               warmup_s: float = 10.0, adopt: str = "newest",
+               keys: ClientKeys | None = None) -> dict:
     """Draw ``config``'s path with keyframes from ``servers``; write outputs; return summary.
 
     Before the timed frames the client waits (up to ``warmup_s``) for a first keyframe,
@@ -105,7 +107,7 @@ def run_client(config: RenderConfig, servers: list[str], out_dir: Path,
     args = scene_args(config.terrain, config.texture, config.grid, config.exaggeration,
                       config.size, config.fov_y_deg)
     client = LodClient(scene, args, servers, config.size, config.lod, config.visibility,
-                       config.epsilon, adopt)
+                       config.epsilon, adopt, keys)
     rows: list[dict] = []
     interrupted = False
     stats: list[dict] = []

@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 
 import zmq
 
+from lodsprite.distributed.keys import ServerKeys
 from lodsprite.distributed.predictors import PREDICTORS
 from lodsprite.distributed.protocol import (
     Keyframe,
@@ -71,13 +72,22 @@ class LodServer:
     """A keyframe server; :meth:`run` blocks until a ``shutdown`` message."""
 
     def __init__(self, bind: str = DEFAULT_BIND, predictor: str = "linear",
-                 codec: str = "raw") -> None:
+                 codec: str = "raw", keys: ServerKeys | None = None) -> None:
         self.addresses = endpoints(bind, bind=True)
+        self.keys = keys
         self.predictor_name = predictor
         self.codec = codec
         self.stats = ServerStats()
         self.queue: KeyframeQueue[Keyframe] = KeyframeQueue(2)
         self._ctx = zmq.Context()
+        self._auth = None
+        if keys is not None:
+            from zmq.auth.thread import ThreadAuthenticator
+
+            self._auth = ThreadAuthenticator(self._ctx)
+            self._auth.start()
+            # Only clients whose public key file lies in the keys folder get in.
+            self._auth.configure_curve(domain="*", location=str(keys.clients_dir))
         self._stop = threading.Event()
         self._running = threading.Event()
         self._scene_lock = threading.Lock()
@@ -88,10 +98,16 @@ class LodServer:
         self._delta_t = 0.5  # seconds, until the transmitter has measured one
         self._seq = 0
 
+    def _socket(self, kind: int) -> zmq.Socket:
+        sock = self._ctx.socket(kind)
+        if self.keys is not None:
+            self.keys.apply(sock)
+        return sock
+
     # ----------------------------------------------------------------- SERVER-CONTROL
 
     def run(self) -> None:
-        control = self._ctx.socket(zmq.REP)
+        control = self._socket(zmq.REP)
         control.bind(self.addresses[0])
         threads = [threading.Thread(target=f, daemon=True, name=f.__name__)
                    for f in (self._receive_viewpoints, self._render_keyframes,
@@ -111,6 +127,8 @@ class LodServer:
             for t in threads:
                 t.join(timeout=5.0)
             control.close(linger=0)
+            if self._auth is not None:
+                self._auth.stop()
             self._ctx.term()
 
     def _control(self, frames: list[bytes]) -> dict:
@@ -144,7 +162,7 @@ class LodServer:
     # ------------------------------------------------------ viewpoints and prediction
 
     def _receive_viewpoints(self) -> None:
-        sock = self._ctx.socket(zmq.SUB)
+        sock = self._socket(zmq.SUB)
         sock.setsockopt(zmq.CONFLATE, 1)
         sock.setsockopt(zmq.SUBSCRIBE, b"")
         sock.bind(self.addresses[1])
@@ -218,7 +236,7 @@ class LodServer:
     # ----------------------------------------------------------- KEYFRAME-TRANSMITTER
 
     def _transmit_keyframes(self) -> None:
-        sock = self._ctx.socket(zmq.DEALER)
+        sock = self._socket(zmq.DEALER)
         sock.setsockopt(zmq.SNDHWM, 2)
         sock.bind(self.addresses[2])
         try:
