@@ -180,8 +180,8 @@ def _run_swan2002(out_dir: Path, terrain: str, quick: bool, size: int, lod: int,
     t = Table(title=f"Swan et al. 2002 reproduced: {cfg.terrain}, {cfg.frames} frames")
     for col in ("set-up", "client mean ms", "σ ms", "p99 ms", "sprites/keyframe", "δt ms"):
         t.add_column(col, justify="right")
-    for s in ("inline", "same_cores", "separate", "separate_10mbit", "separate_100mbit",
-              "separate_unlimited"):
+    for s in ("inline", "same_cores", "separate", "two_servers", "separate_10mbit",
+              "separate_100mbit", "separate_unlimited"):
         x = r.get(s, {})
         if "skipped" in x:
             t.add_row(s, "skipped", "", "", "", "")

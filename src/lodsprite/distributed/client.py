@@ -162,7 +162,8 @@ class LodClient:
                     continue
                 if not s.loaded or not reply.get("data", {}).get("running"):
                     s.last_seq = 0  # a restarted server counts from 1 again
-                    for op, args in (("load", self.scene_args), ("start", {})):
+                    slot = {"slot": self._servers.index(s), "slots": len(self._servers)}
+                    for op, args in (("load", {**self.scene_args, **slot}), ("start", {})):
                         self._ctl(s, op, args)
                     s.loaded = True
             self._stop.wait(1.0)

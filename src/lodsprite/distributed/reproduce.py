@@ -8,6 +8,8 @@ the same run:
   non-distributed Figures 9-10);
 * ``separate`` - server and client pinned to different cores, one llvmpipe thread each
   (the paper's two machines); skipped with fewer than two cores;
+* ``two_servers`` - two LOD servers and the client sharing all cores: keyframe rate and
+  δt with 2 servers against ``same_cores``' 1;
 * ``separate_10mbit``, ``separate_100mbit``, ``separate_unlimited`` - the same, with server
   and client on two hosts (network namespaces joined by a veth pair, rate-limited with
   tc's token bucket: the paper's 10BASE-T and its proposed 100BASE-T); skipped where
@@ -38,7 +40,7 @@ from lodsprite.paths import swan2002
 from lodsprite.report.io import write_json
 from lodsprite.terrain import load_terrain
 
-SETUPS = ("inline", "same_cores", "separate")
+SETUPS = ("inline", "same_cores", "separate", "two_servers")
 LINK_SETUPS = tuple(f"separate_{name}" for name in RATES)
 NS_PORT = 5555
 ONE_THREAD = {"LP_NUM_THREADS": "1"}
@@ -78,6 +80,10 @@ def _setup(cfg: SwanConfig, setup: str, out: Path, cpus: list[int]) -> dict | No
         with local_server(cfg.predictor) as address:
             _run(lodsprite_command("client", "--server", address, *cfg.args(), "--adopt",
                                    cfg.adopt, "--out", str(out)))
+    elif setup == "two_servers":
+        with local_server(cfg.predictor) as a, local_server(cfg.predictor) as b:
+            _run(lodsprite_command("client", "--server", a, "--server", b, *cfg.args(),
+                                   "--adopt", cfg.adopt, "--out", str(out)))
     elif setup in LINK_SETUPS:
         if len(cpus) < 2:
             return None
@@ -113,12 +119,16 @@ def _collect(setup: str, out: Path) -> dict:
            "client_ms_median": float(np.median(ms)),
            "client_ms_p99": float(np.percentile(ms, 99)),
            "keyframes": received,
+           "keyframe_rate_hz": received / (ms.sum() / 1e3),
            "sprites_per_keyframe": (len(rows) - received) / received if received else None,
            "per_frame_ms": ms.tolist(), "per_frame_type": [r["type"] for r in rows]}
     stats_file = out / "server_stats.json"
     if setup != "inline" and stats_file.exists():
-        stats = (json.loads(stats_file.read_text())["stats"] or [{}])[0]
-        res["server"] = stats
+        every = json.loads(stats_file.read_text())["stats"] or [{}]
+        stats = {k: [v for s in every for v in s.get(k, [])] for k in every[0]
+                 if isinstance(every[0][k], list)}
+        res["server"] = every[0]
+        res["servers"] = len(every)
         for k in ("delta_t", "production", "transmission", "render", "viewpoint_wait",
                   "queue_insert", "queue_retrieve"):
             vals = stats.get(f"{k}_ms", [])

@@ -96,6 +96,7 @@ class LodServer:
         self._predictor = PREDICTORS[predictor]()
         self._have_viewpoint = threading.Event()
         self._delta_t = 0.5  # seconds, until the transmitter has measured one
+        self._lead_factor = 1.0
         self._seq = 0
 
     def _socket(self, kind: int) -> zmq.Socket:
@@ -145,8 +146,13 @@ class LodServer:
         if op == "ping":
             reply["data"] = {"running": self._running.is_set()}
         elif op == "load":
+            args = dict(header.get("args") or {})
+            slot, slots = args.get("slot", 0), args.get("slots", 1)
+            if not (isinstance(slot, int) and isinstance(slots, int) and 0 <= slot < slots):
+                return {**reply, "ok": False, "error": f"bad slot {slot!r} of {slots!r}"}
+            self._lead_factor = 1.0 + slot / slots
             with self._scene_lock:
-                self._scene_request = dict(header.get("args") or {})
+                self._scene_request = args
         elif op == "start":
             self._running.set()
         elif op == "stop":
@@ -187,8 +193,10 @@ class LodServer:
             sock.close(linger=0)
 
     def _predicted_viewpoint(self):
+        """The viewpoint δt ahead; with several servers, server ``slot`` of ``slots`` aims
+        ``δt (1 + slot/slots)`` ahead, so their keyframes cover different moments."""
         with self._latest_lock:
-            return self._predictor.predict(self._delta_t)
+            return self._predictor.predict(self._delta_t * self._lead_factor)
 
     # -------------------------------------------------------------- KEYFRAME-RENDERER
 

@@ -27,6 +27,7 @@ PAPER_2002 = {
 LABELS = {"inline": "inline (1999, keyframes in the frame loop)",
           "same_cores": "client and server on the same cores",
           "separate": "client and server on separate cores",
+          "two_servers": "client and two servers on the same cores",
           "separate_10mbit": "two hosts, 10 Mbit/s link",
           "separate_100mbit": "two hosts, 100 Mbit/s link",
           "separate_unlimited": "two hosts, unlimited link"}
@@ -97,7 +98,8 @@ def write_plots(results: dict, out_dir: Path) -> list[Path]:
 
 ROWS = [("client ms, mean", "client_ms_mean"), ("client ms, σ", "client_ms_std"),
         ("client ms, median", "client_ms_median"), ("client ms, p99", "client_ms_p99"),
-        ("keyframes received", "keyframes"), ("spriteframes per keyframe", "sprites_per_keyframe"),
+        ("keyframes received", "keyframes"), ("keyframes per second", "keyframe_rate_hz"),
+        ("spriteframes per keyframe", "sprites_per_keyframe"),
         ("δt ms", "delta_t_ms_mean"), ("keyframe production ms", "production_ms_mean"),
         ("keyframe render ms", "render_ms_mean"), ("queue insert ms", "queue_insert_ms_mean"),
         ("transmission ms", "transmission_ms_mean")]
@@ -147,5 +149,5 @@ def write_report(results: dict, out_dir: Path, plots: list[Path]) -> Path:
     return path
 
 
-ALL_SETUPS = ("inline", "same_cores", "separate", "separate_10mbit", "separate_100mbit",
-              "separate_unlimited")
+ALL_SETUPS = ("inline", "same_cores", "separate", "two_servers", "separate_10mbit",
+              "separate_100mbit", "separate_unlimited")
