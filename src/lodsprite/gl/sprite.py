@@ -96,6 +96,7 @@ class SpriteRenderer:
         self._next = 0
         self._vaos: dict[int, moderngl.VertexArray] = {}
         self.keyframe: GLKeyframe | None = None
+        self._upload: np.ndarray | None = None  # reused RGBA staging array for uploads
 
     @property
     def target(self) -> RenderTarget:
@@ -129,11 +130,13 @@ class SpriteRenderer:
                              f"depth {depth.shape}")
         target, coarse = self.key_targets[self._next], self.coarse_targets[self._next]
         self._next ^= 1
-        rgba = np.full((h, w, 4), 255, np.uint8)
-        rgba[..., :3] = color
-        target.color.write(np.ascontiguousarray(rgba[::-1]).tobytes())
-        target.depth.write(np.ascontiguousarray(depth[::-1], dtype=np.float32).tobytes())
-        if self.visibility == "coarse":
+        if self._upload is None:
+            self._upload = np.full((h, w, 4), 255, np.uint8)
+        self._upload[..., :3] = color[::-1]  # GL rows run bottom-up; one pass, no new array
+        target.color.write(self._upload)
+        if self.visibility != "coarse":  # the coarse rule never reads the full z-buffer
+            target.depth.write(np.ascontiguousarray(depth[::-1], dtype=np.float32))
+        else:
             self.terrain.render(viewpoint, self.coarse_quads, projection, coarse)
         self.keyframe = GLKeyframe(target, coarse, viewpoint, projection,
                                    projection.matrix() @ viewpoint.view_matrix(), t0)
