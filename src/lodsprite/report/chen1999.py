@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from lodsprite.report.chen1999_plots import write_plots
-from lodsprite.report.io import _atomic_write_bytes
+from lodsprite.report.io import atomic_write_bytes
 from lodsprite.report.paper_numbers import PAPER, PAPER_KEYFRAME_FRACTION, RMSE_RATIO_TARGET
 from lodsprite.report.values import (
     DASH,
@@ -272,5 +272,5 @@ def write_report(results: dict, out_dir: Path, plots: list[Path]) -> Path:
     lines += _comparison_notes(results)
     lines += _figure_sections(results, out_dir, plots)
     path = out_dir / REPORT_NAME
-    _atomic_write_bytes(path, "\n".join(lines).rstrip("\n").encode() + b"\n")
+    atomic_write_bytes(path, "\n".join(lines).rstrip("\n").encode() + b"\n")
     return path

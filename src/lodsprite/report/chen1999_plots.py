@@ -18,7 +18,7 @@ from matplotlib.figure import Figure
 from matplotlib.ticker import LogFormatter
 from PIL import Image
 
-from lodsprite.report.io import _atomic_write_bytes
+from lodsprite.report.io import atomic_write_bytes
 from lodsprite.report.paper_numbers import PAPER, PAPER_KEYFRAME_FRACTION
 from lodsprite.report.values import (
     arr,
@@ -54,7 +54,7 @@ def _figure(width: float = 7.0, height: float = 4.2) -> tuple[Figure, Axes]:
 def _save(fig: Figure, path: Path) -> Path:
     buf = io.BytesIO()
     fig.savefig(buf, format="png", dpi=DPI)
-    _atomic_write_bytes(path, buf.getvalue())
+    atomic_write_bytes(path, buf.getvalue())
     return path
 
 

@@ -16,7 +16,7 @@ import numpy as np
 from PIL import Image
 
 
-def _atomic_write_bytes(path: Path, data: bytes) -> None:
+def atomic_write_bytes(path: Path, data: bytes) -> None:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
@@ -47,7 +47,7 @@ def _jsonable(v):
 
 def write_json(path: Path, obj: dict) -> None:
     """Write ``obj`` as indented JSON; numpy values become plain numbers, NaN becomes null."""
-    _atomic_write_bytes(path, (json.dumps(_jsonable(obj), indent=2) + "\n").encode())
+    atomic_write_bytes(path, (json.dumps(_jsonable(obj), indent=2) + "\n").encode())
 
 
 def write_csv(path: Path, rows: Sequence[dict], columns: Sequence[str] | None = None) -> None:
@@ -58,7 +58,7 @@ def write_csv(path: Path, rows: Sequence[dict], columns: Sequence[str] | None = 
     w.writeheader()
     for r in rows:
         w.writerow({k: _fmt(r.get(k, "")) for k in columns})
-    _atomic_write_bytes(path, buf.getvalue().encode())
+    atomic_write_bytes(path, buf.getvalue().encode())
 
 
 def _fmt(v):
@@ -71,4 +71,4 @@ def write_png(path: Path, image: np.ndarray) -> None:
     """Write an ``(H, W)`` or ``(H, W, 3)`` uint8 image as PNG."""
     buf = io.BytesIO()
     Image.fromarray(np.asarray(image, dtype=np.uint8)).save(buf, format="PNG")
-    _atomic_write_bytes(path, buf.getvalue())
+    atomic_write_bytes(path, buf.getvalue())

@@ -12,7 +12,7 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from lodsprite.report.io import _atomic_write_bytes
+from lodsprite.report.io import atomic_write_bytes
 from lodsprite.report.values import fmt_fixed
 
 #: The paper's numbers (§4; 600 frames, 512² height field, two SGI Onyx over 10BASE-T).
@@ -38,7 +38,7 @@ def _save(fig: Figure, path: Path) -> Path:
 
     buf = io.BytesIO()
     FigureCanvasAgg(fig).print_png(buf)
-    _atomic_write_bytes(path, buf.getvalue())
+    atomic_write_bytes(path, buf.getvalue())
     return path
 
 
@@ -145,7 +145,7 @@ def write_report(results: dict, out_dir: Path, plots: list[Path]) -> Path:
                   "measured in this run on this machine, so compare ratios and shapes.", ""]
     lines += [f"![{p.stem}]({p.name})" for p in plots]
     path = out_dir / "report.md"
-    _atomic_write_bytes(path, ("\n".join(lines) + "\n").encode())
+    atomic_write_bytes(path, ("\n".join(lines) + "\n").encode())
     return path
 
 
