@@ -33,7 +33,7 @@ Progress = Callable[[int, int], None]
 FIG10_FRAMES = (115, 230, 460, 920, 1840)
 FIG11_EPSILON = (0.25, 0.5, 1.0, 2.0, 4.0)
 MIN_FULL_SAMPLE = 46
-QUALITY_SWEEP_STRIDE = 5
+QUALITY_SWEEP_STRIDE = 10
 
 
 @dataclass(frozen=True)
