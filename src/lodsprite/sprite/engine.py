@@ -81,8 +81,9 @@ class LodSpriteEngine:
         beta = projection.pixel_angle_rad(self.sprite.target.height)
         return self.metric.error_px(c_prime, viewpoint.o, view_proj, beta)
 
-    def _ahead(self, viewpoint: Viewpoint, projection) -> tuple[Viewpoint, object, float] | None:
-        """A keyframe viewpoint ahead of ``viewpoint`` that serves it within the margin."""
+    def _ahead(self, viewpoint: Viewpoint, projection) -> tuple | None:
+        """``(viewpoint, projection, C', error)`` of a keyframe ahead of ``viewpoint`` that
+        serves it within the margin, or None."""
         if not self.predict or self._prev is None or self._interval < 2:
             return None
         hf = self.sprite.terrain.geometry.hf
@@ -99,7 +100,7 @@ class LodSpriteEngine:
             c_prime = self.metric.reproject(ahead.o)
             err = self._error(c_prime, viewpoint, projection)
             if err < PREDICT_MARGIN * self.epsilon_px:
-                return ahead, c_prime, err
+                return ahead, key_proj, c_prime, err
         return None
 
     def frame(self, viewpoint: Viewpoint) -> SpriteFrame:
@@ -116,8 +117,8 @@ class LodSpriteEngine:
                 self._c_prime, shown, self._shows_keyframe = (
                     self.metric.reproject(viewpoint.o), 0.0, True)
             else:
-                key_vp, self._c_prime, shown = ahead
-                key_stats = self.sprite.render_keyframe(key_vp, t0)
+                key_vp, key_proj, self._c_prime, shown = ahead
+                key_stats = self.sprite.render_keyframe(key_vp, t0, key_proj)
                 stats = self.sprite.render_spriteframe(viewpoint, projection)
                 stats = replace(stats, triangles=stats.triangles + key_stats.triangles)
                 self._shows_keyframe = False

@@ -13,7 +13,7 @@ Everything in ``results.json`` is measured in one run on one machine:
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
@@ -75,7 +75,6 @@ class _Work:
     total: int
     progress: Progress | None
     done: int = 0
-    phase: list = field(default_factory=list)
 
     def step(self, _i: int = 0, _n: int = 0) -> None:
         self.done += 1
