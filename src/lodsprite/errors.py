@@ -26,3 +26,7 @@ class PathError(InputError):
 
 class GLUnavailableError(LodspriteError, RuntimeError):
     """No OpenGL 3.3+ context could be created (missing EGL/Mesa libraries)."""
+
+
+class MeshError(InputError):
+    """A mesh file or model spec could not be loaded or is unusable."""
