@@ -162,3 +162,35 @@ void main() {
 }
 """
 )
+
+# Flat-shaded meshes under one directional light (Scoggins et al. 2000 §4.1: "directional
+# lighting ... flat shading").  Many objects share one LOD mesh: each draw is instanced with a
+# per-object model matrix and albedo.  The face normal comes from screen-space derivatives of
+# the world position, so meshes need no per-face vertex copies; it always faces the viewer.
+MESH_VS = """#version 330
+uniform mat4 u_view_proj;
+in vec3 in_pos;
+in mat4 in_model;     // per instance: object -> world
+in vec3 in_albedo;    // per instance: linear RGB in [0, 1]
+out vec3 v_world;
+out vec3 v_albedo;
+void main() {
+    vec4 w = in_model * vec4(in_pos, 1.0);
+    v_world = w.xyz;
+    v_albedo = in_albedo;
+    gl_Position = u_view_proj * w;
+}
+"""
+
+MESH_FS = """#version 330
+uniform vec3 u_light;     // unit vector towards the light, world space
+uniform float u_ambient;  // ambient fraction in [0, 1]
+in vec3 v_world;
+in vec3 v_albedo;
+out vec4 f_color;
+void main() {
+    vec3 n = normalize(cross(dFdx(v_world), dFdy(v_world)));
+    float lit = u_ambient + (1.0 - u_ambient) * max(dot(n, u_light), 0.0);
+    f_color = vec4(v_albedo * lit, 1.0);
+}
+"""
