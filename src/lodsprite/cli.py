@@ -196,9 +196,109 @@ def _run_swan2002(out_dir: Path, terrain: str, quick: bool, size: int, lod: int,
     out.print(f"report: {report}")
 
 
+def _multi_progress():
+    """A rich progress display with one bar per named task; yields ``(name, done, total)``."""
+    cols = (TextColumn("[bold]{task.description}"), BarColumn(), MofNCompleteColumn(),
+            TimeRemainingColumn())
+    bar = Progress(*cols, console=err, transient=False)
+    tasks: dict[str, int] = {}
+
+    def update(name: str, done: int, total: int) -> None:
+        if not tasks:
+            bar.start()
+        if name not in tasks:
+            tasks[name] = bar.add_task(name, total=total)
+        bar.update(tasks[name], completed=done, total=total)
+
+    return bar, update
+
+
+def _run_scoggins2000(out_dir: Path, terrain: str, quick: bool, size: int) -> None:
+    from lodsprite.profiles.reproduce import ScogginsConfig, reproduce_scoggins2000
+    from lodsprite.report.scoggins2000 import PAPER_2000, write_outputs
+
+    if out_dir == Path("out/chen1999"):
+        out_dir = Path("out/scoggins2000")
+    cfg = ScogginsConfig.quick(terrain=terrain) if quick else ScogginsConfig(terrain=terrain,
+                                                                             size=size)
+    bar, update = _multi_progress()
+    try:
+        r = reproduce_scoggins2000(cfg, update)
+    finally:
+        bar.stop()
+    report, _ = write_outputs(r, out_dir)
+    t = Table(title="Scoggins et al. 2000 reproduced")
+    for col in ("", "this run", "paper"):
+        t.add_column(col, justify="right")
+    t.add_row("profile s, sphere family", f"{r['profile_s_sphere']:.1f}",
+              f"{PAPER_2000['profile_min_sphere'] * 60}")
+    t.add_row("profile s, mountain", f"{r['profile_s_mountain']:.1f}",
+              f"{PAPER_2000['profile_min_mountain'] * 60}")
+    t.add_row("sphereflake triangles, full", f"{r['snowflake_triangles_full']:,}",
+              f"{PAPER_2000['snowflake_triangles_full']:,}")
+    t.add_row("far sphereflake, CSF / no CSF", f"{r['snowflake_triangles_far_csf']:,} / "
+              f"{r['snowflake_triangles_far_nocsf']:,}", "")
+    t.add_row("RMSE profile / SSE (equal triangles)",
+              f"{r['rmse_profile']:.3f} / {r['rmse_sse']:.3f}", "")
+    t.add_row("FLIP profile / SSE", f"{r['flip_profile']:.4f} / {r['flip_sse']:.4f}", "")
+    out.print(t)
+    out.print(f"report: {report}")
+
+
+@app.command()
+def profile(
+    model: Annotated[str, typer.Argument(
+        help="sphere | mountain[:TERRAIN] | a mesh file (.obj .ply .off .stl .glb)")],
+    out_path: Annotated[Path | None, typer.Option(
+        "--out", help="table file to write (default: MODEL-profile.npz here)")] = None,
+    faces: Annotated[str | None, typer.Option(
+        "--faces", help="mesh files: LOD face counts, e.g. 1000,2000,4000")] = None,
+    ratios: Annotated[str | None, typer.Option(
+        "--ratios", help="mesh files: LOD face ratios, e.g. 0.05,0.2,0.5 "
+                         "(default 0.01,0.02,0.05,0.1,0.2,0.5)")] = None,
+    image: Annotated[int, typer.Option("--image", help="profile image size M (pixels)")] = 512,
+    phi_step: Annotated[float, typer.Option("--phi-step", help="azimuth step, degrees")] = 30.0,
+    theta_step: Annotated[float, typer.Option(
+        "--theta-step", help="elevation step, degrees (0..90)")] = 15.0,
+    workers: Annotated[int | None, typer.Option(
+        "--workers", help="local worker processes (default: one per core)")] = None,
+    scheduler: Annotated[str | None, typer.Option(
+        "--scheduler", help="Dask scheduler address (tcp://HOST:PORT): run views there")] = None,
+) -> None:
+    """Compute a model's LOD error profile (Scoggins et al. 2000) and write its table."""
+    from lodsprite.profiles.generate import ProfileSettings, generate_profile
+    from lodsprite.profiles.models import get_model
+
+    settings = ProfileSettings(image_size=image, phi_step_deg=phi_step,
+                               theta_step_deg=theta_step)
+    chain = get_model(model, faces=_numbers(faces, int, "--faces"),
+                      ratios=_numbers(ratios, float, "--ratios"))
+    if out_path is None:
+        stem = Path(model).stem if Path(model).suffix else model.replace(":", "-")
+        out_path = Path(f"{stem}-profile.npz")
+    with progress_bar(f"profile {chain.name} (views)") as update:
+        table = generate_profile(chain, settings, workers=workers, scheduler=scheduler,
+                                 progress=update)
+    table.save(out_path)
+    out.print(f"{chain.name}: {len(chain.levels)} LODs {chain.faces}, {table.error.shape[1]}x"
+              f"{table.error.shape[2]} views, {len(table.z)} distances, "
+              f"{table.meta['seconds']:.1f} s; wrote {out_path}")
+
+
+def _numbers(text: str | None, kind: type, option: str) -> list | None:
+    from lodsprite.errors import InputError
+
+    if text is None:
+        return None
+    try:
+        return [kind(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise InputError(f"{option}: expected comma-separated numbers, got '{text}'") from None
+
+
 @app.command()
 def reproduce(
-    experiment: Annotated[str, typer.Argument(help="chen1999 | swan2002")],
+    experiment: Annotated[str, typer.Argument(help="chen1999 | swan2002 | scoggins2000")],
     out_dir: Annotated[Path, typer.Option("--out", help="output folder")] = Path("out/chen1999"),
     terrain: TerrainOpt = "jacksboro",
     size: Annotated[int, typer.Option("--size", help="image size in pixels (square)")] = 512,
@@ -224,8 +324,12 @@ def reproduce(
     if experiment == "swan2002":
         _run_swan2002(out_dir, terrain, quick, size, lod, adopt)
         return
+    if experiment == "scoggins2000":
+        _run_scoggins2000(out_dir, terrain, quick, size)
+        return
     if experiment != "chen1999":
-        raise InputError(f"unknown experiment '{experiment}': available: chen1999, swan2002")
+        raise InputError(f"unknown experiment '{experiment}': available: chen1999, swan2002, "
+                         "scoggins2000")
     kw = {"terrain": terrain, "grid": grid, "lod": lod, "epsilon": epsilon,
           "visibility": visibility,
           "full_sample": full_sample, "sweeps": sweeps}

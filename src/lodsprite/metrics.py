@@ -46,3 +46,16 @@ def difference_image(image: np.ndarray, reference: np.ndarray, gain: float = 4.0
     a, b = _check(image, reference)
     d = np.abs(a - b).mean(axis=-1) * gain
     return np.clip(d, 0, 255).astype(np.uint8)
+
+
+def flip(image: np.ndarray, reference: np.ndarray, ppd: float = 67.0) -> float:
+    """Mean LDR-FLIP error in [0, 1] (NVIDIA's perceptual difference evaluator,
+    flip-evaluator), sRGB ``uint8`` images, ``ppd`` pixels per degree of visual angle
+    (67: a 0.7 m viewing distance from a 24-inch 4K monitor, FLIP's default)."""
+    import flip_evaluator
+
+    a, b = _check(image, reference)
+    _, mean, _ = flip_evaluator.evaluate(
+        (b / DATA_RANGE).astype(np.float32), (a / DATA_RANGE).astype(np.float32), "LDR",
+        applyMagma=False, parameters={"ppd": float(ppd)})
+    return float(mean)

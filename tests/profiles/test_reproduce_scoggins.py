@@ -1,0 +1,74 @@
+"""The scoggins2000 reproduction end to end on tiny settings, and the profile command."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import trimesh
+
+from lodsprite.cli import main
+from lodsprite.profiles.generate import ProfileSettings
+from lodsprite.profiles.reproduce import ScogginsConfig, reproduce_scoggins2000
+from lodsprite.profiles.table import ProfileTable
+from lodsprite.report.scoggins2000 import write_outputs
+
+KEYS = ("profile_s_sphere", "profile_s_mountain", "snowflake_triangles_full",
+        "snowflake_triangles_far_csf", "snowflake_triangles_far_nocsf", "triangles",
+        "rmse_profile", "rmse_sse", "flip_profile", "flip_sse", "ssim_profile", "ssim_sse")
+
+
+@pytest.fixture(scope="module")
+def results():
+    cfg = ScogginsConfig.quick(
+        size=128, profile=ProfileSettings(image_size=64, phi_step_deg=180.0,
+                                          theta_step_deg=90.0),
+        sphere_levels=5, sphere_max_faces=3000, flakes=3, sweep_frames=6, compare_frames=2,
+        workers=1)
+    return reproduce_scoggins2000(cfg)
+
+
+def test_results_have_the_issue_keys(results, tmp_path):
+    report, plots = write_outputs(results, tmp_path)
+    data = json.loads((tmp_path / "results.json").read_text())
+    for key in KEYS:
+        assert key in data and data[key] is not None, key
+    assert data["snowflake_triangles_full"] == 10 * data["sphere"]["faces"][-1]
+    # Farther flakes never need more triangles (the profile's errors fall with distance).
+    assert np.all(np.diff(data["spiral"]["triangles_csf"]) <= 0)
+    # Equal-triangle comparison: screen-space selection never over the profile's budget.
+    for c in data["comparison"].values():
+        assert c["triangles_sse"] <= c["triangles_profile"] <= c["triangles_full"]
+    assert {p.name for p in plots} >= {"fig05_snowflake_triangles.png",
+                                       "fig06a_mean_error.png", "fig07_spiral.png",
+                                       "fig06b_mountain_triangles.png", "fig08_mountain.png"}
+    assert "17 min" in report.read_text()
+    table = ProfileTable.load(tmp_path / "profile_mountain.npz")
+    assert table.levels == 8
+
+
+def test_profile_command_on_a_mesh_file(tmp_path, capsys):
+    mesh = trimesh.creation.icosphere(subdivisions=3)
+    path = tmp_path / "ball.ply"
+    mesh.export(path)
+    out = tmp_path / "ball.npz"
+    with pytest.raises(SystemExit) as exc:
+        main(["profile", str(path), "--faces", "80,320", "--image", "64", "--phi-step", "180",
+              "--theta-step", "90", "--workers", "1", "--out", str(out)])
+    assert exc.value.code == 0
+    t = ProfileTable.load(out)
+    assert list(t.faces) == [80, 320, 1280] and np.all(t.error[-1] == 0)
+
+
+@pytest.mark.parametrize("content", [b"", b"garbage \x00\x01 not a mesh", b"v 0 0 0\nv 1 0 0\n"])
+def test_profile_command_rejects_bad_meshes(tmp_path, capsys, content):
+    path = tmp_path / "bad.obj"
+    path.write_bytes(content)
+    out = tmp_path / "t.npz"
+    with pytest.raises(SystemExit) as exc:
+        main(["profile", str(path), "--out", str(out)])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("lodsprite: error:") and len(err.splitlines()) == 1
+    assert not out.exists()
