@@ -104,7 +104,8 @@ def test_csf_table_used_on_request():
     models = translate(0, 20, 0)[None]
     plain = select_profile(t, models, np.zeros(3), 6.0, 512, threshold=1.0, csf=False)
     weighted = select_profile(t, models, np.zeros(3), 6.0, 512, threshold=1.0, csf=True)
-    assert weighted[0] <= plain[0]
+    # z_eff = 20 rounds down to z = 18.77: plain errors 2.27, 1.14, 0.28; CSF ones a tenth.
+    assert (plain[0], weighted[0]) == (2, 0)
 
 
 def test_screen_space_selection():
