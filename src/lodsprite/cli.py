@@ -266,6 +266,7 @@ def profile(
         "--scheduler", help="Dask scheduler address (tcp://HOST:PORT): run views there")] = None,
 ) -> None:
     """Compute a model's LOD error profile (Scoggins et al. 2000) and write its table."""
+    from lodsprite.errors import InputError
     from lodsprite.profiles.generate import ProfileSettings, generate_profile
     from lodsprite.profiles.models import get_model
 
@@ -276,6 +277,8 @@ def profile(
     if out_path is None:
         stem = Path(model).stem if Path(model).suffix else model.replace(":", "-")
         out_path = Path(f"{stem}-profile.npz")
+    if out_path.is_dir():
+        raise InputError(f"--out {out_path} is a folder; give a table file name")
     with progress_bar(f"profile {chain.name} (views)") as update:
         table = generate_profile(chain, settings, workers=workers, scheduler=scheduler,
                                  progress=update)

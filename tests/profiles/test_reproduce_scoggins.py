@@ -72,3 +72,18 @@ def test_profile_command_rejects_bad_meshes(tmp_path, capsys, content):
     err = capsys.readouterr().err.strip()
     assert err.startswith("lodsprite: error:") and len(err.splitlines()) == 1
     assert not out.exists()
+
+
+def test_profile_command_refuses_a_folder_as_output_before_working(tmp_path, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["profile", "sphere", "--out", str(tmp_path)])
+    assert exc.value.code == 2
+    assert "is a folder" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("size", [0, -5, 100_000])
+def test_reproduction_rejects_impossible_image_sizes(size):
+    from lodsprite.errors import InputError
+
+    with pytest.raises(InputError, match="image size"):
+        ScogginsConfig(size=size)

@@ -25,7 +25,8 @@ def synthetic_table(levels: int = 4) -> ProfileTable:
     z = 10.0 * 1.37 ** np.arange(8)
     scale = np.array([8.0, 4.0, 1.0, 0.0])[:levels, None, None, None]
     err = scale * (10.0 / z[None, None, None, :]) ** 2 * np.ones((1, len(phi), len(theta), 1))
-    meta = {"fov_deg": 6.0, "image_size": 512, "centre": [0.0, 0.0, 0.0], "model": "test"}
+    meta = {"fov_deg": 6.0, "image_size": 512, "z0": 10.0, "centre": [0.0, 0.0, 0.0],
+            "model": "test"}
     return ProfileTable(err, err / 10, phi, theta, z, np.array([10, 100, 1000, 10000]),
                         np.array([0.1, 0.05, 0.01, 0.0]), meta)
 
@@ -56,6 +57,15 @@ def test_bad_files_raise_profile_error(tmp_path, content):
         ProfileTable.load(path)
     with pytest.raises(ProfileError):
         ProfileTable.load(tmp_path / "missing.npz")
+
+
+def test_table_without_required_metadata_is_rejected(tmp_path):
+    t = synthetic_table()
+    bare = ProfileTable(t.error, t.error_csf, t.phi_deg, t.theta_deg, t.z, t.faces,
+                        t.geometric_error, {"model": "test"})
+    path = bare.save(tmp_path / "bare.npz")
+    with pytest.raises(ProfileError, match="lacks fov_deg"):
+        ProfileTable.load(path)
 
 
 def test_object_views_in_object_space():

@@ -227,9 +227,13 @@ def _run_views(key: str, levels: list, setup: ViewSetup, views: list[tuple[float
     with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn"),
                              initializer=_init_worker, initargs=(key, levels, setup)) as pool:
         futures = {pool.submit(_worker_view, view): i for i, view in enumerate(views)}
-        for n, fut in enumerate(as_completed(futures), 1):
-            results[futures[fut]] = fut.result()
-            done(n)
+        try:
+            for n, fut in enumerate(as_completed(futures), 1):
+                results[futures[fut]] = fut.result()
+                done(n)
+        except BaseException:
+            pool.shutdown(wait=True, cancel_futures=True)  # report a failure at once
+            raise
     return results
 
 

@@ -22,6 +22,7 @@ from dataclasses import asdict, dataclass, replace
 import numpy as np
 
 from lodsprite import metrics
+from lodsprite.errors import InputError
 from lodsprite.gl.context import GLContext
 from lodsprite.profiles.generate import ProfileSettings, generate_profile, release_cached
 from lodsprite.profiles.models import mountain, sphere_family, sphereflake
@@ -58,6 +59,12 @@ class ScogginsConfig:
     compare_frames: int = 8
     workers: int | None = None
     scheduler: str | None = None
+
+    def __post_init__(self) -> None:
+        if not 16 <= self.size <= 4096:
+            raise InputError(f"image size must be in 16..4096 pixels, got {self.size}")
+        if self.flakes < 1 or self.sweep_frames < 2 or self.compare_frames < 1:
+            raise InputError("need at least 1 flake, 2 sweep frames and 1 comparison frame")
 
     @classmethod
     def quick(cls, **kw) -> ScogginsConfig:

@@ -12,8 +12,9 @@ the profile view at the effective distance
     factor ``M / H`` keeps the object's size in pixels, and is 1 when ``H = M``).
 
 The LOD chosen is the coarsest whose error at the largest table distance not beyond
-``z_eff`` is at most the threshold (rounding the distance down is the conservative
-side, as error falls with distance).  Closer than ``z0`` the table says nothing and
+``z_eff`` is at most the threshold (the distance is rounded down to a table sample:
+the conservative side where error falls with distance, as it mostly does with the CSF;
+Eq. 7 errors are nearly flat).  Closer than ``z0`` the table says nothing and
 the full model is used; beyond the last distance the last one applies.
 """
 

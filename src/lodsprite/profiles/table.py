@@ -120,6 +120,9 @@ class ProfileTable:
             raise ProfileError(f"{path} is not an LOD error table ({exc})") from None
         if not isinstance(meta, dict) or meta.get("format") != FORMAT:
             raise ProfileError(f"{path} is not an LOD error table")
+        missing = [k for k in ("fov_deg", "image_size", "z0") if k not in meta]
+        if missing:
+            raise ProfileError(f"{path}: table metadata lacks {', '.join(missing)}")
         if meta.get("version") != VERSION:
             raise ProfileError(f"{path}: table version {meta.get('version')} is not supported "
                                f"(this lodsprite reads version {VERSION})")
