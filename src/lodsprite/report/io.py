@@ -72,3 +72,13 @@ def write_png(path: Path, image: np.ndarray) -> None:
     buf = io.BytesIO()
     Image.fromarray(np.asarray(image, dtype=np.uint8)).save(buf, format="PNG")
     atomic_write_bytes(path, buf.getvalue())
+
+
+def save_figure(fig, path: Path) -> Path:
+    """Write a matplotlib ``Figure`` as PNG atomically (Agg canvas, the figure's own dpi)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    buf = io.BytesIO()
+    FigureCanvasAgg(fig).print_png(buf)
+    atomic_write_bytes(Path(path), buf.getvalue())
+    return Path(path)

@@ -7,14 +7,12 @@ Our analogues of the paper's Figures 5-8, the two profile tables, ``results.json
 
 from __future__ import annotations
 
-import io
 from pathlib import Path
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from lodsprite.report.io import atomic_write_bytes, write_json, write_png
+from lodsprite.report.io import atomic_write_bytes, save_figure, write_json, write_png
 from lodsprite.report.values import fmt_fixed
 
 #: The paper's numbers (§4.2-4.3; dual 600 MHz Pentium III).
@@ -23,11 +21,6 @@ PAPER_2000 = {"profile_min_sphere": 17, "profile_min_mountain": 100,
               "mountain_faces_full": 8538, "threshold_nocsf": 1e-6, "threshold_csf": 1e-5}
 
 
-def _save(fig: Figure, path: Path) -> Path:
-    buf = io.BytesIO()
-    FigureCanvasAgg(fig).print_png(buf)
-    atomic_write_bytes(path, buf.getvalue())
-    return path
 
 
 def _fig5(r: dict, path: Path) -> Path:
@@ -44,7 +37,7 @@ def _fig5(r: dict, path: Path) -> Path:
            title="Fig. 5 — sphereflake triangles vs distance")
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3, which="both")
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def _fig6a(r: dict, path: Path) -> Path:
@@ -60,7 +53,7 @@ def _fig6a(r: dict, path: Path) -> Path:
         ax.legend(fontsize=7)
         ax.grid(alpha=0.3, which="both")
     fig.tight_layout()
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def _fig6b(r: dict, path: Path) -> Path:
@@ -75,7 +68,7 @@ def _fig6b(r: dict, path: Path) -> Path:
            title=f"Fig. 6b — mountain sweep, {s['fov_deg']:.0f}° field of view")
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def _fig7(images: dict, path: Path) -> Path:
@@ -92,7 +85,7 @@ def _fig7(images: dict, path: Path) -> Path:
         ax.axis("off")
     fig.suptitle("Fig. 7 — sphereflake spiral, nearest top left, farthest at the centre")
     fig.tight_layout()
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def _crop_box(img: np.ndarray, margin: int = 6) -> tuple[slice, slice]:
@@ -123,7 +116,7 @@ def _fig8(r: dict, images: dict, path: Path) -> Path | None:
     fig.suptitle("Fig. 8 — mountain, cropped to its extent (colour: LOD, red high, green low; "
                  "white full)", fontsize=9)
     fig.tight_layout()
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def write_outputs(results: dict, out_dir: Path) -> tuple[Path, list[Path]]:

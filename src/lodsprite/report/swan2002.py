@@ -9,10 +9,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
-from lodsprite.report.io import atomic_write_bytes
+from lodsprite.report.io import atomic_write_bytes, save_figure
 from lodsprite.report.values import fmt_fixed
 
 #: The paper's numbers (§4; 600 frames, 512² height field, two SGI Onyx over 10BASE-T).
@@ -33,13 +32,6 @@ LABELS = {"inline": "inline (1999, keyframes in the frame loop)",
           "separate_unlimited": "two hosts, unlimited link"}
 
 
-def _save(fig: Figure, path: Path) -> Path:
-    import io
-
-    buf = io.BytesIO()
-    FigureCanvasAgg(fig).print_png(buf)
-    atomic_write_bytes(path, buf.getvalue())
-    return path
 
 
 def _client_plot(results: dict, setups: list[str], path: Path, title: str) -> Path | None:
@@ -58,7 +50,7 @@ def _client_plot(results: dict, setups: list[str], path: Path, title: str) -> Pa
     ax.set_yscale("log")
     ax.legend(fontsize=7)
     ax.grid(alpha=0.3)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def _server_plot(results: dict, keys: list[str], path: Path, title: str) -> Path | None:
@@ -75,7 +67,7 @@ def _server_plot(results: dict, keys: list[str], path: Path, title: str) -> Path
     ax.set(xlabel="keyframe", ylabel="ms", title=title)
     ax.legend(fontsize=7)
     ax.grid(alpha=0.3)
-    return _save(fig, path)
+    return save_figure(fig, path)
 
 
 def write_plots(results: dict, out_dir: Path) -> list[Path]:
