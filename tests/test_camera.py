@@ -12,6 +12,7 @@ from lodsprite.camera import (
     look_at,
     perspective,
     project_points,
+    widened,
 )
 from lodsprite.errors import InputError
 
@@ -99,3 +100,22 @@ def test_viewpoint_dict_round_trip():
         np.testing.assert_array_equal(getattr(vp, k), getattr(vp2, k))
     with pytest.raises(InputError):
         Viewpoint.from_dict({"x": [1, 0, 0]})
+
+
+@pytest.mark.parametrize(("w", "h", "m"), [(512, 512, 32), (640, 360, 16), (64, 128, 0)])
+def test_widened_projection_puts_the_image_at_an_offset_pixel_for_pixel(w, h, m):
+    vp = look_at((30.0, -400.0, 250.0), (0.0, 0.0, 0.0))
+    p = Projection(45.0, w / h, 1.0, 5000.0)
+    q = widened(p, w, h, m)
+    rng = np.random.default_rng(1)
+    pts = rng.uniform(-300, 300, (50, 3))
+    a, za, _ = project_points(pts, p.matrix() @ vp.view_matrix(), w, h)
+    b, zb, _ = project_points(pts, q.matrix() @ vp.view_matrix(), w + 2 * m, h + 2 * m)
+    np.testing.assert_allclose(b, a + m, atol=1e-6)
+    np.testing.assert_allclose(zb, za, atol=1e-12)  # same near/far: same depths
+    assert q.pixel_angle_rad(h + 2 * m) == pytest.approx(p.pixel_angle_rad(h), rel=0.02)
+
+
+def test_widened_projection_refuses_a_negative_guard_band():
+    with pytest.raises(InputError):
+        widened(Projection(45.0, 1.0, 1.0, 10.0), 64, 64, -1)

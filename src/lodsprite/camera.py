@@ -137,6 +137,20 @@ class Projection:
         return math.radians(self.fov_y_deg) / float(height_px)
 
 
+def widened(projection: Projection, width: int, height: int, margin_px: int) -> Projection:
+    """``projection`` grown by a guard band of ``margin_px`` pixels on every side of a
+    ``width x height`` image: the ``(width + 2m) x (height + 2m)`` image of the result holds
+    the original image, pixel for pixel, at offset ``(m, m)``."""
+    if margin_px < 0:
+        raise InputError(f"guard band must be >= 0 pixels, got {margin_px}")
+    if margin_px == 0:
+        return projection
+    half = math.tan(math.radians(projection.fov_y_deg) / 2.0) * (height + 2 * margin_px) / height
+    return Projection(math.degrees(2.0 * math.atan(half)),
+                      (width + 2 * margin_px) / (height + 2 * margin_px),
+                      projection.near, projection.far)
+
+
 def fit_near_far(
     viewpoint: Viewpoint,
     bounds_min,
