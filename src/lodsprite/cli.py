@@ -42,6 +42,11 @@ LodOpt = Annotated[int, typer.Option("--lod", help="coarse level: N x N quads ov
 EpsOpt = Annotated[float, typer.Option("--epsilon", help="sprite mode: error threshold (pixels)")]
 VisOpt = Annotated[str, typer.Option(
     "--visibility", help="sprite mode: where the sprite is used: coarse | triangle | fragment")]
+BorderOpt = Annotated[bool, typer.Option(
+    "--border/--no-border", help="sprite mode: draw the terrain's full-resolution outline "
+                                 "(border ribbons) with the coarse level")]
+GuardOpt = Annotated[int, typer.Option(
+    "--guard", help="sprite mode: keyframe guard band in pixels on every side")]
 
 
 @contextmanager
@@ -99,6 +104,8 @@ def render(
         "--ground-truth", help="sprite mode: also render full resolution (untimed) and "
                                "report RMSE/PSNR/SSIM of sprite and plain coarse frames")] = False,
     visibility: VisOpt = "coarse",
+    border: BorderOpt = True,
+    guard: GuardOpt = 32,
 ) -> None:
     """Render a camera path; write DIR/frames.csv and DIR/summary.json (and PNG frames)."""
     from lodsprite.run import RenderConfig, parse_size, render_path
@@ -106,7 +113,8 @@ def render(
     config = RenderConfig(terrain=terrain, texture=texture, path=path, mode=mode, lod=lod,
                           size=parse_size(size), frames=frames, grid=grid,
                           exaggeration=exaggeration, save_frames=save_frames, epsilon=epsilon,
-                          ground_truth=ground_truth, visibility=visibility)
+                          ground_truth=ground_truth, visibility=visibility, border=border,
+                          guard_px=guard)
     with progress_bar(f"render {mode}") as update:
         s = render_path(config, out_dir, update)
     t = Table(title=f"{s['frames']} frames, {s['mode']}, {s['terrain']} ({s['grid']}² grid)")
@@ -311,6 +319,8 @@ def reproduce(
     lod: LodOpt = 16,
     epsilon: EpsOpt = 1.0,
     visibility: VisOpt = "coarse",
+    border: BorderOpt = True,
+    guard: GuardOpt = 32,
     full_sample: Annotated[int | None, typer.Option(
         "--full-sample", help="time full resolution on this many evenly spaced frames "
                               "(>= 46) and scale; default all frames up to 1024², else 46")] = None,
@@ -334,7 +344,7 @@ def reproduce(
         raise InputError(f"unknown experiment '{experiment}': available: chen1999, swan2002, "
                          "scoggins2000")
     kw = {"terrain": terrain, "grid": grid, "lod": lod, "epsilon": epsilon,
-          "visibility": visibility,
+          "visibility": visibility, "border": border, "guard_px": guard,
           "full_sample": full_sample, "sweeps": sweeps}
     cfg = ReproduceConfig.quick(**kw) if quick else ReproduceConfig(size=size, **kw)
     _run_reproduction(cfg, out_dir)

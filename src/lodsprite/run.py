@@ -19,7 +19,12 @@ import numpy as np
 
 from lodsprite.errors import InputError
 from lodsprite.gl.context import GLContext
-from lodsprite.gl.sprite import DEFAULT_VISIBILITY, VISIBILITY_MODES, SpriteRenderer
+from lodsprite.gl.sprite import (
+    DEFAULT_GUARD_PX,
+    DEFAULT_VISIBILITY,
+    VISIBILITY_MODES,
+    SpriteRenderer,
+)
 from lodsprite.gl.terrain import TerrainGeometry, TerrainRenderer
 from lodsprite.paths import CameraPath, get_path
 from lodsprite.report.io import write_csv, write_json, write_png
@@ -31,7 +36,9 @@ from lodsprite.terrain.lod import DEFAULT_COARSE, level_step
 MODES = ("full", "lod", "sprite", "distributed")
 FRAME_COLUMNS = ["frame", "mode", "ms", "triangles"]
 SPRITE_COLUMNS = ["type", "error_px"]
-QUALITY_COLUMNS = ["rmse_sprite", "psnr_sprite", "ssim_sprite", "rmse_lod", "psnr_lod", "ssim_lod"]
+QUALITY_COLUMNS = ["rmse_sprite", "psnr_sprite", "ssim_sprite", "rmse_lod", "psnr_lod", "ssim_lod",
+                   "rmse_lod_border"]
+MAX_GUARD_PX = 1024
 
 Progress = Callable[[int, int], None]
 
@@ -55,6 +62,8 @@ class RenderConfig:
     ground_truth: bool = False
     quality_stride: int = 1
     visibility: str = DEFAULT_VISIBILITY
+    border: bool = True
+    guard_px: int = DEFAULT_GUARD_PX
 
     def validate(self) -> None:
         if self.mode not in MODES:
@@ -69,6 +78,9 @@ class RenderConfig:
         if self.visibility not in VISIBILITY_MODES:
             raise InputError(f"unknown visibility '{self.visibility}': use one of "
                              f"{', '.join(VISIBILITY_MODES)}")
+        if not (isinstance(self.guard_px, int) and 0 <= self.guard_px <= MAX_GUARD_PX):
+            raise InputError(f"--guard must be a whole number of pixels in 0..{MAX_GUARD_PX}, "
+                             f"got {self.guard_px}")
         if self.quality_stride < 1:
             raise InputError(f"quality stride must be >= 1, got {self.quality_stride}")
         if self.ground_truth and self.mode != "sprite":
@@ -136,12 +148,14 @@ def prepare(config: RenderConfig) -> tuple[Scene, CameraPath]:
     return scene, get_path(config.path, scene.hf, config.frames)
 
 
-def _quality(image: np.ndarray, lod: np.ndarray, truth: np.ndarray) -> dict:
+def _quality(image: np.ndarray, lod: np.ndarray, lod_border: np.ndarray,
+             truth: np.ndarray) -> dict:
     from lodsprite.metrics import psnr, rmse, ssim
 
     return {"rmse_sprite": rmse(image, truth), "psnr_sprite": psnr(image, truth),
             "ssim_sprite": ssim(image, truth), "rmse_lod": rmse(lod, truth),
-            "psnr_lod": psnr(lod, truth), "ssim_lod": ssim(lod, truth)}
+            "psnr_lod": psnr(lod, truth), "ssim_lod": ssim(lod, truth),
+            "rmse_lod_border": rmse(lod_border, truth)}
 
 
 def quality_summary(rows: list[dict]) -> dict:
@@ -156,6 +170,9 @@ def quality_summary(rows: list[dict]) -> dict:
         out[f"ssim_{kind}_mean"] = float(np.mean([row[f"ssim_{kind}"] for row in rows]))
     out["rmse_ratio"] = (out["rmse_sprite_mean"] / out["rmse_lod_mean"]
                          if out["rmse_lod_mean"] > 0 else float("nan"))
+    # The plain coarse level with the border ribbons LOD-sprite draws (an ablation: how much
+    # of LOD-sprite's gain is the ribbons' alone).
+    out["rmse_lod_border_mean"] = float(np.mean([row["rmse_lod_border"] for row in rows]))
     return out
 
 
@@ -174,7 +191,8 @@ def sprite_frames(pr: PathRenderer, path: CameraPath, config: RenderConfig,
                   progress: Progress | None = None, on_frame=None) -> list[dict]:
     """Run LOD-sprite along ``path``; rows with type, error_px, ms, triangles (and quality
     against an untimed full-resolution ground truth when ``config.ground_truth``)."""
-    sprite = SpriteRenderer(pr.renderer, config.lod, config.visibility)
+    sprite = SpriteRenderer(pr.renderer, config.lod, config.visibility, border=config.border,
+                            guard_px=config.guard_px)
     try:
         vp0 = path.viewpoints[0]
         sprite.render_keyframe(vp0, 0.0)  # warm-up (shader compilation), untimed
@@ -187,14 +205,16 @@ def sprite_frames(pr: PathRenderer, path: CameraPath, config: RenderConfig,
             row = {"frame": i, "mode": "sprite", "ms": f.ms, "triangles": f.triangles,
                    "type": f.type, "error_px": f.error_px}
             if config.ground_truth or on_frame:
-                image = engine.image_target.read_color()
+                image = engine.read_image()
                 if on_frame:
                     on_frame(i, image)
                 if config.ground_truth and i % config.quality_stride == 0:
                     pr.renderer.render(vp, None)
                     truth = pr.renderer.target.read_color()
                     pr.renderer.render(vp, config.lod)
-                    row.update(_quality(image, pr.renderer.target.read_color(), truth))
+                    lod = pr.renderer.target.read_color()
+                    pr.renderer.render_proxy(vp, config.lod, border=True)
+                    row.update(_quality(image, lod, pr.renderer.target.read_color(), truth))
             rows.append(row)
             if progress:
                 progress(i + 1, len(path))

@@ -17,10 +17,10 @@ from lodsprite.terrain.heightfield import HeightField
 def build(gl):
     made = []
 
-    def make(hf, texture, coarse=8, visibility="coarse", size=(128, 128)):
+    def make(hf, texture, coarse=8, visibility="coarse", size=(128, 128), **kw):
         geo = TerrainGeometry(gl, hf, texture)
         tr = TerrainRenderer(gl, geo, *size)
-        sp = SpriteRenderer(tr, coarse, visibility)
+        sp = SpriteRenderer(tr, coarse, visibility, **kw)
         made.append((sp, tr, geo))
         return sp
 
@@ -38,20 +38,25 @@ def truth_and_coarse(sp, vp):
     return truth, sp.terrain.target.read_color()
 
 
-KEY_CASES = [("coarse", "ridges", 150.0)] + [(v, "bump", 200.0) for v in VISIBILITY_MODES]
+KEY_CASES = ([("coarse", "ridges", 150.0, g) for g in (0, 32)]
+             + [(v, "bump", 200.0, 32) for v in VISIBILITY_MODES])
 
 
-@pytest.mark.parametrize(("visibility", "kind", "relief"), KEY_CASES)
+@pytest.mark.parametrize(("visibility", "kind", "relief", "guard"), KEY_CASES)
 def test_spriteframe_from_the_keyframe_viewpoint_equals_the_keyframe(build, visibility, kind,
-                                                                     relief):
+                                                                     relief, guard):
     # The paper's per-triangle and per-fragment rules fall back to the terrain texture where
     # full-resolution detail hides coarse vertices, so they meet this only on a field without
     # such occlusion (the bump); the default "coarse" rule meets it on rough ridges too.
+    # With a guard band the keyframe is larger than the frame; its centre is compared.
     hf = make_field(64, kind=kind, relief=relief)
-    sp = build(hf, make_texture("terrain", hf), visibility=visibility)
+    sp = build(hf, make_texture("terrain", hf), visibility=visibility, guard_px=guard)
     vp = look_at((0.0, -300.0, 1500.0), (0.0, 0.0, 0.0))  # terrain fills the whole image
     sp.render_keyframe(vp, 0.0)
-    key = sp.keyframe.target.read_color().astype(int)
+    assert sp.keyframe.target.size == (128 + 2 * guard, 128 + 2 * guard)
+    key = sp.keyframe_color().astype(int)
+    sp.terrain.render(vp)  # the keyframe's centre is the full-resolution frame itself
+    assert np.abs(sp.terrain.target.read_color().astype(int) - key).max() <= 1
     sp.render_spriteframe(vp)
     frame = sp.target.read_color().astype(int)
     diff = np.abs(frame - key)
@@ -110,7 +115,9 @@ def test_geometry_outside_the_keyframe_frustum_takes_the_terrain_texture(build, 
     frame = sp.target.read_color()
     truth, _ = truth_and_coarse(sp, vp)
     west = np.s_[:, :40]  # the western third lies outside the keyframe's view
-    assert rmse(frame[west], truth[west]) < 12.0
+    # The fallback samples the checker nearest-mipmap-nearest, the truth trilinearly: the
+    # checker's edges differ (RMSE about 12); the sprite's sky there would give about 90.
+    assert rmse(frame[west], truth[west]) < 14.0
     sky = np.all(np.abs(frame[west].astype(int) - frame[0, 0].astype(int)) < 3, axis=-1)
     truth_sky = np.all(np.abs(truth[west].astype(int) - truth[0, 0].astype(int)) < 3, axis=-1)
     assert sky.sum() <= truth_sky.sum() + 5  # no holes where new geometry appears
@@ -136,7 +143,9 @@ def test_sprite_beats_plain_coarse_at_a_novel_viewpoint(build, visibility, kind,
     hf = make_field(64, kind=kind, relief=relief)
     sprite_err, coarse_err = novel_view_errors(
         build(hf, make_texture("terrain", hf), visibility=visibility))
-    assert sprite_err < 0.8 * coarse_err
+    # Stated margins: the default rule at most 0.6 of the plain coarse error, the paper's
+    # rules (which fall back to the terrain texture more often) at most 0.85.
+    assert sprite_err < (0.6 if visibility == "coarse" else 0.85) * coarse_err
 
 
 def test_coarse_visibility_keeps_the_sprite_behind_fine_detail(build):
@@ -206,3 +215,53 @@ def test_uploaded_keyframe_gives_the_same_spriteframe_as_a_local_one(build, visi
     sp.upload_keyframe(key_vp, projection, color, depth, 0.0)
     sp.render_spriteframe(vp)
     np.testing.assert_array_equal(sp.target.read_color(), local)
+
+
+@pytest.mark.parametrize("visibility", list(VISIBILITY_MODES))
+def test_a_surface_seen_at_a_grazing_angle_keeps_the_sprite(build, visibility):
+    # Regression: nearest samples of the keyframe z-buffer err by half a texel's depth slope,
+    # which at 10 degrees of elevation is several per cent of the depth; the visibility
+    # tests then failed in moire stripes and painted them with the terrain texture.
+    hf = make_field(64, kind="flat")
+    sp = build(hf, make_texture("checker:8", hf), visibility=visibility, size=(256, 256))
+    dist, elev = 3500.0, np.radians(10.0)
+
+    def orbit(azimuth_deg):
+        a = np.radians(azimuth_deg)
+        eye = dist * np.array([np.cos(elev) * np.cos(a), np.cos(elev) * np.sin(a), np.sin(elev)])
+        return look_at(eye, (0.0, 0.0, 0.0))
+
+    sp.render_keyframe(orbit(-90.0), 0.0)
+    magenta = np.zeros((65, 65, 3), np.uint8)
+    magenta[:] = (255, 0, 255)
+    sp.terrain.geometry.set_texture(magenta)  # any fallback fragment now shows magenta
+    sp.render_spriteframe(orbit(-88.0))
+    frame = sp.target.read_color().astype(int)
+    ground = np.any(np.abs(frame - frame[0, 0]) > 3, axis=-1)
+    fallback = (frame[..., 0] > 200) & (frame[..., 1] < 60) & (frame[..., 2] > 200)
+    assert ground.sum() > 3000
+    assert fallback[ground].mean() < 0.01
+
+
+def test_border_ribbon_carries_the_full_resolution_outline(build):
+    # Flat ground whose far (north) border rises in bumps between the 8x8 level's vertices:
+    # the coarse far edge is a straight line at 0 m, the real outline is bumpy.
+    h = np.zeros((65, 65), np.float32)
+    h[0] = 150.0 * np.sin(np.pi * np.arange(65) / 8.0) ** 2
+    hf = HeightField(h, 30.0, 30.0, "bumpy-border")
+    tex = make_texture("terrain", hf)
+    vp = look_at((60.0, -2500.0, 400.0), (0.0, 0.0, 0.0))
+
+    def sky(img):
+        return np.all(np.abs(img.astype(int) - img[0, 0].astype(int)) <= 2, axis=-1)
+
+    mismatch = {}
+    for border in (False, True):
+        sp = build(hf, tex, border=border, size=(256, 256))
+        sp.render_keyframe(look_at((0.0, -2500.0, 420.0), (0.0, 0.0, 0.0)), 0.0)
+        sp.render_spriteframe(vp)
+        frame = sp.target.read_color()
+        truth, _ = truth_and_coarse(sp, vp)
+        mismatch[border] = int(np.sum(sky(frame) != sky(truth)))
+    assert mismatch[False] > 300         # without ribbons the bumps show as sky
+    assert mismatch[True] < 0.2 * mismatch[False]

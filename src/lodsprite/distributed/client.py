@@ -131,7 +131,7 @@ class LodClient:
         self._c_prime = None
         self.scene_args = scene_args
         self.paths = PathRenderer(scene, size, float(scene_args.get("fov_y_deg", 45.0)))
-        self.sprite = SpriteRenderer(self.paths.renderer, lod, visibility)
+        self.sprite = SpriteRenderer(self.paths.renderer, lod, visibility, guard_px=0)
         self.local = LodSpriteEngine(self.sprite, epsilon)
         self.queue: KeyframeQueue[tuple[str, Keyframe]] = KeyframeQueue(2)
         self._zmq = zmq.Context()
@@ -251,7 +251,7 @@ class LodClient:
     def image(self):
         """The last frame's image, ``(H, W, 3) uint8``."""
         if self._current is None:
-            return self.local.image_target.read_color()
+            return self.local.read_image()
         return self.sprite.target.read_color()
 
     def server_stats(self) -> list[dict]:

@@ -25,6 +25,27 @@ vec3 terrain_position(out vec2 uv) {
 }
 """
 
+# Proxy meshes (lodsprite.terrain.proxy: a coarse level plus border ribbons) carry their own
+# world positions and texture coordinates; a program's "proxy twin" swaps this in for
+# TERRAIN_VERTEX_COMMON.
+PROXY_VERTEX_COMMON = """
+in vec3 in_pos;               // world metres
+in vec2 in_uv;                // terrain texture coordinates
+
+vec3 terrain_position(out vec2 uv) {
+    uv = in_uv;
+    return in_pos;
+}
+"""
+
+
+def proxy_twin(vertex_shader: str) -> str:
+    """The same vertex shader reading proxy-mesh vertices instead of grid vertices."""
+    if TERRAIN_VERTEX_COMMON not in vertex_shader:
+        raise ValueError("not a terrain vertex shader")
+    return vertex_shader.replace(TERRAIN_VERTEX_COMMON, PROXY_VERTEX_COMMON)
+
+
 TERRAIN_VS = (
     "#version 330\n"
     + TERRAIN_VERTEX_COMMON
@@ -143,10 +164,22 @@ uniform sampler2D u_key_coarse; // keyframe's z-buffer of the coarse level
 uniform int u_visibility;       // 0: per triangle (paper), 1: per fragment, 2: coarse occlusion
 uniform float u_fragment_tol;
 uniform float u_coarse_tol;
+uniform int u_color_levels;     // mipmap levels of u_color
 in vec2 g_uv;
 in vec4 g_key;
 flat in int g_sprite;
 out vec4 f_color;
+// The terrain texture where the keyframe did not see the surface, sampled nearest-mipmap-
+// nearest with one texelFetch: software rasterisers shade both sides of a branch for every
+// fragment, and a trilinear lookup cost 0.3 ms per 512x512 frame on llvmpipe for the
+// few hundred fragments that use it.
+vec3 terrain_fallback(vec2 uv) {
+    vec2 t = uv * vec2(textureSize(u_color, 0));
+    float rho2 = max(dot(dFdx(t), dFdx(t)), dot(dFdy(t), dFdy(t)));
+    int level = clamp(int(floor(0.5 * log2(max(rho2, 1.0)) + 0.5)), 0, u_color_levels - 1);
+    ivec2 size = textureSize(u_color, level);
+    return texelFetch(u_color, clamp(ivec2(uv * vec2(size)), ivec2(0), size - 1), level).rgb;
+}
 void main() {
     bool sprite;
     if (u_visibility == 0) {
@@ -157,7 +190,7 @@ void main() {
         sprite = seen_by_keyframe(g_key, u_key_coarse, u_coarse_tol) > 0.5;
     }
     vec3 rgb = sprite ? textureProj(u_sprite, vec3(g_key.xy * 0.5 + 0.5 * g_key.w, g_key.w)).rgb
-                      : texture(u_color, g_uv).rgb;
+                      : terrain_fallback(g_uv);
     f_color = vec4(rgb, 1.0);
 }
 """

@@ -14,10 +14,10 @@ from dataclasses import dataclass
 import moderngl
 import numpy as np
 
-from lodsprite.camera import Projection, Viewpoint
+from lodsprite.camera import Projection, Viewpoint, widened
 from lodsprite.errors import InputError
 from lodsprite.gl.context import GLContext
-from lodsprite.gl.shaders import SPRITE_FS, SPRITE_GS, SPRITE_VS, SPRITE_VS_FRAGMENT
+from lodsprite.gl.shaders import SPRITE_FS, SPRITE_GS, SPRITE_VS, SPRITE_VS_FRAGMENT, proxy_twin
 from lodsprite.gl.target import RenderTarget
 from lodsprite.gl.terrain import SKY_RGB, FrameStats, TerrainRenderer, mat_bytes
 
@@ -26,6 +26,7 @@ DEFAULT_FRAGMENT_TOL = 0.03
 DEFAULT_COARSE_TOL = 0.002
 VISIBILITY_MODES = {"triangle": 0, "fragment": 1, "coarse": 2}
 DEFAULT_VISIBILITY = "coarse"
+DEFAULT_GUARD_PX = 32
 
 
 @dataclass(frozen=True)
@@ -66,54 +67,84 @@ class SpriteRenderer:
     def __init__(self, terrain: TerrainRenderer, coarse_quads: int = 16,
                  visibility: str = DEFAULT_VISIBILITY, vertex_tol: float = DEFAULT_VERTEX_TOL,
                  fragment_tol: float = DEFAULT_FRAGMENT_TOL,
-                 coarse_tol: float = DEFAULT_COARSE_TOL) -> None:
+                 coarse_tol: float = DEFAULT_COARSE_TOL, border: bool = True,
+                 guard_px: int = DEFAULT_GUARD_PX) -> None:
         if visibility not in VISIBILITY_MODES:
             raise InputError(f"visibility must be one of {', '.join(VISIBILITY_MODES)}, "
                              f"got {visibility!r}")
+        if not (isinstance(guard_px, int) and guard_px >= 0):
+            raise InputError(f"guard band must be a whole number of pixels >= 0, got {guard_px}")
         self.terrain = terrain
         self.ctx: GLContext = terrain.ctx
         self.coarse_quads = coarse_quads
         self.visibility = visibility
-        mgl = self.ctx.mgl
-        if visibility == "triangle":
-            self.program = mgl.program(vertex_shader=SPRITE_VS, geometry_shader=SPRITE_GS,
-                                       fragment_shader=SPRITE_FS)
-            self.program["u_vertex_tol"].value = vertex_tol
-        else:
-            self.program = mgl.program(vertex_shader=SPRITE_VS_FRAGMENT,
-                                       fragment_shader=SPRITE_FS)
-        self.program["u_visibility"].value = VISIBILITY_MODES[visibility]
-        for name, value in (("u_fragment_tol", fragment_tol), ("u_coarse_tol", coarse_tol)):
-            if name in self.program:
-                self.program[name].value = value
-        w, h = terrain.target.size
+        self.border = border
+        self.guard_px = guard_px
+        self.program = self._program(visibility, {"u_vertex_tol": vertex_tol,
+                                                  "u_fragment_tol": fragment_tol,
+                                                  "u_coarse_tol": coarse_tol})
+        w, h = (n + 2 * guard_px for n in terrain.target.size)
         self.key_targets = [RenderTarget(self.ctx, w, h), RenderTarget(self.ctx, w, h)]
         self.coarse_targets = [RenderTarget(self.ctx, w, h, color=False),
                                RenderTarget(self.ctx, w, h, color=False)]
         for t in self.key_targets + self.coarse_targets:
             t.depth.compare_func = ""  # sample raw depth values, no shadow comparison
-            t.depth.filter = (moderngl.NEAREST, moderngl.NEAREST)
+            # Window depth is affine across a triangle in screen space, so bilinear samples
+            # of a z-buffer are exact inside triangles: no moire where the keyframe sees a
+            # surface at a grazing angle (nearest samples there err by up to half a texel's
+            # depth slope, far beyond the tolerances).
+            t.depth.filter = (moderngl.LINEAR, moderngl.LINEAR)
         self._next = 0
-        self._vaos: dict[int, moderngl.VertexArray] = {}
+        self._vaos: dict[tuple[int, bool], moderngl.VertexArray] = {}
         self.keyframe: GLKeyframe | None = None
         self._upload: np.ndarray | None = None  # reused RGBA staging array for uploads
+
+    def _program(self, visibility: str, tols: dict[str, float]) -> moderngl.Program:
+        mgl = self.ctx.mgl
+        if visibility == "triangle":
+            prog = mgl.program(vertex_shader=proxy_twin(SPRITE_VS), geometry_shader=SPRITE_GS,
+                               fragment_shader=SPRITE_FS)
+        else:
+            prog = mgl.program(vertex_shader=proxy_twin(SPRITE_VS_FRAGMENT),
+                               fragment_shader=SPRITE_FS)
+        prog["u_visibility"].value = VISIBILITY_MODES[visibility]
+        units = {"u_color": 0, "u_sprite": 2, "u_key_depth": 3, "u_key_coarse": 4}
+        for name, value in [*tols.items(), *units.items()]:
+            if name in prog:
+                prog[name].value = value
+        return prog
 
     @property
     def target(self) -> RenderTarget:
         """Where spriteframes are drawn."""
         return self.terrain.target
 
-    def render_keyframe(self, viewpoint: Viewpoint, t0: float,
-                        projection: Projection | None = None) -> FrameStats:
-        """Render the full-resolution terrain into the next keyframe target and keep it."""
-        target, coarse = self.key_targets[self._next], self.coarse_targets[self._next]
-        self._next ^= 1
-        projection = projection or self.terrain.projection(viewpoint)
+    def key_projection(self, projection: Projection) -> Projection:
+        """The keyframe's projection for a frame projection: widened by the guard band."""
+        w, h = self.target.size
+        return widened(projection, w, h, self.guard_px)
+
+    def _keep(self, target: RenderTarget, coarse: RenderTarget, viewpoint: Viewpoint,
+              projection: Projection, t0: float) -> None:
         if self.visibility == "coarse":
-            self.terrain.render(viewpoint, self.coarse_quads, projection, coarse)
-        stats = self.terrain.render(viewpoint, None, projection, target)
+            self.terrain.render_proxy(viewpoint, self.coarse_quads, self.border, projection,
+                                      coarse)
         self.keyframe = GLKeyframe(target, coarse, viewpoint, projection,
                                    projection.matrix() @ viewpoint.view_matrix(), t0)
+
+    def render_keyframe(self, viewpoint: Viewpoint, t0: float,
+                        projection: Projection | None = None) -> FrameStats:
+        """Render the full-resolution terrain into the next keyframe target and keep it.
+
+        ``projection`` is the frame's; the keyframe is rendered through it widened by the
+        guard band (``guard_px`` pixels on every side, same pixel angle), so that frames
+        turning away from the keyframe still find their borders in the sprite.
+        """
+        target, coarse = self.key_targets[self._next], self.coarse_targets[self._next]
+        self._next ^= 1
+        projection = self.key_projection(projection or self.terrain.projection(viewpoint))
+        stats = self.terrain.render(viewpoint, None, projection, target)
+        self._keep(target, coarse, viewpoint, projection, t0)
         return stats
 
     def upload_keyframe(self, viewpoint: Viewpoint, projection: Projection, color: np.ndarray,
@@ -121,10 +152,11 @@ class SpriteRenderer:
         """Make a keyframe rendered elsewhere (the distributed server) the current one.
 
         ``color (H, W, 3) uint8`` and ``depth (H, W) float32`` (window depth), row 0 at
-        the top, must match this renderer's image size.  The coarse z-buffer of the
+        the top, must match this renderer's keyframe size (the image size plus the guard
+        band), and ``projection`` is the keyframe's own.  The coarse z-buffer of the
         ``coarse`` visibility rule is rendered here from the keyframe's viewpoint.
         """
-        w, h = self.target.size
+        w, h = self.key_targets[0].size
         if color.shape != (h, w, 3) or depth.shape != (h, w):
             raise InputError(f"keyframe images must be {w}x{h}, got colour {color.shape}, "
                              f"depth {depth.shape}")
@@ -136,35 +168,39 @@ class SpriteRenderer:
         target.color.write(self._upload)
         if self.visibility != "coarse":  # the coarse rule never reads the full z-buffer
             target.depth.write(np.ascontiguousarray(depth[::-1], dtype=np.float32))
-        else:
-            self.terrain.render(viewpoint, self.coarse_quads, projection, coarse)
-        self.keyframe = GLKeyframe(target, coarse, viewpoint, projection,
-                                   projection.matrix() @ viewpoint.view_matrix(), t0)
+        self._keep(target, coarse, viewpoint, projection, t0)
+
+    def keyframe_color(self) -> np.ndarray:
+        """The current keyframe's colour without its guard band: ``(H, W, 3) uint8``, the
+        frame size, row 0 at the top."""
+        if self.keyframe is None:
+            raise RuntimeError("no keyframe yet")
+        g = self.guard_px
+        img = self.keyframe.target.read_color()
+        return img[g:img.shape[0] - g, g:img.shape[1] - g] if g else img
 
     def render_spriteframe(self, viewpoint: Viewpoint,
                            projection: Projection | None = None) -> FrameStats:
-        """Render the coarse level textured from the current keyframe into :attr:`target`."""
+        """Render the coarse level (and its border ribbon) textured from the current
+        keyframe into :attr:`target`."""
         key = self.keyframe
         if key is None:
             raise RuntimeError("render_spriteframe needs a keyframe first")
         projection = projection or self.terrain.projection(viewpoint)
-        mgl = self.ctx.mgl
         self.target.use(SKY_RGB)
-        mgl.enable(moderngl.DEPTH_TEST)
-        geo = self.terrain.geometry
-        geo.color_tex.use(0)
-        geo.height_tex.use(1)
+        self.ctx.mgl.enable(moderngl.DEPTH_TEST)
+        self.terrain.geometry.color_tex.use(0)
         key.target.color.use(2)
         key.target.depth.use(3)
         key.coarse.depth.use(4)
         prog = self.program
-        prog["u_color"].value, prog["u_height"].value = 0, 1
-        for name, unit in (("u_sprite", 2), ("u_key_depth", 3), ("u_key_coarse", 4)):
-            if name in prog:
-                prog[name].value = unit
         prog["u_key_mvp"].write(mat_bytes(key.view_proj))
         prog["u_key_near_far"].value = (key.projection.near, key.projection.far)
-        return self.terrain.draw(prog, self._vaos, viewpoint, projection, self.coarse_quads)
+        prog["u_color_levels"].value = self.terrain.geometry.color_tex_levels
+        tris = self.terrain.draw_proxy(prog, self._vaos,
+                                       projection.matrix() @ viewpoint.view_matrix(),
+                                       self.coarse_quads, self.border)
+        return FrameStats(tris, 1, projection)
 
     def release(self) -> None:
         for vao in self._vaos.values():

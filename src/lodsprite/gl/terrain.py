@@ -15,10 +15,11 @@ import numpy as np
 from lodsprite.camera import Projection, Viewpoint, boxes_in_frustum, fit_near_far, frustum_planes
 from lodsprite.errors import InputError
 from lodsprite.gl.context import GLContext
-from lodsprite.gl.shaders import TERRAIN_FS, TERRAIN_VS
+from lodsprite.gl.shaders import TERRAIN_FS, TERRAIN_VS, proxy_twin
 from lodsprite.gl.target import RenderTarget
 from lodsprite.terrain.heightfield import HeightField
 from lodsprite.terrain.lod import DEFAULT_CHUNK, ChunkLayout, chunk_layout, grid_mesh
+from lodsprite.terrain.proxy import proxy_mesh
 
 SKY_RGB = (0.62, 0.74, 0.86)
 
@@ -52,6 +53,7 @@ class TerrainGeometry:
         self.set_texture(texture_rgb)
         self._meshes: dict[int, tuple[moderngl.Buffer, moderngl.Buffer, int]] = {}
         self._layouts: dict[int, ChunkLayout] = {}
+        self._proxies: dict[tuple[int, bool], tuple[moderngl.Buffer, moderngl.Buffer, int]] = {}
         max_chunks = (hf.quads // min(chunk_quads, hf.quads)) ** 2
         self.instances = mgl.buffer(reserve=max_chunks * 8)
 
@@ -71,6 +73,7 @@ class TerrainGeometry:
         tex.build_mipmaps()
         tex.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
         self.color_tex = tex
+        self.color_tex_levels = 1 + int(np.log2(max(tw, th)))
 
     def layout(self, level_quads: int) -> ChunkLayout:
         if level_quads not in self._layouts:
@@ -86,12 +89,27 @@ class TerrainGeometry:
                                          tris.size)
         return self._meshes[chunk_quads]
 
+    def proxy(self, level_quads: int, border: bool) -> tuple[moderngl.Buffer, moderngl.Buffer,
+                                                              int]:
+        """(vertex buffer ``3f 2f``: position and uv, index buffer, index count) of level
+        ``level_quads`` as one mesh, with its border ribbon if ``border``
+        (:mod:`lodsprite.terrain.proxy`)."""
+        key = (level_quads, border)
+        if key not in self._proxies:
+            mesh = proxy_mesh(self.hf, level_quads, border)
+            verts = np.concatenate([mesh.positions, mesh.uv], axis=1).astype(np.float32)
+            mgl = self.ctx.mgl
+            self._proxies[key] = (mgl.buffer(verts.tobytes()), mgl.buffer(mesh.tris.tobytes()),
+                                  mesh.tris.size)
+        return self._proxies[key]
+
     def set_uniforms(self, prog: moderngl.Program, step: int) -> None:
         hf = self.hf
         prog["u_step"].value = step
         prog["u_corner"].value = (-hf.width / 2, hf.depth / 2)
         prog["u_spacing"].value = (hf.dx, hf.dy)
-        prog["u_uv_scale"].value = (1.0 / (hf.cols - 1), 1.0 / (hf.rows - 1))
+        if "u_uv_scale" in prog:  # optimised out of programs that never read the texture
+            prog["u_uv_scale"].value = (1.0 / (hf.cols - 1), 1.0 / (hf.rows - 1))
 
     def visible_chunks(self, layout: ChunkLayout, view_proj: np.ndarray) -> int:
         """Cull ``layout``'s chunks against the frustum; upload survivors' origins; return count."""
@@ -102,10 +120,11 @@ class TerrainGeometry:
         return len(visible)
 
     def release(self) -> None:
-        for vbo, ibo, _ in self._meshes.values():
+        for vbo, ibo, _ in [*self._meshes.values(), *self._proxies.values()]:
             vbo.release()
             ibo.release()
         self._meshes.clear()
+        self._proxies.clear()
         for obj in (self.height_tex, self.color_tex, self.instances):
             obj.release()
 
@@ -130,7 +149,10 @@ class TerrainRenderer:
         self.fov_y_deg = fov_y_deg
         self.target = RenderTarget(ctx, width, height)
         self.program = ctx.mgl.program(vertex_shader=TERRAIN_VS, fragment_shader=TERRAIN_FS)
+        self.proxy_program = ctx.mgl.program(vertex_shader=proxy_twin(TERRAIN_VS),
+                                             fragment_shader=TERRAIN_FS)
         self._vaos: dict[int, moderngl.VertexArray] = {}
+        self._proxy_vaos: dict[tuple[int, bool], moderngl.VertexArray] = {}
 
     def vao(self, program: moderngl.Program, chunk_quads: int,
             cache: dict[int, moderngl.VertexArray]) -> moderngl.VertexArray:
@@ -141,6 +163,23 @@ class TerrainRenderer:
                 [(vbo, "2i", "in_local"), (self.geometry.instances, "2i/i", "in_origin")],
                 index_buffer=ibo, index_element_size=4)
         return cache[chunk_quads]
+
+    def draw_proxy(self, program: moderngl.Program,
+                   cache: dict[tuple[int, bool], moderngl.VertexArray], view_proj: np.ndarray,
+                   level_quads: int, border: bool) -> int:
+        """Draw the proxy mesh of level ``level_quads`` (:meth:`TerrainGeometry.proxy`) whole,
+        with ``program`` (a :func:`proxy_twin` program, other uniforms already set); returns
+        the triangles drawn."""
+        key = (level_quads, border)
+        vbo, ibo, count = self.geometry.proxy(level_quads, border)
+        if key not in cache:
+            # A program that never reads the texture has no in_uv: skip those 8 bytes.
+            fmt = ("3f 2f", "in_pos", "in_uv") if "in_uv" in program else ("3f 8x", "in_pos")
+            cache[key] = self.ctx.mgl.vertex_array(program, [(vbo, *fmt)], index_buffer=ibo,
+                                                   index_element_size=4)
+        program["u_mvp"].write(mat_bytes(view_proj))
+        cache[key].render(moderngl.TRIANGLES)
+        return count // 3
 
     def projection(self, viewpoint: Viewpoint) -> Projection:
         """Projection with near/far fitted to the terrain's box and the eye's ground clearance."""
@@ -163,6 +202,12 @@ class TerrainRenderer:
                                                                  instances=chunks)
         return FrameStats(chunks * layout.triangles_per_chunk, chunks, projection)
 
+    def _begin(self, target: RenderTarget | None) -> None:
+        (target or self.target).use(SKY_RGB)
+        self.ctx.mgl.enable(moderngl.DEPTH_TEST)
+        self.geometry.color_tex.use(0)
+        self.geometry.height_tex.use(1)
+
     def render(self, viewpoint: Viewpoint, level_quads: int | None = None,
                projection: Projection | None = None,
                target: RenderTarget | None = None) -> FrameStats:
@@ -170,18 +215,28 @@ class TerrainRenderer:
         renderer's own); ``level_quads`` None means full resolution."""
         level = self.geometry.hf.quads if level_quads is None else level_quads
         projection = projection or self.projection(viewpoint)
-        mgl = self.ctx.mgl
-        (target or self.target).use(SKY_RGB)
-        mgl.enable(moderngl.DEPTH_TEST)
-        self.geometry.color_tex.use(0)
-        self.geometry.height_tex.use(1)
+        self._begin(target)
         self.program["u_color"].value = 0
         self.program["u_height"].value = 1
         return self.draw(self.program, self._vaos, viewpoint, projection, level)
 
+    def render_proxy(self, viewpoint: Viewpoint, level_quads: int, border: bool = True,
+                     projection: Projection | None = None,
+                     target: RenderTarget | None = None) -> FrameStats:
+        """Render the proxy mesh of a coarse level (with its border ribbon if ``border``)
+        textured with the terrain's colour texture, like :meth:`render`."""
+        projection = projection or self.projection(viewpoint)
+        self._begin(target)
+        self.proxy_program["u_color"].value = 0
+        tris = self.draw_proxy(self.proxy_program, self._proxy_vaos,
+                               projection.matrix() @ viewpoint.view_matrix(), level_quads, border)
+        return FrameStats(tris, 1, projection)
+
     def release(self) -> None:
-        for vao in self._vaos.values():
+        for vao in [*self._vaos.values(), *self._proxy_vaos.values()]:
             vao.release()
         self._vaos.clear()
+        self._proxy_vaos.clear()
         self.program.release()
+        self.proxy_program.release()
         self.target.release()

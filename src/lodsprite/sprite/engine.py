@@ -8,13 +8,17 @@ step 4  go to step 2.
 
 With ``predict=True`` (the default) a due keyframe is rendered from a viewpoint
 extrapolated ahead of the viewer (the paper's §5 proposal, :mod:`lodsprite.sprite.predict`).
-Look-aheads of 1, 3/4, 1/2 and 1/4 of the previous keyframe interval are tried, largest
-first; a candidate is taken when (a) the current frame's error against it, computed on
-the CPU from ``C'`` before any rendering, is under ``PREDICT_MARGIN`` ε (0.9 ε), and
-(b) every coarse square in the current view is also in the candidate's view (otherwise
-the current frame would fall back to the terrain texture along the borders).  The
-current frame is then a spriteframe from it.  When no candidate passes, the keyframe is
-rendered at the current viewpoint, as in the paper.
+The first look-ahead tried is the previous keyframe interval; up to ``LOOKAHEAD_TRIES``
+candidates are tried, each shorter than the last.  A candidate is taken when (a) the
+current frame's error against it, computed on the CPU from ``C'`` before any rendering,
+is under ``PREDICT_MARGIN`` ε (0.9 ε), and (b) every coarse square in the current view
+is also in the candidate's view, guard band included (otherwise the current frame would
+fall back to the terrain texture along the borders).  The current frame is then a
+spriteframe from it.  When no candidate passes, the keyframe is rendered at the current
+viewpoint, as in the paper.
+
+Keyframes are rendered with a guard band (:class:`~lodsprite.gl.sprite.SpriteRenderer`
+``guard_px``); a frame that is a keyframe shows the keyframe's centre.
 
 A frame's time covers everything it costs: choosing the projection, the error
 metric, culling, the GL work, ``C'`` for a new keyframe, and ``ctx.finish()``.
@@ -25,10 +29,11 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, replace
 
+import numpy as np
+
 from lodsprite.camera import Viewpoint
 from lodsprite.errors import InputError
 from lodsprite.gl.sprite import SpriteRenderer
-from lodsprite.gl.target import RenderTarget
 from lodsprite.sprite.metric import ErrorMetric
 from lodsprite.sprite.predict import extrapolate
 
@@ -36,7 +41,8 @@ KEYFRAME, FIRST_SPRITE, SPRITE = "keyframe", "first_sprite", "sprite"
 FRAME_TYPES = (KEYFRAME, FIRST_SPRITE, SPRITE)
 DEFAULT_EPSILON_PX = 1.0
 PREDICT_MARGIN = 0.9
-LOOKAHEAD_FRACTIONS = (1.0, 0.75, 0.5, 0.25)
+LOOKAHEAD_AIM = 0.95   # aim a rescaled look-ahead at this fraction of the margin
+LOOKAHEAD_TRIES = 4
 
 
 @dataclass(frozen=True)
@@ -71,10 +77,12 @@ class LodSpriteEngine:
         self._shows_keyframe = True
         self.predicted_keyframes = 0
 
-    @property
-    def image_target(self) -> RenderTarget:
-        """The target holding the image of the last frame."""
-        return self.sprite.keyframe.target if self._shows_keyframe else self.sprite.target
+    def read_image(self) -> np.ndarray:
+        """The image of the last frame, ``(H, W, 3) uint8``, row 0 at the top: the keyframe
+        (without its guard band) when the frame was one, else the spriteframe."""
+        if self._shows_keyframe:
+            return self.sprite.keyframe_color()
+        return self.sprite.target.read_color()
 
     def _error(self, c_prime, viewpoint: Viewpoint, projection) -> float:
         view_proj = projection.matrix() @ viewpoint.view_matrix()
@@ -83,24 +91,33 @@ class LodSpriteEngine:
 
     def _ahead(self, viewpoint: Viewpoint, projection) -> tuple | None:
         """``(viewpoint, projection, C', error)`` of a keyframe ahead of ``viewpoint`` that
-        serves it within the margin, or None."""
+        serves it within the margin, or None.
+
+        The first look-ahead is the previous keyframe interval.  The error of the current
+        frame grows about linearly with the look-ahead, so a candidate whose error is too
+        large is followed by one scaled to land at ``LOOKAHEAD_AIM`` of the margin; a
+        candidate under the ground or not covering the view by half the look-ahead.
+        """
         if not self.predict or self._prev is None or self._interval < 2:
             return None
         hf = self.sprite.terrain.geometry.hf
-        for fraction in LOOKAHEAD_FRACTIONS:
-            steps = fraction * self._interval
+        limit = PREDICT_MARGIN * self.epsilon_px
+        steps = float(self._interval)
+        for _ in range(LOOKAHEAD_TRIES):
             if steps < 1:
-                continue
+                return None
             ahead = extrapolate(self._prev, viewpoint, steps)
-            if ahead.o[2] <= float(hf.height_at(ahead.o[0], ahead.o[1])):
-                continue
             key_proj = self.sprite.terrain.projection(ahead)
-            if not self.metric.covers(viewpoint, projection, ahead, key_proj):
+            if ahead.o[2] <= float(hf.height_at(ahead.o[0], ahead.o[1])) or not \
+                    self.metric.covers(viewpoint, projection, ahead,
+                                       self.sprite.key_projection(key_proj)):
+                steps *= 0.5
                 continue
             c_prime = self.metric.reproject(ahead.o)
             err = self._error(c_prime, viewpoint, projection)
-            if err < PREDICT_MARGIN * self.epsilon_px:
+            if err < limit:
                 return ahead, key_proj, c_prime, err
+            steps *= min(LOOKAHEAD_AIM * limit / err, 0.75)
         return None
 
     def frame(self, viewpoint: Viewpoint) -> SpriteFrame:

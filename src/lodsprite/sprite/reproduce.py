@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from lodsprite.errors import InputError
-from lodsprite.gl.sprite import DEFAULT_VISIBILITY, SpriteRenderer
+from lodsprite.gl.sprite import DEFAULT_GUARD_PX, DEFAULT_VISIBILITY, SpriteRenderer
 from lodsprite.metrics import difference_image
 from lodsprite.paths import chen1999
 from lodsprite.report.io import write_json, write_png
@@ -47,6 +47,8 @@ class ReproduceConfig:
     epsilon: float = 1.0
     lod: int = 16
     visibility: str = DEFAULT_VISIBILITY
+    border: bool = True
+    guard_px: int = DEFAULT_GUARD_PX
     fig10_frames: tuple[int, ...] = FIG10_FRAMES
     fig11_epsilon: tuple[float, ...] = FIG11_EPSILON
     full_sample: int | None = None      # None: every frame up to 1024², else 46 frames
@@ -64,7 +66,7 @@ class ReproduceConfig:
         base = {"terrain": self.terrain, "texture": "terrain", "path": "chen1999",
                 "mode": "sprite", "lod": self.lod, "size": (self.size, self.size),
                 "frames": self.frames, "grid": self.grid, "epsilon": self.epsilon,
-                "visibility": self.visibility}
+                "visibility": self.visibility, "border": self.border, "guard_px": self.guard_px}
         return RenderConfig(**{**base, **kw})
 
 
@@ -157,7 +159,8 @@ def _figure_images(pr: PathRenderer, scene: Scene, cfg: ReproduceConfig, path, f
         full = r.target.read_color()
         r.render(vp, cfg.lod)
         lod = r.target.read_color()
-        sprite = SpriteRenderer(r, cfg.lod, cfg.visibility)
+        sprite = SpriteRenderer(r, cfg.lod, cfg.visibility, border=cfg.border,
+                                guard_px=cfg.guard_px)
         try:
             sprite.render_keyframe(key_vp, 0.0)
             sprite.render_spriteframe(vp)
@@ -233,7 +236,8 @@ def _results(cfg, scene, main, ms_full, ms_lod, full_idx, stride, total_s_full, 
         "experiment": "chen1999", "path": "chen1999", "terrain": cfg.terrain,
         "grid": scene.hf.quads,
         "lod": cfg.lod, "size": [cfg.size, cfg.size], "frames": cfg.frames,
-        "epsilon": cfg.epsilon, "visibility": cfg.visibility,
+        "epsilon": cfg.epsilon, "visibility": cfg.visibility, "border": cfg.border,
+        "guard_px": cfg.guard_px,
         "gl_renderer": info.renderer, "gl_version": info.version,
         "machine": f"{platform.machine()}, {platform.system()}, python {platform.python_version()}",
         **sprite_summary(main),
