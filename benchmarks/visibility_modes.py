@@ -1,9 +1,8 @@
-"""Benchmark: the three spriteframe visibility rules side by side, with and without
-keyframes rendered ahead of the viewer.
+"""Benchmark: the three spriteframe visibility rules side by side, and the default rule
+without each of its additions (keyframes ahead of the viewer, border ribbons, guard band).
 
-For each rule (paper's per-triangle, per-fragment, coarse occlusion) and keyframe policy,
-runs LOD-sprite along chen1999 on Jacksboro 512² at 512×512 px, ε = 1 px: a timed pass,
-then an untimed pass measuring every 5th frame against full resolution.
+Each case runs LOD-sprite along chen1999 on Jacksboro 512² at 512×512 px, ε = 1 px: a
+timed pass, then an untimed pass measuring every 5th frame against full resolution.
 
     python benchmarks/visibility_modes.py [--terrain SPEC] [--frames N]
 """
@@ -14,14 +13,21 @@ import argparse
 
 import numpy as np
 
-from lodsprite.gl.sprite import VISIBILITY_MODES, SpriteRenderer
+from lodsprite.gl.sprite import SpriteRenderer
 from lodsprite.metrics import rmse
 from lodsprite.run import PathRenderer, RenderConfig, prepare
 from lodsprite.sprite.engine import KEYFRAME, LodSpriteEngine
 
+CASES = [  # visibility, keyframes ahead, border ribbons, guard band (px)
+    ("triangle", True, True, 32), ("fragment", True, True, 32), ("coarse", True, True, 32),
+    ("coarse", False, True, 32), ("coarse", True, False, 32), ("coarse", True, True, 0),
+    ("coarse", False, False, 0),
+]
 
-def run(pr: PathRenderer, path, visibility: str, predict: bool) -> dict:
-    sprite = SpriteRenderer(pr.renderer, 16, visibility)
+
+def run(pr: PathRenderer, path, visibility: str, predict: bool, border: bool,
+        guard: int) -> dict:
+    sprite = SpriteRenderer(pr.renderer, 16, visibility, border=border, guard_px=guard)
     try:
         vp0 = path.viewpoints[0]
         sprite.render_keyframe(vp0, 0.0)
@@ -35,7 +41,7 @@ def run(pr: PathRenderer, path, visibility: str, predict: bool) -> dict:
             engine.frame(vp)
             if i % 5:
                 continue
-            image = engine.image_target.read_color()
+            image = engine.read_image()
             pr.renderer.render(vp)
             truth = pr.renderer.target.read_color()
             pr.renderer.render(vp, 16)
@@ -55,16 +61,16 @@ def main() -> None:
     ap.add_argument("--frames", type=int, default=460)
     args = ap.parse_args()
     scene, path = prepare(RenderConfig(terrain=args.terrain, frames=args.frames, mode="sprite"))
-    print(f"{'visibility':10s} {'ahead':>5s} {'keyframes':>9s} {'sprite ms':>9s} "
-          f"{'total s':>8s} {'RMSE sprite':>11s} {'RMSE 16²':>9s} {'ratio':>6s}")
+    print(f"{'visibility':10s} {'ahead':>5s} {'border':>6s} {'guard':>5s} {'keyframes':>9s} "
+          f"{'sprite ms':>9s} {'total s':>8s} {'RMSE sprite':>11s} {'RMSE 16²':>9s} "
+          f"{'ratio':>6s}")
     with PathRenderer(scene, (512, 512)) as pr:
-        for visibility in VISIBILITY_MODES:
-            for predict in (False, True):
-                r = run(pr, path, visibility, predict)
-                print(f"{visibility:10s} {predict!s:>5s} {r['keyframes']:9d} "
-                      f"{r['sprite_ms']:9.2f} {r['total_s']:8.2f} {r['rmse_sprite']:11.2f} "
-                      f"{r['rmse_lod']:9.2f} {r['rmse_sprite'] / r['rmse_lod']:6.3f}",
-                      flush=True)
+        for visibility, predict, border, guard in CASES:
+            r = run(pr, path, visibility, predict, border, guard)
+            print(f"{visibility:10s} {predict!s:>5s} {border!s:>6s} {guard:5d} "
+                  f"{r['keyframes']:9d} {r['sprite_ms']:9.2f} {r['total_s']:8.2f} "
+                  f"{r['rmse_sprite']:11.2f} {r['rmse_lod']:9.2f} "
+                  f"{r['rmse_sprite'] / r['rmse_lod']:6.3f}", flush=True)
 
 
 if __name__ == "__main__":
