@@ -81,6 +81,7 @@ class _Server:
         self.control: zmq.Socket | None = None
         self.last_seq = 0
         self.loaded = False
+        self.closed = False
         self.lock = threading.Lock()  # the control socket moves between threads
 
     def _socket(self, kind: int) -> zmq.Socket:
@@ -96,6 +97,8 @@ class _Server:
             return self._request(header)
 
     def _request(self, header: dict) -> dict | None:
+        if self.closed:  # never open a socket after close(): the context could not end
+            return None
         if self.control is None:
             self.control = self._socket(zmq.REQ)
             self.control.setsockopt(zmq.LINGER, 0)
@@ -112,9 +115,13 @@ class _Server:
         return None
 
     def close(self) -> None:
-        for s in (self.viewpoint, self.keyframes, self.control):
-            if s is not None:
-                s.close(linger=0)
+        """Close the sockets; later requests answer None at once (thread-safe)."""
+        with self.lock:
+            self.closed = True
+            for s in (self.viewpoint, self.keyframes, self.control):
+                if s is not None:
+                    s.close(linger=0)
+            self.control = None
 
 
 class LodClient:
@@ -271,6 +278,6 @@ class LodClient:
             t.join(timeout=3.0)
         for s in self._servers:
             s.close()
-        self._zmq.term()
+        self._zmq.destroy(linger=0)  # closes any socket still open, then ends the context
         self.sprite.release()
         self.paths.release()
