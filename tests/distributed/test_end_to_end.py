@@ -143,7 +143,11 @@ def test_interrupted_client_writes_complete_statistics(tmp_path):
                                "client", "--server", address, "--terrain", "fractal:64:2",
                                "--size", "256x256", "--lod", "8", "--path", "chen1999",
                                "--frames", "30000", "--out", str(out)],
-                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                              # A test run started in the background (nohup ... &) inherits
+                              # SIGINT ignored, and Python then never raises
+                              # KeyboardInterrupt: give the client the default disposition.
+                              preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         time.sleep(10.0)  # start-up, path, first keyframe, then some frames
         client.send_signal(signal.SIGINT)
