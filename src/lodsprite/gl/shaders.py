@@ -4,7 +4,9 @@ The terrain is one shared grid mesh of ``C x C`` quads drawn once per visible
 chunk (instanced); each vertex reads its height from an ``R32F`` height texture
 with ``texelFetch``, so no level of detail needs its own vertex buffer.  A
 level with step ``s`` (in full-resolution samples) reads every ``s``-th sample:
-coarse vertices are exact full-resolution samples.
+coarse vertices are exact full-resolution samples.  LOD-sprite draws a coarse level
+as a *proxy mesh* instead (the level plus border ribbons, :mod:`lodsprite.terrain.proxy`)
+whose vertices carry world positions: its programs read ``PROXY_VERTEX_COMMON``.
 """
 
 # Shared by every terrain program: world position and texture coordinate of a grid vertex.
@@ -91,7 +93,7 @@ float seen_by_keyframe(vec4 k, sampler2D key_depth, float tol) {
 
 SPRITE_VS = (
     "#version 330\n"
-    + TERRAIN_VERTEX_COMMON
+    + PROXY_VERTEX_COMMON
     + _LINEAR_DEPTH
     + """
 uniform mat4 u_mvp;
@@ -113,7 +115,7 @@ void main() {
 # Per-fragment rules need no per-vertex visibility and no geometry shader.
 SPRITE_VS_FRAGMENT = (
     "#version 330\n"
-    + TERRAIN_VERTEX_COMMON
+    + PROXY_VERTEX_COMMON
     + """
 uniform mat4 u_mvp;
 uniform mat4 u_key_mvp;

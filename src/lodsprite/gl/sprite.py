@@ -17,7 +17,7 @@ import numpy as np
 from lodsprite.camera import Projection, Viewpoint, widened
 from lodsprite.errors import InputError
 from lodsprite.gl.context import GLContext
-from lodsprite.gl.shaders import SPRITE_FS, SPRITE_GS, SPRITE_VS, SPRITE_VS_FRAGMENT, proxy_twin
+from lodsprite.gl.shaders import SPRITE_FS, SPRITE_GS, SPRITE_VS, SPRITE_VS_FRAGMENT
 from lodsprite.gl.target import RenderTarget
 from lodsprite.gl.terrain import SKY_RGB, FrameStats, TerrainRenderer, mat_bytes
 
@@ -102,11 +102,10 @@ class SpriteRenderer:
     def _program(self, visibility: str, tols: dict[str, float]) -> moderngl.Program:
         mgl = self.ctx.mgl
         if visibility == "triangle":
-            prog = mgl.program(vertex_shader=proxy_twin(SPRITE_VS), geometry_shader=SPRITE_GS,
+            prog = mgl.program(vertex_shader=SPRITE_VS, geometry_shader=SPRITE_GS,
                                fragment_shader=SPRITE_FS)
         else:
-            prog = mgl.program(vertex_shader=proxy_twin(SPRITE_VS_FRAGMENT),
-                               fragment_shader=SPRITE_FS)
+            prog = mgl.program(vertex_shader=SPRITE_VS_FRAGMENT, fragment_shader=SPRITE_FS)
         prog["u_visibility"].value = VISIBILITY_MODES[visibility]
         units = {"u_color": 0, "u_sprite": 2, "u_key_depth": 3, "u_key_coarse": 4}
         for name, value in [*tols.items(), *units.items()]:

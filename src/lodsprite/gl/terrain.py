@@ -108,8 +108,7 @@ class TerrainGeometry:
         prog["u_step"].value = step
         prog["u_corner"].value = (-hf.width / 2, hf.depth / 2)
         prog["u_spacing"].value = (hf.dx, hf.dy)
-        if "u_uv_scale" in prog:  # optimised out of programs that never read the texture
-            prog["u_uv_scale"].value = (1.0 / (hf.cols - 1), 1.0 / (hf.rows - 1))
+        prog["u_uv_scale"].value = (1.0 / (hf.cols - 1), 1.0 / (hf.rows - 1))
 
     def visible_chunks(self, layout: ChunkLayout, view_proj: np.ndarray) -> int:
         """Cull ``layout``'s chunks against the frustum; upload survivors' origins; return count."""
@@ -168,15 +167,13 @@ class TerrainRenderer:
                    cache: dict[tuple[int, bool], moderngl.VertexArray], view_proj: np.ndarray,
                    level_quads: int, border: bool) -> int:
         """Draw the proxy mesh of level ``level_quads`` (:meth:`TerrainGeometry.proxy`) whole,
-        with ``program`` (a :func:`proxy_twin` program, other uniforms already set); returns
+        with ``program`` (reading ``PROXY_VERTEX_COMMON``, other uniforms set); returns
         the triangles drawn."""
         key = (level_quads, border)
         vbo, ibo, count = self.geometry.proxy(level_quads, border)
         if key not in cache:
-            # A program that never reads the texture has no in_uv: skip those 8 bytes.
-            fmt = ("3f 2f", "in_pos", "in_uv") if "in_uv" in program else ("3f 8x", "in_pos")
-            cache[key] = self.ctx.mgl.vertex_array(program, [(vbo, *fmt)], index_buffer=ibo,
-                                                   index_element_size=4)
+            cache[key] = self.ctx.mgl.vertex_array(program, [(vbo, "3f 2f", "in_pos", "in_uv")],
+                                                   index_buffer=ibo, index_element_size=4)
         program["u_mvp"].write(mat_bytes(view_proj))
         cache[key].render(moderngl.TRIANGLES)
         return count // 3

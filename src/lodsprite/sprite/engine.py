@@ -21,7 +21,7 @@ Keyframes are rendered with a guard band (:class:`~lodsprite.gl.sprite.SpriteRen
 ``guard_px``); a frame that is a keyframe shows the keyframe's centre.
 
 A frame's time covers everything it costs: choosing the projection, the error
-metric, culling, the GL work, ``C'`` for a new keyframe, and ``ctx.finish()``.
+metric, the GL work, ``C'`` for a new keyframe, and ``ctx.finish()``.
 """
 
 from __future__ import annotations
