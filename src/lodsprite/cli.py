@@ -47,6 +47,9 @@ BorderOpt = Annotated[bool, typer.Option(
                                  "(border ribbons) with the coarse level")]
 GuardOpt = Annotated[int, typer.Option(
     "--guard", help="sprite mode: keyframe guard band in pixels on every side")]
+PaceOpt = Annotated[str, typer.Option(
+    "--pace", help="distributed: needed (the server renders a keyframe when the shown one "
+                   "nears ε) | continuous (back to back, the paper)")]
 
 
 @contextmanager
@@ -106,6 +109,7 @@ def render(
     visibility: VisOpt = "coarse",
     border: BorderOpt = True,
     guard: GuardOpt = 32,
+    pace: PaceOpt = "needed",
 ) -> None:
     """Render a camera path; write DIR/frames.csv and DIR/summary.json (and PNG frames)."""
     from lodsprite.run import RenderConfig, parse_size, render_path
@@ -114,7 +118,7 @@ def render(
                           size=parse_size(size), frames=frames, grid=grid,
                           exaggeration=exaggeration, save_frames=save_frames, epsilon=epsilon,
                           ground_truth=ground_truth, visibility=visibility, border=border,
-                          guard_px=guard)
+                          guard_px=guard, pace=pace)
     with progress_bar(f"render {mode}") as update:
         s = render_path(config, out_dir, update)
     t = Table(title=f"{s['frames']} frames, {s['mode']}, {s['terrain']} ({s['grid']}² grid)")
@@ -174,13 +178,13 @@ def _print_reproduction(r: dict, report: Path) -> None:
 
 
 def _run_swan2002(out_dir: Path, terrain: str, quick: bool, size: int, lod: int,
-                  adopt: str) -> None:
+                  adopt: str, pace: str) -> None:
     from lodsprite.distributed.reproduce import SwanConfig, reproduce_swan2002
-    from lodsprite.report.swan2002 import write_plots, write_report
+    from lodsprite.report.swan2002 import setups_in, write_plots, write_report
 
     if out_dir == Path("out/chen1999"):
         out_dir = Path("out/swan2002")
-    kw = {"terrain": terrain, "lod": lod, "adopt": adopt}
+    kw = {"terrain": terrain, "lod": lod, "adopt": adopt, "pace": pace}
     cfg = SwanConfig.quick(**kw) if quick else SwanConfig(size=size, **kw)
     with progress_bar("reproduce swan2002 (set-ups)") as update:
         r = reproduce_swan2002(cfg, out_dir, update)
@@ -188,9 +192,8 @@ def _run_swan2002(out_dir: Path, terrain: str, quick: bool, size: int, lod: int,
     t = Table(title=f"Swan et al. 2002 reproduced: {cfg.terrain}, {cfg.frames} frames")
     for col in ("set-up", "client mean ms", "σ ms", "p99 ms", "sprites/keyframe", "δt ms"):
         t.add_column(col, justify="right")
-    for s in ("inline", "same_cores", "separate", "two_servers", "separate_10mbit",
-              "separate_100mbit", "separate_unlimited"):
-        x = r.get(s, {})
+    for s in setups_in(r):
+        x = r[s]
         if "skipped" in x:
             t.add_row(s, "skipped", "", "", "", "")
             continue
@@ -329,13 +332,14 @@ def reproduce(
     adopt: Annotated[str, typer.Option(
         "--adopt", help="swan2002: when the client takes a newer keyframe: needed | newest")
     ] = "newest",
+    pace: PaceOpt = "needed",
 ) -> None:
     """Run a paper's experiment; write DIR/results.json, PNG plots and DIR/report.md."""
     from lodsprite.errors import InputError
     from lodsprite.sprite.reproduce import ReproduceConfig
 
     if experiment == "swan2002":
-        _run_swan2002(out_dir, terrain, quick, size, lod, adopt)
+        _run_swan2002(out_dir, terrain, quick, size, lod, adopt, pace)
         return
     if experiment == "scoggins2000":
         _run_scoggins2000(out_dir, terrain, quick, size)
@@ -425,6 +429,9 @@ def client(
     grid: GridOpt = None,
     exaggeration: ExagOpt = DEFAULT_EXAGGERATION,
     visibility: VisOpt = "coarse",
+    epsilon: EpsOpt = 1.0,
+    border: BorderOpt = True,
+    pace: PaceOpt = "needed",
     adopt: Annotated[str, typer.Option(
         "--adopt", help="needed: take a newer keyframe when the error metric reaches ε/2; "
                         "newest: take every newer keyframe (the paper)")] = "newest",
@@ -441,7 +448,8 @@ def client(
     logging.basicConfig(level=logging.WARNING, format="lodsprite client: %(message)s")
     config = RenderConfig(terrain=terrain, texture=texture, path=path, mode="distributed",
                           lod=lod, size=parse_size(size), frames=frames, grid=grid,
-                          exaggeration=exaggeration, visibility=visibility)
+                          exaggeration=exaggeration, visibility=visibility, epsilon=epsilon,
+                          border=border, pace=pace)
     with progress_bar("client") as update:
         s = run_client(config, list(server or ["127.0.0.1:5555"]), out_dir, update,
                        adopt=adopt, keys=ClientKeys.load(keys) if keys is not None else None)

@@ -64,6 +64,7 @@ class RenderConfig:
     visibility: str = DEFAULT_VISIBILITY
     border: bool = True
     guard_px: int = DEFAULT_GUARD_PX
+    pace: str = "needed"  # distributed mode: when the server renders keyframes (see pacing)
 
     def validate(self) -> None:
         if self.mode not in MODES:
@@ -81,6 +82,8 @@ class RenderConfig:
         if not (isinstance(self.guard_px, int) and 0 <= self.guard_px <= MAX_GUARD_PX):
             raise InputError(f"--guard must be a whole number of pixels in 0..{MAX_GUARD_PX}, "
                              f"got {self.guard_px}")
+        if self.pace not in ("needed", "continuous"):
+            raise InputError(f"--pace must be needed or continuous, got '{self.pace}'")
         if self.quality_stride < 1:
             raise InputError(f"quality stride must be >= 1, got {self.quality_stride}")
         if self.ground_truth and self.mode != "sprite":

@@ -11,6 +11,7 @@ import pytest
 
 from lodsprite.distributed.client import LodClient
 from lodsprite.distributed.render import scene_args
+from lodsprite.distributed.reproduce import SETUPS
 from lodsprite.distributed.run import free_ports
 from lodsprite.run import RenderConfig, prepare
 
@@ -78,6 +79,31 @@ def test_client_keeps_drawing_when_the_server_dies_and_resumes_when_it_returns(s
     finally:
         client.close(shutdown_servers=True)
         stop(server)
+
+
+@pytest.mark.parametrize("pace", ["needed", "continuous"])
+def test_a_still_viewer_gets_one_keyframe_unless_the_server_renders_continuously(scene, pace):
+    sc, path = scene
+    address = f"127.0.0.1:{free_ports()}"
+    server = start_server(address)
+    args = scene_args(SMALL.terrain, SMALL.texture, None, SMALL.exaggeration, SMALL.size)
+    client = LodClient(sc, args, [address], SMALL.size, SMALL.lod, pace=pace)
+    try:
+        assert wait_for(client, path.viewpoints[0])
+        frames = []
+        t_end = time.perf_counter() + 1.5
+        while time.perf_counter() < t_end:
+            frames.append(client.frame(path.viewpoints[0]))
+            time.sleep(0.01)
+        stats = client.server_stats()[0]
+    finally:
+        client.close(shutdown_servers=True)
+        stop(server)
+    received = sum(f.type == "keyframe" for f in frames)
+    if pace == "needed":
+        assert received == 0 and len(stats["render_ms"]) == 1
+    else:
+        assert received >= 3 and len(stats["render_ms"]) >= 4
 
 
 def test_client_without_any_server_renders_keyframes_itself(scene):
@@ -170,8 +196,7 @@ def test_reproduce_swan2002_quick_writes_all_setups(tmp_path):
                            "--out", str(out)], capture_output=True, text=True, timeout=300)
     assert proc.returncode == 0, proc.stderr
     results = json.loads((out / "results.json").read_text())
-    for setup in ("inline", "same_cores", "separate", "two_servers", "separate_10mbit",
-                  "separate_100mbit", "separate_unlimited"):
+    for setup in SETUPS:
         r = results[setup]
         if "skipped" in r:
             continue
@@ -183,7 +208,8 @@ def test_reproduce_swan2002_quick_writes_all_setups(tmp_path):
         if setup == "two_servers":
             assert r["servers"] == 2
     assert "linear" in results["prediction"] and "kalman" in results["prediction"]
-    assert (out / "report.md").read_text().count("61.9") >= 1
+    report = (out / "report.md").read_text()
+    assert report.count("61.9") >= 1 and "`separate` ÷ `same_cores`" in report
 
 
 def test_curve_keys_admit_the_right_client_and_refuse_a_wrong_one(scene, tmp_path):

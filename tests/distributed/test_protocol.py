@@ -14,19 +14,20 @@ from lodsprite.distributed.protocol import (
 )
 
 
-def keyframe(seq=7, h=24, w=32) -> Keyframe:
+def keyframe(seq=7, h=24, w=32, zbuffer="full") -> Keyframe:
     rng = np.random.default_rng(seq)
     return Keyframe(seq, 123.25, look_at((10.0, -500.0, 300.0), (0.0, 0.0, 0.0)),
                     Projection(45.0, w / h, 2.5, 9000.0),
                     rng.integers(0, 256, (h, w, 3), dtype=np.uint8),
-                    rng.random((h, w), dtype=np.float32))
+                    rng.random((h, w), dtype=np.float32), zbuffer)
 
 
+@pytest.mark.parametrize("zbuffer", ["full", "coarse"])
 @pytest.mark.parametrize("codec", ["raw", "zlib"])
-def test_keyframe_round_trip_keeps_every_field(codec):
-    kf = keyframe()
+def test_keyframe_round_trip_keeps_every_field(codec, zbuffer):
+    kf = keyframe(zbuffer=zbuffer)
     back = decode_keyframe(encode_keyframe(kf, codec))
-    assert back.seq == kf.seq and back.t0 == kf.t0
+    assert back.seq == kf.seq and back.t0 == kf.t0 and back.zbuffer == zbuffer
     for k in "xyzo":
         np.testing.assert_array_equal(getattr(back.viewpoint, k), getattr(kf.viewpoint, k))
     assert back.projection == kf.projection
@@ -38,11 +39,29 @@ def test_keyframe_round_trip_keeps_every_field(codec):
     assert len(buffers) == 2
 
 
-def test_images_travel_raw_not_pickled():
+def test_images_travel_raw_not_pickled_rows_bottom_up():
     kf = keyframe()
     frames = encode_keyframe(kf, "raw")
-    assert frames[1] == kf.color.tobytes() and frames[2] == kf.depth.tobytes()
+    assert bytes(frames[1]) == kf.color[::-1].tobytes()
+    assert bytes(frames[2]) == kf.depth[::-1].tobytes()
     assert b"pickle" not in frames[0]
+
+
+def test_gl_rows_cross_the_wire_without_a_copy():
+    # A flipped view of bottom-up rows (a GL read-back) is sent as its own buffer, and a
+    # decoded keyframe's images are views of the received frames.
+    gl_color = np.arange(24 * 32 * 3, dtype=np.uint8).reshape(24, 32, 3)
+    gl_depth = np.linspace(0, 1, 24 * 32, dtype=np.float32).reshape(24, 32)
+    kf = keyframe()
+    kf = Keyframe(kf.seq, kf.t0, kf.viewpoint, kf.projection, gl_color[::-1], gl_depth[::-1])
+    frames = encode_keyframe(kf, "raw")
+    assert np.shares_memory(frames[1], gl_color) and np.shares_memory(frames[2], gl_depth)
+    received = [bytes(frames[0]), bytearray(frames[1]), bytearray(frames[2])]
+    back = decode_keyframe(received)
+    np.testing.assert_array_equal(back.color, gl_color[::-1])
+    assert back.color[::-1].flags.c_contiguous  # what a texture upload takes as it is
+    received[1][0] = 99  # the first byte: bottom row, first pixel, red
+    assert back.color[-1, 0, 0] == 99
 
 
 def corrupt(frames, **changes):
@@ -71,7 +90,7 @@ def test_malformed_and_wrong_version_messages_are_rejected(frames):
 
 
 def test_malformed_keyframes_are_rejected():
-    good = encode_keyframe(keyframe())
+    good = [bytes(f) for f in encode_keyframe(keyframe())]
     bad = [
         good[:2],                                    # depth buffer missing
         [good[0], good[1][:-1], good[2]],            # truncated colour
@@ -82,6 +101,8 @@ def test_malformed_keyframes_are_rejected():
         corrupt(good, near=None),
         corrupt(good, near=5.0, far=1.0),
         corrupt(good, t0="yesterday"),
+        corrupt(good, zbuffer="half"),
+        corrupt(good, zbuffer=None),
         corrupt(good, color={"shape": [24, 32, 3], "dtype": "float64", "codec": "raw"}),
         corrupt(good, color={"shape": [24, 32], "dtype": "uint8", "codec": "raw"}),
         corrupt(good, depth={"shape": [24, 32], "dtype": "float32", "codec": "lz4"}),

@@ -5,6 +5,7 @@ import pytest
 
 from conftest import make_field
 from lodsprite.camera import look_at
+from lodsprite.errors import InputError
 from lodsprite.gl.sprite import VISIBILITY_MODES, SpriteRenderer
 from lodsprite.gl.terrain import TerrainGeometry, TerrainRenderer
 from lodsprite.metrics import rmse
@@ -212,9 +213,19 @@ def test_uploaded_keyframe_gives_the_same_spriteframe_as_a_local_one(build, visi
     projection = sp.keyframe.projection
     sp.render_spriteframe(vp)
     local = sp.target.read_color()
+    coarse = sp.keyframe.coarse.read_depth()
     sp.upload_keyframe(key_vp, projection, color, depth, 0.0)
     sp.render_spriteframe(vp)
     np.testing.assert_array_equal(sp.target.read_color(), local)
+    g = sp.guard_px
+    np.testing.assert_array_equal(sp.keyframe_color(), color[g:-g, g:-g] if g else color)
+    if visibility == "coarse":  # the server sends the coarse z-buffer: nothing to render here
+        sp.upload_keyframe(key_vp, projection, color[::-1].copy()[::-1], coarse, 0.0, "coarse")
+        sp.render_spriteframe(vp)
+        np.testing.assert_array_equal(sp.target.read_color(), local)
+    else:
+        with pytest.raises(InputError):
+            sp.upload_keyframe(key_vp, projection, color, coarse, 0.0, "coarse")
 
 
 @pytest.mark.parametrize("visibility", list(VISIBILITY_MODES))

@@ -12,10 +12,15 @@ steadier than ``newest``.  It never waits for a keyframe: with none yet (no serv
 a server that died before sending one) it renders keyframes itself with the 1999
 algorithm.
 
-KEYFRAME-RECEIVER (a thread): receives keyframes from every server, acknowledges them,
-drops any not newer than the last one from the same server, and queues the rest.
-CLIENT-CONTROL (a thread): loads the scene on each server and starts it, pings every
-second and loads again when a server comes back after a restart.
+KEYFRAME-RECEIVER (a thread): receives keyframes from every server (without copying
+them: the images are views of the received frames and go to the textures as they are),
+acknowledges them, drops any not newer than the last one from the same server, and
+queues the rest.  CLIENT-CONTROL (a thread): loads the scene on each server (with the
+client's coarse level, visibility rule, ε and pace, so that the server sends the
+z-buffer this client reads and keyframes when it needs them) and starts it, pings every
+second and loads again when a server comes back after a restart.  When no server
+answers, the client says so once and draws from its last keyframe; it says so again
+when one is back.
 """
 
 from __future__ import annotations
@@ -24,11 +29,13 @@ import itertools
 import logging
 import threading
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 
 import zmq
 
 from lodsprite.distributed.keys import ClientKeys
+from lodsprite.distributed.pacing import DEFAULT_PACE, PACES
 from lodsprite.distributed.protocol import (
     Keyframe,
     ProtocolError,
@@ -48,7 +55,6 @@ from lodsprite.sprite.engine import LodSpriteEngine
 log = logging.getLogger("lodsprite.client")
 
 CONTROL_TIMEOUT_MS = 1000
-SILENCE_S = 3.0  # no keyframe for this long while a server should be sending: say so
 ADOPT_MODES = ("needed", "newest")
 ADOPT_FRACTION = 0.5
 
@@ -81,6 +87,8 @@ class _Server:
         self.control: zmq.Socket | None = None
         self.last_seq = 0
         self.loaded = False
+        self.alive: bool | None = None  # None until the first ping is answered or not
+        self.refusal: str | None = None  # the server's reason for refusing the last load
         self.closed = False
         self.lock = threading.Lock()  # the control socket moves between threads
 
@@ -124,21 +132,51 @@ class _Server:
             self.control = None
 
 
+def keep_loaded(link: _Server, load_args: dict, counter: Iterator[int]) -> None:
+    """One CLIENT-CONTROL round for one server: ping it; load the scene and start it when
+    it has none, is not running, or an earlier load or start got no answer (a server
+    busy starting up may have lost it).  Sets ``link.alive`` and ``link.loaded``."""
+    def ctl(op: str, args: dict | None = None) -> dict | None:
+        return link.request({"kind": "control", "seq": next(counter), "op": op,
+                             "args": args or {}})
+
+    reply = ctl("ping")
+    link.alive = reply is not None
+    if reply is None:
+        link.loaded = False
+        return
+    data = reply.get("data", {})
+    if link.loaded and data.get("running") and data.get("loaded"):
+        return
+    link.last_seq = 0  # a restarted server counts from 1 again
+    replies = [ctl("load", load_args), ctl("start")]
+    link.loaded = all(r is not None and r.get("ok") for r in replies)
+    refusal = replies[0].get("error") if replies[0] and not replies[0].get("ok") else None
+    if refusal and refusal != link.refusal:
+        log.warning("%s refused the scene: %s", link.address, refusal)
+    link.refusal = refusal
+
+
 class LodClient:
     """Spriteframes along any viewpoint stream, keyframes from one or more LOD servers."""
 
     def __init__(self, scene: Scene, scene_args: dict, servers: list[str],
                  size: tuple[int, int] = (512, 512), lod: int = 16,
                  visibility: str = "coarse", epsilon: float = 1.0,
-                 adopt: str = "newest", keys: ClientKeys | None = None) -> None:
+                 adopt: str = "newest", keys: ClientKeys | None = None,
+                 border: bool = True, pace: str = DEFAULT_PACE) -> None:
         if adopt not in ADOPT_MODES:
             raise InputError(f"adopt must be one of {', '.join(ADOPT_MODES)}, got {adopt!r}")
+        if pace not in PACES:
+            raise InputError(f"pace must be one of {', '.join(PACES)}, got {pace!r}")
         self.adopt = adopt
         self._pending: Keyframe | None = None
         self._c_prime = None
-        self.scene_args = scene_args
+        self.scene_args = {**scene_args, "lod": lod, "visibility": visibility,
+                           "border": border, "epsilon": float(epsilon), "pace": pace}
         self.paths = PathRenderer(scene, size, float(scene_args.get("fov_y_deg", 45.0)))
-        self.sprite = SpriteRenderer(self.paths.renderer, lod, visibility, guard_px=0)
+        self.sprite = SpriteRenderer(self.paths.renderer, lod, visibility, border=border,
+                                     guard_px=0)
         self.local = LodSpriteEngine(self.sprite, epsilon)
         self.queue: KeyframeQueue[tuple[str, Keyframe]] = KeyframeQueue(2)
         self._zmq = zmq.Context()
@@ -146,7 +184,6 @@ class LodClient:
         self._stop = threading.Event()
         self._counter = itertools.count(1)
         self._current: Keyframe | None = None
-        self._last_arrival = time.perf_counter()
         self._silent = False
         self.rejected_messages = 0
         self._threads = [threading.Thread(target=self._receive, daemon=True),
@@ -162,17 +199,9 @@ class LodClient:
 
     def _control(self) -> None:
         while not self._stop.is_set():
-            for s in self._servers:
-                reply = self._ctl(s, "ping")
-                if reply is None:
-                    s.loaded = False
-                    continue
-                if not s.loaded or not reply.get("data", {}).get("running"):
-                    s.last_seq = 0  # a restarted server counts from 1 again
-                    slot = {"slot": self._servers.index(s), "slots": len(self._servers)}
-                    for op, args in (("load", {**self.scene_args, **slot}), ("start", {})):
-                        self._ctl(s, op, args)
-                    s.loaded = True
+            for i, s in enumerate(self._servers):
+                keep_loaded(s, {**self.scene_args, "slot": i, "slots": len(self._servers)},
+                            self._counter)
             self._stop.wait(1.0)
 
     # ---------------------------------------------------------------- KEYFRAME-RECEIVER
@@ -185,7 +214,7 @@ class LodClient:
         while not self._stop.is_set():
             for sock, _ in poller.poll(50):
                 s = by_socket[sock]
-                frames = sock.recv_multipart()
+                frames = sock.recv_multipart(copy=False)
                 try:
                     kf = decode_keyframe(frames)
                 except ProtocolError as exc:
@@ -220,13 +249,10 @@ class LodClient:
         kind = "sprite"
         if newest is not None:
             self._pending = newest[1]
-            self._last_arrival = t0
-            if self._silent:
-                log.warning("keyframes arrive again")
-                self._silent = False
         if self._pending is not None and self._should_adopt(viewpoint):
             kf, self._pending = self._pending, None
-            self.sprite.upload_keyframe(kf.viewpoint, kf.projection, kf.color, kf.depth, kf.t0)
+            self.sprite.upload_keyframe(kf.viewpoint, kf.projection, kf.color, kf.depth, kf.t0,
+                                        kf.zbuffer)
             self._current, kind = kf, "keyframe"
             if self.adopt == "needed":
                 self._c_prime = self.local.metric.reproject(kf.viewpoint.o)
@@ -237,11 +263,20 @@ class LodClient:
         else:
             triangles = self.sprite.render_spriteframe(viewpoint).triangles
             self.paths.ctx.finish()
-            if t0 - self._last_arrival > SILENCE_S and not self._silent:
-                log.warning("no keyframe for %.0f s: drawing from the last one", SILENCE_S)
-                self._silent = True
+        self._say_link_state()
         seq = self._current.seq if self._current is not None else 0
         return ClientFrame(kind, (time.perf_counter() - t0) * 1e3, triangles, seq)
+
+    def _say_link_state(self) -> None:
+        """Say once when no server answers any more, and once when one answers again."""
+        states = [s.alive for s in self._servers]
+        if not self._silent and states and all(a is False for a in states):
+            self._silent = True
+            log.warning("no LOD server answers: drawing from the %s",
+                        "last keyframe" if self._current is not None else "client's own keyframes")
+        elif self._silent and any(states):
+            self._silent = False
+            log.warning("a LOD server answers again")
 
     def _should_adopt(self, viewpoint) -> bool:
         """``newest`` (the paper): take every newer keyframe.  ``needed``: keep the current

@@ -12,15 +12,20 @@ control    ``op`` (start, stop, load, stats, shutdown,   none
 reply      ``ok`` (bool), ``error`` (str), ``data``      none
 viewpoint  ``t`` (client clock, s), ``viewpoint``        none
            ({x, y, z, o} lists of 3 floats)
-keyframe   ``t0`` (server clock when rendering began),   colour (H, W, 3) uint8 row 0 at the
-           ``viewpoint``, ``view``, ``proj`` (16 floats  top; depth (H, W) float32 window
-           each, row-major), ``fov``, ``near``, ``far``, depth in [0, 1]; each raw or zlib
-           ``color``/``depth`` ({shape, dtype, codec})   compressed (``codec``)
+keyframe   ``t0`` (server clock when rendering began),   colour (H, W, 3) uint8; depth (H, W)
+           ``viewpoint``, ``view``, ``proj`` (16 floats  float32 window depth in [0, 1];
+           each, row-major), ``fov``, ``near``, ``far``, both with rows bottom-up (OpenGL's
+           ``zbuffer`` (``full``: the full-resolution    order, so neither side flips them);
+           z-buffer, ``coarse``: the coarse level's,     each raw or zlib compressed
+           all the ``coarse`` visibility rule reads),    (``codec``)
+           ``color``/``depth`` ({shape, dtype, codec})
 ack        ``t`` (client clock)                          none
 =========  ============================================  =====================================
 
 :func:`decode` rejects anything malformed - wrong version, missing or mistyped
-fields, truncated or oversized buffers - with :class:`ProtocolError`.
+fields, truncated or oversized buffers - with :class:`ProtocolError`.  Buffers are not
+copied on the way through: :func:`decode` hands out memoryviews of the received frames
+(``recv_multipart(copy=False)``) and a decoded keyframe's images are views of them.
 """
 
 from __future__ import annotations
@@ -34,10 +39,11 @@ import numpy as np
 from lodsprite.camera import Projection, Viewpoint
 from lodsprite.errors import InputError, LodspriteError
 
-PROTOCOL_VERSION = 1
+PROTOCOL_VERSION = 2
 KINDS = ("control", "reply", "viewpoint", "keyframe", "ack")
 CONTROL_OPS = ("start", "stop", "load", "stats", "shutdown", "ping")
 CODECS = ("raw", "zlib")
+ZBUFFERS = ("full", "coarse")
 MAX_IMAGE_SIDE = 16384
 
 
@@ -45,14 +51,16 @@ class ProtocolError(LodspriteError, ValueError):
     """A message that does not follow the protocol (malformed, truncated, wrong version)."""
 
 
-def encode(header: dict, *buffers: bytes) -> list[bytes]:
-    """Multipart frames for ``header`` (must hold ``kind`` and ``seq``) and raw buffers."""
+def encode(header: dict, *buffers) -> list:
+    """Multipart frames for ``header`` (must hold ``kind`` and ``seq``) and raw buffers
+    (any objects with the buffer protocol: bytes, contiguous arrays)."""
     head = {"v": PROTOCOL_VERSION, **header}
     return [msgpack.packb(head, use_bin_type=True), *buffers]
 
 
-def decode(frames: list[bytes]) -> tuple[dict, list[bytes]]:
-    """Header and buffers of a multipart message; raises :class:`ProtocolError`."""
+def decode(frames: list) -> tuple[dict, list[memoryview]]:
+    """Header and buffers of a multipart message (``bytes`` or ``zmq.Frame``); raises
+    :class:`ProtocolError`.  The buffers are views of the frames, not copies."""
     if not frames:
         raise ProtocolError("empty message")
     try:
@@ -68,7 +76,7 @@ def decode(frames: list[bytes]) -> tuple[dict, list[bytes]]:
     seq = header.get("seq")
     if isinstance(seq, bool) or not isinstance(seq, int) or seq < 0:
         raise ProtocolError(f"bad sequence number {seq!r}")
-    return header, [bytes(f) for f in frames[1:]]
+    return header, [memoryview(f).cast("B") for f in frames[1:]]
 
 
 def _floats(value, n: int, name: str) -> np.ndarray:
@@ -99,7 +107,14 @@ def viewpoint_from_wire(d) -> Viewpoint:
 class Keyframe:
     """A keyframe crossing the wire: the 2002 paper's (sprite, z-buffer, view, t0) plus the
     projection.  ``color (H, W, 3) uint8``, ``depth (H, W) float32`` window depth in [0, 1],
-    row 0 at the top of the image; ``t0`` in seconds on the server's clock."""
+    row 0 at the top of the image; ``t0`` in seconds on the server's clock.  ``zbuffer``
+    says whose depth it is: ``full`` (the full-resolution terrain's) or ``coarse`` (the
+    coarse level's, from the same view: all that the default visibility rule reads).
+
+    Arrays that are ``[::-1]`` views of contiguous bottom-up rows (what
+    :meth:`~lodsprite.gl.target.RenderTarget.read_color` gives with ``copy=False`` and what
+    :func:`decode_keyframe` returns) cross the wire and reach a texture without a copy.
+    """
 
     seq: int
     t0: float
@@ -107,19 +122,24 @@ class Keyframe:
     projection: Projection
     color: np.ndarray
     depth: np.ndarray
+    zbuffer: str = "full"
 
 
-def _image_spec(a: np.ndarray, codec: str) -> tuple[dict, bytes]:
-    data = np.ascontiguousarray(a).tobytes()
+def _image_spec(a: np.ndarray, codec: str) -> tuple[dict, object]:
+    data = np.ascontiguousarray(a[::-1])  # bottom-up rows; no copy for a flipped GL read
     if codec == "zlib":
         data = zlib.compress(data, 1)
     return {"shape": list(a.shape), "dtype": str(a.dtype), "codec": codec}, data
 
 
-def encode_keyframe(kf: Keyframe, codec: str = "raw") -> list[bytes]:
-    """Frames of a keyframe message; ``codec`` is ``raw`` or ``zlib`` (both images)."""
+def encode_keyframe(kf: Keyframe, codec: str = "raw") -> list:
+    """Frames of a keyframe message; ``codec`` is ``raw`` or ``zlib`` (both images).  Raw
+    image frames are the keyframe's own buffers where its arrays allow (send them with
+    ``copy=False``)."""
     if codec not in CODECS:
         raise InputError(f"codec must be one of {CODECS}, got {codec!r}")
+    if kf.zbuffer not in ZBUFFERS:
+        raise InputError(f"zbuffer must be one of {ZBUFFERS}, got {kf.zbuffer!r}")
     color_spec, color = _image_spec(kf.color, codec)
     depth_spec, depth = _image_spec(kf.depth, codec)
     p = kf.projection
@@ -128,11 +148,11 @@ def encode_keyframe(kf: Keyframe, codec: str = "raw") -> list[bytes]:
               "view": kf.viewpoint.view_matrix().ravel().tolist(),
               "proj": p.matrix().ravel().tolist(),
               "fov": p.fov_y_deg, "aspect": p.aspect, "near": p.near, "far": p.far,
-              "color": color_spec, "depth": depth_spec}
+              "zbuffer": kf.zbuffer, "color": color_spec, "depth": depth_spec}
     return encode(header, color, depth)
 
 
-def _image(spec, data: bytes, dtype: str, channels: int | None, name: str) -> np.ndarray:
+def _image(spec, data, dtype: str, channels: int | None, name: str) -> np.ndarray:
     if not isinstance(spec, dict) or spec.get("dtype") != dtype or spec.get("codec") not in CODECS:
         raise ProtocolError(f"{name}: bad image description {spec!r}")
     shape = spec.get("shape")
@@ -149,7 +169,7 @@ def _image(spec, data: bytes, dtype: str, channels: int | None, name: str) -> np
             raise ProtocolError(f"{name}: corrupt zlib data") from exc
     if len(data) != size:
         raise ProtocolError(f"{name}: {len(data)} bytes, expected {size}")
-    return np.frombuffer(data, dtype=dtype).reshape(shape)
+    return np.frombuffer(data, dtype=dtype).reshape(shape)[::-1]  # rows arrive bottom-up
 
 
 def decode_keyframe(frames: list[bytes]) -> Keyframe:
@@ -172,4 +192,7 @@ def decode_keyframe(frames: list[bytes]) -> Keyframe:
     depth = _image(header.get("depth"), buffers[1], "float32", None, "depth")
     if color.shape[:2] != depth.shape:
         raise ProtocolError("colour and depth sizes differ")
-    return Keyframe(header["seq"], float(nums["t0"]), vp, proj, color, depth)
+    zbuffer = header.get("zbuffer")
+    if zbuffer not in ZBUFFERS:
+        raise ProtocolError(f"unknown z-buffer {zbuffer!r}")
+    return Keyframe(header["seq"], float(nums["t0"]), vp, proj, color, depth, zbuffer)

@@ -1,19 +1,26 @@
 """Reproduction of Swan, Arango & Nakshatrala (2002) §4: the 600-frame timing study.
 
-The swan2002 path is drawn in three set-ups, each as separate processes measured in
-the same run:
+The swan2002 path is drawn in these set-ups, each as separate processes measured in the
+same run (:data:`SETUPS`):
 
 * ``inline`` - the 1999 algorithm, keyframes rendered in the client's own frame loop;
-* ``same_cores`` - LOD server and LOD client sharing all cores (the paper's
-  non-distributed Figures 9-10);
 * ``separate`` - server and client pinned to different cores, one llvmpipe thread each
-  (the paper's two machines); skipped with fewer than two cores;
+  (the paper's two machines, each with its own graphics pipe); skipped with fewer than
+  two cores;
+* ``same_cores`` - the same, but the server pinned to the client's core: the two
+  programs share one "graphics pipe", as in the paper's non-distributed Figures 9-10,
+  and nothing else changes;
+* ``same_all_cores`` - server and client sharing all cores, llvmpipe's default threads;
+* ``separate_continuous``, ``same_cores_continuous`` - as above with the paper's server,
+  which renders keyframes back to back (pace ``continuous``) instead of when the client
+  will need one (pace ``needed``, :mod:`lodsprite.distributed.pacing`);
 * ``two_servers`` - two LOD servers and the client sharing all cores: keyframe rate and
-  δt with 2 servers against ``same_cores``' 1;
-* ``separate_10mbit``, ``separate_100mbit``, ``separate_unlimited`` - the same, with server
-  and client on two hosts (network namespaces joined by a veth pair, rate-limited with
-  tc's token bucket: the paper's 10BASE-T and its proposed 100BASE-T); skipped where
-  this process may not create namespaces (:mod:`lodsprite.distributed.netns`).
+  δt with 2 servers against ``same_all_cores``' 1;
+* ``separate_10mbit``, ``separate_100mbit``, ``separate_unlimited`` - server and client
+  on two hosts (network namespaces joined by a veth pair, rate-limited with tc's token
+  bucket: the paper's 10BASE-T and its proposed 100BASE-T), and
+  ``separate_10mbit_zlib`` with compressed keyframes; skipped where this process may
+  not create namespaces (:mod:`lodsprite.distributed.netns`).
 
 Each set-up's folder holds the client's ``frames.csv``, ``summary.json`` and the
 server's per-keyframe statistics; ``results.json`` gathers them with the prediction
@@ -27,7 +34,8 @@ import json
 import os
 import subprocess
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from contextlib import ExitStack
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -40,10 +48,41 @@ from lodsprite.paths import swan2002
 from lodsprite.report.io import write_json
 from lodsprite.terrain import load_terrain
 
-SETUPS = ("inline", "same_cores", "separate", "two_servers")
-LINK_SETUPS = tuple(f"separate_{name}" for name in RATES)
 NS_PORT = 5555
 ONE_THREAD = {"LP_NUM_THREADS": "1"}
+
+
+@dataclass(frozen=True)
+class Setup:
+    """Where the programs run: ``client``/``server`` are ``"own"`` (pinned to a core of its
+    own, one llvmpipe thread), ``"shared"`` (the server on the client's core) or
+    ``"all"`` (every core, default threads); ``link`` a key of ``netns.RATES`` (two
+    hosts); ``pace`` overrides the run's; ``codec`` is the server's."""
+
+    client: str = "own"
+    server: str = "own"
+    servers: int = 1
+    pace: str | None = None  # None: the run's pace
+    codec: str = "raw"
+    link: str | None = None
+
+    @property
+    def cores(self) -> int:
+        return 2 if self.server == "own" else 1
+
+
+SETUPS: dict[str, Setup | None] = {
+    "inline": None,
+    "same_cores": Setup(server="shared"),
+    "separate": Setup(),
+    "same_all_cores": Setup(client="all", server="all"),
+    "same_cores_continuous": Setup(server="shared", pace="continuous"),
+    "separate_continuous": Setup(pace="continuous"),
+    "two_servers": Setup(client="all", server="all", servers=2),
+    **{f"separate_{name}": Setup(link=name) for name in RATES},
+    "separate_10mbit_zlib": Setup(link="10mbit", codec="zlib"),
+}
+LINK_SETUPS = tuple(k for k, v in SETUPS.items() if v is not None and v.link)
 
 
 @dataclass(frozen=True)
@@ -54,6 +93,7 @@ class SwanConfig:
     lod: int = 16
     predictor: str = "linear"
     adopt: str = "newest"
+    pace: str = "needed"
     links: bool = True
 
     @classmethod
@@ -62,7 +102,7 @@ class SwanConfig:
 
     def args(self) -> list[str]:
         return ["--terrain", self.terrain, "--path", "swan2002", "--frames", str(self.frames),
-                "--size", f"{self.size}x{self.size}", "--lod", str(self.lod)]
+                "--size", f"{self.size}x{self.size}", "--lod", str(self.lod), "--pace", self.pace]
 
 
 def _run(cmd: list[str], cpus: set[int] | None = None, env: dict | None = None) -> None:
@@ -73,40 +113,46 @@ def _run(cmd: list[str], cpus: set[int] | None = None, env: dict | None = None) 
         raise LodspriteError(f"{' '.join(cmd[3:5])} failed: {last}")
 
 
-def _setup(cfg: SwanConfig, setup: str, out: Path, cpus: list[int]) -> dict | None:
-    if setup == "inline":
+def _placement(where: str, own: int, cpus: list[int]) -> tuple[set[int] | None, dict | None]:
+    if where == "all":
+        return None, None
+    return {cpus[own] if where == "own" else cpus[0]}, ONE_THREAD
+
+
+def _setup(cfg: SwanConfig, name: str, out: Path, cpus: list[int]) -> dict | None:
+    setup = SETUPS[name]
+    if setup is None:
         _run(lodsprite_command("render", "--mode", "sprite", *cfg.args(), "--out", str(out)))
-    elif setup == "same_cores":
-        with local_server(cfg.predictor) as address:
-            _run(lodsprite_command("client", "--server", address, *cfg.args(), "--adopt",
-                                   cfg.adopt, "--out", str(out)))
-    elif setup == "two_servers":
-        with local_server(cfg.predictor) as a, local_server(cfg.predictor) as b:
-            _run(lodsprite_command("client", "--server", a, "--server", b, *cfg.args(),
-                                   "--adopt", cfg.adopt, "--out", str(out)))
-    elif setup in LINK_SETUPS:
-        if len(cpus) < 2:
-            return None
-        _two_hosts(cfg, RATES[setup.removeprefix("separate_")], out, cpus)
-    else:
-        if len(cpus) < 2:
-            return None
-        with local_server(cfg.predictor, {cpus[1]}, ONE_THREAD) as address:
-            _run(lodsprite_command("client", "--server", address, *cfg.args(), "--adopt",
-                                   cfg.adopt, "--out", str(out)), {cpus[0]}, ONE_THREAD)
-    return _collect(setup, out)
+        return _collect(name, out)
+    if len(cpus) < setup.cores:
+        return None
+    run_cfg = replace(cfg, pace=setup.pace or cfg.pace)
+    client_cpus, client_env = _placement(setup.client, 0, cpus)
+    server_cpus, server_env = _placement(setup.server, 1, cpus)
+    if setup.link is not None:
+        _two_hosts(run_cfg, setup, out, (client_cpus, client_env), (server_cpus, server_env))
+        return _collect(name, out)
+    serve = ["--predictor", cfg.predictor, "--codec", setup.codec]
+    with ExitStack() as stack:
+        addresses = [stack.enter_context(local_server(serve, server_cpus, server_env))
+                     for _ in range(setup.servers)]
+        servers = [a for address in addresses for a in ("--server", address)]
+        _run(lodsprite_command("client", *servers, *run_cfg.args(), "--adopt", cfg.adopt,
+                               "--out", str(out)), client_cpus, client_env)
+    return _collect(name, out)
 
 
-def _two_hosts(cfg: SwanConfig, rate: str | None, out: Path, cpus: list[int]) -> None:
+def _two_hosts(cfg: SwanConfig, setup: Setup, out: Path, client: tuple, server: tuple) -> None:
     """Server and client in two network namespaces joined by a (rate-limited) veth."""
     address = f"{SERVER_IP}:{NS_PORT}"
-    with two_hosts(rate) as hosts:
+    with two_hosts(RATES[setup.link]) as hosts:
         serve = hosts.server(lodsprite_command("serve", "--bind", address, "--allow-remote",
-                                               "--predictor", cfg.predictor))
-        with server_process(serve, {cpus[1]}, ONE_THREAD):
+                                               "--predictor", cfg.predictor,
+                                               "--codec", setup.codec))
+        with server_process(serve, *server):
             _run(hosts.client(lodsprite_command("client", "--server", address, *cfg.args(),
                                                 "--adopt", cfg.adopt, "--out", str(out))),
-                 {cpus[0]}, ONE_THREAD)
+                 *client)
 
 
 def _collect(setup: str, out: Path) -> dict:
@@ -118,6 +164,9 @@ def _collect(setup: str, out: Path) -> dict:
     res = {"client_ms_mean": float(ms.mean()), "client_ms_std": float(ms.std()),
            "client_ms_median": float(np.median(ms)),
            "client_ms_p99": float(np.percentile(ms, 99)),
+           # stutter: RMS of the change from one frame's time to the next (slow changes
+           # of the scene's cost along the path hardly count, unlike in σ)
+           "client_ms_jitter": float(np.sqrt(np.mean(np.diff(ms) ** 2))) if len(ms) > 1 else 0.0,
            "keyframes": received,
            "keyframe_rate_hz": received / (ms.sum() / 1e3),
            "sprites_per_keyframe": (len(rows) - received) / received if received else None,
@@ -159,7 +208,7 @@ def reproduce_swan2002(cfg: SwanConfig, out_dir: Path,
     cpus = sorted(os.sched_getaffinity(0))
     results: dict = {"experiment": "swan2002", "config": asdict(cfg), "cpus": len(cpus)}
     no_netns = available() if cfg.links else "not asked for (--no-links)"
-    setups = SETUPS + LINK_SETUPS
+    setups = list(SETUPS)
     for i, setup in enumerate(setups):
         if setup in LINK_SETUPS and no_netns:
             results[setup] = {"skipped": f"two hosts on one machine: {no_netns}"}

@@ -12,7 +12,7 @@ import socket
 import subprocess
 import sys
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
@@ -65,13 +65,13 @@ def pinned(cpus: set[int] | None):
 
 
 @contextmanager
-def local_server(predictor: str = "linear", cpus: set[int] | None = None,
+def local_server(serve_args: Sequence[str] = (), cpus: set[int] | None = None,
                  env: dict | None = None):
-    """A LOD server process on free loopback ports, optionally pinned to ``cpus`` and with
-    extra environment variables; yields its ``HOST:PORT``."""
+    """A LOD server process on free loopback ports (``lodsprite serve`` with extra
+    ``serve_args``), optionally pinned to ``cpus`` and with extra environment variables;
+    yields its ``HOST:PORT``."""
     address = f"127.0.0.1:{free_ports()}"
-    with server_process(lodsprite_command("serve", "--bind", address, "--predictor",
-                                          predictor), cpus, env):
+    with server_process(lodsprite_command("serve", "--bind", address, *serve_args), cpus, env):
         yield address
 
 
@@ -107,7 +107,7 @@ def run_client(config: RenderConfig, servers: list[str], out_dir: Path,
     args = scene_args(config.terrain, config.texture, config.grid, config.exaggeration,
                       config.size, config.fov_y_deg)
     client = LodClient(scene, args, servers, config.size, config.lod, config.visibility,
-                       config.epsilon, adopt, keys)
+                       config.epsilon, adopt, keys, config.border, config.pace)
     rows: list[dict] = []
     interrupted = False
     stats: list[dict] = []
@@ -131,6 +131,7 @@ def run_client(config: RenderConfig, servers: list[str], out_dir: Path,
     if rows:
         summary = _summary(config, rows, stats, info.renderer, servers)
         summary.update(grid=scene.hf.quads, lod=config.lod, interrupted=interrupted, adopt=adopt,
+                       pace=config.pace,
                        triangles_mean=float(np.mean([r["triangles"] for r in rows])))
         write_csv(out_dir / "frames.csv", rows, FRAME_COLUMNS)
         write_json(out_dir / "server_stats.json", {"servers": servers, "stats": stats})

@@ -3,14 +3,17 @@
 No user interface: it is driven by messages on three connections, bound to consecutive
 ports ``port``, ``port + 1``, ``port + 2`` (the paper's Figure 4):
 
-* control (REP): ``ping``, ``load`` (terrain, texture, grid, exaggeration, size, fov),
-  ``start``, ``stop``, ``stats``, ``shutdown``;
+* control (REP): ``ping``, ``load`` (terrain, texture, grid, exaggeration, size, fov, and
+  the client's coarse level, visibility rule, ε and pace), ``start``, ``stop``,
+  ``stats``, ``shutdown``;
 * viewpoint (SUB, conflated: the newest viewpoint wins);
 * keyframe (DEALER): keyframes out, acknowledgements back.
 
 Modules, each a thread: SERVER-CONTROL, the viewpoint receiver feeding the
 VIEWPOINT-PREDICTOR, KEYFRAME-RENDERER (owns the GL context), SERVER-KEYFRAME-QUEUE
-(capacity 2) and KEYFRAME-TRANSMITTER, which measures ``δt = t1 - t0``.
+(capacity 2) and KEYFRAME-TRANSMITTER, which measures ``δt = t1 - t0``.  With pace
+``needed`` (default; :mod:`lodsprite.distributed.pacing`) the renderer waits until the
+client will need a new keyframe; ``continuous`` renders back to back as in the paper.
 """
 
 from __future__ import annotations
@@ -33,6 +36,7 @@ from lodsprite.distributed.protocol import (
     viewpoint_from_wire,
 )
 from lodsprite.distributed.queue import Closed, KeyframeQueue
+from lodsprite.distributed.render import check_load_args
 from lodsprite.errors import LodspriteError
 
 log = logging.getLogger("lodsprite.server")
@@ -53,7 +57,8 @@ def endpoints(address: str, bind: bool) -> tuple[str, str, str]:
 
 @dataclass
 class ServerStats:
-    """Per-keyframe timings (ms) of Figures 11-12."""
+    """Per-keyframe timings (ms) of Figures 11-12.  ``viewpoint_wait_ms`` includes, with
+    pace ``needed``, the wait until a keyframe is due."""
 
     production_ms: list = field(default_factory=list)
     viewpoint_wait_ms: list = field(default_factory=list)
@@ -92,9 +97,11 @@ class LodServer:
         self._running = threading.Event()
         self._scene_lock = threading.Lock()
         self._scene_request: dict | None = None
+        self._loaded = False  # a load request was accepted
         self._latest_lock = threading.Lock()
         self._predictor = PREDICTORS[predictor]()
         self._have_viewpoint = threading.Event()
+        self._fresh_viewpoint = threading.Event()  # set by each viewpoint received
         self._delta_t = 0.5  # seconds, until the transmitter has measured one
         self._lead_factor = 1.0
         self._seq = 0
@@ -144,15 +151,22 @@ class LodServer:
         if header["kind"] != "control":
             return {**reply, "ok": False, "error": "expected a control message"}
         if op == "ping":
-            reply["data"] = {"running": self._running.is_set()}
+            reply["data"] = {"running": self._running.is_set(), "loaded": self._loaded}
         elif op == "load":
-            args = dict(header.get("args") or {})
+            args = header.get("args") or {}
+            if not isinstance(args, dict):
+                return {**reply, "ok": False, "error": "load: args is not a map"}
             slot, slots = args.get("slot", 0), args.get("slots", 1)
             if not (isinstance(slot, int) and isinstance(slots, int) and 0 <= slot < slots):
                 return {**reply, "ok": False, "error": f"bad slot {slot!r} of {slots!r}"}
+            try:
+                check_load_args(args)
+            except ProtocolError as exc:
+                return {**reply, "ok": False, "error": str(exc)}
             self._lead_factor = 1.0 + slot / slots
             with self._scene_lock:
                 self._scene_request = args
+            self._loaded = True
         elif op == "start":
             self._running.set()
         elif op == "stop":
@@ -189,6 +203,7 @@ class LodServer:
                 with self._latest_lock:
                     self._predictor.observe(time.perf_counter(), vp)
                 self._have_viewpoint.set()
+                self._fresh_viewpoint.set()
         finally:
             sock.close(linger=0)
 
@@ -211,7 +226,11 @@ class LodServer:
                 if request is not None:
                     if renderer is not None:
                         renderer.release()
-                    renderer = KeyframeRenderer(request)
+                        renderer = None
+                    try:
+                        renderer = KeyframeRenderer(request)
+                    except (LodspriteError, ValueError) as exc:
+                        log.error("cannot load the scene: %s", exc)
                 if renderer is None or not self._running.is_set():
                     time.sleep(0.01)
                     continue
@@ -227,9 +246,16 @@ class LodServer:
         if not self._have_viewpoint.wait(0.1):
             return
         vp = self._predicted_viewpoint()
-        t1 = time.perf_counter()
+        while not renderer.pacer.due(vp, renderer.projection(vp)):
+            if (self._stop.is_set() or not self._running.is_set()
+                    or self._scene_request is not None):
+                return
+            self._fresh_viewpoint.wait(0.05)  # check again with the next viewpoint
+            self._fresh_viewpoint.clear()
+            vp = self._predicted_viewpoint()
+        t1 = time.perf_counter()  # δt runs from here: the prediction was made for t1 + δt
         self._seq += 1
-        kf = renderer.render(vp, self._seq, t0)
+        kf = renderer.render(vp, self._seq, t1)
         t2 = time.perf_counter()
         while not self.queue.put(kf, timeout=0.1):
             if self._stop.is_set() or not self._running.is_set():

@@ -33,7 +33,8 @@ DEFAULT_GUARD_PX = 32
 class GLKeyframe:
     """The keyframe tuple of Swan et al. (2002): sprite texture and z-buffer (GPU-resident, in
     ``target``), view and projection, and the time it was started (``t0``, seconds);
-    ``coarse`` holds the coarse level's z-buffer from the same view."""
+    ``coarse`` holds the coarse level's z-buffer from the same view; ``color`` is the sprite
+    texture (``target``'s own colour, or an uploaded RGB texture)."""
 
     target: RenderTarget
     coarse: RenderTarget
@@ -41,6 +42,7 @@ class GLKeyframe:
     projection: Projection
     view_proj: np.ndarray
     t0: float
+    color: moderngl.Texture
 
 
 class SpriteRenderer:
@@ -97,7 +99,7 @@ class SpriteRenderer:
         self._next = 0
         self._vaos: dict[tuple[int, bool], moderngl.VertexArray] = {}
         self.keyframe: GLKeyframe | None = None
-        self._upload: np.ndarray | None = None  # reused RGBA staging array for uploads
+        self._uploads: list[moderngl.Texture] = []  # RGB sprite textures of uploaded keyframes
 
     def _program(self, visibility: str, tols: dict[str, float]) -> moderngl.Program:
         mgl = self.ctx.mgl
@@ -124,12 +126,20 @@ class SpriteRenderer:
         return widened(projection, w, h, self.guard_px)
 
     def _keep(self, target: RenderTarget, coarse: RenderTarget, viewpoint: Viewpoint,
-              projection: Projection, t0: float) -> None:
-        if self.visibility == "coarse":
-            self.terrain.render_proxy(viewpoint, self.coarse_quads, self.border, projection,
-                                      coarse)
+              projection: Projection, t0: float, color: moderngl.Texture | None = None,
+              coarse_ready: bool = False) -> None:
+        if self.visibility == "coarse" and not coarse_ready:
+            self.render_coarse_depth(viewpoint, projection, coarse)
         self.keyframe = GLKeyframe(target, coarse, viewpoint, projection,
-                                   projection.matrix() @ viewpoint.view_matrix(), t0)
+                                   projection.matrix() @ viewpoint.view_matrix(), t0,
+                                   target.color if color is None else color)
+
+    def render_coarse_depth(self, viewpoint: Viewpoint, projection: Projection,
+                            target: RenderTarget) -> None:
+        """The z-buffer of the coarse level (and its border ribbons) from a keyframe's view
+        into ``target``: what the ``coarse`` visibility rule compares against."""
+        self.terrain.render_proxy(viewpoint, self.coarse_quads, self.border, projection,
+                                  target)
 
     def render_keyframe(self, viewpoint: Viewpoint, t0: float,
                         projection: Projection | None = None) -> FrameStats:
@@ -147,27 +157,40 @@ class SpriteRenderer:
         return stats
 
     def upload_keyframe(self, viewpoint: Viewpoint, projection: Projection, color: np.ndarray,
-                        depth: np.ndarray, t0: float) -> None:
+                        depth: np.ndarray, t0: float, zbuffer: str = "full") -> None:
         """Make a keyframe rendered elsewhere (the distributed server) the current one.
 
         ``color (H, W, 3) uint8`` and ``depth (H, W) float32`` (window depth), row 0 at
         the top, must match this renderer's keyframe size (the image size plus the guard
-        band), and ``projection`` is the keyframe's own.  The coarse z-buffer of the
-        ``coarse`` visibility rule is rendered here from the keyframe's viewpoint.
+        band), and ``projection`` is the keyframe's own.  ``zbuffer`` says whose depth
+        ``depth`` is: ``full`` (the full-resolution terrain's; the ``coarse`` rule then
+        renders its coarse z-buffer here) or ``coarse`` (the coarse level's, as
+        :meth:`render_coarse_depth` draws it; only for the ``coarse`` rule).  Arrays that
+        are ``[::-1]`` views of contiguous rows (decoded keyframes) go to the textures
+        without a copy.
         """
         w, h = self.key_targets[0].size
         if color.shape != (h, w, 3) or depth.shape != (h, w):
             raise InputError(f"keyframe images must be {w}x{h}, got colour {color.shape}, "
                              f"depth {depth.shape}")
+        if zbuffer not in ("full", "coarse") or (zbuffer == "coarse"
+                                                 and self.visibility != "coarse"):
+            raise InputError(f"a {zbuffer!r} z-buffer does not serve the {self.visibility!r} "
+                             "visibility rule")
         target, coarse = self.key_targets[self._next], self.coarse_targets[self._next]
+        if not self._uploads:
+            self._uploads = [self.ctx.mgl.texture((w, h), 3, alignment=1) for _ in range(2)]
+            for tex in self._uploads:
+                tex.repeat_x = tex.repeat_y = False
+        tex = self._uploads[self._next]
         self._next ^= 1
-        if self._upload is None:
-            self._upload = np.full((h, w, 4), 255, np.uint8)
-        self._upload[..., :3] = color[::-1]  # GL rows run bottom-up; one pass, no new array
-        target.color.write(self._upload)
-        if self.visibility != "coarse":  # the coarse rule never reads the full z-buffer
-            target.depth.write(np.ascontiguousarray(depth[::-1], dtype=np.float32))
-        self._keep(target, coarse, viewpoint, projection, t0)
+        tex.write(np.ascontiguousarray(color[::-1], dtype=np.uint8))  # GL rows: bottom-up
+        rows = np.ascontiguousarray(depth[::-1], dtype=np.float32)
+        if zbuffer == "coarse":
+            coarse.depth.write(rows)
+        elif self.visibility != "coarse":  # the coarse rule never reads the full z-buffer
+            target.depth.write(rows)
+        self._keep(target, coarse, viewpoint, projection, t0, tex, zbuffer == "coarse")
 
     def keyframe_color(self) -> np.ndarray:
         """The current keyframe's colour without its guard band: ``(H, W, 3) uint8``, the
@@ -175,8 +198,11 @@ class SpriteRenderer:
         if self.keyframe is None:
             raise RuntimeError("no keyframe yet")
         g = self.guard_px
-        img = self.keyframe.target.read_color()
-        return img[g:img.shape[0] - g, g:img.shape[1] - g] if g else img
+        tex = self.keyframe.color
+        w, h = tex.size
+        data = np.frombuffer(tex.read(alignment=1), np.uint8).reshape(h, w, tex.components)
+        img = data[::-1, :, :3]
+        return (img[g:h - g, g:w - g] if g else img).copy()
 
     def render_spriteframe(self, viewpoint: Viewpoint,
                            projection: Projection | None = None) -> FrameStats:
@@ -189,7 +215,7 @@ class SpriteRenderer:
         self.target.use(SKY_RGB)
         self.ctx.mgl.enable(moderngl.DEPTH_TEST)
         self.terrain.geometry.color_tex.use(0)
-        key.target.color.use(2)
+        key.color.use(2)
         key.target.depth.use(3)
         key.coarse.depth.use(4)
         prog = self.program
@@ -208,4 +234,7 @@ class SpriteRenderer:
         self.program.release()
         for t in self.key_targets + self.coarse_targets:
             t.release()
+        for tex in self._uploads:
+            tex.release()
+        self._uploads.clear()
         self.keyframe = None

@@ -39,15 +39,22 @@ class RenderTarget:
         self.fbo.use()
         self.fbo.clear(*clear_rgb, 1.0, depth=1.0)
 
-    def read_color(self) -> np.ndarray:
-        """Colour ``(height, width, 3) uint8``, row 0 at the top of the image."""
-        data = self.fbo.read(components=3, alignment=1)
-        return np.frombuffer(data, np.uint8).reshape(self.height, self.width, 3)[::-1].copy()
+    def read_color(self, copy: bool = True) -> np.ndarray:
+        """Colour ``(height, width, 3) uint8``, row 0 at the top of the image.
 
-    def read_depth(self) -> np.ndarray:
-        """Window depth ``(height, width) float32`` in [0, 1] (1 = far plane / background)."""
+        ``copy=False`` returns a read-only view flipped from GL's bottom-up rows, whose
+        ``[::-1]`` is contiguous again: what a sender of raw GL rows wants.
+        """
+        data = self.fbo.read(components=3, alignment=1)
+        img = np.frombuffer(data, np.uint8).reshape(self.height, self.width, 3)[::-1]
+        return img.copy() if copy else img
+
+    def read_depth(self, copy: bool = True) -> np.ndarray:
+        """Window depth ``(height, width) float32`` in [0, 1] (1 = far plane / background),
+        row 0 at the top; ``copy=False`` as in :meth:`read_color`."""
         data = self.depth.read(alignment=1)
-        return np.frombuffer(data, np.float32).reshape(self.height, self.width)[::-1].copy()
+        img = np.frombuffer(data, np.float32).reshape(self.height, self.width)[::-1]
+        return img.copy() if copy else img
 
     def release(self) -> None:
         if self.ctx.mgl.fbo is self.fbo:

@@ -12,7 +12,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from lodsprite.report.io import atomic_write_bytes, save_figure
-from lodsprite.report.values import fmt_fixed
+from lodsprite.report.values import fmt_fixed, fmt_int
 
 #: The paper's numbers (§4; 600 frames, 512² height field, two SGI Onyx over 10BASE-T).
 PAPER_2002 = {
@@ -24,14 +24,25 @@ PAPER_2002 = {
     "same_cores": {"client_ms_mean": 256, "client_ms_std": 225},
 }
 LABELS = {"inline": "inline (1999, keyframes in the frame loop)",
-          "same_cores": "client and server on the same cores",
+          "same_cores": "client and server on one core",
           "separate": "client and server on separate cores",
-          "two_servers": "client and two servers on the same cores",
+          "same_all_cores": "client and server sharing all cores",
+          "same_cores_continuous": "one core, server rendering back to back",
+          "separate_continuous": "separate cores, server rendering back to back",
+          "two_servers": "client and two servers sharing all cores",
           "separate_10mbit": "two hosts, 10 Mbit/s link",
           "separate_100mbit": "two hosts, 100 Mbit/s link",
-          "separate_unlimited": "two hosts, unlimited link"}
+          "separate_unlimited": "two hosts, unlimited link",
+          "separate_10mbit_zlib": "two hosts, 10 Mbit/s link, zlib keyframes"}
+#: σ ratios reported: (stable set-up, its shared counterpart).
+RATIOS = (("separate", "same_cores"), ("separate", "same_all_cores"),
+          ("separate_continuous", "same_cores_continuous"))
 
 
+def setups_in(results: dict) -> list[str]:
+    """The set-ups of a results object, in the order they ran."""
+    return [k for k, v in results.items()
+            if isinstance(v, dict) and ("client_ms_mean" in v or "skipped" in v)]
 
 
 def _client_plot(results: dict, setups: list[str], path: Path, title: str) -> Path | None:
@@ -75,9 +86,10 @@ def write_plots(results: dict, out_dir: Path) -> list[Path]:
     made = [
         _client_plot(results, ["separate"], out_dir / "fig08_client.png",
                      "Fig. 8 — distributed client time per frame (dots: keyframe received)"),
-        _client_plot(results, ["inline", "same_cores", "separate"],
+        _client_plot(results, ["inline", "same_cores", "same_all_cores", "separate"],
                      out_dir / "fig09_setups.png", "Fig. 9 — client time per frame by set-up"),
-        _client_plot(results, ["separate_10mbit", "separate_100mbit", "separate_unlimited"],
+        _client_plot(results, ["separate_10mbit", "separate_10mbit_zlib", "separate_100mbit",
+                               "separate_unlimited"],
                      out_dir / "fig10_links.png", "Client time per frame by link speed"),
         _server_plot(results, ["production", "viewpoint_wait", "render", "queue_insert"],
                      out_dir / "fig11_renderer.png", "Fig. 11 — KEYFRAME-RENDERER timings"),
@@ -88,40 +100,59 @@ def write_plots(results: dict, out_dir: Path) -> list[Path]:
     return [p for p in made if p is not None]
 
 
-ROWS = [("client ms, mean", "client_ms_mean"), ("client ms, σ", "client_ms_std"),
-        ("client ms, median", "client_ms_median"), ("client ms, p99", "client_ms_p99"),
-        ("keyframes received", "keyframes"), ("keyframes per second", "keyframe_rate_hz"),
-        ("spriteframes per keyframe", "sprites_per_keyframe"),
-        ("δt ms", "delta_t_ms_mean"), ("keyframe production ms", "production_ms_mean"),
-        ("keyframe render ms", "render_ms_mean"), ("queue insert ms", "queue_insert_ms_mean"),
-        ("transmission ms", "transmission_ms_mean")]
+COLUMNS = [("client ms mean", "client_ms_mean"), ("σ", "client_ms_std"),
+           ("median", "client_ms_median"), ("p99", "client_ms_p99"),
+           ("jitter", "client_ms_jitter"),
+           ("keyframes", "keyframes"), ("sprites per keyframe", "sprites_per_keyframe"),
+           ("δt ms", "delta_t_ms_mean"), ("production ms", "production_ms_mean"),
+           ("render ms", "render_ms_mean"), ("queue insert ms", "queue_insert_ms_mean"),
+           ("transmission ms", "transmission_ms_mean")]
+
+
+def stability_lines(results: dict) -> list[str]:
+    """The targets: σ ratios of each stable set-up to its shared counterpart, p99/median."""
+    lines = []
+    for stable, shared in RATIOS:
+        a, b = results.get(stable, {}), results.get(shared, {})
+        if a.get("client_ms_std") and b.get("client_ms_std"):
+            lines.append(f"- Frame-time σ, `{stable}` ÷ `{shared}`: "
+                         f"{a['client_ms_std'] / b['client_ms_std']:.3f} (target ≤ 0.2); "
+                         f"p99 ÷ median of `{stable}`: "
+                         f"{a['client_ms_p99'] / a['client_ms_median']:.2f} (target ≤ 2); "
+                         f"jitter ratio {a['client_ms_jitter'] / b['client_ms_jitter']:.3f}.")
+    if lines:
+        lines.append("- Jitter is the RMS change of the client's frame time from one frame to "
+                     "the next: the stutter a viewer sees.  σ also counts the slow change of "
+                     "the scene's cost along the path, which no set-up removes.")
+    return lines
+
+
+def _cells(row: dict) -> str:
+    return " | ".join(fmt_int(row.get(k)) if k == "keyframes" else fmt_fixed(row.get(k), 2)
+                      for _, k in COLUMNS)
 
 
 def write_report(results: dict, out_dir: Path, plots: list[Path]) -> Path:
     out_dir = Path(out_dir)
     cfg = results.get("config", {})
-    present = [s for s in ALL_SETUPS if s in results and "skipped" not in results[s]]
+    setups = setups_in(results)
+    present = [s for s in setups if "skipped" not in results[s]]
     lines = ["# Swan, Arango & Nakshatrala (2002) distributed LOD-sprite — swan2002", "",
              f"`{cfg.get('terrain')}` terrain, swan2002 path, {cfg.get('frames')} frames at "
              f"{cfg.get('size')}² px, {cfg.get('lod')}² coarse level, predictor "
-             f"`{cfg.get('predictor')}`, {results.get('cpus')} CPU cores. Server and client "
-             "are separate processes on this machine talking over loopback TCP.", "",
-             "| quantity | " + " | ".join(s.replace("_", " ") for s in present)
-             + " | paper distributed | paper non-distributed |",
-             "|---" * (len(present) + 3) + "|"]
-    for title, key in ROWS:
-        cells = [fmt_fixed(results[s].get(key), 2) for s in present]
-        paper = [fmt_fixed(PAPER_2002[s].get(key), 2) for s in ("separate", "same_cores")]
-        lines.append(f"| {title} | " + " | ".join(cells + paper) + " |")
-    for s in ALL_SETUPS:
-        if "skipped" in results.get(s, {}):
+             f"`{cfg.get('predictor')}`, server pace `{cfg.get('pace')}`, "
+             f"{results.get('cpus')} CPU cores. Server and client are separate processes on "
+             "this machine talking over TCP.", "",
+             "| set-up | " + " | ".join(t for t, _ in COLUMNS) + " |",
+             "|---" * (len(COLUMNS) + 1) + "|"]
+    for s in present:
+        lines.append(f"| {LABELS.get(s, s)} | " + _cells(results[s]) + " |")
+    for s, name in (("separate", "paper distributed"), ("same_cores", "paper non-distributed")):
+        lines.append(f"| {name} | " + _cells(PAPER_2002[s]) + " |")
+    for s in setups:
+        if "skipped" in results[s]:
             lines += ["", f"- `{s}` skipped: {results[s]['skipped']}."]
-    sep, same = results.get("separate", {}), results.get("same_cores", {})
-    if sep.get("client_ms_std") and same.get("client_ms_std"):
-        lines += ["", f"Frame-time σ, separate ÷ same cores: "
-                      f"{sep['client_ms_std'] / same['client_ms_std']:.3f} (target ≤ 0.2); "
-                      f"p99 ÷ median, separate: "
-                      f"{sep['client_ms_p99'] / sep['client_ms_median']:.2f} (target ≤ 2)."]
+    lines += ["", *stability_lines(results)]
     pred = results.get("prediction") or {}
     if pred:
         lines += ["", f"## Viewpoint prediction, {pred['lead_frames']} frames ahead (δt)", "",
@@ -139,7 +170,3 @@ def write_report(results: dict, out_dir: Path, plots: list[Path]) -> Path:
     path = out_dir / "report.md"
     atomic_write_bytes(path, ("\n".join(lines) + "\n").encode())
     return path
-
-
-ALL_SETUPS = ("inline", "same_cores", "separate", "two_servers", "separate_10mbit",
-              "separate_100mbit", "separate_unlimited")
