@@ -185,11 +185,9 @@ class SpriteRenderer:
         tex = self._uploads[self._next]
         self._next ^= 1
         tex.write(np.ascontiguousarray(color[::-1], dtype=np.uint8))  # GL rows: bottom-up
-        rows = np.ascontiguousarray(depth[::-1], dtype=np.float32)
-        if zbuffer == "coarse":
-            coarse.depth.write(rows)
-        elif self.visibility != "coarse":  # the coarse rule never reads the full z-buffer
-            target.depth.write(rows)
+        if zbuffer == "coarse" or self.visibility != "coarse":  # else it is never read
+            rows = np.ascontiguousarray(depth[::-1], dtype=np.float32)
+            (coarse if zbuffer == "coarse" else target).depth.write(rows)
         self._keep(target, coarse, viewpoint, projection, t0, tex, zbuffer == "coarse")
 
     def keyframe_color(self) -> np.ndarray:
