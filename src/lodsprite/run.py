@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from lodsprite.distributed.pacing import DEFAULT_PACE, PACES
 from lodsprite.errors import InputError
 from lodsprite.gl.context import GLContext
 from lodsprite.gl.sprite import (
@@ -64,7 +65,7 @@ class RenderConfig:
     visibility: str = DEFAULT_VISIBILITY
     border: bool = True
     guard_px: int = DEFAULT_GUARD_PX
-    pace: str = "needed"  # distributed mode: when the server renders keyframes (see pacing)
+    pace: str = DEFAULT_PACE  # distributed mode: when the server renders keyframes (see pacing)
 
     def validate(self) -> None:
         if self.mode not in MODES:
@@ -82,8 +83,8 @@ class RenderConfig:
         if not (isinstance(self.guard_px, int) and 0 <= self.guard_px <= MAX_GUARD_PX):
             raise InputError(f"--guard must be a whole number of pixels in 0..{MAX_GUARD_PX}, "
                              f"got {self.guard_px}")
-        if self.pace not in ("needed", "continuous"):
-            raise InputError(f"--pace must be needed or continuous, got '{self.pace}'")
+        if self.pace not in PACES:
+            raise InputError(f"--pace must be {' or '.join(PACES)}, got '{self.pace}'")
         if self.quality_stride < 1:
             raise InputError(f"quality stride must be >= 1, got {self.quality_stride}")
         if self.ground_truth and self.mode != "sprite":

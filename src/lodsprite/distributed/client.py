@@ -6,9 +6,9 @@ the CLIENT-KEYFRAME-QUEUE to its newest keyframe, render the coarse level textur
 it with the LOD-sprite visibility rules.  ``adopt="newest"`` (default) takes every newer
 keyframe at once, as in the paper.  With ``adopt="needed"`` a newer keyframe waits until
 the 1999 error metric of the current viewpoint against the shown keyframe reaches half
-of ε, sparing uploads (the client's largest per-frame cost) when keyframes arrive faster
-than they are needed; on swan2002 they are needed every two frames, and it measured no
-steadier than ``newest``.  It never waits for a keyframe: with none yet (no server, or
+of ε, sparing uploads when keyframes arrive faster than they are needed (a server with
+pace ``continuous``; with the default pace ``needed`` the server already renders a
+keyframe only when one is due).  It never waits for a keyframe: with none yet (no server, or
 a server that died before sending one) it renders keyframes itself with the 1999
 algorithm.
 
@@ -132,15 +132,18 @@ class _Server:
             self.control = None
 
 
+def control(link: _Server, counter: Iterator[int], op: str,
+            args: dict | None = None) -> dict | None:
+    """Send the control request ``op`` to one server; its reply header, or None."""
+    return link.request({"kind": "control", "seq": next(counter), "op": op,
+                         "args": args or {}})
+
+
 def keep_loaded(link: _Server, load_args: dict, counter: Iterator[int]) -> None:
     """One CLIENT-CONTROL round for one server: ping it; load the scene and start it when
     it has none, is not running, or an earlier load or start got no answer (a server
     busy starting up may have lost it).  Sets ``link.alive`` and ``link.loaded``."""
-    def ctl(op: str, args: dict | None = None) -> dict | None:
-        return link.request({"kind": "control", "seq": next(counter), "op": op,
-                             "args": args or {}})
-
-    reply = ctl("ping")
+    reply = control(link, counter, "ping")
     link.alive = reply is not None
     if reply is None:
         link.loaded = False
@@ -149,7 +152,7 @@ def keep_loaded(link: _Server, load_args: dict, counter: Iterator[int]) -> None:
     if link.loaded and data.get("running") and data.get("loaded"):
         return
     link.last_seq = 0  # a restarted server counts from 1 again
-    replies = [ctl("load", load_args), ctl("start")]
+    replies = [control(link, counter, "load", load_args), control(link, counter, "start")]
     link.loaded = all(r is not None and r.get("ok") for r in replies)
     refusal = replies[0].get("error") if replies[0] and not replies[0].get("ok") else None
     if refusal and refusal != link.refusal:
@@ -192,10 +195,6 @@ class LodClient:
             t.start()
 
     # ------------------------------------------------------------------ CLIENT-CONTROL
-
-    def _ctl(self, server: _Server, op: str, args: dict | None = None) -> dict | None:
-        return server.request({"kind": "control", "seq": next(self._counter), "op": op,
-                               "args": args or {}})
 
     def _control(self) -> None:
         while not self._stop.is_set():
@@ -281,7 +280,7 @@ class LodClient:
     def _should_adopt(self, viewpoint) -> bool:
         """``newest`` (the paper): take every newer keyframe.  ``needed``: keep the current
         keyframe while the error metric of this viewpoint against it stays under
-        ``ADOPT_FRACTION`` ε, sparing the upload (the client's largest per-frame cost)."""
+        ``ADOPT_FRACTION`` ε, sparing the upload."""
         if self._current is None or self.adopt == "newest":
             return True
         projection = self.paths.renderer.projection(viewpoint)
@@ -299,14 +298,14 @@ class LodClient:
     def server_stats(self) -> list[dict]:
         out = []
         for s in self._servers:
-            reply = self._ctl(s, "stats")
+            reply = control(s, self._counter, "stats")
             out.append(reply.get("data", {}) if reply else {})
         return out
 
     def close(self, shutdown_servers: bool = False) -> None:
         if shutdown_servers:
             for s in self._servers:
-                self._ctl(s, "shutdown")
+                control(s, self._counter, "shutdown")
         self._stop.set()
         self.queue.close()
         for t in self._threads:

@@ -36,7 +36,7 @@ from lodsprite.distributed.protocol import (
     viewpoint_from_wire,
 )
 from lodsprite.distributed.queue import Closed, KeyframeQueue
-from lodsprite.distributed.render import check_load_args
+from lodsprite.distributed.render import KeyframeRenderer, check_load_args
 from lodsprite.errors import LodspriteError
 
 log = logging.getLogger("lodsprite.server")
@@ -216,8 +216,6 @@ class LodServer:
     # -------------------------------------------------------------- KEYFRAME-RENDERER
 
     def _render_keyframes(self) -> None:
-        from lodsprite.distributed.render import KeyframeRenderer
-
         renderer: KeyframeRenderer | None = None
         try:
             while not self._stop.is_set():
