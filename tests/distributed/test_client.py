@@ -93,3 +93,67 @@ def test_a_load_that_got_no_answer_is_sent_again():
         server.join(2.0)
         link.close()
         ctx.destroy(linger=0)
+
+
+def test_viewpoint_messages_name_the_shown_keyframe_for_the_servers_pacing():
+    """Servers pace against the keyframe the client shows, which may be another server's:
+    once a keyframe is shown, every viewpoint message carries its eye."""
+    import numpy as np
+
+    from lodsprite.camera import Projection
+    from lodsprite.distributed.client import LodClient
+    from lodsprite.distributed.protocol import Keyframe, decode, encode_keyframe
+    from lodsprite.distributed.render import scene_args
+    from lodsprite.distributed.run import free_ports
+    from lodsprite.run import RenderConfig, prepare
+
+    cfg = RenderConfig(terrain="fractal:64:2", size=(64, 64), lod=8, frames=8,
+                       path="chen1999", mode="sprite")
+    sc, path = prepare(cfg)
+    port = free_ports()
+    stop = threading.Event()
+    control = _fake_server(port, lambda h: {"data": {"running": True, "loaded": True}}, stop)
+    ctx = zmq.Context()
+    views = ctx.socket(zmq.SUB)
+    views.setsockopt(zmq.SUBSCRIBE, b"")
+    views.bind(f"tcp://127.0.0.1:{port + 1}")
+    keys = ctx.socket(zmq.DEALER)
+    keys.bind(f"tcp://127.0.0.1:{port + 2}")
+    client = LodClient(sc, scene_args(cfg.terrain, cfg.texture, None, 1.0, cfg.size),
+                       [f"127.0.0.1:{port}"], cfg.size, cfg.lod)
+
+    def next_header(vp) -> dict:
+        """The newest viewpoint message after drawing ``vp`` (PUB drops messages until
+        the subscription has joined, so draw until one comes)."""
+        while views.poll(0):
+            views.recv_multipart()
+        for _ in range(100):
+            client.frame(vp)
+            if views.poll(100):
+                while views.poll(0):
+                    header, _ = decode(views.recv_multipart())
+                return header
+        raise AssertionError("no viewpoint message reached the server")
+
+    try:
+        vp = path.viewpoints[0]
+        header = next_header(vp)
+        assert "shown" not in header  # nothing shown yet: the client draws its own
+        key_vp = path.viewpoints[3]
+        rng = np.random.default_rng(1)
+        kf = Keyframe(1, 0.0, key_vp, Projection(45.0, 1.0, 1.0, 1e5),
+                      rng.integers(0, 256, (64, 64, 3), dtype=np.uint8),
+                      np.full((64, 64), 0.5, np.float32))
+        keys.send_multipart(encode_keyframe(kf))
+        deadline = time.perf_counter() + 10.0
+        while client.frame(vp).type != "keyframe":
+            assert time.perf_counter() < deadline, "the keyframe never arrived"
+        header = next_header(path.viewpoints[1])
+        assert header["shown"] == {"eye": [float(v) for v in key_vp.o], "slot": 0}
+    finally:
+        client.close()
+        stop.set()
+        control.join(2.0)
+        views.close(linger=0)
+        keys.close(linger=0)
+        ctx.destroy(linger=0)

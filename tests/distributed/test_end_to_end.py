@@ -52,6 +52,7 @@ def test_render_mode_distributed_writes_frames_and_server_statistics(tmp_path):
     summary = json.loads((out / "summary.json").read_text())
     assert summary["keyframes_received"] >= 1
     assert summary["delta_t_ms_mean"] > 0 and summary["render_ms_mean"] > 0
+    assert summary["paced_ms_mean"] >= 0
 
 
 @pytest.fixture

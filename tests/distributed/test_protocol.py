@@ -11,6 +11,7 @@ from lodsprite.distributed.protocol import (
     decode_keyframe,
     encode,
     encode_keyframe,
+    shown_from_wire,
 )
 
 
@@ -113,3 +114,15 @@ def test_malformed_keyframes_are_rejected():
     for frames in bad:
         with pytest.raises(ProtocolError):
             decode_keyframe(frames)
+
+
+def test_the_shown_keyframe_is_optional_and_checked():
+    assert shown_from_wire(None) is None
+    eye, slot = shown_from_wire({"eye": [1.0, 2, -3.5], "slot": 1})
+    assert eye.tolist() == [1.0, 2.0, -3.5] and slot == 1
+    for bad in ([1.0, 2.0, 3.0], {"eye": [1.0, 2.0], "slot": 0},
+                {"eye": [1.0, 2.0, float("nan")], "slot": 0}, {"eye": "here", "slot": 0},
+                {"eye": [1.0, 2.0, 3.0]}, {"eye": [1.0, 2.0, 3.0], "slot": -1},
+                {"eye": [1.0, 2.0, 3.0], "slot": True}, {"eye": [1.0, 2.0, 3.0], "slot": 0.5}):
+        with pytest.raises(ProtocolError):
+            shown_from_wire(bad)

@@ -173,7 +173,7 @@ class LodClient:
         if pace not in PACES:
             raise InputError(f"pace must be one of {', '.join(PACES)}, got {pace!r}")
         self.adopt = adopt
-        self._pending: Keyframe | None = None
+        self._pending: tuple[int, Keyframe] | None = None  # (server slot, keyframe)
         self._c_prime = None
         self.scene_args = {**scene_args, "lod": lod, "visibility": visibility,
                            "border": border, "epsilon": float(epsilon), "pace": pace}
@@ -181,12 +181,13 @@ class LodClient:
         self.sprite = SpriteRenderer(self.paths.renderer, lod, visibility, border=border,
                                      guard_px=0)
         self.local = LodSpriteEngine(self.sprite, epsilon)
-        self.queue: KeyframeQueue[tuple[str, Keyframe]] = KeyframeQueue(2)
+        self.queue: KeyframeQueue[tuple[int, Keyframe]] = KeyframeQueue(2)
         self._zmq = zmq.Context()
         self._servers = [_Server(self._zmq, a, keys) for a in servers]
         self._stop = threading.Event()
         self._counter = itertools.count(1)
         self._current: Keyframe | None = None
+        self._shown: dict = {}  # the shown keyframe's eye and server slot, for the servers
         self._silent = False
         self.rejected_messages = 0
         self._threads = [threading.Thread(target=self._receive, daemon=True),
@@ -209,10 +210,10 @@ class LodClient:
         poller = zmq.Poller()
         for s in self._servers:
             poller.register(s.keyframes, zmq.POLLIN)
-        by_socket = {s.keyframes: s for s in self._servers}
+        by_socket = {s.keyframes: (i, s) for i, s in enumerate(self._servers)}
         while not self._stop.is_set():
             for sock, _ in poller.poll(50):
-                s = by_socket[sock]
+                slot, s = by_socket[sock]
                 frames = sock.recv_multipart(copy=False)
                 try:
                     kf = decode_keyframe(frames)
@@ -226,9 +227,9 @@ class LodClient:
                     continue  # older than one already taken from this server
                 s.last_seq = kf.seq
                 try:
-                    if not self.queue.put((s.address, kf), timeout=0):
+                    if not self.queue.put((slot, kf), timeout=0):
                         self.queue.drain()  # full: newest wins
-                        self.queue.put((s.address, kf), timeout=0)
+                        self.queue.put((slot, kf), timeout=0)
                 except Closed:
                     return  # the client is closing
 
@@ -237,8 +238,11 @@ class LodClient:
     def frame(self, viewpoint) -> ClientFrame:
         """Draw one frame for ``viewpoint``; returns once its GL work has finished."""
         t0 = time.perf_counter()
-        msg = encode({"kind": "viewpoint", "seq": next(self._counter), "t": t0,
-                      "viewpoint": viewpoint_to_wire(viewpoint)})
+        header = {"kind": "viewpoint", "seq": next(self._counter), "t": t0,
+                  "viewpoint": viewpoint_to_wire(viewpoint)}
+        if self._current is not None:
+            header["shown"] = self._shown
+        msg = encode(header)
         for s in self._servers:
             try:
                 s.viewpoint.send_multipart(msg, flags=zmq.NOBLOCK)
@@ -247,12 +251,13 @@ class LodClient:
         newest = self.queue.drain()
         kind = "sprite"
         if newest is not None:
-            self._pending = newest[1]
+            self._pending = newest
         if self._pending is not None and self._should_adopt(viewpoint):
-            kf, self._pending = self._pending, None
+            (slot, kf), self._pending = self._pending, None
             self.sprite.upload_keyframe(kf.viewpoint, kf.projection, kf.color, kf.depth, kf.t0,
                                         kf.zbuffer)
             self._current, kind = kf, "keyframe"
+            self._shown = {"eye": [float(v) for v in kf.viewpoint.o], "slot": slot}
             if self.adopt == "needed":
                 self._c_prime = self.local.metric.reproject(kf.viewpoint.o)
         if self._current is None:

@@ -13,6 +13,14 @@ to the keyframe it rendered last, at the viewpoint predicted for when a new keyf
 would arrive (δt ahead).  It renders a new one only when that error reaches
 ``PACE_FRACTION`` ε: the 1999 algorithm's own keyframe rule, applied where the keyframe
 will be shown.  Pace ``continuous`` is the paper's behaviour.
+
+The keyframe the client shows need not be this server's: with several servers it is
+the newest from any of them.  The client names the keyframe it shows (its eye and the
+server's slot) in each viewpoint message, and a keyframe is due only when neither that
+keyframe nor the one this server rendered last (perhaps still on its way) serves the
+predicted viewpoint.  Servers take turns: the one after the shown keyframe's slot renders
+at ``PACE_FRACTION`` ε; the others only at ε itself, to help when the one whose turn it
+is cannot keep up.
 """
 
 from __future__ import annotations
@@ -39,20 +47,44 @@ class KeyframePacer:
                  pace: str = DEFAULT_PACE, fraction: float = PACE_FRACTION) -> None:
         self.pace = pace
         self.limit_px = fraction * epsilon_px
+        self.epsilon_px = epsilon_px
         self.height_px = height_px
         self.metric = ErrorMetric.for_level(hf, lod) if pace == "needed" else None
         self._c_prime: np.ndarray | None = None  # C' of the last keyframe rendered
+        self._own_eye: tuple[float, ...] | None = None
+        self._shown: tuple[tuple[float, ...], np.ndarray] | None = None  # eye, C'
 
-    def due(self, viewpoint: Viewpoint, projection: Projection) -> bool:
-        """Whether a keyframe for ``viewpoint`` (the predicted one) should be rendered."""
+    def due(self, viewpoint: Viewpoint, projection: Projection,
+            shown_eye: np.ndarray | None = None, turn: bool = True) -> bool:
+        """Whether a keyframe for ``viewpoint`` (the predicted one) should be rendered.
+
+        ``shown_eye (3,)`` metres: the eye of the keyframe the client shows, when it said;
+        ``turn``: whether this server is the next to render (always, with one server).
+        """
         if self.metric is None or self._c_prime is None:
             return True
         view_proj = projection.matrix() @ viewpoint.view_matrix()
         beta = projection.pixel_angle_rad(self.height_px)
-        return self.metric.error_px(self._c_prime, viewpoint.o, view_proj,
-                                    beta) >= self.limit_px
+        limit = self.limit_px if turn else self.epsilon_px
+        for c_prime in (self._c_prime, self._shown_c_prime(shown_eye)):
+            if c_prime is not None and self.metric.error_px(
+                    c_prime, viewpoint.o, view_proj, beta) < limit:
+                return False
+        return True
+
+    def _shown_c_prime(self, eye: np.ndarray | None) -> np.ndarray | None:
+        """``C'`` of the client's shown keyframe, computed once per keyframe eye."""
+        if eye is None or self.metric is None:
+            return None
+        key = tuple(float(v) for v in eye)
+        if key == self._own_eye:
+            return None  # this server's own keyframe, tested already
+        if self._shown is None or self._shown[0] != key:
+            self._shown = key, self.metric.reproject(np.asarray(key))
+        return self._shown[1]
 
     def rendered(self, viewpoint: Viewpoint) -> None:
         """Note the keyframe just rendered (its ``C'`` is computed once, here)."""
         if self.metric is not None:
             self._c_prime = self.metric.reproject(viewpoint.o)
+            self._own_eye = tuple(float(v) for v in viewpoint.o)

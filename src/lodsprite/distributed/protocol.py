@@ -11,7 +11,10 @@ control    ``op`` (start, stop, load, stats, shutdown,   none
            ping), ``args`` (dict)
 reply      ``ok`` (bool), ``error`` (str), ``data``      none
 viewpoint  ``t`` (client clock, s), ``viewpoint``        none
-           ({x, y, z, o} lists of 3 floats)
+           ({x, y, z, o} lists of 3 floats), optional
+           ``shown`` ({eye: 3 floats, slot: int}: the
+           keyframe the client shows and the server it
+           came from, for the servers' pacing)
 keyframe   ``t0`` (server clock when rendering began),   colour (H, W, 3) uint8; depth (H, W)
            ``viewpoint``, ``view``, ``proj`` (16 floats  float32 window depth in [0, 1];
            each, row-major), ``fov``, ``near``, ``far``, both with rows bottom-up (OpenGL's
@@ -101,6 +104,19 @@ def viewpoint_from_wire(d) -> Viewpoint:
         return Viewpoint(*parts)
     except InputError as exc:
         raise ProtocolError(f"bad viewpoint: {exc}") from exc
+
+
+def shown_from_wire(value) -> tuple[np.ndarray, int] | None:
+    """The optional ``shown`` field of a viewpoint message: the shown keyframe's eye
+    ``(3,)`` in metres and the slot of the server that rendered it; None when absent."""
+    if value is None:
+        return None
+    if not isinstance(value, dict):
+        raise ProtocolError("shown is not a map")
+    slot = value.get("slot")
+    if isinstance(slot, bool) or not isinstance(slot, int) or slot < 0:
+        raise ProtocolError(f"shown.slot {slot!r} is not a server slot")
+    return _floats(value.get("eye"), 3, "shown.eye"), slot
 
 
 @dataclass(frozen=True, eq=False)

@@ -178,7 +178,7 @@ def _collect(setup: str, out: Path) -> dict:
                  if isinstance(every[0][k], list)}
         res["server"] = every[0]
         res["servers"] = len(every)
-        for k in ("delta_t", "production", "transmission", "render", "viewpoint_wait",
+        for k in ("delta_t", "production", "transmission", "render", "viewpoint_wait", "paced",
                   "queue_insert", "queue_retrieve"):
             vals = stats.get(f"{k}_ms", [])
             res[f"{k}_ms_mean"] = float(np.mean(vals)) if vals else None

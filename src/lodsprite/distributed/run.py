@@ -158,8 +158,9 @@ def _summary(config: RenderConfig, rows: list[dict], stats: list[dict], renderer
     ms = np.array([r["ms"] for r in rows])
     received = sum(r["type"] == "keyframe" for r in rows)
     server = {k: _mean([v for s in stats for v in s.get(k, [])])
-              for k in ("production_ms", "viewpoint_wait_ms", "render_ms", "queue_insert_ms",
-                        "delta_t_ms", "queue_retrieve_ms", "transmission_ms")}
+              for k in ("production_ms", "viewpoint_wait_ms", "paced_ms", "render_ms",
+                        "queue_insert_ms", "delta_t_ms", "queue_retrieve_ms",
+                        "transmission_ms")}
     return {
         "frames": len(rows), "mode": "distributed", "terrain": config.terrain,
         "path": config.path, "size": list(config.size), "servers": servers,

@@ -33,6 +33,7 @@ from lodsprite.distributed.protocol import (
     decode,
     encode,
     encode_keyframe,
+    shown_from_wire,
     viewpoint_from_wire,
 )
 from lodsprite.distributed.queue import Closed, KeyframeQueue
@@ -57,11 +58,13 @@ def endpoints(address: str, bind: bool) -> tuple[str, str, str]:
 
 @dataclass
 class ServerStats:
-    """Per-keyframe timings (ms) of Figures 11-12.  ``viewpoint_wait_ms`` includes, with
-    pace ``needed``, the wait until a keyframe is due."""
+    """Per-keyframe timings (ms) of Figures 11-12.  ``production_ms`` is the whole
+    Figure 6 loop: ``viewpoint_wait_ms`` (for a first viewpoint), ``paced_ms`` (with
+    pace ``needed``, until a keyframe is due), ``render_ms`` and ``queue_insert_ms``."""
 
     production_ms: list = field(default_factory=list)
     viewpoint_wait_ms: list = field(default_factory=list)
+    paced_ms: list = field(default_factory=list)
     render_ms: list = field(default_factory=list)
     queue_insert_ms: list = field(default_factory=list)
     delta_t_ms: list = field(default_factory=list)
@@ -102,6 +105,8 @@ class LodServer:
         self._predictor = PREDICTORS[predictor]()
         self._have_viewpoint = threading.Event()
         self._fresh_viewpoint = threading.Event()  # set by each viewpoint received
+        self._shown = None  # (eye, slot) of the keyframe the client says it shows
+        self._slot, self._slots = 0, 1  # this server's place among the client's servers
         self._delta_t = 0.5  # seconds, until the transmitter has measured one
         self._lead_factor = 1.0
         self._seq = 0
@@ -164,6 +169,7 @@ class LodServer:
             except ProtocolError as exc:
                 return {**reply, "ok": False, "error": str(exc)}
             self._lead_factor = 1.0 + slot / slots
+            self._slot, self._slots = slot, slots
             with self._scene_lock:
                 self._scene_request = args
             self._loaded = True
@@ -196,22 +202,34 @@ class LodServer:
                     if header["kind"] != "viewpoint":
                         raise ProtocolError("expected a viewpoint message")
                     vp = viewpoint_from_wire(header.get("viewpoint"))
+                    shown = shown_from_wire(header.get("shown"))
                 except ProtocolError as exc:
                     self.stats.rejected_messages += 1
                     log.warning("rejected viewpoint message: %s", exc)
                     continue
                 with self._latest_lock:
                     self._predictor.observe(time.perf_counter(), vp)
+                    self._shown = shown
                 self._have_viewpoint.set()
                 self._fresh_viewpoint.set()
         finally:
             sock.close(linger=0)
 
     def _predicted_viewpoint(self):
-        """The viewpoint δt ahead; with several servers, server ``slot`` of ``slots`` aims
-        ``δt (1 + slot/slots)`` ahead, so their keyframes cover different moments."""
+        """The viewpoint δt ahead, and what the client shows.  With several servers,
+        server ``slot`` of ``slots`` aims ``δt (1 + slot/slots)`` ahead, so their keyframes
+        cover different moments."""
         with self._latest_lock:
-            return self._predictor.predict(self._delta_t * self._lead_factor)
+            return self._predictor.predict(self._delta_t * self._lead_factor), self._shown
+
+    def _due(self, renderer: KeyframeRenderer, vp, shown) -> bool:
+        """Whether to render for ``vp``.  With several servers they take turns: it is this
+        server's turn when the client shows the previous slot's keyframe."""
+        eye, turn = None, True
+        if shown is not None:
+            eye, slot = shown
+            turn = (slot + 1) % self._slots == self._slot
+        return renderer.pacer.due(vp, renderer.projection(vp), eye, turn)
 
     # -------------------------------------------------------------- KEYFRAME-RENDERER
 
@@ -243,14 +261,15 @@ class LodServer:
         t0 = time.perf_counter()
         if not self._have_viewpoint.wait(0.1):
             return
-        vp = self._predicted_viewpoint()
-        while not renderer.pacer.due(vp, renderer.projection(vp)):
+        t_vp = time.perf_counter()
+        vp, shown = self._predicted_viewpoint()
+        while not self._due(renderer, vp, shown):
             if (self._stop.is_set() or not self._running.is_set()
                     or self._scene_request is not None):
                 return
             self._fresh_viewpoint.wait(0.05)  # check again with the next viewpoint
             self._fresh_viewpoint.clear()
-            vp = self._predicted_viewpoint()
+            vp, shown = self._predicted_viewpoint()
         t1 = time.perf_counter()  # δt runs from here: the prediction was made for t1 + δt
         self._seq += 1
         kf = renderer.render(vp, self._seq, t1)
@@ -260,7 +279,8 @@ class LodServer:
                 return
         t3 = time.perf_counter()
         s = self.stats
-        s.viewpoint_wait_ms.append((t1 - t0) * 1e3)
+        s.viewpoint_wait_ms.append((t_vp - t0) * 1e3)
+        s.paced_ms.append((t1 - t_vp) * 1e3)
         s.render_ms.append((t2 - t1) * 1e3)
         s.queue_insert_ms.append((t3 - t2) * 1e3)
         s.production_ms.append((t3 - t0) * 1e3)

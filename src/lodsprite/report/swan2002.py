@@ -91,7 +91,7 @@ def write_plots(results: dict, out_dir: Path) -> list[Path]:
         _client_plot(results, ["separate_10mbit", "separate_10mbit_zlib", "separate_100mbit",
                                "separate_unlimited"],
                      out_dir / "fig10_links.png", "Client time per frame by link speed"),
-        _server_plot(results, ["production", "viewpoint_wait", "render", "queue_insert"],
+        _server_plot(results, ["production", "viewpoint_wait", "paced", "render", "queue_insert"],
                      out_dir / "fig11_renderer.png", "Fig. 11 — KEYFRAME-RENDERER timings"),
         _server_plot(results, ["delta_t", "production", "queue_retrieve", "transmission"],
                      out_dir / "fig12_transmitter.png",
@@ -105,6 +105,7 @@ COLUMNS = [("client ms mean", "client_ms_mean"), ("σ", "client_ms_std"),
            ("jitter", "client_ms_jitter"),
            ("keyframes", "keyframes"), ("sprites per keyframe", "sprites_per_keyframe"),
            ("δt ms", "delta_t_ms_mean"), ("production ms", "production_ms_mean"),
+           ("paced ms", "paced_ms_mean"),
            ("render ms", "render_ms_mean"), ("queue insert ms", "queue_insert_ms_mean"),
            ("transmission ms", "transmission_ms_mean")]
 
