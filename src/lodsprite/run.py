@@ -152,10 +152,24 @@ def prepare(config: RenderConfig) -> tuple[Scene, CameraPath]:
     return scene, get_path(config.path, scene.hf, config.frames)
 
 
-def _quality(image: np.ndarray, lod: np.ndarray, lod_border: np.ndarray,
-             truth: np.ndarray) -> dict:
+def reference_images(pr: PathRenderer, viewpoint, lod: int) -> tuple[np.ndarray, ...]:
+    """What a frame is compared with (untimed): the full-resolution frame, the plain
+    coarse level, and the coarse level with the border ribbons; ``(H, W, 3) uint8`` each."""
+    r = pr.renderer
+    r.render(viewpoint, None)
+    truth = r.target.read_color()
+    r.render(viewpoint, lod)
+    plain = r.target.read_color()
+    r.render_proxy(viewpoint, lod, border=True)
+    return truth, plain, r.target.read_color()
+
+
+def frame_quality(image: np.ndarray, references: tuple[np.ndarray, ...]) -> dict:
+    """RMSE, PSNR and SSIM of ``image`` and of the plain coarse level against the full
+    resolution (:func:`reference_images`), and RMSE of the coarse level with ribbons."""
     from lodsprite.metrics import psnr, rmse, ssim
 
+    truth, lod, lod_border = references
     return {"rmse_sprite": rmse(image, truth), "psnr_sprite": psnr(image, truth),
             "ssim_sprite": ssim(image, truth), "rmse_lod": rmse(lod, truth),
             "psnr_lod": psnr(lod, truth), "ssim_lod": ssim(lod, truth),
@@ -213,12 +227,7 @@ def sprite_frames(pr: PathRenderer, path: CameraPath, config: RenderConfig,
                 if on_frame:
                     on_frame(i, image)
                 if config.ground_truth and i % config.quality_stride == 0:
-                    pr.renderer.render(vp, None)
-                    truth = pr.renderer.target.read_color()
-                    pr.renderer.render(vp, config.lod)
-                    lod = pr.renderer.target.read_color()
-                    pr.renderer.render_proxy(vp, config.lod, border=True)
-                    row.update(_quality(image, lod, pr.renderer.target.read_color(), truth))
+                    row.update(frame_quality(image, reference_images(pr, vp, config.lod)))
             rows.append(row)
             if progress:
                 progress(i + 1, len(path))

@@ -9,6 +9,7 @@ import time
 import numpy as np
 import pytest
 
+from lodsprite.camera import Viewpoint
 from lodsprite.distributed.client import LodClient
 from lodsprite.distributed.render import scene_args
 from lodsprite.distributed.reproduce import SETUPS
@@ -53,6 +54,9 @@ def test_render_mode_distributed_writes_frames_and_server_statistics(tmp_path):
     assert summary["keyframes_received"] >= 1
     assert summary["delta_t_ms_mean"] > 0 and summary["render_ms_mean"] > 0
     assert summary["paced_ms_mean"] >= 0
+    keys = json.loads((out / "keyframes.json").read_text())["keyframes"]
+    shown = [int(r["keyframe"]) for r in rows]
+    assert len(keys) >= 1 and max(shown) == len(keys) - 1 and min(shown) >= -1
 
 
 @pytest.fixture
@@ -209,8 +213,13 @@ def test_reproduce_swan2002_quick_writes_all_setups(tmp_path):
         if setup == "two_servers":
             assert r["servers"] == 2
     assert "linear" in results["prediction"] and "kalman" in results["prediction"]
+    for setup in ("inline", "separate"):
+        image = results[setup]["image"]
+        assert image["replayed_frames"] > 0 and image["rmse_sprite_mean"] > 0
+    assert results["inline"]["image"]["over_epsilon"] == 0.0
     report = (out / "report.md").read_text()
     assert report.count("61.9") >= 1 and "`separate` ÷ `same_cores`" in report
+    assert "## Image error, replayed" in report and (out / "image_error.png").exists()
 
 
 def test_curve_keys_admit_the_right_client_and_refuse_a_wrong_one(scene, tmp_path):
@@ -243,3 +252,28 @@ def test_curve_keys_admit_the_right_client_and_refuse_a_wrong_one(scene, tmp_pat
             bad.close()
     finally:
         stop(server)
+
+
+def test_a_replayed_frame_is_the_frame_the_client_drew(scene):
+    """The image error of distributed runs is measured by replaying their frames from the
+    recorded keyframe viewpoints; that is sound only if a replay draws what the client drew
+    from the keyframe the server sent."""
+    from lodsprite.distributed.quality import Replayer
+
+    sc, path = scene
+    address = f"127.0.0.1:{free_ports()}"
+    server = start_server(address)
+    args = scene_args(SMALL.terrain, SMALL.texture, None, SMALL.exaggeration, SMALL.size)
+    client = LodClient(sc, args, [address], SMALL.size, SMALL.lod)
+    try:
+        assert wait_for(client, path.viewpoints[0])
+        frames = [client.frame(vp) for vp in path.viewpoints[:12]]
+        drawn = client.image()
+        key = client.shown[frames[-1].keyframe_index]
+    finally:
+        client.close(shutdown_servers=True)
+        stop(server)
+    with Replayer(SMALL) as replayer:
+        again = replayer.draw(Viewpoint.from_dict(key["viewpoint"]), path.viewpoints[11])
+    diff = np.abs(again.astype(int) - drawn.astype(int))
+    assert diff.mean() < 0.05 and diff.max() <= 2  # stated tolerance, in grey levels

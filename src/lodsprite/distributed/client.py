@@ -63,12 +63,14 @@ ADOPT_FRACTION = 0.5
 class ClientFrame:
     """One client frame: ``type`` is ``keyframe`` (a server keyframe was taken this frame),
     ``sprite``, or ``local_keyframe`` / ``local_sprite`` (drawn without any server
-    keyframe); wall time in ms; triangles drawn."""
+    keyframe); wall time in ms; triangles drawn; the shown server keyframe's sequence
+    number and its index in :attr:`LodClient.shown` (0 and -1 when none)."""
 
     type: str
     ms: float
     triangles: int
     keyframe_seq: int
+    keyframe_index: int = -1
 
 
 class _Server:
@@ -188,6 +190,9 @@ class LodClient:
         self._counter = itertools.count(1)
         self._current: Keyframe | None = None
         self._shown: dict = {}  # the shown keyframe's eye and server slot, for the servers
+        # Every server keyframe taken, in order: {slot, seq, t0, viewpoint} (to replay
+        # the frames afterwards and measure their image error).
+        self.shown: list[dict] = []
         self._silent = False
         self.rejected_messages = 0
         self._threads = [threading.Thread(target=self._receive, daemon=True),
@@ -258,6 +263,8 @@ class LodClient:
                                         kf.zbuffer)
             self._current, kind = kf, "keyframe"
             self._shown = {"eye": [float(v) for v in kf.viewpoint.o], "slot": slot}
+            self.shown.append({"slot": slot, "seq": kf.seq, "t0": kf.t0,
+                               "viewpoint": kf.viewpoint.to_dict()})
             if self.adopt == "needed":
                 self._c_prime = self.local.metric.reproject(kf.viewpoint.o)
         if self._current is None:
@@ -269,7 +276,8 @@ class LodClient:
             self.paths.ctx.finish()
         self._say_link_state()
         seq = self._current.seq if self._current is not None else 0
-        return ClientFrame(kind, (time.perf_counter() - t0) * 1e3, triangles, seq)
+        return ClientFrame(kind, (time.perf_counter() - t0) * 1e3, triangles, seq,
+                           len(self.shown) - 1)
 
     def _say_link_state(self) -> None:
         """Say once when no server answers any more, and once when one answers again."""

@@ -22,9 +22,13 @@ same run (:data:`SETUPS`):
   ``separate_10mbit_zlib`` with compressed keyframes; skipped where this process may
   not create namespaces (:mod:`lodsprite.distributed.netns`).
 
-Each set-up's folder holds the client's ``frames.csv``, ``summary.json`` and the
-server's per-keyframe statistics; ``results.json`` gathers them with the prediction
-error of each predictor on the same path, ahead by the measured δt.
+Each set-up's folder holds the client's ``frames.csv``, ``summary.json``,
+``keyframes.json`` and the server's per-keyframe statistics; ``results.json`` gathers
+them with the prediction error of each predictor on the same path, ahead by the measured
+δt.  After the timed runs every set-up's frames are replayed untimed
+(:mod:`lodsprite.distributed.quality`): the error metric of each frame against the
+keyframe it showed and, every ``quality_stride`` frames, RMSE against full resolution
+(``image`` in each set-up's results).
 """
 
 from __future__ import annotations
@@ -42,10 +46,12 @@ import numpy as np
 
 from lodsprite.distributed.netns import RATES, SERVER_IP, available, two_hosts
 from lodsprite.distributed.predictors import PREDICTORS, prediction_error
+from lodsprite.distributed.quality import Replayer, inline_quality, recorded_keyframes
 from lodsprite.distributed.run import local_server, lodsprite_command, pinned, server_process
 from lodsprite.errors import LodspriteError
 from lodsprite.paths import swan2002
 from lodsprite.report.io import write_json
+from lodsprite.run import RenderConfig
 from lodsprite.terrain import load_terrain
 
 NS_PORT = 5555
@@ -95,10 +101,16 @@ class SwanConfig:
     adopt: str = "newest"
     pace: str = "needed"
     links: bool = True
+    quality_stride: int = 10  # replay every n-th frame for image quality (0: none)
 
     @classmethod
     def quick(cls, **kw) -> SwanConfig:
         return cls(**{"frames": 150, "size": 256, **kw})
+
+    def render_config(self) -> RenderConfig:
+        """The client's frames, as :mod:`lodsprite.distributed.quality` replays them."""
+        return RenderConfig(terrain=self.terrain, path="swan2002", frames=self.frames,
+                            size=(self.size, self.size), lod=self.lod, mode="sprite")
 
     def args(self) -> list[str]:
         return ["--terrain", self.terrain, "--path", "swan2002", "--frames", str(self.frames),
@@ -201,6 +213,18 @@ def _prediction(cfg: SwanConfig, results: dict) -> dict:
                                     for name, cls in PREDICTORS.items()}}
 
 
+def _image_error(cfg: SwanConfig, results: dict, out_dir: Path) -> None:
+    """Replay every set-up's frames untimed and add their image error (``image``)."""
+    render_cfg = cfg.render_config()
+    ran = [s for s in SETUPS if "per_frame_ms" in results.get(s, {})]
+    if "inline" in ran:  # its own GL context, released before the replayer's is made
+        results["inline"]["image"] = inline_quality(render_cfg, cfg.quality_stride)
+    with Replayer(render_cfg, cfg.quality_stride) as replayer:
+        for name in ran:
+            if name != "inline":
+                results[name]["image"] = replayer.replay(*recorded_keyframes(out_dir / name))
+
+
 def reproduce_swan2002(cfg: SwanConfig, out_dir: Path,
                        progress: Callable[[int, int], None] | None = None) -> dict:
     """Run the three set-ups; write ``results.json`` and return it (plots: report.swan2002)."""
@@ -219,6 +243,8 @@ def reproduce_swan2002(cfg: SwanConfig, out_dir: Path,
         if progress:
             progress(i + 1, len(setups) + 1)
     results["prediction"] = _prediction(cfg, results)
+    if cfg.quality_stride:
+        _image_error(cfg, results, out_dir)
     if progress:
         progress(len(setups) + 1, len(setups) + 1)
     write_json(out_dir / "results.json", results)

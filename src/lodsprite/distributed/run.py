@@ -26,7 +26,7 @@ from lodsprite.errors import LodspriteError
 from lodsprite.report.io import write_csv, write_json
 from lodsprite.run import RenderConfig, prepare, timing_summary
 
-FRAME_COLUMNS = ["frame", "mode", "ms", "triangles", "type", "keyframe_seq"]
+FRAME_COLUMNS = ["frame", "mode", "ms", "triangles", "type", "keyframe_seq", "keyframe"]
 
 
 def free_ports(count: int = 3, host: str = "127.0.0.1") -> int:
@@ -118,7 +118,7 @@ def run_client(config: RenderConfig, servers: list[str], out_dir: Path,
             f = client.frame(vp)
             rows.append({"frame": i, "mode": "distributed", "ms": f.ms,
                          "triangles": f.triangles, "type": f.type,
-                         "keyframe_seq": f.keyframe_seq})
+                         "keyframe_seq": f.keyframe_seq, "keyframe": f.keyframe_index})
             if progress:
                 progress(i + 1, len(path))
     except KeyboardInterrupt:
@@ -127,6 +127,7 @@ def run_client(config: RenderConfig, servers: list[str], out_dir: Path,
         if rows:
             stats = client.server_stats()
         info = client.paths.ctx.info
+        shown = client.shown
         client.close()
     if rows:
         summary = _summary(config, rows, stats, info.renderer, servers)
@@ -135,6 +136,7 @@ def run_client(config: RenderConfig, servers: list[str], out_dir: Path,
                        triangles_mean=float(np.mean([r["triangles"] for r in rows])))
         write_csv(out_dir / "frames.csv", rows, FRAME_COLUMNS)
         write_json(out_dir / "server_stats.json", {"servers": servers, "stats": stats})
+        write_json(out_dir / "keyframes.json", {"servers": servers, "keyframes": shown})
         write_json(out_dir / "summary.json", summary)
     if interrupted:
         raise KeyboardInterrupt

@@ -81,6 +81,27 @@ def _server_plot(results: dict, keys: list[str], path: Path, title: str) -> Path
     return save_figure(fig, path)
 
 
+def _error_plot(results: dict, setups: list[str], path: Path) -> Path | None:
+    present = [s for s in setups if (results.get(s) or {}).get("image")]
+    if not present:
+        return None
+    fig = Figure(figsize=(7.5, 4.2), dpi=110)
+    ax = fig.add_subplot()
+    for s in present:
+        e = np.array([np.nan if v is None else v
+                      for v in results[s]["image"]["per_frame_error_px"]], dtype=float)
+        ax.plot(np.maximum(e, 1e-3), lw=0.8,
+                label=f"{LABELS[s]} (≥ ε on {100 * results[s]['image']['over_epsilon']:.0f} %)")
+    eps = (results.get("config") or {}).get("epsilon", 1.0)
+    ax.axhline(eps, color="k", lw=0.8, ls="--", label=f"ε = {eps:g} px")
+    ax.set(xlabel="frame", ylabel="error metric of the frame shown (px)",
+           title="Image error per frame, replayed (Eq. 2 against the keyframe shown)")
+    ax.set_yscale("log")
+    ax.legend(fontsize=7)
+    ax.grid(alpha=0.3)
+    return save_figure(fig, path)
+
+
 def write_plots(results: dict, out_dir: Path) -> list[Path]:
     out_dir = Path(out_dir)
     made = [
@@ -96,6 +117,8 @@ def write_plots(results: dict, out_dir: Path) -> list[Path]:
         _server_plot(results, ["delta_t", "production", "queue_retrieve", "transmission"],
                      out_dir / "fig12_transmitter.png",
                      "Fig. 12 — KEYFRAME-TRANSMITTER timings"),
+        _error_plot(results, ["inline", "separate", "same_cores", "separate_10mbit"],
+                    out_dir / "image_error.png"),
     ]
     return [p for p in made if p is not None]
 
@@ -128,6 +151,34 @@ def stability_lines(results: dict) -> list[str]:
     return lines
 
 
+IMAGE_COLUMNS = [("error px mean", "error_px_mean"), ("p95", "error_px_p95"),
+                 ("max", "error_px_max"), ("RMSE", "rmse_sprite_mean"),
+                 ("SSIM", "ssim_sprite_mean")]
+
+
+def image_error_lines(results: dict, setups: list[str]) -> list[str]:
+    """The replayed image error of each set-up (:mod:`lodsprite.distributed.quality`)."""
+    rows = [s for s in setups if (results[s].get("image") or {}).get("replayed_frames")]
+    if not rows:
+        return []
+    first = results[rows[0]]["image"]
+    lines = ["", "## Image error, replayed after the timed runs", "",
+             "Every frame drawn again, untimed, from the keyframe it showed: the 1999 error "
+             "metric (Eq. 2, pixels) against that keyframe, and RMSE / SSIM against full "
+             f"resolution on {first['quality_frames']} evenly spaced frames. The plain "
+             f"{(results.get('config') or {}).get('lod')}² level has RMSE "
+             f"{fmt_fixed(first.get('rmse_lod_mean'), 2)}.", "",
+             "| set-up | " + " | ".join(t for t, _ in IMAGE_COLUMNS) + " | frames ≥ ε |",
+             "|---" * (len(IMAGE_COLUMNS) + 2) + "|"]
+    for s in rows:
+        im = results[s]["image"]
+        over = im.get("over_epsilon")
+        lines.append(f"| {LABELS.get(s, s)} | "
+                     + " | ".join(fmt_fixed(im.get(k), 2) for _, k in IMAGE_COLUMNS)
+                     + f" | {'—' if over is None else f'{100 * over:.1f} %'} |")
+    return lines
+
+
 def _cells(row: dict) -> str:
     return " | ".join(fmt_int(row.get(k)) if k == "keyframes" else fmt_fixed(row.get(k), 2)
                       for _, k in COLUMNS)
@@ -154,6 +205,7 @@ def write_report(results: dict, out_dir: Path, plots: list[Path]) -> Path:
         if "skipped" in results[s]:
             lines += ["", f"- `{s}` skipped: {results[s]['skipped']}."]
     lines += ["", *stability_lines(results)]
+    lines += image_error_lines(results, present)
     pred = results.get("prediction") or {}
     if pred:
         lines += ["", f"## Viewpoint prediction, {pred['lead_frames']} frames ahead (δt)", "",
