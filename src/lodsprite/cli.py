@@ -330,7 +330,8 @@ def reproduce(
     sweeps: Annotated[bool, typer.Option(
         "--sweeps/--no-sweeps", help="run the Fig. 10-12 sweeps")] = True,
     adopt: Annotated[str, typer.Option(
-        "--adopt", help="swan2002: when the client takes a newer keyframe: needed | newest")
+        "--adopt", help="swan2002: when the client takes a newer keyframe: "
+                        "newest | better | needed")
     ] = "newest",
     pace: PaceOpt = "needed",
 ) -> None:
@@ -433,8 +434,9 @@ def client(
     border: BorderOpt = True,
     pace: PaceOpt = "needed",
     adopt: Annotated[str, typer.Option(
-        "--adopt", help="needed: take a newer keyframe when the error metric reaches ε/2; "
-                        "newest: take every newer keyframe (the paper)")] = "newest",
+        "--adopt", help="newest: take every newer keyframe (the paper); better: once its "
+                        "error metric here is lower than the shown one's; needed: when the "
+                        "shown one's reaches ε/2")] = "newest",
     keys: Annotated[Path | None, typer.Option(
         "--keys", help="folder holding client.key_secret and server.key (CURVE)")] = None,
 ) -> None:

@@ -157,3 +157,56 @@ def test_viewpoint_messages_name_the_shown_keyframe_for_the_servers_pacing():
         views.close(linger=0)
         keys.close(linger=0)
         ctx.destroy(linger=0)
+
+
+def test_adopt_better_keeps_the_shown_keyframe_until_a_newer_one_serves_better():
+    """A keyframe placed by a prediction that overshot must not replace a better one."""
+    import numpy as np
+
+    from lodsprite.camera import Projection
+    from lodsprite.distributed.client import LodClient
+    from lodsprite.distributed.protocol import Keyframe, encode_keyframe
+    from lodsprite.distributed.render import scene_args
+    from lodsprite.distributed.run import free_ports
+    from lodsprite.run import RenderConfig, prepare
+
+    cfg = RenderConfig(terrain="fractal:64:2", size=(64, 64), lod=8, frames=12,
+                       path="chen1999", mode="sprite")
+    sc, path = prepare(cfg)
+    port = free_ports()
+    stop = threading.Event()
+    control = _fake_server(port, lambda h: {"data": {"running": True, "loaded": True}}, stop)
+    ctx = zmq.Context()
+    keys = ctx.socket(zmq.DEALER)
+    keys.bind(f"tcp://127.0.0.1:{port + 2}")
+    client = LodClient(sc, scene_args(cfg.terrain, cfg.texture, None, 1.0, cfg.size),
+                       [f"127.0.0.1:{port}"], cfg.size, cfg.lod, adopt="better")
+    rng = np.random.default_rng(2)
+
+    def send(seq, vp):
+        keys.send_multipart(encode_keyframe(Keyframe(
+            seq, 0.0, vp, Projection(45.0, 1.0, 1.0, 1e5),
+            rng.integers(0, 256, (64, 64, 3), dtype=np.uint8),
+            np.full((64, 64), 0.5, np.float32))))
+
+    def types(vp, n=15):
+        out = []
+        for _ in range(n):
+            out.append(client.frame(vp).type)
+            time.sleep(0.02)
+        return out
+
+    try:
+        near, far = path.viewpoints[2], path.viewpoints[11]
+        send(1, near)
+        assert "keyframe" in types(near, 100)  # the first keyframe is always taken
+        send(2, far)
+        assert "keyframe" not in types(near)  # the far one serves worse here: kept back
+        assert types(far)[0] == "keyframe"     # ... and taken once the viewer is there
+        assert client.shown[-1]["seq"] == 2
+    finally:
+        client.close()
+        stop.set()
+        control.join(2.0)
+        keys.close(linger=0)
+        ctx.destroy(linger=0)
