@@ -3,6 +3,8 @@
 import threading
 import time
 
+import numpy as np
+import pytest
 import zmq
 
 from lodsprite.distributed.client import _Server
@@ -95,32 +97,68 @@ def test_a_load_that_got_no_answer_is_sent_again():
         ctx.destroy(linger=0)
 
 
-def test_viewpoint_messages_name_the_shown_keyframe_for_the_servers_pacing():
+class _FakeLodServer:
+    """A server's three sockets played by the test: control answers "loaded and
+    running", viewpoints are read, keyframes are sent by hand."""
+
+    def __init__(self):
+        from lodsprite.distributed.run import free_ports
+        from lodsprite.run import RenderConfig, prepare
+
+        self.cfg = RenderConfig(terrain="fractal:64:2", size=(64, 64), lod=8, frames=12,
+                                path="chen1999", mode="sprite")
+        self.scene, self.path = prepare(self.cfg)
+        self.port = free_ports()
+        self.stop = threading.Event()
+        self.control = _fake_server(
+            self.port, lambda h: {"data": {"running": True, "loaded": True}}, self.stop)
+        self.ctx = zmq.Context()
+        self.views = self.ctx.socket(zmq.SUB)
+        self.views.setsockopt(zmq.SUBSCRIBE, b"")
+        self.views.bind(f"tcp://127.0.0.1:{self.port + 1}")
+        self.keys = self.ctx.socket(zmq.DEALER)
+        self.keys.bind(f"tcp://127.0.0.1:{self.port + 2}")
+        self.rng = np.random.default_rng(1)
+
+    def client(self, **kw):
+        from lodsprite.distributed.client import LodClient
+        from lodsprite.distributed.render import scene_args
+
+        c = self.cfg
+        return LodClient(self.scene, scene_args(c.terrain, c.texture, None, 1.0, c.size),
+                         [f"127.0.0.1:{self.port}"], c.size, c.lod, **kw)
+
+    def send(self, seq, vp):
+        from lodsprite.camera import Projection
+        from lodsprite.distributed.protocol import Keyframe, encode_keyframe
+
+        self.keys.send_multipart(encode_keyframe(Keyframe(
+            seq, 0.0, vp, Projection(45.0, 1.0, 1.0, 1e5),
+            self.rng.integers(0, 256, (64, 64, 3), dtype=np.uint8),
+            np.full((64, 64), 0.5, np.float32))))
+
+    def close(self):
+        self.stop.set()
+        self.control.join(2.0)
+        self.views.close(linger=0)
+        self.keys.close(linger=0)
+        self.ctx.destroy(linger=0)
+
+
+@pytest.fixture
+def fake():
+    f = _FakeLodServer()
+    yield f
+    f.close()
+
+
+def test_viewpoint_messages_name_the_shown_keyframe_for_the_servers_pacing(fake):
     """Servers pace against the keyframe the client shows, which may be another server's:
     once a keyframe is shown, every viewpoint message carries its eye."""
-    import numpy as np
+    from lodsprite.distributed.protocol import decode
 
-    from lodsprite.camera import Projection
-    from lodsprite.distributed.client import LodClient
-    from lodsprite.distributed.protocol import Keyframe, decode, encode_keyframe
-    from lodsprite.distributed.render import scene_args
-    from lodsprite.distributed.run import free_ports
-    from lodsprite.run import RenderConfig, prepare
-
-    cfg = RenderConfig(terrain="fractal:64:2", size=(64, 64), lod=8, frames=8,
-                       path="chen1999", mode="sprite")
-    sc, path = prepare(cfg)
-    port = free_ports()
-    stop = threading.Event()
-    control = _fake_server(port, lambda h: {"data": {"running": True, "loaded": True}}, stop)
-    ctx = zmq.Context()
-    views = ctx.socket(zmq.SUB)
-    views.setsockopt(zmq.SUBSCRIBE, b"")
-    views.bind(f"tcp://127.0.0.1:{port + 1}")
-    keys = ctx.socket(zmq.DEALER)
-    keys.bind(f"tcp://127.0.0.1:{port + 2}")
-    client = LodClient(sc, scene_args(cfg.terrain, cfg.texture, None, 1.0, cfg.size),
-                       [f"127.0.0.1:{port}"], cfg.size, cfg.lod)
+    client = fake.client()
+    views = fake.views
 
     def next_header(vp) -> dict:
         """The newest viewpoint message after drawing ``vp`` (PUB drops messages until
@@ -136,58 +174,23 @@ def test_viewpoint_messages_name_the_shown_keyframe_for_the_servers_pacing():
         raise AssertionError("no viewpoint message reached the server")
 
     try:
-        vp = path.viewpoints[0]
+        vp = fake.path.viewpoints[0]
         header = next_header(vp)
         assert "shown" not in header  # nothing shown yet: the client draws its own
-        key_vp = path.viewpoints[3]
-        rng = np.random.default_rng(1)
-        kf = Keyframe(1, 0.0, key_vp, Projection(45.0, 1.0, 1.0, 1e5),
-                      rng.integers(0, 256, (64, 64, 3), dtype=np.uint8),
-                      np.full((64, 64), 0.5, np.float32))
-        keys.send_multipart(encode_keyframe(kf))
+        key_vp = fake.path.viewpoints[3]
+        fake.send(1, key_vp)
         deadline = time.perf_counter() + 10.0
         while client.frame(vp).type != "keyframe":
             assert time.perf_counter() < deadline, "the keyframe never arrived"
-        header = next_header(path.viewpoints[1])
+        header = next_header(fake.path.viewpoints[1])
         assert header["shown"] == {"eye": [float(v) for v in key_vp.o], "slot": 0}
     finally:
         client.close()
-        stop.set()
-        control.join(2.0)
-        views.close(linger=0)
-        keys.close(linger=0)
-        ctx.destroy(linger=0)
 
 
-def test_adopt_better_keeps_the_shown_keyframe_until_a_newer_one_serves_better():
+def test_adopt_better_keeps_the_shown_keyframe_until_a_newer_one_serves_better(fake):
     """A keyframe placed by a prediction that overshot must not replace a better one."""
-    import numpy as np
-
-    from lodsprite.camera import Projection
-    from lodsprite.distributed.client import LodClient
-    from lodsprite.distributed.protocol import Keyframe, encode_keyframe
-    from lodsprite.distributed.render import scene_args
-    from lodsprite.distributed.run import free_ports
-    from lodsprite.run import RenderConfig, prepare
-
-    cfg = RenderConfig(terrain="fractal:64:2", size=(64, 64), lod=8, frames=12,
-                       path="chen1999", mode="sprite")
-    sc, path = prepare(cfg)
-    port = free_ports()
-    stop = threading.Event()
-    control = _fake_server(port, lambda h: {"data": {"running": True, "loaded": True}}, stop)
-    ctx = zmq.Context()
-    keys = ctx.socket(zmq.DEALER)
-    keys.bind(f"tcp://127.0.0.1:{port + 2}")
-    client = LodClient(sc, scene_args(cfg.terrain, cfg.texture, None, 1.0, cfg.size),
-                       [f"127.0.0.1:{port}"], cfg.size, cfg.lod, adopt="better")
-    rng = np.random.default_rng(2)
-
-    def send(seq, vp):
-        keys.send_multipart(encode_keyframe(Keyframe(
-            seq, 0.0, vp, Projection(45.0, 1.0, 1.0, 1e5),
-            rng.integers(0, 256, (64, 64, 3), dtype=np.uint8),
-            np.full((64, 64), 0.5, np.float32))))
+    client = fake.client(adopt="better")
 
     def types(vp, n=15):
         out = []
@@ -197,16 +200,16 @@ def test_adopt_better_keeps_the_shown_keyframe_until_a_newer_one_serves_better()
         return out
 
     try:
-        near, far = path.viewpoints[2], path.viewpoints[11]
-        send(1, near)
+        near, far = fake.path.viewpoints[2], fake.path.viewpoints[11]
+        fake.send(1, near)
         assert "keyframe" in types(near, 100)  # the first keyframe is always taken
-        send(2, far)
+        fake.send(2, far)
+        deadline = time.perf_counter() + 10.0
+        while client._pending is None:  # until the far keyframe has been received
+            assert client.frame(near).type == "sprite"
+            assert time.perf_counter() < deadline, "the second keyframe never arrived"
         assert "keyframe" not in types(near)  # the far one serves worse here: kept back
         assert types(far)[0] == "keyframe"     # ... and taken once the viewer is there
         assert client.shown[-1]["seq"] == 2
     finally:
         client.close()
-        stop.set()
-        control.join(2.0)
-        keys.close(linger=0)
-        ctx.destroy(linger=0)

@@ -32,6 +32,15 @@ def stop(proc):
     proc.wait(timeout=10)
 
 
+def server_and_client(scene, **client_kw):
+    """A server process on free loopback ports and a client of it: (address, server, client)."""
+    address = f"127.0.0.1:{free_ports()}"
+    server = start_server(address)
+    args = scene_args(SMALL.terrain, SMALL.texture, None, SMALL.exaggeration, SMALL.size)
+    return address, server, LodClient(scene, args, [address], SMALL.size, SMALL.lod,
+                                      **client_kw)
+
+
 def wait_for(client, vp, kind="keyframe", timeout=20.0):
     deadline = time.perf_counter() + timeout
     while time.perf_counter() < deadline:
@@ -66,10 +75,7 @@ def scene():
 
 def test_client_keeps_drawing_when_the_server_dies_and_resumes_when_it_returns(scene):
     sc, path = scene
-    address = f"127.0.0.1:{free_ports()}"
-    server = start_server(address)
-    args = scene_args(SMALL.terrain, SMALL.texture, None, SMALL.exaggeration, SMALL.size)
-    client = LodClient(sc, args, [address], SMALL.size, SMALL.lod)
+    address, server, client = server_and_client(sc)
     try:
         assert wait_for(client, path.viewpoints[0])
         stop(server)
@@ -89,10 +95,7 @@ def test_client_keeps_drawing_when_the_server_dies_and_resumes_when_it_returns(s
 @pytest.mark.parametrize("pace", ["needed", "continuous"])
 def test_a_still_viewer_gets_one_keyframe_unless_the_server_renders_continuously(scene, pace):
     sc, path = scene
-    address = f"127.0.0.1:{free_ports()}"
-    server = start_server(address)
-    args = scene_args(SMALL.terrain, SMALL.texture, None, SMALL.exaggeration, SMALL.size)
-    client = LodClient(sc, args, [address], SMALL.size, SMALL.lod, pace=pace)
+    _, server, client = server_and_client(sc, pace=pace)
     try:
         assert wait_for(client, path.viewpoints[0])
         frames = []
@@ -261,10 +264,7 @@ def test_a_replayed_frame_is_the_frame_the_client_drew(scene):
     from lodsprite.distributed.quality import Replayer
 
     sc, path = scene
-    address = f"127.0.0.1:{free_ports()}"
-    server = start_server(address)
-    args = scene_args(SMALL.terrain, SMALL.texture, None, SMALL.exaggeration, SMALL.size)
-    client = LodClient(sc, args, [address], SMALL.size, SMALL.lod)
+    _, server, client = server_and_client(sc)
     try:
         assert wait_for(client, path.viewpoints[0])
         frames = [client.frame(vp) for vp in path.viewpoints[:12]]

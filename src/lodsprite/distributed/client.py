@@ -196,7 +196,6 @@ class LodClient:
         self._stop = threading.Event()
         self._counter = itertools.count(1)
         self._current: Keyframe | None = None
-        self._shown: dict = {}  # the shown keyframe's eye and server slot, for the servers
         # Every server keyframe taken, in order: {slot, seq, t0, viewpoint} (to replay
         # the frames afterwards and measure their image error).
         self.shown: list[dict] = []
@@ -257,7 +256,8 @@ class LodClient:
         header = {"kind": "viewpoint", "seq": next(self._counter), "t": t0,
                   "viewpoint": viewpoint_to_wire(viewpoint)}
         if self._current is not None:
-            header["shown"] = self._shown
+            last = self.shown[-1]  # the shown keyframe, for the servers' pacing
+            header["shown"] = {"eye": last["viewpoint"]["o"], "slot": last["slot"]}
         msg = encode(header)
         for s in self._servers:
             try:
@@ -273,7 +273,6 @@ class LodClient:
             self.sprite.upload_keyframe(kf.viewpoint, kf.projection, kf.color, kf.depth, kf.t0,
                                         kf.zbuffer)
             self._current, kind = kf, "keyframe"
-            self._shown = {"eye": [float(v) for v in kf.viewpoint.o], "slot": slot}
             self.shown.append({"slot": slot, "seq": kf.seq, "t0": kf.t0,
                                "viewpoint": kf.viewpoint.to_dict()})
         if self._current is None:

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import csv
 import json
-from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
@@ -76,8 +75,7 @@ class Replayer:
         self._references: dict[int, tuple[np.ndarray, ...]] = {}
         self._key: Viewpoint | None = None  # the keyframe rendered last
 
-    def replay(self, keys: list[Viewpoint], shown: np.ndarray,
-               progress: Callable[[], None] | None = None) -> dict:
+    def replay(self, keys: list[Viewpoint], shown: np.ndarray) -> dict:
         """Error metric of every frame and image quality of every ``stride``-th frame;
         ``shown (frames,)`` indexes ``keys`` (-1: left out)."""
         views = self.path.viewpoints
@@ -98,8 +96,6 @@ class Replayer:
             if i % self.stride:
                 continue
             rows.append(frame_quality(self.draw(keys[k], vp), self._reference(i, vp)))
-            if progress:
-                progress()
         return _summary(errors, rows, self.config.epsilon)
 
     def draw(self, key: Viewpoint, viewpoint: Viewpoint) -> np.ndarray:

@@ -108,7 +108,6 @@ class LodServer:
         self._shown = None  # (eye, slot) of the keyframe the client says it shows
         self._slot, self._slots = 0, 1  # this server's place among the client's servers
         self._delta_t = 0.5  # seconds, until the transmitter has measured one
-        self._lead_factor = 1.0
         self._seq = 0
 
     def _socket(self, kind: int) -> zmq.Socket:
@@ -168,7 +167,6 @@ class LodServer:
                 check_load_args(args)
             except ProtocolError as exc:
                 return {**reply, "ok": False, "error": str(exc)}
-            self._lead_factor = 1.0 + slot / slots
             self._slot, self._slots = slot, slots
             with self._scene_lock:
                 self._scene_request = args
@@ -220,7 +218,8 @@ class LodServer:
         server ``slot`` of ``slots`` aims ``δt (1 + slot/slots)`` ahead, so their keyframes
         cover different moments."""
         with self._latest_lock:
-            return self._predictor.predict(self._delta_t * self._lead_factor), self._shown
+            lead = self._delta_t * (1.0 + self._slot / self._slots)
+            return self._predictor.predict(lead), self._shown
 
     def _due(self, renderer: KeyframeRenderer, vp, shown) -> bool:
         """Whether to render for ``vp``.  With several servers they take turns: it is this
