@@ -13,9 +13,10 @@ import argparse
 
 import numpy as np
 
+from lodsprite.gl.paths import PathRenderer
 from lodsprite.gl.sprite import SpriteRenderer
 from lodsprite.metrics import rmse
-from lodsprite.run import PathRenderer, RenderConfig, prepare
+from lodsprite.run import RenderConfig, prepare
 from lodsprite.sprite.engine import KEYFRAME, LodSpriteEngine
 
 CASES = [  # visibility, keyframes ahead, border ribbons, guard band (px)

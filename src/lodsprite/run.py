@@ -10,7 +10,6 @@ so that shader compilation and first-use driver work are not charged to frame 0.
 from __future__ import annotations
 
 import platform
-import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -19,14 +18,13 @@ import numpy as np
 
 from lodsprite.distributed.pacing import DEFAULT_PACE, PACES
 from lodsprite.errors import InputError
-from lodsprite.gl.context import GLContext
+from lodsprite.gl.paths import PathRenderer
 from lodsprite.gl.sprite import (
     DEFAULT_GUARD_PX,
     DEFAULT_VISIBILITY,
     VISIBILITY_MODES,
     SpriteRenderer,
 )
-from lodsprite.gl.terrain import TerrainGeometry, TerrainRenderer
 from lodsprite.paths import CameraPath, get_path
 from lodsprite.report.io import write_csv, write_json, write_png
 from lodsprite.scene import Scene, load_scene
@@ -103,36 +101,6 @@ def parse_size(text: str) -> tuple[int, int]:
     if len(vals) != 2:
         raise InputError(f"size must look like 512x512, got '{text}'")
     return vals[0], vals[1]
-
-
-class PathRenderer:
-    """GL state for one scene: context, geometry and renderer, created once, released once."""
-
-    def __init__(self, scene: Scene, size: tuple[int, int], fov_y_deg: float = 45.0,
-                 ctx: GLContext | None = None) -> None:
-        self.own_ctx = ctx is None
-        self.ctx = ctx or GLContext()
-        self.geometry = TerrainGeometry(self.ctx, scene.hf, scene.texture)
-        self.renderer = TerrainRenderer(self.ctx, self.geometry, size[0], size[1], fov_y_deg)
-
-    def timed(self, viewpoint, level: int | None) -> tuple[float, int]:
-        """Render one frame; (milliseconds including ``ctx.finish()``, triangles)."""
-        t0 = time.perf_counter()
-        stats = self.renderer.render(viewpoint, level)
-        self.ctx.finish()
-        return (time.perf_counter() - t0) * 1e3, stats.triangles
-
-    def release(self) -> None:
-        self.renderer.release()
-        self.geometry.release()
-        if self.own_ctx:
-            self.ctx.release()
-
-    def __enter__(self) -> PathRenderer:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.release()
 
 
 def timing_summary(ms: np.ndarray) -> dict:

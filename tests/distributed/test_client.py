@@ -7,14 +7,14 @@ import numpy as np
 import pytest
 import zmq
 
-from lodsprite.distributed.client import _Server
+from lodsprite.distributed.link import ServerLink
 
 
 def test_a_closed_server_link_answers_at_once_and_opens_no_socket():
     # Regression: the control thread could open a new control socket after close() (a
     # request timing out during shutdown), and the context's term() then waited forever.
     ctx = zmq.Context()
-    link = _Server(ctx, "127.0.0.1:59997")  # nothing listens there
+    link = ServerLink(ctx, "127.0.0.1:59997")  # nothing listens there
     link.close()
     t0 = time.perf_counter()
     assert link.request({"kind": "control", "seq": 1, "op": "ping", "args": {}}) is None
@@ -61,7 +61,7 @@ def test_a_load_that_got_no_answer_is_sent_again():
     # (a server busy starting up), and never loaded it again: no keyframes, ever.
     import itertools
 
-    from lodsprite.distributed.client import keep_loaded
+    from lodsprite.distributed.link import keep_loaded
     from lodsprite.distributed.run import free_ports
 
     port = free_ports()
@@ -81,7 +81,7 @@ def test_a_load_that_got_no_answer_is_sent_again():
     stop = threading.Event()
     server = _fake_server(port, answer, stop)
     ctx = zmq.Context()
-    link = _Server(ctx, f"127.0.0.1:{port}")
+    link = ServerLink(ctx, f"127.0.0.1:{port}")
     counter = itertools.count(1)
     try:
         keep_loaded(link, {"terrain": "x"}, counter)

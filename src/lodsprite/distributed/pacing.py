@@ -29,6 +29,7 @@ import numpy as np
 
 from lodsprite.camera import Projection, Viewpoint
 from lodsprite.sprite.metric import ErrorMetric
+from lodsprite.sprite.policy import keyframe_error_px
 from lodsprite.terrain.heightfield import HeightField
 
 PACES = ("needed", "continuous")
@@ -63,12 +64,10 @@ class KeyframePacer:
         """
         if self.metric is None or self._c_prime is None:
             return True
-        view_proj = projection.matrix() @ viewpoint.view_matrix()
-        beta = projection.pixel_angle_rad(self.height_px)
         limit = self.limit_px if turn else self.epsilon_px
         for c_prime in (self._c_prime, self._shown_c_prime(shown_eye)):
-            if c_prime is not None and self.metric.error_px(
-                    c_prime, viewpoint.o, view_proj, beta) < limit:
+            if c_prime is not None and keyframe_error_px(
+                    self.metric, c_prime, viewpoint, projection, self.height_px) < limit:
                 return False
         return True
 

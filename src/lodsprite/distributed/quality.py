@@ -28,9 +28,9 @@ import numpy as np
 
 from lodsprite.camera import Viewpoint
 from lodsprite.errors import InputError
+from lodsprite.gl.paths import PathRenderer
 from lodsprite.gl.sprite import SpriteRenderer
 from lodsprite.run import (
-    PathRenderer,
     RenderConfig,
     frame_quality,
     prepare,

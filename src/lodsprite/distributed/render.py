@@ -14,9 +14,9 @@ from numbers import Real
 from lodsprite.camera import Viewpoint
 from lodsprite.distributed.pacing import DEFAULT_PACE, PACES, KeyframePacer
 from lodsprite.distributed.protocol import Keyframe, ProtocolError
+from lodsprite.gl.paths import PathRenderer
 from lodsprite.gl.sprite import DEFAULT_VISIBILITY, VISIBILITY_MODES
 from lodsprite.gl.target import RenderTarget
-from lodsprite.run import PathRenderer
 from lodsprite.scene import load_scene
 from lodsprite.terrain import DEFAULT_EXAGGERATION
 

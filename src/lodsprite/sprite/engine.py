@@ -35,6 +35,7 @@ from lodsprite.camera import Viewpoint
 from lodsprite.errors import InputError
 from lodsprite.gl.sprite import SpriteRenderer
 from lodsprite.sprite.metric import ErrorMetric
+from lodsprite.sprite.policy import keyframe_error_px
 from lodsprite.sprite.predict import extrapolate
 
 KEYFRAME, FIRST_SPRITE, SPRITE = "keyframe", "first_sprite", "sprite"
@@ -49,13 +50,14 @@ LOOKAHEAD_TRIES = 4
 class SpriteFrame:
     """One frame: its type, the error of the image shown (pixels; 0 for a keyframe), the
     error that decided it (pixels, measured against the previous keyframe), triangles
-    drawn and wall time (ms)."""
+    drawn, wall time (ms) and the index of the keyframe the image comes from."""
 
     type: str
     error_px: float
     decision_error_px: float
     triangles: int
     ms: float
+    keyframe: int = -1  # index in LodSpriteEngine.keyframes of the keyframe shown
 
 
 class LodSpriteEngine:
@@ -76,6 +78,9 @@ class LodSpriteEngine:
         self._prev: Viewpoint | None = None
         self._shows_keyframe = True
         self.predicted_keyframes = 0
+        # Every keyframe rendered, in order: (viewpoint, frame projection) it was rendered
+        # from (ahead of the viewer, with prediction).
+        self.keyframes: list[tuple[Viewpoint, object]] = []
 
     def read_image(self) -> np.ndarray:
         """The image of the last frame, ``(H, W, 3) uint8``, row 0 at the top: the keyframe
@@ -85,9 +90,8 @@ class LodSpriteEngine:
         return self.sprite.target.read_color()
 
     def _error(self, c_prime, viewpoint: Viewpoint, projection) -> float:
-        view_proj = projection.matrix() @ viewpoint.view_matrix()
-        beta = projection.pixel_angle_rad(self.sprite.target.height)
-        return self.metric.error_px(c_prime, viewpoint.o, view_proj, beta)
+        return keyframe_error_px(self.metric, c_prime, viewpoint, projection,
+                                 self.sprite.target.height)
 
     def _ahead(self, viewpoint: Viewpoint, projection) -> tuple | None:
         """``(viewpoint, projection, C', error)`` of a keyframe ahead of ``viewpoint`` that
@@ -131,11 +135,13 @@ class LodSpriteEngine:
             ahead = self._ahead(viewpoint, projection)
             if ahead is None:
                 stats = self.sprite.render_keyframe(viewpoint, t0, projection)
+                self.keyframes.append((viewpoint, projection))
                 self._c_prime, shown, self._shows_keyframe = (
                     self.metric.reproject(viewpoint.o), 0.0, True)
             else:
                 key_vp, key_proj, self._c_prime, shown = ahead
                 key_stats = self.sprite.render_keyframe(key_vp, t0, key_proj)
+                self.keyframes.append((key_vp, key_proj))
                 stats = self.sprite.render_spriteframe(viewpoint, projection)
                 stats = replace(stats, triangles=stats.triangles + key_stats.triangles)
                 self._shows_keyframe = False
@@ -151,4 +157,4 @@ class LodSpriteEngine:
         terrain.ctx.finish()
         self._prev = viewpoint
         return SpriteFrame(kind, shown, decision, stats.triangles,
-                           (time.perf_counter() - t0) * 1e3)
+                           (time.perf_counter() - t0) * 1e3, len(self.keyframes) - 1)

@@ -19,11 +19,12 @@ from pathlib import Path
 import numpy as np
 
 from lodsprite.errors import InputError
+from lodsprite.gl.paths import PathRenderer
 from lodsprite.gl.sprite import DEFAULT_GUARD_PX, DEFAULT_VISIBILITY, SpriteRenderer
 from lodsprite.metrics import difference_image
 from lodsprite.paths import chen1999
 from lodsprite.report.io import write_json, write_png
-from lodsprite.run import PathRenderer, RenderConfig, quality_summary, sprite_frames
+from lodsprite.run import RenderConfig, quality_summary, sprite_frames
 from lodsprite.scene import Scene, load_scene
 from lodsprite.sprite.engine import KEYFRAME
 from lodsprite.terrain import make_texture

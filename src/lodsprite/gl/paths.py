@@ -1,0 +1,39 @@
+"""GL state for rendering one scene along camera paths: context, geometry, renderer."""
+
+from __future__ import annotations
+
+import time
+
+from lodsprite.gl.context import GLContext
+from lodsprite.gl.terrain import TerrainGeometry, TerrainRenderer
+from lodsprite.scene import Scene
+
+
+class PathRenderer:
+    """GL state for one scene: context, geometry and renderer, created once, released once."""
+
+    def __init__(self, scene: Scene, size: tuple[int, int], fov_y_deg: float = 45.0,
+                 ctx: GLContext | None = None) -> None:
+        self.own_ctx = ctx is None
+        self.ctx = ctx or GLContext()
+        self.geometry = TerrainGeometry(self.ctx, scene.hf, scene.texture)
+        self.renderer = TerrainRenderer(self.ctx, self.geometry, size[0], size[1], fov_y_deg)
+
+    def timed(self, viewpoint, level: int | None) -> tuple[float, int]:
+        """Render one frame; (milliseconds including ``ctx.finish()``, triangles)."""
+        t0 = time.perf_counter()
+        stats = self.renderer.render(viewpoint, level)
+        self.ctx.finish()
+        return (time.perf_counter() - t0) * 1e3, stats.triangles
+
+    def release(self) -> None:
+        self.renderer.release()
+        self.geometry.release()
+        if self.own_ctx:
+            self.ctx.release()
+
+    def __enter__(self) -> PathRenderer:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
