@@ -17,7 +17,8 @@ from lodsprite.gl.paths import PathRenderer
 from lodsprite.gl.sprite import SpriteRenderer
 from lodsprite.metrics import rmse
 from lodsprite.run import RenderConfig, prepare
-from lodsprite.sprite.engine import KEYFRAME, LodSpriteEngine
+from lodsprite.sprite.engine import LodSpriteEngine
+from lodsprite.sprite.policy import KEYFRAME
 
 CASES = [  # visibility, keyframes ahead, border ribbons, guard band (px)
     ("triangle", True, True, 32), ("fragment", True, True, 32), ("coarse", True, True, 32),

@@ -17,10 +17,14 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from functools import cached_property
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from lodsprite.errors import InputError
+
+if TYPE_CHECKING:
+    from scipy.spatial.transform import Rotation
 
 DEFAULT_FOV_Y_DEG = 45.0
 
@@ -79,6 +83,24 @@ class Viewpoint:
             return cls(*(np.asarray(d[k], dtype=np.float64) for k in ("x", "y", "z", "o")))
         except (KeyError, TypeError, ValueError) as exc:
             raise InputError(f"malformed viewpoint {d!r}: {exc}") from exc
+
+
+def view_rotation(viewpoint: Viewpoint) -> Rotation:
+    """The orientation of ``viewpoint`` as a rotation taking eye space to world space.
+
+    The rows of the view matrix are ``x, y, z``; as columns they map eye-space axes to
+    world-space ones.
+    """
+    from scipy.spatial.transform import Rotation
+
+    return Rotation.from_matrix(np.stack([viewpoint.x, viewpoint.y, viewpoint.z], axis=1))
+
+
+def rotated_viewpoint(rotation: Rotation, eye) -> Viewpoint:
+    """The viewpoint at ``eye (3,)`` metres oriented by ``rotation`` (eye space to world
+    space): the inverse of :func:`view_rotation`."""
+    m = rotation.as_matrix()
+    return Viewpoint(m[:, 0], m[:, 1], m[:, 2], np.asarray(eye, dtype=np.float64))
 
 
 def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> Viewpoint:
@@ -183,6 +205,20 @@ def fit_near_far(
     if near >= far:
         near = far / max_ratio
     return near, far
+
+
+def fitted_projection(viewpoint: Viewpoint, fov_y_deg: float, aspect: float, bounds_min,
+                      bounds_max, ground_z: float) -> Projection:
+    """Perspective projection of ``viewpoint`` with near and far fitted to the scene box
+    ``bounds_min, bounds_max (3,)`` (metres) and to the eye's clearance above the ground
+    height ``ground_z`` (metres) below it (:func:`fit_near_far`); ``aspect`` is w/h.
+
+    Pure camera math: the terrain renderer draws through this projection, and the GL-free
+    keyframe policy (:mod:`lodsprite.sprite.policy`) reasons with the same one.
+    """
+    clearance = float(viewpoint.o[2] - ground_z)
+    near, far = fit_near_far(viewpoint, bounds_min, bounds_max, clearance=clearance)
+    return Projection(fov_y_deg, aspect, near, far)
 
 
 def frustum_planes(view_proj: np.ndarray) -> np.ndarray:

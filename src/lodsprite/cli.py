@@ -50,6 +50,10 @@ GuardOpt = Annotated[int, typer.Option(
 PaceOpt = Annotated[str, typer.Option(
     "--pace", help="distributed: needed (the server renders a keyframe when the shown one "
                    "nears ε) | continuous (back to back, the paper)")]
+MaxErrorOpt = Annotated[str | None, typer.Option(
+    "--max-error", help="distributed: PX: the client renders its own keyframe when the shown "
+                        "one's error reaches PX pixels and no better one has arrived | off: "
+                        "never (the paper's client); default 4")]
 
 
 @contextmanager
@@ -110,17 +114,31 @@ def render(
     border: BorderOpt = True,
     guard: GuardOpt = 32,
     pace: PaceOpt = "needed",
+    max_error: MaxErrorOpt = None,
 ) -> None:
     """Render a camera path; write DIR/frames.csv and DIR/summary.json (and PNG frames)."""
-    from lodsprite.run import RenderConfig, parse_size, render_path
+    from lodsprite.errors import InputError
+    from lodsprite.run import MODES, RenderConfig, parse_size, render_path
 
-    config = RenderConfig(terrain=terrain, texture=texture, path=path, mode=mode, lod=lod,
+    if mode not in (*MODES, "distributed"):
+        raise InputError(f"unknown mode '{mode}': use one of {', '.join(MODES)}, distributed")
+    distributed = mode == "distributed"  # not a core mode: the distributed layer runs it
+    if distributed and ground_truth:
+        raise InputError("--ground-truth needs --mode sprite")
+    config = RenderConfig(terrain=terrain, texture=texture, path=path,
+                          mode="sprite" if distributed else mode, lod=lod,
                           size=parse_size(size), frames=frames, grid=grid,
                           exaggeration=exaggeration, save_frames=save_frames, epsilon=epsilon,
                           ground_truth=ground_truth, visibility=visibility, border=border,
-                          guard_px=guard, pace=pace)
+                          guard_px=guard)
     with progress_bar(f"render {mode}") as update:
-        s = render_path(config, out_dir, update)
+        if distributed:
+            from lodsprite.distributed.run import parse_max_error, render_distributed
+
+            s = render_distributed(config, out_dir, update, pace=pace,
+                                   max_error=parse_max_error(max_error))
+        else:
+            s = render_path(config, out_dir, update)
     t = Table(title=f"{s['frames']} frames, {s['mode']}, {s['terrain']} ({s['grid']}² grid)")
     for col in ("median ms", "mean ms", "p95 ms", "total s", "triangles"):
         t.add_column(col, justify="right")
@@ -178,13 +196,20 @@ def _print_reproduction(r: dict, report: Path) -> None:
 
 
 def _run_swan2002(out_dir: Path, terrain: str, quick: bool, size: int, lod: int,
-                  adopt: str, pace: str) -> None:
+                  adopt: str, pace: str, epsilon: float, max_error: float | None) -> None:
     from lodsprite.distributed.reproduce import SwanConfig, reproduce_swan2002
-    from lodsprite.report.swan2002 import setups_in, write_plots, write_report
+    from lodsprite.distributed.run import check_client_options, parse_max_error
+    from lodsprite.errors import InputError
+    from lodsprite.report.swan2002 import policy_lines, setups_in, write_plots, write_report
 
     if out_dir == Path("out/chen1999"):
         out_dir = Path("out/swan2002")
-    kw = {"terrain": terrain, "lod": lod, "adopt": adopt, "pace": pace}
+    if not epsilon > 0:
+        raise InputError(f"--epsilon must be > 0 pixels, got {epsilon}")
+    max_error = parse_max_error(None) if max_error is None else max_error
+    check_client_options(pace, adopt, max_error)
+    kw = {"terrain": terrain, "lod": lod, "adopt": adopt, "pace": pace, "epsilon": epsilon,
+          "max_error": max_error}
     cfg = SwanConfig.quick(**kw) if quick else SwanConfig(size=size, **kw)
     with progress_bar("reproduce swan2002 (set-ups)") as update:
         r = reproduce_swan2002(cfg, out_dir, update)
@@ -204,6 +229,8 @@ def _run_swan2002(out_dir: Path, terrain: str, quick: bool, size: int, lod: int,
     t.add_row("paper distributed", "61.9", "14.8", "", "34.3", "8940")
     t.add_row("paper non-distributed", "256", "225", "", "", "")
     out.print(t)
+    for line in policy_lines(r):
+        out.print(line, markup=False, highlight=False)
     out.print(f"report: {report}")
 
 
@@ -226,7 +253,8 @@ def _multi_progress():
 
 def _run_scoggins2000(out_dir: Path, terrain: str, quick: bool, size: int) -> None:
     from lodsprite.profiles.reproduce import ScogginsConfig, reproduce_scoggins2000
-    from lodsprite.report.scoggins2000 import PAPER_2000, write_outputs
+    from lodsprite.report.paper_numbers import PAPER_2000
+    from lodsprite.report.scoggins2000 import write_outputs
 
     if out_dir == Path("out/chen1999"):
         out_dir = Path("out/scoggins2000")
@@ -274,13 +302,17 @@ def profile(
     workers: Annotated[int | None, typer.Option(
         "--workers", help="local worker processes (default: one per core)")] = None,
     scheduler: Annotated[str | None, typer.Option(
-        "--scheduler", help="Dask scheduler address (tcp://HOST:PORT): run views there")] = None,
+        "--scheduler", help="Dask scheduler address (tcp://HOST:PORT): run views there "
+                             "(needs the cluster extra: pip install 'lodsprite[cluster]')")
+    ] = None,
 ) -> None:
     """Compute a model's LOD error profile (Scoggins et al. 2000) and write its table."""
     from lodsprite.errors import InputError
-    from lodsprite.profiles.generate import ProfileSettings, generate_profile
+    from lodsprite.profiles.generate import ProfileSettings, generate_profile, require_dask
     from lodsprite.profiles.models import get_model
 
+    if scheduler is not None:
+        require_dask()  # one line naming the extra, before any model is built
     settings = ProfileSettings(image_size=image, phi_step_deg=phi_step,
                                theta_step_deg=theta_step)
     chain = get_model(model, faces=_numbers(faces, int, "--faces"),
@@ -334,13 +366,16 @@ def reproduce(
                         "newest | better | needed")
     ] = "newest",
     pace: PaceOpt = "needed",
+    max_error: Annotated[float | None, typer.Option(
+        "--max-error", help="swan2002: the bounded client's --max-error in pixels, run beside "
+                            "the paper's client (default: the client's default, 4)")] = None,
 ) -> None:
     """Run a paper's experiment; write DIR/results.json, PNG plots and DIR/report.md."""
     from lodsprite.errors import InputError
     from lodsprite.sprite.reproduce import ReproduceConfig
 
     if experiment == "swan2002":
-        _run_swan2002(out_dir, terrain, quick, size, lod, adopt, pace)
+        _run_swan2002(out_dir, terrain, quick, size, lod, adopt, pace, epsilon, max_error)
         return
     if experiment == "scoggins2000":
         _run_scoggins2000(out_dir, terrain, quick, size)
@@ -377,31 +412,25 @@ def serve(
     keys: Annotated[Path | None, typer.Option(
         "--keys", help="folder from `lodsprite keys`: encrypt with CURVE and accept only "
                        "clients whose public key is there")] = None,
+    data: Annotated[Path | None, typer.Option(
+        "--data", help="folder whose terrain and texture files clients may name (relative "
+                       "to it); without it only built-ins (jacksboro, fractal:SIZE:SEED, "
+                       "terrain, checker) are served")] = None,
 ) -> None:
     """The LOD server: renders keyframes for LOD clients; driven entirely by messages."""
     import logging
 
-    from lodsprite.distributed.predictors import PREDICTORS
-    from lodsprite.distributed.protocol import CODECS
-    from lodsprite.distributed.server import LodServer
-    from lodsprite.errors import InputError
-
-    host = bind.rpartition(":")[0]
-    if host not in ("127.0.0.1", "localhost", "::1", "[::1]") and not allow_remote:
-        raise InputError(f"binding {bind} exposes the server beyond this machine: "
-                         "add --allow-remote")
-    if predictor not in PREDICTORS:
-        raise InputError(f"unknown predictor '{predictor}': use {', '.join(PREDICTORS)}")
-    if codec not in CODECS:
-        raise InputError(f"unknown codec '{codec}': use {', '.join(CODECS)}")
     from lodsprite.distributed.keys import ServerKeys
+    from lodsprite.distributed.server import LodServer
 
     server_keys = ServerKeys.load(keys) if keys is not None else None
+    server = LodServer(bind, predictor, codec, server_keys, data_dir=data,
+                       allow_remote=allow_remote)
     logging.basicConfig(level=logging.INFO, format="lodsprite serve: %(message)s")
     if server_keys is None and allow_remote:
         logging.warning("serving beyond loopback without --keys: anyone who can reach "
                         "the port can drive this server")
-    LodServer(bind, predictor, codec, server_keys).run()
+    server.run()
 
 
 @app.command(name="keys")
@@ -437,6 +466,7 @@ def client(
         "--adopt", help="newest: take every newer keyframe (the paper); better: once its "
                         "error metric here is lower than the shown one's; needed: when the "
                         "shown one's reaches ε/2")] = "newest",
+    max_error: MaxErrorOpt = None,
     keys: Annotated[Path | None, typer.Option(
         "--keys", help="folder holding client.key_secret and server.key (CURVE)")] = None,
 ) -> None:
@@ -444,20 +474,23 @@ def client(
     import logging
 
     from lodsprite.distributed.keys import ClientKeys
-    from lodsprite.distributed.run import run_client
+    from lodsprite.distributed.run import check_client_options, parse_max_error, run_client
     from lodsprite.run import RenderConfig, parse_size
 
     logging.basicConfig(level=logging.WARNING, format="lodsprite client: %(message)s")
-    config = RenderConfig(terrain=terrain, texture=texture, path=path, mode="distributed",
+    bound = check_client_options(pace, adopt, parse_max_error(max_error))
+    config = RenderConfig(terrain=terrain, texture=texture, path=path, mode="sprite",
                           lod=lod, size=parse_size(size), frames=frames, grid=grid,
                           exaggeration=exaggeration, visibility=visibility, epsilon=epsilon,
-                          border=border, pace=pace)
+                          border=border)
     with progress_bar("client") as update:
         s = run_client(config, list(server or ["127.0.0.1:5555"]), out_dir, update,
-                       adopt=adopt, keys=ClientKeys.load(keys) if keys is not None else None)
+                       adopt=adopt, keys=ClientKeys.load(keys) if keys is not None else None,
+                       pace=pace, max_error=bound)
     out.print(f"{s['frames']} frames: median {s['median_ms']:.2f} ms, mean {s['mean_ms']:.2f}, "
               f"σ {s['std_ms']:.2f}, p99 {s['p99_ms']:.2f}; {s['keyframes_received']} keyframes "
-              f"received; δt {s['delta_t_ms_mean']:.0f} ms")
+              f"received, {s['local_keyframes']} own keyframes, {s['rejected_keyframes']} "
+              f"rejected; δt {s['delta_t_ms_mean']:.0f} ms")
     out.print(f"wrote {out_dir / 'frames.csv'}, {out_dir / 'summary.json'}")
 
 

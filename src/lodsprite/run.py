@@ -1,5 +1,9 @@
 """Rendering a camera path with timings: the engine behind ``lodsprite render``.
 
+Modes ``full``, ``lod`` and ``sprite`` run in this process.  The distributed mode is not
+core: the command line hands it to :func:`lodsprite.distributed.run.render_distributed`
+(this module never imports :mod:`lodsprite.distributed`).
+
 Per-frame time covers issuing the frame's GL work and waiting for it to finish
 (``ctx.finish()``) — the view-frustum culling, uniform and instance uploads
 included.  Reading pixels back (for saving frames) happens after the clock
@@ -10,13 +14,11 @@ so that shader compilation and first-use driver work are not charged to frame 0.
 from __future__ import annotations
 
 import platform
-from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 
-from lodsprite.distributed.pacing import DEFAULT_PACE, PACES
 from lodsprite.errors import InputError
 from lodsprite.gl.paths import PathRenderer
 from lodsprite.gl.sprite import (
@@ -26,20 +28,19 @@ from lodsprite.gl.sprite import (
     SpriteRenderer,
 )
 from lodsprite.paths import CameraPath, get_path
+from lodsprite.progress import Progress
 from lodsprite.report.io import write_csv, write_json, write_png
 from lodsprite.scene import Scene, load_scene
 from lodsprite.sprite.engine import DEFAULT_EPSILON_PX, FRAME_TYPES, LodSpriteEngine
 from lodsprite.terrain import DEFAULT_EXAGGERATION
 from lodsprite.terrain.lod import DEFAULT_COARSE, level_step
 
-MODES = ("full", "lod", "sprite", "distributed")
+MODES = ("full", "lod", "sprite")
 FRAME_COLUMNS = ["frame", "mode", "ms", "triangles"]
 SPRITE_COLUMNS = ["type", "error_px"]
 QUALITY_COLUMNS = ["rmse_sprite", "psnr_sprite", "ssim_sprite", "rmse_lod", "psnr_lod", "ssim_lod",
                    "rmse_lod_border"]
 MAX_GUARD_PX = 1024
-
-Progress = Callable[[int, int], None]
 
 
 @dataclass(frozen=True)
@@ -63,7 +64,6 @@ class RenderConfig:
     visibility: str = DEFAULT_VISIBILITY
     border: bool = True
     guard_px: int = DEFAULT_GUARD_PX
-    pace: str = DEFAULT_PACE  # distributed mode: when the server renders keyframes (see pacing)
 
     def validate(self) -> None:
         if self.mode not in MODES:
@@ -81,8 +81,6 @@ class RenderConfig:
         if not (isinstance(self.guard_px, int) and 0 <= self.guard_px <= MAX_GUARD_PX):
             raise InputError(f"--guard must be a whole number of pixels in 0..{MAX_GUARD_PX}, "
                              f"got {self.guard_px}")
-        if self.pace not in PACES:
-            raise InputError(f"--pace must be {' or '.join(PACES)}, got '{self.pace}'")
         if self.quality_stride < 1:
             raise InputError(f"quality stride must be >= 1, got {self.quality_stride}")
         if self.ground_truth and self.mode != "sprite":
@@ -174,9 +172,13 @@ def sprite_summary(rows: list[dict]) -> dict:
 
 
 def sprite_frames(pr: PathRenderer, path: CameraPath, config: RenderConfig,
-                  progress: Progress | None = None, on_frame=None) -> list[dict]:
-    """Run LOD-sprite along ``path``; rows with type, error_px, ms, triangles (and quality
-    against an untimed full-resolution ground truth when ``config.ground_truth``)."""
+                  progress: Progress | None = None, on_frame=None,
+                  keyframes: list | None = None) -> list[dict]:
+    """Run LOD-sprite along ``path``; rows with type, error_px, ms, triangles, keyframe (the
+    index of the keyframe shown) and quality against an untimed full-resolution ground
+    truth when ``config.ground_truth``.  ``keyframes``, if given, is extended with the
+    engine's keyframes, ``(viewpoint, frame projection)`` in order (what ``keyframe``
+    indexes)."""
     sprite = SpriteRenderer(pr.renderer, config.lod, config.visibility, border=config.border,
                             guard_px=config.guard_px)
     try:
@@ -189,7 +191,7 @@ def sprite_frames(pr: PathRenderer, path: CameraPath, config: RenderConfig,
         for i, vp in enumerate(path.viewpoints):
             f = engine.frame(vp)
             row = {"frame": i, "mode": "sprite", "ms": f.ms, "triangles": f.triangles,
-                   "type": f.type, "error_px": f.error_px}
+                   "type": f.type, "error_px": f.error_px, "keyframe": f.keyframe}
             if config.ground_truth or on_frame:
                 image = engine.read_image()
                 if on_frame:
@@ -199,6 +201,8 @@ def sprite_frames(pr: PathRenderer, path: CameraPath, config: RenderConfig,
             rows.append(row)
             if progress:
                 progress(i + 1, len(path))
+        if keyframes is not None:
+            keyframes.extend(engine.keyframes)
         return rows
     finally:
         sprite.release()
@@ -207,12 +211,6 @@ def sprite_frames(pr: PathRenderer, path: CameraPath, config: RenderConfig,
 def render_path(config: RenderConfig, out_dir: Path, progress: Progress | None = None) -> dict:
     """Render ``config``'s path; write ``frames.csv``, ``summary.json`` and optionally PNG
     frames to ``out_dir``; return the summary."""
-    if config.mode == "distributed":
-        from lodsprite.distributed.run import local_server, run_client
-
-        prepare(config)  # report input errors before starting a server
-        with local_server() as address:
-            return run_client(config, [address], Path(out_dir), progress)
     scene, path = prepare(config)
     out_dir = Path(out_dir)
 

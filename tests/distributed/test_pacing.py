@@ -44,6 +44,16 @@ def test_needed_pace_waits_until_the_error_reaches_its_share_of_epsilon(hf):
     assert any(due) and not all(due)
     assert due == [e >= PACE_FRACTION for e in errors]
 
+def test_a_view_where_nothing_can_be_measured_makes_a_keyframe_due(hf):
+    """The pacer decides with the keyframe policy's rule: an error that cannot be measured
+    (no terrain in view: the metric says ``inf``) is not small, so a keyframe is due, from
+    this server and from any other (the shown keyframe does not serve either)."""
+    pacer = KeyframePacer(hf, 8, 1.0, HEIGHT, "needed")
+    pacer.rendered(eye_at(0.0))
+    sky = look_at(eye_at(0.0).o, (0.0, -3000.0, 3000.0))  # turned up, away from the terrain
+    assert not pacer.due(eye_at(0.0), PROJ)
+    assert pacer.due(sky, PROJ)
+    assert pacer.due(sky, PROJ, np.asarray(eye_at(100.0).o), turn=False)
 
 
 def test_a_shown_keyframe_from_another_server_counts_as_covering(hf):

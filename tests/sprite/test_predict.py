@@ -3,7 +3,7 @@
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from lodsprite.camera import Viewpoint, look_at
+from lodsprite.camera import Viewpoint, look_at, rotated_viewpoint, view_rotation
 from lodsprite.sprite.predict import extrapolate
 
 
@@ -39,3 +39,14 @@ def test_zero_steps_returns_the_current_viewpoint():
     c = extrapolate(a, b, 0.0)
     for k in "xyzo":
         np.testing.assert_allclose(getattr(c, k), getattr(b, k), atol=1e-12)
+
+
+def test_the_one_rotation_helper_maps_eye_space_to_world_space_and_back():
+    vp = look_at((300.0, -1000.0, 500.0), (0.0, 50.0, 0.0))
+    r = view_rotation(vp)
+    # The camera looks along eye-space -z: in world space, towards the target.
+    np.testing.assert_allclose(r.apply([0.0, 0.0, -1.0]), vp.forward, atol=1e-12)
+    np.testing.assert_allclose(r.apply([1.0, 0.0, 0.0]), vp.x, atol=1e-12)
+    back = rotated_viewpoint(r, vp.o)
+    for k in "xyzo":
+        np.testing.assert_allclose(getattr(back, k), getattr(vp, k), atol=1e-12)

@@ -12,7 +12,9 @@ Kaufman (1999, Eq. 2: ``sqrt(mean θ²) / β`` in pixels, :mod:`lodsprite.sprite
 to the keyframe it rendered last, at the viewpoint predicted for when a new keyframe
 would arrive (δt ahead).  It renders a new one only when that error reaches
 ``PACE_FRACTION`` ε: the 1999 algorithm's own keyframe rule, applied where the keyframe
-will be shown.  Pace ``continuous`` is the paper's behaviour.
+will be shown.  The rule and the error are the keyframe policy's
+(:func:`lodsprite.sprite.policy.keyframe_needed`), the same that the in-process engine and
+the client's own keyframes follow.  Pace ``continuous`` is the paper's behaviour.
 
 The keyframe the client shows need not be this server's: with several servers it is
 the newest from any of them.  The client names the keyframe it shows (its eye and the
@@ -29,7 +31,7 @@ import numpy as np
 
 from lodsprite.camera import Projection, Viewpoint
 from lodsprite.sprite.metric import ErrorMetric
-from lodsprite.sprite.policy import keyframe_error_px
+from lodsprite.sprite.policy import keyframe_needed
 from lodsprite.terrain.heightfield import HeightField
 
 PACES = ("needed", "continuous")
@@ -65,11 +67,8 @@ class KeyframePacer:
         if self.metric is None or self._c_prime is None:
             return True
         limit = self.limit_px if turn else self.epsilon_px
-        for c_prime in (self._c_prime, self._shown_c_prime(shown_eye)):
-            if c_prime is not None and keyframe_error_px(
-                    self.metric, c_prime, viewpoint, projection, self.height_px) < limit:
-                return False
-        return True
+        return keyframe_needed(self.metric, (self._c_prime, self._shown_c_prime(shown_eye)),
+                               viewpoint, projection, self.height_px, limit)
 
     def _shown_c_prime(self, eye: np.ndarray | None) -> np.ndarray | None:
         """``C'`` of the client's shown keyframe, computed once per keyframe eye."""

@@ -12,7 +12,13 @@ from dataclasses import dataclass
 import moderngl
 import numpy as np
 
-from lodsprite.camera import Projection, Viewpoint, boxes_in_frustum, fit_near_far, frustum_planes
+from lodsprite.camera import (
+    Projection,
+    Viewpoint,
+    boxes_in_frustum,
+    fitted_projection,
+    frustum_planes,
+)
 from lodsprite.errors import InputError
 from lodsprite.gl.context import GLContext
 from lodsprite.gl.shaders import TERRAIN_FS, TERRAIN_VS, proxy_twin
@@ -181,10 +187,8 @@ class TerrainRenderer:
     def projection(self, viewpoint: Viewpoint) -> Projection:
         """Projection with near/far fitted to the terrain's box and the eye's ground clearance."""
         hf = self.geometry.hf
-        lo, hi = hf.bounds()
-        clearance = float(viewpoint.o[2] - hf.height_at(viewpoint.o[0], viewpoint.o[1]))
-        near, far = fit_near_far(viewpoint, lo, hi, clearance=clearance)
-        return Projection(self.fov_y_deg, self.target.width / self.target.height, near, far)
+        return fitted_projection(viewpoint, self.fov_y_deg, self.target.width / self.target.height,
+                                 *hf.bounds(), float(hf.height_at(viewpoint.o[0], viewpoint.o[1])))
 
     def draw(self, program: moderngl.Program, cache: dict[int, moderngl.VertexArray],
              viewpoint: Viewpoint, projection: Projection, level_quads: int) -> FrameStats:

@@ -16,7 +16,8 @@ shows views at theta = 0 that differ with phi, which a view from the pole could 
 
 Views are independent, so they run in parallel: local worker processes by default
 (each with its own headless GL context), or the workers of a Dask distributed cluster
-when a scheduler address is given.
+when a scheduler address is given.  Dask is optional (the ``cluster`` extra:
+``pip install 'lodsprite[cluster]'``); only a scheduler address needs it.
 """
 
 from __future__ import annotations
@@ -25,10 +26,11 @@ import math
 import os
 import threading
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass, field
 from multiprocessing import get_context
+from types import ModuleType
 
 import numpy as np
 
@@ -36,14 +38,25 @@ from lodsprite.camera import Viewpoint, perspective
 from lodsprite.errors import InputError
 from lodsprite.profiles.spectra import CSF_NAME, F_MIN, distances, lod_errors, power_spectra
 from lodsprite.profiles.table import ProfileTable
+from lodsprite.progress import Progress
 
 # Paper §4.3: z1 = z0 + 50 km with z0 = 135 km, i.e. each distance 1.37 times the last.
 DEFAULT_Z_RATIO = 185.0 / 135.0
 DEFAULT_LIGHT = (0.35, 0.25, 0.9)  # towards the light, object space (sun high in the south-east)
 
 DASK_CONNECT_TIMEOUT_S = 10.0
+CLUSTER_EXTRA = "lodsprite[cluster]"
 
-Progress = Callable[[int, int], None]
+
+def require_dask() -> ModuleType:
+    """The ``dask.distributed`` module, or :class:`InputError` naming the extra that
+    installs it (``--scheduler`` is the only use of Dask; a lean install has none)."""
+    try:
+        import dask.distributed as dask_distributed
+    except ImportError:
+        raise InputError(f"--scheduler needs Dask distributed: pip install '{CLUSTER_EXTRA}'"
+                         ) from None
+    return dask_distributed
 
 
 @dataclass(frozen=True)
@@ -202,20 +215,16 @@ def _run_views(key: str, levels: list, setup: ViewSetup, views: list[tuple[float
             progress(n, len(views))
 
     if scheduler:
+        dask_distributed = require_dask()
         try:
-            from dask.distributed import Client
-            from dask.distributed import as_completed as dask_completed
-        except ImportError as exc:  # pragma: no cover - dask is a dependency
-            raise InputError("profile generation on a cluster needs dask.distributed") from exc
-        try:
-            client = Client(scheduler, timeout=f"{DASK_CONNECT_TIMEOUT_S}s")
+            client = dask_distributed.Client(scheduler, timeout=f"{DASK_CONNECT_TIMEOUT_S}s")
         except (OSError, TimeoutError, ValueError) as exc:
             raise InputError(f"cannot reach the Dask scheduler at {scheduler}: {exc}") from None
         with client:
             payload = client.scatter((key, levels, setup), broadcast=True)
             futures = client.map(_dask_view, [payload] * len(views), views, pure=False)
             index = {f.key: i for i, f in enumerate(futures)}
-            for n, fut in enumerate(dask_completed(futures), 1):
+            for n, fut in enumerate(dask_distributed.as_completed(futures), 1):
                 results[index[fut.key]] = fut.result()
                 done(n)
         return results
@@ -259,6 +268,8 @@ def generate_profile(chain, settings: ProfileSettings | None = None, workers: in
     from lodsprite import __version__
     from lodsprite.profiles.chain import geometric_errors
 
+    if scheduler:
+        require_dask()  # before any work
     settings = settings or ProfileSettings()
     centre, radius = chain.full.bounding_sphere()
     setup = ViewSetup.for_sphere(centre, radius, settings)

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
 from dataclasses import asdict, dataclass, replace
 
 import numpy as np
@@ -37,10 +36,10 @@ from lodsprite.profiles.scenes import (
 )
 from lodsprite.profiles.select import effective_distance, select_profile, select_screen_space
 from lodsprite.profiles.table import ProfileTable
+from lodsprite.progress import StageProgress
+from lodsprite.report.paper_numbers import PAPER_2000
 
-Progress = Callable[[str, int, int], None]
-
-PAPER_THRESHOLD = {"nocsf": 1e-6, "csf": 1e-5}
+PAPER_THRESHOLD = {"nocsf": PAPER_2000["threshold_nocsf"], "csf": PAPER_2000["threshold_csf"]}
 
 
 @dataclass(frozen=True)
@@ -125,7 +124,7 @@ def _compare(renderer: ChainRenderer, table: ProfileTable, shots: list[Shot],
     return out
 
 
-def _profile(chain, cfg: ScogginsConfig, name: str, progress: Progress | None) -> ProfileTable:
+def _profile(chain, cfg: ScogginsConfig, name: str, progress: StageProgress | None) -> ProfileTable:
     def step(done: int, total: int) -> None:
         if progress is not None:
             progress(f"profile {name}", done, total)
@@ -134,7 +133,7 @@ def _profile(chain, cfg: ScogginsConfig, name: str, progress: Progress | None) -
                             progress=step)
 
 
-def reproduce_scoggins2000(cfg: ScogginsConfig, progress: Progress | None = None) -> dict:
+def reproduce_scoggins2000(cfg: ScogginsConfig, progress: StageProgress | None = None) -> dict:
     """Run the experiment; returns ``results`` (JSON-ready) with an ``_images`` entry of
     ``(H, W, 3) uint8`` figures and ``_tables`` with the two profile tables."""
     res: dict = {"config": asdict(cfg), "paper_thresholds": PAPER_THRESHOLD}
@@ -183,7 +182,7 @@ def _table_summary(table: ProfileTable) -> dict:
 
 
 def _spiral(ctx: GLContext, cfg: ScogginsConfig, chain, table: ProfileTable,
-            images: dict, progress: Progress | None) -> dict:
+            images: dict, progress: StageProgress | None) -> dict:
     centres, radii = sphereflake(cfg.flake_depth)
     z0 = float(table.meta["z0"])
     shot, dist = spiral(centres, radii, cfg.flakes, 3.0 * z0, cfg.profile.z_ratio, cfg.size)
@@ -223,7 +222,7 @@ def _spiral(ctx: GLContext, cfg: ScogginsConfig, chain, table: ProfileTable,
 
 
 def _sweep(ctx: GLContext, cfg: ScogginsConfig, chain, table: ProfileTable, images: dict,
-           progress: Progress | None) -> dict:
+           progress: StageProgress | None) -> dict:
     centre, radius = table.centre, float(table.meta["radius"])
     phi, theta = cfg.sweep_view
     # From filling the 30 degree view out to the table's last distance.

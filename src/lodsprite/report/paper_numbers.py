@@ -1,4 +1,9 @@
-"""The papers' published numbers, kept once, for side-by-side reports."""
+"""The papers' published numbers, kept once, for side-by-side reports.
+
+Chen, Swan & Kaufman 1999 (:data:`PAPER`), Scoggins, Machiraju & Moorhead 2000
+(:data:`PAPER_2000`) and Swan, Arango & Nakshatrala 2002 (:data:`PAPER_2002`).  Reports,
+the command line and the reproductions read them from here; nothing else types them.
+"""
 
 from __future__ import annotations
 
@@ -24,3 +29,23 @@ PAPER_KEYFRAME_FRACTION = PAPER["keyframes"] / PAPER["frames"]
 #: Target for (mean RMSE of LOD-sprite) / (mean RMSE of plain LOD): our reading of the
 #: paper's qualitative claim (Figs 13-14) that LOD-sprite is "much closer" to full res.
 RMSE_RATIO_TARGET = 0.5
+
+#: Scoggins, Machiraju & Moorhead (2000, §4.2-4.3; dual 600 MHz Pentium III): profile times
+#: in minutes, triangle and face counts, and the sphereflake thresholds of Eq. 7 (no CSF)
+#: and Eq. 16 (CSF).
+PAPER_2000: dict[str, float] = {
+    "profile_min_sphere": 17, "profile_min_mountain": 100,
+    "snowflake_triangles_full": 9_451_008, "sphere_faces_full": 394_212,
+    "mountain_faces_full": 8538, "threshold_nocsf": 1e-6, "threshold_csf": 1e-5,
+}
+
+#: Swan, Arango & Nakshatrala (2002, §4; 600 frames, 512² height field, two SGI Onyx over
+#: 10BASE-T): per set-up, times in ms.
+PAPER_2002: dict[str, dict[str, float]] = {
+    "separate": {"client_ms_mean": 61.9, "client_ms_std": 14.8, "sprites_per_keyframe": 34.3,
+                 "delta_t_ms_mean": 8940, "production_ms_mean": 2140,
+                 "transmission_ms_mean": 2320, "render_ms_mean": 517,
+                 "queue_insert_ms_mean": 1590, "viewpoint_wait_ms_mean": 0.06,
+                 "queue_retrieve_ms_mean": 25},
+    "same_cores": {"client_ms_mean": 256, "client_ms_std": 225},
+}

@@ -13,14 +13,8 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from lodsprite.report.io import atomic_write_bytes, save_figure, write_json, write_png
+from lodsprite.report.paper_numbers import PAPER_2000
 from lodsprite.report.values import fmt_fixed
-
-#: The paper's numbers (§4.2-4.3; dual 600 MHz Pentium III).
-PAPER_2000 = {"profile_min_sphere": 17, "profile_min_mountain": 100,
-              "snowflake_triangles_full": 9_451_008, "sphere_faces_full": 394_212,
-              "mountain_faces_full": 8538, "threshold_nocsf": 1e-6, "threshold_csf": 1e-5}
-
-
 
 
 def _fig5(r: dict, path: Path) -> Path:

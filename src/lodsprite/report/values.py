@@ -13,7 +13,6 @@ import numpy as np
 DASH = "—"
 
 
-
 def num(v: Any) -> float | None:
     """``v`` as a finite float; None for None, NaN, ±inf, "inf"/"nan" strings, non-numbers."""
     if v is None or isinstance(v, bool):

@@ -1,24 +1,233 @@
-"""The LOD-sprite keyframe policy, free of GL (Chen, Swan & Kaufman 1999, §3.1-3.2, Eq. 2).
+"""The LOD-sprite keyframe policy, free of GL (Chen, Swan & Kaufman 1999, §3.1-3.2, Eq. 2,
+and the look-ahead their §5 proposes).
 
 Which image a viewer may show is decided from geometry alone: the error metric of
-:mod:`lodsprite.sprite.metric` measures a keyframe's ``C'`` at a viewpoint, in pixels.
-The in-process engine, the distributed server's pacer and the distributed client all
-decide through this module.
+:mod:`lodsprite.sprite.metric` measures a keyframe's ``C'`` at a viewpoint, in pixels
+(:func:`keyframe_error_px`), and a keyframe is due when that error reaches the threshold
+(:func:`keyframe_due`: Eq. 2's ``mean θ² >= (β ε)²`` is ``error_px >= ε``).  Everything
+here is numpy and camera math; the GL drivers render what it decides:
+
+* the in-process engine (:class:`lodsprite.sprite.engine.LodSpriteEngine`) follows a
+  :class:`KeyframePolicy` frame by frame (§3.1 steps 1-4, with look-ahead);
+* the distributed client's own fallback keyframes are that engine's;
+* the distributed server's pacer decides with :func:`keyframe_needed`, the same rule
+  applied to the keyframes the client may show.
+
+Look-ahead (``predict=True``): a due keyframe is placed at a viewpoint extrapolated ahead
+of the viewer (:func:`lodsprite.sprite.predict.extrapolate`), so that it serves the frames
+on both sides of it.  The first look-ahead tried is the previous keyframe interval; up to
+``LOOKAHEAD_TRIES`` candidates are tried, each shorter than the last.  A candidate is
+taken when (a) its eye is above the ground, (b) every coarse square in the current view
+is also in the candidate's view (guard band included; otherwise the current frame would
+fall back to the terrain texture along its borders), and (c) the current frame's error
+against it is under ``PREDICT_MARGIN`` ε.  The current frame is then a spriteframe from
+it.  When no candidate passes, the keyframe is placed at the current viewpoint, as in the
+paper.
+
+Errors are plain floats compared with thresholds: an infinite error (nothing measurable,
+:meth:`~lodsprite.sprite.metric.ErrorMetric.error_px`) makes a keyframe due, and so
+does NaN.
 """
 
 from __future__ import annotations
 
+import math
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+
 import numpy as np
 
-from lodsprite.camera import Projection, Viewpoint
+from lodsprite.camera import Projection, Viewpoint, fitted_projection, widened
+from lodsprite.errors import InputError
 from lodsprite.sprite.metric import ErrorMetric
+from lodsprite.sprite.predict import extrapolate
+from lodsprite.terrain.heightfield import HeightField
+
+KEYFRAME, FIRST_SPRITE, SPRITE = "keyframe", "first_sprite", "sprite"
+FRAME_TYPES = (KEYFRAME, FIRST_SPRITE, SPRITE)
+DEFAULT_EPSILON_PX = 1.0
+PREDICT_MARGIN = 0.9   # of ε: a look-ahead keyframe must serve the current frame under this
+LOOKAHEAD_AIM = 0.95   # aim a rescaled look-ahead at this fraction of the margin
+LOOKAHEAD_TRIES = 4
+
+#: A frame's projection at a viewpoint (near/far fitted to the scene).
+ProjectionFn = Callable[[Viewpoint], Projection]
+#: The projection a keyframe is rendered through, from the frame's (guard band added).
+KeyProjectionFn = Callable[[Projection], Projection]
 
 
 def keyframe_error_px(metric: ErrorMetric, c_prime: np.ndarray, viewpoint: Viewpoint,
                       projection: Projection, height_px: int) -> float:
     """Error (pixels, Eq. 2) of showing the keyframe whose reprojected centres are
     ``c_prime (n*n, 3)`` metres at ``viewpoint`` seen through ``projection`` on an
-    image ``height_px`` pixels high."""
+    image ``height_px`` pixels high.  May be ``inf`` (nothing measurable)."""
     view_proj = projection.matrix() @ viewpoint.view_matrix()
     beta = projection.pixel_angle_rad(height_px)
     return metric.error_px(c_prime, viewpoint.o, view_proj, beta)
+
+
+def keyframe_due(error_px: float, limit_px: float) -> bool:
+    """Whether a keyframe whose error at the current viewpoint is ``error_px`` must be
+    replaced under the threshold ``limit_px`` (pixels): ``error_px >= limit_px``, the 1999
+    rule.  ``inf`` and NaN are due: an error that cannot be measured is not small."""
+    return not error_px < limit_px
+
+
+def keyframe_needed(metric: ErrorMetric, c_primes: Iterable[np.ndarray | None],
+                    viewpoint: Viewpoint, projection: Projection, height_px: int,
+                    limit_px: float) -> bool:
+    """Whether a new keyframe is needed at ``viewpoint``: True unless one of the keyframes
+    whose ``C'`` are ``c_primes`` (None entries skipped) serves it under ``limit_px``."""
+    for c_prime in c_primes:
+        if c_prime is not None and not keyframe_due(
+                keyframe_error_px(metric, c_prime, viewpoint, projection, height_px),
+                limit_px):
+            return False
+    return True
+
+
+@dataclass(frozen=True)
+class KeyChoice:
+    """A keyframe to render: its viewpoint, the frame projection there (the renderer adds
+    the guard band) and whether it was placed ahead of the viewer."""
+
+    viewpoint: Viewpoint
+    projection: Projection
+    predicted: bool
+
+
+@dataclass(frozen=True)
+class Decision:
+    """What to draw at one viewpoint.
+
+    ``type``: one of :data:`FRAME_TYPES`; ``projection``: the frame's; ``key``: the keyframe
+    to render first (None: draw a spriteframe from the current keyframe).  A keyframe at the
+    current viewpoint is shown as it is; one placed ahead is followed by a spriteframe from
+    it.  ``error_px``: the error of the image shown (0 for a keyframe shown as it is);
+    ``decision_error_px``: the error of the previous keyframe here, which decided (0 for
+    the first frame, which has none).
+    """
+
+    type: str
+    projection: Projection
+    key: KeyChoice | None
+    error_px: float
+    decision_error_px: float
+
+    @property
+    def shows_keyframe(self) -> bool:
+        """Whether the frame is the new keyframe itself (no spriteframe drawn)."""
+        return self.key is not None and not self.key.predicted
+
+
+class KeyframePolicy:
+    """The LOD-sprite decision for a stream of viewpoints (GL-free, stateful).
+
+    ``metric``: the error metric of the coarse level; ``hf``: the terrain (ground height
+    for the look-ahead); ``epsilon_px``: the threshold ε in pixels; ``height_px``: the
+    image height (sets the pixel angle β); ``projection(viewpoint)``: the frame projection;
+    ``key_projection(projection)``: the projection a keyframe is rendered through (default:
+    the frame's); ``predict``: place due keyframes ahead of the viewer.
+    """
+
+    def __init__(self, metric: ErrorMetric, hf: HeightField, epsilon_px: float,
+                 height_px: int, projection: ProjectionFn,
+                 key_projection: KeyProjectionFn | None = None, predict: bool = True) -> None:
+        if not epsilon_px > 0:
+            raise InputError(f"error threshold epsilon must be > 0 pixels, got {epsilon_px}")
+        self.metric = metric
+        self.hf = hf
+        self.epsilon_px = float(epsilon_px)
+        self.height_px = int(height_px)
+        self.projection = projection
+        self.key_projection = key_projection or (lambda p: p)
+        self.predict = predict
+        self.c_prime: np.ndarray | None = None  # C' of the current keyframe, (n*n, 3) metres
+        self.predicted_keyframes = 0
+        self._since_key = 0
+        self._interval = 0          # frames between the last two keyframes
+        self._prev: Viewpoint | None = None
+
+    @classmethod
+    def for_terrain(cls, hf: HeightField, lod: int, epsilon_px: float,
+                    size: tuple[int, int], fov_y_deg: float = 45.0, guard_px: int = 0,
+                    predict: bool = True) -> KeyframePolicy:
+        """The policy for ``hf`` at coarse level ``lod`` on ``size = (w, h)`` pixel images,
+        with the projections the terrain renderer uses (near/far fitted to the terrain,
+        keyframes widened by ``guard_px`` pixels on every side)."""
+        w, h = size
+        lo, hi = hf.bounds()
+
+        def projection(vp: Viewpoint) -> Projection:
+            ground = float(hf.height_at(vp.o[0], vp.o[1]))
+            return fitted_projection(vp, fov_y_deg, w / h, lo, hi, ground)
+
+        return cls(ErrorMetric.for_level(hf, lod), hf, epsilon_px, h, projection,
+                   lambda p: widened(p, w, h, guard_px), predict)
+
+    def error_px(self, c_prime: np.ndarray, viewpoint: Viewpoint,
+                 projection: Projection) -> float:
+        """:func:`keyframe_error_px` with this policy's metric and image height."""
+        return keyframe_error_px(self.metric, c_prime, viewpoint, projection, self.height_px)
+
+    def lookahead(self, viewpoint: Viewpoint,
+                  projection: Projection) -> tuple[KeyChoice, np.ndarray, float] | None:
+        """A keyframe ahead of ``viewpoint`` that serves it within the margin, as
+        ``(choice, C', error of the current frame against it)``, or None.
+
+        The first look-ahead is the previous keyframe interval.  The error of the current
+        frame grows about linearly with the look-ahead, so a candidate whose error is too
+        large is followed by one scaled to land at ``LOOKAHEAD_AIM`` of the margin; a
+        candidate under the ground or not covering the view by half the look-ahead.
+        """
+        if not self.predict or self._prev is None or self._interval < 2:
+            return None
+        limit = PREDICT_MARGIN * self.epsilon_px
+        steps = float(self._interval)
+        for _ in range(LOOKAHEAD_TRIES):
+            if steps < 1:
+                return None
+            ahead = extrapolate(self._prev, viewpoint, steps)
+            if not self.above_ground(ahead):
+                steps *= 0.5
+                continue
+            key_proj = self.projection(ahead)
+            if not self.metric.covers(viewpoint, projection, ahead,
+                                      self.key_projection(key_proj)):
+                steps *= 0.5
+                continue
+            c_prime = self.metric.reproject(ahead.o)
+            err = self.error_px(c_prime, viewpoint, projection)
+            if not keyframe_due(err, limit):
+                return KeyChoice(ahead, key_proj, True), c_prime, err
+            # inf or NaN (nothing measurable from here): no shorter look-ahead can tell
+            steps = steps * min(LOOKAHEAD_AIM * limit / err, 0.75) if err < math.inf else 0.0
+        return None
+
+    def above_ground(self, viewpoint: Viewpoint) -> bool:
+        """Whether the eye of ``viewpoint`` is above the terrain surface below it."""
+        o = viewpoint.o
+        return bool(o[2] > float(self.hf.height_at(o[0], o[1])))
+
+    def decide(self, viewpoint: Viewpoint) -> Decision:
+        """The decision for the next frame, at ``viewpoint``; the policy then takes it as
+        done (a new keyframe's ``C'`` becomes the current one)."""
+        projection = self.projection(viewpoint)
+        decision = (0.0 if self.c_prime is None
+                    else self.error_px(self.c_prime, viewpoint, projection))
+        if self.c_prime is None or keyframe_due(decision, self.epsilon_px):
+            ahead = self.lookahead(viewpoint, projection)
+            if ahead is None:
+                key = KeyChoice(viewpoint, projection, False)
+                self.c_prime, shown = self.metric.reproject(viewpoint.o), 0.0
+            else:
+                key, self.c_prime, shown = ahead
+                self.predicted_keyframes += 1
+            kind = KEYFRAME
+            self._interval, self._since_key = self._since_key + 1, 0
+        else:
+            key, shown = None, decision
+            kind = FIRST_SPRITE if self._since_key == 0 else SPRITE
+            self._since_key += 1
+        self._prev = viewpoint
+        return Decision(kind, projection, key, shown, decision)

@@ -8,15 +8,9 @@ both sides of it, so the error metric stays under the threshold for longer.
 
 from __future__ import annotations
 
-import numpy as np
 from scipy.spatial.transform import Rotation
 
-from lodsprite.camera import Viewpoint
-
-
-def _rotation(vp: Viewpoint) -> Rotation:
-    # Rows of the view matrix are x, y, z: their transpose maps eye space to world space.
-    return Rotation.from_matrix(np.stack([vp.x, vp.y, vp.z], axis=1))
+from lodsprite.camera import Viewpoint, rotated_viewpoint, view_rotation
 
 
 def extrapolate(prev: Viewpoint, cur: Viewpoint, steps: float) -> Viewpoint:
@@ -25,9 +19,7 @@ def extrapolate(prev: Viewpoint, cur: Viewpoint, steps: float) -> Viewpoint:
     The eye moves on linearly; the orientation keeps turning at the same angular velocity
     (the rotation ``prev -> cur`` raised to the power ``steps``).
     """
-    r_prev, r_cur = _rotation(prev), _rotation(cur)
+    r_prev, r_cur = view_rotation(prev), view_rotation(cur)
     turn = r_cur * r_prev.inv()
     r_new = Rotation.from_rotvec(turn.as_rotvec() * steps) * r_cur
-    m = r_new.as_matrix()
-    eye = cur.o + steps * (cur.o - prev.o)
-    return Viewpoint(m[:, 0], m[:, 1], m[:, 2], eye)
+    return rotated_viewpoint(r_new, cur.o + steps * (cur.o - prev.o))

@@ -1,0 +1,196 @@
+"""Layering and the lean install (issue 12, items 9 and 10).
+
+* The core (everything but :mod:`lodsprite.distributed`) never imports the distributed
+  layer, nor Dask: each module is imported in a fresh interpreter's one pass.
+* The engine renders what the GL-free keyframe policy decides.
+* Dask is the ``cluster`` extra: ``--scheduler`` without it is one line naming the extra.
+"""
+
+from __future__ import annotations
+
+import json
+import pkgutil
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import lodsprite
+from conftest import make_field
+from lodsprite.errors import InputError
+
+ROOT = Path(__file__).resolve().parents[1]
+DISTRIBUTED = "lodsprite.distributed"
+FORBIDDEN = (DISTRIBUTED, "dask", "distributed")  # the distributed layer; the cluster extra
+
+
+def core_modules() -> list[str]:
+    """Every module of the package outside :mod:`lodsprite.distributed`, found on disk
+    (without importing anything)."""
+    found = []
+
+    def walk(path: list[str], prefix: str) -> None:
+        for info in pkgutil.iter_modules(path, prefix):
+            if info.name == DISTRIBUTED or info.name.endswith(".__main__"):
+                continue
+            found.append(info.name)
+            if info.ispkg:
+                walk([str(Path(path[0]) / info.name.rpartition(".")[2])], info.name + ".")
+
+    walk(list(lodsprite.__path__), "lodsprite.")
+    return sorted(found)
+
+
+CHECK = """
+import importlib, json, sys
+forbidden = tuple(sys.argv[2].split(","))
+bad = {}
+for name in sys.argv[1].split(","):
+    importlib.import_module(name)
+    loaded = sorted(m for m in sys.modules if m.split(".")[0] in forbidden
+                    or m.startswith(forbidden[0]))
+    if loaded:
+        bad[name] = loaded
+        break  # what came in stays in: later modules would be blamed for it
+print(json.dumps(bad))
+"""
+
+
+def test_the_core_never_imports_the_distributed_layer_nor_dask():
+    modules = core_modules()
+    for name in ("lodsprite.run", "lodsprite.sprite.engine", "lodsprite.sprite.policy",
+                 "lodsprite.gl.paths", "lodsprite.report.chen1999", "lodsprite.report.swan2002",
+                 "lodsprite.profiles.generate", "lodsprite.cli", "lodsprite.progress"):
+        assert name in modules
+    proc = subprocess.run([sys.executable, "-c", CHECK, ",".join(modules), ",".join(FORBIDDEN)],
+                          capture_output=True, text=True, timeout=240, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads(proc.stdout) == {}
+
+
+def test_the_policy_module_needs_no_gl():
+    code = ("import sys, lodsprite.sprite.policy; "
+            "print(sorted(m for m in sys.modules if m.startswith(('moderngl', 'lodsprite.gl'))))")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=120, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == "[]"
+
+
+def test_the_engine_renders_what_the_policy_decides(gl):
+    """The GL driver and a policy built from pure camera math alone agree frame by frame:
+    the same frame types, keyframes at the same viewpoints (ahead of the viewer too)."""
+    from lodsprite.camera import look_at
+    from lodsprite.gl.sprite import SpriteRenderer
+    from lodsprite.gl.terrain import TerrainGeometry, TerrainRenderer
+    from lodsprite.sprite.engine import LodSpriteEngine
+    from lodsprite.sprite.policy import KeyframePolicy
+    from lodsprite.terrain import make_texture
+
+    hf = make_field(64, kind="ridges", relief=150.0)
+    geometry = TerrainGeometry(gl, hf, make_texture("terrain", hf))
+    renderer = TerrainRenderer(gl, geometry, 64, 64)
+    sprite = SpriteRenderer(renderer, 8, guard_px=4)
+    try:
+        path = [look_at((2600 * np.sin(a), -2600 * np.cos(a), 1300.0), (0.0, 0.0, 0.0))
+                for a in np.linspace(0.0, np.pi / 2, 40)]
+        engine = LodSpriteEngine(sprite, 0.05)
+        frames = [engine.frame(vp) for vp in path]
+        policy = KeyframePolicy.for_terrain(hf, 8, 0.05, (64, 64), guard_px=4)
+        decisions = [policy.decide(vp) for vp in path]
+        assert [f.type for f in frames] == [d.type for d in decisions]
+        keys = [d.key.viewpoint.o for d in decisions if d.key is not None]
+        assert len(engine.keyframes) == len(keys) > 3
+        for (vp, _), o in zip(engine.keyframes, keys, strict=True):
+            np.testing.assert_allclose(vp.o, o)
+        assert engine.predicted_keyframes == policy.predicted_keyframes > 0
+        assert [f.error_px for f in frames] == pytest.approx([d.error_px for d in decisions])
+    finally:
+        sprite.release()
+        renderer.release()
+        geometry.release()
+
+
+# --- the cluster extra -----------------------------------------------------------------------
+
+def without_dask(monkeypatch) -> None:
+    """Make ``import dask.distributed`` fail as it does where the extra is not installed."""
+    for name in ("distributed", "dask.distributed"):
+        monkeypatch.setitem(sys.modules, name, None)
+
+
+def test_require_dask_names_the_extra_when_dask_is_missing(monkeypatch):
+    from lodsprite.profiles.generate import require_dask
+
+    without_dask(monkeypatch)
+    with pytest.raises(InputError, match=r"lodsprite\[cluster\]") as exc:
+        require_dask()
+    assert "\n" not in str(exc.value)
+
+
+def test_a_scheduler_without_dask_fails_before_any_work(monkeypatch):
+    from lodsprite.profiles.generate import generate_profile
+
+    without_dask(monkeypatch)
+    # No chain at all: the check comes first.
+    with pytest.raises(InputError, match=r"--scheduler.*lodsprite\[cluster\]"):
+        generate_profile(None, scheduler="tcp://127.0.0.1:9")
+
+
+def test_profile_scheduler_without_dask_is_one_line_and_exit_2(tmp_path):
+    code = ("import sys; sys.modules['distributed'] = sys.modules['dask.distributed'] = None; "
+            "from lodsprite.cli import main; main()")
+    out = tmp_path / "t.npz"
+    proc = subprocess.run([sys.executable, "-c", code, "profile", "sphere", "--scheduler",
+                           "tcp://127.0.0.1:9", "--out", str(out)],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2, proc.stderr
+    lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "lodsprite[cluster]" in lines[0], proc.stderr
+    assert not out.exists()
+
+
+def test_dask_is_an_extra_that_the_test_install_pulls_in():
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    assert not any(d.startswith(("dask", "distributed")) for d in project["dependencies"])
+    extras = project["optional-dependencies"]
+    assert any(d.startswith("dask[distributed]") for d in extras["cluster"])
+    assert "lodsprite[cluster]" in extras["test"]
+
+
+# --- the command line picks the distributed mode ---------------------------------------------
+
+def lodsprite_cli(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-c", "from lodsprite.cli import main; main()",
+                           *args], capture_output=True, text=True, timeout=120)
+
+
+@pytest.mark.parametrize(("args", "fragment"), [
+    (["--mode", "warp"], "distributed"),
+    (["--mode", "distributed", "--ground-truth"], "--ground-truth needs --mode sprite"),
+    (["--mode", "distributed", "--pace", "sometimes"], "--pace"),
+    (["--mode", "distributed", "--max-error", "wide"], "--max-error"),
+    (["--mode", "distributed", "--epsilon", "0"], "epsilon"),
+])
+def test_render_mode_errors_name_the_distributed_mode(tmp_path, args, fragment):
+    out = tmp_path / "never"
+    proc = lodsprite_cli("render", "--terrain", "fractal:64:1", "--size", "64x64", *args,
+                         "--out", str(out))
+    assert proc.returncode == 2, proc.stderr
+    lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and fragment in lines[0], proc.stderr
+    assert not out.exists()
+
+
+def test_render_config_has_no_distributed_fields():
+    from dataclasses import fields
+
+    from lodsprite.run import MODES, RenderConfig
+
+    assert "distributed" not in MODES
+    assert "pace" not in {f.name for f in fields(RenderConfig)}
+    with pytest.raises(InputError, match="mode"):
+        RenderConfig(mode="distributed").validate()
