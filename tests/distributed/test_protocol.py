@@ -126,3 +126,135 @@ def test_the_shown_keyframe_is_optional_and_checked():
                 {"eye": [1.0, 2.0, 3.0], "slot": True}, {"eye": [1.0, 2.0, 3.0], "slot": 0.5}):
         with pytest.raises(ProtocolError):
             shown_from_wire(bad)
+
+
+# ----------------------------------------------------- bounded decoding (issue 12, item 2)
+
+def _zlib_keyframe(shape, stream: bytes) -> list:
+    good = [bytes(f) for f in encode_keyframe(keyframe())]
+    return [corrupt(good, color={"shape": list(shape), "dtype": "uint8", "codec": "zlib"})[0],
+            stream, good[2]]
+
+
+def _peak_bytes(f) -> int:
+    import tracemalloc
+
+    tracemalloc.start()
+    try:
+        f()
+    finally:
+        peak = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+    return peak
+
+
+def test_a_zlib_bomb_is_refused_without_inflating_it():
+    """Regression: zlib.decompress inflated the whole stream before checking its size."""
+    import zlib
+
+    bomb = zlib.compress(b"\x00" * (200 * 2**20), 9)  # 200 MiB of zeros in about 200 KB
+    frames = _zlib_keyframe((24, 32, 3), bomb)
+
+    def run():
+        with pytest.raises(ProtocolError, match="beyond"):
+            decode_keyframe(frames)
+    assert _peak_bytes(run) < 8 * 2**20
+
+
+def test_a_declared_shape_allocates_nothing_by_itself():
+    """Regression: the declared size was passed to zlib as its buffer size, so a small
+    message made the receiver allocate what the header declared (up to 16384² x 3)."""
+    import zlib
+
+    frames = _zlib_keyframe((4096, 4096, 3), zlib.compress(b"\x01" * 100))
+
+    def run():
+        with pytest.raises(ProtocolError):
+            decode_keyframe(frames)
+    assert _peak_bytes(run) < 8 * 2**20
+    with pytest.raises(ProtocolError):  # over the cap: refused from the header alone
+        decode_keyframe(_zlib_keyframe((8192, 8192, 3), b""))
+
+
+def test_zlib_images_must_inflate_to_exactly_their_size_and_end_there():
+    import zlib
+
+    kf = keyframe()
+    size = kf.color.nbytes
+    raw = np.ascontiguousarray(kf.color[::-1]).tobytes()
+    good = zlib.compress(raw)
+    assert bytes(decode_keyframe(_zlib_keyframe((24, 32, 3), good)).color[::-1]) == raw
+    for stream in (good[:-5], good + b"trailing", zlib.compress(raw[:-1]),
+                   zlib.compress(raw + b"x"), b""):
+        with pytest.raises(ProtocolError):
+            decode_keyframe(_zlib_keyframe((24, 32, 3), stream))
+    assert size == 24 * 32 * 3
+
+
+@pytest.mark.parametrize("change", [
+    {"color": {"shape": [24, 32, 3.0], "dtype": "uint8", "codec": "raw"}},  # killed the client
+    {"color": {"shape": [24.0, 32, 3], "dtype": "uint8", "codec": "raw"}},
+    {"color": {"shape": [24, 32, 3], "dtype": "uint8", "codec": "raw", "x": 1}},
+    {"color": {"shape": [24, 32, 3, 1], "dtype": "uint8", "codec": "raw"}},
+    {"color": {"shape": [0, 32, 3], "dtype": "uint8", "codec": "raw"}},
+    {"color": "24x32"},
+    {"seq": 2**64 - 1},
+    {"t0": float("nan")},
+    {"fov": 180.0},
+    {"view": [0.0] * 15},
+    {"viewpoint": {"x": [1, 0, 0], "y": [0, 1, 0], "z": [0, 0, 1], "o": [0, 0, "1"]}},
+    {"extra": True},
+    {"v": 2},
+])
+def test_keyframe_headers_are_typed(change):
+    good = [bytes(f) for f in encode_keyframe(keyframe())]
+    with pytest.raises(ProtocolError):
+        decode_keyframe(corrupt(good, **change))
+
+
+def test_messages_carry_exactly_their_buffers():
+    with pytest.raises(ProtocolError, match="buffers"):
+        decode(encode({"kind": "ack", "seq": 1}, b"unexpected"))
+    good = [bytes(f) for f in encode_keyframe(keyframe())]
+    with pytest.raises(ProtocolError, match="buffers"):
+        decode_keyframe([*good, b""])
+
+
+def test_control_arguments_are_typed_per_op():
+    from lodsprite.distributed.protocol import LoadArgs, NoArgs, decode_message
+
+    msg, _ = decode_message(encode({"kind": "control", "seq": 1, "op": "load",
+                                    "args": {"terrain": "fractal:64:1", "grid": 64}}))
+    assert isinstance(msg.args, LoadArgs) and msg.args.grid == 64 and msg.args.lod == 16
+    msg, _ = decode_message(encode({"kind": "control", "seq": 1, "op": "ping"}))
+    assert isinstance(msg.args, NoArgs)
+    for bad in ({"op": "ping", "args": {"x": 1}}, {"op": "launch"},
+                {"op": "load", "args": {"grid": 64.0}}, {"op": "ping", "client": "XYZ"}):
+        with pytest.raises(ProtocolError):
+            decode(encode({"kind": "control", "seq": 1, **bad}))
+
+
+def test_the_protocol_knows_the_renderers_visibility_rules_and_paces():
+    from lodsprite.distributed.pacing import PACES
+    from lodsprite.distributed.protocol import PACE_NAMES, VISIBILITY
+    from lodsprite.gl.sprite import VISIBILITY_MODES
+
+    assert set(VISIBILITY) == set(VISIBILITY_MODES) and set(PACE_NAMES) == set(PACES)
+
+
+def test_every_link_socket_caps_its_message_size():
+    import zmq
+
+    from lodsprite.distributed.link import ServerLink
+    from lodsprite.distributed.protocol import MAX_KEYFRAME_FRAME_BYTES
+
+    ctx = zmq.Context()
+    link = ServerLink(ctx, "127.0.0.1:59991")
+    try:
+        assert link.keyframes.getsockopt(zmq.MAXMSGSIZE) == MAX_KEYFRAME_FRAME_BYTES
+        assert link.viewpoint.getsockopt(zmq.MAXMSGSIZE) > 0
+        assert link.keyframes.getsockopt(zmq.IDENTITY) == link.client_id.encode()
+        assert len(link.client_id) == 16
+    finally:
+        link.close()
+        ctx.destroy(linger=0)

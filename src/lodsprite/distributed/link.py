@@ -2,37 +2,60 @@
 
 CLIENT-CONTROL (Swan et al. 2002, §3.2) keeps each server loaded with the client's scene
 and started (:func:`keep_loaded`); :class:`ServerLink` owns the sockets.
+
+Each link has a random client id (16 hex digits): it travels in every control and
+viewpoint message, and it is the ZeroMQ identity of the link's keyframe socket, so that
+the server (one client holds it at a time, :mod:`.server`) sends keyframes to this
+client only.  Every socket has a ``zmq.MAXMSGSIZE``.
 """
 
 from __future__ import annotations
 
 import logging
+import secrets
 import threading
 from collections.abc import Iterator
 
 import zmq
 
 from lodsprite.distributed.keys import ClientKeys
-from lodsprite.distributed.protocol import ProtocolError, decode, encode
+from lodsprite.distributed.protocol import (
+    MAX_CONTROL_BYTES,
+    MAX_KEYFRAME_FRAME_BYTES,
+    MAX_REPLY_BYTES,
+    ProtocolError,
+    decode,
+    encode,
+)
 from lodsprite.distributed.server import endpoints
 
 log = logging.getLogger("lodsprite.client")
 
 CONTROL_TIMEOUT_MS = 1000
+RELEASE_TIMEOUT_MS = 300
+
+
+def new_client_id() -> str:
+    """A random client id: 16 lowercase hex digits."""
+    return secrets.token_hex(8)
 
 
 class ServerLink:
-    """The client's three sockets to one server."""
+    """The client's three sockets to one server; ``client_id`` (default: a new random
+    one) names the client in its messages and is its keyframe socket's identity."""
 
-    def __init__(self, ctx: zmq.Context, address: str, keys: ClientKeys | None = None) -> None:
+    def __init__(self, ctx: zmq.Context, address: str, keys: ClientKeys | None = None,
+                 client_id: str | None = None) -> None:
         self.address = address
         self.keys = keys
+        self.client_id = client_id or new_client_id()
         self.control_ep, self.viewpoint_ep, self.keyframe_ep = endpoints(address, bind=False)
         self.ctx = ctx
-        self.viewpoint = self._socket(zmq.PUB)
+        self.viewpoint = self._socket(zmq.PUB, MAX_CONTROL_BYTES)
         self.viewpoint.setsockopt(zmq.SNDHWM, 1)
         self.viewpoint.connect(self.viewpoint_ep)
-        self.keyframes = self._socket(zmq.DEALER)
+        self.keyframes = self._socket(zmq.DEALER, MAX_KEYFRAME_FRAME_BYTES)
+        self.keyframes.setsockopt(zmq.IDENTITY, self.client_id.encode())
         self.keyframes.connect(self.keyframe_ep)
         self.control: zmq.Socket | None = None
         self.last_seq = 0
@@ -42,27 +65,37 @@ class ServerLink:
         self.closed = False
         self.lock = threading.Lock()  # the control socket moves between threads
 
-    def _socket(self, kind: int) -> zmq.Socket:
+    def _socket(self, kind: int, max_bytes: int) -> zmq.Socket:
         sock = self.ctx.socket(kind)
+        sock.setsockopt(zmq.MAXMSGSIZE, max_bytes)
         if self.keys is not None:
             self.keys.apply(sock)
         return sock
 
-    def request(self, header: dict) -> dict | None:
-        """Send a control message; the reply header, or None if the server did not answer
-        (the REQ socket is then replaced, as a REQ cannot send twice in a row)."""
+    def request(self, header: dict, timeout_ms: int = CONTROL_TIMEOUT_MS) -> dict | None:
+        """Send a control message (this client's id added); the reply header, or None if
+        the server did not answer (the REQ socket is then replaced, as a REQ cannot send
+        twice in a row)."""
         with self.lock:
-            return self._request(header)
+            return self._request({**header, "client": self.client_id}, timeout_ms)
 
-    def _request(self, header: dict) -> dict | None:
+    def send_viewpoint(self, header: dict) -> None:
+        """Publish a viewpoint message (this client's id added); never blocks."""
+        try:
+            self.viewpoint.send_multipart(encode({**header, "client": self.client_id}),
+                                          flags=zmq.NOBLOCK)
+        except zmq.Again:
+            pass
+
+    def _request(self, header: dict, timeout_ms: int) -> dict | None:
         if self.closed:  # never open a socket after close(): the context could not end
             return None
         if self.control is None:
-            self.control = self._socket(zmq.REQ)
+            self.control = self._socket(zmq.REQ, MAX_REPLY_BYTES)
             self.control.setsockopt(zmq.LINGER, 0)
             self.control.connect(self.control_ep)
         self.control.send_multipart(encode(header))
-        if self.control.poll(CONTROL_TIMEOUT_MS):
+        if self.control.poll(timeout_ms):
             try:
                 return decode(self.control.recv_multipart())[0]
             except ProtocolError as exc:
@@ -72,8 +105,13 @@ class ServerLink:
         self.control = None
         return None
 
-    def close(self) -> None:
-        """Close the sockets; later requests answer None at once (thread-safe)."""
+    def close(self, release: bool = True) -> None:
+        """Close the sockets; later requests answer None at once (thread-safe).  With
+        ``release`` a server this link loaded is told first (briefly), so that another
+        client may take it at once rather than after the hold's lease."""
+        if release and self.loaded and self.alive and not self.closed:
+            self.request({"kind": "control", "seq": 0, "op": "release", "args": {}},
+                         RELEASE_TIMEOUT_MS)
         with self.lock:
             self.closed = True
             for s in (self.viewpoint, self.keyframes, self.control):
@@ -91,15 +129,26 @@ def control(link: ServerLink, counter: Iterator[int], op: str,
 
 def keep_loaded(link: ServerLink, load_args: dict, counter: Iterator[int]) -> None:
     """One CLIENT-CONTROL round for one server: ping it; load the scene and start it when
-    it has none, is not running, or an earlier load or start got no answer (a server
-    busy starting up may have lost it).  Sets ``link.alive`` and ``link.loaded``."""
+    this client does not hold it (another client's hold lapsed or was released, or the
+    server restarted), it is not running, or an earlier load or start got no answer (a
+    server busy starting up may have lost it).  A scene that failed on the server is not
+    sent again (its error is said once).  Sets ``link.alive`` and ``link.loaded``."""
     reply = control(link, counter, "ping")
     link.alive = reply is not None
     if reply is None:
         link.loaded = False
         return
     data = reply.get("data", {})
-    if link.loaded and data.get("running") and data.get("loaded"):
+    if not isinstance(data, dict):
+        data = {}
+    yours = data.get("yours", True) is True  # servers before protocol 3 have no holds
+    if link.loaded and yours and data.get("state") == "failed":
+        error = str(data.get("error", ""))
+        if error != link.refusal:
+            log.warning("%s could not load the scene: %s", link.address, error)
+        link.refusal = error
+        return
+    if link.loaded and yours and data.get("running") and data.get("loaded"):
         return
     link.last_seq = 0  # a restarted server counts from 1 again
     replies = [control(link, counter, "load", load_args), control(link, counter, "start")]

@@ -21,11 +21,7 @@ import math
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from lodsprite.camera import Viewpoint
-
-
-def _rotation(vp: Viewpoint) -> Rotation:
-    return Rotation.from_matrix(np.stack([vp.x, vp.y, vp.z], axis=1))
+from lodsprite.camera import Viewpoint, view_rotation
 
 
 def _with(rotation: Rotation, eye: np.ndarray) -> Viewpoint:
@@ -93,7 +89,7 @@ class KalmanPredictor:
             innovation = viewpoint.o - self._x[:, 0]
             self._x = self._x + k * innovation[:, None]
             self._p = self._p - k[:, :, None] * self._p[:, None, 0, :]
-            turn = _rotation(viewpoint) * _rotation(self._last).inv()
+            turn = view_rotation(viewpoint) * view_rotation(self._last).inv()
             self._omega = turn.as_rotvec() / dt
         self._t, self._last = t, viewpoint
 
@@ -101,7 +97,7 @@ class KalmanPredictor:
         if self._last is None:
             raise RuntimeError("predict() before any observe()")
         eye = self._x[:, 0] + self._x[:, 1] * dt
-        rotation = Rotation.from_rotvec(self._omega * dt) * _rotation(self._last)
+        rotation = Rotation.from_rotvec(self._omega * dt) * view_rotation(self._last)
         return _with(rotation, eye)
 
 

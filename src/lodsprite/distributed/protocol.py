@@ -1,123 +1,351 @@
 """Wire protocol between the LOD server and the LOD client (Swan et al. 2002, §3, Figure 4).
 
 Every message is a ZeroMQ multipart message: frame 0 is a msgpack header, the following
-frames are raw buffers (images), never pickled.  The header always carries
-``v`` (protocol version), ``kind`` and ``seq`` (sequence number).
+frames are raw buffers (images), never pickled.  Each header is one declared schema, a
+:class:`msgspec.Struct` tagged by ``kind``, and every message is decoded and validated
+here, in one place (:func:`decode_message`): types, ranges, lengths, enumerated values,
+image shapes and dtypes, the number of buffers.  Anything else raises
+:class:`ProtocolError`, never another exception.  Every header carries ``v`` (protocol
+version, :data:`PROTOCOL_VERSION`), ``kind`` and ``seq`` (a sequence number in
+``0 .. 2**63 - 1``).
 
-=========  ============================================  =====================================
-kind       header fields                                 buffers
-=========  ============================================  =====================================
-control    ``op`` (start, stop, load, stats, shutdown,   none
-           ping), ``args`` (dict)
-reply      ``ok`` (bool), ``error`` (str), ``data``      none
-viewpoint  ``t`` (client clock, s), ``viewpoint``        none
-           ({x, y, z, o} lists of 3 floats), optional
-           ``shown`` ({eye: 3 floats, slot: int}: the
-           keyframe the client shows and the server it
-           came from, for the servers' pacing)
-keyframe   ``t0`` (server clock when rendering began),   colour (H, W, 3) uint8; depth (H, W)
-           ``viewpoint``, ``view``, ``proj`` (16 floats  float32 window depth in [0, 1];
-           each, row-major), ``fov``, ``near``, ``far``, both with rows bottom-up (OpenGL's
-           ``zbuffer`` (``full``: the full-resolution    order, so neither side flips them);
-           z-buffer, ``coarse``: the coarse level's,     each raw or zlib compressed
-           all the ``coarse`` visibility rule reads),    (``codec``)
-           ``color``/``depth`` ({shape, dtype, codec})
-ack        ``t`` (client clock)                          none
-=========  ============================================  =====================================
+=========  ================================================  ==================================
+kind       header fields (ranges)                            buffers
+=========  ================================================  ==================================
+control    ``op`` (start, stop, load, stats, shutdown,       none
+           ping, release), ``args`` (the op's arguments:
+           :class:`LoadArgs` for ``load``, an empty map
+           otherwise), ``client`` (the sender's id: 16-64
+           lowercase hex digits, or "" for anonymous)
+reply      ``ok`` (bool), ``error`` (str, <= 4096 chars),    none
+           ``data`` (map)
+viewpoint  ``t`` (client clock, s, ``|t| <= 1e12``),         none
+           ``viewpoint`` ({x, y, z, o}: 3 numbers each,
+           ``|c| <= 1e9``, axes orthonormal), optional
+           ``shown`` ({eye: 3 numbers, slot: 0..63}: the
+           keyframe the client shows and the server it came
+           from, for the servers' pacing), ``client``
+keyframe   ``t0`` (server clock when rendering began),       colour (H, W, 3) uint8; depth
+           ``viewpoint``, ``view``, ``proj`` (16 numbers     (H, W) float32 window depth in
+           each, row-major), ``fov`` (0..180 degrees),       [0, 1]; rows bottom-up (OpenGL's
+           ``aspect``, ``near``, ``far`` (> near > 0),       order, so neither side flips
+           ``zbuffer`` (``full``: the full-resolution        them); H, W in 1..4096; each raw
+           z-buffer, ``coarse``: the coarse level's),        or zlib compressed (``codec``);
+           ``color``/``depth`` ({shape, dtype, codec})       zlib output bounded to the size
+ack        ``t`` (client clock)                              none
+=========  ================================================  ==================================
 
-:func:`decode` rejects anything malformed - wrong version, missing or mistyped
-fields, truncated or oversized buffers - with :class:`ProtocolError`.  Buffers are not
-copied on the way through: :func:`decode` hands out memoryviews of the received frames
-(``recv_multipart(copy=False)``) and a decoded keyframe's images are views of them.
+Buffers are not copied on the way through: :func:`decode_message` hands out memoryviews
+of the received frames (``recv_multipart(copy=False)``) and a decoded keyframe's raw
+images are views of them.  A declared image shape never allocates anything by itself:
+a raw buffer must have exactly the declared size, and a zlib stream is inflated with
+``decompressobj().decompress(data, size)`` and refused if it holds more (or less).
+
+The ``MAX_*_BYTES`` constants are the ``zmq.MAXMSGSIZE`` of each socket (ZeroMQ applies
+it to each frame): a peer that sends more is disconnected by ZeroMQ itself.
 """
 
 from __future__ import annotations
 
 import zlib
 from dataclasses import dataclass
+from typing import Annotated, Any, Literal
 
-import msgpack
+import msgspec
 import numpy as np
+from msgspec import Meta, Struct, field
 
 from lodsprite.camera import Projection, Viewpoint
+from lodsprite.distributed.pacing import DEFAULT_PACE
 from lodsprite.errors import InputError, LodspriteError
 
-PROTOCOL_VERSION = 2
+PROTOCOL_VERSION = 3
 KINDS = ("control", "reply", "viewpoint", "keyframe", "ack")
-CONTROL_OPS = ("start", "stop", "load", "stats", "shutdown", "ping")
+CONTROL_OPS = ("start", "stop", "load", "stats", "shutdown", "ping", "release")
 CODECS = ("raw", "zlib")
 ZBUFFERS = ("full", "coarse")
-MAX_IMAGE_SIDE = 16384
+VISIBILITY = ("triangle", "fragment", "coarse")  # lodsprite.gl.sprite.VISIBILITY_MODES
+PACE_NAMES = ("needed", "continuous")  # lodsprite.distributed.pacing.PACES
+
+MAX_IMAGE_SIDE = 4096
+"""Largest keyframe (and server render target) side in pixels."""
+MAX_GRID = 8192
+"""Largest working grid (quads per side) a ``load`` may ask for."""
+MAX_SLOTS = 64
+"""Most servers one client may use."""
+MAX_NAME = 256
+"""Longest terrain or texture name, characters."""
+MAX_COORD = 1e9
+"""Largest coordinate (metres) of a viewpoint on the wire."""
+MAX_TIME = 1e12
+"""Largest clock value (seconds) on the wire."""
+
+MAX_CONTROL_BYTES = 64 * 1024
+MAX_VIEWPOINT_BYTES = 4 * 1024
+MAX_ACK_BYTES = 4 * 1024
+MAX_REPLY_BYTES = 64 * 1024 * 1024  # statistics replies grow with the keyframes sent
+MAX_KEYFRAME_FRAME_BYTES = (MAX_IMAGE_SIDE**2 * 4 * 102) // 100 + 65536
+"""Largest frame of a keyframe message: the depth image at the largest size (4 bytes a
+pixel), plus zlib's worst-case expansion of incompressible data and the header."""
 
 
 class ProtocolError(LodspriteError, ValueError):
     """A message that does not follow the protocol (malformed, truncated, wrong version)."""
 
 
-def encode(header: dict, *buffers) -> list:
-    """Multipart frames for ``header`` (must hold ``kind`` and ``seq``) and raw buffers
-    (any objects with the buffer protocol: bytes, contiguous arrays)."""
-    head = {"v": PROTOCOL_VERSION, **header}
-    return [msgpack.packb(head, use_bin_type=True), *buffers]
+# ------------------------------------------------------------------------------ schemas
+
+Seq = Annotated[int, Meta(ge=0, le=2**63 - 1)]
+Coord = Annotated[float, Meta(ge=-MAX_COORD, le=MAX_COORD)]
+Time = Annotated[float, Meta(ge=-MAX_TIME, le=MAX_TIME)]
+Vec3 = tuple[Coord, Coord, Coord]
+Matrix = Annotated[list[Annotated[float, Meta(ge=-1e15, le=1e15)]],
+                   Meta(min_length=16, max_length=16)]
+ClientId = Annotated[str, Meta(pattern="^(?:[0-9a-f]{16,64})?$")]
+Name = Annotated[str, Meta(min_length=1, max_length=MAX_NAME)]
+Side = Annotated[int, Meta(ge=1, le=MAX_IMAGE_SIDE)]
+Slot = Annotated[int, Meta(ge=0, lt=MAX_SLOTS)]
+
+
+class WireViewpoint(Struct, forbid_unknown_fields=True):
+    """A viewpoint: unit axes ``x, y, z`` and eye ``o`` (metres), 3 numbers each."""
+
+    x: Vec3
+    y: Vec3
+    z: Vec3
+    o: Vec3
+
+
+class Shown(Struct, forbid_unknown_fields=True):
+    """The keyframe a client shows: its eye (metres) and the slot of its server."""
+
+    eye: Vec3
+    slot: Slot
+
+
+class LoadArgs(Struct, forbid_unknown_fields=True, omit_defaults=True):
+    """Arguments of ``load``: the scene (terrain and texture names, working grid in quads,
+    vertical exaggeration, keyframe size ``(width, height)`` px, vertical field of view in
+    degrees) and the client's sprite settings (coarse level in quads, visibility rule,
+    border ribbons, ε in pixels, pace) and its place among its servers (slot of slots)."""
+
+    terrain: Name = "jacksboro"
+    texture: Name = "terrain"
+    grid: Annotated[int, Meta(ge=16, le=MAX_GRID)] | None = None
+    exaggeration: Annotated[float, Meta(gt=0.0, le=1000.0)] = 1.0
+    size: tuple[Side, Side] = (512, 512)
+    fov_y_deg: Annotated[float, Meta(ge=1.0, le=179.0)] = 45.0
+    lod: Annotated[int, Meta(ge=1, le=MAX_GRID)] = 16
+    visibility: Literal[VISIBILITY] = "coarse"  # type: ignore[valid-type]
+    border: bool = True
+    epsilon: Annotated[float, Meta(gt=0.0, le=10000.0)] = 1.0
+    pace: Literal[PACE_NAMES] = DEFAULT_PACE  # type: ignore[valid-type]
+    slot: Slot = 0
+    slots: Annotated[int, Meta(ge=1, le=MAX_SLOTS)] = 1
+
+    def __post_init__(self) -> None:
+        if self.grid is not None and self.grid & (self.grid - 1):
+            raise ValueError(f"grid {self.grid} is not a power of two")
+        if self.lod & (self.lod - 1):
+            raise ValueError(f"lod {self.lod} is not a power of two")
+        if self.grid is not None and self.lod > self.grid:
+            raise ValueError(f"lod {self.lod} exceeds the grid {self.grid}")
+        if not self.slot < self.slots:
+            raise ValueError(f"slot {self.slot} is not below slots {self.slots}")
+
+
+class NoArgs(Struct, forbid_unknown_fields=True):
+    """Arguments of every op other than ``load``: none (an empty map)."""
+
+
+class ImageSpec(Struct, forbid_unknown_fields=True):
+    """An image buffer: ``shape`` (H, W) or (H, W, C), ``dtype`` and ``codec``."""
+
+    shape: Annotated[list[Side], Meta(min_length=2, max_length=3)]
+    dtype: Literal["uint8", "float32"]
+    codec: Literal[CODECS]  # type: ignore[valid-type]
+
+
+class Message(Struct, forbid_unknown_fields=True, omit_defaults=True, tag_field="kind"):
+    """Every header: protocol version and sequence number (``kind`` is the tag)."""
+
+    v: Literal[PROTOCOL_VERSION]  # type: ignore[valid-type]
+    seq: Seq
+
+
+class Control(Message, tag="control"):
+    """A control request.  On the wire ``args`` is a map; :func:`decode_message` replaces
+    it with the op's argument Struct (:class:`LoadArgs` or :class:`NoArgs`)."""
+
+    op: Literal[CONTROL_OPS]  # type: ignore[valid-type]
+    args: Any = field(default_factory=dict)
+    client: ClientId = ""
+
+
+class Reply(Message, tag="reply"):
+    ok: bool
+    error: Annotated[str, Meta(max_length=4096)] = ""
+    data: dict[str, Any] = field(default_factory=dict)
+
+
+class ViewpointMessage(Message, tag="viewpoint"):
+    t: Time
+    viewpoint: WireViewpoint
+    shown: Shown | None = None
+    client: ClientId = ""
+
+
+class KeyframeMessage(Message, tag="keyframe"):
+    t0: Time
+    viewpoint: WireViewpoint
+    view: Matrix
+    proj: Matrix
+    fov: Annotated[float, Meta(gt=0.0, lt=180.0)]
+    aspect: Annotated[float, Meta(gt=0.0, le=1e4)]
+    near: Annotated[float, Meta(gt=0.0, le=MAX_COORD)]
+    far: Annotated[float, Meta(gt=0.0, le=1e12)]
+    zbuffer: Literal[ZBUFFERS]  # type: ignore[valid-type]
+    color: ImageSpec
+    depth: ImageSpec
+
+
+class Ack(Message, tag="ack"):
+    t: Time = 0.0
+
+
+ANY_MESSAGE = Control | Reply | ViewpointMessage | KeyframeMessage | Ack
+BUFFERS = {"control": 0, "reply": 0, "viewpoint": 0, "keyframe": 2, "ack": 0}
+OP_ARGS: dict[str, type[Struct]] = {op: LoadArgs if op == "load" else NoArgs
+                                     for op in CONTROL_OPS}
+
+
+class _Envelope(Struct):
+    """The first look at a header: only version and kind, any other field ignored."""
+
+    v: Any = None
+    kind: Any = None
+
+
+_envelope = msgspec.msgpack.Decoder(_Envelope)
+_decoder = msgspec.msgpack.Decoder(ANY_MESSAGE)
+
+
+def _enc_hook(obj: Any) -> Any:
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    raise NotImplementedError(f"cannot encode {type(obj).__name__}")
+
+
+_encoder = msgspec.msgpack.Encoder(enc_hook=_enc_hook)
+
+
+# ---------------------------------------------------------------------- encode / decode
+
+def encode(header: dict | Message, *buffers) -> list:
+    """Multipart frames for ``header`` and raw buffers (any objects with the buffer
+    protocol: bytes, contiguous arrays).  ``header`` is a message Struct or a map holding
+    ``kind`` and ``seq`` (``v`` is added)."""
+    if isinstance(header, Message):
+        return [_encoder.encode(header), *buffers]
+    return [_encoder.encode({"v": PROTOCOL_VERSION, **header}), *buffers]
+
+
+def _view(frame) -> memoryview:
+    try:
+        return memoryview(frame).cast("B")
+    except TypeError as exc:
+        raise ProtocolError(f"a frame is not a buffer: {type(frame).__name__}") from exc
+
+
+def decode_message(frames: list) -> tuple[Message, list[memoryview]]:
+    """The typed header and buffers of a multipart message (frames are ``bytes``,
+    ``memoryview`` or ``zmq.Frame``); raises :class:`ProtocolError` and nothing else.
+
+    The buffers are views of the frames, not copies.  A control message's ``args`` is
+    replaced by the op's argument Struct."""
+    try:
+        if not isinstance(frames, list | tuple) or not frames:
+            raise ProtocolError("empty message")
+        head = _view(frames[0])
+        try:
+            env = _envelope.decode(head)
+        except (msgspec.DecodeError, msgspec.ValidationError) as exc:
+            raise ProtocolError(f"header is not a msgpack map: {exc}") from None
+        if env.v != PROTOCOL_VERSION or isinstance(env.v, bool):
+            raise ProtocolError(f"protocol version {env.v!r}, expected {PROTOCOL_VERSION}")
+        if env.kind not in KINDS:
+            raise ProtocolError(f"unknown message kind {env.kind!r}")
+        try:
+            msg = _decoder.decode(head)
+        except (msgspec.DecodeError, msgspec.ValidationError) as exc:
+            raise ProtocolError(f"{env.kind}: {exc}") from None
+        if len(frames) - 1 != BUFFERS[env.kind]:
+            raise ProtocolError(f"{env.kind}: {len(frames) - 1} buffers, expected "
+                                f"{BUFFERS[env.kind]}")
+        if isinstance(msg, Control):
+            try:
+                msg.args = msgspec.convert(msg.args, OP_ARGS[msg.op])
+            except msgspec.ValidationError as exc:
+                raise ProtocolError(f"{msg.op}: {exc}") from None
+        return msg, [_view(f) for f in frames[1:]]
+    except ProtocolError:
+        raise
+    except (RecursionError, MemoryError, ValueError, TypeError, OverflowError) as exc:
+        raise ProtocolError(f"undecodable message: {type(exc).__name__}") from None
 
 
 def decode(frames: list) -> tuple[dict, list[memoryview]]:
-    """Header and buffers of a multipart message (``bytes`` or ``zmq.Frame``); raises
-    :class:`ProtocolError`.  The buffers are views of the frames, not copies."""
-    if not frames:
-        raise ProtocolError("empty message")
-    try:
-        header = msgpack.unpackb(bytes(frames[0]), raw=False, strict_map_key=True)
-    except Exception as exc:  # msgpack raises several exception types
-        raise ProtocolError(f"header is not valid msgpack: {exc}") from exc
-    if not isinstance(header, dict):
-        raise ProtocolError("header is not a map")
-    if header.get("v") != PROTOCOL_VERSION:
-        raise ProtocolError(f"protocol version {header.get('v')!r}, expected {PROTOCOL_VERSION}")
-    if header.get("kind") not in KINDS:
-        raise ProtocolError(f"unknown message kind {header.get('kind')!r}")
-    seq = header.get("seq")
-    if isinstance(seq, bool) or not isinstance(seq, int) or seq < 0:
-        raise ProtocolError(f"bad sequence number {seq!r}")
-    return header, [memoryview(f).cast("B") for f in frames[1:]]
-
-
-def _floats(value, n: int, name: str) -> np.ndarray:
-    try:
-        a = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
-        raise ProtocolError(f"{name} is not numeric") from exc
-    if a.shape != (n,) or not np.all(np.isfinite(a)):
-        raise ProtocolError(f"{name} must be {n} finite numbers")
-    return a
+    """Header (the map as sent, after validation by :func:`decode_message`) and buffers
+    of a multipart message; raises :class:`ProtocolError`.  The buffers are views of the
+    frames, not copies."""
+    _, buffers = decode_message(frames)
+    return msgspec.msgpack.decode(_view(frames[0])), buffers
 
 
 def viewpoint_to_wire(vp: Viewpoint) -> dict:
     return vp.to_dict()
 
 
-def viewpoint_from_wire(d) -> Viewpoint:
-    if not isinstance(d, dict):
-        raise ProtocolError("viewpoint is not a map")
-    parts = [_floats(d.get(k), 3, f"viewpoint.{k}") for k in ("x", "y", "z", "o")]
+def viewpoint_from_wire(d: WireViewpoint | dict) -> Viewpoint:
+    """A :class:`Viewpoint` from its wire form; raises :class:`ProtocolError`."""
+    if not isinstance(d, WireViewpoint):
+        try:
+            d = msgspec.convert(d, WireViewpoint)
+        except msgspec.ValidationError as exc:
+            raise ProtocolError(f"viewpoint: {exc}") from None
     try:
-        return Viewpoint(*parts)
+        return Viewpoint(np.array(d.x), np.array(d.y), np.array(d.z), np.array(d.o))
     except InputError as exc:
-        raise ProtocolError(f"bad viewpoint: {exc}") from exc
+        raise ProtocolError(f"bad viewpoint: {exc}") from None
 
 
-def shown_from_wire(value) -> tuple[np.ndarray, int] | None:
+def shown_from_wire(value: Shown | dict | None) -> tuple[np.ndarray, int] | None:
     """The optional ``shown`` field of a viewpoint message: the shown keyframe's eye
     ``(3,)`` in metres and the slot of the server that rendered it; None when absent."""
     if value is None:
         return None
-    if not isinstance(value, dict):
-        raise ProtocolError("shown is not a map")
-    slot = value.get("slot")
-    if isinstance(slot, bool) or not isinstance(slot, int) or slot < 0:
-        raise ProtocolError(f"shown.slot {slot!r} is not a server slot")
-    return _floats(value.get("eye"), 3, "shown.eye"), slot
+    if not isinstance(value, Shown):
+        try:
+            value = msgspec.convert(value, Shown)
+        except msgspec.ValidationError as exc:
+            raise ProtocolError(f"shown: {exc}") from None
+    return np.array(value.eye, dtype=np.float64), value.slot
 
+
+def check_load_args(args: dict | LoadArgs) -> LoadArgs:
+    """``load`` arguments validated against :class:`LoadArgs`; raises
+    :class:`ProtocolError` (a terrain that does not load is reported by the renderer)."""
+    if isinstance(args, LoadArgs):
+        return args
+    try:
+        return msgspec.convert(args, LoadArgs)
+    except msgspec.ValidationError as exc:
+        raise ProtocolError(f"load: {exc}") from None
+
+
+# ------------------------------------------------------------------------------ keyframes
 
 @dataclass(frozen=True, eq=False)
 class Keyframe:
@@ -168,47 +396,55 @@ def encode_keyframe(kf: Keyframe, codec: str = "raw") -> list:
     return encode(header, color, depth)
 
 
-def _image(spec, data, dtype: str, channels: int | None, name: str) -> np.ndarray:
-    if not isinstance(spec, dict) or spec.get("dtype") != dtype or spec.get("codec") not in CODECS:
-        raise ProtocolError(f"{name}: bad image description {spec!r}")
-    shape = spec.get("shape")
-    want = 3 if channels else 2
-    if (not isinstance(shape, list) or len(shape) != want
-            or not all(isinstance(s, int) and 1 <= s <= MAX_IMAGE_SIDE for s in shape[:2])
-            or (channels and shape[2] != channels)):
-        raise ProtocolError(f"{name}: bad shape {shape!r}")
-    size = int(np.prod(shape)) * np.dtype(dtype).itemsize
-    if spec["codec"] == "zlib":
-        try:
-            data = zlib.decompress(data, bufsize=size)
-        except zlib.error as exc:
-            raise ProtocolError(f"{name}: corrupt zlib data") from exc
-    if len(data) != size:
-        raise ProtocolError(f"{name}: {len(data)} bytes, expected {size}")
-    return np.frombuffer(data, dtype=dtype).reshape(shape)[::-1]  # rows arrive bottom-up
-
-
-def decode_keyframe(frames: list[bytes]) -> Keyframe:
-    """A :class:`Keyframe` from message frames; raises :class:`ProtocolError`."""
-    header, buffers = decode(frames)
-    if header["kind"] != "keyframe" or len(buffers) != 2:
-        raise ProtocolError("not a keyframe message with two image buffers")
-    vp = viewpoint_from_wire(header.get("viewpoint"))
-    nums = {k: header.get(k) for k in ("t0", "fov", "aspect", "near", "far")}
-    if not all(isinstance(v, int | float) and not isinstance(v, bool) and np.isfinite(v)
-               for v in nums.values()):
-        raise ProtocolError("keyframe timing or projection fields missing or not numbers")
+def inflate(data: memoryview | bytes, size: int, name: str = "image") -> bytes:
+    """Exactly ``size`` bytes from the zlib stream ``data``; raises :class:`ProtocolError`
+    for a corrupt or truncated stream, one that inflates to more or fewer bytes, or
+    trailing data.  Never produces more than ``size + 1`` bytes (no zlib bombs)."""
+    d = zlib.decompressobj()
     try:
-        proj = Projection(float(nums["fov"]), float(nums["aspect"]), float(nums["near"]),
-                          float(nums["far"]))
+        out = d.decompress(data, size)
+        if not d.eof:
+            if d.decompress(d.unconsumed_tail, 1):
+                raise ProtocolError(f"{name}: zlib data inflates beyond {size} bytes")
+            if not d.eof:
+                raise ProtocolError(f"{name}: truncated zlib data")
+    except zlib.error as exc:
+        raise ProtocolError(f"{name}: corrupt zlib data") from exc
+    if d.unused_data:
+        raise ProtocolError(f"{name}: data after the zlib stream")
+    if len(out) != size:
+        raise ProtocolError(f"{name}: zlib data inflates to {len(out)} bytes, expected {size}")
+    return out
+
+
+def _image(spec: ImageSpec, data: memoryview, dtype: str, channels: int | None,
+           name: str) -> np.ndarray:
+    want = (3,) if channels else ()
+    if spec.dtype != dtype or len(spec.shape) != 2 + len(want) or (
+            channels and spec.shape[2] != channels):
+        raise ProtocolError(f"{name}: expected {dtype} of shape (H, W{', 3' if channels else ''})"
+                            f", got {spec.dtype} {spec.shape}")
+    size = int(np.prod(spec.shape)) * np.dtype(dtype).itemsize
+    if spec.codec == "zlib":
+        data = inflate(data, size, name)
+    elif len(data) != size:
+        raise ProtocolError(f"{name}: {len(data)} bytes, expected {size}")
+    return np.frombuffer(data, dtype=dtype).reshape(spec.shape)[::-1]  # rows arrive bottom-up
+
+
+def decode_keyframe(frames: list) -> Keyframe:
+    """A :class:`Keyframe` from message frames; raises :class:`ProtocolError` only."""
+    msg, buffers = decode_message(frames)
+    if not isinstance(msg, KeyframeMessage):
+        raise ProtocolError(f"expected a keyframe message, got {type(msg).__name__}")
+    vp = viewpoint_from_wire(msg.viewpoint)
+    try:
+        proj = Projection(msg.fov, msg.aspect, msg.near, msg.far)
         proj.matrix()
-    except InputError as exc:
-        raise ProtocolError(f"bad projection: {exc}") from exc
-    color = _image(header.get("color"), buffers[0], "uint8", 3, "color")
-    depth = _image(header.get("depth"), buffers[1], "float32", None, "depth")
+    except (InputError, ValueError, ZeroDivisionError) as exc:
+        raise ProtocolError(f"bad projection: {exc}") from None
+    color = _image(msg.color, buffers[0], "uint8", 3, "color")
+    depth = _image(msg.depth, buffers[1], "float32", None, "depth")
     if color.shape[:2] != depth.shape:
         raise ProtocolError("colour and depth sizes differ")
-    zbuffer = header.get("zbuffer")
-    if zbuffer not in ZBUFFERS:
-        raise ProtocolError(f"unknown z-buffer {zbuffer!r}")
-    return Keyframe(header["seq"], float(nums["t0"]), vp, proj, color, depth, zbuffer)
+    return Keyframe(msg.seq, msg.t0, vp, proj, color, depth, msg.zbuffer)

@@ -9,16 +9,16 @@ Images are read in OpenGL's bottom-up row order and sent as they are.
 
 from __future__ import annotations
 
-from numbers import Real
-
 from lodsprite.camera import Viewpoint
-from lodsprite.distributed.pacing import DEFAULT_PACE, PACES, KeyframePacer
-from lodsprite.distributed.protocol import Keyframe, ProtocolError
+from lodsprite.distributed.pacing import KeyframePacer
+from lodsprite.distributed.protocol import Keyframe, LoadArgs, check_load_args
 from lodsprite.gl.paths import PathRenderer
-from lodsprite.gl.sprite import DEFAULT_VISIBILITY, VISIBILITY_MODES
 from lodsprite.gl.target import RenderTarget
 from lodsprite.scene import load_scene
-from lodsprite.terrain import DEFAULT_EXAGGERATION
+from lodsprite.terrain.heightfield import DEFAULT_GRID
+
+__all__ = ["KeyframeRenderer", "check_load_args", "estimate_scene_bytes", "memory_available",
+           "scene_args"]
 
 SCENE_KEYS = ("terrain", "texture", "grid", "exaggeration", "size", "fov_y_deg")
 SPRITE_KEYS = ("lod", "visibility", "border", "epsilon", "pace")
@@ -32,45 +32,68 @@ def scene_args(terrain: str, texture: str, grid: int | None, exaggeration: float
             "exaggeration": exaggeration, "size": list(size), "fov_y_deg": fov_y_deg}
 
 
-def check_load_args(args: dict) -> None:
-    """Raise :class:`ProtocolError` for ``load`` arguments of the wrong type or range
-    (a terrain that does not load is reported by the renderer)."""
-    def bad(key: str) -> ProtocolError:
-        return ProtocolError(f"load: bad {key} {args.get(key)!r}")
+def working_grid(args: LoadArgs) -> int:
+    """The working grid (quads per side) ``args`` asks for (as :func:`load_terrain`)."""
+    if args.grid is not None:
+        return args.grid
+    from lodsprite.terrain.loaders import parse_fractal_spec
 
-    size = args.get("size", [512, 512])
-    if not (isinstance(size, list) and len(size) == 2
-            and all(isinstance(n, int) and 1 <= n <= 16384 for n in size)):
-        raise bad("size")
-    for key in ("exaggeration", "fov_y_deg", "epsilon"):
-        value = args.get(key, 1.0)
-        if isinstance(value, bool) or not isinstance(value, Real) or not value > 0:
-            raise bad(key)
-    lod = args.get("lod", 16)
-    if isinstance(lod, bool) or not isinstance(lod, int) or lod < 1:
-        raise bad("lod")
-    if args.get("visibility", DEFAULT_VISIBILITY) not in VISIBILITY_MODES:
-        raise bad("visibility")
-    if args.get("pace", DEFAULT_PACE) not in PACES:
-        raise bad("pace")
-    if not isinstance(args.get("border", True), bool):
-        raise bad("border")
+    parsed = parse_fractal_spec(args.terrain)
+    return parsed[0] if parsed is not None else DEFAULT_GRID
+
+
+def estimate_scene_bytes(args: LoadArgs, source: tuple[int, int] | None,
+                         texture: tuple[int, int] | None) -> int:
+    """A generous estimate of the memory (bytes, host and GL together: llvmpipe keeps GL
+    objects in host memory) that loading ``args`` takes at its peak.
+
+    ``source`` (rows, cols) of the terrain as stored, ``texture`` (rows, cols) of an image
+    texture (None: the ``terrain`` texture, one texel per working sample).  Terms, per
+    element: source samples 48 bytes (int/float64 copies while validating and filling,
+    fractal generation's float32 bands), working samples 64 bytes (float64 resampling,
+    float32 heights, hillshade and tint temporaries, the height texture), texels 16
+    bytes (RGB array, its upload copy, RGBA texture with mipmaps), render pixels 48
+    bytes (colour and depth targets, the coarse target, read-back buffers).
+    """
+    n = working_grid(args) + 1
+    src = source[0] * source[1] if source is not None else n * n
+    texels = texture[0] * texture[1] if texture is not None else n * n
+    pixels = args.size[0] * args.size[1]
+    return 48 * src + 64 * n * n + 16 * texels + 48 * pixels + 64 * 2**20
+
+
+def memory_available() -> int | None:
+    """``MemAvailable`` of ``/proc/meminfo`` in bytes; None where there is no such file."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        return None
+    return None
 
 
 class KeyframeRenderer:
     """Full-resolution renderer of one scene, created and used on one thread."""
 
-    def __init__(self, args: dict) -> None:
-        scene = load_scene(args.get("terrain", "jacksboro"), args.get("texture", "terrain"),
-                           args.get("grid"), args.get("exaggeration", DEFAULT_EXAGGERATION))
-        size = tuple(args.get("size", (512, 512)))
-        self.paths = PathRenderer(scene, size, float(args.get("fov_y_deg", 45.0)))
-        self.lod = int(args.get("lod", 16))
-        self.border = bool(args.get("border", True))
-        self.coarse_z = args.get("visibility", DEFAULT_VISIBILITY) == "coarse"
-        self.coarse = RenderTarget(self.paths.ctx, *size, color=False) if self.coarse_z else None
-        self.pacer = KeyframePacer(scene.hf, self.lod, float(args.get("epsilon", 1.0)),
-                                   size[1], args.get("pace", DEFAULT_PACE))
+    def __init__(self, args: LoadArgs | dict) -> None:
+        """``args``: the ``load`` arguments, terrain and texture as loader specs (the
+        server resolves the names a client sends first, :mod:`.datasets`)."""
+        args = check_load_args(args)
+        scene = load_scene(args.terrain, args.texture, args.grid, args.exaggeration)
+        size = tuple(args.size)
+        self.paths = PathRenderer(scene, size, args.fov_y_deg)
+        try:
+            self.lod = args.lod
+            self.border = args.border
+            self.coarse_z = args.visibility == "coarse"
+            self.coarse = (RenderTarget(self.paths.ctx, *size, color=False) if self.coarse_z
+                           else None)
+            self.pacer = KeyframePacer(scene.hf, self.lod, args.epsilon, size[1], args.pace)
+        except BaseException:
+            self.paths.release()
+            raise
 
     def projection(self, viewpoint: Viewpoint):
         return self.paths.renderer.projection(viewpoint)

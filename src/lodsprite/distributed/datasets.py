@@ -1,0 +1,138 @@
+"""What a LOD server serves: built-in datasets, and files under one data folder.
+
+A client names its terrain and texture; the server never takes a path from it.  A name
+is either a built-in:
+
+* terrains ``jacksboro`` and ``fractal[:SIZE[:SEED]]`` with SIZE a power of two in
+  ``16 .. MAX_FRACTAL_SIZE``;
+* textures ``terrain`` and ``checker[:K]`` (K in 1..1024);
+
+or a file relative to the server's data folder (``lodsprite serve --data DIR``).  A file
+name that is absolute, holds a ``..`` component, or resolves (through symlinks) to a
+place outside DIR is refused; so is every file name when the server has no data folder.
+The client loads the same name itself (its coarse model and fallback texture), as in
+Swan et al. 2002 where both hosts hold the dataset.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path, PurePosixPath
+
+import numpy as np
+
+from lodsprite.errors import InputError, TerrainError
+from lodsprite.terrain.loaders import parse_fractal_spec
+from lodsprite.terrain.textures import CHECKER_SIZE
+
+MAX_FRACTAL_SIZE = 4096
+"""Largest ``fractal:SIZE`` a server generates (quads per side)."""
+MAX_SOURCE_SIDE = 16384
+"""Largest side (samples or texels) of a terrain or texture file a server reads."""
+JACKSBORO_SHAPE = (344, 403)
+
+
+@dataclass(frozen=True)
+class Dataset:
+    """A resolved name: ``spec`` for the loaders (a built-in spec or an absolute path
+    inside the data folder) and ``shape`` (rows, cols) of the source when known cheaply
+    (for the memory estimate; None when the file could not be peeked at)."""
+
+    spec: str
+    shape: tuple[int, int] | None
+    builtin: bool
+
+
+class Datasets:
+    """The names a server serves: built-ins, and files under ``data_dir`` (None: none)."""
+
+    def __init__(self, data_dir: Path | str | None = None) -> None:
+        self.data_dir: Path | None = None
+        if data_dir is not None:
+            root = Path(data_dir).expanduser()
+            if not root.is_dir():
+                raise InputError(f"data folder not found: {data_dir}")
+            self.data_dir = root.resolve()
+
+    def terrain(self, name: str) -> Dataset:
+        """The terrain named ``name``; raises :class:`InputError` with the reason."""
+        name = _clean(name, "terrain")
+        if name.lower() == "jacksboro":
+            return Dataset("jacksboro", JACKSBORO_SHAPE, True)
+        parsed = parse_fractal_spec(name)  # raises TerrainError when malformed
+        if parsed is not None:
+            size, _ = parsed
+            if not (16 <= size <= MAX_FRACTAL_SIZE and size & (size - 1) == 0):
+                raise InputError(f"fractal size {size} is not a power of two in "
+                                 f"16..{MAX_FRACTAL_SIZE}")
+            return Dataset(name, (size + 1, size + 1), True)
+        path = self._file(name, "terrain")
+        return Dataset(str(path), _peek_shape(path), False)
+
+    def texture(self, name: str) -> Dataset:
+        """The texture named ``name``; raises :class:`InputError` with the reason."""
+        name = _clean(name, "texture")
+        low = name.lower()
+        if low == "terrain":
+            return Dataset("terrain", None, True)  # the working grid's size
+        if low == "checker" or low.startswith("checker:"):
+            _, _, k = low.partition(":")
+            if k and not (k.isdigit() and 1 <= int(k) <= CHECKER_SIZE):
+                raise InputError(f"checker squares must be an integer in 1..{CHECKER_SIZE}, "
+                                 f"got {k!r}")
+            return Dataset(name, (CHECKER_SIZE, CHECKER_SIZE), True)
+        path = self._file(name, "texture")
+        return Dataset(str(path), _peek_shape(path), False)
+
+    def _file(self, name: str, what: str) -> Path:
+        if self.data_dir is None:
+            raise InputError(f"{what} {name!r} is not a built-in, and this server serves no "
+                             "files (start it with --data DIR)")
+        rel = PurePosixPath(name)
+        if rel.is_absolute() or name.startswith("~"):
+            raise InputError(f"{what} {name!r}: absolute paths are refused; name a file "
+                             "relative to the data folder")
+        if ".." in rel.parts:
+            raise InputError(f"{what} {name!r}: '..' is refused")
+        try:
+            path = (self.data_dir / rel).resolve(strict=True)
+        except (OSError, RuntimeError, ValueError):
+            raise InputError(f"{what} {name!r}: no such file in the data folder") from None
+        if not path.is_relative_to(self.data_dir):
+            raise InputError(f"{what} {name!r} leads outside the data folder")
+        if not path.is_file():
+            raise InputError(f"{what} {name!r} is not a file")
+        shape = _peek_shape(path)
+        if shape is not None and max(shape) > MAX_SOURCE_SIDE:
+            raise InputError(f"{what} {name!r} is {shape[1]}x{shape[0]}: more than "
+                             f"{MAX_SOURCE_SIDE} a side")
+        return path
+
+
+def _clean(name: str, what: str) -> str:
+    if not isinstance(name, str) or not name.strip() or "\x00" in name:
+        raise InputError(f"{what} name must be a non-empty string")
+    return name.strip()
+
+
+def _peek_shape(path: Path) -> tuple[int, int] | None:
+    """(rows, cols) of an image, GeoTIFF or .npy file without reading its data; None when
+    the file cannot be read this way (the loader then reports what is wrong)."""
+    suffix = path.suffix.lower()
+    try:
+        if suffix == ".npy":
+            a = np.load(path, mmap_mode="r", allow_pickle=False)
+            return (int(a.shape[0]), int(a.shape[1])) if a.ndim == 2 else None
+        if suffix in (".tif", ".tiff"):
+            import rasterio
+
+            with rasterio.open(path) as ds:
+                return int(ds.height), int(ds.width)
+        from PIL import Image
+
+        with Image.open(path) as img:
+            return int(img.size[1]), int(img.size[0])
+    except (TerrainError, InputError):
+        raise
+    except Exception:  # any reader's error: the loader names it properly later
+        return None
