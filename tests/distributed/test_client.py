@@ -1,29 +1,55 @@
-"""The LOD client's links to servers: shutting down never hangs."""
+"""The LOD client: its links to servers, its keyframe receiver, and the error it shows."""
 
 import threading
 import time
 
+import msgpack
 import numpy as np
 import pytest
 import zmq
 
 from lodsprite.distributed.link import ServerLink
 
+PING = {"kind": "control", "seq": 1, "op": "ping", "args": {}}
 
-def test_a_closed_server_link_answers_at_once_and_opens_no_socket():
+
+def test_a_closed_server_link_answers_none_and_opens_no_socket():
     # Regression: the control thread could open a new control socket after close() (a
     # request timing out during shutdown), and the context's term() then waited forever.
     ctx = zmq.Context()
     link = ServerLink(ctx, "127.0.0.1:59997")  # nothing listens there
     link.close()
-    t0 = time.perf_counter()
-    assert link.request({"kind": "control", "seq": 1, "op": "ping", "args": {}}) is None
-    assert time.perf_counter() - t0 < 0.5
+    assert link.request(PING) is None
     assert link.control is None
     ender = threading.Thread(target=ctx.term, daemon=True)
     ender.start()
-    ender.join(5.0)
+    ender.join(10.0)  # a hang guard, not a speed: term() waits for every open socket
     assert not ender.is_alive()
+
+
+def test_a_request_to_a_dead_server_answers_none_and_the_next_one_uses_a_new_socket():
+    """A REQ socket that got no answer cannot send again: the link drops it, and a later
+    request reaches a server that has come up meanwhile."""
+    from lodsprite.distributed.run import free_ports
+
+    port = free_ports()
+    ctx = zmq.Context()
+    link = ServerLink(ctx, f"127.0.0.1:{port}")
+    stop = threading.Event()
+    server = None
+    try:
+        assert link.request(PING) is None
+        assert link.control is None  # the socket stuck in "awaiting a reply" is gone
+        server = _fake_server(port, lambda h: {"data": {"pong": h["seq"]}}, stop)
+        reply = link.request({**PING, "seq": 2})
+        assert reply is not None and reply["ok"] and reply["data"] == {"pong": 2}
+        assert link.control is not None
+    finally:
+        stop.set()
+        if server is not None:
+            server.join(5.0)
+        link.close()
+        ctx.destroy(linger=0)
 
 
 def _fake_server(port: int, answer, stop: threading.Event) -> threading.Thread:
@@ -128,14 +154,18 @@ class _FakeLodServer:
         return LodClient(self.scene, scene_args(c.terrain, c.texture, None, 1.0, c.size),
                          [f"127.0.0.1:{self.port}"], c.size, c.lod, **kw)
 
-    def send(self, seq, vp):
+    def message(self, seq, vp, size=64) -> list:
+        """The frames of a well-formed keyframe message (images ``size`` x ``size``)."""
         from lodsprite.camera import Projection
         from lodsprite.distributed.protocol import Keyframe, encode_keyframe
 
-        self.keys.send_multipart(encode_keyframe(Keyframe(
+        return [bytes(f) for f in encode_keyframe(Keyframe(
             seq, 0.0, vp, Projection(45.0, 1.0, 1.0, 1e5),
-            self.rng.integers(0, 256, (64, 64, 3), dtype=np.uint8),
-            np.full((64, 64), 0.5, np.float32))))
+            self.rng.integers(0, 256, (size, size, 3), dtype=np.uint8),
+            np.full((size, size), 0.5, np.float32)))]
+
+    def send(self, seq, vp, size=64):
+        self.keys.send_multipart(self.message(seq, vp, size))
 
     def close(self):
         self.stop.set()
@@ -157,7 +187,7 @@ def test_viewpoint_messages_name_the_shown_keyframe_for_the_servers_pacing(fake)
     once a keyframe is shown, every viewpoint message carries its eye."""
     from lodsprite.distributed.protocol import decode
 
-    client = fake.client()
+    client = fake.client(max_error=None)  # the paper's client: the far keyframe is shown
     views = fake.views
 
     def next_header(vp) -> dict:
@@ -211,5 +241,120 @@ def test_adopt_better_keeps_the_shown_keyframe_until_a_newer_one_serves_better(f
         assert "keyframe" not in types(near)  # the far one serves worse here: kept back
         assert types(far)[0] == "keyframe"     # ... and taken once the viewer is there
         assert client.shown[-1]["seq"] == 2
+    finally:
+        client.close()
+
+
+def _until(client, vp, kind, timeout=30.0):
+    """Draw ``vp`` until a frame of ``kind``; the deadline only guards against a hang."""
+    deadline = time.perf_counter() + timeout
+    while True:
+        f = client.frame(vp)
+        if f.type == kind:
+            return f
+        assert time.perf_counter() < deadline, f"no {kind} frame came"
+        time.sleep(0.01)
+
+
+def _with_header(frames: list, change) -> list:
+    """A keyframe message whose msgpack header ``change(header)`` has altered."""
+    header = msgpack.unpackb(frames[0], raw=False)
+    assert isinstance(header, dict)
+    change(header)
+    return [msgpack.packb(header, use_bin_type=True), *frames[1:]]
+
+
+def _float_in_shape(header: dict) -> None:
+    header["color"]["shape"] = [64, 64, 3.0]
+
+
+def test_the_receiver_survives_hostile_keyframes_counts_them_and_shows_the_next_good_one(fake):
+    """Regression: a float in a shape killed the receiver thread, and the client then
+    showed its last keyframe forever.  No message may stop it; each is counted."""
+    client = fake.client(max_error=None)
+    vp = fake.path.viewpoints[2]
+    good = fake.message(1, vp)
+    hostile = [
+        [b"\x00garbage"],                                          # not msgpack
+        [b"\xc1"],                                                 # msgpack's unused byte
+        [msgpack.packb([1, 2, 3])],                                # not a map
+        _with_header(good, lambda h: h.update(seq="one")),         # wrong types
+        _with_header(good, lambda h: h.update(viewpoint=[1, 2])),
+        _with_header(good, _float_in_shape),                       # a float in a shape
+        _with_header(good, lambda h: h["color"].update(shape=[1 << 40, 1 << 40, 3])),
+        good[:1],                                                  # no images
+        good[:1] + [good[1][:100], good[2]],                       # truncated image
+        fake.message(7, vp, size=32),  # well-formed, not this client's keyframe size
+    ]
+    try:
+        for m in hostile:
+            fake.keys.send_multipart(m)
+        fake.keys.send_multipart(good)
+        f = _until(client, vp, "keyframe")
+        assert client.shown[f.keyframe_index]["seq"] == 1  # seq 7 did not count as taken
+        assert client.rejected_keyframes == len(hostile)
+        assert all(t.is_alive() for t in client._threads)
+        fake.send(2, fake.path.viewpoints[3])  # and it goes on receiving
+        f = _until(client, vp, "keyframe")
+        assert client.shown[f.keyframe_index]["seq"] == 2
+    finally:
+        client.close()
+
+
+@pytest.mark.parametrize("max_error", [None, 1.0])
+def test_the_bounded_client_renders_its_own_keyframe_when_the_shown_one_is_too_far(
+        fake, max_error):
+    """With ``max_error`` the client renders its own keyframe where the server's shown
+    keyframe's error reaches it; the paper's client (None) keeps showing the far one."""
+    from lodsprite.camera import Viewpoint
+    from lodsprite.distributed.quality import Replayer
+    from lodsprite.sprite.policy import keyframe_error_px
+
+    client = fake.client(max_error=max_error)
+    near, far = fake.path.viewpoints[2], fake.path.viewpoints[11]
+    try:
+        fake.send(1, near)
+        _until(client, near, "keyframe")
+        r = client.paths.renderer
+        # the server keyframe is out of bounds at `far`, as the metric measures it
+        assert keyframe_error_px(client.metric, client.metric.reproject(near.o), far,
+                                 r.projection(far), r.target.height) >= 1.0
+        f = client.frame(far)
+        drawn = client.image()
+        again = client.frame(far)
+        shown = list(client.shown)
+    finally:
+        client.close()
+    if max_error is None:
+        assert (f.type, again.type) == ("sprite", "sprite") and f.keyframe_seq == 1
+        return
+    assert (f.type, again.type) == ("local_keyframe", "local_sprite")
+    assert f.keyframe_seq == 0 and again.keyframe_index == f.keyframe_index
+    own = shown[f.keyframe_index]
+    assert own["local"] and own["seq"] == 0
+    assert Viewpoint.from_dict(own["viewpoint"]).to_dict() == far.to_dict()
+    # The replay draws this frame from the logged viewpoint as the client drew it.
+    with Replayer(fake.cfg) as replayer:
+        replayed = replayer.draw(Viewpoint.from_dict(own["viewpoint"]), far)
+    diff = np.abs(replayed.astype(int) - drawn.astype(int))
+    assert diff.mean() < 0.05 and diff.max() <= 2
+
+
+def test_the_bounded_client_keeps_a_far_server_keyframe_back_until_it_serves(fake):
+    """A server keyframe whose error here reaches the bound is not shown (the client would
+    replace it at once), even under ``adopt="newest"``, until the viewer is where it serves."""
+    client = fake.client(max_error=1.0)
+    near, far = fake.path.viewpoints[2], fake.path.viewpoints[11]
+    try:
+        fake.send(1, near)
+        _until(client, near, "keyframe")
+        fake.send(2, far)
+        deadline = time.perf_counter() + 30.0
+        while client._pending is None:  # until the far keyframe has been received
+            assert client.frame(near).type == "sprite"
+            assert time.perf_counter() < deadline, "the second keyframe never arrived"
+        assert [client.frame(near).type for _ in range(3)] == ["sprite"] * 3
+        f = client.frame(far)
+        assert f.type == "keyframe" and f.keyframe_seq == 2
     finally:
         client.close()

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from lodsprite.camera import Viewpoint
-from lodsprite.distributed.client import LodClient
+from lodsprite.distributed.client import DEFAULT_MAX_ERROR, LodClient
 from lodsprite.distributed.render import scene_args
 from lodsprite.distributed.reproduce import SETUPS
 from lodsprite.distributed.run import free_ports
@@ -60,12 +60,15 @@ def test_render_mode_distributed_writes_frames_and_server_statistics(tmp_path):
     rows = list(csv.DictReader((out / "frames.csv").open()))
     assert len(rows) == 30
     summary = json.loads((out / "summary.json").read_text())
-    assert summary["keyframes_received"] >= 1
     assert summary["delta_t_ms_mean"] > 0 and summary["render_ms_mean"] > 0
     assert summary["paced_ms_mean"] >= 0
+    assert summary["max_error"] == DEFAULT_MAX_ERROR and summary["rejected_keyframes"] == 0
     keys = json.loads((out / "keyframes.json").read_text())["keyframes"]
     shown = [int(r["keyframe"]) for r in rows]
-    assert len(keys) >= 1 and max(shown) == len(keys) - 1 and min(shown) >= -1
+    # every frame names the keyframe it showed (the server's or the client's own)
+    assert max(shown) == len(keys) - 1 and min(shown) >= 0
+    assert any(not k["local"] for k in keys)  # the server's keyframes reached the client
+    assert summary["local_keyframes"] == sum(r["type"] == "local_keyframe" for r in rows)
 
 
 @pytest.fixture
@@ -75,7 +78,7 @@ def scene():
 
 def test_client_keeps_drawing_when_the_server_dies_and_resumes_when_it_returns(scene):
     sc, path = scene
-    address, server, client = server_and_client(sc)
+    address, server, client = server_and_client(sc, max_error=None)  # the paper's client
     try:
         assert wait_for(client, path.viewpoints[0])
         stop(server)
@@ -94,24 +97,58 @@ def test_client_keeps_drawing_when_the_server_dies_and_resumes_when_it_returns(s
 
 @pytest.mark.parametrize("pace", ["needed", "continuous"])
 def test_a_still_viewer_gets_one_keyframe_unless_the_server_renders_continuously(scene, pace):
+    """A viewer that does not move needs one keyframe: with pace ``needed`` no other comes
+    over 60 frames, while a ``continuous`` server keeps sending (its 3 further keyframes
+    are awaited with a deadline that only guards against a hang)."""
     sc, path = scene
-    _, server, client = server_and_client(sc, pace=pace)
+    _, server, client = server_and_client(sc, pace=pace, max_error=None)
+    vp = path.viewpoints[0]
     try:
-        assert wait_for(client, path.viewpoints[0])
-        frames = []
-        t_end = time.perf_counter() + 1.5
-        while time.perf_counter() < t_end:
-            frames.append(client.frame(path.viewpoints[0]))
-            time.sleep(0.01)
+        assert wait_for(client, vp)
+        received = 0
+        if pace == "needed":
+            for _ in range(60):
+                received += client.frame(vp).type == "keyframe"
+                time.sleep(0.01)
+        else:
+            deadline = time.perf_counter() + 60.0
+            while received < 3 and time.perf_counter() < deadline:
+                received += client.frame(vp).type == "keyframe"
+                time.sleep(0.01)
         stats = client.server_stats()[0]
     finally:
         client.close(shutdown_servers=True)
         stop(server)
-    received = sum(f.type == "keyframe" for f in frames)
     if pace == "needed":
         assert received == 0 and len(stats["render_ms"]) == 1
     else:
-        assert received >= 3 and len(stats["render_ms"]) >= 4
+        assert received == 3 and len(stats["render_ms"]) >= 4
+
+
+def test_a_bounded_client_renders_its_own_keyframes_once_the_server_is_gone(scene):
+    """With ``max_error`` the client does not show the last server keyframe forever: when
+    the viewer moves on after the server died, it renders its own keyframes, and every
+    frame it draws stays under the bound as the replay measures it."""
+    from lodsprite.distributed.quality import Replayer
+
+    sc, path = scene
+    _, server, client = server_and_client(sc, max_error=1.0)
+    try:
+        assert wait_for(client, path.viewpoints[0])
+        stop(server)
+        frames = [client.frame(vp) for vp in path.viewpoints]
+        shown = list(client.shown)
+    finally:
+        client.close()
+        stop(server)
+    types = [f.type for f in frames]
+    assert "local_keyframe" in types and set(types) <= {"keyframe", "sprite", "local_keyframe",
+                                                        "local_sprite"}
+    keys = [Viewpoint.from_dict(k["viewpoint"]) for k in shown]
+    with Replayer(SMALL, stride=len(frames)) as replayer:
+        res = replayer.replay(keys, np.array([f.keyframe_index for f in frames]))
+    assert res["replayed_frames"] == len(frames)
+    assert res["error_px_max"] < 1.0 and res["over_epsilon"] == 0.0
 
 
 def test_client_without_any_server_renders_keyframes_itself(scene):
@@ -219,10 +256,19 @@ def test_reproduce_swan2002_quick_writes_all_setups(tmp_path):
     for setup in ("inline", "separate"):
         image = results[setup]["image"]
         assert image["replayed_frames"] > 0 and image["rmse_sprite_mean"] > 0
-    assert results["inline"]["image"]["over_epsilon"] == 0.0
+    # Both client policies side by side; the bounded one's frames all replayed (its own
+    # keyframes logged), none at or above its bound.
+    pairs = {p["setup"]: p for p in results["policies"]}
+    assert set(pairs) == {"separate", "same_cores"}
+    bounded = results["separate_bounded"]
+    assert bounded["max_error"] == DEFAULT_MAX_ERROR and bounded["rejected_keyframes"] == 0
+    assert bounded["image"]["replayed_frames"] == len(bounded["per_frame_ms"])
+    assert bounded["image"]["error_px_max"] < DEFAULT_MAX_ERROR
+    assert pairs["separate"]["paper"]["client_ms_std"] == results["separate"]["client_ms_std"]
     report = (out / "report.md").read_text()
     assert report.count("61.9") >= 1 and "`separate` ÷ `same_cores`" in report
     assert "## Image error, replayed" in report and (out / "image_error.png").exists()
+    assert "## The client's policies" in report and (out / "policies.png").exists()
 
 
 def test_curve_keys_admit_the_right_client_and_refuse_a_wrong_one(scene, tmp_path):
@@ -277,3 +323,23 @@ def test_a_replayed_frame_is_the_frame_the_client_drew(scene):
         again = replayer.draw(Viewpoint.from_dict(key["viewpoint"]), path.viewpoints[11])
     diff = np.abs(again.astype(int) - drawn.astype(int))
     assert diff.mean() < 0.05 and diff.max() <= 2  # stated tolerance, in grey levels
+
+
+@pytest.mark.parametrize("value", ["-1", "0", "nan", "much"])
+def test_client_refuses_a_max_error_that_is_not_pixels_or_off(value):
+    proc = subprocess.run([sys.executable, "-c", "from lodsprite.cli import main; main()",
+                           "client", "--server", "127.0.0.1:1", "--max-error", value],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2 and "--max-error" in proc.stderr
+    assert len(proc.stderr.strip().splitlines()) == 1
+
+
+def test_max_error_parses_pixels_off_and_the_default():
+    from lodsprite.distributed.run import parse_max_error
+    from lodsprite.errors import InputError
+
+    assert parse_max_error(None) == DEFAULT_MAX_ERROR
+    assert parse_max_error("off") is None and parse_max_error("None") is None
+    assert parse_max_error("2.5") == 2.5
+    with pytest.raises(InputError):
+        parse_max_error("-0.5")

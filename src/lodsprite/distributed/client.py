@@ -12,20 +12,40 @@ keyframe only when one is due).  With ``adopt="better"`` a newer keyframe is sho
 once its error metric at the current viewpoint is lower than the shown one's: a keyframe
 placed by a viewpoint prediction that overshot waits until the viewer reaches it,
 instead of replacing a better one.  The receiver computes each keyframe's ``C'`` (about
-2 ms) off the frame loop; a frame then costs two metric evaluations (about 0.04 ms
-each).  It never waits for a keyframe: with none yet (no server, or
-a server that died before sending one) it renders keyframes itself with the 1999
-algorithm.
+2 ms) off the frame loop; a frame then costs one or two metric evaluations (about
+0.04 ms each).
+
+The client's own keyframes (Chen, Swan & Kaufman 1999, §3.1 step 1, rendered in the
+frame loop at the current viewpoint, as the inline algorithm does):
+
+* before any server keyframe is shown (no server yet, or none that answers), whenever
+  the error metric (Eq. 2, :func:`~lodsprite.sprite.policy.keyframe_error_px`) of the
+  shown keyframe reaches ε: the 1999 algorithm;
+* afterwards only with ``max_error`` (pixels): when the shown keyframe's error at the
+  current viewpoint reaches it (``inf``, nothing measurable, included) and no better
+  server keyframe has arrived.  A server keyframe whose error here is ``max_error`` or
+  more is then kept back (it would be replaced at once) until the viewer is where it
+  serves.  Without ``max_error`` (the paper's client) a server keyframe, once shown, is
+  shown until a newer one is taken, however far the viewer has gone from it.
+
+Frames drawn from the client's own keyframes are ``local_keyframe`` (rendered this
+frame) and ``local_sprite``.  Every frame, keyframe frames included, is a spriteframe
+drawn from the keyframe it shows, and every keyframe shown (server or own) is logged in
+:attr:`LodClient.shown`, so that :mod:`lodsprite.distributed.quality` can replay each
+frame exactly.
 
 KEYFRAME-RECEIVER (a thread): receives keyframes from every server (without copying
 them: the images are views of the received frames and go to the textures as they are),
 acknowledges them, drops any not newer than the last one from the same server, and
-queues the rest.  CLIENT-CONTROL (a thread): loads the scene on each server (with the
-client's coarse level, visibility rule, ε and pace, so that the server sends the
-z-buffer this client reads and keyframes when it needs them) and starts it, pings every
-second and loads again when a server comes back after a restart.  When no server
-answers, the client says so once and draws from its last keyframe; it says so again
-when one is back.
+queues the rest.  It refuses malformed messages, keyframes whose images are not this
+client's keyframe size (the image size: the client's sprite renderer has no guard
+band) and anything else a message may cause, counts them
+(:attr:`LodClient.rejected_keyframes`) and goes on: no message stops it.
+CLIENT-CONTROL (a thread): loads the scene on each server (with the client's coarse
+level, visibility rule, ε and pace, so that the server sends the z-buffer this client
+reads and keyframes when it needs them) and starts it, pings every second and loads
+again when a server comes back after a restart.  When no server answers, the client
+says so once and draws from its last keyframe; it says so again when one is back.
 """
 
 from __future__ import annotations
@@ -54,21 +74,39 @@ from lodsprite.errors import InputError
 from lodsprite.gl.paths import PathRenderer
 from lodsprite.gl.sprite import SpriteRenderer
 from lodsprite.scene import Scene
-from lodsprite.sprite.engine import LodSpriteEngine
+from lodsprite.sprite.metric import ErrorMetric
 from lodsprite.sprite.policy import keyframe_error_px
 
 log = logging.getLogger("lodsprite.client")
 
 ADOPT_MODES = ("needed", "newest", "better")
 ADOPT_FRACTION = 0.5
+#: The client's bound on the error of the frames it shows, pixels (None: no bound, the
+#: paper's client).  4 px, chosen from ``lodsprite reproduce swan2002`` and a sweep of
+#: bounds (README): the worst frame shows 4 px instead of the paper client's tens to
+#: hundreds, for about 2 % of frames rendered locally; a bound of ε (1 px) turns half
+#: the keyframes into the client's own and multiplies the frame-time σ by about 20.
+DEFAULT_MAX_ERROR: float | None = 4.0
+
+
+def check_max_error(max_error: float | None) -> float | None:
+    """``max_error`` as a float in pixels, or None (no bound); raises :class:`InputError`
+    unless it is None or a number > 0."""
+    if max_error is None:
+        return None
+    value = float(max_error)
+    if not value > 0:  # NaN too
+        raise InputError(f"--max-error must be > 0 pixels (or off), got {max_error}")
+    return value
 
 
 @dataclass(frozen=True)
 class ClientFrame:
     """One client frame: ``type`` is ``keyframe`` (a server keyframe was taken this frame),
-    ``sprite``, or ``local_keyframe`` / ``local_sprite`` (drawn without any server
-    keyframe); wall time in ms; triangles drawn; the shown server keyframe's sequence
-    number and its index in :attr:`LodClient.shown` (0 and -1 when none)."""
+    ``sprite`` (drawn from a server keyframe), ``local_keyframe`` (the client rendered its
+    own keyframe this frame) or ``local_sprite`` (drawn from the client's own keyframe);
+    wall time in ms; triangles drawn; the shown server keyframe's sequence number (0 when
+    the client shows its own) and the shown keyframe's index in :attr:`LodClient.shown`."""
 
     type: str
     ms: float
@@ -78,38 +116,54 @@ class ClientFrame:
 
 
 class LodClient:
-    """Spriteframes along any viewpoint stream, keyframes from one or more LOD servers."""
+    """Spriteframes along any viewpoint stream, keyframes from one or more LOD servers.
+
+    ``max_error``: bound (pixels) on the error of the keyframe shown, above which the
+    client renders its own keyframe; None: no bound (the paper's client).
+    """
 
     def __init__(self, scene: Scene, scene_args: dict, servers: list[str],
                  size: tuple[int, int] = (512, 512), lod: int = 16,
                  visibility: str = "coarse", epsilon: float = 1.0,
                  adopt: str = "newest", keys: ClientKeys | None = None,
-                 border: bool = True, pace: str = DEFAULT_PACE) -> None:
+                 border: bool = True, pace: str = DEFAULT_PACE,
+                 max_error: float | None = DEFAULT_MAX_ERROR) -> None:
         if adopt not in ADOPT_MODES:
             raise InputError(f"adopt must be one of {', '.join(ADOPT_MODES)}, got {adopt!r}")
         if pace not in PACES:
             raise InputError(f"pace must be one of {', '.join(PACES)}, got {pace!r}")
+        if not epsilon > 0:
+            raise InputError(f"error threshold epsilon must be > 0 pixels, got {epsilon}")
         self.adopt = adopt
+        self.epsilon_px = float(epsilon)
+        self.max_error = check_max_error(max_error)
         # (server slot, keyframe, C' or None) received and not shown yet
         self._pending: tuple[int, Keyframe, np.ndarray | None] | None = None
-        self._c_prime = None
+        # C' of the shown keyframe (None: nothing shown yet, or a server keyframe whose
+        # C' no rule here reads)
+        self._c_prime: np.ndarray | None = None
+        self._own = False  # whether the shown keyframe is the client's own
         self.scene_args = {**scene_args, "lod": lod, "visibility": visibility,
                            "border": border, "epsilon": float(epsilon), "pace": pace}
         self.paths = PathRenderer(scene, size, float(scene_args.get("fov_y_deg", 45.0)))
         self.sprite = SpriteRenderer(self.paths.renderer, lod, visibility, border=border,
                                      guard_px=0)
-        self.local = LodSpriteEngine(self.sprite, epsilon)
+        self.metric = ErrorMetric.for_level(scene.hf, lod)
         self.queue: KeyframeQueue[tuple[int, Keyframe, np.ndarray | None]] = KeyframeQueue(2)
         self._zmq = zmq.Context()
         self._servers = [ServerLink(self._zmq, a, keys) for a in servers]
         self._stop = threading.Event()
         self._counter = itertools.count(1)
-        self._current: Keyframe | None = None
-        # Every server keyframe taken, in order: {slot, seq, t0, viewpoint} (to replay
-        # the frames afterwards and measure their image error).
+        self._current: Keyframe | None = None  # the last server keyframe taken
+        # Every keyframe shown, in order: {slot, seq, t0, viewpoint, local} (to replay
+        # the frames afterwards and measure their image error).  The client's own have
+        # ``local: true``, ``seq`` 0 and the slot of the last server keyframe shown (0
+        # before any): the servers' turns (pacing) go on from that server.
         self.shown: list[dict] = []
+        self.local_keyframes = 0
         self._silent = False
-        self.rejected_messages = 0
+        self.rejected_keyframes = 0
+        self._logged: set[str] = set()  # kinds of rejection said once already
         self._threads = [threading.Thread(target=self._receive, daemon=True),
                          threading.Thread(target=self._control, daemon=True)]
         for t in self._threads:
@@ -132,30 +186,61 @@ class LodClient:
             poller.register(s.keyframes, zmq.POLLIN)
         by_socket = {s.keyframes: (i, s) for i, s in enumerate(self._servers)}
         while not self._stop.is_set():
-            for sock, _ in poller.poll(50):
+            try:
+                ready = poller.poll(50)
+            except zmq.ZMQError as exc:  # a socket closed under it: only while closing
+                if not self._stop.wait(0.05):
+                    log.debug("keyframe poll failed: %s", exc)
+                continue
+            for sock, _ in ready:
                 slot, s = by_socket[sock]
-                frames = sock.recv_multipart(copy=False)
                 try:
-                    kf = decode_keyframe(frames)
-                except ProtocolError as exc:
-                    self.rejected_messages += 1
-                    log.warning("rejected keyframe from %s: %s", s.address, exc)
-                    continue
-                sock.send_multipart(encode({"kind": "ack", "seq": kf.seq,
-                                            "t": time.perf_counter()}))
-                if kf.seq <= s.last_seq:
-                    continue  # older than one already taken from this server
-                s.last_seq = kf.seq
-                # C' for the adoption rules that compare errors, computed here, not in
-                # the frame loop
-                c_prime = (None if self.adopt == "newest"
-                           else self.local.metric.reproject(kf.viewpoint.o))
-                try:
-                    if not self.queue.put((slot, kf, c_prime), timeout=0):
-                        self.queue.drain()  # full: newest wins
-                        self.queue.put((slot, kf, c_prime), timeout=0)
-                except Closed:
-                    return  # the client is closing
+                    if not self._take(slot, s, sock):
+                        return  # the client is closing
+                except Exception as exc:  # noqa: BLE001 - no message may stop the receiver
+                    self._reject(s, exc)
+
+    def _take(self, slot: int, s: ServerLink, sock: zmq.Socket) -> bool:
+        """Receive one message from server ``slot``; queue it if it is a newer keyframe
+        this client can show.  Raises for anything else; False once the queue is closed."""
+        frames = sock.recv_multipart(copy=False)
+        kf = decode_keyframe(frames)
+        sock.send_multipart(encode({"kind": "ack", "seq": kf.seq,
+                                    "t": time.perf_counter()}))
+        self._check_fits(kf)
+        if kf.seq <= s.last_seq:
+            return True  # older than one already taken from this server
+        # C' for the rules that compare errors, computed here, not in the frame loop
+        c_prime = (None if self.adopt == "newest" and self.max_error is None
+                   else self.metric.reproject(kf.viewpoint.o))
+        s.last_seq = kf.seq
+        try:
+            if not self.queue.put((slot, kf, c_prime), timeout=0):
+                self.queue.drain()  # full: newest wins
+                self.queue.put((slot, kf, c_prime), timeout=0)
+        except Closed:
+            return False
+        return True
+
+    def _check_fits(self, kf: Keyframe) -> None:
+        """Raise :class:`ProtocolError` unless ``kf`` can be uploaded here: images of this
+        client's keyframe size and a z-buffer its visibility rule reads."""
+        w, h = self.sprite.key_targets[0].size
+        if kf.color.shape != (h, w, 3) or kf.depth.shape != (h, w):
+            raise ProtocolError(f"keyframe images must be {w}x{h}, got colour "
+                                f"{kf.color.shape}, depth {kf.depth.shape}")
+        if kf.zbuffer not in ("full", "coarse") or (kf.zbuffer == "coarse"
+                                                    and self.sprite.visibility != "coarse"):
+            raise ProtocolError(f"a {kf.zbuffer!r} z-buffer does not serve the "
+                                f"{self.sprite.visibility!r} visibility rule")
+
+    def _reject(self, s: ServerLink, exc: BaseException) -> None:
+        """Count a refused message; say it once per kind of fault."""
+        self.rejected_keyframes += 1
+        kind = type(exc).__name__
+        level = logging.DEBUG if kind in self._logged else logging.WARNING
+        self._logged.add(kind)
+        log.log(level, "rejected keyframe message from %s (%s): %s", s.address, kind, exc)
 
     # ------------------------------------------------------------ SPRITEFRAME-RENDERER
 
@@ -167,34 +252,51 @@ class LodClient:
         if self._current is not None:
             last = self.shown[-1]  # the shown keyframe, for the servers' pacing
             header["shown"] = {"eye": last["viewpoint"]["o"], "slot": last["slot"]}
-        msg = encode(header)
         for s in self._servers:
-            try:
-                s.viewpoint.send_multipart(msg, flags=zmq.NOBLOCK)
-            except zmq.Again:
-                pass
+            s.send_viewpoint(header)  # adds the link's client id
+        projection = self.paths.renderer.projection(viewpoint)
         newest = self.queue.drain()
-        kind = "sprite"
+        kind = "local_sprite" if self._own else "sprite"
+        triangles = 0
         if newest is not None:
             self._pending = newest
-        if self._pending is not None and self._should_adopt(viewpoint, self._pending[2]):
+        if self._pending is not None and self._should_adopt(viewpoint, projection,
+                                                            self._pending[2]):
             (slot, kf, self._c_prime), self._pending = self._pending, None
             self.sprite.upload_keyframe(kf.viewpoint, kf.projection, kf.color, kf.depth, kf.t0,
                                         kf.zbuffer)
-            self._current, kind = kf, "keyframe"
+            self._current, self._own, kind = kf, False, "keyframe"
             self.shown.append({"slot": slot, "seq": kf.seq, "t0": kf.t0,
-                               "viewpoint": kf.viewpoint.to_dict()})
-        if self._current is None:
-            f = self.local.frame(viewpoint)
-            kind = "local_keyframe" if f.type == "keyframe" else "local_sprite"
-            triangles = f.triangles
-        else:
-            triangles = self.sprite.render_spriteframe(viewpoint).triangles
-            self.paths.ctx.finish()
+                               "viewpoint": kf.viewpoint.to_dict(), "local": False})
+        if self._own_keyframe_due(viewpoint, projection):
+            triangles += self.sprite.render_keyframe(viewpoint, t0, projection).triangles
+            self._c_prime, self._own = self.metric.reproject(viewpoint.o), True
+            kind = "local_keyframe"
+            self.local_keyframes += 1
+            self.shown.append({"slot": self.shown[-1]["slot"] if self.shown else 0, "seq": 0,
+                               "t0": t0, "viewpoint": viewpoint.to_dict(), "local": True})
+        triangles += self.sprite.render_spriteframe(viewpoint, projection).triangles
+        self.paths.ctx.finish()
         self._say_link_state()
-        seq = self._current.seq if self._current is not None else 0
+        seq = self._current.seq if self._current is not None and not self._own else 0
         return ClientFrame(kind, (time.perf_counter() - t0) * 1e3, triangles, seq,
                            len(self.shown) - 1)
+
+    def _error(self, c_prime: np.ndarray, viewpoint, projection) -> float:
+        """Error (pixels, Eq. 2) of the keyframe with ``C' = c_prime`` here; may be inf."""
+        return keyframe_error_px(self.metric, c_prime, viewpoint, projection,
+                                 self.sprite.target.height)
+
+    def _own_keyframe_due(self, viewpoint, projection) -> bool:
+        """Whether to render the client's own keyframe: nothing shown yet, or the shown
+        keyframe's error here reached the bound (ε before any server keyframe was taken,
+        then ``max_error``; inf and NaN reach any bound)."""
+        if not self.shown:
+            return True
+        bound = self.epsilon_px if self._current is None else self.max_error
+        if bound is None:
+            return False
+        return not self._error(self._c_prime, viewpoint, projection) < bound
 
     def _say_link_state(self) -> None:
         """Say once when no server answers any more, and once when one answers again."""
@@ -207,24 +309,31 @@ class LodClient:
             self._silent = False
             log.warning("a LOD server answers again")
 
-    def _should_adopt(self, viewpoint, c_prime: np.ndarray | None) -> bool:
-        """``newest`` (the paper): take every newer keyframe.  ``needed``: keep the current
-        keyframe while the error metric of this viewpoint against it stays under
-        ``ADOPT_FRACTION`` ε, sparing the upload.  ``better``: take the newer keyframe
-        once its error here is lower than the current one's."""
-        if self._current is None or self.adopt == "newest":
+    def _should_adopt(self, viewpoint, projection, c_prime: np.ndarray | None) -> bool:
+        """Whether to show the pending server keyframe (``C' = c_prime``) now.
+
+        With ``max_error``, never one whose error here is ``max_error`` or more (the
+        client's own keyframe would replace it at once).  Then ``newest`` (the paper):
+        take every newer keyframe; ``needed``: keep the current keyframe while its error
+        here stays under ``ADOPT_FRACTION`` ε, sparing the upload; ``better``: take the
+        newer keyframe once its error here is lower than the current one's.  The first
+        server keyframe is always taken (when it is within ``max_error``)."""
+        new = None
+        if self.max_error is not None:
+            new = self._error(c_prime, viewpoint, projection)
+            if not new < self.max_error:
+                return False
+        if self._current is None or self.adopt == "newest" or self._c_prime is None:
             return True
-        projection = self.paths.renderer.projection(viewpoint)
-        height = self.sprite.target.height
-        err = keyframe_error_px(self.local.metric, self._c_prime, viewpoint, projection, height)
+        err = self._error(self._c_prime, viewpoint, projection)
         if self.adopt == "needed":
-            return err >= ADOPT_FRACTION * self.local.epsilon_px
-        return keyframe_error_px(self.local.metric, c_prime, viewpoint, projection, height) < err
+            return not err < ADOPT_FRACTION * self.epsilon_px
+        if new is None:
+            new = self._error(c_prime, viewpoint, projection)
+        return new < err
 
     def image(self):
-        """The last frame's image, ``(H, W, 3) uint8``."""
-        if self._current is None:
-            return self.local.read_image()
+        """The last frame's image, ``(H, W, 3) uint8``, row 0 at the top."""
         return self.sprite.target.read_color()
 
     def server_stats(self) -> list[dict]:

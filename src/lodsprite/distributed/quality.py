@@ -1,12 +1,14 @@
 """Image error of a distributed run, measured afterwards by replaying what the client drew.
 
 A timed run must not read its frames back: that would change the times it measures.
-Instead the client records every server keyframe it took (``keyframes.json``: slot,
-sequence number, viewpoint) and, for every frame, which of them it showed
-(``frames.csv``, column ``keyframe``).  A keyframe is a function of its viewpoint: the
-server renders the full-resolution terrain through the renderer's projection for that
-viewpoint, as :class:`~lodsprite.gl.sprite.SpriteRenderer` does with no guard band.  So,
-untimed, every frame can be drawn again as the client drew it and measured:
+Instead the client records every keyframe it showed (``keyframes.json``: slot, sequence
+number, viewpoint; ``local: true`` for the client's own, rendered in its frame loop)
+and, for every frame, which of them it showed (``frames.csv``, column ``keyframe``).  A
+keyframe is a function of its viewpoint: the server, and the client for its own, render
+the full-resolution terrain through the renderer's projection for that viewpoint, as
+:class:`~lodsprite.gl.sprite.SpriteRenderer` does with no guard band; and every client
+frame is a spriteframe from the keyframe it shows.  So, untimed, every frame can be
+drawn again as the client drew it and measured:
 
 * the LOD-sprite error metric (Chen, Swan & Kaufman 1999, Eq. 2: ``sqrt(mean θ²) / β``,
   pixels) of every frame against the keyframe it showed: how far, and how often, the
@@ -14,7 +16,9 @@ untimed, every frame can be drawn again as the client drew it and measured:
 * RMSE, PSNR and SSIM against the full-resolution frame on every ``stride``-th frame,
   beside the plain coarse level's (:func:`lodsprite.run.frame_quality`).
 
-Frames drawn before any server keyframe (``local_*``) are left out.
+Frames that name no keyframe (index -1, runs recorded before the client logged its own
+keyframes) are left out.  A frame whose error cannot be measured (no coarse square in
+view: ``inf``) counts as at or above ε; means and percentiles are over the measured ones.
 """
 
 from __future__ import annotations
@@ -39,6 +43,7 @@ from lodsprite.run import (
     sprite_frames,
 )
 from lodsprite.sprite.metric import ErrorMetric
+from lodsprite.sprite.policy import keyframe_error_px
 
 DEFAULT_STRIDE = 10
 
@@ -82,7 +87,6 @@ class Replayer:
         if len(shown) != len(views):
             raise InputError(f"the run has {len(shown)} frames, the path {len(views)}")
         renderer = self.paths.renderer
-        beta = renderer.projection(views[0]).pixel_angle_rad(renderer.target.height)
         c_primes: dict[int, np.ndarray] = {}
         errors = np.full(len(views), np.nan)
         rows = []
@@ -91,16 +95,16 @@ class Replayer:
                 continue
             if k not in c_primes:
                 c_primes[k] = self.metric.reproject(keys[k].o)
-            view_proj = renderer.projection(vp).matrix() @ vp.view_matrix()
-            errors[i] = self.metric.error_px(c_primes[k], vp.o, view_proj, beta)
+            errors[i] = keyframe_error_px(self.metric, c_primes[k], vp, renderer.projection(vp),
+                                          renderer.target.height)
             if i % self.stride:
                 continue
             rows.append(frame_quality(self.draw(keys[k], vp), self._reference(i, vp)))
         return _summary(errors, rows, self.config.epsilon)
 
     def draw(self, key: Viewpoint, viewpoint: Viewpoint) -> np.ndarray:
-        """The frame a client drew at ``viewpoint`` from the server keyframe taken at
-        ``key``: ``(H, W, 3) uint8``, row 0 at the top."""
+        """The frame a client drew at ``viewpoint`` from the keyframe (a server's or its
+        own) at ``key``: ``(H, W, 3) uint8``, row 0 at the top."""
         if self._key is not key:
             self.sprite.render_keyframe(key, 0.0)
             self._key = key
@@ -125,15 +129,20 @@ class Replayer:
 
 
 def _summary(errors: np.ndarray, rows: list[dict], epsilon: float) -> dict:
-    """``errors (frames,)`` pixels, NaN for frames left out; ``rows`` of frame_quality."""
-    done = errors[np.isfinite(errors)]
+    """``errors (frames,)`` pixels, NaN for frames left out, inf where nothing was
+    measurable; ``rows`` of frame_quality."""
+    done = errors[~np.isnan(errors)]
+    finite = done[np.isfinite(done)]
     out: dict = {"replayed_frames": int(done.size), "quality_frames": len(rows),
+                 "unmeasurable_frames": int(done.size - finite.size),
                  "per_frame_error_px": [None if np.isnan(e) else float(e) for e in errors]}
     if done.size:
-        out.update(error_px_mean=float(done.mean()),
-                   error_px_p95=float(np.percentile(done, 95)),
-                   error_px_max=float(done.max()),
-                   over_epsilon=float(np.mean(done >= epsilon)))
+        out["over_epsilon"] = float(np.mean(~(done < epsilon)))
+    if finite.size:
+        out.update(error_px_mean=float(finite.mean()),
+                   error_px_p95=float(np.percentile(finite, 95)),
+                   error_px_p99=float(np.percentile(finite, 99)),
+                   error_px_max=float(finite.max()))
     if rows:
         out.update(quality_summary(rows))
     return out

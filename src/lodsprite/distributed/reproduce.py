@@ -16,6 +16,10 @@ same run (:data:`SETUPS`):
   will need one (pace ``needed``, :mod:`lodsprite.distributed.pacing`);
 * ``two_servers`` - two LOD servers and the client sharing all cores: keyframe rate and
   δt with 2 servers against ``same_all_cores``' 1;
+* ``separate_bounded``, ``same_cores_bounded`` - ``separate`` and ``same_cores`` with the
+  bounded client (``--max-error``, :data:`SwanConfig.max_error`): it renders its own
+  keyframe when the shown one's error reaches the bound.  Every other client set-up is
+  the paper's client (``--max-error off``), so each pair compares the two policies;
 * ``separate_10mbit``, ``separate_100mbit``, ``separate_unlimited`` - server and client
   on two hosts (network namespaces joined by a veth pair, rate-limited with tc's token
   bucket: the paper's 10BASE-T and its proposed 100BASE-T), and
@@ -28,7 +32,9 @@ them with the prediction error of each predictor on the same path, ahead by the 
 δt.  After the timed runs every set-up's frames are replayed untimed
 (:mod:`lodsprite.distributed.quality`): the error metric of each frame against the
 keyframe it showed and, every ``quality_stride`` frames, RMSE against full resolution
-(``image`` in each set-up's results).
+(``image`` in each set-up's results).  ``policies`` sets each bounded set-up beside its
+paper counterpart (:data:`POLICY_PAIRS`): frame-time σ and p99, the shown error's mean,
+p99 and maximum, and the share of frames at or above ε.
 """
 
 from __future__ import annotations
@@ -44,6 +50,7 @@ from pathlib import Path
 
 import numpy as np
 
+from lodsprite.distributed.client import DEFAULT_MAX_ERROR
 from lodsprite.distributed.netns import RATES, SERVER_IP, available, two_hosts
 from lodsprite.distributed.predictors import PREDICTORS, prediction_error
 from lodsprite.distributed.quality import Replayer, inline_quality, recorded_keyframes
@@ -71,6 +78,7 @@ class Setup:
     pace: str | None = None  # None: the run's pace
     codec: str = "raw"
     link: str | None = None
+    bounded: bool = False  # the client bounds the shown error (--max-error)
 
     @property
     def cores(self) -> int:
@@ -87,8 +95,12 @@ SETUPS: dict[str, Setup | None] = {
     "two_servers": Setup(client="all", server="all", servers=2),
     **{f"separate_{name}": Setup(link=name) for name in RATES},
     "separate_10mbit_zlib": Setup(link="10mbit", codec="zlib"),
+    "separate_bounded": Setup(bounded=True),
+    "same_cores_bounded": Setup(server="shared", bounded=True),
 }
 LINK_SETUPS = tuple(k for k, v in SETUPS.items() if v is not None and v.link)
+#: (the paper's client, the bounded client) on the same placement.
+POLICY_PAIRS = (("separate", "separate_bounded"), ("same_cores", "same_cores_bounded"))
 
 
 @dataclass(frozen=True)
@@ -102,6 +114,8 @@ class SwanConfig:
     pace: str = "needed"
     links: bool = True
     quality_stride: int = 10  # replay every n-th frame for image quality (0: none)
+    epsilon: float = 1.0      # ε, pixels: the servers' pacing and the replayed error's
+    max_error: float = DEFAULT_MAX_ERROR  # the bounded client's --max-error, pixels
 
     @classmethod
     def quick(cls, **kw) -> SwanConfig:
@@ -110,11 +124,19 @@ class SwanConfig:
     def render_config(self) -> RenderConfig:
         """The client's frames, as :mod:`lodsprite.distributed.quality` replays them."""
         return RenderConfig(terrain=self.terrain, path="swan2002", frames=self.frames,
-                            size=(self.size, self.size), lod=self.lod, mode="sprite")
+                            size=(self.size, self.size), lod=self.lod, mode="sprite",
+                            epsilon=self.epsilon)
 
     def args(self) -> list[str]:
+        """Options shared by ``render --mode sprite`` (inline) and ``client``."""
         return ["--terrain", self.terrain, "--path", "swan2002", "--frames", str(self.frames),
-                "--size", f"{self.size}x{self.size}", "--lod", str(self.lod), "--pace", self.pace]
+                "--size", f"{self.size}x{self.size}", "--lod", str(self.lod),
+                "--epsilon", str(self.epsilon)]
+
+    def client_args(self, bounded: bool) -> list[str]:
+        """``lodsprite client`` options: shared ones, pace, adoption rule and the bound."""
+        return [*self.args(), "--pace", self.pace, "--adopt", self.adopt,
+                "--max-error", str(self.max_error) if bounded else "off"]
 
 
 def _run(cmd: list[str], cpus: set[int] | None = None, env: dict | None = None) -> None:
@@ -149,7 +171,7 @@ def _setup(cfg: SwanConfig, name: str, out: Path, cpus: list[int]) -> dict | Non
         addresses = [stack.enter_context(local_server(serve, server_cpus, server_env))
                      for _ in range(setup.servers)]
         servers = [a for address in addresses for a in ("--server", address)]
-        _run(lodsprite_command("client", *servers, *run_cfg.args(), "--adopt", cfg.adopt,
+        _run(lodsprite_command("client", *servers, *run_cfg.client_args(setup.bounded),
                                "--out", str(out)), client_cpus, client_env)
     return _collect(name, out)
 
@@ -162,9 +184,9 @@ def _two_hosts(cfg: SwanConfig, setup: Setup, out: Path, client: tuple, server: 
                                                "--predictor", cfg.predictor,
                                                "--codec", setup.codec))
         with server_process(serve, *server):
-            _run(hosts.client(lodsprite_command("client", "--server", address, *cfg.args(),
-                                                "--adopt", cfg.adopt, "--out", str(out))),
-                 *client)
+            _run(hosts.client(lodsprite_command("client", "--server", address,
+                                                *cfg.client_args(setup.bounded),
+                                                "--out", str(out))), *client)
 
 
 def _collect(setup: str, out: Path) -> dict:
@@ -180,6 +202,7 @@ def _collect(setup: str, out: Path) -> dict:
            # of the scene's cost along the path hardly count, unlike in σ)
            "client_ms_jitter": float(np.sqrt(np.mean(np.diff(ms) ** 2))) if len(ms) > 1 else 0.0,
            "keyframes": received,
+           "local_keyframes": sum(r["type"] == "local_keyframe" for r in rows),
            "keyframe_rate_hz": received / (ms.sum() / 1e3),
            "sprites_per_keyframe": (len(rows) - received) / received if received else None,
            "per_frame_ms": ms.tolist(), "per_frame_type": [r["type"] for r in rows]}
@@ -188,6 +211,9 @@ def _collect(setup: str, out: Path) -> dict:
         every = json.loads(stats_file.read_text())["stats"] or [{}]
         stats = {k: [v for s in every for v in s.get(k, [])] for k in every[0]
                  if isinstance(every[0][k], list)}
+        summary = json.loads((out / "summary.json").read_text())
+        res["max_error"] = summary.get("max_error")
+        res["rejected_keyframes"] = summary.get("rejected_keyframes")
         res["server"] = every[0]
         res["servers"] = len(every)
         for k in ("delta_t", "production", "transmission", "render", "viewpoint_wait", "paced",
@@ -225,6 +251,31 @@ def _image_error(cfg: SwanConfig, results: dict, out_dir: Path) -> None:
                 results[name]["image"] = replayer.replay(*recorded_keyframes(out_dir / name))
 
 
+#: What :func:`policies` sets side by side: (results key, where it lies).
+POLICY_MEASURES = (("client_ms_std", None), ("client_ms_p99", None), ("client_ms_mean", None),
+                   ("error_px_mean", "image"), ("error_px_p99", "image"),
+                   ("error_px_max", "image"), ("over_epsilon", "image"),
+                   ("keyframes", None), ("local_keyframes", None))
+
+
+def policies(results: dict) -> list[dict]:
+    """Each pair of :data:`POLICY_PAIRS` that ran: ``{"setup", "max_error", "paper": {...},
+    "bounded": {...}}`` with the :data:`POLICY_MEASURES` of both clients."""
+    out = []
+    for paper, bounded in POLICY_PAIRS:
+        a, b = results.get(paper) or {}, results.get(bounded) or {}
+        if "client_ms_mean" not in a or "client_ms_mean" not in b:
+            continue
+
+        def pick(r: dict) -> dict:
+            return {k: (r.get(where) or {}).get(k) if where else r.get(k)
+                    for k, where in POLICY_MEASURES}
+
+        out.append({"setup": paper, "max_error": b.get("max_error"),
+                    "paper": pick(a), "bounded": pick(b)})
+    return out
+
+
 def reproduce_swan2002(cfg: SwanConfig, out_dir: Path,
                        progress: Callable[[int, int], None] | None = None) -> dict:
     """Run the three set-ups; write ``results.json`` and return it (plots: report.swan2002)."""
@@ -245,6 +296,7 @@ def reproduce_swan2002(cfg: SwanConfig, out_dir: Path,
     results["prediction"] = _prediction(cfg, results)
     if cfg.quality_stride:
         _image_error(cfg, results, out_dir)
+    results["policies"] = policies(results)
     if progress:
         progress(len(setups) + 1, len(setups) + 1)
     write_json(out_dir / "results.json", results)

@@ -1,8 +1,9 @@
 """Running the distributed programs: a client along a scripted path, a local server.
 
-``lodsprite client`` and ``lodsprite render --mode distributed`` call :func:`run_client`,
-which writes ``frames.csv`` and ``summary.json`` like ``lodsprite render``; the latter
-first starts a server process on free loopback ports (:func:`local_server`).
+``lodsprite client`` calls :func:`run_client`, which writes ``frames.csv``,
+``summary.json``, ``keyframes.json`` and ``server_stats.json`` like ``lodsprite render``;
+``lodsprite render --mode distributed`` calls :func:`render_distributed`, which first
+starts a server process on free loopback ports (:func:`local_server`).
 """
 
 from __future__ import annotations
@@ -19,14 +20,44 @@ from pathlib import Path
 
 import numpy as np
 
-from lodsprite.distributed.client import LodClient
+from lodsprite.distributed.client import (
+    ADOPT_MODES,
+    DEFAULT_MAX_ERROR,
+    LodClient,
+    check_max_error,
+)
 from lodsprite.distributed.keys import ClientKeys
+from lodsprite.distributed.pacing import DEFAULT_PACE, PACES
 from lodsprite.distributed.render import scene_args
-from lodsprite.errors import LodspriteError
+from lodsprite.errors import InputError, LodspriteError
 from lodsprite.report.io import write_csv, write_json
 from lodsprite.run import RenderConfig, prepare, timing_summary
 
 FRAME_COLUMNS = ["frame", "mode", "ms", "triangles", "type", "keyframe_seq", "keyframe"]
+MAX_ERROR_OFF = ("off", "none")
+
+
+def parse_max_error(text: str | None) -> float | None:
+    """``--max-error``: pixels (a number > 0), ``off`` / ``none`` (no bound), or None
+    (not given: :data:`~lodsprite.distributed.client.DEFAULT_MAX_ERROR`)."""
+    if text is None:
+        return DEFAULT_MAX_ERROR
+    if text.strip().lower() in MAX_ERROR_OFF:
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        raise InputError(f"--max-error must be pixels or off, got '{text}'") from None
+    return check_max_error(value)
+
+
+def check_client_options(pace: str, adopt: str, max_error: float | None) -> float | None:
+    """Raise :class:`InputError` for a bad pace, adoption rule or bound; the bound."""
+    if pace not in PACES:
+        raise InputError(f"--pace must be {' or '.join(PACES)}, got '{pace}'")
+    if adopt not in ADOPT_MODES:
+        raise InputError(f"--adopt must be one of {', '.join(ADOPT_MODES)}, got '{adopt}'")
+    return check_max_error(max_error)
 
 
 def free_ports(count: int = 3, host: str = "127.0.0.1") -> int:
@@ -94,20 +125,42 @@ def server_process(cmd: list[str], cpus: set[int] | None = None, env: dict | Non
             proc.stderr.close()
 
 
+def render_distributed(config: RenderConfig, out_dir: Path,
+                       progress: Callable[[int, int], None] | None = None, *,
+                       pace: str = DEFAULT_PACE, adopt: str = "newest",
+                       max_error: float | None = DEFAULT_MAX_ERROR) -> dict:
+    """``lodsprite render --mode distributed``: ``config``'s path (its sprite settings) drawn
+    by a client with keyframes from a LOD server started here on free loopback ports;
+    writes what :func:`run_client` writes and returns its summary.  Input errors are
+    reported before the server starts."""
+    config = replace(config, mode="sprite")
+    prepare(config)
+    check_client_options(pace, adopt, max_error)
+    with local_server() as address:
+        return run_client(config, [address], Path(out_dir), progress, adopt=adopt, pace=pace,
+                          max_error=max_error)
+
+
 def run_client(config: RenderConfig, servers: list[str], out_dir: Path,
                progress: Callable[[int, int], None] | None = None,
                warmup_s: float = 10.0, adopt: str = "newest",
-               keys: ClientKeys | None = None) -> dict:
+               keys: ClientKeys | None = None, *, pace: str = DEFAULT_PACE,
+               max_error: float | None = DEFAULT_MAX_ERROR) -> dict:
     """Draw ``config``'s path with keyframes from ``servers``; write outputs; return summary.
 
-    Before the timed frames the client waits (up to ``warmup_s``) for a first keyframe,
-    so that server start-up is not counted as frames drawn without one.
+    ``pace``: when the servers render keyframes (:mod:`lodsprite.distributed.pacing`);
+    ``adopt``: when the client takes a newer one; ``max_error``: the client's bound on
+    the shown keyframe's error, pixels (None: none, the paper's client), see
+    :class:`~lodsprite.distributed.client.LodClient`.  Before the timed frames the client
+    waits (up to ``warmup_s``) for a first keyframe, so that server start-up is not
+    counted as frames drawn without one.
     """
+    max_error = check_client_options(pace, adopt, max_error)
     scene, path = prepare(replace(config, mode="sprite"))
     args = scene_args(config.terrain, config.texture, config.grid, config.exaggeration,
                       config.size, config.fov_y_deg)
     client = LodClient(scene, args, servers, config.size, config.lod, config.visibility,
-                       config.epsilon, adopt, keys, config.border, config.pace)
+                       config.epsilon, adopt, keys, config.border, pace, max_error)
     rows: list[dict] = []
     interrupted = False
     stats: list[dict] = []
@@ -128,11 +181,13 @@ def run_client(config: RenderConfig, servers: list[str], out_dir: Path,
             stats = client.server_stats()
         info = client.paths.ctx.info
         shown = client.shown
+        rejected = client.rejected_keyframes
         client.close()
     if rows:
         summary = _summary(config, rows, stats, info.renderer, servers)
         summary.update(grid=scene.hf.quads, lod=config.lod, interrupted=interrupted, adopt=adopt,
-                       pace=config.pace,
+                       pace=pace, max_error=max_error, epsilon=config.epsilon,
+                       rejected_keyframes=rejected,
                        triangles_mean=float(np.mean([r["triangles"] for r in rows])))
         write_csv(out_dir / "frames.csv", rows, FRAME_COLUMNS)
         write_json(out_dir / "server_stats.json", {"servers": servers, "stats": stats})
@@ -171,6 +226,7 @@ def _summary(config: RenderConfig, rows: list[dict], stats: list[dict], renderer
         "keyframes_received": received,
         "sprites_per_keyframe": (len(rows) - received) / received if received else None,
         "local_frames": sum(r["type"].startswith("local") for r in rows),
+        "local_keyframes": sum(r["type"] == "local_keyframe" for r in rows),
         **{f"{k.removesuffix('_ms')}_ms_mean": v for k, v in server.items()},
         "gl_renderer": renderer,
     }

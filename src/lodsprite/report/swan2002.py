@@ -12,17 +12,9 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from lodsprite.report.io import atomic_write_bytes, save_figure
+from lodsprite.report.paper_numbers import PAPER_2002
 from lodsprite.report.values import fmt_fixed, fmt_int
 
-#: The paper's numbers (§4; 600 frames, 512² height field, two SGI Onyx over 10BASE-T).
-PAPER_2002 = {
-    "separate": {"client_ms_mean": 61.9, "client_ms_std": 14.8, "sprites_per_keyframe": 34.3,
-                 "delta_t_ms_mean": 8940, "production_ms_mean": 2140,
-                 "transmission_ms_mean": 2320, "render_ms_mean": 517,
-                 "queue_insert_ms_mean": 1590, "viewpoint_wait_ms_mean": 0.06,
-                 "queue_retrieve_ms_mean": 25},
-    "same_cores": {"client_ms_mean": 256, "client_ms_std": 225},
-}
 LABELS = {"inline": "inline (1999, keyframes in the frame loop)",
           "same_cores": "client and server on one core",
           "separate": "client and server on separate cores",
@@ -33,7 +25,9 @@ LABELS = {"inline": "inline (1999, keyframes in the frame loop)",
           "separate_10mbit": "two hosts, 10 Mbit/s link",
           "separate_100mbit": "two hosts, 100 Mbit/s link",
           "separate_unlimited": "two hosts, unlimited link",
-          "separate_10mbit_zlib": "two hosts, 10 Mbit/s link, zlib keyframes"}
+          "separate_10mbit_zlib": "two hosts, 10 Mbit/s link, zlib keyframes",
+          "separate_bounded": "separate cores, client with --max-error",
+          "same_cores_bounded": "one core, client with --max-error"}
 #: σ ratios reported: (stable set-up, its shared counterpart).
 RATIOS = (("separate", "same_cores"), ("separate", "same_all_cores"),
           ("separate_continuous", "same_cores_continuous"))
@@ -102,6 +96,41 @@ def _error_plot(results: dict, setups: list[str], path: Path) -> Path | None:
     return save_figure(fig, path)
 
 
+def _policy_plot(results: dict, path: Path) -> Path | None:
+    """Frame time and replayed error per frame of the paper's client and the bounded one,
+    for each policy pair that ran (one column each)."""
+    pairs = [p for p in results.get("policies") or []
+             if all((results.get(s) or {}).get("image") for s in (p["setup"],
+                                                                   f"{p['setup']}_bounded"))]
+    if not pairs:
+        return None
+    eps = (results.get("config") or {}).get("epsilon", 1.0)
+    fig = Figure(figsize=(5.5 * len(pairs), 6.0), dpi=110)
+    axes = fig.subplots(2, len(pairs), squeeze=False, sharex=True)
+    for col, pair in enumerate(pairs):
+        top, bottom = axes[0][col], axes[1][col]
+        for name, label in ((pair["setup"], "no bound (paper)"),
+                            (f"{pair['setup']}_bounded", f"--max-error {pair['max_error']:g}")):
+            r = results[name]
+            ms = np.array(r["per_frame_ms"])
+            top.plot(ms, lw=0.8, label=f"{label}: σ {ms.std():.1f}, p99 "
+                                       f"{np.percentile(ms, 99):.1f} ms")
+            e = np.array([np.nan if v is None else v
+                          for v in r["image"]["per_frame_error_px"]], dtype=float)
+            bottom.plot(np.maximum(e, 1e-3), lw=0.8,
+                        label=f"{label}: ≥ ε on {100 * r['image'].get('over_epsilon', 0):.1f} %")
+        bottom.axhline(eps, color="k", lw=0.8, ls="--", label=f"ε = {eps:g} px")
+        top.set(ylabel="client ms per frame", title=LABELS.get(pair["setup"], pair["setup"]))
+        top.set_yscale("log")
+        bottom.set(xlabel="frame", ylabel="replayed error of the frame shown (px)")
+        bottom.set_yscale("log")
+        for ax in (top, bottom):
+            ax.legend(fontsize=7)
+            ax.grid(alpha=0.3)
+    fig.suptitle("The client's two policies: the paper's, and bounding the shown error")
+    return save_figure(fig, path)
+
+
 def write_plots(results: dict, out_dir: Path) -> list[Path]:
     out_dir = Path(out_dir)
     made = [
@@ -119,6 +148,7 @@ def write_plots(results: dict, out_dir: Path) -> list[Path]:
                      "Fig. 12 — KEYFRAME-TRANSMITTER timings"),
         _error_plot(results, ["inline", "separate", "same_cores", "separate_10mbit"],
                     out_dir / "image_error.png"),
+        _policy_plot(results, out_dir / "policies.png"),
     ]
     return [p for p in made if p is not None]
 
@@ -179,6 +209,36 @@ def image_error_lines(results: dict, setups: list[str]) -> list[str]:
     return lines
 
 
+def policy_lines(results: dict) -> list[str]:
+    """The two client policies side by side (``results["policies"]``): a Markdown table."""
+    pairs = results.get("policies") or []
+    if not pairs:
+        return []
+    eps = (results.get("config") or {}).get("epsilon", 1.0)
+    lines = ["", "## The client's policies: the paper's, and a bound on the shown error", "",
+             "The paper's client shows each server keyframe until a newer one arrives, "
+             "however far the viewer has gone.  With `--max-error PX` the client renders its "
+             "own keyframe (full resolution, in its frame loop, as the 1999 algorithm does) "
+             "when the shown keyframe's error at the current viewpoint reaches PX and no "
+             f"better one has arrived.  Errors are replayed (Eq. 2, pixels); ε = {eps:g} px.",
+             "", "| set-up | client | σ ms | p99 ms | mean ms | error px mean | p99 | max "
+                 "| frames ≥ ε | server keyframes | own keyframes |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for pair in pairs:
+        for key, label in (("paper", "no bound (paper)"),
+                           ("bounded", f"--max-error {pair['max_error']:g}")):
+            m = pair[key]
+            over = m.get("over_epsilon")
+            lines.append(
+                f"| {LABELS.get(pair['setup'], pair['setup'])} | {label} | "
+                + " | ".join(fmt_fixed(m.get(k), 2) for k in (
+                    "client_ms_std", "client_ms_p99", "client_ms_mean", "error_px_mean",
+                    "error_px_p99", "error_px_max"))
+                + f" | {'—' if over is None else f'{100 * over:.1f} %'} | "
+                + f"{fmt_int(m.get('keyframes'))} | {fmt_int(m.get('local_keyframes'))} |")
+    return lines
+
+
 def _cells(row: dict) -> str:
     return " | ".join(fmt_int(row.get(k)) if k == "keyframes" else fmt_fixed(row.get(k), 2)
                       for _, k in COLUMNS)
@@ -206,6 +266,7 @@ def write_report(results: dict, out_dir: Path, plots: list[Path]) -> Path:
             lines += ["", f"- `{s}` skipped: {results[s]['skipped']}."]
     lines += ["", *stability_lines(results)]
     lines += image_error_lines(results, present)
+    lines += policy_lines(results)
     pred = results.get("prediction") or {}
     if pred:
         lines += ["", f"## Viewpoint prediction, {pred['lead_frames']} frames ahead (δt)", "",
