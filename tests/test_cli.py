@@ -113,7 +113,18 @@ def test_reproduce_quick_writes_results_plots_and_report(tmp_path):
                 "rmse_sprite_mean", "rmse_lod_mean", "psnr_sprite_mean", "psnr_lod_mean",
                 "fig10", "fig11", "fig12"):
         assert key in results
-    assert results["speedup"] == pytest.approx(results["total_s_full"] / results["total_s_sprite"])
+    # The speedup from the per-frame times, independently of the run's own totals: the
+    # full-resolution frames' mean time scaled to the path, over the sum of LOD-sprite times.
+    pf = results["per_frame"]
+    assert len(pf["ms_sprite"]) == len(pf["ms_full"]) == results["frames"]
+    ms_full = [v for v in pf["ms_full"] if v is not None]
+    assert len(ms_full) == results["full_sample_frames"]
+    total_full = float(np.mean(ms_full)) * results["frames"] / 1e3
+    total_sprite = sum(pf["ms_sprite"]) / 1e3
+    assert results["speedup"] == pytest.approx(total_full / total_sprite, rel=1e-9)
+    # Keyframes: counted from the frame types, one logged view each, fewer than the frames.
+    assert results["keyframes"] == pf["type"].count("keyframe") == len(results["keyframe_views"])
+    assert 0 < results["keyframes"] < results["frames"]
     report = (out / "report.md").read_text()
     assert "12.32" in report
     for png in ("fig08_error.png", "fig09_time.png", "fig13.png", "fig14.png"):

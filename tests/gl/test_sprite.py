@@ -1,15 +1,20 @@
 """LOD-sprite keyframes and spriteframes on the real GL driver."""
 
+import math
+import re
+
 import numpy as np
 import pytest
 
 from conftest import make_field
 from lodsprite.camera import look_at
 from lodsprite.errors import InputError
+from lodsprite.gl.shaders import SPRITE_FS
 from lodsprite.gl.sprite import VISIBILITY_MODES, SpriteRenderer
 from lodsprite.gl.terrain import TerrainGeometry, TerrainRenderer
 from lodsprite.metrics import rmse
 from lodsprite.sprite.engine import FIRST_SPRITE, KEYFRAME, SPRITE, LodSpriteEngine
+from lodsprite.sprite.metric import ErrorMetric
 from lodsprite.terrain import make_texture
 from lodsprite.terrain.heightfield import HeightField
 
@@ -39,19 +44,23 @@ def truth_and_coarse(sp, vp):
     return truth, sp.terrain.target.read_color()
 
 
-KEY_CASES = ([("coarse", "ridges", 150.0, g) for g in (0, 32)]
-             + [(v, "bump", 200.0, 32) for v in VISIBILITY_MODES])
+KEY_CASES = ([("coarse", "ridges", 150.0, g, False) for g in (0, 32)]
+             + [(v, "bump", 200.0, 32, False) for v in VISIBILITY_MODES]
+             + [("coarse", "ridges", 150.0, 32, True)])
 
 
-@pytest.mark.parametrize(("visibility", "kind", "relief", "guard"), KEY_CASES)
+@pytest.mark.parametrize(("visibility", "kind", "relief", "guard", "mipmaps"), KEY_CASES)
 def test_spriteframe_from_the_keyframe_viewpoint_equals_the_keyframe(build, visibility, kind,
-                                                                     relief, guard):
+                                                                     relief, guard, mipmaps):
     # The paper's per-triangle and per-fragment rules fall back to the terrain texture where
     # full-resolution detail hides coarse vertices, so they meet this only on a field without
     # such occlusion (the bump); the default "coarse" rule meets it on rough ridges too.
     # With a guard band the keyframe is larger than the frame; its centre is compared.
+    # With a mipmapped sprite the textureGrad gradients must select level 0 here (no
+    # minification), or the frame would blur.
     hf = make_field(64, kind=kind, relief=relief)
-    sp = build(hf, make_texture("terrain", hf), visibility=visibility, guard_px=guard)
+    sp = build(hf, make_texture("terrain", hf), visibility=visibility, guard_px=guard,
+               mipmaps=mipmaps)
     vp = look_at((0.0, -300.0, 1500.0), (0.0, 0.0, 0.0))  # terrain fills the whole image
     sp.render_keyframe(vp, 0.0)
     assert sp.keyframe.target.size == (128 + 2 * guard, 128 + 2 * guard)
@@ -164,6 +173,22 @@ def orbit(n, radius=1800.0, height=900.0, turn=np.pi / 2):
             for a in np.linspace(0.0, turn, n)]
 
 
+def shown_errors(engine, path, frames) -> np.ndarray:
+    """Independently of the engine's bookkeeping: the error (px) at each frame's viewpoint
+    of the keyframe the frame says it shows, from that keyframe's recorded viewpoint, with
+    a metric of our own."""
+    sp = engine.sprite
+    metric = ErrorMetric.for_level(sp.terrain.geometry.hf, sp.coarse_quads)
+    errors = []
+    for vp, f in zip(path, frames, strict=True):
+        key_vp, _ = engine.keyframes[f.keyframe]
+        proj = sp.terrain.projection(vp)
+        errors.append(metric.error_px(metric.reproject(key_vp.o), vp.o,
+                                      proj.matrix() @ vp.view_matrix(),
+                                      proj.pixel_angle_rad(sp.target.height)))
+    return np.array(errors)
+
+
 def test_keyframe_fraction_falls_as_epsilon_grows(build):
     hf = make_field(64, kind="ridges", relief=150.0)
     sp = build(hf, make_texture("terrain", hf), size=(96, 96))
@@ -180,8 +205,14 @@ def test_keyframe_fraction_falls_as_epsilon_grows(build):
                 assert b in (KEYFRAME, FIRST_SPRITE)
             if b == SPRITE:
                 assert a in (FIRST_SPRITE, SPRITE)
-        # The image shown never carries an error at or above the threshold.
-        assert all(f.error_px < eps for f in frames)
+        # Every frame shows a keyframe already rendered, and the error it reports is that
+        # keyframe's at the frame's viewpoint, under the threshold.
+        shown = [f.keyframe for f in frames]
+        assert all(0 <= k < len(engine.keyframes) for k in shown)
+        assert all(b in (a, a + 1) for a, b in zip(shown, shown[1:], strict=False))
+        independent = shown_errors(engine, path, frames)
+        np.testing.assert_allclose([f.error_px for f in frames], independent, atol=1e-6)
+        assert np.all(independent < eps)
         counts.append(types.count(KEYFRAME))
     assert all(b <= a for a, b in zip(counts, counts[1:], strict=False))
     assert counts[-1] < counts[0]
@@ -195,10 +226,16 @@ def test_keyframes_ahead_of_the_viewer_need_fewer_keyframes(build):
     for predict in (False, True):
         engine = LodSpriteEngine(sp, 0.1, predict=predict)
         frames = [engine.frame(vp) for vp in path]
-        assert all(f.error_px < 0.1 for f in frames)
+        # The keyframe each frame shows, rendered where the engine recorded it, serves the
+        # frame under ε: measured here, not taken from the engine.
+        assert np.all(shown_errors(engine, path, frames) < 0.1)
         counts[predict] = sum(f.type == KEYFRAME for f in frames)
         if predict:
             assert engine.predicted_keyframes > 0
+            # The keyframes recorded as rendered ahead lie at no viewpoint of the path.
+            off_path = [min(np.linalg.norm(key.o - vp.o) for vp in path) > 1.0
+                        for key, _ in engine.keyframes]
+            assert sum(off_path) == engine.predicted_keyframes
     assert counts[True] < counts[False]
 
 
@@ -276,3 +313,82 @@ def test_border_ribbon_carries_the_full_resolution_outline(build):
         mismatch[border] = int(np.sum(sky(frame) != sky(truth)))
     assert mismatch[False] > 300         # without ribbons the bumps show as sky
     assert mismatch[True] < 0.2 * mismatch[False]
+
+
+def test_shown_image_tracks_full_resolution_within_the_threshold(build):
+    # Spriteframes err by under ε pixels of reprojection: with ε = 0.25 px the image shown is
+    # much closer to full resolution than the plain coarse level, and closer than with
+    # ε = 4 px.  A keyframe frame shows the full-resolution frame itself.
+    hf = make_field(64, kind="ridges", relief=150.0)
+    sp = build(hf, make_texture("terrain", hf), size=(96, 96))
+    path = orbit(24, turn=np.pi / 8)
+    mean_rmse = {}
+    for eps in (0.25, 4.0):
+        engine = LodSpriteEngine(sp, eps, predict=False)
+        sprite_err, coarse_err = [], []
+        for vp in path:
+            f = engine.frame(vp)
+            image = engine.read_image()
+            truth, coarse = truth_and_coarse(sp, vp)
+            if f.type == KEYFRAME:
+                assert rmse(image, truth) < 0.5
+            else:
+                sprite_err.append(rmse(image, truth))
+                coarse_err.append(rmse(coarse, truth))
+        assert sprite_err, "no spriteframe to check"
+        mean_rmse[eps] = float(np.mean(sprite_err))
+        if eps < 1:
+            assert mean_rmse[eps] < 0.5 * float(np.mean(coarse_err))
+    assert mean_rmse[0.25] < mean_rmse[4.0]
+
+
+def test_a_far_viewpoint_or_a_view_without_terrain_calls_for_a_keyframe(build):
+    hf = make_field(64, kind="ridges", relief=150.0)
+    sp = build(hf, make_texture("terrain", hf), size=(96, 96))
+    engine = LodSpriteEngine(sp, 1.0, predict=False)
+    near = orbit(3, turn=np.radians(0.2))
+    assert [engine.frame(vp).type for vp in near] == [KEYFRAME, FIRST_SPRITE, SPRITE]
+    far = look_at((1800.0, 0.0, 900.0), (0.0, 0.0, 0.0))  # 90 degrees around the terrain
+    f = engine.frame(far)
+    assert f.type == KEYFRAME and f.decision_error_px >= 1.0
+    # Turned to the sky: nothing of the terrain can be measured, so the keyframe is stale
+    # (the metric once said 0 here and the terrain's image stayed on screen).
+    sky = look_at((1800.0, 0.0, 900.0), (5000.0, 0.0, 3000.0))
+    f = engine.frame(sky)
+    assert f.type == KEYFRAME and f.decision_error_px == math.inf
+
+
+_IMPLICIT_DERIVATIVES = re.compile(r"\b(dFdx|dFdy|fwidth|texture|textureProj|textureOffset)\s*\(")
+_CONTROL_FLOW = re.compile(r"\bif\b|\?|\bfor\b|\bwhile\b|\breturn\b")
+
+
+def _functions(glsl: str) -> dict[str, str]:
+    """Bodies of the top-level functions of a GLSL source (no nested braces at top level
+    other than function bodies)."""
+    out, i = {}, 0
+    for m in re.finditer(r"\b\w+\s+(\w+)\s*\([^;{)]*\)\s*\{", glsl):
+        if m.start() < i:
+            continue
+        depth, j = 1, m.end()
+        while depth:
+            depth += {"{": 1, "}": -1}.get(glsl[j], 0)
+            j += 1
+        out[m.group(1)] = glsl[m.end():j - 1]
+        i = j
+    return out
+
+
+def test_sprite_shader_takes_derivatives_only_in_uniform_control_flow():
+    # GLSL leaves dFdx/dFdy, and the implicit derivatives of texture()/textureProj(),
+    # undefined in non-uniform control flow.  In the spriteframe shader they may appear only
+    # in main(), before its first branch; helpers (called from branches) use explicit ones.
+    src = re.sub(r"//[^\n]*", "", SPRITE_FS)
+    bodies = _functions(src)
+    assert {"main", "terrain_fallback", "seen_by_keyframe"} <= set(bodies)
+    for name, body in bodies.items():
+        calls = [m.start() for m in _IMPLICIT_DERIVATIVES.finditer(body)]
+        if name != "main":
+            assert not calls, f"{name}() takes derivatives"
+            continue
+        branch = _CONTROL_FLOW.search(body)
+        assert calls and branch and max(calls) < branch.start(), "main() branches first"

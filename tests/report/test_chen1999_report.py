@@ -28,7 +28,7 @@ def _frame_types(n: int, period: int = 8) -> list[str]:
 def _images(out_dir: Path) -> dict:
     rng = np.random.default_rng(0)
     names = {}
-    for key in ("full", "lod", "sprite"):
+    for key in ("full", "lod", "sprite", "keyframe_image"):
         Image.fromarray(rng.integers(0, 255, (32, 32, 3), dtype=np.uint8)).save(
             out_dir / f"fig14_{key}.png")
         names[key] = f"fig14_{key}.png"
@@ -37,7 +37,8 @@ def _images(out_dir: Path) -> dict:
             out_dir / f"fig14_{key}.png")
         names[key] = f"fig14_{key}.png"
     fig13 = {k: names[k] for k in ("full", "lod", "sprite")}
-    return {"fig13": {"frame": 17, **fig13}, "fig14": {"frame": 23, **names}}
+    key = {"keyframe": 3, "keyframe_frame": 20, "keyframe_ahead": True}
+    return {"fig13": {"frame": 17, **fig13}, "fig14": {"frame": 23, **key, **names}}
 
 
 def _results(out_dir: Path) -> dict:
@@ -151,3 +152,24 @@ def test_nan_none_and_inf_render_as_dash(results: dict, tmp_path: Path) -> None:
         assert rows[quantity].split("|")[2].strip() == "—", rows[quantity]
     assert "| 0.5 | 0.20 | — |" in report.read_text()
     assert "nan" not in report.read_text().lower()
+
+
+def test_figure_14_names_and_shows_the_keyframe_drawn_from(
+        produced: tuple[Path, list[Path], str], tmp_path: Path) -> None:
+    out_dir, _, text = produced
+    assert "Frame 23 (keyframe 3, rendered at frame 20 from a viewpoint ahead of the viewer)" \
+        in text
+    assert "Frame 17:" in text  # no keyframe recorded for Fig. 13: the frame alone
+    # The keyframe panel (f) takes the free cell of the second row: the same layout with it
+    # left out draws one panel fewer, so the images differ.
+    results = _results(tmp_path)
+    del results["images"]["fig14"]["keyframe_image"]
+    without = _plot_panels_png(results, tmp_path)
+    with Image.open(out_dir / "fig14.png") as a, Image.open(without) as b:
+        assert a.size == b.size
+        assert np.abs(np.asarray(a.convert("L"), int) - np.asarray(b.convert("L"), int)).sum() > 0
+
+
+def _plot_panels_png(results: dict, out_dir: Path) -> Path:
+    plots = write_plots({"images": results["images"], "grid": 512, "lod": 16}, out_dir)
+    return next(p for p in plots if p.name == "fig14.png")

@@ -10,6 +10,7 @@ from lodsprite.sprite.metric import (
     ErrorMetric,
     angles_at_eye,
     coarse_squares,
+    in_view,
     ray_triangle_t,
     reprojected_centres,
 )
@@ -94,14 +95,16 @@ def test_error_grows_with_distance_from_the_keyframe_and_matches_eq2():
     assert all(b > a for a, b in zip(errors, errors[1:], strict=False))
 
 
-def test_squares_outside_the_view_are_ignored():
+def test_nothing_in_view_means_a_keyframe_is_due():
     hf = spiked_field()
     metric = ErrorMetric.for_level(hf, 4)
     proj = Projection(45.0, 1.0, 1.0, 2000.0)
     away = look_at((0.0, 0.0, 100.0), (0.0, 1000.0, 100.0))  # looking at the horizon, no terrain
     cp = metric.reproject(np.array([0.0, -300.0, 250.0]))
-    assert metric.theta(cp, away.o, proj.matrix() @ away.view_matrix()).size == 0
-    assert metric.error_px(cp, away.o, proj.matrix() @ away.view_matrix(), 0.001) == 0.0
+    vpm = proj.matrix() @ away.view_matrix()
+    assert metric.theta(cp, away.o, vpm).size == 0
+    assert metric.error_px(cp, away.o, vpm, 0.001) == math.inf  # used to be 0: never due
+    assert len(metric.fallback_points(vpm)[0]) == 0
 
 
 def test_ray_triangle_hits_and_misses():
@@ -113,14 +116,108 @@ def test_ray_triangle_hits_and_misses():
     assert np.isnan(t[0, 0])
 
 
-def test_ray_missing_the_coarse_surface_is_left_out():
+def hit_or_miss(sq, eye):
+    """Per square centre, whether the ray eye -> C meets any coarse triangle in front of the
+    eye: brute force over every triangle of the level."""
+    d = sq.centres - eye
+    every = np.broadcast_to(sq.own.reshape(1, -1, 3, 3), (len(d), len(sq.own) * 2, 3, 3))
+    t = ray_triangle_t(eye, d, every)
+    return np.any(t > 0, axis=1)
+
+
+def test_rays_missing_the_coarse_surface_count_at_the_terrain_edge():
     hf = spiked_field()
     metric = ErrorMetric.for_level(hf, 4)
     # Grazing keyframe: rays through the far spikes leave the terrain before reaching z = 0.
     key = np.array([0.0, -400.0, 250.0])
+    hit = hit_or_miss(metric.squares, key)
+    assert 0 < hit.sum() < hit.size
     cp = metric.reproject(key)
-    assert np.isnan(cp).any() and np.isfinite(cp).any()
+    assert np.all(np.isfinite(cp))
+    # A miss's C' is on the ray, beyond C, in the vertical plane of the terrain's edge.
+    c = metric.squares.centres
+    t = (cp - key)[:, 1] / (c - key)[:, 1]
+    np.testing.assert_allclose(cp[~hit], (key + t[:, None] * (c - key))[~hit], atol=1e-9)
+    assert np.all(t[~hit] > 1)
+    lo, hi = hf.bounds()
+    on_edge = np.isclose(np.abs(cp[~hit, 0]), hi[0]) | np.isclose(np.abs(cp[~hit, 1]), hi[1])
+    assert on_edge.all()
+
     proj = Projection(45.0, 1.0, 1.0, 2000.0)
     vp = look_at((10.0, -400.0, 250.0), (0.0, 0.0, 0.0))
-    e = metric.error_px(cp, vp.o, proj.matrix() @ vp.view_matrix(), proj.pixel_angle_rad(512))
-    assert np.isfinite(e) and e > 0
+    vpm, beta = proj.matrix() @ vp.view_matrix(), proj.pixel_angle_rad(512)
+    e = metric.error_px(cp, vp.o, vpm, beta)
+    # Independently: the squares in view whose rays hit, as the metric once averaged alone.
+    vis = in_view(np.c_[c, np.ones(len(c))], vpm)
+    assert vis[~hit].any()
+    th_hits = angles_at_eye(vp.o, c[vis & hit], cp[vis & hit])
+    hits_only = float(np.sqrt(np.mean(th_hits**2)) / beta)
+    # A miss counts with the angle to its exit point, but never less than the worst hit.
+    th_miss = np.maximum(angles_at_eye(vp.o, c[vis & ~hit], cp[vis & ~hit]), th_hits.max())
+    expect = float(np.sqrt(np.mean(np.r_[th_hits, th_miss] ** 2)) / beta)
+    assert e == pytest.approx(expect, rel=1e-9)
+    assert e > 1.02 * hits_only  # the misses no longer pull the mean down (old: equal)
+    at_key = look_at(key, (0.0, 0.0, 0.0))
+    assert metric.error_px(cp, key, proj.matrix() @ at_key.view_matrix(),
+                           beta) == pytest.approx(0.0, abs=1e-6)
+
+
+def test_hits_behind_the_keyframe_eye_do_not_count():
+    # A keyframe eye 10 m above the flat coarse level looks up at the 50 m spikes: each ray
+    # through a spike meets z = 0 only behind the eye, where the keyframe saw nothing.
+    hf = spiked_field()
+    metric = ErrorMetric.for_level(hf, 4)
+    key = np.array([0.0, -75.0, 10.0])
+    cp = metric.reproject(key)
+    c = metric.squares.centres
+    ahead = np.einsum("kj,kj->k", cp - key, c - key)
+    assert np.all(ahead > 0)
+
+
+def wavy_field() -> HeightField:
+    """16 x 16 quads, 10 m spacing, smooth relief that the 4 x 4 level does not follow."""
+    r, c = np.meshgrid(np.arange(17.0), np.arange(17.0), indexing="ij")
+    h = 20.0 * np.sin(r * 0.9) * np.cos(c * 0.7) + 3.0 * r
+    return HeightField(h.astype(np.float32), 10.0, 10.0, "wavy")
+
+
+def brute_force_error(metric, hf, key_eye, vp, proj, height_px):
+    """sqrt(mean θ²)/β over every full-resolution vertex in view that is not a coarse vertex,
+    C' from rays against every coarse triangle (the hit in front of the eye nearest C)."""
+    rr, cc = (a.ravel() for a in np.meshgrid(np.arange(hf.rows), np.arange(hf.cols),
+                                             indexing="ij"))
+    step = hf.quads // metric.squares.level_quads
+    keep = (rr % step != 0) | (cc % step != 0)
+    pts = hf.points(rr[keep], cc[keep])
+    vpm = proj.matrix() @ vp.view_matrix()
+    clip = np.c_[pts, np.ones(len(pts))] @ vpm.T
+    vis = (clip[:, 3] > 0) & np.all(np.abs(clip[:, :3]) <= clip[:, 3:4], axis=1)
+    pts = pts[vis]
+    d = pts - key_eye
+    every = np.broadcast_to(metric.squares.own.reshape(1, -1, 3, 3), (len(d), 32, 3, 3))
+    t = ray_triangle_t(key_eye, d, every)
+    t = np.where(t > 0, t, np.nan)
+    best = t[np.arange(len(t)), np.nanargmin(np.abs(t - 1.0), axis=1)]
+    th = angles_at_eye(vp.o, pts, key_eye + best[:, None] * d)
+    return len(pts), float(np.sqrt(np.mean(th**2)) / proj.pixel_angle_rad(height_px))
+
+
+def test_flying_low_between_the_centres_measures_the_fallback_sample():
+    hf = wavy_field()
+    metric = ErrorMetric.for_level(hf, 4)
+    proj = Projection(45.0, 1.0, 1.0, 2000.0)
+    # 30 m above the edge midpoint (row 4, col 2), looking down: the nearest square centres
+    # (rows 2 and 6) are 20 m away, outside the view, though terrain fills it.
+    spot = hf.points(np.array(4), np.array(2))
+    vp = look_at(spot + (0.0, -1.0, 30.0), spot)
+    vpm = proj.matrix() @ vp.view_matrix()
+    assert metric.theta(metric.reproject(vp.o), vp.o, vpm).size == 0
+    key_eye = vp.o + np.array([-25.0, 0.0, 10.0])
+    cp = metric.reproject(key_eye)
+    e = metric.error_px(cp, vp.o, vpm, proj.pixel_angle_rad(512))
+    n, expect = brute_force_error(metric, hf, key_eye, vp, proj, 512)
+    assert n >= 4
+    assert e == pytest.approx(expect, rel=1e-9)
+    assert e > 1.0  # the old metric said 0 here: no keyframe would ever be due
+    same = metric.error_px(metric.reproject(vp.o), vp.o, vpm, proj.pixel_angle_rad(512))
+    assert same == pytest.approx(0.0, abs=1e-6)

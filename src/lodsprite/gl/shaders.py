@@ -172,17 +172,25 @@ in vec4 g_key;
 flat in int g_sprite;
 out vec4 f_color;
 // The terrain texture where the keyframe did not see the surface, sampled nearest-mipmap-
-// nearest with one texelFetch: software rasterisers shade both sides of a branch for every
-// fragment, and a trilinear lookup cost 0.3 ms per 512x512 frame on llvmpipe for the
-// few hundred fragments that use it.
-vec3 terrain_fallback(vec2 uv) {
-    vec2 t = uv * vec2(textureSize(u_color, 0));
-    float rho2 = max(dot(dFdx(t), dFdx(t)), dot(dFdy(t), dFdy(t)));
-    int level = clamp(int(floor(0.5 * log2(max(rho2, 1.0)) + 0.5)), 0, u_color_levels - 1);
+// nearest with one texelFetch at a level chosen before the branch: software rasterisers
+// shade both sides of a branch for every fragment, and a trilinear lookup cost 0.3 ms per
+// 512x512 frame on llvmpipe for the few hundred fragments that use it.
+vec3 terrain_fallback(vec2 uv, int level) {
     ivec2 size = textureSize(u_color, level);
     return texelFetch(u_color, clamp(ivec2(uv * vec2(size)), ivec2(0), size - 1), level).rgb;
 }
 void main() {
+    // Every derivative is taken here, in uniform control flow: GLSL leaves dFdx/dFdy (and
+    // the implicit ones of texture()) undefined inside a branch that the neighbouring
+    // fragments of a 2x2 quad may not take.  The sprite is then sampled with textureGrad.
+    vec2 key_uv = g_key.xy / g_key.w * 0.5 + 0.5;
+    vec2 key_dx = dFdx(key_uv);
+    vec2 key_dy = dFdy(key_uv);
+    vec2 t = g_uv * vec2(textureSize(u_color, 0));
+    vec2 t_dx = dFdx(t);
+    vec2 t_dy = dFdy(t);
+    float rho2 = max(dot(t_dx, t_dx), dot(t_dy, t_dy));
+    int level = clamp(int(floor(0.5 * log2(max(rho2, 1.0)) + 0.5)), 0, u_color_levels - 1);
     bool sprite;
     if (u_visibility == 0) {
         sprite = g_sprite == 1;
@@ -191,8 +199,8 @@ void main() {
     } else {
         sprite = seen_by_keyframe(g_key, u_key_coarse, u_coarse_tol) > 0.5;
     }
-    vec3 rgb = sprite ? textureProj(u_sprite, vec3(g_key.xy * 0.5 + 0.5 * g_key.w, g_key.w)).rgb
-                      : terrain_fallback(g_uv);
+    vec3 rgb = sprite ? textureGrad(u_sprite, key_uv, key_dx, key_dy).rgb
+                      : terrain_fallback(g_uv, level);
     f_color = vec4(rgb, 1.0);
 }
 """

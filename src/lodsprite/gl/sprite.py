@@ -27,6 +27,7 @@ DEFAULT_COARSE_TOL = 0.002
 VISIBILITY_MODES = {"triangle": 0, "fragment": 1, "coarse": 2}
 DEFAULT_VISIBILITY = "coarse"
 DEFAULT_GUARD_PX = 32
+DEFAULT_SPRITE_MIPMAPS = False  # benchmarks/sprite_mipmaps.py: see SpriteRenderer
 
 
 @dataclass(frozen=True)
@@ -64,13 +65,19 @@ class SpriteRenderer:
       it - instead of the terrain texture of a surface that stays hidden; surfaces the
       coarse model itself hid (revealed geometry) take the terrain texture.  From the
       keyframe viewpoint this reproduces the keyframe everywhere but along silhouettes.
+
+    The sprite is sampled bilinearly with ``textureGrad`` (derivatives taken before the
+    visibility branch).  ``mipmaps=True`` builds the sprite texture's mipmaps with each
+    keyframe and samples it trilinearly, which can help only where a spriteframe shrinks the
+    keyframe (flying away from it).
     """
 
     def __init__(self, terrain: TerrainRenderer, coarse_quads: int = 16,
                  visibility: str = DEFAULT_VISIBILITY, vertex_tol: float = DEFAULT_VERTEX_TOL,
                  fragment_tol: float = DEFAULT_FRAGMENT_TOL,
                  coarse_tol: float = DEFAULT_COARSE_TOL, border: bool = True,
-                 guard_px: int = DEFAULT_GUARD_PX) -> None:
+                 guard_px: int = DEFAULT_GUARD_PX,
+                 mipmaps: bool = DEFAULT_SPRITE_MIPMAPS) -> None:
         if visibility not in VISIBILITY_MODES:
             raise InputError(f"visibility must be one of {', '.join(VISIBILITY_MODES)}, "
                              f"got {visibility!r}")
@@ -82,6 +89,7 @@ class SpriteRenderer:
         self.visibility = visibility
         self.border = border
         self.guard_px = guard_px
+        self.mipmaps = bool(mipmaps)
         self.program = self._program(visibility, {"u_vertex_tol": vertex_tol,
                                                   "u_fragment_tol": fragment_tol,
                                                   "u_coarse_tol": coarse_tol})
@@ -130,9 +138,12 @@ class SpriteRenderer:
               coarse_ready: bool = False) -> None:
         if self.visibility == "coarse" and not coarse_ready:
             self.render_coarse_depth(viewpoint, projection, coarse)
+        color = target.color if color is None else color
+        if self.mipmaps:
+            color.build_mipmaps()
+            color.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
         self.keyframe = GLKeyframe(target, coarse, viewpoint, projection,
-                                   projection.matrix() @ viewpoint.view_matrix(), t0,
-                                   target.color if color is None else color)
+                                   projection.matrix() @ viewpoint.view_matrix(), t0, color)
 
     def render_coarse_depth(self, viewpoint: Viewpoint, projection: Projection,
                             target: RenderTarget) -> None:

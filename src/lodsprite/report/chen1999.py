@@ -209,8 +209,12 @@ def _frame_of(r: dict, name: str) -> str:
     spec = (r.get("images") or {}).get(name)
     if not isinstance(spec, dict):
         return DASH
-    key = num(spec.get("keyframe"))
-    return fmt_text(spec.get("frame")) + ("" if key is None else f" (keyframe {key:.0f})")
+    key, at = num(spec.get("keyframe")), num(spec.get("keyframe_frame"))
+    if key is None:
+        return fmt_text(spec.get("frame"))
+    where = "" if at is None else f", rendered at frame {at:.0f}"
+    ahead = " from a viewpoint ahead of the viewer" if spec.get("keyframe_ahead") else ""
+    return f"{fmt_text(spec.get('frame'))} (keyframe {key:.0f}{where}{ahead})"
 
 
 def _captions(r: dict) -> dict[str, tuple[str, str]]:
@@ -235,7 +239,8 @@ def _captions(r: dict) -> dict[str, tuple[str, str]]:
             f"only reported value ({p['speedup']:.2f} at ε = 1 px, SGI IR, 1999)."),
         "fig13.png": ("Fig. 13 — full resolution, plain LOD, LOD-sprite",
             f"Frame {_frame_of(r, 'fig13')}: (a) full {grid} height field, (b) plain {lod} "
-            f"LOD, (c) LOD-sprite on the same {lod} mesh, textured from the keyframe."),
+            f"LOD, (c) LOD-sprite on the same {lod} mesh, textured from the keyframe (f), "
+            f"re-rendered from the viewpoint and projection the run logged for it."),
         "fig14.png": ("Fig. 14 — with difference images",
             f"Frame {_frame_of(r, 'fig14')}: as Fig. 13 plus the differences (d) |a−b| and "
             f"(e) |a−c|, shown on the same 0–255 grey scale."),

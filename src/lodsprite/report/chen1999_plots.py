@@ -220,7 +220,18 @@ def _panel_titles(results: dict) -> dict[str, str]:
         "sprite": f"(c) LOD-sprite on {lod}",
         "diff_lod": "(d) |a−b|",
         "diff_sprite": "(e) |a−c|",
+        "keyframe_image": "(f) the keyframe (c) is drawn from",
     }
+
+
+def _keyframe_title(spec: dict) -> str:
+    """Panel (f)'s title: which keyframe, rendered when, and whether ahead of the viewer."""
+    key, at = num(spec.get("keyframe")), num(spec.get("keyframe_frame"))
+    if key is None:
+        return _panel_titles({})["keyframe_image"]
+    where = "" if at is None else f" of frame {at:.0f}"
+    ahead = ", placed ahead" if spec.get("keyframe_ahead") else ""
+    return f"(f) keyframe {key:.0f}{where}{ahead}"
 
 
 def _load_image(path: Path) -> tuple[np.ndarray, bool] | None:
@@ -253,8 +264,11 @@ def _draw_panel(ax: Axes, image: tuple[np.ndarray, bool] | None, title: str) -> 
 
 def _panel_layout(images: dict[str, Any]) -> list[list[str | None]]:
     rows: list[list[str | None]] = [["full", "lod", "sprite"]]
+    key = "keyframe_image" if images.get("keyframe_image") is not None else None
     if images.get("diff_lod") is not None or images.get("diff_sprite") is not None:
-        rows.append([None, "diff_lod", "diff_sprite"])  # (d) under (b), (e) under (c)
+        rows.append([key, "diff_lod", "diff_sprite"])  # (d) under (b), (e) under (c)
+    elif key:
+        rows.append([key, None, None])
     return rows
 
 
@@ -262,7 +276,7 @@ def _plot_panels(results: dict, out_dir: Path, name: str) -> Path | None:
     spec = (results.get("images") or {}).get(name)
     if not isinstance(spec, dict):
         return None
-    titles = _panel_titles(results)
+    titles = {**_panel_titles(results), "keyframe_image": _keyframe_title(spec)}
     images = {k: _load_image(out_dir / str(spec[k])) for k in titles if spec.get(k)}
     if not any(v is not None for v in images.values()):
         return None

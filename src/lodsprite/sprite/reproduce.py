@@ -7,29 +7,33 @@ Everything in ``results.json`` is measured in one run on one machine:
 * for large fields the full-resolution time may be measured on an even sample of
   frames (at least 46) and scaled to the whole path (``full_sampled``);
 * image quality compares each LOD-sprite frame and the plain coarse frame with an
-  untimed full-resolution render of the same viewpoint (optionally every k-th frame).
+  untimed full-resolution render of the same viewpoint (optionally every k-th frame);
+* every keyframe is logged with the viewpoint and projection it was rendered from
+  (``keyframe_views``; with look-ahead, ahead of the viewer), and each frame with the
+  index of the keyframe it shows (``per_frame.keyframe``) and that keyframe's eye
+  (``per_frame.keyframe_eye``).  Figures 13-14 show the keyframe their LOD-sprite image
+  was drawn from, re-rendered from its logged viewpoint and projection.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
 
+from lodsprite.camera import Projection, Viewpoint
 from lodsprite.errors import InputError
 from lodsprite.gl.paths import PathRenderer
 from lodsprite.gl.sprite import DEFAULT_GUARD_PX, DEFAULT_VISIBILITY, SpriteRenderer
 from lodsprite.metrics import difference_image
 from lodsprite.paths import chen1999
+from lodsprite.progress import Progress
 from lodsprite.report.io import write_json, write_png
 from lodsprite.run import RenderConfig, quality_summary, sprite_frames
 from lodsprite.scene import Scene, load_scene
 from lodsprite.sprite.engine import KEYFRAME
 from lodsprite.terrain import make_texture
-
-Progress = Callable[[int, int], None]
 
 FIG10_FRAMES = (115, 230, 460, 920, 1840)
 FIG11_EPSILON = (0.25, 0.5, 1.0, 2.0, 4.0)
@@ -133,25 +137,38 @@ def _sweep(pr: PathRenderer, scene: Scene, cfg: ReproduceConfig, work: _Work,
     return {"fig10": fig10, "fig11": fig11, "fig12": fig12}
 
 
-def _pick_frame(rows: list[dict]) -> tuple[int, int]:
-    """(frame, its keyframe) for Figures 13-14: the spriteframe with the largest error in the
-    middle half of the path, i.e. LOD-sprite at its worst just before a new keyframe."""
+def _pick_frame(rows: list[dict]) -> int:
+    """The frame of Figures 13-14: the spriteframe with the largest error in the middle half
+    of the path, i.e. LOD-sprite at its worst just before a new keyframe."""
     n = len(rows)
-    key = 0
-    best = (-1.0, n // 2, 0)
+    best = (-1.0, n // 2)
     for i, r in enumerate(rows):
-        if r["type"] == KEYFRAME:
-            key = i
-        elif n // 4 <= i < 3 * n // 4 and r["error_px"] > best[0]:
-            best = (r["error_px"], i, key)
-    return best[1], best[2]
+        if r["type"] != KEYFRAME and n // 4 <= i < 3 * n // 4 and r["error_px"] > best[0]:
+            best = (r["error_px"], i)
+    return best[1]
+
+
+KeyView = tuple[Viewpoint, Projection]
+
+
+def _key_view_json(key: KeyView, frame: int, path_vp: Viewpoint) -> dict:
+    """One logged keyframe: its viewpoint and frame projection, the frame that rendered it
+    and whether it was placed ahead of that frame's viewpoint."""
+    vp, proj = key
+    return {"frame": frame, "viewpoint": vp.to_dict(),
+            "projection": {"fov_y_deg": proj.fov_y_deg, "aspect": proj.aspect,
+                           "near": proj.near, "far": proj.far},
+            "ahead": not np.allclose(vp.view_matrix(), path_vp.view_matrix())}
 
 
 def _figure_images(pr: PathRenderer, scene: Scene, cfg: ReproduceConfig, path, frame: int,
-                   key: int, out_dir: Path) -> dict:
-    """Figures 13 (checker texture) and 14 (terrain texture): full, coarse, LOD-sprite."""
+                   key: int, key_view: KeyView, key_frame: int, out_dir: Path) -> dict:
+    """Figures 13 (checker texture) and 14 (terrain texture): full, coarse, LOD-sprite, and
+    the keyframe LOD-sprite drew from (keyframe ``key``, rendered at frame ``key_frame``
+    from ``key_view`` = its logged viewpoint and frame projection)."""
     images = {}
-    vp, key_vp = path.viewpoints[frame], path.viewpoints[key]
+    vp = path.viewpoints[frame]
+    key_vp, key_proj = key_view
     for fig, texture in (("fig13", make_texture("checker", scene.hf)), ("fig14", None)):
         if texture is not None:
             pr.geometry.set_texture(texture)
@@ -163,13 +180,15 @@ def _figure_images(pr: PathRenderer, scene: Scene, cfg: ReproduceConfig, path, f
         sprite = SpriteRenderer(r, cfg.lod, cfg.visibility, border=cfg.border,
                                 guard_px=cfg.guard_px)
         try:
-            sprite.render_keyframe(key_vp, 0.0)
+            sprite.render_keyframe(key_vp, 0.0, key_proj)
+            keyframe = sprite.keyframe_color()
             sprite.render_spriteframe(vp)
             lsp = sprite.target.read_color()
         finally:
             sprite.release()
-        entry = {"frame": frame, "keyframe": key}
-        for name, img in (("full", full), ("lod", lod), ("sprite", lsp)):
+        entry = {"frame": frame, "keyframe": key, "keyframe_frame": key_frame}
+        for name, img in (("full", full), ("lod", lod), ("sprite", lsp),
+                          ("keyframe_image", keyframe)):
             write_png(out_dir / f"{fig}_{name}.png", img)
             entry[name] = f"{fig}_{name}.png"
         if fig == "fig14":
@@ -209,24 +228,35 @@ def reproduce_chen1999(cfg: ReproduceConfig, out_dir: Path,
         total_s_full = float(np.nanmean(ms_full)) * cfg.frames / 1e3
         # Timed run first, then the same frames again for quality: interleaving untimed
         # ground-truth renders would evict caches and slow the timed spriteframes.
-        main = sprite_frames(pr, path, cfg.render_config(), work.step)
+        keys: list[KeyView] = []
+        main = sprite_frames(pr, path, cfg.render_config(), work.step, keyframes=keys)
         checked = sprite_frames(pr, path, cfg.render_config(ground_truth=True,
                                                             quality_stride=stride), work.step)
         if [r["type"] for r in checked] != [r["type"] for r in main]:
             raise RuntimeError("LOD-sprite frame decisions differ between two identical runs")
         for row, q in zip(main, checked, strict=True):
             row.update({k: v for k, v in q.items() if k.startswith(("rmse_", "psnr_", "ssim_"))})
-        frame, key = _pick_frame(main)
-        images = _figure_images(pr, scene, cfg, path, frame, key, out_dir)
+        # Frame at which each keyframe was rendered: the first frame showing it.
+        key_frames = {}
+        for i, row in enumerate(main):
+            key_frames.setdefault(row["keyframe"], i)
+        key_views = [_key_view_json(kv, key_frames[k], path.viewpoints[key_frames[k]])
+                     for k, kv in enumerate(keys)]
+        frame = _pick_frame(main)
+        key = main[frame]["keyframe"]
+        images = _figure_images(pr, scene, cfg, path, frame, key, keys[key], key_frames[key],
+                                out_dir)
+        images["fig13"]["keyframe_ahead"] = images["fig14"]["keyframe_ahead"] = \
+            key_views[key]["ahead"]
         sweeps = _sweep(pr, scene, cfg, work, total_s_full) if cfg.sweeps else {}
         info = pr.ctx.info
         pr.ctx.check_error("reproduce")
-    return _results(cfg, scene, main, ms_full, ms_lod, full_idx, stride, total_s_full,
-                    images, sweeps, info, out_dir)
+    return _results(cfg, scene, main, key_views, ms_full, ms_lod, full_idx, stride,
+                    total_s_full, images, sweeps, info, out_dir)
 
 
-def _results(cfg, scene, main, ms_full, ms_lod, full_idx, stride, total_s_full, images, sweeps,
-             info, out_dir) -> dict:
+def _results(cfg, scene, main, key_views, ms_full, ms_lod, full_idx, stride, total_s_full,
+             images, sweeps, info, out_dir) -> dict:
     import platform
 
     from lodsprite.run import sprite_summary
@@ -251,12 +281,16 @@ def _results(cfg, scene, main, ms_full, ms_lod, full_idx, stride, total_s_full, 
         "per_frame": {
             "type": [r["type"] for r in main],
             "error_px": [r["error_px"] for r in main],
+            "keyframe": [r["keyframe"] for r in main],
+            "keyframe_eye": [key_views[r["keyframe"]]["viewpoint"]["o"] for r in main],
             "ms_sprite": [r["ms"] for r in main],
             "ms_full": [None if np.isnan(v) else float(v) for v in ms_full],
             "ms_lod": [float(v) for v in ms_lod],
             "rmse_sprite": [r.get("rmse_sprite") for r in main],
             "rmse_lod": [r.get("rmse_lod") for r in main],
         },
+        "keyframe_views": key_views,
+        "keyframes_ahead": sum(k["ahead"] for k in key_views),
         **sweeps,
         "images": images,
         "config": asdict(cfg),
