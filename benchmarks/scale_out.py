@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lodsprite.distributed.reproduce import SwanConfig, _setup
+from lodsprite.distributed.reproduce import SwanConfig, run_setup
 
 SETUPS = ("same_all_cores", "two_servers")
 
@@ -40,7 +40,7 @@ def main() -> None:
     for run in range(args.runs):
         for name in SETUPS:
             out = args.out / f"{name}_{run}"
-            res = _setup(cfg, name, out, cpus)
+            res = run_setup(cfg, name, out, cpus)
             stats = json.loads((out / "server_stats.json").read_text())["stats"]
             per_server = [len(s.get("render_ms", [])) for s in stats]
             rendered[name].append(sum(per_server))

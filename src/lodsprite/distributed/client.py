@@ -75,7 +75,7 @@ from lodsprite.gl.paths import PathRenderer
 from lodsprite.gl.sprite import SpriteRenderer
 from lodsprite.scene import Scene
 from lodsprite.sprite.metric import ErrorMetric
-from lodsprite.sprite.policy import keyframe_error_px
+from lodsprite.sprite.policy import keyframe_due, keyframe_error_px
 
 log = logging.getLogger("lodsprite.client")
 
@@ -296,7 +296,7 @@ class LodClient:
         bound = self.epsilon_px if self._current is None else self.max_error
         if bound is None:
             return False
-        return not self._error(self._c_prime, viewpoint, projection) < bound
+        return keyframe_due(self._error(self._c_prime, viewpoint, projection), bound)
 
     def _say_link_state(self) -> None:
         """Say once when no server answers any more, and once when one answers again."""
@@ -321,13 +321,13 @@ class LodClient:
         new = None
         if self.max_error is not None:
             new = self._error(c_prime, viewpoint, projection)
-            if not new < self.max_error:
+            if keyframe_due(new, self.max_error):
                 return False
         if self._current is None or self.adopt == "newest" or self._c_prime is None:
             return True
         err = self._error(self._c_prime, viewpoint, projection)
         if self.adopt == "needed":
-            return not err < ADOPT_FRACTION * self.epsilon_px
+            return keyframe_due(err, ADOPT_FRACTION * self.epsilon_px)
         if new is None:
             new = self._error(c_prime, viewpoint, projection)
         return new < err

@@ -153,7 +153,9 @@ def _placement(where: str, own: int, cpus: list[int]) -> tuple[set[int] | None, 
     return {cpus[own] if where == "own" else cpus[0]}, ONE_THREAD
 
 
-def _setup(cfg: SwanConfig, name: str, out: Path, cpus: list[int]) -> dict | None:
+def run_setup(cfg: SwanConfig, name: str, out: Path, cpus: list[int]) -> dict | None:
+    """Run set-up ``name`` (a key of ``SETUPS``) as real processes, outputs in ``out``;
+    its collected figures, or None when this machine has too few cores for it."""
     setup = SETUPS[name]
     if setup is None:
         _run(lodsprite_command("render", "--mode", "sprite", *cfg.args(), "--out", str(out)))
@@ -288,7 +290,7 @@ def reproduce_swan2002(cfg: SwanConfig, out_dir: Path,
         if setup in LINK_SETUPS and no_netns:
             results[setup] = {"skipped": f"two hosts on one machine: {no_netns}"}
             continue
-        res = _setup(cfg, setup, out_dir / setup, cpus)
+        res = run_setup(cfg, setup, out_dir / setup, cpus)
         results[setup] = res if res is not None else {
             "skipped": "needs at least two cores to pin server and client apart"}
         if progress:

@@ -9,7 +9,9 @@ here is numpy and camera math; the GL drivers render what it decides:
 
 * the in-process engine (:class:`lodsprite.sprite.engine.LodSpriteEngine`) follows a
   :class:`KeyframePolicy` frame by frame (§3.1 steps 1-4, with look-ahead);
-* the distributed client's own fallback keyframes are that engine's;
+* the distributed client decides with :func:`keyframe_due` when to render its own
+  keyframe (at the current viewpoint, as in the paper's step 1) and whether a server
+  keyframe serves;
 * the distributed server's pacer decides with :func:`keyframe_needed`, the same rule
   applied to the keyframes the client may show.
 
