@@ -37,7 +37,7 @@ from lodsprite.terrain.lod import DEFAULT_COARSE, level_step
 
 MODES = ("full", "lod", "sprite")
 FRAME_COLUMNS = ["frame", "mode", "ms", "triangles"]
-SPRITE_COLUMNS = ["type", "error_px"]
+SPRITE_COLUMNS = ["type", "error_px", "keyframe"]
 QUALITY_COLUMNS = ["rmse_sprite", "psnr_sprite", "ssim_sprite", "rmse_lod", "psnr_lod", "ssim_lod",
                    "rmse_lod_border"]
 MAX_GUARD_PX = 1024
@@ -208,19 +208,42 @@ def sprite_frames(pr: PathRenderer, path: CameraPath, config: RenderConfig,
         sprite.release()
 
 
+def keyframe_records(keyframes: list, rows: list[dict], viewpoints: list) -> list[dict]:
+    """JSON records of the keyframes a LOD-sprite run rendered (``keyframes``: the engine's
+    ``(viewpoint, frame projection)`` log; ``rows``: the run's frames with their
+    ``keyframe`` index; ``viewpoints``: the path's).  Each holds its viewpoint and frame
+    projection, the frame that rendered it and whether it was placed ahead of that
+    frame's viewpoint (look-ahead)."""
+    first: dict[int, int] = {}
+    for i, row in enumerate(rows):
+        first.setdefault(row["keyframe"], i)
+    out = []
+    for k, (vp, proj) in enumerate(keyframes):
+        frame = first.get(k, -1)
+        ahead = frame >= 0 and not np.allclose(vp.view_matrix(),
+                                               viewpoints[frame].view_matrix())
+        out.append({"frame": frame, "viewpoint": vp.to_dict(),
+                    "projection": {"fov_y_deg": proj.fov_y_deg, "aspect": proj.aspect,
+                                   "near": proj.near, "far": proj.far},
+                    "ahead": bool(ahead)})
+    return out
+
+
 def render_path(config: RenderConfig, out_dir: Path, progress: Progress | None = None) -> dict:
-    """Render ``config``'s path; write ``frames.csv``, ``summary.json`` and optionally PNG
-    frames to ``out_dir``; return the summary."""
+    """Render ``config``'s path; write ``frames.csv``, ``summary.json`` (and in sprite mode
+    ``keyframes.json``, every keyframe rendered, indexed by the ``keyframe`` column) and
+    optionally PNG frames to ``out_dir``; return the summary."""
     scene, path = prepare(config)
     out_dir = Path(out_dir)
 
     def save(i: int, image: np.ndarray) -> None:
         write_png(out_dir / "frames" / f"frame_{i:05d}.png", image)
 
+    keyframes: list = []
     with PathRenderer(scene, config.size, config.fov_y_deg) as pr:
         if config.mode == "sprite":
             rows = sprite_frames(pr, path, config, progress,
-                                 save if config.save_frames else None)
+                                 save if config.save_frames else None, keyframes)
         else:
             rows = plain_frames(pr, path, config, progress, save if config.save_frames else None)
         info = pr.ctx.info
@@ -247,6 +270,9 @@ def render_path(config: RenderConfig, out_dir: Path, progress: Progress | None =
             summary.update(quality_summary(rows))
             columns += QUALITY_COLUMNS
     write_csv(out_dir / "frames.csv", rows, columns)
+    if config.mode == "sprite":
+        write_json(out_dir / "keyframes.json",
+                   {"keyframes": keyframe_records(keyframes, rows, path.viewpoints)})
     write_json(out_dir / "summary.json", summary)
     return summary
 

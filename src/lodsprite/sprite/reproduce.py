@@ -30,7 +30,7 @@ from lodsprite.metrics import difference_image
 from lodsprite.paths import chen1999
 from lodsprite.progress import Progress
 from lodsprite.report.io import write_json, write_png
-from lodsprite.run import RenderConfig, quality_summary, sprite_frames
+from lodsprite.run import RenderConfig, keyframe_records, quality_summary, sprite_frames
 from lodsprite.scene import Scene, load_scene
 from lodsprite.sprite.engine import KEYFRAME
 from lodsprite.terrain import make_texture
@@ -151,16 +151,6 @@ def _pick_frame(rows: list[dict]) -> int:
 KeyView = tuple[Viewpoint, Projection]
 
 
-def _key_view_json(key: KeyView, frame: int, path_vp: Viewpoint) -> dict:
-    """One logged keyframe: its viewpoint and frame projection, the frame that rendered it
-    and whether it was placed ahead of that frame's viewpoint."""
-    vp, proj = key
-    return {"frame": frame, "viewpoint": vp.to_dict(),
-            "projection": {"fov_y_deg": proj.fov_y_deg, "aspect": proj.aspect,
-                           "near": proj.near, "far": proj.far},
-            "ahead": not np.allclose(vp.view_matrix(), path_vp.view_matrix())}
-
-
 def _figure_images(pr: PathRenderer, scene: Scene, cfg: ReproduceConfig, path, frame: int,
                    key: int, key_view: KeyView, key_frame: int, out_dir: Path) -> dict:
     """Figures 13 (checker texture) and 14 (terrain texture): full, coarse, LOD-sprite, and
@@ -237,15 +227,11 @@ def reproduce_chen1999(cfg: ReproduceConfig, out_dir: Path,
         for row, q in zip(main, checked, strict=True):
             row.update({k: v for k, v in q.items() if k.startswith(("rmse_", "psnr_", "ssim_"))})
         # Frame at which each keyframe was rendered: the first frame showing it.
-        key_frames = {}
-        for i, row in enumerate(main):
-            key_frames.setdefault(row["keyframe"], i)
-        key_views = [_key_view_json(kv, key_frames[k], path.viewpoints[key_frames[k]])
-                     for k, kv in enumerate(keys)]
+        key_views = keyframe_records(keys, main, path.viewpoints)
         frame = _pick_frame(main)
         key = main[frame]["keyframe"]
-        images = _figure_images(pr, scene, cfg, path, frame, key, keys[key], key_frames[key],
-                                out_dir)
+        images = _figure_images(pr, scene, cfg, path, frame, key, keys[key],
+                                key_views[key]["frame"], out_dir)
         images["fig13"]["keyframe_ahead"] = images["fig14"]["keyframe_ahead"] = \
             key_views[key]["ahead"]
         sweeps = _sweep(pr, scene, cfg, work, total_s_full) if cfg.sweeps else {}

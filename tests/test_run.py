@@ -1,0 +1,39 @@
+"""lodsprite.run: what ``lodsprite render --mode sprite`` records about its keyframes."""
+
+import csv
+import json
+
+import numpy as np
+
+from lodsprite.camera import Viewpoint, fitted_projection
+from lodsprite.run import RenderConfig, prepare, render_path
+from lodsprite.sprite.metric import ErrorMetric
+from lodsprite.sprite.policy import keyframe_error_px
+
+
+def test_sprite_frames_name_the_keyframe_they_show_and_its_viewpoint(tmp_path, gl):
+    config = RenderConfig(terrain="fractal:64:3", mode="sprite", lod=8, size=(64, 64),
+                          frames=40, epsilon=4.0)
+    render_path(config, tmp_path)
+    rows = list(csv.DictReader((tmp_path / "frames.csv").open()))
+    keys = json.loads((tmp_path / "keyframes.json").read_text())["keyframes"]
+    shown = [int(r["keyframe"]) for r in rows]
+    assert shown[0] == 0 and shown == sorted(shown) and shown[-1] == len(keys) - 1
+    assert sum(r["type"] == "keyframe" for r in rows) == len(keys)
+    # Recompute every spriteframe's error from the logged keyframe viewpoint: it must be
+    # the error the run reported (wrong if the log named another keyframe or viewpoint).
+    scene, path = prepare(config)
+    metric = ErrorMetric.for_level(scene.hf, config.lod)
+    checked = 0
+    for i, row in enumerate(rows):
+        if row["type"] == "keyframe":
+            continue
+        eye = Viewpoint.from_dict(keys[shown[i]]["viewpoint"]).o
+        vp = path.viewpoints[i]
+        projection = fitted_projection(vp, config.fov_y_deg, 1.0, *scene.hf.bounds(),
+                                       float(scene.hf.height_at(vp.o[0], vp.o[1])))
+        err = keyframe_error_px(metric, metric.reproject(eye), vp, projection, 64)
+        assert np.isclose(err, float(row["error_px"]), rtol=1e-4, atol=1e-6), i  # the CSV keeps 6 digits
+        checked += 1
+    assert checked > 10
+
