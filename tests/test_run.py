@@ -33,7 +33,8 @@ def test_sprite_frames_name_the_keyframe_they_show_and_its_viewpoint(tmp_path, g
         projection = fitted_projection(vp, config.fov_y_deg, 1.0, *scene.hf.bounds(),
                                        float(scene.hf.height_at(vp.o[0], vp.o[1])))
         err = keyframe_error_px(metric, metric.reproject(eye), vp, projection, 64)
-        assert np.isclose(err, float(row["error_px"]), rtol=1e-4, atol=1e-6), i  # the CSV keeps 6 digits
+        # the CSV keeps 6 significant digits
+        assert np.isclose(err, float(row["error_px"]), rtol=1e-4, atol=1e-6), i
         checked += 1
     assert checked > 10
 

@@ -76,7 +76,8 @@ def mutated_keyframes(draw):
         nested = draw(st.sampled_from(["", "viewpoint", "color", "depth"]))
         if nested and isinstance(header.get(nested), dict):
             target = header[nested] = dict(header[nested])
-        key = draw(keys | st.sampled_from(sorted(target)))
+        own = sorted(target, key=repr)  # an earlier mutation may leave int keys, or none
+        key = draw(keys | st.sampled_from(own) if own else keys)
         if draw(st.booleans()):
             target[key] = draw(values)
         else:
@@ -131,14 +132,14 @@ def test_the_control_handler_answers_everything(server, fr):
 @FAST
 @given(frames | mutated("viewpoint"))
 def test_the_viewpoint_handler_takes_everything(server, fr):
-    assert server._viewpoint(fr) in (True, False)
+    assert server._viewpoints.take(fr) in (True, False)
 
 
 @FAST
 @given(st.binary(max_size=20), frames | mutated("ack"))
 def test_the_ack_handler_takes_everything(server, identity, fr):
-    assert server._ack([identity, *fr], "c" * 16, 1) in (True, False)
-    assert server._ack(fr, None, -1) in (True, False)
+    assert server._transmitter.ack([identity, *fr], "c" * 16, 1) in (True, False)
+    assert server._transmitter.ack(fr, None, -1) in (True, False)
 
 
 def test_hostile_messages_are_hostile():

@@ -116,9 +116,9 @@ def test_two_servers_take_turns_after_the_shown_keyframes_server(hf, slot, shown
                 return True
 
         eye = np.asarray(eye_at(0.0).o)
-        assert server._due(_Renderer(Pacer()), eye_at(10.0), (eye, shown_slot))
+        assert server._producer.due(_Renderer(Pacer()), eye_at(10.0), (eye, shown_slot))
         assert calls[-1][1] is turn and calls[-1][0] is eye
-        server._due(_Renderer(Pacer()), eye_at(10.0), None)  # nothing shown yet
+        server._producer.due(_Renderer(Pacer()), eye_at(10.0), None)  # nothing shown yet
         assert calls[-1] == (None, True)
     finally:
         server._ctx.term()

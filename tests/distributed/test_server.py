@@ -9,6 +9,7 @@ import pytest
 import zmq
 
 from lodsprite.camera import Viewpoint, look_at
+from lodsprite.distributed import producer as producer_module
 from lodsprite.distributed import server as server_module
 from lodsprite.distributed.datasets import MAX_FRACTAL_SIZE, Datasets
 from lodsprite.distributed.protocol import decode, decode_keyframe, encode
@@ -110,11 +111,11 @@ def test_a_hold_lapses_after_the_lease_without_messages(server):
 
 def test_viewpoints_from_a_client_that_does_not_hold_are_ignored_and_counted(server):
     vp = look_at((0.0, -500.0, 300.0), (0.0, 0.0, 0.0))
-    assert not server._viewpoint(viewpoint_frames(vp, 1.0, A))  # nobody holds it yet
+    assert not server._viewpoints.take(viewpoint_frames(vp, 1.0, A))  # nobody holds it yet
     assert control(server, "load", SMALL, A)["ok"]
-    assert not server._viewpoint(viewpoint_frames(vp, 1.0, B))
-    assert server._viewpoint(viewpoint_frames(vp, 1.0, A))
-    assert not server._viewpoint(viewpoint_frames(vp, 0.5, A))  # older than the last
+    assert not server._viewpoints.take(viewpoint_frames(vp, 1.0, B))
+    assert server._viewpoints.take(viewpoint_frames(vp, 1.0, A))
+    assert not server._viewpoints.take(viewpoint_frames(vp, 0.5, A))  # older than the last
     assert server.stats.ignored == {"viewpoint_not_holder": 2, "viewpoint_not_newer": 1}
     assert server.stats.rejected["viewpoint"] == 0
 
@@ -170,7 +171,7 @@ def test_a_load_naming_a_path_is_refused_with_ok_false(data_dir):
         assert reply["ok"] is False
         assert control(plain, "load", {**SMALL, "terrain": "dem.npy"})["ok"] is False
         assert control(s, "load", {**SMALL, "terrain": "dem.npy", "grid": 64})["ok"] is True
-        assert s._scene_request.terrain == str((data_dir / "dem.npy").resolve())
+        assert s._producer.pending.terrain == str((data_dir / "dem.npy").resolve())
     finally:
         s._ctx.term()
         plain._ctx.term()
@@ -182,12 +183,12 @@ def test_a_scene_the_machine_cannot_hold_is_refused_before_loading(server, monke
     monkeypatch.setattr(server_module, "memory_available", lambda: 200 * 2**20)
     reply = control(server, "load", {**SMALL, "terrain": "fractal:4096:1", "grid": 4096})
     assert reply["ok"] is False and "MiB" in reply["error"]
-    assert server._scene_request is None and server._state == "idle"
+    assert server._producer.pending is None and server._producer.state == "idle"
     assert control(server, "load", SMALL)["ok"] is True
 
 
 def test_sizes_over_the_gl_maximum_texture_size_are_refused(server):
-    server._max_texture = 100
+    server._producer.max_texture = 100
     reply = control(server, "load", {**SMALL, "grid": 128})
     assert reply["ok"] is False and "maximum texture size" in reply["error"]
     assert control(server, "load", {**SMALL, "size": [128, 64]})["ok"] is False
@@ -217,10 +218,10 @@ def test_samples_arriving_in_a_burst_are_timed_by_the_client_clock(server):
     for i in range(10):  # client times 1/30 s apart, all arriving at one server instant
         t = 7.0 + i / 30
         vp = Viewpoint(start.x, start.y, start.z, start.o + v * (t - 7.0))
-        assert server._viewpoint(viewpoint_frames(vp, t, A, seq=i + 1))
-    server._delta_t = 0.5
+        assert server._viewpoints.take(viewpoint_frames(vp, t, A, seq=i + 1))
+    server._transmitter.delta_t = 0.5
     clock[0] += 0.2  # predicted from the newest sample: δt + 0.2 s since it arrived
-    predicted, _ = server._predicted_viewpoint()
+    predicted, _ = server._producer.predicted_viewpoint()
     np.testing.assert_allclose(predicted.o, vp.o + v * 0.7, atol=1e-6)
 
 
@@ -322,7 +323,7 @@ def test_keyframes_go_to_the_holder_only(live):
 
 
 def _fail_for(terrain, exc):
-    real = server_module.KeyframeRenderer
+    real = producer_module.KeyframeRenderer
 
     def make(args):
         if args.terrain == terrain:
@@ -338,7 +339,7 @@ def test_the_renderer_survives_a_scene_that_fails_and_a_later_load_works(live, m
     """Regression: only LodspriteError and ValueError were caught: anything else (a
     MemoryError, a GL error) killed the renderer thread, and the server answered ping
     but never sent a keyframe again."""
-    monkeypatch.setattr(server_module, "KeyframeRenderer", _fail_for("fractal:32:9", exc))
+    monkeypatch.setattr(producer_module, "KeyframeRenderer", _fail_for("fractal:32:9", exc))
     assert live.control("load", {**SMALL, "terrain": "fractal:32:9"})["ok"]
     assert live.control("start")["ok"]
     data = live.wait_state({"failed"})
@@ -351,7 +352,7 @@ def test_the_renderer_survives_a_scene_that_fails_and_a_later_load_works(live, m
 
 def test_the_renderer_survives_a_keyframe_that_fails_to_render(live, monkeypatch):
     calls = []
-    real = server_module.KeyframeRenderer
+    real = producer_module.KeyframeRenderer
 
     class Flaky(real):
         def render(self, *a, **kw):
@@ -360,7 +361,7 @@ def test_the_renderer_survives_a_keyframe_that_fails_to_render(live, monkeypatch
                 raise RuntimeError("GL_INVALID_OPERATION")
             return super().render(*a, **kw)
 
-    monkeypatch.setattr(server_module, "KeyframeRenderer", Flaky)
+    monkeypatch.setattr(producer_module, "KeyframeRenderer", Flaky)
     assert live.control("load", SMALL)["ok"] and live.control("start")["ok"]
     pub = live.ctx.socket(zmq.PUB)
     pub.connect(live.vp_ep)

@@ -83,7 +83,7 @@ MAX_TIME = 1e12
 MAX_CONTROL_BYTES = 64 * 1024
 MAX_VIEWPOINT_BYTES = 4 * 1024
 MAX_ACK_BYTES = 4 * 1024
-MAX_REPLY_BYTES = 64 * 1024 * 1024  # statistics replies grow with the keyframes sent
+MAX_REPLY_BYTES = 64 * 1024 * 1024  # a stats reply: at most 8 x 10,000 timings, under 1 MiB
 MAX_KEYFRAME_FRAME_BYTES = (MAX_IMAGE_SIDE**2 * 4 * 102) // 100 + 65536
 """Largest frame of a keyframe message: the depth image at the largest size (4 bytes a
 pixel), plus zlib's worst-case expansion of incompressible data and the header."""
