@@ -21,12 +21,7 @@ import math
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from lodsprite.camera import Viewpoint, view_rotation
-
-
-def _with(rotation: Rotation, eye: np.ndarray) -> Viewpoint:
-    m = rotation.as_matrix()
-    return Viewpoint(m[:, 0], m[:, 1], m[:, 2], eye)
+from lodsprite.camera import Viewpoint, rotated_viewpoint, view_rotation
 
 
 class DecayLinearPredictor:
@@ -98,7 +93,7 @@ class KalmanPredictor:
             raise RuntimeError("predict() before any observe()")
         eye = self._x[:, 0] + self._x[:, 1] * dt
         rotation = Rotation.from_rotvec(self._omega * dt) * view_rotation(self._last)
-        return _with(rotation, eye)
+        return rotated_viewpoint(rotation, eye)
 
 
 PREDICTORS = {"linear": DecayLinearPredictor, "kalman": KalmanPredictor}

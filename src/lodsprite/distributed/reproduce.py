@@ -43,7 +43,6 @@ import csv
 import json
 import os
 import subprocess
-from collections.abc import Callable
 from contextlib import ExitStack
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
@@ -57,6 +56,7 @@ from lodsprite.distributed.quality import Replayer, inline_quality, recorded_key
 from lodsprite.distributed.run import local_server, lodsprite_command, pinned, server_process
 from lodsprite.errors import LodspriteError
 from lodsprite.paths import swan2002
+from lodsprite.progress import Progress
 from lodsprite.report.io import write_json
 from lodsprite.run import RenderConfig
 from lodsprite.terrain import load_terrain
@@ -279,7 +279,7 @@ def policies(results: dict) -> list[dict]:
 
 
 def reproduce_swan2002(cfg: SwanConfig, out_dir: Path,
-                       progress: Callable[[int, int], None] | None = None) -> dict:
+                       progress: Progress | None = None) -> dict:
     """Run the three set-ups; write ``results.json`` and return it (plots: report.swan2002)."""
     out_dir = Path(out_dir)
     cpus = sorted(os.sched_getaffinity(0))

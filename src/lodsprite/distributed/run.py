@@ -13,7 +13,7 @@ import socket
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
@@ -30,6 +30,7 @@ from lodsprite.distributed.keys import ClientKeys
 from lodsprite.distributed.pacing import DEFAULT_PACE, PACES
 from lodsprite.distributed.render import scene_args
 from lodsprite.errors import InputError, LodspriteError
+from lodsprite.progress import Progress
 from lodsprite.report.io import write_csv, write_json
 from lodsprite.run import RenderConfig, prepare, timing_summary
 
@@ -126,7 +127,7 @@ def server_process(cmd: list[str], cpus: set[int] | None = None, env: dict | Non
 
 
 def render_distributed(config: RenderConfig, out_dir: Path,
-                       progress: Callable[[int, int], None] | None = None, *,
+                       progress: Progress | None = None, *,
                        pace: str = DEFAULT_PACE, adopt: str = "newest",
                        max_error: float | None = DEFAULT_MAX_ERROR) -> dict:
     """``lodsprite render --mode distributed``: ``config``'s path (its sprite settings) drawn
@@ -142,7 +143,7 @@ def render_distributed(config: RenderConfig, out_dir: Path,
 
 
 def run_client(config: RenderConfig, servers: list[str], out_dir: Path,
-               progress: Callable[[int, int], None] | None = None,
+               progress: Progress | None = None,
                warmup_s: float = 10.0, adopt: str = "newest",
                keys: ClientKeys | None = None, *, pace: str = DEFAULT_PACE,
                max_error: float | None = DEFAULT_MAX_ERROR) -> dict:
