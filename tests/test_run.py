@@ -20,6 +20,9 @@ def test_sprite_frames_name_the_keyframe_they_show_and_its_viewpoint(tmp_path, g
     shown = [int(r["keyframe"]) for r in rows]
     assert shown[0] == 0 and shown == sorted(shown) and shown[-1] == len(keys) - 1
     assert sum(r["type"] == "keyframe" for r in rows) == len(keys)
+    for row, k in zip(rows, shown, strict=True):  # each frame's keyframe eye, in metres
+        eye = [float(row[c]) for c in ("key_x", "key_y", "key_z")]
+        assert np.allclose(eye, keys[k]["viewpoint"]["o"], rtol=1e-5)
     # Recompute every spriteframe's error from the logged keyframe viewpoint: it must be
     # the error the run reported (wrong if the log named another keyframe or viewpoint).
     scene, path = prepare(config)

@@ -37,7 +37,7 @@ from lodsprite.terrain.lod import DEFAULT_COARSE, level_step
 
 MODES = ("full", "lod", "sprite")
 FRAME_COLUMNS = ["frame", "mode", "ms", "triangles"]
-SPRITE_COLUMNS = ["type", "error_px", "keyframe"]
+SPRITE_COLUMNS = ["type", "error_px", "keyframe", "key_x", "key_y", "key_z"]
 QUALITY_COLUMNS = ["rmse_sprite", "psnr_sprite", "ssim_sprite", "rmse_lod", "psnr_lod", "ssim_lod",
                    "rmse_lod_border"]
 MAX_GUARD_PX = 1024
@@ -176,9 +176,9 @@ def sprite_frames(pr: PathRenderer, path: CameraPath, config: RenderConfig,
                   keyframes: list | None = None) -> list[dict]:
     """Run LOD-sprite along ``path``; rows with type, error_px, ms, triangles, keyframe (the
     index of the keyframe shown) and quality against an untimed full-resolution ground
-    truth when ``config.ground_truth``.  ``keyframes``, if given, is extended with the
-    engine's keyframes, ``(viewpoint, frame projection)`` in order (what ``keyframe``
-    indexes)."""
+    truth when ``config.ground_truth``, and ``key_x, key_y, key_z``, the eye (metres) of the
+    keyframe shown.  ``keyframes``, if given, is extended with the engine's keyframes,
+    ``(viewpoint, frame projection, ahead)`` in order (what ``keyframe`` indexes)."""
     sprite = SpriteRenderer(pr.renderer, config.lod, config.visibility, border=config.border,
                             guard_px=config.guard_px)
     try:
@@ -201,32 +201,31 @@ def sprite_frames(pr: PathRenderer, path: CameraPath, config: RenderConfig,
             rows.append(row)
             if progress:
                 progress(i + 1, len(path))
+        for row in rows:  # the eye of the keyframe each frame shows, metres
+            eye = engine.keyframes[row["keyframe"]][0].o
+            row.update(key_x=float(eye[0]), key_y=float(eye[1]), key_z=float(eye[2]))
         if keyframes is not None:
-            keyframes.extend(engine.keyframes)
+            keyframes.extend((vp, proj, ahead) for (vp, proj), ahead
+                             in zip(engine.keyframes, engine.keyframes_ahead, strict=True))
         return rows
     finally:
         sprite.release()
 
 
-def keyframe_records(keyframes: list, rows: list[dict], viewpoints: list) -> list[dict]:
-    """JSON records of the keyframes a LOD-sprite run rendered (``keyframes``: the engine's
-    ``(viewpoint, frame projection)`` log; ``rows``: the run's frames with their
-    ``keyframe`` index; ``viewpoints``: the path's).  Each holds its viewpoint and frame
-    projection, the frame that rendered it and whether it was placed ahead of that
-    frame's viewpoint (look-ahead)."""
+def keyframe_records(keyframes: list, rows: list[dict]) -> list[dict]:
+    """JSON records of the keyframes a LOD-sprite run rendered: ``keyframes`` is the
+    engine's log, ``(viewpoint, frame projection, ahead)`` in order (``ahead``: placed
+    ahead of the viewer by look-ahead); ``rows`` the run's frames with their ``keyframe``
+    index.  Each record holds the viewpoint, the frame projection, the frame that
+    rendered it and ``ahead``."""
     first: dict[int, int] = {}
     for i, row in enumerate(rows):
         first.setdefault(row["keyframe"], i)
-    out = []
-    for k, (vp, proj) in enumerate(keyframes):
-        frame = first.get(k, -1)
-        ahead = frame >= 0 and not np.allclose(vp.view_matrix(),
-                                               viewpoints[frame].view_matrix())
-        out.append({"frame": frame, "viewpoint": vp.to_dict(),
-                    "projection": {"fov_y_deg": proj.fov_y_deg, "aspect": proj.aspect,
-                                   "near": proj.near, "far": proj.far},
-                    "ahead": bool(ahead)})
-    return out
+    return [{"frame": first.get(k, -1), "viewpoint": vp.to_dict(),
+             "projection": {"fov_y_deg": proj.fov_y_deg, "aspect": proj.aspect,
+                            "near": proj.near, "far": proj.far},
+             "ahead": bool(ahead)}
+            for k, (vp, proj, ahead) in enumerate(keyframes)]
 
 
 def render_path(config: RenderConfig, out_dir: Path, progress: Progress | None = None) -> dict:
@@ -272,7 +271,7 @@ def render_path(config: RenderConfig, out_dir: Path, progress: Progress | None =
     write_csv(out_dir / "frames.csv", rows, columns)
     if config.mode == "sprite":
         write_json(out_dir / "keyframes.json",
-                   {"keyframes": keyframe_records(keyframes, rows, path.viewpoints)})
+                   {"keyframes": keyframe_records(keyframes, rows)})
     write_json(out_dir / "summary.json", summary)
     return summary
 

@@ -71,6 +71,7 @@ class LodSpriteEngine:
         # Every keyframe rendered, in order: (viewpoint, frame projection) it was rendered
         # from (ahead of the viewer, with prediction).
         self.keyframes: list[tuple[Viewpoint, Projection]] = []
+        self.keyframes_ahead: list[bool] = []  # per keyframe: placed ahead by look-ahead
 
     @property
     def metric(self) -> ErrorMetric:
@@ -104,6 +105,7 @@ class LodSpriteEngine:
         if d.key is not None:
             stats = self.sprite.render_keyframe(d.key.viewpoint, t0, d.key.projection)
             self.keyframes.append((d.key.viewpoint, d.key.projection))
+            self.keyframes_ahead.append(d.key.predicted)
         if not d.shows_keyframe:
             key_stats = stats
             stats = self.sprite.render_spriteframe(viewpoint, d.projection)

@@ -218,7 +218,7 @@ def reproduce_chen1999(cfg: ReproduceConfig, out_dir: Path,
         total_s_full = float(np.nanmean(ms_full)) * cfg.frames / 1e3
         # Timed run first, then the same frames again for quality: interleaving untimed
         # ground-truth renders would evict caches and slow the timed spriteframes.
-        keys: list[KeyView] = []
+        keys: list[tuple[Viewpoint, Projection, bool]] = []
         main = sprite_frames(pr, path, cfg.render_config(), work.step, keyframes=keys)
         checked = sprite_frames(pr, path, cfg.render_config(ground_truth=True,
                                                             quality_stride=stride), work.step)
@@ -227,10 +227,10 @@ def reproduce_chen1999(cfg: ReproduceConfig, out_dir: Path,
         for row, q in zip(main, checked, strict=True):
             row.update({k: v for k, v in q.items() if k.startswith(("rmse_", "psnr_", "ssim_"))})
         # Frame at which each keyframe was rendered: the first frame showing it.
-        key_views = keyframe_records(keys, main, path.viewpoints)
+        key_views = keyframe_records(keys, main)
         frame = _pick_frame(main)
         key = main[frame]["keyframe"]
-        images = _figure_images(pr, scene, cfg, path, frame, key, keys[key],
+        images = _figure_images(pr, scene, cfg, path, frame, key, keys[key][:2],
                                 key_views[key]["frame"], out_dir)
         images["fig13"]["keyframe_ahead"] = images["fig14"]["keyframe_ahead"] = \
             key_views[key]["ahead"]
