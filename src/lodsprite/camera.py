@@ -85,15 +85,18 @@ class Viewpoint:
             raise InputError(f"malformed viewpoint {d!r}: {exc}") from exc
 
 
-def view_rotation(viewpoint: Viewpoint) -> Rotation:
-    """The orientation of ``viewpoint`` as a rotation taking eye space to world space.
+def view_rotation(viewpoint: Viewpoint | np.ndarray) -> Rotation:
+    """The orientation of ``viewpoint`` as a rotation taking eye space to world space;
+    given axes ``(..., 3, 3)`` (rows ``x, y, z`` per viewpoint), a stack of rotations.
 
     The rows of the view matrix are ``x, y, z``; as columns they map eye-space axes to
     world-space ones.
     """
     from scipy.spatial.transform import Rotation
 
-    return Rotation.from_matrix(np.stack([viewpoint.x, viewpoint.y, viewpoint.z], axis=1))
+    if isinstance(viewpoint, Viewpoint):
+        return Rotation.from_matrix(np.stack([viewpoint.x, viewpoint.y, viewpoint.z], axis=1))
+    return Rotation.from_matrix(np.swapaxes(np.asarray(viewpoint, dtype=np.float64), -1, -2))
 
 
 def rotated_viewpoint(rotation: Rotation, eye) -> Viewpoint:

@@ -50,9 +50,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Rotation, Slerp
+from scipy.spatial.transform import Slerp
 
-from lodsprite.camera import DEFAULT_FOV_Y_DEG, Viewpoint, look_at
+from lodsprite.camera import DEFAULT_FOV_Y_DEG, Viewpoint, look_at, rotated_viewpoint, view_rotation
 from lodsprite.errors import InputError, PathError
 
 PATH_FORMAT = "lodsprite-path"
@@ -123,9 +123,9 @@ class CameraPath:
         if count == 1:
             return CameraPath(self.name, (self.viewpoints[0],) * n, self.fov_y_deg)
         eyes = self.eyes()
-        rots = Rotation.from_matrix(np.transpose(self.axes(), (0, 2, 1)))  # columns x, y, z
+        rots = view_rotation(self.axes())
         slerp = Slerp(np.arange(count, dtype=np.float64), rots)
-        mats = slerp(u).as_matrix()  # (n, 3, 3), columns x, y, z
+        rotations = slerp(u)
         pos = eyes[i0] * (1.0 - w)[:, None] + eyes[i0 + 1] * w[:, None]
         out = []
         for j in range(n):
@@ -134,8 +134,7 @@ class CameraPath:
             elif w[j] == 1.0:
                 out.append(self.viewpoints[i0[j] + 1])
             else:
-                m = mats[j]
-                out.append(Viewpoint(m[:, 0], m[:, 1], m[:, 2], pos[j]))
+                out.append(rotated_viewpoint(rotations[j], pos[j]))
         return CameraPath(self.name, tuple(out), self.fov_y_deg)
 
     def to_dict(self) -> dict:
