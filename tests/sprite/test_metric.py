@@ -5,8 +5,12 @@ import math
 import numpy as np
 import pytest
 
+from conftest import make_field
 from lodsprite.camera import Projection, look_at
+from lodsprite.sprite import metric as metric_module
 from lodsprite.sprite.metric import (
+    MAX_FALLBACK,
+    MIN_SAMPLES,
     ErrorMetric,
     angles_at_eye,
     coarse_squares,
@@ -14,6 +18,7 @@ from lodsprite.sprite.metric import (
     ray_triangle_t,
     reprojected_centres,
 )
+from lodsprite.sprite.policy import KeyframePolicy
 from lodsprite.terrain.heightfield import HeightField
 
 H_SPIKE = 50.0
@@ -221,3 +226,142 @@ def test_flying_low_between_the_centres_measures_the_fallback_sample():
     assert e > 1.0  # the old metric said 0 here: no keyframe would ever be due
     same = metric.error_px(metric.reproject(vp.o), vp.o, vpm, proj.pixel_angle_rad(512))
     assert same == pytest.approx(0.0, abs=1e-6)
+
+
+def noncoarse_in_view(hf, step, vpm):
+    rr, cc = (a.ravel() for a in np.meshgrid(np.arange(hf.rows), np.arange(hf.cols),
+                                             indexing="ij"))
+    keep = (rr % step != 0) | (cc % step != 0)
+    pts = hf.points(rr[keep], cc[keep])
+    return int(in_view(np.c_[pts, np.ones(len(pts))], vpm).sum())
+
+
+@pytest.mark.parametrize("eye, target, key_offset", [
+    # Low views over a 512² ridged field at level 16 where the frustum holds only 2 or 3
+    # full-resolution vertices, none of them a square centre: the fallback grid used to
+    # stay at spacing step/2 (its bounding box reached far beyond the slope) and say inf.
+    ((-5278.321944110511, -2322.045435917755, 126.87180830306852),
+     (-5277.639752078112, -2321.5099885363147, 126.37390255632538), (-15.0, -5.0, 30.0)),
+    ((-5197.9361351982025, 1213.0522493096105, 262.86120771861306),
+     (-5197.155828325078, 1213.484906554816, 263.31279258541633), (15.0, 5.0, 3.0)),
+])
+def test_vertices_in_view_are_always_measured(eye, target, key_offset):
+    hf = make_field(512, relief=400.0, spacing=30.0, kind="ridges")
+    p = KeyframePolicy.for_terrain(hf, 16, 1.0, (512, 512), predict=False)
+    m = p.metric
+    vp = look_at(eye, target)
+    proj = p.projection(vp)
+    vpm = proj.matrix() @ vp.view_matrix()
+    assert 0 < noncoarse_in_view(hf, m.squares.step, vpm) < MIN_SAMPLES
+    assert in_view(m._centres_h, vpm).sum() == 0
+    assert len(m.fallback_points(vpm)[0]) == noncoarse_in_view(hf, m.squares.step, vpm)
+    cp = m.reproject(vp.o + np.array(key_offset))  # their rays meet the coarse surface
+    assert not m.fallback_theta(cp.key_eye, vp.o, vpm)[1].any()
+    assert math.isfinite(p.error_px(cp, vp, proj))  # was inf: no fallback vertex found
+
+
+def test_the_fallback_sample_never_exceeds_its_cap(monkeypatch):
+    # Level 64 of a 128² field (step 2): the coarsest fallback grid is already the full
+    # grid, and a low view looking down along a slope holds thousands of its vertices.
+    hf = make_field(128, relief=400.0, spacing=30.0, kind="ridges")
+    m = ErrorMetric.for_level(hf, 64)
+    tested = []
+    real = metric_module.in_view
+
+    def counting(points_h, view_proj):
+        tested.append(len(points_h))
+        return real(points_h, view_proj)
+
+    monkeypatch.setattr(metric_module, "in_view", counting)
+    proj = Projection(80.0, 1.0, 0.5, 12000.0)
+    spot = hf.points(np.array(37), np.array(41))
+    for vp in (look_at(spot + (0.0, -1.0, 400.0), spot),
+               look_at(spot + (0.0, -900.0, 300.0), spot),
+               look_at(spot + (5.0, -1.0, 2.0), spot)):
+        vpm = proj.matrix() @ vp.view_matrix()
+        tested.clear()
+        pts, square = m.fallback_points(vpm)
+        assert 0 < len(pts) <= MAX_FALLBACK
+        assert max(tested) <= metric_module.CANDIDATE_CHUNK
+        assert np.all(in_view(np.c_[pts, np.ones(len(pts))], vpm))
+    assert len(pts) < noncoarse_in_view(hf, 2, vpm) or len(pts) == MAX_FALLBACK
+
+
+def test_the_fallback_reprojection_is_cached_per_keyframe(monkeypatch):
+    hf = wavy_field()
+    metric = ErrorMetric.for_level(hf, 4)
+    proj = Projection(45.0, 1.0, 1.0, 2000.0)
+    spot = hf.points(np.array(4), np.array(2))
+    vp = look_at(spot + (0.0, -1.0, 30.0), spot)
+    vpm, beta = proj.matrix() @ vp.view_matrix(), proj.pixel_angle_rad(512)
+    cp = metric.reproject(vp.o + np.array([-25.0, 0.0, 10.0]))
+    calls = []
+    real = metric_module.reproject_points
+
+    def counting(squares, key_eye, points, square=None):
+        calls.append(len(points))
+        return real(squares, key_eye, points, square)
+
+    monkeypatch.setattr(metric_module, "reproject_points", counting)
+    first = metric.error_px(cp, vp.o, vpm, beta)
+    assert len(calls) == 1
+    again = metric.error_px(cp, vp.o, vpm, beta)
+    assert again == first and len(calls) == 1  # the same keyframe: nothing reprojected
+    moved = look_at(spot + (3.0, -1.0, 30.0), spot + (3.0, 0.0, 0.0))
+    vpm2 = proj.matrix() @ moved.view_matrix()
+    e2 = metric.error_px(cp, moved.o, vpm2, beta)
+    fresh = metric.reproject(cp.key_eye)
+    assert e2 == metric.error_px(fresh, moved.o, vpm2, beta)  # cached C' equals fresh C'
+    other = metric.reproject(vp.o)  # another keyframe: its own cache
+    n = len(calls)
+    metric.error_px(other, vp.o, vpm, beta)
+    assert len(calls) == n + 1
+
+
+def test_the_whole_level_search_in_blocks_equals_the_unblocked_search():
+    hf = make_field(16, relief=300.0, spacing=10.0, kind="ridges")
+    sq = coarse_squares(hf, 8)
+    every = sq.own.reshape(-1, 3, 3)
+    key = np.array([3.0, -120.0, 200.0])
+    d = sq.centres - key
+    d = np.r_[d, d * np.array([1.0, 1.0, -1.0]), d * 3.0]  # hits, misses, far points
+
+    def tris(k0, k1, j0, j1):
+        return np.broadcast_to(every[None, j0:j1], (k1 - k0, j1 - j0, 3, 3))
+
+    whole = metric_module.nearest_hits(key, d, tris, len(every), chunk_pairs=10**9)
+    every_b = np.broadcast_to(every[None], (len(d), *every.shape))
+    t = ray_triangle_t(key, d, every_b)
+    np.testing.assert_array_equal(whole, metric_module._nearest_to_c(t))
+    assert np.isnan(whole).any() and np.isfinite(whole).any()
+    for chunk in (1, 5, 7, len(every), 3 * len(every) + 1):
+        blocked = metric_module.nearest_hits(key, d, tris, len(every), chunk)
+        np.testing.assert_array_equal(blocked, whole)
+
+
+def test_reprojection_in_blocks_equals_reprojection_at_once(monkeypatch):
+    hf = make_field(32, relief=300.0, spacing=10.0, kind="ridges")
+    sq = coarse_squares(hf, 16)
+    key = np.array([0.0, -150.0, 160.0])  # grazing: misses reach the whole-level stage
+    at_once = metric_module.reproject_points(sq, key, sq.centres)
+    assert at_once[1].any()
+    monkeypatch.setattr(metric_module, "RAY_PAIRS", 13)
+    monkeypatch.setattr(metric_module.nearest_hits, "__defaults__", (13,))
+    blocked = metric_module.reproject_points(sq, key, sq.centres)
+    np.testing.assert_array_equal(blocked[0], at_once[0])
+    np.testing.assert_array_equal(blocked[1], at_once[1])
+
+
+def test_when_every_sample_misses_a_keyframe_is_due():
+    # A keyframe eye far away at the spikes' height: every ray through a spike passes
+    # above the flat coarse level until it leaves the terrain.
+    hf = spiked_field()
+    metric = ErrorMetric.for_level(hf, 4)
+    key = np.array([0.0, -1000.0, 55.0])
+    cp = metric.reproject(key)
+    assert cp.missed.all()
+    proj = Projection(45.0, 1.0, 1.0, 2000.0)
+    vp = look_at((0.0, -300.0, 250.0), (0.0, 0.0, 0.0))
+    vpm = proj.matrix() @ vp.view_matrix()
+    assert metric.theta(cp, vp.o, vpm).size == 16
+    assert metric.error_px(cp, vp.o, vpm, proj.pixel_angle_rad(512)) == math.inf  # was 84.6 px

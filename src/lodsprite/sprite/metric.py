@@ -35,16 +35,35 @@ better than it is:
   the exit point lies just behind ``C``: it would still pull the mean down.)
 * **Nothing measurable.**  When fewer than :data:`MIN_SAMPLES` square centres lie in the
   view (flying low, the view can fall between them although terrain fills it), a
-  *fallback sample* is measured instead: full-resolution vertices inside the view that
-  are not coarse vertices (on a coarse vertex ``C' = C`` always), on the finest regular
-  grid of spacing ``step/2, step/4, ...`` with at most ``ENUMERATE_FACTOR * MAX_FALLBACK``
-  vertices in the footprint of the view (at most :data:`MAX_FALLBACK` of those in view are
-  kept, evenly), reprojected through the keyframe eye exactly as the centres are, misses
-  included.  The square centres are themselves points of those grids, so the fallback
-  measures the same kind of sample, only denser; it costs about 0.5 ms for 256 samples,
-  in those frames only.  When no terrain vertex at all is in view,
-  :meth:`ErrorMetric.error_px` returns ``math.inf``: a keyframe is due.  Callers compare
-  the value with thresholds and never assume it is finite.
+  *fallback sample* is measured instead, if it is larger: full-resolution vertices inside
+  the view that are not coarse vertices (on a coarse vertex ``C' = C`` always).  They are
+  enumerated only inside the coarse squares whose bounding box (with the heights of
+  their vertices) meets the view frustum, on the grid of spacing ``step/2``, then
+  ``step/4``, ...: the grid is refined while fewer than :data:`MIN_SAMPLES` of its
+  vertices are in view, or while the finer grid has at most ``ENUMERATE_FACTOR *
+  MAX_FALLBACK`` candidates in those squares, down to spacing 1 (every vertex).  So
+  every vertex in view is found when fewer than :data:`MIN_SAMPLES` are.  Candidates are
+  tested against the view :data:`CANDIDATE_CHUNK` at a time; of those in view at most
+  :data:`MAX_FALLBACK` are kept, evenly in row-major order.  They are reprojected through
+  the keyframe eye exactly as the centres are, misses included, once per keyframe: the
+  keyframe's :class:`Reprojection` caches the ``C'`` of every fallback vertex met so far
+  (up to :data:`FALLBACK_CACHE`), so that later frames reproject only new vertices.  The
+  square centres are themselves points of those grids, so the fallback measures the same
+  kind of sample, only denser.  :meth:`ErrorMetric.error_px` returns ``math.inf`` (a
+  keyframe is due) when no terrain vertex is in view, and when every sample measured
+  missed (e.g. a keyframe eye level with or below the coarse surface ahead): the sprite
+  draws none of them anywhere, there is no hit to floor the misses, and the angles to
+  the exit points alone would judge the frame better than it is.  This holds at the
+  keyframe's own viewpoint too.  Callers compare the value with thresholds and never
+  assume it is finite.
+* **Cost.**  The per-frame part (:meth:`ErrorMetric.error_px`) tests the ``n²`` centres
+  against the view; only frames with fewer than :data:`MIN_SAMPLES` centres in view add
+  the fallback (culling the ``n²`` square boxes, enumerating candidates, reprojecting
+  the vertices not yet cached).  A ray that misses its 3x3 neighbourhood is tested
+  against the wider ones of :data:`SEARCH_RADII` and, missing those, against all ``2 n²``
+  coarse triangles; every stage runs in blocks of :data:`RAY_PAIRS` ray-triangle pairs,
+  so its memory is bounded (about 32 MB of temporaries) while its time grows with
+  ``misses × n²``.  The results are those of the unblocked search, bit for bit.
 
 The fallback needs the keyframe eye: :meth:`ErrorMetric.reproject` returns a
 :class:`Reprojection`, an ``(n*n, 3)`` array of ``C'`` that also carries it.
@@ -64,8 +83,11 @@ from lodsprite.terrain.lod import level_indices, level_step
 SEARCH_RADII = (3, 8, 1 << 30)
 MIN_SAMPLES = 4       # fewer square centres in view than this: measure the fallback sample
 MAX_FALLBACK = 256    # at most this many fallback vertices are measured (evenly chosen)
-ENUMERATE_FACTOR = 4  # the fallback grid has at most this times MAX_FALLBACK vertices in
-                      # the view's footprint (a bounding box: only part of it is in view)
+ENUMERATE_FACTOR = 4  # the fallback grid is refined while it has at most this times
+                      # MAX_FALLBACK candidate vertices in the coarse squares the view meets
+CANDIDATE_CHUNK = 1 << 14  # candidate vertices tested against the view at once
+RAY_PAIRS = 1 << 17   # ray-triangle pairs intersected at once (about 32 MB of temporaries)
+FALLBACK_CACHE = 1 << 15  # reprojected fallback vertices kept per keyframe and level
 
 
 @dataclass(frozen=True)
@@ -119,20 +141,29 @@ class Reprojection(np.ndarray):
     An ``ndarray`` subclass: it indexes, compares and pickles like the array; ufuncs and
     reductions give plain arrays and scalars.  A view of another shape drops ``missed``
     (it no longer lines up; such a view counts every ray as a hit).
+
+    ``fallback_cache`` holds the fallback vertices already reprojected for this keyframe
+    (:meth:`ErrorMetric.fallback_theta`), so that successive frames measuring the
+    fallback sample reproject only the vertices they have not met yet; views share it,
+    pickling drops it.
     """
 
     key_eye: np.ndarray | None
     missed: np.ndarray | None
+    fallback_cache: dict
 
     def __new__(cls, c_prime: np.ndarray, key_eye: np.ndarray,
                 missed: np.ndarray | None = None) -> Reprojection:
         obj = np.asarray(c_prime, dtype=np.float64).view(cls)
         obj.key_eye = np.array(key_eye, dtype=np.float64)
         obj.missed = None if missed is None else np.asarray(missed, dtype=bool)
+        obj.fallback_cache = {}
         return obj
 
     def __array_finalize__(self, obj) -> None:
         self.key_eye = getattr(obj, "key_eye", None)
+        cache = getattr(obj, "fallback_cache", None)
+        self.fallback_cache = {} if cache is None else cache
         missed = getattr(obj, "missed", None)
         self.missed = missed if missed is not None and obj.shape == self.shape else None
 
@@ -147,6 +178,7 @@ class Reprojection(np.ndarray):
 
     def __setstate__(self, state) -> None:
         array_state, self.key_eye, self.missed = state
+        self.fallback_cache = {}
         super().__setstate__(array_state)
 
 
@@ -176,9 +208,44 @@ def ray_triangle_t(origin: np.ndarray, direction: np.ndarray, tris: np.ndarray) 
 def _nearest_to_c(t: np.ndarray) -> np.ndarray:
     """Per row of ray parameters ``(K, T)``, the hit in front of the eye (t > 0) nearest to
     ``C`` (t = 1); NaN if none."""
+    return _nearest_score(t)[0]
+
+
+def _nearest_score(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(t, |t - 1|)`` per row of :func:`_nearest_to_c` (NaN and inf where none)."""
     score = np.where(np.isnan(t) | (t <= 0), np.inf, np.abs(t - 1.0))
-    best = t[np.arange(len(t)), np.argmin(score, axis=1)]
-    return np.where(np.isfinite(score.min(axis=1)), best, np.nan)
+    j = np.argmin(score, axis=1)
+    rows = np.arange(len(t))
+    best, low = t[rows, j], score[rows, j]
+    return np.where(np.isfinite(low), best, np.nan), low
+
+
+def nearest_hits(origin: np.ndarray, d: np.ndarray, tris, count: int,
+                 chunk_pairs: int = RAY_PAIRS) -> np.ndarray:
+    """:func:`_nearest_to_c` of rays ``origin + t d (K, 3)`` against ``count`` triangles
+    per ray, ``tris(k0, k1, j0, j1) -> (k1-k0, j1-j0, 3, 3)`` giving those of rays
+    ``k0:k1``, numbers ``j0:j1``; intersected in blocks of at most ``chunk_pairs``
+    ray-triangle pairs (rays, then triangles), so that temporaries stay bounded.  Equal to
+    the unblocked result: of equally near hits, the first triangle's is kept in both.
+    """
+    k = len(d)
+    t_best = np.full(k, np.nan)
+    if k == 0 or count == 0:
+        return t_best
+    per = max(1, min(count, chunk_pairs))
+    rays = max(1, chunk_pairs // per)
+    for k0 in range(0, k, rays):
+        k1 = min(k0 + rays, k)
+        low = np.full(k1 - k0, np.inf)
+        best = np.full(k1 - k0, np.nan)
+        for j0 in range(0, count, per):
+            j1 = min(j0 + per, count)
+            t, score = _nearest_score(ray_triangle_t(origin, d[k0:k1], tris(k0, k1, j0, j1)))
+            better = score < low
+            low = np.where(better, score, low)
+            best = np.where(better, t, best)
+        t_best[k0:k1] = np.where(np.isfinite(low), best, np.nan)
+    return t_best
 
 
 def _exit_t(squares: CoarseSquares, origin: np.ndarray, d: np.ndarray) -> np.ndarray:
@@ -201,25 +268,31 @@ def reproject_points(squares: CoarseSquares, key_eye: np.ndarray, points: np.nda
     then ``SEARCH_RADII`` squares, then the whole level) that has any, the one in front of
     the eye nearest to the point along the ray is kept.  A ray that meets no coarse
     triangle is ``missed``; its ``C'`` is where it leaves the terrain's footprint.
+    Every stage runs in blocks of at most :data:`RAY_PAIRS` ray-triangle pairs
+    (:func:`nearest_hits`): the whole level costs ``2 n²`` tests per ray that reaches it,
+    but never more memory than one block.
     """
     key_eye = np.asarray(key_eye, dtype=np.float64)
     d = points - key_eye  # the point at t = 1
-    first = squares.tris if square is None else squares.tris[square]
-    t_best = _nearest_to_c(ray_triangle_t(key_eye, d, first))
-    index = np.arange(len(points)) if square is None else square
+    index = np.arange(len(points)) if square is None else np.asarray(square, np.intp)
     n = squares.level_quads
+    first = squares.tris
+    t_best = nearest_hits(key_eye, d, lambda k0, k1, j0, j1: first[index[k0:k1], j0:j1],
+                          first.shape[1])
+    every = squares.own.reshape(-1, 3, 3)
     for radius in SEARCH_RADII:
         missing = np.flatnonzero(np.isnan(t_best))
         if missing.size == 0:
             break
-        if radius >= n:  # the whole level
-            every = squares.own.reshape(1, -1, 3, 3)
-            tris = np.broadcast_to(every, (missing.size, *every.shape[1:]))
-        else:
-            tris = _neighbourhood(squares, index[missing], radius)
-        t_best[missing] = _nearest_to_c(ray_triangle_t(key_eye, d[missing], tris))
-        if radius >= n:
+        at = index[missing]
+        if radius >= n:  # the whole level, in blocks (RAY_PAIRS) to bound the memory
+            def tris(k0, k1, j0, j1):
+                return np.broadcast_to(every[None, j0:j1], (k1 - k0, j1 - j0, 3, 3))
+            t_best[missing] = nearest_hits(key_eye, d[missing], tris, len(every))
             break
+        def tris(k0, k1, j0, j1, at=at, radius=radius):
+            return _neighbourhood(squares, at[k0:k1], radius)[:, j0:j1]
+        t_best[missing] = nearest_hits(key_eye, d[missing], tris, 2 * (2 * radius + 1) ** 2)
     missed = np.isnan(t_best)
     if missed.any():
         t_best[missed] = _exit_t(squares, key_eye, d[missed])
@@ -342,50 +415,128 @@ class ErrorMetric:
         missed = getattr(c_prime, "missed", None)
         return th, (np.zeros(th.size, bool) if missed is None else missed[vis])
 
+    @cached_property
+    def _square_boxes(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(lo, hi) (n*n, 3)``: bounds of the full-resolution vertices of each coarse
+        square (edges included)."""
+        sq = self.squares
+        hf, step, n = sq.hf, sq.step, sq.level_quads
+        h = hf.heights.astype(np.float64)
+        m = n * step
+
+        def extreme(red) -> np.ndarray:
+            cols = red(red.reduce(h[:, :m].reshape(len(h), n, step), axis=2), h[:, step::step])
+            return red(red.reduce(cols[:m].reshape(n, step, n), axis=1), cols[step::step])
+
+        idx = level_indices(hf, n)
+        x, y = hf.world_xy(idx, idx)  # x by column index, y by row index
+        rr, cc = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
+        x0, x1 = x[cc].ravel(), x[cc + 1].ravel()
+        y0, y1 = y[rr + 1].ravel(), y[rr].ravel()  # row 0 is north: y falls with the row
+        lo = np.c_[x0, y0, extreme(np.minimum).ravel()]
+        hi = np.c_[x1, y1, extreme(np.maximum).ravel()]
+        return lo, hi
+
+    def squares_in_view(self, view_proj: np.ndarray) -> np.ndarray:
+        """Indices ``(Q,) intp`` of the coarse squares whose bounding box meets the view
+        frustum of ``view_proj`` (conservatively: every vertex in view lies in one)."""
+        lo, hi = self._square_boxes
+        m = np.asarray(view_proj, dtype=np.float64)
+        planes = np.array([m[3] + m[0], m[3] - m[0], m[3] + m[1], m[3] - m[1],
+                           m[3] + m[2], m[3] - m[2]])
+        keep = np.ones(len(lo), bool)
+        scale = np.abs(np.r_[lo.min(axis=0), hi.max(axis=0)]).max() + 1.0
+        for pl in planes:
+            top = np.where(pl[:3] > 0, hi, lo) @ pl[:3] + pl[3]
+            keep &= top >= -1e-9 * (np.abs(pl[:3]).sum() * scale + abs(pl[3]))
+        return np.flatnonzero(keep)
+
+    def _visible_grid(self, squares: np.ndarray, s: int, view_proj: np.ndarray) -> np.ndarray:
+        """Sorted linear indices of the vertices on the grid of spacing ``s`` inside the
+        coarse ``squares`` that are in view and are not coarse vertices; the candidates
+        are tested :data:`CANDIDATE_CHUNK` at a time."""
+        sq = self.squares
+        hf, step, n = sq.hf, sq.step, sq.level_quads
+        off = np.arange(0, step + 1, s)
+        per = len(off) ** 2
+        found = []
+        for q0 in range(0, len(squares), max(1, CANDIDATE_CHUNK // per)):
+            r, c = np.divmod(squares[q0:q0 + max(1, CANDIDATE_CHUNK // per)], n)
+            rr = (r[:, None, None] * step + off[None, :, None]) + 0 * off[None, None, :]
+            cc = (c[:, None, None] * step + off[None, None, :]) + 0 * off[None, :, None]
+            rr, cc = rr.ravel(), cc.ravel()
+            keep = (rr % step != 0) | (cc % step != 0)
+            rr, cc = rr[keep], cc[keep]
+            pts = hf.points(rr, cc)
+            vis = in_view(np.c_[pts, np.ones(len(pts))], view_proj)
+            found.append(np.unique(rr[vis] * hf.cols + cc[vis]))
+        return np.unique(np.concatenate(found)) if found else np.zeros(0, np.intp)
+
+    def fallback_grid(self, view_proj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(rows (K,), cols (K,)) intp`` of the fallback sample of the current view
+        (module docstring): at most :data:`MAX_FALLBACK` vertices, in row-major order."""
+        sq = self.squares
+        hf, step = sq.hf, sq.step
+        squares = self.squares_in_view(view_proj)
+        s = step // 2  # the centres' spacing: every grid below includes them
+        while True:
+            idx = self._visible_grid(squares, s, view_proj)
+            if s == 1:
+                break
+            finer = len(squares) * (2 * step // s + 1) ** 2  # candidates at spacing s/2
+            if len(idx) >= MIN_SAMPLES and finer > ENUMERATE_FACTOR * MAX_FALLBACK:
+                break
+            s //= 2
+        if len(idx) > MAX_FALLBACK:
+            idx = idx[np.linspace(0, len(idx) - 1, MAX_FALLBACK).round().astype(np.intp)]
+        return np.divmod(idx, hf.cols)
+
     def fallback_points(self, view_proj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The fallback sample of the current view: ``(points (K, 3) float64 metres,
         square (K,) intp)``, full-resolution vertices in view that are not coarse vertices
-        (module docstring), and the coarse square each lies in."""
+        (module docstring, :meth:`fallback_grid`), and the coarse square each lies in."""
         sq = self.squares
-        hf, step, n = sq.hf, sq.step, sq.level_quads
-        lo, hi = hf.bounds()
-        box = view_footprint(view_proj, lo, hi)
-        empty = np.zeros((0, 3)), np.zeros(0, np.intp)
-        if box is None:
-            return empty
-        (x0, y0), (x1, y1) = box
-        r0, c0 = hf.grid_index(x0, y1)  # north-west corner: smallest row and column
-        r1, c1 = hf.grid_index(x1, y0)
-        r0, c0 = max(int(np.floor(r0)), 0), max(int(np.floor(c0)), 0)
-        r1, c1 = min(int(np.ceil(r1)), hf.rows - 1), min(int(np.ceil(c1)), hf.cols - 1)
-        def count(s: int) -> int:
-            return ((r1 - r0) // s + 1) * ((c1 - c0) // s + 1)
-
-        s = step // 2  # the centres' spacing: every grid below includes them
-        while s > 1 and count(s // 2) <= ENUMERATE_FACTOR * MAX_FALLBACK:
-            s //= 2
-        rows = np.arange(-(-r0 // s) * s, r1 + 1, s)
-        cols = np.arange(-(-c0 // s) * s, c1 + 1, s)
-        rr, cc = (a.ravel() for a in np.meshgrid(rows, cols, indexing="ij"))
-        keep = (rr % step != 0) | (cc % step != 0)
-        rr, cc = rr[keep], cc[keep]
-        pts = hf.points(rr, cc)
-        vis = in_view(np.c_[pts, np.ones(len(pts))], view_proj)
-        pts, rr, cc = pts[vis], rr[vis], cc[vis]
-        if len(pts) > MAX_FALLBACK:
-            pick = np.linspace(0, len(pts) - 1, MAX_FALLBACK).round().astype(np.intp)
-            pts, rr, cc = pts[pick], rr[pick], cc[pick]
+        rr, cc = self.fallback_grid(view_proj)
+        n, step = sq.level_quads, sq.step
         square = np.minimum(rr // step, n - 1) * n + np.minimum(cc // step, n - 1)
-        return pts, square
+        return sq.hf.points(rr, cc), square
 
-    def fallback_theta(self, key_eye: np.ndarray, eye: np.ndarray,
-                       view_proj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def fallback_theta(self, key_eye: np.ndarray, eye: np.ndarray, view_proj: np.ndarray,
+                       cache: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
         """``(θ (K,) radians, missed (K,) bool)`` of the fallback sample
-        (:meth:`fallback_points`) for the keyframe rendered from ``key_eye``."""
-        pts, square = self.fallback_points(view_proj)
-        if len(pts) == 0:
+        (:meth:`fallback_points`) for the keyframe rendered from ``key_eye``.
+
+        ``cache``: a keyframe's ``Reprojection.fallback_cache``; vertices reprojected
+        before for that keyframe are taken from it (the same ``C'``, computed once)."""
+        sq = self.squares
+        rr, cc = self.fallback_grid(view_proj)
+        if len(rr) == 0:
             return np.zeros(0), np.zeros(0, bool)
-        p_prime, missed = reproject_points(self.squares, key_eye, pts, square)
+        n, step = sq.level_quads, sq.step
+        pts = sq.hf.points(rr, cc)
+        lin = rr * sq.hf.cols + cc
+        entry = None if cache is None else cache.get(id(sq))
+        if entry is not None and entry[0] is not sq:
+            entry = None
+        p_prime = np.empty((len(lin), 3))
+        missed = np.zeros(len(lin), bool)
+        new = np.ones(len(lin), bool)
+        if entry is not None:
+            _, known, known_cp, known_missed = entry
+            pos = np.minimum(np.searchsorted(known, lin), len(known) - 1)
+            new = known[pos] != lin
+            p_prime[~new], missed[~new] = known_cp[pos[~new]], known_missed[pos[~new]]
+        if new.any():
+            square = (np.minimum(rr[new] // step, n - 1) * n
+                      + np.minimum(cc[new] // step, n - 1))
+            p_prime[new], missed[new] = reproject_points(sq, key_eye, pts[new], square)
+            if cache is not None:
+                if entry is None or len(entry[1]) + int(new.sum()) > FALLBACK_CACHE:
+                    entry = (sq, np.zeros(0, lin.dtype), np.zeros((0, 3)), np.zeros(0, bool))
+                keys = np.r_[entry[1], lin[new]]
+                order = np.argsort(keys, kind="stable")
+                cache[id(sq)] = (sq, keys[order], np.r_[entry[2], p_prime[new]][order],
+                                 np.r_[entry[3], missed[new]][order])
         return angles_at_eye(np.asarray(eye, dtype=np.float64), pts, p_prime), missed
 
     def covers(self, viewpoint, projection, key_viewpoint, key_projection) -> bool:
@@ -399,17 +550,19 @@ class ErrorMetric:
         """``sqrt(mean(θ²)) / β`` in pixels, over the square centres in view, or over the
         fallback sample when fewer than :data:`MIN_SAMPLES` centres are in view and
         ``c_prime`` is a :class:`Reprojection`; misses count as :func:`miss_floor` says;
-        ``math.inf`` when nothing is measurable (a keyframe is due).
+        ``math.inf`` when nothing is measurable (a keyframe is due): no sample in view, or
+        every sample in view missed.
 
         Eq. 2's test ``mean(θ²) >= (β ε)²`` is equivalent to ``error_px >= ε``.
         """
         th, missed = self._theta(c_prime, eye, view_proj)
         key_eye = getattr(c_prime, "key_eye", None)
         if th.size < MIN_SAMPLES and key_eye is not None:
-            fallback = self.fallback_theta(key_eye, eye, view_proj)
+            fallback = self.fallback_theta(key_eye, eye, view_proj,
+                                           getattr(c_prime, "fallback_cache", None))
             if fallback[0].size > th.size:
                 th, missed = fallback
-        if th.size == 0:
+        if th.size == 0 or missed.all():  # nothing in view, or nothing the sprite draws
             return math.inf
         th = miss_floor(th, missed)
         return float(np.sqrt(np.mean(th * th)) / pixel_angle_rad)
