@@ -425,6 +425,9 @@ def serve(
         "--data", help="folder whose terrain and texture files clients may name (relative "
                        "to it); without it only built-ins (jacksboro, fractal:SIZE:SEED, "
                        "terrain, checker) are served")] = None,
+    allow_shutdown: Annotated[bool, typer.Option(
+        "--allow-shutdown", help="carry out a `shutdown` message from the client holding "
+                                 "the server (refused otherwise)")] = False,
 ) -> None:
     """The LOD server: renders keyframes for LOD clients; driven entirely by messages."""
     import logging
@@ -434,7 +437,7 @@ def serve(
 
     server_keys = ServerKeys.load(keys) if keys is not None else None
     server = LodServer(bind, predictor, codec, server_keys, data_dir=data,
-                       allow_remote=allow_remote)
+                       allow_remote=allow_remote, allow_shutdown=allow_shutdown)
     logging.basicConfig(level=logging.INFO, format="lodsprite serve: %(message)s")
     if server_keys is None and allow_remote:
         logging.warning("serving beyond loopback without --keys: anyone who can reach "

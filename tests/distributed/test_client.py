@@ -11,6 +11,7 @@ import zmq
 from lodsprite.distributed.link import ServerLink
 
 PING = {"kind": "control", "seq": 1, "op": "ping", "args": {}}
+FLOOD = 5_000  # refused keyframes a flood sends
 
 
 def test_a_closed_server_link_answers_none_and_opens_no_socket():
@@ -127,7 +128,7 @@ class _FakeLodServer:
     """A server's three sockets played by the test: control answers "loaded and
     running", viewpoints are read, keyframes are sent by hand."""
 
-    def __init__(self):
+    def __init__(self, router: bool = False):
         from lodsprite.distributed.run import free_ports
         from lodsprite.run import RenderConfig, prepare
 
@@ -142,7 +143,11 @@ class _FakeLodServer:
         self.views = self.ctx.socket(zmq.SUB)
         self.views.setsockopt(zmq.SUBSCRIBE, b"")
         self.views.bind(f"tcp://127.0.0.1:{self.port + 1}")
-        self.keys = self.ctx.socket(zmq.DEALER)
+        self.keys = self.ctx.socket(zmq.ROUTER if router else zmq.DEALER)
+        if router:  # a server's socket that takes in as few acknowledgements as it can
+            for option, value in ((zmq.RCVHWM, 1), (zmq.RCVBUF, 1024),
+                                  (zmq.ROUTER_MANDATORY, 1), (zmq.LINGER, 0)):
+                self.keys.setsockopt(option, value)
         self.keys.bind(f"tcp://127.0.0.1:{self.port + 2}")
         self.rng = np.random.default_rng(1)
 
@@ -232,7 +237,7 @@ def test_adopt_better_keeps_the_shown_keyframe_until_a_newer_one_serves_better(f
     try:
         near, far = fake.path.viewpoints[2], fake.path.viewpoints[11]
         fake.send(1, near)
-        assert "keyframe" in types(near, 100)  # the first keyframe is always taken
+        _until(client, near, "keyframe")  # the first keyframe is always taken
         fake.send(2, far)
         deadline = time.perf_counter() + 10.0
         while client._pending is None:  # until the far keyframe has been received
@@ -356,5 +361,121 @@ def test_the_bounded_client_keeps_a_far_server_keyframe_back_until_it_serves(fak
         assert [client.frame(near).type for _ in range(3)] == ["sprite"] * 3
         f = client.frame(far)
         assert f.type == "keyframe" and f.keyframe_seq == 2
+    finally:
+        client.close()
+
+
+class _Frame(bytes):
+    more = False
+
+
+class _AckQueueFull:
+    """A keyframe socket holding one message, whose acknowledgement queue is full: a
+    blocking send would wait for good."""
+
+    def __init__(self, frames: list):
+        self.frames = [_Frame(f) for f in frames]
+        for f in self.frames[:-1]:
+            f.more = True
+        self.sends = []
+
+    def recv(self, flags=0, copy=True):
+        return self.frames.pop(0)
+
+    def recv_multipart(self, flags=0, copy=True):
+        out, self.frames = self.frames, []
+        return out
+
+    def send_multipart(self, frames, flags=0, **kw):
+        self.sends.append(flags)
+        if not flags & zmq.NOBLOCK:
+            raise AssertionError("a blocking send: the receiver would wait for good")
+        raise zmq.Again()
+
+
+def test_acknowledgements_never_wait_and_refused_keyframes_get_none(fake):
+    """Regression (with the flood below): the receiver acknowledged every keyframe, refused
+    ones included, with a blocking send on a socket without a send timeout: a server that
+    reads no acknowledgements blocked the receiver thread for good (alive, receiving
+    nothing; about 56,000 messages on loopback here)."""
+    from lodsprite.distributed.protocol import ProtocolError
+
+    client = fake.client(max_error=None)
+    link = client._servers[0]
+    vp = fake.path.viewpoints[2]
+    try:
+        refused = _AckQueueFull(fake.message(5, vp, size=32))
+        with pytest.raises(ProtocolError):
+            client._take(0, link, refused)
+        assert refused.sends == []  # not acknowledged
+        full = _AckQueueFull(fake.message(6, vp))
+        assert client._take(0, link, full) is True
+        assert full.sends == [zmq.NOBLOCK] and client.dropped_acks == 1
+        assert link.last_seq == 6  # taken all the same
+    finally:
+        client.close()
+
+
+def test_a_server_that_reads_no_acknowledgements_cannot_wedge_the_receiver():
+    """A server floods keyframes (refused, then well-formed) and reads no
+    acknowledgements: the receiver goes on and takes the last one."""
+    from lodsprite.camera import look_at
+
+    fake = _FakeLodServer(router=True)
+    router = fake.keys
+    client = fake.client(max_error=None)
+    identity = client._servers[0].client_id.encode()
+    vp = fake.path.viewpoints[2]
+    small = fake.message(1, look_at((10.0, -500.0, 300.0), (0.0, 0.0, 0.0)), size=1)
+
+    def send(frames, timeout=20.0) -> None:
+        deadline = time.perf_counter() + timeout  # a hang guard
+        while True:
+            try:
+                router.send_multipart([identity, *frames], flags=zmq.NOBLOCK)
+                return
+            except (zmq.Again, zmq.ZMQError):  # not connected yet, or the client's full
+                assert time.perf_counter() < deadline, "the client takes no more messages"
+                time.sleep(0.001)
+
+    try:
+        for _ in range(FLOOD):  # keyframes of the wrong size: each refused
+            send(small)
+        for seq in range(1, 200):  # well-formed ones, each acknowledged (or the ack dropped)
+            send(fake.message(seq, vp))
+        send(fake.message(10_000, vp))
+        deadline = time.perf_counter() + 30.0  # a hang guard
+        while client.shown[-1]["seq"] != 10_000 if client.shown else True:
+            client.frame(vp)
+            assert time.perf_counter() < deadline, (
+                f"the last keyframe never came: {client._servers[0].taken} taken, the "
+                f"last {client._servers[0].last_seq}")
+        assert all(t.is_alive() for t in client._threads)
+        assert client.rejected_keyframes == FLOOD
+    finally:
+        client.close()
+        fake.close()
+
+
+def test_a_keyframe_number_far_ahead_does_not_freeze_the_link(fake, monkeypatch):
+    """Regression: after a keyframe numbered far ahead every later keyframe of that server
+    was dropped as older, until the scene was loaded again.  A keyframe not newer than the
+    last is taken once none was taken for ``SEQ_RESET_S``."""
+    from lodsprite.distributed import client as client_module
+
+    client = fake.client(max_error=None)
+    near, far = fake.path.viewpoints[2], fake.path.viewpoints[4]
+    try:
+        deadline = time.perf_counter() + 30.0  # a hang guard
+        while not client._servers[0].loaded:  # loading sets the link's numbering afresh
+            assert time.perf_counter() < deadline, "the client never loaded the scene"
+            time.sleep(0.01)
+        fake.send(2**62, near)
+        f = _until(client, near, "keyframe")
+        assert f.keyframe_seq == 2**62
+        monkeypatch.setattr(client_module, "SEQ_RESET_S", 0.0)  # as if it were long ago
+        fake.send(7, far)
+        f = _until(client, far, "keyframe")
+        assert f.keyframe_seq == 7 and client._servers[0].last_seq == 7
     finally:
         client.close()

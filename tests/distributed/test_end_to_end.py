@@ -20,9 +20,9 @@ SMALL = RenderConfig(terrain="fractal:64:2", size=(64, 64), lod=8, frames=40,
                      path="chen1999", mode="sprite")
 
 
-def start_server(address):
+def start_server(address, *serve_args):
     return subprocess.Popen([sys.executable, "-c", "from lodsprite.cli import main; main()",
-                             "serve", "--bind", address],
+                             "serve", "--bind", address, *serve_args],
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
 
 
@@ -91,7 +91,7 @@ def test_client_keeps_drawing_when_the_server_dies_and_resumes_when_it_returns(s
         server = start_server(address)
         assert wait_for(client, path.viewpoints[5], timeout=30.0)
     finally:
-        client.close(shutdown_servers=True)
+        client.close()
         stop(server)
 
 
@@ -117,7 +117,7 @@ def test_a_still_viewer_gets_one_keyframe_unless_the_server_renders_continuously
                 time.sleep(0.01)
         stats = client.server_stats()[0]
     finally:
-        client.close(shutdown_servers=True)
+        client.close()
         stop(server)
     if pace == "needed":
         assert received == 0 and len(stats["render_ms"]) == 1
@@ -171,23 +171,31 @@ def test_server_rejects_garbage_and_keeps_serving(scene):
     from lodsprite.distributed.server import endpoints
 
     address = f"127.0.0.1:{free_ports()}"
-    server = start_server(address)
+    server = start_server(address, "--allow-shutdown")
     ctx = zmq.Context()
+    holder, stranger = "c" * 16, "d" * 16
     try:
         control = ctx.socket(zmq.REQ)
         control.setsockopt(zmq.RCVTIMEO, 10000)
         control.connect(endpoints(address, bind=False)[0])
+
+        def ask(seq, op, client=holder, args=None) -> dict:
+            control.send_multipart(encode({"kind": "control", "seq": seq, "op": op,
+                                           "args": args or {}, "client": client}))
+            return decode(control.recv_multipart())[0]
+
         control.send_multipart([b"\x00garbage"])
         header, _ = decode(control.recv_multipart())
         assert header["ok"] is False
-        control.send_multipart(encode({"kind": "control", "seq": 1, "op": "ping"}))
-        header, _ = decode(control.recv_multipart())
-        assert header["ok"] is True
-        control.send_multipart(encode({"kind": "control", "seq": 2, "op": "stats"}))
-        header, _ = decode(control.recv_multipart())
-        assert header["data"]["rejected_messages"] == 1
-        control.send_multipart(encode({"kind": "control", "seq": 3, "op": "shutdown"}))
-        decode(control.recv_multipart())
+        assert ask(1, "ping")["ok"] is True
+        assert ask(2, "stats")["data"]["rejected_messages"] == 1
+        # shutdown only from the holder, even with --allow-shutdown
+        assert ask(3, "shutdown", stranger)["ok"] is False  # nobody holds it
+        assert ask(4, "load", args={"terrain": "fractal:64:2", "size": [64, 64],
+                                    "lod": 8})["ok"] is True
+        assert ask(5, "shutdown", stranger)["ok"] is False
+        assert server.poll() is None and ask(6, "ping", stranger)["ok"] is True
+        assert ask(7, "shutdown")["ok"] is True
         assert server.wait(timeout=10) == 0
         control.close(linger=0)
     finally:
@@ -317,7 +325,7 @@ def test_a_replayed_frame_is_the_frame_the_client_drew(scene):
         drawn = client.image()
         key = client.shown[frames[-1].keyframe_index]
     finally:
-        client.close(shutdown_servers=True)
+        client.close()
         stop(server)
     with Replayer(SMALL) as replayer:
         again = replayer.draw(Viewpoint.from_dict(key["viewpoint"]), path.viewpoints[11])

@@ -37,7 +37,8 @@ keys = st.sampled_from(["v", "kind", "seq", "op", "args", "client", "t", "viewpo
 headers = st.fixed_dictionaries(
     {"v": st.just(PROTOCOL_VERSION) | values, "kind": st.sampled_from(KINDS) | values,
      "seq": st.integers(0, 10) | values},
-    optional={"op": st.sampled_from(["ping", "load", "start", "stop", "release", "stats"])
+    optional={"op": st.sampled_from(["ping", "load", "start", "stop", "release", "stats",
+                                     "shutdown"])
               | values, "args": values, "client": st.text(max_size=20) | values,
               "t": values, "viewpoint": values, "shown": values})
 
@@ -126,7 +127,7 @@ def mutated(draw, kind):
 def test_the_control_handler_answers_everything(server, fr):
     reply = server._control(fr)
     _check_reply(reply)
-    server._stop.clear()
+    assert not server._stop.is_set()  # shutdown is not allowed: refused, from anyone
 
 
 @FAST
@@ -147,13 +148,15 @@ def test_hostile_messages_are_hostile():
     from lodsprite.distributed.protocol import decode_message
 
     rng = np.random.default_rng(1)
-    bad = 0
+    bad, ops = 0, set()
     for _ in range(300):
         try:
-            decode_message(hostile_frames("control", rng))
+            msg, _ = decode_message(hostile_frames("control", rng))
+            ops.add(getattr(msg, "op", None))
         except ProtocolError:
             bad += 1
     assert 150 < bad < 300  # refused mostly, but valid ones get through too
+    assert "shutdown" in ops  # which a server must refuse unless it allows it
 
 
 # --------------------------------------------------------------------- end to end, live
@@ -171,13 +174,21 @@ def test_a_flooded_server_still_serves_a_real_client():
     thread.start()
     try:
         sent = flood(address, {"control": 800, "viewpoint": 1200, "keyframe": 1000}, seed=3)
-        assert sum(sent["sent"].values()) == 3000 and sent["unanswered"] <= 5
-        assert thread.is_alive()
-        # Control requests are answered one by one; viewpoints and acks are dropped while
-        # ZeroMQ reconnects a peer it cut off for an oversized frame: fewer arrive.
-        rejected = server.stats.rejected
-        assert rejected["control"] > 300
-        assert rejected["ack"] > 100 and rejected["viewpoint"] > 100
+        assert sum(sent["sent"].values()) == 3000
+        assert thread.is_alive() and not server._stop.is_set()  # shutdown was refused
+        # Every control request was answered or counted unanswered (its REQ socket made
+        # afresh); how many arrive in time, and how many viewpoints and acks ZeroMQ drops
+        # while it reconnects a peer cut off for an oversized frame, depends on scheduling.
+        replies = sent["replies"]["ok"] + sent["replies"]["refused"]
+        assert replies + sent["unanswered"] == sent["sent"]["control"]
+        stats = server.stats
+        assert replies <= stats.received["control"] <= sent["sent"]["control"]
+        # every refusal the flood saw was counted by the server: rejected (malformed) or
+        # refused (well-formed, not carried out)
+        refused = stats.rejected["control"] + sum(stats.refused.values())
+        assert sent["replies"]["refused"] <= refused <= stats.received["control"]
+        assert stats.rejected["viewpoint"] <= stats.received["viewpoint"] <= 1200
+        assert stats.rejected["ack"] <= stats.received["keyframe"] <= 1000
         cfg = RenderConfig(terrain="fractal:64:2", size=(64, 64), lod=8, frames=20,
                            path="chen1999", mode="sprite")
         scene, path = prepare(cfg)

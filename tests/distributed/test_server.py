@@ -1,6 +1,7 @@
 """The LOD server's edge: typed control requests, holds, datasets, memory, a renderer that
 survives bad scenes, keyframes for the holder only, prediction on the client's clock."""
 
+import logging
 import threading
 import time
 
@@ -341,27 +342,37 @@ def test_the_renderer_survives_a_scene_that_fails_and_a_later_load_works(live, m
     but never sent a keyframe again."""
     monkeypatch.setattr(producer_module, "KeyframeRenderer", _fail_for("fractal:32:9", exc))
     assert live.control("load", {**SMALL, "terrain": "fractal:32:9"})["ok"]
-    assert live.control("start")["ok"]
+    live.control("start")  # refused when the load has failed already, accepted before
     data = live.wait_state({"failed"})
     assert type(exc).__name__ in data["error"] and not data["running"]
+    refused = live.control("start")  # a failed scene cannot be started
+    assert not refused["ok"] and type(exc).__name__ in refused["error"]
+    assert not live.control("ping")["data"]["running"]
     assert live.control("load", SMALL)["ok"] and live.control("start")["ok"]
     assert live.wait_state({"ready"})["error"] == ""
     kf, _ = _keyframe_for(live, A)
     assert kf.color.shape == (64, 64, 3)
 
 
-def test_the_renderer_survives_a_keyframe_that_fails_to_render(live, monkeypatch):
-    calls = []
+def _first_render_fails(monkeypatch, message: str) -> list:
+    """Make the server's first keyframe render raise ``RuntimeError(message)``; the list
+    of render calls so far."""
+    calls: list = []
     real = producer_module.KeyframeRenderer
 
     class Flaky(real):
         def render(self, *a, **kw):
             calls.append(1)
             if len(calls) == 1:
-                raise RuntimeError("GL_INVALID_OPERATION")
+                raise RuntimeError(message)
             return super().render(*a, **kw)
 
     monkeypatch.setattr(producer_module, "KeyframeRenderer", Flaky)
+    return calls
+
+
+def test_the_renderer_survives_a_keyframe_that_fails_to_render(live, monkeypatch):
+    calls = _first_render_fails(monkeypatch, "GL_INVALID_OPERATION")
     assert live.control("load", SMALL)["ok"] and live.control("start")["ok"]
     pub = live.ctx.socket(zmq.PUB)
     pub.connect(live.vp_ep)
@@ -378,3 +389,47 @@ def test_the_renderer_survives_a_keyframe_that_fails_to_render(live, monkeypatch
     assert live.control("load", SMALL)["ok"] and live.control("start")["ok"]
     kf, _ = _keyframe_for(live, A)
     assert len(calls) >= 2 and kf.depth.shape == (64, 64)
+
+
+def test_a_failed_scene_holds_no_memory_in_the_servers_accounting(live, monkeypatch):
+    """Regression: the estimate of a scene that failed stayed credited as held, so the
+    next load's memory check counted memory nobody held."""
+    monkeypatch.setattr(producer_module, "KeyframeRenderer",
+                        _fail_for("fractal:32:9", MemoryError()))
+    assert live.control("load", {**SMALL, "terrain": "fractal:32:9"})["ok"]
+    assert live.server._producer.scene_bytes > 0  # asked for, not yet loaded
+    live.wait_state({"failed"})
+    assert live.server._producer.scene_bytes == 0
+    assert live.control("load", SMALL)["ok"]
+    live.wait_state({"ready"})
+    assert live.server._producer.scene_bytes > 0
+
+
+def test_a_client_gets_keyframes_again_after_a_passing_render_failure(live, monkeypatch,
+                                                                     caplog):
+    """Regression: after one render failure the client never loaded the scene again and
+    the server stayed idle for good.  The client loads a failed scene again after a wait
+    (shortened here) that doubles while it keeps failing."""
+    from lodsprite.distributed import link as link_module
+    from lodsprite.distributed.client import LodClient
+    from lodsprite.distributed.render import scene_args
+    from lodsprite.run import RenderConfig, prepare
+
+    calls = _first_render_fails(monkeypatch, "GL_OUT_OF_MEMORY")
+    monkeypatch.setattr(link_module, "RETRY_FIRST_S", 0.2)
+    caplog.set_level(logging.WARNING, logger="lodsprite.client")
+    cfg = RenderConfig(terrain="fractal:64:2", size=(64, 64), lod=8, frames=5,
+                       path="chen1999", mode="sprite")
+    scene, path = prepare(cfg)
+    client = LodClient(scene, scene_args(cfg.terrain, cfg.texture, None, 1.0, cfg.size),
+                       [live.address], cfg.size, cfg.lod)
+    try:
+        deadline = time.perf_counter() + 60.0  # a hang guard
+        while client.frame(path.viewpoints[0]).type != "keyframe":
+            assert time.perf_counter() < deadline, f"no keyframe after {len(calls)} renders"
+            time.sleep(0.02)
+        # rendered again: the failed renderer was dropped, so the scene was loaded again
+        assert len(calls) >= 2
+        assert "could not load or render the scene" in caplog.text
+    finally:
+        client.close()

@@ -6,9 +6,8 @@ a socket: random bytes, random msgpack structures, valid messages with one field
 mutated, removed or added, wrong versions, extra frames, deep nesting, or frames over
 the socket's ``zmq.MAXMSGSIZE``.  :func:`flood` sends a number of them to a live server.
 
-Valid ``shutdown`` requests are never made: any client may shut down a server nobody
-holds (use ``--keys`` where that matters), and a fuzz run that did so would prove
-nothing.
+``shutdown`` is among the ops: a server started without ``allow_shutdown`` (as the fuzz
+runs do) must refuse it from anyone, holder or not, and go on serving.
 """
 
 from __future__ import annotations
@@ -27,7 +26,7 @@ from lodsprite.distributed.protocol import (
 from lodsprite.distributed.server import endpoints
 
 SOCKETS = ("control", "viewpoint", "keyframe")
-_OPS = ("start", "stop", "load", "stats", "ping", "release")
+_OPS = ("start", "stop", "load", "stats", "ping", "release", "shutdown")
 _KEYS = ("v", "kind", "seq", "op", "args", "client", "t", "viewpoint", "shown", "terrain",
          "texture", "grid", "size", "lod", "visibility", "slot", "slots", "x", "o", "eye")
 
@@ -70,8 +69,9 @@ def _viewpoint(rng: np.random.Generator) -> dict:
 
 
 def valid_header(kind: str, rng: np.random.Generator, client: str = "") -> dict:
-    """A valid header for socket ``kind`` (control requests other than shutdown,
-    viewpoints, acknowledgements), light enough for any server to carry out."""
+    """A valid header for socket ``kind`` (control requests, viewpoints,
+    acknowledgements), light enough for any server to carry out (``shutdown`` only by a
+    server that allows it)."""
     seq = int(rng.integers(0, 2**31))
     if kind == "control":
         op = str(rng.choice(_OPS))
@@ -104,8 +104,6 @@ def mutate(header: dict, rng: np.random.Generator) -> dict:
         del target[_pick(rng, keys)]
     else:
         target[_pick(rng, _KEYS)] = random_value(rng)
-    if h.get("kind") == "control" and h.get("op") == "shutdown":
-        h["op"] = "ping"
     return h
 
 

@@ -14,7 +14,8 @@ from __future__ import annotations
 import logging
 import secrets
 import threading
-from collections.abc import Iterator
+import time
+from collections.abc import Callable, Iterator
 
 import zmq
 
@@ -33,6 +34,14 @@ log = logging.getLogger("lodsprite.client")
 
 CONTROL_TIMEOUT_MS = 1000
 RELEASE_TIMEOUT_MS = 300
+KEYFRAME_RCVHWM = 4
+"""Keyframe messages the link's keyframe socket queues; the server holds the rest."""
+ACK_SNDHWM = 16
+"""Acknowledgements queued for a server; more are dropped (the server reads none)."""
+RETRY_FIRST_S = 2.0
+"""Wait before loading again a scene that failed on the server; doubled after each
+failure, up to :data:`RETRY_MAX_S`."""
+RETRY_MAX_S = 60.0
 
 
 def new_client_id() -> str:
@@ -56,9 +65,20 @@ class ServerLink:
         self.viewpoint.connect(self.viewpoint_ep)
         self.keyframes = self._socket(zmq.DEALER, MAX_KEYFRAME_FRAME_BYTES)
         self.keyframes.setsockopt(zmq.IDENTITY, self.client_id.encode())
+        # Bounded both ways: a few keyframes waiting (the server holds the rest), and
+        # acknowledgements that a server does not read are dropped, never waited for.
+        self.keyframes.setsockopt(zmq.RCVHWM, KEYFRAME_RCVHWM)
+        self.keyframes.setsockopt(zmq.SNDHWM, ACK_SNDHWM)
+        self.keyframes.setsockopt(zmq.LINGER, 0)
         self.keyframes.connect(self.keyframe_ep)
         self.control: zmq.Socket | None = None
         self.last_seq = 0
+        self.taken = 0  # keyframes taken from this server (the client's receiver counts)
+        self.taken_at_load = 0  # ... when the scene was last sent
+        self.last_taken = 0.0  # time.monotonic() when a keyframe was last taken
+        self.failure: str | None = None  # the server's error for the scene, said once
+        self.retry_at: float | None = None  # when to send a failed scene again
+        self.retry_s = RETRY_FIRST_S  # the wait before the next reload of a failed scene
         self.loaded = False
         self.alive: bool | None = None  # None until the first ping is answered or not
         self.refusal: str | None = None  # the server's reason for refusing the last load
@@ -127,12 +147,16 @@ def control(link: ServerLink, counter: Iterator[int], op: str,
                          "args": args or {}})
 
 
-def keep_loaded(link: ServerLink, load_args: dict, counter: Iterator[int]) -> None:
+def keep_loaded(link: ServerLink, load_args: dict, counter: Iterator[int],
+                now: Callable[[], float] = time.monotonic) -> None:
     """One CLIENT-CONTROL round for one server: ping it; load the scene and start it when
     this client does not hold it (another client's hold lapsed or was released, or the
     server restarted), it is not running, or an earlier load or start got no answer (a
-    server busy starting up may have lost it).  A scene that failed on the server is not
-    sent again (its error is said once).  Sets ``link.alive`` and ``link.loaded``."""
+    server busy starting up may have lost it).  A scene that failed on the server (to load
+    or to render) is loaded again after :data:`RETRY_FIRST_S`, then after twice as long
+    each time it fails again, up to :data:`RETRY_MAX_S`, until a keyframe arrives: a passing
+    failure heals, a lasting one costs a load a minute.  Its error is said once.  Sets
+    ``link.alive`` and ``link.loaded``.  ``now``: the clock of the retries (seconds)."""
     reply = control(link, counter, "ping")
     link.alive = reply is not None
     if reply is None:
@@ -142,14 +166,23 @@ def keep_loaded(link: ServerLink, load_args: dict, counter: Iterator[int]) -> No
     if not isinstance(data, dict):
         data = {}
     yours = data.get("yours", True) is True  # servers before protocol 3 have no holds
+    if link.taken > link.taken_at_load:  # keyframes came since the last load: it works
+        link.retry_s, link.failure = RETRY_FIRST_S, None
     if link.loaded and yours and data.get("state") == "failed":
         error = str(data.get("error", ""))
-        if error != link.refusal:
-            log.warning("%s could not load the scene: %s", link.address, error)
-        link.refusal = error
+        if error != link.failure:
+            log.warning("%s could not load or render the scene: %s (loading it again in "
+                        "%.0f s, then less often while it fails)", link.address, error,
+                        link.retry_s)
+            link.failure = error
+        if link.retry_at is None:  # this failure's reload is not scheduled yet
+            link.retry_at = now() + link.retry_s
+            link.retry_s = min(2 * link.retry_s, RETRY_MAX_S)
+        if now() < link.retry_at:
+            return
+    elif link.loaded and yours and data.get("running") and data.get("loaded"):
         return
-    if link.loaded and yours and data.get("running") and data.get("loaded"):
-        return
+    link.retry_at, link.taken_at_load = None, link.taken
     link.last_seq = 0  # a restarted server counts from 1 again
     replies = [control(link, counter, "load", load_args), control(link, counter, "start")]
     link.loaded = all(r is not None and r.get("ok") for r in replies)

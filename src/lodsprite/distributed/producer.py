@@ -46,7 +46,7 @@ class KeyframeProducer:
         self.delta_t = delta_t
         self.state, self.error = "idle", ""
         self.max_texture: int | None = None  # from the GL driver, once probed
-        self.scene_bytes = 0  # estimate for the scene asked for last
+        self.scene_bytes = 0  # estimate for the scene asked for last (0 once it failed)
         self.slot, self.slots = 0, 1  # this server's place among the client's servers
         self.pending: LoadArgs | None = None
         self._running, self._stop = running, stop
@@ -86,6 +86,7 @@ class KeyframeProducer:
         with self._lock:
             if self.pending is None:  # a newer load is not failed by this one
                 self._set_state("failed", error)
+                self.scene_bytes = 0  # the failed scene is released: it holds nothing
         self._running.clear()
         log.error("%s", error)
 

@@ -5,7 +5,7 @@ ports ``port``, ``port + 1``, ``port + 2`` (the paper's Figure 4):
 
 * control (REP): ``ping``, ``load`` (terrain, texture, grid, exaggeration, size, fov, and
   the client's coarse level, visibility rule, ε and pace), ``start``, ``stop``,
-  ``release``, ``stats``, ``shutdown``;
+  ``release``, ``stats``, ``shutdown`` (refused unless allowed, see below);
 * viewpoint (SUB): viewpoint samples, each stamped with the client's clock;
 * keyframe (ROUTER): keyframes out to the client that holds the server, acknowledgements
   back.
@@ -38,7 +38,16 @@ The edge (a server no message can stop, wedge or misuse):
   ``loading``, ``ready``, ``failed``) and the last ``error``; a later ``load`` starts
   afresh (:mod:`.producer`).
 * Every socket has a ``zmq.MAXMSGSIZE``; the server binds loopback unless
-  ``allow_remote``.
+  ``allow_remote``.  Each message is received frame by frame (:mod:`.frames`), keeping at
+  most the frames its kind has (1 for control and viewpoint messages, 1 after the
+  identity for acknowledgements); one with more is dropped as it comes and rejected.
+  ZeroMQ bounds each frame, not the number of frames of one message; libzmq holds a
+  multipart message whole before delivering it, so a peer can still make the server hold
+  one long message; beyond loopback use ``--keys``, which admits only known clients.
+* ``shutdown`` over the network is refused unless the server was started with
+  ``allow_shutdown=True`` (``lodsprite serve --allow-shutdown``), and then it is carried
+  out only for the client that holds the server.  A server is otherwise stopped by its
+  owner: a signal, or :meth:`LodServer.shutdown` in the same process.
 * Nothing grows with use (:mod:`.server_stats`): ``stats`` keeps the most recent
   ``MAX_SAMPLES`` timings of each kind and exact keyframe counts; counts are keyed by a
   fixed set of kinds and ops, and lines said once by their kind, never by what a message
@@ -60,6 +69,7 @@ import msgspec
 import zmq
 
 from lodsprite.distributed.datasets import Datasets
+from lodsprite.distributed.frames import check_frames, recv_frames
 from lodsprite.distributed.hold import LEASE_S, Hold
 from lodsprite.distributed.keys import ServerKeys
 from lodsprite.distributed.predictors import PREDICTORS
@@ -93,6 +103,8 @@ DEFAULT_BIND = "127.0.0.1:5555"
 LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "::1", "[::1]")
 MEMORY_FRACTION = 0.8
 """Share of the available memory a scene may take (its estimate)."""
+CONTROL_FRAMES = 1
+"""Frames of a control message (a header); the server keeps no more of one."""
 
 
 def endpoints(address: str, bind: bool) -> tuple[str, str, str]:
@@ -113,18 +125,20 @@ def is_loopback(address: str) -> bool:
 
 
 class LodServer:
-    """A keyframe server; :meth:`run` blocks until a ``shutdown`` message (or
-    :meth:`shutdown`).
+    """A keyframe server; :meth:`run` blocks until :meth:`shutdown` (or, with
+    ``allow_shutdown``, the holder's ``shutdown`` message).
 
     ``bind`` is ``HOST:PORT``; a host other than loopback needs ``allow_remote=True``
     (raises :class:`InputError` otherwise).  ``data_dir``: the folder whose files clients
     may name (None: built-in datasets only).  ``lease_s``: see the module docstring.
+    ``allow_shutdown``: carry out a ``shutdown`` message from the holding client
+    (otherwise it is refused).
     """
 
     def __init__(self, bind: str = DEFAULT_BIND, predictor: str = "linear",
                  codec: str = "raw", keys: ServerKeys | None = None,
                  data_dir: Path | str | None = None, allow_remote: bool = False,
-                 lease_s: float = LEASE_S) -> None:
+                 lease_s: float = LEASE_S, allow_shutdown: bool = False) -> None:
         self.addresses = endpoints(bind, bind=True)
         if not is_loopback(bind) and not allow_remote:
             raise InputError(f"binding {bind} exposes the server beyond this machine: "
@@ -137,6 +151,7 @@ class LodServer:
         self.keys = keys
         self.predictor_name = predictor
         self.codec = codec
+        self.allow_shutdown = bool(allow_shutdown)
         self.stats = ServerStats()
         self.queue: KeyframeQueue[Keyframe] = KeyframeQueue(2)
         self._ctx = zmq.Context()
@@ -190,7 +205,10 @@ class LodServer:
             while not self._stop.is_set():
                 if not control.poll(100):
                     continue
-                frames = control.recv_multipart()
+                try:  # a REP socket: exactly one reply to each message received
+                    frames = recv_frames(control, CONTROL_FRAMES)
+                except zmq.Again:
+                    continue
                 control.send_multipart(encode(self._control(frames)))
         finally:
             self._stop.set()
@@ -251,6 +269,7 @@ class LodServer:
         self._tally.received("control")
         try:
             try:
+                check_frames(frames)
                 msg, _ = decode_message(frames)
                 if not isinstance(msg, Control):
                     raise ProtocolError(f"expected a control message, got {type(msg).__name__}")
@@ -288,6 +307,8 @@ class LodServer:
         elif op == "start":
             if not mine:
                 return "load a scene first"
+            if self._producer.state == "failed":  # a start must not outlive its scene
+                return f"the scene failed: {self._producer.error}"
             self._running.set()
         elif op == "stop":
             if mine:
@@ -299,6 +320,11 @@ class LodServer:
                 self._hold.drop()
                 self._running.clear()
         elif op == "shutdown":
+            if not self.allow_shutdown:
+                return ("shutdown: not allowed (this server was started without "
+                        "--allow-shutdown)")
+            if not mine:
+                return "shutdown: only the client holding the server may stop it"
             self._stop.set()
         return None
 
@@ -318,7 +344,7 @@ class LodServer:
             return error
         resolved = msgspec.structs.replace(args, terrain=terrain.spec, texture=texture.spec)
         if self._hold.take(client):  # a new session: nothing of the previous one is kept
-            self._viewpoints.reset()
+            self._viewpoints.reset(client)
         self._producer.request(resolved, need)
         self._loaded = True
         return None

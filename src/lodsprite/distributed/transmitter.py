@@ -9,9 +9,11 @@ aims that far ahead.
 
 A keyframe the holder cannot take (not connected, not reading) or does not acknowledge
 within :data:`ACK_TIMEOUT_S` is dropped.  Anything arriving on the keyframe connection is
-taken by :meth:`KeyframeTransmitter.ack`, which never raises: a malformed message is
-rejected and counted, an acknowledgement from a client that does not hold the server is
-ignored and counted, and the holder's renews its hold.
+taken by :meth:`KeyframeTransmitter.ack`, which never raises: a malformed message (one
+with more frames than an acknowledgement included, :mod:`.frames`) is rejected and
+counted, an acknowledgement from a client that does not hold the server is ignored and
+counted, and the holder's renews its hold.  An unexpected error in the loop is logged
+once per kind, and the loop goes on.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ import time
 
 import zmq
 
+from lodsprite.distributed.frames import check_frames, recv_frames
 from lodsprite.distributed.hold import Hold
 from lodsprite.distributed.protocol import (
     Ack,
@@ -35,6 +38,9 @@ from lodsprite.distributed.server_stats import Tally
 
 ACK_TIMEOUT_S = 5.0
 """Seconds the holder has to take a keyframe, and then to acknowledge it."""
+ACK_FRAMES = 2
+"""Frames of a message on the keyframe connection: the sender's identity and an ack
+header; the transmitter keeps no more of one."""
 
 
 class KeyframeTransmitter:
@@ -50,10 +56,18 @@ class KeyframeTransmitter:
         self._stop = stop
 
     def run(self, sock: zmq.Socket) -> None:
-        """Transmit until the server stops or the queue closes; closes ``sock``."""
+        """Transmit until the server stops or the queue closes; closes ``sock``.  An
+        unexpected error is logged once per kind and the loop goes on."""
         try:
             while not self._stop.is_set():
-                self._transmit_one(sock)
+                try:
+                    self._transmit_one(sock)
+                except Closed:
+                    raise
+                except Exception as exc:  # a bug must not stop the transmitter
+                    self.tally.once(f"internal:transmit:{type(exc).__name__}", logging.ERROR,
+                                    "internal error transmitting keyframes: %r", exc)
+                    self._stop.wait(0.01)
         except Closed:
             pass
         finally:
@@ -106,7 +120,7 @@ class KeyframeTransmitter:
         if sock.poll(int(timeout_s * 1e3)):
             for _ in range(1000):
                 try:
-                    frames = sock.recv_multipart(zmq.NOBLOCK)
+                    frames = recv_frames(sock, ACK_FRAMES)
                 except zmq.Again:
                     return
                 self.ack(frames, None, -1)
@@ -120,6 +134,7 @@ class KeyframeTransmitter:
                 self.tally.reject("ack", ProtocolError("no message after the identity frame"))
                 return False
             try:
+                check_frames(frames)
                 msg, _ = decode_message(frames[1:])
                 if not isinstance(msg, Ack):
                     raise ProtocolError(f"expected an ack, got {type(msg).__name__}")
@@ -146,7 +161,7 @@ class KeyframeTransmitter:
                     return False
                 continue
             try:
-                frames = sock.recv_multipart(zmq.NOBLOCK)
+                frames = recv_frames(sock, ACK_FRAMES)
             except zmq.Again:
                 continue
             if self.ack(frames, holder, seq):

@@ -25,6 +25,7 @@ import threading
 
 import zmq
 
+from lodsprite.distributed.frames import check_frames, recv_frames
 from lodsprite.distributed.hold import Hold
 from lodsprite.distributed.predictors import PREDICTORS
 from lodsprite.distributed.protocol import (
@@ -41,6 +42,8 @@ MAX_ELAPSED_S = 1.0
 """Longest time since the newest viewpoint sample that prediction extrapolates over."""
 MIN_SAMPLE_SPACING_S = 1e-4
 """Samples closer than this (client clock) to the previous one are ignored."""
+VIEWPOINT_FRAMES = 1
+"""Frames of a viewpoint message (a header); the receiver keeps no more of one."""
 
 
 class ViewpointReceiver:
@@ -63,27 +66,39 @@ class ViewpointReceiver:
         self._last_arrival = 0.0  # server clock when it arrived
         self._last_vp = None
         self._shown = None  # (eye, slot) of the keyframe the client says it shows
+        self._client: str | None = None  # whose samples are kept (the holder's, at reset)
 
     def run(self, sock: zmq.Socket) -> None:
-        """Receive until the server stops; closes ``sock``."""
+        """Receive until the server stops; closes ``sock``.  An unexpected error is logged
+        once per kind and the loop goes on."""
         try:
             while not self._stop.is_set():
-                if not sock.poll(50):
-                    continue
-                for _ in range(1000):  # everything queued, oldest first
-                    try:
-                        frames = sock.recv_multipart(zmq.NOBLOCK)
-                    except zmq.Again:
-                        break
-                    self.take(frames)
+                try:
+                    self._receive(sock)
+                except Exception as exc:  # a bug must not stop the receiver
+                    self.tally.once(f"internal:vp-loop:{type(exc).__name__}", logging.ERROR,
+                                    "internal error receiving viewpoints: %r", exc)
+                    self._stop.wait(0.01)
         finally:
             sock.close(linger=0)
+
+    def _receive(self, sock: zmq.Socket) -> None:
+        """Take everything queued on ``sock``, oldest first (waits up to 50 ms for it)."""
+        if not sock.poll(50):
+            return
+        for _ in range(1000):
+            try:
+                frames = recv_frames(sock, VIEWPOINT_FRAMES)
+            except zmq.Again:
+                return
+            self.take(frames)
 
     def take(self, frames: list) -> bool:
         """Take one viewpoint message; whether it was observed.  Never raises."""
         self.tally.received("viewpoint")
         try:
             try:
+                check_frames(frames)
                 msg, _ = decode_message(frames)
                 if not isinstance(msg, ViewpointMessage):
                     raise ProtocolError(f"expected a viewpoint message, got "
@@ -96,8 +111,9 @@ class ViewpointReceiver:
             if self.hold.current() is None or not self.hold.touch(msg.client):
                 self.tally.ignore("viewpoint_not_holder")
                 return False
-            if not self._observe(msg.t, vp, shown):
-                self.tally.ignore("viewpoint_not_newer")
+            why = self._observe(msg.client, msg.t, vp, shown)
+            if why is not None:
+                self.tally.ignore(why)
                 return False
             return True
         except Exception as exc:
@@ -105,21 +121,28 @@ class ViewpointReceiver:
                             "internal error handling a viewpoint: %r", exc)
             return False
 
-    def _observe(self, t: float, vp, shown) -> bool:
-        """Keep a sample taken at client time ``t``; False when it is not newer."""
+    def _observe(self, client: str, t: float, vp, shown) -> str | None:
+        """Keep ``client``'s sample taken at client time ``t``; why not (the reason
+        counted as ignored), or None.  The client is checked under the lock against the
+        one :meth:`reset` was last called for, so that a sample of the previous holder
+        that was in flight during a new client's ``load`` cannot be kept."""
         with self._lock:
+            if client != self._client:
+                return "viewpoint_not_holder"
             if self._last_t is not None and t < self._last_t + MIN_SAMPLE_SPACING_S:
-                return False
+                return "viewpoint_not_newer"
             self._predictor.observe(t, vp)  # the client's clock, not arrival
             self._last_t, self._last_arrival, self._last_vp = t, self.hold.now(), vp
             self._shown = shown
         self.have.set()
         self.fresh.set()
-        return True
+        return None
 
-    def reset(self) -> None:
-        """Forget everything (a new client: nothing of the previous one's motion is kept)."""
+    def reset(self, client: str | None = None) -> None:
+        """Forget everything and take samples from ``client`` only from now on (a new
+        holder: nothing of the previous one's motion is kept)."""
         with self._lock:
+            self._client = client
             self._predictor = PREDICTORS[self.predictor_name]()
             self._last_t, self._last_vp, self._shown = None, None, None
             self.have.clear()
