@@ -83,6 +83,46 @@ def _fake_server(port: int, answer, stop: threading.Event) -> threading.Thread:
     return t
 
 
+def test_a_start_refused_because_the_scene_failed_leaves_the_reload_to_the_backoff():
+    # Regression: a scene that failed between the load and the start made the server
+    # refuse the start; the link then counted as not loaded and sent the failing load
+    # again every second, bypassing the backoff.
+    import itertools
+
+    from lodsprite.distributed.link import RETRY_FIRST_S, keep_loaded
+    from lodsprite.distributed.run import free_ports
+
+    port = free_ports()
+    loads = []
+
+    def answer(header):
+        if header["op"] == "load":
+            loads.append(1)
+        if header["op"] == "start":
+            return {"ok": False, "error": "the scene failed: MemoryError"}
+        return {"data": {"state": "failed", "error": "MemoryError", "running": False,
+                         "loaded": True, "yours": True}}
+
+    stop = threading.Event()
+    server = _fake_server(port, answer, stop)
+    ctx = zmq.Context()
+    link = ServerLink(ctx, f"127.0.0.1:{port}")
+    counter, clock = itertools.count(1), [0.0]
+    try:
+        keep_loaded(link, {"terrain": "x"}, counter, now=lambda: clock[0])
+        assert len(loads) == 1 and link.loaded
+        keep_loaded(link, {"terrain": "x"}, counter, now=lambda: clock[0])
+        assert len(loads) == 1  # failed: the reload waits
+        clock[0] += RETRY_FIRST_S + 0.01
+        keep_loaded(link, {"terrain": "x"}, counter, now=lambda: clock[0])
+        assert len(loads) == 2
+    finally:
+        stop.set()
+        server.join(2.0)
+        link.close(release=False)
+        ctx.destroy(linger=0)
+
+
 def test_a_load_that_got_no_answer_is_sent_again():
     # Regression: the client marked a server loaded even when its load request timed out
     # (a server busy starting up), and never loaded it again: no keyframes, ever.

@@ -185,7 +185,10 @@ def keep_loaded(link: ServerLink, load_args: dict, counter: Iterator[int],
     link.retry_at, link.taken_at_load = None, link.taken
     link.last_seq = 0  # a restarted server counts from 1 again
     replies = [control(link, counter, "load", load_args), control(link, counter, "start")]
-    link.loaded = all(r is not None and r.get("ok") for r in replies)
+    # Loaded once the load was accepted and the start answered: a start refused because
+    # the scene failed meanwhile leaves the reload to the backoff above.
+    link.loaded = bool(replies[0] is not None and replies[0].get("ok")
+                       and replies[1] is not None)
     refusal = replies[0].get("error") if replies[0] and not replies[0].get("ok") else None
     if refusal and refusal != link.refusal:
         log.warning("%s refused the scene: %s", link.address, refusal)
