@@ -104,6 +104,9 @@ def render(
     frames: FramesOpt = None,
     out_dir: Annotated[Path, typer.Option("--out", help="output folder")] = Path("out"),
     save_frames: Annotated[bool, typer.Option("--save-frames", help="write PNG frames")] = False,
+    video: Annotated[Path | None, typer.Option(
+        "--video", help="write the frames to an MP4 file (with --ground-truth: full | "
+                        "LOD-sprite | difference side by side)")] = None,
     grid: GridOpt = None,
     exaggeration: ExagOpt = DEFAULT_EXAGGERATION,
     epsilon: EpsOpt = 1.0,
@@ -125,6 +128,8 @@ def render(
     distributed = mode == "distributed"  # not a core mode: the distributed layer runs it
     if distributed and ground_truth:
         raise InputError("--ground-truth needs --mode sprite")
+    if distributed and video is not None:
+        raise InputError("--video is for --mode full, lod and sprite")
     config = RenderConfig(terrain=terrain, texture=texture, path=path,
                           mode="sprite" if distributed else mode, lod=lod,
                           size=parse_size(size), frames=frames, grid=grid,
@@ -138,7 +143,7 @@ def render(
             s = render_distributed(config, out_dir, update, pace=pace,
                                    max_error=parse_max_error(max_error))
         else:
-            s = render_path(config, out_dir, update)
+            s = render_path(config, out_dir, update, video)
     t = Table(title=f"{s['frames']} frames, {s['mode']}, {s['terrain']} ({s['grid']}² grid)")
     for col in ("median ms", "mean ms", "p95 ms", "total s", "triangles"):
         t.add_column(col, justify="right")

@@ -14,6 +14,7 @@ so that shader compilation and first-use driver work are not charged to frame 0.
 from __future__ import annotations
 
 import platform
+from contextlib import ExitStack
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -228,23 +229,39 @@ def keyframe_records(keyframes: list, rows: list[dict]) -> list[dict]:
             for k, (vp, proj, ahead) in enumerate(keyframes)]
 
 
-def render_path(config: RenderConfig, out_dir: Path, progress: Progress | None = None) -> dict:
+def render_path(config: RenderConfig, out_dir: Path, progress: Progress | None = None,
+                video: Path | None = None) -> dict:
     """Render ``config``'s path; write ``frames.csv``, ``summary.json`` (and in sprite mode
     ``keyframes.json``, every keyframe rendered, indexed by the ``keyframe`` column) and
-    optionally PNG frames to ``out_dir``; return the summary."""
+    optionally PNG frames to ``out_dir``; return the summary.
+
+    ``video``: an MP4 file of the frames shown (:mod:`lodsprite.report.video`); with
+    ``config.ground_truth`` each video frame is full resolution | LOD-sprite | difference.
+    """
+    from lodsprite.report.video import VideoWriter, check_video_path, side_by_side
+
+    if video is not None:
+        check_video_path(video)
     scene, path = prepare(config)
     out_dir = Path(out_dir)
-
-    def save(i: int, image: np.ndarray) -> None:
-        write_png(out_dir / "frames" / f"frame_{i:05d}.png", image)
-
     keyframes: list = []
-    with PathRenderer(scene, config.size, config.fov_y_deg) as pr:
+    with PathRenderer(scene, config.size, config.fov_y_deg) as pr, ExitStack() as stack:
+        writer = stack.enter_context(VideoWriter(video)) if video is not None else None
+
+        def on_frame(i: int, image: np.ndarray) -> None:
+            if config.save_frames:
+                write_png(out_dir / "frames" / f"frame_{i:05d}.png", image)
+            if writer is not None:
+                if config.ground_truth:  # untimed, after the frame's clock stopped
+                    pr.renderer.render(path.viewpoints[i], None)
+                    image = side_by_side(pr.renderer.target.read_color(), image)
+                writer.append(image)
+
+        wanted = on_frame if config.save_frames or writer is not None else None
         if config.mode == "sprite":
-            rows = sprite_frames(pr, path, config, progress,
-                                 save if config.save_frames else None, keyframes)
+            rows = sprite_frames(pr, path, config, progress, wanted, keyframes)
         else:
-            rows = plain_frames(pr, path, config, progress, save if config.save_frames else None)
+            rows = plain_frames(pr, path, config, progress, wanted)
         info = pr.ctx.info
         pr.ctx.check_error("render_path")
     ms = np.array([r["ms"] for r in rows])
