@@ -8,17 +8,16 @@ import pytest
 from conftest import make_field
 from lodsprite.camera import Projection, look_at
 from lodsprite.sprite import metric as metric_module
+from lodsprite.sprite import raycast
 from lodsprite.sprite.metric import (
     MAX_FALLBACK,
     MIN_SAMPLES,
     ErrorMetric,
     angles_at_eye,
-    coarse_squares,
     in_view,
-    ray_triangle_t,
-    reprojected_centres,
 )
 from lodsprite.sprite.policy import KeyframePolicy
+from lodsprite.sprite.raycast import coarse_squares, ray_triangle_t, reprojected_centres
 from lodsprite.terrain.heightfield import HeightField
 
 H_SPIKE = 50.0
@@ -329,13 +328,13 @@ def test_the_whole_level_search_in_blocks_equals_the_unblocked_search():
     def tris(k0, k1, j0, j1):
         return np.broadcast_to(every[None, j0:j1], (k1 - k0, j1 - j0, 3, 3))
 
-    whole = metric_module.nearest_hits(key, d, tris, len(every), chunk_pairs=10**9)
+    whole = raycast.nearest_hits(key, d, tris, len(every), chunk_pairs=10**9)
     every_b = np.broadcast_to(every[None], (len(d), *every.shape))
     t = ray_triangle_t(key, d, every_b)
-    np.testing.assert_array_equal(whole, metric_module._nearest_to_c(t))
+    np.testing.assert_array_equal(whole, raycast._nearest_to_c(t))
     assert np.isnan(whole).any() and np.isfinite(whole).any()
     for chunk in (1, 5, 7, len(every), 3 * len(every) + 1):
-        blocked = metric_module.nearest_hits(key, d, tris, len(every), chunk)
+        blocked = raycast.nearest_hits(key, d, tris, len(every), chunk)
         np.testing.assert_array_equal(blocked, whole)
 
 
@@ -343,11 +342,11 @@ def test_reprojection_in_blocks_equals_reprojection_at_once(monkeypatch):
     hf = make_field(32, relief=300.0, spacing=10.0, kind="ridges")
     sq = coarse_squares(hf, 16)
     key = np.array([0.0, -150.0, 160.0])  # grazing: misses reach the whole-level stage
-    at_once = metric_module.reproject_points(sq, key, sq.centres)
+    at_once = raycast.reproject_points(sq, key, sq.centres)
     assert at_once[1].any()
-    monkeypatch.setattr(metric_module, "RAY_PAIRS", 13)
-    monkeypatch.setattr(metric_module.nearest_hits, "__defaults__", (13,))
-    blocked = metric_module.reproject_points(sq, key, sq.centres)
+    monkeypatch.setattr(raycast, "RAY_PAIRS", 13)
+    monkeypatch.setattr(raycast.nearest_hits, "__defaults__", (13,))
+    blocked = raycast.reproject_points(sq, key, sq.centres)
     np.testing.assert_array_equal(blocked[0], at_once[0])
     np.testing.assert_array_equal(blocked[1], at_once[1])
 

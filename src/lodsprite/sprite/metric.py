@@ -46,10 +46,10 @@ better than it is:
   tested against the view :data:`CANDIDATE_CHUNK` at a time; of those in view at most
   :data:`MAX_FALLBACK` are kept, evenly in row-major order.  They are reprojected through
   the keyframe eye exactly as the centres are, misses included, once per keyframe: the
-  keyframe's :class:`Reprojection` caches the ``C'`` of every fallback vertex met so far
-  (up to :data:`FALLBACK_CACHE`), so that later frames reproject only new vertices.  The
-  square centres are themselves points of those grids, so the fallback measures the same
-  kind of sample, only denser.  :meth:`ErrorMetric.error_px` returns ``math.inf`` (a
+  keyframe's :class:`~lodsprite.sprite.raycast.Reprojection` caches the ``C'`` of every
+  fallback vertex met so far (up to ``FALLBACK_CACHE``), so that later frames reproject
+  only new vertices.  The square centres are themselves points of those grids, so the
+  fallback measures the same kind of sample, only denser.  :meth:`ErrorMetric.error_px` returns ``math.inf`` (a
   keyframe is due) when no terrain vertex is in view, and when every sample measured
   missed (e.g. a keyframe eye level with or below the coarse surface ahead): the sprite
   draws none of them anywhere, there is no hit to floor the misses, and the angles to
@@ -59,11 +59,12 @@ better than it is:
 * **Cost.**  The per-frame part (:meth:`ErrorMetric.error_px`) tests the ``n²`` centres
   against the view; only frames with fewer than :data:`MIN_SAMPLES` centres in view add
   the fallback (culling the ``n²`` square boxes, enumerating candidates, reprojecting
-  the vertices not yet cached).  A ray that misses its 3x3 neighbourhood is tested
-  against the wider ones of :data:`SEARCH_RADII` and, missing those, against all ``2 n²``
-  coarse triangles; every stage runs in blocks of :data:`RAY_PAIRS` ray-triangle pairs,
-  so its memory is bounded (about 32 MB of temporaries) while its time grows with
-  ``misses × n²``.  The results are those of the unblocked search, bit for bit.
+  the vertices not yet cached).  Ray casting (:mod:`lodsprite.sprite.raycast`): a ray
+  that misses its 3x3 neighbourhood is tested against the wider ones of
+  ``SEARCH_RADII`` and, missing those, against all ``2 n²`` coarse triangles; every
+  stage runs in blocks of ``RAY_PAIRS`` ray-triangle pairs, so its memory is bounded
+  (about 32 MB of temporaries) while its time grows with ``misses × n²``.  The results
+  are those of the unblocked search, bit for bit.
 
 The fallback needs the keyframe eye: :meth:`ErrorMetric.reproject` returns a
 :class:`Reprojection`, an ``(n*n, 3)`` array of ``C'`` that also carries it.
@@ -77,233 +78,22 @@ from functools import cached_property
 
 import numpy as np
 
+from lodsprite.sprite.raycast import (
+    FALLBACK_CACHE,
+    CoarseSquares,
+    Reprojection,
+    coarse_squares,
+    reproject_points,
+    reprojected_centres,
+)
 from lodsprite.terrain.heightfield import HeightField
-from lodsprite.terrain.lod import level_indices, level_step
+from lodsprite.terrain.lod import level_indices
 
-SEARCH_RADII = (3, 8, 1 << 30)
 MIN_SAMPLES = 4       # fewer square centres in view than this: measure the fallback sample
 MAX_FALLBACK = 256    # at most this many fallback vertices are measured (evenly chosen)
 ENUMERATE_FACTOR = 4  # the fallback grid is refined while it has at most this times
                       # MAX_FALLBACK candidate vertices in the coarse squares the view meets
 CANDIDATE_CHUNK = 1 << 14  # candidate vertices tested against the view at once
-RAY_PAIRS = 1 << 17   # ray-triangle pairs intersected at once (about 32 MB of temporaries)
-FALLBACK_CACHE = 1 << 15  # reprojected fallback vertices kept per keyframe and level
-
-
-@dataclass(frozen=True)
-class CoarseSquares:
-    """Geometry of one coarse level for the metric.
-
-    ``centres (n*n, 3)``: the full-resolution centre vertex ``C`` of each square;
-    ``tris (n*n, 18, 3, 3)``: for each square, the 18 coarse triangles of its
-    3x3 neighbourhood (degenerate copies at the borders), vertices in metres;
-    ``own (n*n, 2, 3, 3)``: the square's own two triangles; ``hf`` the full-resolution
-    field and ``step`` the level's step in its samples.
-    """
-
-    level_quads: int
-    centres: np.ndarray
-    tris: np.ndarray
-    own: np.ndarray
-    hf: HeightField
-    step: int
-
-
-def coarse_squares(hf: HeightField, level_quads: int) -> CoarseSquares:
-    """Precompute centres and neighbourhood triangles of level ``level_quads`` (needs step >= 2)."""
-    step = level_step(hf.quads, level_quads)
-    if step < 2:
-        raise ValueError("the error metric needs a coarse level (step >= 2)")
-    n = level_quads
-    idx = level_indices(hf, n)
-    rr, cc = np.meshgrid(idx, idx, indexing="ij")
-    verts = hf.points(rr, cc)  # (n+1, n+1, 3)
-    nw, ne = verts[:-1, :-1], verts[:-1, 1:]
-    sw, se = verts[1:, :-1], verts[1:, 1:]
-    # The same diagonal split as the renderer's grid mesh: (nw, sw, se) and (nw, se, ne).
-    own = np.stack([np.stack([nw, sw, se], -2), np.stack([nw, se, ne], -2)], 2)  # (n,n,2,3,3)
-    pad = np.pad(own, ((1, 1), (1, 1), (0, 0), (0, 0), (0, 0)), mode="edge")
-    neigh = np.stack([pad[1 + a:1 + a + n, 1 + b:1 + b + n] for a in (-1, 0, 1)
-                      for b in (-1, 0, 1)], axis=2)  # (n, n, 9, 2, 3, 3)
-    ci = idx[:-1] + step // 2
-    cr, ccol = np.meshgrid(ci, ci, indexing="ij")
-    centres = hf.points(cr, ccol).reshape(-1, 3)
-    return CoarseSquares(n, centres, neigh.reshape(n * n, 18, 3, 3),
-                         own.reshape(n * n, 2, 3, 3), hf, step)
-
-
-class Reprojection(np.ndarray):
-    """``C' (n*n, 3) float64`` metres of one keyframe, with that keyframe's eye
-    ``key_eye (3,) float64`` (what the fallback sample of :class:`ErrorMetric` needs) and
-    ``missed (n*n,) bool``, the rays that met no coarse triangle (their ``C'`` is the exit
-    point, module docstring).
-
-    An ``ndarray`` subclass: it indexes, compares and pickles like the array; ufuncs and
-    reductions give plain arrays and scalars.  A view of another shape drops ``missed``
-    (it no longer lines up; such a view counts every ray as a hit).
-
-    ``fallback_cache`` holds the fallback vertices already reprojected for this keyframe
-    (:meth:`ErrorMetric.fallback_theta`), so that successive frames measuring the
-    fallback sample reproject only the vertices they have not met yet; views share it,
-    pickling drops it.
-    """
-
-    key_eye: np.ndarray | None
-    missed: np.ndarray | None
-    fallback_cache: dict
-
-    def __new__(cls, c_prime: np.ndarray, key_eye: np.ndarray,
-                missed: np.ndarray | None = None) -> Reprojection:
-        obj = np.asarray(c_prime, dtype=np.float64).view(cls)
-        obj.key_eye = np.array(key_eye, dtype=np.float64)
-        obj.missed = None if missed is None else np.asarray(missed, dtype=bool)
-        obj.fallback_cache = {}
-        return obj
-
-    def __array_finalize__(self, obj) -> None:
-        self.key_eye = getattr(obj, "key_eye", None)
-        cache = getattr(obj, "fallback_cache", None)
-        self.fallback_cache = {} if cache is None else cache
-        missed = getattr(obj, "missed", None)
-        self.missed = missed if missed is not None and obj.shape == self.shape else None
-
-    def __array_wrap__(self, arr, context=None, return_scalar=False):
-        # Results of ufuncs and reductions are plain arrays and scalars, not C'.
-        plain = arr.view(np.ndarray)
-        return plain[()] if return_scalar else plain
-
-    def __reduce__(self):
-        fn, args, state = super().__reduce__()
-        return fn, args, (state, self.key_eye, self.missed)
-
-    def __setstate__(self, state) -> None:
-        array_state, self.key_eye, self.missed = state
-        self.fallback_cache = {}
-        super().__setstate__(array_state)
-
-
-def ray_triangle_t(origin: np.ndarray, direction: np.ndarray, tris: np.ndarray) -> np.ndarray:
-    """Ray parameters ``t`` of hits of rays ``origin + t * direction`` with triangles.
-
-    ``origin (3,)``, ``direction (K, 3)``, ``tris (K, T, 3, 3)``; returns ``(K, T)``
-    with NaN where a ray misses a triangle (Möller & Trumbore 1997).
-    """
-    a, b, c = tris[..., 0, :], tris[..., 1, :], tris[..., 2, :]
-    e1, e2 = b - a, c - a
-    d = direction[:, None, :]
-    p = np.cross(d, e2)
-    det = np.einsum("ktj,ktj->kt", e1, p)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inv = 1.0 / det
-        s = origin - a
-        u = np.einsum("ktj,ktj->kt", s, p) * inv
-        q = np.cross(s, e1)
-        v = np.einsum("ktj,ktj->kt", np.broadcast_to(d, q.shape), q) * inv
-        t = np.einsum("ktj,ktj->kt", e2, q) * inv
-    eps = 1e-9
-    hit = (np.abs(det) > 1e-12) & (u >= -eps) & (v >= -eps) & (u + v <= 1 + eps)
-    return np.where(hit, t, np.nan)
-
-
-def _nearest_to_c(t: np.ndarray) -> np.ndarray:
-    """Per row of ray parameters ``(K, T)``, the hit in front of the eye (t > 0) nearest to
-    ``C`` (t = 1); NaN if none."""
-    return _nearest_score(t)[0]
-
-
-def _nearest_score(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(t, |t - 1|)`` per row of :func:`_nearest_to_c` (NaN and inf where none)."""
-    score = np.where(np.isnan(t) | (t <= 0), np.inf, np.abs(t - 1.0))
-    j = np.argmin(score, axis=1)
-    rows = np.arange(len(t))
-    best, low = t[rows, j], score[rows, j]
-    return np.where(np.isfinite(low), best, np.nan), low
-
-
-def nearest_hits(origin: np.ndarray, d: np.ndarray, tris, count: int,
-                 chunk_pairs: int = RAY_PAIRS) -> np.ndarray:
-    """:func:`_nearest_to_c` of rays ``origin + t d (K, 3)`` against ``count`` triangles
-    per ray, ``tris(k0, k1, j0, j1) -> (k1-k0, j1-j0, 3, 3)`` giving those of rays
-    ``k0:k1``, numbers ``j0:j1``; intersected in blocks of at most ``chunk_pairs``
-    ray-triangle pairs (rays, then triangles), so that temporaries stay bounded.  Equal to
-    the unblocked result: of equally near hits, the first triangle's is kept in both.
-    """
-    k = len(d)
-    t_best = np.full(k, np.nan)
-    if k == 0 or count == 0:
-        return t_best
-    per = max(1, min(count, chunk_pairs))
-    rays = max(1, chunk_pairs // per)
-    for k0 in range(0, k, rays):
-        k1 = min(k0 + rays, k)
-        low = np.full(k1 - k0, np.inf)
-        best = np.full(k1 - k0, np.nan)
-        for j0 in range(0, count, per):
-            j1 = min(j0 + per, count)
-            t, score = _nearest_score(ray_triangle_t(origin, d[k0:k1], tris(k0, k1, j0, j1)))
-            better = score < low
-            low = np.where(better, score, low)
-            best = np.where(better, t, best)
-        t_best[k0:k1] = np.where(np.isfinite(low), best, np.nan)
-    return t_best
-
-
-def _exit_t(squares: CoarseSquares, origin: np.ndarray, d: np.ndarray) -> np.ndarray:
-    """``(K,)`` ray parameter ``t >= 1`` where rays ``origin + t d (K, 3)`` (inside the
-    terrain's footprint at t = 1) leave it through its vertical sides."""
-    lo, hi = squares.hf.bounds()
-    with np.errstate(divide="ignore", invalid="ignore"):
-        bound = np.where(d[:, :2] > 0, hi[:2], lo[:2])
-        t = np.where(d[:, :2] != 0, (bound - origin[:2]) / d[:, :2], np.inf)
-    return np.maximum(t.min(axis=1), 1.0)
-
-
-def reproject_points(squares: CoarseSquares, key_eye: np.ndarray, points: np.ndarray,
-                     square: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """``(C' (K, 3) float64, missed (K,) bool)``: rays ``key_eye -> points (K, 3)``
-    meeting the coarse surface.
-
-    ``square (K,) intp`` is the coarse square each point lies in (None: point ``k`` is
-    the centre of square ``k``).  Of the hits in the first neighbourhood (3x3 squares,
-    then ``SEARCH_RADII`` squares, then the whole level) that has any, the one in front of
-    the eye nearest to the point along the ray is kept.  A ray that meets no coarse
-    triangle is ``missed``; its ``C'`` is where it leaves the terrain's footprint.
-    Every stage runs in blocks of at most :data:`RAY_PAIRS` ray-triangle pairs
-    (:func:`nearest_hits`): the whole level costs ``2 n²`` tests per ray that reaches it,
-    but never more memory than one block.
-    """
-    key_eye = np.asarray(key_eye, dtype=np.float64)
-    d = points - key_eye  # the point at t = 1
-    index = np.arange(len(points)) if square is None else np.asarray(square, np.intp)
-    n = squares.level_quads
-    first = squares.tris
-    t_best = nearest_hits(key_eye, d, lambda k0, k1, j0, j1: first[index[k0:k1], j0:j1],
-                          first.shape[1])
-    every = squares.own.reshape(-1, 3, 3)
-    for radius in SEARCH_RADII:
-        missing = np.flatnonzero(np.isnan(t_best))
-        if missing.size == 0:
-            break
-        at = index[missing]
-        if radius >= n:  # the whole level, in blocks (RAY_PAIRS) to bound the memory
-            def tris(k0, k1, j0, j1):
-                return np.broadcast_to(every[None, j0:j1], (k1 - k0, j1 - j0, 3, 3))
-            t_best[missing] = nearest_hits(key_eye, d[missing], tris, len(every))
-            break
-        def tris(k0, k1, j0, j1, at=at, radius=radius):
-            return _neighbourhood(squares, at[k0:k1], radius)[:, j0:j1]
-        t_best[missing] = nearest_hits(key_eye, d[missing], tris, 2 * (2 * radius + 1) ** 2)
-    missed = np.isnan(t_best)
-    if missed.any():
-        t_best[missed] = _exit_t(squares, key_eye, d[missed])
-    return key_eye + t_best[:, None] * d, missed
-
-
-def reprojected_centres(squares: CoarseSquares, key_eye: np.ndarray) -> Reprojection:
-    """``C'`` for every square ``(n*n, 3)``: the ray ``key_eye -> C`` meeting the coarse
-    surface (:func:`reproject_points`), carrying ``key_eye`` and the misses."""
-    c_prime, missed = reproject_points(squares, key_eye, squares.centres)
-    return Reprojection(c_prime, key_eye, missed)
 
 
 def miss_floor(theta: np.ndarray, missed: np.ndarray) -> np.ndarray:
@@ -313,18 +103,6 @@ def miss_floor(theta: np.ndarray, missed: np.ndarray) -> np.ndarray:
     if missed.any() and not missed.all():
         theta = np.where(missed, np.maximum(theta, theta[~missed].max()), theta)
     return theta
-
-
-def _neighbourhood(squares: CoarseSquares, index: np.ndarray, radius: int) -> np.ndarray:
-    """Triangles ``(K, 2 (2r+1)^2, 3, 3)`` of the squares within ``radius`` of each square
-    in ``index`` (clamped at the borders, so some repeat)."""
-    n = squares.level_quads
-    r, c = np.divmod(index, n)
-    off = np.arange(-radius, radius + 1)
-    rr = np.clip(r[:, None, None] + off[None, :, None], 0, n - 1)
-    cc = np.clip(c[:, None, None] + off[None, None, :], 0, n - 1)
-    sq = (rr * n + cc).reshape(len(index), -1)
-    return squares.own[sq].reshape(len(index), -1, 3, 3)
 
 
 def angles_at_eye(eye: np.ndarray, p: np.ndarray, q: np.ndarray) -> np.ndarray:
