@@ -49,8 +49,9 @@ better than it is:
   keyframe's :class:`~lodsprite.sprite.raycast.Reprojection` caches the ``C'`` of every
   fallback vertex met so far (up to ``FALLBACK_CACHE``), so that later frames reproject
   only new vertices.  The square centres are themselves points of those grids, so the
-  fallback measures the same kind of sample, only denser.  :meth:`ErrorMetric.error_px` returns ``math.inf`` (a
-  keyframe is due) when no terrain vertex is in view, and when every sample measured
+  fallback measures the same kind of sample, only denser.
+  :meth:`ErrorMetric.error_px` returns ``math.inf`` (a keyframe is due) when no terrain
+  vertex is in view, and when every sample measured
   missed (e.g. a keyframe eye level with or below the coarse surface ahead): the sprite
   draws none of them anywhere, there is no hit to floor the misses, and the angles to
   the exit points alone would judge the frame better than it is.  This holds at the
