@@ -259,9 +259,11 @@ def _view(frame) -> memoryview:
         raise ProtocolError(f"a frame is not a buffer: {type(frame).__name__}") from exc
 
 
-def decode_message(frames: list) -> tuple[Message, list[memoryview]]:
+def decode_message(frames: list, expect: type | None = None
+                   ) -> tuple[Message, list[memoryview]]:
     """The typed header and buffers of a multipart message (frames are ``bytes``,
-    ``memoryview`` or ``zmq.Frame``); raises :class:`ProtocolError` and nothing else.
+    ``memoryview`` or ``zmq.Frame``); raises :class:`ProtocolError` and nothing else,
+    also when ``expect`` (a message Struct) is given and the message is another kind.
 
     The buffers are views of the frames, not copies.  A control message's ``args`` is
     replaced by the op's argument Struct."""
@@ -289,6 +291,8 @@ def decode_message(frames: list) -> tuple[Message, list[memoryview]]:
                 msg.args = msgspec.convert(msg.args, OP_ARGS[msg.op])
             except msgspec.ValidationError as exc:
                 raise ProtocolError(f"{msg.op}: {exc}") from None
+        if expect is not None and not isinstance(msg, expect):
+            raise ProtocolError(f"expected a {expect.__name__} message, got {env.kind}")
         return msg, [_view(f) for f in frames[1:]]
     except ProtocolError:
         raise
@@ -434,9 +438,7 @@ def _image(spec: ImageSpec, data: memoryview, dtype: str, channels: int | None,
 
 def decode_keyframe(frames: list) -> Keyframe:
     """A :class:`Keyframe` from message frames; raises :class:`ProtocolError` only."""
-    msg, buffers = decode_message(frames)
-    if not isinstance(msg, KeyframeMessage):
-        raise ProtocolError(f"expected a keyframe message, got {type(msg).__name__}")
+    msg, buffers = decode_message(frames, KeyframeMessage)
     vp = viewpoint_from_wire(msg.viewpoint)
     try:
         proj = Projection(msg.fov, msg.aspect, msg.near, msg.far)

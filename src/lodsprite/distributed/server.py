@@ -270,9 +270,7 @@ class LodServer:
         try:
             try:
                 check_frames(frames)
-                msg, _ = decode_message(frames)
-                if not isinstance(msg, Control):
-                    raise ProtocolError(f"expected a control message, got {type(msg).__name__}")
+                msg, _ = decode_message(frames, Control)
             except ProtocolError as exc:
                 self._tally.reject("control", exc)
                 return {"kind": "reply", "seq": 0, "ok": False, "error": str(exc)[:4000]}

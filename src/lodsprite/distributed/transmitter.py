@@ -135,9 +135,7 @@ class KeyframeTransmitter:
                 return False
             try:
                 check_frames(frames)
-                msg, _ = decode_message(frames[1:])
-                if not isinstance(msg, Ack):
-                    raise ProtocolError(f"expected an ack, got {type(msg).__name__}")
+                msg, _ = decode_message(frames[1:], Ack)
             except ProtocolError as exc:
                 self.tally.reject("ack", exc)
                 return False

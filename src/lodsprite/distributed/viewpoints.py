@@ -99,10 +99,7 @@ class ViewpointReceiver:
         try:
             try:
                 check_frames(frames)
-                msg, _ = decode_message(frames)
-                if not isinstance(msg, ViewpointMessage):
-                    raise ProtocolError(f"expected a viewpoint message, got "
-                                        f"{type(msg).__name__}")
+                msg, _ = decode_message(frames, ViewpointMessage)
                 vp = viewpoint_from_wire(msg.viewpoint)
                 shown = shown_from_wire(msg.shown)
             except ProtocolError as exc:
