@@ -179,7 +179,8 @@ def sprite_frames(pr: PathRenderer, path: CameraPath, config: RenderConfig,
     index of the keyframe shown) and quality against an untimed full-resolution ground
     truth when ``config.ground_truth``, and ``key_x, key_y, key_z``, the eye (metres) of the
     keyframe shown.  ``keyframes``, if given, is extended with the engine's keyframes,
-    ``(viewpoint, frame projection, ahead)`` in order (what ``keyframe`` indexes)."""
+    :class:`~lodsprite.sprite.policy.KeyChoice` records in order (what ``keyframe``
+    indexes)."""
     sprite = SpriteRenderer(pr.renderer, config.lod, config.visibility, border=config.border,
                             guard_px=config.guard_px)
     try:
@@ -203,11 +204,10 @@ def sprite_frames(pr: PathRenderer, path: CameraPath, config: RenderConfig,
             if progress:
                 progress(i + 1, len(path))
         for row in rows:  # the eye of the keyframe each frame shows, metres
-            eye = engine.keyframes[row["keyframe"]][0].o
+            eye = engine.keyframes[row["keyframe"]].viewpoint.o
             row.update(key_x=float(eye[0]), key_y=float(eye[1]), key_z=float(eye[2]))
         if keyframes is not None:
-            keyframes.extend((vp, proj, ahead) for (vp, proj), ahead
-                             in zip(engine.keyframes, engine.keyframes_ahead, strict=True))
+            keyframes.extend(engine.keyframes)
         return rows
     finally:
         sprite.release()
@@ -215,18 +215,19 @@ def sprite_frames(pr: PathRenderer, path: CameraPath, config: RenderConfig,
 
 def keyframe_records(keyframes: list, rows: list[dict]) -> list[dict]:
     """JSON records of the keyframes a LOD-sprite run rendered: ``keyframes`` is the
-    engine's log, ``(viewpoint, frame projection, ahead)`` in order (``ahead``: placed
-    ahead of the viewer by look-ahead); ``rows`` the run's frames with their ``keyframe``
-    index.  Each record holds the viewpoint, the frame projection, the frame that
-    rendered it and ``ahead``."""
+    engine's log (:class:`~lodsprite.sprite.policy.KeyChoice` in order); ``rows`` the
+    run's frames with their ``keyframe`` index.  Each record holds the viewpoint, the frame
+    projection, the frame that rendered it and ``ahead`` (placed ahead of the viewer by
+    look-ahead)."""
     first: dict[int, int] = {}
     for i, row in enumerate(rows):
         first.setdefault(row["keyframe"], i)
-    return [{"frame": first.get(k, -1), "viewpoint": vp.to_dict(),
-             "projection": {"fov_y_deg": proj.fov_y_deg, "aspect": proj.aspect,
-                            "near": proj.near, "far": proj.far},
-             "ahead": bool(ahead)}
-            for k, (vp, proj, ahead) in enumerate(keyframes)]
+    return [{"frame": first.get(k, -1), "viewpoint": key.viewpoint.to_dict(),
+             "projection": {"fov_y_deg": key.projection.fov_y_deg,
+                            "aspect": key.projection.aspect, "near": key.projection.near,
+                            "far": key.projection.far},
+             "ahead": bool(key.predicted)}
+            for k, key in enumerate(keyframes)]
 
 
 def render_path(config: RenderConfig, out_dir: Path, progress: Progress | None = None,

@@ -26,7 +26,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from lodsprite.camera import Projection, Viewpoint
+from lodsprite.camera import Viewpoint
 from lodsprite.gl.sprite import SpriteRenderer
 from lodsprite.sprite.metric import ErrorMetric
 from lodsprite.sprite.policy import (
@@ -35,6 +35,7 @@ from lodsprite.sprite.policy import (
     FRAME_TYPES,
     KEYFRAME,
     SPRITE,
+    KeyChoice,
     KeyframePolicy,
 )
 
@@ -68,10 +69,9 @@ class LodSpriteEngine:
                                      epsilon_px, sprite.target.height,
                                      sprite.terrain.projection, sprite.key_projection, predict)
         self._shows_keyframe = True
-        # Every keyframe rendered, in order: (viewpoint, frame projection) it was rendered
-        # from (ahead of the viewer, with prediction).
-        self.keyframes: list[tuple[Viewpoint, Projection]] = []
-        self.keyframes_ahead: list[bool] = []  # per keyframe: placed ahead by look-ahead
+        # Every keyframe rendered, in order: its viewpoint, frame projection and whether
+        # look-ahead placed it ahead of the viewer.
+        self.keyframes: list[KeyChoice] = []
 
     @property
     def metric(self) -> ErrorMetric:
@@ -104,8 +104,7 @@ class LodSpriteEngine:
         stats = None
         if d.key is not None:
             stats = self.sprite.render_keyframe(d.key.viewpoint, t0, d.key.projection)
-            self.keyframes.append((d.key.viewpoint, d.key.projection))
-            self.keyframes_ahead.append(d.key.predicted)
+            self.keyframes.append(d.key)
         if not d.shows_keyframe:
             key_stats = stats
             stats = self.sprite.render_spriteframe(viewpoint, d.projection)

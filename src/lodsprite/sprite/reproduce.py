@@ -22,7 +22,6 @@ from pathlib import Path
 
 import numpy as np
 
-from lodsprite.camera import Projection, Viewpoint
 from lodsprite.errors import InputError
 from lodsprite.gl.paths import PathRenderer
 from lodsprite.gl.sprite import DEFAULT_GUARD_PX, DEFAULT_VISIBILITY, SpriteRenderer
@@ -33,6 +32,7 @@ from lodsprite.report.io import write_json, write_png
 from lodsprite.run import RenderConfig, keyframe_records, quality_summary, sprite_frames
 from lodsprite.scene import Scene, load_scene
 from lodsprite.sprite.engine import KEYFRAME
+from lodsprite.sprite.policy import KeyChoice
 from lodsprite.terrain import make_texture
 
 FIG10_FRAMES = (115, 230, 460, 920, 1840)
@@ -148,17 +148,15 @@ def _pick_frame(rows: list[dict]) -> int:
     return best[1]
 
 
-KeyView = tuple[Viewpoint, Projection]
-
 
 def _figure_images(pr: PathRenderer, scene: Scene, cfg: ReproduceConfig, path, frame: int,
-                   key: int, key_view: KeyView, key_frame: int, out_dir: Path) -> dict:
+                   key: int, key_view: KeyChoice, key_frame: int, out_dir: Path) -> dict:
     """Figures 13 (checker texture) and 14 (terrain texture): full, coarse, LOD-sprite, and
     the keyframe LOD-sprite drew from (keyframe ``key``, rendered at frame ``key_frame``
     from ``key_view`` = its logged viewpoint and frame projection)."""
     images = {}
     vp = path.viewpoints[frame]
-    key_vp, key_proj = key_view
+    key_vp, key_proj = key_view.viewpoint, key_view.projection
     for fig, texture in (("fig13", make_texture("checker", scene.hf)), ("fig14", None)):
         if texture is not None:
             pr.geometry.set_texture(texture)
@@ -218,7 +216,7 @@ def reproduce_chen1999(cfg: ReproduceConfig, out_dir: Path,
         total_s_full = float(np.nanmean(ms_full)) * cfg.frames / 1e3
         # Timed run first, then the same frames again for quality: interleaving untimed
         # ground-truth renders would evict caches and slow the timed spriteframes.
-        keys: list[tuple[Viewpoint, Projection, bool]] = []
+        keys: list[KeyChoice] = []
         main = sprite_frames(pr, path, cfg.render_config(), work.step, keyframes=keys)
         checked = sprite_frames(pr, path, cfg.render_config(ground_truth=True,
                                                             quality_stride=stride), work.step)
@@ -230,7 +228,7 @@ def reproduce_chen1999(cfg: ReproduceConfig, out_dir: Path,
         key_views = keyframe_records(keys, main)
         frame = _pick_frame(main)
         key = main[frame]["keyframe"]
-        images = _figure_images(pr, scene, cfg, path, frame, key, keys[key][:2],
+        images = _figure_images(pr, scene, cfg, path, frame, key, keys[key],
                                 key_views[key]["frame"], out_dir)
         images["fig13"]["keyframe_ahead"] = images["fig14"]["keyframe_ahead"] = \
             key_views[key]["ahead"]
