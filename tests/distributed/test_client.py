@@ -53,6 +53,20 @@ def test_a_request_to_a_dead_server_answers_none_and_the_next_one_uses_a_new_soc
         ctx.destroy(linger=0)
 
 
+def _rebind(ctx: zmq.Context, port: int) -> zmq.Socket:
+    """A new REP socket on ``port``: ZeroMQ closes sockets in the background, so the port
+    may still be taken for a moment after the old socket's close."""
+    sock = ctx.socket(zmq.REP)
+    for _ in range(200):
+        try:
+            sock.bind(f"tcp://127.0.0.1:{port}")
+            return sock
+        except zmq.ZMQError:
+            time.sleep(0.01)
+    sock.close(linger=0)
+    raise RuntimeError(f"port {port} stayed taken")
+
+
 def _fake_server(port: int, answer, stop: threading.Event) -> threading.Thread:
     """A control socket answering with ``answer(header) -> reply or None (no answer)``."""
     from lodsprite.distributed.protocol import decode, encode
@@ -70,8 +84,7 @@ def _fake_server(port: int, answer, stop: threading.Event) -> threading.Thread:
                 reply = answer(header)
                 if reply is None:  # drop it: the REP socket must be made afresh
                     sock.close(linger=0)
-                    sock = ctx.socket(zmq.REP)
-                    sock.bind(f"tcp://127.0.0.1:{port}")
+                    sock = _rebind(ctx, port)
                     continue
                 sock.send_multipart(encode({"kind": "reply", "seq": header["seq"], "ok": True,
                                             "error": "", **reply}))
