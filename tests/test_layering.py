@@ -104,8 +104,8 @@ def test_the_engine_renders_what_the_policy_decides(gl):
         assert [f.type for f in frames] == [d.type for d in decisions]
         keys = [d.key.viewpoint.o for d in decisions if d.key is not None]
         assert len(engine.keyframes) == len(keys) > 3
-        for (vp, _), o in zip(engine.keyframes, keys, strict=True):
-            np.testing.assert_allclose(vp.o, o)
+        for key, o in zip(engine.keyframes, keys, strict=True):
+            np.testing.assert_allclose(key.viewpoint.o, o)
         assert engine.predicted_keyframes == policy.predicted_keyframes > 0
         assert [f.error_px for f in frames] == pytest.approx([d.error_px for d in decisions])
     finally:
