@@ -51,7 +51,6 @@ import numpy as np
 
 from lodsprite.distributed.client import DEFAULT_MAX_ERROR
 from lodsprite.distributed.netns import RATES, SERVER_IP, available, two_hosts
-from lodsprite.distributed.predictors import PREDICTORS, prediction_error
 from lodsprite.distributed.quality import Replayer, inline_quality, recorded_keyframes
 from lodsprite.distributed.run import local_server, lodsprite_command, pinned, server_process
 from lodsprite.errors import LodspriteError
@@ -59,6 +58,7 @@ from lodsprite.paths import swan2002
 from lodsprite.progress import Progress
 from lodsprite.report.io import write_json
 from lodsprite.run import RenderConfig
+from lodsprite.sprite.predictors import PREDICTORS, prediction_error
 from lodsprite.terrain import load_terrain
 
 NS_PORT = 5555

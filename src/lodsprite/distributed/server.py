@@ -72,7 +72,6 @@ from lodsprite.distributed.datasets import Datasets
 from lodsprite.distributed.frames import check_frames, recv_frames
 from lodsprite.distributed.hold import LEASE_S, Hold
 from lodsprite.distributed.keys import ServerKeys
-from lodsprite.distributed.predictors import PREDICTORS
 from lodsprite.distributed.producer import STATES, KeyframeProducer
 from lodsprite.distributed.protocol import (
     CODECS,
@@ -92,6 +91,7 @@ from lodsprite.distributed.server_stats import MAX_SAMPLES, ServerStats, Tally
 from lodsprite.distributed.transmitter import ACK_TIMEOUT_S, KeyframeTransmitter
 from lodsprite.distributed.viewpoints import MAX_ELAPSED_S, MIN_SAMPLE_SPACING_S, ViewpointReceiver
 from lodsprite.errors import InputError, LodspriteError
+from lodsprite.sprite.predictors import PREDICTORS
 
 __all__ = ["ACK_TIMEOUT_S", "DEFAULT_BIND", "LEASE_S", "LOOPBACK_HOSTS", "MAX_ELAPSED_S",
            "MAX_SAMPLES", "MEMORY_FRACTION", "MIN_SAMPLE_SPACING_S", "STATES", "LodServer",

@@ -27,7 +27,6 @@ import zmq
 
 from lodsprite.distributed.frames import check_frames, recv_frames
 from lodsprite.distributed.hold import Hold
-from lodsprite.distributed.predictors import PREDICTORS
 from lodsprite.distributed.protocol import (
     ProtocolError,
     ViewpointMessage,
@@ -37,6 +36,7 @@ from lodsprite.distributed.protocol import (
 )
 from lodsprite.distributed.server_stats import Tally
 from lodsprite.errors import LodspriteError
+from lodsprite.sprite.predictors import PREDICTORS
 
 MAX_ELAPSED_S = 1.0
 """Longest time since the newest viewpoint sample that prediction extrapolates over."""

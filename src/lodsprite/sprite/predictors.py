@@ -1,6 +1,7 @@
-"""Viewpoint predictors of the LOD server (Swan et al. 2002, §3.3, VIEWPOINT-PREDICTOR).
+"""Viewpoint predictors (Swan et al. 2002, §3.3, VIEWPOINT-PREDICTOR).
 
-The server predicts where the viewer will be when a keyframe it starts now reaches the
+A keyframe producer (the distributed LOD server, or the viewer's keyframe worker thread)
+predicts where the viewer will be when a keyframe it starts now reaches the
 client, ``δt`` seconds ahead (δt measured by the KEYFRAME-TRANSMITTER).
 
 * :class:`DecayLinearPredictor` - the paper's: orientation is the latest received; the

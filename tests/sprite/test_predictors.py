@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from lodsprite.camera import Viewpoint, look_at
-from lodsprite.distributed.predictors import (
+from lodsprite.sprite.predictors import (
     DecayLinearPredictor,
     KalmanPredictor,
     prediction_error,
