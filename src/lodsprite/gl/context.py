@@ -1,4 +1,5 @@
-"""Headless OpenGL context (the only place a moderngl context is created).
+"""Headless OpenGL context (the only place a moderngl context is created), or an
+application's own context wrapped for embedding (:meth:`GLContext.wrap`).
 
 lodsprite renders offscreen through a standalone EGL context: Mesa's llvmpipe
 software rasteriser on machines without a GPU, the vendor's driver where there
@@ -7,6 +8,9 @@ is one.  OpenGL 3.3 core is required.
 
 from __future__ import annotations
 
+import ctypes
+import ctypes.util
+import functools
 import os
 from dataclasses import dataclass
 
@@ -23,6 +27,19 @@ MISSING_GL_HELP = (
     "with an NVIDIA GPU the vendor driver provides libEGL_nvidia. Set LODSPRITE_GL_BACKEND "
     "to another moderngl/glcontext backend name to try a different one."
 )
+
+
+@functools.cache
+def _gl_finish():
+    """``glFinish`` from the GL dispatch library (glvnd's libOpenGL, else libGL), or None."""
+    names = ["libOpenGL.so.0", "libGL.so.1", ctypes.util.find_library("OpenGL"),
+             ctypes.util.find_library("GL")]
+    for name in filter(None, names):
+        try:
+            return ctypes.CDLL(name).glFinish
+        except (OSError, AttributeError):
+            continue
+    return None
 
 
 class GLError(LodspriteError, RuntimeError):
@@ -51,8 +68,26 @@ class GLContext:
             reason = " ".join(str(exc).split()) or type(exc).__name__
             raise GLUnavailableError(MISSING_GL_HELP.format(reason=reason)) from exc
         self.backend = backend
+        self.owned = True
         # The framebuffer bound at creation (id 0); re-bound before a bound target is released.
         self.default_fbo = self.mgl.detect_framebuffer(0)
+
+    @classmethod
+    def wrap(cls, mgl: moderngl.Context) -> GLContext:
+        """An existing moderngl context (an application's or a window's) for lodsprite to
+        draw with (embedding).  It must be current on the calling thread and offer OpenGL
+        3.3; lodsprite never releases it (:meth:`release` only forgets it)."""
+        if not isinstance(mgl, moderngl.Context):
+            raise LodspriteError(f"expected a moderngl.Context, got {type(mgl).__name__}")
+        if mgl.version_code < REQUIRED_GL:
+            raise GLUnavailableError(f"lodsprite needs OpenGL 3.3; this context offers "
+                                     f"{mgl.version_code // 100}.{mgl.version_code % 100 // 10}")
+        self = cls.__new__(cls)
+        self.mgl = mgl
+        self.backend = "external"
+        self.owned = False
+        self.default_fbo = mgl.screen if mgl.screen is not None else mgl.detect_framebuffer(0)
+        return self
 
     @property
     def info(self) -> GLInfo:
@@ -69,6 +104,18 @@ class GLContext:
         """Block until all issued GL work is done (call before stopping a clock)."""
         self.mgl.finish()
 
+    def finish_unlocked(self) -> None:
+        """:meth:`finish` without holding Python's GIL, for worker threads: moderngl holds
+        the GIL in ``glFinish`` (moderngl PR #723), which would stop every other Python
+        thread while this context's frame renders.  ``glFinish`` is called through ctypes,
+        which releases the GIL, on the context current on the calling thread (this one,
+        in the thread that made it)."""
+        fn = _gl_finish()
+        if fn is None:
+            self.mgl.finish()
+        else:
+            fn()
+
     def check_error(self, where: str = "") -> None:
         """Raise :class:`GLError` if the GL error flag is set."""
         err = self.mgl.error
@@ -76,9 +123,9 @@ class GLContext:
             raise GLError(f"OpenGL error {err}{' in ' + where if where else ''}")
 
     def release(self) -> None:
-        if self.mgl is not None:
+        if self.mgl is not None and self.owned:
             self.mgl.release()
-            self.mgl = None
+        self.mgl = None
 
     def __enter__(self) -> GLContext:
         return self

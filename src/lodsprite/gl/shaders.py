@@ -167,6 +167,7 @@ uniform int u_visibility;       // 0: per triangle (paper), 1: per fragment, 2: 
 uniform float u_fragment_tol;
 uniform float u_coarse_tol;
 uniform int u_color_levels;     // mipmap levels of u_color
+uniform vec4 u_fallback_tint;   // mixed into fallback fragments by its alpha (0: none)
 in vec2 g_uv;
 in vec4 g_key;
 flat in int g_sprite;
@@ -200,7 +201,8 @@ void main() {
         sprite = seen_by_keyframe(g_key, u_key_coarse, u_coarse_tol) > 0.5;
     }
     vec3 rgb = sprite ? textureGrad(u_sprite, key_uv, key_dx, key_dy).rgb
-                      : terrain_fallback(g_uv, level);
+                      : mix(terrain_fallback(g_uv, level), u_fallback_tint.rgb,
+                            u_fallback_tint.a);
     f_color = vec4(rgb, 1.0);
 }
 """

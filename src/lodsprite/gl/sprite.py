@@ -108,6 +108,9 @@ class SpriteRenderer:
         self._vaos: dict[tuple[int, bool], moderngl.VertexArray] = {}
         self.keyframe: GLKeyframe | None = None
         self._uploads: list[moderngl.Texture] = []  # RGB sprite textures of uploaded keyframes
+        # Mixed by its alpha into fragments that fell back to the terrain texture (the
+        # viewer's tint toggle); alpha 0 draws them as they are.
+        self.fallback_tint: tuple[float, float, float, float] = (1.0, 0.0, 1.0, 0.0)
 
     def _program(self, visibility: str, tols: dict[str, float]) -> moderngl.Program:
         mgl = self.ctx.mgl
@@ -231,6 +234,7 @@ class SpriteRenderer:
         prog["u_key_mvp"].write(mat_bytes(key.view_proj))
         prog["u_key_near_far"].value = (key.projection.near, key.projection.far)
         prog["u_color_levels"].value = self.terrain.geometry.color_tex_levels
+        prog["u_fallback_tint"].value = self.fallback_tint
         tris = self.terrain.draw_proxy(prog, self._vaos,
                                        projection.matrix() @ viewpoint.view_matrix(),
                                        self.coarse_quads, self.border)

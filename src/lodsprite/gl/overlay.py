@@ -1,0 +1,220 @@
+"""What a window draws besides the scene: the frame image, line overlays and the HUD.
+
+* :class:`Presenter` draws a region of a colour texture over a viewport of the bound
+  framebuffer (a keyframe's centre without its guard band, or a frame rendered at another
+  size than the window's framebuffer).
+* :class:`LineOverlay` draws world-space line segments (a keyframe's frustum) and the
+  coarse level as a wireframe, over the frame.
+* :class:`HudLayer` draws an RGBA panel (text the caller rasterised) and a rolling
+  frame-time graph as a line strip, in pixels from the top-left corner.
+
+GPU objects are made once and reused every frame; only small uniforms and vertex data
+change per frame.
+"""
+
+from __future__ import annotations
+
+import moderngl
+import numpy as np
+
+from lodsprite.camera import Projection, Viewpoint
+from lodsprite.gl.context import GLContext
+from lodsprite.gl.terrain import TerrainGeometry, mat_bytes
+
+_QUAD_VS = """#version 330
+uniform vec4 u_rect;   // destination in normalised device coordinates: x0, y0, x1, y1
+uniform vec4 u_uv;     // source region in texture coordinates: u0, v0, u1, v1
+in vec2 in_corner;     // (0, 0) .. (1, 1)
+out vec2 v_uv;
+void main() {
+    v_uv = mix(u_uv.xy, u_uv.zw, in_corner);
+    gl_Position = vec4(mix(u_rect.xy, u_rect.zw, in_corner), 0.0, 1.0);
+}
+"""
+_QUAD_FS = """#version 330
+uniform sampler2D u_image;
+in vec2 v_uv;
+out vec4 f_color;
+void main() { f_color = texture(u_image, v_uv); }
+"""
+_LINE_VS = """#version 330
+uniform mat4 u_mvp;
+in vec3 in_pos;
+void main() { gl_Position = u_mvp * vec4(in_pos, 1.0); }
+"""
+_LINE_FS = """#version 330
+uniform vec4 u_rgba;
+out vec4 f_color;
+void main() { f_color = u_rgba; }
+"""
+# Edges of the clip-space cube, as index pairs into its corners (x, y, z bits).
+_CUBE_EDGES = np.array([[0, 1], [2, 3], [4, 5], [6, 7], [0, 2], [1, 3], [4, 6], [5, 7],
+                        [0, 4], [1, 5], [2, 6], [3, 7]], dtype=np.intp)
+
+
+def frustum_segments(viewpoint: Viewpoint, projection: Projection) -> np.ndarray:
+    """The 12 edges of the view frustum of ``viewpoint`` through ``projection``, as
+    ``(24, 3) float32`` world-space end points (metres), pairs in order."""
+    inv = np.linalg.inv(projection.matrix() @ viewpoint.view_matrix())
+    bits = np.arange(8)
+    ndc = np.stack([(bits & 1) * 2 - 1, (bits >> 1 & 1) * 2 - 1, (bits >> 2 & 1) * 2 - 1,
+                    np.ones(8)], axis=1).astype(np.float64)
+    world = ndc @ inv.T
+    corners = world[:, :3] / world[:, 3:]
+    return corners[_CUBE_EDGES.ravel()].astype(np.float32)
+
+
+class _Quad:
+    """A unit quad drawn as a triangle strip with a program of ``_QUAD_VS``."""
+
+    def __init__(self, ctx: GLContext, fragment_shader: str) -> None:
+        mgl = ctx.mgl
+        self.program = mgl.program(vertex_shader=_QUAD_VS, fragment_shader=fragment_shader)
+        corners = np.array([0, 0, 1, 0, 0, 1, 1, 1], dtype=np.float32)
+        self.vbo = mgl.buffer(corners.tobytes())
+        self.vao = mgl.vertex_array(self.program, [(self.vbo, "2f", "in_corner")])
+
+    def draw(self, rect: tuple[float, float, float, float],
+             uv: tuple[float, float, float, float]) -> None:
+        self.program["u_rect"].value = rect
+        self.program["u_uv"].value = uv
+        self.vao.render(moderngl.TRIANGLE_STRIP)
+
+    def release(self) -> None:
+        for obj in (self.vao, self.vbo, self.program):
+            obj.release()
+
+
+class Presenter:
+    """Draws a texture region over the whole viewport of the bound framebuffer."""
+
+    def __init__(self, ctx: GLContext) -> None:
+        self.ctx = ctx
+        self.quad = _Quad(ctx, _QUAD_FS)
+
+    def draw(self, texture: moderngl.Texture,
+             uv: tuple[float, float, float, float] = (0.0, 0.0, 1.0, 1.0)) -> None:
+        """Draw ``texture``'s region ``uv = (u0, v0, u1, v1)`` (GL's bottom-up texture
+        coordinates) stretched over the viewport, with no depth test and no blending."""
+        mgl = self.ctx.mgl
+        mgl.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
+        texture.use(0)
+        self.quad.program["u_image"].value = 0
+        self.quad.draw((-1.0, -1.0, 1.0, 1.0), uv)
+
+    def release(self) -> None:
+        self.quad.release()
+
+
+class LineOverlay:
+    """World-space lines over a frame: segments (a frustum) and a coarse level's wireframe."""
+
+    def __init__(self, ctx: GLContext, max_segments: int = 64) -> None:
+        mgl = ctx.mgl
+        self.ctx = ctx
+        self.program = mgl.program(vertex_shader=_LINE_VS, fragment_shader=_LINE_FS)
+        self.max_segments = max_segments
+        self.vbo = mgl.buffer(reserve=max_segments * 2 * 12)
+        self.vao = mgl.vertex_array(self.program, [(self.vbo, "3f", "in_pos")])
+        self._meshes: dict[tuple[int, int], moderngl.VertexArray] = {}
+
+    def segments(self, points: np.ndarray, view_proj: np.ndarray,
+                 rgba: tuple[float, float, float, float]) -> None:
+        """Draw ``points (2k, 3)`` metres as ``k`` segments (at most ``max_segments``)."""
+        pts = np.ascontiguousarray(points[: 2 * self.max_segments], dtype=np.float32)
+        self.vbo.write(pts.tobytes())
+        self._begin(view_proj, rgba)
+        self.vao.render(moderngl.LINES, vertices=len(pts))
+
+    def wireframe(self, geometry: TerrainGeometry, level_quads: int, view_proj: np.ndarray,
+                  rgba: tuple[float, float, float, float]) -> None:
+        """Draw the proxy mesh of level ``level_quads`` (border ribbons excluded) as lines."""
+        key = (id(geometry), level_quads)
+        if key not in self._meshes:
+            vbo, ibo, _ = geometry.proxy(level_quads, False)
+            self._meshes[key] = self.ctx.mgl.vertex_array(
+                self.program, [(vbo, "3f 8x", "in_pos")], index_buffer=ibo,
+                index_element_size=4)
+        self._begin(view_proj, rgba)
+        self.ctx.mgl.wireframe = True
+        try:
+            self._meshes[key].render(moderngl.TRIANGLES)
+        finally:
+            self.ctx.mgl.wireframe = False
+
+    def _begin(self, view_proj: np.ndarray, rgba: tuple[float, float, float, float]) -> None:
+        mgl = self.ctx.mgl
+        mgl.disable(moderngl.DEPTH_TEST)
+        mgl.enable(moderngl.BLEND)
+        mgl.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
+        self.program["u_mvp"].write(mat_bytes(view_proj))
+        self.program["u_rgba"].value = rgba
+
+    def release(self) -> None:
+        for vao in self._meshes.values():
+            vao.release()
+        self._meshes.clear()
+        for obj in (self.vao, self.vbo, self.program):
+            obj.release()
+
+
+class HudLayer:
+    """An RGBA text panel and a frame-time graph, drawn in window pixels."""
+
+    def __init__(self, ctx: GLContext, graph_points: int = 240) -> None:
+        mgl = ctx.mgl
+        self.ctx = ctx
+        self.quad = _Quad(ctx, _QUAD_FS)
+        self.panel: moderngl.Texture | None = None
+        self.graph_points = graph_points
+        self.line_program = mgl.program(vertex_shader="""#version 330
+in vec2 in_xy;
+void main() { gl_Position = vec4(in_xy, 0.0, 1.0); }
+""", fragment_shader=_LINE_FS)
+        self.graph_vbo = mgl.buffer(reserve=graph_points * 8)
+        self.graph_vao = mgl.vertex_array(self.line_program, [(self.graph_vbo, "2f", "in_xy")])
+
+    def set_panel(self, rgba: np.ndarray) -> None:
+        """Replace the panel image, ``(h, w, 4) uint8``, row 0 at the top."""
+        h, w = rgba.shape[:2]
+        if self.panel is None or self.panel.size != (w, h):
+            if self.panel is not None:
+                self.panel.release()
+            self.panel = self.ctx.mgl.texture((w, h), 4)
+            self.panel.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        self.panel.write(np.ascontiguousarray(rgba[::-1]).tobytes())
+
+    def draw(self, viewport: tuple[int, int], graph_ms: np.ndarray,
+             graph_box: tuple[int, int, int, int], graph_max_ms: float) -> None:
+        """Draw the panel at the top-left corner and the graph of ``graph_ms`` (oldest
+        first) in ``graph_box = (x, y, w, h)`` pixels from the top-left, scaled so that
+        ``graph_max_ms`` reaches the top of the box.  ``viewport`` is ``(w, h)`` pixels."""
+        mgl = self.ctx.mgl
+        vw, vh = viewport
+        mgl.disable(moderngl.DEPTH_TEST)
+        mgl.enable(moderngl.BLEND)
+        mgl.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
+        if self.panel is not None:
+            pw, ph = self.panel.size
+            self.panel.use(0)
+            self.quad.program["u_image"].value = 0
+            self.quad.draw((-1.0, 1.0 - 2.0 * ph / vh, -1.0 + 2.0 * pw / vw, 1.0),
+                           (0.0, 0.0, 1.0, 1.0))
+        ms = np.asarray(graph_ms, dtype=np.float32)[-self.graph_points:]
+        if len(ms) >= 2:
+            x, y, w, h = graph_box
+            px = x + np.linspace(0.0, w, len(ms), dtype=np.float32)
+            py = y + h - h * np.clip(ms / graph_max_ms, 0.0, 1.0)
+            xy = np.stack([2.0 * px / vw - 1.0, 1.0 - 2.0 * py / vh], axis=1)
+            self.graph_vbo.write(np.ascontiguousarray(xy, dtype=np.float32).tobytes())
+            self.line_program["u_rgba"].value = (1.0, 0.85, 0.2, 1.0)
+            self.graph_vao.render(moderngl.LINE_STRIP, vertices=len(ms))
+        mgl.disable(moderngl.BLEND)
+
+    def release(self) -> None:
+        if self.panel is not None:
+            self.panel.release()
+            self.panel = None
+        for obj in (self.graph_vao, self.graph_vbo, self.line_program):
+            obj.release()
+        self.quad.release()
