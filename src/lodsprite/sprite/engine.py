@@ -90,6 +90,11 @@ class LodSpriteEngine:
         """Keyframes placed ahead of the viewer so far."""
         return self.policy.predicted_keyframes
 
+    @property
+    def shows_keyframe(self) -> bool:
+        """Whether the last frame was a keyframe shown as it is (no spriteframe drawn)."""
+        return self._shows_keyframe
+
     def read_image(self) -> np.ndarray:
         """The image of the last frame, ``(H, W, 3) uint8``, row 0 at the top: the keyframe
         (without its guard band) when the frame was one, else the spriteframe."""

@@ -1,0 +1,116 @@
+"""LOD-sprite with keyframes from a worker thread: the drawing thread only draws
+spriteframes (Chen et al. 1999 §3.1 step 3, as the 2002 client does) and never waits for
+a keyframe after the first.
+
+Per frame, on the drawing thread:
+
+1. take the worker's newest keyframe, if one arrived, and adopt it when its error at the
+   current viewpoint (Eq. 2, pixels) is below the shown keyframe's (the ``--adopt better``
+   rule of the distributed client); a worse one is discarded;
+2. measure the shown keyframe's error here; at ``request_fraction`` ε or more, ask the
+   worker for the next keyframe, placed ahead by the measured request-to-adoption latency;
+3. draw the spriteframe and ``finish()``.
+
+The bound ε is kept only as well as the worker keeps up: while a keyframe is on its way,
+the error of the frames shown can exceed ε (reported per frame), but the frame rate does
+not drop.  :class:`~lodsprite.sprite.engine.LodSpriteEngine` is the inline alternative.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from lodsprite.camera import Viewpoint
+from lodsprite.gl.sprite import SpriteRenderer
+from lodsprite.scene import Scene
+from lodsprite.sprite.engine import SpriteFrame
+from lodsprite.sprite.metric import ErrorMetric
+from lodsprite.sprite.policy import (
+    DEFAULT_EPSILON_PX,
+    FIRST_SPRITE,
+    KEYFRAME,
+    SPRITE,
+    KeyChoice,
+    keyframe_error_px,
+)
+from lodsprite.sprite.worker import KeyframeImage, KeyframeWorker, WorkerSettings
+
+DEFAULT_REQUEST_FRACTION = 0.5
+LEAD_SMOOTHING = 0.3   # weight of the newest latency in the lead's running mean
+
+
+class ThreadedLodSpriteEngine:
+    """LOD-sprite frame by frame with a :class:`~lodsprite.sprite.worker.KeyframeWorker`.
+
+    ``sprite`` draws the spriteframes on the caller's context; ``scene`` is what the worker
+    loads on its own context; ``fov_y_deg`` must be the renderer's.
+    """
+
+    def __init__(self, sprite: SpriteRenderer, scene: Scene, fov_y_deg: float,
+                 epsilon_px: float = DEFAULT_EPSILON_PX,
+                 request_fraction: float = DEFAULT_REQUEST_FRACTION,
+                 predictor: str = "linear") -> None:
+        self.sprite = sprite
+        self.epsilon_px = float(epsilon_px)
+        self.request_fraction = float(request_fraction)
+        self.metric = ErrorMetric.for_level(scene.hf, sprite.coarse_quads)
+        self.worker = KeyframeWorker(scene, WorkerSettings(
+            sprite.target.size, fov_y_deg, sprite.coarse_quads, sprite.visibility,
+            sprite.border, sprite.guard_px, predictor))
+        self.keyframes: list[KeyChoice] = []
+        self.discarded = 0
+        self._c_prime: np.ndarray | None = None
+
+    def error_px(self, viewpoint: Viewpoint, projection) -> float:
+        """Error (pixels) of the shown keyframe at ``viewpoint`` (inf before the first)."""
+        if self._c_prime is None:
+            return float("inf")
+        return keyframe_error_px(self.metric, self._c_prime, viewpoint, projection,
+                                 self.sprite.target.height)
+
+    def _adopt(self, key: KeyframeImage, now: float) -> None:
+        self.sprite.upload_keyframe(key.viewpoint, key.projection, key.color, key.depth, now,
+                                    key.zbuffer)
+        self._c_prime = key.c_prime
+        self.keyframes.append(KeyChoice(key.viewpoint, key.frame_projection, key.predicted))
+        latency = now - key.requested_at
+        w = LEAD_SMOOTHING if self.worker.lead_s > 0 else 1.0
+        self.worker.lead_s = (1 - w) * self.worker.lead_s + w * latency
+
+    def frame(self, viewpoint: Viewpoint) -> SpriteFrame:
+        """Draw the frame for ``viewpoint``; returns once the GL work has finished."""
+        t0 = time.perf_counter()
+        self.worker.observe(t0, viewpoint)
+        projection = self.sprite.terrain.projection(viewpoint)
+        kind = SPRITE
+        if self._c_prime is None:  # start-up: the first keyframe is waited for
+            self.worker.request()
+            self._adopt(self.worker.wait(), t0)
+            kind = KEYFRAME
+        else:
+            new = self.worker.poll()
+            if new is not None:
+                if keyframe_error_px(self.metric, new.c_prime, viewpoint, projection,
+                                     self.sprite.target.height) < self.error_px(viewpoint,
+                                                                                projection):
+                    self._adopt(new, t0)
+                    kind = FIRST_SPRITE
+                else:
+                    self.discarded += 1
+        error = self.error_px(viewpoint, projection)
+        if not error < self.request_fraction * self.epsilon_px:
+            self.worker.request()
+        stats = self.sprite.render_spriteframe(viewpoint, projection)
+        self.sprite.terrain.ctx.finish()
+        return SpriteFrame(kind, error, error, stats.triangles,
+                           (time.perf_counter() - t0) * 1e3, len(self.keyframes) - 1)
+
+    def read_image(self) -> np.ndarray:
+        """The last frame, ``(H, W, 3) uint8``, row 0 at the top (always a spriteframe)."""
+        return self.sprite.target.read_color()
+
+    def close(self) -> None:
+        """Stop the worker thread (its GL objects are released there)."""
+        self.worker.close()

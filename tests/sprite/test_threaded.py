@@ -1,0 +1,112 @@
+"""LOD-sprite with keyframes from a worker thread (its own GL context)."""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import pytest
+
+from conftest import make_field
+from lodsprite.camera import look_at
+from lodsprite.errors import LodspriteError
+from lodsprite.gl.sprite import SpriteRenderer
+from lodsprite.gl.terrain import TerrainGeometry, TerrainRenderer
+from lodsprite.metrics import rmse
+from lodsprite.scene import Scene
+from lodsprite.sprite.engine import KEYFRAME, LodSpriteEngine
+from lodsprite.sprite.threaded import ThreadedLodSpriteEngine
+from lodsprite.sprite.worker import KeyframeWorker, WorkerSettings
+from lodsprite.terrain import make_texture
+
+SIZE = (96, 96)
+
+
+@pytest.fixture
+def scene() -> Scene:
+    hf = make_field(64, kind="ridges")
+    return Scene(hf, make_texture("terrain", hf), "ridges", "terrain")
+
+
+@pytest.fixture
+def sprite(gl, scene):
+    geo = TerrainGeometry(gl, scene.hf, scene.texture)
+    tr = TerrainRenderer(gl, geo, *SIZE)
+    sp = SpriteRenderer(tr, 8, guard_px=4)
+    yield sp
+    sp.release()
+    tr.release()
+    geo.release()
+
+
+def orbit(n: int, start_deg: float = 0.0, span_deg: float = 40.0):
+    out = []
+    for a in np.radians(np.linspace(start_deg, start_deg + span_deg, n)):
+        out.append(look_at((1400 * np.cos(a), 1400 * np.sin(a), 900), (0, 0, 100)))
+    return out
+
+
+def worker_threads() -> list[threading.Thread]:
+    return [t for t in threading.enumerate() if t.name == "lodsprite-keyframes"]
+
+
+def test_a_worker_keyframe_draws_the_same_spriteframe_as_an_inline_one(gl, scene, sprite):
+    vp = orbit(1)[0]
+    engine = ThreadedLodSpriteEngine(sprite, scene, 45.0, 1.0)
+    try:
+        first = engine.frame(vp)  # waits for the worker's first keyframe, at vp
+        threaded = engine.read_image()
+    finally:
+        engine.close()
+    assert first.type == KEYFRAME and len(engine.keyframes) == 1
+    np.testing.assert_allclose(engine.keyframes[0].viewpoint.o, vp.o)
+    inline = LodSpriteEngine(sprite, 1.0, predict=False)
+    inline.frame(vp)
+    sprite.render_spriteframe(vp)
+    local = sprite.target.read_color()
+    # Same keyframe, one rendered on the worker's context and uploaded, one rendered here:
+    # the spriteframes differ by no more than rounding (measured 0.0 on llvmpipe).
+    assert rmse(threaded, local) < 0.5
+    assert threaded.std() > 5  # a picture, not a cleared target
+
+
+def test_frames_go_on_while_the_worker_renders_and_it_stops_on_close(gl, scene, sprite):
+    path = orbit(40)
+    engine = ThreadedLodSpriteEngine(sprite, scene, 45.0, 0.5)
+    try:
+        frames = [engine.frame(vp) for vp in path]
+        # let the worker finish what it was asked for, then take it
+        engine.worker.wait(30.0) if engine.worker.busy else None
+    finally:
+        engine.close()
+    assert not worker_threads()
+    assert frames[0].type == KEYFRAME
+    assert all(f.type != KEYFRAME for f in frames[1:])  # the drawing thread never renders one
+    assert engine.worker.rendered >= 2  # keyframes were asked for along the orbit
+    assert engine.worker.error is None
+    # errors are measured per frame; the first is the keyframe's own view
+    assert frames[0].error_px == pytest.approx(0.0, abs=1e-6)
+    assert all(np.isfinite(f.error_px) for f in frames)
+
+
+def test_an_adopted_keyframe_is_never_worse_than_the_one_shown(gl, scene, sprite):
+    engine = ThreadedLodSpriteEngine(sprite, scene, 45.0, 0.5)
+    try:
+        for vp in orbit(30, span_deg=30):
+            before = engine.error_px(vp, sprite.terrain.projection(vp))
+            f = engine.frame(vp)
+            if f.type == "first_sprite":
+                assert f.error_px < before
+    finally:
+        engine.close()
+
+
+def test_a_worker_that_cannot_start_says_why(gl, scene):
+    with pytest.raises(LodspriteError, match="could not start"):
+        KeyframeWorker(scene, WorkerSettings((1 << 20, 16), 45.0, 8, "coarse", True, 0))
+    assert not worker_threads()
+
+
+def test_an_unknown_predictor_is_refused(scene):
+    with pytest.raises(LodspriteError, match="predictor"):
+        KeyframeWorker(scene, WorkerSettings((64, 64), 45.0, 8, "coarse", True, 0, "psychic"))
