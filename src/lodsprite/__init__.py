@@ -1,4 +1,21 @@
-"""lodsprite: time-critical rendering of large datasets with LOD geometry and image reuse."""
+"""lodsprite: time-critical rendering of large datasets with LOD geometry and image reuse.
+
+The public API (see the README's "Python API" section):
+
+* scenes: :func:`load_scene` (terrain and texture specs) -> :class:`Scene`;
+* rendering: :class:`Renderer` (standalone headless context, or an application's
+  moderngl context for embedding), :meth:`Renderer.sprite` -> :class:`LodSprite`, the
+  LOD-sprite engine frame by frame (keyframes inline, or on a worker thread);
+* cameras and paths: :class:`Viewpoint`, :func:`look_at`, :class:`CameraPath`,
+  :func:`get_path` (built-in paths and JSON files), :func:`load_path_json`;
+* images: :func:`read_image`, :func:`write_image`;
+* batch runs: :class:`RenderConfig` and :func:`render_path` (what ``lodsprite render``
+  does);
+* techniques the viewer drives: :class:`Technique` and :func:`terrain_techniques`;
+* errors: :class:`LodspriteError` and its subclasses.
+"""
+
+from typing import TYPE_CHECKING
 
 from lodsprite.errors import (
     GLUnavailableError,
@@ -8,13 +25,70 @@ from lodsprite.errors import (
     TerrainError,
 )
 
+# Where each public name lives.  They load on first use (PEP 562), so that importing one
+# GL-free module (``lodsprite.sprite.policy``, say) does not load OpenGL.
+_LAZY = {
+    "LodSprite": "lodsprite.api", "Renderer": "lodsprite.api", "read_image": "lodsprite.api",
+    "write_image": "lodsprite.api", "Projection": "lodsprite.camera",
+    "Viewpoint": "lodsprite.camera", "look_at": "lodsprite.camera",
+    "CameraPath": "lodsprite.paths", "get_path": "lodsprite.paths",
+    "load_path_json": "lodsprite.paths", "RenderConfig": "lodsprite.run",
+    "render_path": "lodsprite.run", "Scene": "lodsprite.scene",
+    "load_scene": "lodsprite.scene", "SpriteFrame": "lodsprite.sprite.engine",
+    "FrameInfo": "lodsprite.technique", "Param": "lodsprite.technique",
+    "Technique": "lodsprite.technique", "terrain_techniques": "lodsprite.technique",
+}
+
+if TYPE_CHECKING:
+    from lodsprite.api import LodSprite, Renderer, read_image, write_image
+    from lodsprite.camera import Projection, Viewpoint, look_at
+    from lodsprite.paths import CameraPath, get_path, load_path_json
+    from lodsprite.run import RenderConfig, render_path
+    from lodsprite.scene import Scene, load_scene
+    from lodsprite.sprite.engine import SpriteFrame
+    from lodsprite.technique import FrameInfo, Param, Technique, terrain_techniques
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        import importlib
+
+        value = getattr(importlib.import_module(_LAZY[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'lodsprite' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(__all__)
+
+
 __version__ = "0.1.0"
 
 __all__ = [
+    "CameraPath",
+    "FrameInfo",
     "GLUnavailableError",
     "InputError",
+    "LodSprite",
     "LodspriteError",
+    "Param",
     "PathError",
+    "Projection",
+    "RenderConfig",
+    "Renderer",
+    "Scene",
+    "SpriteFrame",
+    "Technique",
     "TerrainError",
+    "Viewpoint",
     "__version__",
+    "get_path",
+    "load_path_json",
+    "load_scene",
+    "look_at",
+    "read_image",
+    "render_path",
+    "terrain_techniques",
+    "write_image",
 ]

@@ -75,6 +75,7 @@ from lodsprite.distributed.protocol import (
 )
 from lodsprite.distributed.queue import Closed, KeyframeQueue
 from lodsprite.errors import InputError
+from lodsprite.gl.context import GLContext
 from lodsprite.gl.paths import PathRenderer
 from lodsprite.gl.sprite import SpriteRenderer
 from lodsprite.scene import Scene
@@ -130,7 +131,8 @@ class LodClient:
     """Spriteframes along any viewpoint stream, keyframes from one or more LOD servers.
 
     ``max_error``: bound (pixels) on the error of the keyframe shown, above which the
-    client renders its own keyframe; None: no bound (the paper's client).
+    client renders its own keyframe; None: no bound (the paper's client).  ``ctx``: the
+    GL context to draw with (a viewer window's); None makes a headless one.
     """
 
     def __init__(self, scene: Scene, scene_args: dict, servers: list[str],
@@ -138,7 +140,8 @@ class LodClient:
                  visibility: str = "coarse", epsilon: float = 1.0,
                  adopt: str = "newest", keys: ClientKeys | None = None,
                  border: bool = True, pace: str = DEFAULT_PACE,
-                 max_error: float | None = DEFAULT_MAX_ERROR) -> None:
+                 max_error: float | None = DEFAULT_MAX_ERROR,
+                 ctx: GLContext | None = None) -> None:
         if adopt not in ADOPT_MODES:
             raise InputError(f"adopt must be one of {', '.join(ADOPT_MODES)}, got {adopt!r}")
         if pace not in PACES:
@@ -156,7 +159,7 @@ class LodClient:
         self._own = False  # whether the shown keyframe is the client's own
         self.scene_args = {**scene_args, "lod": lod, "visibility": visibility,
                            "border": border, "epsilon": float(epsilon), "pace": pace}
-        self.paths = PathRenderer(scene, size, float(scene_args.get("fov_y_deg", 45.0)))
+        self.paths = PathRenderer(scene, size, float(scene_args.get("fov_y_deg", 45.0)), ctx)
         self.sprite = SpriteRenderer(self.paths.renderer, lod, visibility, border=border,
                                      guard_px=0)
         self.metric = ErrorMetric.for_level(scene.hf, lod)
@@ -304,6 +307,18 @@ class LodClient:
         """Error (pixels, Eq. 2) of the keyframe with ``C' = c_prime`` here; may be inf."""
         return keyframe_error_px(self.metric, c_prime, viewpoint, projection,
                                  self.sprite.target.height)
+
+    def shown_error_px(self, viewpoint) -> float:
+        """Error (pixels, Eq. 2) of the shown keyframe at ``viewpoint``; NaN when none is
+        shown or its ``C'`` is unknown."""
+        if self._c_prime is None:
+            return float("nan")
+        return self._error(self._c_prime, viewpoint, self.paths.renderer.projection(viewpoint))
+
+    @property
+    def links_alive(self) -> list[bool | None]:
+        """Per server: answers (True), silent (False) or not asked yet (None)."""
+        return [s.alive for s in self._servers]
 
     def _own_keyframe_due(self, viewpoint, projection) -> bool:
         """Whether to render the client's own keyframe: nothing shown yet, or the shown

@@ -1,0 +1,243 @@
+"""The Python API: scenes, renderers (standalone or embedded), LOD-sprite frame by frame,
+camera paths and images.  ``import lodsprite`` exports everything here.
+
+A minimal session::
+
+    import lodsprite as ls
+
+    scene = ls.load_scene("jacksboro")
+    path = ls.get_path("chen1999", scene.hf, frames=60)
+    with ls.Renderer(scene, size=(512, 512)) as renderer:
+        sprite = renderer.sprite(epsilon_px=1.0)
+        for vp in path.viewpoints:
+            frame = sprite.frame(vp)          # keyframe or spriteframe, timed
+        ls.write_image("last.png", sprite.read_image())
+
+Embedding: ``Renderer(scene, size, ctx=app_ctx)`` draws with an application's moderngl
+context (for example a moderngl-window window's ``ctx``) and :meth:`Renderer.draw_to` /
+:meth:`LodSprite.draw_to` put the last frame into the application's framebuffer.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import moderngl
+import numpy as np
+from PIL import Image
+
+from lodsprite.camera import Projection, Viewpoint
+from lodsprite.errors import InputError
+from lodsprite.gl.context import GLContext, GLInfo
+from lodsprite.gl.overlay import Presenter
+from lodsprite.gl.paths import PathRenderer
+from lodsprite.gl.sprite import DEFAULT_GUARD_PX, DEFAULT_VISIBILITY, SpriteRenderer
+from lodsprite.gl.terrain import FrameStats
+from lodsprite.report.io import write_png
+from lodsprite.scene import Scene
+from lodsprite.sprite.engine import DEFAULT_EPSILON_PX, LodSpriteEngine, SpriteFrame
+from lodsprite.sprite.threaded import ThreadedLodSpriteEngine
+from lodsprite.terrain.lod import DEFAULT_COARSE
+
+MAX_IMAGE_PIXELS = 1 << 28
+
+
+class Renderer:
+    """One scene on one GL context: full-resolution and uniform-level frames of
+    ``size = (w, h)`` pixels with a vertical field of view ``fov_y_deg`` (degrees).
+
+    ``ctx=None`` makes a headless EGL context that the renderer owns; a
+    :class:`moderngl.Context` (current on this thread) is used as it is and never
+    released.  GPU objects live until :meth:`release` (or the ``with`` block's end).
+    """
+
+    def __init__(self, scene: Scene, size: tuple[int, int] = (512, 512),
+                 fov_y_deg: float = 45.0, ctx: moderngl.Context | None = None) -> None:
+        w, h = (int(v) for v in size)
+        if not (16 <= w <= 8192 and 16 <= h <= 8192):
+            raise InputError(f"image size must be between 16 and 8192 pixels, got {w}x{h}")
+        self.scene = scene
+        self.size = (w, h)
+        self.fov_y_deg = float(fov_y_deg)
+        self.gl = GLContext() if ctx is None else GLContext.wrap(ctx)
+        self._paths = PathRenderer(scene, self.size, self.fov_y_deg, self.gl)
+        self._presenter: Presenter | None = None
+
+    @property
+    def info(self) -> GLInfo:
+        """The GL driver's renderer and version strings."""
+        return self.gl.info
+
+    @property
+    def paths(self) -> PathRenderer:
+        """The GL state underneath (context, geometry, terrain renderer)."""
+        return self._paths
+
+    def projection(self, viewpoint: Viewpoint) -> Projection:
+        """The frame projection at ``viewpoint`` (near/far fitted to the terrain)."""
+        return self._paths.renderer.projection(viewpoint)
+
+    def render(self, viewpoint: Viewpoint, lod: int | None = None) -> FrameStats:
+        """Draw the terrain at full resolution (``lod=None``) or at uniform level ``lod``
+        (quads per side) into the renderer's image; returns once the GL work is done."""
+        stats = self._paths.renderer.render(viewpoint, lod)
+        self.gl.finish()
+        return stats
+
+    def read_color(self) -> np.ndarray:
+        """The last image, ``(h, w, 3) uint8``, row 0 at the top."""
+        return self._paths.renderer.target.read_color()
+
+    def read_depth(self) -> np.ndarray:
+        """The last z-buffer, ``(h, w) float32`` window depth in [0, 1], row 0 at the top."""
+        return self._paths.renderer.target.read_depth()
+
+    def sprite(self, epsilon_px: float = DEFAULT_EPSILON_PX, lod: int = DEFAULT_COARSE,
+               threaded: bool = False, visibility: str = DEFAULT_VISIBILITY,
+               guard_px: int = DEFAULT_GUARD_PX, border: bool = True) -> LodSprite:
+        """A LOD-sprite engine on this renderer: error threshold ``epsilon_px`` pixels,
+        coarse level ``lod`` quads per side.  ``threaded=True`` renders keyframes on a
+        worker thread with its own context (:mod:`lodsprite.sprite.threaded`); otherwise a
+        keyframe is rendered inline in the frame that needs it (the 1999 algorithm)."""
+        if not epsilon_px > 0:
+            raise InputError(f"epsilon must be > 0 pixels, got {epsilon_px}")
+        return LodSprite(self, epsilon_px, lod, threaded, visibility, guard_px, border)
+
+    def draw_to(self, framebuffer: moderngl.Framebuffer | None = None) -> None:
+        """Draw the last image over ``framebuffer``'s viewport (default: the one bound,
+        for embedding in an application's frame)."""
+        target = self._paths.renderer.target
+        self.present(target.color, (0.0, 0.0, 1.0, 1.0), framebuffer, target.fbo)
+
+    def present(self, texture: moderngl.Texture, uv: tuple[float, float, float, float],
+                 framebuffer: moderngl.Framebuffer | None,
+                 source: moderngl.Framebuffer | None = None) -> None:
+        """Draw ``texture``'s region ``uv`` over ``framebuffer`` (default: the bound one).
+        A whole image of the framebuffer's size (``source``, its framebuffer) is copied
+        with a blit, which costs a third of a textured quad on llvmpipe."""
+        mgl = self.gl.mgl
+        dst = framebuffer if framebuffer is not None else mgl.fbo
+        if (source is not None and uv == (0.0, 0.0, 1.0, 1.0)
+                and tuple(dst.viewport[2:]) == tuple(source.size)
+                and tuple(dst.viewport[:2]) == (0, 0)):
+            mgl.copy_framebuffer(dst, source)
+            return
+        if self._presenter is None:
+            self._presenter = Presenter(self.gl)
+        if framebuffer is not None:
+            framebuffer.use()
+        self._presenter.draw(texture, uv)
+
+    def release(self) -> None:
+        """Release every GPU object (and the context, if the renderer made it)."""
+        if self._presenter is not None:
+            self._presenter.release()
+            self._presenter = None
+        if self._paths is not None:
+            self._paths.release()
+            self._paths = None
+
+    def __enter__(self) -> Renderer:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
+
+
+class LodSprite:
+    """LOD-sprite frame by frame on a :class:`Renderer` (made by :meth:`Renderer.sprite`).
+
+    :meth:`frame` decides, renders and times one frame; :attr:`keyframes` lists every
+    keyframe taken (:class:`~lodsprite.sprite.policy.KeyChoice`); :meth:`read_image` and
+    :meth:`draw_to` give the frame shown.
+    """
+
+    def __init__(self, renderer: Renderer, epsilon_px: float, lod: int, threaded: bool,
+                 visibility: str, guard_px: int, border: bool) -> None:
+        self.renderer = renderer
+        self.threaded = threaded
+        self.sprite = SpriteRenderer(renderer.paths.renderer, lod, visibility, border=border,
+                                     guard_px=guard_px)
+        try:
+            self.engine: LodSpriteEngine | ThreadedLodSpriteEngine = (
+                ThreadedLodSpriteEngine(self.sprite, renderer.scene, renderer.fov_y_deg,
+                                        epsilon_px) if threaded
+                else LodSpriteEngine(self.sprite, epsilon_px))
+        except BaseException:
+            self.sprite.release()
+            raise
+        self.last: SpriteFrame | None = None
+
+    @property
+    def epsilon_px(self) -> float:
+        return self.engine.epsilon_px
+
+    @epsilon_px.setter
+    def epsilon_px(self, value: float) -> None:
+        if not value > 0:
+            raise InputError(f"epsilon must be > 0 pixels, got {value}")
+        if isinstance(self.engine, LodSpriteEngine):
+            self.engine.policy.epsilon_px = float(value)
+        else:
+            self.engine.epsilon_px = float(value)
+
+    @property
+    def keyframes(self) -> list:
+        return self.engine.keyframes
+
+    @property
+    def lod(self) -> int:
+        return self.sprite.coarse_quads
+
+    def frame(self, viewpoint: Viewpoint) -> SpriteFrame:
+        """Render the frame for ``viewpoint`` (returns after ``ctx.finish()``)."""
+        self.last = self.engine.frame(viewpoint)
+        return self.last
+
+    def read_image(self) -> np.ndarray:
+        """The frame shown, ``(h, w, 3) uint8``, row 0 at the top."""
+        return self.engine.read_image()
+
+    def key_view(self) -> tuple[Viewpoint, Projection] | None:
+        """The shown keyframe's viewpoint and (guard-band widened) projection."""
+        key = self.sprite.keyframe
+        return None if key is None else (key.viewpoint, key.projection)
+
+    def draw_to(self, framebuffer: moderngl.Framebuffer | None = None) -> None:
+        """Draw the frame shown over ``framebuffer``'s viewport (default: the one bound):
+        the keyframe's centre (without its guard band) or the spriteframe."""
+        key = self.sprite.keyframe
+        if isinstance(self.engine, LodSpriteEngine) and self.engine.shows_keyframe and key:
+            w, h = key.color.size
+            g = self.sprite.guard_px
+            self.renderer.present(key.color, (g / w, g / h, 1 - g / w, 1 - g / h),
+                                   framebuffer)
+        else:
+            self.renderer.draw_to(framebuffer)
+
+    def release(self) -> None:
+        """Stop the keyframe worker (if any) and release the sprite's GPU objects."""
+        if isinstance(self.engine, ThreadedLodSpriteEngine):
+            self.engine.close()
+        self.sprite.release()
+
+
+def read_image(path: str | os.PathLike) -> np.ndarray:
+    """An image file as ``(h, w, 3) uint8`` RGB (raises :class:`InputError`)."""
+    try:
+        with Image.open(Path(path)) as im:
+            if im.width * im.height > MAX_IMAGE_PIXELS:
+                raise InputError(f"{path}: image of {im.width}x{im.height} is too large")
+            return np.asarray(im.convert("RGB"))
+    except (OSError, ValueError, Image.DecompressionBombError) as exc:
+        raise InputError(f"cannot read image {path}: {exc}") from exc
+
+
+def write_image(path: str | os.PathLike, image: np.ndarray) -> None:
+    """Write an ``(h, w, 3) uint8`` image as PNG (atomically: no half-written file)."""
+    image = np.asarray(image)
+    if image.ndim != 3 or image.shape[2] != 3 or image.dtype != np.uint8:
+        raise InputError(f"image must be an (h, w, 3) uint8 array, got {image.shape} "
+                         f"{image.dtype}")
+    write_png(Path(path), image)

@@ -1,0 +1,86 @@
+"""The distributed LOD-sprite client as a viewer technique (Swan et al. 2002).
+
+The viewer's ``distributed`` mode: a :class:`~lodsprite.distributed.client.LodClient`
+drawing on the viewer's own GL context, with keyframes from a LOD server
+(``lodsprite serve``) that loads the same scene.  Made by :func:`distributed_factory`
+with the server's address; the viewer core never imports this layer.
+"""
+
+from __future__ import annotations
+
+import moderngl
+import numpy as np
+
+from lodsprite.api import Renderer
+from lodsprite.camera import Projection, Viewpoint
+from lodsprite.distributed.client import DEFAULT_MAX_ERROR, LodClient
+from lodsprite.distributed.render import scene_args
+from lodsprite.sprite.engine import DEFAULT_EPSILON_PX
+from lodsprite.technique import FALLBACK_TINT, FrameInfo, Param, Technique, TechniqueFactory
+from lodsprite.terrain.lod import DEFAULT_COARSE
+
+
+class DistributedTechnique(Technique):
+    """Spriteframes drawn here from keyframes a LOD server renders."""
+
+    name = "distributed"
+
+    def __init__(self, renderer: Renderer, server: str, lod: int = DEFAULT_COARSE,
+                 epsilon_px: float = DEFAULT_EPSILON_PX,
+                 max_error: float | None = DEFAULT_MAX_ERROR) -> None:
+        super().__init__(renderer)
+        scene = renderer.scene
+        self.server = server
+        args = scene_args(scene.terrain_spec, scene.texture_spec, scene.hf.quads,
+                          float(scene.hf.meta.get("exaggeration", 1.0)), renderer.size,
+                          renderer.fov_y_deg)
+        self.client = LodClient(scene, args, [server], renderer.size, lod, epsilon=epsilon_px,
+                                adopt="better", max_error=max_error, ctx=renderer.gl)
+
+    def params(self) -> dict[str, Param]:
+        bound = self.client.max_error
+        return {} if bound is None else {
+            "max_error": Param("max_error", bound, 0.25, 256.0, 1.25, "px")}
+
+    def set_param(self, name: str, value: float) -> None:
+        if name != "max_error":
+            super().set_param(name, value)
+        self.client.max_error = float(value)
+
+    def frame(self, viewpoint: Viewpoint) -> FrameInfo:
+        f = self.client.frame(viewpoint)
+        return FrameInfo(f.type, f.ms, f.triangles, self.client.shown_error_px(viewpoint),
+                         len(self.client.shown))
+
+    def draw_to(self, framebuffer: moderngl.Framebuffer | None = None) -> None:
+        target = self.client.paths.renderer.target
+        self.renderer.present(target.color, (0.0, 0.0, 1.0, 1.0), framebuffer, target.fbo)
+
+    def read_image(self) -> np.ndarray:
+        return self.client.image()
+
+    def key_view(self) -> tuple[Viewpoint, Projection] | None:
+        key = self.client.sprite.keyframe
+        return None if key is None else (key.viewpoint, key.projection)
+
+    def coarse_level(self) -> int | None:
+        return self.client.sprite.coarse_quads
+
+    def set_fallback_tint(self, on: bool) -> None:
+        self.client.sprite.fallback_tint = FALLBACK_TINT if on else (*FALLBACK_TINT[:3], 0.0)
+
+    def status(self) -> str:
+        alive = self.client.links_alive[0]
+        state = {True: "answers", False: "silent", None: "connecting"}[alive]
+        return (f"server {self.server}: {state}; own keyframes {self.client.local_keyframes}, "
+                f"rejected {self.client.rejected_keyframes}")
+
+    def release(self) -> None:
+        self.client.close()
+
+
+def distributed_factory(server: str, lod: int = DEFAULT_COARSE,
+                        epsilon_px: float = DEFAULT_EPSILON_PX,
+                        max_error: float | None = DEFAULT_MAX_ERROR) -> TechniqueFactory:
+    """A factory of :class:`DistributedTechnique` for the viewer's ``distributed`` mode."""
+    return lambda renderer: DistributedTechnique(renderer, server, lod, epsilon_px, max_error)
