@@ -165,6 +165,61 @@ def render(
               f"{out_dir / 'summary.json'}")
 
 
+@app.command()
+def view(
+    terrain: Annotated[str, typer.Argument(
+        help="jacksboro | fractal:SIZE[:SEED] | FILE (.tif/.tiff/.png/.npy)")] = "jacksboro",
+    texture: TextureOpt = "terrain",
+    grid: GridOpt = None,
+    mode: Annotated[str, typer.Option(
+        "--mode", help="full | lod | sprite | distributed (needs --server); keys 1-4 "
+                       "switch live")] = "sprite",
+    lod: LodOpt = 16,
+    epsilon: EpsOpt = 1.0,
+    size: Annotated[str, typer.Option("--size", help="window size WxH")] = "1024x768",
+    fps: Annotated[float, typer.Option(
+        "--fps", help="frame rate cap (0: none); the keyframe worker uses the time left")] = 60,
+    inline: Annotated[bool, typer.Option(
+        "--inline-keyframes", help="sprite mode: render keyframes in the frame that needs "
+                                   "them (the 1999 algorithm) instead of on a worker "
+                                   "thread")] = False,
+    play: Annotated[str | None, typer.Option(
+        "--play", help="play a path (chen1999 | swan2002 | FILE.json) instead of flying")] = None,
+    frames: FramesOpt = None,
+    screenshots: Annotated[Path | None, typer.Option(
+        "--screenshots", help="folder for screenshots (key p; with --play every K "
+                              "frames)")] = None,
+    every: Annotated[int, typer.Option("--every", help="with --play: screenshot every K "
+                                                       "frames")] = 1,
+    exit_: Annotated[bool, typer.Option("--exit", help="with --play: quit at the end")] = False,
+    out_dir: Annotated[Path | None, typer.Option(
+        "--out", help="with --play: write DIR/frames.csv and DIR/summary.json")] = None,
+    record: Annotated[Path | None, typer.Option(
+        "--record", help="save the flight as a path FILE.json for render and "
+                         "reproduce")] = None,
+    server: Annotated[str | None, typer.Option(
+        "--server", help="distributed mode: a LOD server's HOST:PORT")] = None,
+) -> None:
+    """Fly through a terrain in a window with live LOD-sprite (WASD/QE, mouse, tab orbit)."""
+    from lodsprite.run import parse_size
+    from lodsprite.viewer.app import ViewOptions
+    from lodsprite.viewer.app import view as run_view
+
+    opts = ViewOptions(terrain=terrain, texture=texture, grid=grid, mode=mode, lod=lod,
+                       epsilon=epsilon, size=parse_size(size), fps=fps, threaded=not inline,
+                       play=play, frames=frames, screenshots=screenshots, every=every,
+                       exit=exit_, out=out_dir, record=record, server=server)
+    s = run_view(opts)
+    if s:
+        out.print(f"{s['frames']} frames, {s['mode']}: median {s['median_ms']:.2f} ms, "
+                  f"p99 {s['p99_ms']:.2f} ms, mean {s['mean_ms']:.2f} ms; keyframes "
+                  f"{s['keyframes']}; GL {s['gl_renderer']}")
+    if out_dir is not None and s:
+        out.print(f"wrote {out_dir / 'frames.csv'}, {out_dir / 'summary.json'}")
+    if record is not None:
+        out.print(f"wrote {record}")
+
+
 def _run_reproduction(cfg, out_dir: Path) -> dict:
     from lodsprite.report.chen1999 import write_plots, write_report
     from lodsprite.sprite.reproduce import reproduce_chen1999

@@ -1,0 +1,1 @@
+"""The interactive viewer: a window that drives lodsprite's techniques (lodsprite view)."""

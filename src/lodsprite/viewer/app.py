@@ -1,0 +1,85 @@
+"""``lodsprite view``: options checked, scene and path loaded, techniques chosen, window run.
+
+Every user error surfaces as a :class:`~lodsprite.errors.InputError` before the window
+opens; with no display the error is :class:`~lodsprite.viewer.window.NoDisplayError`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from lodsprite import get_path, load_scene, terrain_techniques
+from lodsprite.errors import InputError
+from lodsprite.technique import TechniqueFactory
+from lodsprite.viewer.core import PlayPlan
+from lodsprite.viewer.window import WindowOptions, check_display, run_viewer
+
+VIEW_MODES = ("full", "lod", "sprite", "distributed")
+
+
+@dataclass(frozen=True)
+class ViewOptions:
+    """What ``lodsprite view`` was asked for (see ``lodsprite view --help``)."""
+
+    terrain: str = "jacksboro"
+    texture: str = "terrain"
+    grid: int | None = None
+    mode: str = "sprite"
+    lod: int = 16
+    epsilon: float = 1.0
+    size: tuple[int, int] = (1024, 768)
+    fps: float = 60.0
+    threaded: bool = True
+    play: str | None = None
+    frames: int | None = None
+    screenshots: Path | None = None
+    every: int = 1
+    exit: bool = False
+    out: Path | None = None
+    record: Path | None = None
+    server: str | None = None
+    fov_y_deg: float = 45.0
+
+    def validate(self) -> None:
+        if self.mode not in VIEW_MODES:
+            raise InputError(f"unknown mode '{self.mode}': use one of {', '.join(VIEW_MODES)}")
+        if self.mode == "distributed" and not self.server:
+            raise InputError("--mode distributed needs --server HOST:PORT")
+        if self.every < 1:
+            raise InputError(f"--every must be at least 1, got {self.every}")
+        if not self.epsilon > 0:
+            raise InputError(f"--epsilon must be > 0 pixels, got {self.epsilon}")
+        if not (self.fps >= 0):
+            raise InputError(f"--fps must be >= 0 (0: no cap), got {self.fps}")
+        w, h = self.size
+        if not (64 <= w <= 8192 and 64 <= h <= 8192):
+            raise InputError(f"window size must be between 64 and 8192 pixels, got {w}x{h}")
+        if self.play is None and (self.exit or self.out is not None or self.frames is not None):
+            raise InputError("--exit, --out and --frames go with --play PATH")
+        if self.record is not None and self.record.suffix.lower() != ".json":
+            raise InputError(f"--record writes a JSON path file: name it .json, got "
+                             f"'{self.record}'")
+
+
+def factories(o: ViewOptions) -> dict[str, TechniqueFactory]:
+    """The viewer's modes: the terrain techniques, and ``distributed`` with a server."""
+    found = terrain_techniques(o.lod, o.epsilon, o.threaded)
+    if o.server:
+        from lodsprite.distributed.technique import distributed_factory
+
+        found["distributed"] = distributed_factory(o.server, o.lod, o.epsilon)
+    return found
+
+
+def view(o: ViewOptions) -> dict:
+    """Run the viewer; returns the summary of the frames shown (empty if none)."""
+    o.validate()
+    check_display()
+    scene = load_scene(o.terrain, o.texture, o.grid)
+    plan = None
+    if o.play is not None:
+        path = get_path(o.play, scene.hf, o.frames)
+        plan = PlayPlan(path, o.out, o.screenshots, o.every, o.exit)
+    return run_viewer(scene, factories(o), o.mode, WindowOptions(o.size, fps=o.fps), plan,
+                      o.record, o.fov_y_deg, o.screenshots or Path("screenshots"))

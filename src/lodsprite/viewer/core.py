@@ -1,0 +1,273 @@
+"""The viewer's core: techniques, camera, overlays, HUD, screenshots, played and recorded
+flights, on any moderngl context and framebuffer (a window's, or an offscreen one in tests).
+
+The window (:mod:`lodsprite.viewer.window`) turns its events into :meth:`ViewerCore.key`,
+:meth:`~ViewerCore.drag`, :meth:`~ViewerCore.scroll` and calls :meth:`~ViewerCore.frame`
+then :meth:`~ViewerCore.log_frame` once per displayed frame.  The core knows techniques
+only through :class:`~lodsprite.technique.Technique` and a dict of factories by mode name.
+
+Keys: ``1``-``9`` switch mode (in the order of the factories), ``[`` / ``]`` step the
+technique's parameter (ε in sprite mode, N in lod mode), ``x`` coarse wireframe, ``t``
+fallback tint, ``k`` keyframe frustum, ``h`` HUD, ``p`` screenshot, ``escape`` quits; the
+rest go to the :class:`~lodsprite.viewer.controls.CameraController` (WASD/QE fly, shift
+faster, tab fly/orbit, r reset).
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import platform
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import moderngl
+import numpy as np
+
+from lodsprite.api import Renderer, write_image
+from lodsprite.errors import LodspriteError
+from lodsprite.gl.overlay import HudLayer, LineOverlay, frustum_segments
+from lodsprite.paths import CameraPath
+from lodsprite.report.io import write_csv, write_json
+from lodsprite.scene import Scene
+from lodsprite.technique import Technique, TechniqueFactory
+from lodsprite.viewer.controls import CameraController, FlightRecorder
+from lodsprite.viewer.hud import PANEL_HZ, HudState, text_panel
+
+log = logging.getLogger(__name__)
+
+FRAME_COLUMNS = ["frame", "type", "ms", "render_ms", "interval_ms", "triangles", "error_px",
+                 "keyframes"]
+TOGGLE_KEYS = {"x": "wireframe", "t": "tint", "k": "frustum", "h": "hud"}
+WIREFRAME_RGBA = (0.1, 0.1, 0.1, 0.55)
+FRUSTUM_RGBA = (1.0, 0.9, 0.1, 0.9)
+
+
+@dataclass(frozen=True)
+class PlayPlan:
+    """A path to play frame by frame: screenshots every ``every`` frames into
+    ``screenshots`` (if set), timings to ``out_dir`` (if set), quit at the end if ``exit``."""
+
+    path: CameraPath
+    out_dir: Path | None = None
+    screenshots: Path | None = None
+    every: int = 1
+    exit: bool = True
+
+
+class ViewerCore:
+    """Everything the viewer does between window events (see the module docstring)."""
+
+    def __init__(self, ctx: moderngl.Context, scene: Scene, size: tuple[int, int],
+                 factories: dict[str, TechniqueFactory], mode: str,
+                 controller: CameraController, fov_y_deg: float = 45.0,
+                 play: PlayPlan | None = None, record: FlightRecorder | None = None,
+                 screenshot_dir: Path = Path("screenshots")) -> None:
+        if mode not in factories:
+            raise LodspriteError(f"unknown mode {mode!r}: use one of {', '.join(factories)}")
+        self.ctx = ctx
+        self.scene = scene
+        self.factories = dict(factories)
+        self.controller = controller
+        self.fov_y_deg = fov_y_deg
+        self.play = play
+        self.record = record
+        self.screenshot_dir = Path(play.screenshots) if play and play.screenshots else Path(
+            screenshot_dir)
+        self.toggles = {"wireframe": False, "tint": False, "frustum": False, "hud": True}
+        self.renderer = Renderer(scene, size, fov_y_deg, ctx=ctx)
+        self.hud = HudState(renderer=self.renderer.info.renderer)
+        self._hud_layer = HudLayer(self.renderer.gl)
+        self._lines = LineOverlay(self.renderer.gl)
+        self.mode = mode
+        self.technique: Technique = self.factories[mode](self.renderer)
+        self.rows: list[dict] = []
+        self.index = 0
+        self.quit = False
+        self.screenshots: list[Path] = []
+        self._panel_at = -math.inf
+        self._last_start: float | None = None
+        self._last = None
+
+    # ------------------------------------------------------------------ input
+
+    def key(self, name: str, pressed: bool = True) -> None:
+        """A key went down (``pressed``) or up; names are lower-case key names."""
+        name = name.lower()
+        if pressed and name.isdigit() and name != "0":
+            modes = list(self.factories)
+            if int(name) <= len(modes):
+                self.switch_mode(modes[int(name) - 1])
+        elif pressed and name in ("[", "]"):
+            self.step_param(name == "]")
+        elif pressed and name in TOGGLE_KEYS:
+            self.toggle(TOGGLE_KEYS[name])
+        elif pressed and name == "p":
+            self.screenshot()
+        elif pressed and name == "escape":
+            self.quit = True
+        else:
+            self.controller.key(name, pressed)
+
+    def drag(self, dx: float, dy: float) -> None:
+        """Mouse moved ``dx, dy`` framebuffer pixels with a button held."""
+        self.controller.drag(dx, dy)
+
+    def scroll(self, steps: float) -> None:
+        self.controller.scroll(steps)
+
+    def toggle(self, what: str) -> None:
+        self.toggles[what] = not self.toggles[what]
+        if what == "tint":
+            self.technique.set_fallback_tint(self.toggles["tint"])
+
+    def step_param(self, up: bool) -> None:
+        """Step the technique's first parameter up or down (its own factor)."""
+        params = self.technique.params()
+        if params:
+            p = next(iter(params.values())).stepped(up)
+            self.technique.set_param(p.name, p.value)
+
+    def switch_mode(self, mode: str) -> None:
+        """Switch technique; on failure keep the current one and say why in the HUD."""
+        if mode == self.mode:
+            return
+        try:
+            new = self.factories[mode](self.renderer)
+        except LodspriteError as exc:
+            self.hud.status = f"cannot switch to {mode}: {exc}"
+            log.warning("cannot switch to %s: %s", mode, exc)
+            return
+        self.technique.release()
+        self.technique, self.mode = new, mode
+        self.technique.set_fallback_tint(self.toggles["tint"])
+        self.hud.status = ""
+
+    def resize(self, size: tuple[int, int]) -> None:
+        """The framebuffer is now ``size = (w, h)`` pixels: remake renderer and technique."""
+        if tuple(size) == self.renderer.size or min(size) < 16:
+            return
+        self.technique.release()
+        self.renderer.release()
+        self.renderer = Renderer(self.scene, size, self.fov_y_deg, ctx=self.ctx)
+        self.technique = self.factories[self.mode](self.renderer)
+        self.technique.set_fallback_tint(self.toggles["tint"])
+
+    # ------------------------------------------------------------------ frames
+
+    def viewpoint(self, dt_s: float):
+        """The next frame's viewpoint: the played path's, or the controller's after
+        ``dt_s`` seconds of held keys."""
+        if self.play is not None:
+            return self.play.path.viewpoints[min(self.index, len(self.play.path) - 1)]
+        return self.controller.update(dt_s)
+
+    def frame(self, dt_s: float, framebuffer: moderngl.Framebuffer) -> None:
+        """Render and draw one frame into ``framebuffer`` (its whole viewport)."""
+        self._start = time.perf_counter()
+        vp = self.viewpoint(dt_s)
+        self._last = self.technique.frame(vp)
+        framebuffer.use()
+        self.technique.draw_to(framebuffer)
+        self._overlays(vp)
+        if self.record is not None:
+            self.record.append(vp)
+        if self.toggles["hud"]:
+            self._draw_hud(framebuffer)
+
+    def warm_up(self, framebuffer: moderngl.Framebuffer) -> None:
+        """One untimed, unlogged frame at the first viewpoint (shader compilation, the
+        first keyframe), as ``lodsprite render`` does before its timed frames."""
+        vp = self.viewpoint(0.0)
+        self.technique.frame(vp)
+        framebuffer.use()
+        self.technique.draw_to(framebuffer)
+        self.ctx.finish()
+
+    def log_frame(self) -> None:
+        """Log the frame just shown (call after the buffer swap): its time from the start
+        of :meth:`frame` to now, the technique's own time and the interval since the
+        previous frame's start; take the played path's screenshot; finish a played path."""
+        now = time.perf_counter()
+        ms = (now - self._start) * 1e3
+        interval = (self._start - self._last_start) * 1e3 if self._last_start else 0.0
+        self._last_start = self._start
+        f = self._last
+        self.hud.record(ms, interval)
+        self.hud.frame_type, self.hud.error_px = f.type, f.error_px
+        self.hud.keyframes, self.hud.triangles = f.keyframes, f.triangles
+        self.rows.append({"frame": self.index, "type": f.type, "ms": ms, "render_ms": f.ms,
+                          "interval_ms": interval, "triangles": f.triangles,
+                          "error_px": f.error_px, "keyframes": f.keyframes})
+        plan = self.play
+        if plan is not None and plan.screenshots is not None and self.index % plan.every == 0:
+            self.screenshot()
+        self.index += 1
+        if plan is not None and self.index >= len(plan.path):
+            if plan.out_dir is not None:
+                self.write_outputs(plan.out_dir)
+            self.quit = self.quit or plan.exit
+            self.play = None if not plan.exit else plan
+
+    def _overlays(self, vp) -> None:
+        view_proj = self.renderer.projection(vp).matrix() @ vp.view_matrix()
+        level = self.technique.coarse_level()
+        if self.toggles["wireframe"] and level is not None:
+            self._lines.wireframe(self.renderer.paths.geometry, level, view_proj,
+                                  WIREFRAME_RGBA)
+        key = self.technique.key_view()
+        if self.toggles["frustum"] and key is not None:
+            self._lines.segments(frustum_segments(*key), view_proj, FRUSTUM_RGBA)
+
+    def _draw_hud(self, framebuffer: moderngl.Framebuffer) -> None:
+        now = time.perf_counter()
+        if now - self._panel_at >= 1.0 / PANEL_HZ:
+            self._panel_at = now
+            h = self.hud
+            h.mode = self.mode
+            h.params = "  ".join(f"{p.name} {p.value:g}{p.unit}"
+                                 for p in self.technique.params().values())
+            h.toggles = "  ".join(k for k, on in self.toggles.items() if on and k != "hud")
+            h.status = h.status if h.status.startswith("cannot") else self.technique.status()
+            scale = 2 if framebuffer.width >= 2000 else 1
+            self._hud_layer.set_panel(text_panel(h.lines(), scale))
+        w, h = framebuffer.width, framebuffer.height
+        ph = self._hud_layer.panel.size[1] if self._hud_layer.panel else 0
+        ms = np.asarray(self.hud.frame_ms)
+        top = max(33.4, float(np.percentile(ms, 99)) * 1.2) if len(ms) else 33.4
+        self._hud_layer.draw((w, h), ms, (8, ph + 8, min(240, w - 16), 60), top)
+
+    def screenshot(self) -> Path:
+        """Write the frame shown (no HUD) as ``frame_NNNNN.png`` in the screenshot folder."""
+        path = self.screenshot_dir / f"frame_{self.index:05d}.png"
+        write_image(path, self.technique.read_image())
+        self.screenshots.append(path)
+        return path
+
+    def summary(self) -> dict:
+        """Median, p99 and mean of the frame times (ms) and the run's facts."""
+        ms = np.array([r["ms"] for r in self.rows], dtype=np.float64)
+        render = np.array([r["render_ms"] for r in self.rows], dtype=np.float64)
+        return {"frames": len(ms), "mode": self.mode, "terrain": self.scene.terrain_spec,
+                "path": self.play.path.name if self.play else "flight",
+                "size": list(self.renderer.size), "median_ms": float(np.median(ms)),
+                "p99_ms": float(np.percentile(ms, 99)), "mean_ms": float(ms.mean()),
+                "render_median_ms": float(np.median(render)),
+                "render_p99_ms": float(np.percentile(render, 99)),
+                "keyframes": int(self.rows[-1]["keyframes"]) if self.rows else 0,
+                "status": self.technique.status(), "gl_renderer": self.renderer.info.renderer,
+                "machine": platform.machine(), "python": platform.python_version()}
+
+    def write_outputs(self, out_dir: Path) -> dict:
+        """``frames.csv`` and ``summary.json`` of the frames shown so far."""
+        summary = self.summary()
+        write_csv(Path(out_dir) / "frames.csv", self.rows, FRAME_COLUMNS)
+        write_json(Path(out_dir) / "summary.json", summary)
+        return summary
+
+    def release(self) -> None:
+        self.technique.release()
+        self._hud_layer.release()
+        self._lines.release()
+        self.renderer.release()

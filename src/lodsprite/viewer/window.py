@@ -1,0 +1,140 @@
+"""The viewer's window: moderngl-window (pyglet backend) around :class:`ViewerCore`.
+
+moderngl-window makes the window and its OpenGL 3.3 core context and turns the
+toolkit's events into callbacks; lodsprite draws with that context through its public
+API (:class:`lodsprite.Renderer` with ``ctx=``).  The frame loop is ours: draw, swap,
+log, then sleep to the frame period (``fps``; 0 = as fast as possible, no vsync), so that
+keyframe work on the worker thread gets the time between frames, as at a display's rate.
+Sizes are the framebuffer's, not the window's, so HiDPI screens get full resolution.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from lodsprite.errors import InputError
+from lodsprite.scene import Scene
+from lodsprite.technique import TechniqueFactory
+from lodsprite.viewer.controls import CameraController, FlightRecorder
+from lodsprite.viewer.core import PlayPlan, ViewerCore
+
+DEFAULT_FPS = 60.0
+
+
+class NoDisplayError(InputError):
+    """No display to open a window on."""
+
+
+@dataclass(frozen=True)
+class WindowOptions:
+    """Window size ``(w, h)`` (screen units), title, frame rate cap (0: none), vsync."""
+
+    size: tuple[int, int] = (1024, 768)
+    title: str = "lodsprite"
+    fps: float = DEFAULT_FPS
+    vsync: bool = False
+    resizable: bool = True
+
+
+def check_display() -> None:
+    """Raise :class:`NoDisplayError` (one line) when no window can be opened here."""
+    if os.name == "posix" and not (os.environ.get("DISPLAY") or os.environ.get(
+            "WAYLAND_DISPLAY")) and platform_needs_display():
+        raise NoDisplayError("no display: lodsprite view needs a screen (set DISPLAY, or run "
+                             "it under xvfb-run for a virtual one)")
+
+
+def platform_needs_display() -> bool:
+    import sys
+
+    return sys.platform.startswith("linux")
+
+
+def open_window(options: WindowOptions):
+    """A moderngl-window window (pyglet) with an OpenGL 3.3 core context."""
+    check_display()
+    import moderngl_window
+    from moderngl_window import settings
+
+    settings.WINDOW["class"] = "moderngl_window.context.pyglet.Window"
+    settings.WINDOW["gl_version"] = (3, 3)
+    settings.WINDOW["size"] = tuple(options.size)
+    settings.WINDOW["title"] = options.title
+    settings.WINDOW["vsync"] = options.vsync
+    settings.WINDOW["resizable"] = options.resizable
+    settings.WINDOW["aspect_ratio"] = None
+    try:
+        return moderngl_window.create_window_from_settings()
+    except Exception as exc:  # pyglet raises several kinds when no window can be made
+        raise NoDisplayError(f"cannot open a window: {' '.join(str(exc).split())}") from exc
+
+
+def _key_name(window, key) -> str:
+    keys = window.keys
+    named = {keys.ESCAPE: "escape", keys.TAB: "tab", keys.LEFT_SHIFT: "shift",
+             keys.RIGHT_SHIFT: "shift"}
+    if key in named:
+        return named[key]
+    try:
+        return chr(key).lower()
+    except (TypeError, ValueError, OverflowError):
+        return ""
+
+
+def run_viewer(scene: Scene, factories: dict[str, TechniqueFactory], mode: str,
+               options: WindowOptions, play: PlayPlan | None = None,
+               record: Path | None = None, fov_y_deg: float = 45.0,
+               screenshot_dir: Path = Path("screenshots")) -> dict:
+    """Open the window and run until it closes (or a played path ends with ``exit``);
+    returns the summary of the frames shown."""
+    window = open_window(options)
+    recorder = FlightRecorder() if record is not None else None
+    controller = CameraController.for_terrain(scene.hf)
+    try:
+        core = ViewerCore(window.ctx, scene, window.buffer_size, factories, mode, controller,
+                          fov_y_deg, play, recorder, screenshot_dir)
+    except BaseException:
+        window.destroy()
+        raise
+    ratio = window.pixel_ratio
+
+    def on_key(key, action, modifiers):
+        name = _key_name(window, key)
+        if name:
+            core.key(name, action == window.keys.ACTION_PRESS)
+
+    window.key_event_func = on_key
+    window.mouse_drag_event_func = lambda x, y, dx, dy: core.drag(dx * ratio, dy * ratio)
+    window.mouse_scroll_event_func = lambda dx, dy: core.scroll(dy)
+    window.resize_func = lambda w, h: core.resize(window.buffer_size)
+    try:
+        _loop(window, core, options.fps)
+        if record is not None:
+            recorder.save(record, fov_y_deg)
+        return core.summary() if core.rows else {}
+    finally:
+        core.release()
+        window.destroy()
+
+
+def _loop(window, core: ViewerCore, fps: float) -> None:
+    period = 1.0 / fps if fps > 0 else 0.0
+    screen = window.ctx.screen
+    if core.play is not None:  # warm-up, untimed: shaders, first keyframe
+        core.warm_up(screen)
+        window.swap_buffers()
+    last = time.perf_counter()
+    while not window.is_closing and not core.quit:
+        start = time.perf_counter()
+        core.frame(min(start - last, 0.25), screen)
+        last = start
+        window.swap_buffers()
+        core.log_frame()
+        if period:
+            rest = period - (time.perf_counter() - start)
+            if rest > 0:
+                time.sleep(rest)
+
