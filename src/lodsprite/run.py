@@ -57,7 +57,7 @@ class RenderConfig:
     frames: int | None = None
     grid: int | None = None
     exaggeration: float = DEFAULT_EXAGGERATION
-    fov_y_deg: float = 45.0
+    fov_y_deg: float | None = None  # None: the path's own (45° for the built-in paths)
     save_frames: bool = False
     epsilon: float = DEFAULT_EPSILON_PX
     ground_truth: bool = False
@@ -117,6 +117,12 @@ def prepare(config: RenderConfig) -> tuple[Scene, CameraPath]:
     if config.mode != "full":
         level_step(scene.hf.quads, config.lod)
     return scene, get_path(config.path, scene.hf, config.frames)
+
+
+def field_of_view(config: RenderConfig, path: CameraPath) -> float:
+    """The vertical field of view (degrees) to render ``path`` with: the config's if set,
+    else the path's own (a path file keeps the field of view it was recorded with)."""
+    return path.fov_y_deg if config.fov_y_deg is None else config.fov_y_deg
 
 
 def reference_images(pr: PathRenderer, viewpoint, lod: int) -> tuple[np.ndarray, ...]:
@@ -246,7 +252,8 @@ def render_path(config: RenderConfig, out_dir: Path, progress: Progress | None =
     scene, path = prepare(config)
     out_dir = Path(out_dir)
     keyframes: list = []
-    with PathRenderer(scene, config.size, config.fov_y_deg) as pr, ExitStack() as stack:
+    with PathRenderer(scene, config.size, field_of_view(config, path)) as pr, \
+            ExitStack() as stack:
         writer = stack.enter_context(VideoWriter(video)) if video is not None else None
 
         def on_frame(i: int, image: np.ndarray) -> None:

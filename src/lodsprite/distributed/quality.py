@@ -36,6 +36,7 @@ from lodsprite.gl.paths import PathRenderer
 from lodsprite.gl.sprite import SpriteRenderer
 from lodsprite.run import (
     RenderConfig,
+    field_of_view,
     frame_quality,
     prepare,
     quality_summary,
@@ -73,7 +74,7 @@ class Replayer:
             raise InputError(f"stride must be >= 1, got {stride}")
         self.config, self.stride = config, stride
         scene, self.path = prepare(config)
-        self.paths = PathRenderer(scene, config.size, config.fov_y_deg)
+        self.paths = PathRenderer(scene, config.size, field_of_view(config, self.path))
         self.sprite = SpriteRenderer(self.paths.renderer, config.lod, config.visibility,
                                      border=config.border, guard_px=0)
         self.metric = ErrorMetric.for_level(scene.hf, config.lod)
@@ -153,7 +154,7 @@ def inline_quality(config: RenderConfig, stride: int = DEFAULT_STRIDE) -> dict:
     untimed run of it with ground truth; it draws the same frames as a timed run."""
     cfg = replace(config, mode="sprite", ground_truth=True, quality_stride=stride)
     scene, path = prepare(cfg)
-    with PathRenderer(scene, cfg.size, cfg.fov_y_deg) as pr:
+    with PathRenderer(scene, cfg.size, field_of_view(cfg, path)) as pr:
         rows = sprite_frames(pr, path, cfg)
     errors = np.array([r["error_px"] for r in rows])
     return _summary(errors, [r for r in rows if "rmse_sprite" in r], cfg.epsilon)

@@ -32,7 +32,7 @@ from lodsprite.distributed.render import scene_args
 from lodsprite.errors import InputError, LodspriteError
 from lodsprite.progress import Progress
 from lodsprite.report.io import write_csv, write_json
-from lodsprite.run import RenderConfig, prepare, timing_summary
+from lodsprite.run import RenderConfig, field_of_view, prepare, timing_summary
 
 FRAME_COLUMNS = ["frame", "mode", "ms", "triangles", "type", "keyframe_seq", "keyframe"]
 MAX_ERROR_OFF = ("off", "none")
@@ -159,7 +159,7 @@ def run_client(config: RenderConfig, servers: list[str], out_dir: Path,
     max_error = check_client_options(pace, adopt, max_error)
     scene, path = prepare(replace(config, mode="sprite"))
     args = scene_args(config.terrain, config.texture, config.grid, config.exaggeration,
-                      config.size, config.fov_y_deg)
+                      config.size, field_of_view(config, path))
     client = LodClient(scene, args, servers, config.size, config.lod, config.visibility,
                        config.epsilon, adopt, keys, config.border, pace, max_error)
     rows: list[dict] = []
