@@ -11,7 +11,8 @@ The public API (see the README's "Python API" section):
 * images: :func:`read_image`, :func:`write_image`;
 * batch runs: :class:`RenderConfig` and :func:`render_path` (what ``lodsprite render``
   does);
-* techniques the viewer drives: :class:`Technique` and :func:`terrain_techniques`;
+* techniques the viewer drives: :class:`Technique`, :func:`terrain_techniques`, and
+  :func:`view_scene`, the viewer window with your own techniques;
 * errors: :class:`LodspriteError` and its subclasses.
 """
 
@@ -37,6 +38,7 @@ _LAZY = {
     "load_scene": "lodsprite.scene", "SpriteFrame": "lodsprite.sprite.engine",
     "FrameInfo": "lodsprite.technique", "Param": "lodsprite.technique",
     "Technique": "lodsprite.technique", "terrain_techniques": "lodsprite.technique",
+    "view_scene": "lodsprite.viewer.app",
 }
 
 if TYPE_CHECKING:
@@ -47,6 +49,7 @@ if TYPE_CHECKING:
     from lodsprite.scene import Scene, load_scene
     from lodsprite.sprite.engine import SpriteFrame
     from lodsprite.technique import FrameInfo, Param, Technique, terrain_techniques
+    from lodsprite.viewer.app import view_scene
 
 
 def __getattr__(name: str):
@@ -90,5 +93,6 @@ __all__ = [
     "read_image",
     "render_path",
     "terrain_techniques",
+    "view_scene",
     "write_image",
 ]

@@ -63,6 +63,7 @@ class Renderer:
         self.gl = GLContext() if ctx is None else GLContext.wrap(ctx)
         self._paths = PathRenderer(scene, self.size, self.fov_y_deg, self.gl)
         self._presenter: Presenter | None = None
+        self._sprites: list[LodSprite] = []  # released with the renderer
 
     @property
     def info(self) -> GLInfo:
@@ -102,7 +103,9 @@ class Renderer:
         keyframe is rendered inline in the frame that needs it (the 1999 algorithm)."""
         if not epsilon_px > 0:
             raise InputError(f"epsilon must be > 0 pixels, got {epsilon_px}")
-        return LodSprite(self, epsilon_px, lod, threaded, visibility, guard_px, border)
+        sprite = LodSprite(self, epsilon_px, lod, threaded, visibility, guard_px, border)
+        self._sprites.append(sprite)
+        return sprite
 
     def draw_to(self, framebuffer: moderngl.Framebuffer | None = None) -> None:
         """Draw the last image over ``framebuffer``'s viewport (default: the one bound,
@@ -130,13 +133,20 @@ class Renderer:
         self._presenter.draw(texture, uv)
 
     def release(self) -> None:
-        """Release every GPU object (and the context, if the renderer made it)."""
+        """Release every GPU object, the sprites made here included (and the context, if
+        the renderer made it)."""
+        for sprite in self._sprites:
+            sprite.release()
+        self._sprites.clear()
         if self._presenter is not None:
             self._presenter.release()
             self._presenter = None
         if self._paths is not None:
             self._paths.release()
             self._paths = None
+        if self.gl is not None and self.gl.owned:
+            self.gl.release()
+            self.gl = None
 
     def __enter__(self) -> Renderer:
         return self
@@ -217,10 +227,22 @@ class LodSprite:
             self.renderer.draw_to(framebuffer)
 
     def release(self) -> None:
-        """Stop the keyframe worker (if any) and release the sprite's GPU objects."""
+        """Stop the keyframe worker (if any) and release the sprite's GPU objects (once;
+        :meth:`Renderer.release` calls it for every sprite not released yet)."""
+        if self.sprite is None:
+            return
         if isinstance(self.engine, ThreadedLodSpriteEngine):
             self.engine.close()
         self.sprite.release()
+        self.sprite = None
+        if self in self.renderer._sprites:
+            self.renderer._sprites.remove(self)
+
+    def __enter__(self) -> LodSprite:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
 
 
 def read_image(path: str | os.PathLike) -> np.ndarray:

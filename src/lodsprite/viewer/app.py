@@ -77,9 +77,26 @@ def view(o: ViewOptions) -> dict:
     o.validate()
     check_display()
     scene = load_scene(o.terrain, o.texture, o.grid)
-    plan = None
+    plan, fov = None, o.fov_y_deg
     if o.play is not None:
         path = get_path(o.play, scene.hf, o.frames)
-        plan = PlayPlan(path, o.out, o.screenshots, o.every, o.exit)
+        plan, fov = PlayPlan(path, o.out, o.screenshots, o.every, o.exit), path.fov_y_deg
     return run_viewer(scene, factories(o), o.mode, WindowOptions(o.size, fps=o.fps), plan,
-                      o.record, o.fov_y_deg, o.screenshots or Path("screenshots"))
+                      o.record, fov, o.screenshots or Path("screenshots"))
+
+
+def view_scene(scene, techniques: dict[str, TechniqueFactory], mode: str | None = None,
+               size: tuple[int, int] = (1024, 768), fps: float = 60.0,
+               path=None, fov_y_deg: float = 45.0) -> dict:
+    """Open the viewer on ``scene`` with your own ``techniques`` (factories by mode name;
+    keys 1-9 switch between them) starting in ``mode`` (default: the first).  ``path``: a
+    :class:`~lodsprite.paths.CameraPath` to play once (then quit) instead of flying.
+    Returns the summary of the frames shown.  Raises
+    :class:`~lodsprite.viewer.window.NoDisplayError` with no display."""
+    if not techniques:
+        raise InputError("view_scene needs at least one technique")
+    mode = mode if mode is not None else next(iter(techniques))
+    plan = PlayPlan(path) if path is not None else None
+    fov = path.fov_y_deg if path is not None else fov_y_deg
+    return run_viewer(scene, techniques, mode, WindowOptions(tuple(size), fps=fps), plan,
+                      None, fov)
