@@ -1,0 +1,96 @@
+"""In-window frame times of LOD-sprite against the offscreen spriteframe time (issue 13).
+
+For each terrain, in one run:
+
+* offscreen: ``lodsprite render --mode sprite`` along chen1999 (inline keyframes, EGL
+  context): the median spriteframe time, the reference;
+* in a window (``lodsprite view --play chen1999 --mode sprite --exit``), keyframes on the
+  worker thread (default) and inline (``--inline-keyframes``): median and p99 frame time
+  (from the start of a frame to its buffer swap), the technique's own time, keyframes and
+  the error of the frames shown.
+
+Prints p99 / median and median / offscreen spriteframe for each.  Needs a display: with
+none, it starts a virtual one (Xvfb, through xvfbwrapper).
+
+    python benchmarks/viewer_frames.py [--terrains jacksboro fractal:4096] [--frames 460]
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import subprocess
+import sys
+import tempfile
+from contextlib import nullcontext
+from pathlib import Path
+
+import numpy as np
+
+CLI = [sys.executable, "-c", "from lodsprite.cli import main; main()"]
+
+
+def run(args: list[str]) -> None:
+    proc = subprocess.run(CLI + args, capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise SystemExit(f"lodsprite {' '.join(args)} failed:\n{proc.stderr}")
+
+
+def offscreen_sprite_ms(terrain: str, frames: int, size: str, tmp: Path) -> float:
+    out = tmp / f"off-{terrain.replace(':', '_')}"
+    run(["render", "--terrain", terrain, "--mode", "sprite", "--frames", str(frames),
+         "--size", size, "--out", str(out)])
+    with open(out / "frames.csv") as f:
+        ms = [float(r["ms"]) for r in csv.DictReader(f) if r["type"] == "sprite"]
+    return float(np.median(ms))
+
+
+def window_run(terrain: str, frames: int, size: str, fps: float, inline: bool,
+               tmp: Path) -> dict:
+    out = tmp / f"win-{terrain.replace(':', '_')}-{'inline' if inline else 'worker'}"
+    run(["view", terrain, "--play", "chen1999", "--frames", str(frames), "--mode", "sprite",
+         "--size", size, "--fps", str(fps), "--exit", "--out", str(out)]
+        + (["--inline-keyframes"] if inline else []))
+    s = json.loads((out / "summary.json").read_text())
+    with open(out / "frames.csv") as f:
+        err = np.array([float(r["error_px"]) for r in csv.DictReader(f)])
+    s["error_mean"] = float(np.mean(err))
+    s["error_max"] = float(np.max(err))
+    s["over_eps"] = float(np.mean(err >= 1.0))
+    return s
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--terrains", nargs="+", default=["jacksboro", "fractal:4096"])
+    ap.add_argument("--frames", type=int, default=460)
+    ap.add_argument("--size", default="512x512")
+    ap.add_argument("--fps", type=float, default=60.0)
+    a = ap.parse_args()
+    display = nullcontext()
+    if not os.environ.get("DISPLAY"):
+        from xvfbwrapper import Xvfb
+
+        display = Xvfb(width=1280, height=1024, colordepth=24)
+    print(f"chen1999, {a.frames} frames, {a.size}, window frame cap {a.fps:g} fps")
+    print("| terrain | keyframes | median ms | p99 ms | p99/median | technique median ms | "
+          "offscreen sprite ms | median/offscreen | keyframes taken | error mean / max px "
+          "| frames >= ε |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    with display, tempfile.TemporaryDirectory() as tmp:
+        for terrain in a.terrains:
+            ref = offscreen_sprite_ms(terrain, a.frames, a.size, Path(tmp))
+            for inline in (False, True):
+                s = window_run(terrain, a.frames, a.size, a.fps, inline, Path(tmp))
+                print(f"| {terrain} | {'inline' if inline else 'worker thread'} | "
+                      f"{s['median_ms']:.2f} | {s['p99_ms']:.2f} | "
+                      f"{s['p99_ms'] / s['median_ms']:.2f} | {s['render_median_ms']:.2f} | "
+                      f"{ref:.2f} | {s['median_ms'] / ref:.2f} | {s['keyframes']} | "
+                      f"{s['error_mean']:.2f} / {s['error_max']:.2f} | "
+                      f"{100 * s['over_eps']:.0f} % |", flush=True)
+
+
+if __name__ == "__main__":
+    main()
