@@ -6,7 +6,7 @@ import json
 import numpy as np
 
 from lodsprite.camera import Viewpoint, fitted_projection
-from lodsprite.run import RenderConfig, prepare, render_path
+from lodsprite.run import RenderConfig, field_of_view, prepare, render_path
 from lodsprite.sprite.metric import ErrorMetric
 from lodsprite.sprite.policy import keyframe_error_px
 
@@ -33,7 +33,7 @@ def test_sprite_frames_name_the_keyframe_they_show_and_its_viewpoint(tmp_path, g
             continue
         eye = Viewpoint.from_dict(keys[shown[i]]["viewpoint"]).o
         vp = path.viewpoints[i]
-        projection = fitted_projection(vp, config.fov_y_deg, 1.0, *scene.hf.bounds(),
+        projection = fitted_projection(vp, field_of_view(config, path), 1.0, *scene.hf.bounds(),
                                        float(scene.hf.height_at(vp.o[0], vp.o[1])))
         err = keyframe_error_px(metric, metric.reproject(eye), vp, projection, 64)
         # the CSV keeps 6 significant digits
