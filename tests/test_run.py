@@ -41,3 +41,33 @@ def test_sprite_frames_name_the_keyframe_they_show_and_its_viewpoint(tmp_path, g
         checked += 1
     assert checked > 10
 
+
+
+def test_a_path_file_is_rendered_with_its_own_field_of_view(tmp_path):
+    from lodsprite import CameraPath, Renderer, get_path, load_scene, read_image
+    from lodsprite.metrics import rmse
+
+    scene = load_scene("fractal:64", grid=64)
+    vp = get_path("chen1999", scene.hf, 2).viewpoints[0]
+    CameraPath("narrow", (vp, vp), fov_y_deg=30.0).to_json(tmp_path / "narrow.json")
+    config = RenderConfig(terrain="fractal:64", grid=64, path=str(tmp_path / "narrow.json"),
+                          size=(64, 64), save_frames=True)
+    render_path(config, tmp_path / "out")
+    shown = read_image(tmp_path / "out" / "frames" / "frame_00000.png")
+    refs = {}
+    for fov in (30.0, 45.0):
+        with Renderer(scene, (64, 64), fov) as r:
+            r.render(vp)
+            refs[fov] = r.read_color()
+    assert rmse(shown, refs[30.0]) < 0.5 < rmse(shown, refs[45.0])
+
+
+def test_a_renderer_releases_the_context_it_made_and_its_sprites():
+    from lodsprite import Renderer, load_scene
+
+    with Renderer(load_scene("fractal:64", grid=64), (32, 32)) as r:
+        gl = r.gl
+        sprite = r.sprite()
+    assert gl.mgl is None and r.gl is None  # the EGL context was released
+    assert sprite.sprite is None  # and the sprite with it
+    sprite.release()  # a second release is harmless
