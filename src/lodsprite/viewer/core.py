@@ -87,6 +87,7 @@ class ViewerCore:
         self.quit = False
         self.screenshots: list[Path] = []
         self._panel_at = -math.inf
+        self._start = time.perf_counter()
         self._last_start: float | None = None
         self._last = None
 
@@ -148,10 +149,19 @@ class ViewerCore:
         """The framebuffer is now ``size = (w, h)`` pixels: remake renderer and technique."""
         if tuple(size) == self.renderer.size or min(size) < 16:
             return
+        renderer = None
+        try:  # the new pair first: on failure the old one goes on drawing
+            renderer = Renderer(self.scene, size, self.fov_y_deg, ctx=self.ctx)
+            technique = self.factories[self.mode](renderer)
+        except LodspriteError as exc:
+            if renderer is not None:
+                renderer.release()
+            self.hud.status = f"cannot resize: {exc}"
+            log.warning("cannot resize to %s: %s", size, exc)
+            return
         self.technique.release()
         self.renderer.release()
-        self.renderer = Renderer(self.scene, size, self.fov_y_deg, ctx=self.ctx)
-        self.technique = self.factories[self.mode](self.renderer)
+        self.renderer, self.technique = renderer, technique
         self.technique.set_fallback_tint(self.toggles["tint"])
 
     # ------------------------------------------------------------------ frames
@@ -189,6 +199,8 @@ class ViewerCore:
         """Log the frame just shown (call after the buffer swap): its time from the start
         of :meth:`frame` to now, the technique's own time and the interval since the
         previous frame's start; take the played path's screenshot; finish a played path."""
+        if self._last is None:  # no frame drawn yet
+            return
         now = time.perf_counter()
         ms = (now - self._start) * 1e3
         interval = (self._start - self._last_start) * 1e3 if self._last_start else 0.0
@@ -239,8 +251,10 @@ class ViewerCore:
         self._hud_layer.draw((w, h), ms, (8, ph + 8, min(240, w - 16), 60), top)
 
     def screenshot(self) -> Path:
-        """Write the frame shown (no HUD) as ``frame_NNNNN.png`` in the screenshot folder."""
-        path = self.screenshot_dir / f"frame_{self.index:05d}.png"
+        """Write the frame shown (no HUD) as ``frame_NNNNN.png`` in the screenshot folder,
+        NNNNN the number of that frame (the last one logged)."""
+        shown = self.rows[-1]["frame"] if self.rows else 0
+        path = self.screenshot_dir / f"frame_{shown:05d}.png"
         write_image(path, self.technique.read_image())
         self.screenshots.append(path)
         return path
