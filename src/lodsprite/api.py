@@ -49,11 +49,19 @@ class Renderer:
 
     ``ctx=None`` makes a headless EGL context that the renderer owns; a
     :class:`moderngl.Context` (current on this thread) is used as it is and never
-    released.  GPU objects live until :meth:`release` (or the ``with`` block's end).
+    released.  ``framebuffer``: one of that context's framebuffers (a window's screen,
+    with a depth buffer) to draw frames straight into, at its size, instead of an
+    offscreen image of the renderer's own: nothing to copy to show them.  GPU objects
+    live until :meth:`release` (or the ``with`` block's end).
     """
 
     def __init__(self, scene: Scene, size: tuple[int, int] = (512, 512),
-                 fov_y_deg: float = 45.0, ctx: moderngl.Context | None = None) -> None:
+                 fov_y_deg: float = 45.0, ctx: moderngl.Context | None = None,
+                 framebuffer: moderngl.Framebuffer | None = None) -> None:
+        if framebuffer is not None:
+            if ctx is None:
+                raise InputError("framebuffer= needs the ctx= it belongs to")
+            size = tuple(framebuffer.viewport[2:])
         w, h = (int(v) for v in size)
         if not (16 <= w <= 8192 and 16 <= h <= 8192):
             raise InputError(f"image size must be between 16 and 8192 pixels, got {w}x{h}")
@@ -61,7 +69,7 @@ class Renderer:
         self.size = (w, h)
         self.fov_y_deg = float(fov_y_deg)
         self.gl = GLContext() if ctx is None else GLContext.wrap(ctx)
-        self._paths = PathRenderer(scene, self.size, self.fov_y_deg, self.gl)
+        self._paths = PathRenderer(scene, self.size, self.fov_y_deg, self.gl, framebuffer)
         self._presenter: Presenter | None = None
         self._sprites: list[LodSprite] = []  # released with the renderer
 
@@ -111,6 +119,11 @@ class Renderer:
         """Draw the last image over ``framebuffer``'s viewport (default: the one bound,
         for embedding in an application's frame)."""
         target = self._paths.renderer.target
+        if target.external:  # already drawn there, or copied from there
+            dst = framebuffer if framebuffer is not None else self.gl.mgl.fbo
+            if dst is not target.fbo and dst.glo != target.fbo.glo:
+                self.gl.mgl.copy_framebuffer(dst, target.fbo)
+            return
         self.present(target.color, (0.0, 0.0, 1.0, 1.0), framebuffer, target.fbo)
 
     def present(self, texture: moderngl.Texture, uv: tuple[float, float, float, float],

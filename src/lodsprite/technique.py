@@ -194,8 +194,14 @@ class SpriteTechnique(Technique):
         self.sprite.sprite.fallback_tint = FALLBACK_TINT if on else (*FALLBACK_TINT[:3], 0.0)
 
     def status(self) -> str:
-        mode = "worker thread" if self.threaded else "inline"
-        return f"keyframes: {mode}"
+        if not self.threaded:
+            return "keyframes: inline"
+        engine = self.sprite.engine
+        w = engine.worker
+        state = f"failed: {w.error}" if w.error is not None else (
+            "rendering" if w.busy else "idle")
+        return (f"keyframes: worker thread, {state}; {w.rendered} rendered, "
+                f"{engine.discarded} discarded, lead {w.lead_s * 1e3:.0f} ms")
 
     def release(self) -> None:
         self.sprite.release()

@@ -318,9 +318,9 @@ def test_played_path_without_exit_hands_over_to_the_controller(make_core, scene,
 def test_key_p_writes_a_screenshot(make_core, tmp_path):
     core, t = make_core(screenshot_dir=tmp_path / "s"), make_core.target()
     show(core, t.fbo)
-    core.key("p")
-    # named after the frame shown (frame 0), not the next one
-    assert [p.name for p in (tmp_path / "s").iterdir()] == ["frame_00000.png"]
+    core.key("p")  # a screenshot of the next frame, read before its HUD
+    show(core, t.fbo)
+    assert [p.name for p in (tmp_path / "s").iterdir()] == ["frame_00001.png"]
     assert np.array_equal(read_image(core.screenshots[0]), core.technique.read_image())
 
 
@@ -406,3 +406,24 @@ def test_log_frame_before_any_frame_does_nothing(make_core):
     core = make_core()
     core.log_frame()
     assert core.rows == [] and core.index == 0
+
+
+@pytest.mark.parametrize("mode", ["full", "sprite"])
+def test_frames_drawn_straight_into_the_window_framebuffer_match_the_offscreen_ones(
+        make_core, gl, scene, tmp_path, mode):
+    """As the window does: the renderer draws into the given framebuffer (no copy)."""
+    path = get_path("chen1999", scene.hf, 4)
+    window = make_core.target()  # stands in for the window's screen (colour and depth)
+    direct = make_core(mode=mode, framebuffer=window.fbo,
+                       play=PlayPlan(path, screenshots=tmp_path / "d", every=1))
+    direct.toggles["hud"] = False
+    offscreen = make_core(mode=mode, play=PlayPlan(path, screenshots=tmp_path / "o", every=1))
+    offscreen.toggles["hud"] = False
+    other = make_core.target()
+    assert play(direct, window.fbo) == play(offscreen, other.fbo) == 4
+    for i in range(4):
+        a = read_image(tmp_path / "d" / f"frame_{i:05d}.png")
+        b = read_image(tmp_path / "o" / f"frame_{i:05d}.png")
+        assert np.abs(a.astype(int) - b).max() <= 1, i
+    # the framebuffer holds the last frame, and the screenshot is what it held
+    assert np.abs(window.read_color().astype(int) - a).max() <= 1

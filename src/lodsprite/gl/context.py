@@ -30,16 +30,36 @@ MISSING_GL_HELP = (
 
 
 @functools.cache
-def _gl_finish():
-    """``glFinish`` from the GL dispatch library (glvnd's libOpenGL, else libGL), or None."""
+def _gl_library() -> ctypes.CDLL | None:
+    """The GL dispatch library (glvnd's libOpenGL, else libGL), or None."""
     names = ["libOpenGL.so.0", "libGL.so.1", ctypes.util.find_library("OpenGL"),
              ctypes.util.find_library("GL")]
     for name in filter(None, names):
         try:
-            return ctypes.CDLL(name).glFinish
-        except (OSError, AttributeError):
+            return ctypes.CDLL(name)
+        except OSError:
             continue
     return None
+
+
+def _gl_finish():
+    """``glFinish`` through ctypes (which releases the GIL while it runs), or None."""
+    lib = _gl_library()
+    return getattr(lib, "glFinish", None) if lib is not None else None
+
+
+@functools.cache
+def gl_draw_elements_instanced():
+    """``glDrawElementsInstanced(mode, count, type, offset, instances)`` through ctypes
+    (the GIL released while it runs: on llvmpipe a draw call shades the vertices on the
+    calling thread), or None where the GL library cannot be found."""
+    lib = _gl_library()
+    fn = getattr(lib, "glDrawElementsInstanced", None) if lib is not None else None
+    if fn is not None:
+        fn.argtypes = [ctypes.c_uint, ctypes.c_int, ctypes.c_uint, ctypes.c_void_p,
+                       ctypes.c_int]
+        fn.restype = None
+    return fn
 
 
 class GLError(LodspriteError, RuntimeError):

@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import time
 
+import moderngl
+
 from lodsprite.gl.context import GLContext
+from lodsprite.gl.target import RenderTarget
 from lodsprite.gl.terrain import TerrainGeometry, TerrainRenderer
 from lodsprite.scene import Scene
 
@@ -13,11 +16,14 @@ class PathRenderer:
     """GL state for one scene: context, geometry and renderer, created once, released once."""
 
     def __init__(self, scene: Scene, size: tuple[int, int], fov_y_deg: float = 45.0,
-                 ctx: GLContext | None = None) -> None:
+                 ctx: GLContext | None = None,
+                 framebuffer: moderngl.Framebuffer | None = None) -> None:
         self.own_ctx = ctx is None
         self.ctx = ctx or GLContext()
         self.geometry = TerrainGeometry(self.ctx, scene.hf, scene.texture)
-        self.renderer = TerrainRenderer(self.ctx, self.geometry, size[0], size[1], fov_y_deg)
+        target = RenderTarget.wrap(self.ctx, framebuffer) if framebuffer is not None else None
+        self.renderer = TerrainRenderer(self.ctx, self.geometry, size[0], size[1], fov_y_deg,
+                                        target)
 
     def timed(self, viewpoint, level: int | None) -> tuple[float, int]:
         """Render one frame; (milliseconds including ``ctx.finish()``, triangles)."""

@@ -20,7 +20,7 @@ from lodsprite.camera import (
     frustum_planes,
 )
 from lodsprite.errors import InputError
-from lodsprite.gl.context import GLContext
+from lodsprite.gl.context import GLContext, gl_draw_elements_instanced
 from lodsprite.gl.shaders import TERRAIN_FS, TERRAIN_VS, proxy_twin
 from lodsprite.gl.target import RenderTarget
 from lodsprite.terrain.heightfield import HeightField
@@ -28,6 +28,7 @@ from lodsprite.terrain.lod import DEFAULT_CHUNK, ChunkLayout, chunk_layout, grid
 from lodsprite.terrain.proxy import proxy_mesh
 
 SKY_RGB = (0.62, 0.74, 0.86)
+GL_UNSIGNED_INT = 0x1405
 
 
 @dataclass(frozen=True)
@@ -148,16 +149,22 @@ class TerrainRenderer:
     """
 
     def __init__(self, ctx: GLContext, geometry: TerrainGeometry, width: int = 512,
-                 height: int = 512, fov_y_deg: float = 45.0) -> None:
+                 height: int = 512, fov_y_deg: float = 45.0,
+                 target: RenderTarget | None = None) -> None:
         self.ctx = ctx
         self.geometry = geometry
         self.fov_y_deg = fov_y_deg
-        self.target = RenderTarget(ctx, width, height)
+        # Where frames go: a target of its own, or a given one (an application's window).
+        self.target = target if target is not None else RenderTarget(ctx, width, height)
         self.program = ctx.mgl.program(vertex_shader=TERRAIN_VS, fragment_shader=TERRAIN_FS)
         self.proxy_program = ctx.mgl.program(vertex_shader=proxy_twin(TERRAIN_VS),
                                              fragment_shader=TERRAIN_FS)
         self._vaos: dict[int, moderngl.VertexArray] = {}
         self._proxy_vaos: dict[tuple[int, bool], moderngl.VertexArray] = {}
+        # Issue the chunk draws through ctypes, without the GIL (for worker threads: on
+        # llvmpipe a large draw call shades its vertices on the calling thread, 30-40 ms
+        # at full resolution, and moderngl holds the GIL meanwhile).
+        self.unlocked_draws = False
 
     def vao(self, program: moderngl.Program, chunk_quads: int,
             cache: dict[int, moderngl.VertexArray]) -> moderngl.VertexArray:
@@ -199,8 +206,14 @@ class TerrainRenderer:
         self.geometry.set_uniforms(program, layout.step)
         program["u_mvp"].write(mat_bytes(view_proj))
         if chunks:
-            self.vao(program, layout.chunk_quads, cache).render(moderngl.TRIANGLES,
-                                                                 instances=chunks)
+            vao = self.vao(program, layout.chunk_quads, cache)
+            draw = gl_draw_elements_instanced() if self.unlocked_draws else None
+            if draw is None:
+                vao.render(moderngl.TRIANGLES, instances=chunks)
+            else:  # bind program and vertex array through moderngl, then draw
+                vao.render(moderngl.TRIANGLES, vertices=0, instances=chunks)
+                draw(moderngl.TRIANGLES, self.geometry.mesh(layout.chunk_quads)[2],
+                     GL_UNSIGNED_INT, None, chunks)
         return FrameStats(chunks * layout.triangles_per_chunk, chunks, projection)
 
     def _begin(self, target: RenderTarget | None) -> None:

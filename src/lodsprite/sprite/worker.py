@@ -210,6 +210,7 @@ class _WorkerGL:
         from lodsprite.gl.sprite import SpriteRenderer
 
         self.paths = PathRenderer(scene, s.size, s.fov_y_deg)
+        self.paths.renderer.unlocked_draws = True  # the drawing thread runs meanwhile
         self.sprite = SpriteRenderer(self.paths.renderer, s.lod, s.visibility, border=s.border,
                                      guard_px=s.guard_px)
         self.metric = ErrorMetric.for_level(scene.hf, s.lod)

@@ -8,7 +8,8 @@ only through :class:`~lodsprite.technique.Technique` and a dict of factories by 
 
 Keys: ``1``-``9`` switch mode (in the order of the factories), ``[`` / ``]`` step the
 technique's parameter (ε in sprite mode, N in lod mode), ``x`` coarse wireframe, ``t``
-fallback tint, ``k`` keyframe frustum, ``h`` HUD, ``p`` screenshot, ``escape`` quits; the
+fallback tint, ``k`` keyframe frustum, ``h`` HUD, ``p`` screenshot (of the next frame, without
+overlays and HUD), ``escape`` quits; the
 rest go to the :class:`~lodsprite.viewer.controls.CameraController` (WASD/QE fly, shift
 faster, tab fly/orbit, r reset).
 """
@@ -63,7 +64,8 @@ class ViewerCore:
                  factories: dict[str, TechniqueFactory], mode: str,
                  controller: CameraController, fov_y_deg: float = 45.0,
                  play: PlayPlan | None = None, record: FlightRecorder | None = None,
-                 screenshot_dir: Path = Path("screenshots")) -> None:
+                 screenshot_dir: Path = Path("screenshots"),
+                 framebuffer: moderngl.Framebuffer | None = None) -> None:
         if mode not in factories:
             raise LodspriteError(f"unknown mode {mode!r}: use one of {', '.join(factories)}")
         self.ctx = ctx
@@ -76,7 +78,9 @@ class ViewerCore:
         self.screenshot_dir = Path(play.screenshots) if play and play.screenshots else Path(
             screenshot_dir)
         self.toggles = {"wireframe": False, "tint": False, "frustum": False, "hud": True}
-        self.renderer = Renderer(scene, size, fov_y_deg, ctx=ctx)
+        # With ``framebuffer`` (the window's), frames are drawn straight into it.
+        self.framebuffer = framebuffer
+        self.renderer = Renderer(scene, size, fov_y_deg, ctx=ctx, framebuffer=framebuffer)
         self.hud = HudState(renderer=self.renderer.info.renderer)
         self._hud_layer = HudLayer(self.renderer.gl)
         self._lines = LineOverlay(self.renderer.gl)
@@ -87,6 +91,9 @@ class ViewerCore:
         self.quit = False
         self.screenshots: list[Path] = []
         self._panel_at = -math.inf
+        self._want_shot = False
+        self._shot: np.ndarray | None = None
+        self._shot_ms = 0.0
         self._start = time.perf_counter()
         self._last_start: float | None = None
         self._last = None
@@ -105,7 +112,7 @@ class ViewerCore:
         elif pressed and name in TOGGLE_KEYS:
             self.toggle(TOGGLE_KEYS[name])
         elif pressed and name == "p":
-            self.screenshot()
+            self._want_shot = True  # of the next frame, before the HUD is drawn
         elif pressed and name == "escape":
             self.quit = True
         else:
@@ -150,8 +157,11 @@ class ViewerCore:
         if tuple(size) == self.renderer.size or min(size) < 16:
             return
         renderer = None
+        if self.framebuffer is not None:  # the window's, at its new size
+            self.framebuffer = self.ctx.detect_framebuffer(0)
         try:  # the new pair first: on failure the old one goes on drawing
-            renderer = Renderer(self.scene, size, self.fov_y_deg, ctx=self.ctx)
+            renderer = Renderer(self.scene, size, self.fov_y_deg, ctx=self.ctx,
+                                framebuffer=self.framebuffer)
             technique = self.factories[self.mode](renderer)
         except LodspriteError as exc:
             if renderer is not None:
@@ -178,6 +188,11 @@ class ViewerCore:
         self._start = time.perf_counter()
         vp = self.viewpoint(dt_s)
         self._last = self.technique.frame(vp)
+        self._shot, self._shot_ms = None, 0.0
+        if self._shot_due():  # read before overlays and HUD; its time is not the frame's
+            t = time.perf_counter()
+            self._shot = self.technique.read_image()
+            self._shot_ms = (time.perf_counter() - t) * 1e3
         framebuffer.use()
         self.technique.draw_to(framebuffer)
         self._overlays(vp)
@@ -185,6 +200,11 @@ class ViewerCore:
             self.record.append(vp)
         if self.toggles["hud"]:
             self._draw_hud(framebuffer)
+
+    def _shot_due(self) -> bool:
+        plan = self.play
+        return self._want_shot or (plan is not None and plan.screenshots is not None
+                                   and self.index % plan.every == 0)
 
     def warm_up(self, framebuffer: moderngl.Framebuffer) -> None:
         """One untimed, unlogged frame at the first viewpoint (shader compilation, the
@@ -202,7 +222,7 @@ class ViewerCore:
         if self._last is None:  # no frame drawn yet
             return
         now = time.perf_counter()
-        ms = (now - self._start) * 1e3
+        ms = (now - self._start) * 1e3 - self._shot_ms
         interval = (self._start - self._last_start) * 1e3 if self._last_start else 0.0
         self._last_start = self._start
         f = self._last
@@ -212,10 +232,11 @@ class ViewerCore:
         self.rows.append({"frame": self.index, "type": f.type, "ms": ms, "render_ms": f.ms,
                           "interval_ms": interval, "triangles": f.triangles,
                           "error_px": f.error_px, "keyframes": f.keyframes})
-        plan = self.play
-        if plan is not None and plan.screenshots is not None and self.index % plan.every == 0:
-            self.screenshot()
+        if self._shot is not None:
+            self.screenshot(self._shot)
+            self._shot, self._want_shot = None, False
         self.index += 1
+        plan = self.play
         if plan is not None and self.index >= len(plan.path):
             if plan.out_dir is not None:
                 self.write_outputs(plan.out_dir)
@@ -250,12 +271,13 @@ class ViewerCore:
         top = max(33.4, float(np.percentile(ms, 99)) * 1.2) if len(ms) else 33.4
         self._hud_layer.draw((w, h), ms, (8, ph + 8, min(240, w - 16), 60), top)
 
-    def screenshot(self) -> Path:
-        """Write the frame shown (no HUD) as ``frame_NNNNN.png`` in the screenshot folder,
-        NNNNN the number of that frame (the last one logged)."""
+    def screenshot(self, image: np.ndarray | None = None) -> Path:
+        """Write ``image`` (default: the frame shown, read now) as ``frame_NNNNN.png`` in
+        the screenshot folder, NNNNN the number of that frame (the last one logged).  The
+        viewer reads a frame before drawing its overlays and HUD, so none are in it."""
         shown = self.rows[-1]["frame"] if self.rows else 0
         path = self.screenshot_dir / f"frame_{shown:05d}.png"
-        write_image(path, self.technique.read_image())
+        write_image(path, self.technique.read_image() if image is None else image)
         self.screenshots.append(path)
         return path
 

@@ -11,6 +11,7 @@ Sizes are the framebuffer's, not the window's, so HiDPI screens get full resolut
 from __future__ import annotations
 
 import os
+import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -22,6 +23,7 @@ from lodsprite.viewer.controls import CameraController, FlightRecorder
 from lodsprite.viewer.core import PlayPlan, ViewerCore
 
 DEFAULT_FPS = 60.0
+SWITCH_INTERVAL_S = 0.0005
 
 
 class NoDisplayError(InputError):
@@ -48,8 +50,6 @@ def check_display() -> None:
 
 
 def platform_needs_display() -> bool:
-    import sys
-
     return sys.platform.startswith("linux")
 
 
@@ -95,7 +95,7 @@ def run_viewer(scene: Scene, factories: dict[str, TechniqueFactory], mode: str,
     controller = CameraController.for_terrain(scene.hf)
     try:
         core = ViewerCore(window.ctx, scene, window.buffer_size, factories, mode, controller,
-                          fov_y_deg, play, recorder, screenshot_dir)
+                          fov_y_deg, play, recorder, screenshot_dir, window.ctx.screen)
     except BaseException:
         window.destroy()
         raise
@@ -122,14 +122,25 @@ def run_viewer(scene: Scene, factories: dict[str, TechniqueFactory], mode: str,
 
 def _loop(window, core: ViewerCore, fps: float) -> None:
     period = 1.0 / fps if fps > 0 else 0.0
-    screen = window.ctx.screen
+    # The keyframe worker thread holds the GIL in numpy and readbacks; a drawing thread
+    # that wants it back waits up to the switch interval (5 ms by default): 0.5 ms keeps
+    # that wait under a tenth of a frame.
+    interval = sys.getswitchinterval()
+    sys.setswitchinterval(min(interval, SWITCH_INTERVAL_S))
+    try:
+        _frames(window, core, period)
+    finally:
+        sys.setswitchinterval(interval)
+
+
+def _frames(window, core: ViewerCore, period: float) -> None:
     if core.play is not None:  # warm-up, untimed: shaders, first keyframe
-        core.warm_up(screen)
+        core.warm_up(core.framebuffer)
         window.swap_buffers()
     last = time.perf_counter()
     while not window.is_closing and not core.quit:
         start = time.perf_counter()
-        core.frame(min(start - last, 0.25), screen)
+        core.frame(min(start - last, 0.25), core.framebuffer)
         last = start
         window.swap_buffers()
         core.log_frame()
