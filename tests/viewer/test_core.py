@@ -377,7 +377,9 @@ def test_threaded_sprite_mode_renders_and_release_stops_the_worker(make_core, sc
     t = make_core.target()
     assert len(workers()) == before + 1
     assert play(core, t.fbo) == 8
-    assert core.hud.keyframes >= 1 and core.technique.status() == "keyframes: worker thread"
+    status = core.technique.status()
+    assert core.hud.keyframes >= 1 and status.startswith("keyframes: worker thread")
+    assert "lead -" not in status  # the lead is a latency, never negative
     assert {r["type"] for r in core.rows} <= {"keyframe", "first_sprite", "sprite"}
     assert core.technique.read_image().std() > 0
     core.technique.release()

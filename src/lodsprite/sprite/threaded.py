@@ -75,7 +75,7 @@ class ThreadedLodSpriteEngine:
                                     key.zbuffer)
         self._c_prime = key.c_prime
         self.keyframes.append(KeyChoice(key.viewpoint, key.frame_projection, key.predicted))
-        latency = now - key.requested_at
+        latency = max(time.perf_counter() - key.requested_at, 0.0)
         w = LEAD_SMOOTHING if self.worker.lead_s > 0 else 1.0
         self.worker.lead_s = (1 - w) * self.worker.lead_s + w * latency
 
