@@ -266,7 +266,8 @@ class CameraController:
         lifted = self._lift(eye)
         if lifted is not eye:
             self._orbit_from_eye(lifted)
-            eye = self._orbit_eye()
+            # the round trip through angles (and the elevation limit) can lose the lift
+            eye = self._lift(self._orbit_eye())
         self._eye = eye
         self._heading, self._pitch = (self._az + math.pi) % math.tau, -self._el
         self._vp = _oriented(self._heading, self._pitch, eye)
