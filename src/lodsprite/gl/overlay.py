@@ -5,7 +5,7 @@
   size than the window's framebuffer).
 * :class:`LineOverlay` draws world-space line segments (a keyframe's frustum) and the
   coarse level as a wireframe, over the frame.
-* :class:`HudLayer` draws an RGBA panel (text the caller rasterised) and a rolling
+* :class:`HudLayer` draws text from a glyph atlas on a translucent panel and a rolling
   frame-time graph as a line strip, in pixels from the top-left corner.
 
 GPU objects are made once and reused every frame; only small uniforms and vertex data
@@ -158,14 +158,49 @@ class LineOverlay:
             obj.release()
 
 
-class HudLayer:
-    """An RGBA text panel and a frame-time graph, drawn in window pixels."""
+_TEXT_VS = """#version 330
+uniform vec2 u_viewport;   // pixels
+in vec2 in_xy;             // pixels from the top-left
+in vec2 in_uv;
+out vec2 v_uv;
+void main() {
+    v_uv = in_uv;
+    gl_Position = vec4(2.0 * in_xy.x / u_viewport.x - 1.0, 1.0 - 2.0 * in_xy.y / u_viewport.y,
+                       0.0, 1.0);
+}
+"""
+_TEXT_FS = """#version 330
+uniform sampler2D u_atlas;  // glyph coverage
+uniform vec4 u_rgba;
+in vec2 v_uv;
+out vec4 f_color;
+void main() { f_color = vec4(u_rgba.rgb, u_rgba.a * texture(u_atlas, v_uv).r); }
+"""
+PANEL_RGBA = (0.04, 0.055, 0.08, 0.67)
+TEXT_RGBA = (0.92, 0.94, 0.96, 1.0)
+GRAPH_RGBA = (1.0, 0.85, 0.2, 1.0)
 
-    def __init__(self, ctx: GLContext, graph_points: int = 240) -> None:
+
+class HudLayer:
+    """Text from a glyph atlas on a translucent panel, and a frame-time graph, drawn in
+    window pixels (:mod:`lodsprite.viewer.hud` lays the text out)."""
+
+    def __init__(self, ctx: GLContext, atlas_alpha: np.ndarray, max_chars: int = 2048,
+                 graph_points: int = 240) -> None:
         mgl = ctx.mgl
         self.ctx = ctx
-        self.quad = _Quad(ctx, _QUAD_FS)
-        self.panel: moderngl.Texture | None = None
+        h, w = atlas_alpha.shape
+        # v runs down the atlas image (row 0 at the top): upload rows as they are.
+        self.atlas = mgl.texture((w, h), 1, np.ascontiguousarray(atlas_alpha).tobytes(),
+                                 alignment=1)
+        self.atlas.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        self.text_program = mgl.program(vertex_shader=_TEXT_VS, fragment_shader=_TEXT_FS)
+        self.max_chars = max_chars
+        self.text_vbo = mgl.buffer(reserve=(max_chars + 1) * 6 * 16)
+        self.text_vao = mgl.vertex_array(self.text_program,
+                                         [(self.text_vbo, "2f 2f", "in_xy", "in_uv")])
+        self._glyph_vertices = 0
+        self.panel_height = 0.0
         self.graph_points = graph_points
         self.line_program = mgl.program(vertex_shader="""#version 330
 in vec2 in_xy;
@@ -174,32 +209,35 @@ void main() { gl_Position = vec4(in_xy, 0.0, 1.0); }
         self.graph_vbo = mgl.buffer(reserve=graph_points * 8)
         self.graph_vao = mgl.vertex_array(self.line_program, [(self.graph_vbo, "2f", "in_xy")])
 
-    def set_panel(self, rgba: np.ndarray) -> None:
-        """Replace the panel image, ``(h, w, 4) uint8``, row 0 at the top."""
-        h, w = rgba.shape[:2]
-        if self.panel is None or self.panel.size != (w, h):
-            if self.panel is not None:
-                self.panel.release()
-            self.panel = self.ctx.mgl.texture((w, h), 4)
-            self.panel.filter = (moderngl.NEAREST, moderngl.NEAREST)
-        self.panel.write(np.ascontiguousarray(rgba[::-1]).tobytes())
+    def set_text(self, background: np.ndarray, glyphs: np.ndarray) -> None:
+        """The panel's quads: ``background (6, 4)`` and ``glyphs (n*6, 4) float32``
+        vertices ``x, y, u, v`` (pixels from the top-left; atlas coordinates), as
+        :func:`lodsprite.viewer.hud.layout_text` makes them."""
+        glyphs = glyphs[: self.max_chars * 6]
+        data = np.ascontiguousarray(np.concatenate([background, glyphs]), dtype=np.float32)
+        self.text_vbo.write(data.tobytes())
+        self._glyph_vertices = len(glyphs)
+        self.panel_height = float(background[:, 1].max())
 
     def draw(self, viewport: tuple[int, int], graph_ms: np.ndarray,
              graph_box: tuple[int, int, int, int], graph_max_ms: float) -> None:
-        """Draw the panel at the top-left corner and the graph of ``graph_ms`` (oldest
-        first) in ``graph_box = (x, y, w, h)`` pixels from the top-left, scaled so that
+        """Draw the panel and its text, and the graph of ``graph_ms`` (oldest first) in
+        ``graph_box = (x, y, w, h)`` pixels from the top-left, scaled so that
         ``graph_max_ms`` reaches the top of the box.  ``viewport`` is ``(w, h)`` pixels."""
         mgl = self.ctx.mgl
         vw, vh = viewport
         mgl.disable(moderngl.DEPTH_TEST)
         mgl.enable(moderngl.BLEND)
         mgl.blend_func = moderngl.SRC_ALPHA, moderngl.ONE_MINUS_SRC_ALPHA
-        if self.panel is not None:
-            pw, ph = self.panel.size
-            self.panel.use(0)
-            self.quad.program["u_image"].value = 0
-            self.quad.draw((-1.0, 1.0 - 2.0 * ph / vh, -1.0 + 2.0 * pw / vw, 1.0),
-                           (0.0, 0.0, 1.0, 1.0))
+        if self._glyph_vertices:
+            self.atlas.use(0)
+            prog = self.text_program
+            prog["u_atlas"].value = 0
+            prog["u_viewport"].value = (float(vw), float(vh))
+            prog["u_rgba"].value = PANEL_RGBA
+            self.text_vao.render(moderngl.TRIANGLES, vertices=6)
+            prog["u_rgba"].value = TEXT_RGBA
+            self.text_vao.render(moderngl.TRIANGLES, vertices=self._glyph_vertices, first=6)
         ms = np.asarray(graph_ms, dtype=np.float32)[-self.graph_points:]
         if len(ms) >= 2:
             x, y, w, h = graph_box
@@ -207,14 +245,11 @@ void main() { gl_Position = vec4(in_xy, 0.0, 1.0); }
             py = y + h - h * np.clip(ms / graph_max_ms, 0.0, 1.0)
             xy = np.stack([2.0 * px / vw - 1.0, 1.0 - 2.0 * py / vh], axis=1)
             self.graph_vbo.write(np.ascontiguousarray(xy, dtype=np.float32).tobytes())
-            self.line_program["u_rgba"].value = (1.0, 0.85, 0.2, 1.0)
+            self.line_program["u_rgba"].value = GRAPH_RGBA
             self.graph_vao.render(moderngl.LINE_STRIP, vertices=len(ms))
         mgl.disable(moderngl.BLEND)
 
     def release(self) -> None:
-        if self.panel is not None:
-            self.panel.release()
-            self.panel = None
-        for obj in (self.graph_vao, self.graph_vbo, self.line_program):
+        for obj in (self.text_vao, self.text_vbo, self.text_program, self.atlas,
+                    self.graph_vao, self.graph_vbo, self.line_program):
             obj.release()
-        self.quad.release()

@@ -34,7 +34,7 @@ from lodsprite.report.io import write_csv, write_json
 from lodsprite.scene import Scene
 from lodsprite.technique import Technique, TechniqueFactory
 from lodsprite.viewer.controls import CameraController, FlightRecorder
-from lodsprite.viewer.hud import PANEL_HZ, HudState, text_panel
+from lodsprite.viewer.hud import PANEL_HZ, HudState, glyph_atlas, layout_text
 
 log = logging.getLogger(__name__)
 
@@ -82,7 +82,8 @@ class ViewerCore:
         self.framebuffer = framebuffer
         self.renderer = Renderer(scene, size, fov_y_deg, ctx=ctx, framebuffer=framebuffer)
         self.hud = HudState(renderer=self.renderer.info.renderer)
-        self._hud_layer = HudLayer(self.renderer.gl)
+        self._atlas = glyph_atlas(26 if max(size) >= 2000 else 13)  # HiDPI: twice the size
+        self._hud_layer = HudLayer(self.renderer.gl, self._atlas.alpha)
         self._lines = LineOverlay(self.renderer.gl)
         self.mode = mode
         self.technique: Technique = self.factories[mode](self.renderer)
@@ -206,13 +207,18 @@ class ViewerCore:
         return self._want_shot or (plan is not None and plan.screenshots is not None
                                    and self.index % plan.every == 0)
 
-    def warm_up(self, framebuffer: moderngl.Framebuffer) -> None:
-        """One untimed, unlogged frame at the first viewpoint (shader compilation, the
-        first keyframe), as ``lodsprite render`` does before its timed frames."""
-        vp = self.viewpoint(0.0)
-        self.technique.frame(vp)
-        framebuffer.use()
-        self.technique.draw_to(framebuffer)
+    def warm_up(self, framebuffer: moderngl.Framebuffer, frames: int = 3) -> None:
+        """Untimed, unlogged frames at the first viewpoint, as ``lodsprite render`` does
+        before its timed frames: shaders compiled (llvmpipe compiles a shader variant at
+        its first draw), the first keyframe taken, overlays and HUD drawn once."""
+        record, self.record = self.record, None
+        try:
+            for _ in range(frames):
+                self.frame(0.0, framebuffer)
+                self._panel_at = -math.inf
+        finally:
+            self.record = record
+        self._last = None
         self.ctx.finish()
 
     def log_frame(self) -> None:
@@ -263,10 +269,9 @@ class ViewerCore:
                                  for p in self.technique.params().values())
             h.toggles = "  ".join(k for k, on in self.toggles.items() if on and k != "hud")
             h.status = h.status if h.status.startswith("cannot") else self.technique.status()
-            scale = 2 if framebuffer.width >= 2000 else 1
-            self._hud_layer.set_panel(text_panel(h.lines(), scale))
+            self._hud_layer.set_text(*layout_text(h.lines(), self._atlas))
         w, h = framebuffer.width, framebuffer.height
-        ph = self._hud_layer.panel.size[1] if self._hud_layer.panel else 0
+        ph = int(self._hud_layer.panel_height)
         ms = np.asarray(self.hud.frame_ms)
         top = max(33.4, float(np.percentile(ms, 99)) * 1.2) if len(ms) else 33.4
         self._hud_layer.draw((w, h), ms, (8, ph + 8, min(240, w - 16), 60), top)
