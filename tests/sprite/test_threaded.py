@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -110,3 +111,21 @@ def test_a_worker_that_cannot_start_says_why(gl, scene):
 def test_an_unknown_predictor_is_refused(scene):
     with pytest.raises(LodspriteError, match="predictor"):
         KeyframeWorker(scene, WorkerSettings((64, 64), 45.0, 8, "coarse", True, 0, "psychic"))
+
+
+def test_the_lead_comes_from_every_delivered_keyframe_not_the_start_up_one(gl, scene, sprite):
+    vp = orbit(1)[0]
+    engine = ThreadedLodSpriteEngine(sprite, scene, 45.0, 1.0, request_fraction=0.0)
+    try:
+        engine.frame(vp)  # start-up: waited for, not a measure of the latency
+        assert engine.worker.lead_s == 0.0
+        for _ in range(400):  # the viewer stays put: every new keyframe is no better
+            engine.frame(vp)
+            if engine.discarded:
+                break
+            time.sleep(0.005)
+        assert engine.discarded >= 1 and len(engine.keyframes) == 1
+        # a discarded keyframe still says how long keyframes take to arrive
+        assert engine.worker.lead_s > 0.0
+    finally:
+        engine.close()

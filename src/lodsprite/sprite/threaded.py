@@ -61,6 +61,7 @@ class ThreadedLodSpriteEngine:
             sprite.border, sprite.guard_px, predictor))
         self.keyframes: list[KeyChoice] = []
         self.discarded = 0
+        self._leads = 0
         self._c_prime: np.ndarray | None = None
 
     def error_px(self, viewpoint: Viewpoint, projection) -> float:
@@ -75,8 +76,15 @@ class ThreadedLodSpriteEngine:
                                     key.zbuffer)
         self._c_prime = key.c_prime
         self.keyframes.append(KeyChoice(key.viewpoint, key.frame_projection, key.predicted))
-        latency = max(time.perf_counter() - key.requested_at, 0.0)
-        w = LEAD_SMOOTHING if self.worker.lead_s > 0 else 1.0
+
+    def _measure_lead(self, key: KeyframeImage, now: float) -> None:
+        """Keyframes are placed ahead by the running mean of the request-to-delivery
+        latency, taken from every keyframe delivered, adopted or not (from adopted ones
+        only, a lead that overshot would discard every later keyframe and never be
+        corrected).  The first keyframe, waited for at start-up, is not counted."""
+        latency = max(now - key.requested_at, 0.0)
+        w = LEAD_SMOOTHING if self._leads else 1.0
+        self._leads += 1
         self.worker.lead_s = (1 - w) * self.worker.lead_s + w * latency
 
     def frame(self, viewpoint: Viewpoint) -> SpriteFrame:
@@ -92,6 +100,7 @@ class ThreadedLodSpriteEngine:
         else:
             new = self.worker.poll()
             if new is not None:
+                self._measure_lead(new, t0)
                 if keyframe_error_px(self.metric, new.c_prime, viewpoint, projection,
                                      self.sprite.target.height) < self.error_px(viewpoint,
                                                                                 projection):
