@@ -26,7 +26,7 @@ from pathlib import Path
 import moderngl
 import numpy as np
 
-from lodsprite.api import Renderer, write_image
+from lodsprite import Renderer, write_image
 from lodsprite.errors import LodspriteError
 from lodsprite.gl.overlay import HudLayer, LineOverlay, frustum_segments
 from lodsprite.paths import CameraPath
