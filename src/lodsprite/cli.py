@@ -120,8 +120,8 @@ def render(
     max_error: MaxErrorOpt = None,
 ) -> None:
     """Render a camera path; write DIR/frames.csv and DIR/summary.json (and PNG frames)."""
-    from lodsprite.errors import InputError
-    from lodsprite.run import MODES, RenderConfig, parse_size, render_path
+    from lodsprite import InputError, RenderConfig, render_path
+    from lodsprite.run import MODES, parse_size
 
     if mode not in (*MODES, "distributed"):
         raise InputError(f"unknown mode '{mode}': use one of {', '.join(MODES)}, distributed")
