@@ -19,11 +19,11 @@ FRAMES, EVERY, SIZE = 30, 10, (256, 256)
 SHOTS = [f"frame_{i:05d}.png" for i in range(0, FRAMES, EVERY)]
 
 # Full mode: the window's context and the offscreen one are the same driver (Mesa llvmpipe
-# here, through GLX and EGL) drawing the same geometry into the same kind of offscreen
-# target, and a screenshot reads that target (not the window), so the frames are the same
-# bits: measured RMSE 0.0 at frames 0, 10 and 20.  Half a grey level allows a driver that
-# rounds a few pixels differently per context; a wrong viewpoint, size or row order is off
-# by tens (neighbouring frames of this path differ by about 20).
+# here, through GLX and EGL) drawing the same geometry, the window straight into its own
+# framebuffer, and a screenshot copies that framebuffer before the HUD is drawn, so the
+# frames are the same bits: measured RMSE 0.0 at frames 0, 10 and 20.  Half a grey level
+# allows a driver that rounds a few pixels differently per context; a wrong viewpoint, size
+# or row order is off by tens (neighbouring frames of this path differ by about 20).
 FULL_RMSE_TOL = 0.5
 # Sprite mode, keyframes on the worker thread: an approximation (spriteframes resample the
 # keyframe; the worker's timing decides which keyframe is shown).  Measured over 10 runs
@@ -148,3 +148,14 @@ def test_bad_options_are_one_line_before_any_window(args, fragment):
     # No display either: the options are checked first, so their error is the one shown.
     proc = lodsprite("view", "fractal:64", *args, env=no_display_env(), timeout=60)
     assert_one_line_error(proc, fragment)
+
+
+def test_the_embedding_example_runs_in_a_window(display):
+    """examples/embed_moderngl_window.py: lodsprite drawing into a moderngl-window app."""
+    root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    proc = subprocess.run([sys.executable, os.path.join(root, "examples",
+                                                         "embed_moderngl_window.py"),
+                           "--frames", "5"], capture_output=True, text=True, env=display,
+                          timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert "5 frames" in proc.stdout
