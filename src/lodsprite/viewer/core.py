@@ -214,10 +214,14 @@ class ViewerCore:
         record, self.record = self.record, None
         try:
             for _ in range(frames):
+                for _ in range(2):  # so that the frame-time graph is drawn too
+                    self.hud.record(0.0, 0.0)
                 self.frame(0.0, framebuffer)
                 self._panel_at = -math.inf
         finally:
             self.record = record
+            self.hud.frame_ms.clear()
+            self.hud.interval_ms.clear()
         self._last = None
         self.ctx.finish()
 

@@ -25,6 +25,7 @@ from lodsprite.viewer.core import PlayPlan, ViewerCore
 
 DEFAULT_FPS = 60.0
 SWITCH_INTERVAL_S = 0.0005
+WARM_UP_FRAMES = 5
 
 
 class NoDisplayError(InputError):
@@ -136,9 +137,10 @@ def _loop(window, core: ViewerCore, fps: float) -> None:
 
 
 def _frames(window, core: ViewerCore, period: float) -> None:
-    if core.play is not None:  # warm-up, untimed: shaders, first keyframe
-        core.warm_up(core.framebuffer)
-        window.swap_buffers()
+    if core.play is not None:  # warm-up, untimed: shaders, first keyframe, first swaps
+        for _ in range(WARM_UP_FRAMES):
+            core.warm_up(core.framebuffer, frames=1)
+            window.swap_buffers()
     # Everything made so far (modules, the scene, GL wrappers) moves out of the collector's
     # reach: a full collection of it costs about 35 ms, a stall if it came mid-flight.
     gc.collect()
