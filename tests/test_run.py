@@ -4,6 +4,7 @@ import csv
 import json
 
 import numpy as np
+import pytest
 
 from lodsprite.camera import Viewpoint, fitted_projection
 from lodsprite.run import RenderConfig, field_of_view, prepare, render_path
@@ -71,3 +72,37 @@ def test_a_renderer_releases_the_context_it_made_and_its_sprites():
     assert gl.mgl is None and r.gl is None  # the EGL context was released
     assert sprite.sprite is None  # and the sprite with it
     sprite.release()  # a second release is harmless
+
+
+def test_a_renderer_that_fails_to_build_releases_the_context_it_made(monkeypatch):
+    from lodsprite import Renderer, load_scene
+    from lodsprite.errors import InputError
+    from lodsprite.gl import paths as gl_paths
+    from lodsprite.gl.context import GLContext
+
+    released = []
+    real_release = GLContext.release
+    monkeypatch.setattr(GLContext, "release",
+                        lambda self: (released.append(self), real_release(self)))
+
+    def no_renderer(*args, **kwargs):
+        raise InputError("no renderer today")
+
+    monkeypatch.setattr(gl_paths, "TerrainRenderer", no_renderer)
+    with pytest.raises(InputError, match="no renderer today"):
+        Renderer(load_scene("fractal:64", grid=64), (32, 32))
+    assert released and released[-1].mgl is None
+
+
+def test_a_framebuffer_with_an_offset_viewport_is_refused(gl):
+    from lodsprite import Renderer, load_scene
+    from lodsprite.errors import InputError
+    from lodsprite.gl.target import RenderTarget
+
+    target = RenderTarget(gl, 64, 64)
+    try:
+        target.fbo.viewport = (8, 8, 48, 48)
+        with pytest.raises(InputError, match="viewport"):
+            Renderer(load_scene("fractal:64", grid=64), ctx=gl.mgl, framebuffer=target.fbo)
+    finally:
+        target.release()

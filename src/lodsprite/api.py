@@ -61,6 +61,9 @@ class Renderer:
         if framebuffer is not None:
             if ctx is None:
                 raise InputError("framebuffer= needs the ctx= it belongs to")
+            if tuple(framebuffer.viewport[:2]) != (0, 0):
+                raise InputError("framebuffer= must have its viewport at (0, 0); draw into "
+                                 "an offset viewport with draw_to() instead")
             size = tuple(framebuffer.viewport[2:])
         w, h = (int(v) for v in size)
         if not (16 <= w <= 8192 and 16 <= h <= 8192):
@@ -69,7 +72,11 @@ class Renderer:
         self.size = (w, h)
         self.fov_y_deg = float(fov_y_deg)
         self.gl = GLContext() if ctx is None else GLContext.wrap(ctx)
-        self._paths = PathRenderer(scene, self.size, self.fov_y_deg, self.gl, framebuffer)
+        try:
+            self._paths = PathRenderer(scene, self.size, self.fov_y_deg, self.gl, framebuffer)
+        except BaseException:
+            self.gl.release()  # a context of our own only; a wrapped one is only forgotten
+            raise
         self._presenter: Presenter | None = None
         self._sprites: list[LodSprite] = []  # released with the renderer
 
@@ -116,11 +123,12 @@ class Renderer:
         return sprite
 
     def draw_to(self, framebuffer: moderngl.Framebuffer | None = None) -> None:
-        """Draw the last image over ``framebuffer``'s viewport (default: the one bound,
-        for embedding in an application's frame)."""
+        """Draw the last image over ``framebuffer``'s viewport (default: the context's
+        screen, the window of an embedding application).  Rendering binds lodsprite's own
+        targets, so an application passes the framebuffer it draws into next."""
         target = self._paths.renderer.target
         if target.external:  # already drawn there, or copied from there
-            dst = framebuffer if framebuffer is not None else self.gl.mgl.fbo
+            dst = framebuffer if framebuffer is not None else self.gl.default_fbo
             if dst is not target.fbo and dst.glo != target.fbo.glo:
                 self.gl.mgl.copy_framebuffer(dst, target.fbo)
             return
@@ -133,7 +141,8 @@ class Renderer:
         A whole image of the framebuffer's size (``source``, its framebuffer) is copied
         with a blit, which costs a third of a textured quad on llvmpipe."""
         mgl = self.gl.mgl
-        dst = framebuffer if framebuffer is not None else mgl.fbo
+        framebuffer = framebuffer if framebuffer is not None else self.gl.default_fbo
+        dst = framebuffer
         if (source is not None and uv == (0.0, 0.0, 1.0, 1.0)
                 and tuple(dst.viewport[2:]) == tuple(source.size)
                 and tuple(dst.viewport[:2]) == (0, 0)):
@@ -228,8 +237,8 @@ class LodSprite:
         return None if key is None else (key.viewpoint, key.projection)
 
     def draw_to(self, framebuffer: moderngl.Framebuffer | None = None) -> None:
-        """Draw the frame shown over ``framebuffer``'s viewport (default: the one bound):
-        the keyframe's centre (without its guard band) or the spriteframe."""
+        """Draw the frame shown over ``framebuffer``'s viewport (default: the context's
+        screen): the keyframe's centre (without its guard band) or the spriteframe."""
         key = self.sprite.keyframe
         if isinstance(self.engine, LodSpriteEngine) and self.engine.shows_keyframe and key:
             w, h = key.color.size
@@ -275,4 +284,7 @@ def write_image(path: str | os.PathLike, image: np.ndarray) -> None:
     if image.ndim != 3 or image.shape[2] != 3 or image.dtype != np.uint8:
         raise InputError(f"image must be an (h, w, 3) uint8 array, got {image.shape} "
                          f"{image.dtype}")
-    write_png(Path(path), image)
+    try:
+        write_png(Path(path), image)
+    except OSError as exc:
+        raise InputError(f"cannot write image {path}: {exc.strerror or exc}") from exc

@@ -129,3 +129,22 @@ def test_the_lead_comes_from_every_delivered_keyframe_not_the_start_up_one(gl, s
         assert engine.worker.lead_s > 0.0
     finally:
         engine.close()
+
+
+def test_frames_say_so_when_the_worker_has_died(gl, scene, sprite, monkeypatch):
+    from lodsprite.sprite import worker as worker_module
+
+    engine = ThreadedLodSpriteEngine(sprite, scene, 45.0, 1.0, request_fraction=0.0)
+    try:
+        engine.frame(orbit(1)[0])
+
+        def broken(self, target, asked):
+            raise RuntimeError("the GL context was lost")
+
+        monkeypatch.setattr(worker_module._WorkerGL, "render", broken)
+        with pytest.raises(LodspriteError, match="worker stopped: the GL context was lost"):
+            for vp in orbit(400) * 5:  # keyframes are asked for every frame
+                engine.frame(vp)
+                time.sleep(0.002)
+    finally:
+        engine.close()

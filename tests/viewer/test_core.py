@@ -429,3 +429,15 @@ def test_frames_drawn_straight_into_the_window_framebuffer_match_the_offscreen_o
         assert np.abs(a.astype(int) - b).max() <= 1, i
     # the framebuffer holds the last frame, and the screenshot is what it held
     assert np.abs(window.read_color().astype(int) - a).max() <= 1
+
+
+def test_a_screenshot_that_cannot_be_written_does_not_end_the_flight(make_core, tmp_path):
+    blocker = tmp_path / "not_a_folder"
+    blocker.write_text("a file where the screenshot folder should be")
+    core, t = make_core(screenshot_dir=blocker), make_core.target()
+    show(core, t.fbo)
+    core.key("p")
+    show(core, t.fbo)  # no exception: the flight goes on
+    assert "cannot save a screenshot" in core.hud.status
+    show(core, t.fbo)
+    assert len(core.rows) == 3

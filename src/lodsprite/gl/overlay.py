@@ -142,6 +142,12 @@ class LineOverlay:
         finally:
             self.ctx.mgl.wireframe = False
 
+    def forget_meshes(self) -> None:
+        """Release the wireframe vertex arrays (their terrain geometry is going away)."""
+        for vao in self._meshes.values():
+            vao.release()
+        self._meshes.clear()
+
     def _begin(self, view_proj: np.ndarray, rgba: tuple[float, float, float, float]) -> None:
         mgl = self.ctx.mgl
         mgl.disable(moderngl.DEPTH_TEST)

@@ -20,10 +20,19 @@ class PathRenderer:
                  framebuffer: moderngl.Framebuffer | None = None) -> None:
         self.own_ctx = ctx is None
         self.ctx = ctx or GLContext()
-        self.geometry = TerrainGeometry(self.ctx, scene.hf, scene.texture)
-        target = RenderTarget.wrap(self.ctx, framebuffer) if framebuffer is not None else None
-        self.renderer = TerrainRenderer(self.ctx, self.geometry, size[0], size[1], fov_y_deg,
-                                        target)
+        self.geometry = None
+        try:
+            self.geometry = TerrainGeometry(self.ctx, scene.hf, scene.texture)
+            target = (RenderTarget.wrap(self.ctx, framebuffer) if framebuffer is not None
+                      else None)
+            self.renderer = TerrainRenderer(self.ctx, self.geometry, size[0], size[1],
+                                            fov_y_deg, target)
+        except BaseException:  # release what was made: a leaked context outlives us
+            if self.geometry is not None:
+                self.geometry.release()
+            if self.own_ctx:
+                self.ctx.release()
+            raise
 
     def timed(self, viewpoint, level: int | None) -> tuple[float, int]:
         """Render one frame; (milliseconds including ``ctx.finish()``, triangles)."""

@@ -23,6 +23,7 @@ import time
 import numpy as np
 
 from lodsprite.camera import Viewpoint
+from lodsprite.errors import LodspriteError
 from lodsprite.gl.sprite import SpriteRenderer
 from lodsprite.scene import Scene
 from lodsprite.sprite.engine import SpriteFrame
@@ -90,6 +91,8 @@ class ThreadedLodSpriteEngine:
     def frame(self, viewpoint: Viewpoint) -> SpriteFrame:
         """Draw the frame for ``viewpoint``; returns once the GL work has finished."""
         t0 = time.perf_counter()
+        if self.worker.error is not None:  # no keyframe will ever come: say so
+            raise LodspriteError(f"the keyframe worker stopped: {self.worker.error}")
         self.worker.observe(t0, viewpoint)
         projection = self.sprite.terrain.projection(viewpoint)
         kind = SPRITE

@@ -158,7 +158,7 @@ class KeyframeWorker:
     def _run(self) -> None:
         _lower_priority(self.settings.nice)
         try:
-            gl = _WorkerGL(self.scene, self.settings)
+            gl = _WorkerGL(self.scene, self.settings)  # releases what it made if it fails
         except BaseException as exc:  # reported to the constructor
             self.error = exc
             self._started.set()
@@ -173,7 +173,8 @@ class KeyframeWorker:
                     if self._stop:
                         return
                     asked = self._wanted
-                    samples = [s for s in self._samples if s[0] > fed]
+                    # tuple() copies the deque in one step: observe() may append meanwhile
+                    samples = [s for s in tuple(self._samples) if s[0] > fed]
                 for t, vp in samples:
                     predictor.observe(t, vp)
                     fed = t
@@ -211,8 +212,12 @@ class _WorkerGL:
 
         self.paths = PathRenderer(scene, s.size, s.fov_y_deg)
         self.paths.renderer.unlocked_draws = True  # the drawing thread runs meanwhile
-        self.sprite = SpriteRenderer(self.paths.renderer, s.lod, s.visibility, border=s.border,
-                                     guard_px=s.guard_px)
+        try:
+            self.sprite = SpriteRenderer(self.paths.renderer, s.lod, s.visibility,
+                                         border=s.border, guard_px=s.guard_px)
+        except BaseException:
+            self.paths.release()
+            raise
         self.metric = ErrorMetric.for_level(scene.hf, s.lod)
         self.zbuffer = "coarse" if s.visibility == "coarse" else "full"
 

@@ -43,6 +43,7 @@ FRAME_COLUMNS = ["frame", "type", "ms", "render_ms", "interval_ms", "triangles",
 TOGGLE_KEYS = {"x": "wireframe", "t": "tint", "k": "frustum", "h": "hud"}
 WIREFRAME_RGBA = (0.1, 0.1, 0.1, 0.55)
 FRUSTUM_RGBA = (1.0, 0.9, 0.1, 0.9)
+MESSAGE_S = 5.0  # how long a message ("cannot switch ...") holds the HUD's status line
 
 
 @dataclass(frozen=True)
@@ -90,9 +91,11 @@ class ViewerCore:
         self.rows: list[dict] = []
         self.index = 0
         self.quit = False
+        self.pending_size: tuple[int, int] | None = None  # set by the window's resize event
         self.screenshots: list[Path] = []
         self._panel_at = -math.inf
         self._want_shot = False
+        self._message, self._message_until = "", 0.0
         self._shot: np.ndarray | None = None
         self._shot_ms = 0.0
         self._start = time.perf_counter()
@@ -145,13 +148,13 @@ class ViewerCore:
         try:
             new = self.factories[mode](self.renderer)
         except LodspriteError as exc:
-            self.hud.status = f"cannot switch to {mode}: {exc}"
+            self._say(f"cannot switch to {mode}: {exc}")
             log.warning("cannot switch to %s: %s", mode, exc)
             return
         self.technique.release()
         self.technique, self.mode = new, mode
         self.technique.set_fallback_tint(self.toggles["tint"])
-        self.hud.status = ""
+        self._message_until, self.hud.status = 0.0, ""
 
     def resize(self, size: tuple[int, int]) -> None:
         """The framebuffer is now ``size = (w, h)`` pixels: remake renderer and technique."""
@@ -167,10 +170,11 @@ class ViewerCore:
         except LodspriteError as exc:
             if renderer is not None:
                 renderer.release()
-            self.hud.status = f"cannot resize: {exc}"
+            self._say(f"cannot resize: {exc}")
             log.warning("cannot resize to %s: %s", size, exc)
             return
         self.technique.release()
+        self._lines.forget_meshes()
         self.renderer.release()
         self.renderer, self.technique = renderer, technique
         self.technique.set_fallback_tint(self.toggles["tint"])
@@ -272,7 +276,8 @@ class ViewerCore:
             h.params = "  ".join(f"{p.name} {p.value:g}{p.unit}"
                                  for p in self.technique.params().values())
             h.toggles = "  ".join(k for k, on in self.toggles.items() if on and k != "hud")
-            h.status = h.status if h.status.startswith("cannot") else self.technique.status()
+            h.status = (self._message if now < self._message_until
+                        else self.technique.status())
             self._hud_layer.set_text(*layout_text(h.lines(), self._atlas))
         w, h = framebuffer.width, framebuffer.height
         ph = int(self._hud_layer.panel_height)
@@ -280,13 +285,24 @@ class ViewerCore:
         top = max(33.4, float(np.percentile(ms, 99)) * 1.2) if len(ms) else 33.4
         self._hud_layer.draw((w, h), ms, (8, ph + 8, min(240, w - 16), 60), top)
 
-    def screenshot(self, image: np.ndarray | None = None) -> Path:
+    def _say(self, message: str) -> None:
+        """Show ``message`` in the HUD's status line for ``MESSAGE_S`` seconds."""
+        self._message, self._message_until = message, time.perf_counter() + MESSAGE_S
+        self.hud.status = message
+        self._panel_at = -math.inf
+
+    def screenshot(self, image: np.ndarray | None = None) -> Path | None:
         """Write ``image`` (default: the frame shown, read now) as ``frame_NNNNN.png`` in
         the screenshot folder, NNNNN the number of that frame (the last one logged).  The
         viewer reads a frame before drawing its overlays and HUD, so none are in it."""
         shown = self.rows[-1]["frame"] if self.rows else 0
         path = self.screenshot_dir / f"frame_{shown:05d}.png"
-        write_image(path, self.technique.read_image() if image is None else image)
+        try:
+            write_image(path, self.technique.read_image() if image is None else image)
+        except LodspriteError as exc:  # a flight goes on without its screenshot
+            self._say(f"cannot save a screenshot: {exc}")
+            log.warning("cannot save a screenshot: %s", exc)
+            return None
         self.screenshots.append(path)
         return path
 
@@ -307,8 +323,12 @@ class ViewerCore:
     def write_outputs(self, out_dir: Path) -> dict:
         """``frames.csv`` and ``summary.json`` of the frames shown so far."""
         summary = self.summary()
-        write_csv(Path(out_dir) / "frames.csv", self.rows, FRAME_COLUMNS)
-        write_json(Path(out_dir) / "summary.json", summary)
+        try:
+            write_csv(Path(out_dir) / "frames.csv", self.rows, FRAME_COLUMNS)
+            write_json(Path(out_dir) / "summary.json", summary)
+        except OSError as exc:
+            raise LodspriteError(f"cannot write the run's results to {out_dir}: "
+                                 f"{exc.strerror or exc}") from exc
         return summary
 
     def release(self) -> None:

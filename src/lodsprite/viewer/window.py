@@ -111,7 +111,9 @@ def run_viewer(scene: Scene, factories: dict[str, TechniqueFactory], mode: str,
     window.key_event_func = on_key
     window.mouse_drag_event_func = lambda x, y, dx, dy: core.drag(dx * ratio, dy * ratio)
     window.mouse_scroll_event_func = lambda dx, dy: core.scroll(dy)
-    window.resize_func = lambda w, h: core.resize(window.buffer_size)
+    # A resize remakes the renderer (and a keyframe worker): dragging a window corner
+    # sends dozens of events, so only the last size is applied, before the next frame.
+    window.resize_func = lambda w, h: setattr(core, "pending_size", window.buffer_size)
     try:
         _loop(window, core, options.fps)
         if record is not None:
@@ -148,6 +150,9 @@ def _frames(window, core: ViewerCore, period: float) -> None:
     last = time.perf_counter()
     while not window.is_closing and not core.quit:
         start = time.perf_counter()
+        if core.pending_size is not None:
+            size, core.pending_size = core.pending_size, None
+            core.resize(size)
         core.frame(min(start - last, 0.25), core.framebuffer)
         last = start
         window.swap_buffers()
