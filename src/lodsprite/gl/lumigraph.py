@@ -139,18 +139,28 @@ class ColorMeshRenderer:
 def reconstruction_vertices(slab: Slab, layers: np.ndarray) -> np.ndarray:
     """The vertex data of §2.3 for the nodes with data (``layers (n_st, n_st) int``,
     their texture-array layer, -1 for none): each st triangle once per corner with data,
-    ``(k * 3, 8) float32``: position (3), alpha (1), layer (1), node position (3)."""
+    ``(k * 3, 8) float32``: position (3), alpha (1), layer (1), node position (3).
+
+    The copy for corner ``a`` has alpha 1 at ``a`` and 0 at the other corners with data;
+    a corner without data (a fictitious node, §3.1's ``draw_node_without_data``) gets
+    ``1 / d`` from each of the triangle's ``d`` corners with data, so the alphas still sum
+    to one wherever a triangle has a corner with data."""
     n = slab.n_st
     nodes = slab.node_local().reshape(-1, 3)
     lay = np.asarray(layers).reshape(-1)
     tris = grid_triangles(n)                                  # (T, 3)
+    has = lay[tris] >= 0                                      # (T, 3)
+    count = has.sum(axis=1)                                   # data corners per triangle
     corner = np.repeat(tris, 3, axis=0)                       # (3T, 3): one copy per corner
     which = np.tile(np.arange(3), len(tris))                  # the corner that copy serves
     node = corner[np.arange(len(corner)), which]              # (3T,)
     keep = lay[node] >= 0
+    has_c = np.repeat(has, 3, axis=0)[keep]
+    d = np.repeat(count, 3)[keep]
     corner, which, node = corner[keep], which[keep], node[keep]
+    own = np.arange(3)[None, :] == which[:, None]
+    alpha = np.where(own, 1.0, np.where(has_c, 0.0, 1.0 / d[:, None]))
     pos = nodes[corner]                                       # (K, 3, 3)
-    alpha = (np.arange(3)[None, :] == which[:, None]).astype(np.float64)
     out = np.concatenate([pos, alpha[..., None],
                           np.broadcast_to(lay[node][:, None, None], (len(node), 3, 1)),
                           np.broadcast_to(nodes[node][:, None, :], (len(node), 3, 3))],
