@@ -246,6 +246,25 @@ def lumigraph_capture(
               f"({s['faces']:,} triangles) in {s['capture_s']:.1f} s; wrote {out_dir}")
 
 
+@lumigraph_app.command("import")
+def lumigraph_import(
+    folder: Annotated[Path, typer.Argument(
+        help="a Stanford Light Field Archive rectified/ folder (out_RR_CC_Y_X_.png)")],
+    out_dir: Annotated[Path, typer.Option("--out", help="lumigraph folder to write")] = Path(
+        "out/lumigraph"),
+    uv: Annotated[int, typer.Option("--uv", help="uv image size in pixels")] = 256,
+    codec: Annotated[str, typer.Option("--codec", help="jpeg | png (lossless)")] = "jpeg",
+    st_scale: Annotated[float, typer.Option(
+        "--st-scale", help="scale of the camera grid against the image plane")] = 1.0,
+) -> None:
+    """Import a rectified light field of the Stanford archive as a lumigraph."""
+    from lodsprite.lumigraph.importer import import_stanford
+
+    s = import_stanford(folder, out_dir, uv, codec, st_scale=st_scale)
+    out.print(f"{s['nodes']} nodes ({s['grid']}x{s['grid']} cameras) of {s['uv']}²; "
+              f"wrote {out_dir}")
+
+
 @lumigraph_app.command("render")
 def lumigraph_render(
     folder: Annotated[Path, typer.Argument(help="a lumigraph folder (lumigraph capture)")],
