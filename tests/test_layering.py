@@ -194,3 +194,10 @@ def test_render_config_has_no_distributed_fields():
     assert "pace" not in {f.name for f in fields(RenderConfig)}
     with pytest.raises(InputError, match="mode"):
         RenderConfig(mode="distributed").validate()
+
+
+def test_test_module_names_are_unique():
+    """The test folders have no ``__init__.py``: two test files with one basename make
+    pytest refuse to collect the second (as tests/lumigraph/test_cli.py once did)."""
+    names = [p.name for p in (ROOT / "tests").rglob("test_*.py")]
+    assert sorted(n for n in set(names) if names.count(n) > 1) == []
