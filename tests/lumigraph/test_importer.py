@@ -13,14 +13,14 @@ from lodsprite.lumigraph.store import Lumigraph
 GRID, W, H = 3, 120, 80  # the archive's images are neither square nor powers of two
 
 
-def make_archive(folder, grid=GRID, skip=None):
+def make_archive(folder, grid=GRID, skip=None, first_col=0):
     folder.mkdir()
     for r in range(grid):
-        for c in range(grid):
+        for c in range(first_col, first_col + grid):
             if (r, c) == skip:
                 continue
             img = np.zeros((H, W, 3), np.uint8)
-            img[..., 0], img[..., 1] = 40 + 60 * r, 40 + 60 * c  # the camera in the colour
+            img[..., 0], img[..., 1] = 40 + 60 * r, 40 + 60 * (c - first_col)  # the camera
             img[:, W // 2:, 2] = 200  # the right half blue: checks the orientation
             y, x = -100.0 * r, 100.0 * c
             Image.fromarray(img).save(folder / f"out_{r:02d}_{c:02d}_{y:.6f}_{x:.6f}_.png")
@@ -55,3 +55,11 @@ def test_a_grid_with_gaps_is_refused(tmp_path):
     src = make_archive(tmp_path / "rectified", skip=(1, 1))
     with pytest.raises(InputError, match="gaps"):
         import_stanford(src, tmp_path / "lf")
+
+
+def test_columns_numbered_from_one_are_placed_from_the_left(tmp_path):
+    src = make_archive(tmp_path / "rectified", first_col=1)
+    import_stanford(src, tmp_path / "lf", n_uv=16, codec="png")
+    lf = Lumigraph(tmp_path / "lf")
+    assert len(lf.nodes(0)) == GRID * GRID
+    assert abs(int(lf.node(0, 0, GRID - 1)[8, 2, 1]) - 40) <= 2  # leftmost column, top row

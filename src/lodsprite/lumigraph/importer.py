@@ -51,7 +51,8 @@ def scan(folder: Path) -> dict[tuple[int, int], tuple[Path, float, float]]:
     if len(rows) != len(cols) or len(rows) < 2 or len(rows) > MAX_GRID:
         raise InputError(f"{folder}: a {len(rows)} x {len(cols)} camera grid; lodsprite "
                          f"imports square grids of 2 to {MAX_GRID} cameras per side")
-    if len(found) != len(rows) ** 2 or rows != list(range(rows[0], rows[0] + len(rows))):
+    if (len(found) != len(rows) ** 2 or rows != list(range(rows[0], rows[0] + len(rows)))
+            or cols != list(range(cols[0], cols[0] + len(cols)))):
         raise InputError(f"{folder}: the camera grid has gaps")
     return found
 
@@ -76,12 +77,12 @@ def import_stanford(folder: str | Path, out_dir: str | Path, n_uv: int = 256,
     found = scan(Path(folder))
     rows = sorted({r for r, _ in found})
     n = len(rows)
-    r0 = rows[0]
+    r0, c0 = rows[0], min(c for _, c in found)
     images, side = {}, 1
     pos = np.array([[found[k][2], found[k][1]] for k in sorted(found)])  # (x, y)
     for (r, c), (path, _, _) in found.items():
         img, side = _square(path, n_uv)
-        images[(c - r0, n - 1 - (r - r0))] = img  # i along s (columns), j along t (up)
+        images[(c - c0, n - 1 - (r - r0))] = img  # i along s (columns), j along t (up)
     spread = float(np.ptp(pos, axis=0).max()) or 1.0
     uv_size = 1.0
     st_size = st_scale * uv_size * spread / side
