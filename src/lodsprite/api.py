@@ -137,21 +137,17 @@ class Renderer:
     def present(self, texture: moderngl.Texture, uv: tuple[float, float, float, float],
                  framebuffer: moderngl.Framebuffer | None,
                  source: moderngl.Framebuffer | None = None) -> None:
-        """Draw ``texture``'s region ``uv`` over ``framebuffer`` (default: the bound one).
-        A whole image of the framebuffer's size (``source``, its framebuffer) is copied
-        with a blit, which costs a third of a textured quad on llvmpipe."""
-        mgl = self.gl.mgl
-        framebuffer = framebuffer if framebuffer is not None else self.gl.default_fbo
-        dst = framebuffer
+        """Draw ``texture``'s region ``uv`` over ``framebuffer`` (default: the context's
+        screen).  A whole image of the framebuffer's size (``source``, its framebuffer) is
+        copied with a blit, which costs a third of a textured quad on llvmpipe."""
+        dst = framebuffer if framebuffer is not None else self.gl.default_fbo
         if (source is not None and uv == (0.0, 0.0, 1.0, 1.0)
-                and tuple(dst.viewport[2:]) == tuple(source.size)
-                and tuple(dst.viewport[:2]) == (0, 0)):
-            mgl.copy_framebuffer(dst, source)
+                and tuple(dst.viewport) == (0, 0, *source.size)):
+            self.gl.mgl.copy_framebuffer(dst, source)
             return
         if self._presenter is None:
             self._presenter = Presenter(self.gl)
-        if framebuffer is not None:
-            framebuffer.use()
+        dst.use()
         self._presenter.draw(texture, uv)
 
     def release(self) -> None:

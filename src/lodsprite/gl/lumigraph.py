@@ -182,6 +182,7 @@ class LumigraphRenderer:
         for k, (i, j) in enumerate(keys):
             layers[i, j] = k
         self.layers = layers
+        self.images = len(keys)  # node images drawn per frame (every one with data)
         n = slab.n_uv
         self.nodes = mgl.texture_array((n, n, max(len(keys), 1)), 3, alignment=1)
         for k, key in enumerate(keys):

@@ -22,13 +22,12 @@ from lodsprite.gl.context import GLContext
 from lodsprite.gl.terrain import TerrainGeometry, mat_bytes
 
 _QUAD_VS = """#version 330
-uniform vec4 u_rect;   // destination in normalised device coordinates: x0, y0, x1, y1
 uniform vec4 u_uv;     // source region in texture coordinates: u0, v0, u1, v1
-in vec2 in_corner;     // (0, 0) .. (1, 1)
+in vec2 in_corner;     // (0, 0) .. (1, 1): the whole viewport
 out vec2 v_uv;
 void main() {
     v_uv = mix(u_uv.xy, u_uv.zw, in_corner);
-    gl_Position = vec4(mix(u_rect.xy, u_rect.zw, in_corner), 0.0, 1.0);
+    gl_Position = vec4(in_corner * 2.0 - 1.0, 0.0, 1.0);
 }
 """
 _QUAD_FS = """#version 330
@@ -64,46 +63,30 @@ def frustum_segments(viewpoint: Viewpoint, projection: Projection) -> np.ndarray
     return corners[_CUBE_EDGES.ravel()].astype(np.float32)
 
 
-class _Quad:
-    """A unit quad drawn as a triangle strip with a program of ``_QUAD_VS``."""
+class Presenter:
+    """Draws a texture region over the whole viewport of the bound framebuffer."""
 
-    def __init__(self, ctx: GLContext, fragment_shader: str) -> None:
+    def __init__(self, ctx: GLContext) -> None:
         mgl = ctx.mgl
-        self.program = mgl.program(vertex_shader=_QUAD_VS, fragment_shader=fragment_shader)
+        self.ctx = ctx
+        self.program = mgl.program(vertex_shader=_QUAD_VS, fragment_shader=_QUAD_FS)
         corners = np.array([0, 0, 1, 0, 0, 1, 1, 1], dtype=np.float32)
         self.vbo = mgl.buffer(corners.tobytes())
         self.vao = mgl.vertex_array(self.program, [(self.vbo, "2f", "in_corner")])
 
-    def draw(self, rect: tuple[float, float, float, float],
-             uv: tuple[float, float, float, float]) -> None:
-        self.program["u_rect"].value = rect
+    def draw(self, texture: moderngl.Texture,
+             uv: tuple[float, float, float, float] = (0.0, 0.0, 1.0, 1.0)) -> None:
+        """Draw ``texture``'s region ``uv = (u0, v0, u1, v1)`` (GL's bottom-up texture
+        coordinates) stretched over the viewport, with no depth test and no blending."""
+        self.ctx.mgl.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
+        texture.use(0)
+        self.program["u_image"].value = 0
         self.program["u_uv"].value = uv
         self.vao.render(moderngl.TRIANGLE_STRIP)
 
     def release(self) -> None:
         for obj in (self.vao, self.vbo, self.program):
             obj.release()
-
-
-class Presenter:
-    """Draws a texture region over the whole viewport of the bound framebuffer."""
-
-    def __init__(self, ctx: GLContext) -> None:
-        self.ctx = ctx
-        self.quad = _Quad(ctx, _QUAD_FS)
-
-    def draw(self, texture: moderngl.Texture,
-             uv: tuple[float, float, float, float] = (0.0, 0.0, 1.0, 1.0)) -> None:
-        """Draw ``texture``'s region ``uv = (u0, v0, u1, v1)`` (GL's bottom-up texture
-        coordinates) stretched over the viewport, with no depth test and no blending."""
-        mgl = self.ctx.mgl
-        mgl.disable(moderngl.DEPTH_TEST | moderngl.BLEND)
-        texture.use(0)
-        self.quad.program["u_image"].value = 0
-        self.quad.draw((-1.0, -1.0, 1.0, 1.0), uv)
-
-    def release(self) -> None:
-        self.quad.release()
 
 
 class LineOverlay:

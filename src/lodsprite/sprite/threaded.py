@@ -100,18 +100,17 @@ class ThreadedLodSpriteEngine:
             self.worker.request()
             self._adopt(self.worker.wait(), t0)
             kind = KEYFRAME
-        else:
-            new = self.worker.poll()
-            if new is not None:
-                self._measure_lead(new, t0)
-                if keyframe_error_px(self.metric, new.c_prime, viewpoint, projection,
-                                     self.sprite.target.height) < self.error_px(viewpoint,
-                                                                                projection):
-                    self._adopt(new, t0)
-                    kind = FIRST_SPRITE
-                else:
-                    self.discarded += 1
         error = self.error_px(viewpoint, projection)
+        new = None if kind == KEYFRAME else self.worker.poll()
+        if new is not None:
+            self._measure_lead(new, t0)
+            new_error = keyframe_error_px(self.metric, new.c_prime, viewpoint, projection,
+                                          self.sprite.target.height)
+            if new_error < error:
+                self._adopt(new, t0)
+                kind, error = FIRST_SPRITE, new_error
+            else:
+                self.discarded += 1
         if not error < self.request_fraction * self.epsilon_px:
             self.worker.request()
         stats = self.sprite.render_spriteframe(viewpoint, projection)

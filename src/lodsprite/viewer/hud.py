@@ -118,10 +118,12 @@ def layout_text(lines: list[str], atlas: GlyphAtlas, origin: tuple[float, float]
     cw, ch = atlas.cell
     aw, ah = cw * ATLAS_COLUMNS, atlas.alpha.shape[0]
     codes, xs, ys = [], [], []
+    width = 0.0
     for row, text in enumerate(lines):
         c = np.frombuffer(text.encode("ascii", "replace"), np.uint8).astype(np.intp)
         c = np.where((c < FIRST_GLYPH) | (c > LAST_GLYPH), ord("?"), c) - FIRST_GLYPH
         adv = atlas.advance[c]
+        width = max(width, float(adv.sum()))
         xs.append(np.concatenate([[0.0], np.cumsum(adv)[:-1]]))
         ys.append(np.full(len(c), row * ch, np.float32))
         codes.append(c)
@@ -130,9 +132,6 @@ def layout_text(lines: list[str], atlas: GlyphAtlas, origin: tuple[float, float]
     y = origin[1] + pad + (np.concatenate(ys) if ys else np.zeros(0))
     u0, v0 = (c % ATLAS_COLUMNS) * cw / aw, (c // ATLAS_COLUMNS) * ch / ah
     glyphs = _quads(x, y, x + cw, y + ch, u0, v0, u0 + cw / aw, v0 + ch / ah)
-    width = max((float(np.sum(atlas.advance[np.clip(np.frombuffer(t.encode("ascii",
-                "replace"), np.uint8).astype(np.intp) - FIRST_GLYPH, 0, 94)])) for t in lines),
-                default=0.0)
     solid = LAST_GLYPH - FIRST_GLYPH + 1
     su, sv = (solid % ATLAS_COLUMNS + 0.5) * cw / aw, (solid // ATLAS_COLUMNS + 0.5) * ch / ah
     bg = _quads(*(np.array([v], np.float64) for v in (

@@ -45,14 +45,10 @@ class WindowOptions:
 
 def check_display() -> None:
     """Raise :class:`NoDisplayError` (one line) when no window can be opened here."""
-    if os.name == "posix" and not (os.environ.get("DISPLAY") or os.environ.get(
-            "WAYLAND_DISPLAY")) and platform_needs_display():
+    if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY")
+                                                 or os.environ.get("WAYLAND_DISPLAY")):
         raise NoDisplayError("no display: lodsprite view needs a screen (set DISPLAY, or run "
                              "it under xvfb-run for a virtual one)")
-
-
-def platform_needs_display() -> bool:
-    return sys.platform.startswith("linux")
 
 
 def open_window(options: WindowOptions):
