@@ -38,11 +38,37 @@ def test_capture_then_render_with_ground_truth(tmp_path):
                   "--ground-truth", "--out", str(out))
     assert r.returncode == 0, r.stderr
     s = json.loads((out / "summary.json").read_text())
-    assert s["frames"] == 4 and s["nodes"] == 36
+    assert s["frames"] == 4 and s["images_per_frame_mean"] == 36
     # a coarse 6x6 lumigraph of 64² images still resembles the object
     assert 15.0 < s["psnr_mean"] < 60.0
     with open(out / "frames.csv") as f:
         assert len(list(csv.DictReader(f))) == 4
+    crit = tmp_path / "crit"
+    r = lodsprite("lumigraph", "render", str(lf), "--frames", "6", "--size", "64x64",
+                  "--method", "critical", "--texture-mb", "0.05", "--ground-truth",
+                  "--every", "2", "--out", str(crit))
+    assert r.returncode == 0, r.stderr
+    s = json.loads((crit / "summary.json").read_text())
+    # 0.05 MB of texture memory holds 3 node images of 64² RGBA
+    assert s["method"] == "critical" and s["texture_layers"] == 3
+    assert 1 <= s["images_per_frame_mean"] <= 3
+    for key in ("mean_ms", "median_ms", "p99_ms", "psnr_mean", "target_ms"):
+        assert np.isfinite(s[key])
+    with open(crit / "frames.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert [r["psnr"] != "" for r in rows] == [True, False] * 3
+
+
+def test_render_options_out_of_range_are_one_line(tmp_path):
+    lf = tmp_path / "lf"
+    assert lodsprite("lumigraph", "capture", "--out", str(lf), "--st", "4", "--uv", "32",
+                     "--codec", "png").returncode == 0
+    assert_user_error(lodsprite("lumigraph", "render", str(lf), "--method", "nope"),
+                      "unknown lumigraph method")
+    assert_user_error(lodsprite("lumigraph", "render", str(lf), "--method", "critical",
+                                "--texture-mb", "0.001"), "holds no")
+    assert_user_error(lodsprite("lumigraph", "render", str(lf), "--method", "arbitrary",
+                                "--nodes", "0"), "--nodes")
 
 
 def test_render_of_a_folder_that_is_not_a_lumigraph_is_one_line(tmp_path):

@@ -34,7 +34,7 @@ def lumigraph(gl):
         target = RenderTarget(gl, sl.n_uv, sl.n_uv)
         images = capture(obj, sl, target, near=0.1, far=10.0)
         target.release()
-        rec = LumigraphRenderer(gl, sl, images, SIZE, SIZE)
+        rec = LumigraphRenderer.full(gl, sl, images, SIZE, SIZE)
         made.extend([obj, rec])
         return obj, rec, images
 

@@ -3,16 +3,20 @@
 * :class:`ColorMeshRenderer` draws a mesh with per-vertex colours under a fixed
   directional light through any view and projection: the node images of a capture, the
   ground truth, and the z-buffer of the approximate geometry (depth correction).
-* :class:`LumigraphRenderer` reconstructs an image from node images kept in one texture
-  array: every st-plane triangle is drawn once per corner node with data, textured from
-  that node's uv image, with alpha 1 at that node and 0 at the other two corners, blended
-  additively (the alphas sum to one).  The uv coordinate of a fragment is where the ray
-  from the eye through it meets the uv plane, or, with depth correction (Gortler et al.
-  1996), where the ray from the node through the approximate geometry's surface point
-  seen at that pixel meets it; both per fragment, in the shader.
+* :class:`LumigraphRenderer` reconstructs an image from node images resident in one
+  texture array (the texture memory of §4): the draws of a covering of the st plane
+  (:mod:`lodsprite.lumigraph.subsets`: each triangle once per node with data round it,
+  textured from that node's uv image, alphas summing to one), blended additively.  The uv
+  coordinate of a fragment is where the ray from the eye through it meets the uv plane,
+  or, with depth correction (Gortler et al. 1996), where the ray from the node through
+  the approximate geometry's surface point seen at that pixel meets it; both per
+  fragment, in the shader.
 
-All triangles of all nodes are one vertex buffer and one draw: a frame uploads only the
-eye and its matrices.
+* :class:`ProjectiveRenderer` reuses the last reconstructed image as a projective texture
+  on the approximate geometry (§3.2).
+
+All draws are one vertex buffer and one draw call; a frame uploads only the eye and its
+matrices, plus the vertex buffer when the covering changes.
 """
 
 from __future__ import annotations
@@ -22,7 +26,8 @@ import numpy as np
 
 from lodsprite.gl.context import GLContext
 from lodsprite.gl.terrain import mat_bytes
-from lodsprite.lumigraph.geometry import Slab, grid_triangles
+from lodsprite.lumigraph.geometry import Slab
+from lodsprite.lumigraph.subsets import Draws, cover_draws, grid_cover
 
 COLOR_MESH_VS = """#version 330
 uniform mat4 u_mvp;
@@ -136,77 +141,152 @@ class ColorMeshRenderer:
             obj.release()
 
 
-def reconstruction_vertices(slab: Slab, layers: np.ndarray) -> np.ndarray:
-    """The vertex data of §2.3 for the nodes with data (``layers (n_st, n_st) int``,
-    their texture-array layer, -1 for none): each st triangle once per corner with data,
-    ``(k * 3, 8) float32``: position (3), alpha (1), layer (1), node position (3).
-
-    The copy for corner ``a`` has alpha 1 at ``a`` and 0 at the other corners with data;
-    a corner without data (a fictitious node, §3.1's ``draw_node_without_data``) gets
-    ``1 / d`` from each of the triangle's ``d`` corners with data, so the alphas still sum
-    to one wherever a triangle has a corner with data."""
-    n = slab.n_st
+def draw_vertices(slab: Slab, draws: Draws, slots: np.ndarray) -> np.ndarray:
+    """The vertex data of ``draws`` (:mod:`lodsprite.lumigraph.subsets`), ``(D * 3, 8)
+    float32``: st corner in the local frame (3), alpha (1), the texture-array layer of the
+    draw's node (1, from ``slots (n_st * n_st,)``) and that node's position (3)."""
+    d = len(draws)
     nodes = slab.node_local().reshape(-1, 3)
-    lay = np.asarray(layers).reshape(-1)
-    tris = grid_triangles(n)                                  # (T, 3)
-    has = lay[tris] >= 0                                      # (T, 3)
-    count = has.sum(axis=1)                                   # data corners per triangle
-    corner = np.repeat(tris, 3, axis=0)                       # (3T, 3): one copy per corner
-    which = np.tile(np.arange(3), len(tris))                  # the corner that copy serves
-    node = corner[np.arange(len(corner)), which]              # (3T,)
-    keep = lay[node] >= 0
-    has_c = np.repeat(has, 3, axis=0)[keep]
-    d = np.repeat(count, 3)[keep]
-    corner, which, node = corner[keep], which[keep], node[keep]
-    own = np.arange(3)[None, :] == which[:, None]
-    alpha = np.where(own, 1.0, np.where(has_c, 0.0, 1.0 / d[:, None]))
-    pos = nodes[corner]                                       # (K, 3, 3)
-    out = np.concatenate([pos, alpha[..., None],
-                          np.broadcast_to(lay[node][:, None, None], (len(node), 3, 1)),
-                          np.broadcast_to(nodes[node][:, None, :], (len(node), 3, 3))],
-                         axis=2)
+    pos = np.concatenate([draws.corners, np.full((d, 3, 1), slab.st_distance)], axis=2)
+    layer = np.broadcast_to(slots[draws.node].astype(np.float64)[:, None, None], (d, 3, 1))
+    node = np.broadcast_to(nodes[draws.node][:, None, :], (d, 3, 3))
+    out = np.concatenate([pos, draws.alpha[..., None], layer, node], axis=2)
     return out.reshape(-1, 8).astype(np.float32)
 
 
-class LumigraphRenderer:
-    """Reconstruction from node images (``images[i, j]`` ``(n_uv, n_uv, 3) uint8``, row 0
-    at the top, or None for a node without data) into a ``width x height`` float target."""
+class FloatTarget:
+    """A ``width x height`` half-float RGBA colour texture (premultiplied alpha) with a
+    depth buffer, bound as one framebuffer: where reconstructions accumulate."""
 
-    def __init__(self, ctx: GLContext, slab: Slab, images: dict[tuple[int, int], np.ndarray],
-                 width: int, height: int) -> None:
+    def __init__(self, ctx: GLContext, width: int, height: int) -> None:
         mgl = ctx.mgl
-        self.ctx, self.slab = ctx, slab
+        self.ctx = ctx
         self.size = (int(width), int(height))
-        layers = np.full((slab.n_st, slab.n_st), -1, dtype=np.int64)
-        keys = sorted(images)
-        for k, (i, j) in enumerate(keys):
-            layers[i, j] = k
-        self.layers = layers
-        self.images = len(keys)  # node images drawn per frame (every one with data)
-        n = slab.n_uv
-        self.nodes = mgl.texture_array((n, n, max(len(keys), 1)), 3, alignment=1)
-        for k, key in enumerate(keys):
-            img = np.ascontiguousarray(images[key][::-1], dtype=np.uint8)  # GL rows
-            self.nodes.write(img.tobytes(), viewport=(0, 0, k, n, n, 1))
-        self.nodes.build_mipmaps()
-        self.nodes.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
+        self.color = mgl.texture(self.size, 4, dtype="f2")
+        self.color.repeat_x = self.color.repeat_y = False
+        self.depth = mgl.depth_renderbuffer(self.size)
+        self.fbo = mgl.framebuffer(color_attachments=[self.color], depth_attachment=self.depth)
+
+    def read_rgba(self) -> np.ndarray:
+        """``(h, w, 4) float32`` premultiplied, row 0 at the top."""
+        w, h = self.size
+        data = np.frombuffer(self.color.read(alignment=1), np.float16).reshape(h, w, 4)
+        return data[::-1].astype(np.float32)
+
+    def read_rgb8(self, background: tuple[float, float, float] = (0.0, 0.0, 0.0)
+                  ) -> np.ndarray:
+        """Composited over ``background`` (linear [0, 1]), ``(h, w, 3) uint8``."""
+        rgba = self.read_rgba()
+        rgb = rgba[..., :3] + (1.0 - np.clip(rgba[..., 3:], 0, 1)) * np.array(background)
+        return np.clip(np.rint(rgb * 255.0), 0, 255).astype(np.uint8)
+
+    def release(self) -> None:
+        if self.ctx.mgl.fbo is self.fbo:
+            # moderngl re-binds the current framebuffer after creating others: never a dead one.
+            self.ctx.default_fbo.use()
+        for obj in (self.fbo, self.color, self.depth):
+            obj.release()
+
+
+class LumigraphRenderer(FloatTarget):
+    """Reconstruction (§2.3) from node images resident in a texture array of ``capacity``
+    layers of ``n_uv >> level`` pixels square (the texture memory of §4: nodes are
+    uploaded into free layers and evicted by the caller) into a float target.
+
+    :meth:`set_draws` takes any covering of §3.1 (:mod:`lodsprite.lumigraph.subsets`)
+    whose nodes are resident; :meth:`render` draws it in one call."""
+
+    BYTES_PER_TEXEL = 4  # RGB is stored as RGBA by GL drivers (and by the paper's Impact)
+
+    def __init__(self, ctx: GLContext, slab: Slab, width: int, height: int,
+                 capacity: int, level: int = 0) -> None:
+        super().__init__(ctx, width, height)
+        mgl = ctx.mgl
+        self.slab, self.level = slab, int(level)
+        self.n = max(1, slab.n_uv >> self.level)
+        self.capacity = max(1, int(capacity))
+        self.nodes = mgl.texture_array((self.n, self.n, self.capacity), 3, alignment=1)
+        self.nodes.filter = (moderngl.LINEAR, moderngl.LINEAR)
         self.nodes.repeat_x = self.nodes.repeat_y = False
+        self.slot_of: dict[int, int] = {}            # node i * n_st + j -> layer
+        self._free = list(range(self.capacity - 1, -1, -1))
         self.program = mgl.program(vertex_shader=RECON_VS, fragment_shader=RECON_FS)
-        verts = reconstruction_vertices(slab, layers)
-        self.vertex_count = len(verts)
-        self.vbo = mgl.buffer(verts.tobytes() if len(verts) else b"\0" * 32)
+        self.vbo = mgl.buffer(reserve=max(32, 32 * 3 * 2 * slab.n_st ** 2 * 3))
         self.vao = mgl.vertex_array(self.program, [(self.vbo, "3f 1f 1f 3f", "in_pos",
                                                     "in_alpha", "in_layer", "in_node")])
-        self.color = mgl.texture(self.size, 4, dtype="f2")
-        self.fbo = mgl.framebuffer(color_attachments=[self.color])
+        self.vertex_count = 0
+        self.draws: Draws | None = None
         self.proxy_depth = mgl.depth_texture(self.size)
         self.proxy_depth.compare_func = ""
         self.proxy_fbo = mgl.framebuffer(depth_attachment=self.proxy_depth)
+        self.query = mgl.query(samples=True)
+        self.samples = 0                             # textured samples of the last render
+
+    @property
+    def node_bytes(self) -> int:
+        """Texture memory of one resident node."""
+        return self.n * self.n * self.BYTES_PER_TEXEL
+
+    @classmethod
+    def full(cls, ctx: GLContext, slab: Slab, images: dict[tuple[int, int], np.ndarray],
+             width: int, height: int) -> LumigraphRenderer:
+        """Every node with data resident, drawn over the full grid (nodes missing from
+        ``images`` are fictitious)."""
+        self = cls(ctx, slab, width, height, max(len(images), 1))
+        n = slab.n_st
+        valid = np.zeros((n, n))
+        for (i, j), img in images.items():
+            self.upload(i * n + j, img)
+            valid[i, j] = 1.0
+        self.set_draws(cover_draws(grid_cover(slab, valid)))
+        return self
+
+    @property
+    def images(self) -> int:
+        """Node images drawn per frame."""
+        return 0 if self.draws is None else len(self.draws.nodes)
+
+    def upload(self, node: int, image: np.ndarray) -> int:
+        """Make node ``i * n_st + j`` resident (``image (m, m, 3) uint8``, row 0 at the top,
+        ``m = n_uv >> level``); returns its layer.  Raises when texture memory is full."""
+        if node in self.slot_of:
+            return self.slot_of[node]
+        if not self._free:
+            raise RuntimeError("lumigraph texture memory is full: evict a node first")
+        img = np.ascontiguousarray(image[::-1], dtype=np.uint8)  # GL rows
+        if img.shape != (self.n, self.n, 3):
+            raise ValueError(f"node image {img.shape}, expected {(self.n, self.n, 3)}")
+        slot = self._free.pop()
+        self.nodes.write(img, viewport=(0, 0, slot, self.n, self.n, 1))
+        self.slot_of[node] = slot
+        return slot
+
+    def evict(self, node: int) -> None:
+        """Free node ``node``'s layer (it must not be in the draws of the next render)."""
+        slot = self.slot_of.pop(node, None)
+        if slot is not None:
+            self._free.append(slot)
+
+    def set_draws(self, draws: Draws) -> None:
+        """What the next renders draw; every node of ``draws`` must be resident."""
+        slots = np.full(self.slab.n_st ** 2, -1, dtype=np.int64)
+        for node, slot in self.slot_of.items():
+            slots[node] = slot
+        if len(draws) and (slots[draws.node] < 0).any():
+            raise RuntimeError("a drawn lumigraph node is not resident")
+        verts = draw_vertices(self.slab, draws, slots)
+        if verts.nbytes > self.vbo.size:
+            self.vbo.orphan(verts.nbytes)
+        if len(verts):
+            self.vbo.write(verts.tobytes())
+        self.vertex_count, self.draws = len(verts), draws
 
     def render(self, view: np.ndarray, projection: np.ndarray,
-               proxy: ColorMeshRenderer | None = None, white: bool = False) -> None:
+               proxy: ColorMeshRenderer | None = None, white: bool = False,
+               count_samples: bool = False) -> None:
         """Reconstruct the view ``projection @ view`` (world to clip); with ``proxy``, the
-        approximate geometry's z-buffer corrects the uv coordinates for depth."""
+        approximate geometry's z-buffer corrects the uv coordinates for depth.  With
+        ``count_samples``, :attr:`samples` becomes the number of textured samples drawn."""
         mgl = self.ctx.mgl
         view_proj = projection @ view
         mvp = view_proj @ self.slab.frame                     # local -> clip
@@ -231,23 +311,97 @@ class LumigraphRenderer:
         self.nodes.use(0)
         self.proxy_depth.use(1)
         if self.vertex_count:
-            self.vao.render(moderngl.TRIANGLES, vertices=self.vertex_count)
+            if count_samples:
+                with self.query:
+                    self.vao.render(moderngl.TRIANGLES, vertices=self.vertex_count)
+                self.samples = int(self.query.samples)
+            else:
+                self.vao.render(moderngl.TRIANGLES, vertices=self.vertex_count)
         mgl.disable(moderngl.BLEND)
 
-    def read_rgba(self) -> np.ndarray:
-        """The reconstruction, ``(h, w, 4) float32`` premultiplied, row 0 at the top."""
-        w, h = self.size
-        data = np.frombuffer(self.color.read(alignment=1), np.float16).reshape(h, w, 4)
-        return data[::-1].astype(np.float32)
+    def release(self) -> None:
+        if self.ctx.mgl.fbo is self.proxy_fbo:
+            self.ctx.default_fbo.use()
+        for obj in (self.vao, self.vbo, self.program, self.nodes, self.proxy_fbo,
+                    self.proxy_depth):
+            obj.release()
+        super().release()
 
-    def read_rgb8(self, background: tuple[float, float, float] = (0.0, 0.0, 0.0)
-                  ) -> np.ndarray:
-        """Composited over ``background`` (linear [0, 1]), ``(h, w, 3) uint8``."""
-        rgba = self.read_rgba()
-        rgb = rgba[..., :3] + (1.0 - np.clip(rgba[..., 3:], 0, 1)) * np.array(background)
-        return np.clip(np.rint(rgb * 255.0), 0, 255).astype(np.uint8)
+
+PROJ_VS = """#version 330
+uniform mat4 u_mvp;       // world -> clip, this frame
+uniform mat4 u_tex;       // world -> [0, 1]^3: the reused image's view, scaled (§3.2's M)
+in vec3 in_pos;
+out vec4 v_tc;
+void main() {
+    v_tc = u_tex * vec4(in_pos, 1.0);
+    gl_Position = u_mvp * vec4(in_pos, 1.0);
+}
+"""
+PROJ_FS = """#version 330
+uniform sampler2D u_image;  // the reused reconstruction, premultiplied
+in vec4 v_tc;
+out vec4 f_color;
+void main() {
+    vec2 tc = v_tc.xy / v_tc.w;
+    bool outside = v_tc.w <= 0.0 || any(lessThan(tc, vec2(0.0)))
+                   || any(greaterThan(tc, vec2(1.0)));
+    f_color = outside ? vec4(0.0) : texture(u_image, tc);
+}
+"""
+TEXTURE_MATRIX = np.array([[0.5, 0, 0, 0.5], [0, 0.5, 0, 0.5], [0, 0, 0.5, 0.5],
+                           [0, 0, 0, 1.0]])
+
+
+class ProjectiveRenderer(FloatTarget):
+    """§3.2: the last reconstructed image reused as a projective texture on the
+    approximate geometry (``proxy``, vertices in world space) for the frames after it."""
+
+    def __init__(self, ctx: GLContext, proxy_vertices: np.ndarray, proxy_faces: np.ndarray,
+                 width: int, height: int) -> None:
+        super().__init__(ctx, width, height)
+        mgl = ctx.mgl
+        self.image = mgl.texture(self.size, 4, dtype="f2")
+        self.image.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        self.image.repeat_x = self.image.repeat_y = False
+        self.vbo = mgl.buffer(np.ascontiguousarray(proxy_vertices, np.float32).tobytes())
+        self.ibo = mgl.buffer(np.ascontiguousarray(proxy_faces, np.int32).tobytes())
+        self.program = mgl.program(vertex_shader=PROJ_VS, fragment_shader=PROJ_FS)
+        self.vao = mgl.vertex_array(self.program, [(self.vbo, "3f", "in_pos")],
+                                    index_buffer=self.ibo, index_element_size=4)
+        self.key_view_proj: np.ndarray | None = None
+        self.query = mgl.query(samples=True)
+        self.samples = 0
+
+    def take(self, source: FloatTarget, view_proj: np.ndarray) -> None:
+        """Keep ``source``'s image, reconstructed through ``view_proj``, as the texture
+        (a framebuffer-to-texture copy, as the paper's glCopyTexImage)."""
+        self.ctx.mgl.copy_framebuffer(self.image, source.fbo)
+        self.key_view_proj = np.asarray(view_proj, dtype=np.float64)
+
+    def render(self, view: np.ndarray, projection: np.ndarray,
+               count_samples: bool = False) -> None:
+        """Warp the kept image to the view ``projection @ view`` on the geometry."""
+        if self.key_view_proj is None:
+            raise RuntimeError("no reconstructed image to reuse yet: call take() first")
+        mgl = self.ctx.mgl
+        self.fbo.use()
+        self.fbo.clear(0.0, 0.0, 0.0, 0.0, depth=1.0)
+        mgl.enable(moderngl.DEPTH_TEST)
+        mgl.disable(moderngl.BLEND | moderngl.CULL_FACE)
+        self.program["u_mvp"].write(mat_bytes(projection @ view))
+        self.program["u_tex"].write(mat_bytes(TEXTURE_MATRIX @ self.key_view_proj))
+        self.program["u_image"].value = 0
+        self.image.use(0)
+        if count_samples:
+            with self.query:
+                self.vao.render(moderngl.TRIANGLES)
+            self.samples = int(self.query.samples)
+        else:
+            self.vao.render(moderngl.TRIANGLES)
+        mgl.disable(moderngl.DEPTH_TEST)
 
     def release(self) -> None:
-        for obj in (self.vao, self.vbo, self.program, self.nodes, self.fbo, self.color,
-                    self.proxy_fbo, self.proxy_depth):
+        for obj in (self.vao, self.program, self.vbo, self.ibo, self.image):
             obj.release()
+        super().release()

@@ -7,8 +7,9 @@ geometry: the mesh simplified with fast-simplification (``proxy_faces`` triangle
 object itself is kept too (``object.npz``), so that renders can be compared with the
 ground truth: the mesh drawn directly from the same eye.
 
-Rendering reconstructs every frame from all nodes (the ``full`` method, §2.3), with depth
-correction from the approximate geometry unless switched off, timed up to ``finish()``.
+Rendering reconstructs every frame with one of the methods of
+:mod:`lodsprite.lumigraph.methods` (``full``, §2.3, by default), with depth correction from
+the approximate geometry unless switched off, timed up to ``finish()``.
 """
 
 from __future__ import annotations
@@ -130,12 +131,14 @@ def _read_object(folder: Path) -> ColorMesh | None:
 def render_lumigraph(folder: Path, out_dir: Path, frames: int = 120,
                      size: tuple[int, int] = (512, 512), path: CameraPath | None = None,
                      ground_truth: bool = False, depth_correction: bool = True,
-                     progress: Progress | None = None) -> dict:
-    """Reconstruct every frame of ``path`` (default: :func:`object_path`) from all nodes;
-    write ``frames.csv`` and ``summary.json`` to ``out_dir`` and return the summary."""
+                     method: str = "full", quality_every: int = 1,
+                     progress: Progress | None = None, **options) -> dict:
+    """Reconstruct every frame of ``path`` (default: :func:`object_path`) with ``method``
+    (:data:`~lodsprite.lumigraph.methods.METHODS`; ``options`` go to
+    :func:`~lodsprite.lumigraph.methods.make_method`); write ``frames.csv`` and
+    ``summary.json`` to ``out_dir`` and return the summary.  With ``ground_truth``, every
+    ``quality_every``-th frame is compared (untimed) with the object drawn directly."""
     from lodsprite.gl.context import GLContext
-    from lodsprite.gl.lumigraph import ColorMeshRenderer, LumigraphRenderer
-    from lodsprite.gl.target import RenderTarget
 
     lf = Lumigraph(folder)
     slab = lf.slabs[0]
@@ -145,61 +148,99 @@ def render_lumigraph(folder: Path, out_dir: Path, frames: int = 120,
         raise InputError(f"{folder} holds no {OBJECT_FILE}: no ground truth to compare with")
     w, h = size
     proj = perspective(path.fov_y_deg, w / h, lf.header.near, 4 * lf.header.far)
-    t0 = time.perf_counter()
-    images = lf.nodes(0)
-    load_s = time.perf_counter() - t0
-    rows = []
     with GLContext() as gl:
-        proxy_mesh = lf.proxy() if depth_correction else None
-        proxy = (ColorMeshRenderer(gl, proxy_mesh.vertices, proxy_mesh.faces,
-                                   proxy_mesh.colors, proxy_mesh.normals)
-                 if proxy_mesh is not None else None)
-        rec = LumigraphRenderer(gl, slab, images, w, h)
-        truth = (ColorMeshRenderer(gl, obj_mesh.vertices, obj_mesh.faces, obj_mesh.colors,
-                                   obj_mesh.normals) if obj_mesh is not None else None)
-        target = RenderTarget(gl, w, h) if truth is not None else None
+        run = _Run(gl, lf, (w, h), depth_correction, obj_mesh, method, options)
         try:
-            rec.render(path.viewpoints[0].view_matrix(), proj, proxy)  # warm-up, untimed
-            gl.finish()
-            for i, vp in enumerate(path.viewpoints):
-                rows.append(_frame(gl, rec, proxy, truth, target, vp, proj, i))
-                if progress:
-                    progress(i + 1, len(path))
+            rows = run.frames(path, proj, quality_every, progress)
+            info = run.info()
         finally:
-            for obj in (rec, proxy, truth, target):
-                if obj is not None:
-                    obj.release()
+            run.release()
         renderer = gl.info.renderer
     ms = np.array([r["ms"] for r in rows])
-    summary = {"frames": len(rows), "method": "full", "lumigraph": str(folder),
-               "object": lf.header.object, "nodes": len(images),
-               "bad_nodes": len(lf.bad_nodes), "size": [w, h],
-               "depth_correction": depth_correction, "load_s": load_s,
+    summary = {"frames": len(rows), "method": method, "lumigraph": str(folder),
+               "object": lf.header.object, "bad_nodes": len(lf.bad_nodes), "size": [w, h],
+               "depth_correction": depth_correction,
                "median_ms": float(np.median(ms)), "mean_ms": float(ms.mean()),
-               "p99_ms": float(np.percentile(ms, 99)),
-               "images_per_frame_mean": float(len(images)),
-               "gl_renderer": renderer, "machine": platform.machine()}
-    if ground_truth:
-        summary["psnr_mean"] = float(np.mean([r["psnr"] for r in rows]))
-        summary["ssim_mean"] = float(np.mean([r["ssim"] for r in rows]))
-    columns = ["frame", "ms", "images"] + (["psnr", "ssim"] if ground_truth else [])
+               "p99_ms": float(np.percentile(ms, 99)), "max_ms": float(ms.max()),
+               "images_per_frame_mean": float(np.mean([r["images"] for r in rows])),
+               "uploads_per_frame_mean": float(np.mean([r["uploads"] for r in rows])),
+               "gl_renderer": renderer, "machine": platform.machine(), **info}
+    judged = [r for r in rows if r.get("psnr") is not None]
+    if judged:
+        summary["psnr_mean"] = float(np.mean([r["psnr"] for r in judged]))
+        summary["ssim_mean"] = float(np.mean([r["ssim"] for r in judged]))
+    columns = ["frame", "kind", "ms", "upload_ms", "raster_ms", "images", "uploads",
+               "evictions"] + (["psnr", "ssim"] if ground_truth else [])
     write_csv(Path(out_dir) / "frames.csv", rows, columns)
     write_json(Path(out_dir) / "summary.json", summary)
     return summary
 
 
-def _frame(gl, rec, proxy, truth, target, vp: Viewpoint, proj, i: int) -> dict:
-    """One timed reconstruction (and, untimed, its PSNR/SSIM against ``truth``)."""
-    view = vp.view_matrix()
-    t0 = time.perf_counter()
-    rec.render(view, proj, proxy)
-    gl.finish()
-    row = {"frame": i, "ms": (time.perf_counter() - t0) * 1e3, "images": rec.images}
-    if truth is not None:  # untimed
+class _Run:
+    """A method, the approximate geometry and the ground truth on one GL context."""
+
+    def __init__(self, gl, lf: Lumigraph, size, depth_correction: bool,
+                 obj_mesh: ColorMesh | None, method: str, options: dict) -> None:
+        from lodsprite.gl.lumigraph import ColorMeshRenderer
+        from lodsprite.gl.target import RenderTarget
+        from lodsprite.lumigraph.methods import Context, make_method
+
+        self.gl, self.made = gl, []
+        proxy_mesh = lf.proxy() if depth_correction else None
+        self.proxy = (ColorMeshRenderer(gl, proxy_mesh.vertices, proxy_mesh.faces,
+                                        proxy_mesh.colors, proxy_mesh.normals)
+                      if proxy_mesh is not None else None)
+        self.made.append(self.proxy)
+        self.truth = (ColorMeshRenderer(gl, obj_mesh.vertices, obj_mesh.faces,
+                                        obj_mesh.colors, obj_mesh.normals)
+                      if obj_mesh is not None else None)
+        self.target = RenderTarget(gl, *size) if self.truth is not None else None
+        self.made += [self.truth, self.target]
+        self.method = make_method(method, Context(gl, lf, 0, size, self.proxy), **options)
+        self.made.append(self.method)
+
+    def frames(self, path: CameraPath, proj, quality_every: int,
+               progress: Progress | None) -> list[dict]:
+        m, vp0 = self.method, path.viewpoints[0]
+        if hasattr(m, "warm_up"):
+            m.warm_up(vp0, proj)
+        else:
+            m.frame(0, vp0, proj)  # untimed: the first set of nodes decoded and resident
+        self.gl.finish()
+        rows = []
+        for i, vp in enumerate(path.viewpoints):
+            f = m.frame(i, vp, proj)
+            row = {"frame": i, "kind": f.kind, "ms": f.ms, "upload_ms": f.upload_ms,
+                   "raster_ms": f.raster_ms, "images": f.images, "uploads": f.uploads,
+                   "evictions": f.evictions}
+            if self.truth is not None and i % max(1, quality_every) == 0:
+                row.update(self.quality(vp, proj))
+            rows.append(row)
+            if progress:
+                progress(i + 1, len(path))
+        return rows
+
+    def quality(self, vp: Viewpoint, proj) -> dict:
+        """PSNR and SSIM of the method's image against the object drawn directly (untimed)."""
         from lodsprite.metrics import psnr, ssim
 
-        got = rec.read_rgb8()
-        truth.render(proj @ view, target.fbo)
-        want = target.read_color()
-        row.update(psnr=psnr(got, want), ssim=ssim(got, want))
-    return row
+        got = self.method.output.read_rgb8()
+        self.truth.render(proj @ vp.view_matrix(), self.target.fbo)
+        want = self.target.read_color()
+        return {"psnr": psnr(got, want), "ssim": ssim(got, want)}
+
+    def info(self) -> dict:
+        m = self.method
+        out = {"nodes_decoded": m.loader.decoded,
+               "texture_layers": m.rec.capacity,
+               "texture_mb": m.rec.capacity * m.rec.node_bytes / 2 ** 20}
+        if hasattr(m, "target_ms"):
+            out.update(target_ms=m.target_ms, scale=dict(m.costs.scale),
+                       fetch_ms=m.costs.fetch, decode_ms=m.costs.decode,
+                       upload_ms_per_node=m.costs.upload * m.costs.scale["upload"])
+        return out
+
+    def release(self) -> None:
+        for obj in reversed(self.made):
+            if obj is not None:
+                obj.release()

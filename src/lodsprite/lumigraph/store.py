@@ -132,27 +132,56 @@ class Lumigraph:
         self.slabs = [s.slab() for s in self.header.slabs]
         self.bad_nodes: dict[tuple[int, int, int], str] = {}
 
-    def node(self, slab: int, i: int, j: int) -> np.ndarray | None:
-        """Node ``(i, j)`` of ``slab``'s uv image, ``(n_uv, n_uv, 3) uint8``, or None when
-        its file is missing or corrupt (recorded in :attr:`bad_nodes`)."""
+    def node(self, slab: int, i: int, j: int, level: int = 0) -> np.ndarray | None:
+        """Node ``(i, j)`` of ``slab``'s uv image, ``(m, m, 3) uint8`` with ``m = n_uv >>
+        level`` (level ``k`` of the uv mipmap), or None when its file is missing or corrupt
+        (recorded in :attr:`bad_nodes`)."""
+        data = self.node_bytes(slab, i, j)
+        return None if data is None else self.decode(data, slab, i, j, level)
+
+    def node_path(self, slab: int, i: int, j: int) -> Path:
         s = self.slabs[slab]
         if not (0 <= i < s.n_st and 0 <= j < s.n_st):
             raise InputError(f"node ({i}, {j}) is outside slab {slab}'s {s.n_st}² grid")
-        path = self.folder / node_name(slab, i, j, self.header.codec)
+        return self.folder / node_name(slab, i, j, self.header.codec)
+
+    def node_bytes(self, slab: int, i: int, j: int) -> bytes | None:
+        """The compressed file of a node (the fetch of §4.2), or None (see :meth:`node`)."""
+        path = self.node_path(slab, i, j)
         try:
             if path.is_symlink() or path.stat().st_size > MAX_NODE_BYTES:
                 raise OSError("not a plain node file of a sane size")
-            with Image.open(path) as im:
+            return path.read_bytes()
+        except OSError as exc:
+            self._bad(slab, i, j, exc)
+            return None
+
+    def decode(self, data: bytes, slab: int, i: int, j: int, level: int = 0
+               ) -> np.ndarray | None:
+        """Decode a node file (the decompression of §4.2) at uv level ``level``: JPEG
+        decodes straight at 1/2, 1/4 or 1/8 scale (DCT scaling), PNG is box-reduced."""
+        s = self.slabs[slab]
+        m = max(1, s.n_uv >> int(level))
+        try:
+            with Image.open(io.BytesIO(data)) as im:
                 if im.size != (s.n_uv, s.n_uv):
                     raise OSError(f"{im.size[0]}x{im.size[1]}, not {s.n_uv}²")
-                return np.asarray(im.convert("RGB"))
+                if level and im.format == "JPEG":
+                    im.draft("RGB", (m, m))
+                im = im.convert("RGB")
+                if im.size != (m, m):
+                    im = im.reduce(max(1, im.size[0] // m)).resize((m, m))
+                return np.asarray(im)
         except (OSError, ValueError, Image.DecompressionBombError) as exc:
-            reason = " ".join(str(exc).split()) or type(exc).__name__
-            if (slab, i, j) not in self.bad_nodes:
-                log.warning("lumigraph node %s is unusable (%s): drawn without data",
-                            path.name, reason)
-            self.bad_nodes[(slab, i, j)] = reason
+            self._bad(slab, i, j, exc)
             return None
+
+    def _bad(self, slab: int, i: int, j: int, exc: BaseException) -> None:
+        reason = " ".join(str(exc).split()) or type(exc).__name__
+        if (slab, i, j) not in self.bad_nodes:
+            log.warning("lumigraph node %s is unusable (%s): drawn without data",
+                        node_name(slab, i, j, self.header.codec), reason)
+        self.bad_nodes[(slab, i, j)] = reason
 
     def nodes(self, slab: int = 0, which=None) -> dict[tuple[int, int], np.ndarray]:
         """The usable node images of ``slab`` (all, or the ``(i, j)`` in ``which``)."""

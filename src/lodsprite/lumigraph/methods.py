@@ -1,0 +1,346 @@
+"""The reconstruction methods of Sloan, Cohen & Gortler (1997), frame by frame.
+
+Each method turns a viewpoint into a reconstruction in its float target and reports what
+the frame cost (GL work finished before each clock stops):
+
+* ``full`` - every node (§2.3).
+* ``subsample`` - level ``level`` of the 4D mipmap: every ``2**level``-th st node, uv
+  images decoded at ``1/2**level`` (§3.1).
+* ``fixed`` - the 9 nodes round the eye's st point, plus fictitious corners (Figure 3);
+  the block moves when the eye's nearest node leaves its centre.
+* ``arbitrary`` - the ``nodes`` nearest the eye's st point, any subset, triangulated.
+* ``line`` - the row or column of nodes along the predicted motion, drawn as strips.
+* ``projective`` - §3.2: every ``reuse`` frames a reconstruction (``arbitrary``) at the
+  viewpoint predicted for the end of the cycle, warped on the approximate geometry in
+  between.
+* ``progressive`` - §3.3: the ``arbitrary`` set, nodes blended in and out over ``fade``
+  frames through their validity.
+* ``critical`` - §4: benefit/cost selection under a time and a texture-memory budget,
+  nodes fetched and decoded on the loader thread (:class:`CriticalMethod`).
+
+Except for ``critical``, a method that needs a node not yet decoded decodes it in the
+frame (its "texture load" in Table 1 terms).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from lodsprite.camera import Viewpoint
+from lodsprite.errors import InputError
+from lodsprite.gl.lumigraph import (
+    ColorMeshRenderer,
+    FloatTarget,
+    LumigraphRenderer,
+    ProjectiveRenderer,
+)
+from lodsprite.lumigraph.critical import st_point
+from lodsprite.lumigraph.loader import NodeLoader
+from lodsprite.lumigraph.store import Lumigraph
+from lodsprite.lumigraph.subsets import (
+    cover_draws,
+    grid_cover,
+    line_draws,
+    nearest_block,
+    nearest_nodes,
+    subsample_nodes,
+    subset_cover,
+)
+from lodsprite.sprite.predictors import DecayLinearPredictor
+
+METHODS = ("full", "subsample", "fixed", "arbitrary", "line", "projective", "progressive",
+           "critical")
+FRAME_S = 1.0 / 30.0  # the nominal time between frames, for the motion predictor
+
+
+@dataclass(frozen=True)
+class MethodFrame:
+    """One frame: ``ms`` in all, of which ``upload_ms`` making nodes resident (decoding
+    included where the method decodes in the frame) and ``raster_ms`` drawing; node
+    ``images`` drawn, ``uploads`` and ``evictions`` made, and the frame's ``kind``."""
+
+    ms: float
+    upload_ms: float
+    raster_ms: float
+    images: int
+    uploads: int
+    evictions: int
+    kind: str = "frame"
+
+
+@dataclass
+class Context:
+    """What every method needs: the GL context, the lumigraph and its slab, the output
+    size and the approximate geometry's renderer (None: no depth correction)."""
+
+    gl: object
+    lf: Lumigraph
+    slab_index: int
+    size: tuple[int, int]
+    proxy: ColorMeshRenderer | None
+    white: bool = False  # every texel white: the image is the alpha sum (tests)
+
+
+class Method:
+    """A reconstruction method over a pool of resident nodes (see module doc)."""
+
+    name = "base"
+
+    def __init__(self, ctx: Context, capacity: int, level: int = 0) -> None:
+        self.ctx = ctx
+        self.slab = ctx.lf.slabs[ctx.slab_index]
+        self.n_nodes = self.slab.n_st ** 2
+        w, h = ctx.size
+        self.rec = LumigraphRenderer(ctx.gl, self.slab, w, h, capacity, level)
+        self.loader = NodeLoader(ctx.lf, ctx.slab_index, level)
+        self.predictor = DecayLinearPredictor()
+        self.samples = 0
+        self._set: tuple[int, ...] | None = None
+
+    @property
+    def output(self) -> FloatTarget:
+        return self.rec
+
+    def eye_st(self, viewpoint: Viewpoint) -> np.ndarray:
+        return st_point(self.slab, viewpoint.o)
+
+    def ensure(self, nodes: np.ndarray) -> tuple[np.ndarray, int, int]:
+        """Make ``nodes`` resident, decoding in this frame what the loader does not hold;
+        returns the validity of each (0 for a node without data), uploads, evictions."""
+        keep = {int(n) for n in nodes}
+        valid = np.ones(len(nodes))
+        ups = evs = 0
+        for k, n in enumerate(int(x) for x in nodes):
+            if n in self.rec.slot_of:
+                continue
+            img = self.loader.load_now(n)
+            if img is None:
+                valid[k] = 0.0
+                continue
+            if not self.rec._free:
+                out = next(m for m in self.rec.slot_of if m not in keep)
+                self.rec.evict(out)
+                evs += 1
+            self.rec.upload(n, img)
+            ups += 1
+        return valid, ups, evs
+
+    def choose(self, index: int, viewpoint: Viewpoint) -> np.ndarray:
+        """The nodes this frame needs."""
+        raise NotImplementedError
+
+    def draws(self, nodes: np.ndarray, valid: np.ndarray, viewpoint: Viewpoint):
+        return cover_draws(subset_cover(self.slab, nodes, valid))
+
+    def frame(self, index: int, viewpoint: Viewpoint, projection: np.ndarray,
+              count_samples: bool = False) -> MethodFrame:
+        gl = self.ctx.gl
+        t0 = time.perf_counter()
+        self.predictor.observe(index * FRAME_S, viewpoint)
+        nodes = self.choose(index, viewpoint)
+        valid, ups, evs = self.ensure(nodes)
+        key = tuple(int(n) for n in nodes) + tuple(valid)
+        if key != self._set or self.dynamic:
+            self.rec.set_draws(self.draws(nodes, valid, viewpoint))
+            self._set = key
+        gl.finish()
+        t1 = time.perf_counter()
+        raster_ms = self.draw(viewpoint, projection, count_samples)
+        return MethodFrame((t1 - t0) * 1e3 + raster_ms, (t1 - t0) * 1e3, raster_ms,
+                           self.rec.images, ups, evs)
+
+    def draw(self, viewpoint: Viewpoint, projection: np.ndarray, count_samples: bool
+             ) -> float:
+        """Reconstruct the current draws (ms, GL work finished)."""
+        t0 = time.perf_counter()
+        self.rec.render(viewpoint.view_matrix(), projection, self.ctx.proxy,
+                        white=self.ctx.white, count_samples=count_samples)
+        self.ctx.gl.finish()
+        self.samples = self.rec.samples
+        return (time.perf_counter() - t0) * 1e3
+
+    dynamic = False  # draws change with the viewpoint even for the same nodes
+
+    def release(self) -> None:
+        self.loader.close()
+        self.rec.release()
+
+
+class FullMethod(Method):
+    name = "full"
+
+    def __init__(self, ctx: Context) -> None:
+        n = ctx.lf.slabs[ctx.slab_index].n_st
+        super().__init__(ctx, n * n)
+        self.all = np.arange(n * n)
+
+    def choose(self, index, viewpoint):
+        return self.all
+
+    def draws(self, nodes, valid, viewpoint):
+        return cover_draws(grid_cover(self.slab, valid))
+
+
+class SubsampleMethod(Method):
+    name = "subsample"
+
+    def __init__(self, ctx: Context, level: int = 1) -> None:
+        n = ctx.lf.slabs[ctx.slab_index].n_st
+        if not 0 <= level <= 4 or (n - 1) >> level < 1:
+            raise InputError(f"subsample level must be 0..4 and leave 2 nodes a side, "
+                             f"got {level}")
+        self.nodes = subsample_nodes(n, level)
+        super().__init__(ctx, len(self.nodes), level)
+
+    def choose(self, index, viewpoint):
+        return self.nodes
+
+
+class FixedMethod(Method):
+    name = "fixed"
+
+    def __init__(self, ctx: Context) -> None:
+        super().__init__(ctx, 9)
+        self.block: np.ndarray | None = None
+
+    def choose(self, index, viewpoint):
+        centre = nearest_nodes(self.slab, self.eye_st(viewpoint), 1)[0]
+        if self.block is None or centre not in self.block[[4]]:
+            # moves only once the eye's nearest node is no longer the block's centre
+            self.block = nearest_block(self.slab, self.eye_st(viewpoint), 3)
+        return self.block
+
+
+class ArbitraryMethod(Method):
+    name = "arbitrary"
+
+    def __init__(self, ctx: Context, nodes: int = 16) -> None:
+        if not 1 <= nodes <= ctx.lf.slabs[ctx.slab_index].n_st ** 2:
+            raise InputError(f"--nodes must be 1..{ctx.lf.slabs[ctx.slab_index].n_st ** 2}, "
+                             f"got {nodes}")
+        super().__init__(ctx, nodes)
+        self.count = nodes
+
+    def choose(self, index, viewpoint):
+        return np.sort(nearest_nodes(self.slab, self.eye_st(viewpoint), self.count))
+
+
+class LineMethod(Method):
+    name = "line"
+
+    def __init__(self, ctx: Context) -> None:
+        super().__init__(ctx, ctx.lf.slabs[ctx.slab_index].n_st)
+        self.direction = np.array([1.0, 0.0])
+
+    def choose(self, index, viewpoint):
+        st = self.eye_st(viewpoint)
+        ahead = st_point(self.slab, self.predictor.predict(0.5).o) - st
+        if np.linalg.norm(ahead) > 1e-9:
+            self.direction = ahead
+        self._draws = line_draws(self.slab, st, self.direction)
+        return self._draws.nodes
+
+    def draws(self, nodes, valid, viewpoint):
+        return self._draws
+
+
+class ProgressiveMethod(Method):
+    name = "progressive"
+    dynamic = True  # validities change every frame while nodes fade
+
+    def __init__(self, ctx: Context, nodes: int = 16, fade: int = 8) -> None:
+        super().__init__(ctx, 2 * nodes)
+        self.count, self.step = nodes, 1.0 / max(1, fade)
+        self.validity: dict[int, float] = {}
+
+    def choose(self, index, viewpoint):
+        target = set(int(n) for n in nearest_nodes(self.slab, self.eye_st(viewpoint),
+                                                    self.count))
+        for n in target | set(self.validity):
+            v = self.validity.get(n, 0.0) + (self.step if n in target else -self.step)
+            self.validity[n] = min(1.0, v)
+            if self.validity[n] <= 0.0:
+                del self.validity[n]
+                self.rec.evict(n)
+        return np.array(sorted(self.validity), dtype=np.int64)
+
+    def draws(self, nodes, valid, viewpoint):
+        v = np.array([self.validity[int(n)] for n in nodes]) * valid
+        return cover_draws(subset_cover(self.slab, nodes, v))
+
+    @property
+    def partial(self) -> float:
+        """The fraction of drawn nodes with partial validity (Table 1's x)."""
+        v = np.array(list(self.validity.values()))
+        return float(np.mean(v < 1.0)) if len(v) else 0.0
+
+
+class ProjectiveMethod(ArbitraryMethod):
+    name = "projective"
+
+    def __init__(self, ctx: Context, nodes: int = 16, reuse: int = 6) -> None:
+        super().__init__(ctx, nodes)
+        if ctx.proxy is None:
+            raise InputError("the projective method needs the approximate geometry "
+                             "(depth correction on)")
+        mesh = ctx.lf.proxy()
+        self.proj = ProjectiveRenderer(ctx.gl, mesh.vertices, mesh.faces, *ctx.size)
+        self.reuse = max(1, int(reuse))
+
+    @property
+    def output(self) -> FloatTarget:
+        return self.proj
+
+    def frame(self, index, viewpoint, projection, count_samples=False):
+        if index % self.reuse == 0 or self.proj.key_view_proj is None:
+            # a new image, from where the eye is predicted to be half a cycle on
+            ahead = self.predictor.predict(self.reuse * FRAME_S / 2) if index else viewpoint
+            key = Viewpoint(viewpoint.x, viewpoint.y, viewpoint.z, ahead.o)
+            t0 = time.perf_counter()
+            f = super().frame(index, key, projection)
+            self.proj.take(self.rec, projection @ key.view_matrix())
+            self.ctx.gl.finish()
+            extra = (time.perf_counter() - t0) * 1e3 - f.ms
+        else:
+            self.predictor.observe(index * FRAME_S, viewpoint)
+            f, extra = MethodFrame(0.0, 0.0, 0.0, 0, 0, 0, "reuse"), 0.0
+        t1 = time.perf_counter()
+        self.proj.render(viewpoint.view_matrix(), projection, count_samples)
+        self.ctx.gl.finish()
+        warp = (time.perf_counter() - t1) * 1e3
+        self.samples = self.proj.samples
+        kind = "reuse" if f.kind == "reuse" else "keyframe"
+        return MethodFrame(f.ms + extra + warp, f.upload_ms, f.raster_ms + extra + warp,
+                           f.images, f.uploads, f.evictions, kind)
+
+    def release(self) -> None:
+        self.proj.release()
+        super().release()
+
+
+def make_method(name: str, ctx: Context, nodes: int = 16, level: int = 1, reuse: int = 6,
+                fade: int = 8, target_fps: float = 30.0, texture_mb: float = 4.0,
+                **critical) -> Method:
+    """The method ``name`` of :data:`METHODS` with its options."""
+    if name == "full":
+        return FullMethod(ctx)
+    if name == "subsample":
+        return SubsampleMethod(ctx, level)
+    if name == "fixed":
+        return FixedMethod(ctx)
+    if name == "arbitrary":
+        return ArbitraryMethod(ctx, nodes)
+    if name == "line":
+        return LineMethod(ctx)
+    if name == "projective":
+        return ProjectiveMethod(ctx, nodes, reuse)
+    if name == "progressive":
+        return ProgressiveMethod(ctx, nodes, fade)
+    if name == "critical":
+        from lodsprite.lumigraph.timecritical import CriticalMethod
+
+        return CriticalMethod(ctx, target_fps, texture_mb, **critical)
+    raise InputError(f"unknown lumigraph method {name!r}: use one of {', '.join(METHODS)}")
