@@ -450,6 +450,36 @@ def _run_scoggins2000(out_dir: Path, terrain: str, quick: bool, size: int) -> No
     out.print(f"report: {report}")
 
 
+def _run_sloan1997(out_dir: Path, quick: bool) -> None:
+    from lodsprite.lumigraph.reproduce import SloanConfig, reproduce_sloan1997
+    from lodsprite.report.paper_numbers import PAPER_1997
+    from lodsprite.report.sloan1997 import write_outputs
+
+    if out_dir == Path("out/chen1999"):
+        out_dir = Path("out/sloan1997")
+    cfg = SloanConfig.quick() if quick else SloanConfig()
+    bar, update = _multi_progress()
+    try:
+        r = reproduce_sloan1997(cfg, out_dir, update)
+    finally:
+        bar.stop()
+    report = write_outputs(r, out_dir)
+    t = Table(title="Sloan, Cohen & Gortler 1997 reproduced")
+    for col in ("", "this run", "paper"):
+        t.add_column(col, justify="right")
+    t.add_row("capture s", f"{r['capture_s']:.1f}", "")
+    t.add_row("PSNR full / no depth correction",
+              f"{r['psnr_full']:.2f} / {r['psnr_no_depth_correction']:.2f} dB", "")
+    for name, v in r["table1"].items():
+        t.add_row(f"fill rate {name}", f"{v['fill_rate']:.2f}",
+                  str(PAPER_1997["fill_rate"][name]))
+    for name, q in r["critical"].items():
+        t.add_row(f"{name}: mean / p99 ms (target {q['target_ms']:.1f})",
+                  f"{q['mean_ms']:.1f} / {q['p99_ms']:.1f}", "")
+    out.print(t)
+    out.print(f"report: {report}")
+
+
 @app.command()
 def profile(
     model: Annotated[str, typer.Argument(
@@ -510,7 +540,8 @@ def _numbers(text: str | None, kind: type, option: str) -> list | None:
 
 @app.command()
 def reproduce(
-    experiment: Annotated[str, typer.Argument(help="chen1999 | swan2002 | scoggins2000")],
+    experiment: Annotated[str, typer.Argument(
+        help="chen1999 | swan2002 | scoggins2000 | sloan1997")],
     out_dir: Annotated[Path, typer.Option("--out", help="output folder")] = Path("out/chen1999"),
     terrain: TerrainOpt = "jacksboro",
     size: Annotated[int, typer.Option("--size", help="image size in pixels (square)")] = 512,
@@ -546,9 +577,12 @@ def reproduce(
     if experiment == "scoggins2000":
         _run_scoggins2000(out_dir, terrain, quick, size)
         return
+    if experiment == "sloan1997":
+        _run_sloan1997(out_dir, quick)
+        return
     if experiment != "chen1999":
         raise InputError(f"unknown experiment '{experiment}': available: chen1999, swan2002, "
-                         "scoggins2000")
+                         "scoggins2000, sloan1997")
     kw = {"terrain": terrain, "grid": grid, "lod": lod, "epsilon": epsilon,
           "visibility": visibility, "border": border, "guard_px": guard,
           "full_sample": full_sample, "sweeps": sweeps}

@@ -59,13 +59,14 @@ def neighbour_fraction_missing(drawn: np.ndarray) -> np.ndarray:
     return 1.0 - count / total
 
 
-def benefit(slab: Slab, eye_st: np.ndarray, path_st: np.ndarray, drawn: np.ndarray
-            ) -> np.ndarray:
+def benefit(slab: Slab, eye_st: np.ndarray, path_st: np.ndarray, drawn: np.ndarray,
+            points: np.ndarray | None = None) -> np.ndarray:
     """§4.1's benefit of every node, ``(n_st * n_st,)`` in [0, 1]: ``eye_st (2,)`` the eye's
     st point, ``path_st (K, 2)`` its predicted future st points (may be empty),
-    ``drawn (n_st * n_st,) bool`` the nodes in the current triangulation."""
+    ``drawn (n_st * n_st,) bool`` the nodes in the current triangulation; ``points``
+    the nodes' st coordinates ``(n_st * n_st, 2)`` if already at hand."""
     n = slab.n_st
-    pts = slab.node_local()[..., :2].reshape(-1, 2)
+    pts = slab.node_local()[..., :2].reshape(-1, 2) if points is None else points
     c = (slab.st_size / (n - 1)) ** 2
     dist = _falloff(((pts - eye_st) ** 2).sum(axis=1), c)
     path = np.ones(len(pts))
@@ -171,34 +172,53 @@ def plan(gain: np.ndarray, where: np.ndarray, costs: CostModel, budget_ms: float
          capacity: int, requests: int = 16, floor: float = 1e-4) -> Plan:
     """§4's greedy choice: nodes in order of benefit/cost (``gain (N,)`` benefit,
     ``where (N,)`` DISK/RAM/RESIDENT) are added while the predicted frame time stays within
-    ``budget_ms`` and at most ``capacity`` nodes fit in texture memory; nodes worth drawing
+    ``budget_ms``; once ``capacity`` nodes fill texture memory, each next node in line
+    replaces the lowest-benefit node chosen if it has more benefit.  Nodes worth drawing
     that are only on disk go to the loader (``requests`` of them, best first).  Resident
     nodes not drawn are evicted lowest benefit first, as many as uploads need room."""
     gain = np.asarray(gain, dtype=np.float64)
     where = np.asarray(where)
     cost = costs.node_costs(where)
-    order = np.argsort(-(gain / cost), kind="stable")
+    ratio = gain / cost
+    # only the best few can matter: enough to fill memory, replace, and feed the loader
+    keep = min(len(gain), 3 * capacity + requests + 32)
+    top = np.argpartition(-ratio, keep - 1)[:keep] if keep < len(gain) else np.arange(len(gain))
+    order = top[np.argsort(-ratio[top], kind="stable")]
     order = order[gain[order] > floor]
     sc = costs.scale
     t = costs.base * sc["base"] + costs.raster_base * sc["raster"]
     raster = costs.raster_node * sc["raster"]
     upload = costs.upload * sc["upload"]
+    g, wh = gain.tolist(), where.tolist()
     draw, ups, want = [], [], []
-    for node in order:
-        w = where[node]
+    low = np.inf  # the lowest benefit drawn, once memory is full
+    for node in order.tolist():
+        w = wh[node]
         if w == DISK:
             if len(want) < requests:
                 want.append(node)
             continue
-        if len(draw) >= capacity:
-            if len(want) >= requests:
-                break
-            continue
         c = raster + (upload if w != RESIDENT else 0.0)
-        if t + c > budget_ms and draw:
+        if len(draw) >= capacity:
+            # texture memory full: the next in line replaces the lowest-benefit node
+            if g[node] <= low:
+                continue
+            k = min(range(len(draw)), key=lambda i: g[draw[i]])
+            out = draw[k]
+            c_out = raster + (upload if wh[out] != RESIDENT else 0.0)
+            if t - c_out + c > budget_ms:
+                continue
+            draw[k], t = node, t - c_out + c
+            if out in ups:
+                ups.remove(out)
+            low = min(g[d] for d in draw)
+        elif t + c > budget_ms and draw:
             continue
-        draw.append(node)
-        t += c
+        else:
+            draw.append(node)
+            t += c
+            if len(draw) == capacity:
+                low = min(g[d] for d in draw)
         if w != RESIDENT:
             ups.append(node)
     draw_a = np.array(draw, dtype=np.int64)

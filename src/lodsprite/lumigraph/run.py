@@ -138,6 +138,21 @@ def render_lumigraph(folder: Path, out_dir: Path, frames: int = 120,
     :func:`~lodsprite.lumigraph.methods.make_method`); write ``frames.csv`` and
     ``summary.json`` to ``out_dir`` and return the summary.  With ``ground_truth``, every
     ``quality_every``-th frame is compared (untimed) with the object drawn directly."""
+    rows, summary = measure(folder, method, path, frames, size, ground_truth,
+                            depth_correction, quality_every, progress, **options)
+    columns = ["frame", "kind", "ms", "upload_ms", "raster_ms", "images", "uploads",
+               "evictions"] + (["psnr", "ssim"] if ground_truth else [])
+    write_csv(Path(out_dir) / "frames.csv", rows, columns)
+    write_json(Path(out_dir) / "summary.json", summary)
+    return summary
+
+
+def measure(folder: Path, method: str = "full", path: CameraPath | None = None,
+            frames: int = 120, size: tuple[int, int] = (512, 512), ground_truth: bool = False,
+            depth_correction: bool = True, quality_every: int = 1,
+            progress: Progress | None = None, **options) -> tuple[list[dict], dict]:
+    """Run ``method`` along ``path``: the per-frame rows and their summary (see
+    :func:`render_lumigraph`)."""
     from lodsprite.gl.context import GLContext
 
     lf = Lumigraph(folder)
@@ -149,7 +164,7 @@ def render_lumigraph(folder: Path, out_dir: Path, frames: int = 120,
     w, h = size
     proj = perspective(path.fov_y_deg, w / h, lf.header.near, 4 * lf.header.far)
     with GLContext() as gl:
-        run = _Run(gl, lf, (w, h), depth_correction, obj_mesh, method, options)
+        run = MethodRun(gl, lf, (w, h), depth_correction, obj_mesh, method, options)
         try:
             rows = run.frames(path, proj, quality_every, progress)
             info = run.info()
@@ -169,14 +184,10 @@ def render_lumigraph(folder: Path, out_dir: Path, frames: int = 120,
     if judged:
         summary["psnr_mean"] = float(np.mean([r["psnr"] for r in judged]))
         summary["ssim_mean"] = float(np.mean([r["ssim"] for r in judged]))
-    columns = ["frame", "kind", "ms", "upload_ms", "raster_ms", "images", "uploads",
-               "evictions"] + (["psnr", "ssim"] if ground_truth else [])
-    write_csv(Path(out_dir) / "frames.csv", rows, columns)
-    write_json(Path(out_dir) / "summary.json", summary)
-    return summary
+    return rows, summary
 
 
-class _Run:
+class MethodRun:
     """A method, the approximate geometry and the ground truth on one GL context."""
 
     def __init__(self, gl, lf: Lumigraph, size, depth_correction: bool,

@@ -54,6 +54,7 @@ class CriticalMethod(Method):
         self.drawn = np.zeros(self.n_nodes, dtype=bool)
         self.current = np.zeros(0, dtype=np.int64)
         self.predicted_ms = 0.0
+        self.points = self.slab.node_local()[..., :2].reshape(-1, 2)
 
     def warm_up(self, viewpoint: Viewpoint, projection: np.ndarray) -> None:
         """Untimed: decode and upload the nodes round the first view; calibrate the upload
@@ -101,9 +102,11 @@ class CriticalMethod(Method):
         now = index * FRAME_S
         self.predictor.observe(now, viewpoint)
         st = self.eye_st(viewpoint)
-        path = np.array([st_point(self.slab, self.predictor.predict(dt).o)
+        # the linear predictor's eye, sampled along its line (one prediction)
+        ahead = self.predictor.predict(PATH_AHEAD_S[-1]).o - viewpoint.o
+        path = np.array([st_point(self.slab, viewpoint.o + ahead * (dt / PATH_AHEAD_S[-1]))
                          for dt in PATH_AHEAD_S])
-        gain = benefit(self.slab, st, path, self.drawn)
+        gain = benefit(self.slab, st, path, self.drawn, self.points)
         gain[list(self.loader.bad)] = 0.0
         for _, fetch_ms, decode_ms in self.loader.drain_costs():
             self.costs.loaded(fetch_ms, decode_ms)
