@@ -62,21 +62,29 @@ def test_subsets_with_fictitious_corners_cover_the_plane_with_unit_alphas(nodes)
     np.testing.assert_allclose(alpha_sum(d, points()), 1.0, atol=1e-9)
 
 
-def test_figure_3_alphas_of_a_triangle_outside_the_nine():
-    # the paper's triangle I: texture a with alpha 1 at a, 0 at b, 1/n at the fictitious
-    # corner; an interior triangle of the nine is drawn exactly three times
-    d = cover_draws(subset_cover(SLAB, nearest_block(SLAB, np.zeros(2))))
-    fict = np.isclose(np.abs(d.corners), SLAB.st_size / 2).all(axis=2)  # (D, 3)
-    with_fict = fict.any(axis=1)
-    assert with_fict.any() and (~with_fict).any()
-    shares = d.alpha[fict]
-    # a fictitious corner gets 1/n from each of its n neighbours with data, 0 from others
-    assert (shares < 1).all() and (shares > 0).any()
-    assert set(np.round(shares[shares > 0], 9)) <= {round(1 / n, 9) for n in range(1, 9)}
-    keys = {}
-    for c, n in zip(d.corners[~with_fict], d.node[~with_fict], strict=True):
-        keys.setdefault(tuple(np.round(c, 9).ravel()), set()).add(int(n))
-    assert all(len(v) == 3 for v in keys.values())
+def test_figure_3_alphas_of_the_fixed_nine():
+    # inside the nine every triangle is drawn three times; the paper's triangle I (nodes
+    # a, b with data, fictitious (b, c) beside them) is drawn from a with alphas 1 at a,
+    # 0 at b and 1/2 at the fictitious node, whose only neighbours with data are a and b
+    cover = subset_cover(SLAB, nearest_block(SLAB, np.zeros(2)))
+    d = cover_draws(cover)
+    data = {tuple(np.round(p, 9)) for p, n in zip(cover.points, cover.node, strict=True)
+            if n >= 0}
+    draws_of: dict = {}
+    for c, n, a in zip(d.corners, d.node, d.alpha, strict=True):
+        key = tuple(sorted(tuple(np.round(p, 9)) for p in c))
+        draws_of.setdefault(key, []).append((int(n), c, a))
+    inner = [k for k in draws_of if all(p in data for p in k)]
+    assert len(inner) == 8 and all(len(draws_of[k]) == 3 for k in inner)
+    halves = 0
+    for k, ds in draws_of.items():
+        if sum(p in data for p in k) == 2 and len(ds) == 2:
+            for _, c, a in ds:
+                fict = [i for i in range(3) if tuple(np.round(c[i], 9)) not in data]
+                assert len(fict) == 1 and a[fict[0]] == 0.5
+                assert sorted(np.delete(a, fict[0]).tolist()) == [0.0, 1.0]
+            halves += 1
+    assert halves >= 4  # along the block's sides (diagonal ring nodes touch three)
 
 
 @settings(max_examples=30, deadline=None)

@@ -198,6 +198,9 @@ class SubsampleMethod(Method):
     def choose(self, index, viewpoint):
         return self.nodes
 
+    def draws(self, nodes, valid, viewpoint):
+        return cover_draws(subset_cover(self.slab, nodes, valid, ring=False))
+
 
 class FixedMethod(Method):
     name = "fixed"

@@ -145,10 +145,13 @@ def grid_cover(slab: Slab, validity: np.ndarray | None = None) -> Cover:
     return Cover(np.stack([ss.ravel(), tt.ravel()], 1), grid_triangles(n), node, v)
 
 
-def subset_cover(slab: Slab, nodes: np.ndarray, validity: np.ndarray | None = None) -> Cover:
-    """Nodes ``i * n_st + j`` (any subset, validity default 1) plus fictitious nodes at the
-    st square's corners, triangulated (Delaunay) so that the whole st square is covered
-    and every fictitious vertex has a neighbour with data (Figure 3)."""
+def subset_cover(slab: Slab, nodes: np.ndarray, validity: np.ndarray | None = None,
+                 ring: bool = True) -> Cover:
+    """Nodes ``i * n_st + j`` (any subset, validity default 1) plus fictitious nodes,
+    triangulated (Delaunay) so that the whole st square is covered (Figure 3): with
+    ``ring``, the grid nodes next to the subset (8-neighbours not in it), so that a
+    triangle outside the subset is drawn from the one or two nodes beside it as in
+    Figure 3; and the st square's corners."""
     nodes = np.asarray(nodes, dtype=np.int64).reshape(-1)
     if len(nodes) == 0:
         raise InputError("a node subset needs at least one node")
@@ -158,6 +161,10 @@ def subset_cover(slab: Slab, nodes: np.ndarray, validity: np.ndarray | None = No
     v = np.ones(len(nodes)) if validity is None else np.asarray(validity, np.float64)
     h = slab.st_size / 2
     corners = np.array([[-h, -h], [h, -h], [h, h], [-h, h]])
+    if ring:
+        around = _ring(nodes, n)
+        corners = np.concatenate([np.stack([s[around // n], s[around % n]], 1), corners])
+    corners = np.unique(corners, axis=0)                           # a ring node may be one
     near = np.linalg.norm(corners[:, None, :] - pts[None], axis=2).min(axis=1)
     corners = corners[near > 1e-9 * slab.st_size]               # corners that are not nodes
     all_pts = np.concatenate([pts, corners])
@@ -167,6 +174,18 @@ def subset_cover(slab: Slab, nodes: np.ndarray, validity: np.ndarray | None = No
     return Cover(all_pts, tri.simplices.astype(np.int64),
                  np.concatenate([nodes, np.full(len(corners), FICTITIOUS)]),
                  np.concatenate([v, np.zeros(len(corners))]))
+
+
+def _ring(nodes: np.ndarray, n: int) -> np.ndarray:
+    """Grid nodes next to ``nodes`` (8-neighbourhood) but not among them."""
+    inside = np.zeros((n + 2, n + 2), bool)
+    inside[nodes // n + 1, nodes % n + 1] = True
+    grown = inside.copy()
+    for di in (-1, 0, 1):
+        for dj in (-1, 0, 1):
+            grown[1:-1, 1:-1] |= inside[1 + di: n + 1 + di, 1 + dj: n + 1 + dj]
+    ring = grown[1:-1, 1:-1] & ~inside[1:-1, 1:-1]
+    return np.flatnonzero(ring.ravel())
 
 
 def subsample_nodes(n_st: int, level: int) -> np.ndarray:

@@ -52,13 +52,16 @@ PAPER_2002: dict[str, dict[str, float]] = {
 
 #: Sloan, Cohen & Gortler (1997, §5; SGI Maximum Impact, RE2, O2): Table 1's fill rates
 #: (bilinear textured pixels drawn per pixel; "progressive" is Partial Valid, 6x²-3x+3 with
-#: x the share of nodes partly valid), its texture load and locality, and the set-up.
+#: x the share of nodes partly valid; "full" is §5.1's "each pixel has to be textured 3
+#: times"), its texture load and locality, and the set-up.
 PAPER_1997: dict = {
-    "fill_rate": {"subsample": 3.0, "fixed": 2.25, "arbitrary": 3.0,
+    "fill_rate": {"full": 3.0, "subsample": 3.0, "fixed": 2.25, "arbitrary": 3.0,
                   "progressive": "6x²−3x+3", "line": 2.0, "projective": 1.5},
-    "texture_load": {"subsample": "poor", "fixed": "good", "arbitrary": "strong",
+    "texture_load": {"full": "(all nodes)", "subsample": "poor", "fixed": "good",
+                     "arbitrary": "strong",
                      "progressive": "strong", "line": "good", "projective": "not a factor"},
-    "locality": {"subsample": "low", "fixed": "strong", "arbitrary": "good",
+    "locality": {"full": "(reference)", "subsample": "low", "fixed": "strong",
+                 "arbitrary": "good",
                  "progressive": "strong", "line": "strong", "projective": "strong"},
     "st": 32, "uv": 256, "size": 512, "full_fps": 30, "critical_target_fps": 10,
     "texture_mb_re2": 4, "fill_mtex_s_needed": 23.6,

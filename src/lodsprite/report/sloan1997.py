@@ -109,8 +109,8 @@ def report_lines(r: dict, plots: list[Path]) -> list[str]:
         "Fill rate: textured samples per covered pixel, counted by a GL occlusion query "
         "round the reconstruction's draw. Texture load: node images uploaded per frame "
         "along the path (decoded in the frame for these methods). Locality: PSNR in the "
-        "image's central quarter minus PSNR elsewhere (dB; positive: detail concentrated "
-        "at the centre).", "",
+        "image's central quarter minus PSNR elsewhere, less the same for the full method "
+        "(dB; positive: the method keeps its detail at the centre).", "",
         "| method | fill rate | paper | per screen px | uploads/frame | MB/frame | paper load "
         "| locality dB | paper locality |", "|---|---|---|---|---|---|---|---|---|"]
     for name, t in r["table1"].items():
