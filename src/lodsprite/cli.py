@@ -236,12 +236,16 @@ def lumigraph_capture(
     uv: Annotated[int, typer.Option("--uv", help="uv image size in pixels")] = 256,
     codec: Annotated[str, typer.Option("--codec", help="jpeg | png (lossless)")] = "jpeg",
     quality: Annotated[int, typer.Option("--quality", help="JPEG quality 1-100")] = 90,
+    slabs: Annotated[int, typer.Option(
+        "--slabs", help="1 (in front, as in the paper) or 6 (round the object: orbit it)")
+    ] = 1,
 ) -> None:
     """Render a two-plane lumigraph of an object: one uv image per st node, compressed."""
     from lodsprite.lumigraph.run import capture_lumigraph
 
     with progress_bar("capture") as update:
-        s = capture_lumigraph(model, out_dir, st, uv, codec, quality, progress=update)
+        s = capture_lumigraph(model, out_dir, st, uv, codec, quality, slabs=slabs,
+                              progress=update)
     out.print(f"{s['nodes']} nodes of {s['uv']}² ({s['codec']}) of {s['object']} "
               f"({s['faces']:,} triangles) in {s['capture_s']:.1f} s; wrote {out_dir}")
 
@@ -270,7 +274,8 @@ def lumigraph_render(
     folder: Annotated[Path, typer.Argument(help="a lumigraph folder (lumigraph capture)")],
     frames: Annotated[int, typer.Option("--frames", help="frames along the arc")] = 120,
     path: Annotated[str | None, typer.Option(
-        "--path", help="a JSON path file (default: an arc in front of the object)")] = None,
+        "--path", help="a JSON path file (default: an arc in front of the object, or an "
+                       "orbit round it for six slabs)")] = None,
     size: SizeOpt = "512x512",
     out_dir: Annotated[Path, typer.Option("--out", help="output folder")] = Path(
         "out/lumigraph-render"),

@@ -4,11 +4,13 @@ Figures 1-2), GL-free.
 A slab is a pair of parallel planes in a local frame ``(x, y, z)`` of the world: the *uv*
 plane at ``z = 0`` through the object's centre and the *st* plane at ``z = st_distance``,
 in front of it (towards the viewer).  A ray crossing both is the 4D point ``(s, t, u, v)``
-(metres in each plane, centred).  An st *node* ``(i, j)`` sits on a regular ``n_st x n_st``
-grid over ``[-st_size/2, st_size/2]²``; its *uv image* (``n_uv x n_uv`` pixels over
-``[-uv_size/2, uv_size/2]²``) holds the colour of every ray from the node through the uv
-plane: it is a pinhole image taken from the node with an off-axis frustum whose image
-plane is the uv square (:func:`node_frustum`).
+(metres in each plane, centred).  A lumigraph may hold up to six slabs round the object
+(:data:`SIX_SLABS`); a view uses the one facing the eye (:func:`facing_slab`).  An st
+*node* ``(i, j)`` sits on a regular ``n_st x n_st`` grid over ``[-st_size/2,
+st_size/2]²``; its *uv image* (``n_uv x n_uv`` pixels over ``[-uv_size/2, uv_size/2]²``)
+holds the colour of every ray from the node through the uv plane: it is a pinhole image
+taken from the node with an off-axis frustum whose image plane is the uv square
+(:func:`node_frustum`).
 
 Reconstruction (§2.3) needs, per eye, where the ray from the eye through a point of the st
 plane meets the uv plane (:func:`uv_through`), and with depth correction where the ray
@@ -131,7 +133,7 @@ def grid_triangles(n: int) -> np.ndarray:
 
 def slab_facing(centre: np.ndarray, radius: float, direction: np.ndarray,
                 n_st: int = 32, n_uv: int = 256, st_scale: float = 2.0,
-                distance_scale: float = 2.5) -> Slab:
+                distance_scale: float = 2.5, uv_scale: float = 1.0) -> Slab:
     """A slab for an object of bounding ``radius`` at ``centre`` seen from ``direction``
     (unit, from the object towards the viewers): the uv square spans the object, the st
     plane ``distance_scale`` radii in front of its centre, ``st_scale`` times as wide."""
@@ -143,4 +145,25 @@ def slab_facing(centre: np.ndarray, radius: float, direction: np.ndarray,
     y = np.cross(z, x)
     frame = np.eye(4)
     frame[:3, 0], frame[:3, 1], frame[:3, 2], frame[:3, 3] = x, y, z, centre
-    return Slab(frame, st_scale * 2 * radius, 2 * radius, distance_scale * radius, n_st, n_uv)
+    return Slab(frame, st_scale * 2 * radius, uv_scale * 2 * radius, distance_scale * radius,
+                n_st, n_uv)
+
+
+#: Six slabs round an object (beyond the paper, which uses one): the st planes are wider
+#: (``st_scale``) and the uv squares larger (``uv_scale``) than a single slab's so that
+#: the slab facing an eye anywhere on an orbit at 2.2 st distances still covers its rays;
+#: their node spacing is correspondingly coarser.
+SIX_SLABS = {"st_scale": 4.0, "uv_scale": 1.5, "distance_scale": 2.5}
+SIX_DIRECTIONS = np.array([[0, 0, 1], [0, 0, -1], [1, 0, 0], [-1, 0, 0], [0, 1, 0],
+                           [0, -1, 0]], dtype=np.float64)
+
+
+def facing_slab(slabs: list[Slab], eye_world: np.ndarray) -> int:
+    """The index of the slab whose axis points most nearly at ``eye_world (3,)``."""
+    best, score = 0, -np.inf
+    for k, s in enumerate(slabs):
+        d = np.asarray(eye_world, float) - s.frame[:3, 3]
+        v = float(s.frame[:3, 2] @ d) / max(float(np.linalg.norm(d)), 1e-12)
+        if v > score:
+            best, score = k, v
+    return best

@@ -38,6 +38,7 @@ from lodsprite.gl.lumigraph import (
     ProjectiveRenderer,
 )
 from lodsprite.lumigraph.critical import st_point
+from lodsprite.lumigraph.geometry import facing_slab
 from lodsprite.lumigraph.loader import NodeLoader
 from lodsprite.lumigraph.store import Lumigraph
 from lodsprite.lumigraph.subsets import (
@@ -322,6 +323,52 @@ class ProjectiveMethod(ArbitraryMethod):
     def release(self) -> None:
         self.proj.release()
         super().release()
+
+
+class MultiSlabMethod:
+    """A method over a lumigraph of several slabs: each frame uses the slab facing the eye
+    (:func:`~lodsprite.lumigraph.geometry.facing_slab`), through its own instance of the
+    method, made when the eye first comes round to it; the previous slab's instance is
+    released on a switch, so texture memory holds one slab at a time."""
+
+    def __init__(self, ctx: Context, name: str, options: dict) -> None:
+        self.ctx, self.name, self.options = ctx, name, options
+        self.current: Method | None = None
+        self.slab_index = -1
+        self.switches = 0
+
+    def _for(self, viewpoint: Viewpoint, projection: np.ndarray) -> Method:
+        k = facing_slab(self.ctx.lf.slabs, viewpoint.o)
+        if k != self.slab_index:
+            if self.current is not None:
+                self.current.release()
+                self.switches += 1
+            ctx = Context(self.ctx.gl, self.ctx.lf, k, self.ctx.size, self.ctx.proxy,
+                          self.ctx.white)
+            self.current = make_method(self.name, ctx, **self.options)
+            self.slab_index = k
+            if hasattr(self.current, "warm_up"):
+                self.current.warm_up(viewpoint, projection)
+        return self.current
+
+    def warm_up(self, viewpoint: Viewpoint, projection: np.ndarray) -> None:
+        self._for(viewpoint, projection)
+
+    def frame(self, index: int, viewpoint: Viewpoint, projection: np.ndarray,
+              count_samples: bool = False) -> MethodFrame:
+        return self._for(viewpoint, projection).frame(index, viewpoint, projection,
+                                                      count_samples)
+
+    def __getattr__(self, name: str):
+        current = self.__dict__.get("current")
+        if current is None:
+            raise AttributeError(name)
+        return getattr(current, name)
+
+    def release(self) -> None:
+        if self.current is not None:
+            self.current.release()
+            self.current = None
 
 
 def make_method(name: str, ctx: Context, nodes: int = 16, level: int = 1, reuse: int = 6,

@@ -25,7 +25,7 @@ import numpy as np
 from lodsprite.camera import Viewpoint, look_at, perspective
 from lodsprite.errors import InputError
 from lodsprite.lumigraph.capture import ColorMesh, capture, still_life
-from lodsprite.lumigraph.geometry import Slab, slab_facing
+from lodsprite.lumigraph.geometry import SIX_DIRECTIONS, SIX_SLABS, Slab, slab_facing
 from lodsprite.lumigraph.store import Lumigraph, save
 from lodsprite.paths import CameraPath
 from lodsprite.report.io import atomic_write_bytes, write_csv, write_json
@@ -38,8 +38,9 @@ Progress = Callable[[int, int], None]
 
 
 def load_object(spec: str) -> ColorMesh:
-    """``still-life`` or a mesh file (OBJ, PLY, OFF, STL, GLB, GLTF), drawn in one colour
-    under the light (its own colours are not read yet)."""
+    """``still-life`` or a mesh file (OBJ, PLY, OFF, STL, GLB, GLTF) with its colours:
+    per-vertex or per-face colours as given, a texture sampled at each vertex's texture
+    coordinate (trimesh), otherwise one colour; lit by the capture's light either way."""
     if spec in BUILTIN_OBJECTS:
         return still_life()
     import trimesh
@@ -47,12 +48,34 @@ def load_object(spec: str) -> ColorMesh:
     from lodsprite.profiles.meshes import MeshError, load_mesh
 
     try:
-        mesh = load_mesh(spec)
+        load_mesh(spec)  # validates the file (one clear line for anything wrong)
+        tm = trimesh.load(str(spec), force="mesh", process=False)
+        colors = _vertex_colors(tm)
     except MeshError as exc:
         raise InputError(str(exc)) from exc
-    normals = trimesh.Trimesh(mesh.vertices, mesh.faces, process=False).vertex_normals
-    colors = np.tile([0.8, 0.72, 0.6], (len(mesh.vertices), 1))
-    return ColorMesh(mesh.vertices, mesh.faces.astype(np.int32), colors, np.asarray(normals))
+    vertices = np.asarray(tm.vertices, dtype=np.float64)
+    faces = np.asarray(tm.faces, dtype=np.int32)
+    normals = trimesh.Trimesh(vertices, faces, process=False).vertex_normals
+    if colors is None:
+        colors = np.tile([0.8, 0.72, 0.6], (len(vertices), 1))
+    return ColorMesh(vertices, faces, colors, np.asarray(normals))
+
+
+def _vertex_colors(tm) -> np.ndarray | None:
+    """A trimesh's colours per vertex in [0, 1], ``(N, 3)``, or None when it has none."""
+    vis = getattr(tm, "visual", None)
+    kind = getattr(vis, "kind", None)
+    try:
+        if kind == "texture":
+            vis = vis.to_color()
+            kind = "vertex"
+        if kind in ("vertex", "face"):
+            c = np.asarray(vis.vertex_colors, dtype=np.float64)[:, :3] / 255.0
+            if c.shape == (len(tm.vertices), 3) and np.isfinite(c).all():
+                return c
+    except (ValueError, IndexError, AttributeError):  # a texture trimesh cannot sample
+        return None
+    return None
 
 
 def simplified(mesh: ColorMesh, faces: int) -> ColorMesh:
@@ -70,36 +93,48 @@ def simplified(mesh: ColorMesh, faces: int) -> ColorMesh:
 
 def capture_lumigraph(model: str, out_dir: Path, n_st: int = 32, n_uv: int = 256,
                       codec: str = "jpeg", quality: int = 90,
-                      proxy_faces: int = DEFAULT_PROXY_FACES,
+                      proxy_faces: int = DEFAULT_PROXY_FACES, slabs: int = 1,
                       progress: Progress | None = None) -> dict:
-    """Capture ``model`` into the lumigraph folder ``out_dir``; returns a summary."""
+    """Capture ``model`` into the lumigraph folder ``out_dir`` with 1 slab (in front,
+    +z) or 6 (round it); returns a summary."""
     from lodsprite.gl.context import GLContext
     from lodsprite.gl.lumigraph import ColorMeshRenderer
     from lodsprite.gl.target import RenderTarget
 
+    if slabs not in (1, 6):
+        raise InputError(f"--slabs must be 1 or 6, got {slabs}")
     mesh = load_object(model)
-    slab = slab_facing(mesh.centre, mesh.radius, np.array([0.0, 0.0, 1.0]), n_st, n_uv)
-    near, far = 0.05 * slab.st_distance, slab.st_distance + 2 * mesh.radius
+    if slabs == 1:
+        planes = [slab_facing(mesh.centre, mesh.radius, SIX_DIRECTIONS[0], n_st, n_uv)]
+    else:
+        planes = [slab_facing(mesh.centre, mesh.radius, d, n_st, n_uv, **SIX_SLABS)
+                  for d in SIX_DIRECTIONS]
+    near = 0.05 * planes[0].st_distance
+    far = planes[0].st_distance + 2 * mesh.radius * (2.0 if slabs > 1 else 1.0)
+    per = n_st * n_st
     t0 = time.perf_counter()
     with GLContext() as gl:
         obj = ColorMeshRenderer(gl, mesh.vertices, mesh.faces, mesh.colors, mesh.normals)
         target = RenderTarget(gl, n_uv, n_uv)
         try:
-            images = capture(obj, slab, target, near, far, progress)
+            images = [capture(obj, slab, target, near, far,
+                              (lambda d, t, k=k: progress(k * per + d, slabs * per))
+                              if progress else None)
+                      for k, slab in enumerate(planes)]
             gl.finish()
         finally:
             target.release()
             obj.release()
     capture_s = time.perf_counter() - t0
-    save(out_dir, [slab], [images], simplified(mesh, proxy_faces), model, near, far, codec,
+    save(out_dir, planes, images, simplified(mesh, proxy_faces), model, near, far, codec,
          quality, capture_s)
     buf = io.BytesIO()
     np.savez_compressed(buf, vertices=mesh.vertices.astype(np.float32), faces=mesh.faces,
                         colors=mesh.colors.astype(np.float32),
                         normals=mesh.normals.astype(np.float32))
     atomic_write_bytes(Path(out_dir) / OBJECT_FILE, buf.getvalue())
-    return {"object": model, "nodes": n_st * n_st, "uv": n_uv, "codec": codec,
-            "capture_s": capture_s, "faces": int(len(mesh.faces))}
+    return {"object": model, "nodes": slabs * per, "slabs": slabs, "uv": n_uv,
+            "codec": codec, "capture_s": capture_s, "faces": int(len(mesh.faces))}
 
 
 def object_path(slab: Slab, frames: int, arc_deg: float = 50.0) -> CameraPath:
@@ -117,6 +152,27 @@ def object_path(slab: Slab, frames: int, arc_deg: float = 50.0) -> CameraPath:
     up = slab.frame[:3, 1]
     return CameraPath("lumigraph-arc", tuple(look_at(e[:3], centre, up) for e in eyes),
                       FOV_Y_DEG)
+
+
+def orbit_path(slabs: list[Slab], frames: int, elevation_deg: float = 15.0) -> CameraPath:
+    """A full orbit round the object of a six-slab lumigraph, about its y axis, at 2.2
+    times the st planes' distance, looking at the centre."""
+    if frames < 2:
+        raise InputError(f"a path needs at least 2 frames, got {frames}")
+    centre = slabs[0].frame[:3, 3]
+    d = 2.2 * max(s.st_distance for s in slabs)
+    a = np.linspace(0.0, 2 * np.pi, frames, endpoint=False)
+    e = np.radians(elevation_deg)
+    eyes = centre + d * np.stack([np.cos(e) * np.sin(a), np.full_like(a, np.sin(e)),
+                                  np.cos(e) * np.cos(a)], axis=1)
+    return CameraPath("lumigraph-orbit", tuple(look_at(p, centre, (0.0, 1.0, 0.0))
+                                               for p in eyes), FOV_Y_DEG)
+
+
+def default_path(lf: Lumigraph, frames: int) -> CameraPath:
+    """The arc in front of a one-slab lumigraph, the orbit round a six-slab one."""
+    return object_path(lf.slabs[0], frames) if len(lf.slabs) == 1 else orbit_path(lf.slabs,
+                                                                                frames)
 
 
 def _read_object(folder: Path) -> ColorMesh | None:
@@ -156,8 +212,7 @@ def measure(folder: Path, method: str = "full", path: CameraPath | None = None,
     from lodsprite.gl.context import GLContext
 
     lf = Lumigraph(folder)
-    slab = lf.slabs[0]
-    path = path or object_path(slab, frames)
+    path = path or default_path(lf, frames)
     obj_mesh = _read_object(Path(folder)) if ground_truth else None
     if ground_truth and obj_mesh is None:
         raise InputError(f"{folder} holds no {OBJECT_FILE}: no ground truth to compare with")
@@ -194,7 +249,7 @@ class MethodRun:
                  obj_mesh: ColorMesh | None, method: str, options: dict) -> None:
         from lodsprite.gl.lumigraph import ColorMeshRenderer
         from lodsprite.gl.target import RenderTarget
-        from lodsprite.lumigraph.methods import Context, make_method
+        from lodsprite.lumigraph.methods import Context, MultiSlabMethod, make_method
 
         self.gl, self.made = gl, []
         proxy_mesh = lf.proxy() if depth_correction else None
@@ -207,7 +262,9 @@ class MethodRun:
                       if obj_mesh is not None else None)
         self.target = RenderTarget(gl, *size) if self.truth is not None else None
         self.made += [self.truth, self.target]
-        self.method = make_method(method, Context(gl, lf, 0, size, self.proxy), **options)
+        ctx = Context(gl, lf, 0, size, self.proxy)
+        self.method = (make_method(method, ctx, **options) if len(lf.slabs) == 1
+                       else MultiSlabMethod(ctx, method, options))
         self.made.append(self.method)
 
     def frames(self, path: CameraPath, proj, quality_every: int,
@@ -245,6 +302,8 @@ class MethodRun:
         out = {"nodes_decoded": m.loader.decoded,
                "texture_layers": m.rec.capacity,
                "texture_mb": m.rec.capacity * m.rec.node_bytes / 2 ** 20}
+        if hasattr(m, "switches"):
+            out["slab_switches"] = m.switches
         if hasattr(m, "target_ms"):
             out.update(target_ms=m.target_ms, scale=dict(m.costs.scale),
                        fetch_ms=m.costs.fetch, decode_ms=m.costs.decode,
