@@ -168,12 +168,15 @@ def render(
 @app.command()
 def view(
     terrain: Annotated[str, typer.Argument(
-        help="jacksboro | fractal:SIZE[:SEED] | FILE (.tif/.tiff/.png/.npy)")] = "jacksboro",
+        help="jacksboro | fractal:SIZE[:SEED] | FILE (.tif/.tiff/.png/.npy) | a lumigraph "
+             "folder")] = "jacksboro",
     texture: TextureOpt = "terrain",
     grid: GridOpt = None,
-    mode: Annotated[str, typer.Option(
-        "--mode", help="full | lod | sprite | distributed (needs --server); keys 1-4 "
-                       "switch live")] = "sprite",
+    mode: Annotated[str | None, typer.Option(
+        "--mode", help="terrain: full | lod | sprite (default) | distributed (needs "
+                       "--server), keys 1-4; lumigraph: critical (default) | full | "
+                       "arbitrary | fixed | line | projective | progressive | subsample, "
+                       "keys 1-8")] = None,
     lod: LodOpt = 16,
     epsilon: EpsOpt = 1.0,
     size: Annotated[str, typer.Option("--size", help="window size WxH")] = "1024x768",
@@ -184,7 +187,8 @@ def view(
                                    "them (the 1999 algorithm) instead of on a worker "
                                    "thread")] = False,
     play: Annotated[str | None, typer.Option(
-        "--play", help="play a path (chen1999 | swan2002 | FILE.json) instead of flying")] = None,
+        "--play", help="play a path (chen1999 | swan2002 | FILE.json; lumigraph: arc | "
+                       "FILE.json) instead of flying")] = None,
     frames: FramesOpt = None,
     screenshots: Annotated[Path | None, typer.Option(
         "--screenshots", help="folder for screenshots (key p; with --play every K "
@@ -200,7 +204,8 @@ def view(
     server: Annotated[str | None, typer.Option(
         "--server", help="distributed mode: a LOD server's HOST:PORT")] = None,
 ) -> None:
-    """Fly through a terrain in a window with live LOD-sprite (WASD/QE, mouse, tab orbit)."""
+    """Fly through a terrain with live LOD-sprite, or round a lumigraph (WASD/QE, mouse, tab
+    orbit)."""
     from lodsprite.run import parse_size
     from lodsprite.viewer.app import ViewOptions
     from lodsprite.viewer.app import view as run_view

@@ -69,6 +69,8 @@ def test_render_options_out_of_range_are_one_line(tmp_path):
                                 "--texture-mb", "0.001"), "holds no")
     assert_user_error(lodsprite("lumigraph", "render", str(lf), "--method", "arbitrary",
                                 "--nodes", "0"), "--nodes")
+    # the viewer takes the lumigraph's methods as its modes (checked before any window)
+    assert_user_error(lodsprite("view", str(lf), "--mode", "sprite"), "use one of critical")
 
 
 def test_render_of_a_folder_that_is_not_a_lumigraph_is_one_line(tmp_path):

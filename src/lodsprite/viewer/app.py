@@ -25,7 +25,7 @@ class ViewOptions:
     terrain: str = "jacksboro"
     texture: str = "terrain"
     grid: int | None = None
-    mode: str = "sprite"
+    mode: str | None = None  # sprite for a terrain, critical for a lumigraph
     lod: int = 16
     epsilon: float = 1.0
     size: tuple[int, int] = (1024, 768)
@@ -41,9 +41,29 @@ class ViewOptions:
     server: str | None = None
     fov_y_deg: float = 45.0
 
+    @property
+    def lumigraph(self) -> bool:
+        """The scene is a lumigraph folder (``lodsprite lumigraph capture``)."""
+        return (Path(self.terrain) / "lumigraph.json").is_file()
+
+    @property
+    def modes(self) -> tuple[str, ...]:
+        if self.lumigraph:
+            from lodsprite.lumigraph.technique import VIEW_METHODS
+
+            return VIEW_METHODS
+        return VIEW_MODES
+
+    @property
+    def start_mode(self) -> str:
+        return self.mode or ("critical" if self.lumigraph else "sprite")
+
     def validate(self) -> None:
-        if self.mode not in VIEW_MODES:
-            raise InputError(f"unknown mode '{self.mode}': use one of {', '.join(VIEW_MODES)}")
+        if self.start_mode not in self.modes:
+            raise InputError(f"unknown mode '{self.start_mode}': use one of "
+                             f"{', '.join(self.modes)}")
+        if self.lumigraph and self.server:
+            raise InputError("--server goes with a terrain, not a lumigraph")
         if self.mode == "distributed" and not self.server:
             raise InputError("--mode distributed needs --server HOST:PORT")
         if self.every < 1:
@@ -76,13 +96,35 @@ def view(o: ViewOptions) -> dict:
     """Run the viewer; returns the summary of the frames shown (empty if none)."""
     o.validate()
     check_display()
+    if o.lumigraph:
+        return _view_lumigraph(o)
     scene = load_scene(o.terrain, o.texture, o.grid)
     plan, fov = None, o.fov_y_deg
     if o.play is not None:
         path = get_path(o.play, scene.hf, o.frames)
         plan, fov = PlayPlan(path, o.out, o.screenshots, o.every, o.exit), path.fov_y_deg
-    return run_viewer(scene, factories(o), o.mode, WindowOptions(o.size, fps=o.fps), plan,
-                      o.record, fov, o.screenshots or Path("screenshots"))
+    return run_viewer(scene, factories(o), o.start_mode, WindowOptions(o.size, fps=o.fps),
+                      plan, o.record, fov, o.screenshots or Path("screenshots"))
+
+
+def _view_lumigraph(o: ViewOptions) -> dict:
+    """``lodsprite view LF``: the lumigraph's methods as the viewer's modes; ``--play``
+    takes ``arc`` (the default path: an arc, or an orbit for six slabs) or a JSON file,
+    in the lumigraph's own coordinates (turned into the viewer's)."""
+    from lodsprite.lumigraph import technique as lt
+    from lodsprite.lumigraph.run import default_path
+    from lodsprite.lumigraph.store import Lumigraph
+    from lodsprite.paths import load_path_json
+
+    lf = Lumigraph(o.terrain)  # header checked before the window opens
+    plan, fov = None, o.fov_y_deg
+    if o.play is not None:
+        path = lt.viewer_path(default_path(lf, o.frames or 240) if o.play == "arc"
+                              else load_path_json(o.play))
+        plan, fov = PlayPlan(path, o.out, o.screenshots, o.every, o.exit), path.fov_y_deg
+    return run_viewer(lt.stage_scene(o.terrain), lt.lumigraph_techniques(o.terrain),
+                      o.start_mode, WindowOptions(o.size, fps=o.fps), plan, o.record, fov,
+                      o.screenshots or Path("screenshots"), lt.lumigraph_controller(o.terrain))
 
 
 def view_scene(scene, techniques: dict[str, TechniqueFactory], mode: str | None = None,

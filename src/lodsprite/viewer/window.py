@@ -85,12 +85,14 @@ def _key_name(window, key) -> str:
 def run_viewer(scene: Scene, factories: dict[str, TechniqueFactory], mode: str,
                options: WindowOptions, play: PlayPlan | None = None,
                record: Path | None = None, fov_y_deg: float = 45.0,
-               screenshot_dir: Path = Path("screenshots")) -> dict:
+               screenshot_dir: Path = Path("screenshots"),
+               controller: CameraController | None = None) -> dict:
     """Open the window and run until it closes (or a played path ends with ``exit``);
-    returns the summary of the frames shown."""
+    returns the summary of the frames shown.  ``controller``: the camera (default: the
+    terrain's)."""
     window = open_window(options)
     recorder = FlightRecorder() if record is not None else None
-    controller = CameraController.for_terrain(scene.hf)
+    controller = controller or CameraController.for_terrain(scene.hf)
     try:
         core = ViewerCore(window.ctx, scene, window.buffer_size, factories, mode, controller,
                           fov_y_deg, play, recorder, screenshot_dir, window.ctx.screen)

@@ -1,0 +1,64 @@
+"""``lodsprite view LF``: the lumigraph's methods driven through the viewer's technique
+interface, headless (a :class:`ViewerCore` on the session's context, offscreen)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lodsprite.gl.target import RenderTarget
+from lodsprite.lumigraph.run import capture_lumigraph
+from lodsprite.lumigraph.technique import (
+    VIEW_METHODS,
+    lumigraph_controller,
+    lumigraph_techniques,
+    stage_scene,
+    to_lumigraph,
+)
+from lodsprite.viewer.core import ViewerCore
+
+SIZE = (96, 96)
+
+
+@pytest.fixture(scope="module")
+def lf_dir(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("view") / "lf"
+    capture_lumigraph("still-life", folder, n_st=8, n_uv=48, codec="png")
+    return folder
+
+
+def test_the_home_view_looks_at_the_object_from_in_front(lf_dir):
+    from lodsprite.lumigraph.store import Lumigraph
+
+    centre = Lumigraph(lf_dir).slabs[0].frame[:3, 3]
+    vp = to_lumigraph(lumigraph_controller(lf_dir).viewpoint)
+    # in the lumigraph's world the eye is in front of the object (+z), looking at it
+    to = centre - vp.o
+    assert -to[2] > Lumigraph(lf_dir).slabs[0].st_distance
+    np.testing.assert_allclose(vp.forward, to / np.linalg.norm(to), atol=1e-6)
+
+
+def test_every_method_draws_the_object_in_the_viewer_and_keys_switch(gl, lf_dir):
+    core = ViewerCore(gl.mgl, stage_scene(lf_dir), SIZE, lumigraph_techniques(lf_dir),
+                      "critical", lumigraph_controller(lf_dir))
+    target = RenderTarget(gl, *SIZE)
+    try:
+        for k, name in enumerate(VIEW_METHODS):
+            core.key(str(k + 1))
+            assert core.mode == name
+            for _ in range(2):
+                core.frame(1 / 30, target.fbo)
+                core.log_frame()
+            img = core.technique.read_image().astype(float)
+            # the object (the red sphere at its centre) fills the middle of the view
+            mid = img[40:56, 40:56]
+            assert mid.mean() > 40 and (mid[..., 0] > mid[..., 2]).mean() > 0.5, name
+            assert core.technique.status()
+        core.key("1")
+        before = core.technique.params()["fps"].value
+        core.key("]")
+        assert core.technique.params()["fps"].value == pytest.approx(before * 1.25)
+        assert core.summary()["frames"] == 2 * len(VIEW_METHODS)
+    finally:
+        core.release()
+        target.release()
