@@ -307,6 +307,8 @@ def lumigraph_render(
         "--fade", help="progressive: frames to blend a node in or out")] = 8,
     every: Annotated[int, typer.Option(
         "--every", help="with --ground-truth: compare every K-th frame")] = 1,
+    flip: Annotated[bool, typer.Option(
+        "--flip", help="with --ground-truth: FLIP too (about 0.4 s a 512² frame)")] = False,
 ) -> None:
     """Reconstruct a lumigraph along a path with one of the paper's methods."""
     from lodsprite.lumigraph.run import render_lumigraph
@@ -318,12 +320,14 @@ def lumigraph_render(
                 texture_mb=texture_mb)
     with progress_bar(f"lumigraph {method}") as update:
         s = render_lumigraph(folder, out_dir, frames, parse_size(size), cam, ground_truth,
-                             depth_correction, method, every, update, **opts)
+                             depth_correction, method, every, update, flip, **opts)
     line = (f"{s['frames']} frames ({method}, {s['images_per_frame_mean']:.1f} images a "
             f"frame): median {s['median_ms']:.2f} ms, mean {s['mean_ms']:.2f} ms, "
             f"p99 {s['p99_ms']:.2f} ms")
     if "psnr_mean" in s:
         line += f"; PSNR {s['psnr_mean']:.2f} dB, SSIM {s['ssim_mean']:.3f}"
+    if "flip_mean" in s:
+        line += f", FLIP {s['flip_mean']:.4f}"
     out.print(line + f"; wrote {out_dir / 'frames.csv'}, {out_dir / 'summary.json'}")
 
 
@@ -367,7 +371,8 @@ def _print_reproduction(r: dict, report: Path) -> None:
 
 
 def _run_swan2002(out_dir: Path, terrain: str, quick: bool, size: int, lod: int,
-                  adopt: str, pace: str, epsilon: float, max_error: float | None) -> None:
+                  adopt: str, pace: str, epsilon: float, max_error: float | None,
+                  links: bool = True) -> None:
     from lodsprite.distributed.reproduce import SwanConfig, reproduce_swan2002
     from lodsprite.distributed.run import check_client_options, parse_max_error
     from lodsprite.errors import InputError
@@ -380,7 +385,7 @@ def _run_swan2002(out_dir: Path, terrain: str, quick: bool, size: int, lod: int,
     max_error = parse_max_error(None) if max_error is None else max_error
     check_client_options(pace, adopt, max_error)
     kw = {"terrain": terrain, "lod": lod, "adopt": adopt, "pace": pace, "epsilon": epsilon,
-          "max_error": max_error}
+          "max_error": max_error, "links": links}
     cfg = SwanConfig.quick(**kw) if quick else SwanConfig(size=size, **kw)
     with progress_bar("reproduce swan2002 (set-ups)") as update:
         r = reproduce_swan2002(cfg, out_dir, update)
@@ -576,13 +581,17 @@ def reproduce(
     max_error: Annotated[float | None, typer.Option(
         "--max-error", help="swan2002: the bounded client's --max-error in pixels, run beside "
                             "the paper's client (default: the client's default, 4)")] = None,
+    links: Annotated[bool, typer.Option(
+        "--links/--no-links", help="swan2002: run the set-ups over emulated network links "
+                                   "(network namespaces, root)")] = True,
 ) -> None:
     """Run a paper's experiment; write DIR/results.json, PNG plots and DIR/report.md."""
     from lodsprite.errors import InputError
     from lodsprite.sprite.reproduce import ReproduceConfig
 
     if experiment == "swan2002":
-        _run_swan2002(out_dir, terrain, quick, size, lod, adopt, pace, epsilon, max_error)
+        _run_swan2002(out_dir, terrain, quick, size, lod, adopt, pace, epsilon, max_error,
+                      links)
         return
     if experiment == "scoggins2000":
         _run_scoggins2000(out_dir, terrain, quick, size)

@@ -12,7 +12,7 @@ import pytest
 from lodsprite.camera import Viewpoint
 from lodsprite.distributed.client import DEFAULT_MAX_ERROR, LodClient
 from lodsprite.distributed.render import scene_args
-from lodsprite.distributed.reproduce import SETUPS
+from lodsprite.distributed.reproduce import LINK_SETUPS, SETUPS
 from lodsprite.distributed.run import free_ports
 from lodsprite.run import RenderConfig, prepare
 
@@ -246,12 +246,14 @@ def test_reproduce_swan2002_quick_writes_all_setups(tmp_path):
     out = tmp_path / "s"
     proc = subprocess.run([sys.executable, "-c", "from lodsprite.cli import main; main()",
                            "reproduce", "swan2002", "--quick", "--terrain", "fractal:64:2",
-                           "--out", str(out)], capture_output=True, text=True, timeout=300)
+                           "--no-links", "--out", str(out)], capture_output=True, text=True,
+                          timeout=300)
     assert proc.returncode == 0, proc.stderr
     results = json.loads((out / "results.json").read_text())
     for setup in SETUPS:
         r = results[setup]
         if "skipped" in r:
+            assert setup in LINK_SETUPS and "--no-links" in r["skipped"]
             continue
         for key in ("client_ms_mean", "client_ms_std", "client_ms_p99", "client_ms_median",
                     "sprites_per_keyframe"):

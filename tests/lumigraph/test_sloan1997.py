@@ -18,6 +18,7 @@ def test_quick_reproduction_writes_results_plots_and_report(tmp_path):
     saved = json.loads((tmp_path / "results.json").read_text())
     for key in ("capture_s", "psnr_full", "psnr_no_depth_correction"):
         assert np.isfinite(saved[key])
+    assert 0.0 < saved["full"]["flip_mean"] < 1.0
     assert set(saved["fill_rate"]) == {"full", "subsample", "fixed", "arbitrary", "progressive",
                                        "line", "projective"}
     # strips are drawn twice and every st triangle of the sub-sampled grid three times,

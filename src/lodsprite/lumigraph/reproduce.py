@@ -92,7 +92,7 @@ def reproduce_sloan1997(cfg: SloanConfig, out_dir: Path, update: Update | None =
     path = object_path(slab, cfg.quality_frames)
     for key, dc in (("full", True), ("full_no_depth_correction", False)):
         _, s = measure(lf_dir, "full", path, size=size, ground_truth=True,
-                       depth_correction=dc, quality_every=1, progress=step(key))
+                       depth_correction=dc, quality_every=2, progress=step(key), flip=True)
         r[key] = s
     r["psnr_full"] = r["full"]["psnr_mean"]
     r["psnr_no_depth_correction"] = r["full_no_depth_correction"]["psnr_mean"]
@@ -129,6 +129,7 @@ def _profile(s: dict, opts: dict) -> dict:
             "images_per_frame_mean": s["images_per_frame_mean"],
             "uploads_per_frame_mean": s["uploads_per_frame_mean"],
             "psnr_mean": s.get("psnr_mean"), "ssim_mean": s.get("ssim_mean"),
+            "flip_mean": s.get("flip_mean"),
             "texture_mb": opts.get("texture_mb"), "texture_layers": s["texture_layers"],
             "per_component": opts.get("per_component", True), "scale": s["scale"],
             "decode_ms": s["decode_ms"], "frames": s["frames"]}

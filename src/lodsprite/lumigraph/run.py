@@ -188,16 +188,18 @@ def render_lumigraph(folder: Path, out_dir: Path, frames: int = 120,
                      size: tuple[int, int] = (512, 512), path: CameraPath | None = None,
                      ground_truth: bool = False, depth_correction: bool = True,
                      method: str = "full", quality_every: int = 1,
-                     progress: Progress | None = None, **options) -> dict:
+                     progress: Progress | None = None, flip: bool = False,
+                     **options) -> dict:
     """Reconstruct every frame of ``path`` (default: :func:`object_path`) with ``method``
     (:data:`~lodsprite.lumigraph.methods.METHODS`; ``options`` go to
     :func:`~lodsprite.lumigraph.methods.make_method`); write ``frames.csv`` and
     ``summary.json`` to ``out_dir`` and return the summary.  With ``ground_truth``, every
     ``quality_every``-th frame is compared (untimed) with the object drawn directly."""
     rows, summary = measure(folder, method, path, frames, size, ground_truth,
-                            depth_correction, quality_every, progress, **options)
+                            depth_correction, quality_every, progress, flip, **options)
     columns = ["frame", "kind", "ms", "upload_ms", "raster_ms", "images", "uploads",
-               "evictions"] + (["psnr", "ssim"] if ground_truth else [])
+               "evictions"] + (["psnr", "ssim"] if ground_truth else []) + (
+        ["flip"] if ground_truth and flip else [])
     write_csv(Path(out_dir) / "frames.csv", rows, columns)
     write_json(Path(out_dir) / "summary.json", summary)
     return summary
@@ -206,9 +208,11 @@ def render_lumigraph(folder: Path, out_dir: Path, frames: int = 120,
 def measure(folder: Path, method: str = "full", path: CameraPath | None = None,
             frames: int = 120, size: tuple[int, int] = (512, 512), ground_truth: bool = False,
             depth_correction: bool = True, quality_every: int = 1,
-            progress: Progress | None = None, **options) -> tuple[list[dict], dict]:
+            progress: Progress | None = None, flip: bool = False, **options
+            ) -> tuple[list[dict], dict]:
     """Run ``method`` along ``path``: the per-frame rows and their summary (see
-    :func:`render_lumigraph`)."""
+    :func:`render_lumigraph`); with ``flip``, compared frames get FLIP too (0.4 s a 512²
+    frame here)."""
     from lodsprite.gl.context import GLContext
 
     lf = Lumigraph(folder)
@@ -220,6 +224,7 @@ def measure(folder: Path, method: str = "full", path: CameraPath | None = None,
     proj = perspective(path.fov_y_deg, w / h, lf.header.near, 4 * lf.header.far)
     with GLContext() as gl:
         run = MethodRun(gl, lf, (w, h), depth_correction, obj_mesh, method, options)
+        run.flip = flip
         try:
             rows = run.frames(path, proj, quality_every, progress)
             info = run.info()
@@ -239,6 +244,8 @@ def measure(folder: Path, method: str = "full", path: CameraPath | None = None,
     if judged:
         summary["psnr_mean"] = float(np.mean([r["psnr"] for r in judged]))
         summary["ssim_mean"] = float(np.mean([r["ssim"] for r in judged]))
+        if any("flip" in r for r in judged):
+            summary["flip_mean"] = float(np.mean([r["flip"] for r in judged if "flip" in r]))
     return rows, summary
 
 
@@ -251,7 +258,7 @@ class MethodRun:
         from lodsprite.gl.target import RenderTarget
         from lodsprite.lumigraph.methods import Context, MultiSlabMethod, make_method
 
-        self.gl, self.made = gl, []
+        self.gl, self.made, self.flip = gl, [], False
         proxy_mesh = lf.proxy() if depth_correction else None
         self.proxy = (ColorMeshRenderer(gl, proxy_mesh.vertices, proxy_mesh.faces,
                                         proxy_mesh.colors, proxy_mesh.normals)
@@ -289,13 +296,17 @@ class MethodRun:
         return rows
 
     def quality(self, vp: Viewpoint, proj) -> dict:
-        """PSNR and SSIM of the method's image against the object drawn directly (untimed)."""
-        from lodsprite.metrics import psnr, ssim
+        """PSNR, SSIM and FLIP of the method's image against the object drawn directly
+        (untimed)."""
+        from lodsprite.metrics import flip, psnr, ssim
 
         got = self.method.output.read_rgb8()
         self.truth.render(proj @ vp.view_matrix(), self.target.fbo)
         want = self.target.read_color()
-        return {"psnr": psnr(got, want), "ssim": ssim(got, want)}
+        out = {"psnr": psnr(got, want), "ssim": ssim(got, want)}
+        if self.flip:
+            out["flip"] = flip(got, want)
+        return out
 
     def info(self) -> dict:
         m = self.method

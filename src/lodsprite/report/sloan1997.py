@@ -16,7 +16,7 @@ from lodsprite.report.values import fmt_fixed
 
 PROFILE_LABEL = {"re2_small_memory": "small texture memory (RE2-like)",
                  "o2_unified_memory": "unified memory (O2-like)",
-                 "re2_single_factor": "small memory, one scale factor (paper's §5.2)"}
+                 "re2_single_factor": "small memory, one scale factor (§5.2)"}
 
 
 def _fig5_6(r: dict, path: Path) -> Path:
@@ -104,7 +104,10 @@ def report_lines(r: dict, plots: list[Path]) -> list[str]:
         f"| PSNR, depth-corrected | {f(r['psnr_full'], 2)} dB | (no figure) |",
         f"| PSNR, no depth correction | {f(r['psnr_no_depth_correction'], 2)} dB | |",
         f"| SSIM, depth-corrected / not | {f(r['full']['ssim_mean'], 3)} / "
-        f"{f(r['full_no_depth_correction']['ssim_mean'], 3)} | |", "",
+        f"{f(r['full_no_depth_correction']['ssim_mean'], 3)} | |",
+        f"| FLIP (mean, 0 is identical), depth-corrected / not | "
+        f"{f(r['full']['flip_mean'], 4)} / "
+        f"{f(r['full_no_depth_correction']['flip_mean'], 4)} | |", "",
         "## Table 1: methods", "",
         "Fill rate: textured samples per covered pixel, counted by a GL occlusion query "
         "round the reconstruction's draw. Texture load: node images uploaded per frame "

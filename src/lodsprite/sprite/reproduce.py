@@ -63,7 +63,7 @@ class ReproduceConfig:
     @classmethod
     def quick(cls, **kw) -> ReproduceConfig:
         """A short run (about a tenth of the work) for smoke tests and first looks."""
-        base = {"size": 256, "frames": 115, "fig10_frames": (58, 115, 230),
+        base = {"size": 256, "frames": 115, "fig10_frames": (58, 115),
                 "fig11_epsilon": (0.5, 1.0, 2.0)}
         return cls(**{**base, **kw})
 
