@@ -1,0 +1,151 @@
+"""The crowd, frame by frame: LOD selection, extraction, instanced drawing (Gumbau et al.).
+
+:class:`CrowdEngine` runs one of three modes on a :class:`~lodsprite.manager.scene.Crowd`:
+
+* ``manager`` - the LODManager (§4): desired LOD from distance and frame-rate feedback,
+  the active list, §4.1's borrowing of similar LODs from ``D_T``, extractions for the rest;
+* ``independent`` - baseline (a): the same, but every object extracts its own LOD when
+  its desired factor leaves its bucket (no sharing);
+* ``discrete`` - baseline (b), the engines' default: a chain of four LODs per type
+  extracted once (factors 1, 0.5, 0.25, 0), picked per object by projected screen height
+  with hysteresis (Unity's LODGroup, Godot's mesh LOD); its LOD switches are counted.
+
+Every frame: frustum culling (bounding spheres), LOD work (timed as ``lod_ms``: the
+decisions, the extractions and their uploads), then the visible objects grouped by the
+index buffer they draw, one instanced draw a group.  Times stop after ``ctx.finish()``.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from lodsprite.camera import Viewpoint, frustum_planes, perspective
+from lodsprite.errors import InputError
+from lodsprite.manager.core import Feedback, LodManager, active_list, desired_lod, linear
+from lodsprite.manager.scene import Crowd, spheres_in_frustum
+
+MODES = ("manager", "independent", "discrete")
+DISCRETE_LEVELS = (1.0, 0.5, 0.25, 0.0)
+#: Projected height (fraction of the screen) below which a finer level gives way.
+DISCRETE_THRESHOLDS = (0.25, 0.1, 0.04)
+HYSTERESIS = 0.15
+
+
+@dataclass(frozen=True)
+class CrowdFrame:
+    """One frame: ``ms`` in all (GL finished), ``lod_ms`` of LOD work, ``extractions``,
+    ``draw_calls``, ``triangles`` drawn, ``visible`` objects, the feedback ``exponent``
+    and (discrete) LOD ``switches``."""
+
+    ms: float
+    lod_ms: float
+    extractions: int
+    draw_calls: int
+    triangles: int
+    visible: int
+    exponent: float
+    switches: int = 0
+
+
+def discrete_levels(height_frac: np.ndarray, current: np.ndarray,
+                    thresholds=DISCRETE_THRESHOLDS, hysteresis: float = HYSTERESIS
+                    ) -> np.ndarray:
+    """Baseline (b): the level (0 finest) each object shows given its projected height
+    (fraction of the screen); a level changes only once the height passes its threshold
+    by ``hysteresis`` (relative) in the direction of the change."""
+    t = np.asarray(thresholds, dtype=np.float64)
+    h = np.asarray(height_frac, dtype=np.float64)[:, None]
+    plain = (h < t[None, :]).sum(axis=1)                  # no hysteresis
+    finer = (h < t[None, :] * (1 + hysteresis)).sum(axis=1)
+    coarser = (h < t[None, :] * (1 - hysteresis)).sum(axis=1)
+    cur = np.asarray(current)
+    return np.where(plain < cur, np.minimum(cur, finer),
+                    np.where(plain > cur, np.maximum(cur, coarser), cur))
+
+
+class CrowdEngine:
+    """A crowd on a GL context, drawn into ``target`` (a RenderTarget or wrapped window
+    framebuffer) of ``size``; see the module doc for ``mode``."""
+
+    def __init__(self, gl, crowd: Crowd, target, mode: str = "manager", slots: int = 16,
+                 active: int = 300, target_fps: float | None = None, range_near: float = 5.0,
+                 range_far: float = 150.0, dist=linear, fov_y_deg: float = 60.0,
+                 penalty: float = 0.25) -> None:
+        from lodsprite.gl.crowd import CrowdRenderer
+
+        if mode not in MODES:
+            raise InputError(f"unknown crowd mode {mode!r}: use one of {', '.join(MODES)}")
+        if active < 1:
+            raise InputError(f"--active must be at least 1, got {active}")
+        if not (0 <= range_near < range_far):
+            raise InputError(f"LOD ranges need 0 <= near < far, got {range_near}, {range_far}")
+        self.gl, self.crowd, self.target, self.mode = gl, crowd, target, mode
+        self.n_active, self.penalty, self.dist = int(active), float(penalty), dist
+        self.range = (float(range_near), float(range_far))
+        self.feedback = Feedback(target_fps)
+        w, h = target.size
+        self.fov_y_deg = fov_y_deg
+        self.projection = perspective(fov_y_deg, w / h, 0.3, 4.0 * crowd.extent + 100.0)
+        self.renderer = CrowdRenderer(gl, crowd.models, crowd.extent)
+        n_types = len(crowd.models)
+        self.manager = LodManager(crowd.types, n_types, slots, base_lod=0.0,
+                                  share=(mode == "manager"), dist=dist)
+        for t, m in enumerate(crowd.models):   # every object starts on its type's base LOD
+            self.renderer.set_indices(t, t, m.extract(0.0))
+        self.centres, self.radii = crowd.centres, crowd.radii
+        self.level = np.full(len(crowd), len(DISCRETE_LEVELS) - 1)
+        if mode == "discrete":
+            for t, m in enumerate(crowd.models):
+                for k, f in enumerate(DISCRETE_LEVELS):
+                    self.renderer.set_indices(self._discrete_id(t, k), t, m.extract(f))
+        self.transforms = np.concatenate([crowd.positions, crowd.yaw[:, None]],
+                                         axis=1).astype(np.float32)
+
+    def _discrete_id(self, t: int, k: int) -> int:
+        return len(self.crowd.models) + t * len(DISCRETE_LEVELS) + k
+
+    def frame(self, viewpoint: Viewpoint, extra_ms: float = 0.0) -> CrowdFrame:
+        """Select, extract and draw one frame from ``viewpoint``."""
+        t0 = time.perf_counter()
+        view_proj = self.projection @ viewpoint.view_matrix()
+        visible = spheres_in_frustum(frustum_planes(view_proj), self.centres, self.radii)
+        dist = np.linalg.norm(self.centres - viewpoint.o, axis=1)
+        t_lod = time.perf_counter()
+        switches = extractions = 0
+        if self.mode == "discrete":
+            height = self.radii / np.maximum(dist, 1e-6) / np.tan(np.radians(self.fov_y_deg) / 2)
+            new = discrete_levels(height, self.level)
+            switches = int(np.count_nonzero(new != self.level))
+            self.level = new
+            using = np.array([self._discrete_id(t, 0) for t in range(len(self.crowd.models))]
+                             )[self.crowd.types] + self.level
+        else:
+            desired = desired_lod(dist, *self.range, self.feedback.exponent)
+            active = active_list(desired, self.manager.lod, visible, self.n_active,
+                                 self.manager.n_slots, self.penalty, self.dist)
+            orders = self.manager.update(active, desired)
+            for o in orders:
+                self.renderer.set_indices(o.buffer, o.type_index,
+                                          self.crowd.models[o.type_index].extract(o.lod))
+            extractions = len(orders)
+            using = self.manager.using
+        lod_ms = (time.perf_counter() - t_lod) * 1e3
+        idx = np.flatnonzero(visible)
+        order = idx[np.argsort(using[idx], kind="stable")]
+        buffers, first, counts = np.unique(using[order], return_index=True, return_counts=True)
+        self.renderer.upload_instances(self.transforms[order])
+        self.renderer.draw(view_proj, self.target.fbo, list(zip(buffers.tolist(),
+                                                                first.tolist(),
+                                                                counts.tolist(), strict=True)))
+        self.gl.finish()
+        ms = (time.perf_counter() - t0) * 1e3
+        exponent = self.feedback.exponent
+        self.feedback.observe(ms + extra_ms)
+        return CrowdFrame(ms, lod_ms, extractions, self.renderer.draw_calls,
+                          self.renderer.triangles, len(idx), exponent, switches)
+
+    def release(self) -> None:
+        self.renderer.release()
