@@ -169,14 +169,15 @@ def render(
 def view(
     terrain: Annotated[str, typer.Argument(
         help="jacksboro | fractal:SIZE[:SEED] | FILE (.tif/.tiff/.png/.npy) | a lumigraph "
-             "folder")] = "jacksboro",
+             "folder | crowd[:OBJECTS[:TREES]]")] = "jacksboro",
     texture: TextureOpt = "terrain",
     grid: GridOpt = None,
     mode: Annotated[str | None, typer.Option(
         "--mode", help="terrain: full | lod | sprite (default) | distributed (needs "
                        "--server), keys 1-4; lumigraph: critical (default) | full | "
                        "arbitrary | fixed | line | projective | progressive | subsample, "
-                       "keys 1-8")] = None,
+                       "keys 1-8; crowd: manager (default) | independent | discrete, "
+                       "keys 1-3")] = None,
     lod: LodOpt = 16,
     epsilon: EpsOpt = 1.0,
     size: Annotated[str, typer.Option("--size", help="window size WxH")] = "1024x768",
@@ -188,7 +189,7 @@ def view(
                                    "thread")] = False,
     play: Annotated[str | None, typer.Option(
         "--play", help="play a path (chen1999 | swan2002 | FILE.json; lumigraph: arc | "
-                       "FILE.json) instead of flying")] = None,
+                       "FILE.json; crowd: walk | FILE.json) instead of flying")] = None,
     frames: FramesOpt = None,
     screenshots: Annotated[Path | None, typer.Option(
         "--screenshots", help="folder for screenshots (key p; with --play every K "
@@ -203,6 +204,9 @@ def view(
                          "reproduce")] = None,
     server: Annotated[str | None, typer.Option(
         "--server", help="distributed mode: a LOD server's HOST:PORT")] = None,
+    target_fps: Annotated[float | None, typer.Option(
+        "--target-fps", help="crowd: bend the LODs to hold this frame rate ([ ] step it)")
+    ] = None,
 ) -> None:
     """Fly through a terrain with live LOD-sprite, or round a lumigraph (WASD/QE, mouse, tab
     orbit)."""
@@ -213,7 +217,8 @@ def view(
     opts = ViewOptions(terrain=terrain, texture=texture, grid=grid, mode=mode, lod=lod,
                        epsilon=epsilon, size=parse_size(size), fps=fps, threaded=not inline,
                        play=play, frames=frames, screenshots=screenshots, every=every,
-                       exit=exit_, out=out_dir, record=record, server=server)
+                       exit=exit_, out=out_dir, record=record, server=server,
+                       target_fps=target_fps)
     s = run_view(opts)
     if s:
         out.print(f"{s['frames']} frames, {s['mode']}: median {s['median_ms']:.2f} ms, "
@@ -465,6 +470,35 @@ def _run_scoggins2000(out_dir: Path, terrain: str, quick: bool, size: int) -> No
     out.print(f"report: {report}")
 
 
+def _run_gumbau(out_dir: Path, quick: bool) -> None:
+    from lodsprite.manager.reproduce import GumbauConfig, reproduce_gumbau
+    from lodsprite.report.gumbau import write_outputs
+
+    if out_dir == Path("out/chen1999"):
+        out_dir = Path("out/gumbau")
+    cfg = GumbauConfig.quick() if quick else GumbauConfig()
+    bar, update = _multi_progress()
+    try:
+        r = reproduce_gumbau(cfg, update)
+    finally:
+        bar.stop()
+    report = write_outputs(r, out_dir)
+    t = Table(title="Gumbau, Ripolles & Chover (LODManager) reproduced")
+    for col in ("", "with the manager", "without"):
+        t.add_column(col, justify="right")
+    t.add_row("extractions", f"{r['extractions_with']:,}", f"{r['extractions_without']:,}")
+    t.add_row("fps (mean)", f"{r['fps_mean_with']:.2f}", f"{r['fps_mean_without']:.2f}")
+    t.add_row("LOD CPU ms / frame", f"{r['lod_cpu_ms_with']:.2f}",
+              f"{r['lod_cpu_ms_without']:.2f}")
+    t.add_row("draw calls", f"{r['draw_calls_mean_with']:.0f}",
+              f"{r['draw_calls_mean_without']:.0f}")
+    t.add_row("image difference (grey levels)", f"{r['image_diff_mean']:.3f}", "")
+    t.add_row(f"target {r['target_fps']:g} fps: median / p99 ms",
+              f"{r['frame_ms_median_at_target']:.1f} / {r['frame_ms_p99_at_target']:.1f}", "")
+    out.print(t)
+    out.print(f"report: {report}")
+
+
 def _run_sloan1997(out_dir: Path, quick: bool) -> None:
     from lodsprite.lumigraph.reproduce import SloanConfig, reproduce_sloan1997
     from lodsprite.report.paper_numbers import PAPER_1997
@@ -510,6 +544,9 @@ def crowd(
         "--discrete", help="baseline b: a discrete LOD chain by screen size with "
                            "hysteresis, instead of continuous LOD")] = False,
     slots: Annotated[int, typer.Option("--slots", help="N_T: LOD snapshots a type")] = 16,
+    snapshots: Annotated[str, typer.Option(
+        "--snapshots", help="their distribution: linear | finer-near (narrower slots for "
+                            "close objects, §4.3)")] = "linear",
     active: Annotated[int, typer.Option("--active", help="N_a: active-list size")] = 300,
     target_fps: Annotated[float | None, typer.Option(
         "--target-fps", help="bend the LODs to hold this frame rate")] = None,
@@ -526,7 +563,7 @@ def crowd(
 
     mode = "discrete" if discrete else ("manager" if manager else "independent")
     cfg = CrowdConfig(objects, trees, mesh, mode, slots, active, target_fps, frames,
-                      parse_size(size))
+                      parse_size(size), snapshots=snapshots)
     cfg.validate()
     cam = load_path_json(path) if path is not None else None
     with progress_bar(f"crowd ({mode})") as update:
@@ -599,7 +636,7 @@ def _numbers(text: str | None, kind: type, option: str) -> list | None:
 @app.command()
 def reproduce(
     experiment: Annotated[str, typer.Argument(
-        help="chen1999 | swan2002 | scoggins2000 | sloan1997")],
+        help="chen1999 | swan2002 | scoggins2000 | sloan1997 | gumbau")],
     out_dir: Annotated[Path, typer.Option("--out", help="output folder")] = Path("out/chen1999"),
     terrain: TerrainOpt = "jacksboro",
     size: Annotated[int, typer.Option("--size", help="image size in pixels (square)")] = 512,
@@ -642,9 +679,12 @@ def reproduce(
     if experiment == "sloan1997":
         _run_sloan1997(out_dir, quick)
         return
+    if experiment == "gumbau":
+        _run_gumbau(out_dir, quick)
+        return
     if experiment != "chen1999":
         raise InputError(f"unknown experiment '{experiment}': available: chen1999, swan2002, "
-                         "scoggins2000, sloan1997")
+                         "scoggins2000, sloan1997, gumbau")
     kw = {"terrain": terrain, "grid": grid, "lod": lod, "epsilon": epsilon,
           "visibility": visibility, "border": border, "guard_px": guard,
           "full_sample": full_sample, "sweeps": sweeps}

@@ -215,3 +215,14 @@ def terrain_techniques(lod: int = DEFAULT_COARSE, epsilon_px: float = DEFAULT_EP
         "lod": lambda r: LodTechnique(r, lod),
         "sprite": lambda r: SpriteTechnique(r, lod, epsilon_px, threaded),
     }
+
+
+def stage_scene(label: str):
+    """A placeholder terrain for a technique that draws no terrain (a lumigraph, a crowd):
+    the viewer's renderer then supplies only the GL context, size, presenter and HUD.
+    ``label`` names the scene in summaries."""
+    from lodsprite.scene import Scene
+    from lodsprite.terrain.heightfield import HeightField
+
+    hf = HeightField(np.zeros((17, 17), np.float32), 1.0, 1.0, name="stage")
+    return Scene(hf, np.zeros((16, 16, 3), np.uint8), str(label), "none")

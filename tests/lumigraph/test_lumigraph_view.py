@@ -12,9 +12,9 @@ from lodsprite.lumigraph.technique import (
     VIEW_METHODS,
     lumigraph_controller,
     lumigraph_techniques,
-    stage_scene,
     to_lumigraph,
 )
+from lodsprite.technique import stage_scene
 from lodsprite.viewer.core import ViewerCore
 
 SIZE = (96, 96)

@@ -45,12 +45,12 @@ def load_object(spec: str) -> ColorMesh:
         return still_life()
     import trimesh
 
-    from lodsprite.profiles.meshes import MeshError, load_mesh
+    from lodsprite.profiles.meshes import MeshError, load_mesh, vertex_colors
 
     try:
         load_mesh(spec)  # validates the file (one clear line for anything wrong)
         tm = trimesh.load(str(spec), force="mesh", process=False)
-        colors = _vertex_colors(tm)
+        colors = vertex_colors(tm)
     except MeshError as exc:
         raise InputError(str(exc)) from exc
     vertices = np.asarray(tm.vertices, dtype=np.float64)
@@ -59,23 +59,6 @@ def load_object(spec: str) -> ColorMesh:
     if colors is None:
         colors = np.tile([0.8, 0.72, 0.6], (len(vertices), 1))
     return ColorMesh(vertices, faces, colors, np.asarray(normals))
-
-
-def _vertex_colors(tm) -> np.ndarray | None:
-    """A trimesh's colours per vertex in [0, 1], ``(N, 3)``, or None when it has none."""
-    vis = getattr(tm, "visual", None)
-    kind = getattr(vis, "kind", None)
-    try:
-        if kind == "texture":
-            vis = vis.to_color()
-            kind = "vertex"
-        if kind in ("vertex", "face"):
-            c = np.asarray(vis.vertex_colors, dtype=np.float64)[:, :3] / 255.0
-            if c.shape == (len(tm.vertices), 3) and np.isfinite(c).all():
-                return c
-    except (ValueError, IndexError, AttributeError):  # a texture trimesh cannot sample
-        return None
-    return None
 
 
 def simplified(mesh: ColorMesh, faces: int) -> ColorMesh:

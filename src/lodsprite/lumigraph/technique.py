@@ -131,14 +131,3 @@ def lumigraph_controller(folder):
     d = float(np.linalg.norm(eye - centre))
     return CameraController(look_at(eye, centre), centre, d / 4.0,
                             min_distance_m=lf.slabs[0].st_distance * 1.5)
-
-
-def stage_scene(folder):
-    """A placeholder terrain for the viewer's renderer (never drawn): the viewer's
-    renderer supplies the GL context, size, presenter and HUD; the lumigraph is drawn by
-    its technique."""
-    from lodsprite.scene import Scene
-    from lodsprite.terrain.heightfield import HeightField
-
-    hf = HeightField(np.zeros((17, 17), np.float32), 1.0, 1.0, name="lumigraph-stage")
-    return Scene(hf, np.zeros((16, 16, 3), np.uint8), str(folder), "lumigraph")

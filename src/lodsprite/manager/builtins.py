@@ -113,8 +113,7 @@ def mesh_model(path: str, height_m: float = OGRE_HEIGHT_M) -> ProgressiveMesh:
     scaled to ``height_m``; an empty, malformed or faceless file is an :class:`InputError`."""
     import trimesh
 
-    from lodsprite.lumigraph.run import _vertex_colors
-    from lodsprite.profiles.meshes import MeshError, load_mesh
+    from lodsprite.profiles.meshes import MeshError, load_mesh, vertex_colors
 
     try:
         load_mesh(path)  # validation: one clear line for anything wrong
@@ -123,7 +122,7 @@ def mesh_model(path: str, height_m: float = OGRE_HEIGHT_M) -> ProgressiveMesh:
         raise InputError(str(exc)) from exc
     v = np.asarray(tm.vertices, dtype=np.float64)
     f = np.asarray(tm.faces, dtype=np.int64)
-    colors = _vertex_colors(tm)
+    colors = vertex_colors(tm)
     lo, hi = v.min(0), v.max(0)
     extent = float((hi - lo).max())
     if not extent > 0:

@@ -11,11 +11,13 @@ from pathlib import Path
 import numpy as np
 
 from lodsprite.errors import InputError
+from lodsprite.manager.core import finer_near, linear
 from lodsprite.manager.scene import Crowd, build_crowd, walkthrough
 from lodsprite.paths import CameraPath
 from lodsprite.report.io import write_csv, write_json
 
 Progress = Callable[[int, int], None]
+SNAPSHOTS = {"linear": linear, "finer-near": finer_near}
 FRAME_COLUMNS = ["frame", "ms", "fps", "lod_ms", "extractions", "draw_calls", "triangles",
                  "visible", "exponent", "switches"]
 
@@ -36,6 +38,7 @@ class CrowdConfig:
     range_near: float = 5.0
     range_far: float = 150.0
     seed: int = 1
+    snapshots: str = "linear"  # D_T's distribution: linear | finer-near (§4.3)
 
     def validate(self) -> None:
         """Impossible options are an :class:`InputError`, before anything is built."""
@@ -50,6 +53,9 @@ class CrowdConfig:
             raise InputError(f"--active must be at least 1, got {self.active}")
         if self.target_fps is not None and not self.target_fps > 0:
             raise InputError(f"--target-fps must be > 0, got {self.target_fps}")
+        if self.snapshots not in SNAPSHOTS:
+            raise InputError(f"--snapshots must be one of {', '.join(SNAPSHOTS)}, got "
+                             f"{self.snapshots!r}")
         if self.frames < 2:
             raise InputError(f"--frames must be at least 2, got {self.frames}")
         w, h = self.size
@@ -96,7 +102,7 @@ def run_crowd(cfg: CrowdConfig, out_dir: Path | None = None, path: CameraPath | 
         target = RenderTarget(gl, *cfg.size)
         engine = CrowdEngine(gl, crowd, target, cfg.mode, cfg.slots, cfg.active,
                              cfg.target_fps, cfg.range_near, cfg.range_far,
-                             fov_y_deg=path.fov_y_deg)
+                             SNAPSHOTS[cfg.snapshots], fov_y_deg=path.fov_y_deg)
         try:
             warm = engine.frame(path.viewpoints[0])  # untimed: shaders compiled, first LODs
             gl.finish()
@@ -129,6 +135,7 @@ def summarise(rows: list[dict], cfg: CrowdConfig, path: CameraPath, renderer: st
     col = {k: np.array([r[k] for r in rows], dtype=np.float64) for k in FRAME_COLUMNS[1:]}
     return {"frames": len(rows), "mode": cfg.mode, "objects": objects, "trees": cfg.trees,
             "mesh": cfg.mesh or "ogre", "slots": cfg.slots, "active": cfg.active,
+            "snapshots": cfg.snapshots,
             "target_fps": cfg.target_fps, "path": path.name, "size": list(cfg.size),
             "extractions_total": int(col["extractions"].sum()),
             "fps_mean": float(len(rows) / seconds), "frame_ms_mean": float(ms.mean()),

@@ -218,3 +218,20 @@ def load_mesh(path: str | os.PathLike) -> Mesh:
     if not np.all(np.isfinite(vertices.astype(np.float32))):
         raise MeshError(f"mesh file {p} has coordinates too large for float32")
     return Mesh(vertices, faces, p.stem)
+
+
+def vertex_colors(tm) -> np.ndarray | None:
+    """A trimesh's colours per vertex in [0, 1], ``(N, 3)``, or None when it has none."""
+    vis = getattr(tm, "visual", None)
+    kind = getattr(vis, "kind", None)
+    try:
+        if kind == "texture":
+            vis = vis.to_color()
+            kind = "vertex"
+        if kind in ("vertex", "face"):
+            c = np.asarray(vis.vertex_colors, dtype=np.float64)[:, :3] / 255.0
+            if c.shape == (len(tm.vertices), 3) and np.isfinite(c).all():
+                return c
+    except (ValueError, IndexError, AttributeError):  # a texture trimesh cannot sample
+        return None
+    return None

@@ -66,3 +66,10 @@ PAPER_1997: dict = {
     "st": 32, "uv": 256, "size": 512, "full_fps": 30, "critical_target_fps": 10,
     "texture_mb_re2": 4, "fill_mtex_s_needed": 23.6,
 }
+
+#: Gumbau, Ripolles & Chover (§5.3; Athlon 64 3500+, GeForce 6800 Ultra): the scenes and
+#: the models.  The paper gives its fps only as plots (Figure 6), no figures in the text.
+PAPER_GUMBAU: dict = {
+    "objects": 3000, "trees": 100, "ogre_triangles": 1960, "tree_triangles": 97_133,
+    "min_fraction": 0.1,
+}

@@ -11,7 +11,7 @@ from pathlib import Path
 
 from lodsprite import get_path, load_scene, terrain_techniques
 from lodsprite.errors import InputError
-from lodsprite.technique import TechniqueFactory
+from lodsprite.technique import TechniqueFactory, stage_scene
 from lodsprite.viewer.core import PlayPlan
 from lodsprite.viewer.window import WindowOptions, check_display, run_viewer
 
@@ -40,6 +40,12 @@ class ViewOptions:
     record: Path | None = None
     server: str | None = None
     fov_y_deg: float = 45.0
+    target_fps: float | None = None  # a crowd's LOD feedback target
+
+    @property
+    def crowd(self) -> bool:
+        """The scene is a crowd (``crowd[:OBJECTS[:TREES]]``)."""
+        return self.terrain == "crowd" or self.terrain.startswith("crowd:")
 
     @property
     def lumigraph(self) -> bool:
@@ -48,6 +54,10 @@ class ViewOptions:
 
     @property
     def modes(self) -> tuple[str, ...]:
+        if self.crowd:
+            from lodsprite.manager.technique import VIEW_MODES as CROWD_MODES
+
+            return CROWD_MODES
         if self.lumigraph:
             from lodsprite.lumigraph.technique import VIEW_METHODS
 
@@ -56,14 +66,18 @@ class ViewOptions:
 
     @property
     def start_mode(self) -> str:
-        return self.mode or ("critical" if self.lumigraph else "sprite")
+        if self.mode:
+            return self.mode
+        return "manager" if self.crowd else ("critical" if self.lumigraph else "sprite")
 
     def validate(self) -> None:
         if self.start_mode not in self.modes:
             raise InputError(f"unknown mode '{self.start_mode}': use one of "
                              f"{', '.join(self.modes)}")
-        if self.lumigraph and self.server:
-            raise InputError("--server goes with a terrain, not a lumigraph")
+        if (self.lumigraph or self.crowd) and self.server:
+            raise InputError("--server goes with a terrain")
+        if self.target_fps is not None and not (self.crowd and self.target_fps > 0):
+            raise InputError("--target-fps goes with a crowd and must be > 0")
         if self.mode == "distributed" and not self.server:
             raise InputError("--mode distributed needs --server HOST:PORT")
         if self.every < 1:
@@ -98,6 +112,8 @@ def view(o: ViewOptions) -> dict:
     check_display()
     if o.lumigraph:
         return _view_lumigraph(o)
+    if o.crowd:
+        return _view_crowd(o)
     scene = load_scene(o.terrain, o.texture, o.grid)
     plan, fov = None, o.fov_y_deg
     if o.play is not None:
@@ -122,7 +138,7 @@ def _view_lumigraph(o: ViewOptions) -> dict:
         path = lt.viewer_path(default_path(lf, o.frames or 240) if o.play == "arc"
                               else load_path_json(o.play))
         plan, fov = PlayPlan(path, o.out, o.screenshots, o.every, o.exit), path.fov_y_deg
-    return run_viewer(lt.stage_scene(o.terrain), lt.lumigraph_techniques(o.terrain),
+    return run_viewer(stage_scene(o.terrain), lt.lumigraph_techniques(o.terrain),
                       o.start_mode, WindowOptions(o.size, fps=o.fps), plan, o.record, fov,
                       o.screenshots or Path("screenshots"), lt.lumigraph_controller(o.terrain))
 
@@ -142,3 +158,25 @@ def view_scene(scene, techniques: dict[str, TechniqueFactory], mode: str | None 
     fov = path.fov_y_deg if path is not None else fov_y_deg
     return run_viewer(scene, techniques, mode, WindowOptions(tuple(size), fps=fps), plan,
                       None, fov)
+
+
+def _view_crowd(o: ViewOptions) -> dict:
+    """``lodsprite view crowd[:OBJECTS[:TREES]]``: the crowd's modes (manager, independent,
+    discrete); ``--play walk`` plays the walkthrough, or a JSON path."""
+    from lodsprite.manager.run import CrowdConfig, make_crowd
+    from lodsprite.manager.scene import walkthrough
+    from lodsprite.manager.technique import crowd_controller, crowd_techniques, parse_crowd
+    from lodsprite.paths import load_path_json
+
+    objects, trees = parse_crowd(o.terrain)
+    cfg = CrowdConfig(objects=objects, trees=trees, target_fps=o.target_fps)
+    cfg.validate()
+    crowd = make_crowd(cfg)
+    plan, fov = None, 60.0
+    if o.play is not None:
+        path = (walkthrough(crowd, o.frames or 600) if o.play == "walk"
+                else load_path_json(o.play))
+        plan, fov = PlayPlan(path, o.out, o.screenshots, o.every, o.exit), path.fov_y_deg
+    return run_viewer(stage_scene(o.terrain), crowd_techniques(crowd, o.target_fps),
+                      o.start_mode, WindowOptions(o.size, fps=o.fps), plan, o.record, fov,
+                      o.screenshots or Path("screenshots"), crowd_controller(crowd))
