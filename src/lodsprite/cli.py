@@ -470,18 +470,22 @@ def _run_scoggins2000(out_dir: Path, terrain: str, quick: bool, size: int) -> No
     out.print(f"report: {report}")
 
 
+def _with_bars(run, *args):
+    """``run(*args, update)`` under one progress bar per step."""
+    bar, update = _multi_progress()
+    try:
+        return run(*args, update)
+    finally:
+        bar.stop()
+
+
 def _run_gumbau(out_dir: Path, quick: bool) -> None:
     from lodsprite.manager.reproduce import GumbauConfig, reproduce_gumbau
     from lodsprite.report.gumbau import write_outputs
 
     if out_dir == Path("out/chen1999"):
         out_dir = Path("out/gumbau")
-    cfg = GumbauConfig.quick() if quick else GumbauConfig()
-    bar, update = _multi_progress()
-    try:
-        r = reproduce_gumbau(cfg, update)
-    finally:
-        bar.stop()
+    r = _with_bars(reproduce_gumbau, GumbauConfig.quick() if quick else GumbauConfig())
     report = write_outputs(r, out_dir)
     t = Table(title="Gumbau, Ripolles & Chover (LODManager) reproduced")
     for col in ("", "with the manager", "without"):
@@ -506,12 +510,8 @@ def _run_sloan1997(out_dir: Path, quick: bool) -> None:
 
     if out_dir == Path("out/chen1999"):
         out_dir = Path("out/sloan1997")
-    cfg = SloanConfig.quick() if quick else SloanConfig()
-    bar, update = _multi_progress()
-    try:
-        r = reproduce_sloan1997(cfg, out_dir, update)
-    finally:
-        bar.stop()
+    r = _with_bars(reproduce_sloan1997, SloanConfig.quick() if quick else SloanConfig(),
+                   out_dir)
     report = write_outputs(r, out_dir)
     t = Table(title="Sloan, Cohen & Gortler 1997 reproduced")
     for col in ("", "this run", "paper"):
