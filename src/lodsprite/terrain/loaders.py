@@ -30,7 +30,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy import ndimage
 
-from lodsprite.errors import TerrainError
+from lodsprite.errors import InputError, TerrainError
 from lodsprite.terrain.generators import fractal
 from lodsprite.terrain.heightfield import DEFAULT_GRID, HeightField
 
@@ -82,6 +82,11 @@ def parse_fractal_spec(spec: str) -> tuple[int, int] | None:
     return size, seed
 
 
+#: The largest level of a terrain store loaded whole by commands that need the whole
+#: field in memory (a store of any size is read at its finest level up to this side).
+STORE_MAX_SIDE = 4096
+
+
 def load_heightfield(spec: str | os.PathLike) -> HeightField:
     """Load the raw height field named by ``spec`` (see the module docstring).
 
@@ -101,6 +106,13 @@ def load_heightfield(spec: str | os.PathLike) -> HeightField:
         return fractal(*parsed)
     path = Path(spec).expanduser()
     suffix = path.suffix.lower()
+    if path.is_dir() and (path / "zarr.json").is_file():
+        from lodsprite.terrain.store import TerrainStore
+
+        try:
+            return TerrainStore(path).heightfield(STORE_MAX_SIDE)
+        except InputError as exc:
+            raise TerrainError(str(exc)) from exc
     if not path.exists():
         if suffix in _FILE_TYPES:
             raise TerrainError(f"terrain file not found: {spec}")

@@ -1,0 +1,391 @@
+"""Terrain pyramids on disk: Zarr v3 multiscale stores built by streaming, for height
+fields larger than memory (any size and aspect).
+
+Layout of ``STORE.zarr`` (a Zarr v3 group)::
+
+    attrs["lodsprite"]   the header (:class:`StoreHeader`): format, version, grid, spacing
+                         (metres), georeferencing, encoding, levels, build state
+    0, 1, 2, ...         level k: ``ceil(rows / 2^k) x ceil(cols / 2^k)`` heights, inner
+                         chunks of ``chunk²`` inside shards of ``tile²``; float32 metres,
+                         or int16 with ``height = stored * scale + offset``
+    minmax/0, ...        level k's min and max per chunk, ``(chunk rows, chunk cols, 2)``
+
+Level 0 is written tile by tile from the source (:mod:`lodsprite.terrain.tiled`); level
+``k + 1`` is the exact 2×2 mean of level ``k`` (an odd last row or column is averaged with
+itself), read back from the store tile by tile, so memory never holds more than a few
+tiles.  The header records which tiles are done: an interrupted build resumes where it
+stopped; a store whose build has not finished is refused when opened, with the command
+that finishes it.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from collections.abc import Callable
+from pathlib import Path
+from typing import Literal
+
+import msgspec
+import numpy as np
+
+from lodsprite.errors import InputError
+
+FORMAT = "lodsprite-terrain-pyramid"
+VERSION = 1
+DEFAULT_TILE = 1024
+DEFAULT_CHUNK = 256
+MIN_LEVEL_SIDE = 256
+Progress = Callable[[int, int], None]
+
+
+class StoreHeader(msgspec.Struct, forbid_unknown_fields=True):
+    """The store's header (``attrs["lodsprite"]``)."""
+
+    format: str
+    version: int
+    source: str
+    rows: int
+    cols: int
+    dx: float
+    dy: float
+    levels: int
+    tile: int
+    chunk: int
+    encoding: Literal["float32", "int16"]
+    scale: float = 1.0
+    offset: float = 0.0
+    crs: str | None = None
+    transform: list[float] | None = None
+    complete: bool = False
+    done: list[list[int]] = []  # per level, the tiles written (row-major tile index)
+
+
+def level_shape(rows: int, cols: int, k: int) -> tuple[int, int]:
+    return -(-rows // (1 << k)), -(-cols // (1 << k))
+
+
+def pyramid_levels(rows: int, cols: int) -> int:
+    """Levels down to the first whose longer side is at most ``MIN_LEVEL_SIDE``."""
+    n = 1
+    while max(level_shape(rows, cols, n - 1)) > MIN_LEVEL_SIDE:
+        n += 1
+    return n
+
+
+def downsample(a: np.ndarray) -> np.ndarray:
+    """The exact 2×2 mean, an odd last row or column averaged with itself, ``float32``."""
+    a = np.asarray(a, dtype=np.float64)
+    if a.shape[0] % 2:
+        a = np.concatenate([a, a[-1:]], axis=0)
+    if a.shape[1] % 2:
+        a = np.concatenate([a, a[:, -1:]], axis=1)
+    return (0.25 * (a[0::2, 0::2] + a[1::2, 0::2] + a[0::2, 1::2] + a[1::2, 1::2])
+            ).astype(np.float32)
+
+
+def _tiles(shape: tuple[int, int], tile: int) -> list[tuple[int, int, int, int]]:
+    r, c = shape
+    return [(r0, min(r, r0 + tile), c0, min(c, c0 + tile))
+            for r0 in range(0, r, tile) for c0 in range(0, c, tile)]
+
+
+def estimate_bytes(rows: int, cols: int, encoding: str) -> int:
+    """An upper bound on the store's size (uncompressed, all levels)."""
+    item = 4 if encoding == "float32" else 2
+    return int(rows * cols * item * 4 / 3) + (1 << 20)
+
+
+def _header_of(group) -> StoreHeader:
+    raw = group.attrs.get("lodsprite")
+    if raw is None:
+        raise InputError("not a lodsprite terrain store (no header)")
+    try:
+        return msgspec.convert(raw, StoreHeader)
+    except msgspec.ValidationError as exc:
+        raise InputError(f"malformed terrain store header: {exc}") from exc
+
+
+def build_store(source_spec: str, out: str | Path, tile: int = DEFAULT_TILE,
+                chunk: int = DEFAULT_CHUNK, encoding: str = "float32", scale: float = 0.25,
+                overwrite: bool = False, progress: Progress | None = None,
+                stop_after: int | None = None, scheduler: str | None = None) -> dict:
+    """Build (or resume building) the pyramid of ``source_spec`` in ``out``; returns a
+    summary.  ``scheduler``: a Dask scheduler address to spread each level's tiles over
+    (the store and the source must be on storage the workers share).  ``stop_after``
+    stops after that many tiles (to test resuming)."""
+    import time
+
+    from lodsprite.terrain.tiled import open_source
+
+    if encoding not in ("float32", "int16"):
+        raise InputError(f"--encoding must be float32 or int16, got {encoding!r}")
+    if not (chunk >= 16 and tile >= chunk and tile % chunk == 0):
+        raise InputError(f"the tile ({tile}) must be a multiple of the chunk ({chunk}), "
+                         "chunk at least 16")
+    if encoding == "int16" and not scale > 0:
+        raise InputError(f"--scale must be > 0 m, got {scale}")
+    src = open_source(source_spec)
+    out = Path(out)
+    offset = _check_source(src, encoding, scale)
+    levels = pyramid_levels(src.rows, src.cols)
+    header = StoreHeader(FORMAT, VERSION, source_spec, src.rows, src.cols, float(src.dx),
+                         float(src.dy), levels, tile, chunk, encoding,
+                         float(scale) if encoding == "int16" else 1.0, float(offset),
+                         src.crs, src.transform, False, [[] for _ in range(levels)])
+    group = _open_for_build(out, header, overwrite)
+    header = _header_of(group)
+    if header.complete:
+        return {"store": str(out), "rows": src.rows, "cols": src.cols, "levels": levels,
+                "tiles_written": 0, "seconds": 0.0, "resumed": False, "already": True}
+    total = sum(len(_tiles(level_shape(src.rows, src.cols, k), tile)) for k in range(levels))
+    done_before = sum(len(d) for d in header.done)
+    written, t0 = 0, time.perf_counter()
+    client = _client(scheduler) if scheduler else None
+    try:
+        for k in range(levels):
+            pending = [n for n in range(len(_tiles(level_shape(src.rows, src.cols, k), tile)))
+                       if n not in set(header.done[k])]
+            if stop_after is not None:
+                pending = pending[: max(0, stop_after - written)]
+            for n in _run_tiles(client, out, k, pending, src, group, header):
+                header.done[k].append(n)
+                _save_header(group, header)
+                written += 1
+                if progress:
+                    progress(done_before + written, total)
+            if stop_after is not None and written >= stop_after and len(header.done[k]) < len(
+                    _tiles(level_shape(src.rows, src.cols, k), tile)):
+                return {"store": str(out), "interrupted": True, "tiles_written": written}
+    finally:
+        if client is not None:
+            client.close()
+    header.complete = True
+    _save_header(group, header)
+    seconds = time.perf_counter() - t0
+    return {"store": str(out), "rows": src.rows, "cols": src.cols, "levels": levels,
+            "tiles_written": written, "seconds": seconds, "resumed": done_before > 0,
+            "mb_per_s": src.rows * src.cols * 4 / 2 ** 20 / max(seconds, 1e-9)}
+
+
+def _client(address: str):
+    from lodsprite.profiles.generate import DASK_CONNECT_TIMEOUT_S, require_dask
+
+    dd = require_dask()
+    try:
+        return dd.Client(address, timeout=f"{DASK_CONNECT_TIMEOUT_S}s")
+    except OSError as exc:
+        raise InputError(f"cannot reach the Dask scheduler at {address}: {exc}") from exc
+
+
+def _run_tiles(client, out: Path, k: int, tiles: list[int], src, group, header):
+    """Write level ``k``'s ``tiles`` here or on the cluster; yields each tile index once
+    it is written."""
+    if client is None:
+        for n in tiles:
+            build_tile(out, k, n, src, group, header)
+            yield n
+        return
+    from dask.distributed import as_completed
+
+    futures = {client.submit(build_tile, str(out), k, n, pure=False): n for n in tiles}
+    for fut in as_completed(futures):
+        fut.result()
+        yield futures[fut]
+
+
+def _open_group(out: Path):
+    import zarr
+
+    return zarr.open_group(str(out), mode="r+")
+
+
+def build_tile(out, k: int, n: int, src=None, group=None, header=None) -> None:
+    """Write tile ``n`` of level ``k`` (level 0 from the source, others from the level
+    below) with its chunks' min and max; opens what it is not given (a cluster worker)."""
+    from lodsprite.terrain.tiled import open_source
+
+    group = group if group is not None else _open_group(Path(out))
+    header = header if header is not None else _header_of(group)
+    r0, r1, c0, c1 = _tiles(level_shape(header.rows, header.cols, k), header.tile)[n]
+    if k == 0:
+        src = src if src is not None else open_source(header.source)
+        h = src.read(r0, r1, c0, c1)
+    else:
+        h = _parent_window(group, header, k, r0, r1, c0, c1)
+    _write_tile(group[str(k)], group[f"minmax/{k}"], header, h, r0, c0)
+
+
+def _check_source(src, encoding: str, scale: float) -> float:
+    """Refuse an all-nodata source; the int16 offset (the coarse minimum)."""
+    coarse = src.coarse() if hasattr(src, "coarse") else src.read(0, min(src.rows, 64), 0,
+                                                                  min(src.cols, 64))
+    finite = np.asarray(coarse, np.float64)
+    finite = finite[np.isfinite(finite)]
+    if not len(finite):
+        raise InputError(f"{src.name}: every sample is nodata")
+    if encoding == "int16":
+        lo = float(finite.min()) - 0.1 * (float(np.ptp(finite)) + 1.0)
+        if (float(finite.max()) - lo) / scale > 32767:
+            raise InputError(f"heights span more than int16 holds at --scale {scale} m: "
+                             "use a larger scale or float32")
+        return lo
+    return 0.0
+
+
+def _open_for_build(out: Path, header: StoreHeader, overwrite: bool):
+    import zarr
+
+    if out.exists():
+        if overwrite:
+            shutil.rmtree(out)
+        else:
+            try:
+                group = zarr.open_group(str(out), mode="r+")
+                old = _header_of(group)
+            except InputError as exc:
+                raise InputError(f"{out} exists and is not a terrain store being built "
+                                 f"({exc}): pass --overwrite to replace it") from exc
+            same = (old.source, old.rows, old.cols, old.tile, old.chunk, old.encoding,
+                    old.scale) == (header.source, header.rows, header.cols, header.tile,
+                                   header.chunk, header.encoding, header.scale)
+            if not same:
+                raise InputError(f"{out} holds a store built with other parameters: pass "
+                                 "--overwrite to rebuild it")
+            return group
+    free = shutil.disk_usage(out.parent if out.parent.exists() else Path.cwd()).free
+    need = estimate_bytes(header.rows, header.cols, header.encoding)
+    if need > free:
+        raise InputError(f"the store needs up to {need / 2 ** 30:.1f} GB and the disk has "
+                         f"{free / 2 ** 30:.1f} GB free")
+    group = zarr.open_group(str(out), mode="w")
+    dtype = "float32" if header.encoding == "float32" else "int16"
+    fill = np.nan if header.encoding == "float32" else -32768
+    for k in range(header.levels):
+        shape = level_shape(header.rows, header.cols, k)
+        shard = (min(header.tile, _ceil_to(shape[0], header.chunk)),
+                 min(header.tile, _ceil_to(shape[1], header.chunk)))
+        group.create_array(str(k), shape=shape, chunks=(header.chunk, header.chunk),
+                           shards=shard, dtype=dtype, fill_value=fill)
+        cr, cc = (-(-s // header.chunk) for s in shape)
+        per = header.tile // header.chunk  # one minmax chunk a tile: tiles write apart
+        group.create_array(f"minmax/{k}", shape=(cr, cc, 2),
+                           chunks=(min(per, cr), min(per, cc), 2), dtype="float32",
+                           fill_value=np.nan)
+    _save_header(group, header)
+    return group
+
+
+def _ceil_to(n: int, m: int) -> int:
+    return -(-n // m) * m
+
+
+def _save_header(group, header: StoreHeader) -> None:
+    group.attrs["lodsprite"] = json.loads(msgspec.json.encode(header))
+
+
+def _parent_window(group, header: StoreHeader, k: int, r0: int, r1: int, c0: int, c1: int
+                   ) -> np.ndarray:
+    """Level ``k``'s window as the 2×2 mean of level ``k - 1`` (read from the store)."""
+    pr, pc = level_shape(header.rows, header.cols, k - 1)
+    below = decode(group[str(k - 1)][2 * r0: min(pr, 2 * r1), 2 * c0: min(pc, 2 * c1)], header)
+    return downsample(below)[: r1 - r0, : c1 - c0]
+
+
+def encode(h: np.ndarray, header: StoreHeader) -> np.ndarray:
+    if header.encoding == "float32":
+        return h.astype(np.float32)
+    q = np.rint((np.asarray(h, np.float64) - header.offset) / header.scale)
+    return np.where(np.isfinite(q), np.clip(q, -32767, 32767), -32768).astype(np.int16)
+
+
+def decode(a: np.ndarray, header: StoreHeader) -> np.ndarray:
+    """Stored values to metres (``float32``; NaN where nothing was written)."""
+    if header.encoding == "float32":
+        return np.asarray(a, dtype=np.float32)
+    a = np.asarray(a)
+    out = a.astype(np.float32) * np.float32(header.scale) + np.float32(header.offset)
+    out[a == -32768] = np.nan
+    return out
+
+
+def _write_tile(arr, mm, header: StoreHeader, h: np.ndarray, r0: int, c0: int) -> None:
+    arr[r0: r0 + h.shape[0], c0: c0 + h.shape[1]] = encode(h, header)
+    stored = decode(encode(h, header), header)
+    c = header.chunk
+    for i in range(0, h.shape[0], c):
+        for j in range(0, h.shape[1], c):
+            block = stored[i: i + c, j: j + c]
+            ok = block[np.isfinite(block)]
+            val = (ok.min(), ok.max()) if len(ok) else (np.nan, np.nan)
+            mm[(r0 + i) // c, (c0 + j) // c] = np.array(val, np.float32)
+
+
+class TerrainStore:
+    """A pyramid store opened for reading: header and arrays validated when opened."""
+
+    def __init__(self, path: str | Path) -> None:
+        import zarr
+
+        self.path = Path(path)
+        if not (self.path / "zarr.json").is_file():
+            raise InputError(f"{self.path} is not a terrain store (no zarr.json)")
+        try:
+            self.group = zarr.open_group(str(self.path), mode="r")
+            self.header = _header_of(self.group)
+        except InputError as exc:
+            raise InputError(f"{self.path}: {exc}") from exc
+        except Exception as exc:  # zarr raises many kinds on a damaged store
+            raise InputError(f"{self.path}: unreadable terrain store "
+                             f"({type(exc).__name__}: {exc})") from exc
+        h = self.header
+        if h.format != FORMAT or h.version != VERSION:
+            raise InputError(f"{self.path}: not a {FORMAT} version {VERSION} store")
+        if not h.complete:
+            raise InputError(f"{self.path}: the build did not finish; run `lodsprite tile "
+                             f"{h.source} --out {self.path}` again to resume it")
+        for k in range(h.levels):
+            try:
+                shape = tuple(self.group[str(k)].shape)
+            except KeyError as exc:
+                raise InputError(f"{self.path}: level {k} is missing") from exc
+            if shape != level_shape(h.rows, h.cols, k):
+                raise InputError(f"{self.path}: level {k} is {shape}, the header says "
+                                 f"{level_shape(h.rows, h.cols, k)}")
+
+    @property
+    def levels(self) -> int:
+        return self.header.levels
+
+    def shape(self, k: int) -> tuple[int, int]:
+        return level_shape(self.header.rows, self.header.cols, k)
+
+    def read(self, k: int, r0: int, r1: int, c0: int, c1: int) -> np.ndarray:
+        """Level ``k``'s heights in metres over a window, ``float32`` (NaN: unwritten)."""
+        return decode(self.group[str(k)][r0:r1, c0:c1], self.header)
+
+    def minmax(self, k: int) -> np.ndarray:
+        """Level ``k``'s per-chunk min and max, ``(chunk rows, chunk cols, 2)``."""
+        return np.asarray(self.group[f"minmax/{k}"][...])
+
+    def level_for(self, max_side: int) -> int:
+        """The finest level whose longer side is at most ``max_side``."""
+        for k in range(self.levels):
+            if max(self.shape(k)) <= max_side:
+                return k
+        return self.levels - 1
+
+    def heightfield(self, max_side: int = 4096):
+        """The finest level that fits ``max_side`` as an in-memory :class:`HeightField`
+        (spacing scaled to the level), for commands that need the whole field."""
+        from lodsprite.terrain.loaders import heightfield_from_array
+
+        k = self.level_for(max_side)
+        r, c = self.shape(k)
+        a = self.read(k, 0, r, 0, c)
+        f = 1 << k
+        meta = {"source": str(self.path), "format": "lodsprite terrain store",
+                "level": k, "store_rows": self.header.rows, "store_cols": self.header.cols,
+                "crs": self.header.crs}
+        return heightfield_from_array(a, self.header.dx * f, self.header.dy * f,
+                                      self.path.name, meta)

@@ -1,0 +1,129 @@
+"""Terrain pyramids in Zarr v3 stores, built by streaming (issue 16, first part)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from lodsprite.errors import InputError
+from lodsprite.terrain.store import TerrainStore, build_store, downsample
+from lodsprite.terrain.tiled import parse_fractal
+
+
+def levels_of(path):
+    st = TerrainStore(path)
+    return st, [st.read(k, 0, st.shape(k)[0], 0, st.shape(k)[1]) for k in range(st.levels)]
+
+
+def test_levels_are_exact_downsamples_and_chunk_bounds_hold(tmp_path):
+    build_store("fractal:702x1000:3", tmp_path / "s.zarr", tile=256, chunk=64)
+    st, lv = levels_of(tmp_path / "s.zarr")
+    assert [a.shape for a in lv] == [(702, 1000), (351, 500), (176, 250)]
+    for k in range(1, len(lv)):
+        np.testing.assert_array_equal(lv[k], downsample(lv[k - 1]))
+    # level 1 has an odd number of rows: its last row is averaged with itself
+    np.testing.assert_allclose(lv[2][-1, 0], lv[1][-1, 0:2].mean(), rtol=1e-6)
+    np.testing.assert_allclose(lv[1][0, 0], lv[0][0:2, 0:2].mean(), rtol=1e-6)
+    mm = st.minmax(0)
+    assert mm.shape == (11, 16, 2)
+    block = lv[0][64:128, 192:256]
+    np.testing.assert_allclose(mm[1, 3], [block.min(), block.max()])
+
+
+def test_the_same_samples_whatever_the_tiling(tmp_path):
+    build_store("fractal:600x520:9", tmp_path / "a.zarr", tile=128, chunk=64)
+    build_store("fractal:600x520:9", tmp_path / "b.zarr", tile=512, chunk=128)
+    _, a = levels_of(tmp_path / "a.zarr")
+    _, b = levels_of(tmp_path / "b.zarr")
+    for x, y in zip(a, b, strict=True):
+        np.testing.assert_array_equal(x, y)
+    # and a window read across tile borders is the generator's own
+    src = parse_fractal("fractal:600x520:9")
+    np.testing.assert_array_equal(a[0][100:300, 90:400], src.read(100, 300, 90, 400))
+
+
+def test_tiling_the_same_source_twice_gives_identical_stores(tmp_path):
+    for name in ("a", "b"):
+        build_store("fractal:300x400:1", tmp_path / f"{name}.zarr", tile=128, chunk=64,
+                    encoding="int16", scale=0.1)
+    ha = json.loads((tmp_path / "a.zarr" / "zarr.json").read_text())["attributes"]
+    hb = json.loads((tmp_path / "b.zarr" / "zarr.json").read_text())["attributes"]
+    assert ha == hb
+    _, a = levels_of(tmp_path / "a.zarr")
+    _, b = levels_of(tmp_path / "b.zarr")
+    assert all(np.array_equal(x, y) for x, y in zip(a, b, strict=True))
+    # int16: within half a step of the float source
+    src = parse_fractal("fractal:300x400:1").read(0, 300, 0, 400)
+    assert np.abs(a[0] - src).max() <= 0.05 + 1e-3
+
+
+def write_geotiff(path, heights, nodata=-9999.0):
+    import rasterio
+    from rasterio.transform import from_origin
+
+    with rasterio.open(path, "w", driver="GTiff", height=heights.shape[0],
+                       width=heights.shape[1], count=1, dtype="float32", crs="EPSG:32614",
+                       transform=from_origin(500000, 4000000, 10.0, 12.0),
+                       nodata=nodata) as ds:
+        ds.write(heights.astype(np.float32), 1)
+
+
+def test_a_non_square_geotiff_keeps_rows_columns_spacing_and_values(tmp_path):
+    rng = np.random.default_rng(0)
+    h = rng.uniform(100, 900, (300, 517))
+    h[40:50, 60:75] = -9999.0                        # a nodata hole
+    write_geotiff(tmp_path / "dem.tif", h)
+    build_store(str(tmp_path / "dem.tif"), tmp_path / "d.zarr", tile=128, chunk=64)
+    st, lv = levels_of(tmp_path / "d.zarr")
+    assert (st.header.rows, st.header.cols) == (300, 517)
+    assert (st.header.dx, st.header.dy) == (10.0, 12.0) and "32614" in st.header.crs
+    ok = h != -9999.0
+    np.testing.assert_allclose(lv[0][ok], h[ok], rtol=1e-6)
+    assert np.isfinite(lv[0]).all()                  # the hole filled from its neighbours
+
+
+def test_an_all_nodata_dem_is_refused_before_anything_is_written(tmp_path):
+    write_geotiff(tmp_path / "empty.tif", np.full((64, 80), -9999.0))
+    with pytest.raises(InputError, match="nodata"):
+        build_store(str(tmp_path / "empty.tif"), tmp_path / "e.zarr")
+    assert not (tmp_path / "e.zarr").exists()
+
+
+def test_an_interrupted_build_is_refused_then_resumes_to_the_same_store(tmp_path):
+    out = tmp_path / "r.zarr"
+    r = build_store("fractal:600x600:4", out, tile=128, chunk=64, stop_after=7)
+    assert r["interrupted"]
+    with pytest.raises(InputError, match="did not finish"):
+        TerrainStore(out)
+    s = build_store("fractal:600x600:4", out, tile=128, chunk=64)
+    assert s["resumed"] and s["tiles_written"] > 0
+    build_store("fractal:600x600:4", tmp_path / "fresh.zarr", tile=128, chunk=64)
+    _, a = levels_of(out)
+    _, b = levels_of(tmp_path / "fresh.zarr")
+    assert all(np.array_equal(x, y) for x, y in zip(a, b, strict=True))
+
+
+def test_a_corrupt_store_is_one_line_and_exit_code_2(tmp_path):
+    build_store("fractal:200x200:1", tmp_path / "c.zarr", tile=128, chunk=64)
+    (tmp_path / "c.zarr" / "zarr.json").write_text("{not json")
+    with pytest.raises(InputError):
+        TerrainStore(tmp_path / "c.zarr")
+    r = subprocess.run([sys.executable, "-c", "from lodsprite.cli import main; main()",
+                        "render", "--terrain", str(tmp_path / "c.zarr"), "--frames", "2",
+                        "--out", str(tmp_path / "o")], capture_output=True, text=True,
+                       timeout=120)
+    assert r.returncode == 2 and "Traceback" not in r.stderr
+    assert len([ln for ln in r.stderr.splitlines() if ln.strip()]) == 1
+    assert not (tmp_path / "o").exists()
+
+
+def test_every_terrain_command_takes_a_store(tmp_path):
+    from lodsprite.terrain import load_terrain
+
+    build_store("fractal:300x500:2", tmp_path / "t.zarr", tile=128, chunk=64)
+    hf = load_terrain(str(tmp_path / "t.zarr"), grid=64)
+    assert hf.heights.shape == (65, 65) and np.isfinite(hf.heights).all()
