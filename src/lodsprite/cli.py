@@ -98,7 +98,8 @@ def render(
     texture: TextureOpt = "terrain",
     path: PathOpt = "chen1999",
     mode: Annotated[str, typer.Option(
-        "--mode", help="full | lod | sprite | distributed (starts a local LOD server)")] = "full",
+        "--mode", help="full | lod | sprite | adaptive (view-dependent, --sse) | distributed "
+                       "(starts a local LOD server)")] = "full",
     lod: LodOpt = 16,
     size: SizeOpt = "512x512",
     frames: FramesOpt = None,
@@ -118,6 +119,12 @@ def render(
     guard: GuardOpt = 32,
     pace: PaceOpt = "needed",
     max_error: MaxErrorOpt = None,
+    sse: Annotated[float, typer.Option(
+        "--sse", help="adaptive: screen-space error tolerance in pixels")] = 1.0,
+    gpu_mb: Annotated[float, typer.Option(
+        "--gpu-mb", help="adaptive: GPU tile cache budget (MB)")] = 256.0,
+    host_mb: Annotated[float, typer.Option(
+        "--host-mb", help="adaptive: host tile cache budget (MB)")] = 512.0,
 ) -> None:
     """Render a camera path; write DIR/frames.csv and DIR/summary.json (and PNG frames)."""
     from lodsprite import InputError, RenderConfig, render_path
@@ -135,7 +142,7 @@ def render(
                           size=parse_size(size), frames=frames, grid=grid,
                           exaggeration=exaggeration, save_frames=save_frames, epsilon=epsilon,
                           ground_truth=ground_truth, visibility=visibility, border=border,
-                          guard_px=guard)
+                          guard_px=guard, sse=sse, gpu_mb=gpu_mb, host_mb=host_mb)
     with progress_bar(f"render {mode}") as update:
         if distributed:
             from lodsprite.distributed.run import parse_max_error, render_distributed
@@ -154,6 +161,10 @@ def render(
         out.print(f"keyframes received: {s['keyframes_received']}, σ {s['std_ms']:.2f} ms, "
                   f"p99 {s['p99_ms']:.2f} ms; server δt {s['delta_t_ms_mean']:.0f} ms, "
                   f"keyframe render {s['render_ms_mean']:.0f} ms")
+    if s["mode"] == "adaptive":
+        out.print(f"{s['sse']:g} px: first frame {s['first_frame_s']:.2f} s; tiles resident "
+                  f"{s['tiles_resident']}, loaded {s['tiles_loaded']}, evicted "
+                  f"{s['tiles_evicted']}, unreadable {s['tiles_bad']}")
     if s["mode"] == "sprite":
         out.print(f"keyframes: {s['keyframes']} of {s['frames']}; mean ms keyframe "
                   f"{s['mean_ms_keyframe']:.1f}, first spriteframe "

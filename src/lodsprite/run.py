@@ -36,9 +36,10 @@ from lodsprite.sprite.engine import DEFAULT_EPSILON_PX, FRAME_TYPES, LodSpriteEn
 from lodsprite.terrain import DEFAULT_EXAGGERATION
 from lodsprite.terrain.lod import DEFAULT_COARSE, level_step
 
-MODES = ("full", "lod", "sprite")
+MODES = ("full", "lod", "sprite", "adaptive")
 FRAME_COLUMNS = ["frame", "mode", "ms", "triangles"]
 SPRITE_COLUMNS = ["type", "error_px", "keyframe", "key_x", "key_y", "key_z"]
+ADAPTIVE_COLUMNS = ["nodes", "uploaded", "resident", "loaded", "evicted"]
 QUALITY_COLUMNS = ["rmse_sprite", "psnr_sprite", "ssim_sprite", "rmse_lod", "psnr_lod", "ssim_lod",
                    "rmse_lod_border"]
 MAX_GUARD_PX = 1024
@@ -65,6 +66,9 @@ class RenderConfig:
     visibility: str = DEFAULT_VISIBILITY
     border: bool = True
     guard_px: int = DEFAULT_GUARD_PX
+    sse: float = 1.0          # adaptive: screen-space error tolerance, pixels
+    gpu_mb: float = 256.0     # adaptive: GPU tile cache budget
+    host_mb: float = 512.0    # adaptive: host tile cache budget
 
     def validate(self) -> None:
         if self.mode not in MODES:
@@ -86,6 +90,9 @@ class RenderConfig:
             raise InputError(f"quality stride must be >= 1, got {self.quality_stride}")
         if self.ground_truth and self.mode != "sprite":
             raise InputError("--ground-truth needs --mode sprite")
+        if not (self.sse > 0 and self.gpu_mb > 0 and self.host_mb > 0):
+            raise InputError(f"--sse, --gpu-mb and --host-mb must be > 0, got {self.sse}, "
+                             f"{self.gpu_mb}, {self.host_mb}")
 
 
 def parse_size(text: str) -> tuple[int, int]:
@@ -114,7 +121,7 @@ def prepare(config: RenderConfig) -> tuple[Scene, CameraPath]:
     """Validate the config and load scene and path (all user errors surface here)."""
     config.validate()
     scene = load_scene(config.terrain, config.texture, config.grid, config.exaggeration)
-    if config.mode != "full":
+    if config.mode in ("lod", "sprite"):
         level_step(scene.hf.quads, config.lod)
     return scene, get_path(config.path, scene.hf, config.frames)
 
@@ -266,8 +273,11 @@ def render_path(config: RenderConfig, out_dir: Path, progress: Progress | None =
                 writer.append(image)
 
         wanted = on_frame if config.save_frames or writer is not None else None
+        extra: dict = {}
         if config.mode == "sprite":
             rows = sprite_frames(pr, path, config, progress, wanted, keyframes)
+        elif config.mode == "adaptive":
+            rows, extra = adaptive_frames(pr, scene, path, config, progress, wanted)
         else:
             rows = plain_frames(pr, path, config, progress, wanted)
         info = pr.ctx.info
@@ -277,15 +287,17 @@ def render_path(config: RenderConfig, out_dir: Path, progress: Progress | None =
         "frames": len(rows), "mode": config.mode, "terrain": config.terrain,
         "texture": config.texture, "path": config.path,
         "size": list(config.size), "grid": scene.hf.quads,
-        "lod": config.lod if config.mode != "full" else scene.hf.quads,
+        "lod": config.lod if config.mode in ("lod", "sprite") else scene.hf.quads,
         "exaggeration": config.exaggeration,
         **timing_summary(ms),
         "triangles_mean": float(np.mean([r["triangles"] for r in rows])),
         "gl_renderer": info.renderer, "gl_version": info.version,
         "machine": platform.machine(), "python": platform.python_version(),
-        "config": asdict(config),
+        "config": asdict(config), **extra,
     }
     columns = list(FRAME_COLUMNS)
+    if config.mode == "adaptive":
+        columns += ADAPTIVE_COLUMNS
     if config.mode == "sprite":
         summary.update({"epsilon": config.epsilon, "visibility": config.visibility,
                         **sprite_summary(rows)})
@@ -315,3 +327,54 @@ def plain_frames(pr: PathRenderer, path: CameraPath, config: RenderConfig,
         if progress:
             progress(i + 1, len(path))
     return rows
+
+
+def pyramid_for(config: RenderConfig, scene: Scene):
+    """What the adaptive renderer draws: the store itself when ``--terrain`` is one, else
+    the scene's height field as an in-memory pyramid (so it is the field full resolution
+    draws)."""
+    from lodsprite.terrain.pyramid import MemoryPyramid
+    from lodsprite.terrain.store import TerrainStore
+
+    p = Path(config.terrain).expanduser()
+    if p.is_dir() and (p / "zarr.json").is_file():
+        return TerrainStore(p)
+    return MemoryPyramid.from_heightfield(scene.hf)
+
+
+def adaptive_frames(pr: PathRenderer, scene: Scene, path: CameraPath, config: RenderConfig,
+                    progress: Progress | None = None, on_frame=None
+                    ) -> tuple[list[dict], dict]:
+    """Adaptive frames along ``path`` (:mod:`lodsprite.terrain.adaptive`): no warm-up
+    beyond the roots (the first frame's time is part of ``first_frame_s``)."""
+    import time
+
+    from lodsprite.terrain.adaptive import AdaptiveTerrain
+
+    t0 = time.perf_counter()
+    pyramid = pyramid_for(config, scene)
+    from lodsprite.terrain.pyramid import MemoryPyramid
+
+    color = pr.geometry.color_tex if isinstance(pyramid, MemoryPyramid) else None
+    terrain = AdaptiveTerrain(pr.ctx, pyramid, pr.renderer.target,
+                              field_of_view(config, path), config.sse,
+                              gpu_mb=config.gpu_mb, host_mb=config.host_mb, color=color)
+    rows = []
+    try:
+        for i, vp in enumerate(path.viewpoints):
+            f = terrain.frame(vp)
+            if i == 0:
+                first = time.perf_counter() - t0
+            rows.append({"frame": i, "mode": "adaptive", "ms": f.ms, "triangles": f.triangles,
+                         "nodes": f.nodes, "uploaded": f.uploaded, "resident": f.resident,
+                         "loaded": f.loaded, "evicted": f.evicted})
+            if on_frame:
+                on_frame(i, pr.renderer.target.read_color())
+            if progress:
+                progress(i + 1, len(path))
+        extra = {"sse": config.sse, "first_frame_s": first, "tiles_resident": f.resident,
+                 "tiles_loaded": f.loaded, "tiles_evicted": f.evicted, "tiles_bad": f.bad,
+                 "gpu_cache_tiles": terrain.slots.capacity, "levels": terrain.tree.levels}
+    finally:
+        terrain.release()
+    return rows, extra

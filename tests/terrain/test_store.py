@@ -29,9 +29,19 @@ def test_levels_are_exact_downsamples_and_chunk_bounds_hold(tmp_path):
     np.testing.assert_allclose(lv[2][-1, 0], lv[1][-1, 0:2].mean(), rtol=1e-6)
     np.testing.assert_allclose(lv[1][0, 0], lv[0][0:2, 0:2].mean(), rtol=1e-6)
     mm = st.minmax(0)
-    assert mm.shape == (11, 16, 2)
+    assert mm.shape == (11, 16, 3)
     block = lv[0][64:128, 192:256]
-    np.testing.assert_allclose(mm[1, 3], [block.min(), block.max()])
+    np.testing.assert_allclose(mm[1, 3], [block.min(), block.max(), 0.0])
+    # level 1's error: its triangulated grid against level 0, by hand at one sample
+    e1 = st.minmax(1)[..., 2]
+    c, f = lv[1], lv[0]
+    by_hand = max(abs(f[2 * 5 + 1, 2 * 7 + 1] - (c[5, 7] + c[6, 8]) / 2),
+                  abs(f[2 * 5 + 1, 2 * 7] - (c[5, 7] + c[6, 7]) / 2),
+                  abs(f[2 * 5, 2 * 7 + 1] - (c[5, 7] + c[5, 8]) / 2), abs(f[10, 14] - c[5, 7]))
+    assert e1[0, 0] >= by_hand - 1e-3
+    assert st.header.level_errors[0] == 0 and st.header.level_errors[1] == pytest.approx(
+        float(e1.max()), rel=1e-6)
+    assert st.header.level_errors[2] > st.header.level_errors[1]
 
 
 def test_the_same_samples_whatever_the_tiling(tmp_path):
@@ -127,3 +137,33 @@ def test_every_terrain_command_takes_a_store(tmp_path):
     build_store("fractal:300x500:2", tmp_path / "t.zarr", tile=128, chunk=64)
     hf = load_terrain(str(tmp_path / "t.zarr"), grid=64)
     assert hf.heights.shape == (65, 65) and np.isfinite(hf.heights).all()
+
+
+def test_a_dask_cluster_builds_the_same_store(tmp_path):
+    distributed = pytest.importorskip("dask.distributed")
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=2, processes=True,
+                                  dashboard_address=None) as cluster:
+        build_store("fractal:400x300:6", tmp_path / "d.zarr", tile=128, chunk=64,
+                    scheduler=cluster.scheduler_address)
+    build_store("fractal:400x300:6", tmp_path / "l.zarr", tile=128, chunk=64)
+    _, a = levels_of(tmp_path / "d.zarr")
+    _, b = levels_of(tmp_path / "l.zarr")
+    assert all(np.array_equal(x, y) for x, y in zip(a, b, strict=True))
+    assert np.array_equal(TerrainStore(tmp_path / "d.zarr").minmax(1),
+                          TerrainStore(tmp_path / "l.zarr").minmax(1))
+
+
+def test_tile_then_render_adaptive_from_the_command_line(tmp_path):
+    def run(*args):
+        return subprocess.run([sys.executable, "-c", "from lodsprite.cli import main; main()",
+                               *args], capture_output=True, text=True, timeout=240)
+
+    r = run("tile", "fractal:300x400:1", "--out", str(tmp_path / "s.zarr"), "--tile", "128",
+            "--chunk", "64")
+    assert r.returncode == 0, r.stderr
+    r = run("render", "--terrain", str(tmp_path / "s.zarr"), "--mode", "adaptive",
+            "--frames", "4", "--size", "64x64", "--sse", "2", "--out", str(tmp_path / "o"))
+    assert r.returncode == 0, r.stderr
+    s = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert s["mode"] == "adaptive" and s["tiles_resident"] >= 1 and s["first_frame_s"] > 0
+    assert s["tiles_bad"] == 0

@@ -8,7 +8,14 @@ Layout of ``STORE.zarr`` (a Zarr v3 group)::
     0, 1, 2, ...         level k: ``ceil(rows / 2^k) x ceil(cols / 2^k)`` heights, inner
                          chunks of ``chunk²`` inside shards of ``tile²``; float32 metres,
                          or int16 with ``height = stored * scale + offset``
-    minmax/0, ...        level k's min and max per chunk, ``(chunk rows, chunk cols, 2)``
+    minmax/0, ...        per chunk of level k: min, max and geometric error (metres),
+                         ``(chunk rows, chunk cols, 3)``
+
+The geometric error of a chunk of level ``k`` is the largest height difference between
+the triangulated grid of level ``k`` (samples placed at every ``2^k``-th level-0 position,
+each square split along its main diagonal, as the adaptive renderer draws it) and the
+samples of level ``k - 1`` beneath it; the header's ``level_errors`` sums them up the
+levels (a bound on the error against level 0).
 
 Level 0 is written tile by tile from the source (:mod:`lodsprite.terrain.tiled`); level
 ``k + 1`` is the exact 2×2 mean of level ``k`` (an odd last row or column is averaged with
@@ -59,6 +66,7 @@ class StoreHeader(msgspec.Struct, forbid_unknown_fields=True):
     transform: list[float] | None = None
     complete: bool = False
     done: list[list[int]] = []  # per level, the tiles written (row-major tile index)
+    level_errors: list[float] = []  # per level, the geometric error bound (metres)
 
 
 def level_shape(rows: int, cols: int, k: int) -> tuple[int, int]:
@@ -160,12 +168,23 @@ def build_store(source_spec: str, out: str | Path, tile: int = DEFAULT_TILE,
     finally:
         if client is not None:
             client.close()
+    header.level_errors = level_errors(group, header)
     header.complete = True
     _save_header(group, header)
     seconds = time.perf_counter() - t0
     return {"store": str(out), "rows": src.rows, "cols": src.cols, "levels": levels,
             "tiles_written": written, "seconds": seconds, "resumed": done_before > 0,
             "mb_per_s": src.rows * src.cols * 4 / 2 ** 20 / max(seconds, 1e-9)}
+
+
+def level_errors(group, header: StoreHeader) -> list[float]:
+    """Per level, the sum of the largest chunk errors of it and every finer level."""
+    total, out = 0.0, []
+    for k in range(header.levels):
+        e = np.asarray(group[f"minmax/{k}"][...])[..., 2]
+        total += float(np.nanmax(e)) if k and np.isfinite(e).any() else 0.0
+        out.append(total)
+    return out
 
 
 def _client(address: str):
@@ -210,10 +229,10 @@ def build_tile(out, k: int, n: int, src=None, group=None, header=None) -> None:
     r0, r1, c0, c1 = _tiles(level_shape(header.rows, header.cols, k), header.tile)[n]
     if k == 0:
         src = src if src is not None else open_source(header.source)
-        h = src.read(r0, r1, c0, c1)
+        h, err = src.read(r0, r1, c0, c1), None
     else:
-        h = _parent_window(group, header, k, r0, r1, c0, c1)
-    _write_tile(group[str(k)], group[f"minmax/{k}"], header, h, r0, c0)
+        h, err = _parent_window(group, header, k, r0, r1, c0, c1)
+    _write_tile(group[str(k)], group[f"minmax/{k}"], header, h, r0, c0, err)
 
 
 def _check_source(src, encoding: str, scale: float) -> float:
@@ -269,8 +288,8 @@ def _open_for_build(out: Path, header: StoreHeader, overwrite: bool):
                            shards=shard, dtype=dtype, fill_value=fill)
         cr, cc = (-(-s // header.chunk) for s in shape)
         per = header.tile // header.chunk  # one minmax chunk a tile: tiles write apart
-        group.create_array(f"minmax/{k}", shape=(cr, cc, 2),
-                           chunks=(min(per, cr), min(per, cc), 2), dtype="float32",
+        group.create_array(f"minmax/{k}", shape=(cr, cc, 3),
+                           chunks=(min(per, cr), min(per, cc), 3), dtype="float32",
                            fill_value=np.nan)
     _save_header(group, header)
     return group
@@ -285,11 +304,38 @@ def _save_header(group, header: StoreHeader) -> None:
 
 
 def _parent_window(group, header: StoreHeader, k: int, r0: int, r1: int, c0: int, c1: int
-                   ) -> np.ndarray:
-    """Level ``k``'s window as the 2×2 mean of level ``k - 1`` (read from the store)."""
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """Level ``k``'s window as the 2×2 mean of level ``k - 1`` (read from the store), and
+    the geometric error of that window's samples against level ``k - 1``."""
     pr, pc = level_shape(header.rows, header.cols, k - 1)
-    below = decode(group[str(k - 1)][2 * r0: min(pr, 2 * r1), 2 * c0: min(pc, 2 * c1)], header)
-    return downsample(below)[: r1 - r0, : c1 - c0]
+    kr, kc = level_shape(header.rows, header.cols, k)
+    er, ec = min(kr, r1 + 1), min(kc, c1 + 1)        # one more row and column, if any
+    below = decode(group[str(k - 1)][2 * r0: min(pr, 2 * er), 2 * c0: min(pc, 2 * ec)],
+                   header)
+    ext = downsample(below)[: er - r0, : ec - c0]
+    h = ext[: r1 - r0, : c1 - c0]
+    return h, coarse_error(ext, below, r1 - r0, c1 - c0)
+
+
+def coarse_error(coarse: np.ndarray, fine: np.ndarray, rows: int, cols: int) -> np.ndarray:
+    """Per coarse sample of the first ``rows x cols``, the largest difference between
+    the coarse grid's triangulated surface (square ``(i, j)`` split along ``(i, j)-(i+1,
+    j+1)``) and the fine samples ``(2i + a, 2j + b)``, ``a, b`` in {0, 1}.  ``coarse``
+    may hold one more row and column (the next tile's); the edge is repeated past it."""
+    c = np.asarray(coarse, np.float64)
+    c = np.concatenate([c, c[-1:]], 0) if c.shape[0] == rows else c
+    c = np.concatenate([c, c[:, -1:]], 1) if c.shape[1] == cols else c
+    c = c[: rows + 1, : cols + 1]
+    f = np.full((2 * rows, 2 * cols), np.nan)
+    fh, fw = min(fine.shape[0], 2 * rows), min(fine.shape[1], 2 * cols)
+    f[:fh, :fw] = fine[:fh, :fw]
+    h00, h10, h01, h11 = c[:-1, :-1], c[1:, :-1], c[:-1, 1:], c[1:, 1:]
+    err = np.zeros((rows, cols))
+    for a, b, surf in ((0, 0, h00), (1, 0, (h00 + h10) / 2), (0, 1, (h00 + h01) / 2),
+                       (1, 1, (h00 + h11) / 2)):
+        d = np.abs(f[a::2, b::2][:rows, :cols] - surf)
+        err = np.fmax(err, np.where(np.isfinite(d), d, 0.0))
+    return err.astype(np.float32)
 
 
 def encode(h: np.ndarray, header: StoreHeader) -> np.ndarray:
@@ -309,16 +355,20 @@ def decode(a: np.ndarray, header: StoreHeader) -> np.ndarray:
     return out
 
 
-def _write_tile(arr, mm, header: StoreHeader, h: np.ndarray, r0: int, c0: int) -> None:
+def _write_tile(arr, mm, header: StoreHeader, h: np.ndarray, r0: int, c0: int,
+                err: np.ndarray | None = None) -> None:
     arr[r0: r0 + h.shape[0], c0: c0 + h.shape[1]] = encode(h, header)
     stored = decode(encode(h, header), header)
     c = header.chunk
+    out = np.full((-(-h.shape[0] // c), -(-h.shape[1] // c), 3), np.nan, np.float32)
     for i in range(0, h.shape[0], c):
         for j in range(0, h.shape[1], c):
             block = stored[i: i + c, j: j + c]
             ok = block[np.isfinite(block)]
-            val = (ok.min(), ok.max()) if len(ok) else (np.nan, np.nan)
-            mm[(r0 + i) // c, (c0 + j) // c] = np.array(val, np.float32)
+            e = 0.0 if err is None else float(np.max(err[i: i + c, j: j + c]))
+            if len(ok):
+                out[i // c, j // c] = (ok.min(), ok.max(), e)
+    mm[r0 // c: r0 // c + out.shape[0], c0 // c: c0 // c + out.shape[1]] = out
 
 
 class TerrainStore:
@@ -356,6 +406,22 @@ class TerrainStore:
     @property
     def levels(self) -> int:
         return self.header.levels
+
+    @property
+    def dx(self) -> float:
+        return self.header.dx
+
+    @property
+    def dy(self) -> float:
+        return self.header.dy
+
+    @property
+    def chunk(self) -> int:
+        return self.header.chunk
+
+    @property
+    def level_errors(self) -> list[float]:
+        return self.header.level_errors
 
     def shape(self, k: int) -> tuple[int, int]:
         return level_shape(self.header.rows, self.header.cols, k)

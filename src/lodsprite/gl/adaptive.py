@@ -1,0 +1,171 @@
+"""GL side of the adaptive terrain renderer (CDLOD-style, :mod:`lodsprite.terrain.quadtree`).
+
+Every node is the same ``G x G`` grid mesh (squares split along their main diagonal),
+drawn instanced: per instance, the node's world origin and sample spacing, its slot in the
+height atlas, its parent's slot and quadrant, its morph range and its valid extent.  Node
+heights live in one float atlas texture of ``(G + 1)²`` tiles (the GPU cache); the vertex
+shader fetches a vertex's height from its node's tile and, within the morph range, blends
+it towards the parent's triangulated surface (the mean of the parent samples at the floor
+and ceiling of its position), so a node has become its parent's surface where the parent
+takes over.  Normals come from the neighbouring samples; colour from a height ramp.
+"""
+
+from __future__ import annotations
+
+import math
+
+import moderngl
+import numpy as np
+
+from lodsprite.gl.context import GLContext
+from lodsprite.gl.terrain import mat_bytes
+
+ADAPTIVE_VS = """#version 330
+uniform mat4 u_view_proj;
+uniform sampler2D u_atlas;
+uniform int u_per_row;
+uniform int u_grid;
+uniform vec3 u_eye;
+uniform vec4 u_extent;  // world x of column 0, y of row 0, width, depth (texture mapping)
+in vec2 in_uv;          // grid vertex: column, row (0..G)
+in vec4 in_node;        // world x, y of sample (0, 0); metres a sample east, south
+in vec4 in_slots;       // own slot, parent slot (-1: none), quadrant row, column
+in vec4 in_extra;       // morph start, end (metres); last valid row, column
+out vec3 v_normal;
+out float v_height;
+out vec2 v_uv;
+float fetch(float slot, vec2 rc) {
+    int s = int(slot);
+    ivec2 base = ivec2(s % u_per_row, s / u_per_row) * (u_grid + 1);
+    return texelFetch(u_atlas, base + ivec2(int(rc.y), int(rc.x)), 0).r;
+}
+void main() {
+    vec2 rc = min(vec2(in_uv.y, in_uv.x), in_extra.zw);
+    vec2 xy = in_node.xy + vec2(rc.y * in_node.z, -rc.x * in_node.w);
+    float h = fetch(in_slots.x, rc);
+    if (in_slots.y >= 0.0) {
+        vec2 p = in_slots.zw * float(u_grid / 2) + rc * 0.5;
+        float hc = 0.5 * (fetch(in_slots.y, floor(p)) + fetch(in_slots.y, ceil(p)));
+        float d = distance(u_eye, vec3(xy, h));
+        float m = clamp((d - in_extra.x) / max(in_extra.y - in_extra.x, 1e-6), 0.0, 1.0);
+        h = mix(h, hc, m);
+    }
+    vec2 e = vec2(min(rc.x + 1.0, in_extra.z), min(rc.y + 1.0, in_extra.w));
+    vec2 w = vec2(max(rc.x - 1.0, 0.0), max(rc.y - 1.0, 0.0));
+    float dzdx = (fetch(in_slots.x, vec2(rc.x, e.y)) - fetch(in_slots.x, vec2(rc.x, w.y)))
+                 / max((e.y - w.y) * in_node.z, 1e-6);
+    float dzdy = (fetch(in_slots.x, vec2(w.x, rc.y)) - fetch(in_slots.x, vec2(e.x, rc.y)))
+                 / max((e.x - w.x) * in_node.w, 1e-6);
+    v_normal = normalize(vec3(-dzdx, -dzdy, 1.0));
+    v_height = h;
+    v_uv = vec2((xy.x - u_extent.x) / u_extent.z, (u_extent.y - xy.y) / u_extent.w);
+    gl_Position = u_view_proj * vec4(xy, h, 1.0);
+}
+"""
+ADAPTIVE_FS = """#version 330
+uniform vec3 u_light;
+uniform vec2 u_range;   // lowest, highest height (metres)
+uniform sampler2D u_color;
+uniform int u_textured; // 1: the terrain's colour texture, as full resolution draws it
+in vec3 v_normal;
+in float v_height;
+in vec2 v_uv;
+out vec4 f_color;
+void main() {
+    if (u_textured == 1) {
+        f_color = vec4(texture(u_color, v_uv).rgb, 1.0);
+        return;
+    }
+    float t = clamp((v_height - u_range.x) / max(u_range.y - u_range.x, 1e-3), 0.0, 1.0);
+    vec3 low = vec3(0.32, 0.45, 0.25), mid = vec3(0.55, 0.48, 0.34), high = vec3(0.9);
+    vec3 c = t < 0.6 ? mix(low, mid, t / 0.6) : mix(mid, high, (t - 0.6) / 0.4);
+    float lit = 0.3 + 0.7 * max(dot(normalize(v_normal), u_light), 0.0);
+    f_color = vec4(c * lit, 1.0);
+}
+"""
+LIGHT = np.array([-0.45, 0.45, 0.77]) / np.linalg.norm([-0.45, 0.45, 0.77])
+SKY = (0.62, 0.74, 0.88)
+
+
+def grid_mesh(g: int) -> tuple[np.ndarray, np.ndarray]:
+    """The node mesh: ``(g+1)²`` vertices (column, row) and ``2 g²`` triangles, square
+    ``(r, c)`` split along ``(r, c)-(r+1, c+1)``."""
+    r, c = np.meshgrid(np.arange(g + 1), np.arange(g + 1), indexing="ij")
+    uv = np.stack([c.ravel(), r.ravel()], 1).astype(np.float32)
+    a = (r[:-1, :-1] * (g + 1) + c[:-1, :-1]).ravel()
+    b, d, e = a + (g + 1), a + (g + 1) + 1, a + 1
+    tris = np.concatenate([np.stack([a, b, d], 1), np.stack([a, d, e], 1)])
+    return uv, tris.astype(np.int32)
+
+
+class AdaptiveRenderer:
+    """The GPU cache (a height atlas of ``capacity`` tiles) and the instanced node draw."""
+
+    def __init__(self, ctx: GLContext, grid: int, capacity: int) -> None:
+        mgl = ctx.mgl
+        self.ctx, self.g = ctx, int(grid)
+        side = self.g + 1
+        limit = mgl.info["GL_MAX_TEXTURE_SIZE"] // side
+        self.per_row = max(1, min(limit, math.ceil(math.sqrt(capacity))))
+        rows = max(1, math.ceil(capacity / self.per_row))
+        self.capacity = min(capacity, self.per_row * min(rows, limit))
+        self.atlas = mgl.texture((self.per_row * side, rows * side), 1, dtype="f4")
+        self.atlas.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        self.program = mgl.program(vertex_shader=ADAPTIVE_VS, fragment_shader=ADAPTIVE_FS)
+        self.program["u_light"].value = tuple(LIGHT)
+        uv, tris = grid_mesh(self.g)
+        self.vbo = mgl.buffer(uv.tobytes())
+        self.ibo = mgl.buffer(tris.tobytes())
+        self.index_count = tris.size
+        self.instances = mgl.buffer(reserve=48 * 256)
+        self.vao = mgl.vertex_array(self.program, [
+            (self.vbo, "2f", "in_uv"),
+            (self.instances, "4f 4f 4f/i", "in_node", "in_slots", "in_extra")],
+            index_buffer=self.ibo, index_element_size=4)
+        self.triangles = 0
+
+    def upload(self, slot: int, heights: np.ndarray) -> None:
+        """Node samples ``(rows, cols) float32`` (at most ``(G+1)²``) into ``slot``."""
+        side = self.g + 1
+        x, y = (slot % self.per_row) * side, (slot // self.per_row) * side
+        h = np.ascontiguousarray(heights, dtype=np.float32)
+        self.atlas.write(h.tobytes(), viewport=(x, y, h.shape[1], h.shape[0]))
+
+    def draw(self, fbo: moderngl.Framebuffer, view_proj: np.ndarray, eye: np.ndarray,
+             instances: np.ndarray, height_range: tuple[float, float],
+             extent: tuple[float, float, float, float] = (0.0, 0.0, 1.0, 1.0),
+             color: moderngl.Texture | None = None) -> None:
+        """Clear ``fbo`` and draw ``instances (N, 12) float32`` nodes, coloured by
+        ``color`` (a texture over ``extent``: x of the west edge, y of the north edge,
+        width, depth) or by a height ramp."""
+        mgl = self.ctx.mgl
+        fbo.use()
+        fbo.clear(*SKY, 1.0, depth=1.0)
+        mgl.enable(moderngl.DEPTH_TEST)
+        mgl.disable(moderngl.CULL_FACE | moderngl.BLEND)
+        n = len(instances)
+        if n:
+            data = np.ascontiguousarray(instances, dtype=np.float32)
+            if data.nbytes > self.instances.size:
+                self.instances.orphan(data.nbytes * 2)
+            self.instances.write(data.tobytes())
+            p = self.program
+            p["u_view_proj"].write(mat_bytes(view_proj))
+            p["u_eye"].value = tuple(float(v) for v in eye)
+            p["u_per_row"].value = self.per_row
+            p["u_grid"].value = self.g
+            p["u_range"].value = tuple(float(v) for v in height_range)
+            p["u_atlas"].value = 0
+            p["u_extent"].value = tuple(float(v) for v in extent)
+            p["u_textured"].value = int(color is not None)
+            p["u_color"].value = 1
+            self.atlas.use(0)
+            if color is not None:
+                color.use(1)
+            self.vao.render(moderngl.TRIANGLES, vertices=self.index_count, instances=n)
+        self.triangles = n * self.index_count // 3
+        mgl.disable(moderngl.DEPTH_TEST)
+
+    def release(self) -> None:
+        for obj in (self.vao, self.instances, self.ibo, self.vbo, self.program, self.atlas):
+            obj.release()

@@ -1,0 +1,142 @@
+"""The adaptive terrain renderer, frame by frame: quadtree selection by screen-space
+error (:mod:`lodsprite.terrain.quadtree`), tiles streamed through the host and GPU caches
+(:mod:`lodsprite.terrain.streaming`), geomorphed instanced drawing
+(:mod:`lodsprite.gl.adaptive`).
+
+A frame selects with what is resident, asks the loader for what it lacks (most urgent
+first), uploads what has arrived (at most ``upload_budget`` tiles), and draws; it never
+waits for I/O.  The roots are read before the first frame.  Near and far planes are fitted
+to the terrain's bounds as the full-resolution renderer fits them.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from lodsprite.camera import Viewpoint, fitted_projection, frustum_planes
+from lodsprite.errors import InputError
+from lodsprite.terrain.quadtree import DEFAULT_GRID, Node, Quadtree, ranges
+from lodsprite.terrain.streaming import SlotCache, TileLoader
+
+
+@dataclass(frozen=True)
+class AdaptiveFrame:
+    """One frame: ``ms`` (GL finished), nodes and triangles drawn, tiles uploaded this
+    frame, resident on the GPU, loaded and evicted so far, bad tiles."""
+
+    ms: float
+    nodes: int
+    triangles: int
+    uploaded: int
+    resident: int
+    loaded: int
+    evicted: int
+    bad: int
+
+
+class AdaptiveTerrain:
+    """A pyramid (store or :class:`~lodsprite.terrain.pyramid.MemoryPyramid`) drawn into
+    ``target`` at ``sse_px`` pixels of screen-space error."""
+
+    def __init__(self, gl, pyramid, target, fov_y_deg: float, sse_px: float = 1.0,
+                 grid: int = DEFAULT_GRID, gpu_mb: float = 256.0, host_mb: float = 512.0,
+                 upload_budget: int = 16, color=None) -> None:
+        from lodsprite.gl.adaptive import AdaptiveRenderer
+
+        if not sse_px > 0:
+            raise InputError(f"--sse must be > 0 pixels, got {sse_px}")
+        if not gpu_mb > 0:
+            raise InputError(f"the GPU cache budget must be > 0 MB, got {gpu_mb}")
+        self.gl, self.target, self.fov = gl, target, float(fov_y_deg)
+        self.tree = Quadtree(pyramid, grid)
+        self.sse = float(sse_px)
+        self.r = ranges(pyramid.level_errors, sse_px, target.size[1], fov_y_deg)
+        self.loader = TileLoader(self.tree, host_mb)
+        tile_bytes = (grid + 1) ** 2 * 4
+        self.renderer = AdaptiveRenderer(gl, grid, max(1, int(gpu_mb * 2 ** 20 // tile_bytes)))
+        self.slots = SlotCache(self.renderer.capacity)
+        self.upload_budget = int(upload_budget)
+        mm = self.tree.minmax[self.tree.top]
+        lo_z, hi_z = float(np.nanmin(mm[..., 0])), float(np.nanmax(mm[..., 1]))
+        x, y = self.tree.world_xy(0, np.array([0, self.tree.rows0 - 1]),
+                                  np.array([0, self.tree.cols0 - 1]))
+        self.bounds = (np.array([x.min(), y.min(), lo_z]), np.array([x.max(), y.max(), hi_z]))
+        self.height_range = (lo_z, hi_z)
+        self.color = color  # the terrain's colour texture (a moderngl texture) or None
+        self.extent = (float(x.min()), float(y.max()), float(x.max() - x.min()),
+                       float(y.max() - y.min()))
+        roots = self.tree.roots()
+        if len(roots) > self.slots.capacity:
+            raise InputError("the GPU cache cannot hold the coarsest level: raise its budget")
+        for n in roots:
+            data = self.loader.read_now(n)
+            if data is None:
+                raise InputError(f"the coarsest level of {getattr(pyramid, 'path', 'the')} "
+                                 "store is unreadable")
+            self._upload(n, data, set())
+
+    def projection(self, viewpoint: Viewpoint) -> np.ndarray:
+        w, h = self.target.size
+        ground = self.height_range[0]
+        return fitted_projection(viewpoint, self.fov, w / h, *self.bounds, ground).matrix()
+
+    def _upload(self, node: Node, data: np.ndarray, keep: set) -> bool:
+        slot = self.slots.assign(node, keep)
+        if slot is None:
+            return False
+        self.renderer.upload(slot, data)
+        return True
+
+    def frame(self, viewpoint: Viewpoint) -> AdaptiveFrame:
+        t0 = time.perf_counter()
+        view_proj = self.projection(viewpoint) @ viewpoint.view_matrix()
+        eye = np.asarray(viewpoint.o, dtype=np.float64)
+        draw, want = self.tree.select(eye, frustum_planes(view_proj), self.r,
+                                      self.slots.__contains__)
+        self.loader.want(want)
+        keep = set()
+        for n in draw:
+            while n.k <= self.tree.top and n not in keep:
+                keep.add(n)
+                n = n.parent()
+        uploaded = 0
+        for _, n in sorted(want, key=lambda u: -u[0]):
+            if uploaded >= self.upload_budget:
+                break
+            data = self.loader.take(n)
+            if data is not None and n not in self.slots and self._upload(n, data, keep):
+                uploaded += 1
+        self.renderer.draw(self.target.fbo, view_proj, eye, self._instances(draw),
+                           self.height_range, self.extent, self.color)
+        self.gl.finish()
+        return AdaptiveFrame((time.perf_counter() - t0) * 1e3, len(draw),
+                             self.renderer.triangles, uploaded, len(self.slots.slots),
+                             self.loader.loaded, self.slots.evicted, len(self.loader.bad))
+
+    def _instances(self, draw: list[Node]) -> np.ndarray:
+        """Per node: world origin, spacing, slots, quadrant, morph range, valid extent."""
+        out = np.zeros((len(draw), 12), np.float32)
+        g = self.tree.g
+        for m, n in enumerate(draw):
+            self.slots.touch(n)
+            r0, r1, c0, c1 = self.tree.samples(n)
+            x, y = self.tree.world_xy(n.k, np.array([r0]), np.array([c0]))
+            s = 1 << n.k
+            parent = n.parent()
+            if n.k < self.tree.top and parent in self.slots:
+                ps, qr, qc = self.slots.slot(parent), n.i % 2, n.j % 2
+                end = self.r[n.k + 1]
+                start = end - 0.3 * (self.r[n.k + 1] - self.r[n.k])
+            else:
+                ps, qr, qc, start, end = -1, 0, 0, 0.0, 1.0
+            out[m] = (x[0], y[0], s * self.tree.p.dx, s * self.tree.p.dy,
+                      self.slots.slot(n), ps, qr, qc, start, end,
+                      min(g, r1 - r0 - 1), min(g, c1 - c0 - 1))
+        return out
+
+    def release(self) -> None:
+        self.loader.close()
+        self.renderer.release()

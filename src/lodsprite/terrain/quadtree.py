@@ -1,0 +1,174 @@
+"""View-dependent selection over a terrain pyramid, in the manner of CDLOD (Strugar 2009)
+with screen-space error (as CesiumJS refines its tiles), GL-free.
+
+A node ``(k, i, j)`` is a ``G x G``-quad block of pyramid level ``k``: its samples
+``[i G, i G + G] x [j G, j G + G]`` (a shared border), placed at every ``2^k``-th level-0
+position (so the grids of successive levels nest).  Its children are the four nodes of
+level ``k - 1`` beneath it; the roots tile the coarsest level.
+
+Level ``k``'s geometric error ``e_k`` (metres, the store's ``level_errors``: the
+triangulated level-``k`` grid against level 0) seen from distance ``d`` spans
+``e_k · H / (2 d tan(fov / 2))`` pixels of an ``H``-pixel-high image, so level ``k`` is
+fine enough beyond the range ``R_k = e_k · H / (2 τ tan(fov / 2))`` for a tolerance of
+``τ`` pixels.  A node is refined while the distance from the eye to its bounding box is
+below ``R_k`` (its projected error exceeds ``τ``) and all four children are resident;
+otherwise it is drawn (a parent stands in for children still loading, whose loads are
+requested, most urgent first: largest ``R_k / d``).  Ranges are made to at least double
+from level to level, so neighbours differ by at most one level; a vertex of a level-``k``
+node morphs towards level ``k + 1``'s surface over the last ``MORPH_SPAN`` of
+``[R_k, R_{k+1}]``, reaching it where the parent would be drawn instead (no pop, no crack).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+MORPH_SPAN = 0.3
+DEFAULT_GRID = 64
+
+
+@dataclass(frozen=True)
+class Node:
+    """A quadtree node: level ``k``, block row ``i`` and column ``j``."""
+
+    k: int
+    i: int
+    j: int
+
+    def parent(self) -> Node:
+        return Node(self.k + 1, self.i // 2, self.j // 2)
+
+    def children(self) -> tuple[Node, ...]:
+        return tuple(Node(self.k - 1, 2 * self.i + a, 2 * self.j + b)
+                     for a in (0, 1) for b in (0, 1))
+
+
+def ranges(level_errors, tolerance_px: float, height_px: int, fov_y_deg: float
+           ) -> np.ndarray:
+    """``R_k`` (metres) per level: where level ``k``'s error projects to the tolerance,
+    at least doubling from level to level."""
+    f = height_px / (2.0 * tolerance_px * math.tan(math.radians(fov_y_deg) / 2))
+    r = np.asarray(level_errors, dtype=np.float64) * f
+    for k in range(1, len(r)):
+        r[k] = max(r[k], 2.0 * r[k - 1], 1e-6)
+    r[0] = 0.0
+    return r
+
+
+def screen_error_px(error_m: float, distance_m: float, height_px: int, fov_y_deg: float
+                    ) -> float:
+    """A geometric error ``error_m`` seen from ``distance_m``, in pixels."""
+    return error_m * height_px / (2.0 * max(distance_m, 1e-9)
+                                  * math.tan(math.radians(fov_y_deg) / 2))
+
+
+class Quadtree:
+    """Nodes, bounds and selection over a pyramid (``levels``, ``shape(k)``,
+    ``minmax(k)`` per ``chunk``, ``level_errors``, ``dx``, ``dy``; see
+    :class:`~lodsprite.terrain.store.TerrainStore`)."""
+
+    def __init__(self, pyramid, grid: int = DEFAULT_GRID) -> None:
+        self.p, self.g = pyramid, int(grid)
+        r0, c0 = pyramid.shape(0)
+        self.rows0, self.cols0 = r0, c0
+        self.levels = pyramid.levels
+        self.top = self.levels - 1
+        self.errors = np.asarray(pyramid.level_errors, dtype=np.float64)
+        self.minmax = [np.asarray(pyramid.minmax(k)) for k in range(self.levels)]
+        self.chunk = pyramid.chunk
+
+    def blocks(self, k: int) -> tuple[int, int]:
+        """Node rows and columns at level ``k``."""
+        r, c = self.p.shape(k)
+        return max(1, -(-(r - 1) // self.g)), max(1, -(-(c - 1) // self.g))
+
+    def roots(self) -> list[Node]:
+        br, bc = self.blocks(self.top)
+        return [Node(self.top, i, j) for i in range(br) for j in range(bc)]
+
+    def exists(self, n: Node) -> bool:
+        if not 0 <= n.k < self.levels:
+            return False
+        br, bc = self.blocks(n.k)
+        return 0 <= n.i < br and 0 <= n.j < bc
+
+    def samples(self, n: Node) -> tuple[int, int, int, int]:
+        """The node's level-``k`` sample window ``r0, r1, c0, c1`` (``r1`` exclusive,
+        clipped to the level)."""
+        r, c = self.p.shape(n.k)
+        r0, c0 = n.i * self.g, n.j * self.g
+        return r0, min(r, r0 + self.g + 1), c0, min(c, c0 + self.g + 1)
+
+    def world_xy(self, k: int, rows: np.ndarray, cols: np.ndarray) -> tuple[np.ndarray, ...]:
+        """World ``x`` (east) and ``y`` (north), metres, of level-``k`` sample indices,
+        the level-0 grid centred on the origin."""
+        s = 1 << k
+        x = (np.asarray(cols) * s - (self.cols0 - 1) / 2.0) * self.p.dx
+        y = ((self.rows0 - 1) / 2.0 - np.asarray(rows) * s) * self.p.dy
+        return x, y
+
+    def bounds(self, n: Node) -> tuple[np.ndarray, np.ndarray]:
+        """The node's bounding box ``(lo (3,), hi (3,))``, heights from its chunks' min and
+        max widened by the level's error."""
+        r0, r1, c0, c1 = self.samples(n)
+        x, y = self.world_xy(n.k, np.array([r0, r1 - 1]), np.array([c0, c1 - 1]))
+        mm = self.minmax[n.k][r0 // self.chunk: (r1 - 1) // self.chunk + 1,
+                              c0 // self.chunk: (c1 - 1) // self.chunk + 1]
+        lo_z, hi_z = np.nanmin(mm[..., 0]), np.nanmax(mm[..., 1])
+        e = self.errors[n.k]
+        return (np.array([x.min(), y.min(), lo_z - e]), np.array([x.max(), y.max(), hi_z + e]))
+
+    def select(self, eye: np.ndarray, planes: np.ndarray, r: np.ndarray, resident,
+               ) -> tuple[list[Node], list[tuple[float, Node]]]:
+        """The nodes to draw and the loads to request ``(urgency, node)``: see the module
+        doc.  ``resident(node) -> bool``; ``planes (6, 4)`` the frustum."""
+        draw, want = [], []
+        stack = [n for n in self.roots() if resident(n)]
+        while stack:
+            n = stack.pop()
+            lo, hi = self.bounds(n)
+            if not _box_visible(planes, lo, hi):
+                continue
+            d = float(np.linalg.norm(np.clip(eye, lo, hi) - eye))
+            if n.k > 0 and d < r[n.k]:
+                kids = [c for c in n.children() if self.exists(c)]
+                missing = [c for c in kids if not resident(c)]
+                if not missing:
+                    stack.extend(kids)
+                    continue
+                urgency = r[n.k] / max(d, 1e-6)
+                want.extend((urgency, c) for c in missing)
+            draw.append(n)
+        return draw, want
+
+
+def _box_visible(planes: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> bool:
+    """An axis-aligned box not wholly outside any frustum plane."""
+    p = np.where(planes[:, :3] >= 0, hi, lo)          # the box corner furthest inside
+    return bool(((p * planes[:, :3]).sum(axis=1) + planes[:, 3] >= 0).all())
+
+
+def morph_factor(distance: np.ndarray, k: int, r: np.ndarray) -> np.ndarray:
+    """How far a level-``k`` vertex at ``distance`` has morphed towards level ``k + 1``:
+    0 until ``R_{k+1} - MORPH_SPAN (R_{k+1} - R_k)``, 1 from ``R_{k+1}``."""
+    if k + 1 >= len(r):
+        return np.zeros_like(np.asarray(distance, dtype=np.float64))
+    end = r[k + 1]
+    start = end - MORPH_SPAN * (r[k + 1] - r[k])
+    return np.clip((np.asarray(distance, np.float64) - start) / max(end - start, 1e-9), 0, 1)
+
+
+def coarse_surface(fine_uv: np.ndarray, quadrant: tuple[int, int], parent: np.ndarray,
+                   grid: int) -> np.ndarray:
+    """Level ``k + 1``'s triangulated surface at the samples ``fine_uv (..., 2)`` (row,
+    column) of a level-``k`` node in ``quadrant`` of its parent (heights ``parent``): the
+    mean of the two parent samples at the floor and ceiling of the position."""
+    p = np.asarray(quadrant)[None, :] * (grid // 2) + np.asarray(fine_uv, np.float64) / 2
+    lo, hi = np.floor(p).astype(int), np.ceil(p).astype(int)
+    rmax, cmax = parent.shape[0] - 1, parent.shape[1] - 1
+    lo = np.minimum(lo, [rmax, cmax])
+    hi = np.minimum(hi, [rmax, cmax])
+    return 0.5 * (parent[lo[..., 0], lo[..., 1]] + parent[hi[..., 0], hi[..., 1]])

@@ -1,0 +1,194 @@
+"""The adaptive terrain renderer: screen-space-error refinement, geomorphing, streaming
+caches, missing tiles, and its images against full resolution."""
+
+from __future__ import annotations
+
+import math
+import time
+
+import numpy as np
+import pytest
+
+from lodsprite.terrain.pyramid import MemoryPyramid
+from lodsprite.terrain.quadtree import (
+    MORPH_SPAN,
+    Node,
+    Quadtree,
+    coarse_surface,
+    morph_factor,
+    ranges,
+    screen_error_px,
+)
+from lodsprite.terrain.store import coarse_error
+from lodsprite.terrain.streaming import SlotCache, TileLoader
+
+
+def rough(n=513, seed=0):
+    rng = np.random.default_rng(seed)
+    y, x = np.mgrid[0:n, 0:n] / n
+    return (300 * np.sin(6 * x) * np.cos(5 * y) + rng.normal(0, 4, (n, n))).astype(np.float32)
+
+
+def test_ranges_put_the_projected_error_at_the_tolerance():
+    errors = [0.0, 2.0, 5.0, 30.0]
+    r = ranges(errors, 1.0, 600, 60.0)
+    for k in (2, 3):  # (level 1's range is raised to twice level 0's, which is 0: none)
+        assert screen_error_px(errors[k], r[k], 600, 60.0) == pytest.approx(1.0)
+    # by hand: 5 m at R_2 spans 5 * 600 / (2 R_2 tan 30°) = 1 px
+    assert r[2] == pytest.approx(5 * 600 / (2 * math.tan(math.radians(30))))
+    assert (np.diff(r[1:]) >= r[1:-1]).all()            # at least doubling
+
+
+def test_a_node_is_refined_exactly_while_its_screen_error_exceeds_the_tolerance():
+    p = MemoryPyramid(rough(), 30.0, 30.0)
+    q = Quadtree(p, grid=64)
+    r = ranges(p.level_errors, 1.0, 512, 45.0)
+    top = q.roots()[0]
+    lo, hi = q.bounds(top)
+    planes = np.array([[0, 0, 1, 1e9]] * 6, dtype=np.float64)  # everything visible
+    k = top.k
+    for factor, refined in ((0.9, True), (1.1, False)):
+        # an eye straight above the node's box at factor x its range
+        eye = np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, hi[2] + factor * r[k]])
+        draw, _ = q.select(eye, planes, r, lambda n: True)
+        assert (top not in draw) == refined
+        # R_k is where the level's error spans the tolerance, or more (doubling rule):
+        # a node whose error exceeds it is always refined
+        err = screen_error_px(p.level_errors[k], eye[2] - hi[2], 512, 45.0)
+        assert refined or err <= 1.0
+        assert r[k] >= p.level_errors[k] * 512 / (2 * math.tan(math.radians(22.5))) - 1e-6
+
+
+def test_a_parent_is_drawn_while_its_children_load_and_they_are_requested():
+    p = MemoryPyramid(rough(), 30.0, 30.0)
+    q = Quadtree(p, grid=64)
+    r = ranges(p.level_errors, 1.0, 512, 45.0)
+    planes = np.array([[0, 0, 1, 1e9]] * 6, dtype=np.float64)
+    roots = set(q.roots())
+    eye = np.array([0.0, 0.0, 50.0])
+    draw, want = q.select(eye, planes, r, lambda n: n in roots)
+    assert set(draw) <= roots and want
+    assert all(n.k == q.top - 1 for _, n in want)
+    assert {n.parent() for _, n in want} <= set(draw)
+
+
+def test_geomorph_meets_the_parent_surface_with_no_jump_and_no_crack():
+    p = MemoryPyramid(rough(257), 30.0, 30.0)
+    g = 32
+    fine, parent = p.data[0], p.data[1]
+    r = ranges(p.level_errors, 1.0, 512, 45.0)
+    node = Node(0, 1, 2)
+    uv = np.stack(np.meshgrid(np.arange(g + 1), np.arange(g + 1), indexing="ij"), -1)
+    h_fine = fine[g + uv[..., 0], 2 * g + uv[..., 1]]
+    par = node.parent()                                       # level 1, block (0, 1)
+    tile = parent[par.i * g: par.i * g + g + 1, par.j * g: par.j * g + g + 1]
+    h_coarse = coarse_surface(uv, (node.i % 2, node.j % 2), tile, g)
+    # the parent surface is what the parent's triangulation holds at those points
+    assert h_coarse[0, 0] == parent[g // 2, g] and h_coarse[1, 1] == pytest.approx(
+        (parent[g // 2, g] + parent[g // 2 + 1, g + 1]) / 2)
+    # at R_1 (where the parent takes over) the node is wholly morphed: no pop, no crack;
+    # below the morph span it is its own level; in between it moves continuously
+    d = np.linspace(r[1] * 0.5, r[1] * 1.2, 400)
+    m = morph_factor(d, 0, r)
+    assert m[d >= r[1]].min() == 1.0 and m[d <= r[1] - MORPH_SPAN * r[1]].max() == 0.0
+    h = h_fine[None] + m[:, None, None] * (h_coarse - h_fine)[None]
+    assert np.abs(np.diff(h, axis=0)).max() < np.abs(h_coarse - h_fine).max() / 50
+    # and the coarse error bound covers the fine samples against the parent's surface
+    err = coarse_error(parent, fine, *parent.shape)
+    assert np.abs(h_fine - h_coarse).max() <= err.max() + 1e-3
+
+
+def test_the_gpu_cache_evicts_least_recently_used_never_a_kept_tile():
+    c = SlotCache(3)
+    a, b, d, e = (Node(0, 0, j) for j in range(4))
+    for n in (a, b, d):
+        assert c.assign(n, set()) is not None
+    c.touch(a)                                  # b is now the least recently used
+    s = c.assign(e, keep={b})                   # b kept: d goes
+    assert d not in c and b in c and e in c and c.evicted == 1 and s is not None
+    assert c.assign(Node(1, 0, 0), keep={a, b, e}) is None
+
+
+def test_the_host_cache_holds_its_budget_and_a_missing_tile_is_bad_once():
+    class Broken(MemoryPyramid):
+        def read(self, k, r0, r1, c0, c1):
+            if (k, r0, c0) == (0, 64, 64):
+                raise OSError("chunk missing")
+            return super().read(k, r0, r1, c0, c1)
+
+    p = Broken(rough(), 30.0, 30.0)
+    q = Quadtree(p, grid=64)
+    loader = TileLoader(q, host_mb=((64 + 1) ** 2 * 4 * 5) / 2 ** 20)
+    try:
+        assert loader.capacity == 5
+        nodes = [Node(0, i, j) for i in range(3) for j in range(3)]
+        loader.want([(1.0, n) for n in nodes])
+        deadline = time.monotonic() + 20
+        while loader.loaded + len(loader.bad) < 9 and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert loader.bad == {Node(0, 1, 1)} and loader.loaded == 8
+        assert len(loader.cache) == 5 and loader.evicted == 3
+    finally:
+        loader.close()
+
+
+def test_a_missing_tile_is_drawn_from_its_parent(gl):
+    from lodsprite.camera import look_at
+    from lodsprite.gl.target import RenderTarget
+    from lodsprite.terrain.adaptive import AdaptiveTerrain
+
+    class Holey(MemoryPyramid):
+        def read(self, k, r0, r1, c0, c1):
+            a = super().read(k, r0, r1, c0, c1).copy()
+            if k == 0 and (r0, c0) == (192, 192):
+                a[3, 3] = np.nan                 # an unwritten sample: the tile is bad
+            return a
+
+    p = Holey(rough(), 30.0, 30.0)
+    t = RenderTarget(gl, 96, 96)
+    a = AdaptiveTerrain(gl, p, t, 45.0, 0.5)
+    try:
+        vp = look_at((0.0, -2000.0, 1500.0), (0.0, 0.0, 0.0))
+        for _ in range(40):
+            f = a.frame(vp)
+            time.sleep(0.005)
+        assert f.bad == 1 and Node(0, 3, 3) not in a.slots
+        assert Node(1, 1, 1) in a.slots              # its parent, drawn in its place
+        assert np.isfinite(t.read_color().astype(float)).all()
+    finally:
+        a.release()
+        t.release()
+
+
+def test_adaptive_at_a_quarter_pixel_matches_full_resolution(gl):
+    from lodsprite import Renderer
+    from lodsprite.camera import look_at
+    from lodsprite.scene import Scene
+    from lodsprite.terrain.adaptive import AdaptiveTerrain
+    from lodsprite.terrain.heightfield import HeightField
+    from lodsprite.terrain.textures import make_texture
+
+    hf = HeightField(rough(257), 30.0, 30.0)
+    scene = Scene(hf, make_texture("terrain", hf), "rough", "terrain")
+    vp = look_at((0.0, -4000.0, 2500.0), (0.0, 0.0, 0.0))
+    with Renderer(scene, (128, 128), 45.0, ctx=gl.mgl) as r:
+        r.render(vp, None)
+        full = r.read_color().astype(float)
+        rmse = {}
+        for sse in (0.25, 4.0):
+            a = AdaptiveTerrain(r.gl, MemoryPyramid.from_heightfield(hf),
+                                r.paths.renderer.target, 45.0, sse,
+                                color=r.paths.geometry.color_tex)
+            try:
+                for _ in range(30):              # let every wanted tile stream in
+                    a.frame(vp)
+                    time.sleep(0.005)
+                got = a.target.read_color().astype(float)
+            finally:
+                a.release()
+            covered = (full != full[0, 0]).any(axis=2)
+            rmse[sse] = np.sqrt(((got - full)[covered] ** 2).mean())
+    assert covered.mean() > 0.3
+    # measured: 0.0 at 0.25 px (level 0 everywhere in view, the same triangles as full
+    # resolution) and 2.1 grey levels at 4 px; tolerance 0.5
+    assert rmse[0.25] < 0.5 < rmse[4.0]
