@@ -17,10 +17,11 @@ from collections import OrderedDict
 
 import numpy as np
 
+from lodsprite.background import BackgroundLoader
 from lodsprite.lumigraph.store import Lumigraph
 
 
-class NodeLoader:
+class NodeLoader(BackgroundLoader):
     """Fetch and decode the nodes of ``slab`` at uv ``level`` in a daemon thread."""
 
     def __init__(self, lumigraph: Lumigraph, slab: int = 0, level: int = 0,
@@ -34,12 +35,9 @@ class NodeLoader:
         self._bad: set[int] = set()
         self._wanted: list[int] = []
         self._cv = threading.Condition()
-        self._stop = False
         self.loaded: list[tuple[int, float, float]] = []  # (node, fetch_ms, decode_ms)
         self.decoded = 0  # nodes fetched and decoded in all
-        self._thread = threading.Thread(target=self._run, name="lumigraph-loader",
-                                        daemon=True)
-        self._thread.start()
+        super().__init__("lumigraph-loader")
 
     def want(self, nodes: np.ndarray) -> None:
         """Replace the wish list (best first)."""
@@ -98,20 +96,9 @@ class NodeLoader:
             self.loaded.append((node, (t1 - t0) * 1e3, (t2 - t1) * 1e3))
         return img
 
-    def _run(self) -> None:
-        while True:
-            with self._cv:
-                while not self._stop and not self._wanted:
-                    self._cv.wait()
-                if self._stop:
-                    return
-                node = self._wanted.pop(0)
-                if node in self._cache or node in self._bad:
-                    continue
-            self._load(node)
-
-    def close(self) -> None:
-        with self._cv:
-            self._stop = True
-            self._cv.notify_all()
-        self._thread.join(timeout=5.0)
+    def _next(self) -> int | None:
+        while self._wanted:
+            node = self._wanted.pop(0)
+            if node not in self._cache and node not in self._bad:
+                return node
+        return None

@@ -19,12 +19,13 @@ from collections import OrderedDict
 
 import numpy as np
 
+from lodsprite.background import BackgroundLoader
 from lodsprite.errors import InputError
 
 log = logging.getLogger(__name__)
 
 
-class TileLoader:
+class TileLoader(BackgroundLoader):
     """Reads nodes of ``tree`` (:class:`~lodsprite.terrain.quadtree.Quadtree`) on a
     daemon thread into a host cache of ``host_mb`` megabytes."""
 
@@ -40,9 +41,7 @@ class TileLoader:
         self._queue: list = []
         self._queued: set = set()
         self._cv = threading.Condition()
-        self._stop = False
-        self._thread = threading.Thread(target=self._run, name="tile-loader", daemon=True)
-        self._thread.start()
+        super().__init__("tile-loader")
 
     def read_now(self, node) -> np.ndarray | None:
         """Read ``node`` on the calling thread (the roots, before the first frame)."""
@@ -90,22 +89,12 @@ class TileLoader:
                 self.evicted += 1
         return data
 
-    def _run(self) -> None:
-        while True:
-            with self._cv:
-                while not self._stop and not self._queue:
-                    self._cv.wait()
-                if self._stop:
-                    return
-                _, _, node = heapq.heappop(self._queue)
-                self._queued.discard(node)
-            self._load(node)
-
-    def close(self) -> None:
-        with self._cv:
-            self._stop = True
-            self._cv.notify_all()
-        self._thread.join(timeout=5.0)
+    def _next(self):
+        if not self._queue:
+            return None
+        _, _, node = heapq.heappop(self._queue)
+        self._queued.discard(node)
+        return node
 
 
 class SlotCache:
