@@ -121,6 +121,9 @@ def render(
     max_error: MaxErrorOpt = None,
     sse: Annotated[float, typer.Option(
         "--sse", help="adaptive: screen-space error tolerance in pixels")] = 1.0,
+    key_sse: Annotated[float | None, typer.Option(
+        "--key-sse", help="sprite: render keyframes with the adaptive renderer at this "
+                          "tolerance (pixels; 0.5 is a good start)")] = None,
     gpu_mb: Annotated[float, typer.Option(
         "--gpu-mb", help="adaptive: GPU tile cache budget (MB)")] = 256.0,
     host_mb: Annotated[float, typer.Option(
@@ -142,7 +145,8 @@ def render(
                           size=parse_size(size), frames=frames, grid=grid,
                           exaggeration=exaggeration, save_frames=save_frames, epsilon=epsilon,
                           ground_truth=ground_truth, visibility=visibility, border=border,
-                          guard_px=guard, sse=sse, gpu_mb=gpu_mb, host_mb=host_mb)
+                          guard_px=guard, sse=sse, gpu_mb=gpu_mb, host_mb=host_mb,
+                          key_sse=key_sse)
     with progress_bar(f"render {mode}") as update:
         if distributed:
             from lodsprite.distributed.run import parse_max_error, render_distributed

@@ -67,6 +67,7 @@ class RenderConfig:
     border: bool = True
     guard_px: int = DEFAULT_GUARD_PX
     sse: float = 1.0          # adaptive: screen-space error tolerance, pixels
+    key_sse: float | None = None  # sprite: keyframes by the adaptive renderer at this SSE
     gpu_mb: float = 256.0     # adaptive: GPU tile cache budget
     host_mb: float = 512.0    # adaptive: host tile cache budget
 
@@ -90,6 +91,8 @@ class RenderConfig:
             raise InputError(f"quality stride must be >= 1, got {self.quality_stride}")
         if self.ground_truth and self.mode != "sprite":
             raise InputError("--ground-truth needs --mode sprite")
+        if self.key_sse is not None and (self.mode != "sprite" or not self.key_sse > 0):
+            raise InputError("--key-sse goes with --mode sprite and must be > 0 pixels")
         if not (self.sse > 0 and self.gpu_mb > 0 and self.host_mb > 0):
             raise InputError(f"--sse, --gpu-mb and --host-mb must be > 0, got {self.sse}, "
                              f"{self.gpu_mb}, {self.host_mb}")
@@ -196,6 +199,10 @@ def sprite_frames(pr: PathRenderer, path: CameraPath, config: RenderConfig,
     indexes)."""
     sprite = SpriteRenderer(pr.renderer, config.lod, config.visibility, border=config.border,
                             guard_px=config.guard_px)
+    adaptive = None
+    if config.key_sse is not None:  # keyframes by the adaptive renderer
+        adaptive = _adaptive(pr, config, path, config.key_sse)
+        sprite.keyframe_drawer = adaptive.render_into
     try:
         vp0 = path.viewpoints[0]
         sprite.render_keyframe(vp0, 0.0)  # warm-up (shader compilation), untimed
@@ -224,6 +231,8 @@ def sprite_frames(pr: PathRenderer, path: CameraPath, config: RenderConfig,
         return rows
     finally:
         sprite.release()
+        if adaptive is not None:
+            adaptive.release()
 
 
 def keyframe_records(keyframes: list, rows: list[dict]) -> list[dict]:
@@ -329,17 +338,29 @@ def plain_frames(pr: PathRenderer, path: CameraPath, config: RenderConfig,
     return rows
 
 
-def pyramid_for(config: RenderConfig, scene: Scene):
+def _adaptive(pr: PathRenderer, config: RenderConfig, path: CameraPath, sse: float):
+    """The adaptive renderer on ``pr``'s context and target (the scene's colour texture
+    on an in-memory pyramid)."""
+    from lodsprite.terrain.adaptive import AdaptiveTerrain
+    from lodsprite.terrain.pyramid import MemoryPyramid
+
+    pyramid = pyramid_for(config, pr.geometry.hf)
+    color = pr.geometry.color_tex if isinstance(pyramid, MemoryPyramid) else None
+    return AdaptiveTerrain(pr.ctx, pyramid, pr.renderer.target, field_of_view(config, path),
+                           sse, gpu_mb=config.gpu_mb, host_mb=config.host_mb, color=color)
+
+
+def pyramid_for(config: RenderConfig, hf):
     """What the adaptive renderer draws: the store itself when ``--terrain`` is one, else
-    the scene's height field as an in-memory pyramid (so it is the field full resolution
-    draws)."""
+    the scene's height field ``hf`` as an in-memory pyramid (so it is the field full
+    resolution draws)."""
     from lodsprite.terrain.pyramid import MemoryPyramid
     from lodsprite.terrain.store import TerrainStore
 
     p = Path(config.terrain).expanduser()
     if p.is_dir() and (p / "zarr.json").is_file():
         return TerrainStore(p)
-    return MemoryPyramid.from_heightfield(scene.hf)
+    return MemoryPyramid.from_heightfield(hf)
 
 
 def adaptive_frames(pr: PathRenderer, scene: Scene, path: CameraPath, config: RenderConfig,
@@ -349,16 +370,8 @@ def adaptive_frames(pr: PathRenderer, scene: Scene, path: CameraPath, config: Re
     beyond the roots (the first frame's time is part of ``first_frame_s``)."""
     import time
 
-    from lodsprite.terrain.adaptive import AdaptiveTerrain
-
     t0 = time.perf_counter()
-    pyramid = pyramid_for(config, scene)
-    from lodsprite.terrain.pyramid import MemoryPyramid
-
-    color = pr.geometry.color_tex if isinstance(pyramid, MemoryPyramid) else None
-    terrain = AdaptiveTerrain(pr.ctx, pyramid, pr.renderer.target,
-                              field_of_view(config, path), config.sse,
-                              gpu_mb=config.gpu_mb, host_mb=config.host_mb, color=color)
+    terrain = _adaptive(pr, config, path, config.sse)
     rows = []
     try:
         for i, vp in enumerate(path.viewpoints):

@@ -192,3 +192,16 @@ def test_adaptive_at_a_quarter_pixel_matches_full_resolution(gl):
     # measured: 0.0 at 0.25 px (level 0 everywhere in view, the same triangles as full
     # resolution) and 2.1 grey levels at 4 px; tolerance 0.5
     assert rmse[0.25] < 0.5 < rmse[4.0]
+
+
+def test_lod_sprite_with_adaptive_keyframes_stays_closer_than_the_plain_coarse_level(tmp_path):
+    from lodsprite.errors import InputError
+    from lodsprite.run import RenderConfig, render_path
+
+    cfg = RenderConfig(terrain="fractal:128:3", mode="sprite", key_sse=0.5, frames=24,
+                       size=(96, 96), lod=16, ground_truth=True)
+    s = render_path(cfg, tmp_path)
+    assert s["keyframes"] >= 1 and s["config"]["key_sse"] == 0.5
+    assert s["rmse_sprite_mean"] < s["rmse_lod_mean"]
+    with pytest.raises(InputError, match="--key-sse"):
+        RenderConfig(mode="full", key_sse=0.5).validate()

@@ -166,9 +166,17 @@ class SpriteRenderer:
         target, coarse = self.key_targets[self._next], self.coarse_targets[self._next]
         self._next ^= 1
         projection = self.key_projection(projection or self.terrain.projection(viewpoint))
-        stats = self.terrain.render(viewpoint, None, projection, target)
+        if self.keyframe_drawer is not None:
+            stats = self.keyframe_drawer(viewpoint, projection, target)
+        else:
+            stats = self.terrain.render(viewpoint, None, projection, target)
         self._keep(target, coarse, viewpoint, projection, t0)
         return stats
+
+    #: Draws keyframes instead of the full-resolution terrain when set:
+    #: ``(viewpoint, projection, target) -> FrameStats`` (the adaptive renderer's
+    #: :meth:`~lodsprite.terrain.adaptive.AdaptiveTerrain.render_into`).
+    keyframe_drawer = None
 
     def upload_keyframe(self, viewpoint: Viewpoint, projection: Projection, color: np.ndarray,
                         depth: np.ndarray, t0: float, zbuffer: str = "full") -> None:

@@ -90,9 +90,23 @@ class AdaptiveTerrain:
         self.renderer.upload(slot, data)
         return True
 
-    def frame(self, viewpoint: Viewpoint) -> AdaptiveFrame:
+    def render_into(self, viewpoint: Viewpoint, projection, target):
+        """Draw into ``target`` through ``projection`` (a :class:`~lodsprite.camera.
+        Projection`; the LOD-sprite keyframe hook); returns the terrain renderer's
+        ``FrameStats``.  Selection uses the target's height for screen error."""
+        from lodsprite.gl.terrain import FrameStats
+
+        f = self.frame(viewpoint, projection.matrix(), target, finish=False)
+        return FrameStats(f.triangles, f.nodes, projection)
+
+    def frame(self, viewpoint: Viewpoint, projection: np.ndarray | None = None,
+              target=None, finish: bool = True) -> AdaptiveFrame:
+        """Select, stream and draw one frame (into ``target``, default the renderer's own,
+        through ``projection``, default fitted to the terrain)."""
         t0 = time.perf_counter()
-        view_proj = self.projection(viewpoint) @ viewpoint.view_matrix()
+        target = target if target is not None else self.target
+        proj = self.projection(viewpoint) if projection is None else projection
+        view_proj = proj @ viewpoint.view_matrix()
         eye = np.asarray(viewpoint.o, dtype=np.float64)
         draw, want = self.tree.select(eye, frustum_planes(view_proj), self.r,
                                       self.slots.__contains__)
@@ -109,9 +123,10 @@ class AdaptiveTerrain:
             data = self.loader.take(n)
             if data is not None and n not in self.slots and self._upload(n, data, keep):
                 uploaded += 1
-        self.renderer.draw(self.target.fbo, view_proj, eye, self._instances(draw),
+        self.renderer.draw(target.fbo, view_proj, eye, self._instances(draw),
                            self.height_range, self.extent, self.color)
-        self.gl.finish()
+        if finish:
+            self.gl.finish()
         return AdaptiveFrame((time.perf_counter() - t0) * 1e3, len(draw),
                              self.renderer.triangles, uploaded, len(self.slots.slots),
                              self.loader.loaded, self.slots.evicted, len(self.loader.bad))
