@@ -494,6 +494,25 @@ def _with_bars(run, *args):
         bar.stop()
 
 
+def _run_large(out_dir: Path, quick: bool, huge: bool = False) -> None:
+    from dataclasses import replace
+
+    from lodsprite.report.large import write_outputs
+    from lodsprite.terrain.large import LargeConfig, reproduce_large
+
+    if out_dir == Path("out/chen1999"):
+        out_dir = Path("out/large")
+    cfg = LargeConfig.quick() if quick else LargeConfig()
+    r = _with_bars(reproduce_large, replace(cfg, huge=huge), out_dir)
+    report = write_outputs(r, out_dir)
+    for side, v in sorted(r["sizes"].items(), key=lambda kv: int(kv[0])):
+        out.print(f"{side}²: adaptive median {v['median_ms_adaptive']:.1f} ms, sprite "
+                  f"{v['median_ms_sprite']:.1f} ms, RMSE {v['rmse_adaptive']:.2f} / "
+                  f"{v['rmse_sprite']:.2f}, peak RSS {v['peak_rss_mb']:.0f} MB, first frame "
+                  f"{v['first_frame_s']:.2f} s")
+    out.print(f"report: {report}")
+
+
 def _run_gumbau(out_dir: Path, quick: bool) -> None:
     from lodsprite.manager.reproduce import GumbauConfig, reproduce_gumbau
     from lodsprite.report.gumbau import write_outputs
@@ -682,7 +701,7 @@ def _numbers(text: str | None, kind: type, option: str) -> list | None:
 @app.command()
 def reproduce(
     experiment: Annotated[str, typer.Argument(
-        help="chen1999 | swan2002 | scoggins2000 | sloan1997 | gumbau")],
+        help="chen1999 | swan2002 | scoggins2000 | sloan1997 | gumbau | large")],
     out_dir: Annotated[Path, typer.Option("--out", help="output folder")] = Path("out/chen1999"),
     terrain: TerrainOpt = "jacksboro",
     size: Annotated[int, typer.Option("--size", help="image size in pixels (square)")] = 512,
@@ -710,6 +729,9 @@ def reproduce(
     links: Annotated[bool, typer.Option(
         "--links/--no-links", help="swan2002: run the set-ups over emulated network links "
                                    "(network namespaces, root)")] = True,
+    huge: Annotated[bool, typer.Option(
+        "--huge", help="large: also a 65536² store (see report.md for the disk it needs)")
+    ] = False,
 ) -> None:
     """Run a paper's experiment; write DIR/results.json, PNG plots and DIR/report.md."""
     from lodsprite.errors import InputError
@@ -728,9 +750,12 @@ def reproduce(
     if experiment == "gumbau":
         _run_gumbau(out_dir, quick)
         return
+    if experiment == "large":
+        _run_large(out_dir, quick, huge)
+        return
     if experiment != "chen1999":
         raise InputError(f"unknown experiment '{experiment}': available: chen1999, swan2002, "
-                         "scoggins2000, sloan1997, gumbau")
+                         "scoggins2000, sloan1997, gumbau, large")
     kw = {"terrain": terrain, "grid": grid, "lod": lod, "epsilon": epsilon,
           "visibility": visibility, "border": border, "guard_px": guard,
           "full_sample": full_sample, "sweeps": sweeps}

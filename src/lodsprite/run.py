@@ -339,15 +339,13 @@ def plain_frames(pr: PathRenderer, path: CameraPath, config: RenderConfig,
 
 
 def _adaptive(pr: PathRenderer, config: RenderConfig, path: CameraPath, sse: float):
-    """The adaptive renderer on ``pr``'s context and target (the scene's colour texture
-    on an in-memory pyramid)."""
+    """The adaptive renderer on ``pr``'s context and target, coloured with the scene's
+    texture (as full resolution is), over the terrain's extent."""
     from lodsprite.terrain.adaptive import AdaptiveTerrain
-    from lodsprite.terrain.pyramid import MemoryPyramid
 
-    pyramid = pyramid_for(config, pr.geometry.hf)
-    color = pr.geometry.color_tex if isinstance(pyramid, MemoryPyramid) else None
-    return AdaptiveTerrain(pr.ctx, pyramid, pr.renderer.target, field_of_view(config, path),
-                           sse, gpu_mb=config.gpu_mb, host_mb=config.host_mb, color=color)
+    return AdaptiveTerrain(pr.ctx, pyramid_for(config, pr.geometry.hf), pr.renderer.target,
+                           field_of_view(config, path), sse, gpu_mb=config.gpu_mb,
+                           host_mb=config.host_mb, color=pr.geometry.color_tex)
 
 
 def pyramid_for(config: RenderConfig, hf):
@@ -385,9 +383,14 @@ def adaptive_frames(pr: PathRenderer, scene: Scene, path: CameraPath, config: Re
                 on_frame(i, pr.renderer.target.read_color())
             if progress:
                 progress(i + 1, len(path))
-        extra = {"sse": config.sse, "first_frame_s": first, "tiles_resident": f.resident,
+        import resource
+
+        peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # KB on Linux
+        extra = {"sse": config.sse, "first_frame_s": first, "peak_rss_mb": peak,
+                 "tiles_resident": f.resident,
                  "tiles_loaded": f.loaded, "tiles_evicted": f.evicted, "tiles_bad": f.bad,
-                 "gpu_cache_tiles": terrain.slots.capacity, "levels": terrain.tree.levels}
+                 "gpu_cache_tiles": terrain.slots.capacity, "levels": terrain.tree.levels,
+                 "gpu_cache_mb": terrain.slots.capacity * (terrain.tree.g + 1) ** 2 * 4 / 2 ** 20}
     finally:
         terrain.release()
     return rows, extra

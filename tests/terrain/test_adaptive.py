@@ -205,3 +205,23 @@ def test_lod_sprite_with_adaptive_keyframes_stays_closer_than_the_plain_coarse_l
     assert s["rmse_sprite_mean"] < s["rmse_lod_mean"]
     with pytest.raises(InputError, match="--key-sse"):
         RenderConfig(mode="full", key_sse=0.5).validate()
+
+
+def test_the_large_terrain_harness_writes_its_keys(tmp_path):
+    import json
+
+    from lodsprite.report.large import write_outputs
+    from lodsprite.terrain.large import LargeConfig, reproduce_large
+
+    cfg = LargeConfig(sizes=(256,), frames=12, image=96, sample_every=6, quick_512=True)
+    r = reproduce_large(cfg, tmp_path)
+    write_outputs(r, tmp_path)
+    saved = json.loads((tmp_path / "results.json").read_text())
+    v = saved["sizes"]["256"]
+    for key in ("median_ms_adaptive", "p99_ms_adaptive", "median_ms_sprite", "rmse_adaptive",
+                "rmse_sprite", "peak_rss_mb", "first_frame_s"):
+        assert np.isfinite(v[key]), key
+    assert v["reference"] == "full resolution"
+    assert np.isfinite(saved["speedup_sprite_vs_full_512"])
+    assert np.isfinite(saved["rmse_ratio_sprite_vs_lod_512"])
+    assert (tmp_path / "large_scaling.png").stat().st_size > 2000
