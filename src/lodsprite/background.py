@@ -4,7 +4,10 @@ frame)."""
 
 from __future__ import annotations
 
+import logging
 import threading
+
+log = logging.getLogger(__name__)
 
 
 class BackgroundLoader:
@@ -32,7 +35,10 @@ class BackgroundLoader:
                     self._cv.wait()
                 if self._stop:
                     return
-            self._load(item)
+            try:
+                self._load(item)
+            except Exception:  # the thread outlives a bad item; the item stays unloaded
+                log.exception("%s: loading %r failed", self._thread.name, item)
 
     def close(self) -> None:
         """Stop the thread (it finishes the item in hand)."""

@@ -122,3 +122,24 @@ def test_a_missing_node_is_drawn_without_data_and_leaves_no_hole(gl, lf_folder):
             inside = binary_erosion(st_plane_seen(vp, proj, slab), iterations=2)
             assert np.abs(a[inside] - 1.0).max() < TOL, method
             assert gone in {n for (_, i, j) in m.ctx.lf.bad_nodes for n in [i * 8 + j]}
+
+
+def test_progressive_fading_never_overflows_texture_memory(gl, lf_folder):
+    """Regression: nodes fading out were unbounded; jumping the eye between far-apart
+    places filled the texture array and the next upload raised StopIteration."""
+    far = [look_at((x, y, 4.2), (0.0, 0.0, 0.0), up=(0.0, 1.0, 0.0))
+           for x, y in [(-1.2, -1.2)] * 8 + [(1.2, -1.2)] * 4 + [(0.0, 1.2)] * 4]
+    for _vp, _proj, _a, f, m in run(gl, lf_folder, "progressive", far, nodes=6, fade=8):
+        assert len(m.rec.slot_of) <= m.rec.capacity and f.images <= m.rec.capacity
+
+
+def test_projective_predicts_from_the_real_eye(gl, lf_folder):
+    """Regression: the projective method fed its own predicted viewpoints to the motion
+    predictor, which then saw a velocity of about -2v after each new image."""
+    line = [look_at((0.02 * k - 0.3, 0.0, 4.2), (0.02 * k - 0.3, 0.0, 0.0),
+                    up=(0.0, 1.0, 0.0)) for k in range(14)]
+    for i, (vp, _proj, _a, _f, m) in enumerate(run(gl, lf_folder, "projective", line,
+                                                    reuse=3, nodes=6)):
+        if i >= 2:
+            v = (m.predictor.predict(1.0).o - vp.o)   # metres a second, 30 frames a second
+            np.testing.assert_allclose(v, [0.02 * 30, 0.0, 0.0], atol=1e-6)

@@ -36,6 +36,10 @@ def test_six_slabs_let_a_full_orbit_be_reconstructed(tmp_path):
                                ground_truth=True, method="arbitrary", quality_every=1,
                                nodes=9)
     assert summary["slab_switches"] == 4       # round and back to the first
+    # a switch (the next slab's method made and filled) is part of its frame's time
+    kinds = [r.split(",")[1] for r in
+             (tmp_path / "out" / "frames.csv").read_text().splitlines()[1:]]
+    assert kinds.count("switch") == 4
     # a coarse 6x6 lumigraph per side, yet the orbit resembles the object all round
     rows = (tmp_path / "out" / "frames.csv").read_text().splitlines()[1:]
     psnr = [float(r.split(",")[-2]) for r in rows]

@@ -225,3 +225,73 @@ def test_the_large_terrain_harness_writes_its_keys(tmp_path):
     assert np.isfinite(saved["speedup_sprite_vs_full_512"])
     assert np.isfinite(saved["rmse_ratio_sprite_vs_lod_512"])
     assert (tmp_path / "large_scaling.png").stat().st_size > 2000
+
+
+def test_an_evicted_root_comes_back_and_the_loader_drops_stale_requests(gl):
+    """Regressions: an off-screen root evicted from a full GPU cache was never requested
+    again (a hole for good); the loader kept every request it was ever given."""
+    from lodsprite.camera import look_at
+    from lodsprite.gl.target import RenderTarget
+    from lodsprite.terrain.adaptive import AdaptiveTerrain
+
+    p = MemoryPyramid(rough(513), 30.0, 30.0)
+    t = RenderTarget(gl, 64, 64)
+    a = AdaptiveTerrain(gl, p, t, 45.0, 0.5, gpu_mb=10 * 65 * 65 * 4 / 2 ** 20)
+    try:
+        assert a.slots.capacity == 10 and len(a.roots) == 4
+        for x in np.linspace(-6000, 6000, 40):     # sweep low over the field
+            a.frame(look_at((x, -1500.0, 400.0), (x, 0.0, 0.0)))
+            time.sleep(0.003)
+        for _ in range(20):                         # then look at it all from afar
+            a.frame(look_at((0.0, -30000.0, 20000.0), (0.0, 0.0, 0.0)))
+            time.sleep(0.003)
+        assert all(r in a.slots for r in a.roots)
+        a.loader.want([(1.0, Node(0, 0, 0)), (2.0, Node(0, 0, 1))])
+        a.loader.want([(1.0, Node(0, 7, 7))])
+        assert Node(0, 0, 0) not in a.loader._queued and Node(0, 0, 1) not in a.loader._queued
+        # the parent's valid extent travels with each node (the shader clamps to it)
+        inst = a._instances([n for n in a.slots.slots if n.k < a.tree.top][:3])
+        assert inst.shape[1] == 16 and (inst[:, 12:14] > 0).any()
+    finally:
+        a.release()
+        t.release()
+
+
+def test_a_huge_gpu_budget_is_clamped_to_the_largest_atlas(gl):
+    from lodsprite.gl.adaptive import AdaptiveRenderer
+
+    r = AdaptiveRenderer(gl, 64, 10 ** 7)
+    try:
+        side = gl.mgl.info["GL_MAX_TEXTURE_SIZE"] // 65
+        assert r.capacity <= side * side and r.atlas.height <= side * 65
+    finally:
+        r.release()
+
+
+def test_the_background_loader_survives_an_item_that_raises():
+    import threading
+
+    from lodsprite.background import BackgroundLoader
+
+    class Flaky(BackgroundLoader):
+        def __init__(self):
+            self.items, self.done = [1, 2], []
+            self._cv = threading.Condition()
+            super().__init__("flaky")
+
+        def _next(self):
+            return self.items.pop(0) if self.items else None
+
+        def _load(self, item):
+            if item == 1:
+                raise RuntimeError("a bad item")
+            self.done.append(item)
+
+    f = Flaky()
+    try:
+        deadline = time.monotonic() + 10
+        while not f.done and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert f.done == [2] and f._thread.is_alive()
+    finally:
+        f.close()

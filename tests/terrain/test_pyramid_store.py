@@ -167,3 +167,24 @@ def test_tile_then_render_adaptive_from_the_command_line(tmp_path):
     s = json.loads((tmp_path / "o" / "summary.json").read_text())
     assert s["mode"] == "adaptive" and s["tiles_resident"] >= 1 and s["first_frame_s"] > 0
     assert s["tiles_bad"] == 0
+
+
+def test_an_out_folder_that_is_not_a_store_is_never_replaced(tmp_path):
+    """Regression: a non-store folder at --out was a traceback; --overwrite deleted it."""
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "precious.txt").write_text("keep me")
+    with pytest.raises(InputError, match="not a terrain store"):
+        build_store("fractal:64:1", tmp_path / "mine", tile=64, chunk=32)
+    with pytest.raises(InputError, match="not a terrain store"):
+        build_store("fractal:64:1", tmp_path / "mine", tile=64, chunk=32, overwrite=True)
+    assert (tmp_path / "mine" / "precious.txt").read_text() == "keep me"
+
+
+def test_a_window_of_nodata_only_does_not_poison_the_pyramid(tmp_path):
+    """Regression: a tile all nodata stayed NaN and the mean carried it to the root."""
+    h = np.random.default_rng(1).uniform(100, 200, (256, 256))
+    h[:128, :128] = -9999.0                          # one whole 128² tile of nodata
+    write_geotiff(tmp_path / "hole.tif", h)
+    build_store(str(tmp_path / "hole.tif"), tmp_path / "h.zarr", tile=128, chunk=64)
+    _, lv = levels_of(tmp_path / "h.zarr")
+    assert all(np.isfinite(a).all() for a in lv)

@@ -31,6 +31,7 @@ in vec2 in_uv;          // grid vertex: column, row (0..G)
 in vec4 in_node;        // world x, y of sample (0, 0); metres a sample east, south
 in vec4 in_slots;       // own slot, parent slot (-1: none), quadrant row, column
 in vec4 in_extra;       // morph start, end (metres); last valid row, column
+in vec4 in_parent;      // the parent's last valid row, column
 out vec3 v_normal;
 out float v_height;
 out vec2 v_uv;
@@ -45,7 +46,9 @@ void main() {
     float h = fetch(in_slots.x, rc);
     if (in_slots.y >= 0.0) {
         vec2 p = in_slots.zw * float(u_grid / 2) + rc * 0.5;
-        float hc = 0.5 * (fetch(in_slots.y, floor(p)) + fetch(in_slots.y, ceil(p)));
+        vec2 p1 = min(ceil(p), in_parent.xy);   // never past the parent's samples
+        float hc = 0.5 * (fetch(in_slots.y, min(floor(p), in_parent.xy))
+                          + fetch(in_slots.y, p1));
         float d = distance(u_eye, vec3(xy, h));
         float m = clamp((d - in_extra.x) / max(in_extra.y - in_extra.x, 1e-6), 0.0, 1.0);
         h = mix(h, hc, m);
@@ -107,8 +110,8 @@ class AdaptiveRenderer:
         side = self.g + 1
         limit = mgl.info["GL_MAX_TEXTURE_SIZE"] // side
         self.per_row = max(1, min(limit, math.ceil(math.sqrt(capacity))))
-        rows = max(1, math.ceil(capacity / self.per_row))
-        self.capacity = min(capacity, self.per_row * min(rows, limit))
+        rows = min(limit, max(1, math.ceil(capacity / self.per_row)))
+        self.capacity = min(capacity, self.per_row * rows)
         self.atlas = mgl.texture((self.per_row * side, rows * side), 1, dtype="f4")
         self.atlas.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self.program = mgl.program(vertex_shader=ADAPTIVE_VS, fragment_shader=ADAPTIVE_FS)
@@ -117,10 +120,11 @@ class AdaptiveRenderer:
         self.vbo = mgl.buffer(uv.tobytes())
         self.ibo = mgl.buffer(tris.tobytes())
         self.index_count = tris.size
-        self.instances = mgl.buffer(reserve=48 * 256)
+        self.instances = mgl.buffer(reserve=64 * 256)
         self.vao = mgl.vertex_array(self.program, [
             (self.vbo, "2f", "in_uv"),
-            (self.instances, "4f 4f 4f/i", "in_node", "in_slots", "in_extra")],
+            (self.instances, "4f 4f 4f 4f/i", "in_node", "in_slots", "in_extra",
+             "in_parent")],
             index_buffer=self.ibo, index_element_size=4)
         self.triangles = 0
 
@@ -135,7 +139,7 @@ class AdaptiveRenderer:
              instances: np.ndarray, height_range: tuple[float, float],
              extent: tuple[float, float, float, float] = (0.0, 0.0, 1.0, 1.0),
              color: moderngl.Texture | None = None) -> None:
-        """Clear ``fbo`` and draw ``instances (N, 12) float32`` nodes, coloured by
+        """Clear ``fbo`` and draw ``instances (N, 16) float32`` nodes, coloured by
         ``color`` (a texture over ``extent``: x of the west edge, y of the north edge,
         width, depth) or by a height ramp."""
         mgl = self.ctx.mgl

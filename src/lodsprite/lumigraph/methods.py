@@ -137,10 +137,11 @@ class Method:
         return cover_draws(subset_cover(self.slab, nodes, valid))
 
     def frame(self, index: int, viewpoint: Viewpoint, projection: np.ndarray,
-              count_samples: bool = False) -> MethodFrame:
+              count_samples: bool = False, observe: bool = True) -> MethodFrame:
         gl = self.ctx.gl
         t0 = time.perf_counter()
-        self.predictor.observe(index * FRAME_S, viewpoint)
+        if observe:  # (the projective method observes the real eye, not its prediction)
+            self.predictor.observe(index * FRAME_S, viewpoint)
         nodes = self.choose(index, viewpoint)
         valid, ups, evs = self.ensure(nodes)
         key = tuple(int(n) for n in nodes) + tuple(valid)
@@ -269,6 +270,12 @@ class ProgressiveMethod(Method):
             if self.validity[n] <= 0.0:
                 del self.validity[n]
                 self.rec.evict(n)
+        # texture memory holds 2 x nodes: past that, the faintest fading nodes go at once
+        fading = sorted((v, n) for n, v in self.validity.items() if n not in target)
+        while len(self.validity) > self.rec.capacity and fading:
+            _, n = fading.pop(0)
+            del self.validity[n]
+            self.rec.evict(n)
         return np.array(sorted(self.validity), dtype=np.int64)
 
     def draws(self, nodes, valid, viewpoint):
@@ -299,17 +306,17 @@ class ProjectiveMethod(ArbitraryMethod):
         return self.proj
 
     def frame(self, index, viewpoint, projection, count_samples=False):
+        self.predictor.observe(index * FRAME_S, viewpoint)
         if index % self.reuse == 0 or self.proj.key_view_proj is None:
             # a new image, from where the eye is predicted to be half a cycle on
             ahead = self.predictor.predict(self.reuse * FRAME_S / 2) if index else viewpoint
             key = Viewpoint(viewpoint.x, viewpoint.y, viewpoint.z, ahead.o)
             t0 = time.perf_counter()
-            f = super().frame(index, key, projection)
+            f = super().frame(index, key, projection, observe=False)
             self.proj.take(self.rec, projection @ key.view_matrix())
             self.ctx.gl.finish()
             extra = (time.perf_counter() - t0) * 1e3 - f.ms
         else:
-            self.predictor.observe(index * FRAME_S, viewpoint)
             f, extra = MethodFrame(0.0, 0.0, 0.0, 0, 0, 0, "reuse"), 0.0
         t1 = time.perf_counter()
         self.proj.render(viewpoint.view_matrix(), projection, count_samples)
@@ -356,8 +363,27 @@ class MultiSlabMethod:
 
     def frame(self, index: int, viewpoint: Viewpoint, projection: np.ndarray,
               count_samples: bool = False) -> MethodFrame:
-        return self._for(viewpoint, projection).frame(index, viewpoint, projection,
-                                                      count_samples)
+        """A frame on the facing slab; a switch (the new slab's method made, and warmed
+        up for ``critical``) is timed as part of the frame."""
+        from dataclasses import replace as _replace
+
+        t0 = time.perf_counter()
+        before = self.slab_index
+        method = self._for(viewpoint, projection)
+        switch_ms = (time.perf_counter() - t0) * 1e3
+        f = method.frame(index, viewpoint, projection, count_samples)
+        if self.slab_index != before and before >= 0:
+            f = _replace(f, ms=f.ms + switch_ms, kind="switch")
+        return f
+
+    @property
+    def target_ms(self) -> float:
+        return self.current.target_ms
+
+    @target_ms.setter
+    def target_ms(self, value: float) -> None:  # kept for the next slab's method too
+        self.current.target_ms = value
+        self.options["target_fps"] = 1e3 / value
 
     def __getattr__(self, name: str):
         current = self.__dict__.get("current")

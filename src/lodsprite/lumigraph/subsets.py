@@ -203,6 +203,7 @@ def nearest_block(slab: Slab, st: np.ndarray, k: int = 3) -> np.ndarray:
     """The ``k x k`` nodes round the st point ``st (2,)`` (Figure 3's 9 for ``k = 3``),
     clamped inside the grid, ``(k*k,)`` ``i * n_st + j``."""
     n = slab.n_st
+    k = min(int(k), n)
     spacing = slab.st_size / (n - 1)
     centre = np.rint((np.asarray(st, float) + slab.st_size / 2) / spacing).astype(int)
     lo = np.clip(centre - k // 2, 0, n - k)

@@ -18,7 +18,7 @@ import numpy as np
 
 from lodsprite.camera import Viewpoint, fitted_projection, frustum_planes
 from lodsprite.errors import InputError
-from lodsprite.terrain.quadtree import DEFAULT_GRID, Node, Quadtree, ranges
+from lodsprite.terrain.quadtree import DEFAULT_GRID, MORPH_SPAN, Node, Quadtree, ranges
 from lodsprite.terrain.streaming import SlotCache, TileLoader
 
 
@@ -53,7 +53,8 @@ class AdaptiveTerrain:
         self.gl, self.target, self.fov = gl, target, float(fov_y_deg)
         self.tree = Quadtree(pyramid, grid)
         self.sse = float(sse_px)
-        self.r = ranges(pyramid.level_errors, sse_px, target.size[1], fov_y_deg)
+        self.r = ranges(pyramid.level_errors, sse_px, target.size[1], fov_y_deg,
+                        self.tree.node_diagonals())
         self.loader = TileLoader(self.tree, host_mb)
         tile_bytes = (grid + 1) ** 2 * 4
         self.renderer = AdaptiveRenderer(gl, grid, max(1, int(gpu_mb * 2 ** 20 // tile_bytes)))
@@ -68,7 +69,7 @@ class AdaptiveTerrain:
         self.color = color  # the terrain's colour texture (a moderngl texture) or None
         self.extent = (float(x.min()), float(y.max()), float(x.max() - x.min()),
                        float(y.max() - y.min()))
-        roots = self.tree.roots()
+        roots = self.roots = self.tree.roots()
         if len(roots) > self.slots.capacity:
             raise InputError("the GPU cache cannot hold the coarsest level: raise its budget")
         for n in roots:
@@ -110,8 +111,10 @@ class AdaptiveTerrain:
         eye = np.asarray(viewpoint.o, dtype=np.float64)
         draw, want = self.tree.select(eye, frustum_planes(view_proj), self.r,
                                       self.slots.__contains__)
+        # a root evicted (off-screen, LRU) comes back first: its region would be a hole
+        want += [(float("inf"), n) for n in self.roots if n not in self.slots]
         self.loader.want(want)
-        keep = set()
+        keep = set(self.roots)
         for n in draw:
             while n.k <= self.tree.top and n not in keep:
                 keep.add(n)
@@ -132,8 +135,9 @@ class AdaptiveTerrain:
                              self.loader.loaded, self.slots.evicted, len(self.loader.bad))
 
     def _instances(self, draw: list[Node]) -> np.ndarray:
-        """Per node: world origin, spacing, slots, quadrant, morph range, valid extent."""
-        out = np.zeros((len(draw), 12), np.float32)
+        """Per node: world origin, spacing, slots, quadrant, morph range, valid extent, and
+        the parent's valid extent."""
+        out = np.zeros((len(draw), 16), np.float32)
         g = self.tree.g
         for m, n in enumerate(draw):
             self.slots.touch(n)
@@ -144,12 +148,14 @@ class AdaptiveTerrain:
             if n.k < self.tree.top and parent in self.slots:
                 ps, qr, qc = self.slots.slot(parent), n.i % 2, n.j % 2
                 end = self.r[n.k + 1]
-                start = end - 0.3 * (self.r[n.k + 1] - self.r[n.k])
+                start = end - MORPH_SPAN * (self.r[n.k + 1] - self.r[n.k])
+                pr0, pr1, pc0, pc1 = self.tree.samples(parent)
+                prow, pcol = pr1 - pr0 - 1, pc1 - pc0 - 1
             else:
-                ps, qr, qc, start, end = -1, 0, 0, 0.0, 1.0
+                ps, qr, qc, start, end, prow, pcol = -1, 0, 0, 0.0, 1.0, 0, 0
             out[m] = (x[0], y[0], s * self.tree.p.dx, s * self.tree.p.dy,
                       self.slots.slot(n), ps, qr, qc, start, end,
-                      min(g, r1 - r0 - 1), min(g, c1 - c0 - 1))
+                      min(g, r1 - r0 - 1), min(g, c1 - c0 - 1), prow, pcol, 0.0, 0.0)
         return out
 
     def release(self) -> None:

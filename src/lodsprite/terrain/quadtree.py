@@ -13,10 +13,12 @@ fine enough beyond the range ``R_k = e_k · H / (2 τ tan(fov / 2))`` for a tole
 ``τ`` pixels.  A node is refined while the distance from the eye to its bounding box is
 below ``R_k`` (its projected error exceeds ``τ``) and all four children are resident;
 otherwise it is drawn (a parent stands in for children still loading, whose loads are
-requested, most urgent first: largest ``R_k / d``).  Ranges are made to at least double
-from level to level, so neighbours differ by at most one level; a vertex of a level-``k``
-node morphs towards level ``k + 1``'s surface over the last ``MORPH_SPAN`` of
-``[R_k, R_{k+1}]``, reaching it where the parent would be drawn instead (no pop, no crack).
+requested, most urgent first: largest ``R_k / d``).  Ranges at least double from level to
+level and grow by at least a node's diagonal, so neighbours differ by at most one level; a
+vertex of a level-``k`` node morphs towards level ``k + 1``'s surface over the last
+``MORPH_SPAN`` of ``[R_k, R_{k+1}]``, reaching it where the parent would be drawn instead
+(no pop, no crack once the wanted nodes are resident; while a parent stands in for
+children still loading, its edge against their loaded neighbours may show T-junctions).
 """
 
 from __future__ import annotations
@@ -46,14 +48,18 @@ class Node:
                      for a in (0, 1) for b in (0, 1))
 
 
-def ranges(level_errors, tolerance_px: float, height_px: int, fov_y_deg: float
-           ) -> np.ndarray:
+def ranges(level_errors, tolerance_px: float, height_px: int, fov_y_deg: float,
+           node_diagonals=None) -> np.ndarray:
     """``R_k`` (metres) per level: where level ``k``'s error projects to the tolerance,
-    at least doubling from level to level."""
+    at least doubling from level to level and, given ``node_diagonals`` (a node's
+    diagonal per level, metres), at least ``R_{k-1}`` plus a level-``k`` node's diagonal
+    (CDLOD's condition for neighbours at most one level apart)."""
     f = height_px / (2.0 * tolerance_px * math.tan(math.radians(fov_y_deg) / 2))
     r = np.asarray(level_errors, dtype=np.float64) * f
     for k in range(1, len(r)):
         r[k] = max(r[k], 2.0 * r[k - 1], 1e-6)
+        if node_diagonals is not None:
+            r[k] = max(r[k], r[k - 1] + node_diagonals[k])
     r[0] = 0.0
     return r
 
@@ -79,6 +85,11 @@ class Quadtree:
         self.errors = np.asarray(pyramid.level_errors, dtype=np.float64)
         self.minmax = [np.asarray(pyramid.minmax(k)) for k in range(self.levels)]
         self.chunk = pyramid.chunk
+
+    def node_diagonals(self) -> np.ndarray:
+        """A node's diagonal (metres) per level."""
+        return np.array([math.hypot(self.g * (1 << k) * self.p.dx, self.g * (1 << k) * self.p.dy)
+                         for k in range(self.levels)])
 
     def blocks(self, k: int) -> tuple[int, int]:
         """Node rows and columns at level ``k``."""
@@ -118,7 +129,8 @@ class Quadtree:
         mm = self.minmax[n.k][r0 // self.chunk: (r1 - 1) // self.chunk + 1,
                               c0 // self.chunk: (c1 - 1) // self.chunk + 1]
         lo_z, hi_z = np.nanmin(mm[..., 0]), np.nanmax(mm[..., 1])
-        e = self.errors[n.k]
+        # the node's own error, and how far its vertices may morph towards the parent
+        e = self.errors[min(n.k + 1, self.top)]
         return (np.array([x.min(), y.min(), lo_z - e]), np.array([x.max(), y.max(), hi_z + e]))
 
     def select(self, eye: np.ndarray, planes: np.ndarray, r: np.ndarray, resident,

@@ -148,12 +148,17 @@ def build_store(source_spec: str, out: str | Path, tile: int = DEFAULT_TILE,
                 "tiles_written": 0, "seconds": 0.0, "resumed": False, "already": True}
     total = sum(len(_tiles(level_shape(src.rows, src.cols, k), tile)) for k in range(levels))
     done_before = sum(len(d) for d in header.done)
-    written, t0 = 0, time.perf_counter()
+    written, t0, samples0 = 0, time.perf_counter(), 0
     client = _client(scheduler) if scheduler else None
     try:
         for k in range(levels):
+            done_k = set(header.done[k])
             pending = [n for n in range(len(_tiles(level_shape(src.rows, src.cols, k), tile)))
-                       if n not in set(header.done[k])]
+                       if n not in done_k]
+            if k == 0:
+                tiles0 = _tiles(level_shape(src.rows, src.cols, 0), tile)
+                samples0 = sum((tiles0[n][1] - tiles0[n][0]) * (tiles0[n][3] - tiles0[n][2])
+                               for n in pending)
             if stop_after is not None:
                 pending = pending[: max(0, stop_after - written)]
             for n in _run_tiles(client, out, k, pending, src, group, header):
@@ -174,7 +179,7 @@ def build_store(source_spec: str, out: str | Path, tile: int = DEFAULT_TILE,
     seconds = time.perf_counter() - t0
     return {"store": str(out), "rows": src.rows, "cols": src.cols, "levels": levels,
             "tiles_written": written, "seconds": seconds, "resumed": done_before > 0,
-            "mb_per_s": src.rows * src.cols * 4 / 2 ** 20 / max(seconds, 1e-9)}
+            "mb_per_s": samples0 * 4 / 2 ** 20 / max(seconds, 1e-9)}
 
 
 def level_errors(group, header: StoreHeader) -> list[float]:
@@ -255,26 +260,29 @@ def _check_source(src, encoding: str, scale: float) -> float:
 def _open_for_build(out: Path, header: StoreHeader, overwrite: bool):
     import zarr
 
+    free = shutil.disk_usage(out.parent if out.parent.exists() else Path.cwd()).free
+    need = estimate_bytes(header.rows, header.cols, header.encoding)
     if out.exists():
+        old = _existing_header(out)
         if overwrite:
+            if old is None and not (out.is_dir() and not any(out.iterdir())):
+                raise InputError(f"{out} exists and is not a terrain store: not replacing it")
+            if need > free + _size(out):
+                raise InputError(f"the store needs up to {need / 2 ** 30:.1f} GB and the disk "
+                                 f"has {(free + _size(out)) / 2 ** 30:.1f} GB")
             shutil.rmtree(out)
         else:
-            try:
-                group = zarr.open_group(str(out), mode="r+")
-                old = _header_of(group)
-            except InputError as exc:
-                raise InputError(f"{out} exists and is not a terrain store being built "
-                                 f"({exc}): pass --overwrite to replace it") from exc
+            if old is None:
+                raise InputError(f"{out} exists and is not a terrain store being built: "
+                                 "choose another --out")
             same = (old.source, old.rows, old.cols, old.tile, old.chunk, old.encoding,
                     old.scale) == (header.source, header.rows, header.cols, header.tile,
                                    header.chunk, header.encoding, header.scale)
             if not same:
                 raise InputError(f"{out} holds a store built with other parameters: pass "
                                  "--overwrite to rebuild it")
-            return group
-    free = shutil.disk_usage(out.parent if out.parent.exists() else Path.cwd()).free
-    need = estimate_bytes(header.rows, header.cols, header.encoding)
-    if need > free:
+            return zarr.open_group(str(out), mode="r+")
+    elif need > free:
         raise InputError(f"the store needs up to {need / 2 ** 30:.1f} GB and the disk has "
                          f"{free / 2 ** 30:.1f} GB free")
     group = zarr.open_group(str(out), mode="w")
@@ -293,6 +301,22 @@ def _open_for_build(out: Path, header: StoreHeader, overwrite: bool):
                            fill_value=np.nan)
     _save_header(group, header)
     return group
+
+
+def _existing_header(out: Path) -> StoreHeader | None:
+    """The header of a lodsprite store at ``out``, or None for anything else."""
+    import zarr
+
+    if not (out.is_dir() and (out / "zarr.json").is_file()):
+        return None
+    try:
+        return _header_of(zarr.open_group(str(out), mode="r"))
+    except Exception:  # not a group, not ours, damaged: not a store to resume
+        return None
+
+
+def _size(path: Path) -> int:
+    return sum(f.stat().st_size for f in path.rglob("*") if f.is_file())
 
 
 def _ceil_to(n: int, m: int) -> int:
@@ -431,7 +455,8 @@ class TerrainStore:
         return decode(self.group[str(k)][r0:r1, c0:c1], self.header)
 
     def minmax(self, k: int) -> np.ndarray:
-        """Level ``k``'s per-chunk min and max, ``(chunk rows, chunk cols, 2)``."""
+        """Level ``k``'s per-chunk min, max and geometric error, ``(chunk rows, chunk
+        cols, 3)``."""
         return np.asarray(self.group[f"minmax/{k}"][...])
 
     def level_for(self, max_side: int) -> int:

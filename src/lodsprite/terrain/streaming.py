@@ -51,13 +51,16 @@ class TileLoader(BackgroundLoader):
         return self._load(node)
 
     def want(self, requests: list) -> None:
-        """Queue ``(urgency, node)`` requests (most urgent read first)."""
+        """Replace the wish list with ``(urgency, node)`` requests (most urgent read
+        first): what the frame no longer wants is dropped."""
         with self._cv:
+            self._queue, self._queued = [], set()
             for urgency, node in requests:
                 if node in self.cache or node in self.bad or node in self._queued:
                     continue
-                heapq.heappush(self._queue, (-urgency, id(node), node))
+                self._queue.append((-urgency, id(node), node))
                 self._queued.add(node)
+            heapq.heapify(self._queue)
             self._cv.notify()
 
     def take(self, node) -> np.ndarray | None:

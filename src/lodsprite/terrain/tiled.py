@@ -174,14 +174,27 @@ class GeoTiffSource:
         if self.flip_cols:
             h = h[:, ::-1]
         bad = ~np.isfinite(h)
-        if bad.all():
-            return np.full(h.shape, np.nan, np.float32)  # filled from the parent later
+        if bad.all():  # a window of nodata only: the nearest valid sample of the whole file
+            return np.full(h.shape, self._nearest_valid(r0, r1, c0, c1), np.float32)
         if bad.any():
             from scipy.ndimage import distance_transform_edt
 
             _, (ri, ci) = distance_transform_edt(bad, return_indices=True)
             h = h[ri, ci]
         return h.astype(np.float32)
+
+    def _nearest_valid(self, r0: int, r1: int, c0: int, c1: int) -> float:
+        """The valid sample of the decimated file nearest the window's centre."""
+        if not hasattr(self, "_coarse"):
+            self._coarse = self.coarse()
+        c = self._coarse
+        ok = np.argwhere(np.isfinite(c))
+        if not len(ok):
+            return 0.0
+        fr = ((r0 + r1) / 2) * c.shape[0] / self.rows
+        fc = ((c0 + c1) / 2) * c.shape[1] / self.cols
+        i, j = ok[np.argmin((ok[:, 0] - fr) ** 2 + (ok[:, 1] - fc) ** 2)]
+        return float(c[i, j])
 
     def close(self) -> None:
         self.ds.close()
