@@ -213,7 +213,7 @@ def test_the_large_terrain_harness_writes_its_keys(tmp_path):
     from lodsprite.report.large import write_outputs
     from lodsprite.terrain.large import LargeConfig, reproduce_large
 
-    cfg = LargeConfig(sizes=(256,), frames=12, image=96, sample_every=6, quick_512=True)
+    cfg = LargeConfig(sizes=(256,), frames=8, image=64, sample_every=4, jacksboro=False)
     r = reproduce_large(cfg, tmp_path)
     write_outputs(r, tmp_path)
     saved = json.loads((tmp_path / "results.json").read_text())
@@ -222,8 +222,8 @@ def test_the_large_terrain_harness_writes_its_keys(tmp_path):
                 "rmse_sprite", "peak_rss_mb", "first_frame_s"):
         assert np.isfinite(v[key]), key
     assert v["reference"] == "full resolution"
-    assert np.isfinite(saved["speedup_sprite_vs_full_512"])
-    assert np.isfinite(saved["rmse_ratio_sprite_vs_lod_512"])
+    # (the 512² jacksboro runs are the same render commands with --key-sse: covered by
+    # test_lod_sprite_with_adaptive_keyframes_stays_closer_than_the_plain_coarse_level)
     assert (tmp_path / "large_scaling.png").stat().st_size > 2000
 
 

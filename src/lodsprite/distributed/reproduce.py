@@ -119,7 +119,7 @@ class SwanConfig:
 
     @classmethod
     def quick(cls, **kw) -> SwanConfig:
-        return cls(**{"frames": 90, "size": 256, **kw})
+        return cls(**{"frames": 60, "size": 256, **kw})
 
     def render_config(self) -> RenderConfig:
         """The client's frames, as :mod:`lodsprite.distributed.quality` replays them."""
