@@ -19,6 +19,7 @@ import numpy as np
 
 from lodsprite.gl.context import GLContext
 from lodsprite.gl.terrain import mat_bytes
+from lodsprite.terrain.lod import grid_mesh
 
 ADAPTIVE_VS = """#version 330
 uniform mat4 u_view_proj;
@@ -90,17 +91,6 @@ LIGHT = np.array([-0.45, 0.45, 0.77]) / np.linalg.norm([-0.45, 0.45, 0.77])
 SKY = (0.62, 0.74, 0.88)
 
 
-def grid_mesh(g: int) -> tuple[np.ndarray, np.ndarray]:
-    """The node mesh: ``(g+1)²`` vertices (column, row) and ``2 g²`` triangles, square
-    ``(r, c)`` split along ``(r, c)-(r+1, c+1)``."""
-    r, c = np.meshgrid(np.arange(g + 1), np.arange(g + 1), indexing="ij")
-    uv = np.stack([c.ravel(), r.ravel()], 1).astype(np.float32)
-    a = (r[:-1, :-1] * (g + 1) + c[:-1, :-1]).ravel()
-    b, d, e = a + (g + 1), a + (g + 1) + 1, a + 1
-    tris = np.concatenate([np.stack([a, b, d], 1), np.stack([a, d, e], 1)])
-    return uv, tris.astype(np.int32)
-
-
 class AdaptiveRenderer:
     """The GPU cache (a height atlas of ``capacity`` tiles) and the instanced node draw."""
 
@@ -116,9 +106,9 @@ class AdaptiveRenderer:
         self.atlas.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self.program = mgl.program(vertex_shader=ADAPTIVE_VS, fragment_shader=ADAPTIVE_FS)
         self.program["u_light"].value = tuple(LIGHT)
-        uv, tris = grid_mesh(self.g)
-        self.vbo = mgl.buffer(uv.tobytes())
-        self.ibo = mgl.buffer(tris.tobytes())
+        uv, tris = grid_mesh(self.g)  # the terrain's own chunk mesh: the same diagonals
+        self.vbo = mgl.buffer(uv.astype(np.float32).tobytes())
+        self.ibo = mgl.buffer(tris.astype(np.uint32).tobytes())
         self.index_count = tris.size
         self.instances = mgl.buffer(reserve=64 * 256)
         self.vao = mgl.vertex_array(self.program, [

@@ -223,6 +223,11 @@ class LumigraphRenderer(FloatTarget):
         self.samples = 0                             # textured samples of the last render
 
     @property
+    def free_layers(self) -> int:
+        """Layers of texture memory not holding a node."""
+        return len(self._free)
+
+    @property
     def node_bytes(self) -> int:
         """Texture memory of one resident node."""
         return self.n * self.n * self.BYTES_PER_TEXEL

@@ -121,7 +121,7 @@ class Method:
             if img is None:
                 valid[k] = 0.0
                 continue
-            if not self.rec._free:
+            if not self.rec.free_layers:
                 out = next(m for m in self.rec.slot_of if m not in keep)
                 self.rec.evict(out)
                 evs += 1

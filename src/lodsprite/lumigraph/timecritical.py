@@ -123,7 +123,7 @@ class CriticalMethod(Method):
             n = int(n)
             if n not in self.rec.slot_of:
                 img = self.loader.get(n)
-                if img is None or not self.rec._free:
+                if img is None or not self.rec.free_layers:
                     continue  # dropped from the cache meanwhile: drawn without it
                 self.rec.upload(n, img)
                 uploaded += 1

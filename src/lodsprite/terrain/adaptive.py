@@ -134,6 +134,19 @@ class AdaptiveTerrain:
                              self.renderer.triangles, uploaded, len(self.slots.slots),
                              self.loader.loaded, self.slots.evicted, len(self.loader.bad))
 
+    def settle(self, viewpoint: Viewpoint, max_frames: int = 200) -> AdaptiveFrame:
+        """Redraw ``viewpoint`` until no tile it wants is left to load (a converged
+        reference image, untimed use only); returns the last frame."""
+        for _ in range(max_frames):
+            f = self.frame(viewpoint)
+            if f.uploaded == 0 and self.loader.idle():
+                f = self.frame(viewpoint)      # what arrived meanwhile
+                if f.uploaded == 0:
+                    break
+            else:
+                time.sleep(0.002)
+        return f
+
     def _instances(self, draw: list[Node]) -> np.ndarray:
         """Per node: world origin, spacing, slots, quadrant, morph range, valid extent, and
         the parent's valid extent."""

@@ -74,8 +74,6 @@ def _rmse(a: dict, b: dict) -> float:
 
 def reference(store: Path, n: int, cfg: LargeConfig, keep: list[int]) -> dict:
     """The settled adaptive frames at ``cfg.ref_sse`` of the sampled viewpoints."""
-    import time
-
     from lodsprite import get_path, load_scene
     from lodsprite.gl.context import GLContext
     from lodsprite.gl.target import RenderTarget
@@ -93,13 +91,7 @@ def reference(store: Path, n: int, cfg: LargeConfig, keep: list[int]) -> dict:
                             color=geo.color_tex)
         try:
             for i in keep:
-                vp = path.viewpoints[i]
-                for _ in range(200):  # settle: until nothing more arrives
-                    f = a.frame(vp)
-                    if f.uploaded == 0 and not a.loader._queue:
-                        time.sleep(0.01)
-                        if a.frame(vp).uploaded == 0:
-                            break
+                a.settle(path.viewpoints[i])
                 out[i] = t.read_color()
         finally:
             a.release()

@@ -28,6 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from lodsprite.camera import boxes_in_frustum
+
 MORPH_SPAN = 0.3
 DEFAULT_GRID = 64
 
@@ -85,6 +87,7 @@ class Quadtree:
         self.errors = np.asarray(pyramid.level_errors, dtype=np.float64)
         self.minmax = [np.asarray(pyramid.minmax(k)) for k in range(self.levels)]
         self.chunk = pyramid.chunk
+        self._bounds: dict[Node, tuple[np.ndarray, np.ndarray]] = {}
 
     def node_diagonals(self) -> np.ndarray:
         """A node's diagonal (metres) per level."""
@@ -123,7 +126,13 @@ class Quadtree:
 
     def bounds(self, n: Node) -> tuple[np.ndarray, np.ndarray]:
         """The node's bounding box ``(lo (3,), hi (3,))``, heights from its chunks' min and
-        max widened by the level's error."""
+        max widened by the level's error (computed once a node)."""
+        box = self._bounds.get(n)
+        if box is None:
+            box = self._bounds[n] = self._box(n)
+        return box
+
+    def _box(self, n: Node) -> tuple[np.ndarray, np.ndarray]:
         r0, r1, c0, c1 = self.samples(n)
         x, y = self.world_xy(n.k, np.array([r0, r1 - 1]), np.array([c0, c1 - 1]))
         mm = self.minmax[n.k][r0 // self.chunk: (r1 - 1) // self.chunk + 1,
@@ -142,7 +151,7 @@ class Quadtree:
         while stack:
             n = stack.pop()
             lo, hi = self.bounds(n)
-            if not _box_visible(planes, lo, hi):
+            if not boxes_in_frustum(planes, lo[None], hi[None])[0]:
                 continue
             d = float(np.linalg.norm(np.clip(eye, lo, hi) - eye))
             if n.k > 0 and d < r[n.k]:
@@ -155,12 +164,6 @@ class Quadtree:
                 want.extend((urgency, c) for c in missing)
             draw.append(n)
         return draw, want
-
-
-def _box_visible(planes: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> bool:
-    """An axis-aligned box not wholly outside any frustum plane."""
-    p = np.where(planes[:, :3] >= 0, hi, lo)          # the box corner furthest inside
-    return bool(((p * planes[:, :3]).sum(axis=1) + planes[:, 3] >= 0).all())
 
 
 def morph_factor(distance: np.ndarray, k: int, r: np.ndarray) -> np.ndarray:

@@ -63,6 +63,11 @@ class TileLoader(BackgroundLoader):
             heapq.heapify(self._queue)
             self._cv.notify()
 
+    def idle(self) -> bool:
+        """Nothing left on the wish list."""
+        with self._cv:
+            return not self._queue
+
     def take(self, node) -> np.ndarray | None:
         """The node's samples if they have arrived (marks them recently used)."""
         with self._cv:
