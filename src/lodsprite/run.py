@@ -203,6 +203,11 @@ def sprite_frames(pr: PathRenderer, path: CameraPath, config: RenderConfig,
     if config.key_sse is not None:  # keyframes by the adaptive renderer
         adaptive = _adaptive(pr, config, path, config.key_sse)
         sprite.keyframe_drawer = adaptive.render_into
+        from lodsprite.terrain.store import TerrainStore
+        from lodsprite.terrain.storefield import store_field
+
+        if isinstance(adaptive.tree.p, TerrainStore):  # proxy, ribbons, metric from level 0
+            pr.geometry.set_full(store_field(adaptive.tree.p))
     try:
         vp0 = path.viewpoints[0]
         sprite.render_keyframe(vp0, 0.0)  # warm-up (shader compilation), untimed
@@ -357,7 +362,7 @@ def pyramid_for(config: RenderConfig, hf):
 
     p = Path(config.terrain).expanduser()
     if p.is_dir() and (p / "zarr.json").is_file():
-        return TerrainStore(p)
+        return TerrainStore(p, config.exaggeration)
     return MemoryPyramid.from_heightfield(hf)
 
 

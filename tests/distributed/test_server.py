@@ -1,6 +1,7 @@
 """The LOD server's edge: typed control requests, holds, datasets, memory, a renderer that
 survives bad scenes, keyframes for the holder only, prediction on the client's clock."""
 
+import json
 import logging
 import threading
 import time
@@ -159,6 +160,40 @@ def test_datasets_serve_builtins_and_files_inside_the_data_folder_only(data_dir)
     assert without.terrain("fractal:64").builtin
     with pytest.raises(InputError, match="--data"):
         without.terrain("dem.npy")
+
+
+def test_a_terrain_store_in_the_data_folder_is_served_and_a_linked_one_refused(data_dir):
+    import shutil
+
+    from lodsprite.terrain.store import build_store
+
+    build_store("fractal:300x200:1", data_dir / "big.zarr", tile=128, chunk=64)
+    d = Datasets(data_dir)
+    got = d.terrain("big.zarr")
+    assert got.spec == str((data_dir / "big.zarr").resolve()) and got.shape == (300, 200)
+    assert d.terrain("big.zarr/").shape == (300, 200)
+    with pytest.raises(InputError):
+        d.texture("big.zarr")  # a store is a terrain, never a texture file
+    # a store whose chunk file is a symlink (to anything) is refused
+    shutil.copytree(data_dir / "big.zarr", data_dir / "linked.zarr")
+    chunk = next(p for p in (data_dir / "linked.zarr" / "0").rglob("*") if p.is_file())
+    chunk.unlink()
+    chunk.symlink_to(data_dir.parent / "secret.npy")
+    with pytest.raises(InputError, match="symlink"):
+        d.terrain("linked.zarr")
+    # a store whose build did not finish is refused with the reason
+    shutil.copytree(data_dir / "big.zarr", data_dir / "part.zarr")
+    meta = json.loads((data_dir / "part.zarr" / "zarr.json").read_text())
+    meta["attributes"]["lodsprite"]["complete"] = False
+    (data_dir / "part.zarr" / "zarr.json").write_text(json.dumps(meta))
+    with pytest.raises(InputError, match="did not finish"):
+        d.terrain("part.zarr")
+    s = LodServer(bind=f"127.0.0.1:{free_ports()}", data_dir=data_dir)
+    try:
+        assert control(s, "load", {**SMALL, "terrain": "big.zarr", "grid": 64})["ok"] is True
+        assert control(s, "load", {**SMALL, "terrain": "linked.zarr"})["ok"] is False
+    finally:
+        s._ctx.term()
 
 
 def test_a_load_naming_a_path_is_refused_with_ok_false(data_dir):

@@ -7,9 +7,11 @@ is either a built-in:
   ``16 .. MAX_FRACTAL_SIZE``;
 * textures ``terrain`` and ``checker[:K]`` (K in 1..1024);
 
-or a file relative to the server's data folder (``lodsprite serve --data DIR``).  A file
-name that is absolute, holds a ``..`` component, or resolves (through symlinks) to a
-place outside DIR is refused; so is every file name when the server has no data folder.
+or a file relative to the server's data folder (``lodsprite serve --data DIR``), or for
+terrains a terrain store there (a ``lodsprite tile`` folder, read at its finest level of
+at most 4096 a side, as every ``--terrain`` is).  A name that is absolute, holds a ``..``
+component, or resolves (through symlinks) to a place outside DIR is refused; so is a store
+holding any symlink, and every file name when the server has no data folder.
 The client loads the same name itself (its coarse model and fallback texture), as in
 Swan et al. 2002 where both hosts hold the dataset.
 """
@@ -66,7 +68,7 @@ class Datasets:
                 raise InputError(f"fractal size {size} is not a power of two in "
                                  f"16..{MAX_FRACTAL_SIZE}")
             return Dataset(name, (size + 1, size + 1), True)
-        path = self._file(name, "terrain")
+        path = self._file(name, "terrain", stores=True)
         return Dataset(str(path), _peek_shape(path), False)
 
     def texture(self, name: str) -> Dataset:
@@ -84,7 +86,7 @@ class Datasets:
         path = self._file(name, "texture")
         return Dataset(str(path), _peek_shape(path), False)
 
-    def _file(self, name: str, what: str) -> Path:
+    def _file(self, name: str, what: str, stores: bool = False) -> Path:
         if self.data_dir is None:
             raise InputError(f"{what} {name!r} is not a built-in, and this server serves no "
                              "files (start it with --data DIR)")
@@ -100,7 +102,9 @@ class Datasets:
             raise InputError(f"{what} {name!r}: no such file in the data folder") from None
         if not path.is_relative_to(self.data_dir):
             raise InputError(f"{what} {name!r} leads outside the data folder")
-        if not path.is_file():
+        if stores and path.is_dir() and (path / "zarr.json").is_file():
+            _check_store(path, name)
+        elif not path.is_file():
             raise InputError(f"{what} {name!r} is not a file")
         shape = _peek_shape(path)
         if shape is not None and max(shape) > MAX_SOURCE_SIDE:
@@ -115,11 +119,32 @@ def _clean(name: str, what: str) -> str:
     return name.strip()
 
 
+def _check_store(path: Path, name: str) -> None:
+    """Refuse a store holding a symlink (it could lead reads outside the data folder) or
+    one that does not open as a complete terrain store."""
+    import os
+
+    from lodsprite.terrain.store import TerrainStore
+
+    for root, dirs, files in os.walk(path):
+        for entry in (*dirs, *files):
+            if os.path.islink(os.path.join(root, entry)):
+                raise InputError(f"terrain {name!r}: a store holding symlinks is refused")
+    TerrainStore(path)  # raises InputError naming what is wrong
+
+
 def _peek_shape(path: Path) -> tuple[int, int] | None:
-    """(rows, cols) of an image, GeoTIFF or .npy file without reading its data; None when
-    the file cannot be read this way (the loader then reports what is wrong)."""
+    """(rows, cols) of an image, GeoTIFF or .npy file without reading its data, or of the
+    level a terrain store is loaded at; None when the file cannot be read this way (the
+    loader then reports what is wrong)."""
     suffix = path.suffix.lower()
     try:
+        if path.is_dir():
+            from lodsprite.terrain.loaders import STORE_MAX_SIDE
+            from lodsprite.terrain.store import TerrainStore
+
+            st = TerrainStore(path)
+            return st.shape(st.level_for(STORE_MAX_SIDE))
         if suffix == ".npy":
             a = np.load(path, mmap_mode="r", allow_pickle=False)
             return (int(a.shape[0]), int(a.shape[1])) if a.ndim == 2 else None

@@ -52,6 +52,9 @@ class TerrainGeometry:
         mgl = ctx.mgl
         self.ctx = ctx
         self.hf = hf
+        # The full-resolution model LOD-sprite's proxy, ribbons and error metric are taken
+        # from: ``hf`` itself, or a terrain store's level 0 (:meth:`set_full`).
+        self.full: HeightField = hf
         self.chunk_quads = chunk_quads
         self.height_tex = mgl.texture((hf.cols, hf.rows), 1, hf.heights.tobytes(), dtype="f4")
         self.height_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
@@ -96,6 +99,18 @@ class TerrainGeometry:
                                          tris.size)
         return self._meshes[chunk_quads]
 
+    def set_full(self, full: HeightField) -> None:
+        """Take LOD-sprite's proxy and ribbons from ``full`` (same extent as ``hf``, e.g. a
+        :class:`~lodsprite.terrain.storefield.StoreField`); before any proxy is drawn."""
+        if self._proxies:
+            raise RuntimeError("set_full must come before the first proxy is built")
+        if abs(full.width - self.hf.width) > 1e-6 * self.hf.width or \
+                abs(full.depth - self.hf.depth) > 1e-6 * self.hf.depth:
+            raise InputError(f"the full-resolution field spans {full.width:.1f} x "
+                             f"{full.depth:.1f} m, the terrain {self.hf.width:.1f} x "
+                             f"{self.hf.depth:.1f} m")
+        self.full = full
+
     def proxy(self, level_quads: int, border: bool) -> tuple[moderngl.Buffer, moderngl.Buffer,
                                                               int]:
         """(vertex buffer ``3f 2f``: position and uv, index buffer, index count) of level
@@ -103,7 +118,7 @@ class TerrainGeometry:
         (:mod:`lodsprite.terrain.proxy`)."""
         key = (level_quads, border)
         if key not in self._proxies:
-            mesh = proxy_mesh(self.hf, level_quads, border)
+            mesh = proxy_mesh(self.full, level_quads, border)
             verts = np.concatenate([mesh.positions, mesh.uv], axis=1).astype(np.float32)
             mgl = self.ctx.mgl
             self._proxies[key] = (mgl.buffer(verts.tobytes()), mgl.buffer(mesh.tris.tobytes()),

@@ -64,7 +64,7 @@ class LodSpriteEngine:
     def __init__(self, sprite: SpriteRenderer, epsilon_px: float = DEFAULT_EPSILON_PX,
                  predict: bool = True) -> None:
         self.sprite = sprite
-        hf = sprite.terrain.geometry.hf
+        hf = sprite.terrain.geometry.full  # the terrain, or a store's level 0
         self.policy = KeyframePolicy(ErrorMetric.for_level(hf, sprite.coarse_quads), hf,
                                      epsilon_px, sprite.target.height,
                                      sprite.terrain.projection, sprite.key_projection, predict)

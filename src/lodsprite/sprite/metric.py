@@ -200,20 +200,25 @@ class ErrorMetric:
         square (edges included)."""
         sq = self.squares
         hf, step, n = sq.hf, sq.step, sq.level_quads
-        h = hf.heights.astype(np.float64)
-        m = n * step
+        if hasattr(hf.heights, "block_extremes"):  # a store read on demand: chunk bounds
+            zlo, zhi = hf.heights.block_extremes(n, step)
+        else:
+            h = hf.heights.astype(np.float64)
+            m = n * step
 
-        def extreme(red) -> np.ndarray:
-            cols = red(red.reduce(h[:, :m].reshape(len(h), n, step), axis=2), h[:, step::step])
-            return red(red.reduce(cols[:m].reshape(n, step, n), axis=1), cols[step::step])
+            def extreme(red) -> np.ndarray:
+                cols = red(red.reduce(h[:, :m].reshape(len(h), n, step), axis=2),
+                           h[:, step::step])
+                return red(red.reduce(cols[:m].reshape(n, step, n), axis=1), cols[step::step])
 
+            zlo, zhi = extreme(np.minimum), extreme(np.maximum)
         idx = level_indices(hf, n)
         x, y = hf.world_xy(idx, idx)  # x by column index, y by row index
         rr, cc = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
         x0, x1 = x[cc].ravel(), x[cc + 1].ravel()
         y0, y1 = y[rr + 1].ravel(), y[rr].ravel()  # row 0 is north: y falls with the row
-        lo = np.c_[x0, y0, extreme(np.minimum).ravel()]
-        hi = np.c_[x1, y1, extreme(np.maximum).ravel()]
+        lo = np.c_[x0, y0, zlo.ravel()]
+        hi = np.c_[x1, y1, zhi.ravel()]
         return lo, hi
 
     def squares_in_view(self, view_proj: np.ndarray) -> np.ndarray:

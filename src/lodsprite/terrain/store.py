@@ -396,11 +396,17 @@ def _write_tile(arr, mm, header: StoreHeader, h: np.ndarray, r0: int, c0: int,
 
 
 class TerrainStore:
-    """A pyramid store opened for reading: header and arrays validated when opened."""
+    """A pyramid store opened for reading: header and arrays validated when opened.
 
-    def __init__(self, path: str | Path) -> None:
+    ``exaggeration`` (> 0) multiplies every height read, the chunk bounds and the level
+    errors, as ``--exaggeration`` does for in-memory terrains."""
+
+    def __init__(self, path: str | Path, exaggeration: float = 1.0) -> None:
         import zarr
 
+        if not (exaggeration > 0 and np.isfinite(exaggeration)):
+            raise InputError(f"vertical exaggeration must be positive, got {exaggeration}")
+        self.exaggeration = float(exaggeration)
         self.path = Path(path)
         if not (self.path / "zarr.json").is_file():
             raise InputError(f"{self.path} is not a terrain store (no zarr.json)")
@@ -445,19 +451,20 @@ class TerrainStore:
 
     @property
     def level_errors(self) -> list[float]:
-        return self.header.level_errors
+        return [e * self.exaggeration for e in self.header.level_errors]
 
     def shape(self, k: int) -> tuple[int, int]:
         return level_shape(self.header.rows, self.header.cols, k)
 
     def read(self, k: int, r0: int, r1: int, c0: int, c1: int) -> np.ndarray:
         """Level ``k``'s heights in metres over a window, ``float32`` (NaN: unwritten)."""
-        return decode(self.group[str(k)][r0:r1, c0:c1], self.header)
+        h = decode(self.group[str(k)][r0:r1, c0:c1], self.header)
+        return h if self.exaggeration == 1.0 else h * np.float32(self.exaggeration)
 
     def minmax(self, k: int) -> np.ndarray:
         """Level ``k``'s per-chunk min, max and geometric error, ``(chunk rows, chunk
         cols, 3)``."""
-        return np.asarray(self.group[f"minmax/{k}"][...])
+        return np.asarray(self.group[f"minmax/{k}"][...]) * self.exaggeration
 
     def level_for(self, max_side: int) -> int:
         """The finest level whose longer side is at most ``max_side``."""
@@ -468,15 +475,17 @@ class TerrainStore:
 
     def heightfield(self, max_side: int = 4096):
         """The finest level that fits ``max_side`` as an in-memory :class:`HeightField`
-        (spacing scaled to the level), for commands that need the whole field."""
+        (its spacing stretched so that it spans level 0's extent, as the adaptive renderer
+        draws it), for commands that need the whole field."""
         from lodsprite.terrain.loaders import heightfield_from_array
 
         k = self.level_for(max_side)
         r, c = self.shape(k)
         a = self.read(k, 0, r, 0, c)
-        f = 1 << k
+        h = self.header
         meta = {"source": str(self.path), "format": "lodsprite terrain store",
                 "level": k, "store_rows": self.header.rows, "store_cols": self.header.cols,
                 "crs": self.header.crs}
-        return heightfield_from_array(a, self.header.dx * f, self.header.dy * f,
-                                      self.path.name, meta)
+        dx = h.dx * (h.cols - 1) / max(c - 1, 1)
+        dy = h.dy * (h.rows - 1) / max(r - 1, 1)
+        return heightfield_from_array(a, dx, dy, self.path.name, meta)
