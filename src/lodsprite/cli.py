@@ -30,7 +30,8 @@ TerrainOpt = Annotated[str, typer.Option(
     "--terrain", help="jacksboro | fractal:SIZE[:SEED] | FILE (.tif/.tiff/.png/.npy)")]
 TextureOpt = Annotated[str, typer.Option(
     "--texture", help="terrain | checker[:K] | image FILE")]
-PathOpt = Annotated[str, typer.Option("--path", help="chen1999 | swan2002 | FILE.json")]
+PathOpt = Annotated[str, typer.Option(
+    "--path", help="chen1999 | swan2002 | flyover[:HEIGHT_M[:TRACK_M]] | FILE.json")]
 FramesOpt = Annotated[int | None, typer.Option(
     "--frames", help="frames along the path (default: the paper's 460 / 600, or the file's)")]
 SizeOpt = Annotated[str, typer.Option("--size", help="image size WxH in pixels")]
@@ -494,7 +495,8 @@ def _with_bars(run, *args):
         bar.stop()
 
 
-def _run_large(out_dir: Path, quick: bool, huge: bool = False) -> None:
+def _run_large(out_dir: Path, quick: bool, huge: bool = False,
+               terrains: tuple[str, ...] = ()) -> None:
     from dataclasses import replace
 
     from lodsprite.report.large import write_outputs
@@ -503,10 +505,11 @@ def _run_large(out_dir: Path, quick: bool, huge: bool = False) -> None:
     if out_dir == Path("out/chen1999"):
         out_dir = Path("out/large")
     cfg = LargeConfig.quick() if quick else LargeConfig()
-    r = _with_bars(reproduce_large, replace(cfg, huge=huge), out_dir)
+    r = _with_bars(reproduce_large, replace(cfg, huge=huge, terrains=terrains), out_dir)
     report = write_outputs(r, out_dir)
-    for side, v in sorted(r["sizes"].items(), key=lambda kv: int(kv[0])):
-        out.print(f"{side}²: adaptive median {v['median_ms_adaptive']:.1f} ms, sprite "
+    for side, v in [*sorted(r["sizes"].items(), key=lambda kv: int(kv[0])),
+                    *r["terrains"].items()]:
+        out.print(f"{side}: adaptive median {v['median_ms_adaptive']:.1f} ms, sprite "
                   f"{v['median_ms_sprite']:.1f} ms, RMSE {v['rmse_adaptive']:.2f} / "
                   f"{v['rmse_sprite']:.2f}, peak RSS {v['peak_rss_mb']:.0f} MB, first frame "
                   f"{v['first_frame_s']:.2f} s")
@@ -751,7 +754,7 @@ def reproduce(
         _run_gumbau(out_dir, quick)
         return
     if experiment == "large":
-        _run_large(out_dir, quick, huge)
+        _run_large(out_dir, quick, huge, () if terrain == "jacksboro" else (terrain,))
         return
     if experiment != "chen1999":
         raise InputError(f"unknown experiment '{experiment}': available: chen1999, swan2002, "

@@ -366,6 +366,22 @@ def pyramid_for(config: RenderConfig, hf):
     return MemoryPyramid.from_heightfield(hf)
 
 
+def peak_rss_mb() -> float:
+    """This process's peak resident memory in MB: ``VmHWM`` of ``/proc/self/status``, which
+    starts afresh at ``exec`` (``getrusage``'s ``ru_maxrss`` keeps the peak of the process
+    that forked it, e.g. a harness holding a GL context), else ``ru_maxrss``."""
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 1024.0
+    except OSError:
+        pass
+    import resource
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # KB on Linux
+
+
 def adaptive_frames(pr: PathRenderer, scene: Scene, path: CameraPath, config: RenderConfig,
                     progress: Progress | None = None, on_frame=None
                     ) -> tuple[list[dict], dict]:
@@ -388,10 +404,10 @@ def adaptive_frames(pr: PathRenderer, scene: Scene, path: CameraPath, config: Re
                 on_frame(i, pr.renderer.target.read_color())
             if progress:
                 progress(i + 1, len(path))
-        import resource
-
-        peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # KB on Linux
+        reader = getattr(terrain.loader, "reader_peak_mb", lambda: 0.0)()
+        peak = peak_rss_mb() + reader  # with the tile reader process's (an upper bound)
         extra = {"sse": config.sse, "first_frame_s": first, "peak_rss_mb": peak,
+                 "peak_rss_mb_reader": reader,
                  "tiles_resident": f.resident,
                  "tiles_loaded": f.loaded, "tiles_evicted": f.evicted, "tiles_bad": f.bad,
                  "gpu_cache_tiles": terrain.slots.capacity, "levels": terrain.tree.levels,

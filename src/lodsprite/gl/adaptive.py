@@ -18,7 +18,7 @@ import moderngl
 import numpy as np
 
 from lodsprite.gl.context import GLContext
-from lodsprite.gl.terrain import mat_bytes
+from lodsprite.gl.terrain import SKY_RGB, mat_bytes
 from lodsprite.terrain.lod import grid_mesh
 
 ADAPTIVE_VS = """#version 330
@@ -88,7 +88,6 @@ void main() {
 }
 """
 LIGHT = np.array([-0.45, 0.45, 0.77]) / np.linalg.norm([-0.45, 0.45, 0.77])
-SKY = (0.62, 0.74, 0.88)
 
 
 class AdaptiveRenderer:
@@ -134,7 +133,7 @@ class AdaptiveRenderer:
         width, depth) or by a height ramp."""
         mgl = self.ctx.mgl
         fbo.use()
-        fbo.clear(*SKY, 1.0, depth=1.0)
+        fbo.clear(*SKY_RGB, 1.0, depth=1.0)  # the sky every renderer clears to
         mgl.enable(moderngl.DEPTH_TEST)
         mgl.disable(moderngl.CULL_FACE | moderngl.BLEND)
         n = len(instances)

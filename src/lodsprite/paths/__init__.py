@@ -21,6 +21,9 @@ A :class:`CameraPath` is a sequence of :class:`~lodsprite.camera.Viewpoint`
 :class:`~lodsprite.terrain.heightfield.HeightField`: metres, ``+x`` east,
 ``+y`` north, ``+z`` up, the terrain's horizontal centre at the origin.
 
+A third, :func:`flyover`, is not a paper's: a low flight of fixed height and length in
+metres, the same over a terrain of any size (for comparing renderers across sizes).
+
 The JSON file format is documented in :mod:`lodsprite.paths.core`.
 """
 
@@ -40,6 +43,7 @@ from lodsprite.paths.core import (
     _check_frames,
     load_path_json,
 )
+from lodsprite.paths.flyover import flyover, parse_flyover
 from lodsprite.paths.papers import chen1999, swan2002
 from lodsprite.terrain.heightfield import HeightField
 
@@ -51,6 +55,7 @@ __all__ = [
     "SWAN2002_FRAMES",
     "CameraPath",
     "chen1999",
+    "flyover",
     "get_path",
     "load_path_json",
     "swan2002",
@@ -65,10 +70,11 @@ def get_path(spec: str | os.PathLike, hf: HeightField, frames: int | None = None
     """A camera path by name or file.
 
     ``spec`` is ``"chen1999"`` (default 460 frames), ``"swan2002"`` (default
-    600 frames) or a JSON path file (module docstring), which is resampled to
-    ``frames`` when given (:meth:`CameraPath.resampled`).  A spec ending in
-    ``.json`` that does not exist reports the missing file; any other unknown
-    spec raises :class:`PathError`.
+    600 frames), ``"flyover[:HEIGHT_M[:TRACK_M]]"`` (460 frames; a low flight of fixed
+    height and length, :mod:`lodsprite.paths.flyover`) or a JSON path file (module
+    docstring), which is resampled to ``frames`` when given
+    (:meth:`CameraPath.resampled`).  A spec ending in ``.json`` that does not exist
+    reports the missing file; any other unknown spec raises :class:`PathError`.
     """
     if frames is not None:
         frames = _check_frames(frames)
@@ -77,7 +83,11 @@ def get_path(spec: str | os.PathLike, hf: HeightField, frames: int | None = None
         return chen1999(hf, CHEN1999_FRAMES if frames is None else frames)
     if key.strip().lower() == "swan2002":
         return swan2002(hf, SWAN2002_FRAMES if frames is None else frames)
+    low = parse_flyover(key)
+    if low is not None:
+        return flyover(hf, CHEN1999_FRAMES if frames is None else frames, *low)
     if Path(key).is_file() or key.lower().endswith(".json"):
         path = load_path_json(key)
         return path if frames is None else path.resampled(frames)
-    raise PathError(f"unknown path '{key}': use chen1999, swan2002 or a .json file")
+    raise PathError(f"unknown path '{key}': use chen1999, swan2002, "
+                    "flyover[:HEIGHT_M[:TRACK_M]] or a .json file")

@@ -19,7 +19,7 @@ import numpy as np
 from lodsprite.camera import Viewpoint, fitted_projection, frustum_planes
 from lodsprite.errors import InputError
 from lodsprite.terrain.quadtree import DEFAULT_GRID, MORPH_SPAN, Node, Quadtree, ranges
-from lodsprite.terrain.streaming import SlotCache, TileLoader
+from lodsprite.terrain.streaming import SlotCache, tile_loader
 
 
 @dataclass(frozen=True)
@@ -55,7 +55,7 @@ class AdaptiveTerrain:
         self.sse = float(sse_px)
         self.r = ranges(pyramid.level_errors, sse_px, target.size[1], fov_y_deg,
                         self.tree.node_diagonals())
-        self.loader = TileLoader(self.tree, host_mb)
+        self.loader = tile_loader(self.tree, host_mb)
         tile_bytes = (grid + 1) ** 2 * 4
         self.renderer = AdaptiveRenderer(gl, grid, max(1, int(gpu_mb * 2 ** 20 // tile_bytes)))
         self.slots = SlotCache(self.renderer.capacity)
@@ -81,8 +81,23 @@ class AdaptiveTerrain:
 
     def projection(self, viewpoint: Viewpoint) -> np.ndarray:
         w, h = self.target.size
-        ground = self.height_range[0]
+        ground = self.ground_below(viewpoint.o)
         return fitted_projection(viewpoint, self.fov, w / h, *self.bounds, ground).matrix()
+
+    def ground_below(self, eye) -> float:
+        """A height (metres) at or above the ground under ``eye``: the highest sample of
+        the level-0 chunk it stands over (the lowest of the terrain off its footprint).
+        The near plane sits at half the eye's clearance above it: the terrain's lowest
+        point there put the near plane beyond the ground in view of a low flight."""
+        tree = self.tree
+        col = eye[0] / tree.p.dx + (tree.cols0 - 1) / 2.0
+        row = (tree.rows0 - 1) / 2.0 - eye[1] / tree.p.dy
+        if not (0 <= row <= tree.rows0 - 1 and 0 <= col <= tree.cols0 - 1):
+            return self.height_range[0]
+        mm = tree.minmax[0]
+        i = min(int(row) // tree.chunk, mm.shape[0] - 1)
+        j = min(int(col) // tree.chunk, mm.shape[1] - 1)
+        return float(mm[i, j, 1])
 
     def _upload(self, node: Node, data: np.ndarray, keep: set) -> bool:
         slot = self.slots.assign(node, keep)
@@ -109,6 +124,18 @@ class AdaptiveTerrain:
         proj = self.projection(viewpoint) if projection is None else projection
         view_proj = proj @ viewpoint.view_matrix()
         eye = np.asarray(viewpoint.o, dtype=np.float64)
+        draw, uploaded = self._stream(eye, view_proj)
+        self.renderer.draw(target.fbo, view_proj, eye, self._instances(draw),
+                           self.height_range, self.extent, self.color)
+        if finish:
+            self.gl.finish()
+        return AdaptiveFrame((time.perf_counter() - t0) * 1e3, len(draw),
+                             self.renderer.triangles, uploaded, len(self.slots.slots),
+                             self.loader.loaded, self.slots.evicted, len(self.loader.bad))
+
+    def _stream(self, eye: np.ndarray, view_proj: np.ndarray) -> tuple[list[Node], int]:
+        """Select the nodes to draw, ask the loader for what is missing and upload what
+        has arrived (at most ``upload_budget``); returns the nodes and the uploads."""
         draw, want = self.tree.select(eye, frustum_planes(view_proj), self.r,
                                       self.slots.__contains__)
         # a root evicted (off-screen, LRU) comes back first: its region would be a hole
@@ -126,26 +153,21 @@ class AdaptiveTerrain:
             data = self.loader.take(n)
             if data is not None and n not in self.slots and self._upload(n, data, keep):
                 uploaded += 1
-        self.renderer.draw(target.fbo, view_proj, eye, self._instances(draw),
-                           self.height_range, self.extent, self.color)
-        if finish:
-            self.gl.finish()
-        return AdaptiveFrame((time.perf_counter() - t0) * 1e3, len(draw),
-                             self.renderer.triangles, uploaded, len(self.slots.slots),
-                             self.loader.loaded, self.slots.evicted, len(self.loader.bad))
+        return draw, uploaded
 
-    def settle(self, viewpoint: Viewpoint, max_frames: int = 200) -> AdaptiveFrame:
-        """Redraw ``viewpoint`` until no tile it wants is left to load (a converged
-        reference image, untimed use only); returns the last frame."""
-        for _ in range(max_frames):
-            f = self.frame(viewpoint)
-            if f.uploaded == 0 and self.loader.idle():
-                f = self.frame(viewpoint)      # what arrived meanwhile
-                if f.uploaded == 0:
+    def settle(self, viewpoint: Viewpoint, max_rounds: int = 100000) -> AdaptiveFrame:
+        """Stream ``viewpoint``'s tiles until none it wants is left to load, then draw it
+        (a converged reference image, untimed use only); returns that frame."""
+        view_proj = self.projection(viewpoint) @ viewpoint.view_matrix()
+        eye = np.asarray(viewpoint.o, dtype=np.float64)
+        for _ in range(max_rounds):
+            _, uploaded = self._stream(eye, view_proj)
+            if uploaded == 0 and self.loader.idle():
+                if self._stream(eye, view_proj)[1] == 0:  # what arrived meanwhile
                     break
-            else:
+            elif uploaded == 0:
                 time.sleep(0.002)
-        return f
+        return self.frame(viewpoint)
 
     def _instances(self, draw: list[Node]) -> np.ndarray:
         """Per node: world origin, spacing, slots, quadrant, morph range, valid extent, and

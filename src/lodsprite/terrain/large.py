@@ -1,13 +1,19 @@
 """``lodsprite reproduce large``: how frame cost, memory and error scale with terrain size
-(fractal stores of 1k², 4k², 16k², ...), for the adaptive renderer at 1 px and LOD-sprite
-with adaptive keyframes, along the chen1999-shaped path.
+(fractal stores of 1k², 2k², 4k², 16k², ...), for the adaptive renderer at 1 px and LOD-sprite
+with adaptive keyframes, along the chen1999-shaped path and a low flyover.
 
 Each timed run is its own ``lodsprite render`` process (so its peak resident memory and
-time to first frame are its own).  The reference for the image error is full resolution
-where it fits (sides up to ``FULL_MAX``), else the adaptive renderer at 0.25 px, settled
-(each viewpoint redrawn until no tile is left to load); the stand-in is validated against
-full resolution at the sizes where both exist.  Errors are measured on every
-``sample_every``-th frame.
+time to first frame are its own).  The paths: ``chen1999`` (the issue's path; it scales
+with the terrain, so over a large one it flies so high that coarse levels meet 1 px almost
+everywhere) and ``flyover`` (1 km above the ground along 10 km, the same in metres at every
+size).  The reference for the image error is *full resolution*, the store's own level-0
+samples everywhere (the adaptive renderer with every node at level 0, settled), where the
+store fits (sides up to ``FULL_MAX``); beyond, the adaptive renderer at 0.25 px, settled.
+That stand-in is validated against full resolution at every size where both exist (2k² and
+4k² included).  Errors (RMSE in grey levels, and FLIP) are measured on every
+``sample_every``-th frame; full resolution's frame time is measured on those frames too
+(``render --mode full`` on the working grid, the store's samples resampled to
+``(side+1)²``).
 """
 
 from __future__ import annotations
@@ -25,12 +31,14 @@ import numpy as np
 from lodsprite.terrain.store import build_store, estimate_bytes
 
 FULL_MAX = 4096
+FULL_SSE = 1e-6  # px: every node refined to level 0 (full resolution)
 Update = Callable[[str, int, int], None]
 
 
 @dataclass(frozen=True)
 class LargeConfig:
-    sizes: tuple[int, ...] = (1024, 4096, 16384)
+    sizes: tuple[int, ...] = (1024, 2048, 4096, 16384)
+    paths: tuple[str, ...] = ("chen1999", "flyover")
     frames: int = 230
     image: int = 512
     sse: float = 1.0
@@ -40,6 +48,7 @@ class LargeConfig:
     huge: bool = False       # also 65536² (needs the disk and time it names)
     quick_512: bool = False  # the jacksboro runs on ``frames`` frames, not the whole path
     jacksboro: bool = True   # the 512² jacksboro comparison (tests leave it out)
+    terrains: tuple[str, ...] = ()  # more terrains: stores, or sources to tile first
 
     @classmethod
     def quick(cls) -> LargeConfig:
@@ -67,13 +76,18 @@ def _frames(folder: Path, keep: list[int]) -> dict[int, np.ndarray]:
     return {i: read_image(folder / "frames" / f"frame_{i:05d}.png") for i in keep}
 
 
-def _rmse(a: dict, b: dict) -> float:
-    return float(np.mean([np.sqrt(np.mean((a[i].astype(np.float64)
-                                           - b[i].astype(np.float64)) ** 2)) for i in a]))
+def errors(a: dict, b: dict) -> tuple[float, float]:
+    """Mean RMSE (grey levels) and mean FLIP of the images ``a`` against ``b``."""
+    from lodsprite.metrics import flip, rmse
+
+    return (float(np.mean([rmse(a[i], b[i]) for i in a])),
+            float(np.mean([flip(a[i], b[i]) for i in a])))
 
 
-def reference(store: Path, n: int, cfg: LargeConfig, keep: list[int]) -> dict:
-    """The settled adaptive frames at ``cfg.ref_sse`` of the sampled viewpoints."""
+def reference(store: Path, cfg: LargeConfig, keep: list[int], path_spec: str,
+              sse: float) -> dict:
+    """The settled adaptive frames at ``sse`` px (``FULL_SSE``: full resolution) of the
+    sampled viewpoints of ``path_spec``."""
     from lodsprite import get_path, load_scene
     from lodsprite.gl.context import GLContext
     from lodsprite.gl.target import RenderTarget
@@ -82,13 +96,15 @@ def reference(store: Path, n: int, cfg: LargeConfig, keep: list[int]) -> dict:
     from lodsprite.terrain.store import TerrainStore
 
     scene = load_scene(str(store))
-    path = get_path("chen1999", scene.hf, cfg.frames)
+    path = get_path(path_spec, scene.hf, cfg.frames)
+    full = sse <= FULL_SSE
     out = {}
     with GLContext() as gl:
         t = RenderTarget(gl, cfg.image, cfg.image)
         geo = TerrainGeometry(gl, scene.hf, scene.texture)  # the colours render uses
-        a = AdaptiveTerrain(gl, TerrainStore(store), t, path.fov_y_deg, cfg.ref_sse,
-                            color=geo.color_tex)
+        a = AdaptiveTerrain(gl, TerrainStore(store), t, path.fov_y_deg, sse,
+                            gpu_mb=1024.0 if full else 256.0, host_mb=1024.0 if full else 512.0,
+                            upload_budget=4096 if full else 16, color=geo.color_tex)
         try:
             for i in keep:
                 a.settle(path.viewpoints[i])
@@ -100,50 +116,83 @@ def reference(store: Path, n: int, cfg: LargeConfig, keep: list[int]) -> dict:
     return out
 
 
+def run_path(store: Path, n: int, cfg: LargeConfig, path_spec: str, runs: Path) -> dict:
+    """Adaptive, LOD-sprite and the references of one store along one path."""
+    keep = list(range(0, cfg.frames, cfg.sample_every))
+    common = ["--path", path_spec, "--frames", str(cfg.frames), "--size",
+              f"{cfg.image}x{cfg.image}", "--save-frames"]
+    ad = _render(["--terrain", str(store), "--mode", "adaptive", "--sse", str(cfg.sse),
+                  *common], runs / "adaptive")
+    sp = _render(["--terrain", str(store), "--mode", "sprite", "--key-sse",
+                  str(cfg.key_sse), *common], runs / "sprite")
+    res: dict = {}
+    ref = stand_in = reference(store, cfg, keep, path_spec, cfg.ref_sse)
+    res["reference"] = f"adaptive at {cfg.ref_sse} px, settled"
+    if n <= FULL_MAX:
+        ref = reference(store, cfg, keep, path_spec, FULL_SSE)
+        res["reference"] = "full resolution (level 0 everywhere, settled)"
+        res["reference_vs_full_rmse"], res["reference_vs_full_flip"] = errors(stand_in, ref)
+        sampled = sampled_path(store, cfg, keep, path_spec, runs / "sampled.json")
+        fu = _render(["--terrain", str(store), "--mode", "full", "--grid", str(n),
+                      "--path", str(sampled), "--frames", str(len(keep)), "--size",
+                      f"{cfg.image}x{cfg.image}"], runs / "full")
+        res["median_ms_full"] = fu["median_ms"]
+    ea = errors(_frames(runs / "adaptive", keep), ref)
+    es = errors(_frames(runs / "sprite", keep), ref)
+    res.update(
+        median_ms_adaptive=ad["median_ms"],
+        p99_ms_adaptive=float(np.percentile(json_col(runs / "adaptive"), 99)),
+        median_ms_sprite=sp["median_ms"],
+        p99_ms_sprite=float(np.percentile(json_col(runs / "sprite"), 99)),
+        total_s_adaptive=ad["total_s"], total_s_sprite=sp["total_s"],
+        rmse_adaptive=ea[0], flip_adaptive=ea[1], rmse_sprite=es[0], flip_sprite=es[1],
+        peak_rss_mb=ad["peak_rss_mb"], first_frame_s=ad["first_frame_s"],
+        tiles_loaded=ad["tiles_loaded"], tiles_evicted=ad["tiles_evicted"],
+        gpu_cache_mb=ad["gpu_cache_mb"], keyframes_sprite=sp["keyframes"],
+        speedup_sprite_vs_adaptive=ad["total_s"] / sp["total_s"])
+    return res
+
+
+def _store_for(spec: str, stores: Path) -> tuple[Path, dict, int]:
+    """A terrain given with ``--terrain``: a store as it is, anything else tiled first."""
+    from lodsprite.terrain.store import TerrainStore
+
+    p = Path(spec).expanduser()
+    if p.is_dir() and (p / "zarr.json").is_file():
+        built: dict = {}
+    else:
+        name = "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in p.name or spec)
+        built = build_store(spec, stores / f"{name}.zarr")
+        p = stores / f"{name}.zarr"
+    return p, built, max(TerrainStore(p).shape(0))
+
+
 def reproduce_large(cfg: LargeConfig, out_dir: Path, update: Update | None = None) -> dict:
     out_dir = Path(out_dir)
-    keep = list(range(0, cfg.frames, cfg.sample_every))
     sizes = list(cfg.sizes) + ([65536] if cfg.huge else [])
+    jobs = [(str(n), f"fractal:{n}:1") for n in sizes] + [(t, t) for t in cfg.terrains]
     r: dict = {"config": {k: (list(v) if isinstance(v, tuple) else v)
-                          for k, v in cfg.__dict__.items()}, "sizes": {},
-               "huge": huge_needs(), "sample_frames": keep}
-    common = ["--path", "chen1999", "--frames", str(cfg.frames), "--size",
-              f"{cfg.image}x{cfg.image}", "--save-frames"]
-    for step, n in enumerate(sizes):
+                          for k, v in cfg.__dict__.items()}, "sizes": {}, "terrains": {},
+               "huge": huge_needs(),
+               "sample_frames": list(range(0, cfg.frames, cfg.sample_every))}
+    for step, (key, spec) in enumerate(jobs):
         if update:
-            update("sizes", step, len(sizes))
-        store = out_dir / "stores" / f"fractal_{n}.zarr"
-        built = build_store(f"fractal:{n}:1", store)
-        res: dict = {"tile_s": built.get("seconds"), "tile_mb_per_s": built.get("mb_per_s")}
-        runs = out_dir / "runs" / str(n)
-        ad = _render(["--terrain", str(store), "--mode", "adaptive", "--sse", str(cfg.sse),
-                      *common], runs / "adaptive")
-        sp = _render(["--terrain", str(store), "--mode", "sprite", "--key-sse",
-                      str(cfg.key_sse), *common], runs / "sprite")
-        ref = reference(store, n, cfg, keep)
-        res["reference"] = f"adaptive at {cfg.ref_sse} px, settled"
-        if n <= FULL_MAX:  # full resolution of the sampled viewpoints only
-            sampled = sampled_path(store, cfg, keep, runs / "sampled.json")
-            fu = _render(["--terrain", str(store), "--mode", "full", "--grid", str(n),
-                          "--path", str(sampled), "--frames", str(len(keep)), "--size",
-                          f"{cfg.image}x{cfg.image}", "--save-frames"], runs / "full")
-            shown = _frames(runs / "full", list(range(len(keep))))
-            full = {k: shown[m] for m, k in enumerate(keep)}
-            res["median_ms_full"] = fu["median_ms"]
-            res["reference_vs_full_rmse"] = _rmse(ref, full)
-            ref, res["reference"] = full, "full resolution"
-        res.update(
-            median_ms_adaptive=ad["median_ms"], p99_ms_adaptive=float(np.percentile(
-                json_col(runs / "adaptive"), 99)), median_ms_sprite=sp["median_ms"],
-            total_s_adaptive=ad["total_s"], total_s_sprite=sp["total_s"],
-            rmse_adaptive=_rmse(_frames(runs / "adaptive", keep), ref),
-            rmse_sprite=_rmse(_frames(runs / "sprite", keep), ref),
-            peak_rss_mb=ad["peak_rss_mb"], first_frame_s=ad["first_frame_s"],
-            tiles_loaded=ad["tiles_loaded"], gpu_cache_mb=ad["gpu_cache_mb"],
-            keyframes_sprite=sp["keyframes"])
-        r["sizes"][str(n)] = res
+            update("stores", step, len(jobs))
+        if spec.startswith("fractal:"):
+            store, built, n = out_dir / "stores" / f"fractal_{key}.zarr", None, int(key)
+            built = build_store(spec, store)
+        else:
+            store, built, n = _store_for(spec, out_dir / "stores")
+        tile = {"tile_s": built.get("seconds"), "tile_mb_per_s": built.get("mb_per_s"),
+                "side": n}
+        safe = key if key.isdigit() else f"terrain{step}"
+        per_path = {p: run_path(store, n, cfg, p, out_dir / "runs" / safe / p)
+                    for p in cfg.paths}
+        first, *rest = cfg.paths
+        res = {**tile, **per_path[first], **{p: per_path[p] for p in rest}}
+        (r["sizes"] if spec.startswith("fractal:") else r["terrains"])[key] = res
         if update:
-            update("sizes", step + 1, len(sizes))
+            update("stores", step + 1, len(jobs))
     if cfg.jacksboro:
         r.update(_jacksboro(cfg, out_dir))
     return r
@@ -173,12 +222,13 @@ def _jacksboro(cfg: LargeConfig, out_dir: Path) -> dict:
     return r
 
 
-def sampled_path(store: Path, cfg: LargeConfig, keep: list[int], file: Path) -> Path:
-    """The chen1999-shaped path's sampled viewpoints as a path file."""
+def sampled_path(store: Path, cfg: LargeConfig, keep: list[int], path_spec: str,
+                 file: Path) -> Path:
+    """The sampled viewpoints of ``path_spec`` as a path file."""
     from lodsprite import get_path, load_scene
     from lodsprite.paths import CameraPath
 
-    path = get_path("chen1999", load_scene(str(store)).hf, cfg.frames)
+    path = get_path(path_spec, load_scene(str(store)).hf, cfg.frames)
     file.parent.mkdir(parents=True, exist_ok=True)
     CameraPath("sampled", tuple(path.viewpoints[i] for i in keep), path.fov_y_deg
                ).to_json(file)

@@ -1,21 +1,25 @@
-"""Streaming terrain tiles for the adaptive renderer: a background loader filling a host
-cache, and the bookkeeping of the GPU cache's slots; both least-recently-used under a
-budget in MB, GL-free.
+"""Streaming terrain tiles for the adaptive renderer: loaders filling a host cache, and
+the bookkeeping of the GPU cache's slots; both least-recently-used under a budget in MB,
+GL-free.
 
-The frame asks :class:`TileLoader` for the nodes it wants, most urgent first; a worker
-thread reads each node's samples from the pyramid (a Zarr store decodes its chunks with the
-GIL released) into the host cache; the frame takes what has arrived and uploads it into
-GPU slots (:class:`SlotCache`), evicting the slots used longest ago.  A node whose data
-cannot be read, or holds unwritten samples (NaN), is bad: it is reported once and never
-becomes resident, so its parent keeps being drawn in its place.
+The frame asks its loader for the nodes it wants, most urgent first, and takes what has
+arrived, uploading it into GPU slots (:class:`SlotCache`), evicting the slots used longest
+ago.  A node whose data cannot be read, or holds unwritten samples (NaN), is bad: it is
+reported once and never becomes resident, so its parent keeps being drawn in its place.
+
+* :class:`StoreTileLoader` (terrain stores): a reader process
+  (:mod:`lodsprite.terrain.reader`) reads and decodes; the frame's own thread sends
+  requests and collects answers without blocking, so no thread waits on the GIL that the
+  draw calls hold.  A reader process that dies is started again (its request in flight is
+  counted bad); after three deaths the remaining requests are bad.
+* :class:`TileLoader` (in-memory pyramids): a daemon thread copies nodes out of memory.
 """
-
 from __future__ import annotations
 
 import heapq
 import logging
 import threading
-from collections import OrderedDict
+from collections import OrderedDict, deque
 
 import numpy as np
 
@@ -25,11 +29,10 @@ from lodsprite.errors import InputError
 log = logging.getLogger(__name__)
 
 
-class TileLoader(BackgroundLoader):
-    """Reads nodes of ``tree`` (:class:`~lodsprite.terrain.quadtree.Quadtree`) on a
-    daemon thread into a host cache of ``host_mb`` megabytes."""
+class HostCache:
+    """The host LRU cache of node samples and the wish list, shared by the loaders."""
 
-    def __init__(self, tree, host_mb: float = 256.0) -> None:
+    def __init__(self, tree, host_mb: float) -> None:
         if not host_mb > 0:
             raise InputError(f"the host cache budget must be > 0 MB, got {host_mb}")
         self.tree = tree
@@ -41,45 +44,31 @@ class TileLoader(BackgroundLoader):
         self._queue: list = []
         self._queued: set = set()
         self._cv = threading.Condition()
-        super().__init__("tile-loader")
 
-    def read_now(self, node) -> np.ndarray | None:
-        """Read ``node`` on the calling thread (the roots, before the first frame)."""
-        with self._cv:
-            if node in self.cache:
-                return self.cache[node]
-        return self._load(node)
+    def _wish(self, requests: list, busy=()) -> None:
+        """Replace the wish list (holding ``_cv``)."""
+        self._queue, self._queued = [], set()
+        for urgency, node in requests:
+            if node in self.cache or node in self.bad or node in self._queued or node in busy:
+                continue
+            self._queue.append((-urgency, id(node), node))
+            self._queued.add(node)
+        heapq.heapify(self._queue)
 
-    def want(self, requests: list) -> None:
-        """Replace the wish list with ``(urgency, node)`` requests (most urgent read
-        first): what the frame no longer wants is dropped."""
-        with self._cv:
-            self._queue, self._queued = [], set()
-            for urgency, node in requests:
-                if node in self.cache or node in self.bad or node in self._queued:
-                    continue
-                self._queue.append((-urgency, id(node), node))
-                self._queued.add(node)
-            heapq.heapify(self._queue)
-            self._cv.notify()
+    def _next(self):
+        if not self._queue:
+            return None
+        _, _, node = heapq.heappop(self._queue)
+        self._queued.discard(node)
+        return node
 
-    def idle(self) -> bool:
-        """Nothing left on the wish list."""
-        with self._cv:
-            return not self._queue
-
-    def take(self, node) -> np.ndarray | None:
-        """The node's samples if they have arrived (marks them recently used)."""
-        with self._cv:
-            data = self.cache.get(node)
-            if data is not None:
-                self.cache.move_to_end(node)
-            return data
-
-    def _load(self, node) -> np.ndarray | None:
-        r0, r1, c0, c1 = self.tree.samples(node)
+    def _keep(self, node, data) -> np.ndarray | None:
+        """Validate and cache ``data`` (an array, or an exception or text saying why
+        not)."""
         try:
-            data = np.asarray(self.tree.p.read(node.k, r0, r1, c0, c1), np.float32)
+            if isinstance(data, (BaseException, str)):
+                raise OSError(str(data))
+            data = np.asarray(data, np.float32)
             if not np.isfinite(data).all():
                 raise ValueError("unwritten samples")
         except Exception as exc:  # a damaged chunk: draw the parent instead
@@ -97,12 +86,138 @@ class TileLoader(BackgroundLoader):
                 self.evicted += 1
         return data
 
-    def _next(self):
-        if not self._queue:
+    def _read_in_place(self, node):
+        r0, r1, c0, c1 = self.tree.samples(node)
+        try:
+            return self.tree.p.read(node.k, r0, r1, c0, c1)
+        except Exception as exc:
+            return exc
+
+    def read_now(self, node) -> np.ndarray | None:
+        """Read ``node`` on the calling thread (the roots, before the first frame)."""
+        with self._cv:
+            if node in self.cache:
+                return self.cache[node]
+        return self._keep(node, self._read_in_place(node))
+
+    def take(self, node) -> np.ndarray | None:
+        """The node's samples if they have arrived (marks them recently used)."""
+        with self._cv:
+            data = self.cache.get(node)
+            if data is not None:
+                self.cache.move_to_end(node)
+            return data
+
+
+class TileLoader(HostCache, BackgroundLoader):
+    """Reads nodes of ``tree`` (:class:`~lodsprite.terrain.quadtree.Quadtree`) of an
+    in-memory pyramid on a daemon thread into a host cache of ``host_mb`` megabytes."""
+
+    def __init__(self, tree, host_mb: float = 256.0) -> None:
+        HostCache.__init__(self, tree, host_mb)
+        BackgroundLoader.__init__(self, "tile-loader")
+
+    def want(self, requests: list) -> None:
+        """Replace the wish list with ``(urgency, node)`` requests (most urgent read
+        first): what the frame no longer wants is dropped."""
+        with self._cv:
+            self._wish(requests)
+            self._cv.notify()
+
+    def idle(self) -> bool:
+        """Nothing left on the wish list."""
+        with self._cv:
+            return not self._queue
+
+    def _load(self, node) -> np.ndarray | None:
+        return self._keep(node, self._read_in_place(node))
+
+
+class StoreTileLoader(HostCache):
+    """Reads nodes of a terrain store through a reader process, driven by the frame's
+    thread (module docstring): at most ``in_flight`` requests outstanding."""
+
+    RESTARTS = 3
+
+    def __init__(self, tree, host_mb: float = 256.0, in_flight: int = 48) -> None:
+        super().__init__(tree, host_mb)
+        self.in_flight = int(in_flight)
+        self._sent: deque = deque()
+        self._deaths = 0
+        self._reader = self._start()
+
+    def _start(self):
+        from lodsprite.terrain.reader import ReaderProcess
+
+        try:
+            return ReaderProcess(self.tree.p.path, self.tree.p.exaggeration)
+        except OSError as exc:
+            log.error("terrain tile reader cannot start (%s): tiles not yet loaded stay "
+                      "unloaded", exc)
             return None
-        _, _, node = heapq.heappop(self._queue)
-        self._queued.discard(node)
-        return node
+
+    def pump(self) -> None:
+        """Collect what has arrived and send what the wish list wants next."""
+        try:
+            if self._reader is not None:
+                for answer in self._reader.poll():
+                    self._keep(self._sent.popleft(), answer)
+                if self._reader.dead:
+                    raise OSError("the tile reader process has stopped")
+                while self._queue and len(self._sent) < self.in_flight:
+                    node = self._next()
+                    r0, r1, c0, c1 = self.tree.samples(node)
+                    self._sent.append(node)
+                    self._reader.send(node.k, r0, r1, c0, c1)
+        except OSError as exc:
+            self._died(exc)
+        if self._reader is None:  # no reader: what is wanted cannot be read
+            while self._queue:
+                self._keep(self._next(), "no tile reader process")
+
+    def _died(self, exc: Exception) -> None:
+        self._reader.close()
+        self._deaths += 1
+        if self._sent:  # the request it died on is bad; the rest are asked again
+            self._keep(self._sent.popleft(), f"the reader process died on it ({exc})")
+        for node in reversed(self._sent):
+            heapq.heappush(self._queue, (-float("inf"), id(node), node))
+            self._queued.add(node)
+        self._sent.clear()
+        log.warning("terrain tile reader stopped (%s)%s", exc,
+                    ": started again" if self._deaths <= self.RESTARTS else "")
+        self._reader = self._start() if self._deaths <= self.RESTARTS else None
+
+    def want(self, requests: list) -> None:
+        """Replace the wish list with ``(urgency, node)`` requests (most urgent read
+        first; what the frame no longer wants is dropped), and pump."""
+        with self._cv:
+            self._wish(requests, busy=set(self._sent))
+        self.pump()
+
+    def idle(self) -> bool:
+        """Nothing wanted and nothing in flight."""
+        self.pump()
+        return not self._queue and not self._sent
+
+    def reader_peak_mb(self) -> float:
+        """The reader process's peak resident memory in MB (0 when none runs)."""
+        return self._reader.peak_mb() if self._reader is not None else 0.0
+
+    def close(self) -> None:
+        if self._reader is not None:
+            self._reader.close()
+            self._reader = None
+
+
+def tile_loader(tree, host_mb: float = 256.0) -> HostCache:
+    """The loader for ``tree``'s pyramid: a reader process for a store, a thread for an
+    in-memory pyramid."""
+    from lodsprite.terrain.store import TerrainStore
+
+    if isinstance(tree.p, TerrainStore):
+        return StoreTileLoader(tree, host_mb)
+    return TileLoader(tree, host_mb)
 
 
 class SlotCache:

@@ -3,7 +3,12 @@
 * :class:`FractalSource` - ``fractal:SIZE[:SEED]`` or ``fractal:ROWSxCOLS[:SEED]``: fBm of
   2D gradient noise (Perlin 1985/2002) evaluated at each sample's absolute grid position,
   so any window gives the same samples whatever the tiling (seamless borders), at any
-  size (tested to 65536²).  It is a different generator from the in-memory
+  size (tested to 65536²).  Its detail is the same in metres whatever the size: an octave
+  of period ``P`` samples has amplitude ``FRACTAL_RELIEF_M * (P / FRACTAL_REF_PERIOD)^H``
+  with ``H = FRACTAL_HURST`` (rough like real DEMs, Hurst 0.8) up to ``FRACTAL_REF_PERIOD``
+  (about 10 km) and grows only as ``P^FRACTAL_BROAD_H`` beyond, so a 16k² field is a
+  larger land with the same hills as a 1k² one (relief about 1.5 km at 1k², 2.5 km at
+  16k²), not a 1k² field stretched.  It is a different generator from the in-memory
   ``fractal:SIZE`` of :mod:`lodsprite.terrain.generators` (FFT synthesis with erosion,
   powers of two only), which needs the whole field at once.
 * :class:`GeoTiffSource` - a GeoTIFF or Cloud Optimized GeoTIFF read with rasterio one
@@ -26,7 +31,10 @@ from lodsprite.errors import InputError
 
 FRACTAL_MAX_SIDE = 1 << 20
 FRACTAL_SPACING_M = 30.0
-FRACTAL_RELIEF_M = 1400.0
+FRACTAL_RELIEF_M = 700.0        # amplitude of the octave of FRACTAL_REF_PERIOD samples
+FRACTAL_REF_PERIOD = 341.0      # samples (about 10 km at 30 m)
+FRACTAL_HURST = 0.8             # amplitude ratio 2^-H per octave below the reference
+FRACTAL_BROAD_H = 0.25          # and 2^-H' above it
 
 
 def _hash(ix: np.ndarray, iy: np.ndarray, seed: int) -> np.ndarray:
@@ -92,14 +100,14 @@ class FractalSource:
         rr = np.arange(r0, r1, dtype=np.float64)
         cc = np.arange(c0, c1, dtype=np.float64)
         h = np.zeros((r1 - r0, c1 - c0), np.float32)
-        amp, period, norm = 1.0, self.base_period, 0.0
+        period = self.base_period
         for o in range(self.octaves):
             n = gradient_noise(cc / period, rr / period, self.seed * 131 + o)
-            h += amp * (n if o else np.abs(n) * 2)  # a broad ridged base, then fBm
-            norm += amp
-            amp *= 0.5
+            rel = period / FRACTAL_REF_PERIOD
+            amp = FRACTAL_RELIEF_M * rel ** (FRACTAL_HURST if rel <= 1 else FRACTAL_BROAD_H)
+            h += np.float32(amp) * (n if o else np.abs(n) * 2)  # a broad ridged base, fBm
             period /= 2.0
-        return (FRACTAL_RELIEF_M * h / norm).astype(np.float32)
+        return h
 
 
 def parse_fractal(spec: str) -> FractalSource | None:

@@ -1,0 +1,69 @@
+"""A low flight at a fixed height above the ground, the same in metres whatever the
+terrain's size: the path for comparing renderers across terrain sizes.
+
+The papers' paths scale with the terrain (Chen et al. 1999 orbit at 1.5 ``L``): over a
+491 km field they fly so high that coarse levels meet one pixel almost everywhere, so a
+view-dependent renderer's work and error no longer depend on the data.  ``flyover`` flies
+north along the terrain's centre line, ``track_m`` metres long (at most 90 % of the
+terrain's depth), ``height_m`` above the highest ground within ``height_m`` of the track
+ahead and behind (a smoothed running maximum that never falls below it), looking along
+the track pitched down by ``PITCH_DEG``; the ground is sampled from the in-memory field.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy import ndimage
+
+from lodsprite.camera import Viewpoint
+from lodsprite.errors import PathError
+from lodsprite.paths.core import CHEN1999_FRAMES, CameraPath, _check_frames
+from lodsprite.terrain.heightfield import HeightField
+
+DEFAULT_HEIGHT_M = 1000.0
+DEFAULT_TRACK_M = 10000.0
+PITCH_DEG = 20.0
+_SAMPLES = 2048  # ground samples along the track
+
+
+def parse_flyover(spec: str) -> tuple[float, float] | None:
+    """``flyover[:HEIGHT_M[:TRACK_M]]`` as ``(height_m, track_m)``; None for other specs;
+    raises :class:`PathError` when malformed."""
+    head, *rest = spec.strip().lower().split(":")
+    if head != "flyover":
+        return None
+    if len(rest) > 2:
+        raise PathError(f"path {spec!r}: use flyover[:HEIGHT_M[:TRACK_M]]")
+    try:
+        values = [float(v) for v in rest]
+    except ValueError:
+        raise PathError(f"path {spec!r}: height and track are metres (numbers)") from None
+    height = values[0] if values else DEFAULT_HEIGHT_M
+    track = values[1] if len(values) > 1 else DEFAULT_TRACK_M
+    if not (math.isfinite(height) and height > 0 and math.isfinite(track) and track > 0):
+        raise PathError(f"path {spec!r}: height and track must be positive metres")
+    return height, track
+
+
+def flyover(hf: HeightField, frames: int = CHEN1999_FRAMES, height_m: float = DEFAULT_HEIGHT_M,
+            track_m: float = DEFAULT_TRACK_M) -> CameraPath:
+    """The flight (module docstring): ``frames`` viewpoints evenly spaced along the track."""
+    n = _check_frames(frames)
+    length = min(track_m, 0.9 * hf.depth)
+    y = np.linspace(-length / 2, length / 2, _SAMPLES)
+    ground = hf.height_at(np.zeros_like(y), y)
+    reach = max(1, int(math.ceil(height_m / (length / (_SAMPLES - 1)))))
+    # the mean, over +-reach/2, of maxima over +-2 reach: smooth, and at least the highest
+    # ground within +-reach (every maximum averaged covers that window)
+    floor = ndimage.maximum_filter1d(ground, 4 * reach + 1, mode="nearest")
+    floor = ndimage.uniform_filter1d(floor, reach, mode="nearest")
+    ys = np.linspace(-length / 2, length / 2, n)
+    zs = np.interp(ys, y, floor) + height_m
+    p = math.radians(PITCH_DEG)
+    d = np.array([0.0, -math.cos(p), math.sin(p)])  # the camera looks along -d
+    up = np.array([0.0, math.sin(p), math.cos(p)])
+    right = np.cross(up, d)
+    vps = tuple(Viewpoint(right, up, d, np.array([0.0, ys[i], zs[i]])) for i in range(n))
+    return CameraPath(f"flyover:{height_m:g}:{track_m:g}", vps)
