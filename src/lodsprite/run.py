@@ -214,6 +214,8 @@ def sprite_frames(pr: PathRenderer, path: CameraPath, config: RenderConfig,
         sprite.render_spriteframe(vp0)
         pr.ctx.finish()
         engine = LodSpriteEngine(sprite, config.epsilon)
+        if adaptive is not None:  # streaming goes on between keyframes
+            engine.between_keyframes = adaptive.prefetch
         rows = []
         for i, vp in enumerate(path.viewpoints):
             f = engine.frame(vp)

@@ -213,7 +213,8 @@ def test_the_large_terrain_harness_writes_its_keys(tmp_path):
     from lodsprite.report.large import write_outputs
     from lodsprite.terrain.large import LargeConfig, reproduce_large
 
-    cfg = LargeConfig(sizes=(256,), frames=8, image=64, sample_every=4, jacksboro=False)
+    cfg = LargeConfig(sizes=(256,), frames=6, image=48, sample_every=3, jacksboro=False,
+                      sweep_eps=())
     r = reproduce_large(cfg, tmp_path)
     write_outputs(r, tmp_path)
     saved = json.loads((tmp_path / "results.json").read_text())
@@ -226,6 +227,7 @@ def test_the_large_terrain_harness_writes_its_keys(tmp_path):
     # the 0.25 px stand-in is validated against full resolution, and is close to it
     assert 0 <= v["reference_vs_full_rmse"] < 3.0 and 0 <= v["reference_vs_full_flip"] < 0.05
     assert "## Path flyover" in (tmp_path / "report.md").read_text()
+    assert v["sprite_sweep"][0]["epsilon"] == 1.0 and "equal_error" in v
     # (the 512² jacksboro runs are the same render commands with --key-sse: covered by
     # test_lod_sprite_with_adaptive_keyframes_stays_closer_than_the_plain_coarse_level)
     assert (tmp_path / "large_scaling.png").stat().st_size > 2000
@@ -350,6 +352,41 @@ def test_a_low_flight_over_a_field_with_a_deep_pit_elsewhere_sees_the_ground_bel
         bottom = t.read_color()[-4:].reshape(-1, 3).astype(int)
         sky = np.round(np.array(SKY_RGB) * 255).astype(int)
         assert np.abs(bottom - sky).sum(axis=1).min() > 10   # ground, not sky
+    finally:
+        a.release()
+        t.release()
+
+
+def test_equal_error_takes_the_fastest_sprite_run_within_adaptives_rmse():
+    from lodsprite.terrain.large import equal_error
+
+    sweep = [{"epsilon": 1.0, "total_s": 1.0, "rmse": 5.0},
+             {"epsilon": 0.5, "total_s": 2.0, "rmse": 4.0},
+             {"epsilon": 0.25, "total_s": 4.0, "rmse": 3.0}]
+    e = equal_error(sweep, rmse_adaptive=4.5, total_s_adaptive=10.0)
+    assert e["epsilon"] == 0.5 and e["speedup"] == 5.0
+    assert equal_error(sweep, rmse_adaptive=2.0, total_s_adaptive=10.0) is None
+
+
+def test_prefetch_streams_between_keyframes_without_drawing(gl):
+    """LOD-sprite draws the adaptive renderer only for keyframes; between them, prefetch()
+    uploads what the last selection asked for, so the next keyframe finds it."""
+    from lodsprite.camera import look_at
+    from lodsprite.gl.target import RenderTarget
+    from lodsprite.terrain.adaptive import AdaptiveTerrain
+
+    t = RenderTarget(gl, 64, 64)
+    a = AdaptiveTerrain(gl, MemoryPyramid(rough(513), 30.0, 30.0), t, 45.0, 0.5)
+    try:
+        vp = look_at((0.0, -3000.0, 1500.0), (0.0, 0.0, 0.0))
+        a.frame(vp)
+        before = len(a.slots.slots)
+        got, deadline = 0, time.monotonic() + 20
+        while got == 0 and time.monotonic() < deadline:
+            time.sleep(0.01)
+            got += a.prefetch()
+        assert got > 0 and len(a.slots.slots) == before + got
+        assert all(n in a._wanted for n in list(a.slots.slots)[-got:])
     finally:
         a.release()
         t.release()

@@ -53,14 +53,24 @@ def _row(label: str, v: dict, tile: str) -> str:
             f"{f(v['p99_ms_sprite'], 2)} | {f(v['speedup_sprite_vs_adaptive'], 2)}× | "
             f"{f(v['rmse_adaptive'], 2)} / {f(v['flip_adaptive'], 3)} | "
             f"{f(v['rmse_sprite'], 2)} / {f(v['flip_sprite'], 3)} | {v['keyframes_sprite']} | "
-            f"{ref} | {f(v['peak_rss_mb'], 0)} | {f(v['first_frame_s'], 2)} | "
+            f"{_equal(v)} | {ref} | {f(v['peak_rss_mb'], 0)} | {f(v['first_frame_s'], 2)} | "
             f"{v['tiles_loaded']} |")
+
+
+def _equal(v: dict) -> str:
+    """LOD-sprite at adaptive's RMSE or lower: ε, speedup, RMSE; or why none."""
+    f = fmt_fixed
+    e = v.get("equal_error")
+    if e is None:
+        best = min(v.get("sprite_sweep", [{"rmse": v["rmse_sprite"]}]), key=lambda s: s["rmse"])
+        return f"none (lowest sprite RMSE {f(best['rmse'], 2)})"
+    return f"ε {e['epsilon']:g}: {f(e['speedup'], 2)}× (RMSE {f(e['rmse'], 2)})"
 
 
 HEADER = ["| side | tile s (MB/s) | median ms full | adaptive median / p99 ms | sprite median "
           "/ p99 ms | sprite speedup (total) | adaptive RMSE / FLIP | sprite RMSE / FLIP | "
-          "keyframes | reference | peak RSS MB | first frame s | tiles loaded |",
-          "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+          "keyframes | sprite at equal RMSE | reference | peak RSS MB | first frame s | "
+          "tiles loaded |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
 
 
 def _table(r: dict, path: str) -> list[str]:
@@ -88,10 +98,13 @@ def write_outputs(r: dict, out_dir: Path) -> Path:
              f"Fractal stores (tiled, seamless), {c['frames']} frames at {c['image']}² along "
              "each path; adaptive at "
              f"{c['sse']} px; LOD-sprite with keyframes by the adaptive renderer at "
-             f"{c['key_sse']} px (proxy, ribbons and error metric from the store's level 0); "
+             f"{c['key_sse']} px (proxy, ribbons and error metric from the store's level 0; "
+             "coarse level of 16² up to 2k², then squares of 128 samples, at most 128²); "
              f"errors (RMSE in grey levels / mean FLIP) on frames {r['sample_frames']} "
              "against the reference named per row.  Sprite speedup: adaptive's total time "
-             "over LOD-sprite's.  Full resolution's median is timed on the sampled frames."]
+             "over LOD-sprite's at ε = 1 px; at equal RMSE: the fastest LOD-sprite run of "
+             f"ε in {[1.0, *c['sweep_eps']]} whose RMSE is at most adaptive's.  Full "
+             "resolution's median is timed on the sampled frames."]
     for p in c["paths"]:
         lines += ["", f"## Path {p}", "", *_table(r, p)]
     j = r.get("jacksboro")

@@ -69,6 +69,8 @@ class LodSpriteEngine:
                                      epsilon_px, sprite.target.height,
                                      sprite.terrain.projection, sprite.key_projection, predict)
         self._shows_keyframe = True
+        # Called in every frame that draws no keyframe, inside its clock (None: nothing).
+        self.between_keyframes = None
         # Every keyframe rendered, in order: its viewpoint, frame projection and whether
         # look-ahead placed it ahead of the viewer.
         self.keyframes: list[KeyChoice] = []
@@ -115,6 +117,8 @@ class LodSpriteEngine:
             stats = self.sprite.render_spriteframe(viewpoint, d.projection)
             if key_stats is not None:
                 stats = replace(stats, triangles=stats.triangles + key_stats.triangles)
+        if d.key is None and self.between_keyframes is not None:
+            self.between_keyframes()  # e.g. streaming for the next keyframe, timed here
         self._shows_keyframe = d.shows_keyframe
         self.sprite.terrain.ctx.finish()
         return SpriteFrame(d.type, d.error_px, d.decision_error_px, stats.triangles,

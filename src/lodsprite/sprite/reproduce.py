@@ -64,7 +64,7 @@ class ReproduceConfig:
     def quick(cls, **kw) -> ReproduceConfig:
         """A short run (about a tenth of the work) for smoke tests and first looks."""
         base = {"size": 256, "frames": 115, "fig10_frames": (58, 115),
-                "fig11_epsilon": (0.5, 1.0, 2.0)}
+                "fig11_epsilon": (0.5, 1.0, 2.0), "quality_stride": 3}
         return cls(**{**base, **kw})
 
     def render_config(self, **kw) -> RenderConfig:

@@ -69,6 +69,8 @@ class AdaptiveTerrain:
         self.color = color  # the terrain's colour texture (a moderngl texture) or None
         self.extent = (float(x.min()), float(y.max()), float(x.max() - x.min()),
                        float(y.max() - y.min()))
+        self._wanted: list[Node] = []
+        self._keep: set = set()
         roots = self.roots = self.tree.roots()
         if len(roots) > self.slots.capacity:
             raise InputError("the GPU cache cannot hold the coarsest level: raise its budget")
@@ -146,14 +148,29 @@ class AdaptiveTerrain:
             while n.k <= self.tree.top and n not in keep:
                 keep.add(n)
                 n = n.parent()
+        self._wanted, self._keep = [n for _, n in sorted(want, key=lambda u: -u[0])], keep
+        return draw, self._upload_arrived()
+
+    def _upload_arrived(self) -> int:
+        """Upload what has arrived of the last selection's wish list, most urgent first
+        (at most ``upload_budget``)."""
         uploaded = 0
-        for _, n in sorted(want, key=lambda u: -u[0]):
+        for n in self._wanted:
             if uploaded >= self.upload_budget:
                 break
             data = self.loader.take(n)
-            if data is not None and n not in self.slots and self._upload(n, data, keep):
+            if data is not None and n not in self.slots and self._upload(n, data, self._keep):
                 uploaded += 1
-        return draw, uploaded
+        return uploaded
+
+    def prefetch(self) -> int:
+        """Between frames drawn by this renderer (LOD-sprite's spriteframes): go on
+        streaming the last selection's tiles and upload what has arrived, so the next
+        keyframe finds them resident; returns the tiles uploaded."""
+        pump = getattr(self.loader, "pump", None)
+        if pump is not None:
+            pump()
+        return self._upload_arrived()
 
     def settle(self, viewpoint: Viewpoint, max_rounds: int = 100000) -> AdaptiveFrame:
         """Stream ``viewpoint``'s tiles until none it wants is left to load, then draw it

@@ -13,7 +13,9 @@ That stand-in is validated against full resolution at every size where both exis
 4k² included).  Errors (RMSE in grey levels, and FLIP) are measured on every
 ``sample_every``-th frame; full resolution's frame time is measured on those frames too
 (``render --mode full`` on the working grid, the store's samples resampled to
-``(side+1)²``).
+``(side+1)²``).  LOD-sprite runs at ε = 1 px (the paper's) and at each ``sweep_eps``; the
+comparison at equal error takes the fastest of those runs whose RMSE is at most the
+adaptive renderer's.
 """
 
 from __future__ import annotations
@@ -45,6 +47,7 @@ class LargeConfig:
     key_sse: float = 0.5
     ref_sse: float = 0.25
     sample_every: int = 23
+    sweep_eps: tuple[float, ...] = (0.7, 0.5, 0.25)  # LOD-sprite also at these ε (equal error)
     huge: bool = False       # also 65536² (needs the disk and time it names)
     quick_512: bool = False  # the jacksboro runs on ``frames`` frames, not the whole path
     jacksboro: bool = True   # the 512² jacksboro comparison (tests leave it out)
@@ -52,7 +55,8 @@ class LargeConfig:
 
     @classmethod
     def quick(cls) -> LargeConfig:
-        return cls(sizes=(256, 512), frames=24, image=128, sample_every=8, quick_512=True)
+        return cls(sizes=(256, 512), frames=24, image=128, sample_every=8, quick_512=True,
+                   sweep_eps=(0.5,))
 
 
 def huge_needs() -> dict:
@@ -116,15 +120,27 @@ def reference(store: Path, cfg: LargeConfig, keep: list[int], path_spec: str,
     return out
 
 
+def sprite_lod(side: int) -> int:
+    """LOD-sprite's coarse level for a store ``side`` samples a side: squares of about
+    128 samples (3.8 km at 30 m), 16 to 128 squares a side (16, the paper's, up to 2k²).
+    A fixed 16² over 16k² has squares 30 km wide: a low flight sees one or two square
+    centres, and the proxy stands far off the ground in view."""
+    q = 16
+    while q < 128 and q * 128 < side:
+        q *= 2
+    return q
+
+
 def run_path(store: Path, n: int, cfg: LargeConfig, path_spec: str, runs: Path) -> dict:
     """Adaptive, LOD-sprite and the references of one store along one path."""
     keep = list(range(0, cfg.frames, cfg.sample_every))
     common = ["--path", path_spec, "--frames", str(cfg.frames), "--size",
               f"{cfg.image}x{cfg.image}", "--save-frames"]
+    lod = ["--lod", str(sprite_lod(n))]
     ad = _render(["--terrain", str(store), "--mode", "adaptive", "--sse", str(cfg.sse),
                   *common], runs / "adaptive")
     sp = _render(["--terrain", str(store), "--mode", "sprite", "--key-sse",
-                  str(cfg.key_sse), *common], runs / "sprite")
+                  str(cfg.key_sse), *lod, *common], runs / "sprite")
     res: dict = {}
     ref = stand_in = reference(store, cfg, keep, path_spec, cfg.ref_sse)
     res["reference"] = f"adaptive at {cfg.ref_sse} px, settled"
@@ -139,6 +155,17 @@ def run_path(store: Path, n: int, cfg: LargeConfig, path_spec: str, runs: Path) 
         res["median_ms_full"] = fu["median_ms"]
     ea = errors(_frames(runs / "adaptive", keep), ref)
     es = errors(_frames(runs / "sprite", keep), ref)
+    sweep = [{"epsilon": 1.0, "total_s": sp["total_s"], "median_ms": sp["median_ms"],
+              "keyframes": sp["keyframes"], "rmse": es[0], "flip": es[1]}]
+    for eps in cfg.sweep_eps:
+        folder = runs / f"sprite_eps{eps:g}"
+        s = _render(["--terrain", str(store), "--mode", "sprite", "--key-sse", str(cfg.key_sse),
+                     "--epsilon", str(eps), *lod, *common], folder)
+        e = errors(_frames(folder, keep), ref)
+        sweep.append({"epsilon": eps, "total_s": s["total_s"], "median_ms": s["median_ms"],
+                      "keyframes": s["keyframes"], "rmse": e[0], "flip": e[1]})
+    res["sprite_sweep"] = sweep
+    res["equal_error"] = equal_error(sweep, ea[0], ad["total_s"])
     res.update(
         median_ms_adaptive=ad["median_ms"],
         p99_ms_adaptive=float(np.percentile(json_col(runs / "adaptive"), 99)),
@@ -149,8 +176,19 @@ def run_path(store: Path, n: int, cfg: LargeConfig, path_spec: str, runs: Path) 
         peak_rss_mb=ad["peak_rss_mb"], first_frame_s=ad["first_frame_s"],
         tiles_loaded=ad["tiles_loaded"], tiles_evicted=ad["tiles_evicted"],
         gpu_cache_mb=ad["gpu_cache_mb"], keyframes_sprite=sp["keyframes"],
-        speedup_sprite_vs_adaptive=ad["total_s"] / sp["total_s"])
+        speedup_sprite_vs_adaptive=ad["total_s"] / sp["total_s"], sprite_lod=sprite_lod(n))
     return res
+
+
+def equal_error(sweep: list[dict], rmse_adaptive: float, total_s_adaptive: float
+                ) -> dict | None:
+    """The fastest LOD-sprite run of ``sweep`` whose RMSE is at most adaptive's, with its
+    speedup over adaptive (total times); None when no ε reaches adaptive's error."""
+    ok = [s for s in sweep if s["rmse"] <= rmse_adaptive]
+    if not ok:
+        return None
+    best = min(ok, key=lambda s: s["total_s"])
+    return {**best, "speedup": total_s_adaptive / best["total_s"]}
 
 
 def _store_for(spec: str, stores: Path) -> tuple[Path, dict, int]:
