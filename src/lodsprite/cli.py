@@ -709,7 +709,8 @@ def reproduce(
     terrain: TerrainOpt = "jacksboro",
     size: Annotated[int, typer.Option("--size", help="image size in pixels (square)")] = 512,
     quick: Annotated[bool, typer.Option("--quick", help="a short run: 256², 115 frames, "
-                                                        "fewer sweep points")] = False,
+                                                        "fewer sweep points, quality on "
+                                                        "every third frame")] = False,
     grid: GridOpt = None,
     lod: LodOpt = 16,
     epsilon: EpsOpt = 1.0,

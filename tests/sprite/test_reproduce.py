@@ -18,7 +18,7 @@ from lodsprite.sprite.reproduce import ReproduceConfig, reproduce_chen1999
 # A small run whose keyframes are mostly placed ahead of the viewer (look-ahead on, the
 # default), including the one Figures 13-14 pick.
 CFG = ReproduceConfig.quick(terrain="fractal:64:2", size=64, frames=60, epsilon=4.0,
-                            sweeps=False)
+                            sweeps=False, quality_stride=1)
 
 
 @pytest.fixture(scope="module")
