@@ -360,11 +360,10 @@ def pyramid_for(config: RenderConfig, hf):
     the scene's height field ``hf`` as an in-memory pyramid (so it is the field full
     resolution draws)."""
     from lodsprite.terrain.pyramid import MemoryPyramid
-    from lodsprite.terrain.store import TerrainStore
+    from lodsprite.terrain.store import TerrainStore, is_store
 
-    p = Path(config.terrain).expanduser()
-    if p.is_dir() and (p / "zarr.json").is_file():
-        return TerrainStore(p, config.exaggeration)
+    if is_store(config.terrain):
+        return TerrainStore(Path(config.terrain).expanduser(), config.exaggeration)
     return MemoryPyramid.from_heightfield(hf)
 
 

@@ -380,13 +380,14 @@ def test_prefetch_streams_between_keyframes_without_drawing(gl):
     try:
         vp = look_at((0.0, -3000.0, 1500.0), (0.0, 0.0, 0.0))
         a.frame(vp)
-        before = len(a.slots.slots)
+        wanted, before = list(a._wanted), len(a.slots.slots)
         got, deadline = 0, time.monotonic() + 20
         while got == 0 and time.monotonic() < deadline:
             time.sleep(0.01)
             got += a.prefetch()
         assert got > 0 and len(a.slots.slots) == before + got
-        assert all(n in a._wanted for n in list(a.slots.slots)[-got:])
+        assert all(n in wanted for n in list(a.slots.slots)[-got:])
+        assert not any(n in a.slots for n in a._wanted)  # resident ones are not looked for
     finally:
         a.release()
         t.release()

@@ -25,6 +25,7 @@ import numpy as np
 
 from lodsprite.errors import InputError, TerrainError
 from lodsprite.terrain.loaders import parse_fractal_spec
+from lodsprite.terrain.store import is_store
 from lodsprite.terrain.textures import CHECKER_SIZE
 
 MAX_FRACTAL_SIZE = 4096
@@ -102,7 +103,7 @@ class Datasets:
             raise InputError(f"{what} {name!r}: no such file in the data folder") from None
         if not path.is_relative_to(self.data_dir):
             raise InputError(f"{what} {name!r} leads outside the data folder")
-        if stores and path.is_dir() and (path / "zarr.json").is_file():
+        if stores and is_store(path):
             _check_store(path, name)
         elif not path.is_file():
             raise InputError(f"{what} {name!r} is not a file")

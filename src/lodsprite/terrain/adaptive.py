@@ -161,6 +161,8 @@ class AdaptiveTerrain:
             data = self.loader.take(n)
             if data is not None and n not in self.slots and self._upload(n, data, self._keep):
                 uploaded += 1
+        if uploaded:  # what is resident is not looked for again (prefetch, every frame)
+            self._wanted = [n for n in self._wanted if n not in self.slots]
         return uploaded
 
     def prefetch(self) -> int:

@@ -88,19 +88,17 @@ def errors(a: dict, b: dict) -> tuple[float, float]:
             float(np.mean([flip(a[i], b[i]) for i in a])))
 
 
-def reference(store: Path, cfg: LargeConfig, keep: list[int], path_spec: str,
+def reference(store: Path, scene, path, cfg: LargeConfig, keep: list[int],
               sse: float) -> dict:
     """The settled adaptive frames at ``sse`` px (``FULL_SSE``: full resolution) of the
-    sampled viewpoints of ``path_spec``."""
-    from lodsprite import get_path, load_scene
+    sampled viewpoints of ``path`` (a :class:`~lodsprite.paths.CameraPath` over
+    ``scene``, the store as ``render`` loads it, for its colours)."""
     from lodsprite.gl.context import GLContext
     from lodsprite.gl.target import RenderTarget
     from lodsprite.gl.terrain import TerrainGeometry
     from lodsprite.terrain.adaptive import AdaptiveTerrain
     from lodsprite.terrain.store import TerrainStore
 
-    scene = load_scene(str(store))
-    path = get_path(path_spec, scene.hf, cfg.frames)
     full = sse <= FULL_SSE
     out = {}
     with GLContext() as gl:
@@ -137,18 +135,22 @@ def run_path(store: Path, n: int, cfg: LargeConfig, path_spec: str, runs: Path) 
     common = ["--path", path_spec, "--frames", str(cfg.frames), "--size",
               f"{cfg.image}x{cfg.image}", "--save-frames"]
     lod = ["--lod", str(sprite_lod(n))]
+    from lodsprite import get_path, load_scene
+
+    scene = load_scene(str(store))  # once: the references and the sampled path share it
+    path = get_path(path_spec, scene.hf, cfg.frames)
     ad = _render(["--terrain", str(store), "--mode", "adaptive", "--sse", str(cfg.sse),
                   *common], runs / "adaptive")
     sp = _render(["--terrain", str(store), "--mode", "sprite", "--key-sse",
                   str(cfg.key_sse), *lod, *common], runs / "sprite")
     res: dict = {}
-    ref = stand_in = reference(store, cfg, keep, path_spec, cfg.ref_sse)
+    ref = stand_in = reference(store, scene, path, cfg, keep, cfg.ref_sse)
     res["reference"] = f"adaptive at {cfg.ref_sse} px, settled"
     if n <= FULL_MAX:
-        ref = reference(store, cfg, keep, path_spec, FULL_SSE)
+        ref = reference(store, scene, path, cfg, keep, FULL_SSE)
         res["reference"] = "full resolution (level 0 everywhere, settled)"
         res["reference_vs_full_rmse"], res["reference_vs_full_flip"] = errors(stand_in, ref)
-        sampled = sampled_path(store, cfg, keep, path_spec, runs / "sampled.json")
+        sampled = sampled_path(path, keep, runs / "sampled.json")
         fu = _render(["--terrain", str(store), "--mode", "full", "--grid", str(n),
                       "--path", str(sampled), "--frames", str(len(keep)), "--size",
                       f"{cfg.image}x{cfg.image}"], runs / "full")
@@ -193,10 +195,10 @@ def equal_error(sweep: list[dict], rmse_adaptive: float, total_s_adaptive: float
 
 def _store_for(spec: str, stores: Path) -> tuple[Path, dict, int]:
     """A terrain given with ``--terrain``: a store as it is, anything else tiled first."""
-    from lodsprite.terrain.store import TerrainStore
+    from lodsprite.terrain.store import TerrainStore, is_store
 
     p = Path(spec).expanduser()
-    if p.is_dir() and (p / "zarr.json").is_file():
+    if is_store(p):
         built: dict = {}
     else:
         name = "".join(ch if ch.isalnum() or ch in "-_." else "_" for ch in p.name or spec)
@@ -217,7 +219,7 @@ def reproduce_large(cfg: LargeConfig, out_dir: Path, update: Update | None = Non
         if update:
             update("stores", step, len(jobs))
         if spec.startswith("fractal:"):
-            store, built, n = out_dir / "stores" / f"fractal_{key}.zarr", None, int(key)
+            store, n = out_dir / "stores" / f"fractal_{key}.zarr", int(key)
             built = build_store(spec, store)
         else:
             store, built, n = _store_for(spec, out_dir / "stores")
@@ -260,13 +262,10 @@ def _jacksboro(cfg: LargeConfig, out_dir: Path) -> dict:
     return r
 
 
-def sampled_path(store: Path, cfg: LargeConfig, keep: list[int], path_spec: str,
-                 file: Path) -> Path:
-    """The sampled viewpoints of ``path_spec`` as a path file."""
-    from lodsprite import get_path, load_scene
+def sampled_path(path, keep: list[int], file: Path) -> Path:
+    """The viewpoints ``keep`` of ``path`` as a path file."""
     from lodsprite.paths import CameraPath
 
-    path = get_path(path_spec, load_scene(str(store)).hf, cfg.frames)
     file.parent.mkdir(parents=True, exist_ok=True)
     CameraPath("sampled", tuple(path.viewpoints[i] for i in keep), path.fov_y_deg
                ).to_json(file)

@@ -106,9 +106,9 @@ def load_heightfield(spec: str | os.PathLike) -> HeightField:
         return fractal(*parsed)
     path = Path(spec).expanduser()
     suffix = path.suffix.lower()
-    if path.is_dir() and (path / "zarr.json").is_file():
-        from lodsprite.terrain.store import TerrainStore
+    from lodsprite.terrain.store import TerrainStore, is_store
 
+    if is_store(path):
         try:
             return TerrainStore(path).heightfield(STORE_MAX_SIDE)
         except InputError as exc:

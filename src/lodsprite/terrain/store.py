@@ -303,11 +303,17 @@ def _open_for_build(out: Path, header: StoreHeader, overwrite: bool):
     return group
 
 
+def is_store(path: str | Path) -> bool:
+    """Whether ``path`` is a folder holding a Zarr group (a store to open and validate)."""
+    p = Path(path).expanduser()
+    return p.is_dir() and (p / "zarr.json").is_file()
+
+
 def _existing_header(out: Path) -> StoreHeader | None:
     """The header of a lodsprite store at ``out``, or None for anything else."""
     import zarr
 
-    if not (out.is_dir() and (out / "zarr.json").is_file()):
+    if not is_store(out):
         return None
     try:
         return _header_of(zarr.open_group(str(out), mode="r"))
