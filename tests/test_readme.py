@@ -4,6 +4,7 @@ relative link resolves, and every command's options are on its docs page."""
 
 from __future__ import annotations
 
+import os
 import re
 import subprocess
 import sys
@@ -122,6 +123,14 @@ def test_every_docs_page_is_in_the_site_navigation() -> None:
     assert pages == listed, f"not in nav: {pages - listed}; missing: {listed - pages}"
 
 
+def test_every_python_block_in_the_docs_compiles() -> None:
+    for md in markdown_files():
+        blocks = re.findall(r"^```python\n(.*?)^```", md.read_text(encoding="utf-8"),
+                            flags=re.MULTILINE | re.DOTALL)
+        for i, block in enumerate(blocks):
+            compile(block, f"{md.relative_to(ROOT)} block {i}", "exec")
+
+
 def cli_help(*commands: str) -> dict[str, str]:
     """``lodsprite COMMAND --help`` for each command, in one interpreter, through the
     console script's own entry point (pyproject.toml)."""
@@ -139,24 +148,25 @@ def cli_help(*commands: str) -> dict[str, str]:
         "        pass\n"
         "    sys.stdout.flush()\n")
     proc = subprocess.run([sys.executable, "-c", driver], capture_output=True, text=True,
-                          timeout=TIMEOUT_S, env={**__import__("os").environ,
-                                                  "COLUMNS": "200", "NO_COLOR": "1"})
+                          timeout=TIMEOUT_S, env={**os.environ, "COLUMNS": "200", "NO_COLOR": "1"})
     assert proc.returncode == 0, proc.stderr
     parts = re.split(r"^=== (.*)$", proc.stdout, flags=re.MULTILINE)[1:]
     return dict(zip(parts[::2], parts[1::2], strict=True))
 
 
+def commands_in(help_text: str) -> list[str]:
+    """The command names a group's ``--help`` lists (rich's panel or click's plain list)."""
+    panel = help_text[help_text.index("Commands"):]
+    return re.findall(r"^(?:\s*│ |  )([a-z][\w-]*) ", panel, flags=re.MULTILINE)
+
+
 @pytest.fixture(scope="module")
 def helps() -> dict[str, str]:
-    top = cli_help("")[""]
-    panel = top[top.index("Commands"):]
-    commands = re.findall(r"^\W*│ ([a-z][\w-]*) ", panel, flags=re.MULTILINE)
-    assert "render" in commands and "lumigraph" in commands, top
+    commands = commands_in(cli_help("")[""])
+    assert "render" in commands and "lumigraph" in commands, commands
     groups = cli_help(*commands)
-    subs = [f"lumigraph {c}" for c in re.findall(
-        r"^\W*│ ([a-z][\w-]*) ", groups["lumigraph"][groups["lumigraph"].index("Commands"):],
-        flags=re.MULTILINE)]
-    assert subs, groups["lumigraph"]
+    subs = [f"lumigraph {c}" for c in commands_in(groups["lumigraph"])]
+    assert "lumigraph render" in subs, groups["lumigraph"]
     return {**{c: h for c, h in groups.items() if c != "lumigraph"}, **cli_help(*subs)}
 
 
