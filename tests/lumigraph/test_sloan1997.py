@@ -7,8 +7,8 @@ import json
 
 import numpy as np
 
-from lodsprite.lumigraph.reproduce import SloanConfig, reproduce_sloan1997
-from lodsprite.report.sloan1997 import write_outputs
+from lodsprite.experiments.sloan1997.report import write_outputs
+from lodsprite.experiments.sloan1997.run import SloanConfig, reproduce_sloan1997
 
 
 def test_quick_reproduction_writes_results_plots_and_report(tmp_path):

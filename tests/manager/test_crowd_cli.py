@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from lodsprite.errors import InputError
-from lodsprite.manager.reproduce import GumbauConfig, reproduce_gumbau
+from lodsprite.experiments.gumbau.report import write_outputs
+from lodsprite.experiments.gumbau.run import GumbauConfig, reproduce_gumbau
 from lodsprite.manager.run import CrowdConfig, run_crowd
-from lodsprite.report.gumbau import write_outputs
 
 SUMMARY_KEYS = ("extractions_total", "fps_mean", "frame_ms_median", "frame_ms_p99",
                 "triangles_mean", "draw_calls_mean", "lod_cpu_ms_mean")

@@ -9,10 +9,10 @@ import pytest
 import trimesh
 
 from lodsprite.cli import main
+from lodsprite.experiments.scoggins2000.report import write_outputs
+from lodsprite.experiments.scoggins2000.run import ScogginsConfig, reproduce_scoggins2000
 from lodsprite.profiles.generate import ProfileSettings
-from lodsprite.profiles.reproduce import ScogginsConfig, reproduce_scoggins2000
 from lodsprite.profiles.table import ProfileTable
-from lodsprite.report.scoggins2000 import write_outputs
 
 KEYS = ("profile_s_sphere", "profile_s_mountain", "snowflake_triangles_full",
         "snowflake_triangles_far_csf", "snowflake_triangles_far_nocsf", "triangles",
