@@ -10,6 +10,7 @@ import sys
 import numpy as np
 import pytest
 
+from lodsprite import experiments
 from lodsprite.errors import InputError
 from lodsprite.experiments.gumbau.report import write_outputs
 from lodsprite.experiments.gumbau.run import GumbauConfig, reproduce_gumbau
@@ -80,6 +81,9 @@ def test_reproduction_writes_every_key_plots_and_report(tmp_path):
                  "target_fps.png"):
         assert (tmp_path / name).stat().st_size > 2000
     assert "Baseline (b)" in report.read_text()
+    table = experiments.get("gumbau").summary(saved)
+    assert table.rows[0] == ("extractions", f"{saved['extractions_with']:,}",
+                             f"{saved['extractions_without']:,}")
 
 
 def test_the_crowd_in_the_viewer_switches_modes(gl):
