@@ -15,8 +15,8 @@ import argparse
 import json
 from pathlib import Path
 
-from lodsprite.report.chen1999 import write_plots, write_report
-from lodsprite.sprite.reproduce import ReproduceConfig, reproduce_chen1999
+from lodsprite.experiments.chen1999.report import write_plots, write_report
+from lodsprite.experiments.chen1999.run import ReproduceConfig, reproduce_chen1999
 
 CASES = {
     "512": (ReproduceConfig(terrain="jacksboro"), {"speedup": 10.0, "keyframe_fraction": 0.08}),

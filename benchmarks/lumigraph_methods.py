@@ -18,8 +18,8 @@ import argparse
 import tempfile
 from pathlib import Path
 
+from lodsprite.experiments.sloan1997.run import to_and_fro
 from lodsprite.lumigraph.methods import METHODS
-from lodsprite.lumigraph.reproduce import to_and_fro
 from lodsprite.lumigraph.run import capture_lumigraph, measure, object_path
 from lodsprite.lumigraph.store import Lumigraph
 

@@ -19,7 +19,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from lodsprite.distributed.quality import Replayer, recorded_keyframes
-from lodsprite.distributed.reproduce import SwanConfig, run_setup
+from lodsprite.experiments.swan2002.run import SwanConfig, run_setup
 
 
 def main() -> None:

@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lodsprite.distributed.reproduce import SwanConfig, run_setup
+from lodsprite.experiments.swan2002.run import SwanConfig, run_setup
 
 SETUPS = ("same_all_cores", "two_servers")
 

@@ -15,8 +15,8 @@ import argparse
 import os
 from pathlib import Path
 
-from lodsprite.profiles.reproduce import ScogginsConfig, reproduce_scoggins2000
-from lodsprite.report.scoggins2000 import write_outputs
+from lodsprite.experiments.scoggins2000.report import write_outputs
+from lodsprite.experiments.scoggins2000.run import ScogginsConfig, reproduce_scoggins2000
 
 
 def main() -> None:

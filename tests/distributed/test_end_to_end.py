@@ -12,8 +12,8 @@ import pytest
 from lodsprite.camera import Viewpoint
 from lodsprite.distributed.client import DEFAULT_MAX_ERROR, LodClient
 from lodsprite.distributed.render import scene_args
-from lodsprite.distributed.reproduce import LINK_SETUPS, SETUPS
 from lodsprite.distributed.run import free_ports
+from lodsprite.experiments.swan2002.run import LINK_SETUPS, SETUPS
 from lodsprite.run import RenderConfig, prepare
 
 SMALL = RenderConfig(terrain="fractal:64:2", size=(64, 64), lod=8, frames=40,

@@ -7,8 +7,9 @@ import json
 
 import numpy as np
 
-from lodsprite.lumigraph.reproduce import SloanConfig, reproduce_sloan1997
-from lodsprite.report.sloan1997 import write_outputs
+from lodsprite import experiments
+from lodsprite.experiments.sloan1997.report import write_outputs
+from lodsprite.experiments.sloan1997.run import SloanConfig, reproduce_sloan1997
 
 
 def test_quick_reproduction_writes_results_plots_and_report(tmp_path):
@@ -39,3 +40,8 @@ def test_quick_reproduction_writes_results_plots_and_report(tmp_path):
         assert (tmp_path / name).stat().st_size > 5000
     text = report.read_text()
     assert "Table 1" in text and "6x²−3x+3" in text and "fig05_06_critical_time.png" in text
+    # The table the command line prints: Table 1's fill rates beside the paper's.
+    table = experiments.get("sloan1997").summary(r)
+    fill = {row[0]: row for row in table.rows if row[0].startswith("fill rate ")}
+    assert set(fill) == {f"fill rate {name}" for name in saved["table1"]}
+    assert fill["fill rate line"][1:] == (f"{saved['table1']['line']['fill_rate']:.2f}", "2.0")

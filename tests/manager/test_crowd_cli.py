@@ -10,10 +10,11 @@ import sys
 import numpy as np
 import pytest
 
+from lodsprite import experiments
 from lodsprite.errors import InputError
-from lodsprite.manager.reproduce import GumbauConfig, reproduce_gumbau
+from lodsprite.experiments.gumbau.report import write_outputs
+from lodsprite.experiments.gumbau.run import GumbauConfig, reproduce_gumbau
 from lodsprite.manager.run import CrowdConfig, run_crowd
-from lodsprite.report.gumbau import write_outputs
 
 SUMMARY_KEYS = ("extractions_total", "fps_mean", "frame_ms_median", "frame_ms_p99",
                 "triangles_mean", "draw_calls_mean", "lod_cpu_ms_mean")
@@ -80,6 +81,9 @@ def test_reproduction_writes_every_key_plots_and_report(tmp_path):
                  "target_fps.png"):
         assert (tmp_path / name).stat().st_size > 2000
     assert "Baseline (b)" in report.read_text()
+    table = experiments.get("gumbau").summary(saved)
+    assert table.rows[0] == ("extractions", f"{saved['extractions_with']:,}",
+                             f"{saved['extractions_without']:,}")
 
 
 def test_the_crowd_in_the_viewer_switches_modes(gl):

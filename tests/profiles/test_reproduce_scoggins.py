@@ -8,11 +8,12 @@ import numpy as np
 import pytest
 import trimesh
 
+from lodsprite import experiments
 from lodsprite.cli import main
+from lodsprite.experiments.scoggins2000.report import write_outputs
+from lodsprite.experiments.scoggins2000.run import ScogginsConfig, reproduce_scoggins2000
 from lodsprite.profiles.generate import ProfileSettings
-from lodsprite.profiles.reproduce import ScogginsConfig, reproduce_scoggins2000
 from lodsprite.profiles.table import ProfileTable
-from lodsprite.report.scoggins2000 import write_outputs
 
 KEYS = ("profile_s_sphere", "profile_s_mountain", "snowflake_triangles_full",
         "snowflake_triangles_far_csf", "snowflake_triangles_far_nocsf", "triangles",
@@ -46,6 +47,14 @@ def test_results_have_the_issue_keys(results, tmp_path):
     assert "17 min" in report.read_text()
     table = ProfileTable.load(tmp_path / "profile_mountain.npz")
     assert table.levels == 8
+
+
+def test_the_summary_table_gives_the_paper_beside_the_run(results):
+    table = experiments.get("scoggins2000").summary(results)
+    rows = {row[0]: row for row in table.rows}
+    assert rows["profile s, mountain"] == ("profile s, mountain",
+                                           f"{results['profile_s_mountain']:.1f}", "6000")
+    assert rows["sphereflake triangles, full"][2] == "9,451,008"
 
 
 def test_profile_command_on_a_mesh_file(tmp_path, capsys):

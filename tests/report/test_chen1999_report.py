@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from lodsprite.report.chen1999 import PAPER, write_plots, write_report
+from lodsprite.experiments.chen1999.report import PAPER, write_plots, write_report
 from lodsprite.report.io import write_json
 
 N = 40

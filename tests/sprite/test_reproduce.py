@@ -9,11 +9,11 @@ import pytest
 from PIL import Image
 
 from lodsprite.camera import Projection, Viewpoint
+from lodsprite.experiments.chen1999.run import ReproduceConfig, reproduce_chen1999
 from lodsprite.gl.paths import PathRenderer
 from lodsprite.metrics import rmse
 from lodsprite.paths import chen1999
 from lodsprite.scene import load_scene
-from lodsprite.sprite.reproduce import ReproduceConfig, reproduce_chen1999
 
 # A small run whose keyframes are mostly placed ahead of the viewer (look-ahead on, the
 # default), including the one Figures 13-14 pick.

@@ -210,8 +210,8 @@ def test_lod_sprite_with_adaptive_keyframes_stays_closer_than_the_plain_coarse_l
 def test_the_large_terrain_harness_writes_its_keys(tmp_path):
     import json
 
-    from lodsprite.report.large import write_outputs
-    from lodsprite.terrain.large import LargeConfig, reproduce_large
+    from lodsprite.experiments.large.report import write_outputs
+    from lodsprite.experiments.large.run import LargeConfig, reproduce_large
 
     cfg = LargeConfig(sizes=(256,), frames=6, image=48, sample_every=3, jacksboro=False,
                       sweep_eps=())
@@ -358,7 +358,7 @@ def test_a_low_flight_over_a_field_with_a_deep_pit_elsewhere_sees_the_ground_bel
 
 
 def test_equal_error_takes_the_fastest_sprite_run_within_adaptives_rmse():
-    from lodsprite.terrain.large import equal_error
+    from lodsprite.experiments.large.run import equal_error
 
     sweep = [{"epsilon": 1.0, "total_s": 1.0, "rmse": 5.0},
              {"epsilon": 0.5, "total_s": 2.0, "rmse": 4.0},

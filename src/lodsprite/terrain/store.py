@@ -27,91 +27,34 @@ that finishes it.
 
 from __future__ import annotations
 
-import json
 import shutil
 from collections.abc import Callable
 from pathlib import Path
-from typing import Literal
 
-import msgspec
 import numpy as np
 
 from lodsprite.errors import InputError
+from lodsprite.terrain.store_format import (
+    DEFAULT_CHUNK,
+    DEFAULT_TILE,
+    FORMAT,
+    MIN_LEVEL_SIDE,
+    VERSION,
+    StoreHeader,
+    coarse_error,
+    decode,
+    downsample,
+    encode,
+    estimate_bytes,
+    is_store,
+    level_shape,
+    pyramid_levels,
+    read_header,
+    save_header,
+    tile_windows,
+)
 
-FORMAT = "lodsprite-terrain-pyramid"
-VERSION = 1
-DEFAULT_TILE = 1024
-DEFAULT_CHUNK = 256
-MIN_LEVEL_SIDE = 256
 Progress = Callable[[int, int], None]
-
-
-class StoreHeader(msgspec.Struct, forbid_unknown_fields=True):
-    """The store's header (``attrs["lodsprite"]``)."""
-
-    format: str
-    version: int
-    source: str
-    rows: int
-    cols: int
-    dx: float
-    dy: float
-    levels: int
-    tile: int
-    chunk: int
-    encoding: Literal["float32", "int16"]
-    scale: float = 1.0
-    offset: float = 0.0
-    crs: str | None = None
-    transform: list[float] | None = None
-    complete: bool = False
-    done: list[list[int]] = []  # per level, the tiles written (row-major tile index)
-    level_errors: list[float] = []  # per level, the geometric error bound (metres)
-
-
-def level_shape(rows: int, cols: int, k: int) -> tuple[int, int]:
-    return -(-rows // (1 << k)), -(-cols // (1 << k))
-
-
-def pyramid_levels(rows: int, cols: int) -> int:
-    """Levels down to the first whose longer side is at most ``MIN_LEVEL_SIDE``."""
-    n = 1
-    while max(level_shape(rows, cols, n - 1)) > MIN_LEVEL_SIDE:
-        n += 1
-    return n
-
-
-def downsample(a: np.ndarray) -> np.ndarray:
-    """The exact 2×2 mean, an odd last row or column averaged with itself, ``float32``."""
-    a = np.asarray(a, dtype=np.float64)
-    if a.shape[0] % 2:
-        a = np.concatenate([a, a[-1:]], axis=0)
-    if a.shape[1] % 2:
-        a = np.concatenate([a, a[:, -1:]], axis=1)
-    return (0.25 * (a[0::2, 0::2] + a[1::2, 0::2] + a[0::2, 1::2] + a[1::2, 1::2])
-            ).astype(np.float32)
-
-
-def _tiles(shape: tuple[int, int], tile: int) -> list[tuple[int, int, int, int]]:
-    r, c = shape
-    return [(r0, min(r, r0 + tile), c0, min(c, c0 + tile))
-            for r0 in range(0, r, tile) for c0 in range(0, c, tile)]
-
-
-def estimate_bytes(rows: int, cols: int, encoding: str) -> int:
-    """An upper bound on the store's size (uncompressed, all levels)."""
-    item = 4 if encoding == "float32" else 2
-    return int(rows * cols * item * 4 / 3) + (1 << 20)
-
-
-def _header_of(group) -> StoreHeader:
-    raw = group.attrs.get("lodsprite")
-    if raw is None:
-        raise InputError("not a lodsprite terrain store (no header)")
-    try:
-        return msgspec.convert(raw, StoreHeader)
-    except msgspec.ValidationError as exc:
-        raise InputError(f"malformed terrain store header: {exc}") from exc
 
 
 def build_store(source_spec: str, out: str | Path, tile: int = DEFAULT_TILE,
@@ -142,40 +85,40 @@ def build_store(source_spec: str, out: str | Path, tile: int = DEFAULT_TILE,
                          float(scale) if encoding == "int16" else 1.0, float(offset),
                          src.crs, src.transform, False, [[] for _ in range(levels)])
     group = _open_for_build(out, header, overwrite)
-    header = _header_of(group)
+    header = read_header(group)
     if header.complete:
         return {"store": str(out), "rows": src.rows, "cols": src.cols, "levels": levels,
                 "tiles_written": 0, "seconds": 0.0, "resumed": False, "already": True}
-    total = sum(len(_tiles(level_shape(src.rows, src.cols, k), tile)) for k in range(levels))
+    total = sum(len(tile_windows(level_shape(src.rows, src.cols, k), tile)) for k in range(levels))
     done_before = sum(len(d) for d in header.done)
     written, t0, samples0 = 0, time.perf_counter(), 0
     client = _client(scheduler) if scheduler else None
     try:
         for k in range(levels):
             done_k = set(header.done[k])
-            pending = [n for n in range(len(_tiles(level_shape(src.rows, src.cols, k), tile)))
+            pending = [n for n in range(len(tile_windows(level_shape(src.rows, src.cols, k), tile)))
                        if n not in done_k]
             if k == 0:
-                tiles0 = _tiles(level_shape(src.rows, src.cols, 0), tile)
+                tiles0 = tile_windows(level_shape(src.rows, src.cols, 0), tile)
                 samples0 = sum((tiles0[n][1] - tiles0[n][0]) * (tiles0[n][3] - tiles0[n][2])
                                for n in pending)
             if stop_after is not None:
                 pending = pending[: max(0, stop_after - written)]
             for n in _run_tiles(client, out, k, pending, src, group, header):
                 header.done[k].append(n)
-                _save_header(group, header)
+                save_header(group, header)
                 written += 1
                 if progress:
                     progress(done_before + written, total)
             if stop_after is not None and written >= stop_after and len(header.done[k]) < len(
-                    _tiles(level_shape(src.rows, src.cols, k), tile)):
+                    tile_windows(level_shape(src.rows, src.cols, k), tile)):
                 return {"store": str(out), "interrupted": True, "tiles_written": written}
     finally:
         if client is not None:
             client.close()
     header.level_errors = level_errors(group, header)
     header.complete = True
-    _save_header(group, header)
+    save_header(group, header)
     seconds = time.perf_counter() - t0
     return {"store": str(out), "rows": src.rows, "cols": src.cols, "levels": levels,
             "tiles_written": written, "seconds": seconds, "resumed": done_before > 0,
@@ -230,8 +173,8 @@ def build_tile(out, k: int, n: int, src=None, group=None, header=None) -> None:
     from lodsprite.terrain.tiled import open_source
 
     group = group if group is not None else _open_group(Path(out))
-    header = header if header is not None else _header_of(group)
-    r0, r1, c0, c1 = _tiles(level_shape(header.rows, header.cols, k), header.tile)[n]
+    header = header if header is not None else read_header(group)
+    r0, r1, c0, c1 = tile_windows(level_shape(header.rows, header.cols, k), header.tile)[n]
     if k == 0:
         src = src if src is not None else open_source(header.source)
         h, err = src.read(r0, r1, c0, c1), None
@@ -299,14 +242,8 @@ def _open_for_build(out: Path, header: StoreHeader, overwrite: bool):
         group.create_array(f"minmax/{k}", shape=(cr, cc, 3),
                            chunks=(min(per, cr), min(per, cc), 3), dtype="float32",
                            fill_value=np.nan)
-    _save_header(group, header)
+    save_header(group, header)
     return group
-
-
-def is_store(path: str | Path) -> bool:
-    """Whether ``path`` is a folder holding a Zarr group (a store to open and validate)."""
-    p = Path(path).expanduser()
-    return p.is_dir() and (p / "zarr.json").is_file()
 
 
 def _existing_header(out: Path) -> StoreHeader | None:
@@ -316,7 +253,7 @@ def _existing_header(out: Path) -> StoreHeader | None:
     if not is_store(out):
         return None
     try:
-        return _header_of(zarr.open_group(str(out), mode="r"))
+        return read_header(zarr.open_group(str(out), mode="r"))
     except Exception:  # not a group, not ours, damaged: not a store to resume
         return None
 
@@ -327,10 +264,6 @@ def _size(path: Path) -> int:
 
 def _ceil_to(n: int, m: int) -> int:
     return -(-n // m) * m
-
-
-def _save_header(group, header: StoreHeader) -> None:
-    group.attrs["lodsprite"] = json.loads(msgspec.json.encode(header))
 
 
 def _parent_window(group, header: StoreHeader, k: int, r0: int, r1: int, c0: int, c1: int
@@ -345,44 +278,6 @@ def _parent_window(group, header: StoreHeader, k: int, r0: int, r1: int, c0: int
     ext = downsample(below)[: er - r0, : ec - c0]
     h = ext[: r1 - r0, : c1 - c0]
     return h, coarse_error(ext, below, r1 - r0, c1 - c0)
-
-
-def coarse_error(coarse: np.ndarray, fine: np.ndarray, rows: int, cols: int) -> np.ndarray:
-    """Per coarse sample of the first ``rows x cols``, the largest difference between
-    the coarse grid's triangulated surface (square ``(i, j)`` split along ``(i, j)-(i+1,
-    j+1)``) and the fine samples ``(2i + a, 2j + b)``, ``a, b`` in {0, 1}.  ``coarse``
-    may hold one more row and column (the next tile's); the edge is repeated past it."""
-    c = np.asarray(coarse, np.float64)
-    c = np.concatenate([c, c[-1:]], 0) if c.shape[0] == rows else c
-    c = np.concatenate([c, c[:, -1:]], 1) if c.shape[1] == cols else c
-    c = c[: rows + 1, : cols + 1]
-    f = np.full((2 * rows, 2 * cols), np.nan)
-    fh, fw = min(fine.shape[0], 2 * rows), min(fine.shape[1], 2 * cols)
-    f[:fh, :fw] = fine[:fh, :fw]
-    h00, h10, h01, h11 = c[:-1, :-1], c[1:, :-1], c[:-1, 1:], c[1:, 1:]
-    err = np.zeros((rows, cols))
-    for a, b, surf in ((0, 0, h00), (1, 0, (h00 + h10) / 2), (0, 1, (h00 + h01) / 2),
-                       (1, 1, (h00 + h11) / 2)):
-        d = np.abs(f[a::2, b::2][:rows, :cols] - surf)
-        err = np.fmax(err, np.where(np.isfinite(d), d, 0.0))
-    return err.astype(np.float32)
-
-
-def encode(h: np.ndarray, header: StoreHeader) -> np.ndarray:
-    if header.encoding == "float32":
-        return h.astype(np.float32)
-    q = np.rint((np.asarray(h, np.float64) - header.offset) / header.scale)
-    return np.where(np.isfinite(q), np.clip(q, -32767, 32767), -32768).astype(np.int16)
-
-
-def decode(a: np.ndarray, header: StoreHeader) -> np.ndarray:
-    """Stored values to metres (``float32``; NaN where nothing was written)."""
-    if header.encoding == "float32":
-        return np.asarray(a, dtype=np.float32)
-    a = np.asarray(a)
-    out = a.astype(np.float32) * np.float32(header.scale) + np.float32(header.offset)
-    out[a == -32768] = np.nan
-    return out
 
 
 def _write_tile(arr, mm, header: StoreHeader, h: np.ndarray, r0: int, c0: int,
@@ -418,7 +313,7 @@ class TerrainStore:
             raise InputError(f"{self.path} is not a terrain store (no zarr.json)")
         try:
             self.group = zarr.open_group(str(self.path), mode="r")
-            self.header = _header_of(self.group)
+            self.header = read_header(self.group)
         except InputError as exc:
             raise InputError(f"{self.path}: {exc}") from exc
         except Exception as exc:  # zarr raises many kinds on a damaged store
@@ -495,3 +390,9 @@ class TerrainStore:
         dx = h.dx * (h.cols - 1) / max(c - 1, 1)
         dy = h.dy * (h.rows - 1) / max(r - 1, 1)
         return heightfield_from_array(a, dx, dy, self.path.name, meta)
+
+
+__all__ = ["DEFAULT_CHUNK", "DEFAULT_TILE", "FORMAT", "MIN_LEVEL_SIDE", "VERSION", "StoreHeader",
+           "TerrainStore", "build_store", "build_tile", "coarse_error", "decode", "downsample",
+           "encode", "estimate_bytes", "is_store", "level_errors", "level_shape",
+           "pyramid_levels"]

@@ -1,5 +1,5 @@
 """Plots, images and a Markdown report for the Scoggins, Machiraju & Moorhead (2000)
-LOD-matching reproduction (:func:`lodsprite.profiles.reproduce.reproduce_scoggins2000`).
+LOD-matching reproduction (:func:`lodsprite.experiments.scoggins2000.run.reproduce_scoggins2000`).
 
 Our analogues of the paper's Figures 5-8, the two profile tables, ``results.json`` and
 ``report.md`` with every measured number beside the paper's.
@@ -12,8 +12,8 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
+from lodsprite.experiments.paper_numbers import PAPER_2000
 from lodsprite.report.io import atomic_write_bytes, save_figure, write_json, write_png
-from lodsprite.report.paper_numbers import PAPER_2000
 from lodsprite.report.values import fmt_fixed
 
 

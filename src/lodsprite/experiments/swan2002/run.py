@@ -280,7 +280,7 @@ def policies(results: dict) -> list[dict]:
 
 def reproduce_swan2002(cfg: SwanConfig, out_dir: Path,
                        progress: Progress | None = None) -> dict:
-    """Run the three set-ups; write ``results.json`` and return it (plots: report.swan2002)."""
+    """Run the three set-ups; write ``results.json`` and return it (plots: :mod:`.report`)."""
     out_dir = Path(out_dir)
     cpus = sorted(os.sched_getaffinity(0))
     results: dict = {"experiment": "swan2002", "config": asdict(cfg), "cpus": len(cpus)}

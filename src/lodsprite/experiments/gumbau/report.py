@@ -1,5 +1,5 @@
 """Plots, Figure 5's images and a Markdown report for the LODManager reproduction
-(:func:`lodsprite.manager.reproduce.reproduce_gumbau`)."""
+(:func:`lodsprite.experiments.gumbau.run.reproduce_gumbau`)."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
+from lodsprite.experiments.paper_numbers import PAPER_GUMBAU
 from lodsprite.report.io import atomic_write_bytes, save_figure, write_json, write_png
-from lodsprite.report.paper_numbers import PAPER_GUMBAU
 from lodsprite.report.values import fmt_fixed
 
 

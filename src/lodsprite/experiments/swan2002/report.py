@@ -1,6 +1,6 @@
 """Plots and a Markdown report for the Swan, Arango & Nakshatrala (2002) timing study.
 
-Figures 8-12 of the paper drawn from :func:`lodsprite.distributed.reproduce.reproduce_swan2002`
+Figures 8-12 of the paper drawn from :func:`lodsprite.experiments.swan2002.run.reproduce_swan2002`
 results; every number comes from the results or :data:`PAPER_2002`.
 """
 
@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
+from lodsprite.experiments.paper_numbers import PAPER_2002
 from lodsprite.report.io import atomic_write_bytes, save_figure
-from lodsprite.report.paper_numbers import PAPER_2002
 from lodsprite.report.values import fmt_fixed, fmt_int
 
 LABELS = {"inline": "inline (1999, keyframes in the frame loop)",

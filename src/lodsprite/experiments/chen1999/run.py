@@ -193,7 +193,7 @@ def reproduce_chen1999(cfg: ReproduceConfig, out_dir: Path,
                        progress: Progress | None = None) -> dict:
     """Run the experiment; write PNG images, ``results.json``; return the results dict.
 
-    Plots and ``report.md`` are written by :mod:`lodsprite.report.chen1999`.
+    Plots and ``report.md`` are written by :mod:`lodsprite.experiments.chen1999.report`.
     """
     if cfg.frames < 2 or cfg.size < 16:
         raise InputError("reproduce needs at least 2 frames and 16-pixel images")

@@ -2,8 +2,9 @@
 (fractal stores of 1k², 2k², 4k², 16k², ...), for the adaptive renderer at 1 px and LOD-sprite
 with adaptive keyframes, along the chen1999-shaped path and a low flyover.
 
-Each timed run is its own ``lodsprite render`` process (so its peak resident memory and
-time to first frame are its own).  The paths: ``chen1999`` (the issue's path; it scales
+Each timed run is :func:`lodsprite.run.render_path` in a process of its own
+(:mod:`lodsprite.experiments.large.child`; so its peak resident memory and time to first
+frame are its own).  The paths: ``chen1999`` (the issue's path; it scales
 with the terrain, so over a large one it flies so high that coarse levels meet 1 px almost
 everywhere) and ``flyover`` (1 km above the ground along 10 km, the same in metres at every
 size).  The reference for the image error is *full resolution*, the store's own level-0
@@ -20,16 +21,14 @@ adaptive renderer's.
 
 from __future__ import annotations
 
-import json
 import shutil
-import subprocess
-import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from lodsprite.experiments.large.child import render_in_child
 from lodsprite.terrain.store import build_store, estimate_bytes
 
 FULL_MAX = 4096
@@ -64,14 +63,6 @@ def huge_needs() -> dict:
     need = estimate_bytes(65536, 65536, "float32")
     free = shutil.disk_usage(Path.cwd()).free
     return {"need_gb": need / 2 ** 30, "free_gb": free / 2 ** 30}
-
-
-def _render(args: list[str], out: Path) -> dict:
-    r = subprocess.run([sys.executable, "-c", "from lodsprite.cli import main; main()",
-                        "render", *args, "--out", str(out)], capture_output=True, text=True)
-    if r.returncode != 0:
-        raise RuntimeError(f"lodsprite render {' '.join(args)} failed: {r.stderr.strip()}")
-    return json.loads((out / "summary.json").read_text())
 
 
 def _frames(folder: Path, keep: list[int]) -> dict[int, np.ndarray]:
@@ -132,17 +123,17 @@ def sprite_lod(side: int) -> int:
 def run_path(store: Path, n: int, cfg: LargeConfig, path_spec: str, runs: Path) -> dict:
     """Adaptive, LOD-sprite and the references of one store along one path."""
     keep = list(range(0, cfg.frames, cfg.sample_every))
-    common = ["--path", path_spec, "--frames", str(cfg.frames), "--size",
-              f"{cfg.image}x{cfg.image}", "--save-frames"]
-    lod = ["--lod", str(sprite_lod(n))]
+    common = {"path": path_spec, "frames": cfg.frames, "size": [cfg.image, cfg.image],
+              "save_frames": True}
+    lod = {"lod": sprite_lod(n)}
     from lodsprite import get_path, load_scene
 
     scene = load_scene(str(store))  # once: the references and the sampled path share it
     path = get_path(path_spec, scene.hf, cfg.frames)
-    ad = _render(["--terrain", str(store), "--mode", "adaptive", "--sse", str(cfg.sse),
-                  *common], runs / "adaptive")
-    sp = _render(["--terrain", str(store), "--mode", "sprite", "--key-sse",
-                  str(cfg.key_sse), *lod, *common], runs / "sprite")
+    ad = render_in_child({"terrain": str(store), "mode": "adaptive", "sse": cfg.sse, **common},
+                         runs / "adaptive")
+    sp = render_in_child({"terrain": str(store), "mode": "sprite", "key_sse": cfg.key_sse,
+                          **lod, **common}, runs / "sprite")
     res: dict = {}
     ref = stand_in = reference(store, scene, path, cfg, keep, cfg.ref_sse)
     res["reference"] = f"adaptive at {cfg.ref_sse} px, settled"
@@ -151,9 +142,9 @@ def run_path(store: Path, n: int, cfg: LargeConfig, path_spec: str, runs: Path) 
         res["reference"] = "full resolution (level 0 everywhere, settled)"
         res["reference_vs_full_rmse"], res["reference_vs_full_flip"] = errors(stand_in, ref)
         sampled = sampled_path(path, keep, runs / "sampled.json")
-        fu = _render(["--terrain", str(store), "--mode", "full", "--grid", str(n),
-                      "--path", str(sampled), "--frames", str(len(keep)), "--size",
-                      f"{cfg.image}x{cfg.image}"], runs / "full")
+        fu = render_in_child({"terrain": str(store), "mode": "full", "grid": n,
+                              "path": str(sampled), "frames": len(keep),
+                              "size": [cfg.image, cfg.image]}, runs / "full")
         res["median_ms_full"] = fu["median_ms"]
     ea = errors(_frames(runs / "adaptive", keep), ref)
     es = errors(_frames(runs / "sprite", keep), ref)
@@ -161,8 +152,8 @@ def run_path(store: Path, n: int, cfg: LargeConfig, path_spec: str, runs: Path) 
               "keyframes": sp["keyframes"], "rmse": es[0], "flip": es[1]}]
     for eps in cfg.sweep_eps:
         folder = runs / f"sprite_eps{eps:g}"
-        s = _render(["--terrain", str(store), "--mode", "sprite", "--key-sse", str(cfg.key_sse),
-                     "--epsilon", str(eps), *lod, *common], folder)
+        s = render_in_child({"terrain": str(store), "mode": "sprite", "key_sse": cfg.key_sse,
+                             "epsilon": eps, **lod, **common}, folder)
         e = errors(_frames(folder, keep), ref)
         sweep.append({"epsilon": eps, "total_s": s["total_s"], "median_ms": s["median_ms"],
                       "keyframes": s["keyframes"], "rmse": e[0], "flip": e[1]})
@@ -242,14 +233,13 @@ def _jacksboro(cfg: LargeConfig, out_dir: Path) -> dict:
     """The 512² jacksboro of chen1999: LOD-sprite with adaptive keyframes against full
     resolution, beside the plain LOD-sprite."""
     r: dict = {}
-    small = ["--terrain", "jacksboro", "--path", "chen1999", "--size",
-             f"{cfg.image}x{cfg.image}"] + (["--frames", str(cfg.frames)] if cfg.quick_512
-                                            else [])
+    small = {"terrain": "jacksboro", "path": "chen1999", "size": [cfg.image, cfg.image],
+             **({"frames": cfg.frames} if cfg.quick_512 else {})}
     runs = out_dir / "runs" / "jacksboro"
-    full = _render([*small, "--mode", "full"], runs / "full")
-    key = _render([*small, "--mode", "sprite", "--key-sse", str(cfg.key_sse),
-                   "--ground-truth"], runs / "sprite_adaptive_keys")
-    plain = _render([*small, "--mode", "sprite", "--ground-truth"], runs / "sprite")
+    full = render_in_child({**small, "mode": "full"}, runs / "full")
+    key = render_in_child({**small, "mode": "sprite", "key_sse": cfg.key_sse,
+                           "ground_truth": True}, runs / "sprite_adaptive_keys")
+    plain = render_in_child({**small, "mode": "sprite", "ground_truth": True}, runs / "sprite")
     r["speedup_sprite_vs_full_512"] = full["total_s"] / key["total_s"]
     r["rmse_ratio_sprite_vs_lod_512"] = key["rmse_sprite_mean"] / key["rmse_lod_mean"]
     r["jacksboro"] = {"total_s_full": full["total_s"], "total_s_sprite_adaptive_keys":

@@ -22,6 +22,7 @@ import numpy as np
 
 from lodsprite import metrics
 from lodsprite.errors import InputError
+from lodsprite.experiments.paper_numbers import PAPER_2000
 from lodsprite.gl.context import GLContext
 from lodsprite.profiles.generate import ProfileSettings, generate_profile, release_cached
 from lodsprite.profiles.models import mountain, sphere_family, sphereflake
@@ -37,7 +38,6 @@ from lodsprite.profiles.scenes import (
 from lodsprite.profiles.select import effective_distance, select_profile, select_screen_space
 from lodsprite.profiles.table import ProfileTable
 from lodsprite.progress import StageProgress
-from lodsprite.report.paper_numbers import PAPER_2000
 
 PAPER_THRESHOLD = {"nocsf": PAPER_2000["threshold_nocsf"], "csf": PAPER_2000["threshold_csf"]}
 

@@ -1,5 +1,5 @@
 """Plots and a Markdown report for the Sloan, Cohen & Gortler (1997) reproduction
-(:func:`lodsprite.lumigraph.reproduce.reproduce_sloan1997`): Table 1 beside the paper's,
+(:func:`lodsprite.experiments.sloan1997.run.reproduce_sloan1997`): Table 1 beside the paper's,
 Figures 5-6 (time and images per frame under two texture memories), and quality against
 the texture budget and the frame-time target."""
 
@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 from matplotlib.figure import Figure
 
+from lodsprite.experiments.paper_numbers import PAPER_1997
 from lodsprite.report.io import atomic_write_bytes, save_figure, write_json
-from lodsprite.report.paper_numbers import PAPER_1997
 from lodsprite.report.values import fmt_fixed
 
 PROFILE_LABEL = {"re2_small_memory": "small texture memory (RE2-like)",

@@ -19,9 +19,9 @@ from itertools import zip_longest
 from pathlib import Path
 from typing import Any
 
-from lodsprite.report.chen1999_plots import write_plots
+from lodsprite.experiments.chen1999.plots import write_plots
+from lodsprite.experiments.paper_numbers import PAPER, PAPER_KEYFRAME_FRACTION, RMSE_RATIO_TARGET
 from lodsprite.report.io import atomic_write_bytes
-from lodsprite.report.paper_numbers import PAPER, PAPER_KEYFRAME_FRACTION, RMSE_RATIO_TARGET
 from lodsprite.report.values import (
     DASH,
     count_type,
@@ -123,7 +123,8 @@ def _quality_rows(r: dict) -> list[list[str]]:
     ]
 
 
-def _comparison_rows(r: dict) -> list[list[str]]:
+def comparison_rows(r: dict) -> list[list[str]]:
+    """The ours-vs-paper rows: ``[quantity, ours, paper, note]`` cell strings."""
     p = PAPER
     counts = [
         ["keyframes", _of(r.get("keyframes"), r.get("frames")),
@@ -283,7 +284,7 @@ def write_report(results: dict, out_dir: Path, plots: list[Path]) -> Path:
     out_dir = Path(out_dir)
     title = f"# Chen, Swan & Kaufman (1999) LOD-sprite — {fmt_text(results.get('experiment'))}"
     lines = [title, "", _description(results), "", "## Ours vs paper", ""]
-    lines += _table(["quantity", "ours", "paper", "note"], _comparison_rows(results))
+    lines += _table(["quantity", "ours", "paper", "note"], comparison_rows(results))
     lines += _comparison_notes(results)
     lines += _figure_sections(results, out_dir, plots)
     path = out_dir / REPORT_NAME

@@ -1,5 +1,5 @@
 """Plots and a Markdown report for ``reproduce large``
-(:func:`lodsprite.terrain.large.reproduce_large`)."""
+(:func:`lodsprite.experiments.large.run.reproduce_large`)."""
 
 from __future__ import annotations
 

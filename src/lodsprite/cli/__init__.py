@@ -1,0 +1,64 @@
+"""The ``lodsprite`` command line: parses, calls the library, prints.
+
+One module per command group: :mod:`.render` (info, render, view), :mod:`.lumigraph`,
+:mod:`.terrain` (tile), :mod:`.crowd`, :mod:`.profile`, :mod:`.reproduce` (reproduce,
+demo), :mod:`.distributed` (serve, keys, client); :mod:`.common` holds what they share.
+
+User errors (bad files, bad options) print one line on stderr and exit with
+code 2; an interrupted run exits with 130.  No traceback reaches the user for
+either.
+"""
+
+from __future__ import annotations
+
+import sys
+
+import typer
+
+from lodsprite.cli import crowd, distributed, lumigraph, profile, render, reproduce, terrain
+from lodsprite.cli.common import err, one_line, out
+from lodsprite.errors import GLUnavailableError, LodspriteError
+
+app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
+                  help="Time-critical rendering of large terrains with LOD geometry and "
+                       "image reuse (LOD-sprite).")
+for command in (render.info, render.render, render.view, terrain.tile, crowd.crowd,
+                profile.profile, reproduce.reproduce, reproduce.demo, distributed.serve):
+    app.command()(command)
+app.command(name="keys")(distributed.keys_command)
+app.command()(distributed.client)
+app.add_typer(lumigraph.lumigraph_app, name="lumigraph")
+
+
+def _click_error(exc: Exception) -> None:
+    """Click's exceptions (vendored by recent typer releases, hence matched by name)."""
+    name = type(exc).__name__
+    if name == "NoArgsIsHelpError":
+        out.print(exc.ctx.get_help(), markup=False, highlight=False)
+        sys.exit(0)
+    if name == "Abort":
+        err.print("lodsprite: interrupted", markup=False)
+        sys.exit(130)
+    if hasattr(exc, "format_message") and hasattr(exc, "exit_code"):
+        one_line(exc.format_message(), 2)
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Entry point: run the app, turning user errors into one line and exit code 2."""
+    try:
+        code = app(args=argv, standalone_mode=False, prog_name="lodsprite")
+    except GLUnavailableError as exc:
+        err.print(str(exc), markup=False, highlight=False, soft_wrap=True)
+        sys.exit(2)
+    except LodspriteError as exc:
+        one_line(str(exc), 2)
+    except KeyboardInterrupt:
+        err.print("lodsprite: interrupted", markup=False)
+        sys.exit(130)
+    except Exception as exc:
+        _click_error(exc)
+        raise
+    sys.exit(code if isinstance(code, int) else 0)
+
+
+__all__ = ["app", "main"]

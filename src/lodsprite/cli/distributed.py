@@ -1,0 +1,120 @@
+"""``lodsprite serve``, ``keys`` and ``client``: the distributed LOD server and client."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from lodsprite.cli.common import (
+    BorderOpt,
+    EpsOpt,
+    ExagOpt,
+    FramesOpt,
+    GridOpt,
+    LodOpt,
+    MaxErrorOpt,
+    PaceOpt,
+    PathOpt,
+    SizeOpt,
+    TerrainOpt,
+    TextureOpt,
+    VisOpt,
+    out,
+    progress_bar,
+)
+from lodsprite.terrain import DEFAULT_EXAGGERATION
+
+
+def serve(
+    bind: Annotated[str, typer.Option("--bind", help="HOST:PORT; the three connections use "
+                                                     "PORT, PORT+1, PORT+2")] = "127.0.0.1:5555",
+    predictor: Annotated[str, typer.Option("--predictor", help="linear | kalman")] = "linear",
+    codec: Annotated[str, typer.Option("--codec", help="raw | zlib (keyframe images)")] = "raw",
+    allow_remote: Annotated[bool, typer.Option(
+        "--allow-remote", help="allow binding an address other than loopback")] = False,
+    keys: Annotated[Path | None, typer.Option(
+        "--keys", help="folder from `lodsprite keys`: encrypt with CURVE and accept only "
+                       "clients whose public key is there")] = None,
+    data: Annotated[Path | None, typer.Option(
+        "--data", help="folder whose terrain and texture files clients may name (relative "
+                       "to it); without it only built-ins (jacksboro, fractal:SIZE:SEED, "
+                       "terrain, checker) are served")] = None,
+    allow_shutdown: Annotated[bool, typer.Option(
+        "--allow-shutdown", help="carry out a `shutdown` message from the client holding "
+                                 "the server (refused otherwise)")] = False,
+) -> None:
+    """The LOD server: renders keyframes for LOD clients; driven entirely by messages."""
+    import logging
+
+    from lodsprite.distributed.keys import ServerKeys
+    from lodsprite.distributed.server import LodServer
+
+    server_keys = ServerKeys.load(keys) if keys is not None else None
+    server = LodServer(bind, predictor, codec, server_keys, data_dir=data,
+                       allow_remote=allow_remote, allow_shutdown=allow_shutdown)
+    logging.basicConfig(level=logging.INFO, format="lodsprite serve: %(message)s")
+    if server_keys is None and allow_remote:
+        logging.warning("serving beyond loopback without --keys: anyone who can reach "
+                        "the port can drive this server")
+    server.run()
+
+
+def keys_command(
+    out_dir: Annotated[Path, typer.Option("--out", help="output folder")] = Path("keys"),
+) -> None:
+    """Make CURVE key pairs for a LOD server and a client (server.key*, client.key*)."""
+    from lodsprite.distributed.keys import make_keys
+
+    for path in make_keys(out_dir):
+        out.print(str(path))
+
+
+def client(
+    server: Annotated[list[str] | None, typer.Option(
+        "--server", help="HOST:PORT of a LOD server (default 127.0.0.1:5555); repeat for "
+                         "several")] = None,
+    terrain: TerrainOpt = "jacksboro",
+    texture: TextureOpt = "terrain",
+    path: PathOpt = "swan2002",
+    frames: FramesOpt = None,
+    size: SizeOpt = "512x512",
+    lod: LodOpt = 16,
+    out_dir: Annotated[Path, typer.Option("--out", help="output folder")] = Path("out/client"),
+    grid: GridOpt = None,
+    exaggeration: ExagOpt = DEFAULT_EXAGGERATION,
+    visibility: VisOpt = "coarse",
+    epsilon: EpsOpt = 1.0,
+    border: BorderOpt = True,
+    pace: PaceOpt = "needed",
+    adopt: Annotated[str, typer.Option(
+        "--adopt", help="newest: take every newer keyframe (the paper); better: once its "
+                        "error metric here is lower than the shown one's; needed: when the "
+                        "shown one's reaches ε/2")] = "newest",
+    max_error: MaxErrorOpt = None,
+    keys: Annotated[Path | None, typer.Option(
+        "--keys", help="folder holding client.key_secret and server.key (CURVE)")] = None,
+) -> None:
+    """The LOD client: draws a scripted path with keyframes from LOD servers."""
+    import logging
+
+    from lodsprite.distributed.keys import ClientKeys
+    from lodsprite.distributed.run import check_client_options, parse_max_error, run_client
+    from lodsprite.run import RenderConfig, parse_size
+
+    logging.basicConfig(level=logging.WARNING, format="lodsprite client: %(message)s")
+    bound = check_client_options(pace, adopt, parse_max_error(max_error))
+    config = RenderConfig(terrain=terrain, texture=texture, path=path, mode="sprite",
+                          lod=lod, size=parse_size(size), frames=frames, grid=grid,
+                          exaggeration=exaggeration, visibility=visibility, epsilon=epsilon,
+                          border=border)
+    with progress_bar("client") as update:
+        s = run_client(config, list(server or ["127.0.0.1:5555"]), out_dir, update,
+                       adopt=adopt, keys=ClientKeys.load(keys) if keys is not None else None,
+                       pace=pace, max_error=bound)
+    out.print(f"{s['frames']} frames: median {s['median_ms']:.2f} ms, mean {s['mean_ms']:.2f}, "
+              f"σ {s['std_ms']:.2f}, p99 {s['p99_ms']:.2f}; {s['keyframes_received']} keyframes "
+              f"received, {s['local_keyframes']} own keyframes, {s['rejected_keyframes']} "
+              f"rejected; δt {s['delta_t_ms_mean']:.0f} ms")
+    out.print(f"wrote {out_dir / 'frames.csv'}, {out_dir / 'summary.json'}")

@@ -1,0 +1,206 @@
+"""``lodsprite info``, ``render`` and ``view``: terrain rendering, batch and live."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.table import Table
+
+from lodsprite.cli.common import (
+    BorderOpt,
+    EpsOpt,
+    ExagOpt,
+    FramesOpt,
+    GridOpt,
+    GuardOpt,
+    LodOpt,
+    MaxErrorOpt,
+    PaceOpt,
+    PathOpt,
+    SizeOpt,
+    TerrainOpt,
+    TextureOpt,
+    VisOpt,
+    out,
+    progress_bar,
+)
+from lodsprite.terrain import DEFAULT_EXAGGERATION
+
+
+def info() -> None:
+    """Print the OpenGL renderer, version and maximum texture size."""
+    from lodsprite.gl.context import GLContext
+
+    with GLContext() as ctx:
+        i = ctx.info
+    t = Table(show_header=False)
+    for k, v in (("renderer", i.renderer), ("version", i.version), ("vendor", i.vendor),
+                 ("max texture size", str(i.max_texture_size)), ("backend", ctx.backend)):
+        t.add_row(k, v)
+    out.print(t)
+
+
+def _check_mode(mode: str, ground_truth: bool, video: Path | None) -> bool:
+    """Check ``--mode`` and what goes with it; True for ``distributed``."""
+    from lodsprite.errors import InputError
+    from lodsprite.run import MODES
+
+    if mode not in (*MODES, "distributed"):
+        raise InputError(f"unknown mode '{mode}': use one of {', '.join(MODES)}, distributed")
+    distributed = mode == "distributed"  # not a core mode: the distributed layer runs it
+    if distributed and ground_truth:
+        raise InputError("--ground-truth needs --mode sprite")
+    if distributed and video is not None:
+        raise InputError("--video is for --mode full, lod and sprite")
+    return distributed
+
+
+def _print_render(s: dict, out_dir: Path) -> None:
+    t = Table(title=f"{s['frames']} frames, {s['mode']}, {s['terrain']} ({s['grid']}² grid)")
+    for col in ("median ms", "mean ms", "p95 ms", "total s", "triangles"):
+        t.add_column(col, justify="right")
+    t.add_row(f"{s['median_ms']:.2f}", f"{s['mean_ms']:.2f}", f"{s['p95_ms']:.2f}",
+              f"{s['total_s']:.2f}", f"{s['triangles_mean']:.0f}")
+    out.print(t)
+    if s["mode"] == "distributed":
+        out.print(f"keyframes received: {s['keyframes_received']}, σ {s['std_ms']:.2f} ms, "
+                  f"p99 {s['p99_ms']:.2f} ms; server δt {s['delta_t_ms_mean']:.0f} ms, "
+                  f"keyframe render {s['render_ms_mean']:.0f} ms")
+    if s["mode"] == "adaptive":
+        out.print(f"{s['sse']:g} px: first frame {s['first_frame_s']:.2f} s; tiles resident "
+                  f"{s['tiles_resident']}, loaded {s['tiles_loaded']}, evicted "
+                  f"{s['tiles_evicted']}, unreadable {s['tiles_bad']}")
+    if s["mode"] == "sprite":
+        out.print(f"keyframes: {s['keyframes']} of {s['frames']}; mean ms keyframe "
+                  f"{s['mean_ms_keyframe']:.1f}, first spriteframe "
+                  f"{s['mean_ms_first_sprite']:.1f}, spriteframe {s['mean_ms_sprite']:.1f}")
+        if "rmse_sprite_mean" in s:
+            out.print(f"RMSE vs full resolution: LOD-sprite {s['rmse_sprite_mean']:.2f}, "
+                      f"plain {s['lod']}² {s['rmse_lod_mean']:.2f} grey levels")
+    out.print(f"GL: {s['gl_renderer']}   wrote {out_dir / 'frames.csv'}, "
+              f"{out_dir / 'summary.json'}")
+
+
+def render(
+    terrain: TerrainOpt = "jacksboro",
+    texture: TextureOpt = "terrain",
+    path: PathOpt = "chen1999",
+    mode: Annotated[str, typer.Option(
+        "--mode", help="full | lod | sprite | adaptive (view-dependent, --sse) | distributed "
+                       "(starts a local LOD server)")] = "full",
+    lod: LodOpt = 16,
+    size: SizeOpt = "512x512",
+    frames: FramesOpt = None,
+    out_dir: Annotated[Path, typer.Option("--out", help="output folder")] = Path("out"),
+    save_frames: Annotated[bool, typer.Option("--save-frames", help="write PNG frames")] = False,
+    video: Annotated[Path | None, typer.Option(
+        "--video", help="write the frames to an MP4 file (with --ground-truth: full | "
+                        "LOD-sprite | difference side by side)")] = None,
+    grid: GridOpt = None,
+    exaggeration: ExagOpt = DEFAULT_EXAGGERATION,
+    epsilon: EpsOpt = 1.0,
+    ground_truth: Annotated[bool, typer.Option(
+        "--ground-truth", help="sprite mode: also render full resolution (untimed) and "
+                               "report RMSE/PSNR/SSIM of sprite and plain coarse frames")] = False,
+    visibility: VisOpt = "coarse",
+    border: BorderOpt = True,
+    guard: GuardOpt = 32,
+    pace: PaceOpt = "needed",
+    max_error: MaxErrorOpt = None,
+    sse: Annotated[float, typer.Option(
+        "--sse", help="adaptive: screen-space error tolerance in pixels")] = 1.0,
+    key_sse: Annotated[float | None, typer.Option(
+        "--key-sse", help="sprite: render keyframes with the adaptive renderer at this "
+                          "tolerance (pixels; 0.5 is a good start)")] = None,
+    gpu_mb: Annotated[float, typer.Option(
+        "--gpu-mb", help="adaptive: GPU tile cache budget (MB)")] = 256.0,
+    host_mb: Annotated[float, typer.Option(
+        "--host-mb", help="adaptive: host tile cache budget (MB)")] = 512.0,
+) -> None:
+    """Render a camera path; write DIR/frames.csv and DIR/summary.json (and PNG frames)."""
+    from lodsprite import RenderConfig, render_path
+    from lodsprite.run import parse_size
+
+    distributed = _check_mode(mode, ground_truth, video)
+    config = RenderConfig(terrain=terrain, texture=texture, path=path,
+                          mode="sprite" if distributed else mode, lod=lod,
+                          size=parse_size(size), frames=frames, grid=grid,
+                          exaggeration=exaggeration, save_frames=save_frames, epsilon=epsilon,
+                          ground_truth=ground_truth, visibility=visibility, border=border,
+                          guard_px=guard, sse=sse, gpu_mb=gpu_mb, host_mb=host_mb,
+                          key_sse=key_sse)
+    with progress_bar(f"render {mode}") as update:
+        if distributed:
+            from lodsprite.distributed.run import parse_max_error, render_distributed
+
+            s = render_distributed(config, out_dir, update, pace=pace,
+                                   max_error=parse_max_error(max_error))
+        else:
+            s = render_path(config, out_dir, update, video)
+    _print_render(s, out_dir)
+
+
+def view(
+    terrain: Annotated[str, typer.Argument(
+        help="jacksboro | fractal:SIZE[:SEED] | FILE (.tif/.tiff/.png/.npy) | a lumigraph "
+             "folder | crowd[:OBJECTS[:TREES]]")] = "jacksboro",
+    texture: TextureOpt = "terrain",
+    grid: GridOpt = None,
+    mode: Annotated[str | None, typer.Option(
+        "--mode", help="terrain: full | lod | sprite (default) | distributed (needs "
+                       "--server), keys 1-4; lumigraph: critical (default) | full | "
+                       "arbitrary | fixed | line | projective | progressive | subsample, "
+                       "keys 1-8; crowd: manager (default) | independent | discrete, "
+                       "keys 1-3")] = None,
+    lod: LodOpt = 16,
+    epsilon: EpsOpt = 1.0,
+    size: Annotated[str, typer.Option("--size", help="window size WxH")] = "1024x768",
+    fps: Annotated[float, typer.Option(
+        "--fps", help="frame rate cap (0: none); the keyframe worker uses the time left")] = 60,
+    inline: Annotated[bool, typer.Option(
+        "--inline-keyframes", help="sprite mode: render keyframes in the frame that needs "
+                                   "them (the 1999 algorithm) instead of on a worker "
+                                   "thread")] = False,
+    play: Annotated[str | None, typer.Option(
+        "--play", help="play a path (chen1999 | swan2002 | FILE.json; lumigraph: arc | "
+                       "FILE.json; crowd: walk | FILE.json) instead of flying")] = None,
+    frames: FramesOpt = None,
+    screenshots: Annotated[Path | None, typer.Option(
+        "--screenshots", help="folder for screenshots (key p; with --play every K "
+                              "frames)")] = None,
+    every: Annotated[int, typer.Option("--every", help="with --play: screenshot every K "
+                                                       "frames")] = 1,
+    exit_: Annotated[bool, typer.Option("--exit", help="with --play: quit at the end")] = False,
+    out_dir: Annotated[Path | None, typer.Option(
+        "--out", help="with --play: write DIR/frames.csv and DIR/summary.json")] = None,
+    record: Annotated[Path | None, typer.Option(
+        "--record", help="save the flight as a path FILE.json for render and "
+                         "reproduce")] = None,
+    server: Annotated[str | None, typer.Option(
+        "--server", help="distributed mode: a LOD server's HOST:PORT")] = None,
+    target_fps: Annotated[float | None, typer.Option(
+        "--target-fps", help="crowd: bend the LODs to hold this frame rate ([ ] step it)")
+    ] = None,
+) -> None:
+    """Fly through a terrain with live LOD-sprite, or round a lumigraph (WASD/QE, mouse, tab
+    orbit)."""
+    from lodsprite.run import parse_size
+    from lodsprite.viewer.app import ViewOptions
+    from lodsprite.viewer.app import view as run_view
+
+    opts = ViewOptions(terrain=terrain, texture=texture, grid=grid, mode=mode, lod=lod,
+                       epsilon=epsilon, size=parse_size(size), fps=fps, threaded=not inline,
+                       play=play, frames=frames, screenshots=screenshots, every=every,
+                       exit=exit_, out=out_dir, record=record, server=server,
+                       target_fps=target_fps)
+    s = run_view(opts)
+    if s:
+        out.print(f"{s['frames']} frames, {s['mode']}: median {s['median_ms']:.2f} ms, "
+                  f"p99 {s['p99_ms']:.2f} ms, mean {s['mean_ms']:.2f} ms; keyframes "
+                  f"{s['keyframes']}; GL {s['gl_renderer']}")
+    if out_dir is not None and s:
+        out.print(f"wrote {out_dir / 'frames.csv'}, {out_dir / 'summary.json'}")
+    if record is not None:
+        out.print(f"wrote {record}")

@@ -1,0 +1,82 @@
+"""``lodsprite reproduce NAME`` and ``demo``: one lookup in :mod:`lodsprite.experiments`,
+the run, and the table the experiment gives."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from lodsprite.cli.common import (
+    BorderOpt,
+    EpsOpt,
+    GridOpt,
+    GuardOpt,
+    LodOpt,
+    PaceOpt,
+    TerrainOpt,
+    VisOpt,
+    print_summary,
+    progress_bars,
+)
+from lodsprite.experiments import Experiment, Options, get, names
+
+
+def run_experiment(experiment: Experiment, options: Options, out_dir: Path | None) -> None:
+    """Run ``experiment`` under progress bars (into ``out_dir``, default its own
+    ``out/NAME``) and print its summary table."""
+    with progress_bars() as update:
+        _, summary = experiment.reproduce(options, out_dir, update)
+    print_summary(summary)
+
+
+def reproduce(
+    experiment: Annotated[str, typer.Argument(help=" | ".join(names()))],
+    out_dir: Annotated[Path | None, typer.Option(
+        "--out", help="output folder (default: out/EXPERIMENT)")] = None,
+    terrain: TerrainOpt = "jacksboro",
+    size: Annotated[int, typer.Option("--size", help="image size in pixels (square)")] = 512,
+    quick: Annotated[bool, typer.Option("--quick", help="a short run: 256², 115 frames, "
+                                                        "fewer sweep points, quality on "
+                                                        "every third frame")] = False,
+    grid: GridOpt = None,
+    lod: LodOpt = 16,
+    epsilon: EpsOpt = 1.0,
+    visibility: VisOpt = "coarse",
+    border: BorderOpt = True,
+    guard: GuardOpt = 32,
+    full_sample: Annotated[int | None, typer.Option(
+        "--full-sample", help="time full resolution on this many evenly spaced frames "
+                              "(>= 46) and scale; default all frames up to 1024², else 46")] = None,
+    sweeps: Annotated[bool, typer.Option(
+        "--sweeps/--no-sweeps", help="run the Fig. 10-12 sweeps")] = True,
+    adopt: Annotated[str, typer.Option(
+        "--adopt", help="swan2002: when the client takes a newer keyframe: "
+                        "newest | better | needed")
+    ] = "newest",
+    pace: PaceOpt = "needed",
+    max_error: Annotated[float | None, typer.Option(
+        "--max-error", help="swan2002: the bounded client's --max-error in pixels, run beside "
+                            "the paper's client (default: the client's default, 4)")] = None,
+    links: Annotated[bool, typer.Option(
+        "--links/--no-links", help="swan2002: run the set-ups over emulated network links "
+                                   "(network namespaces, root)")] = True,
+    huge: Annotated[bool, typer.Option(
+        "--huge", help="large: also a 65536² store (see report.md for the disk it needs)")
+    ] = False,
+) -> None:
+    """Run a paper's experiment; write DIR/results.json, PNG plots and DIR/report.md."""
+    options = Options(terrain=terrain, size=size, quick=quick, grid=grid, lod=lod,
+                      epsilon=epsilon, visibility=visibility, border=border, guard=guard,
+                      full_sample=full_sample, sweeps=sweeps, adopt=adopt, pace=pace,
+                      max_error=max_error, links=links, huge=huge)
+    run_experiment(get(experiment), options, out_dir)
+
+
+def demo(
+    out_dir: Annotated[Path, typer.Option("--out", help="output folder")] = Path("out/demo"),
+    quick: Annotated[bool, typer.Option("--quick", help="a short run")] = False,
+) -> None:
+    """Reproduce Chen et al. 1999 on the real Jacksboro DEM at 512² (a few minutes)."""
+    run_experiment(get("chen1999"), Options(quick=quick), out_dir)

@@ -1,0 +1,40 @@
+"""``lodsprite tile``: build a Zarr terrain pyramid from a DEM larger than memory."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from lodsprite.cli.common import out, progress_bar
+
+
+def tile(
+    source: Annotated[str, typer.Argument(
+        help="a GeoTIFF/COG file (read window by window) | fractal:SIZE[:SEED] | "
+             "fractal:ROWSxCOLS[:SEED] (generated tile by tile)")],
+    out_dir: Annotated[Path, typer.Option("--out", help="the store to write (STORE.zarr)")],
+    tile_size: Annotated[int, typer.Option("--tile", help="tile (and shard) side")] = 1024,
+    chunk: Annotated[int, typer.Option("--chunk", help="inner chunk side")] = 256,
+    encoding: Annotated[str, typer.Option(
+        "--encoding", help="float32 | int16 (heights = value · scale + offset)")] = "float32",
+    scale: Annotated[float, typer.Option("--scale", help="int16: metres per step")] = 0.25,
+    overwrite: Annotated[bool, typer.Option(
+        "--overwrite", help="replace an existing store")] = False,
+    scheduler: Annotated[str | None, typer.Option(
+        "--scheduler", help="a Dask scheduler address (tcp://HOST:PORT) to spread the tiles "
+                            "over (pip install 'lodsprite[cluster]')")] = None,
+) -> None:
+    """Build a Zarr v3 terrain pyramid from a DEM larger than memory (resumable)."""
+    from lodsprite.terrain.store import build_store
+
+    with progress_bar("tiles") as update:
+        s = build_store(source, out_dir, tile_size, chunk, encoding, scale, overwrite, update,
+                        scheduler=scheduler)
+    if s.get("already"):
+        out.print(f"{out_dir} is already built ({s['rows']}x{s['cols']}, {s['levels']} levels)")
+        return
+    out.print(f"{s['rows']}x{s['cols']} samples, {s['levels']} levels: {s['tiles_written']} "
+              f"tiles in {s['seconds']:.1f} s ({s['mb_per_s']:.1f} MB/s of float32 heights)"
+              f"{' (resumed)' if s['resumed'] else ''}; wrote {out_dir}")

@@ -1,0 +1,172 @@
+"""The wire protocol's schemas and limits: every header a declared
+:class:`msgspec.Struct` tagged by ``kind``, with the ranges, lengths and enumerated values
+:mod:`lodsprite.distributed.protocol` validates (the table of messages is there), and the
+per-socket size limits."""
+
+from __future__ import annotations
+
+from typing import Annotated, Any, Literal
+
+from msgspec import Meta, Struct, field
+
+from lodsprite.distributed.pacing import DEFAULT_PACE
+from lodsprite.errors import LodspriteError
+
+PROTOCOL_VERSION = 3
+KINDS = ("control", "reply", "viewpoint", "keyframe", "ack")
+CONTROL_OPS = ("start", "stop", "load", "stats", "shutdown", "ping", "release")
+CODECS = ("raw", "zlib")
+ZBUFFERS = ("full", "coarse")
+VISIBILITY = ("triangle", "fragment", "coarse")  # lodsprite.gl.sprite.VISIBILITY_MODES
+PACE_NAMES = ("needed", "continuous")  # lodsprite.distributed.pacing.PACES
+
+MAX_IMAGE_SIDE = 4096
+"""Largest keyframe (and server render target) side in pixels."""
+MAX_GRID = 8192
+"""Largest working grid (quads per side) a ``load`` may ask for."""
+MAX_SLOTS = 64
+"""Most servers one client may use."""
+MAX_NAME = 256
+"""Longest terrain or texture name, characters."""
+MAX_COORD = 1e9
+"""Largest coordinate (metres) of a viewpoint on the wire."""
+MAX_TIME = 1e12
+"""Largest clock value (seconds) on the wire."""
+
+MAX_CONTROL_BYTES = 64 * 1024
+MAX_VIEWPOINT_BYTES = 4 * 1024
+MAX_ACK_BYTES = 4 * 1024
+MAX_REPLY_BYTES = 64 * 1024 * 1024  # a stats reply: at most 8 x 10,000 timings, under 1 MiB
+MAX_KEYFRAME_FRAME_BYTES = (MAX_IMAGE_SIDE**2 * 4 * 102) // 100 + 65536
+"""Largest frame of a keyframe message: the depth image at the largest size (4 bytes a
+pixel), plus zlib's worst-case expansion of incompressible data and the header."""
+
+
+class ProtocolError(LodspriteError, ValueError):
+    """A message that does not follow the protocol (malformed, truncated, wrong version)."""
+
+
+# ------------------------------------------------------------------------------ schemas
+
+Seq = Annotated[int, Meta(ge=0, le=2**63 - 1)]
+Coord = Annotated[float, Meta(ge=-MAX_COORD, le=MAX_COORD)]
+Time = Annotated[float, Meta(ge=-MAX_TIME, le=MAX_TIME)]
+Vec3 = tuple[Coord, Coord, Coord]
+Matrix = Annotated[list[Annotated[float, Meta(ge=-1e15, le=1e15)]],
+                   Meta(min_length=16, max_length=16)]
+ClientId = Annotated[str, Meta(pattern="^(?:[0-9a-f]{16,64})?$")]
+Name = Annotated[str, Meta(min_length=1, max_length=MAX_NAME)]
+Side = Annotated[int, Meta(ge=1, le=MAX_IMAGE_SIDE)]
+Slot = Annotated[int, Meta(ge=0, lt=MAX_SLOTS)]
+
+
+class WireViewpoint(Struct, forbid_unknown_fields=True):
+    """A viewpoint: unit axes ``x, y, z`` and eye ``o`` (metres), 3 numbers each."""
+
+    x: Vec3
+    y: Vec3
+    z: Vec3
+    o: Vec3
+
+
+class Shown(Struct, forbid_unknown_fields=True):
+    """The keyframe a client shows: its eye (metres) and the slot of its server."""
+
+    eye: Vec3
+    slot: Slot
+
+
+class LoadArgs(Struct, forbid_unknown_fields=True, omit_defaults=True):
+    """Arguments of ``load``: the scene (terrain and texture names, working grid in quads,
+    vertical exaggeration, keyframe size ``(width, height)`` px, vertical field of view in
+    degrees) and the client's sprite settings (coarse level in quads, visibility rule,
+    border ribbons, ε in pixels, pace) and its place among its servers (slot of slots)."""
+
+    terrain: Name = "jacksboro"
+    texture: Name = "terrain"
+    grid: Annotated[int, Meta(ge=16, le=MAX_GRID)] | None = None
+    exaggeration: Annotated[float, Meta(gt=0.0, le=1000.0)] = 1.0
+    size: tuple[Side, Side] = (512, 512)
+    fov_y_deg: Annotated[float, Meta(ge=1.0, le=179.0)] = 45.0
+    lod: Annotated[int, Meta(ge=1, le=MAX_GRID)] = 16
+    visibility: Literal[VISIBILITY] = "coarse"  # type: ignore[valid-type]
+    border: bool = True
+    epsilon: Annotated[float, Meta(gt=0.0, le=10000.0)] = 1.0
+    pace: Literal[PACE_NAMES] = DEFAULT_PACE  # type: ignore[valid-type]
+    slot: Slot = 0
+    slots: Annotated[int, Meta(ge=1, le=MAX_SLOTS)] = 1
+
+    def __post_init__(self) -> None:
+        if self.grid is not None and self.grid & (self.grid - 1):
+            raise ValueError(f"grid {self.grid} is not a power of two")
+        if self.lod & (self.lod - 1):
+            raise ValueError(f"lod {self.lod} is not a power of two")
+        if self.grid is not None and self.lod > self.grid:
+            raise ValueError(f"lod {self.lod} exceeds the grid {self.grid}")
+        if not self.slot < self.slots:
+            raise ValueError(f"slot {self.slot} is not below slots {self.slots}")
+
+
+class NoArgs(Struct, forbid_unknown_fields=True):
+    """Arguments of every op other than ``load``: none (an empty map)."""
+
+
+class ImageSpec(Struct, forbid_unknown_fields=True):
+    """An image buffer: ``shape`` (H, W) or (H, W, C), ``dtype`` and ``codec``."""
+
+    shape: Annotated[list[Side], Meta(min_length=2, max_length=3)]
+    dtype: Literal["uint8", "float32"]
+    codec: Literal[CODECS]  # type: ignore[valid-type]
+
+
+class Message(Struct, forbid_unknown_fields=True, omit_defaults=True, tag_field="kind"):
+    """Every header: protocol version and sequence number (``kind`` is the tag)."""
+
+    v: Literal[PROTOCOL_VERSION]  # type: ignore[valid-type]
+    seq: Seq
+
+
+class Control(Message, tag="control"):
+    """A control request.  On the wire ``args`` is a map; :func:`decode_message` replaces
+    it with the op's argument Struct (:class:`LoadArgs` or :class:`NoArgs`)."""
+
+    op: Literal[CONTROL_OPS]  # type: ignore[valid-type]
+    args: Any = field(default_factory=dict)
+    client: ClientId = ""
+
+
+class Reply(Message, tag="reply"):
+    ok: bool
+    error: Annotated[str, Meta(max_length=4096)] = ""
+    data: dict[str, Any] = field(default_factory=dict)
+
+
+class ViewpointMessage(Message, tag="viewpoint"):
+    t: Time
+    viewpoint: WireViewpoint
+    shown: Shown | None = None
+    client: ClientId = ""
+
+
+class KeyframeMessage(Message, tag="keyframe"):
+    t0: Time
+    viewpoint: WireViewpoint
+    view: Matrix
+    proj: Matrix
+    fov: Annotated[float, Meta(gt=0.0, lt=180.0)]
+    aspect: Annotated[float, Meta(gt=0.0, le=1e4)]
+    near: Annotated[float, Meta(gt=0.0, le=MAX_COORD)]
+    far: Annotated[float, Meta(gt=0.0, le=1e12)]
+    zbuffer: Literal[ZBUFFERS]  # type: ignore[valid-type]
+    color: ImageSpec
+    depth: ImageSpec
+
+
+class Ack(Message, tag="ack"):
+    t: Time = 0.0
+
+
+ANY_MESSAGE = Control | Reply | ViewpointMessage | KeyframeMessage | Ack
+BUFFERS = {"control": 0, "reply": 0, "viewpoint": 0, "keyframe": 2, "ack": 0}
+OP_ARGS: dict[str, type[Struct]] = {op: LoadArgs if op == "load" else NoArgs
+                                     for op in CONTROL_OPS}

@@ -1,0 +1,92 @@
+"""What an experiment is: options in, a run that writes its outputs, a summary table out.
+
+An :class:`Experiment` is one reproduction: its name, its default output folder
+(``out/NAME``), how it reads the shared :class:`Options` (its defaults and checks), the
+run (results, ``results.json``, plots and ``report.md``) and the :class:`Summary` the
+command line prints after it.  The registry (:func:`lodsprite.experiments.get`) maps a
+name to one.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from lodsprite.progress import Progress, StageProgress
+
+
+@dataclass(frozen=True)
+class Options:
+    """The ``reproduce`` command's options; each experiment reads the ones it uses.
+
+    ``size`` is the square image side in pixels; ``max_error`` None is the client's
+    default bound (swan2002); ``huge`` adds a 65536² store (large)."""
+
+    terrain: str = "jacksboro"
+    size: int = 512
+    quick: bool = False
+    grid: int | None = None
+    lod: int = 16
+    epsilon: float = 1.0
+    visibility: str = "coarse"
+    border: bool = True
+    guard: int = 32
+    full_sample: int | None = None
+    sweeps: bool = True
+    adopt: str = "newest"
+    pace: str = "needed"
+    max_error: float | None = None
+    links: bool = True
+    huge: bool = False
+
+
+@dataclass
+class Summary:
+    """The table printed after a run: a title, column headings, rows of cell strings,
+    then plain lines (``notes``) and the report's path."""
+
+    title: str
+    columns: tuple[str, ...]
+    rows: list[tuple[str, ...]] = field(default_factory=list)
+    notes: list[str] = field(default_factory=list)
+    report: Path | None = None
+
+
+@dataclass(frozen=True)
+class Experiment:
+    """One reproduction.
+
+    ``configure(options)`` checks the options and returns the run's config (the paper's
+    defaults, or its quick variant with ``options.quick``); ``run(config, out_dir,
+    progress)`` measures, writes ``results.json``, the plots and ``report.md`` under
+    ``out_dir`` and returns ``(results, report path)``; ``summary(results)`` gives the
+    table to print."""
+
+    name: str
+    title: str
+    configure: Callable[[Options], Any]
+    run: Callable[[Any, Path, StageProgress | None], tuple[dict, Path]]
+    summary: Callable[[dict], Summary]
+
+    @property
+    def default_out(self) -> Path:
+        """``out/NAME``: where a run writes when no folder is given."""
+        return Path("out") / self.name
+
+    def reproduce(self, options: Options, out_dir: Path | None = None,
+                  progress: StageProgress | None = None) -> tuple[dict, Summary]:
+        """Configure, run (into ``out_dir``, default :attr:`default_out`) and summarise."""
+        config = self.configure(options)
+        results, report = self.run(config, Path(out_dir or self.default_out), progress)
+        summary = self.summary(results)
+        summary.report = report
+        return results, summary
+
+
+def single(progress: StageProgress | None, name: str) -> Progress | None:
+    """A ``(done, total)`` callback reporting to ``progress`` as the step ``name``."""
+    if progress is None:
+        return None
+    return lambda done, total: progress(name, done, total)

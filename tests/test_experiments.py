@@ -1,0 +1,76 @@
+"""The experiments' registry: one lookup a reproduction, each with its default output
+folder, its options, and the table the command line prints."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from lodsprite import experiments
+from lodsprite.errors import InputError
+from lodsprite.experiments import Experiment, Options, Summary
+
+
+def test_every_reproduction_is_registered_under_its_name():
+    assert experiments.names() == ("chen1999", "swan2002", "scoggins2000", "sloan1997",
+                                   "gumbau", "large")
+    for name in experiments.names():
+        e = experiments.get(name)
+        assert e.name == name and e.default_out == Path("out") / name
+
+
+def test_an_unknown_name_is_one_input_error_naming_the_available_ones():
+    with pytest.raises(InputError, match="nobody2000.*chen1999, swan2002") as exc:
+        experiments.get("nobody2000")
+    assert "\n" not in str(exc.value)
+
+
+def test_looking_up_swan2002_does_not_load_the_distributed_layer():
+    code = ("import sys; from lodsprite import experiments; experiments.get('swan2002'); "
+            "print(sorted(m for m in sys.modules if m.startswith('lodsprite.distributed')))")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == "[]"
+
+
+def test_options_become_each_experiments_config():
+    chen = experiments.get("chen1999").configure(Options(quick=True, lod=8, epsilon=0.5))
+    assert (chen.size, chen.frames, chen.lod, chen.epsilon) == (256, 115, 8, 0.5)
+    assert experiments.get("chen1999").configure(Options(size=384)).size == 384
+    large = experiments.get("large").configure(Options(terrain="dem.tif", huge=True))
+    assert large.terrains == ("dem.tif",) and large.huge
+    assert experiments.get("large").configure(Options()).terrains == ()
+    with pytest.raises(InputError, match="epsilon"):
+        experiments.get("swan2002").configure(Options(epsilon=0.0))
+
+
+def test_reproduce_runs_into_the_default_folder_and_attaches_the_report(tmp_path,
+                                                                         monkeypatch):
+    seen = {}
+
+    def run(cfg, out_dir, progress):
+        seen["out"], seen["cfg"] = out_dir, cfg
+        progress("step", 1, 1)
+        return {"x": 2}, out_dir / "report.md"
+
+    e = Experiment("toy", "a toy", lambda o: o.size, run,
+                   lambda r: Summary("toy", ("", "x"), [("x", str(r["x"]))]))
+    monkeypatch.chdir(tmp_path)
+    steps = []
+    results, s = e.reproduce(Options(size=64), progress=lambda *a: steps.append(a))
+    assert seen == {"out": Path("out/toy"), "cfg": 64} and steps == [("step", 1, 1)]
+    assert results == {"x": 2} and s.rows == [("x", "2")]
+    assert s.report == Path("out/toy/report.md")
+
+
+def test_the_large_table_has_a_row_a_store_in_size_order():
+    v = {"median_ms_adaptive": 2.0, "median_ms_sprite": 1.0, "rmse_adaptive": 3.0,
+         "rmse_sprite": 4.0, "peak_rss_mb": 300.0, "first_frame_s": 0.5}
+    r = {"sizes": {"2048": v, "512": v}, "terrains": {"dem.tif": v}}
+    s = experiments.get("large").summary(r)
+    assert [row[0] for row in s.rows] == ["512", "2048", "dem.tif"]
+    assert s.rows[0][1:] == ("2.0", "1.0", "3.00 / 4.00", "300", "0.50")
