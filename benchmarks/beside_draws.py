@@ -1,11 +1,13 @@
 """Benchmark: work beside a busy draw loop (issue 21, must-have 7).
 
 moderngl holds the GIL through each draw call, so a Python thread beside the draws
-starves.  This measures the lumigraph node loader beside full-resolution draws on the
-calling thread: nodes fetched and decoded per second (JPEG, N_UV² node images), with the
-draws and without them (``--alone``).
+starves.  This measures the lumigraph node loader and the terrain store's tile reader
+beside full-resolution draws on the calling thread: nodes fetched and decoded per second
+(JPEG, N_UV² node images) and 65² tiles read per second from a Zarr store, with the draws
+and without them (``--alone``).
 
     python benchmarks/beside_draws.py [--nodes 16] [--uv 256] [--seconds 8] [--alone]
+                                      [--tiles fractal:2048]
 """
 
 from __future__ import annotations
@@ -76,18 +78,66 @@ def node_loads(lf_dir: Path, seconds: float, draws: bool) -> dict:
         renderer.release()
 
 
+def tile_loads(store_dir: Path, seconds: float, draws: bool) -> dict:
+    """Level-0 tiles read per second by the store's tile loader, the calling thread
+    drawing as in :func:`node_loads` and pumping the loader once a frame."""
+    from lodsprite import Renderer, get_path, load_scene
+    from lodsprite.terrain.quadtree import Node, Quadtree
+    from lodsprite.terrain.store import TerrainStore
+    from lodsprite.terrain.streaming import tile_loader
+
+    renderer = Renderer(load_scene("fractal:512"), (512, 512))
+    path = get_path("chen1999", renderer.scene.hf, 100)
+    tree = Quadtree(TerrainStore(store_dir), grid=64)
+    nodes = [Node(0, i, j) for i in range(64) for j in range(64) if tree.exists(Node(0, i, j))]
+    loader = tile_loader(tree, host_mb=2048)
+    pump = getattr(loader, "pump", lambda: None)
+    frames = 0
+    try:
+        renderer.render(path.viewpoints[0])
+        loader.want([(1.0, nodes[0])])
+        while loader.loaded < 1:
+            pump()
+            time.sleep(0.001)
+        t0 = time.perf_counter()
+        loader.want([(float(-m), n) for m, n in enumerate(nodes[1:])])
+        while loader.loaded + len(loader.bad) < len(nodes) and time.perf_counter() - t0 < seconds:
+            pump()
+            if draws:
+                renderer.render(path.viewpoints[frames % len(path.viewpoints)])
+                renderer.paths.ctx.finish()
+            else:
+                time.sleep(0.005)
+            frames += 1
+        dt = time.perf_counter() - t0
+        return {"draws": draws, "tiles": len(nodes) - 1, "loaded": loader.loaded - 1,
+                "seconds": round(dt, 2), "tiles_per_s": round((loader.loaded - 1) / dt, 1),
+                "frames": frames, "frame_ms": round(dt * 1e3 / max(1, frames), 2)}
+    finally:
+        loader.close()
+        renderer.release()
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--nodes", type=int, default=16, help="nodes per side of the slab")
     ap.add_argument("--uv", type=int, default=256, help="node image size (pixels)")
     ap.add_argument("--seconds", type=float, default=8.0)
     ap.add_argument("--alone", action="store_true", help="also without the draws")
+    ap.add_argument("--tiles", metavar="SPEC", help="also tiles of a store built from SPEC")
     args = ap.parse_args()
+    runs = [True, False] if args.alone else [True]
     with tempfile.TemporaryDirectory() as tmp:
         lf = make_lumigraph(Path(tmp), args.nodes, args.uv)
-        runs = [True, False] if args.alone else [True]
         for draws in runs:
-            print(json.dumps(node_loads(lf, args.seconds, draws)))
+            print(json.dumps({"loader": "lumigraph", **node_loads(lf, args.seconds, draws)}))
+        if args.tiles:
+            from lodsprite.terrain.store import build_store
+
+            build_store(args.tiles, Path(tmp) / "t.zarr", tile=128, chunk=64)
+            for draws in runs:
+                print(json.dumps({"loader": "tiles",
+                                  **tile_loads(Path(tmp) / "t.zarr", args.seconds, draws)}))
 
 
 if __name__ == "__main__":

@@ -237,6 +237,24 @@ def fake():
     f.close()
 
 
+def test_the_client_runs_no_thread_beside_its_draws(fake):
+    """Issue 21: receiving keyframes and keeping the servers loaded happen on the frame's
+    thread without waiting; a thread there would wait for every draw call to end."""
+    before = set(threading.enumerate())
+    client = fake.client(max_error=None)
+    vp = fake.path.viewpoints[2]
+    try:
+        deadline = time.perf_counter() + 30.0  # a hang guard
+        while not client._servers[0].loaded:  # the scene loaded by frames alone
+            client.frame(vp)
+            assert time.perf_counter() < deadline, "the client never loaded the scene"
+        fake.send(1, vp)
+        assert _until(client, vp, "keyframe").keyframe_seq == 1
+        assert set(threading.enumerate()) == before
+    finally:
+        client.close()
+
+
 def test_viewpoint_messages_name_the_shown_keyframe_for_the_servers_pacing(fake):
     """Servers pace against the keyframe the client shows, which may be another server's:
     once a keyframe is shown, every viewpoint message carries its eye."""

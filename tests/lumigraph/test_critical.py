@@ -1,9 +1,10 @@
 """Critical-time selection (§4), GL-free: benefit, benefit/cost order, eviction, the
-rescaling of the cost model, and the loader thread."""
+rescaling of the cost model, and the loader's process."""
 
 from __future__ import annotations
 
 import os
+import threading
 import time
 
 import numpy as np
@@ -139,6 +140,7 @@ def test_the_loader_fetches_and_decodes_wanted_nodes_in_a_process(tmp_path):
     save(tmp_path / "lf", [SLAB], [images], textured_plane(2.0, 4), "x", 0.1, 10.0,
          codec="jpeg")
     (tmp_path / "lf" / node_name(0, 0, 1, "jpeg")).unlink()
+    threads = threading.active_count()
     loader = NodeLoader(Lumigraph(tmp_path / "lf"), level=1)
     try:
         loader.want(np.array([9, 1, 2]))
@@ -150,6 +152,7 @@ def test_the_loader_fetches_and_decodes_wanted_nodes_in_a_process(tmp_path):
         assert held[9] and held[2] and not held[1] and loader.bad == {1}
         assert set(loader.lf.bad_nodes) == {(0, 0, 1)}  # said here, found there
         assert loader._worker.pid not in (None, os.getpid())
+        assert threading.active_count() == threads  # no thread beside the draws
         img = loader.get(9)
         assert img.shape == (16, 16, 3)               # level 1: decoded at half size
         costs = loader.drain_costs()

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import signal
+import threading
 import time
 
 import numpy as np
@@ -30,6 +31,7 @@ def pump_until(loader, done, seconds=20.0):
 
 def test_a_store_streams_through_a_reader_process_the_samples_the_store_holds(store):
     tree = Quadtree(store, grid=64)
+    threads = threading.active_count()
     loader = tile_loader(tree, host_mb=64)
     assert isinstance(loader, StoreTileLoader)
     try:
@@ -37,6 +39,7 @@ def test_a_store_streams_through_a_reader_process_the_samples_the_store_holds(st
         loader.want([(float(m), n) for m, n in enumerate(nodes)])
         pump_until(loader, lambda: loader.loaded + len(loader.bad) == len(nodes))
         assert loader.loaded == len(nodes) and not loader.bad and loader.idle()
+        assert threading.active_count() == threads  # no thread beside the draws
         for n in nodes:
             r0, r1, c0, c1 = tree.samples(n)
             np.testing.assert_array_equal(loader.take(n), store.read(0, r0, r1, c0, c1))
