@@ -53,6 +53,49 @@ def test_a_request_to_a_dead_server_answers_none_and_the_next_one_uses_a_new_soc
         ctx.destroy(linger=0)
 
 
+def test_the_frames_control_never_waits_and_a_blocking_request_leaves_it_its_reply():
+    """CLIENT-CONTROL on the frame's thread: a step sends or polls and returns; a silent
+    server is found silent once the request's time is up; a blocking request made while
+    the step's request is in flight (``stats``) does not take the step's reply."""
+    import itertools
+
+    from lodsprite.distributed.link import LinkKeeper
+    from lodsprite.distributed.run import free_ports
+
+    port = free_ports()
+    ctx = zmq.Context()
+    link = ServerLink(ctx, f"127.0.0.1:{port}")
+    keeper = LinkKeeper(link, {"terrain": "x"}, itertools.count(1))
+    stop = threading.Event()
+    server = None
+    try:
+        keeper.step()                               # the ping is sent ...
+        assert link.answer() == (False, None)       # ... and nothing waits for it
+        deadline = time.perf_counter() + 20.0       # a hang guard
+        while link.alive is None:
+            keeper.step()
+            assert time.perf_counter() < deadline
+            time.sleep(0.01)
+        assert link.alive is False and not link.loaded
+        ops = []
+        server = _fake_server(port, lambda h: ops.append(h["op"]) or
+                              {"data": {"running": True, "loaded": True, "yours": True}}, stop)
+        keeper._next = 0.0                          # the next round now
+        keeper.step()                               # its ping in flight, then stats
+        assert link.request({**PING, "op": "stats"}) is not None
+        while not link.loaded:                      # the round goes on: ping, load, start
+            keeper.step()
+            assert time.perf_counter() < deadline
+            time.sleep(0.01)
+        assert link.alive and ops[:2] == ["ping", "stats"] and ops[2:4] == ["load", "start"]
+    finally:
+        stop.set()
+        if server is not None:
+            server.join(5.0)
+        link.close()
+        ctx.destroy(linger=0)
+
+
 def _rebind(ctx: zmq.Context, port: int) -> zmq.Socket:
     """A new REP socket on ``port``: ZeroMQ closes sockets in the background, so the port
     may still be taken for a moment after the old socket's close."""

@@ -185,7 +185,10 @@ class ServerLink:
     def close(self, release: bool = True) -> None:
         """Close the sockets; later requests answer None at once.  With
         ``release`` a server this link loaded is told first (briefly), so that another
-        client may take it at once rather than after the hold's lease."""
+        client may take it at once rather than after the hold's lease.  A request the
+        frame's CLIENT-CONTROL sent is given up."""
+        if self._asked is not None:
+            self._drop_control()
         if release and self.loaded and self.alive and not self.closed:
             self.request({"kind": "control", "seq": 0, "op": "release", "args": {}},
                          RELEASE_TIMEOUT_MS)
