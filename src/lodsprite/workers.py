@@ -18,7 +18,10 @@ the pipes, request or answer, is a header of three little-endian int64 ``status,
 len(meta), len(data)`` and then the two byte strings; an answer's status is 0, or 1 with
 the handler's error as ``meta`` text (the process goes on), or 2: the data are in the
 request's slot of memory shared with the caller (``slot_bytes``; the request's status
-field names the slot), and only the header and meta came through the pipe.
+field names the slot), and only the header and meta came through the pipe.  Slots matter
+for large answers: 512² lumigraph nodes (768 KiB) through the 1 MiB pipe came about one
+a frame, 8-10 nodes/s beside a busy draw loop, against 32-99 through slots (129-151
+alone, against 56-100).
 """
 
 from __future__ import annotations
