@@ -62,7 +62,7 @@ def test_a_reader_that_dies_is_started_again_and_only_its_tile_is_bad(store):
         os.kill(pid, signal.SIGSTOP)        # it cannot answer ...
         victim, other = Node(0, 1, 1), Node(0, 2, 2)
         loader.want([(2.0, victim), (1.0, other)])  # ... the victim is sent to it
-        assert loader.worker.pending == [victim]
+        assert loader.pending == [victim]
         os.kill(pid, signal.SIGKILL)        # and it dies with the victim in flight
         pump_until(loader, lambda: loader.loaded == 2)
         assert loader.bad == {victim} and loader.take(other) is not None

@@ -134,6 +134,11 @@ class TileLoader(HostCache):
         self.pump()
         return not self._queue
 
+    @property
+    def pending(self) -> list:
+        """Nodes in flight: none (each is copied as it is taken from the wish list)."""
+        return []
+
     def close(self) -> None:
         self._queue, self._queued = [], set()
 
@@ -174,6 +179,11 @@ class StoreTileLoader(HostCache):
         """Nothing wanted and nothing in flight."""
         self.pump()
         return not self._queue and not self.worker.pending
+
+    @property
+    def pending(self) -> list:
+        """The nodes sent to the reader and not answered yet, oldest first."""
+        return self.worker.pending
 
     def reader_peak_mb(self) -> float:
         """The reader process's peak resident memory in MB (0 when none runs)."""
