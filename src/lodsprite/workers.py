@@ -2,8 +2,9 @@
 
 moderngl holds the GIL through each draw call (the whole llvmpipe rasterisation), so a
 Python thread beside the draws runs only between them: a Zarr read of 1.9 ms took 113 ms
-beside a busy draw loop, and a lumigraph node loader thread decoded about 5 nodes a
-second where it decodes 230 alone (``benchmarks/beside_draws.py``).  So nothing runs
+beside a busy draw loop, and a lumigraph node loader thread decoded 6.5-31.5 nodes a
+second there where it decoded 226-521 alone (its process: 50-101; ``benchmarks/
+beside_draws.py``, two runs on a shared 2-core machine).  So nothing runs
 beside the draws as a thread.  Work that takes time (reading, decoding) runs in a child
 process, with its own GIL, and the frame's thread talks to it through pipes, without
 ever waiting: :class:`ProcessWorker`.  I/O that only waits (sockets) is polled without

@@ -11,8 +11,8 @@ collects late never leaves the process waiting on a full pipe).  The frame's thr
 collects what has arrived without waiting and keeps decoded images in a memory cache of
 ``ram_mb`` megabytes (least recently used out first).
 A thread would not do: moderngl holds the GIL through each draw call, and a decoder
-thread beside a busy draw loop decoded about 5 nodes a second where it decodes 230 alone
-(``benchmarks/beside_draws.py``).
+thread beside a busy draw loop decoded 6.5-31.5 nodes a second, where the process decodes
+50-101 (``benchmarks/beside_draws.py``; 226-521 alone, either way).
 """
 
 from __future__ import annotations
