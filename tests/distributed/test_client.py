@@ -53,6 +53,49 @@ def test_a_request_to_a_dead_server_answers_none_and_the_next_one_uses_a_new_soc
         ctx.destroy(linger=0)
 
 
+def test_the_frames_control_never_waits_and_a_blocking_request_leaves_it_its_reply():
+    """CLIENT-CONTROL on the frame's thread: a step sends or polls and returns; a silent
+    server is found silent once the request's time is up; a blocking request made while
+    the step's request is in flight (``stats``) does not take the step's reply."""
+    import itertools
+
+    from lodsprite.distributed.link import LinkKeeper
+    from lodsprite.distributed.run import free_ports
+
+    port = free_ports()
+    ctx = zmq.Context()
+    link = ServerLink(ctx, f"127.0.0.1:{port}")
+    keeper = LinkKeeper(link, {"terrain": "x"}, itertools.count(1))
+    stop = threading.Event()
+    server = None
+    try:
+        keeper.step()                               # the ping is sent ...
+        assert link.answer() == (False, None)       # ... and nothing waits for it
+        deadline = time.perf_counter() + 20.0       # a hang guard
+        while link.alive is None:
+            keeper.step()
+            assert time.perf_counter() < deadline
+            time.sleep(0.01)
+        assert link.alive is False and not link.loaded
+        ops = []
+        server = _fake_server(port, lambda h: ops.append(h["op"]) or
+                              {"data": {"running": True, "loaded": True, "yours": True}}, stop)
+        keeper._next = 0.0                          # the next round now
+        keeper.step()                               # its ping in flight, then stats
+        assert link.request({**PING, "op": "stats"}) is not None
+        while not link.loaded:                      # the round goes on: ping, load, start
+            keeper.step()
+            assert time.perf_counter() < deadline
+            time.sleep(0.01)
+        assert link.alive and ops[:2] == ["ping", "stats"] and ops[2:4] == ["load", "start"]
+    finally:
+        stop.set()
+        if server is not None:
+            server.join(5.0)
+        link.close()
+        ctx.destroy(linger=0)
+
+
 def _rebind(ctx: zmq.Context, port: int) -> zmq.Socket:
     """A new REP socket on ``port``: ZeroMQ closes sockets in the background, so the port
     may still be taken for a moment after the old socket's close."""
@@ -181,7 +224,7 @@ class _FakeLodServer:
     """A server's three sockets played by the test: control answers "loaded and
     running", viewpoints are read, keyframes are sent by hand."""
 
-    def __init__(self, router: bool = False):
+    def __init__(self, bind_keys: bool = True):
         from lodsprite.distributed.run import free_ports
         from lodsprite.run import RenderConfig, prepare
 
@@ -196,12 +239,9 @@ class _FakeLodServer:
         self.views = self.ctx.socket(zmq.SUB)
         self.views.setsockopt(zmq.SUBSCRIBE, b"")
         self.views.bind(f"tcp://127.0.0.1:{self.port + 1}")
-        self.keys = self.ctx.socket(zmq.ROUTER if router else zmq.DEALER)
-        if router:  # a server's socket that takes in as few acknowledgements as it can
-            for option, value in ((zmq.RCVHWM, 1), (zmq.RCVBUF, 1024),
-                                  (zmq.ROUTER_MANDATORY, 1), (zmq.LINGER, 0)):
-                self.keys.setsockopt(option, value)
-        self.keys.bind(f"tcp://127.0.0.1:{self.port + 2}")
+        self.keys = self.ctx.socket(zmq.DEALER)
+        if bind_keys:  # else another process binds the keyframe port
+            self.keys.bind(f"tcp://127.0.0.1:{self.port + 2}")
         self.rng = np.random.default_rng(1)
 
     def client(self, **kw):
@@ -238,6 +278,24 @@ def fake():
     f = _FakeLodServer()
     yield f
     f.close()
+
+
+def test_the_client_runs_no_thread_beside_its_draws(fake):
+    """Issue 21: receiving keyframes and keeping the servers loaded happen on the frame's
+    thread without waiting; a thread there would wait for every draw call to end."""
+    before = set(threading.enumerate())
+    client = fake.client(max_error=None)
+    vp = fake.path.viewpoints[2]
+    try:
+        deadline = time.perf_counter() + 30.0  # a hang guard
+        while not client._servers[0].loaded:  # the scene loaded by frames alone
+            client.frame(vp)
+            assert time.perf_counter() < deadline, "the client never loaded the scene"
+        fake.send(1, vp)
+        assert _until(client, vp, "keyframe").keyframe_seq == 1
+        assert set(threading.enumerate()) == before
+    finally:
+        client.close()
 
 
 def test_viewpoint_messages_name_the_shown_keyframe_for_the_servers_pacing(fake):
@@ -351,7 +409,6 @@ def test_the_receiver_survives_hostile_keyframes_counts_them_and_shows_the_next_
         f = _until(client, vp, "keyframe")
         assert client.shown[f.keyframe_index]["seq"] == 1  # seq 7 did not count as taken
         assert client.rejected_keyframes == len(hostile)
-        assert all(t.is_alive() for t in client._threads)
         fake.send(2, fake.path.viewpoints[3])  # and it goes on receiving
         f = _until(client, vp, "keyframe")
         assert client.shown[f.keyframe_index]["seq"] == 2
@@ -469,47 +526,116 @@ def test_acknowledgements_never_wait_and_refused_keyframes_get_none(fake):
         client.close()
 
 
-def test_a_server_that_reads_no_acknowledgements_cannot_wedge_the_receiver():
+FLOOD_SENDER = """
+import json, sys, time
+import numpy as np, zmq
+from lodsprite.camera import Projection, Viewpoint, look_at
+from lodsprite.distributed.protocol import Keyframe, encode_keyframe
+
+port, identity, flood, vp = int(sys.argv[1]), sys.argv[2].encode(), int(sys.argv[3]), \\
+    Viewpoint.from_dict(json.loads(sys.argv[4]))
+rng = np.random.default_rng(1)
+
+def message(seq, vp, size=64):
+    return [bytes(f) for f in encode_keyframe(Keyframe(
+        seq, 0.0, vp, Projection(45.0, 1.0, 1.0, 1e5),
+        rng.integers(0, 256, (size, size, 3), dtype=np.uint8),
+        np.full((size, size), 0.5, np.float32)))]
+
+ctx = zmq.Context()
+# A server's socket that reads no acknowledgement.  Its kernel buffer keeps its default
+# size: with a 1 KiB one (SO_RCVBUF) both directions of the connection could close their
+# TCP windows, and the kernel's zero-window probes, backing off to two minutes, then held
+# the keyframes in the sender's socket (ss: 2.7 MB in its send queue, nothing in the
+# client's receive queue), with the old receiver thread as with this one.
+router = ctx.socket(zmq.ROUTER)
+for option, value in ((zmq.RCVHWM, 1), (zmq.ROUTER_MANDATORY, 1), (zmq.LINGER, 0)):
+    router.setsockopt(option, value)
+router.bind(f"tcp://127.0.0.1:{port}")
+
+def send(frames, timeout=60.0):
+    # A ROUTER drops what a peer's full queue cannot take, silently; mandatory routing
+    # makes a full queue say so (zmq.Again), and this waits (a hang guard, not a timing).
+    deadline = time.perf_counter() + timeout
+    while True:
+        try:
+            router.send_multipart([identity, *frames], flags=zmq.NOBLOCK)
+            return
+        except (zmq.Again, zmq.ZMQError):  # not connected yet, or the client's full
+            if time.perf_counter() > deadline:
+                sys.exit("the client takes no more messages")
+            time.sleep(0.001)
+
+small = message(1, look_at((10.0, -500.0, 300.0), (0.0, 0.0, 0.0)), size=1)
+for _ in range(flood):  # keyframes of the wrong size: each refused
+    send(small)
+for seq in range(1, 200):  # well-formed ones, each acknowledged (or the ack dropped)
+    send(message(seq, vp))
+send(message(10_000, vp))
+print("sent", flush=True)
+sys.stdin.read()  # until the test is done: a closed socket drops what it still holds
+"""
+
+FULL_RENDER = """
+import sys
+from lodsprite import Renderer, get_path, load_scene
+r = Renderer(load_scene("fractal:512"), (512, 512))  # full resolution: every quad drawn
+vps = get_path("chen1999", r.scene.hf, 200).viewpoints
+i = 0
+while True:
+    r.render(vps[i % len(vps)])
+    r.paths.ctx.finish()
+    print(i, flush=True)
+    i += 1
+"""
+
+
+def _full_renders(n: int) -> list:
+    """``n`` processes drawing full-resolution frames, each once it has drawn its first."""
+    import subprocess
+    import sys
+
+    procs = [subprocess.Popen([sys.executable, "-c", FULL_RENDER], stdout=subprocess.PIPE,
+                              text=True) for _ in range(n)]
+    for p in procs:
+        assert p.stdout.readline().strip() == "0", "a full-resolution render did not start"
+    return procs
+
+
+@pytest.mark.parametrize("renders", [0, 2])
+def test_a_server_that_reads_no_acknowledgements_cannot_wedge_the_receiver(renders):
     """A server floods keyframes (refused, then well-formed) and reads no
-    acknowledgements: the receiver goes on and takes the last one."""
-    from lodsprite.camera import look_at
+    acknowledgements: the receiver goes on and takes the last one, also with two
+    full-resolution renders drawing beside the client (issue 21: the receiver was a
+    thread, starved by the GIL that moderngl holds through each draw call; it is now
+    polled without waiting on the frame's thread)."""
+    import json
+    import subprocess
+    import sys
 
-    fake = _FakeLodServer(router=True)
-    router = fake.keys
-    # A ROUTER drops what a peer's full queue cannot take, silently: under load the last
-    # keyframe was dropped and never came.  Mandatory routing makes a full queue say so
-    # (zmq.Again), and send() below waits.
-    router.setsockopt(zmq.ROUTER_MANDATORY, 1)
+    renderers = _full_renders(renders)
+    fake = _FakeLodServer(bind_keys=False)
     client = fake.client(max_error=None)
-    identity = client._servers[0].client_id.encode()
     vp = fake.path.viewpoints[2]
-    small = fake.message(1, look_at((10.0, -500.0, 300.0), (0.0, 0.0, 0.0)), size=1)
-
-    def send(frames, timeout=20.0) -> None:
-        deadline = time.perf_counter() + timeout  # a hang guard
-        while True:
-            try:
-                router.send_multipart([identity, *frames], flags=zmq.NOBLOCK)
-                return
-            except (zmq.Again, zmq.ZMQError):  # not connected yet, or the client's full
-                assert time.perf_counter() < deadline, "the client takes no more messages"
-                time.sleep(0.001)
-
+    sender = subprocess.Popen(
+        [sys.executable, "-c", FLOOD_SENDER, str(fake.port + 2), client._servers[0].client_id,
+         str(FLOOD), json.dumps(vp.to_dict())], stdin=subprocess.PIPE, stdout=subprocess.PIPE)
     try:
-        for _ in range(FLOOD):  # keyframes of the wrong size: each refused
-            send(small)
-        for seq in range(1, 200):  # well-formed ones, each acknowledged (or the ack dropped)
-            send(fake.message(seq, vp))
-        send(fake.message(10_000, vp))
-        deadline = time.perf_counter() + 90.0  # a hang guard, not a timing check
+        deadline = time.perf_counter() + 120.0  # a hang guard, not a timing check
         while client.shown[-1]["seq"] != 10_000 if client.shown else True:
             client.frame(vp)
+            assert sender.poll() is None, "the flood's sender stopped"
             assert time.perf_counter() < deadline, (
                 f"the last keyframe never came: {client._servers[0].taken} taken, the "
                 f"last {client._servers[0].last_seq}")
-        assert all(t.is_alive() for t in client._threads)
         assert client.rejected_keyframes == FLOOD
+        assert all(r.poll() is None for r in renderers)  # drawing beside it all along
     finally:
+        sender.kill()
+        for r in renderers:
+            r.kill()
+        for proc in (sender, *renderers):
+            proc.communicate(timeout=10)
         client.close()
         fake.close()
 
@@ -526,6 +652,7 @@ def test_a_keyframe_number_far_ahead_does_not_freeze_the_link(fake, monkeypatch)
         deadline = time.perf_counter() + 30.0  # a hang guard
         while not client._servers[0].loaded:  # loading sets the link's numbering afresh
             assert time.perf_counter() < deadline, "the client never loaded the scene"
+            client.pump()  # CLIENT-CONTROL goes on from the frame's thread
             time.sleep(0.01)
         fake.send(2**62, near)
         f = _until(client, near, "keyframe")

@@ -1,8 +1,10 @@
 """Critical-time selection (§4), GL-free: benefit, benefit/cost order, eviction, the
-rescaling of the cost model, and the loader thread."""
+rescaling of the cost model, and the loader's process."""
 
 from __future__ import annotations
 
+import os
+import threading
 import time
 
 import numpy as np
@@ -127,7 +129,7 @@ def test_one_factor_for_all_components_also_converges_on_the_mean():
     assert abs(t[-40:].mean() / 33.0 - 1.0) < 0.1
 
 
-def test_the_loader_fetches_and_decodes_wanted_nodes_off_the_calling_thread(tmp_path):
+def test_the_loader_fetches_and_decodes_wanted_nodes_in_a_process(tmp_path):
     from lodsprite.lumigraph.capture import textured_plane
     from lodsprite.lumigraph.loader import NodeLoader
     from lodsprite.lumigraph.store import Lumigraph, node_name, save
@@ -138,14 +140,19 @@ def test_the_loader_fetches_and_decodes_wanted_nodes_off_the_calling_thread(tmp_
     save(tmp_path / "lf", [SLAB], [images], textured_plane(2.0, 4), "x", 0.1, 10.0,
          codec="jpeg")
     (tmp_path / "lf" / node_name(0, 0, 1, "jpeg")).unlink()
+    threads = threading.active_count()
     loader = NodeLoader(Lumigraph(tmp_path / "lf"), level=1)
     try:
         loader.want(np.array([9, 1, 2]))
         deadline = time.monotonic() + 20
         while (loader.decoded < 2 or 1 not in loader.bad) and time.monotonic() < deadline:
+            loader.pump()  # what a frame does: collect without waiting
             time.sleep(0.01)
         held = loader.holds(64)
         assert held[9] and held[2] and not held[1] and loader.bad == {1}
+        assert set(loader.lf.bad_nodes) == {(0, 0, 1)}  # said here, found there
+        assert loader._worker.pid not in (None, os.getpid())
+        assert threading.active_count() == threads  # no thread beside the draws
         img = loader.get(9)
         assert img.shape == (16, 16, 3)               # level 1: decoded at half size
         costs = loader.drain_costs()

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import os
 import signal
+import threading
 import time
 
 import numpy as np
@@ -30,6 +31,7 @@ def pump_until(loader, done, seconds=20.0):
 
 def test_a_store_streams_through_a_reader_process_the_samples_the_store_holds(store):
     tree = Quadtree(store, grid=64)
+    threads = threading.active_count()
     loader = tile_loader(tree, host_mb=64)
     assert isinstance(loader, StoreTileLoader)
     try:
@@ -37,13 +39,14 @@ def test_a_store_streams_through_a_reader_process_the_samples_the_store_holds(st
         loader.want([(float(m), n) for m, n in enumerate(nodes)])
         pump_until(loader, lambda: loader.loaded + len(loader.bad) == len(nodes))
         assert loader.loaded == len(nodes) and not loader.bad and loader.idle()
+        assert threading.active_count() == threads  # no thread beside the draws
         for n in nodes:
             r0, r1, c0, c1 = tree.samples(n)
             np.testing.assert_array_equal(loader.take(n), store.read(0, r0, r1, c0, c1))
-        pid = loader._reader.proc.pid
+        pid = loader.worker.pid
     finally:
         loader.close()
-    assert loader._reader is None
+    assert not loader.worker.alive
     with pytest.raises(ProcessLookupError):
         os.kill(pid, 0)
 
@@ -55,16 +58,16 @@ def test_a_reader_that_dies_is_started_again_and_only_its_tile_is_bad(store):
         first = Node(0, 0, 0)
         loader.want([(1.0, first)])
         pump_until(loader, lambda: loader.loaded == 1)
-        proc = loader._reader.proc
-        os.kill(proc.pid, signal.SIGSTOP)   # it cannot answer ...
+        pid = loader.worker.pid
+        os.kill(pid, signal.SIGSTOP)        # it cannot answer ...
         victim, other = Node(0, 1, 1), Node(0, 2, 2)
         loader.want([(2.0, victim), (1.0, other)])  # ... the victim is sent to it
-        assert list(loader._sent) == [victim]
-        proc.kill()                         # and it dies with the victim in flight
-        proc.wait()
+        assert loader.pending == [victim]
+        os.kill(pid, signal.SIGKILL)        # and it dies with the victim in flight
         pump_until(loader, lambda: loader.loaded == 2)
         assert loader.bad == {victim} and loader.take(other) is not None
-        assert loader._reader is not None and loader._deaths == 1
+        assert loader.worker.alive and loader.worker.pid != pid
+        assert loader.worker.deaths == 1
     finally:
         loader.close()
 

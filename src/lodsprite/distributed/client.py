@@ -11,9 +11,9 @@ pace ``continuous``; with the default pace ``needed`` the server already renders
 keyframe only when one is due).  With ``adopt="better"`` a newer keyframe is shown
 once its error metric at the current viewpoint is lower than the shown one's: a keyframe
 placed by a viewpoint prediction that overshot waits until the viewer reaches it,
-instead of replacing a better one.  The receiver computes each keyframe's ``C'`` (about
-2 ms) off the frame loop; a frame then costs one or two metric evaluations (about
-0.04 ms each).
+instead of replacing a better one.  A keyframe's ``C'`` (1.3 ms for Jacksboro, 3.6 ms
+for a 512² fractal, at a 16² coarse level) is computed once, in the first frame that
+considers it; a frame then costs one or two metric evaluations (about 0.04 ms each).
 
 The client's own keyframes (Chen, Swan & Kaufman 1999, §3.1 step 1, rendered in the
 frame loop at the current viewpoint, as the inline algorithm does):
@@ -34,28 +34,40 @@ drawn from the keyframe it shows, and every keyframe shown (server or own) is lo
 :attr:`LodClient.shown`, so that :mod:`lodsprite.distributed.quality` can replay each
 frame exactly.
 
-KEYFRAME-RECEIVER (a thread): receives keyframes from every server (frame by frame,
-keeping at most the three a keyframe has, and without copying them: the images are
-views of the received frames and go to the textures as they are), acknowledges them,
-drops any not newer than the last one from the same server (unless none came from it
-for :data:`SEQ_RESET_S`), and queues the rest.  It refuses malformed messages,
-keyframes whose images are not this client's keyframe size (the image size: the
-client's sprite renderer has no guard band) and anything else a message may cause,
-counts them (:attr:`LodClient.rejected_keyframes`) and goes on: no message stops it.
-Refused keyframes are not acknowledged, and an acknowledgement is never waited for: one
-the server does not take is dropped and counted (:attr:`LodClient.dropped_acks`).
-CLIENT-CONTROL (a thread): loads the scene on each server (with the client's coarse
-level, visibility rule, ε and pace, so that the server sends the z-buffer this client
-reads and keyframes when it needs them) and starts it, pings every second and loads
-again when a server comes back after a restart.  When no server answers, the client
-says so once and draws from its last keyframe; it says so again when one is back.
+KEYFRAME-RECEIVER (:meth:`LodClient.receive`, on the frame's thread at the start of each
+frame; never waits): takes the keyframes every server has sent (frame by frame, keeping
+at most the three a keyframe has, and without copying them: the images are views of the
+received frames and go to the textures as they are), at most :data:`RECEIVE_BUDGET`
+messages or :data:`RECEIVE_MS` a frame; acknowledges them, drops any not newer than the
+last one from the same server (unless none came from it for :data:`SEQ_RESET_S`), and
+keeps the newest (``C'`` is never computed for a keyframe a newer one replaced before a
+frame considered it).  It refuses malformed messages, keyframes whose images are not this
+client's keyframe size (the image size: the client's sprite renderer has no guard band)
+and anything else a message may cause, counts them (:attr:`LodClient.rejected_keyframes`)
+and goes on: no message stops it.  Refused keyframes are not acknowledged, and an
+acknowledgement is never waited for: one the server does not take is dropped and counted
+(:attr:`LodClient.dropped_acks`).
+CLIENT-CONTROL (:class:`~lodsprite.distributed.link.LinkKeeper`, on the frame's thread
+too, never waiting): loads the scene on each server (with the client's coarse level,
+visibility rule, ε and pace, so that the server sends the z-buffer this client reads and
+keyframes when it needs them) and starts it, pings every second and loads again when a
+server comes back after a restart.  When no server answers, the client says so once and
+draws from its last keyframe; it says so again when one is back.
+
+Neither is a thread: moderngl holds the GIL through each draw call, so a thread beside
+the frame loop runs only between draws.  Sockets only wait, so a zero-timeout poll on the
+frame's thread (:func:`lodsprite.workers.ready`) does a receiver thread's work without
+one, and a keyframe is acknowledged when the frame that can show it takes it.  Under the
+test's flood (5,000 refused messages, then 200 keyframes, from a server that reads no
+acknowledgement) the last keyframe was shown after 3.8-4.7 s here (6.3-12.4 s with the
+receiver thread), and after 5.9-14.4 s with two full-resolution renders running beside
+the client (12.4-16.8 s with the thread).
 """
 
 from __future__ import annotations
 
 import itertools
 import logging
-import threading
 import time
 from dataclasses import dataclass
 
@@ -64,7 +76,7 @@ import zmq
 
 from lodsprite.distributed.frames import check_frames, recv_frames
 from lodsprite.distributed.keys import ClientKeys
-from lodsprite.distributed.link import ServerLink, control, keep_loaded
+from lodsprite.distributed.link import LinkKeeper, ServerLink, control
 from lodsprite.distributed.pacing import DEFAULT_PACE, PACES
 from lodsprite.distributed.protocol import (
     Keyframe,
@@ -73,7 +85,6 @@ from lodsprite.distributed.protocol import (
     encode,
     viewpoint_to_wire,
 )
-from lodsprite.distributed.queue import Closed, KeyframeQueue
 from lodsprite.errors import InputError
 from lodsprite.gl.context import GLContext
 from lodsprite.gl.paths import PathRenderer
@@ -81,6 +92,7 @@ from lodsprite.gl.sprite import SpriteRenderer
 from lodsprite.scene import Scene
 from lodsprite.sprite.metric import ErrorMetric
 from lodsprite.sprite.policy import keyframe_due, keyframe_error_px
+from lodsprite.workers import ready
 
 log = logging.getLogger("lodsprite.client")
 
@@ -95,6 +107,10 @@ ADOPT_FRACTION = 0.5
 DEFAULT_MAX_ERROR: float | None = 4.0
 KEYFRAME_FRAMES = 3
 """Frames of a keyframe message (header, colour, depth); the receiver keeps no more."""
+RECEIVE_BUDGET = 64
+"""Messages the receiver takes in one frame at most (the servers hold the rest)."""
+RECEIVE_MS = 8.0
+"""Milliseconds the receiver spends in one frame at most (checked after each message)."""
 SEQ_RESET_S = 2.0
 """A keyframe not newer than the last one taken from its server is dropped, unless none
 was taken for this long: then its sequence number starts afresh (a server that sent a
@@ -163,10 +179,14 @@ class LodClient:
         self.sprite = SpriteRenderer(self.paths.renderer, lod, visibility, border=border,
                                      guard_px=0)
         self.metric = ErrorMetric.for_level(scene.hf, lod)
-        self.queue: KeyframeQueue[tuple[int, Keyframe, np.ndarray | None]] = KeyframeQueue(2)
+        # the newest keyframe received and not yet considered: (slot, keyframe, None)
+        self._arrived: tuple[int, Keyframe, np.ndarray | None] | None = None
         self._zmq = zmq.Context()
         self._servers = [ServerLink(self._zmq, a, keys) for a in servers]
-        self._stop = threading.Event()
+        self._poller = zmq.Poller()
+        for link in self._servers:
+            self._poller.register(link.keyframes, zmq.POLLIN)
+        self._by_socket = {link.keyframes: (i, link) for i, link in enumerate(self._servers)}
         self._counter = itertools.count(1)
         self._current: Keyframe | None = None  # the last server keyframe taken
         # Every keyframe shown, in order: {slot, seq, t0, viewpoint, local} (to replay
@@ -179,45 +199,42 @@ class LodClient:
         self.rejected_keyframes = 0
         self.dropped_acks = 0  # acknowledgements a server did not take (never waited for)
         self._logged: set[str] = set()  # kinds of rejection said once already
-        self._threads = [threading.Thread(target=self._receive, daemon=True),
-                         threading.Thread(target=self._control, daemon=True)]
-        for t in self._threads:
-            t.start()
+        self._keepers = [LinkKeeper(link, {**self.scene_args, "slot": i,
+                                           "slots": len(self._servers)}, self._counter)
+                         for i, link in enumerate(self._servers)]
+        self.pump()
 
-    # ------------------------------------------------------------------ CLIENT-CONTROL
-
-    def _control(self) -> None:
-        while not self._stop.is_set():
-            for i, s in enumerate(self._servers):
-                keep_loaded(s, {**self.scene_args, "slot": i, "slots": len(self._servers)},
-                            self._counter)
-            self._stop.wait(1.0)
+    def pump(self) -> None:
+        """CLIENT-CONTROL and KEYFRAME-RECEIVER's work so far, without waiting (each
+        frame does it; call it to make progress without drawing)."""
+        for keeper in self._keepers:
+            keeper.step()
+        self.receive()
 
     # ---------------------------------------------------------------- KEYFRAME-RECEIVER
 
-    def _receive(self) -> None:
-        poller = zmq.Poller()
-        for s in self._servers:
-            poller.register(s.keyframes, zmq.POLLIN)
-        by_socket = {s.keyframes: (i, s) for i, s in enumerate(self._servers)}
-        while not self._stop.is_set():
-            try:
-                ready = poller.poll(50)
-            except zmq.ZMQError as exc:  # a socket closed under it: only while closing
-                if not self._stop.wait(0.05):
-                    log.debug("keyframe poll failed: %s", exc)
-                continue
-            for sock, _ in ready:
-                slot, s = by_socket[sock]
+    def receive(self) -> int:
+        """Take what the servers have sent, without waiting (at most
+        :data:`RECEIVE_BUDGET` messages and about :data:`RECEIVE_MS`); returns the
+        messages taken."""
+        taken, t_end = 0, time.perf_counter() + RECEIVE_MS / 1e3
+        for sock in ready(list(self._by_socket), self._poller):
+            slot, s = self._by_socket[sock]
+            while taken < RECEIVE_BUDGET:
                 try:
-                    if not self._take(slot, s, sock):
-                        return  # the client is closing
+                    self._take(slot, s, sock)
+                except zmq.Again:
+                    break
                 except Exception as exc:  # noqa: BLE001 - no message may stop the receiver
                     self._reject(s, exc)
+                taken += 1
+                if time.perf_counter() > t_end:  # checked after one: a loaded machine
+                    return taken               # still takes a message a frame
+        return taken
 
     def _take(self, slot: int, s: ServerLink, sock: zmq.Socket) -> bool:
-        """Receive one message from server ``slot``; queue it if it is a newer keyframe
-        this client can show.  Raises for anything else; False once the queue is closed."""
+        """Receive one message from server ``slot``; keep it if it is a newer keyframe
+        this client can show.  Raises for anything else (``zmq.Again``: none waiting)."""
         frames = recv_frames(sock, KEYFRAME_FRAMES)
         check_frames(frames)
         kf = decode_keyframe(frames)
@@ -230,17 +247,9 @@ class LodClient:
         now = time.monotonic()
         if kf.seq <= s.last_seq and now - s.last_taken < SEQ_RESET_S:
             return True  # older than one taken from this server lately
-        # C' for the rules that compare errors, computed here, not in the frame loop
-        c_prime = (None if self.adopt == "newest" and self.max_error is None
-                   else self.metric.reproject(kf.viewpoint.o))
         s.last_seq, s.last_taken = kf.seq, now
         s.taken += 1
-        try:
-            if not self.queue.put((slot, kf, c_prime), timeout=0):
-                self.queue.drain()  # full: newest wins
-                self.queue.put((slot, kf, c_prime), timeout=0)
-        except Closed:
-            return False
+        self._arrived = (slot, kf, None)  # newest wins; its C' when a frame needs it
         return True
 
     def _check_fits(self, kf: Keyframe) -> None:
@@ -276,11 +285,15 @@ class LodClient:
         for s in self._servers:
             s.send_viewpoint(header)  # adds the link's client id
         projection = self.paths.renderer.projection(viewpoint)
-        newest = self.queue.drain()
+        self.pump()
         kind = "local_sprite" if self._own else "sprite"
         triangles = 0
-        if newest is not None:
-            self._pending = newest
+        if self._arrived is not None:
+            self._pending, self._arrived = self._arrived, None
+        if self._pending is not None and self._pending[2] is None and (
+                self.adopt != "newest" or self.max_error is not None):
+            slot, kf, _ = self._pending  # C' for the rules that compare errors
+            self._pending = (slot, kf, self.metric.reproject(kf.viewpoint.o))
         if self._pending is not None and self._should_adopt(viewpoint, projection,
                                                             self._pending[2]):
             (slot, kf, self._c_prime), self._pending = self._pending, None
@@ -380,10 +393,6 @@ class LodClient:
         if shutdown_servers:
             for s in self._servers:
                 control(s, self._counter, "shutdown")
-        self._stop.set()
-        self.queue.close()
-        for t in self._threads:
-            t.join(timeout=3.0)
         for s in self._servers:
             s.close()
         self._zmq.destroy(linger=0)  # closes any socket still open, then ends the context

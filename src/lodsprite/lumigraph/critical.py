@@ -94,7 +94,7 @@ def _distance_to_polyline(p: np.ndarray, line: np.ndarray) -> np.ndarray:
 class CostModel:
     """Measured costs (ms) and the scale factors that rescale them from frame times.
 
-    ``fetch``, ``decode``: per node, on the loader thread (moving averages of what it
+    ``fetch``, ``decode``: per node, in the loader's process (moving averages of what it
     measures).  ``upload`` per node uploaded, ``raster_base + raster_node * nodes`` per
     frame drawn, ``base`` the rest of a frame: calibrated once, then multiplied by
     :attr:`scale` (one factor per component, or one for all)."""

@@ -16,7 +16,7 @@ the frame cost (GL work finished before each clock stops):
 * ``progressive`` - §3.3: the ``arbitrary`` set, nodes blended in and out over ``fade``
   frames through their validity.
 * ``critical`` - §4: benefit/cost selection under a time and a texture-memory budget,
-  nodes fetched and decoded on the loader thread (:class:`CriticalMethod`).
+  nodes fetched and decoded in the loader's process (:class:`CriticalMethod`).
 
 Except for ``critical``, a method that needs a node not yet decoded decodes it in the
 frame (its "texture load" in Table 1 terms).

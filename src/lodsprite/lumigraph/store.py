@@ -153,7 +153,7 @@ class Lumigraph:
                 raise OSError("not a plain node file of a sane size")
             return path.read_bytes()
         except OSError as exc:
-            self._bad(slab, i, j, exc)
+            self.mark_bad(slab, i, j, exc)
             return None
 
     def decode(self, data: bytes, slab: int, i: int, j: int, level: int = 0
@@ -173,10 +173,11 @@ class Lumigraph:
                     im = im.reduce(max(1, im.size[0] // m)).resize((m, m))
                 return np.asarray(im)
         except (OSError, ValueError, Image.DecompressionBombError) as exc:
-            self._bad(slab, i, j, exc)
+            self.mark_bad(slab, i, j, exc)
             return None
 
-    def _bad(self, slab: int, i: int, j: int, exc: BaseException) -> None:
+    def mark_bad(self, slab: int, i: int, j: int, exc: BaseException | str) -> None:
+        """Record node (slab, i, j) as unusable (said once, kept in :attr:`bad_nodes`)."""
         reason = " ".join(str(exc).split()) or type(exc).__name__
         if (slab, i, j) not in self.bad_nodes:
             log.warning("lumigraph node %s is unusable (%s): drawn without data",

@@ -5,8 +5,8 @@ with the eye's st point and its predicted path from the project's motion predict
 the greedy benefit/cost :func:`~lodsprite.lumigraph.critical.plan` under the frame's time
 budget and the texture memory's capacity, evictions and uploads of decoded nodes, the
 covering of the chosen nodes (any subset, fictitious corners) and one draw.  Fetching
-and decoding happen on the :class:`~lodsprite.lumigraph.loader.NodeLoader` thread; a node
-it has not decoded yet is simply not drawn this frame.  The measured upload, raster and
+and decoding happen in the :class:`~lodsprite.lumigraph.loader.NodeLoader`'s process; a
+node it has not decoded yet is simply not drawn this frame.  The measured upload, raster and
 remaining times rescale their own cost factors (:class:`~lodsprite.lumigraph.critical.
 CostModel`), so the predicted frame time follows the machine's load.
 

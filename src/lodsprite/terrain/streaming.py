@@ -8,29 +8,30 @@ ago.  A node whose data cannot be read, or holds unwritten samples (NaN), is bad
 reported once and never becomes resident, so its parent keeps being drawn in its place.
 
 * :class:`StoreTileLoader` (terrain stores): a reader process
-  (:mod:`lodsprite.terrain.reader`) reads and decodes; the frame's own thread sends
-  requests and collects answers without blocking, so no thread waits on the GIL that the
-  draw calls hold.  A reader process that dies is started again (its request in flight is
-  counted bad); after three deaths the remaining requests are bad.
-* :class:`TileLoader` (in-memory pyramids): a daemon thread copies nodes out of memory.
+  (:mod:`lodsprite.terrain.reader`, a :class:`~lodsprite.workers.ProcessWorker`) reads
+  and decodes; the frame's own thread sends requests and collects answers without
+  blocking, so no thread waits on the GIL that the draw calls hold.  A reader process
+  that dies is started again (its request in flight is counted bad); after three deaths
+  the remaining requests are bad.
+* :class:`TileLoader` (in-memory pyramids): the frame's thread copies nodes out of
+  memory, a few dozen a frame.
 """
 from __future__ import annotations
 
 import heapq
 import logging
-import threading
-from collections import OrderedDict, deque
+from collections import OrderedDict
 
 import numpy as np
 
-from lodsprite.background import BackgroundLoader
 from lodsprite.errors import InputError
 
 log = logging.getLogger(__name__)
 
 
 class HostCache:
-    """The host LRU cache of node samples and the wish list, shared by the loaders."""
+    """The host LRU cache of node samples and the wish list, shared by the loaders (all
+    driven from the frame's thread)."""
 
     def __init__(self, tree, host_mb: float) -> None:
         if not host_mb > 0:
@@ -43,10 +44,9 @@ class HostCache:
         self.loaded = self.evicted = 0
         self._queue: list = []
         self._queued: set = set()
-        self._cv = threading.Condition()
 
     def _wish(self, requests: list, busy=()) -> None:
-        """Replace the wish list (holding ``_cv``)."""
+        """Replace the wish list."""
         self._queue, self._queued = [], set()
         for urgency, node in requests:
             if node in self.cache or node in self.bad or node in self._queued or node in busy:
@@ -72,18 +72,16 @@ class HostCache:
             if not np.isfinite(data).all():
                 raise ValueError("unwritten samples")
         except Exception as exc:  # a damaged chunk: draw the parent instead
-            with self._cv:
-                if node not in self.bad:
-                    log.warning("terrain tile %s unreadable (%s): its parent is drawn "
-                                "instead", node, exc)
-                self.bad.add(node)
+            if node not in self.bad:
+                log.warning("terrain tile %s unreadable (%s): its parent is drawn "
+                            "instead", node, exc)
+            self.bad.add(node)
             return None
-        with self._cv:
-            self.cache[node] = data
-            self.loaded += 1
-            while len(self.cache) > self.capacity:
-                self.cache.popitem(last=False)
-                self.evicted += 1
+        self.cache[node] = data
+        self.loaded += 1
+        while len(self.cache) > self.capacity:
+            self.cache.popitem(last=False)
+            self.evicted += 1
         return data
 
     def _read_in_place(self, node):
@@ -95,42 +93,54 @@ class HostCache:
 
     def read_now(self, node) -> np.ndarray | None:
         """Read ``node`` on the calling thread (the roots, before the first frame)."""
-        with self._cv:
-            if node in self.cache:
-                return self.cache[node]
+        if node in self.cache:
+            return self.cache[node]
         return self._keep(node, self._read_in_place(node))
 
     def take(self, node) -> np.ndarray | None:
         """The node's samples if they have arrived (marks them recently used)."""
-        with self._cv:
-            data = self.cache.get(node)
-            if data is not None:
-                self.cache.move_to_end(node)
-            return data
+        data = self.cache.get(node)
+        if data is not None:
+            self.cache.move_to_end(node)
+        return data
 
 
-class TileLoader(HostCache, BackgroundLoader):
-    """Reads nodes of ``tree`` (:class:`~lodsprite.terrain.quadtree.Quadtree`) of an
-    in-memory pyramid on a daemon thread into a host cache of ``host_mb`` megabytes."""
+class TileLoader(HostCache):
+    """Copies nodes of ``tree`` (:class:`~lodsprite.terrain.quadtree.Quadtree`) of an
+    in-memory pyramid into a host cache of ``host_mb`` megabytes, on the frame's thread:
+    a copy out of memory (tens of microseconds) waits on nothing, so a thread would only
+    contend for the GIL.  At most ``per_pump`` nodes a :meth:`pump`."""
 
-    def __init__(self, tree, host_mb: float = 256.0) -> None:
-        HostCache.__init__(self, tree, host_mb)
-        BackgroundLoader.__init__(self, "tile-loader")
+    def __init__(self, tree, host_mb: float = 256.0, per_pump: int = 48) -> None:
+        super().__init__(tree, host_mb)
+        self.per_pump = max(1, int(per_pump))
+
+    def pump(self) -> None:
+        """Copy the next ``per_pump`` nodes of the wish list."""
+        for _ in range(self.per_pump):
+            node = self._next()
+            if node is None:
+                return
+            self._keep(node, self._read_in_place(node))
 
     def want(self, requests: list) -> None:
         """Replace the wish list with ``(urgency, node)`` requests (most urgent read
-        first): what the frame no longer wants is dropped."""
-        with self._cv:
-            self._wish(requests)
-            self._cv.notify()
+        first; what the frame no longer wants is dropped), and pump."""
+        self._wish(requests)
+        self.pump()
 
     def idle(self) -> bool:
         """Nothing left on the wish list."""
-        with self._cv:
-            return not self._queue
+        self.pump()
+        return not self._queue
 
-    def _load(self, node) -> np.ndarray | None:
-        return self._keep(node, self._read_in_place(node))
+    @property
+    def pending(self) -> list:
+        """Nodes in flight: none (each is copied as it is taken from the wish list)."""
+        return []
+
+    def close(self) -> None:
+        self._queue, self._queued = [], set()
 
 
 class StoreTileLoader(HostCache):
@@ -140,79 +150,52 @@ class StoreTileLoader(HostCache):
     RESTARTS = 3
 
     def __init__(self, tree, host_mb: float = 256.0, in_flight: int = 48) -> None:
+        from lodsprite.terrain.reader import reader_worker
+
         super().__init__(tree, host_mb)
-        self.in_flight = int(in_flight)
-        self._sent: deque = deque()
-        self._deaths = 0
-        self._reader = self._start()
-
-    def _start(self):
-        from lodsprite.terrain.reader import ReaderProcess
-
-        try:
-            return ReaderProcess(self.tree.p.path, self.tree.p.exaggeration)
-        except OSError as exc:
-            log.error("terrain tile reader cannot start (%s): tiles not yet loaded stay "
-                      "unloaded", exc)
-            return None
+        self.worker = reader_worker(tree.p.path, tree.p.exaggeration, in_flight,
+                                    self.RESTARTS)
 
     def pump(self) -> None:
         """Collect what has arrived and send what the wish list wants next."""
-        try:
-            if self._reader is not None:
-                for answer in self._reader.poll():
-                    self._keep(self._sent.popleft(), answer)
-                if self._reader.dead:
-                    raise OSError("the tile reader process has stopped")
-                while self._queue and len(self._sent) < self.in_flight:
-                    node = self._next()
-                    r0, r1, c0, c1 = self.tree.samples(node)
-                    self._sent.append(node)
-                    self._reader.send(node.k, r0, r1, c0, c1)
-        except OSError as exc:
-            self._died(exc)
-        if self._reader is None:  # no reader: what is wanted cannot be read
-            while self._queue:
-                self._keep(self._next(), "no tile reader process")
+        from lodsprite.terrain.reader import tile_answer, tile_request
 
-    def _died(self, exc: Exception) -> None:
-        self._reader.close()
-        self._deaths += 1
-        if self._sent:  # the request it died on is bad; the rest are asked again
-            self._keep(self._sent.popleft(), f"the reader process died on it ({exc})")
-        for node in reversed(self._sent):
-            heapq.heappush(self._queue, (-float("inf"), id(node), node))
-            self._queued.add(node)
-        self._sent.clear()
-        log.warning("terrain tile reader stopped (%s)%s", exc,
-                    ": started again" if self._deaths <= self.RESTARTS else "")
-        self._reader = self._start() if self._deaths <= self.RESTARTS else None
+        for node, answer in self.worker.poll():
+            self._keep(node, tile_answer(answer))
+        while self._queue and not self.worker.full:
+            node = self._next()
+            self.worker.submit(node, tile_request(node.k, *self.tree.samples(node)))
+        if not self.worker.alive:  # no reader: what is wanted cannot be read
+            for node, answer in self.worker.poll():
+                self._keep(node, tile_answer(answer))
 
     def want(self, requests: list) -> None:
         """Replace the wish list with ``(urgency, node)`` requests (most urgent read
         first; what the frame no longer wants is dropped), and pump."""
-        with self._cv:
-            self._wish(requests, busy=set(self._sent))
+        self._wish(requests, busy=set(self.worker.pending))
         self.pump()
 
     def idle(self) -> bool:
         """Nothing wanted and nothing in flight."""
         self.pump()
-        return not self._queue and not self._sent
+        return not self._queue and not self.worker.pending
+
+    @property
+    def pending(self) -> list:
+        """The nodes sent to the reader and not answered yet, oldest first."""
+        return self.worker.pending
 
     def reader_peak_mb(self) -> float:
         """The reader process's peak resident memory in MB (0 when none runs)."""
-        return self._reader.peak_mb() if self._reader is not None else 0.0
+        return self.worker.peak_mb()
 
     def close(self) -> None:
-        if self._reader is not None:
-            self._reader.close()
-            self._reader = None
+        self.worker.close()
 
 
 def tile_loader(tree, host_mb: float = 256.0) -> HostCache:
-    """The loader for ``tree``'s pyramid: a reader process for a store, a thread for an
-    in-memory pyramid."""
+    """The loader for ``tree``'s pyramid: a reader process for a store, copies on the
+    frame's thread for an in-memory pyramid."""
     from lodsprite.terrain.store import TerrainStore
 
     if isinstance(tree.p, TerrainStore):

@@ -126,7 +126,7 @@ def report_lines(r: dict, plots: list[Path]) -> list[str]:
                      f"{f(t['locality_db'], 2)} | {p['locality'][name]} |")
     lines += ["", "## Figures 5-6: critical time (§4)", "",
               f"Target {c['target_fps']:g} fps (the paper asked for {p['critical_target_fps']}"
-              " fps on the RE2); nodes fetched and decoded on the loader thread.", "",
+              " fps on the RE2); nodes fetched and decoded in the loader's process.", "",
               "| profile | texture MB (layers) | target ms | mean ms | mean/target | p99 ms | "
               "p99/target | images/frame | uploads/frame | PSNR dB |",
               "|---|---|---|---|---|---|---|---|---|---|"]
