@@ -79,6 +79,20 @@ class Renderer:
             raise
         self._presenter: Presenter | None = None
         self._sprites: list[LodSprite] = []  # released with the renderer
+        self._own_paths = True
+
+    @classmethod
+    def wrap(cls, paths: PathRenderer) -> Renderer:
+        """A renderer over existing GL state ``paths`` (its scene, size and field of
+        view), which it never releases: what a caller holding a
+        :class:`~lodsprite.gl.paths.PathRenderer` passes to a technique."""
+        self = cls.__new__(cls)
+        r = paths.renderer
+        self.scene, self.size = paths.scene, (r.target.width, r.target.height)
+        self.fov_y_deg = float(r.fov_y_deg)
+        self.gl, self._paths = paths.ctx, paths
+        self._presenter, self._sprites, self._own_paths = None, [], False
+        return self
 
     @property
     def info(self) -> GLInfo:
@@ -160,11 +174,12 @@ class Renderer:
             self._presenter.release()
             self._presenter = None
         if self._paths is not None:
-            self._paths.release()
+            if self._own_paths:
+                self._paths.release()
             self._paths = None
-        if self.gl is not None and self.gl.owned:
+        if self.gl is not None and self.gl.owned and self._own_paths:
             self.gl.release()
-            self.gl = None
+        self.gl = None
 
     def __enter__(self) -> Renderer:
         return self

@@ -15,8 +15,9 @@ from lodsprite.api import Renderer
 from lodsprite.camera import Projection, Viewpoint
 from lodsprite.distributed.client import DEFAULT_MAX_ERROR, LodClient
 from lodsprite.distributed.render import scene_args
+from lodsprite.errors import InputError
 from lodsprite.sprite.engine import DEFAULT_EPSILON_PX
-from lodsprite.technique import FALLBACK_TINT, FrameInfo, Param, Technique, TechniqueFactory
+from lodsprite.techniques import FALLBACK_TINT, Frame, Param, Technique, TechniqueFactory
 from lodsprite.terrain.lod import DEFAULT_COARSE
 
 
@@ -47,10 +48,10 @@ class DistributedTechnique(Technique):
             super().set_param(name, value)
         self.client.max_error = float(value)
 
-    def frame(self, viewpoint: Viewpoint) -> FrameInfo:
+    def frame(self, viewpoint: Viewpoint) -> Frame:
         f = self.client.frame(viewpoint)
-        return FrameInfo(f.type, f.ms, f.triangles, self.client.shown_error_px(viewpoint),
-                         len(self.client.shown))
+        return Frame(f.type, f.ms, f.triangles, self.client.shown_error_px(viewpoint),
+                     {"keyframes": len(self.client.shown)})
 
     def draw_to(self, framebuffer: moderngl.Framebuffer | None = None) -> None:
         target = self.client.paths.renderer.target
@@ -84,3 +85,12 @@ def distributed_factory(server: str, lod: int = DEFAULT_COARSE,
                         max_error: float | None = DEFAULT_MAX_ERROR) -> TechniqueFactory:
     """A factory of :class:`DistributedTechnique` for the viewer's ``distributed`` mode."""
     return lambda renderer: DistributedTechnique(renderer, server, lod, epsilon_px, max_error)
+
+
+def create(renderer: Renderer, server: str, lod: int = DEFAULT_COARSE,
+           epsilon: float = DEFAULT_EPSILON_PX,
+           max_error: float | None = DEFAULT_MAX_ERROR) -> DistributedTechnique:
+    """The registry's factory of ``distributed`` (:mod:`lodsprite.techniques.builtin`)."""
+    if not server:
+        raise InputError("the distributed technique needs a server (HOST:PORT)")
+    return DistributedTechnique(renderer, server, lod, epsilon, max_error)

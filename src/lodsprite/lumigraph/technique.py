@@ -15,7 +15,7 @@ import numpy as np
 
 from lodsprite.camera import Viewpoint, look_at, perspective
 from lodsprite.errors import InputError
-from lodsprite.technique import FrameInfo, Param, Technique, TechniqueFactory
+from lodsprite.techniques import Frame, Param, Technique, TechniqueFactory
 
 #: Viewer world (z up, home to the south) to lumigraph world (y up, front towards +z).
 VIEWER_TO_LUMIGRAPH = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
@@ -77,7 +77,7 @@ class LumigraphTechnique(Technique):
             raise InputError(f"{self.name} has no parameter {name!r}")
         self.method.target_ms = 1e3 / float(value)
 
-    def frame(self, viewpoint: Viewpoint) -> FrameInfo:
+    def frame(self, viewpoint: Viewpoint) -> Frame:
         vp = to_lumigraph(viewpoint)
         if self.index == 0:  # untimed: the first nodes decoded and resident
             if hasattr(self.method, "warm_up"):
@@ -87,7 +87,7 @@ class LumigraphTechnique(Technique):
         f = self.method.frame(self.index, vp, self.projection)
         self.index += 1
         self._last = f
-        return FrameInfo(f.kind, f.ms, self.method.rec.vertex_count // 3)
+        return Frame(f.kind, f.ms, self.method.rec.vertex_count // 3)
 
     def draw_to(self, framebuffer=None) -> None:
         self.renderer.present(self.method.output.color, (0.0, 0.0, 1.0, 1.0), framebuffer)
@@ -107,6 +107,12 @@ class LumigraphTechnique(Technique):
     def release(self) -> None:
         self.method.release()
         self.proxy.release()
+
+
+def create(renderer, method: str, folder: str = "", **options) -> LumigraphTechnique:
+    """The registry's factory of the ``lumigraph-METHOD`` techniques: ``folder`` (default:
+    the scene's)."""
+    return LumigraphTechnique(renderer, folder or renderer.scene.terrain_spec, method, options)
 
 
 def lumigraph_techniques(folder, **options) -> dict[str, TechniqueFactory]:

@@ -10,7 +10,7 @@ import numpy as np
 
 from lodsprite.camera import Viewpoint
 from lodsprite.errors import InputError
-from lodsprite.technique import FrameInfo, Param, Technique, TechniqueFactory
+from lodsprite.techniques import Frame, Param, Technique, TechniqueFactory
 
 VIEW_MODES = ("manager", "independent", "discrete")
 
@@ -27,6 +27,13 @@ def parse_crowd(spec: str) -> tuple[int, int]:
         raise InputError(f"a crowd is crowd[:OBJECTS[:TREES]] with whole numbers, got "
                          f"{spec!r}") from exc
     return objects, trees
+
+
+def crowd_columns(f) -> dict:
+    """A crowd frame's own ``frames.csv`` columns."""
+    return {"fps": 1e3 / f.ms if f.ms > 0 else float("inf"), "lod_ms": f.lod_ms,
+            "extractions": f.extractions, "draw_calls": f.draw_calls, "visible": f.visible,
+            "exponent": f.exponent, "switches": f.switches}
 
 
 class CrowdTechnique(Technique):
@@ -58,10 +65,10 @@ class CrowdTechnique(Technique):
             raise InputError(f"{self.name} has no parameter {name!r}")
         self.engine.feedback.target_fps = float(value)
 
-    def frame(self, viewpoint: Viewpoint) -> FrameInfo:
+    def frame(self, viewpoint: Viewpoint) -> Frame:
         f = self.engine.frame(viewpoint)
         self._last = f
-        return FrameInfo(self.name, f.ms, f.triangles)
+        return Frame(self.name, f.ms, f.triangles, extra=crowd_columns(f))
 
     def draw_to(self, framebuffer=None) -> None:
         self.renderer.present(self.target.color, (0.0, 0.0, 1.0, 1.0), framebuffer)
@@ -79,6 +86,18 @@ class CrowdTechnique(Technique):
     def release(self) -> None:
         self.engine.release()
         self.target.release()
+
+
+def create(renderer, mode: str, crowd=None, target_fps: float | None = None
+           ) -> CrowdTechnique:
+    """The registry's factory of ``manager``, ``independent`` and ``discrete``: ``crowd``
+    (default: the one the scene's spec ``crowd[:OBJECTS[:TREES]]`` names)."""
+    if crowd is None:
+        from lodsprite.manager.run import CrowdConfig, make_crowd
+
+        objects, trees = parse_crowd(renderer.scene.terrain_spec)
+        crowd = make_crowd(CrowdConfig(objects=objects, trees=trees))
+    return CrowdTechnique(renderer, crowd, mode, target_fps)
 
 
 def crowd_techniques(crowd, target_fps: float | None = None) -> dict[str, TechniqueFactory]:

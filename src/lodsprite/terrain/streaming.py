@@ -132,6 +132,12 @@ class TileLoader(HostCache, BackgroundLoader):
     def _load(self, node) -> np.ndarray | None:
         return self._keep(node, self._read_in_place(node))
 
+    @property
+    def in_flight_tiles(self) -> int:
+        """Tiles asked for and not yet read."""
+        with self._cv:
+            return len(self._queue)
+
 
 class StoreTileLoader(HostCache):
     """Reads nodes of a terrain store through a reader process, driven by the frame's
@@ -199,6 +205,11 @@ class StoreTileLoader(HostCache):
         """Nothing wanted and nothing in flight."""
         self.pump()
         return not self._queue and not self._sent
+
+    @property
+    def in_flight_tiles(self) -> int:
+        """Tiles sent to the reader process and not yet answered."""
+        return len(self._sent)
 
     def reader_peak_mb(self) -> float:
         """The reader process's peak resident memory in MB (0 when none runs)."""

@@ -1,0 +1,95 @@
+"""The one harness and the registry: what every run writes, and that the quality replay
+draws the images the timed run showed."""
+
+import csv
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from lodsprite import Renderer, get_path, load_scene, techniques
+from lodsprite.harness import CORE_COLUMNS, CORE_KEYS, run_path, write_run
+
+ROOT = Path(__file__).resolve().parents[1]
+TERRAIN = ("full", "lod", "sprite", "adaptive", "sprite-adaptive")
+
+
+def test_every_builtin_technique_is_registered_lazily():
+    assert set(TERRAIN) | {"distributed", "manager", "independent", "discrete"} <= set(
+        techniques.names())
+    assert len(techniques.names(["lightfield"])) == 8
+    code = ("import sys, lodsprite.techniques as t; t.names(); "
+            "print(sorted(m for m in sys.modules if m.startswith(('lodsprite.lumigraph', "
+            "'lodsprite.manager', 'lodsprite.distributed', 'moderngl'))))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout
+    assert out.strip() == "[]"
+
+
+def test_unknown_technique_and_option_are_user_errors():
+    from lodsprite.errors import InputError
+
+    with pytest.raises(InputError, match="unknown technique 'warp'"):
+        techniques.get("warp")
+    with pytest.raises(InputError, match="no option nope"):
+        techniques.get("lod").create(None, nope=1)
+
+
+@pytest.mark.parametrize("name", TERRAIN)
+def test_the_replay_draws_what_the_timed_run_showed(gl, name):
+    """Each frame's image read right after it was shown (outside the harness) equals the
+    image the replay of its recorded decision draws."""
+    scene = load_scene("fractal:64:3", grid=64)
+    path = get_path("chen1999", scene.hf, 16)
+    with Renderer(scene, (64, 64), ctx=gl.mgl) as renderer:
+        t = techniques.create(name, renderer, **techniques.get(name).bind(
+            {"lod": 8, "epsilon": 2.0, "key_sse": 1.0}))
+        try:
+            shown, decisions = [], []
+            for vp in path.viewpoints:
+                t.frame(vp)
+                shown.append(t.read_image())
+                decisions.append(t.decision())
+            for i, (vp, d) in enumerate(zip(path.viewpoints, decisions, strict=True)):
+                assert np.array_equal(t.replay(vp, d), shown[i]), (name, i)
+        finally:
+            t.release()
+
+
+@pytest.mark.parametrize("name", ["lod", "sprite"])
+def test_a_run_writes_the_core_columns_and_keys(gl, tmp_path, name):
+    scene = load_scene("fractal:64:3", grid=64)
+    path = get_path("chen1999", scene.hf, 12)
+    with Renderer(scene, (64, 64), ctx=gl.mgl) as renderer:
+        t = techniques.create(name, renderer, lod=8)
+        try:
+            result = run_path(t, path, ground_truth=True, quality_stride=2)
+        finally:
+            t.release()
+    write_run(tmp_path, result)
+    rows = list(csv.DictReader((tmp_path / "frames.csv").open()))
+    assert tuple(list(rows[0])[:5]) == CORE_COLUMNS
+    assert [r["rmse"] != "" for r in rows] == [i % 2 == 0 for i in range(12)]
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert set(CORE_KEYS) <= set(summary) and summary["frames"] == 12
+    assert summary["quality_frames"] == 6
+    ms = [float(r["ms"]) for r in rows]
+    assert summary["max_ms"] == pytest.approx(max(ms), rel=1e-4)
+    assert summary["median_ms"] == pytest.approx(float(np.median(ms)), rel=1e-4)
+    if name == "lod":  # the coarse level's replay is its own image: rmse_mean is its error
+        assert summary["rmse_mean"] > 0
+
+
+def test_the_worked_example_runs():
+    import doctest
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("custom_technique",
+                                                  ROOT / "examples" / "custom_technique.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    failed, tried = doctest.testmod(module, raise_on_error=False)
+    assert tried > 5 and failed == 0
