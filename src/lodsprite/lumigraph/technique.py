@@ -5,8 +5,8 @@ screenshots and played paths as a terrain (keys 1-8 switch method).
 
 The viewer's world has z up (terrain); a lumigraph's objects have y up.  The technique
 turns the viewer's viewpoints by :data:`VIEWER_TO_LUMIGRAPH` before reconstructing, and
-:func:`lumigraph_controller` places the camera home in front of the object (the front
-slab), orbiting its centre.
+:func:`lumigraph_home` places the camera home in front of the object (the front slab),
+orbiting its centre; :func:`open_scene` makes a lumigraph folder a scene.
 """
 
 from __future__ import annotations
@@ -112,7 +112,10 @@ class LumigraphTechnique(Technique):
 def create(renderer, method: str, folder: str = "", **options) -> LumigraphTechnique:
     """The registry's factory of the ``lumigraph-METHOD`` techniques: ``folder`` (default:
     the scene's)."""
-    return LumigraphTechnique(renderer, folder or renderer.scene.terrain_spec, method, options)
+    folder = folder or renderer.scene.lightfield
+    if not folder:
+        raise InputError("a lumigraph technique needs a scene with a light field")
+    return LumigraphTechnique(renderer, folder, method, options)
 
 
 def lumigraph_techniques(folder, **options) -> dict[str, TechniqueFactory]:
@@ -123,17 +126,36 @@ def lumigraph_techniques(folder, **options) -> dict[str, TechniqueFactory]:
     return {name: factory(name) for name in VIEW_METHODS}
 
 
-def lumigraph_controller(folder):
-    """A camera controller for the lumigraph: home on the default path's first eye,
-    orbiting the object's centre, in the viewer's (z up) world."""
+def lumigraph_home(folder):
+    """The camera home for the lumigraph: the default path's first eye, orbiting the
+    object's centre, in the viewer's (z up) world."""
     from lodsprite.lumigraph.run import default_path
     from lodsprite.lumigraph.store import Lumigraph
-    from lodsprite.viewer.controls import CameraController
+    from lodsprite.scene import CameraHome
 
     lf = Lumigraph(folder)
     back = VIEWER_TO_LUMIGRAPH.T
     centre = back @ lf.slabs[0].frame[:3, 3]
     eye = back @ default_path(lf, 2).viewpoints[0].o
     d = float(np.linalg.norm(eye - centre))
-    return CameraController(look_at(eye, centre), centre, d / 4.0,
-                            min_distance_m=lf.slabs[0].st_distance * 1.5)
+    return CameraHome(look_at(eye, centre), centre, d / 4.0,
+                      min_distance_m=lf.slabs[0].st_distance * 1.5)
+
+
+def open_scene(folder: str, **_: object):
+    """The scene of a lumigraph folder: the light field as its layer, the camera home,
+    ``arc`` (the default path: an arc, or an orbit for six slabs; 240 frames by default)
+    or a JSON path file in the lumigraph's coordinates, turned into the viewer's."""
+    from lodsprite.lumigraph.run import default_path
+    from lodsprite.lumigraph.store import Lumigraph
+    from lodsprite.paths import load_path_json
+    from lodsprite.scene import Scene
+
+    lf = Lumigraph(folder)  # the header checked now
+
+    def paths(name: str, frames: int | None):
+        return viewer_path(default_path(lf, frames or 240) if name == "arc"
+                           else load_path_json(name))
+
+    return Scene(lightfield=str(folder), home=lumigraph_home(folder), paths=paths,
+                 mode="critical")
