@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import platform
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -129,10 +129,11 @@ def _timed(technique: Technique, path: CameraPath, finish: Callable[[], None],
 
 def _replay(technique: Technique, path: CameraPath, decisions: list[dict], rows: list[dict],
             reference: Reference | None, stride: int, flip: bool,
-            on_image: ImageCallback | None) -> None:
+            on_image: ImageCallback | None, image_frames) -> None:
     for i, (vp, d) in enumerate(zip(path.viewpoints, decisions, strict=True)):
         measured = reference is not None and i % stride == 0
-        if not (measured or on_image):
+        shown = on_image is not None and (image_frames is None or i in image_frames)
+        if not (measured or shown):
             continue
         image = technique.replay(vp, d)
         truth = None
@@ -140,7 +141,7 @@ def _replay(technique: Technique, path: CameraPath, decisions: list[dict], rows:
             truth = reference(vp)
             rows[i].update(_quality(image, truth, flip))
             rows[i].update(technique.quality_extra(vp, d, truth))
-        if on_image:
+        if shown:
             on_image(i, image, truth)
 
 
@@ -148,11 +149,13 @@ def run_path(technique: Technique, path: CameraPath, *, finish: Callable[[], Non
              gl_renderer: str = "", progress: Progress | None = None,
              ground_truth: bool = False, reference: Reference | None = None,
              quality_stride: int = 1, flip: bool = False,
-             on_image: ImageCallback | None = None) -> RunResult:
+             on_image: ImageCallback | None = None,
+             image_frames: Collection[int] | None = None) -> RunResult:
     """Run ``technique`` along ``path`` (module docstring).  ``finish``: the GL context's
     ``finish`` (default: the technique's renderer's); ``gl_renderer``: the driver's name for
     the summary (default: the renderer's); ``reference``: ``viewpoint -> image`` (default:
-    :func:`full_resolution`).  Returns the frames, rows and summary (not written)."""
+    :func:`full_resolution`); ``on_image`` is called for the replayed frames
+    ``image_frames`` (default: all).  Returns the frames, rows and summary (not written)."""
     if quality_stride < 1:
         raise InputError(f"quality stride must be >= 1, got {quality_stride}")
     if len(path.viewpoints) < 1:
@@ -167,7 +170,7 @@ def run_path(technique: Technique, path: CameraPath, *, finish: Callable[[], Non
         reference = full_resolution(renderer)
     if ground_truth or on_image:
         _replay(technique, path, decisions, rows, reference if ground_truth else None,
-                quality_stride, flip, on_image)
+                quality_stride, flip, on_image, image_frames)
         columns += [c for c in _quality_columns(rows) if c not in columns]
     summary = {**timing_summary(np.array([f.ms for f in frames])),
                "gl_renderer": gl_renderer or (renderer.info.renderer if renderer else ""),

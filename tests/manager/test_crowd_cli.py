@@ -15,7 +15,7 @@ from lodsprite.manager.reproduce import GumbauConfig, reproduce_gumbau
 from lodsprite.manager.run import CrowdConfig, run_crowd
 from lodsprite.report.gumbau import write_outputs
 
-SUMMARY_KEYS = ("extractions_total", "fps_mean", "frame_ms_median", "frame_ms_p99",
+SUMMARY_KEYS = ("extractions_total", "fps_mean", "median_ms", "p99_ms",
                 "triangles_mean", "draw_calls_mean", "lod_cpu_ms_mean")
 
 

@@ -31,7 +31,7 @@ def parse_crowd(spec: str) -> tuple[int, int]:
 
 def crowd_columns(f) -> dict:
     """A crowd frame's own ``frames.csv`` columns."""
-    return {"fps": 1e3 / f.ms if f.ms > 0 else float("inf"), "lod_ms": f.lod_ms,
+    return {"lod_ms": f.lod_ms,
             "extractions": f.extractions, "draw_calls": f.draw_calls, "visible": f.visible,
             "exponent": f.exponent, "switches": f.switches}
 
@@ -128,14 +128,17 @@ class CrowdTechnique(Technique):
 
 
 def create(renderer, mode: str, crowd=None, target_fps: float | None = None,
-           **engine: object) -> CrowdTechnique:
+           slots: int = 16, active: int = 300, range_near: float = 5.0,
+           range_far: float = 150.0, dist=None) -> CrowdTechnique:
     """The registry's factory of ``manager``, ``independent`` and ``discrete``: ``crowd``
     (default: the scene's object set)."""
     if crowd is None:
         crowd = renderer.scene.objects
     if crowd is None:
         raise InputError("a crowd technique needs a scene with an object set")
-    return CrowdTechnique(renderer, crowd, mode, target_fps, **engine)
+    extra = {} if dist is None else {"dist": dist}
+    return CrowdTechnique(renderer, crowd, mode, target_fps, slots=slots, active=active,
+                          range_near=range_near, range_far=range_far, **extra)
 
 
 def crowd_techniques(crowd, target_fps: float | None = None) -> dict[str, TechniqueFactory]:

@@ -23,7 +23,12 @@ SERVER = Option("server", str, "", "the LOD server, HOST:PORT")
 MAX_ERROR = Option("max_error", float, 4.0, "distributed: largest error shown, pixels")
 FOLDER = Option("folder", str, "", "the lumigraph folder (default: the scene's)")
 TARGET_FPS = Option("target_fps", float, None, "the crowd's frame-rate target (LOD feedback)")
-CROWD = Option("crowd", object, None, "the crowd (default: made from the scene's spec)")
+CROWD = Option("crowd", object, None, "the crowd (default: the scene's object set)")
+SLOTS = Option("slots", int, 16, "crowd: LOD slots per type in the manager's table")
+ACTIVE = Option("active", int, 300, "crowd: objects whose LOD is updated per frame")
+NEAR = Option("range_near", float, 5.0, "crowd: distance of the finest LOD, metres")
+FAR = Option("range_far", float, 150.0, "crowd: distance of the coarsest LOD, metres")
+DIST = Option("dist", object, None, "crowd: the snapshots' distribution (default linear)")
 
 TERRAIN = "lodsprite.techniques.terrain"
 ADAPTIVE = "lodsprite.techniques.adaptive"
@@ -48,7 +53,8 @@ CROWD_MODES = {"manager": "the LODManager's crowd (Gumbau et al.)",
                "independent": "every object extracts its own LOD (baseline a)",
                "discrete": "discrete LODs by screen size (baseline b)"}
 for _mode, _text in CROWD_MODES.items():
-    register(TechniqueSpec(_mode, "lodsprite.manager.technique:create", (CROWD, TARGET_FPS),
+    register(TechniqueSpec(_mode, "lodsprite.manager.technique:create",
+                           (CROWD, TARGET_FPS, SLOTS, ACTIVE, NEAR, FAR, DIST),
                            ("objects",), _text, fixed={"mode": _mode}))
 
 LUMIGRAPH_METHODS = {
