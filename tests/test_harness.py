@@ -114,3 +114,26 @@ def test_the_crowd_replay_draws_what_the_timed_run_showed(gl, mode):
                 assert np.array_equal(t.replay(path.viewpoints[i], decisions[i]), shown[i])
         finally:
             t.release()
+
+
+def test_the_lumigraph_replay_shows_the_frames_the_timed_run_reconstructed(gl, tmp_path):
+    from lodsprite.lumigraph.run import capture_lumigraph
+    from lodsprite.scene import open_scene
+
+    capture_lumigraph("still-life", tmp_path / "lf", n_st=8, n_uv=48, codec="png")
+    scene = open_scene(str(tmp_path / "lf"))
+    path = scene.path("arc", 6)
+    with Renderer(scene, (48, 48), path.fov_y_deg, ctx=gl.mgl) as renderer:
+        t = techniques.create("lumigraph-critical", renderer)
+        try:
+            t.plan_replay({1, 4})
+            t.warm_up(path.viewpoints[0])
+            shown, decisions = [], []
+            for vp in path.viewpoints:
+                t.frame(vp)
+                shown.append(t.read_image())
+                decisions.append(t.decision())
+            for i in (4, 1):
+                assert np.array_equal(t.replay(path.viewpoints[i], decisions[i]), shown[i])
+        finally:
+            t.release()

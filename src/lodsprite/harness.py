@@ -162,6 +162,11 @@ def run_path(technique: Technique, path: CameraPath, *, finish: Callable[[], Non
         raise InputError("a run needs a path of at least one viewpoint")
     renderer = getattr(technique, "renderer", None)
     finish = finish or renderer.gl.finish
+    n = len(path.viewpoints)
+    planned = set(range(0, n, quality_stride)) if ground_truth else set()
+    if on_image is not None:
+        planned |= set(range(n)) if image_frames is None else set(image_frames)
+    technique.plan_replay(planned)
     technique.warm_up(path.viewpoints[0])
     finish()
     frames, decisions = _timed(technique, path, finish, progress)

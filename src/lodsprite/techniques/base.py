@@ -11,7 +11,8 @@ field of view, framebuffer, and the scene it draws).  The viewer and the batch h
 * :meth:`Technique.decision` — what the last frame decided (which keyframe it showed, from
   where), cheap to record inside a timed run;
 * :meth:`Technique.replay` — draw a recorded decision again, untimed, to the same image
-  (quality against a reference is measured in that replay, never in the timed run);
+  (quality against a reference is measured in that replay, never in the timed run;
+  :meth:`Technique.plan_replay` says beforehand which frames will be replayed);
 * :meth:`Technique.summary` — the technique's own keys for ``summary.json``;
 * :meth:`Technique.draw_to`, :meth:`Technique.read_image`, :meth:`Technique.params`,
   :meth:`Technique.key_view`, :meth:`Technique.coarse_level`, :meth:`Technique.status`,
@@ -115,6 +116,11 @@ class Technique:
         (called after each timed frame: keep it cheap, no GPU reads).  Default: nothing
         (the frame depends on its viewpoint alone)."""
         return {}
+
+    def plan_replay(self, frames: set[int]) -> None:
+        """The frames (indices along the path) the harness will replay after the timed
+        run, told before it (a technique whose decisions are costly to redo may keep what
+        it needs of those frames alone).  Default: nothing to do."""
 
     def replay(self, viewpoint: Viewpoint, decision: dict[str, Any]) -> np.ndarray:
         """Draw a recorded frame again, untimed; its image ``(h, w, 3) uint8``.  Default:

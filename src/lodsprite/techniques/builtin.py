@@ -22,6 +22,13 @@ HOST_MB = Option("host_mb", float, 512.0, "adaptive: host tile cache budget, MB"
 SERVER = Option("server", str, "", "the LOD server, HOST:PORT")
 MAX_ERROR = Option("max_error", float, 4.0, "distributed: largest error shown, pixels")
 FOLDER = Option("folder", str, "", "the lumigraph folder (default: the scene's)")
+LF_OPTIONS = (FOLDER, Option("depth_correction", bool, True, "depth-correct with the proxy"),
+              Option("nodes", int, 16, "nodes per frame (arbitrary, projective)"),
+              Option("level", int, 1, "subsample: mip level of the node images"),
+              Option("reuse", int, 6, "projective: frames a reconstruction is reused"),
+              Option("fade", int, 8, "progressive: frames of a fade"),
+              Option("target_fps", float, 30.0, "critical: the frame-rate target"),
+              Option("texture_mb", float, 4.0, "critical: texture memory, MB"))
 TARGET_FPS = Option("target_fps", float, None, "the crowd's frame-rate target (LOD feedback)")
 CROWD = Option("crowd", object, None, "the crowd (default: the scene's object set)")
 SLOTS = Option("slots", int, 16, "crowd: LOD slots per type in the manager's table")
@@ -65,5 +72,5 @@ LUMIGRAPH_METHODS = {
     "subsample": "a subsampled lumigraph"}
 for _method, _text in LUMIGRAPH_METHODS.items():
     register(TechniqueSpec(f"lumigraph-{_method}", "lodsprite.lumigraph.technique:create",
-                           (FOLDER,), ("lightfield",), _text, mode=_method,
+                           LF_OPTIONS, ("lightfield",), _text, mode=_method,
                            fixed={"method": _method}))
