@@ -58,6 +58,7 @@ class RunResult:
     rows: list[dict]
     columns: list[str]
     summary: dict[str, Any] = field(default_factory=dict)
+    interrupted: bool = False  # stopped by Ctrl-C: the frames finished so far
 
 
 def timing_summary(ms: np.ndarray) -> dict[str, float]:
@@ -113,18 +114,24 @@ def _quality(image: np.ndarray, truth: np.ndarray, flip: bool) -> dict[str, floa
 
 
 def _timed(technique: Technique, path: CameraPath, finish: Callable[[], None],
-           progress: Progress | None) -> tuple[list[Frame], list[dict]]:
+           progress: Progress | None) -> tuple[list[Frame], list[dict], bool]:
+    """The timed loop; stopped by Ctrl-C, it keeps the frames finished so far."""
     frames, decisions = [], []
     n = len(path.viewpoints)
-    for i, vp in enumerate(path.viewpoints):
-        t0 = time.perf_counter()
-        f = technique.frame(vp)
-        finish()
-        frames.append(replace(f, ms=(time.perf_counter() - t0) * 1e3))
-        decisions.append(technique.decision())
-        if progress:
-            progress(i + 1, n)
-    return frames, decisions
+    try:
+        for i, vp in enumerate(path.viewpoints):
+            t0 = time.perf_counter()
+            f = technique.frame(vp)
+            finish()
+            frames.append(replace(f, ms=(time.perf_counter() - t0) * 1e3))
+            decisions.append(technique.decision())
+            if progress:
+                progress(i + 1, n)
+    except KeyboardInterrupt:
+        if not frames:
+            raise
+        return frames, decisions, True
+    return frames, decisions, False
 
 
 def _replay(technique: Technique, path: CameraPath, decisions: list[dict], rows: list[dict],
@@ -160,20 +167,23 @@ def run_path(technique: Technique, path: CameraPath, *, finish: Callable[[], Non
         raise InputError(f"quality stride must be >= 1, got {quality_stride}")
     if len(path.viewpoints) < 1:
         raise InputError("a run needs a path of at least one viewpoint")
-    renderer = getattr(technique, "renderer", None)
+    renderer = technique.renderer
     finish = finish or renderer.gl.finish
     n = len(path.viewpoints)
     planned = set(range(0, n, quality_stride)) if ground_truth else set()
     if on_image is not None:
         planned |= set(range(n)) if image_frames is None else set(image_frames)
+    if planned and not technique.replays:
+        raise InputError(f"{technique.name} cannot replay its frames: no ground truth, "
+                         "saved frames or video from its runs")
     technique.plan_replay(planned)
     technique.warm_up(path.viewpoints[0])
     finish()
-    frames, decisions = _timed(technique, path, finish, progress)
+    frames, decisions, interrupted = _timed(technique, path, finish, progress)
     rows, columns = frame_rows(frames)
     if ground_truth and reference is None:
         reference = full_resolution(renderer)
-    if ground_truth or on_image:
+    if (ground_truth or on_image) and not interrupted:
         _replay(technique, path, decisions, rows, reference if ground_truth else None,
                 quality_stride, flip, on_image, image_frames)
         columns += [c for c in _quality_columns(rows) if c not in columns]
@@ -183,7 +193,9 @@ def run_path(technique: Technique, path: CameraPath, *, finish: Callable[[], Non
                "triangles_mean": float(np.mean([f.triangles for f in frames])),
                "machine": platform.machine(), "python": platform.python_version(),
                **technique.summary(frames), **quality_summary(rows)}
-    return RunResult(frames, decisions, rows, columns, summary)
+    if interrupted:
+        summary["interrupted"] = True
+    return RunResult(frames, decisions, rows, columns, summary, interrupted)
 
 
 def frame_rows(frames: list[Frame]) -> tuple[list[dict], list[str]]:

@@ -8,6 +8,8 @@ with the server's address; the viewer core never imports this layer.
 
 from __future__ import annotations
 
+import time
+
 import moderngl
 import numpy as np
 
@@ -26,6 +28,12 @@ class DistributedTechnique(Technique):
 
     name = "distributed"
 
+    #: Whether :meth:`frame` measures the shown keyframe's error (the viewer's HUD); a
+    #: batch run leaves it out of the frame's time.
+    measure_error = True
+    #: Seconds the warm-up waits for a first keyframe (server start-up is not a frame).
+    warmup_s = 10.0
+
     def __init__(self, renderer: Renderer, server: str, lod: int = DEFAULT_COARSE,
                  epsilon_px: float = DEFAULT_EPSILON_PX,
                  max_error: float | None = DEFAULT_MAX_ERROR) -> None:
@@ -37,6 +45,35 @@ class DistributedTechnique(Technique):
                           renderer.fov_y_deg)
         self.client = LodClient(scene, args, [server], renderer.size, lod, epsilon=epsilon_px,
                                 adopt="better", max_error=max_error, ctx=renderer.gl)
+
+    @classmethod
+    def on_client(cls, client: LodClient, servers: list[str]) -> DistributedTechnique:
+        """The technique over a client made elsewhere (``lodsprite client``): batch runs
+        only (no renderer to present with), the error left out of the frame's time."""
+        self = cls.__new__(cls)
+        Technique.__init__(self, None)
+        self.client, self.server = client, ",".join(servers)
+        self.measure_error = False
+        return self
+
+    replays = False  # keyframes come from servers: quality by lodsprite.distributed.quality
+
+    def warm_up(self, viewpoint: Viewpoint) -> None:
+        """Wait (up to :attr:`warmup_s`) for a first keyframe at ``viewpoint``."""
+        deadline = time.perf_counter() + self.warmup_s
+        while time.perf_counter() < deadline:
+            if self.client.frame(viewpoint).type == "keyframe":
+                return
+            time.sleep(0.02)
+
+    def summary(self, frames: list[Frame]) -> dict:
+        received = sum(f.kind == "keyframe" for f in frames)
+        return {"keyframes_received": received,
+                "sprites_per_keyframe": (len(frames) - received) / received if received
+                else None,
+                "local_frames": sum(f.kind.startswith("local") for f in frames),
+                "local_keyframes": sum(f.kind == "local_keyframe" for f in frames),
+                "rejected_keyframes": self.client.rejected_keyframes}
 
     def params(self) -> dict[str, Param]:
         bound = self.client.max_error
@@ -50,8 +87,10 @@ class DistributedTechnique(Technique):
 
     def frame(self, viewpoint: Viewpoint) -> Frame:
         f = self.client.frame(viewpoint)
-        return Frame(f.type, f.ms, f.triangles, self.client.shown_error_px(viewpoint),
-                     {"keyframes": len(self.client.shown)})
+        error = self.client.shown_error_px(viewpoint) if self.measure_error else float("nan")
+        return Frame(f.type, f.ms, f.triangles, error,
+                     {"keyframe_seq": f.keyframe_seq, "keyframe": f.keyframe_index,
+                      "keyframes": len(self.client.shown)})
 
     def draw_to(self, framebuffer: moderngl.Framebuffer | None = None) -> None:
         target = self.client.paths.renderer.target

@@ -98,6 +98,9 @@ class Technique:
     depends on its viewpoint alone."""
 
     name = "technique"
+    #: Whether :meth:`replay` can draw recorded frames again (False: the harness refuses
+    #: quality, saved frames and video for this technique).
+    replays = True
 
     def __init__(self, renderer: Renderer) -> None:
         self.renderer = renderer
