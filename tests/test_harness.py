@@ -137,3 +137,38 @@ def test_the_lumigraph_replay_shows_the_frames_the_timed_run_reconstructed(gl, t
                 assert np.array_equal(t.replay(path.viewpoints[i], decisions[i]), shown[i])
         finally:
             t.release()
+
+
+@pytest.mark.parametrize("mode", ["adaptive", "sprite-adaptive"])
+def test_the_viewer_flies_the_adaptive_techniques_from_the_registry(gl, mode):
+    """The viewer's modes for a terrain come from the registry, the adaptive renderer and
+    LOD-sprite with adaptive keyframes among them; their HUD line counts the tiles."""
+    import re
+
+    from lodsprite.gl.target import RenderTarget
+    from lodsprite.scene import open_scene
+    from lodsprite.viewer.controls import CameraController
+    from lodsprite.viewer.core import ViewerCore
+
+    scene = open_scene("fractal:128:3", grid=128)
+    modes = techniques.factories(scene.layers, ("distributed",), lod=16, threaded=False)
+    assert list(modes)[:5] == ["full", "lod", "sprite", "adaptive", "sprite-adaptive"]
+    core = ViewerCore(gl.mgl, scene, (64, 64), modes, mode,
+                      CameraController.from_home(scene.camera_home()))
+    target = RenderTarget(gl, 64, 64)
+    try:
+        for _ in range(3):
+            core.frame(1 / 30, target.fbo)
+            core.log_frame()
+        status = core.technique.status()
+        m = re.search(r"tiles: (\d+) resident, (\d+) loaded, (\d+) in flight", status)
+        assert m, status
+        t = core.technique
+        terrain = t.terrain if mode == "adaptive" else t.adaptive
+        assert int(m[1]) == len(terrain.slots.slots) >= len(terrain.roots)
+        assert int(m[2]) == terrain.loader.loaded
+        img = core.technique.read_image()
+        assert (img != img[0, 0]).any(axis=2).mean() > 0.2  # terrain, not only sky
+    finally:
+        core.release()
+        target.release()
