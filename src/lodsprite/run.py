@@ -36,7 +36,18 @@ from lodsprite.techniques.adaptive import peak_rss_mb
 from lodsprite.terrain import DEFAULT_EXAGGERATION
 from lodsprite.terrain.lod import DEFAULT_COARSE, level_step
 
-MODES = ("full", "lod", "sprite", "adaptive")
+
+def _modes() -> tuple[str, ...]:
+    """``--mode`` choices: the registry's terrain techniques run in this process (the
+    distributed client is handed on by the command line; sprite-adaptive is ``sprite``
+    with ``--key-sse``)."""
+    from lodsprite import techniques
+
+    return tuple(n for n in techniques.names(("terrain",))
+                 if n not in ("distributed", "sprite-adaptive"))
+
+
+MODES = _modes()
 MAX_GUARD_PX = 1024
 
 
