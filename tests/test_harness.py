@@ -172,3 +172,15 @@ def test_the_viewer_flies_the_adaptive_techniques_from_the_registry(gl, mode):
     finally:
         core.release()
         target.release()
+
+
+def test_the_viewer_checks_options_against_the_scene_layers_before_any_window():
+    from lodsprite.errors import InputError
+    from lodsprite.viewer.app import ViewOptions, view
+
+    with pytest.raises(InputError, match="goes with a crowd"):
+        view(ViewOptions(terrain="fractal:64", grid=64, target_fps=30.0))
+    with pytest.raises(InputError, match="goes with a terrain"):
+        view(ViewOptions(terrain="crowd:20", server="127.0.0.1:1"))
+    with pytest.raises(InputError, match="use one of full, lod, sprite, adaptive"):
+        view(ViewOptions(terrain="fractal:64", grid=64, mode="manager"))

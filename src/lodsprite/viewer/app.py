@@ -53,25 +53,9 @@ class ViewOptions:
                 "server": self.server, "target_fps": self.target_fps, "sse": self.sse,
                 "key_sse": self.key_sse}
 
-    @property
-    def crowd(self) -> bool:
-        """The scene is a crowd (``crowd[:OBJECTS[:TREES]]``)."""
-        from lodsprite.scene import _is_crowd
-
-        return _is_crowd(self.terrain)
-
-    @property
-    def lumigraph(self) -> bool:
-        """The scene is a lumigraph folder (``lodsprite lumigraph capture``)."""
-        from lodsprite.scene import _is_lumigraph
-
-        return _is_lumigraph(self.terrain)
-
     def validate(self) -> None:
-        if (self.lumigraph or self.crowd) and self.server:
-            raise InputError("--server goes with a terrain")
-        if self.target_fps is not None and not (self.crowd and self.target_fps > 0):
-            raise InputError("--target-fps goes with a crowd and must be > 0")
+        if self.target_fps is not None and not self.target_fps > 0:
+            raise InputError("--target-fps must be > 0")
         if self.mode == "distributed" and not self.server:
             raise InputError("--mode distributed needs --server HOST:PORT")
         if self.every < 1:
@@ -101,6 +85,10 @@ def view(o: ViewOptions) -> dict:
     """Run the viewer; returns the summary of the frames shown (empty if none)."""
     o.validate()
     scene = open_scene(o.terrain, o.texture, o.grid, target_fps=o.target_fps)
+    if o.server and "terrain" not in scene.layers:
+        raise InputError("--server goes with a terrain")
+    if o.target_fps is not None and "objects" not in scene.layers:
+        raise InputError("--target-fps goes with a crowd (a scene of objects)")
     modes = factories(o, scene)
     mode = o.mode or scene.mode
     if mode not in modes:
