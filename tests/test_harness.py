@@ -184,3 +184,34 @@ def test_the_viewer_checks_options_against_the_scene_layers_before_any_window():
         view(ViewOptions(terrain="crowd:20", server="127.0.0.1:1"))
     with pytest.raises(InputError, match="use one of full, lod, sprite, adaptive"):
         view(ViewOptions(terrain="fractal:64", grid=64, mode="manager"))
+
+
+def test_the_viewer_switches_from_sprite_to_sprite_adaptive_over_a_store(gl, tmp_path):
+    """sprite-adaptive takes the proxy from the store's level 0 after sprite drew its own
+    proxy: the geometry drops the old proxies and both techniques go on drawing."""
+    from lodsprite.gl.target import RenderTarget
+    from lodsprite.scene import open_scene
+    from lodsprite.terrain.store import build_store
+    from lodsprite.terrain.storefield import StoreField
+    from lodsprite.viewer.controls import CameraController
+    from lodsprite.viewer.core import ViewerCore
+
+    build_store("fractal:257:4", tmp_path / "s.zarr", tile=128, chunk=32)
+    scene = open_scene(str(tmp_path / "s.zarr"), grid=64)
+    modes = techniques.factories(scene.layers, ("distributed",), lod=16, threaded=False)
+    core = ViewerCore(gl.mgl, scene, (64, 64), modes, "sprite",
+                      CameraController.from_home(scene.camera_home()))
+    target = RenderTarget(gl, 64, 64)
+    try:
+        for mode in ("sprite", "sprite-adaptive", "sprite"):
+            core.switch_mode(mode)
+            assert core.mode == mode
+            for _ in range(2):
+                core.frame(1 / 30, target.fbo)
+                core.log_frame()
+            img = core.technique.read_image()
+            assert (img != img[0, 0]).any(axis=2).mean() > 0.2, mode
+        assert isinstance(core.renderer.paths.geometry.full, StoreField)
+    finally:
+        core.release()
+        target.release()
