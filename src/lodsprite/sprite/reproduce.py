@@ -94,12 +94,23 @@ def _sample_indices(frames: int, sample: int) -> np.ndarray:
 
 
 def _timed_level(pr: PathRenderer, path, level: int | None, indices, work: _Work) -> np.ndarray:
-    """Per-frame ms at ``level`` (None = full) for ``indices``; NaN elsewhere."""
+    """Per-frame ms at ``level`` (None = full) for ``indices``, through the harness (the
+    ``full`` or ``lod`` technique along those viewpoints); NaN elsewhere."""
+    from lodsprite.api import Renderer
+    from lodsprite.harness import run_path
+    from lodsprite.paths import CameraPath
+    from lodsprite.techniques import create
+
     ms = np.full(len(path), np.nan)
-    pr.timed(path.viewpoints[int(indices[0])], level)  # warm-up
-    for i in indices:
-        ms[i], _ = pr.timed(path.viewpoints[int(i)], level)
-        work.step()
+    sampled = CameraPath(path.name, tuple(path.viewpoints[int(i)] for i in indices),
+                         path.fov_y_deg)
+    with Renderer.wrap(pr) as renderer:
+        t = create("full", renderer) if level is None else create("lod", renderer, lod=level)
+        try:
+            result = run_path(t, sampled, progress=work.step)
+        finally:
+            t.release()
+    ms[np.asarray(indices, dtype=int)] = [f.ms for f in result.frames]
     return ms
 
 
