@@ -215,3 +215,27 @@ def test_the_viewer_switches_from_sprite_to_sprite_adaptive_over_a_store(gl, tmp
     finally:
         core.release()
         target.release()
+
+
+def test_a_registered_technique_is_a_render_mode_and_a_viewer_mode(tmp_path):
+    """One class and one registry entry: render_path runs it (its own column in
+    frames.csv, quality from its replay) and the viewer lists it for a terrain."""
+    import importlib.util
+
+    from lodsprite.run import RenderConfig, render_path
+
+    spec = importlib.util.spec_from_file_location("custom_technique",
+                                                  ROOT / "examples" / "custom_technique.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    module.register()
+    try:
+        assert "every-other" in techniques.factories(["terrain"])
+        s = render_path(RenderConfig(terrain="fractal:64", grid=64, mode="every-other",
+                                     frames=6, size=(32, 32), ground_truth=True), tmp_path)
+        rows = list(csv.DictReader((tmp_path / "frames.csv").open()))
+        assert [r["source"] for r in rows] == ["0", "0", "2", "2", "4", "4"]
+        assert [float(r["rmse"]) == 0 for r in rows] == [True, False] * 3
+        assert s["technique"] == "every-other" and s["rmse_mean"] > 0
+    finally:
+        techniques.unregister("every-other")

@@ -47,7 +47,7 @@ def _modes() -> tuple[str, ...]:
                  if n not in ("distributed", "sprite-adaptive"))
 
 
-MODES = _modes()
+MODES = _modes()  # the built-in ones (a technique registered later joins _modes())
 MAX_GUARD_PX = 1024
 
 
@@ -91,8 +91,9 @@ class RenderConfig:
                 "threaded": False}
 
     def validate(self) -> None:
-        if self.mode not in MODES:
-            raise InputError(f"unknown mode '{self.mode}': use one of {', '.join(MODES)}")
+        modes = _modes()  # the registry's now: a technique registered later is one too
+        if self.mode not in modes:
+            raise InputError(f"unknown mode '{self.mode}': use one of {', '.join(modes)}")
         w, h = self.size
         if not (16 <= w <= 8192 and 16 <= h <= 8192):
             raise InputError(f"image size must be between 16 and 8192 pixels, got {w}x{h}")
