@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from lodsprite.harness import peak_rss_mb
 from lodsprite.techniques.base import Frame, Technique
 from lodsprite.techniques.terrain import SpriteTechnique
 
@@ -51,24 +52,14 @@ def tile_status(terrain) -> str:
             f"{getattr(loader, 'in_flight_tiles', 0)} in flight")
 
 
-def peak_rss_mb() -> float:
-    """This process's peak resident memory in MB: ``VmHWM`` of ``/proc/self/status``
-    (which starts afresh at ``exec``), else ``ru_maxrss``."""
-    try:
-        with open("/proc/self/status") as f:
-            for line in f:
-                if line.startswith("VmHWM:"):
-                    return int(line.split()[1]) / 1024.0
-    except OSError:
-        pass
-    import resource
-
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # KB on Linux
+def reader_mb(terrain) -> float:
+    """The tile reader process's peak resident memory, MB (0 without one)."""
+    return getattr(terrain.loader, "reader_peak_mb", lambda: 0.0)()
 
 
 def tile_summary(terrain) -> dict[str, Any]:
     """Peak memory (with the tile reader process's) and the tile caches' counts."""
-    reader = getattr(terrain.loader, "reader_peak_mb", lambda: 0.0)()
+    reader = reader_mb(terrain)
     return {"peak_rss_mb": peak_rss_mb() + reader, "peak_rss_mb_reader": reader,
             "tiles_resident": len(terrain.slots.slots), "tiles_loaded": terrain.loader.loaded,
             "tiles_evicted": terrain.slots.evicted, "tiles_bad": len(terrain.loader.bad),
@@ -115,6 +106,9 @@ class AdaptiveTechnique(Technique):
 
     def status(self) -> str:
         return f"sse {self.terrain.sse:g} px; {tile_status(self.terrain)}"
+
+    def outside_mb(self) -> float:
+        return reader_mb(self.terrain)
 
     def release(self) -> None:
         self.terrain.release()
@@ -176,6 +170,9 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
 
     def status(self) -> str:
         return f"keyframes: adaptive, sse {self.adaptive.sse:g} px; {tile_status(self.adaptive)}"
+
+    def outside_mb(self) -> float:
+        return reader_mb(self.adaptive)
 
     def release(self) -> None:
         super().release()

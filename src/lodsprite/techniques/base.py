@@ -172,6 +172,11 @@ class Technique:
         """One line for the HUD (empty: nothing to add)."""
         return ""
 
+    def outside_mb(self) -> float:
+        """Peak memory (MB) the technique holds outside this process (a reader process's),
+        added to the process's own peak in a run's ``peak_rss_mb``; 0 by default."""
+        return 0.0
+
     def release(self) -> None:
         """Release what the technique made (never the renderer)."""
 

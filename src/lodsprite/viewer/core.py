@@ -309,7 +309,7 @@ class ViewerCore:
     def summary(self) -> dict:
         """The core timing keys of the frame times shown (:func:`lodsprite.harness.
         timing_summary`), the technique's own time, and the run's facts."""
-        from lodsprite.harness import timing_summary
+        from lodsprite.harness import peak_rss_mb, timing_summary
 
         ms = np.array([r["ms"] for r in self.rows], dtype=np.float64)
         render = np.array([r["render_ms"] for r in self.rows], dtype=np.float64)
@@ -320,6 +320,7 @@ class ViewerCore:
                 "render_p99_ms": float(np.percentile(render, 99)),
                 "keyframes": int(self.rows[-1]["keyframes"]) if self.rows else 0,
                 "status": self.technique.status(), "gl_renderer": self.renderer.info.renderer,
+                "peak_rss_mb": peak_rss_mb() + self.technique.outside_mb(),
                 "machine": platform.machine(), "python": platform.python_version()}
 
     def write_outputs(self, out_dir: Path) -> dict:
