@@ -49,7 +49,7 @@ def crowd(
     with progress_bar(f"crowd ({mode})") as update:
         _, s, _ = run_crowd(cfg, out_dir, cam, update)
     out.print(f"{s['frames']} frames, {s['objects']} objects ({mode}): {s['fps_mean']:.1f} fps "
-              f"mean, median {s['frame_ms_median']:.1f} ms, p99 {s['frame_ms_p99']:.1f} ms; "
+              f"mean, median {s['median_ms']:.1f} ms, p99 {s['p99_ms']:.1f} ms; "
               f"{s['extractions_total']} extractions, {s['draw_calls_mean']:.0f} draw calls, "
               f"{s['triangles_mean']:,.0f} triangles a frame; wrote {out_dir / 'frames.csv'}, "
               f"{out_dir / 'summary.json'}")

@@ -51,9 +51,9 @@ def _check_mode(mode: str, ground_truth: bool, video: Path | None) -> bool:
         raise InputError(f"unknown mode '{mode}': use one of {', '.join(MODES)}, distributed")
     distributed = mode == "distributed"  # not a core mode: the distributed layer runs it
     if distributed and ground_truth:
-        raise InputError("--ground-truth needs --mode sprite")
+        raise InputError("--ground-truth replays a run's decisions: not for --mode distributed")
     if distributed and video is not None:
-        raise InputError("--video is for --mode full, lod and sprite")
+        raise InputError(f"--video is for --mode {', '.join(MODES)}")
     return distributed
 
 
@@ -76,9 +76,12 @@ def _print_render(s: dict, out_dir: Path) -> None:
         out.print(f"keyframes: {s['keyframes']} of {s['frames']}; mean ms keyframe "
                   f"{s['mean_ms_keyframe']:.1f}, first spriteframe "
                   f"{s['mean_ms_first_sprite']:.1f}, spriteframe {s['mean_ms_sprite']:.1f}")
-        if "rmse_sprite_mean" in s:
-            out.print(f"RMSE vs full resolution: LOD-sprite {s['rmse_sprite_mean']:.2f}, "
-                      f"plain {s['lod']}² {s['rmse_lod_mean']:.2f} grey levels")
+    if "rmse_mean" in s:
+        plain = (f", plain {s['lod']}² {s['rmse_lod_mean']:.2f}" if "rmse_lod_mean" in s
+                 else "")
+        flip = f", FLIP {s['flip_mean']:.4f}" if "flip_mean" in s else ""
+        out.print(f"RMSE vs full resolution (untimed replay): {s['rmse_mean']:.2f}{plain} "
+                  f"grey levels, PSNR {s['psnr_mean']:.1f} dB, SSIM {s['ssim_mean']:.3f}{flip}")
     out.print(f"GL: {s['gl_renderer']}   wrote {out_dir / 'frames.csv'}, "
               f"{out_dir / 'summary.json'}")
 
@@ -88,8 +91,9 @@ def render(
     texture: TextureOpt = "terrain",
     path: PathOpt = "chen1999",
     mode: Annotated[str, typer.Option(
-        "--mode", help="full | lod | sprite | adaptive (view-dependent, --sse) | distributed "
-                       "(starts a local LOD server)")] = "full",
+        "--mode", help="a technique of the registry: full | lod | sprite (--key-sse: "
+                       "adaptive keyframes) | adaptive (view-dependent, --sse) | "
+                       "distributed (starts a local LOD server)")] = "full",
     lod: LodOpt = 16,
     size: SizeOpt = "512x512",
     frames: FramesOpt = None,
@@ -102,8 +106,10 @@ def render(
     exaggeration: ExagOpt = DEFAULT_EXAGGERATION,
     epsilon: EpsOpt = 1.0,
     ground_truth: Annotated[bool, typer.Option(
-        "--ground-truth", help="sprite mode: also render full resolution (untimed) and "
-                               "report RMSE/PSNR/SSIM of sprite and plain coarse frames")] = False,
+        "--ground-truth", help="replay the run's decisions untimed against full "
+                               "resolution: RMSE/PSNR/SSIM per frame and their means")] = False,
+    flip: Annotated[bool, typer.Option(
+        "--flip", help="with --ground-truth: FLIP per frame too")] = False,
     visibility: VisOpt = "coarse",
     border: BorderOpt = True,
     guard: GuardOpt = 32,
@@ -130,7 +136,7 @@ def render(
                           exaggeration=exaggeration, save_frames=save_frames, epsilon=epsilon,
                           ground_truth=ground_truth, visibility=visibility, border=border,
                           guard_px=guard, sse=sse, gpu_mb=gpu_mb, host_mb=host_mb,
-                          key_sse=key_sse)
+                          key_sse=key_sse, flip=flip)
     with progress_bar(f"render {mode}") as update:
         if distributed:
             from lodsprite.distributed.run import parse_max_error, render_distributed
@@ -149,11 +155,11 @@ def view(
     texture: TextureOpt = "terrain",
     grid: GridOpt = None,
     mode: Annotated[str | None, typer.Option(
-        "--mode", help="terrain: full | lod | sprite (default) | distributed (needs "
-                       "--server), keys 1-4; lumigraph: critical (default) | full | "
-                       "arbitrary | fixed | line | projective | progressive | subsample, "
-                       "keys 1-8; crowd: manager (default) | independent | discrete, "
-                       "keys 1-3")] = None,
+        "--mode", help="terrain: full | lod | sprite (default) | adaptive | "
+                       "sprite-adaptive | distributed (needs --server); lumigraph: "
+                       "critical (default) | full | arbitrary | fixed | line | "
+                       "projective | progressive | subsample; crowd: manager (default) | "
+                       "independent | discrete; keys 1-9 switch")] = None,
     lod: LodOpt = 16,
     epsilon: EpsOpt = 1.0,
     size: Annotated[str, typer.Option("--size", help="window size WxH")] = "1024x768",
@@ -183,6 +189,10 @@ def view(
     target_fps: Annotated[float | None, typer.Option(
         "--target-fps", help="crowd: bend the LODs to hold this frame rate ([ ] step it)")
     ] = None,
+    sse: Annotated[float | None, typer.Option(
+        "--sse", help="adaptive: screen-space error tolerance in pixels")] = None,
+    key_sse: Annotated[float | None, typer.Option(
+        "--key-sse", help="sprite-adaptive: its keyframes' tolerance in pixels")] = None,
 ) -> None:
     """Fly through a terrain with live LOD-sprite, or round a lumigraph (WASD/QE, mouse, tab
     orbit)."""
@@ -194,7 +204,7 @@ def view(
                        epsilon=epsilon, size=parse_size(size), fps=fps, threaded=not inline,
                        play=play, frames=frames, screenshots=screenshots, every=every,
                        exit=exit_, out=out_dir, record=record, server=server,
-                       target_fps=target_fps)
+                       target_fps=target_fps, sse=sse, key_sse=key_sse)
     s = run_view(opts)
     if s:
         out.print(f"{s['frames']} frames, {s['mode']}: median {s['median_ms']:.2f} ms, "
