@@ -132,32 +132,70 @@ def test_the_host_cache_holds_its_budget_and_a_missing_tile_is_bad_once():
         loader.close()
 
 
-def test_a_missing_tile_is_drawn_from_its_parent(gl):
-    from lodsprite.camera import look_at
-    from lodsprite.gl.target import RenderTarget
-    from lodsprite.terrain.adaptive import AdaptiveTerrain
-
+def holey(tiles: set, n: int = 513) -> MemoryPyramid:
+    """``rough(n)`` as a pyramid whose level-0 tiles at ``(row, col)`` in ``tiles`` (first
+    samples) each hold an unwritten sample (NaN): unreadable."""
     class Holey(MemoryPyramid):
         def read(self, k, r0, r1, c0, c1):
             a = super().read(k, r0, r1, c0, c1).copy()
-            if k == 0 and (r0, c0) == (192, 192):
-                a[3, 3] = np.nan                 # an unwritten sample: the tile is bad
+            if k == 0 and (r0, c0) in tiles:
+                a[3, 3] = np.nan
             return a
 
-    p = Holey(rough(), 30.0, 30.0)
-    t = RenderTarget(gl, 96, 96)
-    a = AdaptiveTerrain(gl, p, t, 45.0, 0.5)
+    return Holey(rough(n), 30.0, 30.0)
+
+
+def footprint(a, node: Node, vp, size: int) -> np.ndarray:
+    """``(size, size) bool``: the screen rectangle that bounds ``node``'s box, 1 px wider."""
+    lo, hi = a.tree.bounds(node)
+    corners = np.array([[x, y, z, 1.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                        for z in (lo[2], hi[2])])
+    clip = corners @ (a.projection(vp) @ vp.view_matrix()).T
+    assert (clip[:, 3] > 0).all()                         # wholly in front of the eye
+    px = (clip[:, :2] / clip[:, 3:] + 1) / 2 * size       # x right, y up, pixels
+    x0, x1 = int(np.floor(px[:, 0].min())) - 1, int(np.ceil(px[:, 0].max())) + 1
+    y0, y1 = int(np.floor(px[:, 1].min())) - 1, int(np.ceil(px[:, 1].max())) + 1
+    mask = np.zeros((size, size), bool)
+    mask[max(0, size - y1):max(0, size - y0), max(0, x0):max(0, x1)] = True  # row 0 on top
+    return mask
+
+
+def test_a_missing_tile_is_drawn_from_its_parent(gl):
+    from lodsprite.camera import look_at
+    from lodsprite.gl.target import RenderTarget
+    from lodsprite.gl.terrain import SKY_RGB
+    from lodsprite.terrain.adaptive import AdaptiveTerrain
+
+    vp = look_at((0.0, -2000.0, 1500.0), (0.0, 0.0, 0.0))
+    parent = Node(1, 1, 1)                       # level 0's tiles (2..3, 2..3): 128..256
+    siblings = {(r, c) for r in (128, 192) for c in (128, 192)}
+    images, t = {}, RenderTarget(gl, 96, 96)
     try:
-        vp = look_at((0.0, -2000.0, 1500.0), (0.0, 0.0, 0.0))
-        for _ in range(40):
-            f = a.frame(vp)
-            time.sleep(0.005)
-        assert f.bad == 1 and Node(0, 3, 3) not in a.slots
-        assert Node(1, 1, 1) in a.slots              # its parent, drawn in its place
-        assert np.isfinite(t.read_color().astype(float)).all()
+        for name, tiles in (("one", {(192, 192)}), ("siblings", siblings), ("whole", set())):
+            a = AdaptiveTerrain(gl, holey(tiles), t, 45.0, 0.5)
+            try:
+                f = a.settle(vp)                 # streams until nothing wanted is left
+                images[name] = t.read_color().astype(int)
+                assert f.bad == len(tiles) and (parent in a.slots)
+                assert (Node(0, 3, 3) in a.slots) == (name == "whole")
+                if name == "whole":
+                    mask = footprint(a, parent, vp, 96)
+            finally:
+                a.release()
     finally:
-        a.release()
         t.release()
+    one, whole = images["one"], images["whole"]
+    # the parent is drawn over all four of its children's ground: the image is the one
+    # drawn when every sibling is missing too
+    assert np.abs(one - images["siblings"]).max() <= 1
+    # ... and differs from the whole terrain's only where the parent is on screen, there
+    # visibly (the tile is in view at level 0)
+    diff = np.abs(one - whole).max(axis=2) > 1
+    assert not diff[~mask].any() and diff[mask].sum() > 100
+    # no hole: ground where the whole terrain has ground (but along a ridge's outline)
+    sky = np.round(np.array(SKY_RGB) * 255).astype(int)
+    holes = (np.abs(one - sky).sum(axis=2) <= 3) & (np.abs(whole - sky).sum(axis=2) > 3)
+    assert holes.mean() < 0.01
 
 
 def test_adaptive_at_a_quarter_pixel_matches_full_resolution(gl):
