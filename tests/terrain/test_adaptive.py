@@ -4,11 +4,11 @@ caches, missing tiles, and its images against full resolution."""
 from __future__ import annotations
 
 import math
-import time
 
 import numpy as np
 import pytest
 
+from conftest import wait_until
 from lodsprite.terrain.pyramid import MemoryPyramid
 from lodsprite.terrain.quadtree import (
     MORPH_SPAN,
@@ -123,9 +123,7 @@ def test_the_host_cache_holds_its_budget_and_a_missing_tile_is_bad_once():
         assert loader.capacity == 5
         nodes = [Node(0, i, j) for i in range(3) for j in range(3)]
         loader.want([(1.0, n) for n in nodes])
-        deadline = time.monotonic() + 20
-        while loader.loaded + len(loader.bad) < 9 and time.monotonic() < deadline:
-            time.sleep(0.01)
+        wait_until(lambda: loader.loaded + len(loader.bad) >= 9, 20, "nine tiles read")
         assert loader.bad == {Node(0, 1, 1)} and loader.loaded == 8
         assert len(loader.cache) == 5 and loader.evicted == 3
     finally:
@@ -218,9 +216,7 @@ def test_adaptive_at_a_quarter_pixel_matches_full_resolution(gl):
                                 r.paths.renderer.target, 45.0, sse,
                                 color=r.paths.geometry.color_tex)
             try:
-                for _ in range(30):              # let every wanted tile stream in
-                    a.frame(vp)
-                    time.sleep(0.005)
+                a.settle(vp)                     # every wanted tile streamed in
                 got = a.target.read_color().astype(float)
             finally:
                 a.release()
@@ -283,13 +279,14 @@ def test_an_evicted_root_comes_back_and_the_loader_drops_stale_requests(gl):
     a = AdaptiveTerrain(gl, p, t, 45.0, 0.5, gpu_mb=10 * 65 * 65 * 4 / 2 ** 20)
     try:
         assert a.slots.capacity == 10 and len(a.roots) == 4
-        for x in np.linspace(-6000, 6000, 40):     # sweep low over the field
-            a.frame(look_at((x, -1500.0, 400.0), (x, 0.0, 0.0)))
-            time.sleep(0.003)
-        for _ in range(20):                         # then look at it all from afar
-            a.frame(look_at((0.0, -30000.0, 20000.0), (0.0, 0.0, 0.0)))
-            time.sleep(0.003)
-        assert all(r in a.slots for r in a.roots)
+        for x in np.linspace(-6000, 6000, 40):     # sweep low over the field, each
+            vp = look_at((x, -1500.0, 400.0), (x, 0.0, 0.0))   # view given some tiles
+            wait_until(lambda: a.frame(vp).uploaded or a.loader.idle(), 20,  # noqa: B023
+                       "a tile of the sweep uploaded")
+        assert a.slots.evicted > 0
+        afar = look_at((0.0, -30000.0, 20000.0), (0.0, 0.0, 0.0))  # then see it all
+        wait_until(lambda: a.frame(afar) and all(r in a.slots for r in a.roots), 20,
+                   "every root back in the GPU cache")
         a.loader.want([(1.0, Node(0, 0, 0)), (2.0, Node(0, 0, 1))])
         a.loader.want([(1.0, Node(0, 7, 7))])
         assert Node(0, 0, 0) not in a.loader._queued and Node(0, 0, 1) not in a.loader._queued
@@ -333,9 +330,7 @@ def test_the_background_loader_survives_an_item_that_raises():
 
     f = Flaky()
     try:
-        deadline = time.monotonic() + 10
-        while not f.done and time.monotonic() < deadline:
-            time.sleep(0.01)
+        wait_until(lambda: f.done, 10, "the item after the bad one loaded")
         assert f.done == [2] and f._thread.is_alive()
     finally:
         f.close()
@@ -419,11 +414,8 @@ def test_prefetch_streams_between_keyframes_without_drawing(gl):
         vp = look_at((0.0, -3000.0, 1500.0), (0.0, 0.0, 0.0))
         a.frame(vp)
         wanted, before = list(a._wanted), len(a.slots.slots)
-        got, deadline = 0, time.monotonic() + 20
-        while got == 0 and time.monotonic() < deadline:
-            time.sleep(0.01)
-            got += a.prefetch()
-        assert got > 0 and len(a.slots.slots) == before + got
+        got = wait_until(a.prefetch, 20, "a tile uploaded between keyframes")
+        assert len(a.slots.slots) == before + got
         assert all(n in wanted for n in list(a.slots.slots)[-got:])
         assert not any(n in a.slots for n in a._wanted)  # resident ones are not looked for
     finally:
