@@ -61,6 +61,30 @@ def wait_until(pred: Callable[[], T], timeout_s: float, what: str,
         time.sleep(interval_s)
 
 
+@pytest.fixture
+def cli(capsys):
+    """``cli(*args)`` runs ``lodsprite ARGS`` in this process, as the console script does
+    (``lodsprite.cli.main``), and returns a :class:`subprocess.CompletedProcess` with its
+    exit code and what it printed.  For the CLI's refusals, which happen before any work:
+    a process of its own costs ~2 s of start-up each (tests that need a real process, or
+    a real run, keep one)."""
+    import subprocess
+
+    from lodsprite.cli import main
+
+    def run(*args: str) -> subprocess.CompletedProcess:
+        capsys.readouterr()
+        try:
+            main([str(a) for a in args])
+            code = 0
+        except SystemExit as exc:
+            code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+        out, err = capsys.readouterr()
+        return subprocess.CompletedProcess(["lodsprite", *args], code, out, err)
+
+    return run
+
+
 def make_field(n: int = 64, relief: float = 200.0, spacing: float = 30.0,
                kind: str = "bump") -> HeightField:
     """Synthetic working field of ``(n+1)^2`` samples: flat, a central bump, or ridges."""

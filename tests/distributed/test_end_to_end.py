@@ -354,10 +354,8 @@ def test_a_replayed_frame_is_the_frame_the_client_drew(scene):
 
 
 @pytest.mark.parametrize("value", ["-1", "0", "nan", "much"])
-def test_client_refuses_a_max_error_that_is_not_pixels_or_off(value):
-    proc = subprocess.run([sys.executable, "-c", "from lodsprite.cli import main; main()",
-                           "client", "--server", "127.0.0.1:1", "--max-error", value],
-                          capture_output=True, text=True, timeout=60)
+def test_client_refuses_a_max_error_that_is_not_pixels_or_off(cli, value):
+    proc = cli("client", "--server", "127.0.0.1:1", "--max-error", value)  # before any work
     assert proc.returncode == 2 and "--max-error" in proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1
 

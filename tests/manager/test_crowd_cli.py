@@ -97,14 +97,14 @@ def test_impossible_options_are_refused_before_anything_is_written(tmp_path, arg
     assert not (tmp_path / "never").exists()
 
 
-def test_a_bad_mesh_is_one_line_and_exit_code_2(tmp_path):
-    (tmp_path / "empty.obj").write_text("")
-    r = lodsprite("crowd", "--mesh", str(tmp_path / "empty.obj"), "--objects", "5",
-                  "--frames", "2", "--out", str(tmp_path / "o"))
+def test_a_bad_mesh_is_one_line_and_exit_code_2(tmp_path, cli):
+    (tmp_path / "empty.obj").write_text("")    # (in this process: refused before any work)
+    r = cli("crowd", "--mesh", str(tmp_path / "empty.obj"), "--objects", "5",
+            "--frames", "2", "--out", str(tmp_path / "o"))
     assert r.returncode == 2 and "Traceback" not in r.stderr
     assert len([ln for ln in r.stderr.splitlines() if ln.strip()]) == 1
     assert not (tmp_path / "o").exists()
-    r = lodsprite("crowd", "--slots", "0", "--out", str(tmp_path / "o"))
+    r = cli("crowd", "--slots", "0", "--out", str(tmp_path / "o"))
     assert r.returncode == 2 and "--slots" in r.stderr
 
 
