@@ -111,10 +111,17 @@ def test_malformed_geotiff_exits_2(tmp_path, cli):
                       "broken.tif")
 
 
-def test_reproduce_quick_writes_results_plots_and_report(tmp_path):
+def test_reproduce_quick_writes_results_plots_and_report(tmp_path, cli, monkeypatch):
+    from lodsprite.sprite.reproduce import ReproduceConfig
+
+    # The command in this process, its --quick shortened for the suite (the suite's
+    # slowest test at 256², 115 frames: 30 s): 128², 60 frames, quality every 3rd frame.
+    quick = ReproduceConfig.quick
+    monkeypatch.setattr(ReproduceConfig, "quick", classmethod(lambda cls, **kw: quick(
+        **{"size": 128, "frames": 60, "fig10_frames": (30, 60), **kw})))
     out = tmp_path / "r"
-    proc = lodsprite("reproduce", "chen1999", "--quick", "--terrain", "fractal:64:1",
-                     "--out", str(out))
+    proc = cli("reproduce", "chen1999", "--quick", "--terrain", "fractal:64:1",
+               "--out", str(out))
     assert proc.returncode == 0, proc.stderr
     results = json.loads((out / "results.json").read_text())
     for key in ("frames", "keyframes", "epsilon", "mean_ms_keyframe", "mean_ms_first_sprite",
