@@ -4,6 +4,10 @@ between tests."""
 
 from __future__ import annotations
 
+import time
+from collections.abc import Callable
+from typing import TypeVar
+
 import numpy as np
 import pytest
 
@@ -33,6 +37,52 @@ def gl(gl_session):
         gl_session.check_error("test")
         mgl.disable(moderngl.DEPTH_TEST | moderngl.BLEND | moderngl.CULL_FACE)
         gl_session.default_fbo.use()
+
+
+T = TypeVar("T")
+
+
+def wait_until(pred: Callable[[], T], timeout_s: float, what: str,
+               interval_s: float = 0.01) -> T:
+    """Call ``pred`` until it returns something truthy, and return that; fail the test
+    with "``what`` did not happen within ``timeout_s`` s" once the deadline passes.  The
+    deadline only guards against a hang: it is never a measure of speed.  ``pred`` is
+    called at least once, and once more at the deadline."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        got = pred()
+        if got:
+            return got
+        if time.monotonic() >= deadline:
+            got = pred()
+            if got:
+                return got
+            pytest.fail(f"{what} did not happen within {timeout_s:g} s", pytrace=False)
+        time.sleep(interval_s)
+
+
+@pytest.fixture
+def cli(capsys):
+    """``cli(*args)`` runs ``lodsprite ARGS`` in this process, as the console script does
+    (``lodsprite.cli.main``), and returns a :class:`subprocess.CompletedProcess` with its
+    exit code and what it printed.  For the CLI's refusals, which happen before any work:
+    a process of its own costs ~2 s of start-up each (tests that need a real process, or
+    a real run, keep one)."""
+    import subprocess
+
+    from lodsprite.cli import main
+
+    def run(*args: str) -> subprocess.CompletedProcess:
+        capsys.readouterr()
+        try:
+            main([str(a) for a in args])
+            code = 0
+        except SystemExit as exc:
+            code = exc.code if isinstance(exc.code, int) else (0 if exc.code is None else 1)
+        out, err = capsys.readouterr()
+        return subprocess.CompletedProcess(["lodsprite", *args], code, out, err)
+
+    return run
 
 
 def make_field(n: int = 64, relief: float = 200.0, spacing: float = 30.0,

@@ -1,4 +1,5 @@
-"""The command line, run as a user runs it: a real process, real exit codes."""
+"""The command line, run as a user runs it: a real process, real exit codes (its refusals
+of bad input in this process, through the same ``main``)."""
 
 import csv
 import json
@@ -86,25 +87,40 @@ def test_sprite_mode_with_ground_truth_reports_quality(tmp_path):
     (["render", "--no-such-option"], "no-such-option"),
     (["reproduce", "nobody2000"], "nobody2000"),
 ])
-def test_bad_input_exits_2_with_one_line_and_writes_nothing(tmp_path, args, fragment):
+def test_bad_input_exits_2_with_one_line_and_writes_nothing(tmp_path, cli, args, fragment):
+    # In this process (the console script's main): the refusal comes before any work, and
+    # a process each cost ~2 s of start-up; the real process's exit code is checked below.
     out = tmp_path / "never"
-    proc = lodsprite(*args, "--out", str(out)) if args[0] == "render" and "--no-such-option" \
-        not in args else lodsprite(*args)
+    proc = cli(*args, "--out", str(out)) if args[0] == "render" and "--no-such-option" \
+        not in args else cli(*args)
     assert_user_error(proc, fragment)
     assert not out.exists()
 
 
-def test_malformed_geotiff_exits_2(tmp_path):
+def test_a_real_process_exits_2_with_one_line(tmp_path):
+    out = tmp_path / "never"
+    assert_user_error(lodsprite("render", *SMALL, "--mode", "warp", "--out", str(out)), "mode")
+    assert not out.exists()
+
+
+def test_malformed_geotiff_exits_2(tmp_path, cli):
     bad = tmp_path / "broken.tif"
     bad.write_bytes(b"II*\x00 this is not a tiff")
-    assert_user_error(lodsprite("render", "--terrain", str(bad), "--out", str(tmp_path / "o")),
+    assert_user_error(cli("render", "--terrain", str(bad), "--out", str(tmp_path / "o")),
                       "broken.tif")
 
 
-def test_reproduce_quick_writes_results_plots_and_report(tmp_path):
+def test_reproduce_quick_writes_results_plots_and_report(tmp_path, cli, monkeypatch):
+    from lodsprite.experiments.chen1999.run import ReproduceConfig
+
+    # The command in this process, its --quick shortened for the suite (the suite's
+    # slowest test at 256², 115 frames: 30 s): 128², 60 frames, quality every 3rd frame.
+    quick = ReproduceConfig.quick
+    monkeypatch.setattr(ReproduceConfig, "quick", classmethod(lambda cls, **kw: quick(
+        **{"size": 128, "frames": 60, "fig10_frames": (30, 60), **kw})))
     out = tmp_path / "r"
-    proc = lodsprite("reproduce", "chen1999", "--quick", "--terrain", "fractal:64:1",
-                     "--out", str(out))
+    proc = cli("reproduce", "chen1999", "--quick", "--terrain", "fractal:64:1",
+               "--out", str(out))
     assert proc.returncode == 0, proc.stderr
     results = json.loads((out / "results.json").read_text())
     for key in ("frames", "keyframes", "epsilon", "mean_ms_keyframe", "mean_ms_first_sprite",

@@ -178,10 +178,10 @@ def lodsprite_cli(*args: str) -> subprocess.CompletedProcess:
     (["--mode", "distributed", "--max-error", "wide"], "--max-error"),
     (["--mode", "distributed", "--epsilon", "0"], "epsilon"),
 ])
-def test_render_mode_errors_name_the_distributed_mode(tmp_path, args, fragment):
-    out = tmp_path / "never"
-    proc = lodsprite_cli("render", "--terrain", "fractal:64:1", "--size", "64x64", *args,
-                         "--out", str(out))
+def test_render_mode_errors_name_the_distributed_mode(tmp_path, cli, args, fragment):
+    out = tmp_path / "never"   # (in this process: refused before any work)
+    proc = cli("render", "--terrain", "fractal:64:1", "--size", "64x64", *args,
+               "--out", str(out))
     assert proc.returncode == 2, proc.stderr
     lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
     assert len(lines) == 1 and fragment in lines[0], proc.stderr

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import zmq
 
+from conftest import wait_until
 from lodsprite.distributed.link import ServerLink
 
 PING = {"kind": "control", "seq": 1, "op": "ping", "args": {}}
@@ -100,14 +101,20 @@ def _rebind(ctx: zmq.Context, port: int) -> zmq.Socket:
     """A new REP socket on ``port``: ZeroMQ closes sockets in the background, so the port
     may still be taken for a moment after the old socket's close."""
     sock = ctx.socket(zmq.REP)
-    for _ in range(200):
+
+    def bound() -> bool:
         try:
             sock.bind(f"tcp://127.0.0.1:{port}")
-            return sock
+            return True
         except zmq.ZMQError:
-            time.sleep(0.01)
-    sock.close(linger=0)
-    raise RuntimeError(f"port {port} stayed taken")
+            return False
+
+    try:
+        wait_until(bound, 10, f"port {port} freed")
+    except BaseException:
+        sock.close(linger=0)
+        raise
+    return sock
 
 
 def _fake_server(port: int, answer, stop: threading.Event) -> threading.Thread:

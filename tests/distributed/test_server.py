@@ -9,7 +9,9 @@ import time
 import numpy as np
 import pytest
 import zmq
+from zmq.utils.monitor import recv_monitor_message
 
+from conftest import wait_until
 from lodsprite.camera import Viewpoint, look_at
 from lodsprite.distributed import producer as producer_module
 from lodsprite.distributed import server as server_module
@@ -293,11 +295,21 @@ class Live:
             time.sleep(0.05)
         raise AssertionError(f"state never became {want}: {data}")
 
-    def dealer(self, identity: str | None):
+    def dealer(self, identity: str | None, connected: bool = False):
+        """A DEALER on the keyframe socket; ``connected``: returned once its handshake with
+        the server is done (a socket monitor's event, within a deadline)."""
         d = self.ctx.socket(zmq.DEALER)
         if identity:
             d.setsockopt(zmq.IDENTITY, identity.encode())
+        mon = d.get_monitor_socket(zmq.EVENT_HANDSHAKE_SUCCEEDED) if connected else None
         d.connect(self.kf_ep)
+        if mon is not None:
+            try:
+                wait_until(lambda: mon.poll(0) and recv_monitor_message(mon)["event"]
+                           == zmq.EVENT_HANDSHAKE_SUCCEEDED, 10, "the handshake")
+            finally:
+                d.disable_monitor()
+                mon.close(linger=0)
         return d
 
     def close(self):
@@ -345,8 +357,7 @@ def _keyframe_for(live, identity, others=(), timeout=30.0):
 def test_keyframes_go_to_the_holder_only(live):
     """Regression: the keyframe socket was a bound DEALER, which deals messages round
     robin to every connected peer: any stranger could take keyframes."""
-    strangers = [live.dealer(None), live.dealer(B)]
-    time.sleep(0.2)  # connected before the holder
+    strangers = [live.dealer(None, connected=True), live.dealer(B, connected=True)]
     assert live.control("load", SMALL)["ok"] and live.control("start")["ok"]
     live.wait_state({"ready"})
     kfs = []

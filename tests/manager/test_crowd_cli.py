@@ -11,10 +11,12 @@ import numpy as np
 import pytest
 
 from lodsprite import experiments
+from lodsprite.camera import look_at
 from lodsprite.errors import InputError
 from lodsprite.experiments.gumbau.report import write_outputs
 from lodsprite.experiments.gumbau.run import GumbauConfig, reproduce_gumbau
-from lodsprite.manager.run import CrowdConfig, run_crowd
+from lodsprite.manager.run import CrowdConfig, crowd_models, make_crowd, run_crowd
+from lodsprite.paths import CameraPath
 
 SUMMARY_KEYS = ("extractions_total", "fps_mean", "median_ms", "p99_ms",
                 "triangles_mean", "draw_calls_mean", "lod_cpu_ms_mean")
@@ -25,15 +27,62 @@ def lodsprite(*args):
                            *args], capture_output=True, text=True, timeout=240)
 
 
-def test_crowd_writes_frames_and_summary(tmp_path):
+def test_crowd_writes_one_row_per_frame_and_a_summary_of_those_rows(tmp_path):
     r = lodsprite("crowd", "--objects", "150", "--frames", "6", "--size", "96x72",
                   "--slots", "8", "--out", str(tmp_path / "c"))
     assert r.returncode == 0, r.stderr
     s = json.loads((tmp_path / "c" / "summary.json").read_text())
-    for key in SUMMARY_KEYS:
-        assert np.isfinite(s[key]), key
     with open(tmp_path / "c" / "frames.csv") as f:
-        assert len(list(csv.DictReader(f))) == 6
+        rows = list(csv.DictReader(f))
+    assert [int(row["frame"]) for row in rows] == list(range(6))   # the walkthrough's frames
+    col = {k: np.array([float(row[k]) for row in rows])
+           for k in ("triangles", "visible", "draw_calls", "extractions")}
+    member, _ = crowd_models(None, 0)
+    fine, coarse = (len(member.extract(f)) // 3 for f in (1.0, 0.0))
+    # every object drawn shows one LOD of the member, between its coarsest and finest
+    assert (col["visible"] > 0).all() and (col["visible"] <= 150).all()
+    assert (col["triangles"] >= col["visible"] * coarse).all()
+    assert (col["triangles"] <= col["visible"] * fine).all()
+    assert (col["draw_calls"] >= 2).all() and (col["draw_calls"] <= col["visible"] + 1).all()
+    # the summary is of these rows (keys read: frames, objects, extractions_total,
+    # triangles_mean, draw_calls_mean)
+    assert s["frames"] == 6 and s["objects"] == 150
+    assert s["extractions_total"] == col["extractions"].sum()
+    assert s["triangles_mean"] == pytest.approx(col["triangles"].mean())
+    assert s["draw_calls_mean"] == pytest.approx(col["draw_calls"].mean())
+
+
+def _from_afar(extent: float, frames: int = 3) -> CameraPath:
+    """A still camera high above the crowd's ground: every object in view (within the far
+    plane, 4 extents + 100 m) and under 3 % of the screen high (the discrete baseline's
+    coarsest level)."""
+    vp = look_at((0.0, -2.0 * extent, 5.0 * extent), (0.0, 0.0, 0.0))
+    return CameraPath("afar", (vp,) * frames, 60.0)
+
+
+@pytest.mark.parametrize("mode, near, lod, warm_extractions, groups", [
+    # beyond range_far every object wants the coarsest LOD, its starting one: no work
+    ("manager", 5.0, 0.0, 0, 1),
+    ("discrete", 5.0, 0.0, 0, 1),   # small on screen: the coarsest of the four levels
+    # within range_near every object wants the finest: the manager extracts it once and
+    # all share it; independent, each object extracts and draws its own copy
+    ("manager", 1e4, 1.0, 1, 1),
+    ("independent", 1e4, 1.0, 150, 150),
+])
+def test_a_crowd_on_one_lod_draws_objects_times_that_lods_triangles(mode, near, lod,
+                                                                   warm_extractions, groups):
+    cfg = CrowdConfig(objects=150, frames=3, size=(64, 48), slots=8, mode=mode,
+                      range_near=near, range_far=2 * near)
+    crowd = make_crowd(cfg)
+    rows, s, _ = run_crowd(cfg, path=_from_afar(crowd.extent))
+    per_object = len(crowd.models[0].extract(lod)) // 3
+    assert len(rows) == 3 and s["frames"] == 3
+    for row in rows:
+        assert row["visible"] == 150
+        assert row["triangles"] == 150 * per_object
+        assert row["draw_calls"] == groups + 1            # and the ground
+        assert row["extractions"] == 0                    # all done in the warm-up frame
+    assert s["warmup_extractions"] == warm_extractions
 
 
 @pytest.mark.parametrize("args, fragment", [
@@ -52,14 +101,14 @@ def test_impossible_options_are_refused_before_anything_is_written(tmp_path, arg
     assert not (tmp_path / "never").exists()
 
 
-def test_a_bad_mesh_is_one_line_and_exit_code_2(tmp_path):
-    (tmp_path / "empty.obj").write_text("")
-    r = lodsprite("crowd", "--mesh", str(tmp_path / "empty.obj"), "--objects", "5",
-                  "--frames", "2", "--out", str(tmp_path / "o"))
+def test_a_bad_mesh_is_one_line_and_exit_code_2(tmp_path, cli):
+    (tmp_path / "empty.obj").write_text("")    # (in this process: refused before any work)
+    r = cli("crowd", "--mesh", str(tmp_path / "empty.obj"), "--objects", "5",
+            "--frames", "2", "--out", str(tmp_path / "o"))
     assert r.returncode == 2 and "Traceback" not in r.stderr
     assert len([ln for ln in r.stderr.splitlines() if ln.strip()]) == 1
     assert not (tmp_path / "o").exists()
-    r = lodsprite("crowd", "--slots", "0", "--out", str(tmp_path / "o"))
+    r = cli("crowd", "--slots", "0", "--out", str(tmp_path / "o"))
     assert r.returncode == 2 and "--slots" in r.stderr
 
 

@@ -84,11 +84,11 @@ def test_render_writes_a_side_by_side_video_of_the_frames_shown(tmp_path):
     assert video[key, :, 128:].mean() < 8.0
 
 
-def test_render_refuses_a_video_it_cannot_write(tmp_path):
-    for args in (["--video", str(tmp_path / "v.gif")],
+def test_render_refuses_a_video_it_cannot_write(tmp_path, cli):
+    for args in (["--video", str(tmp_path / "v.gif")],   # (in this process: refused first)
                  ["--mode", "distributed", "--video", str(tmp_path / "v.mp4")]):
-        proc = _lodsprite("render", "--terrain", "fractal:64:3", "--size", "64x64",
-                          "--frames", "4", "--out", str(tmp_path / "o"), *args)
+        proc = cli("render", "--terrain", "fractal:64:3", "--size", "64x64",
+                   "--frames", "4", "--out", str(tmp_path / "o"), *args)
         assert proc.returncode == 2, proc.stderr
         lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
         assert len(lines) == 1 and "Traceback" not in proc.stderr

@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
+import itertools
 import threading
-import time
 
 import numpy as np
 import pytest
 
-from conftest import make_field
+from conftest import make_field, wait_until
 from lodsprite.camera import look_at
 from lodsprite.errors import LodspriteError
 from lodsprite.gl.sprite import SpriteRenderer
@@ -92,20 +92,22 @@ def test_frames_go_on_while_the_worker_renders_and_it_stops_on_close(gl, scene, 
 
 def test_an_adopted_keyframe_is_never_worse_than_the_one_shown(gl, scene, sprite):
     engine = ThreadedLodSpriteEngine(sprite, scene, 45.0, 0.5)
-    adopted = 0
+    views = itertools.cycle(orbit(600, span_deg=60))  # slowly: keyframes arrive on the way
+    adopted = []
+
+    def adopt_three() -> bool:
+        vp = next(views)
+        before = engine.error_px(vp, sprite.terrain.projection(vp))
+        f = engine.frame(vp)
+        if f.type == "first_sprite":
+            adopted.append((f.error_px, before))
+        return len(adopted) >= 3
+
     try:
-        for vp in orbit(600, span_deg=60):  # slowly, so that keyframes arrive on the way
-            before = engine.error_px(vp, sprite.terrain.projection(vp))
-            f = engine.frame(vp)
-            if f.type == "first_sprite":
-                assert f.error_px < before
-                adopted += 1
-                if adopted >= 3:
-                    break
-            time.sleep(0.002)
+        wait_until(adopt_three, 60, "three keyframes adopted", interval_s=0.002)
     finally:
         engine.close()
-    assert adopted >= 1  # the rule was exercised, not skipped
+    assert all(shown < before for shown, before in adopted)  # never worse
 
 
 def test_a_worker_that_cannot_start_says_why(gl, scene):
@@ -125,11 +127,9 @@ def test_the_lead_comes_from_every_delivered_keyframe_not_the_start_up_one(gl, s
     try:
         engine.frame(vp)  # start-up: waited for, not a measure of the latency
         assert engine.worker.lead_s == 0.0
-        for _ in range(400):  # the viewer stays put: every new keyframe is no better
-            engine.frame(vp)
-            if engine.discarded:
-                break
-            time.sleep(0.005)
+        # the viewer stays put: every new keyframe is no better, and is discarded
+        wait_until(lambda: (engine.frame(vp), engine.discarded)[1], 60,
+                   "a keyframe discarded", interval_s=0.005)
         assert engine.discarded >= 1 and len(engine.keyframes) == 1
         # a discarded keyframe still says how long keyframes take to arrive
         assert engine.worker.lead_s > 0.0
@@ -148,9 +148,9 @@ def test_frames_say_so_when_the_worker_has_died(gl, scene, sprite, monkeypatch):
             raise RuntimeError("the GL context was lost")
 
         monkeypatch.setattr(worker_module._WorkerGL, "render", broken)
+        views = itertools.cycle(orbit(400))  # keyframes are asked for every frame
         with pytest.raises(LodspriteError, match="worker stopped: the GL context was lost"):
-            for vp in orbit(400) * 5:  # keyframes are asked for every frame
-                engine.frame(vp)
-                time.sleep(0.002)
+            wait_until(lambda: engine.frame(next(views)) and False, 60,
+                       "a frame that says the worker died", interval_s=0.002)
     finally:
         engine.close()

@@ -117,15 +117,13 @@ def test_an_interrupted_build_is_refused_then_resumes_to_the_same_store(tmp_path
     assert all(np.array_equal(x, y) for x, y in zip(a, b, strict=True))
 
 
-def test_a_corrupt_store_is_one_line_and_exit_code_2(tmp_path):
+def test_a_corrupt_store_is_one_line_and_exit_code_2(tmp_path, cli):
     build_store("fractal:200x200:1", tmp_path / "c.zarr", tile=128, chunk=64)
     (tmp_path / "c.zarr" / "zarr.json").write_text("{not json")
     with pytest.raises(InputError):
         TerrainStore(tmp_path / "c.zarr")
-    r = subprocess.run([sys.executable, "-c", "from lodsprite.cli import main; main()",
-                        "render", "--terrain", str(tmp_path / "c.zarr"), "--frames", "2",
-                        "--out", str(tmp_path / "o")], capture_output=True, text=True,
-                       timeout=120)
+    r = cli("render", "--terrain", str(tmp_path / "c.zarr"), "--frames", "2",  # in-process
+            "--out", str(tmp_path / "o"))
     assert r.returncode == 2 and "Traceback" not in r.stderr
     assert len([ln for ln in r.stderr.splitlines() if ln.strip()]) == 1
     assert not (tmp_path / "o").exists()

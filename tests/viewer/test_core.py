@@ -252,39 +252,72 @@ def test_tint_marks_only_the_fallback_of_a_spriteframe(make_core):
 
 # ------------------------------------------------------------------------------- HUD
 
+def spy_frames(technique) -> list:
+    """Every :class:`FrameInfo` ``technique.frame`` returns from now on, in order."""
+    seen, frame = [], technique.frame
+    technique.frame = lambda vp: seen.append(frame(vp)) or seen[-1]
+    return seen
+
+
+def assert_hud_shows(core, f) -> None:
+    """The HUD's state and text are those of the technique's frame ``f``."""
+    h = core.hud
+    assert (h.frame_type, h.keyframes, h.triangles) == (f.type, f.keyframes, f.triangles)
+    assert h.error_px == f.error_px or (math.isnan(h.error_px) and math.isnan(f.error_px))
+    err = "-" if math.isnan(f.error_px) else f"{f.error_px:.2f} px"
+    lines = h.lines()
+    assert lines[2] == f"frame {f.type}   error {err}   keyframes {f.keyframes}"
+    assert lines[3] == f"triangles {f.triangles:,}"
+
+
 def test_hud_state_after_frames(make_core, gl):
     core, t = make_core(mode="sprite"), make_core.target()
+    seen = spy_frames(core.technique)
     assert core.hud.fps == 0.0
     show(core, t.fbo)
+    assert_hud_shows(core, seen[-1])
     assert core.hud.frame_type == "keyframe" and core.hud.keyframes == 1
     assert core.hud.triangles > 0 and core.hud.error_px == 0.0
     core.key("w", True)
-    show(core, t.fbo, 2, dt=0.05)
-    assert core.hud.frame_type in ("first_sprite", "sprite", "keyframe")
-    assert core.hud.fps > 0
-    assert core.index == 3 and len(core.rows) == 3
+    for _ in range(6):
+        show(core, t.fbo, dt=0.05)
+        f = seen[-1]
+        assert_hud_shows(core, f)
+        # what is shown is within ε (1 px) of the geometry: a keyframe exactly
+        assert f.error_px == 0.0 if f.type == "keyframe" else 0.0 <= f.error_px < 1.0
+    types = [f.type for f in seen]
+    # inline keyframes: each keyframe frame adds one; a spriteframe follows one
+    assert [f.keyframes for f in seen] == [types[:i + 1].count("keyframe")
+                                           for i in range(len(types))]
+    assert set(types[1:]) <= {"keyframe", "first_sprite", "sprite"} and "sprite" in types
+    assert core.index == 7 and [r["kind"] for r in core.rows] == types
+    # the frame rate over the window of intervals logged (the first frame has none)
+    intervals = [r["interval_ms"] for r in core.rows[1:]]
+    assert core.hud.fps == pytest.approx(1e3 / np.mean(intervals))
     lines = core.hud.lines()
-    text = "\n".join(lines)
-    assert "mode sprite" in lines[1] and "epsilon 1px" in lines[1]
-    assert gl.info.renderer in text
-    assert "keyframes 1" in text or "keyframes 2" in text
-    assert "fps" in lines[0]
+    median = float(lines[0].split("frame ")[1].split(" ms median")[0])
+    assert median == pytest.approx(np.median([r["ms"] for r in core.rows]), abs=0.006)
+    assert lines[1] == "mode sprite  epsilon 1px"
+    assert lines[4] == f"GL {gl.info.renderer}"
     core.key("x")
     show(core, t.fbo)
     core._panel_at = -math.inf  # the panel refreshes at most PANEL_HZ times a second
     show(core, t.fbo)
     assert "wireframe" in core.hud.lines()
+    assert_hud_shows(core, seen[-1])
 
 
 # ------------------------------------------------------------------ played paths, files
 
-def test_played_path_writes_frames_summary_and_screenshots(make_core, scene, tmp_path):
+def test_played_path_writes_frames_summary_and_screenshots(make_core, gl, scene, tmp_path):
     path = get_path("chen1999", scene.hf, 5)
     plan = PlayPlan(path, tmp_path / "out", tmp_path / "shots", every=2, exit=True)
     rec = FlightRecorder()
     core, t = make_core(mode="sprite", play=plan, record=rec), make_core.target()
     assert play(core, t.fbo) == 5
     assert core.quit and len(rec) == 5
+    flown = rec.save(tmp_path / "flown.json", path.fov_y_deg)
+    np.testing.assert_array_equal(flown.eyes(), path.eyes())   # the path's frames, in order
 
     with (tmp_path / "out" / "frames.csv").open() as fh:
         head = fh.readline().strip().split(",")
@@ -292,17 +325,48 @@ def test_played_path_writes_frames_summary_and_screenshots(make_core, scene, tmp
     rows = list(csv.DictReader((tmp_path / "out" / "frames.csv").open()))
     assert len(rows) == 5 and list(rows[0]) == FRAME_COLUMNS
     assert [int(r["frame"]) for r in rows] == list(range(5))
-    assert all(float(r["ms"]) > 0 and int(r["triangles"]) > 0 for r in rows)
+    assert all(float(r["ms"]) > 0 for r in rows)
+
+    # The reference: the same technique driven straight along the path, after the same
+    # warm-up (three frames at the first viewpoint).  Inline keyframes are deterministic,
+    # so every frame's type, triangles, keyframes and error must be the played ones.
+    with Renderer(scene, SIZE, 45.0, ctx=gl.mgl) as r:
+        tech = terrain_techniques(16, 1.0, threaded=False)["sprite"](r)
+        try:
+            for _ in range(3):
+                tech.frame(path.viewpoints[0])
+            ref, images = [], []
+            for vp in path.viewpoints:
+                ref.append(tech.frame(vp))
+                images.append(tech.read_image())
+        finally:
+            tech.release()
+    assert [r["kind"] for r in rows] == [f.type for f in ref]
+    assert [int(r["triangles"]) for r in rows] == [f.triangles for f in ref]
+    assert [int(r["keyframes"]) for r in rows] == [f.keyframes for f in ref]
+    np.testing.assert_allclose([float(r["error_px"]) for r in rows],
+                               [f.error_px for f in ref], rtol=1e-5, atol=1e-9)
+
+    # The summary is of those rows (keys read: frames, mode, path, size, keyframes,
+    # median_ms, p99_ms, mean_ms).
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
     for key in SUMMARY_KEYS:
         assert key in summary, key
     assert summary["frames"] == 5 and summary["mode"] == "sprite"
     assert summary["path"] == path.name and summary["size"] == list(SIZE)
-    assert summary["keyframes"] >= 1 and summary["median_ms"] > 0
-    assert summary["p99_ms"] >= summary["median_ms"]
+    assert summary["keyframes"] == ref[-1].keyframes
+    ms = np.array([float(r["ms"]) for r in rows])
+    assert summary["median_ms"] == pytest.approx(np.median(ms), rel=1e-5)  # csv: 6 digits
+    assert summary["p99_ms"] == pytest.approx(np.percentile(ms, 99), rel=1e-5)
+    assert summary["mean_ms"] == pytest.approx(ms.mean(), rel=1e-5)
+
+    # Screenshots of every second frame, each the reference's image of that frame.
     shots = sorted(p.name for p in (tmp_path / "shots").iterdir())
     assert shots == ["frame_00000.png", "frame_00002.png", "frame_00004.png"]
-    assert read_image(tmp_path / "shots" / "frame_00002.png").shape == (96, 96, 3)
+    for i in (0, 2, 4):
+        shot = read_image(tmp_path / "shots" / f"frame_{i:05d}.png")
+        assert shot.shape == (96, 96, 3)
+        assert np.abs(shot.astype(int) - images[i]).max() <= 1, i
 
 
 def test_played_path_without_exit_hands_over_to_the_controller(make_core, scene, tmp_path):
