@@ -170,6 +170,30 @@ def _swan_flight_line(hf: HeightField) -> tuple[np.ndarray, np.ndarray, float, f
     return peak, dirs[k], float(arms[k, 1]), float(arms[k, 0])
 
 
+def _swan_floor(hf: HeightField, peak: np.ndarray, u: np.ndarray, t_f: float,
+                t_b: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The altitude floor of :func:`swan2002` on a dense sampling ``td`` of the flight
+    line (metres along ``u`` from ``peak``, ``t_f`` to ``t_b``): ``(td, floor, need)``;
+    ``need`` is the highest ground within ``0.03 L`` plus the clearance, ``floor`` its
+    running maximum over the look-ahead, smoothed and never below ``need`` (float64
+    metres)."""
+    L = hf.extent
+    step = 0.5 * min(hf.dx, hf.dy)
+    n_dense = int(min(max(math.ceil((t_b - t_f) / step) + 1, 512), 1 << 16))
+    td = np.linspace(t_f, t_b, n_dense)
+    step = float(td[1] - td[0])
+    rad = _SWAN_RADIUS * L
+    size = (2 * (math.ceil(rad / hf.dy) + 1) + 1, 2 * (math.ceil(rad / hf.dx) + 1) + 1)
+    hmax = ndimage.maximum_filter(hf.heights, size, mode="nearest")
+    gx, gy = peak[0] + td * u[0], peak[1] + td * u[1]
+    need = _sample_grid(hf, hmax, gx, gy).astype(np.float64) + _SWAN_CLEARANCE * L
+    hw = max(1, round(_SWAN_LOOKAHEAD * L / step))
+    floor = ndimage.maximum_filter1d(need, 2 * hw + 1, mode="nearest")
+    floor = ndimage.gaussian_filter1d(floor, hw / 3.0, mode="nearest", truncate=3.0)
+    floor = np.maximum(floor, need)  # guard against rounding of the kernel radius
+    return td, floor, need
+
+
 def swan2002(hf: HeightField, frames: int = SWAN2002_FRAMES) -> CameraPath:
     """Swan et al. (2002): zoom in, fly low over a plain, over the range, onto the plain beyond.
 
@@ -227,20 +251,7 @@ def swan2002(hf: HeightField, frames: int = SWAN2002_FRAMES) -> CameraPath:
     h_a = float(hf.height_at(*(peak + t_a * u)))
     z_f = h_a + _SWAN_START_DIST * L * se
 
-    # Altitude floor on a dense sampling of the flight line.
-    step = 0.5 * min(hf.dx, hf.dy)
-    n_dense = int(min(max(math.ceil((t_b - t_f) / step) + 1, 512), 1 << 16))
-    td = np.linspace(t_f, t_b, n_dense)
-    step = float(td[1] - td[0])
-    rad = _SWAN_RADIUS * L
-    size = (2 * (math.ceil(rad / hf.dy) + 1) + 1, 2 * (math.ceil(rad / hf.dx) + 1) + 1)
-    hmax = ndimage.maximum_filter(hf.heights, size, mode="nearest")
-    gx, gy = peak[0] + td * u[0], peak[1] + td * u[1]
-    need = _sample_grid(hf, hmax, gx, gy).astype(np.float64) + _SWAN_CLEARANCE * L
-    hw = max(1, round(_SWAN_LOOKAHEAD * L / step))
-    floor = ndimage.maximum_filter1d(need, 2 * hw + 1, mode="nearest")
-    floor = ndimage.gaussian_filter1d(floor, hw / 3.0, mode="nearest", truncate=3.0)
-    floor = np.maximum(floor, need)  # guard against rounding of the kernel radius
+    td, floor, need = _swan_floor(hf, peak, u, t_f, t_b)
 
     s = np.arange(n, dtype=np.float64) / (n - 1)
     zoom = s <= _SWAN_ZOOM_END
