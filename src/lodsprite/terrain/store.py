@@ -378,7 +378,7 @@ class TerrainStore:
         """The finest level that fits ``max_side`` as an in-memory :class:`HeightField`
         (its spacing stretched so that it spans level 0's extent, as the adaptive renderer
         draws it), for commands that need the whole field."""
-        from lodsprite.terrain.loaders import heightfield_from_array
+        from lodsprite.terrain.rasters import heightfield_from_array
 
         k = self.level_for(max_side)
         r, c = self.shape(k)
