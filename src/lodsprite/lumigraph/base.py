@@ -17,9 +17,10 @@ import numpy as np
 from lodsprite.camera import Viewpoint
 from lodsprite.gl.lumigraph import ColorMeshRenderer, FloatTarget, LumigraphRenderer
 from lodsprite.lumigraph.critical import st_point
+from lodsprite.lumigraph.geometry import Slab
 from lodsprite.lumigraph.loader import NodeLoader
 from lodsprite.lumigraph.store import Lumigraph
-from lodsprite.lumigraph.subsets import cover_draws, subset_cover
+from lodsprite.lumigraph.subsets import cover_draws, grid_cover, subset_cover
 from lodsprite.sprite.predictors import DecayLinearPredictor
 
 FRAME_S = 1.0 / 30.0  # the nominal time between frames, for the motion predictor
@@ -137,3 +138,17 @@ class Method:
     def release(self) -> None:
         self.loader.close()
         self.rec.release()
+
+
+def full_reconstruction(gl: object, slab: Slab, images: dict[tuple[int, int], np.ndarray],
+                        width: int, height: int) -> LumigraphRenderer:
+    """A renderer with every node of ``images`` (``(i, j)`` -> uv image) resident, drawn
+    over the full grid (nodes missing from ``images`` are fictitious)."""
+    rec = LumigraphRenderer(gl, slab, width, height, max(len(images), 1))
+    n = slab.n_st
+    valid = np.zeros((n, n))
+    for (i, j), img in images.items():
+        rec.upload(i * n + j, img)
+        valid[i, j] = 1.0
+    rec.set_draws(cover_draws(grid_cover(slab, valid)))
+    return rec
