@@ -126,7 +126,7 @@ def without_dask(monkeypatch) -> None:
 
 
 def test_require_dask_names_the_extra_when_dask_is_missing(monkeypatch):
-    from lodsprite.profiles.generate import require_dask
+    from lodsprite.cluster import require_dask
 
     without_dask(monkeypatch)
     with pytest.raises(InputError, match=r"lodsprite\[cluster\]") as exc:

@@ -136,13 +136,9 @@ def level_errors(group, header: StoreHeader) -> list[float]:
 
 
 def _client(address: str):
-    from lodsprite.profiles.generate import DASK_CONNECT_TIMEOUT_S, require_dask
+    from lodsprite.cluster import connect
 
-    dd = require_dask()
-    try:
-        return dd.Client(address, timeout=f"{DASK_CONNECT_TIMEOUT_S}s")
-    except OSError as exc:
-        raise InputError(f"cannot reach the Dask scheduler at {address}: {exc}") from exc
+    return connect(address)
 
 
 def _run_tiles(client, out: Path, k: int, tiles: list[int], src, group, header):
