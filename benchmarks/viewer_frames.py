@@ -46,7 +46,7 @@ def offscreen_sprite_ms(terrain: str, frames: int, size: str, tmp: Path) -> floa
     run(["render", "--terrain", terrain, "--mode", "sprite", "--frames", str(frames),
          "--size", size, "--out", str(out)])
     with open(out / "frames.csv") as f:
-        ms = [float(r["ms"]) for r in csv.DictReader(f) if r["type"] == "sprite"]
+        ms = [float(r["ms"]) for r in csv.DictReader(f) if r["kind"] == "sprite"]
     return float(np.median(ms))
 
 

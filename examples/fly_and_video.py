@@ -51,7 +51,7 @@ def main() -> None:
         raise SystemExit(f"error: {exc}") from None
     print(f"{summary['frames']} frames: {summary['keyframes']} keyframes, median "
           f"{summary['median_ms']:.2f} ms per frame, RMSE LOD-sprite "
-          f"{summary['rmse_sprite_mean']:.2f} vs plain {summary['lod']}² "
+          f"{summary['rmse_mean']:.2f} vs plain {summary['lod']}² "
           f"{summary['rmse_lod_mean']:.2f} grey levels; wrote {args.out / 'flight.mp4'}")
 
 

@@ -20,7 +20,7 @@ def test_sprite_frames_name_the_keyframe_they_show_and_its_viewpoint(tmp_path, g
     keys = json.loads((tmp_path / "keyframes.json").read_text())["keyframes"]
     shown = [int(r["keyframe"]) for r in rows]
     assert shown[0] == 0 and shown == sorted(shown) and shown[-1] == len(keys) - 1
-    assert sum(r["type"] == "keyframe" for r in rows) == len(keys)
+    assert sum(r["kind"] == "keyframe" for r in rows) == len(keys)
     for row, k in zip(rows, shown, strict=True):  # each frame's keyframe eye, in metres
         eye = [float(row[c]) for c in ("key_x", "key_y", "key_z")]
         assert np.allclose(eye, keys[k]["viewpoint"]["o"], rtol=1e-5)
@@ -30,7 +30,7 @@ def test_sprite_frames_name_the_keyframe_they_show_and_its_viewpoint(tmp_path, g
     metric = ErrorMetric.for_level(scene.hf, config.lod)
     checked = 0
     for i, row in enumerate(rows):
-        if row["type"] == "keyframe":
+        if row["kind"] == "keyframe":
             continue
         eye = Viewpoint.from_dict(keys[shown[i]]["viewpoint"]).o
         vp = path.viewpoints[i]

@@ -2,7 +2,8 @@
 
 The public API (see the README's "Python API" section):
 
-* scenes: :func:`load_scene` (terrain and texture specs) -> :class:`Scene`;
+* scenes: :func:`load_scene` (terrain and texture specs) and :func:`open_scene` (any
+  scene: a terrain, a lumigraph folder, a crowd) -> :class:`Scene`, which holds layers;
 * rendering: :class:`Renderer` (standalone headless context, or an application's
   moderngl context for embedding), :meth:`Renderer.sprite` -> :class:`LodSprite`, the
   LOD-sprite engine frame by frame (keyframes inline, or on a worker thread);
@@ -11,7 +12,9 @@ The public API (see the README's "Python API" section):
 * images: :func:`read_image`, :func:`write_image`;
 * batch runs: :class:`RenderConfig` and :func:`render_path` (what ``lodsprite render``
   does);
-* techniques the viewer drives: :class:`Technique`, :func:`terrain_techniques`, and
+* techniques, for batch runs and the window alike: :class:`Technique` (frames as
+  :class:`Frame`), the registry (:class:`TechniqueSpec`, :class:`Option`, :func:`register`,
+  module :mod:`lodsprite.techniques`), :func:`run_path`, the one harness, and
   :func:`view_scene`, the viewer window with your own techniques;
 * errors: :class:`LodspriteError` and its subclasses.
 """
@@ -36,19 +39,32 @@ _LAZY = {
     "load_path_json": "lodsprite.paths", "RenderConfig": "lodsprite.run",
     "render_path": "lodsprite.run", "Scene": "lodsprite.scene",
     "load_scene": "lodsprite.scene", "SpriteFrame": "lodsprite.sprite.engine",
-    "FrameInfo": "lodsprite.technique", "Param": "lodsprite.technique",
-    "Technique": "lodsprite.technique", "terrain_techniques": "lodsprite.technique",
+    "FrameInfo": "lodsprite.techniques", "Param": "lodsprite.techniques",
+    "Technique": "lodsprite.techniques", "terrain_techniques": "lodsprite.technique",
+    "Frame": "lodsprite.techniques", "TechniqueSpec": "lodsprite.techniques",
+    "Option": "lodsprite.techniques", "register": "lodsprite.techniques",
+    "run_path": "lodsprite.harness", "open_scene": "lodsprite.scene",
     "view_scene": "lodsprite.viewer.app",
 }
 
 if TYPE_CHECKING:
     from lodsprite.api import LodSprite, Renderer, read_image, write_image
     from lodsprite.camera import Projection, Viewpoint, look_at
+    from lodsprite.harness import run_path
     from lodsprite.paths import CameraPath, get_path, load_path_json
     from lodsprite.run import RenderConfig, render_path
-    from lodsprite.scene import Scene, load_scene
+    from lodsprite.scene import Scene, load_scene, open_scene
     from lodsprite.sprite.engine import SpriteFrame
-    from lodsprite.technique import FrameInfo, Param, Technique, terrain_techniques
+    from lodsprite.technique import terrain_techniques
+    from lodsprite.techniques import (
+        Frame,
+        FrameInfo,
+        Option,
+        Param,
+        Technique,
+        TechniqueSpec,
+        register,
+    )
     from lodsprite.viewer.app import view_scene
 
 
@@ -70,11 +86,13 @@ __version__ = "0.1.0"
 
 __all__ = [
     "CameraPath",
+    "Frame",
     "FrameInfo",
     "GLUnavailableError",
     "InputError",
     "LodSprite",
     "LodspriteError",
+    "Option",
     "Param",
     "PathError",
     "Projection",
@@ -83,6 +101,7 @@ __all__ = [
     "Scene",
     "SpriteFrame",
     "Technique",
+    "TechniqueSpec",
     "TerrainError",
     "Viewpoint",
     "__version__",
@@ -90,8 +109,11 @@ __all__ = [
     "load_path_json",
     "load_scene",
     "look_at",
+    "open_scene",
     "read_image",
+    "register",
     "render_path",
+    "run_path",
     "terrain_techniques",
     "view_scene",
     "write_image",

@@ -72,13 +72,30 @@ class Renderer:
         self.size = (w, h)
         self.fov_y_deg = float(fov_y_deg)
         self.gl = GLContext() if ctx is None else GLContext.wrap(ctx)
-        try:
-            self._paths = PathRenderer(scene, self.size, self.fov_y_deg, self.gl, framebuffer)
-        except BaseException:
-            self.gl.release()  # a context of our own only; a wrapped one is only forgotten
-            raise
+        self._paths = None  # the terrain layer's GL state (none without one)
+        if scene.hf is not None:
+            try:
+                self._paths = PathRenderer(scene, self.size, self.fov_y_deg, self.gl,
+                                           framebuffer)
+            except BaseException:
+                self.gl.release()  # a context of our own only; a wrapped one is forgotten
+                raise
         self._presenter: Presenter | None = None
         self._sprites: list[LodSprite] = []  # released with the renderer
+        self._own_paths = True
+
+    @classmethod
+    def wrap(cls, paths: PathRenderer) -> Renderer:
+        """A renderer over existing GL state ``paths`` (its scene, size and field of
+        view), which it never releases: what a caller holding a
+        :class:`~lodsprite.gl.paths.PathRenderer` passes to a technique."""
+        self = cls.__new__(cls)
+        r = paths.renderer
+        self.scene, self.size = paths.scene, (r.target.width, r.target.height)
+        self.fov_y_deg = float(r.fov_y_deg)
+        self.gl, self._paths = paths.ctx, paths
+        self._presenter, self._sprites, self._own_paths = None, [], False
+        return self
 
     @property
     def info(self) -> GLInfo:
@@ -87,27 +104,35 @@ class Renderer:
 
     @property
     def paths(self) -> PathRenderer:
-        """The GL state underneath (context, geometry, terrain renderer)."""
+        """The terrain layer's GL state (context, geometry, terrain renderer)."""
+        return self._terrain()
+
+    def _terrain(self) -> PathRenderer:
+        if self._paths is None:
+            raise InputError("this scene has no terrain layer to draw")
         return self._paths
 
     def projection(self, viewpoint: Viewpoint) -> Projection:
-        """The frame projection at ``viewpoint`` (near/far fitted to the terrain)."""
+        """The frame projection at ``viewpoint`` (near/far fitted to the terrain; without
+        one, 0.1 m to 100 km)."""
+        if self._paths is None:
+            return Projection(self.fov_y_deg, self.size[0] / self.size[1], 0.1, 1e5)
         return self._paths.renderer.projection(viewpoint)
 
     def render(self, viewpoint: Viewpoint, lod: int | None = None) -> FrameStats:
         """Draw the terrain at full resolution (``lod=None``) or at uniform level ``lod``
         (quads per side) into the renderer's image; returns once the GL work is done."""
-        stats = self._paths.renderer.render(viewpoint, lod)
+        stats = self._terrain().renderer.render(viewpoint, lod)
         self.gl.finish()
         return stats
 
     def read_color(self) -> np.ndarray:
         """The last image, ``(h, w, 3) uint8``, row 0 at the top."""
-        return self._paths.renderer.target.read_color()
+        return self._terrain().renderer.target.read_color()
 
     def read_depth(self) -> np.ndarray:
         """The last z-buffer, ``(h, w) float32`` window depth in [0, 1], row 0 at the top."""
-        return self._paths.renderer.target.read_depth()
+        return self._terrain().renderer.target.read_depth()
 
     def sprite(self, epsilon_px: float = DEFAULT_EPSILON_PX, lod: int = DEFAULT_COARSE,
                threaded: bool = False, visibility: str = DEFAULT_VISIBILITY,
@@ -126,7 +151,7 @@ class Renderer:
         """Draw the last image over ``framebuffer``'s viewport (default: the context's
         screen, the window of an embedding application).  Rendering binds lodsprite's own
         targets, so an application passes the framebuffer it draws into next."""
-        target = self._paths.renderer.target
+        target = self._terrain().renderer.target
         if target.external:  # already drawn there, or copied from there
             dst = framebuffer if framebuffer is not None else self.gl.default_fbo
             if dst is not target.fbo and dst.glo != target.fbo.glo:
@@ -160,11 +185,12 @@ class Renderer:
             self._presenter.release()
             self._presenter = None
         if self._paths is not None:
-            self._paths.release()
+            if self._own_paths:
+                self._paths.release()
             self._paths = None
-        if self.gl is not None and self.gl.owned:
+        if self.gl is not None and self.gl.owned and self._own_paths:
             self.gl.release()
-            self.gl = None
+        self.gl = None
 
     def __enter__(self) -> Renderer:
         return self

@@ -1,19 +1,18 @@
 """Rendering a camera path with timings: the engine behind ``lodsprite render``.
 
-Modes ``full``, ``lod`` and ``sprite`` run in this process.  The distributed mode is not
-core: the command line hands it to :func:`lodsprite.distributed.run.render_distributed`
-(this module never imports :mod:`lodsprite.distributed`).
-
-Per-frame time covers issuing the frame's GL work and waiting for it to finish
-(``ctx.finish()``) — the view-frustum culling, uniform and instance uploads
-included.  Reading pixels back (for saving frames) happens after the clock
-stops, for every mode alike.  One untimed warm-up frame precedes the timed ones
-so that shader compilation and first-use driver work are not charged to frame 0.
+:func:`render_path` makes the registry's technique for the config
+(:mod:`lodsprite.techniques`: ``full``, ``lod``, ``sprite``, ``adaptive``, and
+``sprite-adaptive`` for ``--mode sprite --key-sse``) and runs it through the one harness
+(:func:`lodsprite.harness.run_path`): one untimed warm-up, per-frame time with
+``ctx.finish()`` inside the clock, nothing read back in the timed loop; saved frames,
+video and quality (``--ground-truth``, every technique) come from an untimed replay of the
+same decisions.  The distributed mode is not core: the command line hands it to
+:func:`lodsprite.distributed.run.render_distributed` (this module never imports
+:mod:`lodsprite.distributed`).
 """
 
 from __future__ import annotations
 
-import platform
 from contextlib import ExitStack
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -26,22 +25,28 @@ from lodsprite.gl.sprite import (
     DEFAULT_GUARD_PX,
     DEFAULT_VISIBILITY,
     VISIBILITY_MODES,
-    SpriteRenderer,
 )
+from lodsprite.harness import RunResult, peak_rss_mb, run_path, timing_summary, write_run
 from lodsprite.paths import CameraPath, get_path
 from lodsprite.progress import Progress
-from lodsprite.report.io import write_csv, write_json, write_png
+from lodsprite.report.io import write_json, write_png
 from lodsprite.scene import Scene, load_scene
-from lodsprite.sprite.engine import DEFAULT_EPSILON_PX, FRAME_TYPES, LodSpriteEngine
+from lodsprite.sprite.engine import DEFAULT_EPSILON_PX
 from lodsprite.terrain import DEFAULT_EXAGGERATION
 from lodsprite.terrain.lod import DEFAULT_COARSE, level_step
 
-MODES = ("full", "lod", "sprite", "adaptive")
-FRAME_COLUMNS = ["frame", "mode", "ms", "triangles"]
-SPRITE_COLUMNS = ["type", "error_px", "keyframe", "key_x", "key_y", "key_z"]
-ADAPTIVE_COLUMNS = ["nodes", "uploaded", "resident", "loaded", "evicted"]
-QUALITY_COLUMNS = ["rmse_sprite", "psnr_sprite", "ssim_sprite", "rmse_lod", "psnr_lod", "ssim_lod",
-                   "rmse_lod_border"]
+
+def _modes() -> tuple[str, ...]:
+    """``--mode`` choices: the registry's terrain techniques run in this process (the
+    distributed client is handed on by the command line; sprite-adaptive is ``sprite``
+    with ``--key-sse``)."""
+    from lodsprite import techniques
+
+    return tuple(n for n in techniques.names(("terrain",))
+                 if n not in ("distributed", "sprite-adaptive"))
+
+
+MODES = _modes()  # the built-in ones (a technique registered later joins _modes())
 MAX_GUARD_PX = 1024
 
 
@@ -70,10 +75,24 @@ class RenderConfig:
     key_sse: float | None = None  # sprite: keyframes by the adaptive renderer at this SSE
     gpu_mb: float = 256.0     # adaptive: GPU tile cache budget
     host_mb: float = 512.0    # adaptive: host tile cache budget
+    flip: bool = False        # with ground_truth: FLIP per frame too
+
+    @property
+    def technique(self) -> str:
+        """The registry's name of what this config renders."""
+        return "sprite-adaptive" if self.mode == "sprite" and self.key_sse else self.mode
+
+    def technique_options(self) -> dict:
+        """The options of the config the technique declares (the registry picks them)."""
+        return {"lod": self.lod, "epsilon": self.epsilon, "visibility": self.visibility,
+                "guard_px": self.guard_px, "border": self.border, "sse": self.sse,
+                "key_sse": self.key_sse, "gpu_mb": self.gpu_mb, "host_mb": self.host_mb,
+                "threaded": False}
 
     def validate(self) -> None:
-        if self.mode not in MODES:
-            raise InputError(f"unknown mode '{self.mode}': use one of {', '.join(MODES)}")
+        modes = _modes()  # the registry's now: a technique registered later is one too
+        if self.mode not in modes:
+            raise InputError(f"unknown mode '{self.mode}': use one of {', '.join(modes)}")
         w, h = self.size
         if not (16 <= w <= 8192 and 16 <= h <= 8192):
             raise InputError(f"image size must be between 16 and 8192 pixels, got {w}x{h}")
@@ -89,8 +108,6 @@ class RenderConfig:
                              f"got {self.guard_px}")
         if self.quality_stride < 1:
             raise InputError(f"quality stride must be >= 1, got {self.quality_stride}")
-        if self.ground_truth and self.mode != "sprite":
-            raise InputError("--ground-truth needs --mode sprite")
         if self.key_sse is not None and (self.mode != "sprite" or not self.key_sse > 0):
             raise InputError("--key-sse goes with --mode sprite and must be > 0 pixels")
         if not (self.sse > 0 and self.gpu_mb > 0 and self.host_mb > 0):
@@ -112,19 +129,11 @@ def parse_size(text: str) -> tuple[int, int]:
     return vals[0], vals[1]
 
 
-def timing_summary(ms: np.ndarray) -> dict:
-    """Median, mean, standard deviation, p95 (ms) and total (s) of per-frame times."""
-    ms = np.asarray(ms, dtype=np.float64)
-    return {"median_ms": float(np.median(ms)), "mean_ms": float(ms.mean()),
-            "std_ms": float(ms.std()), "p95_ms": float(np.percentile(ms, 95)),
-            "total_s": float(ms.sum() / 1e3)}
-
-
 def prepare(config: RenderConfig) -> tuple[Scene, CameraPath]:
     """Validate the config and load scene and path (all user errors surface here)."""
     config.validate()
     scene = load_scene(config.terrain, config.texture, config.grid, config.exaggeration)
-    if config.mode in ("lod", "sprite"):
+    if config.mode in ("lod", "sprite"):  # the level checked before any GL work
         level_step(scene.hf.quads, config.lod)
     return scene, get_path(config.path, scene.hf, config.frames)
 
@@ -177,71 +186,6 @@ def quality_summary(rows: list[dict]) -> dict:
     return out
 
 
-def sprite_summary(rows: list[dict]) -> dict:
-    """Keyframe count and mean time per frame type (ms)."""
-    out: dict = {"keyframes": sum(r["type"] == "keyframe" for r in rows)}
-    for t in FRAME_TYPES:
-        ms = [r["ms"] for r in rows if r["type"] == t]
-        out[f"mean_ms_{t}"] = float(np.mean(ms)) if ms else float("nan")
-    out["keyframe_fraction"] = out["keyframes"] / len(rows)
-    out["mean_error_px"] = float(np.mean([r["error_px"] for r in rows]))
-    return out
-
-
-def sprite_frames(pr: PathRenderer, path: CameraPath, config: RenderConfig,
-                  progress: Progress | None = None, on_frame=None,
-                  keyframes: list | None = None) -> list[dict]:
-    """Run LOD-sprite along ``path``; rows with type, error_px, ms, triangles, keyframe (the
-    index of the keyframe shown) and quality against an untimed full-resolution ground
-    truth when ``config.ground_truth``, and ``key_x, key_y, key_z``, the eye (metres) of the
-    keyframe shown.  ``keyframes``, if given, is extended with the engine's keyframes,
-    :class:`~lodsprite.sprite.policy.KeyChoice` records in order (what ``keyframe``
-    indexes)."""
-    sprite = SpriteRenderer(pr.renderer, config.lod, config.visibility, border=config.border,
-                            guard_px=config.guard_px)
-    adaptive = None
-    if config.key_sse is not None:  # keyframes by the adaptive renderer
-        adaptive = _adaptive(pr, config, path, config.key_sse)
-        sprite.keyframe_drawer = adaptive.render_into
-        from lodsprite.terrain.store import TerrainStore
-        from lodsprite.terrain.storefield import store_field
-
-        if isinstance(adaptive.tree.p, TerrainStore):  # proxy, ribbons, metric from level 0
-            pr.geometry.set_full(store_field(adaptive.tree.p))
-    try:
-        vp0 = path.viewpoints[0]
-        sprite.render_keyframe(vp0, 0.0)  # warm-up (shader compilation), untimed
-        sprite.render_spriteframe(vp0)
-        pr.ctx.finish()
-        engine = LodSpriteEngine(sprite, config.epsilon)
-        if adaptive is not None:  # streaming goes on between keyframes
-            engine.between_keyframes = adaptive.prefetch
-        rows = []
-        for i, vp in enumerate(path.viewpoints):
-            f = engine.frame(vp)
-            row = {"frame": i, "mode": "sprite", "ms": f.ms, "triangles": f.triangles,
-                   "type": f.type, "error_px": f.error_px, "keyframe": f.keyframe}
-            if config.ground_truth or on_frame:
-                image = engine.read_image()
-                if on_frame:
-                    on_frame(i, image)
-                if config.ground_truth and i % config.quality_stride == 0:
-                    row.update(frame_quality(image, reference_images(pr, vp, config.lod)))
-            rows.append(row)
-            if progress:
-                progress(i + 1, len(path))
-        for row in rows:  # the eye of the keyframe each frame shows, metres
-            eye = engine.keyframes[row["keyframe"]].viewpoint.o
-            row.update(key_x=float(eye[0]), key_y=float(eye[1]), key_z=float(eye[2]))
-        if keyframes is not None:
-            keyframes.extend(engine.keyframes)
-        return rows
-    finally:
-        sprite.release()
-        if adaptive is not None:
-            adaptive.release()
-
-
 def keyframe_records(keyframes: list, rows: list[dict]) -> list[dict]:
     """JSON records of the keyframes a LOD-sprite run rendered: ``keyframes`` is the
     engine's log (:class:`~lodsprite.sprite.policy.KeyChoice` in order); ``rows`` the
@@ -259,6 +203,48 @@ def keyframe_records(keyframes: list, rows: list[dict]) -> list[dict]:
             for k, key in enumerate(keyframes)]
 
 
+def run_technique(renderer, path: CameraPath, config: RenderConfig,
+                  progress: Progress | None = None, on_image=None,
+                  keyframes: list | None = None) -> RunResult:
+    """The registry's technique for ``config`` on ``renderer`` (a
+    :class:`~lodsprite.api.Renderer`) along ``path``, through the harness; a LOD-sprite
+    run's rows get ``key_x, key_y, key_z`` (the eye, metres, of the keyframe each frame
+    shows) and ``keyframes``, if given, is extended with the engine's keyframe log."""
+    from lodsprite import techniques
+
+    technique = techniques.get(config.technique).create(
+        renderer, **techniques.get(config.technique).bind(config.technique_options()))
+    try:
+        result = run_path(technique, path, progress=progress,
+                          ground_truth=config.ground_truth,
+                          quality_stride=config.quality_stride, flip=config.flip,
+                          on_image=on_image)
+        log = getattr(getattr(technique, "sprite", None), "keyframes", None)
+        if log is not None:
+            for row in result.rows:
+                eye = log[row["keyframe"]].viewpoint.o
+                row.update(key_x=float(eye[0]), key_y=float(eye[1]), key_z=float(eye[2]))
+            result.columns[result.columns.index("keyframe") + 2:
+                           result.columns.index("keyframe") + 2] = ["key_x", "key_y", "key_z"]
+            if keyframes is not None:
+                keyframes.extend(log)
+        return result
+    finally:
+        technique.release()
+
+
+def sprite_frames(pr: PathRenderer, path: CameraPath, config: RenderConfig,
+                  progress: Progress | None = None, on_image=None,
+                  keyframes: list | None = None) -> list[dict]:
+    """The rows of a LOD-sprite run (``config.mode == "sprite"``) on ``pr``'s GL state
+    (:func:`run_technique`): ``kind, ms, triangles, error_px, keyframe, keyframes,
+    key_x..z`` and, with ``config.ground_truth``, the replay's quality columns."""
+    from lodsprite.api import Renderer
+
+    with Renderer.wrap(pr) as renderer:
+        return run_technique(renderer, path, config, progress, on_image, keyframes).rows
+
+
 def render_path(config: RenderConfig, out_dir: Path, progress: Progress | None = None,
                 video: Path | None = None) -> dict:
     """Render ``config``'s path; write ``frames.csv``, ``summary.json`` (and in sprite mode
@@ -266,8 +252,10 @@ def render_path(config: RenderConfig, out_dir: Path, progress: Progress | None =
     optionally PNG frames to ``out_dir``; return the summary.
 
     ``video``: an MP4 file of the frames shown (:mod:`lodsprite.report.video`); with
-    ``config.ground_truth`` each video frame is full resolution | LOD-sprite | difference.
+    ``config.ground_truth`` each video frame is full resolution | technique | difference.
+    Saved frames and video come from the untimed replay.
     """
+    from lodsprite.api import Renderer
     from lodsprite.report.video import VideoWriter, check_video_path, side_by_side
 
     if video is not None:
@@ -275,144 +263,42 @@ def render_path(config: RenderConfig, out_dir: Path, progress: Progress | None =
     scene, path = prepare(config)
     out_dir = Path(out_dir)
     keyframes: list = []
-    with PathRenderer(scene, config.size, field_of_view(config, path)) as pr, \
+    with Renderer(scene, config.size, field_of_view(config, path)) as renderer, \
             ExitStack() as stack:
         writer = stack.enter_context(VideoWriter(video)) if video is not None else None
 
-        def on_frame(i: int, image: np.ndarray) -> None:
+        def on_image(i: int, image: np.ndarray, truth: np.ndarray | None) -> None:
             if config.save_frames:
                 write_png(out_dir / "frames" / f"frame_{i:05d}.png", image)
             if writer is not None:
-                if config.ground_truth:  # untimed, after the frame's clock stopped
-                    pr.renderer.render(path.viewpoints[i], None)
-                    image = side_by_side(pr.renderer.target.read_color(), image)
+                if config.ground_truth:
+                    if truth is None:
+                        renderer.render(path.viewpoints[i], None)
+                        truth = renderer.read_color()
+                    image = side_by_side(truth, image)
                 writer.append(image)
 
-        wanted = on_frame if config.save_frames or writer is not None else None
-        extra: dict = {}
-        if config.mode == "sprite":
-            rows = sprite_frames(pr, path, config, progress, wanted, keyframes)
-        elif config.mode == "adaptive":
-            rows, extra = adaptive_frames(pr, scene, path, config, progress, wanted)
-        else:
-            rows = plain_frames(pr, path, config, progress, wanted)
-        info = pr.ctx.info
-        pr.ctx.check_error("render_path")
-    ms = np.array([r["ms"] for r in rows])
+        wanted = on_image if config.save_frames or writer is not None else None
+        result = run_technique(renderer, path, config, progress, wanted, keyframes)
+        info = renderer.info
+        renderer.gl.check_error("render_path")
     summary = {
-        "frames": len(rows), "mode": config.mode, "terrain": config.terrain,
+        **result.summary, "mode": config.mode, "terrain": config.terrain,
         "texture": config.texture, "path": config.path,
         "size": list(config.size), "grid": scene.hf.quads,
-        "lod": config.lod if config.mode in ("lod", "sprite") else scene.hf.quads,
-        "exaggeration": config.exaggeration,
-        **timing_summary(ms),
-        "triangles_mean": float(np.mean([r["triangles"] for r in rows])),
-        "gl_renderer": info.renderer, "gl_version": info.version,
-        "machine": platform.machine(), "python": platform.python_version(),
-        "config": asdict(config), **extra,
+        "exaggeration": config.exaggeration, "gl_version": info.version,
+        "config": asdict(config),
     }
-    columns = list(FRAME_COLUMNS)
-    if config.mode == "adaptive":
-        columns += ADAPTIVE_COLUMNS
-    if config.mode == "sprite":
-        summary.update({"epsilon": config.epsilon, "visibility": config.visibility,
-                        **sprite_summary(rows)})
-        columns += SPRITE_COLUMNS
-        if config.ground_truth:
-            summary.update(quality_summary(rows))
-            columns += QUALITY_COLUMNS
-    write_csv(out_dir / "frames.csv", rows, columns)
+    if "rmse_mean" in summary and "rmse_lod_mean" in summary:
+        summary["rmse_ratio"] = (summary["rmse_mean"] / summary["rmse_lod_mean"]
+                                 if summary["rmse_lod_mean"] > 0 else float("nan"))
+    write_run(out_dir, result, summary)
     if config.mode == "sprite":
         write_json(out_dir / "keyframes.json",
-                   {"keyframes": keyframe_records(keyframes, rows)})
-    write_json(out_dir / "summary.json", summary)
+                   {"keyframes": keyframe_records(keyframes, result.rows)})
     return summary
 
 
-def plain_frames(pr: PathRenderer, path: CameraPath, config: RenderConfig,
-                 progress: Progress | None = None, on_frame=None) -> list[dict]:
-    """Full-resolution or uniform-level frames along ``path`` (one untimed warm-up first)."""
-    level = None if config.mode == "full" else config.lod
-    pr.timed(path.viewpoints[0], level)
-    rows = []
-    for i, vp in enumerate(path.viewpoints):
-        ms, tris = pr.timed(vp, level)
-        rows.append({"frame": i, "mode": config.mode, "ms": ms, "triangles": tris})
-        if on_frame:
-            on_frame(i, pr.renderer.target.read_color())
-        if progress:
-            progress(i + 1, len(path))
-    return rows
-
-
-def _adaptive(pr: PathRenderer, config: RenderConfig, path: CameraPath, sse: float):
-    """The adaptive renderer on ``pr``'s context and target, coloured with the scene's
-    texture (as full resolution is), over the terrain's extent."""
-    from lodsprite.terrain.adaptive import AdaptiveTerrain
-
-    return AdaptiveTerrain(pr.ctx, pyramid_for(config, pr.geometry.hf), pr.renderer.target,
-                           field_of_view(config, path), sse, gpu_mb=config.gpu_mb,
-                           host_mb=config.host_mb, color=pr.geometry.color_tex)
-
-
-def pyramid_for(config: RenderConfig, hf):
-    """What the adaptive renderer draws: the store itself when ``--terrain`` is one, else
-    the scene's height field ``hf`` as an in-memory pyramid (so it is the field full
-    resolution draws)."""
-    from lodsprite.terrain.pyramid import MemoryPyramid
-    from lodsprite.terrain.store import TerrainStore, is_store
-
-    if is_store(config.terrain):
-        return TerrainStore(Path(config.terrain).expanduser(), config.exaggeration)
-    return MemoryPyramid.from_heightfield(hf)
-
-
-def peak_rss_mb() -> float:
-    """This process's peak resident memory in MB: ``VmHWM`` of ``/proc/self/status``, which
-    starts afresh at ``exec`` (``getrusage``'s ``ru_maxrss`` keeps the peak of the process
-    that forked it, e.g. a harness holding a GL context), else ``ru_maxrss``."""
-    try:
-        with open("/proc/self/status") as f:
-            for line in f:
-                if line.startswith("VmHWM:"):
-                    return int(line.split()[1]) / 1024.0
-    except OSError:
-        pass
-    import resource
-
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # KB on Linux
-
-
-def adaptive_frames(pr: PathRenderer, scene: Scene, path: CameraPath, config: RenderConfig,
-                    progress: Progress | None = None, on_frame=None
-                    ) -> tuple[list[dict], dict]:
-    """Adaptive frames along ``path`` (:mod:`lodsprite.terrain.adaptive`): no warm-up
-    beyond the roots (the first frame's time is part of ``first_frame_s``)."""
-    import time
-
-    t0 = time.perf_counter()
-    terrain = _adaptive(pr, config, path, config.sse)
-    rows = []
-    try:
-        for i, vp in enumerate(path.viewpoints):
-            f = terrain.frame(vp)
-            if i == 0:
-                first = time.perf_counter() - t0
-            rows.append({"frame": i, "mode": "adaptive", "ms": f.ms, "triangles": f.triangles,
-                         "nodes": f.nodes, "uploaded": f.uploaded, "resident": f.resident,
-                         "loaded": f.loaded, "evicted": f.evicted})
-            if on_frame:
-                on_frame(i, pr.renderer.target.read_color())
-            if progress:
-                progress(i + 1, len(path))
-        reader = getattr(terrain.loader, "reader_peak_mb", lambda: 0.0)()
-        peak = peak_rss_mb() + reader  # with the tile reader process's (an upper bound)
-        extra = {"sse": config.sse, "first_frame_s": first, "peak_rss_mb": peak,
-                 "peak_rss_mb_reader": reader,
-                 "tiles_resident": f.resident,
-                 "tiles_loaded": f.loaded, "tiles_evicted": f.evicted, "tiles_bad": f.bad,
-                 "gpu_cache_tiles": terrain.slots.capacity, "levels": terrain.tree.levels,
-                 "gpu_cache_mb": terrain.slots.capacity * (terrain.tree.g + 1) ** 2 * 4 / 2 ** 20}
-    finally:
-        terrain.release()
-    return rows, extra
+__all__ = ["MODES", "RenderConfig", "field_of_view", "keyframe_records", "parse_size",
+           "peak_rss_mb", "prepare", "render_path", "run_technique", "sprite_frames",
+           "timing_summary"]

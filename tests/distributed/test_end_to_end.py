@@ -68,7 +68,7 @@ def test_render_mode_distributed_writes_frames_and_server_statistics(tmp_path):
     # every frame names the keyframe it showed (the server's or the client's own)
     assert max(shown) == len(keys) - 1 and min(shown) >= 0
     assert any(not k["local"] for k in keys)  # the server's keyframes reached the client
-    assert summary["local_keyframes"] == sum(r["type"] == "local_keyframe" for r in rows)
+    assert summary["local_keyframes"] == sum(r["kind"] == "local_keyframe" for r in rows)
 
 
 @pytest.fixture

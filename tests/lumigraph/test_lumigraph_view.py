@@ -6,15 +6,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from lodsprite import techniques
 from lodsprite.gl.target import RenderTarget
 from lodsprite.lumigraph.run import capture_lumigraph
-from lodsprite.lumigraph.technique import (
-    VIEW_METHODS,
-    lumigraph_controller,
-    lumigraph_techniques,
-    to_lumigraph,
-)
-from lodsprite.technique import stage_scene
+from lodsprite.lumigraph.technique import VIEW_METHODS, to_lumigraph
+from lodsprite.scene import open_scene
+from lodsprite.viewer.controls import CameraController
 from lodsprite.viewer.core import ViewerCore
 
 SIZE = (96, 96)
@@ -31,7 +28,8 @@ def test_the_home_view_looks_at_the_object_from_in_front(lf_dir):
     from lodsprite.lumigraph.store import Lumigraph
 
     centre = Lumigraph(lf_dir).slabs[0].frame[:3, 3]
-    vp = to_lumigraph(lumigraph_controller(lf_dir).viewpoint)
+    home = CameraController.from_home(open_scene(str(lf_dir)).camera_home())
+    vp = to_lumigraph(home.viewpoint)
     # in the lumigraph's world the eye is in front of the object (+z), looking at it
     to = centre - vp.o
     assert -to[2] > Lumigraph(lf_dir).slabs[0].st_distance
@@ -39,8 +37,12 @@ def test_the_home_view_looks_at_the_object_from_in_front(lf_dir):
 
 
 def test_every_method_draws_the_object_in_the_viewer_and_keys_switch(gl, lf_dir):
-    core = ViewerCore(gl.mgl, stage_scene(lf_dir), SIZE, lumigraph_techniques(lf_dir),
-                      "critical", lumigraph_controller(lf_dir))
+    scene = open_scene(str(lf_dir))  # the registry's modes for its light field
+    assert scene.layers == ("lightfield",) and scene.mode == "critical"
+    modes = techniques.factories(scene.layers)
+    assert tuple(modes) == VIEW_METHODS
+    core = ViewerCore(gl.mgl, scene, SIZE, modes, "critical",
+                      CameraController.from_home(scene.camera_home()))
     target = RenderTarget(gl, *SIZE)
     try:
         for k, name in enumerate(VIEW_METHODS):

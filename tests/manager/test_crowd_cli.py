@@ -16,7 +16,7 @@ from lodsprite.experiments.gumbau.report import write_outputs
 from lodsprite.experiments.gumbau.run import GumbauConfig, reproduce_gumbau
 from lodsprite.manager.run import CrowdConfig, run_crowd
 
-SUMMARY_KEYS = ("extractions_total", "fps_mean", "frame_ms_median", "frame_ms_p99",
+SUMMARY_KEYS = ("extractions_total", "fps_mean", "median_ms", "p99_ms",
                 "triangles_mean", "draw_calls_mean", "lod_cpu_ms_mean")
 
 
@@ -87,15 +87,18 @@ def test_reproduction_writes_every_key_plots_and_report(tmp_path):
 
 
 def test_the_crowd_in_the_viewer_switches_modes(gl):
+    from lodsprite import techniques
     from lodsprite.gl.target import RenderTarget
-    from lodsprite.manager.run import make_crowd
-    from lodsprite.manager.technique import crowd_controller, crowd_techniques
-    from lodsprite.technique import stage_scene
+    from lodsprite.scene import open_scene
+    from lodsprite.viewer.controls import CameraController
     from lodsprite.viewer.core import ViewerCore
 
-    crowd = make_crowd(CrowdConfig(objects=100))
-    core = ViewerCore(gl.mgl, stage_scene("crowd"), (96, 72), crowd_techniques(crowd, 30.0),
-                      "manager", crowd_controller(crowd))
+    scene = open_scene("crowd:100")  # the registry's modes for its object set
+    assert scene.layers == ("objects",) and scene.mode == "manager"
+    modes = techniques.factories(scene.layers, target_fps=30.0)
+    assert list(modes) == ["manager", "independent", "discrete"]
+    core = ViewerCore(gl.mgl, scene, (96, 72), modes, "manager",
+                      CameraController.from_home(scene.camera_home()))
     target = RenderTarget(gl, 96, 72)
     try:
         for key, mode in (("1", "manager"), ("2", "independent"), ("3", "discrete")):

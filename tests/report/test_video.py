@@ -80,7 +80,7 @@ def test_render_writes_a_side_by_side_video_of_the_frames_shown(tmp_path):
         png = iio.imread(out / "frames" / f"frame_{i:05d}.png").astype(float)
         assert np.abs(video[i, :, 64:128] - png).mean() < 6.0
     # Where the frame shown equals full resolution (a keyframe) the difference is ~black.
-    key = next(i for i, r in enumerate(rows) if r["type"] == "keyframe")
+    key = next(i for i, r in enumerate(rows) if r["kind"] == "keyframe")
     assert video[key, :, 128:].mean() < 8.0
 
 

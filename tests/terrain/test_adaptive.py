@@ -202,7 +202,7 @@ def test_lod_sprite_with_adaptive_keyframes_stays_closer_than_the_plain_coarse_l
                        size=(96, 96), lod=16, ground_truth=True)
     s = render_path(cfg, tmp_path)
     assert s["keyframes"] >= 1 and s["config"]["key_sse"] == 0.5
-    assert s["rmse_sprite_mean"] < s["rmse_lod_mean"]
+    assert s["rmse_mean"] < s["rmse_lod_mean"]
     with pytest.raises(InputError, match="--key-sse"):
         RenderConfig(mode="full", key_sse=0.5).validate()
 

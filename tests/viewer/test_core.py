@@ -287,7 +287,8 @@ def test_played_path_writes_frames_summary_and_screenshots(make_core, scene, tmp
     assert core.quit and len(rec) == 5
 
     with (tmp_path / "out" / "frames.csv").open() as fh:
-        assert fh.readline().strip().split(",")[:3] == ["frame", "type", "ms"]
+        head = fh.readline().strip().split(",")
+        assert head[:5] == ["frame", "kind", "ms", "triangles", "error_px"]
     rows = list(csv.DictReader((tmp_path / "out" / "frames.csv").open()))
     assert len(rows) == 5 and list(rows[0]) == FRAME_COLUMNS
     assert [int(r["frame"]) for r in rows] == list(range(5))
@@ -380,7 +381,7 @@ def test_threaded_sprite_mode_renders_and_release_stops_the_worker(make_core, sc
     status = core.technique.status()
     assert core.hud.keyframes >= 1 and status.startswith("keyframes: worker thread")
     assert "lead -" not in status  # the lead is a latency, never negative
-    assert {r["type"] for r in core.rows} <= {"keyframe", "first_sprite", "sprite"}
+    assert {r["kind"] for r in core.rows} <= {"keyframe", "first_sprite", "sprite"}
     assert core.technique.read_image().std() > 0
     core.technique.release()
     assert len(workers()) == before

@@ -100,7 +100,7 @@ def play(display, tmp_path, mode, fps):
     assert "Traceback" not in proc.stderr
     rows = list(csv.DictReader((out / "frames.csv").open()))
     assert [int(r["frame"]) for r in rows] == list(range(FRAMES))
-    assert {"frame", "type", "ms"} <= set(rows[0])
+    assert {"frame", "kind", "ms"} <= set(rows[0])
     summary = json.loads((out / "summary.json").read_text())
     for key in ("median_ms", "p99_ms", "mean_ms", "keyframes"):
         assert key in summary, key
@@ -113,7 +113,7 @@ def play(display, tmp_path, mode, fps):
 
 def test_full_mode_window_plays_and_matches_offscreen(display, tmp_path, references):
     rows, summary, shots = play(display, tmp_path, "full", fps=0)
-    assert {r["type"] for r in rows} == {"full"} and summary["keyframes"] == 0
+    assert {r["kind"] for r in rows} == {"full"} and summary["keyframes"] == 0
     for i, shot in shots.items():
         assert shot.shape == (*SIZE[::-1], 3)
         assert rmse(shot, references[i]) < FULL_RMSE_TOL, i
@@ -121,7 +121,7 @@ def test_full_mode_window_plays_and_matches_offscreen(display, tmp_path, referen
 
 def test_sprite_mode_window_stays_close_to_full_resolution(display, tmp_path, references):
     rows, summary, shots = play(display, tmp_path, "sprite", fps=30)
-    assert {r["type"] for r in rows} <= {"keyframe", "first_sprite", "sprite"}
+    assert {r["kind"] for r in rows} <= {"keyframe", "first_sprite", "sprite"}
     assert summary["keyframes"] >= 1
     for i, shot in shots.items():
         err = rmse(shot, references[i])

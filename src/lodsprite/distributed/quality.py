@@ -157,4 +157,7 @@ def inline_quality(config: RenderConfig, stride: int = DEFAULT_STRIDE) -> dict:
     with PathRenderer(scene, cfg.size, field_of_view(cfg, path)) as pr:
         rows = sprite_frames(pr, path, cfg)
     errors = np.array([r["error_px"] for r in rows])
-    return _summary(errors, [r for r in rows if "rmse_sprite" in r], cfg.epsilon)
+    # the harness's columns (rmse, psnr, ssim) under this comparison's names
+    named = {"rmse": "rmse_sprite", "psnr": "psnr_sprite", "ssim": "ssim_sprite"}
+    return _summary(errors, [{named.get(k, k): v for k, v in r.items()}
+                             for r in rows if "rmse" in r], cfg.epsilon)

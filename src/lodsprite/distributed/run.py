@@ -12,7 +12,6 @@ import os
 import socket
 import subprocess
 import sys
-import time
 from collections.abc import Sequence
 from contextlib import contextmanager
 from dataclasses import replace
@@ -31,10 +30,9 @@ from lodsprite.distributed.pacing import DEFAULT_PACE, PACES
 from lodsprite.distributed.render import scene_args
 from lodsprite.errors import InputError, LodspriteError
 from lodsprite.progress import Progress
-from lodsprite.report.io import write_csv, write_json
-from lodsprite.run import RenderConfig, field_of_view, prepare, timing_summary
+from lodsprite.report.io import write_json
+from lodsprite.run import RenderConfig, field_of_view, prepare
 
-FRAME_COLUMNS = ["frame", "mode", "ms", "triangles", "type", "keyframe_seq", "keyframe"]
 MAX_ERROR_OFF = ("off", "none")
 
 
@@ -156,78 +154,45 @@ def run_client(config: RenderConfig, servers: list[str], out_dir: Path,
     waits (up to ``warmup_s``) for a first keyframe, so that server start-up is not
     counted as frames drawn without one.
     """
+    from lodsprite.distributed.technique import DistributedTechnique
+    from lodsprite.harness import run_path, write_run
+
     max_error = check_client_options(pace, adopt, max_error)
     scene, path = prepare(replace(config, mode="sprite"))
     args = scene_args(config.terrain, config.texture, config.grid, config.exaggeration,
                       config.size, field_of_view(config, path))
     client = LodClient(scene, args, servers, config.size, config.lod, config.visibility,
                        config.epsilon, adopt, keys, config.border, pace, max_error)
-    rows: list[dict] = []
-    interrupted = False
-    stats: list[dict] = []
-    summary: dict = {}
+    technique = DistributedTechnique.on_client(client, servers)
+    technique.warmup_s = warmup_s
     try:
-        _wait_for_first_keyframe(client, path.viewpoints[0], warmup_s)
-        for i, vp in enumerate(path.viewpoints):
-            f = client.frame(vp)
-            rows.append({"frame": i, "mode": "distributed", "ms": f.ms,
-                         "triangles": f.triangles, "type": f.type,
-                         "keyframe_seq": f.keyframe_seq, "keyframe": f.keyframe_index})
-            if progress:
-                progress(i + 1, len(path))
-    except KeyboardInterrupt:
-        interrupted = True  # write what was measured, completely, then stop
-    finally:
-        if rows:
-            stats = client.server_stats()
-        info = client.paths.ctx.info
+        result = run_path(technique, path, finish=client.paths.ctx.finish,
+                          gl_renderer=client.paths.ctx.info.renderer, progress=progress)
+        stats = client.server_stats()
         shown = client.shown
-        rejected = client.rejected_keyframes
+    finally:
         client.close()
-    if rows:
-        summary = _summary(config, rows, stats, info.renderer, servers)
-        summary.update(grid=scene.hf.quads, lod=config.lod, interrupted=interrupted, adopt=adopt,
-                       pace=pace, max_error=max_error, epsilon=config.epsilon,
-                       rejected_keyframes=rejected,
-                       triangles_mean=float(np.mean([r["triangles"] for r in rows])))
-        write_csv(out_dir / "frames.csv", rows, FRAME_COLUMNS)
-        write_json(out_dir / "server_stats.json", {"servers": servers, "stats": stats})
-        write_json(out_dir / "keyframes.json", {"servers": servers, "keyframes": shown})
-        write_json(out_dir / "summary.json", summary)
-    if interrupted:
+    summary = {**result.summary, "mode": "distributed", "terrain": config.terrain,
+               "path": config.path, "size": list(config.size), "servers": servers,
+               **_server_means(stats), "grid": scene.hf.quads, "lod": config.lod,
+               "interrupted": result.interrupted, "adopt": adopt, "pace": pace,
+               "max_error": max_error, "epsilon": config.epsilon}
+    write_run(out_dir, result, summary)
+    write_json(out_dir / "server_stats.json", {"servers": servers, "stats": stats})
+    write_json(out_dir / "keyframes.json", {"servers": servers, "keyframes": shown})
+    if result.interrupted:
         raise KeyboardInterrupt
     return summary
-
-
-def _wait_for_first_keyframe(client: LodClient, viewpoint, timeout_s: float) -> None:
-    deadline = time.perf_counter() + timeout_s
-    while time.perf_counter() < deadline:
-        if client.frame(viewpoint).type == "keyframe":
-            return
-        time.sleep(0.02)
 
 
 def _mean(values) -> float:
     return float(np.mean(values)) if len(values) else float("nan")
 
 
-def _summary(config: RenderConfig, rows: list[dict], stats: list[dict], renderer: str,
-             servers: list[str]) -> dict:
-    ms = np.array([r["ms"] for r in rows])
-    received = sum(r["type"] == "keyframe" for r in rows)
+def _server_means(stats: list[dict]) -> dict:
+    """The servers' mean times per stage (ms) from their statistics."""
     server = {k: _mean([v for s in stats for v in s.get(k, [])])
               for k in ("production_ms", "viewpoint_wait_ms", "paced_ms", "render_ms",
                         "queue_insert_ms", "delta_t_ms", "queue_retrieve_ms",
                         "transmission_ms")}
-    return {
-        "frames": len(rows), "mode": "distributed", "terrain": config.terrain,
-        "path": config.path, "size": list(config.size), "servers": servers,
-        **timing_summary(ms),
-        "p99_ms": float(np.percentile(ms, 99)),
-        "keyframes_received": received,
-        "sprites_per_keyframe": (len(rows) - received) / received if received else None,
-        "local_frames": sum(r["type"].startswith("local") for r in rows),
-        "local_keyframes": sum(r["type"] == "local_keyframe" for r in rows),
-        **{f"{k.removesuffix('_ms')}_ms_mean": v for k, v in server.items()},
-        "gl_renderer": renderer,
-    }
+    return {f"{k.removesuffix('_ms')}_ms_mean": v for k, v in server.items()}

@@ -8,6 +8,8 @@ with the server's address; the viewer core never imports this layer.
 
 from __future__ import annotations
 
+import time
+
 import moderngl
 import numpy as np
 
@@ -15,8 +17,9 @@ from lodsprite.api import Renderer
 from lodsprite.camera import Projection, Viewpoint
 from lodsprite.distributed.client import DEFAULT_MAX_ERROR, LodClient
 from lodsprite.distributed.render import scene_args
+from lodsprite.errors import InputError
 from lodsprite.sprite.engine import DEFAULT_EPSILON_PX
-from lodsprite.technique import FALLBACK_TINT, FrameInfo, Param, Technique, TechniqueFactory
+from lodsprite.techniques import FALLBACK_TINT, Frame, Param, Technique, TechniqueFactory
 from lodsprite.terrain.lod import DEFAULT_COARSE
 
 
@@ -24,6 +27,12 @@ class DistributedTechnique(Technique):
     """Spriteframes drawn here from keyframes a LOD server renders."""
 
     name = "distributed"
+
+    #: Whether :meth:`frame` measures the shown keyframe's error (the viewer's HUD); a
+    #: batch run leaves it out of the frame's time.
+    measure_error = True
+    #: Seconds the warm-up waits for a first keyframe (server start-up is not a frame).
+    warmup_s = 10.0
 
     def __init__(self, renderer: Renderer, server: str, lod: int = DEFAULT_COARSE,
                  epsilon_px: float = DEFAULT_EPSILON_PX,
@@ -37,6 +46,35 @@ class DistributedTechnique(Technique):
         self.client = LodClient(scene, args, [server], renderer.size, lod, epsilon=epsilon_px,
                                 adopt="better", max_error=max_error, ctx=renderer.gl)
 
+    @classmethod
+    def on_client(cls, client: LodClient, servers: list[str]) -> DistributedTechnique:
+        """The technique over a client made elsewhere (``lodsprite client``): batch runs
+        only (no renderer to present with), the error left out of the frame's time."""
+        self = cls.__new__(cls)
+        Technique.__init__(self, None)
+        self.client, self.server = client, ",".join(servers)
+        self.measure_error = False
+        return self
+
+    replays = False  # keyframes come from servers: quality by lodsprite.distributed.quality
+
+    def warm_up(self, viewpoint: Viewpoint) -> None:
+        """Wait (up to :attr:`warmup_s`) for a first keyframe at ``viewpoint``."""
+        deadline = time.perf_counter() + self.warmup_s
+        while time.perf_counter() < deadline:
+            if self.client.frame(viewpoint).type == "keyframe":
+                return
+            time.sleep(0.02)
+
+    def summary(self, frames: list[Frame]) -> dict:
+        received = sum(f.kind == "keyframe" for f in frames)
+        return {"keyframes_received": received,
+                "sprites_per_keyframe": (len(frames) - received) / received if received
+                else None,
+                "local_frames": sum(f.kind.startswith("local") for f in frames),
+                "local_keyframes": sum(f.kind == "local_keyframe" for f in frames),
+                "rejected_keyframes": self.client.rejected_keyframes}
+
     def params(self) -> dict[str, Param]:
         bound = self.client.max_error
         return {} if bound is None else {
@@ -47,10 +85,12 @@ class DistributedTechnique(Technique):
             super().set_param(name, value)
         self.client.max_error = float(value)
 
-    def frame(self, viewpoint: Viewpoint) -> FrameInfo:
+    def frame(self, viewpoint: Viewpoint) -> Frame:
         f = self.client.frame(viewpoint)
-        return FrameInfo(f.type, f.ms, f.triangles, self.client.shown_error_px(viewpoint),
-                         len(self.client.shown))
+        error = self.client.shown_error_px(viewpoint) if self.measure_error else float("nan")
+        return Frame(f.type, f.ms, f.triangles, error,
+                     {"keyframe_seq": f.keyframe_seq, "keyframe": f.keyframe_index,
+                      "keyframes": len(self.client.shown)})
 
     def draw_to(self, framebuffer: moderngl.Framebuffer | None = None) -> None:
         target = self.client.paths.renderer.target
@@ -84,3 +124,12 @@ def distributed_factory(server: str, lod: int = DEFAULT_COARSE,
                         max_error: float | None = DEFAULT_MAX_ERROR) -> TechniqueFactory:
     """A factory of :class:`DistributedTechnique` for the viewer's ``distributed`` mode."""
     return lambda renderer: DistributedTechnique(renderer, server, lod, epsilon_px, max_error)
+
+
+def create(renderer: Renderer, server: str, lod: int = DEFAULT_COARSE,
+           epsilon: float = DEFAULT_EPSILON_PX,
+           max_error: float | None = DEFAULT_MAX_ERROR) -> DistributedTechnique:
+    """The registry's factory of ``distributed`` (:mod:`lodsprite.techniques.builtin`)."""
+    if not server:
+        raise InputError("the distributed technique needs a server (HOST:PORT)")
+    return DistributedTechnique(renderer, server, lod, epsilon, max_error)

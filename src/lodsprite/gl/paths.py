@@ -18,6 +18,7 @@ class PathRenderer:
     def __init__(self, scene: Scene, size: tuple[int, int], fov_y_deg: float = 45.0,
                  ctx: GLContext | None = None,
                  framebuffer: moderngl.Framebuffer | None = None) -> None:
+        self.scene = scene
         self.own_ctx = ctx is None
         self.ctx = ctx or GLContext()
         self.geometry = None

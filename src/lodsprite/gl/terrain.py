@@ -64,6 +64,7 @@ class TerrainGeometry:
         self._meshes: dict[int, tuple[moderngl.Buffer, moderngl.Buffer, int]] = {}
         self._layouts: dict[int, ChunkLayout] = {}
         self._proxies: dict[tuple[int, bool], tuple[moderngl.Buffer, moderngl.Buffer, int]] = {}
+        self.generation = 0  # counts set_full calls (proxy vertex arrays are cached by it)
         max_chunks = (hf.quads // min(chunk_quads, hf.quads)) ** 2
         self.instances = mgl.buffer(reserve=max_chunks * 8)
 
@@ -101,14 +102,18 @@ class TerrainGeometry:
 
     def set_full(self, full: HeightField) -> None:
         """Take LOD-sprite's proxy and ribbons from ``full`` (same extent as ``hf``, e.g. a
-        :class:`~lodsprite.terrain.storefield.StoreField`); before any proxy is drawn."""
-        if self._proxies:
-            raise RuntimeError("set_full must come before the first proxy is built")
+        :class:`~lodsprite.terrain.storefield.StoreField`); proxies built from the previous
+        field are dropped (a viewer switching to a technique that reads the store)."""
         if abs(full.width - self.hf.width) > 1e-6 * self.hf.width or \
                 abs(full.depth - self.hf.depth) > 1e-6 * self.hf.depth:
             raise InputError(f"the full-resolution field spans {full.width:.1f} x "
                              f"{full.depth:.1f} m, the terrain {self.hf.width:.1f} x "
                              f"{self.hf.depth:.1f} m")
+        for vbo, ibo, _ in self._proxies.values():
+            vbo.release()
+            ibo.release()
+        self._proxies.clear()
+        self.generation += 1  # vertex arrays of the dropped proxies are not used again
         self.full = full
 
     def proxy(self, level_quads: int, border: bool) -> tuple[moderngl.Buffer, moderngl.Buffer,
@@ -192,12 +197,12 @@ class TerrainRenderer:
         return cache[chunk_quads]
 
     def draw_proxy(self, program: moderngl.Program,
-                   cache: dict[tuple[int, bool], moderngl.VertexArray], view_proj: np.ndarray,
+                   cache: dict[tuple, moderngl.VertexArray], view_proj: np.ndarray,
                    level_quads: int, border: bool) -> int:
         """Draw the proxy mesh of level ``level_quads`` (:meth:`TerrainGeometry.proxy`) whole,
         with ``program`` (reading ``PROXY_VERTEX_COMMON``, other uniforms set); returns
         the triangles drawn."""
-        key = (level_quads, border)
+        key = (level_quads, border, self.geometry.generation)
         vbo, ibo, count = self.geometry.proxy(level_quads, border)
         if key not in cache:
             cache[key] = self.ctx.mgl.vertex_array(program, [(vbo, "3f 2f", "in_pos", "in_uv")],

@@ -15,20 +15,19 @@ the approximate geometry unless switched off, timed up to ``finish()``.
 from __future__ import annotations
 
 import io
-import platform
 import time
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
-from lodsprite.camera import Viewpoint, look_at, perspective
+from lodsprite.camera import Viewpoint, look_at
 from lodsprite.errors import InputError
 from lodsprite.lumigraph.capture import ColorMesh, capture, still_life
 from lodsprite.lumigraph.geometry import SIX_DIRECTIONS, SIX_SLABS, Slab, slab_facing
 from lodsprite.lumigraph.store import Lumigraph, save
 from lodsprite.paths import CameraPath
-from lodsprite.report.io import atomic_write_bytes, write_csv, write_json
+from lodsprite.report.io import atomic_write_bytes
 
 OBJECT_FILE = "object.npz"
 BUILTIN_OBJECTS = ("still-life",)
@@ -177,14 +176,13 @@ def render_lumigraph(folder: Path, out_dir: Path, frames: int = 120,
     (:data:`~lodsprite.lumigraph.methods.METHODS`; ``options`` go to
     :func:`~lodsprite.lumigraph.methods.make_method`); write ``frames.csv`` and
     ``summary.json`` to ``out_dir`` and return the summary.  With ``ground_truth``, every
-    ``quality_every``-th frame is compared (untimed) with the object drawn directly."""
-    rows, summary = measure(folder, method, path, frames, size, ground_truth,
-                            depth_correction, quality_every, progress, flip, **options)
-    columns = ["frame", "kind", "ms", "upload_ms", "raster_ms", "images", "uploads",
-               "evictions"] + (["psnr", "ssim"] if ground_truth else []) + (
-        ["flip"] if ground_truth and flip else [])
-    write_csv(Path(out_dir) / "frames.csv", rows, columns)
-    write_json(Path(out_dir) / "summary.json", summary)
+    ``quality_every``-th frame is compared (in the harness's untimed replay) with the
+    object drawn directly."""
+    from lodsprite.harness import write_run
+
+    result, summary = _measure(folder, method, path, frames, size, ground_truth,
+                               depth_correction, quality_every, progress, flip, **options)
+    write_run(Path(out_dir), result, summary)
     return summary
 
 
@@ -193,10 +191,45 @@ def measure(folder: Path, method: str = "full", path: CameraPath | None = None,
             depth_correction: bool = True, quality_every: int = 1,
             progress: Progress | None = None, flip: bool = False, **options
             ) -> tuple[list[dict], dict]:
-    """Run ``method`` along ``path``: the per-frame rows and their summary (see
-    :func:`render_lumigraph`); with ``flip``, compared frames get FLIP too (0.4 s a 512²
-    frame here)."""
-    from lodsprite.gl.context import GLContext
+    """Run ``method`` along ``path`` through the harness: the per-frame rows and their
+    summary (see :func:`render_lumigraph`); with ``flip``, compared frames get FLIP too
+    (0.4 s a 512² frame here)."""
+    result, summary = _measure(folder, method, path, frames, size, ground_truth,
+                               depth_correction, quality_every, progress, flip, **options)
+    return result.rows, summary
+
+
+class ObjectReference:
+    """The ground truth of a lumigraph frame: the object drawn directly from the same eye
+    (a viewer-world viewpoint, as the technique takes it), ``(h, w, 3) uint8``."""
+
+    def __init__(self, gl, mesh: ColorMesh, size: tuple[int, int], projection) -> None:
+        from lodsprite.gl.lumigraph import ColorMeshRenderer
+        from lodsprite.gl.target import RenderTarget
+
+        self.truth = ColorMeshRenderer(gl, mesh.vertices, mesh.faces, mesh.colors,
+                                       mesh.normals)
+        self.target = RenderTarget(gl, *size)
+        self.projection = projection
+
+    def __call__(self, viewpoint: Viewpoint) -> np.ndarray:
+        from lodsprite.lumigraph.technique import to_lumigraph
+
+        self.truth.render(self.projection @ to_lumigraph(viewpoint).view_matrix(),
+                          self.target.fbo)
+        return self.target.read_color()
+
+    def release(self) -> None:
+        self.target.release()
+        self.truth.release()
+
+
+def _measure(folder, method, path, frames, size, ground_truth, depth_correction,
+             quality_every, progress, flip, **options):
+    from lodsprite.api import Renderer
+    from lodsprite.harness import run_path
+    from lodsprite.lumigraph.technique import LumigraphTechnique, viewer_path
+    from lodsprite.scene import Scene
 
     lf = Lumigraph(folder)
     path = path or default_path(lf, frames)
@@ -204,32 +237,22 @@ def measure(folder: Path, method: str = "full", path: CameraPath | None = None,
     if ground_truth and obj_mesh is None:
         raise InputError(f"{folder} holds no {OBJECT_FILE}: no ground truth to compare with")
     w, h = size
-    proj = perspective(path.fov_y_deg, w / h, lf.header.near, 4 * lf.header.far)
-    with GLContext() as gl:
-        run = MethodRun(gl, lf, (w, h), depth_correction, obj_mesh, method, options)
-        run.flip = flip
+    with Renderer(Scene(lightfield=str(folder)), (w, h), path.fov_y_deg) as renderer:
+        t = LumigraphTechnique(renderer, folder, method, options, depth_correction)
+        ref = (ObjectReference(renderer.gl, obj_mesh, (w, h), t.projection)
+               if obj_mesh is not None else None)
         try:
-            rows = run.frames(path, proj, quality_every, progress)
-            info = run.info()
+            result = run_path(t, viewer_path(path), progress=progress,
+                              ground_truth=ground_truth, reference=ref,
+                              quality_stride=max(1, quality_every), flip=flip)
         finally:
-            run.release()
-        renderer = gl.info.renderer
-    ms = np.array([r["ms"] for r in rows])
-    summary = {"frames": len(rows), "method": method, "lumigraph": str(folder),
+            if ref is not None:
+                ref.release()
+            t.release()
+    summary = {**result.summary, "method": method, "lumigraph": str(folder),
                "object": lf.header.object, "bad_nodes": len(lf.bad_nodes), "size": [w, h],
-               "depth_correction": depth_correction,
-               "median_ms": float(np.median(ms)), "mean_ms": float(ms.mean()),
-               "p99_ms": float(np.percentile(ms, 99)), "max_ms": float(ms.max()),
-               "images_per_frame_mean": float(np.mean([r["images"] for r in rows])),
-               "uploads_per_frame_mean": float(np.mean([r["uploads"] for r in rows])),
-               "gl_renderer": renderer, "machine": platform.machine(), **info}
-    judged = [r for r in rows if r.get("psnr") is not None]
-    if judged:
-        summary["psnr_mean"] = float(np.mean([r["psnr"] for r in judged]))
-        summary["ssim_mean"] = float(np.mean([r["ssim"] for r in judged]))
-        if any("flip" in r for r in judged):
-            summary["flip_mean"] = float(np.mean([r["flip"] for r in judged if "flip" in r]))
-    return rows, summary
+               "depth_correction": depth_correction}
+    return result, summary
 
 
 class MethodRun:

@@ -5,8 +5,8 @@ screenshots and played paths as a terrain (keys 1-8 switch method).
 
 The viewer's world has z up (terrain); a lumigraph's objects have y up.  The technique
 turns the viewer's viewpoints by :data:`VIEWER_TO_LUMIGRAPH` before reconstructing, and
-:func:`lumigraph_controller` places the camera home in front of the object (the front
-slab), orbiting its centre.
+:func:`lumigraph_home` places the camera home in front of the object (the front slab),
+orbiting its centre; :func:`open_scene` makes a lumigraph folder a scene.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ import numpy as np
 
 from lodsprite.camera import Viewpoint, look_at, perspective
 from lodsprite.errors import InputError
-from lodsprite.technique import FrameInfo, Param, Technique, TechniqueFactory
+from lodsprite.techniques import Frame, Param, Technique, TechniqueFactory
 
 #: Viewer world (z up, home to the south) to lumigraph world (y up, front towards +z).
 VIEWER_TO_LUMIGRAPH = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
@@ -41,7 +41,8 @@ def viewer_path(path):
 class LumigraphTechnique(Technique):
     """One reconstruction method on the viewer's renderer and GL context."""
 
-    def __init__(self, renderer, folder, method: str, options: dict) -> None:
+    def __init__(self, renderer, folder, method: str, options: dict,
+                 depth_correction: bool = True) -> None:
         super().__init__(renderer)
         from lodsprite.gl.lumigraph import ColorMeshRenderer
         from lodsprite.lumigraph.methods import Context, MultiSlabMethod, make_method
@@ -49,22 +50,28 @@ class LumigraphTechnique(Technique):
 
         self.name = method
         self.lf = Lumigraph(folder)
-        mesh = self.lf.proxy()
         gl = renderer.gl
-        self.proxy = ColorMeshRenderer(gl, mesh.vertices, mesh.faces, mesh.colors,
-                                       mesh.normals)
+        self.proxy = None
+        if depth_correction:
+            mesh = self.lf.proxy()
+            self.proxy = ColorMeshRenderer(gl, mesh.vertices, mesh.faces, mesh.colors,
+                                           mesh.normals)
         ctx = Context(gl, self.lf, 0, renderer.size, self.proxy)
         try:
             self.method = (make_method(method, ctx, **options) if len(self.lf.slabs) == 1
                            else MultiSlabMethod(ctx, method, options))
         except BaseException:
-            self.proxy.release()
+            if self.proxy is not None:
+                self.proxy.release()
             raise
         w, h = renderer.size
         self.projection = perspective(renderer.fov_y_deg, w / h, self.lf.header.near,
                                       4 * self.lf.header.far)
         self.index = 0
         self._last = None
+        self._warm = False
+        self._keep: set[int] = set()  # frames whose image is kept for the replay
+        self._snaps: dict = {}
 
     def params(self) -> dict[str, Param]:
         if hasattr(self.method, "target_ms"):
@@ -77,17 +84,65 @@ class LumigraphTechnique(Technique):
             raise InputError(f"{self.name} has no parameter {name!r}")
         self.method.target_ms = 1e3 / float(value)
 
-    def frame(self, viewpoint: Viewpoint) -> FrameInfo:
+    def warm_up(self, viewpoint: Viewpoint) -> None:
+        """Untimed: the first nodes decoded and resident."""
         vp = to_lumigraph(viewpoint)
-        if self.index == 0:  # untimed: the first nodes decoded and resident
-            if hasattr(self.method, "warm_up"):
-                self.method.warm_up(vp, self.projection)
-            else:
-                self.method.frame(0, vp, self.projection)
-        f = self.method.frame(self.index, vp, self.projection)
+        if hasattr(self.method, "warm_up"):
+            self.method.warm_up(vp, self.projection)
+        else:
+            self.method.frame(0, vp, self.projection)
+        self._warm = True
+
+    def frame(self, viewpoint: Viewpoint) -> Frame:
+        if not self._warm:  # the viewer's first frame
+            self.warm_up(viewpoint)
+        f = self.method.frame(self.index, to_lumigraph(viewpoint), self.projection)
         self.index += 1
         self._last = f
-        return FrameInfo(f.kind, f.ms, self.method.rec.vertex_count // 3)
+        return Frame(f.kind, f.ms, self.method.rec.vertex_count // 3, extra={
+            "upload_ms": f.upload_ms, "raster_ms": f.raster_ms, "images": f.images,
+            "uploads": f.uploads, "evictions": f.evictions})
+
+    def plan_replay(self, frames: set[int]) -> None:
+        self._keep = set(frames)
+
+    def decision(self) -> dict:
+        """The frame's index; for a frame to be replayed, its reconstruction is copied on
+        the GPU (after the frame's clock stopped, finished before the next frame): a
+        method's node cache and loader cannot be rewound, so its image is the decision."""
+        from lodsprite.gl.lumigraph import FloatTarget
+
+        i = self.index - 1
+        if i in self._keep:
+            out = self.method.output
+            snap = FloatTarget(self.renderer.gl, *out.size)
+            self.renderer.gl.mgl.copy_framebuffer(snap.fbo, out.fbo)
+            self.renderer.gl.finish()
+            self._snaps[i] = snap
+        return {"frame": i}
+
+    def replay(self, viewpoint: Viewpoint, decision: dict) -> np.ndarray:
+        snap = self._snaps.pop(decision["frame"], None)
+        if snap is None:
+            raise InputError(f"frame {decision['frame']} was not kept for a replay")
+        try:
+            return snap.read_rgb8()
+        finally:
+            snap.release()
+
+    def summary(self, frames: list[Frame]) -> dict:
+        m = self.method
+        out = {"images_per_frame_mean": float(np.mean([f.extra["images"] for f in frames])),
+               "uploads_per_frame_mean": float(np.mean([f.extra["uploads"] for f in frames])),
+               "nodes_decoded": m.loader.decoded, "texture_layers": m.rec.capacity,
+               "texture_mb": m.rec.capacity * m.rec.node_bytes / 2 ** 20}
+        if hasattr(m, "switches"):
+            out["slab_switches"] = m.switches
+        if hasattr(m, "target_ms"):
+            out.update(target_ms=m.target_ms, scale=dict(m.costs.scale),
+                       fetch_ms=m.costs.fetch, decode_ms=m.costs.decode,
+                       upload_ms_per_node=m.costs.upload * m.costs.scale["upload"])
+        return out
 
     def draw_to(self, framebuffer=None) -> None:
         self.renderer.present(self.method.output.color, (0.0, 0.0, 1.0, 1.0), framebuffer)
@@ -105,8 +160,22 @@ class LumigraphTechnique(Technique):
                 f"{rec.capacity} ({mb:.1f} MB); decoded {self.method.loader.decoded}")
 
     def release(self) -> None:
+        for snap in self._snaps.values():
+            snap.release()
+        self._snaps.clear()
         self.method.release()
-        self.proxy.release()
+        if self.proxy is not None:
+            self.proxy.release()
+
+
+def create(renderer, method: str, folder: str = "", depth_correction: bool = True,
+           **options) -> LumigraphTechnique:
+    """The registry's factory of the ``lumigraph-METHOD`` techniques: ``folder`` (default:
+    the scene's)."""
+    folder = folder or renderer.scene.lightfield
+    if not folder:
+        raise InputError("a lumigraph technique needs a scene with a light field")
+    return LumigraphTechnique(renderer, folder, method, options, depth_correction)
 
 
 def lumigraph_techniques(folder, **options) -> dict[str, TechniqueFactory]:
@@ -117,17 +186,36 @@ def lumigraph_techniques(folder, **options) -> dict[str, TechniqueFactory]:
     return {name: factory(name) for name in VIEW_METHODS}
 
 
-def lumigraph_controller(folder):
-    """A camera controller for the lumigraph: home on the default path's first eye,
-    orbiting the object's centre, in the viewer's (z up) world."""
+def lumigraph_home(folder):
+    """The camera home for the lumigraph: the default path's first eye, orbiting the
+    object's centre, in the viewer's (z up) world."""
     from lodsprite.lumigraph.run import default_path
     from lodsprite.lumigraph.store import Lumigraph
-    from lodsprite.viewer.controls import CameraController
+    from lodsprite.scene import CameraHome
 
     lf = Lumigraph(folder)
     back = VIEWER_TO_LUMIGRAPH.T
     centre = back @ lf.slabs[0].frame[:3, 3]
     eye = back @ default_path(lf, 2).viewpoints[0].o
     d = float(np.linalg.norm(eye - centre))
-    return CameraController(look_at(eye, centre), centre, d / 4.0,
-                            min_distance_m=lf.slabs[0].st_distance * 1.5)
+    return CameraHome(look_at(eye, centre), centre, d / 4.0,
+                      min_distance_m=lf.slabs[0].st_distance * 1.5)
+
+
+def open_scene(folder: str, **_: object):
+    """The scene of a lumigraph folder: the light field as its layer, the camera home,
+    ``arc`` (the default path: an arc, or an orbit for six slabs; 240 frames by default)
+    or a JSON path file in the lumigraph's coordinates, turned into the viewer's."""
+    from lodsprite.lumigraph.run import default_path
+    from lodsprite.lumigraph.store import Lumigraph
+    from lodsprite.paths import load_path_json
+    from lodsprite.scene import Scene
+
+    lf = Lumigraph(folder)  # the header checked now
+
+    def paths(name: str, frames: int | None):
+        return viewer_path(default_path(lf, frames or 240) if name == "arc"
+                           else load_path_json(name))
+
+    return Scene(lightfield=str(folder), home=lumigraph_home(folder), paths=paths,
+                 mode="critical")

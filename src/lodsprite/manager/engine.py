@@ -93,8 +93,7 @@ class CrowdEngine:
         n_types = len(crowd.models)
         self.manager = LodManager(crowd.types, n_types, slots, base_lod=0.0,
                                   share=(mode == "manager"), dist=dist)
-        for t, m in enumerate(crowd.models):   # every object starts on its type's base LOD
-            self.renderer.set_indices(t, t, m.extract(0.0))
+        self.reset_indices()
         self.centres, self.radii = crowd.centres, crowd.radii
         self.level = np.full(len(crowd), len(DISCRETE_LEVELS) - 1)
         if mode == "discrete":
@@ -103,6 +102,13 @@ class CrowdEngine:
                     self.renderer.set_indices(self._discrete_id(t, k), t, m.extract(f))
         self.transforms = np.concatenate([crowd.positions, crowd.yaw[:, None]],
                                          axis=1).astype(np.float32)
+        self.last_orders: list[tuple[int, int, float]] = []  # the last frame's extractions
+        self.last_using: np.ndarray | None = None
+
+    def reset_indices(self) -> None:
+        """Every type's index buffer on its base LOD (the state before the first frame)."""
+        for t, m in enumerate(self.crowd.models):
+            self.renderer.set_indices(t, t, m.extract(0.0))
 
     def _discrete_id(self, t: int, k: int) -> int:
         return len(self.crowd.models) + t * len(DISCRETE_LEVELS) + k
@@ -115,6 +121,7 @@ class CrowdEngine:
         dist = np.linalg.norm(self.centres - viewpoint.o, axis=1)
         t_lod = time.perf_counter()
         switches = extractions = 0
+        self.last_orders = []
         if self.mode == "discrete":
             height = self.radii / np.maximum(dist, 1e-6) / np.tan(np.radians(self.fov_y_deg) / 2)
             new = discrete_levels(height, self.level)
@@ -132,20 +139,38 @@ class CrowdEngine:
                                           self.crowd.models[o.type_index].extract(o.lod))
             extractions = len(orders)
             using = self.manager.using
+            self.last_orders = [(o.buffer, o.type_index, o.lod) for o in orders]
         lod_ms = (time.perf_counter() - t_lod) * 1e3
         idx = np.flatnonzero(visible)
-        order = idx[np.argsort(using[idx], kind="stable")]
-        buffers, first, counts = np.unique(using[order], return_index=True, return_counts=True)
-        self.renderer.upload_instances(self.transforms[order])
-        self.renderer.draw(view_proj, self.target.fbo, list(zip(buffers.tolist(),
-                                                                first.tolist(),
-                                                                counts.tolist(), strict=True)))
+        self.last_using = using
+        self._draw(view_proj, using, idx)
         self.gl.finish()
         ms = (time.perf_counter() - t0) * 1e3
         exponent = self.feedback.exponent
         self.feedback.observe(ms + extra_ms)
         return CrowdFrame(ms, lod_ms, extractions, self.renderer.draw_calls,
                           self.renderer.triangles, len(idx), exponent, switches)
+
+    def _draw(self, view_proj: np.ndarray, using: np.ndarray, idx: np.ndarray) -> None:
+        order = idx[np.argsort(using[idx], kind="stable")]
+        buffers, first, counts = np.unique(using[order], return_index=True, return_counts=True)
+        self.renderer.upload_instances(self.transforms[order])
+        self.renderer.draw(view_proj, self.target.fbo, list(zip(buffers.tolist(),
+                                                                first.tolist(),
+                                                                counts.tolist(), strict=True)))
+
+    def redraw(self, viewpoint: Viewpoint, using: np.ndarray,
+               orders: list[tuple[int, int, float]]) -> None:
+        """Draw a recorded frame again (an untimed replay): first the extraction
+        ``orders`` ``(buffer, type, lod)`` since the last frame drawn this way, then every
+        visible object from the index buffer ``using`` names."""
+        for buffer, type_index, lod in orders:
+            self.renderer.set_indices(buffer, type_index,
+                                      self.crowd.models[type_index].extract(lod))
+        view_proj = self.projection @ viewpoint.view_matrix()
+        visible = spheres_in_frustum(frustum_planes(view_proj), self.centres, self.radii)
+        self._draw(view_proj, using, np.flatnonzero(visible))
+        self.gl.finish()
 
     def release(self) -> None:
         self.renderer.release()

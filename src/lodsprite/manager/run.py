@@ -3,7 +3,6 @@
 
 from __future__ import annotations
 
-import platform
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -14,12 +13,9 @@ from lodsprite.errors import InputError
 from lodsprite.manager.core import finer_near, linear
 from lodsprite.manager.scene import Crowd, build_crowd, walkthrough
 from lodsprite.paths import CameraPath
-from lodsprite.report.io import write_csv, write_json
 
 Progress = Callable[[int, int], None]
 SNAPSHOTS = {"linear": linear, "finer-near": finer_near}
-FRAME_COLUMNS = ["frame", "ms", "fps", "lod_ms", "extractions", "draw_calls", "triangles",
-                 "visible", "exponent", "switches"]
 
 
 @dataclass(frozen=True)
@@ -87,63 +83,38 @@ def make_crowd(cfg: CrowdConfig) -> Crowd:
 def run_crowd(cfg: CrowdConfig, out_dir: Path | None = None, path: CameraPath | None = None,
               progress: Progress | None = None, keep_frames: tuple[int, ...] = ()
               ) -> tuple[list[dict], dict, dict[int, np.ndarray]]:
-    """Walk ``path`` (default: the walkthrough) through the crowd of ``cfg``; returns the
-    rows, the summary and the images of ``keep_frames``; writes ``frames.csv`` and
-    ``summary.json`` to ``out_dir`` if given."""
-    from lodsprite.gl.context import GLContext
-    from lodsprite.gl.target import RenderTarget
-    from lodsprite.manager.engine import CrowdEngine
+    """Walk ``path`` (default: the walkthrough) through the crowd of ``cfg`` with the
+    registry's technique ``cfg.mode``, through the harness
+    (:func:`lodsprite.harness.run_path`); returns the rows, the summary and the images of
+    ``keep_frames`` (from the untimed replay); writes ``frames.csv`` and ``summary.json``
+    to ``out_dir`` if given."""
+    from lodsprite.api import Renderer
+    from lodsprite.harness import run_path, write_run
+    from lodsprite.scene import Scene
+    from lodsprite.techniques import create
 
     cfg.validate()
     crowd = make_crowd(cfg)
     path = path or walkthrough(crowd, cfg.frames)
-    rows, images = [], {}
-    with GLContext() as gl:
-        target = RenderTarget(gl, *cfg.size)
-        engine = CrowdEngine(gl, crowd, target, cfg.mode, cfg.slots, cfg.active,
-                             cfg.target_fps, cfg.range_near, cfg.range_far,
-                             SNAPSHOTS[cfg.snapshots], fov_y_deg=path.fov_y_deg)
+    images: dict[int, np.ndarray] = {}
+    keep = set(keep_frames)
+    with Renderer(Scene(objects=crowd, label="crowd"), cfg.size, path.fov_y_deg) as renderer:
+        technique = create(cfg.mode, renderer, crowd=crowd, target_fps=cfg.target_fps,
+                           slots=cfg.slots, active=cfg.active, range_near=cfg.range_near,
+                           range_far=cfg.range_far, dist=SNAPSHOTS[cfg.snapshots])
         try:
-            warm = engine.frame(path.viewpoints[0])  # untimed: shaders compiled, first LODs
-            gl.finish()
-            for i, vp in enumerate(path.viewpoints):
-                f = engine.frame(vp)
-                rows.append({"frame": i, "ms": f.ms, "fps": 1e3 / f.ms, "lod_ms": f.lod_ms,
-                             "extractions": f.extractions, "draw_calls": f.draw_calls,
-                             "triangles": f.triangles, "visible": f.visible,
-                             "exponent": f.exponent, "switches": f.switches})
-                if i in keep_frames:
-                    images[i] = target.read_color()
-                if progress:
-                    progress(i + 1, len(path))
+            result = run_path(technique, path, progress=progress, image_frames=keep,
+                              on_image=(lambda i, image, _: images.__setitem__(i, image))
+                              if keep else None)
         finally:
-            engine.release()
-            target.release()
-        renderer = gl.info.renderer
-    summary = summarise(rows, cfg, path, renderer, len(crowd))
-    summary["warmup_extractions"] = warm.extractions
+            technique.release()
+    for row in result.rows:
+        row["fps"] = 1e3 / row["ms"]
+    result.columns.insert(result.columns.index("ms") + 1, "fps")
+    summary = {**result.summary, "mode": cfg.mode, "objects": len(crowd),
+               "trees": cfg.trees, "mesh": cfg.mesh or "ogre", "slots": cfg.slots,
+               "active": cfg.active, "snapshots": cfg.snapshots, "target_fps": cfg.target_fps,
+               "path": path.name, "size": list(cfg.size)}
     if out_dir is not None:
-        write_csv(Path(out_dir) / "frames.csv", rows, FRAME_COLUMNS)
-        write_json(Path(out_dir) / "summary.json", summary)
-    return rows, summary, images
-
-
-def summarise(rows: list[dict], cfg: CrowdConfig, path: CameraPath, renderer: str,
-              objects: int) -> dict:
-    ms = np.array([r["ms"] for r in rows])
-    seconds = ms.sum() / 1e3
-    col = {k: np.array([r[k] for r in rows], dtype=np.float64) for k in FRAME_COLUMNS[1:]}
-    return {"frames": len(rows), "mode": cfg.mode, "objects": objects, "trees": cfg.trees,
-            "mesh": cfg.mesh or "ogre", "slots": cfg.slots, "active": cfg.active,
-            "snapshots": cfg.snapshots,
-            "target_fps": cfg.target_fps, "path": path.name, "size": list(cfg.size),
-            "extractions_total": int(col["extractions"].sum()),
-            "fps_mean": float(len(rows) / seconds), "frame_ms_mean": float(ms.mean()),
-            "frame_ms_median": float(np.median(ms)),
-            "frame_ms_p99": float(np.percentile(ms, 99)),
-            "triangles_mean": float(col["triangles"].mean()),
-            "draw_calls_mean": float(col["draw_calls"].mean()),
-            "lod_cpu_ms_mean": float(col["lod_ms"].mean()),
-            "switches_per_s": float(col["switches"].sum() / seconds),
-            "exponent_final": float(col["exponent"][-1]),
-            "gl_renderer": renderer, "machine": platform.machine()}
+        write_run(Path(out_dir), result, summary)
+    return result.rows, summary, images

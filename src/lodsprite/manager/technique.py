@@ -10,7 +10,7 @@ import numpy as np
 
 from lodsprite.camera import Viewpoint
 from lodsprite.errors import InputError
-from lodsprite.technique import FrameInfo, Param, Technique, TechniqueFactory
+from lodsprite.techniques import Frame, Param, Technique, TechniqueFactory
 
 VIEW_MODES = ("manager", "independent", "discrete")
 
@@ -29,10 +29,18 @@ def parse_crowd(spec: str) -> tuple[int, int]:
     return objects, trees
 
 
+def crowd_columns(f) -> dict:
+    """A crowd frame's own ``frames.csv`` columns."""
+    return {"lod_ms": f.lod_ms,
+            "extractions": f.extractions, "draw_calls": f.draw_calls, "visible": f.visible,
+            "exponent": f.exponent, "switches": f.switches}
+
+
 class CrowdTechnique(Technique):
     """One crowd mode on the viewer's renderer (its GL context and size)."""
 
-    def __init__(self, renderer, crowd, mode: str, target_fps: float | None) -> None:
+    def __init__(self, renderer, crowd, mode: str, target_fps: float | None,
+                 **engine: object) -> None:
         super().__init__(renderer)
         from lodsprite.gl.target import RenderTarget
         from lodsprite.manager.engine import CrowdEngine
@@ -41,11 +49,48 @@ class CrowdTechnique(Technique):
         self.target = RenderTarget(renderer.gl, *renderer.size)
         try:
             self.engine = CrowdEngine(renderer.gl, crowd, self.target, mode,
-                                      target_fps=target_fps, fov_y_deg=renderer.fov_y_deg)
+                                      target_fps=target_fps, fov_y_deg=renderer.fov_y_deg,
+                                      **engine)
         except BaseException:
             self.target.release()
             raise
         self._last = None
+        self._warm: list = []     # the warm-up's extraction orders
+        self._orders: list = []   # each timed frame's
+        self._replayed: int | None = None
+
+    def warm_up(self, viewpoint: Viewpoint) -> None:
+        self.engine.frame(viewpoint)
+        self._warm = list(self.engine.last_orders)
+
+    def decision(self) -> dict:
+        """The frame's index and the index buffer each object used (its extraction
+        orders are kept by the technique: a replay applies every order up to the frame)."""
+        return {"frame": len(self._orders) - 1, "using": self.engine.last_using.copy()}
+
+    def replay(self, viewpoint: Viewpoint, decision: dict) -> np.ndarray:
+        i = decision["frame"]
+        if self._replayed is None or i <= self._replayed:  # from the state before frame 0
+            self.engine.reset_indices()
+            pending = self._warm + [o for f in self._orders[:i + 1] for o in f]
+        else:
+            pending = [o for f in self._orders[self._replayed + 1:i + 1] for o in f]
+        self.engine.redraw(viewpoint, decision["using"], pending)
+        self._replayed = i
+        return self.target.read_color()
+
+    def summary(self, frames: list) -> dict:
+        ms = np.array([f.ms for f in frames])
+        col = {k: np.array([f.extra[k] for f in frames], dtype=np.float64)
+               for k in ("extractions", "draw_calls", "lod_ms", "switches", "exponent")}
+        seconds = ms.sum() / 1e3
+        return {"extractions_total": int(col["extractions"].sum()),
+                "fps_mean": float(len(frames) / seconds),
+                "draw_calls_mean": float(col["draw_calls"].mean()),
+                "lod_cpu_ms_mean": float(col["lod_ms"].mean()),
+                "switches_per_s": float(col["switches"].sum() / seconds),
+                "exponent_final": float(col["exponent"][-1]),
+                "warmup_extractions": len(self._warm)}
 
     def params(self) -> dict[str, Param]:
         fb = self.engine.feedback
@@ -58,10 +103,11 @@ class CrowdTechnique(Technique):
             raise InputError(f"{self.name} has no parameter {name!r}")
         self.engine.feedback.target_fps = float(value)
 
-    def frame(self, viewpoint: Viewpoint) -> FrameInfo:
+    def frame(self, viewpoint: Viewpoint) -> Frame:
         f = self.engine.frame(viewpoint)
         self._last = f
-        return FrameInfo(self.name, f.ms, f.triangles)
+        self._orders.append(list(self.engine.last_orders))
+        return Frame(self.name, f.ms, f.triangles, extra=crowd_columns(f))
 
     def draw_to(self, framebuffer=None) -> None:
         self.renderer.present(self.target.color, (0.0, 0.0, 1.0, 1.0), framebuffer)
@@ -81,6 +127,20 @@ class CrowdTechnique(Technique):
         self.target.release()
 
 
+def create(renderer, mode: str, crowd=None, target_fps: float | None = None,
+           slots: int = 16, active: int = 300, range_near: float = 5.0,
+           range_far: float = 150.0, dist=None) -> CrowdTechnique:
+    """The registry's factory of ``manager``, ``independent`` and ``discrete``: ``crowd``
+    (default: the scene's object set)."""
+    if crowd is None:
+        crowd = renderer.scene.objects
+    if crowd is None:
+        raise InputError("a crowd technique needs a scene with an object set")
+    extra = {} if dist is None else {"dist": dist}
+    return CrowdTechnique(renderer, crowd, mode, target_fps, slots=slots, active=active,
+                          range_near=range_near, range_far=range_far, **extra)
+
+
 def crowd_techniques(crowd, target_fps: float | None = None) -> dict[str, TechniqueFactory]:
     """The viewer's modes for a crowd: one factory per mode."""
     def factory(mode):
@@ -89,13 +149,33 @@ def crowd_techniques(crowd, target_fps: float | None = None) -> dict[str, Techni
     return {mode: factory(mode) for mode in VIEW_MODES}
 
 
-def crowd_controller(crowd):
+def crowd_home(crowd):
     """Home on the walkthrough's first eye, orbiting the crowd's centre, feet on the
-    ground (eye height above ``z = 0``)."""
+    ground (eye height above ``z = 0``), a 60° field of view."""
     from lodsprite.manager.scene import EYE_HEIGHT_M, walkthrough
-    from lodsprite.viewer.controls import CameraController
+    from lodsprite.scene import CameraHome
 
     home = walkthrough(crowd, 2).viewpoints[0]
-    return CameraController(home, np.zeros(3), 8.0,
-                            lambda x, y: np.zeros_like(np.asarray(x, dtype=np.float64)),
-                            clearance_m=EYE_HEIGHT_M)
+    return CameraHome(home, np.zeros(3), 8.0,
+                      lambda x, y: np.zeros_like(np.asarray(x, dtype=np.float64)),
+                      clearance_m=EYE_HEIGHT_M, fov_y_deg=60.0)
+
+
+def open_scene(spec: str, target_fps: float | None = None, **_: object):
+    """The scene of ``crowd[:OBJECTS[:TREES]]``: the crowd as its object set, the camera
+    home, ``walk`` (the walkthrough, 600 frames by default) or a JSON path file."""
+    from lodsprite.manager.run import CrowdConfig, make_crowd
+    from lodsprite.manager.scene import walkthrough
+    from lodsprite.paths import load_path_json
+    from lodsprite.scene import Scene
+
+    objects, trees = parse_crowd(spec)
+    cfg = CrowdConfig(objects=objects, trees=trees, target_fps=target_fps)
+    cfg.validate()
+    crowd = make_crowd(cfg)
+
+    def paths(name: str, frames: int | None):
+        return walkthrough(crowd, frames or 600) if name == "walk" else load_path_json(name)
+
+    return Scene(objects=crowd, home=crowd_home(crowd), paths=paths, mode="manager",
+                 label=spec)

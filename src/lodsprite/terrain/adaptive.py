@@ -70,6 +70,8 @@ class AdaptiveTerrain:
         self.extent = (float(x.min()), float(y.max()), float(x.max() - x.min()),
                        float(y.max() - y.min()))
         self._wanted: list[Node] = []
+        self.last_draw: list[Node] = []        # the last frame's selection (for replays)
+        self.last_morphed: frozenset = frozenset()
         self._keep: set = set()
         roots = self.roots = self.tree.roots()
         if len(roots) > self.slots.capacity:
@@ -127,6 +129,7 @@ class AdaptiveTerrain:
         view_proj = proj @ viewpoint.view_matrix()
         eye = np.asarray(viewpoint.o, dtype=np.float64)
         draw, uploaded = self._stream(eye, view_proj)
+        self.last_draw = draw
         self.renderer.draw(target.fbo, view_proj, eye, self._instances(draw),
                            self.height_range, self.extent, self.color)
         if finish:
@@ -188,18 +191,44 @@ class AdaptiveTerrain:
                 time.sleep(0.002)
         return self.frame(viewpoint)
 
-    def _instances(self, draw: list[Node]) -> np.ndarray:
+    def redraw(self, viewpoint: Viewpoint, draw: tuple[Node, ...], morphed: frozenset,
+               projection=None, target=None) -> None:
+        """Draw a recorded selection again (an untimed replay): the nodes ``draw`` (a
+        frame's :attr:`last_draw`), geomorphed towards their parents for the nodes in
+        ``morphed`` (its :attr:`last_morphed`); tiles not resident are read now.  Into
+        ``target`` through ``projection`` (a :class:`~lodsprite.camera.Projection`) when
+        given, as :meth:`render_into` draws."""
+        need = list(draw) + [n.parent() for n in morphed]
+        keep = set(need) | set(self.roots)
+        for n in need:
+            if n not in self.slots:
+                data = self.loader.read_now(n)
+                if data is not None:
+                    self._upload(n, data, keep)
+        proj = self.projection(viewpoint) if projection is None else projection.matrix()
+        view_proj = proj @ viewpoint.view_matrix()
+        eye = np.asarray(viewpoint.o, dtype=np.float64)
+        target = self.target if target is None else target
+        self.renderer.draw(target.fbo, view_proj, eye, self._instances(list(draw), morphed),
+                           self.height_range, self.extent, self.color)
+        self.gl.finish()
+
+    def _instances(self, draw: list[Node], morphed: frozenset | None = None) -> np.ndarray:
         """Per node: world origin, spacing, slots, quadrant, morph range, valid extent, and
-        the parent's valid extent."""
+        the parent's valid extent (a node morphs towards its parent when that is resident,
+        or, in a replay, when it is in ``morphed``); :attr:`last_morphed` keeps which did."""
         out = np.zeros((len(draw), 16), np.float32)
         g = self.tree.g
+        used = set()
         for m, n in enumerate(draw):
             self.slots.touch(n)
             r0, r1, c0, c1 = self.tree.samples(n)
             x, y = self.tree.world_xy(n.k, np.array([r0]), np.array([c0]))
             s = 1 << n.k
             parent = n.parent()
-            if n.k < self.tree.top and parent in self.slots:
+            if n.k < self.tree.top and parent in self.slots and (morphed is None
+                                                                  or n in morphed):
+                used.add(n)
                 ps, qr, qc = self.slots.slot(parent), n.i % 2, n.j % 2
                 end = self.r[n.k + 1]
                 start = end - MORPH_SPAN * (self.r[n.k + 1] - self.r[n.k])
@@ -210,6 +239,7 @@ class AdaptiveTerrain:
             out[m] = (x[0], y[0], s * self.tree.p.dx, s * self.tree.p.dy,
                       self.slots.slot(n), ps, qr, qc, start, end,
                       min(g, r1 - r0 - 1), min(g, c1 - c0 - 1), prow, pcol, 0.0, 0.0)
+        self.last_morphed = frozenset(used)
         return out
 
     def release(self) -> None:

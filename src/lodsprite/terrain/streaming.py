@@ -142,6 +142,12 @@ class TileLoader(HostCache):
     def close(self) -> None:
         self._queue, self._queued = [], set()
 
+    @property
+    def in_flight_tiles(self) -> int:
+        """Tiles asked for and not yet read."""
+        with self._cv:
+            return len(self._queue)
+
 
 class StoreTileLoader(HostCache):
     """Reads nodes of a terrain store through a reader process, driven by the frame's
@@ -184,6 +190,11 @@ class StoreTileLoader(HostCache):
     def pending(self) -> list:
         """The nodes sent to the reader and not answered yet, oldest first."""
         return self.worker.pending
+
+    @property
+    def in_flight_tiles(self) -> int:
+        """Tiles sent to the reader process and not yet answered."""
+        return len(self._sent)
 
     def reader_peak_mb(self) -> float:
         """The reader process's peak resident memory in MB (0 when none runs)."""

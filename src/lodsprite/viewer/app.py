@@ -1,5 +1,9 @@
 """``lodsprite view``: options checked, scene and path loaded, techniques chosen, window run.
 
+The scene (:func:`lodsprite.scene.open_scene`) gives the camera home, its paths and the
+mode to start in; the registry (:mod:`lodsprite.techniques`) the techniques that draw its
+layers.  Nothing here branches on the kind of scene.
+
 Every user error surfaces as a :class:`~lodsprite.errors.InputError` before the window
 opens; with no display the error is :class:`~lodsprite.viewer.window.NoDisplayError`.
 """
@@ -9,13 +13,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from lodsprite import get_path, load_scene, terrain_techniques
+from lodsprite import techniques
 from lodsprite.errors import InputError
-from lodsprite.technique import TechniqueFactory, stage_scene
+from lodsprite.scene import Scene, open_scene
+from lodsprite.techniques import TechniqueFactory
 from lodsprite.viewer.core import PlayPlan
 from lodsprite.viewer.window import WindowOptions, check_display, run_viewer
-
-VIEW_MODES = ("full", "lod", "sprite", "distributed")
 
 
 @dataclass(frozen=True)
@@ -25,7 +28,7 @@ class ViewOptions:
     terrain: str = "jacksboro"
     texture: str = "terrain"
     grid: int | None = None
-    mode: str | None = None  # sprite for a terrain, critical for a lumigraph
+    mode: str | None = None  # default: the scene's (sprite, critical, manager)
     lod: int = 16
     epsilon: float = 1.0
     size: tuple[int, int] = (1024, 768)
@@ -41,43 +44,18 @@ class ViewOptions:
     server: str | None = None
     fov_y_deg: float = 45.0
     target_fps: float | None = None  # a crowd's LOD feedback target
+    sse: float | None = None      # adaptive: screen-space error, pixels
+    key_sse: float | None = None  # sprite-adaptive: its keyframes' SSE, pixels
 
-    @property
-    def crowd(self) -> bool:
-        """The scene is a crowd (``crowd[:OBJECTS[:TREES]]``)."""
-        return self.terrain == "crowd" or self.terrain.startswith("crowd:")
-
-    @property
-    def lumigraph(self) -> bool:
-        """The scene is a lumigraph folder (``lodsprite lumigraph capture``)."""
-        return (Path(self.terrain) / "lumigraph.json").is_file()
-
-    @property
-    def modes(self) -> tuple[str, ...]:
-        if self.crowd:
-            from lodsprite.manager.technique import VIEW_MODES as CROWD_MODES
-
-            return CROWD_MODES
-        if self.lumigraph:
-            from lodsprite.lumigraph.technique import VIEW_METHODS
-
-            return VIEW_METHODS
-        return VIEW_MODES
-
-    @property
-    def start_mode(self) -> str:
-        if self.mode:
-            return self.mode
-        return "manager" if self.crowd else ("critical" if self.lumigraph else "sprite")
+    def technique_options(self) -> dict:
+        """The options of the command the registry's techniques pick theirs from."""
+        return {"lod": self.lod, "epsilon": self.epsilon, "threaded": self.threaded,
+                "server": self.server, "target_fps": self.target_fps, "sse": self.sse,
+                "key_sse": self.key_sse}
 
     def validate(self) -> None:
-        if self.start_mode not in self.modes:
-            raise InputError(f"unknown mode '{self.start_mode}': use one of "
-                             f"{', '.join(self.modes)}")
-        if (self.lumigraph or self.crowd) and self.server:
-            raise InputError("--server goes with a terrain")
-        if self.target_fps is not None and not (self.crowd and self.target_fps > 0):
-            raise InputError("--target-fps goes with a crowd and must be > 0")
+        if self.target_fps is not None and not self.target_fps > 0:
+            raise InputError("--target-fps must be > 0")
         if self.mode == "distributed" and not self.server:
             raise InputError("--mode distributed needs --server HOST:PORT")
         if self.every < 1:
@@ -96,51 +74,33 @@ class ViewOptions:
                              f"'{self.record}'")
 
 
-def factories(o: ViewOptions) -> dict[str, TechniqueFactory]:
-    """The viewer's modes: the terrain techniques, and ``distributed`` with a server."""
-    found = terrain_techniques(o.lod, o.epsilon, o.threaded)
-    if o.server:
-        from lodsprite.distributed.technique import distributed_factory
-
-        found["distributed"] = distributed_factory(o.server, o.lod, o.epsilon)
-    return found
+def factories(o: ViewOptions, scene: Scene) -> dict[str, TechniqueFactory]:
+    """The viewer's modes: the registry's techniques that draw ``scene``'s layers, with the
+    command's options (``distributed`` only with a server)."""
+    return techniques.factories(scene.layers, () if o.server else ("distributed",),
+                                **o.technique_options())
 
 
 def view(o: ViewOptions) -> dict:
     """Run the viewer; returns the summary of the frames shown (empty if none)."""
     o.validate()
+    scene = open_scene(o.terrain, o.texture, o.grid, target_fps=o.target_fps)
+    if o.server and "terrain" not in scene.layers:
+        raise InputError("--server goes with a terrain")
+    if o.target_fps is not None and "objects" not in scene.layers:
+        raise InputError("--target-fps goes with a crowd (a scene of objects)")
+    modes = factories(o, scene)
+    mode = o.mode or scene.mode
+    if mode not in modes:
+        raise InputError(f"unknown mode '{mode}': use one of {', '.join(modes)}")
     check_display()
-    if o.lumigraph:
-        return _view_lumigraph(o)
-    if o.crowd:
-        return _view_crowd(o)
-    scene = load_scene(o.terrain, o.texture, o.grid)
-    plan, fov = None, o.fov_y_deg
+    home = scene.camera_home()
+    plan, fov = None, home.fov_y_deg or o.fov_y_deg
     if o.play is not None:
-        path = get_path(o.play, scene.hf, o.frames)
+        path = scene.path(o.play, o.frames)
         plan, fov = PlayPlan(path, o.out, o.screenshots, o.every, o.exit), path.fov_y_deg
-    return run_viewer(scene, factories(o), o.start_mode, WindowOptions(o.size, fps=o.fps),
-                      plan, o.record, fov, o.screenshots or Path("screenshots"))
-
-
-def _view_lumigraph(o: ViewOptions) -> dict:
-    """``lodsprite view LF``: the lumigraph's methods as the viewer's modes; ``--play``
-    takes ``arc`` (the default path: an arc, or an orbit for six slabs) or a JSON file,
-    in the lumigraph's own coordinates (turned into the viewer's)."""
-    from lodsprite.lumigraph import technique as lt
-    from lodsprite.lumigraph.run import default_path
-    from lodsprite.lumigraph.store import Lumigraph
-    from lodsprite.paths import load_path_json
-
-    lf = Lumigraph(o.terrain)  # header checked before the window opens
-    plan, fov = None, o.fov_y_deg
-    if o.play is not None:
-        path = lt.viewer_path(default_path(lf, o.frames or 240) if o.play == "arc"
-                              else load_path_json(o.play))
-        plan, fov = PlayPlan(path, o.out, o.screenshots, o.every, o.exit), path.fov_y_deg
-    return run_viewer(stage_scene(o.terrain), lt.lumigraph_techniques(o.terrain),
-                      o.start_mode, WindowOptions(o.size, fps=o.fps), plan, o.record, fov,
-                      o.screenshots or Path("screenshots"), lt.lumigraph_controller(o.terrain))
+    return run_viewer(scene, modes, mode, WindowOptions(o.size, fps=o.fps), plan, o.record,
+                      fov, o.screenshots or Path("screenshots"))
 
 
 def view_scene(scene, techniques: dict[str, TechniqueFactory], mode: str | None = None,
@@ -160,23 +120,3 @@ def view_scene(scene, techniques: dict[str, TechniqueFactory], mode: str | None 
                       None, fov)
 
 
-def _view_crowd(o: ViewOptions) -> dict:
-    """``lodsprite view crowd[:OBJECTS[:TREES]]``: the crowd's modes (manager, independent,
-    discrete); ``--play walk`` plays the walkthrough, or a JSON path."""
-    from lodsprite.manager.run import CrowdConfig, make_crowd
-    from lodsprite.manager.scene import walkthrough
-    from lodsprite.manager.technique import crowd_controller, crowd_techniques, parse_crowd
-    from lodsprite.paths import load_path_json
-
-    objects, trees = parse_crowd(o.terrain)
-    cfg = CrowdConfig(objects=objects, trees=trees, target_fps=o.target_fps)
-    cfg.validate()
-    crowd = make_crowd(cfg)
-    plan, fov = None, 60.0
-    if o.play is not None:
-        path = (walkthrough(crowd, o.frames or 600) if o.play == "walk"
-                else load_path_json(o.play))
-        plan, fov = PlayPlan(path, o.out, o.screenshots, o.every, o.exit), path.fov_y_deg
-    return run_viewer(stage_scene(o.terrain), crowd_techniques(crowd, o.target_fps),
-                      o.start_mode, WindowOptions(o.size, fps=o.fps), plan, o.record, fov,
-                      o.screenshots or Path("screenshots"), crowd_controller(crowd))

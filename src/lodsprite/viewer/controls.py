@@ -109,6 +109,12 @@ class CameraController:
         self.reset()
 
     @classmethod
+    def from_home(cls, home) -> CameraController:
+        """The controller a scene's :class:`~lodsprite.scene.CameraHome` describes."""
+        return cls(home.home, home.centre, home.speed_mps, home.ground,
+                   clearance_m=home.clearance_m, min_distance_m=home.min_distance_m)
+
+    @classmethod
     def for_terrain(cls, hf: HeightField, home: Viewpoint | None = None,
                     **kwargs: float) -> CameraController:
         """Defaults for ``hf``: home south of and above the terrain looking at its centre,

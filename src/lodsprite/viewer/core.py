@@ -4,7 +4,7 @@ flights, on any moderngl context and framebuffer (a window's, or an offscreen on
 The window (:mod:`lodsprite.viewer.window`) turns its events into :meth:`ViewerCore.key`,
 :meth:`~ViewerCore.drag`, :meth:`~ViewerCore.scroll` and calls :meth:`~ViewerCore.frame`
 then :meth:`~ViewerCore.log_frame` once per displayed frame.  The core knows techniques
-only through :class:`~lodsprite.technique.Technique` and a dict of factories by mode name.
+only through :class:`~lodsprite.techniques.Technique` and a dict of factories by mode name.
 
 Keys: ``1``-``9`` switch mode (in the order of the factories), ``[`` / ``]`` step the
 technique's parameter (ε in sprite mode, N in lod mode), ``x`` coarse wireframe, ``t``
@@ -32,13 +32,13 @@ from lodsprite.gl.overlay import HudLayer, LineOverlay, frustum_segments
 from lodsprite.paths import CameraPath
 from lodsprite.report.io import write_csv, write_json
 from lodsprite.scene import Scene
-from lodsprite.technique import Technique, TechniqueFactory
+from lodsprite.techniques import Technique, TechniqueFactory
 from lodsprite.viewer.controls import CameraController, FlightRecorder
 from lodsprite.viewer.hud import PANEL_HZ, HudState, glyph_atlas, layout_text
 
 log = logging.getLogger(__name__)
 
-FRAME_COLUMNS = ["frame", "type", "ms", "render_ms", "interval_ms", "triangles", "error_px",
+FRAME_COLUMNS = ["frame", "kind", "ms", "triangles", "error_px", "render_ms", "interval_ms",
                  "keyframes"]
 TOGGLE_KEYS = {"x": "wireframe", "t": "tint", "k": "frustum", "h": "hud"}
 WIREFRAME_RGBA = (0.1, 0.1, 0.1, 0.55)
@@ -241,11 +241,11 @@ class ViewerCore:
         self._last_start = self._start
         f = self._last
         self.hud.record(ms, interval)
-        self.hud.frame_type, self.hud.error_px = f.type, f.error_px
+        self.hud.frame_type, self.hud.error_px = f.kind, f.error_px
         self.hud.keyframes, self.hud.triangles = f.keyframes, f.triangles
-        self.rows.append({"frame": self.index, "type": f.type, "ms": ms, "render_ms": f.ms,
-                          "interval_ms": interval, "triangles": f.triangles,
-                          "error_px": f.error_px, "keyframes": f.keyframes})
+        self.rows.append({"frame": self.index, "kind": f.kind, "ms": ms,
+                          "triangles": f.triangles, "error_px": f.error_px, "render_ms": f.ms,
+                          "interval_ms": interval, "keyframes": f.keyframes})
         if self._shot is not None:
             self.screenshot(self._shot)
             self._shot, self._want_shot = None, False
@@ -307,17 +307,20 @@ class ViewerCore:
         return path
 
     def summary(self) -> dict:
-        """Median, p99 and mean of the frame times (ms) and the run's facts."""
+        """The core timing keys of the frame times shown (:func:`lodsprite.harness.
+        timing_summary`), the technique's own time, and the run's facts."""
+        from lodsprite.harness import peak_rss_mb, timing_summary
+
         ms = np.array([r["ms"] for r in self.rows], dtype=np.float64)
         render = np.array([r["render_ms"] for r in self.rows], dtype=np.float64)
-        return {"frames": len(ms), "mode": self.mode, "terrain": self.scene.terrain_spec,
+        return {**timing_summary(ms), "mode": self.mode, "terrain": self.scene.name,
                 "path": self.play.path.name if self.play else "flight",
-                "size": list(self.renderer.size), "median_ms": float(np.median(ms)),
-                "p99_ms": float(np.percentile(ms, 99)), "mean_ms": float(ms.mean()),
+                "size": list(self.renderer.size),
                 "render_median_ms": float(np.median(render)),
                 "render_p99_ms": float(np.percentile(render, 99)),
                 "keyframes": int(self.rows[-1]["keyframes"]) if self.rows else 0,
                 "status": self.technique.status(), "gl_renderer": self.renderer.info.renderer,
+                "peak_rss_mb": peak_rss_mb() + self.technique.outside_mb(),
                 "machine": platform.machine(), "python": platform.python_version()}
 
     def write_outputs(self, out_dir: Path) -> dict:

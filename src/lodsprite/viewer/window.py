@@ -19,7 +19,7 @@ from pathlib import Path
 
 from lodsprite.errors import InputError
 from lodsprite.scene import Scene
-from lodsprite.technique import TechniqueFactory
+from lodsprite.techniques import TechniqueFactory
 from lodsprite.viewer.controls import CameraController, FlightRecorder
 from lodsprite.viewer.core import PlayPlan, ViewerCore
 
@@ -89,10 +89,10 @@ def run_viewer(scene: Scene, factories: dict[str, TechniqueFactory], mode: str,
                controller: CameraController | None = None) -> dict:
     """Open the window and run until it closes (or a played path ends with ``exit``);
     returns the summary of the frames shown.  ``controller``: the camera (default: the
-    terrain's)."""
+    scene's home)."""
     window = open_window(options)
     recorder = FlightRecorder() if record is not None else None
-    controller = controller or CameraController.for_terrain(scene.hf)
+    controller = controller or CameraController.from_home(scene.camera_home())
     try:
         core = ViewerCore(window.ctx, scene, window.buffer_size, factories, mode, controller,
                           fov_y_deg, play, recorder, screenshot_dir, window.ctx.screen)

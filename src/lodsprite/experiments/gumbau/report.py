@@ -93,8 +93,8 @@ def _lines(r: dict, plots: list[Path]) -> list[str]:
         for mode in ("manager", "independent"):
             s = runs[f"{scene}_{mode}"]["summary"]
             lines.append(f"| {title} | {'with' if mode == 'manager' else 'without'} | "
-                         f"{f(s['fps_mean'], 2)} | {f(s['frame_ms_median'], 1)} | "
-                         f"{f(s['frame_ms_p99'], 1)} | {s['extractions_total']:,} | "
+                         f"{f(s['fps_mean'], 2)} | {f(s['median_ms'], 1)} | "
+                         f"{f(s['p99_ms'], 1)} | {s['extractions_total']:,} | "
                          f"{f(s['lod_cpu_ms_mean'], 2)} | {f(s['draw_calls_mean'], 0)} | "
                          f"{s['triangles_mean']:,.0f} |")
     ratio_ext = r["extractions_without"] / max(1, r["extractions_with"])
@@ -109,9 +109,9 @@ def _lines(r: dict, plots: list[Path]) -> list[str]:
     t = runs["crowd_target"]["summary"]
     target_ms = 1e3 / r["target_fps"]
     lines += [f"Target {r['target_fps']:g} fps ({f(target_ms, 1)} ms): median "
-              f"{f(t['frame_ms_median'], 1)} ms ({f(t['frame_ms_median'] / target_ms, 3)}× "
-              f"the target, within 10 % wanted), p99 {f(t['frame_ms_p99'], 1)} ms "
-              f"({f(t['frame_ms_p99'] / target_ms, 2)}×, ≤ 1.5 wanted), "
+              f"{f(t['median_ms'], 1)} ms ({f(t['median_ms'] / target_ms, 3)}× "
+              f"the target, within 10 % wanted), p99 {f(t['p99_ms'], 1)} ms "
+              f"({f(t['p99_ms'] / target_ms, 2)}×, ≤ 1.5 wanted), "
               f"{t['triangles_mean']:,.0f} triangles a frame, final exponent "
               f"{f(t['exponent_final'], 2)}.", "",
               "## Baseline (b): discrete LODs by screen size, with hysteresis", "",
@@ -120,7 +120,7 @@ def _lines(r: dict, plots: list[Path]) -> list[str]:
     for name, label in (("crowd_manager", "LODManager"), ("crowd_independent", "without"),
                         ("crowd_discrete", "discrete chain")):
         s = runs[name]["summary"]
-        lines.append(f"| {label} | {f(s['fps_mean'], 2)} | {f(s['frame_ms_median'], 1)} | "
+        lines.append(f"| {label} | {f(s['fps_mean'], 2)} | {f(s['median_ms'], 1)} | "
                      f"{s['triangles_mean']:,.0f} | {f(s['draw_calls_mean'], 0)} | "
                      f"{f(s['switches_per_s'], 0)} |")
     lines += ["", "## Plots", ""] + [f"![{pl.stem}]({pl.name})" for pl in plots] + [""]

@@ -196,7 +196,7 @@ def _collect(setup: str, out: Path) -> dict:
         rows = list(csv.DictReader(f))
     ms = np.array([float(r["ms"]) for r in rows])
     key = "keyframe"
-    received = sum(r["type"] == key for r in rows)
+    received = sum(r["kind"] == key for r in rows)
     res = {"client_ms_mean": float(ms.mean()), "client_ms_std": float(ms.std()),
            "client_ms_median": float(np.median(ms)),
            "client_ms_p99": float(np.percentile(ms, 99)),
@@ -204,10 +204,10 @@ def _collect(setup: str, out: Path) -> dict:
            # of the scene's cost along the path hardly count, unlike in σ)
            "client_ms_jitter": float(np.sqrt(np.mean(np.diff(ms) ** 2))) if len(ms) > 1 else 0.0,
            "keyframes": received,
-           "local_keyframes": sum(r["type"] == "local_keyframe" for r in rows),
+           "local_keyframes": sum(r["kind"] == "local_keyframe" for r in rows),
            "keyframe_rate_hz": received / (ms.sum() / 1e3),
            "sprites_per_keyframe": (len(rows) - received) / received if received else None,
-           "per_frame_ms": ms.tolist(), "per_frame_type": [r["type"] for r in rows]}
+           "per_frame_ms": ms.tolist(), "per_frame_type": [r["kind"] for r in rows]}
     stats_file = out / "server_stats.json"
     if setup != "inline" and stats_file.exists():
         every = json.loads(stats_file.read_text())["stats"] or [{}]

@@ -1,0 +1,243 @@
+"""The one harness: a technique along a camera path on a surface, timed honestly, with
+quality measured in a separate untimed replay.
+
+:func:`run_path` does, for every technique alike:
+
+1. one untimed warm-up (:meth:`~lodsprite.techniques.Technique.warm_up`) at the first
+   viewpoint, then ``ctx.finish()``;
+2. the timed loop: per frame, :meth:`~lodsprite.techniques.Technique.frame` then
+   ``ctx.finish()`` before the clock stops; the frame's decision recorded
+   (:meth:`~lodsprite.techniques.Technique.decision`); nothing read back, nothing written;
+3. with ``ground_truth`` (or an ``on_image`` callback: saved frames, a video), a replay of
+   the same decisions (:meth:`~lodsprite.techniques.Technique.replay`), untimed, each image
+   compared with a reference from an independent code path (default: the renderer's
+   full-resolution terrain) every ``quality_stride``-th frame: ``rmse, psnr, ssim`` (and
+   ``flip``) per frame, their means in the summary.
+
+:func:`write_run` writes ``frames.csv`` (core columns :data:`CORE_COLUMNS`, then the
+technique's own, then quality) and ``summary.json`` (core keys :data:`CORE_KEYS`, then
+the technique's own), atomically.
+"""
+
+from __future__ import annotations
+
+import platform
+import time
+from collections.abc import Callable, Collection
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from lodsprite.errors import InputError
+from lodsprite.techniques.base import Frame, Technique
+
+if TYPE_CHECKING:
+    from lodsprite.paths import CameraPath
+    from lodsprite.progress import Progress
+
+CORE_COLUMNS = ("frame", "kind", "ms", "triangles", "error_px")
+CORE_KEYS = ("frames", "median_ms", "mean_ms", "std_ms", "p95_ms", "p99_ms", "max_ms",
+             "total_s", "gl_renderer")
+QUALITY_COLUMNS = ("rmse", "psnr", "ssim", "flip")
+
+#: ``on_image(frame, image, reference)``: a replayed frame's image ``(h, w, 3) uint8`` and
+#: its reference (None without ``ground_truth`` or off the quality stride).
+ImageCallback = Callable[[int, np.ndarray, "np.ndarray | None"], None]
+Reference = Callable[[Any], np.ndarray]
+
+
+@dataclass
+class RunResult:
+    """What :func:`run_path` measured: the frames (times from the harness's clock), the
+    decisions recorded, the rows of ``frames.csv`` with their column order, the summary."""
+
+    frames: list[Frame]
+    decisions: list[dict]
+    rows: list[dict]
+    columns: list[str]
+    summary: dict[str, Any] = field(default_factory=dict)
+    interrupted: bool = False  # stopped by Ctrl-C: the frames finished so far
+
+
+def timing_summary(ms: np.ndarray) -> dict[str, float]:
+    """The core timing keys of per-frame times ``ms`` (milliseconds): median, mean,
+    standard deviation, p95, p99, max (ms) and total (s)."""
+    ms = np.asarray(ms, dtype=np.float64)
+    if ms.size == 0:
+        raise InputError("a run needs at least one frame")
+    return {"frames": int(ms.size), "median_ms": float(np.median(ms)),
+            "mean_ms": float(ms.mean()), "std_ms": float(ms.std()),
+            "p95_ms": float(np.percentile(ms, 95)), "p99_ms": float(np.percentile(ms, 99)),
+            "max_ms": float(ms.max()), "total_s": float(ms.sum() / 1e3)}
+
+
+def peak_rss_mb() -> float:
+    """This process's peak resident memory in MB: ``VmHWM`` of ``/proc/self/status``, which
+    starts afresh at ``exec`` (``getrusage``'s ``ru_maxrss`` keeps the peak of the process
+    that forked it), else ``ru_maxrss``."""
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 1024.0
+    except OSError:
+        pass
+    import resource
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # KB on Linux
+
+
+def full_resolution(renderer) -> Reference:
+    """The default reference: the renderer's full-resolution terrain at a viewpoint."""
+    def reference(viewpoint) -> np.ndarray:
+        renderer.render(viewpoint, None)
+        return renderer.read_color()
+
+    return reference
+
+
+def quality_summary(rows: list[dict]) -> dict[str, float]:
+    """Means of the quality columns over the rows that have them: ``rmse_mean``,
+    ``ssim_mean`` (and ``flip_mean``), and ``psnr_mean`` from the mean squared error (a
+    keyframe equals its reference, whose own PSNR is infinite); a technique's extra
+    columns (``rmse_lod`` ...) the same way (``rmse_lod_mean`` ...)."""
+    rows = [r for r in rows if "rmse" in r]
+    if not rows:
+        return {}
+    out: dict[str, float] = {"quality_frames": len(rows)}
+    for key in rows[0]:
+        if not key.startswith(QUALITY_COLUMNS) or key.startswith("psnr"):
+            continue
+        v = np.array([r[key] for r in rows], dtype=np.float64)
+        out[f"{key}_mean"] = float(v.mean())
+        if key.startswith("rmse"):
+            mse = float(np.mean(v ** 2))
+            out[f"psnr{key[4:]}_mean"] = (float("inf") if mse == 0
+                                          else float(10 * np.log10(255.0 ** 2 / mse)))
+    return out
+
+
+def _quality(image: np.ndarray, truth: np.ndarray, flip: bool) -> dict[str, float]:
+    from lodsprite import metrics
+
+    q = {"rmse": metrics.rmse(image, truth), "psnr": metrics.psnr(image, truth),
+         "ssim": metrics.ssim(image, truth)}
+    if flip:
+        q["flip"] = metrics.flip(image, truth)
+    return q
+
+
+def _timed(technique: Technique, path: CameraPath, finish: Callable[[], None],
+           progress: Progress | None) -> tuple[list[Frame], list[dict], bool]:
+    """The timed loop; stopped by Ctrl-C, it keeps the frames finished so far."""
+    frames, decisions = [], []
+    n = len(path.viewpoints)
+    try:
+        for i, vp in enumerate(path.viewpoints):
+            t0 = time.perf_counter()
+            f = technique.frame(vp)
+            finish()
+            frames.append(replace(f, ms=(time.perf_counter() - t0) * 1e3))
+            decisions.append(technique.decision())
+            if progress:
+                progress(i + 1, n)
+    except KeyboardInterrupt:
+        if not frames:
+            raise
+        return frames, decisions, True
+    return frames, decisions, False
+
+
+def _replay(technique: Technique, path: CameraPath, decisions: list[dict], rows: list[dict],
+            reference: Reference | None, stride: int, flip: bool,
+            on_image: ImageCallback | None, image_frames) -> None:
+    for i, (vp, d) in enumerate(zip(path.viewpoints, decisions, strict=True)):
+        measured = reference is not None and i % stride == 0
+        shown = on_image is not None and (image_frames is None or i in image_frames)
+        if not (measured or shown):
+            continue
+        image = technique.replay(vp, d)
+        truth = None
+        if measured:
+            truth = reference(vp)
+            rows[i].update(_quality(image, truth, flip))
+            rows[i].update(technique.quality_extra(vp, d, truth))
+        if shown:
+            on_image(i, image, truth)
+
+
+def run_path(technique: Technique, path: CameraPath, *, finish: Callable[[], None] | None = None,
+             gl_renderer: str = "", progress: Progress | None = None,
+             ground_truth: bool = False, reference: Reference | None = None,
+             quality_stride: int = 1, flip: bool = False,
+             on_image: ImageCallback | None = None,
+             image_frames: Collection[int] | None = None) -> RunResult:
+    """Run ``technique`` along ``path`` (module docstring).  ``finish``: the GL context's
+    ``finish`` (default: the technique's renderer's); ``gl_renderer``: the driver's name for
+    the summary (default: the renderer's); ``reference``: ``viewpoint -> image`` (default:
+    :func:`full_resolution`); ``on_image`` is called for the replayed frames
+    ``image_frames`` (default: all).  Returns the frames, rows and summary (not written)."""
+    if quality_stride < 1:
+        raise InputError(f"quality stride must be >= 1, got {quality_stride}")
+    if len(path.viewpoints) < 1:
+        raise InputError("a run needs a path of at least one viewpoint")
+    renderer = technique.renderer
+    finish = finish or renderer.gl.finish
+    n = len(path.viewpoints)
+    planned = set(range(0, n, quality_stride)) if ground_truth else set()
+    if on_image is not None:
+        planned |= set(range(n)) if image_frames is None else set(image_frames)
+    if planned and not technique.replays:
+        raise InputError(f"{technique.name} cannot replay its frames: no ground truth, "
+                         "saved frames or video from its runs")
+    technique.plan_replay(planned)
+    technique.warm_up(path.viewpoints[0])
+    finish()
+    frames, decisions, interrupted = _timed(technique, path, finish, progress)
+    rows, columns = frame_rows(frames)
+    if ground_truth and reference is None:
+        reference = full_resolution(renderer)
+    if (ground_truth or on_image) and not interrupted:
+        _replay(technique, path, decisions, rows, reference if ground_truth else None,
+                quality_stride, flip, on_image, image_frames)
+        columns += [c for c in _quality_columns(rows) if c not in columns]
+    summary = {**timing_summary(np.array([f.ms for f in frames])),
+               "gl_renderer": gl_renderer or (renderer.info.renderer if renderer else ""),
+               "technique": technique.name,
+               "triangles_mean": float(np.mean([f.triangles for f in frames])),
+               "machine": platform.machine(), "python": platform.python_version(),
+               **technique.summary(frames), **quality_summary(rows)}
+    if interrupted:
+        summary["interrupted"] = True
+    return RunResult(frames, decisions, rows, columns, summary, interrupted)
+
+
+def frame_rows(frames: list[Frame]) -> tuple[list[dict], list[str]]:
+    """The rows of ``frames.csv`` and their columns: the core ones, then the technique's
+    own (in the order first seen)."""
+    rows, extra = [], {}
+    for i, f in enumerate(frames):
+        rows.append({"frame": i, "kind": f.kind, "ms": f.ms, "triangles": f.triangles,
+                     "error_px": f.error_px, **f.extra})
+        extra.update(dict.fromkeys(f.extra))
+    return rows, [*CORE_COLUMNS, *(k for k in extra if k not in CORE_COLUMNS)]
+
+
+def _quality_columns(rows: list[dict]) -> list[str]:
+    seen: dict[str, None] = {}
+    for r in rows:
+        if "rmse" in r:
+            seen.update(dict.fromkeys(k for k in r if k.startswith(QUALITY_COLUMNS)))
+    return list(seen)
+
+
+def write_run(out_dir: Path, result: RunResult, summary: dict[str, Any] | None = None) -> None:
+    """``frames.csv`` and ``summary.json`` (``summary``, default the result's) into
+    ``out_dir``, each written atomically."""
+    from lodsprite.report.io import write_csv, write_json
+
+    out_dir = Path(out_dir)
+    write_csv(out_dir / "frames.csv", result.rows, result.columns)
+    write_json(out_dir / "summary.json", result.summary if summary is None else summary)

@@ -1,0 +1,184 @@
+"""The one technique interface: :class:`Technique`, its frame record :class:`Frame` and
+its live-adjustable :class:`Param`.
+
+A technique turns a viewpoint into a frame on a renderer (a GL surface: context, size,
+field of view, framebuffer, and the scene it draws).  The viewer and the batch harness
+(:func:`lodsprite.harness.run_path`) drive every technique through these methods alone:
+
+* :meth:`Technique.warm_up` — untimed work before the first timed frame;
+* :meth:`Technique.frame` — render one frame (the harness times it, ``ctx.finish()``
+  included) and say what it was (:class:`Frame`);
+* :meth:`Technique.decision` — what the last frame decided (which keyframe it showed, from
+  where), cheap to record inside a timed run;
+* :meth:`Technique.replay` — draw a recorded decision again, untimed, to the same image
+  (quality against a reference is measured in that replay, never in the timed run;
+  :meth:`Technique.plan_replay` says beforehand which frames will be replayed);
+* :meth:`Technique.summary` — the technique's own keys for ``summary.json``;
+* :meth:`Technique.draw_to`, :meth:`Technique.read_image`, :meth:`Technique.params`,
+  :meth:`Technique.key_view`, :meth:`Technique.coarse_level`, :meth:`Technique.status`,
+  :meth:`Technique.release` — the window's side.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from lodsprite.errors import InputError
+
+if TYPE_CHECKING:  # moderngl only under gl/ at run time
+    import moderngl
+
+    from lodsprite.api import Renderer
+    from lodsprite.camera import Projection, Viewpoint
+
+FALLBACK_TINT = (1.0, 0.0, 1.0, 0.45)
+
+
+@dataclass(frozen=True)
+class Param:
+    """A live-adjustable parameter: value, bounds and the factor one key press applies
+    (``step > 1``: multiply or divide, e.g. 2 for a level, 1.25 for ε)."""
+
+    name: str
+    value: float
+    lo: float
+    hi: float
+    step: float
+    unit: str = ""
+    integer: bool = False
+
+    def stepped(self, up: bool) -> Param:
+        """The parameter one key press up or down, clamped to its bounds."""
+        v = self.value * self.step if up else self.value / self.step
+        v = min(max(v, self.lo), self.hi)
+        return replace(self, value=float(round(v)) if self.integer else v)
+
+
+@dataclass(frozen=True)
+class Frame:
+    """One frame, for every technique.
+
+    ``kind``: what the frame was (``full``, ``lod``, ``adaptive``, ``keyframe``,
+    ``first_sprite``, ``sprite``, a lumigraph method's frame kind, a crowd mode, ...);
+    ``ms``: its time (milliseconds, GL work finished; the harness replaces it with its own
+    clock); ``triangles`` drawn; ``error_px``: the error of the image shown (pixels, NaN
+    where the technique does not measure one); ``extra``: the technique's own columns of
+    ``frames.csv`` (scalars; e.g. ``keyframe``, ``resident``, ``uploads``).
+    """
+
+    kind: str
+    ms: float
+    triangles: int = 0
+    error_px: float = math.nan
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def type(self) -> str:
+        """The frame's kind (the name it had before one frame record served all)."""
+        return self.kind
+
+    @property
+    def keyframes(self) -> int:
+        """Keyframes taken so far (0 for a technique without keyframes)."""
+        return int(self.extra.get("keyframes", 0))
+
+
+#: The name the viewer's frame record had; the same type now.
+FrameInfo = Frame
+
+
+class Technique:
+    """Base of every technique (see the module docstring).  A subclass sets :attr:`name`
+    and implements :meth:`frame`; the rest has defaults that suit a technique whose frame
+    depends on its viewpoint alone."""
+
+    name = "technique"
+    #: Whether :meth:`replay` can draw recorded frames again (False: the harness refuses
+    #: quality, saved frames and video for this technique).
+    replays = True
+
+    def __init__(self, renderer: Renderer) -> None:
+        self.renderer = renderer
+
+    # ------------------------------------------------------------ batch and window
+    def frame(self, viewpoint: Viewpoint) -> Frame:
+        raise NotImplementedError
+
+    def warm_up(self, viewpoint: Viewpoint) -> None:
+        """Untimed work before the first timed frame (shaders compiled, first data
+        resident).  Default: one frame at ``viewpoint``, its record dropped."""
+        self.frame(viewpoint)
+
+    def decision(self) -> dict[str, Any]:
+        """What the last frame decided, enough for :meth:`replay` to draw it again
+        (called after each timed frame: keep it cheap, no GPU reads).  Default: nothing
+        (the frame depends on its viewpoint alone)."""
+        return {}
+
+    def plan_replay(self, frames: set[int]) -> None:
+        """The frames (indices along the path) the harness will replay after the timed
+        run, told before it (a technique whose decisions are costly to redo may keep what
+        it needs of those frames alone).  Default: nothing to do."""
+
+    def replay(self, viewpoint: Viewpoint, decision: dict[str, Any]) -> np.ndarray:
+        """Draw a recorded frame again, untimed; its image ``(h, w, 3) uint8``.  Default:
+        render ``viewpoint`` again (right for a technique without state)."""
+        self.frame(viewpoint)
+        return self.read_image()
+
+    def summary(self, frames: list[Frame]) -> dict[str, Any]:
+        """The technique's own keys for ``summary.json`` (after a run's timed frames)."""
+        return {}
+
+    def quality_extra(self, viewpoint: Viewpoint, decision: dict[str, Any],
+                      truth: np.ndarray) -> dict[str, float]:
+        """Extra per-frame quality columns of the replay (e.g. a baseline's RMSE against
+        the same reference ``truth``); none by default."""
+        return {}
+
+    # ------------------------------------------------------------ window
+    def params(self) -> dict[str, Param]:
+        """Live-adjustable parameters by name (none by default)."""
+        return {}
+
+    def set_param(self, name: str, value: float) -> None:
+        raise InputError(f"{self.name} has no parameter {name!r}")
+
+    def draw_to(self, framebuffer: moderngl.Framebuffer | None = None) -> None:
+        """Draw the last frame over ``framebuffer``'s viewport (default: the bound one)."""
+        self.renderer.draw_to(framebuffer)
+
+    def read_image(self) -> np.ndarray:
+        """The last frame, ``(h, w, 3) uint8``, row 0 at the top."""
+        return self.renderer.read_color()
+
+    def key_view(self) -> tuple[Viewpoint, Projection] | None:
+        """The viewpoint and projection of the keyframe shown, for the frustum overlay."""
+        return None
+
+    def coarse_level(self) -> int | None:
+        """The coarse level drawn (quads per side), for the wireframe overlay."""
+        return None
+
+    def set_fallback_tint(self, on: bool) -> None:
+        """Tint where a spriteframe fell back to the terrain texture (if it draws any)."""
+
+    def status(self) -> str:
+        """One line for the HUD (empty: nothing to add)."""
+        return ""
+
+    def outside_mb(self) -> float:
+        """Peak memory (MB) the technique holds outside this process (a reader process's),
+        added to the process's own peak in a run's ``peak_rss_mb``; 0 by default."""
+        return 0.0
+
+    def release(self) -> None:
+        """Release what the technique made (never the renderer)."""
+
+
+TechniqueFactory = Callable[["Renderer"], Technique]

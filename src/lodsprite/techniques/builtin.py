@@ -1,0 +1,76 @@
+"""Every technique lodsprite ships, registered by dotted path (nothing imported here).
+
+Adding one: write its class (a :class:`~lodsprite.techniques.Technique`) and add one
+:func:`~lodsprite.techniques.register` entry, here or in your own code
+(``examples/custom_technique.py``).
+"""
+
+from __future__ import annotations
+
+from lodsprite.techniques.registry import Option, TechniqueSpec, register
+
+LOD = Option("lod", int, 16, "coarse level, quads per side (a power of two)")
+EPSILON = Option("epsilon", float, 1.0, "LOD-sprite error threshold ε, pixels")
+VISIBILITY = Option("visibility", str, "coarse", "LOD-sprite visibility rule")
+GUARD = Option("guard_px", int, 32, "keyframe guard band, pixels")
+BORDER = Option("border", bool, True, "draw the coarse level's border ribbons")
+THREADED = Option("threaded", bool, False, "render keyframes on a worker thread")
+SSE = Option("sse", float, 1.0, "adaptive: screen-space error tolerance, pixels")
+KEY_SSE = Option("key_sse", float, 1.0, "keyframes by the adaptive renderer at this SSE, px")
+GPU_MB = Option("gpu_mb", float, 256.0, "adaptive: GPU tile cache budget, MB")
+HOST_MB = Option("host_mb", float, 512.0, "adaptive: host tile cache budget, MB")
+SERVER = Option("server", str, "", "the LOD server, HOST:PORT")
+MAX_ERROR = Option("max_error", float, 4.0, "distributed: largest error shown, pixels")
+FOLDER = Option("folder", str, "", "the lumigraph folder (default: the scene's)")
+LF_OPTIONS = (FOLDER, Option("depth_correction", bool, True, "depth-correct with the proxy"),
+              Option("nodes", int, 16, "nodes per frame (arbitrary, projective)"),
+              Option("level", int, 1, "subsample: mip level of the node images"),
+              Option("reuse", int, 6, "projective: frames a reconstruction is reused"),
+              Option("fade", int, 8, "progressive: frames of a fade"),
+              Option("target_fps", float, 30.0, "critical: the frame-rate target"),
+              Option("texture_mb", float, 4.0, "critical: texture memory, MB"))
+TARGET_FPS = Option("target_fps", float, None, "the crowd's frame-rate target (LOD feedback)")
+CROWD = Option("crowd", object, None, "the crowd (default: the scene's object set)")
+SLOTS = Option("slots", int, 16, "crowd: LOD slots per type in the manager's table")
+ACTIVE = Option("active", int, 300, "crowd: objects whose LOD is updated per frame")
+NEAR = Option("range_near", float, 5.0, "crowd: distance of the finest LOD, metres")
+FAR = Option("range_far", float, 150.0, "crowd: distance of the coarsest LOD, metres")
+DIST = Option("dist", object, None, "crowd: the snapshots' distribution (default linear)")
+
+TERRAIN = "lodsprite.techniques.terrain"
+ADAPTIVE = "lodsprite.techniques.adaptive"
+
+register(TechniqueSpec("full", f"{TERRAIN}:FullTechnique", (), ("terrain",),
+                       "the full-resolution terrain (the ground truth)"))
+register(TechniqueSpec("lod", f"{TERRAIN}:LodTechnique", (LOD,), ("terrain",),
+                       "one uniform coarse level"))
+register(TechniqueSpec("sprite", f"{TERRAIN}:SpriteTechnique",
+                       (LOD, EPSILON, THREADED, VISIBILITY, GUARD, BORDER), ("terrain",),
+                       "LOD-sprite (Chen, Swan & Kaufman 1999)"))
+register(TechniqueSpec("adaptive", f"{ADAPTIVE}:AdaptiveTechnique", (SSE, GPU_MB, HOST_MB),
+                       ("terrain",), "the adaptive (CDLOD-style) renderer, stores of any size"))
+register(TechniqueSpec("sprite-adaptive", f"{ADAPTIVE}:SpriteAdaptiveTechnique",
+                       (LOD, EPSILON, KEY_SSE, GPU_MB, HOST_MB, VISIBILITY, GUARD, BORDER),
+                       ("terrain",), "LOD-sprite with keyframes by the adaptive renderer"))
+register(TechniqueSpec("distributed", "lodsprite.distributed.technique:create",
+                       (SERVER, LOD, EPSILON, MAX_ERROR), ("terrain",),
+                       "LOD-sprite client, keyframes from a LOD server (Swan et al. 2002)"))
+
+CROWD_MODES = {"manager": "the LODManager's crowd (Gumbau et al.)",
+               "independent": "every object extracts its own LOD (baseline a)",
+               "discrete": "discrete LODs by screen size (baseline b)"}
+for _mode, _text in CROWD_MODES.items():
+    register(TechniqueSpec(_mode, "lodsprite.manager.technique:create",
+                           (CROWD, TARGET_FPS, SLOTS, ACTIVE, NEAR, FAR, DIST),
+                           ("objects",), _text, fixed={"mode": _mode}))
+
+LUMIGRAPH_METHODS = {
+    "critical": "time-critical reconstruction (Sloan, Cohen & Gortler 1997)",
+    "full": "every node of the lumigraph", "arbitrary": "nearest nodes, any count",
+    "fixed": "a fixed node set", "line": "nodes on a line",
+    "projective": "projective texture reuse", "progressive": "progressive refinement",
+    "subsample": "a subsampled lumigraph"}
+for _method, _text in LUMIGRAPH_METHODS.items():
+    register(TechniqueSpec(f"lumigraph-{_method}", "lodsprite.lumigraph.technique:create",
+                           LF_OPTIONS, ("lightfield",), _text, mode=_method,
+                           fixed={"method": _method}))
