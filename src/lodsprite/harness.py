@@ -236,7 +236,7 @@ def _quality_columns(rows: list[dict]) -> list[str]:
 def write_run(out_dir: Path, result: RunResult, summary: dict[str, Any] | None = None) -> None:
     """``frames.csv`` and ``summary.json`` (``summary``, default the result's) into
     ``out_dir``, each written atomically."""
-    from lodsprite.report.io import write_csv, write_json
+    from lodsprite.files import write_csv, write_json
 
     out_dir = Path(out_dir)
     write_csv(out_dir / "frames.csv", result.rows, result.columns)

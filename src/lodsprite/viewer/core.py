@@ -28,9 +28,9 @@ import numpy as np
 
 from lodsprite import Renderer, write_image
 from lodsprite.errors import LodspriteError
+from lodsprite.files import write_csv, write_json
 from lodsprite.gl.overlay import HudLayer, LineOverlay, frustum_segments
 from lodsprite.paths import CameraPath
-from lodsprite.report.io import write_csv, write_json
 from lodsprite.scene import Scene
 from lodsprite.techniques import Technique, TechniqueFactory
 from lodsprite.viewer.controls import CameraController, FlightRecorder
