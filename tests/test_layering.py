@@ -41,23 +41,7 @@ DASK = ("dask", "distributed")  # the cluster extra's top-level names
 # Every import statement anywhere in a module (inside functions too) is an edge; only those
 # under ``if TYPE_CHECKING:`` never run and count for no cycle.
 
-#: Violations left in modules that the technique-registry and scene-model rewrite (issue 21,
-#: must-haves 1 and 3) is changing at the same time; each goes with that work.  Stale
-#: entries fail :func:`test_every_pending_violation_is_still_there`.
-PENDING = {
-    ("lodsprite.api", "moderngl"): "GLContext hints",
-    ("lodsprite.technique", "moderngl"): "Framebuffer hints",
-    ("lodsprite.distributed.technique", "moderngl"): "Framebuffer hints",
-    ("lodsprite.viewer.core", "moderngl"): "the window's framebuffer",
-    ("lodsprite.gl.paths", "lodsprite.scene"): "the surface reads the scene",
-    ("lodsprite.terrain.adaptive", "lodsprite.gl.adaptive"): "the adaptive renderer drives GL",
-    ("lodsprite.terrain.adaptive", "lodsprite.gl.terrain"): "the adaptive renderer drives GL",
-    ("lodsprite.viewer.app", "lodsprite.distributed.technique"): "registry by import",
-    ("lodsprite.lumigraph.technique", "lodsprite.viewer.controls"): "view controls",
-    ("lodsprite.manager.technique", "lodsprite.viewer.controls"): "view controls",
-}
-ALL_EDGES = importgraph.imports()
-EDGES = [e for e in ALL_EDGES if (e.source, e.target) not in PENDING]
+EDGES = importgraph.imports()
 #: Packages of techniques, experiments and front ends: gl/ draws for them and knows none.
 ABOVE_GL = {"sprite", "lumigraph", "manager", "profiles", "distributed", "adaptive", "viewer",
             "cli", "experiments", "api", "run", "harness", "techniques", "technique", "scene",
@@ -118,10 +102,6 @@ def test_the_core_loads_neither_the_distributed_layer_nor_dask_when_imported():
            and (in_distributed_layer(e.target) or e.target in DASK)]
     assert describe(bad) == []
     assert any(e.target == "dask" and e.lazy for e in EDGES)  # the rule sees them
-
-
-def test_every_pending_violation_is_still_there():
-    assert set(PENDING) <= {(e.source, e.target) for e in ALL_EDGES if not e.type_only}
 
 
 def test_the_import_graph_sees_lazy_imports(tmp_path):

@@ -22,8 +22,8 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import moderngl
 import numpy as np
 from PIL import Image
 
@@ -39,6 +39,9 @@ from lodsprite.scene import Scene
 from lodsprite.sprite.engine import DEFAULT_EPSILON_PX, LodSpriteEngine, SpriteFrame
 from lodsprite.sprite.threaded import ThreadedLodSpriteEngine
 from lodsprite.terrain.lod import DEFAULT_COARSE
+
+if TYPE_CHECKING:  # hints only: moderngl is imported under gl/
+    import moderngl
 
 MAX_IMAGE_PIXELS = 1 << 28
 

@@ -27,13 +27,14 @@ from lodsprite.gl.sprite import (
     DEFAULT_VISIBILITY,
     VISIBILITY_MODES,
 )
-from lodsprite.harness import RunResult, peak_rss_mb, run_path, timing_summary, write_run
+from lodsprite.harness import RunResult, run_path, timing_summary, write_run
 from lodsprite.paths import CameraPath, get_path
 from lodsprite.progress import Progress
 from lodsprite.scene import Scene, load_scene
 from lodsprite.sprite.engine import DEFAULT_EPSILON_PX
 from lodsprite.terrain import DEFAULT_EXAGGERATION
 from lodsprite.terrain.lod import DEFAULT_COARSE, level_step
+from lodsprite.workers import peak_rss_mb
 
 
 def _modes() -> tuple[str, ...]:
