@@ -82,6 +82,20 @@ def test_terrain_imports_neither_gl_nor_the_front_ends():
     assert describe(bad) == []
 
 
+#: The shared helpers every level uses (atomic writers, mesh loading, the cluster extra's
+#: check, worker processes): the bottom of the package, importing nothing of it but errors.
+BASE = ("lodsprite.files", "lodsprite.meshes", "lodsprite.cluster", "lodsprite.workers",
+        "lodsprite.errors")
+
+
+def test_the_shared_helpers_sit_at_the_bottom():
+    bad = [e for e in runtime_edges() if e.source in BASE and e.target != "lodsprite.errors"]
+    assert describe(bad) == []
+    assert {e.source for e in EDGES if e.target in BASE} >= {
+        "lodsprite.terrain.store", "lodsprite.profiles.generate", "lodsprite.harness",
+        "lodsprite.manager.builtins", "lodsprite.lumigraph.store"}
+
+
 def in_distributed_layer(module: str) -> bool:
     return module.startswith((DISTRIBUTED, SWAN_RUN))
 
