@@ -11,12 +11,12 @@
   or, with depth correction (Gortler et al. 1996), where the ray from the node through
   the approximate geometry's surface point seen at that pixel meets it; both per
   fragment, in the shader.
-
 * :class:`ProjectiveRenderer` reuses the last reconstructed image as a projective texture
   on the approximate geometry (§3.2).
 
 All draws are one vertex buffer and one draw call; a frame uploads only the eye and its
-matrices, plus the vertex buffer when the covering changes.
+matrices, plus the vertex buffer when the covering changes.  The slab and the draws are
+the light field's data, passed in (gl/ imports no technique package).
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ import numpy as np
 from lodsprite.gl.context import GLContext
 from lodsprite.gl.terrain import mat_bytes
 
-if TYPE_CHECKING:  # the light field's data, passed in (gl/ imports no technique package)
+if TYPE_CHECKING:
     from lodsprite.lumigraph.geometry import Slab
     from lodsprite.lumigraph.subsets import Draws
 
