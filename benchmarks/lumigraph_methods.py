@@ -20,7 +20,8 @@ from pathlib import Path
 
 from lodsprite.experiments.sloan1997.run import to_and_fro
 from lodsprite.lumigraph.methods import METHODS
-from lodsprite.lumigraph.run import capture_lumigraph, measure, object_path
+from lodsprite.lumigraph.paths import object_path
+from lodsprite.lumigraph.run import capture_lumigraph, measure
 from lodsprite.lumigraph.store import Lumigraph
 
 

@@ -1,7 +1,13 @@
-"""Layering and the lean install (issue 12, items 9 and 10).
+"""Layering and the lean install (issue 12, items 9 and 10; issue 21, must-have 6).
 
-* The core (everything but :mod:`lodsprite.distributed`) never imports the distributed
-  layer, nor Dask: each module is imported in a fresh interpreter's one pass.
+* The layers, read from the source (AST, :mod:`importgraph`), lazy imports counted: no
+  module or package cycle; moderngl only under gl/ (elsewhere hints under
+  ``TYPE_CHECKING``); gl/ knows no technique package; terrain/ knows neither gl/ nor the
+  packages above it; only the command line (and the swan2002 reproduction of the
+  distributed paper) reaches into the distributed layer, and nothing outside that layer
+  loads it, nor Dask, when imported.
+* Nothing of the core pulls Dask in when imported, not even through a third-party
+  package (checked by importing each module in a fresh interpreter).
 * The engine renders what the GL-free keyframe policy decides.
 * Dask is the ``cluster`` extra: ``--scheduler`` without it is one line naming the extra.
 """
@@ -18,16 +24,122 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import importgraph
 import lodsprite
 from conftest import make_field
 from lodsprite.errors import InputError
 
 ROOT = Path(__file__).resolve().parents[1]
 DISTRIBUTED = "lodsprite.distributed"
-#: The swan2002 experiment's runner drives the distributed layer: it belongs to that layer.
-SWAN_RUN = "lodsprite.experiments.swan2002.run"
-FORBIDDEN = (DISTRIBUTED, "dask", "distributed")  # the distributed layer; the cluster extra
+#: The swan2002 reproduction drives the distributed layer: a front end of it, like cli/.
+SWAN2002 = "lodsprite.experiments.swan2002"
+SWAN_RUN = f"{SWAN2002}.run"
+DASK = ("dask", "distributed")  # the cluster extra's top-level names
 
+
+# --- the layers, read from the source (AST): lazy imports count ---------------------------
+# Every import statement anywhere in a module (inside functions too) is an edge; only those
+# under ``if TYPE_CHECKING:`` never run and count for no cycle.
+
+EDGES = importgraph.imports()
+#: Packages of techniques, experiments and front ends: gl/ draws for them and knows none.
+ABOVE_GL = {"sprite", "lumigraph", "manager", "profiles", "distributed", "adaptive", "viewer",
+            "cli", "experiments", "api", "run", "harness", "techniques", "technique", "scene",
+            "report"}
+
+
+def runtime_edges(source_unit: str | None = None):
+    return [e for e in EDGES if not e.type_only and e.target.startswith("lodsprite")
+            and (source_unit is None or importgraph.unit(e.source) == source_unit)]
+
+
+def describe(edges) -> list[str]:
+    return sorted(f"{e.source}:{e.line} -> {e.target}{' (lazy)' if e.lazy else ''}"
+                  for e in edges)
+
+
+def test_no_module_imports_itself_round_a_cycle():
+    assert importgraph.strongly_connected(importgraph.runtime_graph(EDGES)) == []
+
+
+def test_no_package_imports_itself_round_a_cycle():
+    assert importgraph.strongly_connected(importgraph.runtime_graph(EDGES, packages=True)) == []
+
+
+def test_moderngl_is_imported_only_under_gl():
+    bad = [e for e in EDGES if e.target == "moderngl" and not e.type_only
+           and importgraph.unit(e.source) != "gl"]
+    assert describe(bad) == []
+
+
+def test_gl_imports_no_technique_package():
+    bad = [e for e in runtime_edges("gl") if importgraph.unit(e.target) in ABOVE_GL]
+    assert describe(bad) == []
+
+
+def test_terrain_imports_neither_gl_nor_the_front_ends():
+    bad = [e for e in runtime_edges("terrain") if importgraph.unit(e.target) in ABOVE_GL | {"gl"}]
+    assert describe(bad) == []
+
+
+#: The shared helpers every level uses (atomic writers, mesh loading, the cluster extra's
+#: check, worker processes): the bottom of the package, importing nothing of it but errors.
+BASE = ("lodsprite.files", "lodsprite.meshes", "lodsprite.cluster", "lodsprite.workers",
+        "lodsprite.errors")
+
+
+def test_the_shared_helpers_sit_at_the_bottom():
+    bad = [e for e in runtime_edges() if e.source in BASE and e.target != "lodsprite.errors"]
+    assert describe(bad) == []
+    assert {e.source for e in EDGES if e.target in BASE} >= {
+        "lodsprite.terrain.store", "lodsprite.profiles.generate", "lodsprite.harness",
+        "lodsprite.manager.builtins", "lodsprite.lumigraph.store"}
+
+
+def in_distributed_layer(module: str) -> bool:
+    return module.startswith((DISTRIBUTED, SWAN_RUN))
+
+
+def test_only_the_command_line_reaches_into_the_distributed_layer():
+    bad = [e for e in runtime_edges() if importgraph.unit(e.target) == "distributed"
+           and importgraph.unit(e.source) not in ("distributed", "cli")
+           and not e.source.startswith(SWAN2002)]
+    assert describe(bad) == []
+
+
+def test_the_core_loads_neither_the_distributed_layer_nor_dask_when_imported():
+    """Outside the distributed layer, the distributed layer and Dask are imported only
+    inside functions (the command that needs them): importing any other module, and so
+    every module its top level imports, loads neither."""
+    bad = [e for e in EDGES if not e.lazy and not e.type_only
+           and not in_distributed_layer(e.source)
+           and (in_distributed_layer(e.target) or e.target in DASK)]
+    assert describe(bad) == []
+    assert any(e.target == "dask" and e.lazy for e in EDGES)  # the rule sees them
+
+
+def test_the_import_graph_sees_lazy_imports(tmp_path):
+    """The analysis itself: a planted lazy import inside a function closes a cycle."""
+    pkg = tmp_path / "src" / "lodsprite"
+    (pkg / "sub").mkdir(parents=True)
+    (pkg / "__init__.py").write_text("_LAZY = {'Thing': 'lodsprite.a'}\n")
+    (pkg / "a.py").write_text("from lodsprite.sub import b\n")
+    (pkg / "sub" / "__init__.py").write_text("")
+    (pkg / "sub" / "b.py").write_text(
+        "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    import moderngl\n"
+        "def later():\n    from lodsprite import Thing\n    return Thing\n")
+    edges = importgraph.imports(tmp_path / "src")
+    assert importgraph.strongly_connected(importgraph.runtime_graph(edges)) == [
+        ["lodsprite.a", "lodsprite.sub.b"]]
+    assert importgraph.strongly_connected(importgraph.runtime_graph(edges, packages=True)) == [
+        ["a", "sub"]]
+    (lazy,) = [e for e in edges if e.source == "lodsprite.sub.b" and e.target == "lodsprite.a"]
+    assert lazy.lazy and not lazy.type_only
+    (hint,) = [e for e in edges if e.target == "moderngl"]
+    assert hint.type_only
+
+
+# --- importing: what third-party packages pull in -----------------------------------------
 
 def core_modules() -> list[str]:
     """Every module of the package outside :mod:`lodsprite.distributed`, found on disk
@@ -36,7 +148,7 @@ def core_modules() -> list[str]:
 
     def walk(path: list[str], prefix: str) -> None:
         for info in pkgutil.iter_modules(path, prefix):
-            if info.name in (DISTRIBUTED, SWAN_RUN) or info.name.endswith(".__main__"):
+            if in_distributed_layer(info.name) or info.name.endswith(".__main__"):
                 continue
             found.append(info.name)
             if info.ispkg:
@@ -52,8 +164,7 @@ forbidden = tuple(sys.argv[2].split(","))
 bad = {}
 for name in sys.argv[1].split(","):
     importlib.import_module(name)
-    loaded = sorted(m for m in sys.modules if m.split(".")[0] in forbidden
-                    or m.startswith(forbidden[0]))
+    loaded = sorted(m for m in sys.modules if m.split(".")[0] in forbidden)
     if loaded:
         bad[name] = loaded
         break  # what came in stays in: later modules would be blamed for it
@@ -61,14 +172,16 @@ print(json.dumps(bad))
 """
 
 
-def test_the_core_never_imports_the_distributed_layer_nor_dask():
+def test_no_core_module_pulls_dask_in_when_imported():
+    """The AST rule above sees lodsprite's own imports; this sees what third-party packages
+    (zarr, numcodecs, ...) import in turn."""
     modules = core_modules()
     for name in ("lodsprite.run", "lodsprite.sprite.engine", "lodsprite.sprite.policy",
                  "lodsprite.gl.paths", "lodsprite.experiments.chen1999.report",
                  "lodsprite.experiments.swan2002.report", "lodsprite.profiles.generate",
                  "lodsprite.cli", "lodsprite.progress"):
         assert name in modules
-    proc = subprocess.run([sys.executable, "-c", CHECK, ",".join(modules), ",".join(FORBIDDEN)],
+    proc = subprocess.run([sys.executable, "-c", CHECK, ",".join(modules), ",".join(DASK)],
                           capture_output=True, text=True, timeout=240, cwd=ROOT)
     assert proc.returncode == 0, proc.stderr
     assert json.loads(proc.stdout) == {}
@@ -126,7 +239,7 @@ def without_dask(monkeypatch) -> None:
 
 
 def test_require_dask_names_the_extra_when_dask_is_missing(monkeypatch):
-    from lodsprite.profiles.generate import require_dask
+    from lodsprite.cluster import require_dask
 
     without_dask(monkeypatch)
     with pytest.raises(InputError, match=r"lodsprite\[cluster\]") as exc:
@@ -173,7 +286,7 @@ def lodsprite_cli(*args: str) -> subprocess.CompletedProcess:
 
 @pytest.mark.parametrize(("args", "fragment"), [
     (["--mode", "warp"], "distributed"),
-    (["--mode", "distributed", "--ground-truth"], "--ground-truth needs --mode sprite"),
+    (["--mode", "distributed", "--ground-truth"], "not for --mode distributed"),
     (["--mode", "distributed", "--pace", "sometimes"], "--pace"),
     (["--mode", "distributed", "--max-error", "wide"], "--max-error"),
     (["--mode", "distributed", "--epsilon", "0"], "epsilon"),

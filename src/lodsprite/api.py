@@ -22,23 +22,26 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import moderngl
 import numpy as np
 from PIL import Image
 
 from lodsprite.camera import Projection, Viewpoint
 from lodsprite.errors import InputError
+from lodsprite.files import write_png
 from lodsprite.gl.context import GLContext, GLInfo
 from lodsprite.gl.overlay import Presenter
 from lodsprite.gl.paths import PathRenderer
 from lodsprite.gl.sprite import DEFAULT_GUARD_PX, DEFAULT_VISIBILITY, SpriteRenderer
 from lodsprite.gl.terrain import FrameStats
-from lodsprite.report.io import write_png
 from lodsprite.scene import Scene
 from lodsprite.sprite.engine import DEFAULT_EPSILON_PX, LodSpriteEngine, SpriteFrame
 from lodsprite.sprite.threaded import ThreadedLodSpriteEngine
 from lodsprite.terrain.lod import DEFAULT_COARSE
+
+if TYPE_CHECKING:  # hints only: moderngl is imported under gl/
+    import moderngl
 
 MAX_IMAGE_PIXELS = 1 << 28
 

@@ -73,22 +73,6 @@ def timing_summary(ms: np.ndarray) -> dict[str, float]:
             "max_ms": float(ms.max()), "total_s": float(ms.sum() / 1e3)}
 
 
-def peak_rss_mb() -> float:
-    """This process's peak resident memory in MB: ``VmHWM`` of ``/proc/self/status``, which
-    starts afresh at ``exec`` (``getrusage``'s ``ru_maxrss`` keeps the peak of the process
-    that forked it), else ``ru_maxrss``."""
-    try:
-        with open("/proc/self/status") as f:
-            for line in f:
-                if line.startswith("VmHWM:"):
-                    return int(line.split()[1]) / 1024.0
-    except OSError:
-        pass
-    import resource
-
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # KB on Linux
-
-
 def full_resolution(renderer) -> Reference:
     """The default reference: the renderer's full-resolution terrain at a viewpoint."""
     def reference(viewpoint) -> np.ndarray:
@@ -236,7 +220,7 @@ def _quality_columns(rows: list[dict]) -> list[str]:
 def write_run(out_dir: Path, result: RunResult, summary: dict[str, Any] | None = None) -> None:
     """``frames.csv`` and ``summary.json`` (``summary``, default the result's) into
     ``out_dir``, each written atomically."""
-    from lodsprite.report.io import write_csv, write_json
+    from lodsprite.files import write_csv, write_json
 
     out_dir = Path(out_dir)
     write_csv(out_dir / "frames.csv", result.rows, result.columns)

@@ -20,20 +20,21 @@ from pathlib import Path
 import numpy as np
 
 from lodsprite.errors import InputError
+from lodsprite.files import write_json, write_png
 from lodsprite.gl.paths import PathRenderer
 from lodsprite.gl.sprite import (
     DEFAULT_GUARD_PX,
     DEFAULT_VISIBILITY,
     VISIBILITY_MODES,
 )
-from lodsprite.harness import RunResult, peak_rss_mb, run_path, timing_summary, write_run
+from lodsprite.harness import RunResult, run_path, timing_summary, write_run
 from lodsprite.paths import CameraPath, get_path
 from lodsprite.progress import Progress
-from lodsprite.report.io import write_json, write_png
 from lodsprite.scene import Scene, load_scene
 from lodsprite.sprite.engine import DEFAULT_EPSILON_PX
 from lodsprite.terrain import DEFAULT_EXAGGERATION
 from lodsprite.terrain.lod import DEFAULT_COARSE, level_step
+from lodsprite.workers import peak_rss_mb
 
 
 def _modes() -> tuple[str, ...]:

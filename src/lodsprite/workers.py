@@ -339,3 +339,19 @@ def ready(sockets: list, poller=None) -> list:
 
 if __name__ == "__main__":
     main(sys.argv[1:])
+
+
+def peak_rss_mb() -> float:
+    """This process's peak resident memory in MB: ``VmHWM`` of ``/proc/self/status``, which
+    starts afresh at ``exec`` (``getrusage``'s ``ru_maxrss`` keeps the peak of the process
+    that forked it), else ``ru_maxrss``."""
+    try:
+        with open("/proc/self/status") as f:
+            for line in f:
+                if line.startswith("VmHWM:"):
+                    return int(line.split()[1]) / 1024.0
+    except OSError:
+        pass
+    import resource
+
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # KB on Linux

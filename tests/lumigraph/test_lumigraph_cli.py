@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from lodsprite.lumigraph.geometry import Slab
-from lodsprite.lumigraph.run import object_path
+from lodsprite.lumigraph.paths import object_path
 
 
 def lodsprite(*args):

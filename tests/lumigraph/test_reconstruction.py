@@ -7,8 +7,9 @@ import pytest
 from scipy.ndimage import binary_erosion
 
 from lodsprite.camera import look_at, perspective
-from lodsprite.gl.lumigraph import ColorMeshRenderer, LumigraphRenderer
+from lodsprite.gl.lumigraph import ColorMeshRenderer
 from lodsprite.gl.target import RenderTarget
+from lodsprite.lumigraph.base import full_reconstruction
 from lodsprite.lumigraph.capture import capture, textured_plane
 from lodsprite.lumigraph.geometry import Slab, grid_triangles, uv_through
 from lodsprite.metrics import rmse
@@ -34,7 +35,7 @@ def lumigraph(gl):
         target = RenderTarget(gl, sl.n_uv, sl.n_uv)
         images = capture(obj, sl, target, near=0.1, far=10.0)
         target.release()
-        rec = LumigraphRenderer.full(gl, sl, images, SIZE, SIZE)
+        rec = full_reconstruction(gl, sl, images, SIZE, SIZE)
         made.extend([obj, rec])
         return obj, rec, images
 

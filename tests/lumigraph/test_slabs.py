@@ -8,7 +8,8 @@ import numpy as np
 import trimesh
 
 from lodsprite.lumigraph.geometry import SIX_DIRECTIONS, facing_slab, slab_facing
-from lodsprite.lumigraph.run import capture_lumigraph, load_object, orbit_path, render_lumigraph
+from lodsprite.lumigraph.paths import orbit_path
+from lodsprite.lumigraph.run import capture_lumigraph, load_object, render_lumigraph
 from lodsprite.lumigraph.store import Lumigraph
 
 

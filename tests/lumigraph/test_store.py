@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from lodsprite.errors import InputError
-from lodsprite.gl.lumigraph import LumigraphRenderer
+from lodsprite.lumigraph.base import full_reconstruction
 from lodsprite.lumigraph.capture import textured_plane
 from lodsprite.lumigraph.geometry import Slab
 from lodsprite.lumigraph.store import HEADER_FILE, Lumigraph, node_name, save
@@ -84,7 +84,7 @@ def test_a_folder_without_a_header_is_refused(tmp_path):
 def test_a_node_without_data_leaves_no_hole_in_the_reconstruction(gl):
     imgs = {k: np.full((N_UV, N_UV, 3), 200, np.uint8) for k in images()}
     del imgs[(1, 1)], imgs[(2, 1)]
-    rec = LumigraphRenderer.full(gl, slab(), imgs, 64, 64)
+    rec = full_reconstruction(gl, slab(), imgs, 64, 64)
     try:
         from lodsprite.camera import look_at, perspective
 

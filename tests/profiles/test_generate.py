@@ -78,9 +78,9 @@ def test_dask_cluster_matches_inline(inline_table, chain):
 
 
 def test_unreachable_scheduler_is_a_user_error(chain, monkeypatch):
+    from lodsprite import cluster
     from lodsprite.errors import InputError
-    from lodsprite.profiles import generate
 
-    monkeypatch.setattr(generate, "DASK_CONNECT_TIMEOUT_S", 1.0)
+    monkeypatch.setattr(cluster, "DASK_CONNECT_TIMEOUT_S", 1.0)
     with pytest.raises(InputError, match="Dask scheduler"):
         generate_profile(chain, SETTINGS, scheduler="tcp://127.0.0.1:9")

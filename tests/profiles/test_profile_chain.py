@@ -7,6 +7,7 @@ import pytest
 import trimesh
 
 from lodsprite.errors import MeshError
+from lodsprite.meshes import Mesh
 from lodsprite.profiles.chain import (
     DEFAULT_RATIOS,
     LodChain,
@@ -17,7 +18,6 @@ from lodsprite.profiles.chain import (
     simplify,
     surface_distances,
 )
-from lodsprite.profiles.meshes import Mesh
 from lodsprite.profiles.models import sphere_family
 
 

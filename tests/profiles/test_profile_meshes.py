@@ -1,4 +1,4 @@
-"""Tests of meshes and mesh-file loading (lodsprite.profiles.meshes)."""
+"""Tests of meshes and mesh-file loading (lodsprite.meshes)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import pytest
 import trimesh
 
 from lodsprite.errors import InputError, MeshError
-from lodsprite.profiles.meshes import Mesh, bounding_sphere, compact_mesh, load_mesh
+from lodsprite.meshes import Mesh, bounding_sphere, compact_mesh, load_mesh
 
 FORMATS = ["obj", "ply", "off", "stl", "glb"]
 

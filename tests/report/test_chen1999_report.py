@@ -11,7 +11,7 @@ import pytest
 from PIL import Image
 
 from lodsprite.experiments.chen1999.report import PAPER, write_plots, write_report
-from lodsprite.report.io import write_json
+from lodsprite.files import write_json
 
 N = 40
 ALL_PLOTS = [

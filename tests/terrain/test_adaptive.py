@@ -162,7 +162,7 @@ def test_a_missing_tile_is_drawn_from_its_parent(gl):
     from lodsprite.camera import look_at
     from lodsprite.gl.target import RenderTarget
     from lodsprite.gl.terrain import SKY_RGB
-    from lodsprite.terrain.adaptive import AdaptiveTerrain
+    from lodsprite.techniques.adaptive_terrain import AdaptiveTerrain
 
     vp = look_at((0.0, -2000.0, 1500.0), (0.0, 0.0, 0.0))
     parent = Node(1, 1, 1)                       # level 0's tiles (2..3, 2..3): 128..256
@@ -200,7 +200,7 @@ def test_adaptive_at_a_quarter_pixel_matches_full_resolution(gl):
     from lodsprite import Renderer
     from lodsprite.camera import look_at
     from lodsprite.scene import Scene
-    from lodsprite.terrain.adaptive import AdaptiveTerrain
+    from lodsprite.techniques.adaptive_terrain import AdaptiveTerrain
     from lodsprite.terrain.heightfield import HeightField
     from lodsprite.terrain.textures import make_texture
 
@@ -316,7 +316,7 @@ def test_an_evicted_root_comes_back_and_the_loader_drops_stale_requests(gl):
     again (a hole for good); the loader kept every request it was ever given."""
     from lodsprite.camera import look_at
     from lodsprite.gl.target import RenderTarget
-    from lodsprite.terrain.adaptive import AdaptiveTerrain
+    from lodsprite.techniques.adaptive_terrain import AdaptiveTerrain
 
     p = MemoryPyramid(rough(513), 30.0, 30.0)
     t = RenderTarget(gl, 64, 64)
@@ -372,7 +372,7 @@ def test_the_adaptive_sky_is_the_sky_of_every_other_renderer(gl):
     from lodsprite.camera import look_at
     from lodsprite.gl.target import RenderTarget
     from lodsprite.gl.terrain import SKY_RGB
-    from lodsprite.terrain.adaptive import AdaptiveTerrain
+    from lodsprite.techniques.adaptive_terrain import AdaptiveTerrain
 
     t = RenderTarget(gl, 32, 32)
     a = AdaptiveTerrain(gl, MemoryPyramid(rough(129), 30.0, 30.0), t, 45.0, 1.0)
@@ -391,7 +391,7 @@ def test_a_low_flight_over_a_field_with_a_deep_pit_elsewhere_sees_the_ground_bel
     from lodsprite.camera import look_at
     from lodsprite.gl.target import RenderTarget
     from lodsprite.gl.terrain import SKY_RGB
-    from lodsprite.terrain.adaptive import AdaptiveTerrain
+    from lodsprite.techniques.adaptive_terrain import AdaptiveTerrain
 
     h = np.full((257, 257), 1000.0, np.float32)
     h[240:, 240:] = -3000.0                       # a pit in one corner, far away
@@ -423,7 +423,7 @@ def test_prefetch_streams_between_keyframes_without_drawing(gl):
     uploads what the last selection asked for, so the next keyframe finds it."""
     from lodsprite.camera import look_at
     from lodsprite.gl.target import RenderTarget
-    from lodsprite.terrain.adaptive import AdaptiveTerrain
+    from lodsprite.techniques.adaptive_terrain import AdaptiveTerrain
 
     t = RenderTarget(gl, 64, 64)
     a = AdaptiveTerrain(gl, MemoryPyramid(rough(513), 30.0, 30.0), t, 45.0, 0.5)

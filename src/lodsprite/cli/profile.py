@@ -32,8 +32,9 @@ def profile(
     ] = None,
 ) -> None:
     """Compute a model's LOD error profile (Scoggins et al. 2000) and write its table."""
+    from lodsprite.cluster import require_dask
     from lodsprite.errors import InputError
-    from lodsprite.profiles.generate import ProfileSettings, generate_profile, require_dask
+    from lodsprite.profiles.generate import ProfileSettings, generate_profile
     from lodsprite.profiles.models import get_model
 
     if scheduler is not None:

@@ -29,8 +29,8 @@ from lodsprite.distributed.keys import ClientKeys
 from lodsprite.distributed.pacing import DEFAULT_PACE, PACES
 from lodsprite.distributed.render import scene_args
 from lodsprite.errors import InputError, LodspriteError
+from lodsprite.files import write_json
 from lodsprite.progress import Progress
-from lodsprite.report.io import write_json
 from lodsprite.run import RenderConfig, field_of_view, prepare
 
 MAX_ERROR_OFF = ("off", "none")

@@ -9,8 +9,8 @@ with the server's address; the viewer core never imports this layer.
 from __future__ import annotations
 
 import time
+from typing import TYPE_CHECKING
 
-import moderngl
 import numpy as np
 
 from lodsprite.api import Renderer
@@ -21,6 +21,9 @@ from lodsprite.errors import InputError
 from lodsprite.sprite.engine import DEFAULT_EPSILON_PX
 from lodsprite.techniques import FALLBACK_TINT, Frame, Param, Technique, TechniqueFactory
 from lodsprite.terrain.lod import DEFAULT_COARSE
+
+if TYPE_CHECKING:  # hints only: moderngl is imported under gl/
+    import moderngl
 
 
 class DistributedTechnique(Technique):

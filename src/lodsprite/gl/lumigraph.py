@@ -11,23 +11,27 @@
   or, with depth correction (Gortler et al. 1996), where the ray from the node through
   the approximate geometry's surface point seen at that pixel meets it; both per
   fragment, in the shader.
-
 * :class:`ProjectiveRenderer` reuses the last reconstructed image as a projective texture
   on the approximate geometry (§3.2).
 
 All draws are one vertex buffer and one draw call; a frame uploads only the eye and its
-matrices, plus the vertex buffer when the covering changes.
+matrices, plus the vertex buffer when the covering changes.  The slab and the draws are
+the light field's data, passed in (gl/ imports no technique package).
 """
 
 from __future__ import annotations
+
+from typing import TYPE_CHECKING
 
 import moderngl
 import numpy as np
 
 from lodsprite.gl.context import GLContext
 from lodsprite.gl.terrain import mat_bytes
-from lodsprite.lumigraph.geometry import Slab
-from lodsprite.lumigraph.subsets import Draws, cover_draws, grid_cover
+
+if TYPE_CHECKING:
+    from lodsprite.lumigraph.geometry import Slab
+    from lodsprite.lumigraph.subsets import Draws
 
 COLOR_MESH_VS = """#version 330
 uniform mat4 u_mvp;
@@ -231,20 +235,6 @@ class LumigraphRenderer(FloatTarget):
     def node_bytes(self) -> int:
         """Texture memory of one resident node."""
         return self.n * self.n * self.BYTES_PER_TEXEL
-
-    @classmethod
-    def full(cls, ctx: GLContext, slab: Slab, images: dict[tuple[int, int], np.ndarray],
-             width: int, height: int) -> LumigraphRenderer:
-        """Every node with data resident, drawn over the full grid (nodes missing from
-        ``images`` are fictitious)."""
-        self = cls(ctx, slab, width, height, max(len(images), 1))
-        n = slab.n_st
-        valid = np.zeros((n, n))
-        for (i, j), img in images.items():
-            self.upload(i * n + j, img)
-            valid[i, j] = 1.0
-        self.set_draws(cover_draws(grid_cover(slab, valid)))
-        return self
 
     @property
     def images(self) -> int:

@@ -3,13 +3,16 @@
 from __future__ import annotations
 
 import time
+from typing import TYPE_CHECKING
 
 import moderngl
 
 from lodsprite.gl.context import GLContext
 from lodsprite.gl.target import RenderTarget
 from lodsprite.gl.terrain import TerrainGeometry, TerrainRenderer
-from lodsprite.scene import Scene
+
+if TYPE_CHECKING:  # a scene is passed in: gl/ imports no scene code
+    from lodsprite.scene import Scene
 
 
 class PathRenderer:

@@ -175,7 +175,7 @@ class SpriteRenderer:
 
     #: Draws keyframes instead of the full-resolution terrain when set:
     #: ``(viewpoint, projection, target) -> FrameStats`` (the adaptive renderer's
-    #: :meth:`~lodsprite.terrain.adaptive.AdaptiveTerrain.render_into`).
+    #: :meth:`~lodsprite.techniques.adaptive_terrain.AdaptiveTerrain.render_into`).
     keyframe_drawer = None
 
     def upload_keyframe(self, viewpoint: Viewpoint, projection: Projection, color: np.ndarray,

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from lodsprite.lumigraph.geometry import Slab, node_frustum, node_view
-from lodsprite.profiles.models import uv_sphere
+from lodsprite.meshes import uv_sphere
 
 
 @dataclass(frozen=True)

@@ -25,22 +25,15 @@ frame (its "texture load" in Table 1 terms).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
 
 import numpy as np
 
 from lodsprite.camera import Viewpoint
 from lodsprite.errors import InputError
-from lodsprite.gl.lumigraph import (
-    ColorMeshRenderer,
-    FloatTarget,
-    LumigraphRenderer,
-    ProjectiveRenderer,
-)
+from lodsprite.gl.lumigraph import FloatTarget, ProjectiveRenderer
+from lodsprite.lumigraph.base import FRAME_S, Context, Method, MethodFrame
 from lodsprite.lumigraph.critical import st_point
 from lodsprite.lumigraph.geometry import facing_slab
-from lodsprite.lumigraph.loader import NodeLoader
-from lodsprite.lumigraph.store import Lumigraph
 from lodsprite.lumigraph.subsets import (
     cover_draws,
     grid_cover,
@@ -50,125 +43,12 @@ from lodsprite.lumigraph.subsets import (
     subsample_nodes,
     subset_cover,
 )
-from lodsprite.sprite.predictors import DecayLinearPredictor
+
+__all__ = ["FRAME_S", "METHODS", "Context", "Method", "MethodFrame", "MultiSlabMethod",
+           "make_method"]
 
 METHODS = ("full", "subsample", "fixed", "arbitrary", "line", "projective", "progressive",
            "critical")
-FRAME_S = 1.0 / 30.0  # the nominal time between frames, for the motion predictor
-
-
-@dataclass(frozen=True)
-class MethodFrame:
-    """One frame: ``ms`` in all, of which ``upload_ms`` making nodes resident (decoding
-    included where the method decodes in the frame) and ``raster_ms`` drawing; node
-    ``images`` drawn, ``uploads`` and ``evictions`` made, and the frame's ``kind``."""
-
-    ms: float
-    upload_ms: float
-    raster_ms: float
-    images: int
-    uploads: int
-    evictions: int
-    kind: str = "frame"
-
-
-@dataclass
-class Context:
-    """What every method needs: the GL context, the lumigraph and its slab, the output
-    size and the approximate geometry's renderer (None: no depth correction)."""
-
-    gl: object
-    lf: Lumigraph
-    slab_index: int
-    size: tuple[int, int]
-    proxy: ColorMeshRenderer | None
-    white: bool = False  # every texel white: the image is the alpha sum (tests)
-
-
-class Method:
-    """A reconstruction method over a pool of resident nodes (see module doc)."""
-
-    name = "base"
-
-    def __init__(self, ctx: Context, capacity: int, level: int = 0) -> None:
-        self.ctx = ctx
-        self.slab = ctx.lf.slabs[ctx.slab_index]
-        self.n_nodes = self.slab.n_st ** 2
-        w, h = ctx.size
-        self.rec = LumigraphRenderer(ctx.gl, self.slab, w, h, capacity, level)
-        self.loader = NodeLoader(ctx.lf, ctx.slab_index, level)
-        self.predictor = DecayLinearPredictor()
-        self.samples = 0
-        self._set: tuple[int, ...] | None = None
-
-    @property
-    def output(self) -> FloatTarget:
-        return self.rec
-
-    def eye_st(self, viewpoint: Viewpoint) -> np.ndarray:
-        return st_point(self.slab, viewpoint.o)
-
-    def ensure(self, nodes: np.ndarray) -> tuple[np.ndarray, int, int]:
-        """Make ``nodes`` resident, decoding in this frame what the loader does not hold;
-        returns the validity of each (0 for a node without data), uploads, evictions."""
-        keep = {int(n) for n in nodes}
-        valid = np.ones(len(nodes))
-        ups = evs = 0
-        for k, n in enumerate(int(x) for x in nodes):
-            if n in self.rec.slot_of:
-                continue
-            img = self.loader.load_now(n)
-            if img is None:
-                valid[k] = 0.0
-                continue
-            if not self.rec.free_layers:
-                out = next(m for m in self.rec.slot_of if m not in keep)
-                self.rec.evict(out)
-                evs += 1
-            self.rec.upload(n, img)
-            ups += 1
-        return valid, ups, evs
-
-    def choose(self, index: int, viewpoint: Viewpoint) -> np.ndarray:
-        """The nodes this frame needs."""
-        raise NotImplementedError
-
-    def draws(self, nodes: np.ndarray, valid: np.ndarray, viewpoint: Viewpoint):
-        return cover_draws(subset_cover(self.slab, nodes, valid))
-
-    def frame(self, index: int, viewpoint: Viewpoint, projection: np.ndarray,
-              count_samples: bool = False, observe: bool = True) -> MethodFrame:
-        gl = self.ctx.gl
-        t0 = time.perf_counter()
-        if observe:  # (the projective method observes the real eye, not its prediction)
-            self.predictor.observe(index * FRAME_S, viewpoint)
-        nodes = self.choose(index, viewpoint)
-        valid, ups, evs = self.ensure(nodes)
-        key = tuple(int(n) for n in nodes) + tuple(valid)
-        if key != self._set or self.dynamic:
-            self.rec.set_draws(self.draws(nodes, valid, viewpoint))
-            self._set = key
-        gl.finish()
-        t1 = time.perf_counter()
-        raster_ms = self.draw(viewpoint, projection, count_samples)
-        return MethodFrame((t1 - t0) * 1e3 + raster_ms, (t1 - t0) * 1e3, raster_ms,
-                           self.rec.images, ups, evs)
-
-    def draw(self, viewpoint: Viewpoint, projection: np.ndarray, count_samples: bool
-             ) -> float:
-        """Reconstruct the current draws (ms, GL work finished)."""
-        t0 = time.perf_counter()
-        self.rec.render(viewpoint.view_matrix(), projection, self.ctx.proxy,
-                        white=self.ctx.white, count_samples=count_samples)
-        self.ctx.gl.finish()
-        self.samples = self.rec.samples
-        return (time.perf_counter() - t0) * 1e3
-
-    dynamic = False  # draws change with the viewpoint even for the same nodes
-
-    def release(self) -> None:
-        self.loader.close()
-        self.rec.release()
 
 
 class FullMethod(Method):

@@ -21,18 +21,18 @@ from pathlib import Path
 
 import numpy as np
 
-from lodsprite.camera import Viewpoint, look_at
+from lodsprite.camera import Viewpoint
 from lodsprite.errors import InputError
+from lodsprite.files import atomic_write_bytes
 from lodsprite.lumigraph.capture import ColorMesh, capture, still_life
-from lodsprite.lumigraph.geometry import SIX_DIRECTIONS, SIX_SLABS, Slab, slab_facing
+from lodsprite.lumigraph.geometry import SIX_DIRECTIONS, SIX_SLABS, slab_facing
+from lodsprite.lumigraph.paths import default_path
 from lodsprite.lumigraph.store import Lumigraph, save
 from lodsprite.paths import CameraPath
-from lodsprite.report.io import atomic_write_bytes
 
 OBJECT_FILE = "object.npz"
 BUILTIN_OBJECTS = ("still-life",)
 DEFAULT_PROXY_FACES = 2000
-FOV_Y_DEG = 30.0
 Progress = Callable[[int, int], None]
 
 
@@ -44,7 +44,7 @@ def load_object(spec: str) -> ColorMesh:
         return still_life()
     import trimesh
 
-    from lodsprite.profiles.meshes import MeshError, load_mesh, vertex_colors
+    from lodsprite.meshes import MeshError, load_mesh, vertex_colors
 
     try:
         load_mesh(spec)  # validates the file (one clear line for anything wrong)
@@ -119,44 +119,6 @@ def capture_lumigraph(model: str, out_dir: Path, n_st: int = 32, n_uv: int = 256
             "codec": codec, "capture_s": capture_s, "faces": int(len(mesh.faces))}
 
 
-def object_path(slab: Slab, frames: int, arc_deg: float = 50.0) -> CameraPath:
-    """An arc of ``frames`` viewpoints in front of the slab, looking at the uv plane's
-    centre, that stays within the st plane's coverage: eyes at 1.6 times the st plane's
-    distance, swinging ``arc_deg`` degrees about the slab's up axis, a little above."""
-    if frames < 2:
-        raise InputError(f"a path needs at least 2 frames, got {frames}")
-    d = 1.6 * slab.st_distance
-    a = np.radians(np.linspace(-arc_deg / 2, arc_deg / 2, frames))
-    local = np.stack([d * np.sin(a), np.full_like(a, 0.12 * d), d * np.cos(a),
-                      np.ones_like(a)], axis=1)
-    eyes = local @ slab.frame.T
-    centre = slab.frame[:3, 3]
-    up = slab.frame[:3, 1]
-    return CameraPath("lumigraph-arc", tuple(look_at(e[:3], centre, up) for e in eyes),
-                      FOV_Y_DEG)
-
-
-def orbit_path(slabs: list[Slab], frames: int, elevation_deg: float = 15.0) -> CameraPath:
-    """A full orbit round the object of a six-slab lumigraph, about its y axis, at 2.2
-    times the st planes' distance, looking at the centre."""
-    if frames < 2:
-        raise InputError(f"a path needs at least 2 frames, got {frames}")
-    centre = slabs[0].frame[:3, 3]
-    d = 2.2 * max(s.st_distance for s in slabs)
-    a = np.linspace(0.0, 2 * np.pi, frames, endpoint=False)
-    e = np.radians(elevation_deg)
-    eyes = centre + d * np.stack([np.cos(e) * np.sin(a), np.full_like(a, np.sin(e)),
-                                  np.cos(e) * np.cos(a)], axis=1)
-    return CameraPath("lumigraph-orbit", tuple(look_at(p, centre, (0.0, 1.0, 0.0))
-                                               for p in eyes), FOV_Y_DEG)
-
-
-def default_path(lf: Lumigraph, frames: int) -> CameraPath:
-    """The arc in front of a one-slab lumigraph, the orbit round a six-slab one."""
-    return object_path(lf.slabs[0], frames) if len(lf.slabs) == 1 else orbit_path(lf.slabs,
-                                                                                frames)
-
-
 def _read_object(folder: Path) -> ColorMesh | None:
     path = folder / OBJECT_FILE
     if not path.is_file():
@@ -172,7 +134,8 @@ def render_lumigraph(folder: Path, out_dir: Path, frames: int = 120,
                      method: str = "full", quality_every: int = 1,
                      progress: Progress | None = None, flip: bool = False,
                      **options) -> dict:
-    """Reconstruct every frame of ``path`` (default: :func:`object_path`) with ``method``
+    """Reconstruct every frame of ``path`` (default:
+    :func:`~lodsprite.lumigraph.paths.default_path`) with ``method``
     (:data:`~lodsprite.lumigraph.methods.METHODS`; ``options`` go to
     :func:`~lodsprite.lumigraph.methods.make_method`); write ``frames.csv`` and
     ``summary.json`` to ``out_dir`` and return the summary.  With ``ground_truth``, every

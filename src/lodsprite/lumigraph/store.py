@@ -28,9 +28,9 @@ import numpy as np
 from PIL import Image
 
 from lodsprite.errors import InputError
+from lodsprite.files import atomic_write_bytes
 from lodsprite.lumigraph.capture import ColorMesh
 from lodsprite.lumigraph.geometry import Slab
-from lodsprite.report.io import atomic_write_bytes
 
 log = logging.getLogger(__name__)
 

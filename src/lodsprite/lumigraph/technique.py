@@ -189,7 +189,7 @@ def lumigraph_techniques(folder, **options) -> dict[str, TechniqueFactory]:
 def lumigraph_home(folder):
     """The camera home for the lumigraph: the default path's first eye, orbiting the
     object's centre, in the viewer's (z up) world."""
-    from lodsprite.lumigraph.run import default_path
+    from lodsprite.lumigraph.paths import default_path
     from lodsprite.lumigraph.store import Lumigraph
     from lodsprite.scene import CameraHome
 
@@ -206,7 +206,7 @@ def open_scene(folder: str, **_: object):
     """The scene of a lumigraph folder: the light field as its layer, the camera home,
     ``arc`` (the default path: an arc, or an orbit for six slabs; 240 frames by default)
     or a JSON path file in the lumigraph's coordinates, turned into the viewer's."""
-    from lodsprite.lumigraph.run import default_path
+    from lodsprite.lumigraph.paths import default_path
     from lodsprite.lumigraph.store import Lumigraph
     from lodsprite.paths import load_path_json
     from lodsprite.scene import Scene

@@ -22,8 +22,8 @@ import numpy as np
 
 from lodsprite.camera import Viewpoint
 from lodsprite.errors import InputError
+from lodsprite.lumigraph.base import FRAME_S, Context, Method, MethodFrame
 from lodsprite.lumigraph.critical import DISK, RAM, RESIDENT, CostModel, benefit, plan, st_point
-from lodsprite.lumigraph.methods import FRAME_S, Context, Method, MethodFrame
 from lodsprite.lumigraph.subsets import cover_draws, nearest_nodes, subset_cover
 
 PATH_AHEAD_S = (0.1, 0.2, 0.3, 0.5)  # predicted eye positions that make the Path term

@@ -113,7 +113,7 @@ def mesh_model(path: str, height_m: float = OGRE_HEIGHT_M) -> ProgressiveMesh:
     scaled to ``height_m``; an empty, malformed or faceless file is an :class:`InputError`."""
     import trimesh
 
-    from lodsprite.profiles.meshes import MeshError, load_mesh, vertex_colors
+    from lodsprite.meshes import MeshError, load_mesh, vertex_colors
 
     try:
         load_mesh(path)  # validation: one clear line for anything wrong

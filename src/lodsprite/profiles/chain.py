@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from lodsprite.errors import MeshError
-from lodsprite.profiles.meshes import Mesh, compact_mesh
+from lodsprite.meshes import Mesh, compact_mesh
 
 #: Default reduction ratios of :func:`build_chain` (fraction of the full face count).
 DEFAULT_RATIOS = (0.01, 0.02, 0.05, 0.1, 0.2, 0.5)

@@ -30,11 +30,11 @@ from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import asdict, dataclass, field
 from multiprocessing import get_context
-from types import ModuleType
 
 import numpy as np
 
 from lodsprite.camera import Viewpoint, perspective
+from lodsprite.cluster import connect, require_dask
 from lodsprite.errors import InputError
 from lodsprite.profiles.spectra import CSF_NAME, F_MIN, distances, lod_errors, power_spectra
 from lodsprite.profiles.table import ProfileTable
@@ -43,21 +43,6 @@ from lodsprite.progress import Progress
 # Paper §4.3: z1 = z0 + 50 km with z0 = 135 km, i.e. each distance 1.37 times the last.
 DEFAULT_Z_RATIO = 185.0 / 135.0
 DEFAULT_LIGHT = (0.35, 0.25, 0.9)  # towards the light, object space (sun high in the south-east)
-
-DASK_CONNECT_TIMEOUT_S = 10.0
-CLUSTER_EXTRA = "lodsprite[cluster]"
-
-
-def require_dask() -> ModuleType:
-    """The ``dask.distributed`` module, or :class:`InputError` naming the extra that
-    installs it (``--scheduler`` is the only use of Dask; a lean install has none)."""
-    try:
-        import dask.distributed as dask_distributed
-    except ImportError:
-        raise InputError(f"--scheduler needs Dask distributed: pip install '{CLUSTER_EXTRA}'"
-                         ) from None
-    return dask_distributed
-
 
 @dataclass(frozen=True)
 class ProfileSettings:
@@ -216,11 +201,7 @@ def _run_views(key: str, levels: list, setup: ViewSetup, views: list[tuple[float
 
     if scheduler:
         dask_distributed = require_dask()
-        try:
-            client = dask_distributed.Client(scheduler, timeout=f"{DASK_CONNECT_TIMEOUT_S}s")
-        except (OSError, TimeoutError, ValueError) as exc:
-            raise InputError(f"cannot reach the Dask scheduler at {scheduler}: {exc}") from None
-        with client:
+        with connect(scheduler) as client:
             payload = client.scatter((key, levels, setup), broadcast=True)
             futures = client.map(_dask_view, [payload] * len(views), views, pure=False)
             index = {f.key: i for i, f in enumerate(futures)}

@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from lodsprite.errors import MeshError
+from lodsprite.meshes import Mesh, compact_mesh, load_mesh, uv_sphere
 from lodsprite.profiles.chain import LodChain, build_chain
-from lodsprite.profiles.meshes import Mesh, compact_mesh, load_mesh
 
 SPHERE_RADIUS = 0.5
 SPHERE_LEVELS = 19
@@ -28,37 +28,6 @@ SPHERE_MAX_FACES = 394_212
 MOUNTAIN_FACES = 8538
 MOUNTAIN_LOD_FACES = (1000, 2000, 3000, 4000, 5000, 6000, 7000)
 BUILTINS = "sphere, mountain, mountain:TERRAIN"
-
-
-def uv_sphere(m: int, radius: float = SPHERE_RADIUS) -> tuple[np.ndarray, np.ndarray]:
-    """Latitude/longitude sphere with ``m`` latitude bands and ``2m`` longitude segments.
-
-    Centred at the origin; returns shared vertices ``(2 + 2m(m-1), 3) float64``
-    (north pole first, rings north to south, south pole last) and faces
-    ``(4m(m-1), 3) int64``, counter-clockwise seen from outside.  ``m >= 2``.
-    """
-    if m < 2:
-        raise MeshError(f"a UV sphere needs at least 2 latitude bands, got {m}")
-    n = 2 * m
-    theta = np.pi * np.arange(1, m) / m                       # polar angle of rings
-    phi = np.pi * np.arange(n) / m                            # azimuth of segments
-    st, ct = np.sin(theta)[:, None], np.cos(theta)[:, None]
-    ring = np.stack([st * np.cos(phi), st * np.sin(phi), np.broadcast_to(ct, (m - 1, n))],
-                    axis=-1).reshape(-1, 3)
-    vertices = radius * np.concatenate([[[0.0, 0.0, 1.0]], ring, [[0.0, 0.0, -1.0]]])
-    south = 1 + (m - 1) * n
-    j = np.arange(n)
-    j1 = (j + 1) % n
-    north_cap = np.stack([np.zeros(n, np.int64), 1 + j, 1 + j1], axis=1)
-    last = 1 + (m - 2) * n
-    south_cap = np.stack([last + j, np.full(n, south), last + j1], axis=1)
-    i = np.arange(m - 2)[:, None]
-    a = 1 + i * n + j                                         # upper ring, this segment
-    b = 1 + i * n + j1                                        # upper ring, next segment
-    c, d = a + n, b + n                                       # lower ring
-    band = np.stack([np.stack([a, c, d], -1), np.stack([a, d, b], -1)], axis=2)
-    faces = np.concatenate([north_cap, band.reshape(-1, 3), south_cap]).astype(np.int64)
-    return vertices, faces
 
 
 def sphere_bands(levels: int = SPHERE_LEVELS, max_faces: int = SPHERE_MAX_FACES) -> np.ndarray:
@@ -99,7 +68,7 @@ def sphere_family(levels: int = SPHERE_LEVELS, max_faces: int = SPHERE_MAX_FACES
     levels_m = sphere_bands(levels, max_faces)
     meshes = []
     for m in levels_m:
-        v, f = uv_sphere(int(m))
+        v, f = uv_sphere(int(m), SPHERE_RADIUS)
         meshes.append(Mesh(v, f, f"sphere@{f.shape[0]}"))
     return LodChain("sphere", tuple(meshes))
 

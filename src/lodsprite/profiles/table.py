@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from lodsprite.errors import InputError
-from lodsprite.report.io import atomic_write_bytes
+from lodsprite.files import atomic_write_bytes
 
 FORMAT = "lodsprite-lod-error-table"
 VERSION = 1

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from lodsprite.errors import InputError
-from lodsprite.report.io import FILE_MODE
+from lodsprite.files import FILE_MODE
 
 VIDEO_SUFFIXES = (".mp4",)
 DEFAULT_FPS = 30

@@ -19,13 +19,13 @@ not drop.  :class:`~lodsprite.sprite.engine.LodSpriteEngine` is the inline alter
 from __future__ import annotations
 
 import time
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from lodsprite.camera import Viewpoint
 from lodsprite.errors import LodspriteError
 from lodsprite.gl.sprite import SpriteRenderer
-from lodsprite.scene import Scene
 from lodsprite.sprite.engine import SpriteFrame
 from lodsprite.sprite.metric import ErrorMetric
 from lodsprite.sprite.policy import (
@@ -37,6 +37,9 @@ from lodsprite.sprite.policy import (
     keyframe_error_px,
 )
 from lodsprite.sprite.worker import KeyframeImage, KeyframeWorker, WorkerSettings
+
+if TYPE_CHECKING:  # the scene is passed in
+    from lodsprite.scene import Scene
 
 DEFAULT_REQUEST_FRACTION = 0.5
 LEAD_SMOOTHING = 0.3   # weight of the newest latency in the lead's running mean

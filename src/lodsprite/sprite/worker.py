@@ -24,14 +24,17 @@ import threading
 import time
 from collections import deque
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from lodsprite.camera import Projection, Viewpoint
 from lodsprite.errors import LodspriteError
-from lodsprite.scene import Scene
 from lodsprite.sprite.metric import ErrorMetric
 from lodsprite.sprite.predictors import PREDICTORS
+
+if TYPE_CHECKING:  # the scene is passed in
+    from lodsprite.scene import Scene
 
 log = logging.getLogger(__name__)
 

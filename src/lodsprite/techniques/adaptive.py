@@ -1,4 +1,4 @@
-"""The adaptive terrain renderer (:mod:`lodsprite.terrain.adaptive`) as techniques:
+"""The adaptive terrain renderer (:mod:`lodsprite.techniques.adaptive_terrain`) as techniques:
 ``adaptive`` draws every frame with it; ``sprite-adaptive`` is LOD-sprite whose keyframes
 it draws (``--key-sse``), streaming between keyframes.  Both fly a store of any size
 (the scene's terrain spec names the store) or the scene's in-memory height field.
@@ -12,9 +12,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from lodsprite.harness import peak_rss_mb
 from lodsprite.techniques.base import Frame, Technique
 from lodsprite.techniques.terrain import SpriteTechnique
+from lodsprite.workers import peak_rss_mb
 
 if TYPE_CHECKING:
     from lodsprite.api import Renderer
@@ -35,9 +35,9 @@ def scene_pyramid(scene):
 
 
 def make_adaptive(renderer: Renderer, sse: float, gpu_mb: float, host_mb: float):
-    """An :class:`~lodsprite.terrain.adaptive.AdaptiveTerrain` on ``renderer``'s context
+    """An :class:`~lodsprite.techniques.adaptive_terrain.AdaptiveTerrain` on ``renderer``'s context
     and target, coloured with the scene's texture."""
-    from lodsprite.terrain.adaptive import AdaptiveTerrain
+    from lodsprite.techniques.adaptive_terrain import AdaptiveTerrain
 
     pr = renderer.paths
     return AdaptiveTerrain(pr.ctx, scene_pyramid(renderer.scene), pr.renderer.target,

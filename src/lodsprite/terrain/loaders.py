@@ -1,8 +1,9 @@
 """Loading height fields: built-in terrains and GeoTIFF / PNG / NumPy files.
 
 Implements :func:`load_heightfield` (spec string -> raw :class:`HeightField`, not
-resampled, not exaggerated), :func:`heightfield_from_array` (nodata filling and
-validation) and :func:`metres_per_degree` (WGS84 ellipsoid series).
+resampled, not exaggerated); :func:`heightfield_from_array` (nodata filling and
+validation) and :func:`metres_per_degree` (WGS84 ellipsoid series) live in
+:mod:`~lodsprite.terrain.rasters` and are re-exported here.
 
 Units: heights are metres as stored in the source (no vertical-unit conversion);
 ``dx`` / ``dy`` are metres.  Every user-caused failure raises
@@ -21,48 +22,25 @@ Spec forms:
 
 from __future__ import annotations
 
-import math
 import os
 import warnings
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy import ndimage
 
 from lodsprite.errors import InputError, TerrainError
 from lodsprite.terrain.generators import fractal
 from lodsprite.terrain.heightfield import DEFAULT_GRID, HeightField
+from lodsprite.terrain.rasters import (
+    DEFAULT_SPACING_M,
+    first_line,
+    geotiff_spacing,
+    heightfield_from_array,
+    metres_per_degree,
+)
 
-if TYPE_CHECKING:
-    from affine import Affine
-    from rasterio.crs import CRS
-
-DEFAULT_SPACING_M = 30.0
-"""Horizontal spacing (metres) assumed for files without georeferencing (PNG, NPY)."""
-
-MAX_NODATA_FRACTION = 0.5
-"""Largest fraction of nodata samples that is filled rather than rejected."""
-
-NODATA_SENTINELS = (-32768.0, -32767.0, -9999.0)
-"""Heights always treated as nodata (SRTM / ESRI voids), as are ``|h| >= 1e20``."""
-
-_HOLE_SMOOTHING_ITERATIONS = 4
 _FILE_TYPES = (".tif", ".tiff", ".png", ".npy")
 _JACKSBORO = "jacksboro_fault_dem.npz"
-
-
-def metres_per_degree(lat_deg: float) -> tuple[float, float]:
-    """Metres per degree of latitude and of longitude at geodetic latitude ``lat_deg``.
-
-    WGS84 ellipsoid, the standard cosine series (accurate to about 1 cm).
-    """
-    phi = math.radians(lat_deg)
-    per_lat = (111132.92 - 559.82 * math.cos(2 * phi) + 1.175 * math.cos(4 * phi)
-               - 0.0023 * math.cos(6 * phi))
-    per_lon = (111412.84 * math.cos(phi) - 93.5 * math.cos(3 * phi)
-               + 0.118 * math.cos(5 * phi))
-    return per_lat, per_lon
 
 
 def parse_fractal_spec(spec: str) -> tuple[int, int] | None:
@@ -129,51 +107,6 @@ def load_heightfield(spec: str | os.PathLike) -> HeightField:
                        f"(expected one of {', '.join(_FILE_TYPES)})")
 
 
-def heightfield_from_array(a: np.ndarray, dx: float, dy: float, name: str,
-                           meta: dict | None = None) -> HeightField:
-    """Validate ``a (rows, cols)`` (metres; NaN, inf, masked or sentinel = nodata), fill holes.
-
-    Holes are filled from the nearest valid sample and then lightly smoothed
-    inside the holes only, so filled heights stay within the valid range (no
-    spikes).  ``meta['filled_fraction']`` records the share of filled samples.
-    Raises :class:`TerrainError` (naming ``name``) for non-2-D, smaller than
-    2x2, non-numeric or complex data, all-nodata data, or more than 50% nodata.
-    """
-    valid = ~np.ma.getmaskarray(a)
-    a = np.asarray(np.ma.getdata(a))
-    if a.ndim != 2:
-        raise TerrainError(f"{name}: expected a 2-D height grid, got shape {a.shape}")
-    if min(a.shape) < 2:
-        raise TerrainError(f"{name}: height grid must be at least 2x2 samples, got "
-                           f"{a.shape[0]}x{a.shape[1]}")
-    if (not np.issubdtype(a.dtype, np.number) or np.issubdtype(a.dtype, np.complexfloating)):
-        raise TerrainError(f"{name}: heights must be real numbers, found dtype {a.dtype}")
-    h = a.astype(np.float64)
-    valid &= np.isfinite(h) & (np.abs(h) < 1e20) & ~np.isin(h, NODATA_SENTINELS)
-    filled = _fill_holes(h, valid, name)
-    meta = {**(meta or {}), "filled_fraction": filled}
-    return HeightField(h, dx, dy, name, meta)
-
-
-def _fill_holes(h: np.ndarray, valid: np.ndarray, name: str) -> float:
-    """Fill ``h`` (float64, in place) where not ``valid``; return the filled fraction."""
-    bad = ~valid
-    n_bad = int(bad.sum())
-    if n_bad == 0:
-        return 0.0
-    fraction = n_bad / bad.size
-    if n_bad == bad.size:
-        raise TerrainError(f"{name}: contains no valid heights (all samples are nodata)")
-    if fraction > MAX_NODATA_FRACTION:
-        raise TerrainError(f"{name}: {fraction:.0%} of samples are nodata (at most "
-                           f"{MAX_NODATA_FRACTION:.0%} can be filled)")
-    nearest = ndimage.distance_transform_edt(bad, return_distances=False, return_indices=True)
-    h[bad] = h[tuple(idx[bad] for idx in nearest)]
-    for _ in range(_HOLE_SMOOTHING_ITERATIONS):   # averages of valid range: no spikes
-        h[bad] = ndimage.uniform_filter(h, size=3, mode="nearest")[bad]
-    return fraction
-
-
 def _load_jacksboro() -> HeightField:
     """The matplotlib sample DEM, 344 x 403 int16 metres at 3 arc-seconds.
 
@@ -228,49 +161,16 @@ def _load_geotiff(path: Path) -> HeightField:
                                        f"dtype {ds.dtypes[0]}")
                 a = ds.read(1, masked=True)
                 transform = ds.transform
-                dx, dy, meta = _geotiff_spacing(path, transform, ds.crs, ds.height)
+                dx, dy, meta = geotiff_spacing(path, transform, ds.crs, ds.height)
     except TerrainError:
         raise
     except Exception as e:                      # GDAL raises RasterioError or CPLE_* errors
-        raise TerrainError(f"cannot read GeoTIFF {path}: {_first_line(e)}") from e
+        raise TerrainError(f"cannot read GeoTIFF {path}: {first_line(e)}") from e
     if transform.e > 0 and not transform.is_identity:   # south-up raster: make row 0 north
         a = a[::-1]                             # (identity = plain image, row 0 on top)
     if transform.a < 0:                         # east-to-west columns: make column 0 west
         a = a[:, ::-1]
     return heightfield_from_array(a, dx, dy, path.name, meta)
-
-
-def _geotiff_spacing(path: Path, transform: Affine, crs: CRS | None,
-                     height: int) -> tuple[float, float, dict]:
-    """``dx, dy`` in metres and metadata from an affine ``transform`` and ``crs``."""
-    if transform.b != 0 or transform.d != 0:
-        raise TerrainError(f"{path}: rotated or sheared rasters are not supported")
-    sx, sy = abs(transform.a), abs(transform.e)
-    meta: dict = {"source": str(path), "format": "GeoTIFF",
-                  "crs": crs.to_string() if crs else None}
-    if crs is None:
-        if transform.is_identity:               # no georeferencing at all
-            sx = sy = DEFAULT_SPACING_M
-            meta["spacing_assumed"] = f"{DEFAULT_SPACING_M} m (no georeferencing)"
-        else:
-            meta["spacing_assumed"] = "metres (no CRS)"
-        return sx, sy, meta
-    if crs.is_geographic:
-        _, to_rad = crs.units_factor
-        deg = math.degrees(to_rad)              # degrees per angular unit
-        lat = (transform.f + transform.e * height / 2) * deg     # unrotated: d == 0
-        if not -90 <= lat <= 90:
-            raise TerrainError(f"{path}: centre latitude {lat:.3f} is outside -90..90")
-        per_lat, per_lon = metres_per_degree(lat)
-        meta["centre_lat"] = lat
-        return sx * deg * per_lon, sy * deg * per_lat, meta
-    try:
-        unit, factor = crs.linear_units_factor
-    except Exception as e:                      # any CRS without a linear unit
-        raise TerrainError(f"{path}: CRS {meta['crs']} has no linear unit: "
-                           f"{_first_line(e)}") from e
-    meta["linear_unit"] = unit
-    return sx * factor, sy * factor, meta
 
 
 def _load_png(path: Path) -> HeightField:
@@ -288,7 +188,7 @@ def _load_png(path: Path) -> HeightField:
     except (OSError, SyntaxError, ValueError, Image.DecompressionBombError) as e:
         if isinstance(e, TerrainError):
             raise
-        raise TerrainError(f"cannot read PNG {path}: {_first_line(e)}") from e
+        raise TerrainError(f"cannot read PNG {path}: {first_line(e)}") from e
     meta = {"source": str(path), "format": "PNG", "bit_depth": 8 if a.dtype == np.uint8 else 16,
             "spacing_assumed": f"{DEFAULT_SPACING_M} m"}
     return heightfield_from_array(a, DEFAULT_SPACING_M, DEFAULT_SPACING_M, path.name, meta)
@@ -299,7 +199,7 @@ def _load_npy(path: Path) -> HeightField:
     try:
         a = np.load(path, allow_pickle=False)
     except (OSError, ValueError, EOFError) as e:
-        raise TerrainError(f"cannot read NumPy file {path}: {_first_line(e)}") from e
+        raise TerrainError(f"cannot read NumPy file {path}: {first_line(e)}") from e
     if not isinstance(a, np.ndarray):
         raise TerrainError(f"{path}: expected a single .npy array")
     meta = {"source": str(path), "format": "npy", "spacing_assumed": f"{DEFAULT_SPACING_M} m"}
@@ -312,15 +212,3 @@ def _is_real_dtype(dtype: str | np.dtype) -> bool:
     except TypeError:
         return False
     return np.issubdtype(dt, np.number) and not np.issubdtype(dt, np.complexfloating)
-
-
-def _first_line(e: BaseException) -> str:
-    """First line of an exception's message, preferring its immediate cause's detail."""
-    cause = e.__cause__ or e.__context__
-    if "previous exception" in str(e) and cause is not None:
-        e = cause                               # GDAL: "Read failed. See previous exception"
-        text = e.args[-1] if e.args and isinstance(e.args[-1], str) else str(e)
-    else:
-        text = str(e)
-    text = text.strip()
-    return text.splitlines()[0] if text else type(e).__name__

@@ -136,13 +136,9 @@ def level_errors(group, header: StoreHeader) -> list[float]:
 
 
 def _client(address: str):
-    from lodsprite.profiles.generate import DASK_CONNECT_TIMEOUT_S, require_dask
+    from lodsprite.cluster import connect
 
-    dd = require_dask()
-    try:
-        return dd.Client(address, timeout=f"{DASK_CONNECT_TIMEOUT_S}s")
-    except OSError as exc:
-        raise InputError(f"cannot reach the Dask scheduler at {address}: {exc}") from exc
+    return connect(address)
 
 
 def _run_tiles(client, out: Path, k: int, tiles: list[int], src, group, header):
@@ -378,7 +374,7 @@ class TerrainStore:
         """The finest level that fits ``max_side`` as an in-memory :class:`HeightField`
         (its spacing stretched so that it spans level 0's extent, as the adaptive renderer
         draws it), for commands that need the whole field."""
-        from lodsprite.terrain.loaders import heightfield_from_array
+        from lodsprite.terrain.rasters import heightfield_from_array
 
         k = self.level_for(max_side)
         r, c = self.shape(k)

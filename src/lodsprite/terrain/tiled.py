@@ -141,7 +141,7 @@ class GeoTiffSource:
         import rasterio
 
         from lodsprite.errors import TerrainError
-        from lodsprite.terrain.loaders import _geotiff_spacing
+        from lodsprite.terrain.rasters import geotiff_spacing
 
         try:
             self.ds = rasterio.open(self.path)
@@ -150,7 +150,7 @@ class GeoTiffSource:
         self.rows, self.cols = self.ds.height, self.ds.width
         t = self.ds.transform
         try:
-            self.dx, self.dy, _ = _geotiff_spacing(Path(self.path), t, self.ds.crs, self.rows)
+            self.dx, self.dy, _ = geotiff_spacing(Path(self.path), t, self.ds.crs, self.rows)
         except TerrainError as exc:
             raise InputError(str(exc)) from exc
         # as the in-memory loader: row 0 north, column 0 west

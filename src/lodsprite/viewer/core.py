@@ -22,19 +22,22 @@ import platform
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import moderngl
 import numpy as np
 
 from lodsprite import Renderer, write_image
 from lodsprite.errors import LodspriteError
+from lodsprite.files import write_csv, write_json
 from lodsprite.gl.overlay import HudLayer, LineOverlay, frustum_segments
 from lodsprite.paths import CameraPath
-from lodsprite.report.io import write_csv, write_json
 from lodsprite.scene import Scene
 from lodsprite.techniques import Technique, TechniqueFactory
 from lodsprite.viewer.controls import CameraController, FlightRecorder
 from lodsprite.viewer.hud import PANEL_HZ, HudState, glyph_atlas, layout_text
+
+if TYPE_CHECKING:  # hints only: moderngl is imported under gl/
+    import moderngl
 
 log = logging.getLogger(__name__)
 
@@ -309,7 +312,8 @@ class ViewerCore:
     def summary(self) -> dict:
         """The core timing keys of the frame times shown (:func:`lodsprite.harness.
         timing_summary`), the technique's own time, and the run's facts."""
-        from lodsprite.harness import peak_rss_mb, timing_summary
+        from lodsprite.harness import timing_summary
+        from lodsprite.workers import peak_rss_mb
 
         ms = np.array([r["ms"] for r in self.rows], dtype=np.float64)
         render = np.array([r["render_ms"] for r in self.rows], dtype=np.float64)

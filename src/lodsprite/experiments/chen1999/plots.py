@@ -19,7 +19,7 @@ from matplotlib.ticker import LogFormatter
 from PIL import Image
 
 from lodsprite.experiments.paper_numbers import PAPER, PAPER_KEYFRAME_FRACTION
-from lodsprite.report.io import atomic_write_bytes
+from lodsprite.files import atomic_write_bytes
 from lodsprite.report.values import (
     arr,
     fmt_fixed,

@@ -21,7 +21,7 @@ from typing import Any
 
 from lodsprite.experiments.chen1999.plots import write_plots
 from lodsprite.experiments.paper_numbers import PAPER, PAPER_KEYFRAME_FRACTION, RMSE_RATIO_TARGET
-from lodsprite.report.io import atomic_write_bytes
+from lodsprite.files import atomic_write_bytes
 from lodsprite.report.values import (
     DASH,
     count_type,

@@ -23,12 +23,12 @@ from pathlib import Path
 import numpy as np
 
 from lodsprite.errors import InputError
+from lodsprite.files import write_json, write_png
 from lodsprite.gl.paths import PathRenderer
 from lodsprite.gl.sprite import DEFAULT_GUARD_PX, DEFAULT_VISIBILITY, SpriteRenderer
 from lodsprite.metrics import difference_image
 from lodsprite.paths import chen1999
 from lodsprite.progress import Progress
-from lodsprite.report.io import write_json, write_png
 from lodsprite.run import RenderConfig, keyframe_records, sprite_frames
 from lodsprite.scene import Scene, load_scene
 from lodsprite.sprite.engine import KEYFRAME

@@ -9,7 +9,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from lodsprite.experiments.paper_numbers import PAPER_GUMBAU
-from lodsprite.report.io import atomic_write_bytes, save_figure, write_json, write_png
+from lodsprite.files import atomic_write_bytes, save_figure, write_json, write_png
 from lodsprite.report.values import fmt_fixed
 
 

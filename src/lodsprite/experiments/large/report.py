@@ -7,7 +7,7 @@ from pathlib import Path
 
 from matplotlib.figure import Figure
 
-from lodsprite.report.io import atomic_write_bytes, save_figure, write_json
+from lodsprite.files import atomic_write_bytes, save_figure, write_json
 from lodsprite.report.values import fmt_fixed
 
 

@@ -87,7 +87,7 @@ def reference(store: Path, scene, path, cfg: LargeConfig, keep: list[int],
     from lodsprite.gl.context import GLContext
     from lodsprite.gl.target import RenderTarget
     from lodsprite.gl.terrain import TerrainGeometry
-    from lodsprite.terrain.adaptive import AdaptiveTerrain
+    from lodsprite.techniques.adaptive_terrain import AdaptiveTerrain
     from lodsprite.terrain.store import TerrainStore
 
     full = sse <= FULL_SSE

@@ -13,7 +13,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from lodsprite.experiments.paper_numbers import PAPER_2000
-from lodsprite.report.io import atomic_write_bytes, save_figure, write_json, write_png
+from lodsprite.files import atomic_write_bytes, save_figure, write_json, write_png
 from lodsprite.report.values import fmt_fixed
 
 

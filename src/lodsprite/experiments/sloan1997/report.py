@@ -11,7 +11,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from lodsprite.experiments.paper_numbers import PAPER_1997
-from lodsprite.report.io import atomic_write_bytes, save_figure, write_json
+from lodsprite.files import atomic_write_bytes, save_figure, write_json
 from lodsprite.report.values import fmt_fixed
 
 PROFILE_LABEL = {"re2_small_memory": "small texture memory (RE2-like)",

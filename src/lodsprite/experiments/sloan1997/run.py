@@ -23,7 +23,8 @@ from pathlib import Path
 import numpy as np
 
 from lodsprite.camera import perspective
-from lodsprite.lumigraph.run import MethodRun, _read_object, capture_lumigraph, measure, object_path
+from lodsprite.lumigraph.paths import object_path
+from lodsprite.lumigraph.run import MethodRun, _read_object, capture_lumigraph, measure
 from lodsprite.lumigraph.store import Lumigraph
 from lodsprite.paths import CameraPath
 

@@ -12,7 +12,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from lodsprite.experiments.paper_numbers import PAPER_2002
-from lodsprite.report.io import atomic_write_bytes, save_figure
+from lodsprite.files import atomic_write_bytes, save_figure
 from lodsprite.report.values import fmt_fixed, fmt_int
 
 LABELS = {"inline": "inline (1999, keyframes in the frame loop)",

@@ -54,9 +54,9 @@ from lodsprite.distributed.netns import RATES, SERVER_IP, available, two_hosts
 from lodsprite.distributed.quality import Replayer, inline_quality, recorded_keyframes
 from lodsprite.distributed.run import local_server, lodsprite_command, pinned, server_process
 from lodsprite.errors import LodspriteError
+from lodsprite.files import write_json
 from lodsprite.paths import swan2002
 from lodsprite.progress import Progress
-from lodsprite.report.io import write_json
 from lodsprite.run import RenderConfig
 from lodsprite.sprite.predictors import PREDICTORS, prediction_error
 from lodsprite.terrain import load_terrain

@@ -1,5 +1,10 @@
-"""Machine-readable outputs (CSV, JSON, PNG) written atomically: a file is either
-complete or absent, never half-written."""
+"""Machine-readable outputs (CSV, JSON, PNG, matplotlib figures) written atomically: a
+file is either complete or absent, never half-written.
+
+The base I/O of the package (runs, stores, tables, reports): it sits at the bottom,
+importing nothing of lodsprite, so that every level writes through it without reaching
+into :mod:`lodsprite.report`.
+"""
 
 from __future__ import annotations
 

@@ -1,8 +1,9 @@
-"""Indexed triangle meshes and mesh-file loading for LOD error profiling.
+"""Indexed triangle meshes: mesh-file loading, the UV sphere and mesh checks.
 
-Scoggins, Machiraju & Moorhead (2000), "Enabling LOD matching", §4.2–4.3 profile
-surface meshes: sphere models for the sphere snowflake and a mountain cut out of
-a terrain TIN.  :class:`Mesh` is the common currency of :mod:`lodsprite.profiles`:
+Shared by LOD error profiling (:mod:`lodsprite.profiles`), the crowd's mesh types
+(:mod:`lodsprite.manager`) and the lumigraph's approximate geometry
+(:mod:`lodsprite.lumigraph`), so it sits below all three and imports nothing of
+lodsprite but :mod:`lodsprite.errors`.  :class:`Mesh` is their common currency:
 vertices ``(N, 3) float32`` in the model's own (object) units and faces
 ``(F, 3) int32`` indexing them.  :func:`load_mesh` reads OBJ, PLY, OFF, STL and
 glTF (GLB/GLTF) files through trimesh; any error a user can cause (missing file,
@@ -166,6 +167,37 @@ class Mesh:
 
     def __repr__(self) -> str:
         return f"Mesh({self.name!r}, {self.n_vertices} vertices, {self.n_faces} faces)"
+
+
+def uv_sphere(m: int, radius: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """Latitude/longitude sphere with ``m`` latitude bands and ``2m`` longitude segments.
+
+    Centred at the origin; returns shared vertices ``(2 + 2m(m-1), 3) float64``
+    (north pole first, rings north to south, south pole last) and faces
+    ``(4m(m-1), 3) int64``, counter-clockwise seen from outside.  ``m >= 2``.
+    """
+    if m < 2:
+        raise MeshError(f"a UV sphere needs at least 2 latitude bands, got {m}")
+    n = 2 * m
+    theta = np.pi * np.arange(1, m) / m                       # polar angle of rings
+    phi = np.pi * np.arange(n) / m                            # azimuth of segments
+    st, ct = np.sin(theta)[:, None], np.cos(theta)[:, None]
+    ring = np.stack([st * np.cos(phi), st * np.sin(phi), np.broadcast_to(ct, (m - 1, n))],
+                    axis=-1).reshape(-1, 3)
+    vertices = radius * np.concatenate([[[0.0, 0.0, 1.0]], ring, [[0.0, 0.0, -1.0]]])
+    south = 1 + (m - 1) * n
+    j = np.arange(n)
+    j1 = (j + 1) % n
+    north_cap = np.stack([np.zeros(n, np.int64), 1 + j, 1 + j1], axis=1)
+    last = 1 + (m - 2) * n
+    south_cap = np.stack([last + j, np.full(n, south), last + j1], axis=1)
+    i = np.arange(m - 2)[:, None]
+    a = 1 + i * n + j                                         # upper ring, this segment
+    b = 1 + i * n + j1                                        # upper ring, next segment
+    c, d = a + n, b + n                                       # lower ring
+    band = np.stack([np.stack([a, c, d], -1), np.stack([a, d, b], -1)], axis=2)
+    faces = np.concatenate([north_cap, band.reshape(-1, 3), south_cap]).astype(np.int64)
+    return vertices, faces
 
 
 def _one_line(exc: BaseException) -> str:

@@ -7,6 +7,9 @@ A frame selects with what is resident, asks the loader for what it lacks (most u
 first), uploads what has arrived (at most ``upload_budget`` tiles), and draws; it never
 waits for I/O.  The roots are read before the first frame.  Near and far planes are fitted
 to the terrain's bounds as the full-resolution renderer fits them.
+
+It drives GL, so it lives here, above both terrain/ (the selection and the caches, which
+know no GL) and gl/ (the draw, which knows no technique).
 """
 
 from __future__ import annotations
