@@ -440,3 +440,18 @@ def test_prefetch_streams_between_keyframes_without_drawing(gl):
     finally:
         a.release()
         t.release()
+
+
+def test_the_jacksboro_comparison_reads_the_keys_a_sprite_run_writes(tmp_path):
+    """Regression: reproduce large's 512² comparison read ``rmse_sprite_mean`` from its
+    sprite runs' summary.json after the harness had named it ``rmse_mean`` (a KeyError at
+    the end of a 40-minute run).  A real sprite run with ground truth, through the same
+    child-process route, gives the ratio from its own means."""
+    from lodsprite.experiments.large.child import render_in_child
+    from lodsprite.experiments.large.run import rmse_ratio_vs_lod
+
+    s = render_in_child({"terrain": "fractal:64:1", "path": "chen1999", "frames": 6,
+                         "size": [48, 48], "mode": "sprite", "ground_truth": True},
+                        tmp_path / "sprite")
+    ratio = rmse_ratio_vs_lod(s)
+    assert ratio == pytest.approx(s["rmse_mean"] / s["rmse_lod_mean"]) and 0.0 <= ratio < 1.5
