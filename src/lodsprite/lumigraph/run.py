@@ -189,9 +189,10 @@ class ObjectReference:
 
 def _measure(folder, method, path, frames, size, ground_truth, depth_correction,
              quality_every, progress, flip, **options):
+    from lodsprite import techniques
     from lodsprite.api import Renderer
     from lodsprite.harness import run_path
-    from lodsprite.lumigraph.technique import LumigraphTechnique, viewer_path
+    from lodsprite.lumigraph.technique import viewer_path
     from lodsprite.scene import Scene
 
     lf = Lumigraph(folder)
@@ -201,7 +202,13 @@ def _measure(folder, method, path, frames, size, ground_truth, depth_correction,
         raise InputError(f"{folder} holds no {OBJECT_FILE}: no ground truth to compare with")
     w, h = size
     with Renderer(Scene(lightfield=str(folder)), (w, h), path.fov_y_deg) as renderer:
-        t = LumigraphTechnique(renderer, folder, method, options, depth_correction)
+        if f"lumigraph-{method}" not in techniques.names(["lightfield"]):
+            raise InputError(f"unknown lumigraph method {method!r}: use one of "
+                             f"{', '.join(s.short for s in techniques.specs(['lightfield']))}")
+        spec = techniques.get(f"lumigraph-{method}")  # the registry's factory; every
+        # method option passes (the critical method's own knobs too)
+        t = spec.load()(renderer, folder=str(folder), depth_correction=depth_correction,
+                        **spec.fixed, **options)
         ref = (ObjectReference(renderer.gl, obj_mesh, (w, h), t.projection)
                if obj_mesh is not None else None)
         try:
@@ -278,17 +285,9 @@ class MethodRun:
         return out
 
     def info(self) -> dict:
-        m = self.method
-        out = {"nodes_decoded": m.loader.decoded,
-               "texture_layers": m.rec.capacity,
-               "texture_mb": m.rec.capacity * m.rec.node_bytes / 2 ** 20}
-        if hasattr(m, "switches"):
-            out["slab_switches"] = m.switches
-        if hasattr(m, "target_ms"):
-            out.update(target_ms=m.target_ms, scale=dict(m.costs.scale),
-                       fetch_ms=m.costs.fetch, decode_ms=m.costs.decode,
-                       upload_ms_per_node=m.costs.upload * m.costs.scale["upload"])
-        return out
+        from lodsprite.lumigraph.technique import method_facts
+
+        return method_facts(self.method)
 
     def release(self) -> None:
         for obj in reversed(self.made):

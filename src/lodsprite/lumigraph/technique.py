@@ -38,6 +38,20 @@ def viewer_path(path):
                                        for v in path.viewpoints), path.fov_y_deg)
 
 
+def method_facts(m) -> dict:
+    """A reconstruction method's run facts for a summary: nodes decoded, texture layers and
+    MB; the slab switches of six slabs; the critical method's target and cost model."""
+    out = {"nodes_decoded": m.loader.decoded, "texture_layers": m.rec.capacity,
+           "texture_mb": m.rec.capacity * m.rec.node_bytes / 2 ** 20}
+    if hasattr(m, "switches"):
+        out["slab_switches"] = m.switches
+    if hasattr(m, "target_ms"):
+        out.update(target_ms=m.target_ms, scale=dict(m.costs.scale),
+                   fetch_ms=m.costs.fetch, decode_ms=m.costs.decode,
+                   upload_ms_per_node=m.costs.upload * m.costs.scale["upload"])
+    return out
+
+
 class LumigraphTechnique(Technique):
     """One reconstruction method on the viewer's renderer and GL context."""
 
@@ -131,18 +145,9 @@ class LumigraphTechnique(Technique):
             snap.release()
 
     def summary(self, frames: list[Frame]) -> dict:
-        m = self.method
-        out = {"images_per_frame_mean": float(np.mean([f.extra["images"] for f in frames])),
-               "uploads_per_frame_mean": float(np.mean([f.extra["uploads"] for f in frames])),
-               "nodes_decoded": m.loader.decoded, "texture_layers": m.rec.capacity,
-               "texture_mb": m.rec.capacity * m.rec.node_bytes / 2 ** 20}
-        if hasattr(m, "switches"):
-            out["slab_switches"] = m.switches
-        if hasattr(m, "target_ms"):
-            out.update(target_ms=m.target_ms, scale=dict(m.costs.scale),
-                       fetch_ms=m.costs.fetch, decode_ms=m.costs.decode,
-                       upload_ms_per_node=m.costs.upload * m.costs.scale["upload"])
-        return out
+        return {"images_per_frame_mean": float(np.mean([f.extra["images"] for f in frames])),
+                "uploads_per_frame_mean": float(np.mean([f.extra["uploads"] for f in frames])),
+                **method_facts(self.method)}
 
     def draw_to(self, framebuffer=None) -> None:
         self.renderer.present(self.method.output.color, (0.0, 0.0, 1.0, 1.0), framebuffer)
