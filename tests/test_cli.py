@@ -1,5 +1,6 @@
-"""The command line, run as a user runs it: a real process, real exit codes (its refusals
-of bad input in this process, through the same ``main``)."""
+"""The command line through the console script's own ``main``: real runs and refusals in
+this process (``conftest.run_cli`` and the ``cli`` fixture, exit codes and output as a user
+sees them), ``info`` and one refusal as real processes."""
 
 import csv
 import json
@@ -8,6 +9,8 @@ import sys
 
 import numpy as np
 import pytest
+
+from conftest import run_cli
 
 SMALL = ["--terrain", "fractal:64:3", "--size", "64x64"]
 
@@ -34,7 +37,7 @@ def test_info_prints_renderer_and_texture_size():
 @pytest.mark.parametrize("mode", ["full", "lod", "sprite"])
 def test_render_writes_one_row_per_frame(tmp_path, mode):
     out = tmp_path / "o"
-    proc = lodsprite("render", *SMALL, "--mode", mode, "--lod", "8", "--frames", "7",
+    proc = run_cli("render", *SMALL, "--mode", mode, "--lod", "8", "--frames", "7",
                      "--out", str(out), "--save-frames")
     assert proc.returncode == 0, proc.stderr
     rows = list(csv.DictReader((out / "frames.csv").open()))
@@ -55,7 +58,7 @@ def test_render_writes_one_row_per_frame(tmp_path, mode):
 
 def test_sprite_mode_with_ground_truth_reports_quality(tmp_path):
     out = tmp_path / "s"
-    proc = lodsprite("render", *SMALL, "--mode", "sprite", "--lod", "8", "--frames", "12",
+    proc = run_cli("render", *SMALL, "--mode", "sprite", "--lod", "8", "--frames", "12",
                      "--ground-truth", "--epsilon", "0.5", "--out", str(out))
     assert proc.returncode == 0, proc.stderr
     rows = list(csv.DictReader((out / "frames.csv").open()))
@@ -99,7 +102,7 @@ def test_bad_input_exits_2_with_one_line_and_writes_nothing(tmp_path, cli, args,
 
 def test_a_real_process_exits_2_with_one_line(tmp_path):
     out = tmp_path / "never"
-    assert_user_error(lodsprite("render", *SMALL, "--mode", "warp", "--out", str(out)), "mode")
+    assert_user_error(run_cli("render", *SMALL, "--mode", "warp", "--out", str(out)), "mode")
     assert not out.exists()
 
 

@@ -10,11 +10,18 @@ import sys
 import numpy as np
 import pytest
 
+from conftest import run_cli
 from lodsprite.lumigraph.geometry import Slab
 from lodsprite.lumigraph.paths import object_path
 
 
 def lodsprite(*args):
+    """The command in this process (``conftest.run_cli``); ``test_capture_then_render_with_
+    ground_truth`` runs the capture as a real process."""
+    return run_cli(*args)
+
+
+def real_process(*args):
     return subprocess.run([sys.executable, "-c", "from lodsprite.cli import main; main()", *args],
                           capture_output=True, text=True, timeout=240)
 
@@ -28,7 +35,7 @@ def assert_user_error(proc, fragment):
 
 def test_capture_then_render_with_ground_truth(tmp_path):
     lf = tmp_path / "lf"
-    cap = lodsprite("lumigraph", "capture", "--out", str(lf), "--st", "6", "--uv", "64",
+    cap = real_process("lumigraph", "capture", "--out", str(lf), "--st", "6", "--uv", "64",
                     "--codec", "png")
     assert cap.returncode == 0, cap.stderr
     header = json.loads((lf / "lumigraph.json").read_text())

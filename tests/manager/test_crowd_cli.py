@@ -4,12 +4,11 @@ from __future__ import annotations
 
 import csv
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
 
+from conftest import run_cli
 from lodsprite import experiments
 from lodsprite.camera import look_at
 from lodsprite.errors import InputError
@@ -23,8 +22,7 @@ SUMMARY_KEYS = ("extractions_total", "fps_mean", "median_ms", "p99_ms",
 
 
 def lodsprite(*args):
-    return subprocess.run([sys.executable, "-c", "from lodsprite.cli import main; main()",
-                           *args], capture_output=True, text=True, timeout=240)
+    return run_cli(*args)  # in this process: no start-up per run
 
 
 def test_crowd_writes_one_row_per_frame_and_a_summary_of_those_rows(tmp_path):

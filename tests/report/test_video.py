@@ -1,13 +1,12 @@
 """Videos of rendered paths: content, atomic writing, and the render command's --video."""
 
 import csv
-import subprocess
-import sys
 
 import imageio.v3 as iio
 import numpy as np
 import pytest
 
+from conftest import run_cli
 from lodsprite.errors import InputError
 from lodsprite.report.video import DIFF_GAIN, VideoWriter, check_video_path, side_by_side
 
@@ -62,8 +61,7 @@ def test_only_mp4_files_are_accepted(tmp_path):
 
 
 def _lodsprite(*args):
-    return subprocess.run([sys.executable, "-c", "from lodsprite.cli import main; main()",
-                           *args], capture_output=True, text=True, timeout=300)
+    return run_cli(*args)  # in this process: no start-up per run
 
 
 def test_render_writes_a_side_by_side_video_of_the_frames_shown(tmp_path):

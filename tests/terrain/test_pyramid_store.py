@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 
 import numpy as np
 import pytest
 
+from conftest import run_cli
 from lodsprite.errors import InputError
 from lodsprite.terrain.store import TerrainStore, build_store, downsample
 from lodsprite.terrain.tiled import parse_fractal
@@ -153,8 +152,7 @@ def test_a_dask_cluster_builds_the_same_store(tmp_path):
 
 def test_tile_then_render_adaptive_from_the_command_line(tmp_path):
     def run(*args):
-        return subprocess.run([sys.executable, "-c", "from lodsprite.cli import main; main()",
-                               *args], capture_output=True, text=True, timeout=240)
+        return run_cli(*args)  # in this process: no start-up per run
 
     r = run("tile", "fractal:300x400:1", "--out", str(tmp_path / "s.zarr"), "--tile", "128",
             "--chunk", "64")
