@@ -239,3 +239,26 @@ def test_a_registered_technique_is_a_render_mode_and_a_viewer_mode(tmp_path):
         assert s["technique"] == "every-other" and s["rmse_mean"] > 0
     finally:
         techniques.unregister("every-other")
+
+
+def test_the_technique_summary_is_of_the_timed_run_not_of_the_replay(gl):
+    """Regression: the harness read a technique's own summary after the quality replay, so
+    an adaptive run with --ground-truth or --save-frames could report tiles that its replay
+    read (``tiles_loaded``, evictions, peak memory) as the timed run's.  Here the replay
+    of a real technique counts its replayed frames; the summary must see none of them."""
+    scene = load_scene("fractal:64:5", grid=64)
+    path = get_path("chen1999", scene.hf, 6)
+    with Renderer(scene, (32, 32), 45.0, ctx=gl.mgl) as r:
+        t = techniques.create("lod", r, lod=8)
+        replayed = []
+        real_replay = t.replay
+        t.replay = lambda vp, d: (replayed.append(1), real_replay(vp, d))[1]
+        t.summary = lambda frames: {"replayed_before_summary": len(replayed),
+                                    "frames_seen": len(frames)}
+        try:
+            result = run_path(t, path, ground_truth=True)
+        finally:
+            t.release()
+    assert len(replayed) == 6  # every frame was replayed for its quality ...
+    assert result.summary["replayed_before_summary"] == 0  # ... after the summary was read
+    assert result.summary["frames_seen"] == 6 and "rmse_mean" in result.summary

@@ -180,6 +180,7 @@ def run_path(technique: Technique, path: CameraPath, *, finish: Callable[[], Non
     technique.warm_up(path.viewpoints[0])
     finish()
     frames, decisions, interrupted = _timed(technique, path, finish, progress)
+    own = technique.summary(frames)  # the timed run's own figures, before any replay
     rows, columns = frame_rows(frames)
     if ground_truth and reference is None:
         reference = full_resolution(renderer)
@@ -192,7 +193,7 @@ def run_path(technique: Technique, path: CameraPath, *, finish: Callable[[], Non
                "technique": technique.name,
                "triangles_mean": float(np.mean([f.triangles for f in frames])),
                "machine": platform.machine(), "python": platform.python_version(),
-               **technique.summary(frames), **quality_summary(rows)}
+               **own, **quality_summary(rows)}
     if interrupted:
         summary["interrupted"] = True
     return RunResult(frames, decisions, rows, columns, summary, interrupted)

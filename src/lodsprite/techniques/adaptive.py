@@ -141,12 +141,14 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
         self.engine.between_keyframes = self.adaptive.prefetch
         self._selections: dict[int, tuple] = {}  # keyframe -> (nodes drawn, morphed)
 
-    def frame(self, viewpoint: Viewpoint) -> Frame:
-        f = super().frame(viewpoint)
-        k = f.extra["keyframe"]
-        if k not in self._selections:  # a new keyframe: the selection it was drawn with
-            self._selections[k] = (tuple(self.adaptive.last_draw), self.adaptive.last_morphed)
-        return f
+    def decision(self) -> dict[str, Any]:
+        """The keyframe shown; for a new one, the selection it was drawn with (recorded
+        here, after the frame's clock stopped: nothing draws between the two)."""
+        d = super().decision()
+        if d["keyframe"] not in self._selections:
+            self._selections[d["keyframe"]] = (tuple(self.adaptive.last_draw),
+                                               self.adaptive.last_morphed)
+        return d
 
     def replay(self, viewpoint: Viewpoint, decision: dict[str, Any]) -> np.ndarray:
         draw, morphed = self._selections[decision["keyframe"]]
