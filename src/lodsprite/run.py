@@ -145,6 +145,48 @@ def field_of_view(config: RenderConfig, path: CameraPath) -> float:
     return path.fov_y_deg if config.fov_y_deg is None else config.fov_y_deg
 
 
+def reference_images(pr: PathRenderer, viewpoint, lod: int) -> tuple[np.ndarray, ...]:
+    """What a frame is compared with (untimed): the full-resolution frame, the plain
+    coarse level, and the coarse level with the border ribbons; ``(H, W, 3) uint8`` each."""
+    r = pr.renderer
+    r.render(viewpoint, None)
+    truth = r.target.read_color()
+    r.render(viewpoint, lod)
+    plain = r.target.read_color()
+    r.render_proxy(viewpoint, lod, border=True)
+    return truth, plain, r.target.read_color()
+
+
+def frame_quality(image: np.ndarray, references: tuple[np.ndarray, ...]) -> dict:
+    """RMSE, PSNR and SSIM of ``image`` and of the plain coarse level against the full
+    resolution (:func:`reference_images`), and RMSE of the coarse level with ribbons."""
+    from lodsprite.metrics import psnr, rmse, ssim
+
+    truth, lod, lod_border = references
+    return {"rmse_sprite": rmse(image, truth), "psnr_sprite": psnr(image, truth),
+            "ssim_sprite": ssim(image, truth), "rmse_lod": rmse(lod, truth),
+            "psnr_lod": psnr(lod, truth), "ssim_lod": ssim(lod, truth),
+            "rmse_lod_border": rmse(lod_border, truth)}
+
+
+def quality_summary(rows: list[dict]) -> dict:
+    """Mean RMSE / SSIM over frames; PSNR from the mean squared error over frames (a
+    keyframe equals its ground truth, whose per-frame PSNR would be infinite)."""
+    out = {}
+    for kind in ("sprite", "lod"):
+        r = np.array([row[f"rmse_{kind}"] for row in rows])
+        mse = float(np.mean(r**2))
+        out[f"rmse_{kind}_mean"] = float(r.mean())
+        out[f"psnr_{kind}_mean"] = float("inf") if mse == 0 else 10 * np.log10(255.0**2 / mse)
+        out[f"ssim_{kind}_mean"] = float(np.mean([row[f"ssim_{kind}"] for row in rows]))
+    out["rmse_ratio"] = (out["rmse_sprite_mean"] / out["rmse_lod_mean"]
+                         if out["rmse_lod_mean"] > 0 else float("nan"))
+    # The plain coarse level with the border ribbons LOD-sprite draws (an ablation: how much
+    # of LOD-sprite's gain is the ribbons' alone).
+    out["rmse_lod_border_mean"] = float(np.mean([row["rmse_lod_border"] for row in rows]))
+    return out
+
+
 def keyframe_records(keyframes: list, rows: list[dict]) -> list[dict]:
     """JSON records of the keyframes a LOD-sprite run rendered: ``keyframes`` is the
     engine's log (:class:`~lodsprite.sprite.policy.KeyChoice` in order); ``rows`` the

@@ -86,6 +86,7 @@ class LumigraphTechnique(Technique):
         self._warm = False
         self._keep: set[int] = set()  # frames whose image is kept for the replay
         self._snaps: dict = {}
+        self._pool: list = []  # GPU copies made by plan_replay, not yet used
 
     def params(self) -> dict[str, Param]:
         if hasattr(self.method, "target_ms"):
@@ -118,19 +119,24 @@ class LumigraphTechnique(Technique):
             "uploads": f.uploads, "evictions": f.evictions})
 
     def plan_replay(self, frames: set[int]) -> None:
+        """The GPU copies of the frames to be replayed, made now (before the warm-up), so
+        that between timed frames only a copy runs."""
+        from lodsprite.gl.lumigraph import FloatTarget
+
+        for snap in self._pool:  # a plan made before (another run on this technique)
+            snap.release()
         self._keep = set(frames)
+        # the methods draw at the renderer's size (six slabs make their method on first use)
+        self._pool = [FloatTarget(self.renderer.gl, *self.renderer.size) for _ in self._keep]
 
     def decision(self) -> dict:
         """The frame's index; for a frame to be replayed, its reconstruction is copied on
         the GPU (after the frame's clock stopped, finished before the next frame): a
         method's node cache and loader cannot be rewound, so its image is the decision."""
-        from lodsprite.gl.lumigraph import FloatTarget
-
         i = self.index - 1
-        if i in self._keep:
-            out = self.method.output
-            snap = FloatTarget(self.renderer.gl, *out.size)
-            self.renderer.gl.mgl.copy_framebuffer(snap.fbo, out.fbo)
+        if i in self._keep and self._pool:
+            snap = self._pool.pop()
+            self.renderer.gl.mgl.copy_framebuffer(snap.fbo, self.method.output.fbo)
             self.renderer.gl.finish()
             self._snaps[i] = snap
         return {"frame": i}
@@ -165,9 +171,10 @@ class LumigraphTechnique(Technique):
                 f"{rec.capacity} ({mb:.1f} MB); decoded {self.method.loader.decoded}")
 
     def release(self) -> None:
-        for snap in self._snaps.values():
+        for snap in [*self._snaps.values(), *self._pool]:
             snap.release()
         self._snaps.clear()
+        self._pool.clear()
         self.method.release()
         if self.proxy is not None:
             self.proxy.release()
