@@ -167,14 +167,8 @@ class _Pipes:
         return out
 
     def peak_mb(self) -> float:
-        try:
-            with open(f"/proc/{self.proc.pid}/status") as f:
-                for line in f:
-                    if line.startswith("VmHWM:"):
-                        return int(line.split()[1]) / 1024.0
-        except OSError:
-            pass
-        return 0.0
+        peak = vm_hwm_mb(self.proc.pid)
+        return 0.0 if peak is None else peak
 
     def close(self) -> None:
         for f in (self.proc.stdin, self.proc.stdout):
@@ -337,21 +331,30 @@ def ready(sockets: list, poller=None) -> list:
     return [s for s, _ in poller.poll(0)]
 
 
-if __name__ == "__main__":
-    main(sys.argv[1:])
-
-
-def peak_rss_mb() -> float:
-    """This process's peak resident memory in MB: ``VmHWM`` of ``/proc/self/status``, which
-    starts afresh at ``exec`` (``getrusage``'s ``ru_maxrss`` keeps the peak of the process
-    that forked it), else ``ru_maxrss``."""
+def vm_hwm_mb(pid: int | str = "self") -> float | None:
+    """Peak resident memory (``VmHWM`` of ``/proc/PID/status``) in MB; None where there
+    is no such file (another system, a process gone)."""
     try:
-        with open("/proc/self/status") as f:
+        with open(f"/proc/{pid}/status") as f:
             for line in f:
                 if line.startswith("VmHWM:"):
                     return int(line.split()[1]) / 1024.0
     except OSError:
         pass
+    return None
+
+
+def peak_rss_mb() -> float:
+    """This process's peak resident memory in MB: ``VmHWM``, which starts afresh at
+    ``exec`` (``getrusage``'s ``ru_maxrss`` keeps the peak of the process that forked it),
+    else ``ru_maxrss``."""
+    peak = vm_hwm_mb()
+    if peak is not None:
+        return peak
     import resource
 
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # KB on Linux
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
