@@ -48,8 +48,10 @@ better than it is:
   the keyframe eye exactly as the centres are, misses included, once per keyframe: the
   keyframe's :class:`~lodsprite.sprite.raycast.Reprojection` caches the ``C'`` of every
   fallback vertex met so far (up to ``FALLBACK_CACHE``), so that later frames reproject
-  only new vertices.  The square centres are themselves points of those grids, so the
-  fallback measures the same kind of sample, only denser.
+  only new vertices (over a store read without blocking, a vertex whose level-0 chunk
+  is not resident yet is measured with the coarse level's height and not cached:
+  :mod:`lodsprite.terrain.storefield`).  The square centres are themselves points of
+  those grids, so the fallback measures the same kind of sample, only denser.
   :meth:`ErrorMetric.error_px` returns ``math.inf`` (a keyframe is due) when no terrain
   vertex is in view, and when every sample measured
   missed (e.g. a keyframe eye level with or below the coarse surface ahead): the sprite
@@ -314,13 +316,16 @@ class ErrorMetric:
             square = (np.minimum(rr[new] // step, n - 1) * n
                       + np.minimum(cc[new] // step, n - 1))
             p_prime[new], missed[new] = reproject_points(sq, key_eye, pts[new], square)
-            if cache is not None:
-                if entry is None or len(entry[1]) + int(new.sum()) > FALLBACK_CACHE:
+            # a store's heights not resident yet are approximate: not cached, taken again
+            exact = getattr(sq.hf.heights, "exact", None)
+            keep = new if exact is None else new & exact(rr, cc)
+            if cache is not None and keep.any():
+                if entry is None or len(entry[1]) + int(keep.sum()) > FALLBACK_CACHE:
                     entry = (sq, np.zeros(0, lin.dtype), np.zeros((0, 3)), np.zeros(0, bool))
-                keys = np.r_[entry[1], lin[new]]
+                keys = np.r_[entry[1], lin[keep]]
                 order = np.argsort(keys, kind="stable")
-                cache[id(sq)] = (sq, keys[order], np.r_[entry[2], p_prime[new]][order],
-                                 np.r_[entry[3], missed[new]][order])
+                cache[id(sq)] = (sq, keys[order], np.r_[entry[2], p_prime[keep]][order],
+                                 np.r_[entry[3], missed[keep]][order])
         return angles_at_eye(np.asarray(eye, dtype=np.float64), pts, p_prime), missed
 
     def covers(self, viewpoint, projection, key_viewpoint, key_projection) -> bool:

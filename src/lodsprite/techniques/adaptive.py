@@ -67,6 +67,17 @@ def tile_summary(terrain) -> dict[str, Any]:
             "gpu_cache_mb": terrain.slots.capacity * (terrain.tree.g + 1) ** 2 * 4 / 2 ** 20}
 
 
+def level0_summary(heights) -> dict[str, Any]:
+    """The level-0 reads of LOD-sprite's metric and proxy over a store (``heights`` a
+    :class:`~lodsprite.terrain.storefield.LazyHeights`, or None: nothing)."""
+    if heights is None:
+        return {}
+    return {"level0_chunks_read": heights.chunks_read,
+            "level0_samples_approximate": heights.approximate,
+            "level0_chunks_bad": len(heights.bad),
+            "level0_reader_restarts": heights.reader_restarts}
+
+
 class AdaptiveTechnique(Technique):
     """Every frame by the adaptive renderer at ``sse`` pixels of screen-space error,
     tiles through caches of ``gpu_mb`` and ``host_mb``.  No warm-up beyond the roots (the
@@ -130,16 +141,39 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
         from lodsprite.terrain.storefield import store_field
 
         self.adaptive = make_adaptive(renderer, key_sse, gpu_mb, host_mb)
+        self.heights = None  # a store's LazyHeights: read without blocking once set up
         try:
             if isinstance(self.adaptive.tree.p, TerrainStore):
-                renderer.paths.geometry.set_full(store_field(self.adaptive.tree.p))
+                field = store_field(self.adaptive.tree.p)
+                renderer.paths.geometry.set_full(field)
+                self.heights = field.heights
             super().__init__(renderer, lod, epsilon, False, visibility, guard_px, border)
+            if self.heights is not None:  # proxy, ribbons and C read now, then no more
+                renderer.paths.geometry.proxy(lod, border)
+                self.heights.start_reader()
         except BaseException:
             self.adaptive.release()
+            if self.heights is not None:
+                self.heights.close()
             raise
-        self.sprite.sprite.keyframe_drawer = self.adaptive.render_into
-        self.engine.between_keyframes = self.adaptive.prefetch
+        self.sprite.sprite.keyframe_drawer = self._draw_keyframe
+        self.engine.between_keyframes = self._between_keyframes
         self._selections: dict[int, tuple] = {}  # keyframe -> (nodes drawn, morphed)
+
+    def _pump(self) -> None:
+        if self.heights is not None:
+            self.heights.pump()
+
+    def _draw_keyframe(self, viewpoint: Viewpoint, projection, target):
+        """The keyframe hook: collect the level-0 chunks arrived, then draw adaptively."""
+        self._pump()
+        return self.adaptive.render_into(viewpoint, projection, target)
+
+    def _between_keyframes(self) -> int:
+        """Each spriteframe: stream the adaptive renderer's tiles and collect the
+        chunks arrived for the metric (neither waits)."""
+        self._pump()
+        return self.adaptive.prefetch()
 
     def decision(self) -> dict[str, Any]:
         """The keyframe shown; for a new one, the selection it was drawn with (recorded
@@ -164,11 +198,11 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
         try:
             return super().replay(viewpoint, decision)
         finally:
-            s.keyframe_drawer = self.adaptive.render_into
+            s.keyframe_drawer = self._draw_keyframe
 
     def summary(self, frames: list[Frame]) -> dict[str, Any]:
         return {**super().summary(frames), "key_sse": self.adaptive.sse,
-                **tile_summary(self.adaptive)}
+                **tile_summary(self.adaptive), **level0_summary(self.heights)}
 
     def status(self) -> str:
         return f"keyframes: adaptive, sse {self.adaptive.sse:g} px; {tile_status(self.adaptive)}"
@@ -179,3 +213,5 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
     def release(self) -> None:
         super().release()
         self.adaptive.release()
+        if self.heights is not None:
+            self.heights.close()

@@ -1,0 +1,179 @@
+"""No blocking storage read on the frame's thread (issue 22, must-have 6): LOD-sprite's
+level-0 heights over a store come from a reader process, and from a coarser level held
+in memory until they arrive."""
+
+from __future__ import annotations
+
+import os
+import signal
+import threading
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from scipy.ndimage import map_coordinates
+
+from lodsprite.terrain.store import TerrainStore, build_store
+from lodsprite.terrain.storefield import store_field
+
+A, B, CHECKER = 0.5, 0.25, 4.0  # the hand-made store: 100 + A r + B c ± CHECKER
+
+
+@pytest.fixture(scope="module")
+def ramp(tmp_path_factory):
+    """A 300² store whose level 0 is a plane plus a ±4 m checkerboard: level 1 (the exact
+    2×2 mean) is the plane alone, so a coarse value is told from an exact one."""
+    import rasterio
+    from rasterio.transform import from_origin
+
+    d = tmp_path_factory.mktemp("nb")
+    r, c = np.mgrid[0:300, 0:300]
+    h = 100.0 + A * r + B * c + CHECKER * (-1.0) ** (r + c)
+    with rasterio.open(d / "ramp.tif", "w", driver="GTiff", height=300, width=300, count=1,
+                       dtype="float32", crs="EPSG:32614",
+                       transform=from_origin(500000, 4000000, 10.0, 10.0)) as ds:
+        ds.write(h.astype(np.float32), 1)
+    build_store(str(d / "ramp.tif"), d / "ramp.zarr", tile=64, chunk=16)
+    st = TerrainStore(d / "ramp.zarr")
+    assert st.levels == 2
+    return st, st.read(0, 0, 300, 0, 300).astype(np.float64)
+
+
+@pytest.fixture
+def reads(monkeypatch):
+    """Every level read and chunk-bounds read of a store in this process, from now on:
+    ``(kind, level, in_frame, thread)``; ``reads.in_frame`` is set by the test's loop."""
+    log: list = []
+    state = {"in_frame": False}
+    read, minmax = TerrainStore.read, TerrainStore.minmax
+
+    def spy_read(self, k, *window):
+        log.append(("read", k, state["in_frame"], threading.get_ident()))
+        return read(self, k, *window)
+
+    def spy_minmax(self, k):
+        log.append(("minmax", k, state["in_frame"], threading.get_ident()))
+        return minmax(self, k)
+
+    monkeypatch.setattr(TerrainStore, "read", spy_read)
+    monkeypatch.setattr(TerrainStore, "minmax", spy_minmax)
+    return SimpleNamespace(log=log, state=state)
+
+
+def _dies_with(heights, rows, cols) -> np.ndarray:
+    """Ask for ``heights[rows, cols]`` while the reader process is stopped, then kill it
+    and reap it: the request dies in flight.  Returns the values given at once."""
+    proc = heights.reader._pipes.proc
+    os.kill(proc.pid, signal.SIGSTOP)
+    first = heights[rows, cols]
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait(timeout=10)
+    return first
+
+
+def test_a_missing_chunk_is_answered_from_the_coarse_level_then_exactly(ramp, reads):
+    st, level0 = ramp
+    h = store_field(st).heights
+    h.start_reader()
+    assert not h.blocking and h.coarse_level == 1 and h.coarse.shape == (150, 150)
+    before = len(reads.log)
+    rows, cols = np.array([100, 257, 400]), np.array([50, 300, 333])
+    fr, fc = rows * 299 / 512, cols * 299 / 512
+    got = h[rows, cols]
+    assert len(reads.log) == before  # nothing read in this process
+    # level 1 sampled at the same place: the plane (level 1's sample i is level 0's 2i
+    # and 2i+1 averaged, so it stands half a sample further on)
+    np.testing.assert_allclose(got, 100 + A * (fr + 0.5) + B * (fc + 0.5), atol=1e-3)
+    exact = map_coordinates(level0, [fr, fc], order=1)
+    assert np.abs(got - exact).max() > 1.0
+    assert h.approximate == 3 and not h.exact(rows, cols).any()
+    assert h.settle(30.0)
+    assert h.exact(rows, cols).all()
+    np.testing.assert_allclose(h[rows, cols], exact, atol=1e-3)
+    # four chunks: (257, 300) is level 0's (150.1, 175.2), astride chunk columns 10 and 11
+    assert h.approximate == 3 and h.chunks_read == 4 and len(reads.log) == before
+    proc = h.reader._pipes.proc
+    h.close()
+    assert proc.poll() is not None and h.reader is None and h.blocking
+    np.testing.assert_allclose(h[rows, cols], exact, atol=1e-3)  # blocking again
+
+
+def test_a_dying_reader_is_started_again_three_times_then_chunks_stay_coarse(ramp):
+    st, level0 = ramp
+    h = store_field(st).heights
+    h.start_reader()
+    try:
+        for kill in range(1, 5):
+            r, c = np.array([64 * kill]), np.array([20])  # level-0 chunk row 2, 4, 7, 9
+            first = _dies_with(h, r, c)
+            h.settle(30.0)
+            assert h.reader_restarts == min(kill, 3) and h.reader.alive == (kill <= 3)
+            # the chunk the process died on is unreadable: it keeps level 1's value
+            assert len(h.bad) == kill and not h.exact(r, c).any()
+            np.testing.assert_allclose(h[r, c], first)
+            r2 = np.array([64 * kill + 32])  # the next chunk row
+            h[r2, c]
+            assert h.settle(30.0)
+            if kill <= 3:  # a process runs again: a new chunk arrives exactly
+                want = map_coordinates(level0, [r2 * 299 / 512, c * 299 / 512], order=1)
+                assert h.exact(r2, c).all()
+                np.testing.assert_allclose(h[r2, c], want, atol=1e-3)
+            else:  # no process any more: what is asked for fails at once, stays coarse
+                assert len(h.bad) == kill + 1 and not h.exact(r2, c).any()
+    finally:
+        h.close()
+
+
+def test_sprite_adaptive_reads_no_store_inside_its_frames_and_converges(gl, tmp_path, reads,
+                                                                         monkeypatch):
+    """A low flyover over a coarse level of 8² squares: the metric's fallback sample
+    (fewer than 4 centres in view) takes level-0 heights inside frames; none is read in
+    this process while a frame runs, and once the reader is idle they are exact."""
+    from lodsprite import techniques
+    from lodsprite.api import Renderer
+    from lodsprite.paths import get_path
+    from lodsprite.scene import load_scene
+    from lodsprite.sprite import metric
+
+    build_store("fractal:512:7", tmp_path / "s.zarr", tile=256, chunk=16)
+    level0 = TerrainStore(tmp_path / "s.zarr").read(0, 0, 512, 0, 512).astype(np.float64)
+    scene = load_scene(str(tmp_path / "s.zarr"), grid=64)
+    path = get_path("flyover:100", scene.hf, 30)
+    fallbacks = []
+    theta = metric.ErrorMetric.fallback_theta
+
+    def counted(self, *args, **kwargs):
+        fallbacks.append(reads.state["in_frame"])
+        return theta(self, *args, **kwargs)
+
+    with Renderer(scene, (64, 64), ctx=gl.mgl) as renderer:
+        t = techniques.create("sprite-adaptive", renderer, **techniques.get(
+            "sprite-adaptive").bind({"lod": 8, "epsilon": 1.0, "key_sse": 1.0}))
+        h = t.heights
+        proc = h.reader._pipes.proc
+        monkeypatch.setattr(metric.ErrorMetric, "fallback_theta", counted)
+        try:
+            t.warm_up(path.viewpoints[0])
+            setup_chunks = h.chunks_read
+            for vp in path.viewpoints:
+                reads.state["in_frame"] = True
+                t.frame(vp)
+                reads.state["in_frame"] = False
+            in_frame = [r for r in reads.log if r[2]]
+            assert in_frame == []
+            assert any(fallbacks) and h.approximate > 0
+            summary = t.summary([])
+            assert summary["level0_samples_approximate"] == h.approximate
+            # converged: pumped to idle, the fallback sample's heights are level 0's own
+            m, vp = t.engine.metric, path.viewpoints[-1]
+            view_proj = t.engine.policy.projection(vp).matrix() @ vp.view_matrix()
+            rr, cc = m.fallback_grid(view_proj)
+            assert len(rr) > 0
+            assert h.settle(30.0) and h.exact(rr, cc).all()
+            assert h.chunks_read > setup_chunks  # through the reader process
+            s = 511 / 512
+            np.testing.assert_allclose(h[rr, cc], map_coordinates(level0, [rr * s, cc * s],
+                                                                  order=1), atol=1e-3)
+        finally:
+            t.release()
+    assert proc.poll() is not None and h.reader is None
