@@ -69,7 +69,8 @@ def working_quads(rows: int, cols: int) -> int:
 class LazyHeights:
     """Level 0 of ``store`` resampled bilinearly to ``(quads+1)²`` samples, read on
     demand: ``heights[rows, cols]`` with integer index arrays (broadcast together) returns
-    ``float32`` metres of that shape.  Thread-safe.
+    ``float32`` metres of that shape.  Thread-safe while blocking; the reader process is
+    driven from one thread, the frame's.
 
     Blocking (the default, :attr:`blocking`): a missing level-0 chunk is read on the
     calling thread.  After :meth:`start_reader` (what a timed technique does once its
@@ -190,8 +191,8 @@ class LazyHeights:
         c0 = np.minimum(np.floor(c).astype(np.intp), max(a.shape[1] - 2, 0))
         wr, wc = r - r0, c - c0
         r1, c1 = np.minimum(r0 + 1, a.shape[0] - 1), np.minimum(c0 + 1, a.shape[1] - 1)
-        return ((a[r0, c0] * (1 - wc) + a[r0, c1] * wc) * (1 - wr)
-                + (a[r1, c0] * (1 - wc) + a[r1, c1] * wc) * wr)
+        top = a[r0, c0].astype(np.float64) * (1 - wc) + a[r0, c1] * wc
+        return top * (1 - wr) + (a[r1, c0].astype(np.float64) * (1 - wc) + a[r1, c1] * wc) * wr
 
     def gather(self, r: np.ndarray, c: np.ndarray) -> np.ndarray:
         """Level-0 samples at integer ``(r, c)`` (metres, float64), chunk by chunk."""
@@ -274,7 +275,7 @@ class LazyHeights:
         levels = self.store.levels
         k = min(max(1, self.store.level_for(coarse_side)), levels - 1)
         r, c = self.store.shape(k)
-        coarse = np.asarray(self.store.read(k, 0, r, 0, c), np.float64)
+        coarse = np.asarray(self.store.read(k, 0, r, 0, c), np.float32)
         if not np.all(np.isfinite(coarse)):
             raise TerrainError(f"{self.store.path}: level {k} holds unwritten or invalid "
                                "heights")
