@@ -56,6 +56,7 @@ DEFAULT_CACHE_CHUNKS = 256  # level-0 chunks kept decoded (256² float32: 64 MB)
 DEFAULT_IN_FLIGHT = 8       # chunks asked of the reader process at once
 COARSE_SIDE = 1025          # the resident coarse level: the finest with sides at most this
 READER_RESTARTS = 3         # a reader process that dies is started again this many times
+READY_S = 30.0              # setup waits at most this long for the reader's first answer
 
 
 def working_quads(rows: int, cols: int) -> int:
@@ -283,6 +284,22 @@ class LazyHeights:
         self.reader = reader_worker(self.store.path, self.store.exaggeration, in_flight,
                                     READER_RESTARTS)
         self.blocking = False
+        self._ready(k)
+
+    def _ready(self, k: int, timeout_s: float = READY_S) -> None:
+        """Wait (setup) for the reader's first answer, a sample of level ``k``: starting
+        Python and Zarr takes a CPU second or so, which would otherwise be taken from the
+        first timed frames."""
+        from lodsprite.terrain.reader import tile_request
+
+        self.reader.submit("ready", tile_request(k, 0, 1, 0, 1))
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            if any(key == "ready" for key, _ in self.reader.poll()):
+                return
+            time.sleep(0.005)
+        log.warning("%s: the level-0 reader process gave no answer in %.0f s",
+                    self.store.path, timeout_s)
 
     def _request(self, ids: np.ndarray) -> None:
         """Ask for chunks ``ids`` (newest wishes first; the oldest dropped past
