@@ -63,7 +63,7 @@ def reads(monkeypatch):
 def _dies_with(heights, rows, cols) -> np.ndarray:
     """Ask for ``heights[rows, cols]`` while the reader process is stopped, then kill it
     and reap it: the request dies in flight.  Returns the values given at once."""
-    proc = heights.reader._pipes.proc
+    proc = heights.reader.worker._pipes.proc
     os.kill(proc.pid, signal.SIGSTOP)
     first = heights[rows, cols]
     os.kill(proc.pid, signal.SIGKILL)
@@ -92,7 +92,7 @@ def test_a_missing_chunk_is_answered_from_the_coarse_level_then_exactly(ramp, re
     np.testing.assert_allclose(h[rows, cols], exact, atol=1e-3)
     # four chunks: (257, 300) is level 0's (150.1, 175.2), astride chunk columns 10 and 11
     assert h.approximate == 3 and h.chunks_read == 4 and len(reads.log) == before
-    proc = h.reader._pipes.proc
+    proc = h.reader.worker._pipes.proc
     h.close()
     assert proc.poll() is not None and h.reader is None and h.blocking
     np.testing.assert_allclose(h[rows, cols], exact, atol=1e-3)  # blocking again
@@ -124,7 +124,15 @@ def test_a_dying_reader_is_started_again_three_times_then_chunks_stay_coarse(ram
         h.close()
 
 
-def test_sprite_adaptive_reads_no_store_inside_its_frames_and_converges(gl, tmp_path, reads,
+@pytest.fixture(scope="module")
+def flight(tmp_path_factory):
+    """A 512² store of 16² chunks (1024: more than the chunk cache holds), its level 0."""
+    path = tmp_path_factory.mktemp("fl") / "s.zarr"
+    build_store("fractal:512:7", path, tile=256, chunk=16)
+    return path, TerrainStore(path).read(0, 0, 512, 0, 512).astype(np.float64)
+
+
+def test_sprite_adaptive_reads_no_store_inside_its_frames_and_converges(gl, flight, reads,
                                                                          monkeypatch):
     """A low flyover over a coarse level of 8² squares: the metric's fallback sample
     (fewer than 4 centres in view) takes level-0 heights inside frames; none is read in
@@ -135,9 +143,8 @@ def test_sprite_adaptive_reads_no_store_inside_its_frames_and_converges(gl, tmp_
     from lodsprite.scene import load_scene
     from lodsprite.sprite import metric
 
-    build_store("fractal:512:7", tmp_path / "s.zarr", tile=256, chunk=16)
-    level0 = TerrainStore(tmp_path / "s.zarr").read(0, 0, 512, 0, 512).astype(np.float64)
-    scene = load_scene(str(tmp_path / "s.zarr"), grid=64)
+    store, level0 = flight
+    scene = load_scene(str(store), grid=64)
     path = get_path("flyover:100", scene.hf, 30)
     fallbacks = []
     theta = metric.ErrorMetric.fallback_theta
@@ -150,7 +157,7 @@ def test_sprite_adaptive_reads_no_store_inside_its_frames_and_converges(gl, tmp_
         t = techniques.create("sprite-adaptive", renderer, **techniques.get(
             "sprite-adaptive").bind({"lod": 8, "epsilon": 1.0, "key_sse": 1.0}))
         h = t.heights
-        proc = h.reader._pipes.proc
+        proc = h.reader.worker._pipes.proc
         monkeypatch.setattr(metric.ErrorMetric, "fallback_theta", counted)
         try:
             t.warm_up(path.viewpoints[0])
@@ -177,3 +184,34 @@ def test_sprite_adaptive_reads_no_store_inside_its_frames_and_converges(gl, tmp_
         finally:
             t.release()
     assert proc.poll() is not None and h.reader is None
+
+
+def test_a_sprite_made_over_the_same_level_0_keeps_the_reader_until_it_is_released(
+        gl, flight, reads):
+    """The viewer makes the next technique before releasing the last: plain LOD-sprite
+    after sprite-adaptive takes the store's level 0 it left and reads it without blocking
+    too; the reader process ends with the last of them."""
+    from lodsprite import techniques
+    from lodsprite.api import Renderer
+    from lodsprite.paths import get_path
+    from lodsprite.scene import load_scene
+
+    scene = load_scene(str(flight[0]), grid=64)
+    path = get_path("flyover:100", scene.hf, 8)
+    with Renderer(scene, (64, 64), ctx=gl.mgl) as renderer:
+        first = techniques.create("sprite-adaptive", renderer, lod=8, key_sse=1.0)
+        h = first.heights
+        proc = h.reader.worker._pipes.proc
+        second = techniques.create("sprite", renderer, lod=8)
+        first.release()
+        try:
+            assert second.heights is h and not h.blocking and proc.poll() is None
+            for vp in path.viewpoints:
+                reads.state["in_frame"] = True
+                second.frame(vp)
+                reads.state["in_frame"] = False
+            assert [r for r in reads.log if r[2]] == []
+        finally:
+            second.release()
+    proc.wait(timeout=10)
+    assert h.reader is None and h.blocking

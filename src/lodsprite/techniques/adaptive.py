@@ -141,20 +141,17 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
         from lodsprite.terrain.storefield import store_field
 
         self.adaptive = make_adaptive(renderer, key_sse, gpu_mb, host_mb)
-        self.heights = None  # a store's LazyHeights: read without blocking once set up
+        field = None
         try:
             if isinstance(self.adaptive.tree.p, TerrainStore):
                 field = store_field(self.adaptive.tree.p)
                 renderer.paths.geometry.set_full(field)
-                self.heights = field.heights
+            # proxy, ribbons and C read from level 0 there, then only without blocking
             super().__init__(renderer, lod, epsilon, False, visibility, guard_px, border)
-            if self.heights is not None:  # proxy, ribbons and C read now, then no more
-                renderer.paths.geometry.proxy(lod, border)
-                self.heights.start_reader()
         except BaseException:
             self.adaptive.release()
-            if self.heights is not None:
-                self.heights.close()
+            if field is not None:
+                field.heights.close()
             raise
         self.sprite.sprite.keyframe_drawer = self._draw_keyframe
         self.engine.between_keyframes = self._between_keyframes
@@ -211,7 +208,5 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
         return reader_mb(self.adaptive)
 
     def release(self) -> None:
-        super().release()
+        super().release()  # the level-0 reader too
         self.adaptive.release()
-        if self.heights is not None:
-            self.heights.close()

@@ -69,6 +69,20 @@ class LodTechnique(Technique):
         return {"lod": self.lod}
 
 
+def level0_reader(geometry, lod: int, border: bool):
+    """Over a store's level 0 (``geometry.full.heights`` a
+    :class:`~lodsprite.terrain.storefield.LazyHeights`): the proxy and its ribbons read
+    now, then the heights' reader process started, so that no frame reads the store
+    (:mod:`lodsprite.terrain.storefield`); returns the heights (close them with the
+    technique), or None for a field in memory."""
+    heights = getattr(geometry.full, "heights", None)
+    if not hasattr(heights, "start_reader"):
+        return None
+    geometry.proxy(lod, border)
+    heights.start_reader()
+    return heights
+
+
 class SpriteTechnique(Technique):
     """LOD-sprite: keyframes on a worker thread (``threaded``) or inline (the 1999
     algorithm, what batch runs time).  Records per frame the keyframe shown; its replay
@@ -91,6 +105,7 @@ class SpriteTechnique(Technique):
         self._tint = False
         self._replayed: int | None = None
         self._last = None
+        self.heights = level0_reader(renderer.paths.geometry, lod, border)
 
     @property
     def engine(self):
@@ -191,3 +206,6 @@ class SpriteTechnique(Technique):
 
     def release(self) -> None:
         self.sprite.release()
+        if self.heights is not None:
+            self.heights.close()
+            self.heights = None

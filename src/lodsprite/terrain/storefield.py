@@ -26,14 +26,12 @@ before the first frame) and in untimed use (:meth:`LazyHeights.waiting`).  After
 answered at once from a coarser level of the store held whole in memory (the finest
 below level 0 of at most :data:`COARSE_SIDE` a side, read once then), bilinearly at the
 same world position, and counted in ``approximate``; its chunks are asked of a reader
-process (:mod:`lodsprite.terrain.reader`, a :class:`~lodsprite.workers.ProcessWorker`,
-as :class:`~lodsprite.terrain.streaming.StoreTileLoader` reads tiles: never a thread,
-since moderngl holds the GIL through the draws), at most ``in_flight`` at once, newest
-wishes first.  :meth:`LazyHeights.pump` collects the answers on the frame's own thread
-without waiting; :meth:`LazyHeights.exact` says which samples are exact now, so callers
-can take them again later.  A reader process that dies is started again at most
-:data:`READER_RESTARTS` times (its chunk counted unreadable, in ``bad``; such chunks keep
-the coarse level's heights).
+process (:mod:`lodsprite.terrain.chunkreader`: never a thread, since moderngl holds the
+GIL through the draws), at most ``in_flight`` at once, newest wishes first.
+:meth:`LazyHeights.pump` collects the answers on the frame's own thread without
+waiting; :meth:`LazyHeights.exact` says which samples are exact now, so callers can take
+them again later.  A chunk the reader cannot read (or dies on: it is started again at
+most three times) is counted in ``bad`` and keeps the coarse level's heights.
 """
 
 from __future__ import annotations
@@ -55,8 +53,6 @@ log = logging.getLogger(__name__)
 DEFAULT_CACHE_CHUNKS = 256  # level-0 chunks kept decoded (256² float32: 64 MB)
 DEFAULT_IN_FLIGHT = 8       # chunks asked of the reader process at once
 COARSE_SIDE = 1025          # the resident coarse level: the finest with sides at most this
-READER_RESTARTS = 3         # a reader process that dies is started again this many times
-READY_S = 30.0              # setup waits at most this long for the reader's first answer
 
 
 def working_quads(rows: int, cols: int) -> int:
@@ -65,6 +61,17 @@ def working_quads(rows: int, cols: int) -> int:
     while q < max(rows, cols) - 1:
         q *= 2
     return q
+
+
+def bilinear_corners(fr: np.ndarray, fc: np.ndarray, rows: int, cols: int) -> list:
+    """``[(rows, cols, weight)] * 4``: the bilinear corners of fractional indices
+    ``(fr, fc)`` (within the grid) of a ``rows x cols`` grid."""
+    r0 = np.minimum(np.floor(fr).astype(np.intp), max(rows - 2, 0))
+    c0 = np.minimum(np.floor(fc).astype(np.intp), max(cols - 2, 0))
+    wr, wc = fr - r0, fc - c0
+    r1, c1 = np.minimum(r0 + 1, rows - 1), np.minimum(c0 + 1, cols - 1)
+    return [(r0, c0, (1 - wr) * (1 - wc)), (r0, c1, (1 - wr) * wc),
+            (r1, c0, wr * (1 - wc)), (r1, c1, wr * wc)]
 
 
 class LazyHeights:
@@ -97,12 +104,12 @@ class LazyHeights:
         self._minmax = np.asarray(store.minmax(0))  # per-chunk bounds, in memory from now
         self.chunks_read = 0     # level-0 chunks decoded, here or by the reader process
         self.blocking = True     # False after start_reader: nothing read on this thread
-        self.reader = None       # the reader process (a ProcessWorker) while non-blocking
+        self.reader = None       # a ChunkReader (the reader process) while non-blocking
         self.coarse: np.ndarray | None = None  # the resident coarser level, whole
         self.coarse_level = -1
         self.approximate = 0     # samples served from the coarse level so far
         self.bad: set[int] = set()  # chunks the reader could not read (stay approximate)
-        self._wanted: OrderedDict = OrderedDict()  # chunk id -> None, newest last
+        self._users = 0          # start_reader calls not yet closed
 
     def __getitem__(self, key) -> np.ndarray:
         rows, cols = self._indices(key)
@@ -120,14 +127,8 @@ class LazyHeights:
         return rows, cols
 
     def _corners(self, fr: np.ndarray, fc: np.ndarray) -> list:
-        """The four bilinear corners ``(rows, cols, weight)`` of fractional level-0
-        ``(fr, fc)`` (already clipped)."""
-        r0 = np.minimum(np.floor(fr).astype(np.intp), max(self.rows0 - 2, 0))
-        c0 = np.minimum(np.floor(fc).astype(np.intp), max(self.cols0 - 2, 0))
-        wr, wc = fr - r0, fc - c0
-        r1, c1 = np.minimum(r0 + 1, self.rows0 - 1), np.minimum(c0 + 1, self.cols0 - 1)
-        return [(r0, c0, (1 - wr) * (1 - wc)), (r0, c1, (1 - wr) * wc),
-                (r1, c0, wr * (1 - wc)), (r1, c1, wr * wc)]
+        """The four bilinear corners of fractional level-0 ``(fr, fc)`` (clipped)."""
+        return bilinear_corners(fr, fc, self.rows0, self.cols0)
 
     def _clip(self, fr, fc) -> tuple[np.ndarray, np.ndarray]:
         return (np.clip(np.asarray(fr, np.float64), 0, self.rows0 - 1),
@@ -184,16 +185,9 @@ class LazyHeights:
     def _coarse_at(self, fr: np.ndarray, fc: np.ndarray) -> np.ndarray:
         """Bilinear heights of the resident coarse level at fractional level-0 indices
         (level ``k``'s sample ``i`` stands on level 0's ``i 2^k``)."""
-        a = self.coarse
-        s = float(1 << self.coarse_level)
-        r = np.clip(fr / s, 0, a.shape[0] - 1)
-        c = np.clip(fc / s, 0, a.shape[1] - 1)
-        r0 = np.minimum(np.floor(r).astype(np.intp), max(a.shape[0] - 2, 0))
-        c0 = np.minimum(np.floor(c).astype(np.intp), max(a.shape[1] - 2, 0))
-        wr, wc = r - r0, c - c0
-        r1, c1 = np.minimum(r0 + 1, a.shape[0] - 1), np.minimum(c0 + 1, a.shape[1] - 1)
-        top = a[r0, c0].astype(np.float64) * (1 - wc) + a[r0, c1] * wc
-        return top * (1 - wr) + (a[r1, c0].astype(np.float64) * (1 - wc) + a[r1, c1] * wc) * wr
+        a, s = self.coarse, float(1 << self.coarse_level)
+        r, c = np.clip(fr / s, 0, a.shape[0] - 1), np.clip(fc / s, 0, a.shape[1] - 1)
+        return sum(a[rr, cc] * w for rr, cc, w in bilinear_corners(r, c, *a.shape))
 
     def gather(self, r: np.ndarray, c: np.ndarray) -> np.ndarray:
         """Level-0 samples at integer ``(r, c)`` (metres, float64), chunk by chunk."""
@@ -268,74 +262,41 @@ class LazyHeights:
         """Stop reading on the calling thread (setup; this blocks): hold the finest store
         level below level 0 whose longer side is at most ``coarse_side`` whole in memory
         (:attr:`coarse`, level :attr:`coarse_level`; the coarsest level if none fits) and
-        start the reader process, at most ``in_flight`` chunks asked at once."""
-        from lodsprite.terrain.reader import reader_worker
+        start the reader process (:class:`~lodsprite.terrain.chunkreader.ChunkReader`),
+        at most ``in_flight`` chunks asked at once.  Each call is undone by a
+        :meth:`close`."""
+        from lodsprite.terrain.chunkreader import ChunkReader
 
+        self._users += 1
         if self.reader is not None:
             return
-        levels = self.store.levels
-        k = min(max(1, self.store.level_for(coarse_side)), levels - 1)
+        k = min(max(1, self.store.level_for(coarse_side)), self.store.levels - 1)
         r, c = self.store.shape(k)
         coarse = np.asarray(self.store.read(k, 0, r, 0, c), np.float32)
         if not np.all(np.isfinite(coarse)):
             raise TerrainError(f"{self.store.path}: level {k} holds unwritten or invalid "
                                "heights")
         self.coarse, self.coarse_level = coarse, k
-        self.reader = reader_worker(self.store.path, self.store.exaggeration, in_flight,
-                                    READER_RESTARTS)
+        self.reader = ChunkReader(self.store, self._window, in_flight, self.capacity, k)
         self.blocking = False
-        self._ready(k)
-
-    def _ready(self, k: int, timeout_s: float = READY_S) -> None:
-        """Wait (setup) for the reader's first answer, a sample of level ``k``: starting
-        Python and Zarr takes a CPU second or so, which would otherwise be taken from the
-        first timed frames."""
-        from lodsprite.terrain.reader import tile_request
-
-        self.reader.submit("ready", tile_request(k, 0, 1, 0, 1))
-        deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline:
-            if any(key == "ready" for key, _ in self.reader.poll()):
-                return
-            time.sleep(0.005)
-        log.warning("%s: the level-0 reader process gave no answer in %.0f s",
-                    self.store.path, timeout_s)
 
     def _request(self, ids: np.ndarray) -> None:
-        """Ask for chunks ``ids`` (newest wishes first; the oldest dropped past
-        :attr:`capacity`); sends what the reader has room for."""
-        if self.reader is None or len(ids) == 0:
-            return
-        busy = set(self.reader.pending)
-        for cid in ids.tolist():
-            if cid in self.bad or cid in busy:
-                continue
-            self._wanted[cid] = None
-            self._wanted.move_to_end(cid)
-        while len(self._wanted) > self.capacity:
-            self._wanted.popitem(last=False)
-        self._send()
+        if self.reader is not None and len(ids):
+            self.reader.want(ids, self.bad)
+            self._send()
 
     def _send(self) -> None:
-        from lodsprite.terrain.reader import tile_request
-
         with self._lock:
             here = set(self._cache)
-        while self._wanted and not self.reader.full:
-            cid, _ = self._wanted.popitem(last=True)
-            if cid not in here:
-                self.reader.submit(cid, tile_request(0, *self._window(cid)))
+        self.reader.send(here)
 
     def pump(self) -> int:
         """Collect the chunks the reader has answered and send what is wanted next; never
         waits.  Returns the chunks that arrived (0 when blocking)."""
-        from lodsprite.terrain.reader import tile_answer
-
         if self.reader is None:
             return 0
         got = 0
-        for cid, answer in self.reader.poll():
-            block = tile_answer(answer)
+        for cid, block in self.reader.answers():
             if isinstance(block, str) or not np.all(np.isfinite(block)):
                 if cid not in self.bad:
                     log.warning("%s: level-0 chunk %s unreadable (%s): its heights stay "
@@ -353,7 +314,7 @@ class LazyHeights:
     def idle(self) -> bool:
         """Nothing wanted and nothing in flight (pumps first)."""
         self.pump()
-        return self.reader is None or not (self._wanted or self.reader.pending)
+        return self.reader is None or not self.reader.busy
 
     def settle(self, timeout_s: float = 60.0) -> bool:
         """Pump until :meth:`idle` (untimed use only: this waits); False if
@@ -379,14 +340,17 @@ class LazyHeights:
     @property
     def reader_restarts(self) -> int:
         """Times the reader process died and was started again (at most 3)."""
-        return 0 if self.reader is None else min(self.reader.deaths, READER_RESTARTS)
+        return 0 if self.reader is None else self.reader.restarts
 
     def close(self) -> None:
-        """End the reader process; reads block again (the coarse level is dropped)."""
+        """Undo one :meth:`start_reader`; the last ends the reader process and reads block
+        again (the coarse level is dropped)."""
+        self._users = max(0, self._users - 1)
+        if self._users:
+            return
         if self.reader is not None:
             self.reader.close()
         self.reader, self.blocking = None, True
-        self._wanted.clear()
         self.coarse, self.coarse_level = None, -1
 
 
