@@ -92,6 +92,11 @@ def test_a_missing_chunk_is_answered_from_the_coarse_level_then_exactly(ramp, re
     np.testing.assert_allclose(h[rows, cols], exact, atol=1e-3)
     # four chunks: (257, 300) is level 0's (150.1, 175.2), astride chunk columns 10 and 11
     assert h.approximate == 3 and h.chunks_read == 4 and len(reads.log) == before
+    r3, c3 = np.array([500]), np.array([10])  # untimed use: read here and now, exactly
+    with h.waiting():
+        np.testing.assert_allclose(h[r3, c3], map_coordinates(
+            level0, [r3 * 299 / 512, c3 * 299 / 512], order=1), atol=1e-3)
+    assert [r[:2] for r in reads.log[before:]] == [("read", 0)] and not h.blocking
     proc = h.reader.worker._pipes.proc
     h.close()
     assert proc.poll() is not None and h.reader is None and h.blocking
