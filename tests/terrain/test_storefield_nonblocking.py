@@ -176,6 +176,10 @@ def test_sprite_adaptive_reads_no_store_inside_its_frames_and_converges(gl, flig
             assert any(fallbacks) and h.approximate > 0
             summary = t.summary([])
             assert summary["level0_samples_approximate"] == h.approximate
+            # the reader process's memory is counted in the run's peak
+            assert summary["peak_rss_mb_level0_reader"] > 0
+            assert summary["peak_rss_mb"] >= (summary["peak_rss_mb_reader"]
+                                              + summary["peak_rss_mb_level0_reader"])
             # converged: pumped to idle, the fallback sample's heights are level 0's own
             m, vp = t.engine.metric, path.viewpoints[-1]
             view_proj = t.engine.policy.projection(vp).matrix() @ vp.view_matrix()

@@ -67,12 +67,19 @@ def tile_summary(terrain) -> dict[str, Any]:
             "gpu_cache_mb": terrain.slots.capacity * (terrain.tree.g + 1) ** 2 * 4 / 2 ** 20}
 
 
+def level0_reader_mb(heights) -> float:
+    """The level-0 reader process's peak resident memory, MB (0 without one)."""
+    reader = getattr(heights, "reader", None)
+    return 0.0 if reader is None else reader.peak_mb()
+
+
 def level0_summary(heights) -> dict[str, Any]:
     """The level-0 reads of LOD-sprite's metric and proxy over a store (``heights`` a
     :class:`~lodsprite.terrain.storefield.LazyHeights`, or None: nothing)."""
     if heights is None:
         return {}
-    return {"level0_chunks_read": heights.chunks_read,
+    return {"peak_rss_mb_level0_reader": level0_reader_mb(heights),
+            "level0_chunks_read": heights.chunks_read,
             "level0_samples_approximate": heights.approximate,
             "level0_chunks_bad": len(heights.bad),
             "level0_reader_restarts": heights.reader_restarts}
@@ -198,14 +205,16 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
             s.keyframe_drawer = self._draw_keyframe
 
     def summary(self, frames: list[Frame]) -> dict[str, Any]:
-        return {**super().summary(frames), "key_sse": self.adaptive.sse,
-                **tile_summary(self.adaptive), **level0_summary(self.heights)}
+        out = {**super().summary(frames), "key_sse": self.adaptive.sse,
+               **tile_summary(self.adaptive), **level0_summary(self.heights)}
+        out["peak_rss_mb"] += out.get("peak_rss_mb_level0_reader", 0.0)
+        return out
 
     def status(self) -> str:
         return f"keyframes: adaptive, sse {self.adaptive.sse:g} px; {tile_status(self.adaptive)}"
 
     def outside_mb(self) -> float:
-        return reader_mb(self.adaptive)
+        return reader_mb(self.adaptive) + level0_reader_mb(self.heights)
 
     def release(self) -> None:
         super().release()  # the level-0 reader too

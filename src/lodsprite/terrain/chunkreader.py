@@ -100,6 +100,10 @@ class ChunkReader:
         """Times the process died and was started again (at most :data:`READER_RESTARTS`)."""
         return min(self.worker.deaths, READER_RESTARTS)
 
+    def peak_mb(self) -> float:
+        """The process's peak resident memory in MB (0 when none runs)."""
+        return self.worker.peak_mb()
+
     def close(self) -> None:
         self.worker.close()
         self.wanted.clear()
