@@ -97,6 +97,7 @@ class LazyHeights:
         self.rows0, self.cols0 = store.shape(0)
         self.chunk = store.chunk
         self.chunk_cols = -(-self.cols0 // self.chunk)
+        self._here = np.zeros(-(-self.rows0 // self.chunk) * self.chunk_cols, bool)  # cached
         self.scale = ((self.rows0 - 1) / quads, (self.cols0 - 1) / quads)
         self.capacity = max(4, cache_chunks)
         self._cache: OrderedDict = OrderedDict()
@@ -142,7 +143,8 @@ class LazyHeights:
         corners = self._corners(fr, fc)
         ok = None
         if not self.blocking:
-            self.pump()
+            if self.reader.busy:  # answers may have come
+                self.pump()
             ok, missing = self._resident(corners)
             self._request(missing)
         out = np.zeros(fr.shape)
@@ -161,16 +163,9 @@ class LazyHeights:
     def _resident(self, corners: list) -> tuple[np.ndarray, np.ndarray]:
         """``(ok, missing)``: which samples have every corner of weight > 0 in resident
         chunks, and the ids of the chunks that are not."""
-        with self._lock:
-            here = np.fromiter(self._cache.keys(), np.int64, len(self._cache))
-        ok = np.ones(corners[0][0].shape, bool)
-        missing = []
-        for rr, cc, w in corners:
-            ids = self._chunk_ids(rr, cc)
-            have = np.isin(ids, here) | (w <= 0)
-            ok &= have
-            missing.append(ids[~have])
-        return ok, np.unique(np.concatenate([m.ravel() for m in missing]))
+        ids = np.stack([self._chunk_ids(rr, cc) for rr, cc, _ in corners])
+        have = self._here[ids] | (np.stack([w for _, _, w in corners]) <= 0)
+        return have.all(axis=0), np.unique(ids[~have])
 
     def exact(self, rows, cols) -> np.ndarray:
         """``bool`` of the shape of ``rows, cols`` (working-grid indices): whether
@@ -230,9 +225,10 @@ class LazyHeights:
         with self._lock:
             self._cache[key] = block
             self._cache.move_to_end(key)
+            self._here[key] = True
             self.chunks_read += 1
             while len(self._cache) > self.capacity:
-                self._cache.popitem(last=False)
+                self._here[self._cache.popitem(last=False)[0]] = False
 
     def min(self) -> float:
         return float(self._minmax[..., 0].min())
