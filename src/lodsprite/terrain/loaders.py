@@ -66,11 +66,12 @@ STORE_MAX_SIDE = 4096
 
 
 def load_level0(spec: str | os.PathLike, exaggeration: float = 1.0,
-                max_side: int = STORE_MAX_SIDE + 1) -> HeightField:
+                max_side: int | None = None) -> HeightField:
     """A terrain store's level 0 whole, its own samples (no resampling), heights times
     ``exaggeration``, placed as the adaptive renderer places it (centred on the origin).
     Raises :class:`InputError` when its longer side exceeds ``max_side`` samples (what full
-    resolution draws whole) or ``spec`` is no store."""
+    resolution draws whole; default :data:`STORE_MAX_SIDE` + 1) or ``spec`` is no store."""
+    max_side = STORE_MAX_SIDE + 1 if max_side is None else max_side
     from lodsprite.terrain.store import TerrainStore, is_store
 
     if not is_store(spec):
