@@ -191,3 +191,24 @@ def test_heights_shading_has_level_0_detail(gl, store):
         assert rmse(img, coarse) > 3 * rmse(img, fine)
     finally:
         ref.release()
+
+
+def test_shading_reaches_every_terrain_technique_auto_is_heights_on_a_store(store, tmp_path):
+    from lodsprite import techniques
+
+    for name in ("full", "lod", "sprite", "adaptive", "sprite-adaptive"):
+        assert "shading" in {o.name for o in techniques.get(name).options}, name
+    runs = {"store": ["--terrain", store.path, "--mode", "adaptive"],
+            "memory": ["--terrain", "fractal:64:3", "--mode", "adaptive"],
+            "forced": ["--terrain", "fractal:64:3", "--mode", "lod", "--lod", "8",
+                       "--shading", "heights"]}
+    for key, args in runs.items():
+        proc = run_cli("render", *args, "--size", "32x32", "--frames", "2", "--out",
+                       tmp_path / key)
+        assert proc.returncode == 0, proc.stderr
+        summary = json.loads((tmp_path / key / "summary.json").read_text())
+        assert summary["shading"] == {"store": "heights", "memory": "texture",
+                                      "forced": "heights"}[key]
+    proc = run_cli("render", "--terrain", "fractal:64:3", "--shading", "hillshade",
+                   "--out", tmp_path / "bad")
+    assert proc.returncode == 2 and "unknown shading 'hillshade'" in proc.stderr

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from lodsprite.techniques.base import Frame, Technique
-from lodsprite.techniques.terrain import SpriteTechnique, resolve_shading
+from lodsprite.techniques.terrain import SpriteTechnique, resolve_shading, set_shading
 from lodsprite.workers import peak_rss_mb
 
 if TYPE_CHECKING:
@@ -82,7 +82,8 @@ class AdaptiveTechnique(Technique):
                  host_mb: float = 512.0, shading: str = "auto") -> None:
         super().__init__(renderer)
         self._t0 = time.perf_counter()
-        self.shading = resolve_shading(renderer.scene, shading)
+        # the renderer's full resolution (the default reference) is coloured the same way
+        self.shading = set_shading(renderer, shading)
         self.terrain = make_adaptive(renderer, sse, gpu_mb, host_mb, shading)
         self.first_frame_s = float("nan")
 
