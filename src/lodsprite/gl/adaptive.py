@@ -105,6 +105,7 @@ void main() {
 }
 """
 )
+# the sun of terrain_shade (gl.shaders TERRAIN_LIGHT, unit, towards it), for numpy mirrors
 LIGHT = np.array([-0.45, 0.45, 0.77]) / np.linalg.norm([-0.45, 0.45, 0.77])
 
 
