@@ -212,3 +212,27 @@ def test_shading_reaches_every_terrain_technique_auto_is_heights_on_a_store(stor
     proc = run_cli("render", "--terrain", "fractal:64:3", "--shading", "hillshade",
                    "--out", tmp_path / "bad")
     assert proc.returncode == 2 and "unknown shading 'hillshade'" in proc.stderr
+
+
+def test_a_texture_reference_of_a_field_draws_the_texture(gl):
+    """``auto`` with an in-memory field and its texture draws the texture (jacksboro and
+    chen1999 keep theirs): the same image as the full-resolution renderer's."""
+    from lodsprite.gl.terrain import TerrainGeometry, TerrainRenderer
+    from lodsprite.terrain import make_texture
+
+    hf = HeightField(np.asarray(np.random.default_rng(3).normal(0, 40, (65, 65)), np.float32),
+                     30.0, 30.0)
+    tex = make_texture("checker:8", hf)
+    vp = look_at((0.0, -2000.0, 1500.0), (0.0, 0.0, 0.0))
+    ref = LevelZeroReference(gl, hf, SIZE, shading="auto", texture=tex)
+    geo = TerrainGeometry(gl, hf, tex)
+    r = TerrainRenderer(gl, geo, *SIZE)
+    try:
+        img = ref.image(vp)
+        r.render(vp, None, ref.projection(vp))
+        assert ref.shading == "texture" and img.std() > 5
+        assert np.abs(img.astype(int) - r.target.read_color()).max() <= 1
+    finally:
+        ref.release()
+        r.release()
+        geo.release()

@@ -39,13 +39,20 @@ MARGIN = 2       # samples around the footprint (central differences of its edge
 class LevelZeroReference:
     """Reference frames of ``size = (w, h)`` pixels, vertical field of view ``fov_y_deg``,
     coloured by ``shading`` (``heights``: terrain_shade with per-pixel normals; ``texture``:
-    ``texture (H, W, 3) uint8`` over level 0's extent, whole level only)."""
+    ``texture (H, W, 3) uint8`` over level 0's extent, whole level only; ``auto``: heights
+    for a store, the texture for an in-memory field given one).  ``store_or_field``: a
+    :class:`~lodsprite.terrain.store.TerrainStore` (exaggerated as opened) or a
+    :class:`HeightField` (centred on the origin).  GPU objects live until :meth:`release`."""
 
     def __init__(self, ctx: GLContext, store_or_field, size: tuple[int, int],
                  fov_y_deg: float = 45.0, shading: str = "heights",
                  texture: np.ndarray | None = None, max_side: int = MAX_SIDE) -> None:
+        if shading == "auto":  # as --shading auto: heights for a store, else the texture
+            texture_ok = texture is not None and isinstance(store_or_field, HeightField)
+            shading = "texture" if texture_ok else "heights"
         if shading not in ("heights", "texture"):
-            raise InputError(f"the reference shades by heights or texture, not {shading!r}")
+            raise InputError(f"the reference shades by auto, heights or texture, not "
+                             f"{shading!r}")
         if shading == "texture" and texture is None:
             raise InputError("a texture-shaded reference needs the texture")
         self.ctx, self.size, self.fov = ctx, (int(size[0]), int(size[1])), float(fov_y_deg)
