@@ -236,3 +236,20 @@ def test_a_texture_reference_of_a_field_draws_the_texture(gl):
         ref.release()
         r.release()
         geo.release()
+
+
+def test_the_reference_shares_no_code_with_the_adaptive_renderer():
+    """Its draw is the full-resolution renderer's: no import of the adaptive renderer,
+    its selection's streaming or a technique (only the quadtree's box and ground, so the
+    projection is fitted the same way)."""
+    import ast
+    import inspect
+
+    import lodsprite.gl.reference as module
+
+    tree = ast.parse(inspect.getsource(module))
+    imported = {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
+    imported |= {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+    assert not {m for m in imported if m and ("adaptive" in m or "streaming" in m
+                                              or m.startswith("lodsprite.techniques"))}
+    assert "lodsprite.gl.terrain" in imported
