@@ -14,7 +14,7 @@ same decisions.  The distributed mode is not core: the command line hands it to
 from __future__ import annotations
 
 from contextlib import ExitStack
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -27,13 +27,16 @@ from lodsprite.gl.sprite import (
     DEFAULT_VISIBILITY,
     VISIBILITY_MODES,
 )
+from lodsprite.gl.terrain import SHADINGS
 from lodsprite.harness import RunResult, run_path, timing_summary, write_run
 from lodsprite.paths import CameraPath, get_path
 from lodsprite.progress import Progress
 from lodsprite.scene import Scene, load_scene
 from lodsprite.sprite.engine import DEFAULT_EPSILON_PX
 from lodsprite.terrain import DEFAULT_EXAGGERATION
+from lodsprite.terrain.loaders import load_level0
 from lodsprite.terrain.lod import DEFAULT_COARSE, level_step
+from lodsprite.terrain.store import is_store
 from lodsprite.workers import peak_rss_mb
 
 
@@ -77,6 +80,7 @@ class RenderConfig:
     gpu_mb: float = 256.0     # adaptive: GPU tile cache budget
     host_mb: float = 512.0    # adaptive: host tile cache budget
     flip: bool = False        # with ground_truth: FLIP per frame too
+    shading: str = "auto"     # colour: auto (heights on a store) | texture | heights
 
     @property
     def technique(self) -> str:
@@ -88,7 +92,7 @@ class RenderConfig:
         return {"lod": self.lod, "epsilon": self.epsilon, "visibility": self.visibility,
                 "guard_px": self.guard_px, "border": self.border, "sse": self.sse,
                 "key_sse": self.key_sse, "gpu_mb": self.gpu_mb, "host_mb": self.host_mb,
-                "threaded": False}
+                "threaded": False, "shading": self.shading}
 
     def validate(self) -> None:
         modes = _modes()  # the registry's now: a technique registered later is one too
@@ -107,6 +111,9 @@ class RenderConfig:
         if not (isinstance(self.guard_px, int) and 0 <= self.guard_px <= MAX_GUARD_PX):
             raise InputError(f"--guard must be a whole number of pixels in 0..{MAX_GUARD_PX}, "
                              f"got {self.guard_px}")
+        if self.shading not in SHADINGS:
+            raise InputError(f"unknown shading '{self.shading}': use one of "
+                             f"{', '.join(SHADINGS)}")
         if self.quality_stride < 1:
             raise InputError(f"quality stride must be >= 1, got {self.quality_stride}")
         if self.key_sse is not None and (self.mode != "sprite" or not self.key_sse > 0):
@@ -133,7 +140,12 @@ def parse_size(text: str) -> tuple[int, int]:
 def prepare(config: RenderConfig) -> tuple[Scene, CameraPath]:
     """Validate the config and load scene and path (all user errors surface here)."""
     config.validate()
+    level0 = None
+    if config.mode == "full" and is_store(config.terrain):  # level 0's own samples, whole
+        level0 = load_level0(config.terrain, config.exaggeration)  # (refused if too large)
     scene = load_scene(config.terrain, config.texture, config.grid, config.exaggeration)
+    if level0 is not None:  # the texture stays the working grid's: the same extent
+        scene = replace(scene, hf=level0)
     if config.mode in ("lod", "sprite"):  # the level checked before any GL work
         level_step(scene.hf.quads, config.lod)
     return scene, get_path(config.path, scene.hf, config.frames)

@@ -133,6 +133,27 @@ def test_geometry_outside_the_keyframe_frustum_takes_the_terrain_texture(build, 
     assert sky.sum() <= truth_sky.sum() + 5  # no holes where new geometry appears
 
 
+def test_fallback_fragments_take_terrain_shade_with_heights_shading(build):
+    """Where the keyframe did not see the surface, heights shading colours the proxy with
+    terrain_shade (its height and its own normal), not the terrain texture: on flat ground
+    the ramp's lowest colour lit by the sun, (0.32, 0.45, 0.25) x (0.3 + 0.7 x 0.77081)."""
+    hf = make_field(64, kind="flat")
+    magenta = np.zeros((65, 65, 3), np.uint8)
+    magenta[:] = (255, 0, 255)
+    sp = build(hf, magenta)
+    expected = np.array([0.32, 0.45, 0.25]) * (0.3 + 0.7 * 0.770810) * 255
+    vp = look_at((0.0, -800.0, 3200.0), (0.0, 0.0, 0.0))
+    west = np.s_[:, :35]  # the ground there lies outside the keyframe's view
+    for shading, colour in (("heights", expected), ("texture", np.array([255, 0, 255]))):
+        sp.terrain.shading = shading
+        sp.render_keyframe(look_at((500.0, -200.0, 900.0), (500.0, 0.0, 0.0)), 0.0)
+        sp.render_spriteframe(vp)
+        frame = sp.target.read_color().astype(float)[west]
+        ground = np.any(np.abs(frame - frame[0, 0]) > 3, axis=-1)
+        assert ground.sum() > 1000
+        assert np.abs(frame[ground] - colour).max() <= 2.0, shading
+
+
 NOVEL_CASES = [(v, k, r) for v in VISIBILITY_MODES for k, r in (("ridges", 60.0),
                                                                   ("bump", 200.0))]
 

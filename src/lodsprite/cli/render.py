@@ -28,6 +28,10 @@ from lodsprite.cli.common import (
 )
 from lodsprite.terrain import DEFAULT_EXAGGERATION
 
+ShadingOpt = Annotated[str, typer.Option(
+    "--shading", help="terrain colour: auto (heights on a store, else the texture) | "
+                      "texture | heights (height ramp and sun, normals per pixel)")]
+
 
 def info() -> None:
     """Print the OpenGL renderer, version and maximum texture size."""
@@ -124,6 +128,7 @@ def render(
         "--gpu-mb", help="adaptive: GPU tile cache budget (MB)")] = 256.0,
     host_mb: Annotated[float, typer.Option(
         "--host-mb", help="adaptive: host tile cache budget (MB)")] = 512.0,
+    shading: ShadingOpt = "auto",
 ) -> None:
     """Render a camera path; write DIR/frames.csv and DIR/summary.json (and PNG frames)."""
     from lodsprite import RenderConfig, render_path
@@ -136,7 +141,7 @@ def render(
                           exaggeration=exaggeration, save_frames=save_frames, epsilon=epsilon,
                           ground_truth=ground_truth, visibility=visibility, border=border,
                           guard_px=guard, sse=sse, gpu_mb=gpu_mb, host_mb=host_mb,
-                          key_sse=key_sse, flip=flip)
+                          key_sse=key_sse, flip=flip, shading=shading)
     with progress_bar(f"render {mode}") as update:
         if distributed:
             from lodsprite.distributed.run import parse_max_error, render_distributed
@@ -193,6 +198,7 @@ def view(
         "--sse", help="adaptive: screen-space error tolerance in pixels")] = None,
     key_sse: Annotated[float | None, typer.Option(
         "--key-sse", help="sprite-adaptive: its keyframes' tolerance in pixels")] = None,
+    shading: ShadingOpt = "auto",
 ) -> None:
     """Fly through a terrain with live LOD-sprite, or round a lumigraph (WASD/QE, mouse, tab
     orbit)."""
@@ -204,7 +210,7 @@ def view(
                        epsilon=epsilon, size=parse_size(size), fps=fps, threaded=not inline,
                        play=play, frames=frames, screenshots=screenshots, every=every,
                        exit=exit_, out=out_dir, record=record, server=server,
-                       target_fps=target_fps, sse=sse, key_sse=key_sse)
+                       target_fps=target_fps, sse=sse, key_sse=key_sse, shading=shading)
     s = run_view(opts)
     if s:
         out.print(f"{s['frames']} frames, {s['mode']}: median {s['median_ms']:.2f} ms, "

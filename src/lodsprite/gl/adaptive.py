@@ -7,7 +7,8 @@ heights live in one float atlas texture of ``(G + 1)²`` tiles (the GPU cache); 
 shader fetches a vertex's height from its node's tile and, within the morph range, blends
 it towards the parent's triangulated surface (the mean of the parent samples at the floor
 and ceiling of its position), so a node has become its parent's surface where the parent
-takes over.  Normals come from the neighbouring samples; colour from a height ramp.
+takes over.  Colour: the terrain's texture, or ``terrain_shade`` (gl.shaders) with normals
+per pixel from the node's tile.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import moderngl
 import numpy as np
 
 from lodsprite.gl.context import GLContext
+from lodsprite.gl.shaders import HEIGHT_NORMAL, TERRAIN_SHADE
 from lodsprite.gl.terrain import SKY_RGB, mat_bytes
 from lodsprite.terrain.lod import grid_mesh
 
@@ -36,6 +38,9 @@ in vec4 in_parent;      // the parent's last valid row, column
 out vec3 v_normal;
 out float v_height;
 out vec2 v_uv;
+flat out float v_slot;  // the node's atlas slot (heights shading: per-pixel normals)
+out vec2 v_rc;          // fractional (row, column) in the node's tile
+flat out vec4 v_tile;   // the tile's last valid row, column; metres a sample east, south
 float fetch(float slot, vec2 rc) {
     int s = int(slot);
     ivec2 base = ivec2(s % u_per_row, s / u_per_row) * (u_grid + 1);
@@ -62,31 +67,45 @@ void main() {
                  / max((e.x - w.x) * in_node.w, 1e-6);
     v_normal = normalize(vec3(-dzdx, -dzdy, 1.0));
     v_height = h;
+    v_slot = in_slots.x;
+    v_rc = rc;
+    v_tile = vec4(in_extra.zw, in_node.zw);
     v_uv = vec2((xy.x - u_extent.x) / u_extent.z, (u_extent.y - xy.y) / u_extent.w);
     gl_Position = u_view_proj * vec4(xy, h, 1.0);
 }
 """
-ADAPTIVE_FS = """#version 330
-uniform vec3 u_light;
-uniform vec2 u_range;   // lowest, highest height (metres)
+# Coloured by the terrain's texture (as full resolution draws a scene's texture) ...
+ADAPTIVE_TEXTURE_FS = """#version 330
 uniform sampler2D u_color;
-uniform int u_textured; // 1: the terrain's colour texture, as full resolution draws it
-in vec3 v_normal;
-in float v_height;
 in vec2 v_uv;
 out vec4 f_color;
 void main() {
-    if (u_textured == 1) {
-        f_color = vec4(texture(u_color, v_uv).rgb, 1.0);
-        return;
-    }
-    float t = clamp((v_height - u_range.x) / max(u_range.y - u_range.x, 1e-3), 0.0, 1.0);
-    vec3 low = vec3(0.32, 0.45, 0.25), mid = vec3(0.55, 0.48, 0.34), high = vec3(0.9);
-    vec3 c = t < 0.6 ? mix(low, mid, t / 0.6) : mix(mid, high, (t - 0.6) / 0.4);
-    float lit = 0.3 + 0.7 * max(dot(normalize(v_normal), u_light), 0.0);
-    f_color = vec4(c * lit, 1.0);
+    f_color = vec4(texture(u_color, v_uv).rgb, 1.0);
 }
 """
+# ... or by terrain_shade, normals per pixel from the node's tile (gl.shaders.HEIGHT_NORMAL).
+ADAPTIVE_HEIGHTS_FS = (
+    "#version 330\n"
+    + TERRAIN_SHADE
+    + HEIGHT_NORMAL
+    + """
+uniform sampler2D u_atlas;
+uniform int u_per_row;
+uniform int u_grid;
+in float v_height;
+flat in float v_slot;
+in vec2 v_rc;
+flat in vec4 v_tile;
+out vec4 f_color;
+void main() {
+    int s = int(v_slot + 0.5);
+    ivec2 base = ivec2(s % u_per_row, s / u_per_row) * (u_grid + 1);
+    vec3 n = height_normal(u_atlas, base, ivec2(v_tile.y, v_tile.x), v_rc.yx, v_tile.zw);
+    f_color = vec4(terrain_shade(v_height, n), 1.0);
+}
+"""
+)
+# the sun of terrain_shade (gl.shaders TERRAIN_LIGHT, unit, towards it), for numpy mirrors
 LIGHT = np.array([-0.45, 0.45, 0.77]) / np.linalg.norm([-0.45, 0.45, 0.77])
 
 
@@ -103,18 +122,21 @@ class AdaptiveRenderer:
         self.capacity = min(capacity, self.per_row * rows)
         self.atlas = mgl.texture((self.per_row * side, rows * side), 1, dtype="f4")
         self.atlas.filter = (moderngl.NEAREST, moderngl.NEAREST)
-        self.program = mgl.program(vertex_shader=ADAPTIVE_VS, fragment_shader=ADAPTIVE_FS)
-        self.program["u_light"].value = tuple(LIGHT)
+        # one program a colouring (a branch would shade both sides on llvmpipe)
+        self.programs = {"texture": mgl.program(vertex_shader=ADAPTIVE_VS,
+                                                fragment_shader=ADAPTIVE_TEXTURE_FS),
+                         "heights": mgl.program(vertex_shader=ADAPTIVE_VS,
+                                                fragment_shader=ADAPTIVE_HEIGHTS_FS)}
         uv, tris = grid_mesh(self.g)  # the terrain's own chunk mesh: the same diagonals
         self.vbo = mgl.buffer(uv.astype(np.float32).tobytes())
         self.ibo = mgl.buffer(tris.astype(np.uint32).tobytes())
         self.index_count = tris.size
         self.instances = mgl.buffer(reserve=64 * 256)
-        self.vao = mgl.vertex_array(self.program, [
+        self.vaos = {name: mgl.vertex_array(prog, [
             (self.vbo, "2f", "in_uv"),
             (self.instances, "4f 4f 4f 4f/i", "in_node", "in_slots", "in_extra",
-             "in_parent")],
-            index_buffer=self.ibo, index_element_size=4)
+             "in_parent")], index_buffer=self.ibo, index_element_size=4)
+            for name, prog in self.programs.items()}
         self.triangles = 0
 
     def upload(self, slot: int, heights: np.ndarray) -> None:
@@ -130,7 +152,8 @@ class AdaptiveRenderer:
              color: moderngl.Texture | None = None) -> None:
         """Clear ``fbo`` and draw ``instances (N, 16) float32`` nodes, coloured by
         ``color`` (a texture over ``extent``: x of the west edge, y of the north edge,
-        width, depth) or by a height ramp."""
+        width, depth) or by ``terrain_shade`` (height ramp over ``height_range``, normals
+        per pixel from the node's tile)."""
         mgl = self.ctx.mgl
         fbo.use()
         fbo.clear(*SKY_RGB, 1.0, depth=1.0)  # the sky every renderer clears to
@@ -142,23 +165,25 @@ class AdaptiveRenderer:
             if data.nbytes > self.instances.size:
                 self.instances.orphan(data.nbytes * 2)
             self.instances.write(data.tobytes())
-            p = self.program
+            shading = "heights" if color is None else "texture"
+            p = self.programs[shading]
             p["u_view_proj"].write(mat_bytes(view_proj))
             p["u_eye"].value = tuple(float(v) for v in eye)
             p["u_per_row"].value = self.per_row
             p["u_grid"].value = self.g
-            p["u_range"].value = tuple(float(v) for v in height_range)
-            p["u_atlas"].value = 0
-            p["u_extent"].value = tuple(float(v) for v in extent)
-            p["u_textured"].value = int(color is not None)
-            p["u_color"].value = 1
+            for name, value in (("u_range", tuple(float(v) for v in height_range)),
+                                ("u_atlas", 0), ("u_extent", tuple(float(v) for v in extent)),
+                                ("u_color", 1)):
+                if name in p:
+                    p[name].value = value
             self.atlas.use(0)
             if color is not None:
                 color.use(1)
-            self.vao.render(moderngl.TRIANGLES, vertices=self.index_count, instances=n)
+            self.vaos[shading].render(moderngl.TRIANGLES, vertices=self.index_count, instances=n)
         self.triangles = n * self.index_count // 3
         mgl.disable(moderngl.DEPTH_TEST)
 
     def release(self) -> None:
-        for obj in (self.vao, self.instances, self.ibo, self.vbo, self.program, self.atlas):
+        for obj in (*self.vaos.values(), self.instances, self.ibo, self.vbo,
+                    *self.programs.values(), self.atlas):
             obj.release()

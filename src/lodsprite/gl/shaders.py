@@ -16,11 +16,12 @@ uniform int u_step;           // level step in full-resolution samples
 uniform vec2 u_corner;        // world (x, y) of sample (row 0, col 0): (-width/2, +depth/2)
 uniform vec2 u_spacing;       // (dx, dy) metres between columns / rows
 uniform vec2 u_uv_scale;      // (1/(cols-1), 1/(rows-1))
+uniform ivec2 u_last;         // (cols-1, rows-1): vertices past the edge collapse onto it
 in ivec2 in_local;            // (col, row) of the vertex inside the chunk mesh
 in ivec2 in_origin;           // (col, row) of the chunk's first sample (per instance)
 
 vec3 terrain_position(out vec2 uv) {
-    ivec2 s = in_origin + in_local * u_step;
+    ivec2 s = min(in_origin + in_local * u_step, u_last);
     float h = texelFetch(u_height, s, 0).r;
     uv = vec2(s) * u_uv_scale;
     return vec3(u_corner.x + float(s.x) * u_spacing.x, u_corner.y - float(s.y) * u_spacing.y, h);
@@ -54,8 +55,10 @@ TERRAIN_VS = (
     + """
 uniform mat4 u_mvp;
 out vec2 v_uv;
+out vec3 v_world;             // world metres (the heights shading reads the sample there)
 void main() {
     vec3 p = terrain_position(v_uv);
+    v_world = p;
     gl_Position = u_mvp * vec4(p, 1.0);
 }
 """
@@ -69,6 +72,72 @@ void main() {
     f_color = vec4(texture(u_color, v_uv).rgb, 1.0);
 }
 """
+
+# One shading of the terrain from its heights, shared by full resolution, the adaptive
+# renderer, LOD-sprite's fallback and the reference: a height ramp over ``u_range`` (lowest,
+# highest height of level 0, metres) lit by one sun (TERRAIN_LIGHT) with 30 % ambient.
+TERRAIN_SHADE = """
+uniform vec2 u_range;         // lowest, highest height of level 0 (metres)
+const vec3 TERRAIN_LIGHT = vec3(-0.450473, 0.450473, 0.770810);  // unit, towards the sun
+vec3 terrain_shade(float height, vec3 normal) {
+    float t = clamp((height - u_range.x) / max(u_range.y - u_range.x, 1e-3), 0.0, 1.0);
+    vec3 low = vec3(0.32, 0.45, 0.25), mid = vec3(0.55, 0.48, 0.34), high = vec3(0.9);
+    vec3 c = t < 0.6 ? mix(low, mid, t / 0.6) : mix(mid, high, (t - 0.6) / 0.4);
+    float lit = 0.3 + 0.7 * max(dot(normalize(normal), TERRAIN_LIGHT), 0.0);
+    return c * lit;
+}
+"""
+
+# Per-pixel normals from a block of height samples in an R32F texture: texel ``base + (col,
+# row)`` for ``(col, row)`` in ``[0, last]``; ``spacing`` = metres a column east, a row
+# south.  The gradient at a fractional sample position ``p = (col, row)`` is the bilinear
+# blend of the central differences at its four samples (one-sided at the block's edges):
+# the central difference of the bilinear surface.
+HEIGHT_NORMAL = """
+float height_texel(sampler2D t, ivec2 base, ivec2 last, ivec2 s) {
+    return texelFetch(t, base + clamp(s, ivec2(0), last), 0).r;
+}
+vec2 height_slope(sampler2D t, ivec2 base, ivec2 last, ivec2 s) {
+    ivec2 e = min(s + ivec2(1, 0), last), w = max(s - ivec2(1, 0), ivec2(0));
+    ivec2 n = max(s - ivec2(0, 1), ivec2(0)), so = min(s + ivec2(0, 1), last);
+    return vec2((height_texel(t, base, last, e) - height_texel(t, base, last, w))
+                / float(max(e.x - w.x, 1)),
+                (height_texel(t, base, last, so) - height_texel(t, base, last, n))
+                / float(max(so.y - n.y, 1)));
+}
+vec3 height_normal(sampler2D t, ivec2 base, ivec2 last, vec2 p, vec2 spacing) {
+    vec2 q = clamp(p, vec2(0.0), vec2(last));
+    ivec2 i = min(ivec2(floor(q)), max(last - ivec2(1), ivec2(0)));
+    vec2 f = q - vec2(i);
+    vec2 g = mix(mix(height_slope(t, base, last, i), height_slope(t, base, last, i + ivec2(1, 0)),
+                     f.x),
+                 mix(height_slope(t, base, last, i + ivec2(0, 1)),
+                     height_slope(t, base, last, i + ivec2(1, 1)), f.x), f.y);
+    // g: metres per column (east) and per row (south)
+    return normalize(vec3(-g.x / spacing.x, g.y / spacing.y, 1.0));
+}
+"""
+
+# Full resolution shaded from its own heights (``shading = heights``): the sample under the
+# fragment from its world position (grid and proxy meshes alike).
+TERRAIN_HEIGHTS_FS = (
+    "#version 330\n"
+    + TERRAIN_SHADE
+    + HEIGHT_NORMAL
+    + """
+uniform sampler2D u_height;
+uniform vec2 u_corner;
+uniform vec2 u_spacing;
+in vec3 v_world;
+out vec4 f_color;
+void main() {
+    vec2 p = vec2((v_world.x - u_corner.x) / u_spacing.x, (u_corner.y - v_world.y) / u_spacing.y);
+    ivec2 last = textureSize(u_height, 0) - ivec2(1);
+    vec3 n = height_normal(u_height, ivec2(0), last, p, u_spacing);
+    f_color = vec4(terrain_shade(v_world.z, n), 1.0);
+}
+"""
+)
 
 # LOD-sprite spriteframe (Chen et al. 1999 §3.1, §3.3; Swan et al. 2002 Figures 2-3 and 5):
 # the coarse level, textured from the keyframe by projective texture mapping
@@ -103,8 +172,10 @@ uniform float u_vertex_tol;
 out vec2 vs_uv;
 out vec4 vs_key;
 out float vs_seen;
+out vec3 vs_world;
 void main() {
     vec3 p = terrain_position(vs_uv);
+    vs_world = p;
     gl_Position = u_mvp * vec4(p, 1.0);
     vs_key = u_key_mvp * vec4(p, 1.0);
     vs_seen = seen_by_keyframe(vs_key, u_key_depth, u_vertex_tol);
@@ -121,9 +192,11 @@ uniform mat4 u_mvp;
 uniform mat4 u_key_mvp;
 out vec2 g_uv;
 out vec4 g_key;
+out vec3 g_world;
 flat out int g_sprite;
 void main() {
     vec3 p = terrain_position(g_uv);
+    g_world = p;
     gl_Position = u_mvp * vec4(p, 1.0);
     g_key = u_key_mvp * vec4(p, 1.0);
     g_sprite = 0;
@@ -139,8 +212,10 @@ layout(triangle_strip, max_vertices = 3) out;
 in vec2 vs_uv[];
 in vec4 vs_key[];
 in float vs_seen[];
+in vec3 vs_world[];
 out vec2 g_uv;
 out vec4 g_key;
+out vec3 g_world;
 flat out int g_sprite;
 void main() {
     int s = (vs_seen[0] > 0.5 && vs_seen[1] > 0.5 && vs_seen[2] > 0.5) ? 1 : 0;
@@ -148,6 +223,7 @@ void main() {
         gl_Position = gl_in[i].gl_Position;
         g_uv = vs_uv[i];
         g_key = vs_key[i];
+        g_world = vs_world[i];
         g_sprite = s;
         EmitVertex();
     }
@@ -158,6 +234,7 @@ void main() {
 SPRITE_FS = (
     "#version 330\n"
     + _LINEAR_DEPTH
+    + TERRAIN_SHADE
     + """
 uniform sampler2D u_color;      // terrain texture
 uniform sampler2D u_sprite;     // keyframe colour
@@ -168,8 +245,10 @@ uniform float u_fragment_tol;
 uniform float u_coarse_tol;
 uniform int u_color_levels;     // mipmap levels of u_color
 uniform vec4 u_fallback_tint;   // mixed into fallback fragments by its alpha (0: none)
+uniform int u_shading;          // fallback colour: 0 the terrain texture, 1 terrain_shade
 in vec2 g_uv;
 in vec4 g_key;
+in vec3 g_world;
 flat in int g_sprite;
 out vec4 f_color;
 // The terrain texture where the keyframe did not see the surface, sampled nearest-mipmap-
@@ -192,6 +271,9 @@ void main() {
     vec2 t_dy = dFdy(t);
     float rho2 = max(dot(t_dx, t_dx), dot(t_dy, t_dy));
     int level = clamp(int(floor(0.5 * log2(max(rho2, 1.0)) + 0.5)), 0, u_color_levels - 1);
+    // the proxy's own normal (screen derivatives of its world position), for heights shading
+    vec3 n = cross(dFdx(g_world), dFdy(g_world));
+    n = n.z < 0.0 ? -n : n;
     bool sprite;
     if (u_visibility == 0) {
         sprite = g_sprite == 1;
@@ -201,8 +283,9 @@ void main() {
         sprite = seen_by_keyframe(g_key, u_key_coarse, u_coarse_tol) > 0.5;
     }
     vec3 rgb = sprite ? textureGrad(u_sprite, key_uv, key_dx, key_dy).rgb
-                      : mix(terrain_fallback(g_uv, level), u_fallback_tint.rgb,
-                            u_fallback_tint.a);
+                      : mix(u_shading == 1 ? terrain_shade(g_world.z, n)
+                                           : terrain_fallback(g_uv, level),
+                            u_fallback_tint.rgb, u_fallback_tint.a);
     f_color = vec4(rgb, 1.0);
 }
 """

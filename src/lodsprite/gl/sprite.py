@@ -243,6 +243,11 @@ class SpriteRenderer:
         prog["u_key_near_far"].value = (key.projection.near, key.projection.far)
         prog["u_color_levels"].value = self.terrain.geometry.color_tex_levels
         prog["u_fallback_tint"].value = self.fallback_tint
+        # fragments the keyframe did not see: the terrain texture or terrain_shade
+        for name, value in (("u_shading", int(self.terrain.shading == "heights")),
+                            ("u_range", self.terrain.geometry.height_range)):
+            if name in prog:
+                prog[name].value = value
         tris = self.terrain.draw_proxy(prog, self._vaos,
                                        projection.matrix() @ viewpoint.view_matrix(),
                                        self.coarse_quads, self.border)

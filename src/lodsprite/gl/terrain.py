@@ -21,13 +21,21 @@ from lodsprite.camera import (
 )
 from lodsprite.errors import InputError
 from lodsprite.gl.context import GLContext, gl_draw_elements_instanced
-from lodsprite.gl.shaders import TERRAIN_FS, TERRAIN_VS, proxy_twin
+from lodsprite.gl.shaders import TERRAIN_FS, TERRAIN_HEIGHTS_FS, TERRAIN_VS, proxy_twin
 from lodsprite.gl.target import RenderTarget
 from lodsprite.terrain.heightfield import HeightField
-from lodsprite.terrain.lod import DEFAULT_CHUNK, ChunkLayout, chunk_layout, grid_mesh
+from lodsprite.terrain.lod import (
+    DEFAULT_CHUNK,
+    ChunkLayout,
+    chunk_layout,
+    grid_layout,
+    grid_mesh,
+    is_working_grid,
+)
 from lodsprite.terrain.proxy import proxy_mesh
 
 SKY_RGB = (0.62, 0.74, 0.86)
+SHADINGS = ("auto", "texture", "heights")  # auto: heights on a store, else the texture
 GL_UNSIGNED_INT = 0x1405
 
 
@@ -41,10 +49,16 @@ class FrameStats:
 
 
 class TerrainGeometry:
-    """GPU-resident terrain: height texture, colour texture and shared chunk meshes."""
+    """GPU-resident terrain: height texture, colour texture and shared chunk meshes.
 
-    def __init__(self, ctx: GLContext, hf: HeightField, texture_rgb: np.ndarray,
-                 chunk_quads: int = DEFAULT_CHUNK) -> None:
+    ``texture_rgb`` None: a plain grey texture (for drawings shaded from the heights).
+    ``corner``: world ``(x, y)`` metres of sample ``(0, 0)`` (default: ``hf`` centred on the
+    origin); a window of a larger field drawn at its place, full resolution only.
+    ``height_range``: the heights shading's ramp (default ``hf``'s lowest and highest)."""
+
+    def __init__(self, ctx: GLContext, hf: HeightField, texture_rgb: np.ndarray | None,
+                 chunk_quads: int = DEFAULT_CHUNK, corner: tuple[float, float] | None = None,
+                 height_range: tuple[float, float] | None = None) -> None:
         max_tex = ctx.info.max_texture_size
         if max(hf.rows, hf.cols) > max_tex:
             raise InputError(f"height field {hf.cols}x{hf.rows} exceeds this GL driver's "
@@ -56,16 +70,23 @@ class TerrainGeometry:
         # from: ``hf`` itself, or a terrain store's level 0 (:meth:`set_full`).
         self.full: HeightField = hf
         self.chunk_quads = chunk_quads
+        self.corner = (-hf.width / 2, hf.depth / 2) if corner is None else tuple(corner)
+        self.offset = corner is not None
+        lo, hi = hf.bounds()
+        self.height_range = (float(lo[2]), float(hi[2])) if height_range is None else \
+            tuple(float(v) for v in height_range)
         self.height_tex = mgl.texture((hf.cols, hf.rows), 1, hf.heights.tobytes(), dtype="f4")
         self.height_tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
         self.height_tex.repeat_x = self.height_tex.repeat_y = False
         self.color_tex = None
-        self.set_texture(texture_rgb)
+        self.set_texture(np.full((2, 2, 3), 160, np.uint8) if texture_rgb is None
+                         else texture_rgb)
         self._meshes: dict[int, tuple[moderngl.Buffer, moderngl.Buffer, int]] = {}
         self._layouts: dict[int, ChunkLayout] = {}
         self._proxies: dict[tuple[int, bool], tuple[moderngl.Buffer, moderngl.Buffer, int]] = {}
         self.generation = 0  # counts set_full calls (proxy vertex arrays are cached by it)
-        max_chunks = (hf.quads // min(chunk_quads, hf.quads)) ** 2
+        c = max(1, min(chunk_quads, hf.rows - 1, hf.cols - 1))
+        max_chunks = -(-(hf.rows - 1) // c) * -(-(hf.cols - 1) // c)
         self.instances = mgl.buffer(reserve=max_chunks * 8)
 
     def set_texture(self, texture_rgb: np.ndarray) -> None:
@@ -88,7 +109,15 @@ class TerrainGeometry:
 
     def layout(self, level_quads: int) -> ChunkLayout:
         if level_quads not in self._layouts:
-            self._layouts[level_quads] = chunk_layout(self.hf, level_quads, self.chunk_quads)
+            if is_working_grid(self.hf) and not self.offset:
+                self._layouts[level_quads] = chunk_layout(self.hf, level_quads,
+                                                          self.chunk_quads)
+            elif level_quads == self.hf.quads:
+                self._layouts[level_quads] = grid_layout(self.hf, self.chunk_quads,
+                                                         self.corner)
+            else:
+                raise InputError(f"a {self.hf.cols}x{self.hf.rows} field (level 0 of a "
+                                 "store, or a window of it) is drawn at full resolution only")
         return self._layouts[level_quads]
 
     def mesh(self, chunk_quads: int) -> tuple[moderngl.Buffer, moderngl.Buffer, int]:
@@ -132,10 +161,20 @@ class TerrainGeometry:
 
     def set_uniforms(self, prog: moderngl.Program, step: int) -> None:
         hf = self.hf
-        prog["u_step"].value = step
-        prog["u_corner"].value = (-hf.width / 2, hf.depth / 2)
-        prog["u_spacing"].value = (hf.dx, hf.dy)
-        prog["u_uv_scale"].value = (1.0 / (hf.cols - 1), 1.0 / (hf.rows - 1))
+        for name, value in (("u_step", step), ("u_corner", self.corner),
+                            ("u_spacing", (hf.dx, hf.dy)),
+                            ("u_uv_scale", (1.0 / (hf.cols - 1), 1.0 / (hf.rows - 1))),
+                            ("u_last", (hf.cols - 1, hf.rows - 1))):
+            if name in prog:  # a heights program has no texture coordinates
+                prog[name].value = value
+
+    def set_shading(self, prog: moderngl.Program) -> None:
+        """The uniforms of the heights shading (``TERRAIN_HEIGHTS_FS``) that a proxy
+        program's vertex shader does not set: ramp, corner, spacing, height texture 1."""
+        for name, value in (("u_range", self.height_range), ("u_corner", self.corner),
+                            ("u_spacing", (self.hf.dx, self.hf.dy)), ("u_height", 1)):
+            if name in prog:
+                prog[name].value = value
 
     def visible_chunks(self, layout: ChunkLayout, view_proj: np.ndarray) -> int:
         """Cull ``layout``'s chunks against the frustum; upload survivors' origins; return count."""
@@ -181,6 +220,10 @@ class TerrainRenderer:
                                              fragment_shader=TERRAIN_FS)
         self._vaos: dict[int, moderngl.VertexArray] = {}
         self._proxy_vaos: dict[tuple[int, bool], moderngl.VertexArray] = {}
+        # "texture": the terrain's colour texture; "heights": terrain_shade with per-pixel
+        # normals from the height texture (gl.shaders.TERRAIN_HEIGHTS_FS), made when used
+        self.shading = "texture"
+        self._heights: tuple | None = None
         # Issue the chunk draws through ctypes, without the GIL (for worker threads: on
         # llvmpipe a large draw call shades its vertices on the calling thread, 30-40 ms
         # at full resolution, and moderngl holds the GIL meanwhile).
@@ -205,8 +248,10 @@ class TerrainRenderer:
         key = (level_quads, border, self.geometry.generation)
         vbo, ibo, count = self.geometry.proxy(level_quads, border)
         if key not in cache:
-            cache[key] = self.ctx.mgl.vertex_array(program, [(vbo, "3f 2f", "in_pos", "in_uv")],
-                                                   index_buffer=ibo, index_element_size=4)
+            layout = ((vbo, "3f 2f", "in_pos", "in_uv") if "in_uv" in program
+                      else (vbo, "3f 2x4", "in_pos"))  # a heights program reads no uv
+            cache[key] = self.ctx.mgl.vertex_array(program, [layout], index_buffer=ibo,
+                                                   index_element_size=4)
         program["u_mvp"].write(mat_bytes(view_proj))
         cache[key].render(moderngl.TRIANGLES)
         return count // 3
@@ -236,6 +281,23 @@ class TerrainRenderer:
                      GL_UNSIGNED_INT, None, chunks)
         return FrameStats(chunks * layout.triangles_per_chunk, chunks, projection)
 
+    def programs(self, proxy: bool) -> tuple[moderngl.Program, dict]:
+        """The program (grid or proxy mesh) of :attr:`shading` and its vertex arrays,
+        uniforms of the colour set."""
+        if self.shading == "heights":
+            if self._heights is None:
+                mgl = self.ctx.mgl
+                self._heights = (
+                    mgl.program(vertex_shader=TERRAIN_VS, fragment_shader=TERRAIN_HEIGHTS_FS),
+                    mgl.program(vertex_shader=proxy_twin(TERRAIN_VS),
+                                fragment_shader=TERRAIN_HEIGHTS_FS), {}, {})
+            prog, cache = self._heights[1 if proxy else 0], self._heights[3 if proxy else 2]
+            self.geometry.set_shading(prog)
+            return prog, cache
+        prog = self.proxy_program if proxy else self.program
+        prog["u_color"].value = 0
+        return prog, self._proxy_vaos if proxy else self._vaos
+
     def _begin(self, target: RenderTarget | None) -> None:
         (target or self.target).use(SKY_RGB)
         self.ctx.mgl.enable(moderngl.DEPTH_TEST)
@@ -245,32 +307,36 @@ class TerrainRenderer:
     def render(self, viewpoint: Viewpoint, level_quads: int | None = None,
                projection: Projection | None = None,
                target: RenderTarget | None = None) -> FrameStats:
-        """Render the terrain textured with its colour texture into ``target`` (default: this
+        """Render the terrain coloured by :attr:`shading` into ``target`` (default: this
         renderer's own); ``level_quads`` None means full resolution."""
         level = self.geometry.hf.quads if level_quads is None else level_quads
         projection = projection or self.projection(viewpoint)
         self._begin(target)
-        self.program["u_color"].value = 0
-        self.program["u_height"].value = 1
-        return self.draw(self.program, self._vaos, viewpoint, projection, level)
+        prog, cache = self.programs(proxy=False)
+        prog["u_height"].value = 1
+        return self.draw(prog, cache, viewpoint, projection, level)
 
     def render_proxy(self, viewpoint: Viewpoint, level_quads: int, border: bool = True,
                      projection: Projection | None = None,
                      target: RenderTarget | None = None) -> FrameStats:
         """Render the proxy mesh of a coarse level (with its border ribbon if ``border``)
-        textured with the terrain's colour texture, like :meth:`render`."""
+        coloured by :attr:`shading`, like :meth:`render`."""
         projection = projection or self.projection(viewpoint)
         self._begin(target)
-        self.proxy_program["u_color"].value = 0
-        tris = self.draw_proxy(self.proxy_program, self._proxy_vaos,
+        prog, cache = self.programs(proxy=True)
+        tris = self.draw_proxy(prog, cache,
                                projection.matrix() @ viewpoint.view_matrix(), level_quads, border)
         return FrameStats(tris, 1, projection)
 
     def release(self) -> None:
-        for vao in [*self._vaos.values(), *self._proxy_vaos.values()]:
+        heights = self._heights or (None, None, {}, {})
+        for vao in [*self._vaos.values(), *self._proxy_vaos.values(), *heights[2].values(),
+                    *heights[3].values()]:
             vao.release()
         self._vaos.clear()
         self._proxy_vaos.clear()
-        self.program.release()
-        self.proxy_program.release()
+        for prog in (self.program, self.proxy_program, *heights[:2]):
+            if prog is not None:
+                prog.release()
+        self._heights = None
         self.target.release()

@@ -81,6 +81,7 @@ from functools import cached_property
 
 import numpy as np
 
+from lodsprite.camera import view_footprint  # noqa: F401  (moved there; re-exported)
 from lodsprite.sprite.raycast import (
     FALLBACK_CACHE,
     CoarseSquares,
@@ -123,41 +124,6 @@ def in_view(points_h: np.ndarray, view_proj: np.ndarray) -> np.ndarray:
     clip = points_h @ view_proj.T
     w = clip[:, 3:4]
     return (w[:, 0] > 0) & np.all(np.abs(clip[:, :3]) <= w, axis=1)
-
-
-_FRUSTUM_EDGES = ((0, 1), (2, 3), (4, 5), (6, 7), (0, 2), (1, 3), (4, 6), (5, 7),
-                  (0, 4), (1, 5), (2, 6), (3, 7))
-
-
-def view_footprint(view_proj: np.ndarray, lo: np.ndarray,
-                   hi: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
-    """``(xy_min (2,), xy_max (2,))`` metres bounding the part of the box ``lo..hi (3,)``
-    inside the view frustum of ``view_proj (4, 4)``, or None if it is empty.
-
-    The frustum's slice between the box's lowest and highest z is a convex polytope whose
-    vertices are frustum corners in that slab and frustum edges crossing its planes; their
-    xy bounds, clipped to the box's, bound the footprint (a superset of it).
-    """
-    ndc = np.array([[x, y, z, 1.0] for z in (-1, 1) for y in (-1, 1) for x in (-1, 1)])
-    world = ndc @ np.linalg.inv(view_proj).T
-    corners = world[:, :3] / world[:, 3:4]
-    pts = [corners[(corners[:, 2] >= lo[2]) & (corners[:, 2] <= hi[2])]]
-    a = corners[[e[0] for e in _FRUSTUM_EDGES]]
-    b = corners[[e[1] for e in _FRUSTUM_EDGES]]
-    for z in (lo[2], hi[2]):
-        dz = b[:, 2] - a[:, 2]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            s = (z - a[:, 2]) / dz
-        ok = (dz != 0) & (s >= 0) & (s <= 1)
-        pts.append(a[ok] + s[ok, None] * (b[ok] - a[ok]))
-    pts = np.concatenate(pts)
-    if pts.size == 0:
-        return None
-    xy_min = np.maximum(pts[:, :2].min(axis=0), lo[:2])
-    xy_max = np.minimum(pts[:, :2].max(axis=0), hi[:2])
-    if np.any(xy_min > xy_max):
-        return None
-    return xy_min, xy_max
 
 
 @dataclass(frozen=True)

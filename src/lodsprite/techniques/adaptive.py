@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from lodsprite.techniques.base import Frame, Technique
-from lodsprite.techniques.terrain import SpriteTechnique
+from lodsprite.techniques.terrain import SpriteTechnique, resolve_shading, set_shading
 from lodsprite.workers import peak_rss_mb
 
 if TYPE_CHECKING:
@@ -34,15 +34,18 @@ def scene_pyramid(scene):
     return MemoryPyramid.from_heightfield(scene.hf)
 
 
-def make_adaptive(renderer: Renderer, sse: float, gpu_mb: float, host_mb: float):
+def make_adaptive(renderer: Renderer, sse: float, gpu_mb: float, host_mb: float,
+                  shading: str = "auto"):
     """An :class:`~lodsprite.techniques.adaptive_terrain.AdaptiveTerrain` on ``renderer``'s context
-    and target, coloured with the scene's texture."""
+    and target, coloured with the scene's texture or shaded from its heights (``shading``,
+    :func:`~lodsprite.techniques.terrain.resolve_shading`)."""
     from lodsprite.techniques.adaptive_terrain import AdaptiveTerrain
 
     pr = renderer.paths
+    heights = resolve_shading(renderer.scene, shading) == "heights"
     return AdaptiveTerrain(pr.ctx, scene_pyramid(renderer.scene), pr.renderer.target,
                            renderer.fov_y_deg, sse, gpu_mb=gpu_mb, host_mb=host_mb,
-                           color=pr.geometry.color_tex)
+                           color=None if heights else pr.geometry.color_tex)
 
 
 def tile_status(terrain) -> str:
@@ -94,10 +97,12 @@ class AdaptiveTechnique(Technique):
     name = "adaptive"
 
     def __init__(self, renderer: Renderer, sse: float = 1.0, gpu_mb: float = 256.0,
-                 host_mb: float = 512.0) -> None:
+                 host_mb: float = 512.0, shading: str = "auto") -> None:
         super().__init__(renderer)
         self._t0 = time.perf_counter()
-        self.terrain = make_adaptive(renderer, sse, gpu_mb, host_mb)
+        # the renderer's full resolution (the default reference) is coloured the same way
+        self.shading = set_shading(renderer, shading)
+        self.terrain = make_adaptive(renderer, sse, gpu_mb, host_mb, shading)
         self.first_frame_s = float("nan")
 
     def warm_up(self, viewpoint: Viewpoint) -> None:
@@ -120,6 +125,7 @@ class AdaptiveTechnique(Technique):
 
     def summary(self, frames: list[Frame]) -> dict[str, Any]:
         return {"sse": self.terrain.sse, "first_frame_s": self.first_frame_s,
+                "shading": self.shading,
                 **tile_summary(self.terrain)}
 
     def status(self) -> str:
@@ -143,18 +149,19 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
     def __init__(self, renderer: Renderer, lod: int = 16, epsilon: float = 1.0,
                  key_sse: float = 1.0, gpu_mb: float = 256.0, host_mb: float = 512.0,
                  visibility: str | None = None, guard_px: int | None = None,
-                 border: bool = True) -> None:
+                 border: bool = True, shading: str = "auto") -> None:
         from lodsprite.terrain.store import TerrainStore
         from lodsprite.terrain.storefield import store_field
 
-        self.adaptive = make_adaptive(renderer, key_sse, gpu_mb, host_mb)
+        self.adaptive = make_adaptive(renderer, key_sse, gpu_mb, host_mb, shading)
         field = None
         try:
             if isinstance(self.adaptive.tree.p, TerrainStore):
                 field = store_field(self.adaptive.tree.p)
                 renderer.paths.geometry.set_full(field)
             # proxy, ribbons and C read from level 0 there, then only without blocking
-            super().__init__(renderer, lod, epsilon, False, visibility, guard_px, border)
+            super().__init__(renderer, lod, epsilon, False, visibility, guard_px, border,
+                             shading)
         except BaseException:
             self.adaptive.release()
             if field is not None:

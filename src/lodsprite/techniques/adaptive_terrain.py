@@ -63,12 +63,11 @@ class AdaptiveTerrain:
         self.renderer = AdaptiveRenderer(gl, grid, max(1, int(gpu_mb * 2 ** 20 // tile_bytes)))
         self.slots = SlotCache(self.renderer.capacity)
         self.upload_budget = int(upload_budget)
-        mm = self.tree.minmax[self.tree.top]
-        lo_z, hi_z = float(np.nanmin(mm[..., 0])), float(np.nanmax(mm[..., 1]))
-        x, y = self.tree.world_xy(0, np.array([0, self.tree.rows0 - 1]),
-                                  np.array([0, self.tree.cols0 - 1]))
-        self.bounds = (np.array([x.min(), y.min(), lo_z]), np.array([x.max(), y.max(), hi_z]))
-        self.height_range = (lo_z, hi_z)
+        self.bounds = self.tree.box()
+        # the height ramp of terrain_shade: level 0's range, as full resolution's
+        self.height_range = self.tree.height_range()
+        x = np.array([self.bounds[0][0], self.bounds[1][0]])
+        y = np.array([self.bounds[0][1], self.bounds[1][1]])
         self.color = color  # the terrain's colour texture (a moderngl texture) or None
         self.extent = (float(x.min()), float(y.max()), float(x.max() - x.min()),
                        float(y.max() - y.min()))
@@ -92,19 +91,8 @@ class AdaptiveTerrain:
         return fitted_projection(viewpoint, self.fov, w / h, *self.bounds, ground).matrix()
 
     def ground_below(self, eye) -> float:
-        """A height (metres) at or above the ground under ``eye``: the highest sample of
-        the level-0 chunk it stands over (the lowest of the terrain off its footprint).
-        The near plane sits at half the eye's clearance above it: the terrain's lowest
-        point there put the near plane beyond the ground in view of a low flight."""
-        tree = self.tree
-        col = eye[0] / tree.p.dx + (tree.cols0 - 1) / 2.0
-        row = (tree.rows0 - 1) / 2.0 - eye[1] / tree.p.dy
-        if not (0 <= row <= tree.rows0 - 1 and 0 <= col <= tree.cols0 - 1):
-            return self.height_range[0]
-        mm = tree.minmax[0]
-        i = min(int(row) // tree.chunk, mm.shape[0] - 1)
-        j = min(int(col) // tree.chunk, mm.shape[1] - 1)
-        return float(mm[i, j, 1])
+        """A height at or above the ground under ``eye`` (:meth:`Quadtree.ground_below`)."""
+        return self.tree.ground_below(eye)
 
     def _upload(self, node: Node, data: np.ndarray, keep: set) -> bool:
         slot = self.slots.assign(node, keep)

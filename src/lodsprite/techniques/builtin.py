@@ -18,6 +18,7 @@ THREADED = Option("threaded", bool, False, "render keyframes on a worker thread"
 SSE = Option("sse", float, 1.0, "adaptive: screen-space error tolerance, pixels")
 KEY_SSE = Option("key_sse", float, 1.0, "keyframes by the adaptive renderer at this SSE, px")
 GPU_MB = Option("gpu_mb", float, 256.0, "adaptive: GPU tile cache budget, MB")
+SHADING = Option("shading", str, "auto", "colour: auto (heights on a store) | texture | heights")
 HOST_MB = Option("host_mb", float, 512.0, "adaptive: host tile cache budget, MB")
 SERVER = Option("server", str, "", "the LOD server, HOST:PORT")
 MAX_ERROR = Option("max_error", float, 4.0, "distributed: largest error shown, pixels")
@@ -40,17 +41,20 @@ DIST = Option("dist", object, None, "crowd: the snapshots' distribution (default
 TERRAIN = "lodsprite.techniques.terrain"
 ADAPTIVE = "lodsprite.techniques.adaptive"
 
-register(TechniqueSpec("full", f"{TERRAIN}:FullTechnique", (), ("terrain",),
+register(TechniqueSpec("full", f"{TERRAIN}:FullTechnique", (SHADING,), ("terrain",),
                        "the full-resolution terrain (the ground truth)"))
-register(TechniqueSpec("lod", f"{TERRAIN}:LodTechnique", (LOD,), ("terrain",),
+register(TechniqueSpec("lod", f"{TERRAIN}:LodTechnique", (LOD, SHADING), ("terrain",),
                        "one uniform coarse level"))
 register(TechniqueSpec("sprite", f"{TERRAIN}:SpriteTechnique",
-                       (LOD, EPSILON, THREADED, VISIBILITY, GUARD, BORDER), ("terrain",),
+                       (LOD, EPSILON, THREADED, VISIBILITY, GUARD, BORDER, SHADING),
+                       ("terrain",),
                        "LOD-sprite (Chen, Swan & Kaufman 1999)"))
-register(TechniqueSpec("adaptive", f"{ADAPTIVE}:AdaptiveTechnique", (SSE, GPU_MB, HOST_MB),
-                       ("terrain",), "the adaptive (CDLOD-style) renderer, stores of any size"))
+register(TechniqueSpec("adaptive", f"{ADAPTIVE}:AdaptiveTechnique",
+                       (SSE, GPU_MB, HOST_MB, SHADING), ("terrain",),
+                       "the adaptive (CDLOD-style) renderer, stores of any size"))
 register(TechniqueSpec("sprite-adaptive", f"{ADAPTIVE}:SpriteAdaptiveTechnique",
-                       (LOD, EPSILON, KEY_SSE, GPU_MB, HOST_MB, VISIBILITY, GUARD, BORDER),
+                       (LOD, EPSILON, KEY_SSE, GPU_MB, HOST_MB, VISIBILITY, GUARD, BORDER,
+                        SHADING),
                        ("terrain",), "LOD-sprite with keyframes by the adaptive renderer"))
 register(TechniqueSpec("distributed", "lodsprite.distributed.technique:create",
                        (SERVER, LOD, EPSILON, MAX_ERROR), ("terrain",),

@@ -20,13 +20,37 @@ if TYPE_CHECKING:
     from lodsprite.camera import Projection, Viewpoint
 
 
+def resolve_shading(scene, shading: str = "auto") -> str:
+    """``texture`` or ``heights`` for a ``shading`` choice (:data:`~lodsprite.gl.terrain.
+    SHADINGS`): ``auto`` shades a terrain store from its heights (per-pixel normals, level-0
+    detail) and keeps any other scene's texture."""
+    from lodsprite.errors import InputError
+    from lodsprite.gl.terrain import SHADINGS
+    from lodsprite.terrain.store import is_store
+
+    if shading not in SHADINGS:
+        raise InputError(f"unknown shading '{shading}': use one of {', '.join(SHADINGS)}")
+    if shading == "auto":
+        return "heights" if scene.terrain_spec and is_store(scene.terrain_spec) else "texture"
+    return shading
+
+
+def set_shading(renderer: Renderer, shading: str) -> str:
+    """Colour ``renderer``'s terrain frames (full, levels, keyframes, LOD-sprite's
+    fallback) by ``shading`` resolved for its scene; returns the resolved one."""
+    resolved = resolve_shading(renderer.scene, shading)
+    renderer.paths.renderer.shading = resolved
+    return resolved
+
+
 class FullTechnique(Technique):
     """The full-resolution terrain: the ground truth."""
 
     name = "full"
 
-    def __init__(self, renderer: Renderer) -> None:
+    def __init__(self, renderer: Renderer, shading: str = "auto") -> None:
         super().__init__(renderer)
+        self.shading = set_shading(renderer, shading)
 
     def frame(self, viewpoint: Viewpoint) -> Frame:
         t0 = time.perf_counter()
@@ -34,7 +58,7 @@ class FullTechnique(Technique):
         return Frame("full", (time.perf_counter() - t0) * 1e3, stats.triangles)
 
     def summary(self, frames: list[Frame]) -> dict[str, Any]:
-        return {"lod": self.renderer.scene.hf.quads}
+        return {"lod": self.renderer.scene.hf.quads, "shading": self.shading}
 
 
 class LodTechnique(Technique):
@@ -42,8 +66,10 @@ class LodTechnique(Technique):
 
     name = "lod"
 
-    def __init__(self, renderer: Renderer, lod: int = DEFAULT_COARSE) -> None:
+    def __init__(self, renderer: Renderer, lod: int = DEFAULT_COARSE,
+                 shading: str = "auto") -> None:
         super().__init__(renderer)
+        self.shading = set_shading(renderer, shading)
         self.quads = renderer.scene.hf.quads
         level_step(self.quads, lod)
         self.lod = lod
@@ -66,7 +92,7 @@ class LodTechnique(Technique):
         return self.lod
 
     def summary(self, frames: list[Frame]) -> dict[str, Any]:
-        return {"lod": self.lod}
+        return {"lod": self.lod, "shading": self.shading}
 
 
 def level0_reader(geometry, lod: int, border: bool):
@@ -93,9 +119,11 @@ class SpriteTechnique(Technique):
     def __init__(self, renderer: Renderer, lod: int = DEFAULT_COARSE,
                  epsilon: float = DEFAULT_EPSILON_PX, threaded: bool = False,
                  visibility: str | None = None, guard_px: int | None = None,
-                 border: bool = True) -> None:
+                 border: bool = True, shading: str = "auto") -> None:
         super().__init__(renderer)
         from lodsprite.gl.sprite import DEFAULT_GUARD_PX, DEFAULT_VISIBILITY
+
+        self.shading = set_shading(renderer, shading)
 
         level_step(renderer.scene.hf.quads, lod)
         self.threaded = threaded
@@ -171,6 +199,7 @@ class SpriteTechnique(Technique):
         """Keyframe count and fraction, mean time per frame kind (ms), mean error (px)."""
         out: dict[str, Any] = {"lod": self.sprite.lod, "epsilon": self.sprite.epsilon_px,
                                "visibility": self.sprite.sprite.visibility,
+                               "shading": self.shading,
                                "keyframes": sum(f.kind == KEYFRAME for f in frames)}
         for t in FRAME_TYPES:
             ms = [f.ms for f in frames if f.kind == t]

@@ -65,6 +65,29 @@ def parse_fractal_spec(spec: str) -> tuple[int, int] | None:
 STORE_MAX_SIDE = 4096
 
 
+def load_level0(spec: str | os.PathLike, exaggeration: float = 1.0,
+                max_side: int | None = None) -> HeightField:
+    """A terrain store's level 0 whole, its own samples (no resampling), heights times
+    ``exaggeration``, placed as the adaptive renderer places it (centred on the origin).
+    Raises :class:`InputError` when its longer side exceeds ``max_side`` samples (what full
+    resolution draws whole; default :data:`STORE_MAX_SIDE` + 1) or ``spec`` is no store."""
+    max_side = STORE_MAX_SIDE + 1 if max_side is None else max_side
+    from lodsprite.terrain.store import TerrainStore, is_store
+
+    if not is_store(spec):
+        raise InputError(f"{spec}: not a terrain store")
+    store = TerrainStore(Path(spec).expanduser(), exaggeration)
+    rows, cols = store.shape(0)
+    if max(rows, cols) > max_side:
+        raise InputError(f"{spec}: level 0 is {cols}x{rows} samples, more than full resolution "
+                         f"draws whole ({max_side} a side); use --mode adaptive (level 0 "
+                         "streamed by tiles) or render a coarser copy with --mode lod")
+    meta = {"source": str(store.path), "format": "lodsprite terrain store", "level": 0,
+            "store_rows": rows, "store_cols": cols, "exaggeration": float(exaggeration)}
+    return heightfield_from_array(store.read(0, 0, rows, 0, cols), store.dx, store.dy,
+                                  store.path.name, meta)
+
+
 def load_heightfield(spec: str | os.PathLike) -> HeightField:
     """Load the raw height field named by ``spec`` (see the module docstring).
 

@@ -91,6 +91,36 @@ def chunk_layout(hf: HeightField, level_quads: int,
     return ChunkLayout(level_quads, step, c, origins, mins, maxs)
 
 
+def is_working_grid(hf: HeightField) -> bool:
+    """True for a square grid of ``(N+1)²`` samples, ``N`` a power of two (every level)."""
+    return hf.rows == hf.cols and is_power_of_two(hf.quads)
+
+
+def grid_layout(hf: HeightField, chunk_quads: int = DEFAULT_CHUNK,
+                corner: tuple[float, float] | None = None) -> ChunkLayout:
+    """Full resolution of a field of any ``rows x cols`` in chunks of ``C = chunk_quads``
+    (the last chunks of a row or column overhang the edge: the vertex shader collapses
+    their vertices past it onto it).  ``corner``: world ``(x, y)`` metres of sample
+    ``(0, 0)`` (default: the field centred on the origin, :meth:`HeightField.world_xy`)."""
+    c = max(1, min(chunk_quads, hf.rows - 1, hf.cols - 1))
+    kr, kc = -(-(hf.rows - 1) // c), -(-(hf.cols - 1) // c)
+    h = np.pad(hf.heights, ((0, kr * c + 1 - hf.rows), (0, kc * c + 1 - hf.cols)), mode="edge")
+
+    def block(sign: float) -> np.ndarray:  # extremes over samples [i c, (i+1) c] inclusive
+        return sign * np.maximum.reduce([
+            (sign * h[a:a + kr * c, b:b + kc * c]).reshape(kr, c, kc, c).max(axis=(1, 3))
+            for a in (0, 1) for b in (0, 1)]).ravel().astype(np.float64)
+
+    x_west, y_north = corner if corner is not None else (-hf.width / 2, hf.depth / 2)
+    rows, cols = np.meshgrid(np.arange(kr), np.arange(kc), indexing="ij")
+    r0, c0 = rows.ravel() * c, cols.ravel() * c
+    r1, c1 = np.minimum(r0 + c, hf.rows - 1), np.minimum(c0 + c, hf.cols - 1)
+    mins = np.stack([x_west + c0 * hf.dx, y_north - r1 * hf.dy, block(-1.0)], axis=1)
+    maxs = np.stack([x_west + c1 * hf.dx, y_north - r0 * hf.dy, block(1.0)], axis=1)
+    origins = np.stack([c0, r0], axis=1).astype(np.int32)
+    return ChunkLayout(hf.quads, 1, c, origins, mins, maxs)
+
+
 def grid_mesh(chunk_quads: int) -> tuple[np.ndarray, np.ndarray]:
     """A ``C x C`` quad grid: vertices ``((C+1)^2, 2) int32`` as (col, row), triangle indices
     ``(2*C*C, 3) uint32``, counter-clockwise seen from above (+z, with rows running south)."""

@@ -124,6 +124,33 @@ class Quadtree:
         y = ((self.rows0 - 1) / 2.0 - np.asarray(rows) * s) * self.p.dy
         return x, y
 
+    def box(self) -> tuple[np.ndarray, np.ndarray]:
+        """The terrain's box ``(lo (3,), hi (3,))`` metres: level 0's extent, heights from
+        the coarsest level's chunk bounds (what near and far planes are fitted to)."""
+        mm = self.minmax[self.top]
+        x, y = self.world_xy(0, np.array([0, self.rows0 - 1]), np.array([0, self.cols0 - 1]))
+        return (np.array([x.min(), y.min(), float(np.nanmin(mm[..., 0]))]),
+                np.array([x.max(), y.max(), float(np.nanmax(mm[..., 1]))]))
+
+    def height_range(self) -> tuple[float, float]:
+        """Level 0's lowest and highest height (metres, from its chunk bounds)."""
+        mm = self.minmax[0]
+        return float(np.nanmin(mm[..., 0])), float(np.nanmax(mm[..., 1]))
+
+    def ground_below(self, eye) -> float:
+        """A height (metres) at or above the ground under ``eye``: the highest sample of
+        the level-0 chunk it stands over (the lowest of the terrain off its footprint).
+        The near plane sits at half the eye's clearance above it: the terrain's lowest
+        point there put the near plane beyond the ground in view of a low flight."""
+        col = eye[0] / self.p.dx + (self.cols0 - 1) / 2.0
+        row = (self.rows0 - 1) / 2.0 - eye[1] / self.p.dy
+        if not (0 <= row <= self.rows0 - 1 and 0 <= col <= self.cols0 - 1):
+            return float(self.box()[0][2])
+        mm = self.minmax[0]
+        i = min(int(row) // self.chunk, mm.shape[0] - 1)
+        j = min(int(col) // self.chunk, mm.shape[1] - 1)
+        return float(mm[i, j, 1])
+
     def bounds(self, n: Node) -> tuple[np.ndarray, np.ndarray]:
         """The node's bounding box ``(lo (3,), hi (3,))``, heights from its chunks' min and
         max widened by the level's error (computed once a node)."""

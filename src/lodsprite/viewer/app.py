@@ -46,12 +46,13 @@ class ViewOptions:
     target_fps: float | None = None  # a crowd's LOD feedback target
     sse: float | None = None      # adaptive: screen-space error, pixels
     key_sse: float | None = None  # sprite-adaptive: its keyframes' SSE, pixels
+    shading: str = "auto"         # terrain colour: auto | texture | heights
 
     def technique_options(self) -> dict:
         """The options of the command the registry's techniques pick theirs from."""
         return {"lod": self.lod, "epsilon": self.epsilon, "threaded": self.threaded,
                 "server": self.server, "target_fps": self.target_fps, "sse": self.sse,
-                "key_sse": self.key_sse}
+                "key_sse": self.key_sse, "shading": self.shading}
 
     def validate(self) -> None:
         if self.target_fps is not None and not self.target_fps > 0:
@@ -62,6 +63,8 @@ class ViewOptions:
             raise InputError(f"--every must be at least 1, got {self.every}")
         if not self.epsilon > 0:
             raise InputError(f"--epsilon must be > 0 pixels, got {self.epsilon}")
+        if self.shading not in ("auto", "texture", "heights"):
+            raise InputError(f"unknown shading '{self.shading}': use auto, texture or heights")
         if not (self.fps >= 0):
             raise InputError(f"--fps must be >= 0 (0: no cap), got {self.fps}")
         w, h = self.size

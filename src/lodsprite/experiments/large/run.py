@@ -94,10 +94,11 @@ def reference(store: Path, scene, path, cfg: LargeConfig, keep: list[int],
     out = {}
     with GLContext() as gl:
         t = RenderTarget(gl, cfg.image, cfg.image)
-        geo = TerrainGeometry(gl, scene.hf, scene.texture)  # the colours render uses
+        geo = TerrainGeometry(gl, scene.hf, scene.texture)
+        # color None: the heights shading, as render colours a store (--shading auto)
         a = AdaptiveTerrain(gl, TerrainStore(store), t, path.fov_y_deg, sse,
                             gpu_mb=1024.0 if full else 256.0, host_mb=1024.0 if full else 512.0,
-                            upload_budget=4096 if full else 16, color=geo.color_tex)
+                            upload_budget=4096 if full else 16, color=None)
         try:
             for i in keep:
                 a.settle(path.viewpoints[i])
