@@ -26,7 +26,7 @@ from lodsprite.errors import InputError
 from lodsprite.gl.shaders import PROXY_VERTEX_COMMON
 from lodsprite.gl.sprite import SpriteRenderer
 from lodsprite.gl.target import RenderTarget
-from lodsprite.gl.terrain import SKY_RGB, FrameStats, mat_bytes
+from lodsprite.gl.terrain import SKY_RGB, FrameStats
 
 MAX_TILES = 64  # N x N tiles, N <= 8: the shader's uniform arrays
 
