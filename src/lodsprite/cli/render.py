@@ -86,6 +86,14 @@ def _print_render(s: dict, out_dir: Path) -> None:
               f"{out_dir / 'summary.json'}")
 
 
+TilesOpt = Annotated[int, typer.Option(
+    "--tiles", help="sprite: refresh keyframes tile by tile on an N x N grid of screen "
+                    "tiles (1: whole keyframes; inline keyframes only)")]
+TileBudgetOpt = Annotated[float, typer.Option(
+    "--tile-budget-ms", help="sprite with --tiles > 1: tile work per frame (ms); a tile "
+                             "over 2 epsilon is rendered even beyond it")]
+
+
 def render(
     terrain: TerrainOpt = "jacksboro",
     texture: TextureOpt = "terrain",
@@ -124,6 +132,8 @@ def render(
         "--gpu-mb", help="adaptive: GPU tile cache budget (MB)")] = 256.0,
     host_mb: Annotated[float, typer.Option(
         "--host-mb", help="adaptive: host tile cache budget (MB)")] = 512.0,
+    tiles: TilesOpt = 1,
+    tile_budget_ms: TileBudgetOpt = 8.0,
 ) -> None:
     """Render a camera path; write DIR/frames.csv and DIR/summary.json (and PNG frames)."""
     from lodsprite import RenderConfig, render_path
@@ -136,7 +146,8 @@ def render(
                           exaggeration=exaggeration, save_frames=save_frames, epsilon=epsilon,
                           ground_truth=ground_truth, visibility=visibility, border=border,
                           guard_px=guard, sse=sse, gpu_mb=gpu_mb, host_mb=host_mb,
-                          key_sse=key_sse, flip=flip)
+                          key_sse=key_sse, flip=flip, tiles=tiles,
+                          tile_budget_ms=tile_budget_ms)
     with progress_bar(f"render {mode}") as update:
         if distributed:
             from lodsprite.distributed.run import parse_max_error, render_distributed
@@ -193,6 +204,8 @@ def view(
         "--sse", help="adaptive: screen-space error tolerance in pixels")] = None,
     key_sse: Annotated[float | None, typer.Option(
         "--key-sse", help="sprite-adaptive: its keyframes' tolerance in pixels")] = None,
+    tiles: TilesOpt = 1,
+    tile_budget_ms: TileBudgetOpt = 8.0,
 ) -> None:
     """Fly through a terrain with live LOD-sprite, or round a lumigraph (WASD/QE, mouse, tab
     orbit)."""
@@ -204,7 +217,8 @@ def view(
                        epsilon=epsilon, size=parse_size(size), fps=fps, threaded=not inline,
                        play=play, frames=frames, screenshots=screenshots, every=every,
                        exit=exit_, out=out_dir, record=record, server=server,
-                       target_fps=target_fps, sse=sse, key_sse=key_sse)
+                       target_fps=target_fps, sse=sse, key_sse=key_sse, tiles=tiles,
+                       tile_budget_ms=tile_budget_ms)
     s = run_view(opts)
     if s:
         out.print(f"{s['frames']} frames, {s['mode']}: median {s['median_ms']:.2f} ms, "

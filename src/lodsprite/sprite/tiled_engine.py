@@ -152,14 +152,15 @@ class TiledSpriteEngine:
         return self.sprite.target.read_color()
 
     def replay(self, viewpoint: Viewpoint, mosaic, shows_keyframe: bool,
-               shown: np.ndarray, drawer: TileDrawer | None = None) -> np.ndarray:
+               shown: np.ndarray, drawer_for=None) -> np.ndarray:
         """Untimed: bring every tile to the update ``mosaic[t]`` of :attr:`updates` (tiles
         whose ``shown[t]`` already is that update are kept; ``shown`` is updated) and
-        return the frame's image."""
+        return the frame's image.  ``drawer_for(update, tile)``: the drawer that renders
+        the tile as that update did (None, or returning None: :attr:`drawer`)."""
         for t, u in enumerate(mosaic):
             if shown[t] != u:
-                self.render_tiles([t], self.updates[u],
-                                  drawer, measure=False)
+                drawer = None if drawer_for is None else drawer_for(int(u), t)
+                self.render_tiles([t], self.updates[u], drawer, measure=False)
                 shown[t] = u
         if shows_keyframe:
             return self.tiled.keyframe_color()
