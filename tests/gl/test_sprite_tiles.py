@@ -105,3 +105,33 @@ def test_the_replay_reproduces_the_timed_mosaic(build):
             assert np.array_equal(again, img)
     finally:
         eng.release()
+
+
+@pytest.mark.parametrize("name", ["sprite", "sprite-adaptive"])
+def test_the_technique_replay_draws_the_timed_mosaic(gl, name):
+    # Through the registry, in-memory and adaptive keyframes: each frame's image equals
+    # its replay, frames replayed out of order; tiles_rendered counts every tile drawn.
+    from lodsprite import Renderer, get_path, load_scene, techniques
+
+    scene = load_scene("fractal:64:3", grid=64)
+    path = get_path("chen1999", scene.hf, 12)
+    with Renderer(scene, (64, 64), ctx=gl.mgl) as renderer:
+        t = techniques.create(name, renderer, **techniques.get(name).bind(
+            {"lod": 8, "epsilon": 0.5, "key_sse": 1.0, "tiles": 2, "tile_budget_ms": 0.0}))
+        try:
+            t.warm_up(path.viewpoints[0])
+            frames, shown, decisions = [], [], []
+            for vp in path.viewpoints:
+                frames.append(t.frame(vp))
+                shown.append(t.read_image())
+                decisions.append(t.decision())
+            assert frames[0].kind == KEYFRAME and frames[0].extra["tiles"] == 4
+            assert TILES in {f.kind for f in frames}
+            s = t.summary(frames)
+            assert s["tiles_rendered"] == sum(len(d["tiles"]) for d in decisions)
+            assert s["tiles_rendered"] < 4 * len(frames)
+            order = [5, 0, 11, 3, 4, 10, 1]
+            for i in order:
+                assert np.array_equal(t.replay(path.viewpoints[i], decisions[i]), shown[i]), i
+        finally:
+            t.release()
