@@ -135,3 +135,32 @@ def test_the_technique_replay_draws_the_timed_mosaic(gl, name):
                 assert np.array_equal(t.replay(path.viewpoints[i], decisions[i]), shown[i]), i
         finally:
             t.release()
+
+
+def test_the_viewer_flies_tiled_lod_sprite(gl):
+    # The viewer's sprite mode with tiles: frames drawn to its framebuffer (the tiled
+    # keyframe's centre on the first), the status line names the tiles.
+    from lodsprite import techniques
+    from lodsprite.gl.target import RenderTarget
+    from lodsprite.scene import open_scene
+    from lodsprite.viewer.controls import CameraController
+    from lodsprite.viewer.core import ViewerCore
+
+    scene = open_scene("fractal:128:3", grid=128)
+    modes = techniques.factories(scene.layers, ("distributed",), lod=16, threaded=False,
+                                 tiles=3, tile_budget_ms=4.0)
+    core = ViewerCore(gl.mgl, scene, (64, 64), modes, "sprite",
+                      CameraController.from_home(scene.camera_home()))
+    core.toggles["hud"] = False
+    target = RenderTarget(gl, 64, 64)
+    try:
+        core.frame(1 / 30, target.fbo)
+        first = target.read_color()
+        assert np.array_equal(first, core.technique.read_image())  # the keyframe's centre
+        for _ in range(2):
+            core.frame(1 / 30, target.fbo)
+        assert "3x3 tiles" in core.technique.status()
+        assert (first != first[0, 0]).any(axis=2).mean() > 0.2  # terrain, not only sky
+    finally:
+        core.release()
+        target.release()

@@ -118,13 +118,17 @@ def tile_errors(metric: ErrorMetric, c_primes: list, key_view_projs: np.ndarray,
     if lost.any():
         owner[lost] = serving_tiles(pts_h[lost], key_view_proj[None].repeat(t, 0), rects)
     eye = np.asarray(eye, np.float64)
+    whole: dict[int, float] = {}  # whole-view error per C' (tiles of one update share it)
     for i in range(t):
         if c_primes[i] is None:
             continue
         mine = owner == i
         served[i] = int(mine.sum())
         if served[i] < MIN_SAMPLES:
-            errors[i] = metric.error_px(c_primes[i], eye, view_proj, pixel_angle_rad)
+            key = id(c_primes[i])
+            if key not in whole:
+                whole[key] = metric.error_px(c_primes[i], eye, view_proj, pixel_angle_rad)
+            errors[i] = whole[key]
             continue
         idx = vis[mine]
         th = angles_at_eye(eye, metric.squares.centres[idx], np.asarray(c_primes[i])[idx])

@@ -243,6 +243,11 @@ class SpriteTechnique(Technique):
         return self.sprite.read_image()
 
     def key_view(self) -> tuple[Viewpoint, Projection] | None:
+        if self.tiled is not None:  # the latest tile update's view
+            if not self.tiled.updates:
+                return None
+            key = self.tiled.updates[-1]
+            return key.viewpoint, self.sprite.sprite.key_projection(key.projection)
         return self.sprite.key_view()
 
     def coarse_level(self) -> int | None:
@@ -252,6 +257,9 @@ class SpriteTechnique(Technique):
         self.sprite.sprite.fallback_tint = FALLBACK_TINT if on else (*FALLBACK_TINT[:3], 0.0)
 
     def status(self) -> str:
+        if self.tiled is not None:
+            return (f"keyframes: {self.tiled.tiles}x{self.tiled.tiles} tiles, budget "
+                    f"{self.tiled.tile_budget_ms:g} ms; last frame {len(self.tiled.last_tiles)}")
         if not self.threaded:
             return "keyframes: inline"
         engine = self.engine
