@@ -133,6 +133,15 @@ def test_the_technique_replay_draws_the_timed_mosaic(gl, name):
             order = [5, 0, 11, 3, 4, 10, 1]
             for i in order:
                 assert np.array_equal(t.replay(path.viewpoints[i], decisions[i]), shown[i]), i
+            # the scissor holds for this technique's tile drawer too
+            eng = t.tiled
+            before = eng.tiled.target.read_color().astype(int)
+            eng.render_tiles([3], eng.updates[0])
+            changed = np.abs(eng.tiled.target.read_color().astype(int) - before).max(-1) > 0
+            x0, y0, x1, y1 = eng.tiled.rects[3]
+            h = changed.shape[0]
+            changed[h - y1:h - y0, x0:x1] = False
+            assert not changed.any()
         finally:
             t.release()
 
