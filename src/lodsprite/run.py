@@ -122,6 +122,8 @@ class RenderConfig:
                 and self.tile_budget_ms >= 0):
             raise InputError(f"--tiles must be a whole number in 1..{MAX_TILE_GRID} and "
                              f"--tile-budget-ms >= 0, got {self.tiles}, {self.tile_budget_ms}")
+        if self.tiles > 1 and self.mode != "sprite":
+            raise InputError("--tiles goes with --mode sprite")
         if not (self.sse > 0 and self.gpu_mb > 0 and self.host_mb > 0):
             raise InputError(f"--sse, --gpu-mb and --host-mb must be > 0, got {self.sse}, "
                              f"{self.gpu_mb}, {self.host_mb}")

@@ -18,6 +18,7 @@ selection, the tiles, ``C'`` of the new viewpoint and the spriteframe, up to
 from __future__ import annotations
 
 import time
+from collections.abc import Callable, Iterable, Sequence
 
 import numpy as np
 
@@ -93,7 +94,7 @@ class TiledSpriteEngine:
                            viewpoint.o, view_proj, key.matrix() @ viewpoint.view_matrix(),
                            projection.pixel_angle_rad(s.target.height))
 
-    def render_tiles(self, chosen, key: KeyChoice,
+    def render_tiles(self, chosen: Iterable[int], key: KeyChoice,
                      drawer: TileDrawer | None = None, measure: bool = True) -> int:
         """Render tiles ``chosen`` from ``key`` (finishing after each, to measure its cost
         when ``measure``); returns the triangles drawn."""
@@ -151,8 +152,10 @@ class TiledSpriteEngine:
             return self.tiled.keyframe_color()
         return self.sprite.target.read_color()
 
-    def replay(self, viewpoint: Viewpoint, mosaic, shows_keyframe: bool,
-               shown: np.ndarray, drawer_for=None) -> np.ndarray:
+    def replay(self, viewpoint: Viewpoint, mosaic: Sequence[int], shows_keyframe: bool,
+               shown: np.ndarray,
+               drawer_for: Callable[[int, int], TileDrawer | None] | None = None
+               ) -> np.ndarray:
         """Untimed: bring every tile to the update ``mosaic[t]`` of :attr:`updates` (tiles
         whose ``shown[t]`` already is that update are kept; ``shown`` is updated) and
         return the frame's image.  ``drawer_for(update, tile)``: the drawer that renders

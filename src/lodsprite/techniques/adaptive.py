@@ -7,6 +7,7 @@ it draws (``--key-sse``), streaming between keyframes.  Both fly a store of any 
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -159,7 +160,7 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
         self._drawn.append((self.adaptive.last_draw, self.adaptive.last_morphed))
         return stats
 
-    def tile_drawer(self, update: int, tile: int):
+    def tile_drawer(self, update: int, tile: int) -> Callable:
         """Re-renders ``tile`` with the selection update ``update`` drew it with."""
         draw, morphed = self._tile_selections[(update, tile)]
 

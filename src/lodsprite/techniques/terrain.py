@@ -7,6 +7,7 @@ keyframes drawn by the adaptive renderer).  Registered in :mod:`lodsprite.techni
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -172,7 +173,7 @@ class SpriteTechnique(Technique):
         return {"keyframe": self._last.keyframe, "kind": self._last.type,
                 "shows_keyframe": (not self.threaded) and self.engine.shows_keyframe}
 
-    def tile_drawer(self, update: int, tile: int):
+    def tile_drawer(self, update: int, tile: int) -> Callable | None:
         """The drawer that re-renders ``tile`` as update ``update`` drew it (None: the
         full-resolution terrain)."""
         return None
