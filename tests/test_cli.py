@@ -150,7 +150,7 @@ def test_reproduce_quick_writes_results_plots_and_report(tmp_path, cli, monkeypa
 
 
 @pytest.mark.parametrize(("args", "fragment"), [
-    (["--tiles", "9"], "--tiles must be a whole number in 1..8"),
+    (["--tiles", "9"], "--tiles must be a whole number in 1..4"),
     (["--tiles", "2", "--tile-budget-ms", "-1"], "--tile-budget-ms >= 0"),
     (["--tiles", "2", "--mode", "lod"], "--tiles goes with --mode sprite"),
 ])

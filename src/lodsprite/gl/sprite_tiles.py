@@ -28,63 +28,64 @@ from lodsprite.gl.sprite import SpriteRenderer
 from lodsprite.gl.target import RenderTarget
 from lodsprite.gl.terrain import SKY_RGB, FrameStats
 
-MAX_TILES = 64  # N x N tiles, N <= 8: the shader's uniform arrays
+MAX_TILES = 16  # N x N tiles, N <= 4: one vec4 varying per tile
 
-TILED_SPRITE_VS = (
-    "#version 330\n"
-    + PROXY_VERTEX_COMMON
-    + """
+# Key clip coordinates are affine in the world position, so each tile's are computed per
+# vertex and interpolated (perspective-correct, as the world position would be): the
+# fragment shader tests every tile with a divide and four compares, in code unrolled per
+# tile (a loop over uniform matrices, dynamically indexed, cost 7x the whole-keyframe
+# spriteframe at 3 x 3 tiles on llvmpipe).
+_TILED_VS = """
 uniform mat4 u_mvp;
+uniform mat4 u_key_mvp[N_TILES];
 out vec2 g_uv;
-out vec3 g_world;
+out vec4 g_key[N_TILES];
 void main() {
     vec3 p = terrain_position(g_uv);
     gl_Position = u_mvp * vec4(p, 1.0);
-    g_world = p;
+    for (int i = 0; i < N_TILES; ++i) g_key[i] = u_key_mvp[i] * vec4(p, 1.0);
 }
 """
-)
 
-TILED_SPRITE_FS = f"""#version 330
-#define MAX_TILES {MAX_TILES}
+_TILED_FS_HEAD = """
 uniform sampler2D u_color;
 uniform sampler2D u_sprite;
 uniform sampler2D u_key_depth;
 uniform sampler2D u_key_coarse;
-uniform int u_tiles;
-uniform mat4 u_key_mvp[MAX_TILES];
-uniform vec4 u_rect[MAX_TILES];      // NDC x0, y0, x1, y1 of each tile (half-open)
-uniform vec2 u_near_far[MAX_TILES];  // each tile's keyframe near, far (metres)
-uniform int u_visibility;            // 1: full z-buffer, 2: coarse z-buffer
+uniform vec4 u_rect[N_TILES];      // NDC x0, y0, x1, y1 of each tile (half-open)
+uniform vec2 u_near_far[N_TILES];  // each tile's keyframe near, far (metres)
+uniform int u_visibility;          // 1: full z-buffer, 2: coarse z-buffer
 uniform float u_fragment_tol;
 uniform float u_coarse_tol;
 uniform int u_color_levels;
 uniform vec4 u_fallback_tint;
 in vec2 g_uv;
-in vec3 g_world;
+in vec4 g_key[N_TILES];
 out vec4 f_color;
-float linear_depth(float window_z, vec2 nf) {{
+float linear_depth(float window_z, vec2 nf) {
     return 2.0 * nf.x * nf.y / (nf.y + nf.x - (2.0 * window_z - 1.0) * (nf.y - nf.x));
-}}
-vec3 terrain_fallback(vec2 uv, int level) {{
+}
+vec3 terrain_fallback(vec2 uv, int level) {
     ivec2 size = textureSize(u_color, level);
     return texelFetch(u_color, clamp(ivec2(uv * vec2(size)), ivec2(0), size - 1), level).rgb;
-}}
-void main() {{
-    int tile = -1;
+}
+bool holds(vec4 c, vec4 r) {  // c.xy / c.w in [r.xy, r.zw), without the divide
+    vec4 e = r * c.w;
+    return c.w > 0.0 && c.x >= e.x && c.x < e.z && c.y >= e.y && c.y < e.w;
+}
+void main() {
+    bool found = false;
     vec4 k = vec4(0.0, 0.0, 0.0, 1.0);
-    for (int i = 0; i < u_tiles; ++i) {{
-        vec4 c = u_key_mvp[i] * vec4(g_world, 1.0);
-        if (c.w > 0.0) {{
-            vec2 n = c.xy / c.w;
-            vec4 r = u_rect[i];
-            if (n.x >= r.x && n.x < r.z && n.y >= r.y && n.y < r.w) {{
-                tile = i;
-                k = c;
-                break;
-            }}
-        }}
+    vec2 nf = vec2(1.0);
+"""
+
+# One test per tile, last to first: the first tile whose key holds the fragment wins.
+_TILED_FS_TILE = """    if (holds(g_key[{i}], u_rect[{i}])) {{
+        found = true; k = g_key[{i}]; nf = u_near_far[{i}];
     }}
+"""
+
+_TILED_FS_TAIL = """
     vec2 key_uv = k.xy / k.w * 0.5 + 0.5;
     vec2 key_dx = dFdx(key_uv);
     vec2 key_dy = dFdy(key_uv);
@@ -94,23 +95,32 @@ void main() {{
     float rho2 = max(dot(t_dx, t_dx), dot(t_dy, t_dy));
     int level = clamp(int(floor(0.5 * log2(max(rho2, 1.0)) + 0.5)), 0, u_color_levels - 1);
     bool sprite = false;
-    if (tile >= 0) {{
+    if (found) {
         float z = k.z / k.w;
-        if (abs(z) <= 1.0) {{
+        if (abs(z) <= 1.0) {
             bool coarse = u_visibility == 2;
             float zb = coarse ? textureLod(u_key_coarse, key_uv, 0.0).r
                               : textureLod(u_key_depth, key_uv, 0.0).r;
             float tol = coarse ? u_coarse_tol : u_fragment_tol;
-            vec2 nf = u_near_far[tile];
             sprite = linear_depth(z * 0.5 + 0.5, nf) <= linear_depth(zb, nf) * (1.0 + tol);
-        }}
-    }}
+        }
+    }
     vec3 rgb = sprite ? textureGrad(u_sprite, key_uv, key_dx, key_dy).rgb
                       : mix(terrain_fallback(g_uv, level), u_fallback_tint.rgb,
                             u_fallback_tint.a);
     f_color = vec4(rgb, 1.0);
-}}
+}
 """
+
+
+def tiled_sprite_shaders(count: int) -> tuple[str, str]:
+    """``(vertex, fragment)`` GLSL of the tiled spriteframe for ``count`` tiles; the vertex
+    shader reads ``PROXY_VERTEX_COMMON`` (``terrain_position``)."""
+    head = f"#version 330\n#define N_TILES {count}\n"
+    tests = "".join(_TILED_FS_TILE.format(i=i) for i in reversed(range(count)))
+    return (head + PROXY_VERTEX_COMMON + _TILED_VS,
+            head + _TILED_FS_HEAD + tests + _TILED_FS_TAIL)
+
 
 #: Draws a tile's full-resolution terrain: ``(viewpoint, projection, target, cull) ->
 #: FrameStats``, ``cull`` the ``(4, 4)`` sub-frustum matrix the chunks are culled with.
@@ -146,11 +156,11 @@ class TiledSpriteRenderer:
         self.projections: list[Projection | None] = [None] * count
         self.view_projs = np.tile(np.eye(4), (count, 1, 1))
         mode = 2 if sprite.visibility == "coarse" else 1
-        self.program = self.ctx.mgl.program(vertex_shader=TILED_SPRITE_VS,
-                                            fragment_shader=TILED_SPRITE_FS)
+        vs, fs = tiled_sprite_shaders(count)
+        self.program = self.ctx.mgl.program(vertex_shader=vs, fragment_shader=fs)
         prog = self.program
         values = {"u_visibility": mode, "u_color": 0, "u_sprite": 2, "u_key_depth": 3,
-                  "u_key_coarse": 4, "u_tiles": count,
+                  "u_key_coarse": 4,
                   "u_fragment_tol": sprite.program["u_fragment_tol"].value,
                   "u_coarse_tol": sprite.program["u_coarse_tol"].value}
         for name, value in values.items():
@@ -233,5 +243,6 @@ def _write_array(uniform, values: np.ndarray) -> None:
     length."""
     flat = np.asarray(values, np.float32).reshape(len(values), -1)
     out = np.zeros((uniform.array_length, flat.shape[1]), np.float32)
-    out[:len(flat)] = flat
+    k = min(len(flat), len(out))  # the compiler may trim an array's unused tail
+    out[:k] = flat[:k]
     uniform.write(out.tobytes())
