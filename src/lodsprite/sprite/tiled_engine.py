@@ -73,6 +73,9 @@ class TiledSpriteEngine:
         self.last_tiles: tuple[int, ...] = ()
         self.drawer: TileDrawer | None = None
         self.between_keyframes = None  # called in frames that render no tile, timed
+        # Called after a frame's tiles, timed: (viewpoint, key projection) -> None (the
+        # adaptive renderer streams for the whole key view there).
+        self.after_tiles = None
         self._shows_keyframe = False
 
     @property
@@ -128,6 +131,8 @@ class TiledSpriteEngine:
             key = KeyChoice(viewpoint, projection, False)
             self.updates.append(key)
             tris += self.render_tiles(chosen, key)
+            if self.after_tiles is not None:
+                self.after_tiles(viewpoint, s.key_projection(projection))
             c_prime = self.metric.reproject(viewpoint.o)
             for i in chosen:
                 self.c_primes[i] = c_prime

@@ -147,6 +147,7 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
             self._tile_selections: dict[tuple[int, int], tuple] = {}  # (update, tile) ->
             self.tiled.drawer = self._draw_tile
             self.tiled.between_keyframes = self.adaptive.prefetch
+            self.tiled.after_tiles = self.adaptive.request
 
     def warm_up(self, viewpoint: Viewpoint) -> None:
         super().warm_up(viewpoint)
