@@ -132,3 +132,20 @@ def test_the_budget_holds_on_a_synthetic_cost_model(tiles, budget):
             left -= costs[i]
         else:
             assert costs[i] > left
+
+
+def test_the_update_c_prime_is_the_full_one_inside_the_key_view():
+    from lodsprite.sprite.metric import in_view
+    from lodsprite.sprite.tiled import reproject_in_key_view
+
+    metric, vp, proj = _scene()
+    low = look_at((0.0, -700.0, 260.0), (0.0, 0.0, 100.0))  # a low eye: many centres unseen
+    kvp = widened(proj, 128, 128, 16).matrix() @ low.view_matrix()
+    full = metric.reproject(low.o)
+    part = reproject_in_key_view(metric, low.o, kvp)
+    vis = in_view(metric._centres_h, kvp)
+    assert 0 < vis.sum() < len(vis)
+    np.testing.assert_array_equal(np.asarray(part)[vis], np.asarray(full)[vis])
+    np.testing.assert_array_equal(part.missed[vis], full.missed[vis])
+    assert part.missed[~vis].all()
+    np.testing.assert_array_equal(part.key_eye, full.key_eye)

@@ -39,6 +39,7 @@ import math
 import numpy as np
 
 from lodsprite.sprite.metric import MIN_SAMPLES, ErrorMetric, angles_at_eye, in_view, miss_floor
+from lodsprite.sprite.raycast import Reprojection, reproject_points
 
 TILES = "tiles"  # frame kind: some tiles, not all, re-rendered
 FORCE_FACTOR = 2.0  # a candidate over this many ε forces the worst tile in
@@ -141,6 +142,23 @@ def tile_errors(metric: ErrorMetric, c_primes: list, key_view_projs: np.ndarray,
         th = miss_floor(th, missed)
         errors[i] = float(np.sqrt(np.mean(th * th)) / pixel_angle_rad)
     return errors, served
+
+
+def reproject_in_key_view(metric: ErrorMetric, key_eye: np.ndarray,
+                          key_view_proj: np.ndarray) -> Reprojection:
+    """``C'`` of a tile update (:class:`~lodsprite.sprite.raycast.Reprojection`, ``(n*n,
+    3)``) computed only for the centres inside its key view ``key_view_proj (4, 4)``: no
+    tile of the update serves the others.  They count as misses (``C' = C``, floored to
+    the worst hit by :func:`~lodsprite.sprite.metric.miss_floor`) should the whole-view
+    error of a tile serving few samples meet them.  Ray casting grazing rays to centres
+    behind or beside a low keyframe eye was most of the cost of a full ``C'``."""
+    sq = metric.squares
+    vis = np.flatnonzero(in_view(metric._centres_h, key_view_proj))
+    c_prime = sq.centres.astype(np.float64).copy()
+    missed = np.ones(len(c_prime), bool)
+    if vis.size:
+        c_prime[vis], missed[vis] = reproject_points(sq, key_eye, sq.centres[vis], vis)
+    return Reprojection(c_prime, key_eye, missed)
 
 
 def combined_error(errors: np.ndarray, served: np.ndarray) -> float:

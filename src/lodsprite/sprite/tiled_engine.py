@@ -33,6 +33,7 @@ from lodsprite.sprite.tiled import (
     TILES,
     combined_error,
     ndc_rects,
+    reproject_in_key_view,
     select_tiles,
     sub_view_proj,
     tile_errors,
@@ -133,7 +134,9 @@ class TiledSpriteEngine:
             tris += self.render_tiles(chosen, key)
             if self.after_tiles is not None:
                 self.after_tiles(viewpoint, s.key_projection(projection))
-            c_prime = self.metric.reproject(viewpoint.o)
+            key_proj = s.key_projection(projection)
+            c_prime = reproject_in_key_view(self.metric, viewpoint.o,
+                                            key_proj.matrix() @ viewpoint.view_matrix())
             for i in chosen:
                 self.c_primes[i] = c_prime
                 errors[i] = 0.0
