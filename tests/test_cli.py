@@ -147,3 +147,13 @@ def test_reproduce_quick_writes_results_plots_and_report(tmp_path, cli, monkeypa
     assert "12.32" in report
     for png in ("fig08_error.png", "fig09_time.png", "fig13.png", "fig14.png"):
         assert (out / png).stat().st_size > 1000
+
+
+@pytest.mark.parametrize(("args", "fragment"), [
+    (["--tiles", "9"], "--tiles must be a whole number in 1..4"),
+    (["--tiles", "2", "--tile-budget-ms", "-1"], "--tile-budget-ms >= 0"),
+    (["--tiles", "2", "--mode", "lod"], "--tiles goes with --mode sprite"),
+])
+def test_render_refuses_bad_tile_options(args, fragment):
+    assert_user_error(lodsprite("render", *SMALL, "--mode", "sprite", "--frames", "2", *args),
+                      fragment)

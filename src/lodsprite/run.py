@@ -13,6 +13,7 @@ same decisions.  The distributed mode is not core: the command line hands it to
 
 from __future__ import annotations
 
+import math
 from contextlib import ExitStack
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
@@ -27,6 +28,7 @@ from lodsprite.gl.sprite import (
     DEFAULT_VISIBILITY,
     VISIBILITY_MODES,
 )
+from lodsprite.gl.sprite_tiles import MAX_TILES
 from lodsprite.gl.terrain import SHADINGS
 from lodsprite.harness import RunResult, run_path, timing_summary, write_run
 from lodsprite.paths import CameraPath, get_path
@@ -38,6 +40,8 @@ from lodsprite.terrain.loaders import load_level0
 from lodsprite.terrain.lod import DEFAULT_COARSE, level_step
 from lodsprite.terrain.store import is_store
 from lodsprite.workers import peak_rss_mb
+
+MAX_TILE_GRID = math.isqrt(MAX_TILES)  # --tiles N: N x N keyframe tiles
 
 
 def _modes() -> tuple[str, ...]:
@@ -81,6 +85,8 @@ class RenderConfig:
     host_mb: float = 512.0    # adaptive: host tile cache budget
     flip: bool = False        # with ground_truth: FLIP per frame too
     shading: str = "auto"     # colour: auto (heights on a store) | texture | heights
+    tiles: int = 1            # sprite: an N x N grid of keyframe tiles (1: whole keyframes)
+    tile_budget_ms: float = 8.0  # sprite, tiles > 1: tile work per frame, ms
 
     @property
     def technique(self) -> str:
@@ -92,7 +98,8 @@ class RenderConfig:
         return {"lod": self.lod, "epsilon": self.epsilon, "visibility": self.visibility,
                 "guard_px": self.guard_px, "border": self.border, "sse": self.sse,
                 "key_sse": self.key_sse, "gpu_mb": self.gpu_mb, "host_mb": self.host_mb,
-                "threaded": False, "shading": self.shading}
+                "threaded": False, "shading": self.shading, "tiles": self.tiles,
+                "tile_budget_ms": self.tile_budget_ms}
 
     def validate(self) -> None:
         modes = _modes()  # the registry's now: a technique registered later is one too
@@ -118,6 +125,12 @@ class RenderConfig:
             raise InputError(f"quality stride must be >= 1, got {self.quality_stride}")
         if self.key_sse is not None and (self.mode != "sprite" or not self.key_sse > 0):
             raise InputError("--key-sse goes with --mode sprite and must be > 0 pixels")
+        if not (isinstance(self.tiles, int) and 1 <= self.tiles <= MAX_TILE_GRID
+                and self.tile_budget_ms >= 0):
+            raise InputError(f"--tiles must be a whole number in 1..{MAX_TILE_GRID} and "
+                             f"--tile-budget-ms >= 0, got {self.tiles}, {self.tile_budget_ms}")
+        if self.tiles > 1 and self.mode != "sprite":
+            raise InputError("--tiles goes with --mode sprite")
         if not (self.sse > 0 and self.gpu_mb > 0 and self.host_mb > 0):
             raise InputError(f"--sse, --gpu-mb and --host-mb must be > 0, got {self.sse}, "
                              f"{self.gpu_mb}, {self.host_mb}")
@@ -232,7 +245,9 @@ def run_technique(renderer, path: CameraPath, config: RenderConfig,
                           ground_truth=config.ground_truth,
                           quality_stride=config.quality_stride, flip=config.flip,
                           on_image=on_image)
-        log = getattr(getattr(technique, "sprite", None), "keyframes", None)
+        log = getattr(technique, "keyframe_log", None)  # tiled LOD-sprite: tile updates
+        if log is None:
+            log = getattr(getattr(technique, "sprite", None), "keyframes", None)
         if log is not None:
             for row in result.rows:
                 eye = log[row["keyframe"]].viewpoint.o

@@ -90,6 +90,14 @@ def _print_render(s: dict, out_dir: Path) -> None:
               f"{out_dir / 'summary.json'}")
 
 
+TilesOpt = Annotated[int, typer.Option(
+    "--tiles", help="sprite: refresh keyframes tile by tile on an N x N grid of screen "
+                    "tiles (1: whole keyframes; inline keyframes only)")]
+TileBudgetOpt = Annotated[float, typer.Option(
+    "--tile-budget-ms", help="sprite with --tiles > 1: tile work per frame (ms); a tile "
+                             "over 2 epsilon is rendered even beyond it")]
+
+
 def render(
     terrain: TerrainOpt = "jacksboro",
     texture: TextureOpt = "terrain",
@@ -129,6 +137,8 @@ def render(
     host_mb: Annotated[float, typer.Option(
         "--host-mb", help="adaptive: host tile cache budget (MB)")] = 512.0,
     shading: ShadingOpt = "auto",
+    tiles: TilesOpt = 1,
+    tile_budget_ms: TileBudgetOpt = 8.0,
 ) -> None:
     """Render a camera path; write DIR/frames.csv and DIR/summary.json (and PNG frames)."""
     from lodsprite import RenderConfig, render_path
@@ -141,7 +151,8 @@ def render(
                           exaggeration=exaggeration, save_frames=save_frames, epsilon=epsilon,
                           ground_truth=ground_truth, visibility=visibility, border=border,
                           guard_px=guard, sse=sse, gpu_mb=gpu_mb, host_mb=host_mb,
-                          key_sse=key_sse, flip=flip, shading=shading)
+                          key_sse=key_sse, flip=flip, shading=shading, tiles=tiles,
+                          tile_budget_ms=tile_budget_ms)
     with progress_bar(f"render {mode}") as update:
         if distributed:
             from lodsprite.distributed.run import parse_max_error, render_distributed
@@ -199,6 +210,8 @@ def view(
     key_sse: Annotated[float | None, typer.Option(
         "--key-sse", help="sprite-adaptive: its keyframes' tolerance in pixels")] = None,
     shading: ShadingOpt = "auto",
+    tiles: TilesOpt = 1,
+    tile_budget_ms: TileBudgetOpt = 8.0,
 ) -> None:
     """Fly through a terrain with live LOD-sprite, or round a lumigraph (WASD/QE, mouse, tab
     orbit)."""
@@ -210,7 +223,8 @@ def view(
                        epsilon=epsilon, size=parse_size(size), fps=fps, threaded=not inline,
                        play=play, frames=frames, screenshots=screenshots, every=every,
                        exit=exit_, out=out_dir, record=record, server=server,
-                       target_fps=target_fps, sse=sse, key_sse=key_sse, shading=shading)
+                       target_fps=target_fps, sse=sse, key_sse=key_sse, shading=shading,
+                       tiles=tiles, tile_budget_ms=tile_budget_ms)
     s = run_view(opts)
     if s:
         out.print(f"{s['frames']} frames, {s['mode']}: median {s['median_ms']:.2f} ms, "

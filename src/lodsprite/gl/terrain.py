@@ -263,11 +263,14 @@ class TerrainRenderer:
                                  *hf.bounds(), float(hf.height_at(viewpoint.o[0], viewpoint.o[1])))
 
     def draw(self, program: moderngl.Program, cache: dict[int, moderngl.VertexArray],
-             viewpoint: Viewpoint, projection: Projection, level_quads: int) -> FrameStats:
-        """Draw one level with ``program`` (uniforms other than geometry's already set)."""
+             viewpoint: Viewpoint, projection: Projection, level_quads: int,
+             cull: np.ndarray | None = None) -> FrameStats:
+        """Draw one level with ``program`` (uniforms other than geometry's already set);
+        chunks are culled by the frustum of ``cull (4, 4)`` when given (a tile's
+        sub-frustum), else by the view's."""
         layout = self.geometry.layout(level_quads)
         view_proj = projection.matrix() @ viewpoint.view_matrix()
-        chunks = self.geometry.visible_chunks(layout, view_proj)
+        chunks = self.geometry.visible_chunks(layout, view_proj if cull is None else cull)
         self.geometry.set_uniforms(program, layout.step)
         program["u_mvp"].write(mat_bytes(view_proj))
         if chunks:
@@ -306,15 +309,17 @@ class TerrainRenderer:
 
     def render(self, viewpoint: Viewpoint, level_quads: int | None = None,
                projection: Projection | None = None,
-               target: RenderTarget | None = None) -> FrameStats:
+               target: RenderTarget | None = None,
+               cull: np.ndarray | None = None) -> FrameStats:
         """Render the terrain coloured by :attr:`shading` into ``target`` (default: this
-        renderer's own); ``level_quads`` None means full resolution."""
+        renderer's own); ``level_quads`` None means full resolution; ``cull``: as
+        :meth:`draw`."""
         level = self.geometry.hf.quads if level_quads is None else level_quads
         projection = projection or self.projection(viewpoint)
         self._begin(target)
         prog, cache = self.programs(proxy=False)
         prog["u_height"].value = 1
-        return self.draw(prog, cache, viewpoint, projection, level)
+        return self.draw(prog, cache, viewpoint, projection, level, cull)
 
     def render_proxy(self, viewpoint: Viewpoint, level_quads: int, border: bool = True,
                      projection: Projection | None = None,

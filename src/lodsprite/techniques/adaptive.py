@@ -7,6 +7,7 @@ it draws (``--key-sse``), streaming between keyframes.  Both fly a store of any 
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -149,7 +150,8 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
     def __init__(self, renderer: Renderer, lod: int = 16, epsilon: float = 1.0,
                  key_sse: float = 1.0, gpu_mb: float = 256.0, host_mb: float = 512.0,
                  visibility: str | None = None, guard_px: int | None = None,
-                 border: bool = True, shading: str = "auto") -> None:
+                 border: bool = True, shading: str = "auto", tiles: int = 1,
+                 tile_budget_ms: float = 8.0) -> None:
         from lodsprite.terrain.store import TerrainStore
         from lodsprite.terrain.storefield import store_field
 
@@ -161,7 +163,7 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
                 renderer.paths.geometry.set_full(field)
             # proxy, ribbons and C read from level 0 there, then only without blocking
             super().__init__(renderer, lod, epsilon, False, visibility, guard_px, border,
-                             shading)
+                             shading=shading, tiles=tiles, tile_budget_ms=tile_budget_ms)
         except BaseException:
             self.adaptive.release()
             if field is not None:
@@ -170,6 +172,37 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
         self.sprite.sprite.keyframe_drawer = self._draw_keyframe
         self.engine.between_keyframes = self._between_keyframes
         self._selections: dict[int, tuple] = {}  # keyframe -> (nodes drawn, morphed)
+        if self.tiled is not None:
+            self._drawn: list[tuple] = []  # this frame's tile selections, in draw order
+            self._tile_selections: dict[tuple[int, int], tuple] = {}  # (update, tile) ->
+            self.tiled.drawer = self._draw_tile
+            self.tiled.between_keyframes = self._between_keyframes
+            self.tiled.after_tiles = self.adaptive.request
+
+    def warm_up(self, viewpoint: Viewpoint) -> None:
+        super().warm_up(viewpoint)
+        if self.tiled is not None:
+            self._drawn.clear()  # the warm-up's tiles are no update's
+
+    def _draw_tile(self, viewpoint, projection, target, cull):
+        """A tile by the adaptive renderer, culled by its sub-frustum; its selection is
+        kept (references only: recorded in :meth:`decision`)."""
+        self._pump()
+        stats = self.adaptive.render_into(viewpoint, projection, target, cull)
+        self._drawn.append((self.adaptive.last_draw, self.adaptive.last_morphed))
+        return stats
+
+    def tile_drawer(self, update: int, tile: int) -> Callable:
+        """Re-renders ``tile`` with the selection update ``update`` drew it with."""
+        draw, morphed = self._tile_selections[(update, tile)]
+
+        def again(vp, projection, target, cull):
+            from lodsprite.gl.terrain import FrameStats
+
+            self.adaptive.redraw(vp, draw, morphed, projection, target)
+            return FrameStats(0, len(draw), projection)
+
+        return again
 
     def _pump(self) -> None:
         if self.heights is not None:
@@ -190,12 +223,19 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
         """The keyframe shown; for a new one, the selection it was drawn with (recorded
         here, after the frame's clock stopped: nothing draws between the two)."""
         d = super().decision()
+        if self.tiled is not None:
+            for t, (draw, morphed) in zip(d["tiles"], self._drawn, strict=True):
+                self._tile_selections[(d["keyframe"], t)] = (tuple(draw), morphed)
+            self._drawn.clear()
+            return d
         if d["keyframe"] not in self._selections:
             self._selections[d["keyframe"]] = (tuple(self.adaptive.last_draw),
                                                self.adaptive.last_morphed)
         return d
 
     def replay(self, viewpoint: Viewpoint, decision: dict[str, Any]) -> np.ndarray:
+        if self.tiled is not None:
+            return super().replay(viewpoint, decision)
         draw, morphed = self._selections[decision["keyframe"]]
         s = self.sprite.sprite
 

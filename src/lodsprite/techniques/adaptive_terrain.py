@@ -101,25 +101,29 @@ class AdaptiveTerrain:
         self.renderer.upload(slot, data)
         return True
 
-    def render_into(self, viewpoint: Viewpoint, projection, target):
+    def render_into(self, viewpoint: Viewpoint, projection, target, cull=None):
         """Draw into ``target`` through ``projection`` (a :class:`~lodsprite.camera.
         Projection`; the LOD-sprite keyframe hook); returns the terrain renderer's
-        ``FrameStats``.  Selection uses the target's height for screen error."""
+        ``FrameStats``.  Selection uses the target's height for screen error.  ``cull``:
+        a ``(4, 4)`` matrix whose frustum the quadtree is culled by instead of the view's
+        (a keyframe tile's sub-frustum; draw it with ``target.fbo.scissor`` set to the
+        tile)."""
         from lodsprite.gl.terrain import FrameStats
 
-        f = self.frame(viewpoint, projection.matrix(), target, finish=False)
+        f = self.frame(viewpoint, projection.matrix(), target, finish=False, cull=cull)
         return FrameStats(f.triangles, f.nodes, projection)
 
     def frame(self, viewpoint: Viewpoint, projection: np.ndarray | None = None,
-              target=None, finish: bool = True) -> AdaptiveFrame:
+              target=None, finish: bool = True, cull=None) -> AdaptiveFrame:
         """Select, stream and draw one frame (into ``target``, default the renderer's own,
-        through ``projection``, default fitted to the terrain)."""
+        through ``projection``, default fitted to the terrain; the selection culled by
+        the frustum of ``cull (4, 4)`` when given)."""
         t0 = time.perf_counter()
         target = target if target is not None else self.target
         proj = self.projection(viewpoint) if projection is None else projection
         view_proj = proj @ viewpoint.view_matrix()
         eye = np.asarray(viewpoint.o, dtype=np.float64)
-        draw, uploaded = self._stream(eye, view_proj)
+        draw, uploaded = self._stream(eye, view_proj if cull is None else cull)
         self.last_draw = draw
         self.renderer.draw(target.fbo, view_proj, eye, self._instances(draw),
                            self.height_range, self.extent, self.color)
@@ -158,6 +162,14 @@ class AdaptiveTerrain:
         if uploaded:  # what is resident is not looked for again (prefetch, every frame)
             self._wanted = [n for n in self._wanted if n not in self.slots]
         return uploaded
+
+    def request(self, viewpoint: Viewpoint, projection) -> int:
+        """Select for ``viewpoint`` through ``projection`` (a :class:`~lodsprite.camera.
+        Projection`) without drawing: ask the loader for what that view lacks and upload
+        what has arrived; returns the tiles uploaded.  After keyframe tiles culled by
+        their sub-frusta, this streams for the whole view, not only the last tile."""
+        view_proj = projection.matrix() @ viewpoint.view_matrix()
+        return self._stream(np.asarray(viewpoint.o, dtype=np.float64), view_proj)[1]
 
     def prefetch(self) -> int:
         """Between frames drawn by this renderer (LOD-sprite's spriteframes): go on

@@ -15,6 +15,8 @@ VISIBILITY = Option("visibility", str, "coarse", "LOD-sprite visibility rule")
 GUARD = Option("guard_px", int, 32, "keyframe guard band, pixels")
 BORDER = Option("border", bool, True, "draw the coarse level's border ribbons")
 THREADED = Option("threaded", bool, False, "render keyframes on a worker thread")
+TILES = Option("tiles", int, 1, "LOD-sprite: N x N keyframe tiles (1: whole keyframes)")
+TILE_BUDGET = Option("tile_budget_ms", float, 8.0, "LOD-sprite tiles: tile work per frame, ms")
 SSE = Option("sse", float, 1.0, "adaptive: screen-space error tolerance, pixels")
 KEY_SSE = Option("key_sse", float, 1.0, "keyframes by the adaptive renderer at this SSE, px")
 GPU_MB = Option("gpu_mb", float, 256.0, "adaptive: GPU tile cache budget, MB")
@@ -46,7 +48,8 @@ register(TechniqueSpec("full", f"{TERRAIN}:FullTechnique", (SHADING,), ("terrain
 register(TechniqueSpec("lod", f"{TERRAIN}:LodTechnique", (LOD, SHADING), ("terrain",),
                        "one uniform coarse level"))
 register(TechniqueSpec("sprite", f"{TERRAIN}:SpriteTechnique",
-                       (LOD, EPSILON, THREADED, VISIBILITY, GUARD, BORDER, SHADING),
+                       (LOD, EPSILON, THREADED, VISIBILITY, GUARD, BORDER, SHADING, TILES,
+                        TILE_BUDGET),
                        ("terrain",),
                        "LOD-sprite (Chen, Swan & Kaufman 1999)"))
 register(TechniqueSpec("adaptive", f"{ADAPTIVE}:AdaptiveTechnique",
@@ -54,7 +57,7 @@ register(TechniqueSpec("adaptive", f"{ADAPTIVE}:AdaptiveTechnique",
                        "the adaptive (CDLOD-style) renderer, stores of any size"))
 register(TechniqueSpec("sprite-adaptive", f"{ADAPTIVE}:SpriteAdaptiveTechnique",
                        (LOD, EPSILON, KEY_SSE, GPU_MB, HOST_MB, VISIBILITY, GUARD, BORDER,
-                        SHADING),
+                        SHADING, TILES, TILE_BUDGET),
                        ("terrain",), "LOD-sprite with keyframes by the adaptive renderer"))
 register(TechniqueSpec("distributed", "lodsprite.distributed.technique:create",
                        (SERVER, LOD, EPSILON, MAX_ERROR), ("terrain",),

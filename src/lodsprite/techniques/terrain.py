@@ -7,11 +7,15 @@ keyframes drawn by the adaptive renderer).  Registered in :mod:`lodsprite.techni
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from lodsprite.errors import InputError
 from lodsprite.sprite.engine import DEFAULT_EPSILON_PX, FRAME_TYPES, KEYFRAME
+from lodsprite.sprite.tiled import TILES
+from lodsprite.sprite.tiled_engine import DEFAULT_TILE_BUDGET_MS
 from lodsprite.techniques.base import FALLBACK_TINT, Frame, Param, Technique
 from lodsprite.terrain.lod import DEFAULT_COARSE, level_step
 
@@ -112,16 +116,27 @@ def level0_reader(geometry, lod: int, border: bool):
 class SpriteTechnique(Technique):
     """LOD-sprite: keyframes on a worker thread (``threaded``) or inline (the 1999
     algorithm, what batch runs time).  Records per frame the keyframe shown; its replay
-    renders that keyframe from its logged viewpoint and projection, then the frame."""
+    renders that keyframe from its logged viewpoint and projection, then the frame.
+
+    ``tiles > 1``: keyframes refreshed tile by tile within ``tile_budget_ms`` per frame
+    (:class:`~lodsprite.sprite.tiled_engine.TiledSpriteEngine`, inline only); each frame
+    records its mosaic (per tile, the viewpoint it was last rendered from), which the
+    replay brings the tiles to."""
 
     name = "sprite"
 
     def __init__(self, renderer: Renderer, lod: int = DEFAULT_COARSE,
                  epsilon: float = DEFAULT_EPSILON_PX, threaded: bool = False,
                  visibility: str | None = None, guard_px: int | None = None,
-                 border: bool = True, shading: str = "auto") -> None:
+                 border: bool = True, shading: str = "auto", tiles: int = 1,
+                 tile_budget_ms: float = DEFAULT_TILE_BUDGET_MS) -> None:
         super().__init__(renderer)
         from lodsprite.gl.sprite import DEFAULT_GUARD_PX, DEFAULT_VISIBILITY
+        from lodsprite.sprite.tiled_engine import TiledSpriteEngine
+
+        if not (isinstance(tiles, int) and tiles >= 1) or (tiles > 1 and threaded):
+            raise InputError(f"--tiles must be a whole number >= 1 (inline keyframes only "
+                             f"when > 1), got {tiles}")
 
         self.shading = set_shading(renderer, shading)
 
@@ -133,11 +148,26 @@ class SpriteTechnique(Technique):
         self._tint = False
         self._replayed: int | None = None
         self._last = None
+        self.tiled: TiledSpriteEngine | None = None
+        if tiles > 1:
+            try:
+                self.tiled = TiledSpriteEngine(self.sprite.sprite, epsilon, tiles,
+                                               tile_budget_ms)
+            except BaseException:
+                self.sprite.release()
+                raise
+            self._shown = np.full(self.tiled.tiled.count, -1)  # replay: update per tile
         self.heights = level0_reader(renderer.paths.geometry, lod, border)
 
     @property
     def engine(self):
         return self.sprite.engine
+
+    @property
+    def keyframe_log(self) -> list | None:
+        """With tiles: every viewpoint tiles were rendered from (the ``keyframe`` column
+        indexes it: the latest update by the frame); None: the engine's keyframes."""
+        return None if self.tiled is None else self.tiled.updates
 
     def params(self) -> dict[str, Param]:
         return {"epsilon": Param("epsilon", self.sprite.epsilon_px, 0.125, 64.0, 1.25, "px")}
@@ -146,6 +176,8 @@ class SpriteTechnique(Technique):
         if name != "epsilon":
             super().set_param(name, value)
         self.sprite.epsilon_px = value
+        if self.tiled is not None:
+            self.tiled.epsilon_px = float(value)
 
     def warm_up(self, viewpoint: Viewpoint) -> None:
         """Shaders compiled on a keyframe and a spriteframe drawn outside the engine, so
@@ -156,19 +188,44 @@ class SpriteTechnique(Technique):
         s = self.sprite.sprite
         s.render_keyframe(viewpoint, 0.0)
         s.render_spriteframe(viewpoint)
+        if self.tiled is not None:  # tiles drawn, untimed; the timed run starts with none
+            from lodsprite.sprite.policy import KeyChoice
+
+            key = KeyChoice(viewpoint, s.terrain.projection(viewpoint), False)
+            self.tiled.render_tiles(range(self.tiled.tiled.count), key, measure=False)
+            self.tiled.tiled.render_spriteframe(viewpoint)
         self.renderer.gl.finish()
 
     def frame(self, viewpoint: Viewpoint) -> Frame:
+        if self.tiled is not None:
+            f = self._last = self.tiled.frame(viewpoint)
+            return Frame(f.type, f.ms, f.triangles, f.error_px,
+                         {"keyframe": f.keyframe, "keyframes": len(self.tiled.updates),
+                          "tiles": len(self.tiled.last_tiles)})
         f = self.sprite.frame(viewpoint)
         self._last = f
         return Frame(f.type, f.ms, f.triangles, f.error_px,
                      {"keyframe": f.keyframe, "keyframes": len(self.sprite.keyframes)})
 
     def decision(self) -> dict[str, Any]:
+        if self.tiled is not None:
+            return {"keyframe": self._last.keyframe, "kind": self._last.type,
+                    "shows_keyframe": self.tiled.shows_keyframe,
+                    "mosaic": tuple(int(u) for u in self.tiled.mosaic),
+                    "tiles": self.tiled.last_tiles}
         return {"keyframe": self._last.keyframe, "kind": self._last.type,
                 "shows_keyframe": (not self.threaded) and self.engine.shows_keyframe}
 
+    def tile_drawer(self, update: int, tile: int) -> Callable | None:
+        """The drawer that re-renders ``tile`` as update ``update`` drew it (None: the
+        full-resolution terrain)."""
+        return None
+
     def replay(self, viewpoint: Viewpoint, decision: dict[str, Any]) -> np.ndarray:
+        if self.tiled is not None:
+            return self.tiled.replay(viewpoint, decision["mosaic"],
+                                     decision["shows_keyframe"], self._shown,
+                                     self.tile_drawer)
         s = self.sprite.sprite
         k = decision["keyframe"]
         if k != self._replayed:
@@ -201,6 +258,14 @@ class SpriteTechnique(Technique):
                                "visibility": self.sprite.sprite.visibility,
                                "shading": self.shading,
                                "keyframes": sum(f.kind == KEYFRAME for f in frames)}
+        if self.tiled is None:
+            out["tiles_rendered"] = out["keyframes"]  # a whole keyframe is 1 x 1 tile
+        else:
+            out["tiles"] = self.tiled.tiles
+            out["tile_budget_ms"] = self.tiled.tile_budget_ms
+            out["tiles_rendered"] = sum(int(f.extra.get("tiles", 0)) for f in frames)
+            ms = [f.ms for f in frames if f.kind == TILES]
+            out[f"mean_ms_{TILES}"] = float(np.mean(ms)) if ms else float("nan")
         for t in FRAME_TYPES:
             ms = [f.ms for f in frames if f.kind == t]
             out[f"mean_ms_{t}"] = float(np.mean(ms)) if ms else float("nan")
@@ -209,12 +274,25 @@ class SpriteTechnique(Technique):
         return out
 
     def draw_to(self, framebuffer=None) -> None:
+        if self.tiled is not None and self.tiled.shows_keyframe:
+            s = self.sprite.sprite  # the tiled keyframe's centre, as LodSprite.draw_to
+            tex, (w, h), g = self.tiled.tiled.target.color, self.tiled.tiled.target.size, \
+                s.guard_px
+            self.renderer.present(tex, (g / w, g / h, 1 - g / w, 1 - g / h), framebuffer)
+            return
         self.sprite.draw_to(framebuffer)
 
     def read_image(self) -> np.ndarray:
+        if self.tiled is not None:
+            return self.tiled.read_image()
         return self.sprite.read_image()
 
     def key_view(self) -> tuple[Viewpoint, Projection] | None:
+        if self.tiled is not None:  # the latest tile update's view
+            if not self.tiled.updates:
+                return None
+            key = self.tiled.updates[-1]
+            return key.viewpoint, self.sprite.sprite.key_projection(key.projection)
         return self.sprite.key_view()
 
     def coarse_level(self) -> int | None:
@@ -224,6 +302,9 @@ class SpriteTechnique(Technique):
         self.sprite.sprite.fallback_tint = FALLBACK_TINT if on else (*FALLBACK_TINT[:3], 0.0)
 
     def status(self) -> str:
+        if self.tiled is not None:
+            return (f"keyframes: {self.tiled.tiles}x{self.tiled.tiles} tiles, budget "
+                    f"{self.tiled.tile_budget_ms:g} ms; last frame {len(self.tiled.last_tiles)}")
         if not self.threaded:
             return "keyframes: inline"
         engine = self.engine
@@ -234,6 +315,8 @@ class SpriteTechnique(Technique):
                 f"{engine.discarded} discarded, lead {w.lead_s * 1e3:.0f} ms")
 
     def release(self) -> None:
+        if self.tiled is not None:
+            self.tiled.release()
         self.sprite.release()
         if self.heights is not None:
             self.heights.close()

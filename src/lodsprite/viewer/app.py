@@ -47,12 +47,16 @@ class ViewOptions:
     sse: float | None = None      # adaptive: screen-space error, pixels
     key_sse: float | None = None  # sprite-adaptive: its keyframes' SSE, pixels
     shading: str = "auto"         # terrain colour: auto | texture | heights
+    tiles: int = 1                # sprite: N x N keyframe tiles (> 1: inline keyframes)
+    tile_budget_ms: float = 8.0   # sprite, tiles > 1: tile work per frame, ms
 
     def technique_options(self) -> dict:
         """The options of the command the registry's techniques pick theirs from."""
-        return {"lod": self.lod, "epsilon": self.epsilon, "threaded": self.threaded,
+        return {"lod": self.lod, "epsilon": self.epsilon,
+                "threaded": self.threaded and self.tiles == 1,  # tiles are rendered inline
                 "server": self.server, "target_fps": self.target_fps, "sse": self.sse,
-                "key_sse": self.key_sse, "shading": self.shading}
+                "key_sse": self.key_sse, "shading": self.shading, "tiles": self.tiles,
+                "tile_budget_ms": self.tile_budget_ms}
 
     def validate(self) -> None:
         if self.target_fps is not None and not self.target_fps > 0:

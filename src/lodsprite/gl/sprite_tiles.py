@@ -1,0 +1,248 @@
+"""GL side of tiled keyframes (Qu, Wan, Qin & Kaufman 2000: part of the image re-rendered
+every frame; Chen, Swan & Kaufman 1999 §3.3 for the spriteframe).
+
+The keyframe image (frame plus guard band) is one render target split into an ``N x N``
+grid of tiles; each tile is re-rendered on its own, from its own viewpoint, through the
+full widened key projection at that viewpoint, scissored to its rectangle, with the
+terrain culled by the tile's sub-frustum.  The coarse z-buffer is rendered per tile the
+same way.  A tiled spriteframe picks, per fragment, the first tile whose key matrix maps
+the fragment's world position into that tile's rectangle, and samples the colour and the
+depths there as the whole-keyframe spriteframe does (rules ``fragment`` and ``coarse``;
+``triangle`` is taken as ``fragment``: the tile is chosen per fragment).  No mipmaps.
+
+It composes :class:`~lodsprite.gl.sprite.SpriteRenderer` (its key and coarse targets
+index 0 hold the tiles, its terrain and proxy draw the geometry).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import moderngl
+import numpy as np
+
+from lodsprite.camera import Projection, Viewpoint
+from lodsprite.errors import InputError
+from lodsprite.gl.shaders import PROXY_VERTEX_COMMON
+from lodsprite.gl.sprite import SpriteRenderer
+from lodsprite.gl.target import RenderTarget
+from lodsprite.gl.terrain import SKY_RGB, FrameStats
+
+MAX_TILES = 16  # N x N tiles, N <= 4: one vec4 varying per tile
+
+# Key clip coordinates are affine in the world position, so each tile's are computed per
+# vertex and interpolated (perspective-correct, as the world position would be): the
+# fragment shader tests every tile with a divide and four compares, in code unrolled per
+# tile (a loop over uniform matrices, dynamically indexed, cost 7x the whole-keyframe
+# spriteframe at 3 x 3 tiles on llvmpipe).
+_TILED_VS = """
+uniform mat4 u_mvp;
+uniform mat4 u_key_mvp[N_TILES];
+out vec2 g_uv;
+out vec4 g_key[N_TILES];
+void main() {
+    vec3 p = terrain_position(g_uv);
+    gl_Position = u_mvp * vec4(p, 1.0);
+    for (int i = 0; i < N_TILES; ++i) g_key[i] = u_key_mvp[i] * vec4(p, 1.0);
+}
+"""
+
+_TILED_FS_HEAD = """
+uniform sampler2D u_color;
+uniform sampler2D u_sprite;
+uniform sampler2D u_key_depth;
+uniform sampler2D u_key_coarse;
+uniform vec4 u_rect[N_TILES];      // NDC x0, y0, x1, y1 of each tile (half-open)
+uniform vec2 u_near_far[N_TILES];  // each tile's keyframe near, far (metres)
+uniform int u_visibility;          // 1: full z-buffer, 2: coarse z-buffer
+uniform float u_fragment_tol;
+uniform float u_coarse_tol;
+uniform int u_color_levels;
+uniform vec4 u_fallback_tint;
+in vec2 g_uv;
+in vec4 g_key[N_TILES];
+out vec4 f_color;
+float linear_depth(float window_z, vec2 nf) {
+    return 2.0 * nf.x * nf.y / (nf.y + nf.x - (2.0 * window_z - 1.0) * (nf.y - nf.x));
+}
+vec3 terrain_fallback(vec2 uv, int level) {
+    ivec2 size = textureSize(u_color, level);
+    return texelFetch(u_color, clamp(ivec2(uv * vec2(size)), ivec2(0), size - 1), level).rgb;
+}
+bool holds(vec4 c, vec4 r) {  // c.xy / c.w in [r.xy, r.zw), without the divide
+    vec4 e = r * c.w;
+    return c.w > 0.0 && c.x >= e.x && c.x < e.z && c.y >= e.y && c.y < e.w;
+}
+void main() {
+    bool found = false;
+    vec4 k = vec4(0.0, 0.0, 0.0, 1.0);
+    vec2 nf = vec2(1.0);
+"""
+
+# One test per tile, last to first: the first tile whose key holds the fragment wins.
+_TILED_FS_TILE = """    if (holds(g_key[{i}], u_rect[{i}])) {{
+        found = true; k = g_key[{i}]; nf = u_near_far[{i}];
+    }}
+"""
+
+_TILED_FS_TAIL = """
+    vec2 key_uv = k.xy / k.w * 0.5 + 0.5;
+    vec2 key_dx = dFdx(key_uv);
+    vec2 key_dy = dFdy(key_uv);
+    vec2 t = g_uv * vec2(textureSize(u_color, 0));
+    vec2 t_dx = dFdx(t);
+    vec2 t_dy = dFdy(t);
+    float rho2 = max(dot(t_dx, t_dx), dot(t_dy, t_dy));
+    int level = clamp(int(floor(0.5 * log2(max(rho2, 1.0)) + 0.5)), 0, u_color_levels - 1);
+    bool sprite = false;
+    if (found) {
+        float z = k.z / k.w;
+        if (abs(z) <= 1.0) {
+            bool coarse = u_visibility == 2;
+            float zb = coarse ? textureLod(u_key_coarse, key_uv, 0.0).r
+                              : textureLod(u_key_depth, key_uv, 0.0).r;
+            float tol = coarse ? u_coarse_tol : u_fragment_tol;
+            sprite = linear_depth(z * 0.5 + 0.5, nf) <= linear_depth(zb, nf) * (1.0 + tol);
+        }
+    }
+    vec3 rgb = sprite ? textureGrad(u_sprite, key_uv, key_dx, key_dy).rgb
+                      : mix(terrain_fallback(g_uv, level), u_fallback_tint.rgb,
+                            u_fallback_tint.a);
+    f_color = vec4(rgb, 1.0);
+}
+"""
+
+
+def tiled_sprite_shaders(count: int) -> tuple[str, str]:
+    """``(vertex, fragment)`` GLSL of the tiled spriteframe for ``count`` tiles; the vertex
+    shader reads ``PROXY_VERTEX_COMMON`` (``terrain_position``)."""
+    head = f"#version 330\n#define N_TILES {count}\n"
+    tests = "".join(_TILED_FS_TILE.format(i=i) for i in reversed(range(count)))
+    return (head + PROXY_VERTEX_COMMON + _TILED_VS,
+            head + _TILED_FS_HEAD + tests + _TILED_FS_TAIL)
+
+
+#: Draws a tile's full-resolution terrain: ``(viewpoint, projection, target, cull) ->
+#: FrameStats``, ``cull`` the ``(4, 4)`` sub-frustum matrix the chunks are culled with.
+TileDrawer = Callable[[Viewpoint, Projection, RenderTarget, np.ndarray], FrameStats]
+
+
+def scissor_rect(rect: np.ndarray) -> tuple[int, int, int, int]:
+    """``(x, y, w, h)`` of a pixel rectangle ``(x0, y0, x1, y1)``."""
+    x0, y0, x1, y1 = (int(v) for v in rect)
+    return x0, y0, x1 - x0, y1 - y0
+
+
+class TiledSpriteRenderer:
+    """Tiled keyframes and tiled spriteframes over a :class:`SpriteRenderer`.
+
+    ``rects (T, 4) int``: the tiles' pixel rectangles ``(x0, y0, x1, y1)`` in the keyframe
+    target (GL window coordinates), ``ndc (T, 4)``: the same in NDC (``T <=``
+    :data:`MAX_TILES`; :func:`lodsprite.sprite.tiled.tile_rects` makes them).  Tile state
+    (viewpoint, key projection, key view-projection) is set by :meth:`render_tile`.
+    """
+
+    def __init__(self, sprite: SpriteRenderer, rects: np.ndarray, ndc: np.ndarray) -> None:
+        count = len(rects)
+        if not 1 <= count <= MAX_TILES or len(ndc) != count:
+            raise InputError(f"1 to {MAX_TILES} tiles, got {count}")
+        self.sprite = sprite
+        self.ctx = sprite.ctx
+        self.target: RenderTarget = sprite.key_targets[0]
+        self.coarse: RenderTarget = sprite.coarse_targets[0]
+        self.rects = np.asarray(rects)
+        self.ndc = np.asarray(ndc, np.float64)
+        self.viewpoints: list[Viewpoint | None] = [None] * count
+        self.projections: list[Projection | None] = [None] * count
+        self.view_projs = np.tile(np.eye(4), (count, 1, 1))
+        mode = 2 if sprite.visibility == "coarse" else 1
+        vs, fs = tiled_sprite_shaders(count)
+        self.program = self.ctx.mgl.program(vertex_shader=vs, fragment_shader=fs)
+        prog = self.program
+        values = {"u_visibility": mode, "u_color": 0, "u_sprite": 2, "u_key_depth": 3,
+                  "u_key_coarse": 4,
+                  "u_fragment_tol": sprite.program["u_fragment_tol"].value,
+                  "u_coarse_tol": sprite.program["u_coarse_tol"].value}
+        for name, value in values.items():
+            if name in prog:
+                prog[name].value = value
+        self._vaos: dict = {}
+
+    @property
+    def count(self) -> int:
+        return len(self.rects)
+
+    def default_drawer(self, viewpoint: Viewpoint, projection: Projection,
+                       target: RenderTarget, cull: np.ndarray) -> FrameStats:
+        """The full-resolution terrain with its chunks culled by ``cull``."""
+        return self.sprite.terrain.render(viewpoint, None, projection, target, cull=cull)
+
+    def render_tile(self, tile: int, viewpoint: Viewpoint, projection: Projection,
+                    cull: np.ndarray, drawer: TileDrawer | None = None) -> FrameStats:
+        """Re-render tile ``tile`` from ``viewpoint`` through the key ``projection`` (the
+        widened one), scissored to its rectangle, the terrain culled by ``cull (4, 4)``
+        (the tile's sub-frustum, :func:`lodsprite.sprite.tiled.sub_view_proj`); its coarse
+        z-buffer too (``coarse`` rule).  Issues GL work only (no finish)."""
+        view_proj = projection.matrix() @ viewpoint.view_matrix()
+        box = scissor_rect(self.rects[tile])
+        drawer = drawer or self.default_drawer
+        try:
+            self.target.fbo.scissor = box
+            stats = drawer(viewpoint, projection, self.target, cull)
+            if self.sprite.visibility == "coarse":
+                self.coarse.fbo.scissor = box
+                self.sprite.render_coarse_depth(viewpoint, projection, self.coarse)
+        finally:
+            self.target.fbo.scissor = None
+            self.coarse.fbo.scissor = None
+        self.viewpoints[tile], self.projections[tile] = viewpoint, projection
+        self.view_projs[tile] = view_proj
+        return stats
+
+    def keyframe_color(self) -> np.ndarray:
+        """The tiled keyframe image without its guard band, ``(H, W, 3) uint8``, row 0 at
+        the top."""
+        g = self.sprite.guard_px
+        w, h = self.target.size
+        img = self.target.read_color(copy=False)
+        return (img[g:h - g, g:w - g] if g else img).copy()
+
+    def render_spriteframe(self, viewpoint: Viewpoint,
+                           projection: Projection | None = None) -> FrameStats:
+        """The coarse level textured from the tiles into the sprite renderer's target."""
+        if any(v is None for v in self.viewpoints):
+            raise RuntimeError("render_spriteframe needs every tile rendered first")
+        s = self.sprite
+        projection = projection or s.terrain.projection(viewpoint)
+        s.target.use(SKY_RGB)
+        self.ctx.mgl.enable(moderngl.DEPTH_TEST)
+        s.terrain.geometry.color_tex.use(0)
+        self.target.color.use(2)
+        self.target.depth.use(3)
+        self.coarse.depth.use(4)
+        prog = self.program
+        _write_array(prog["u_key_mvp"], np.stack([m.T for m in self.view_projs]))
+        _write_array(prog["u_rect"], self.ndc)
+        _write_array(prog["u_near_far"], np.array([(p.near, p.far) for p in self.projections]))
+        prog["u_color_levels"].value = s.terrain.geometry.color_tex_levels
+        prog["u_fallback_tint"].value = s.fallback_tint
+        tris = s.terrain.draw_proxy(prog, self._vaos,
+                                    projection.matrix() @ viewpoint.view_matrix(),
+                                    s.coarse_quads, s.border)
+        return FrameStats(tris, 1, projection)
+
+    def release(self) -> None:
+        for vao in self._vaos.values():
+            vao.release()
+        self._vaos.clear()
+        self.program.release()
+
+
+def _write_array(uniform, values: np.ndarray) -> None:
+    """Write ``values`` (one row per element) into a uniform array, zero-padded to its
+    length."""
+    flat = np.asarray(values, np.float32).reshape(len(values), -1)
+    out = np.zeros((uniform.array_length, flat.shape[1]), np.float32)
+    k = min(len(flat), len(out))  # the compiler may trim an array's unused tail
+    out[:k] = flat[:k]
+    uniform.write(out.tobytes())

@@ -1,0 +1,182 @@
+"""The tiled LOD-sprite frame loop (Qu, Wan, Qin & Kaufman 2000; Chen, Swan & Kaufman 1999
+Eq. 1-2 per tile): the GL driver of :mod:`lodsprite.sprite.tiled`.
+
+Each frame: the error of every tile at the current view (:func:`~lodsprite.sprite.tiled.
+tile_errors`), the tiles to re-render chosen by benefit/cost within ``tile_budget_ms``
+(:func:`~lodsprite.sprite.tiled.select_tiles`), each re-rendered at the current viewpoint
+through the key projection there (scissored, culled by its sub-frustum), then the tiled
+spriteframe.  A frame that re-rendered every tile is a keyframe (shown as it is, its
+centre); one that re-rendered some is of kind ``tiles``; the others are spriteframes.
+
+Each tile's cost is its last measured time (ms, GL finished after it; the first frame
+renders every tile and measures each).  The frame's time covers the errors, the
+selection, the tiles, ``C'`` of the new viewpoint and the spriteframe, up to
+``ctx.finish()``; it returns a :class:`~lodsprite.sprite.engine.SpriteFrame` as
+:class:`~lodsprite.sprite.engine.LodSpriteEngine` does.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Iterable, Sequence
+
+import numpy as np
+
+from lodsprite.camera import Viewpoint
+from lodsprite.errors import InputError
+from lodsprite.gl.sprite import SpriteRenderer
+from lodsprite.gl.sprite_tiles import TileDrawer, TiledSpriteRenderer
+from lodsprite.sprite.engine import SpriteFrame
+from lodsprite.sprite.metric import ErrorMetric
+from lodsprite.sprite.policy import KEYFRAME, SPRITE, KeyChoice
+from lodsprite.sprite.tiled import (
+    TILES,
+    combined_error,
+    ndc_rects,
+    reproject_in_key_view,
+    select_tiles,
+    sub_view_proj,
+    tile_errors,
+    tile_rects,
+)
+
+DEFAULT_TILE_BUDGET_MS = 8.0
+
+
+class TiledSpriteEngine:
+    """LOD-sprite with keyframes refreshed tile by tile: ``tiles x tiles`` tiles, error
+    threshold ``epsilon_px``, ``tile_budget_ms`` of tile work per frame.
+
+    :attr:`updates` lists every viewpoint tiles were rendered from (a
+    :class:`~lodsprite.sprite.policy.KeyChoice`); :attr:`mosaic` gives, per tile, the
+    index in it of the update the tile shows now; :attr:`last_tiles` the tiles the last
+    frame re-rendered.  :attr:`drawer` draws a tile's terrain (None: full resolution)."""
+
+    def __init__(self, sprite: SpriteRenderer, epsilon_px: float, tiles: int,
+                 tile_budget_ms: float = DEFAULT_TILE_BUDGET_MS) -> None:
+        if not epsilon_px > 0:
+            raise InputError(f"error threshold epsilon must be > 0 pixels, got {epsilon_px}")
+        if not tile_budget_ms >= 0:
+            raise InputError(f"--tile-budget-ms must be >= 0, got {tile_budget_ms}")
+        self.sprite = sprite
+        rects = tile_rects(tiles, sprite.key_targets[0].size)
+        self.tiled = TiledSpriteRenderer(sprite, rects, ndc_rects(rects,
+                                                                  sprite.key_targets[0].size))
+        self.tiles = tiles
+        self.epsilon_px = float(epsilon_px)
+        self.tile_budget_ms = float(tile_budget_ms)
+        self.metric = ErrorMetric.for_level(sprite.terrain.geometry.full, sprite.coarse_quads)
+        count = self.tiled.count
+        self.c_primes: list = [None] * count
+        self.costs_ms = np.zeros(count)
+        self.updates: list[KeyChoice] = []
+        self.mosaic = np.full(count, -1, np.intp)
+        self.last_tiles: tuple[int, ...] = ()
+        self.drawer: TileDrawer | None = None
+        self.between_keyframes = None  # called in frames that render no tile, timed
+        # Called after a frame's tiles, timed: (viewpoint, key projection) -> None (the
+        # adaptive renderer streams for the whole key view there).
+        self.after_tiles = None
+        self._shows_keyframe = False
+
+    @property
+    def keyframes(self) -> list[KeyChoice]:
+        """The viewpoints tiles were rendered from (:attr:`updates`)."""
+        return self.updates
+
+    @property
+    def shows_keyframe(self) -> bool:
+        return self._shows_keyframe
+
+    def errors(self, viewpoint: Viewpoint) -> tuple[np.ndarray, np.ndarray]:
+        """``(errors (T,) px, served (T,))`` of the tiles at ``viewpoint``."""
+        s = self.sprite
+        projection = s.terrain.projection(viewpoint)
+        view_proj = projection.matrix() @ viewpoint.view_matrix()
+        key = s.key_projection(projection)
+        return tile_errors(self.metric, self.c_primes, self.tiled.view_projs, self.tiled.ndc,
+                           viewpoint.o, view_proj, key.matrix() @ viewpoint.view_matrix(),
+                           projection.pixel_angle_rad(s.target.height))
+
+    def render_tiles(self, chosen: Iterable[int], key: KeyChoice,
+                     drawer: TileDrawer | None = None, measure: bool = True) -> int:
+        """Render tiles ``chosen`` from ``key`` (finishing after each, to measure its cost
+        when ``measure``); returns the triangles drawn."""
+        key_proj = self.sprite.key_projection(key.projection)
+        view_proj = key_proj.matrix() @ key.viewpoint.view_matrix()
+        tris = 0
+        ctx = self.sprite.terrain.ctx
+        for i in chosen:
+            t = time.perf_counter()
+            stats = self.tiled.render_tile(int(i), key.viewpoint, key_proj,
+                                           sub_view_proj(view_proj, self.tiled.ndc[i]),
+                                           drawer or self.drawer)
+            tris += stats.triangles
+            if measure:
+                ctx.finish()
+                self.costs_ms[i] = (time.perf_counter() - t) * 1e3
+        return tris
+
+    def frame(self, viewpoint: Viewpoint) -> SpriteFrame:
+        """Render the frame for ``viewpoint``; returns once the GL work has finished."""
+        t0 = time.perf_counter()
+        s = self.sprite
+        projection = s.terrain.projection(viewpoint)
+        errors, served = self.errors(viewpoint)
+        rendered = np.array([c is not None for c in self.c_primes])
+        decision = combined_error(errors, served) if rendered.any() else 0.0
+        chosen = select_tiles(errors, self.epsilon_px, self.costs_ms, served,
+                              self.tile_budget_ms, rendered)
+        tris = 0
+        if len(chosen):
+            key = KeyChoice(viewpoint, projection, False)
+            self.updates.append(key)
+            tris += self.render_tiles(chosen, key)
+            if self.after_tiles is not None:
+                self.after_tiles(viewpoint, s.key_projection(projection))
+            key_proj = s.key_projection(projection)
+            c_prime = reproject_in_key_view(self.metric, viewpoint.o,
+                                            key_proj.matrix() @ viewpoint.view_matrix())
+            for i in chosen:
+                self.c_primes[i] = c_prime
+                errors[i] = 0.0
+            self.mosaic[chosen] = len(self.updates) - 1
+        elif self.between_keyframes is not None:
+            self.between_keyframes()
+        self.last_tiles = tuple(int(i) for i in chosen)
+        whole = len(chosen) == self.tiled.count
+        self._shows_keyframe = whole
+        if not whole:
+            tris += self.tiled.render_spriteframe(viewpoint, projection).triangles
+        kind = KEYFRAME if whole else (TILES if len(chosen) else SPRITE)
+        shown = 0.0 if whole else combined_error(errors, served)
+        s.terrain.ctx.finish()
+        return SpriteFrame(kind, shown, decision, tris, (time.perf_counter() - t0) * 1e3,
+                           len(self.updates) - 1)
+
+    def read_image(self) -> np.ndarray:
+        """The last frame's image, ``(H, W, 3) uint8``, row 0 at the top."""
+        if self._shows_keyframe:
+            return self.tiled.keyframe_color()
+        return self.sprite.target.read_color()
+
+    def replay(self, viewpoint: Viewpoint, mosaic: Sequence[int], shows_keyframe: bool,
+               shown: np.ndarray,
+               drawer_for: Callable[[int, int], TileDrawer | None] | None = None
+               ) -> np.ndarray:
+        """Untimed: bring every tile to the update ``mosaic[t]`` of :attr:`updates` (tiles
+        whose ``shown[t]`` already is that update are kept; ``shown`` is updated) and
+        return the frame's image.  ``drawer_for(update, tile)``: the drawer that renders
+        the tile as that update did (None, or returning None: :attr:`drawer`)."""
+        for t, u in enumerate(mosaic):
+            if shown[t] != u:
+                drawer = None if drawer_for is None else drawer_for(int(u), t)
+                self.render_tiles([t], self.updates[u], drawer, measure=False)
+                shown[t] = u
+        if shows_keyframe:
+            return self.tiled.keyframe_color()
+        self.tiled.render_spriteframe(viewpoint)
+        return self.sprite.target.read_color()
+
+    def release(self) -> None:
+        self.tiled.release()

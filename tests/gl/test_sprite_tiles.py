@@ -1,0 +1,175 @@
+"""Tiled keyframes and tiled spriteframes on the real GL driver."""
+
+import numpy as np
+import pytest
+
+from conftest import make_field
+from lodsprite.camera import look_at
+from lodsprite.gl.sprite import SpriteRenderer
+from lodsprite.gl.terrain import TerrainGeometry, TerrainRenderer
+from lodsprite.sprite.engine import KEYFRAME
+from lodsprite.sprite.tiled import TILES
+from lodsprite.sprite.tiled_engine import TiledSpriteEngine
+from lodsprite.terrain import make_texture
+
+
+@pytest.fixture
+def build(gl):
+    made = []
+
+    def make(coarse=8, visibility="coarse", size=(128, 128), guard=16):
+        hf = make_field(64, kind="ridges", relief=150.0)
+        geo = TerrainGeometry(gl, hf, make_texture("terrain", hf))
+        tr = TerrainRenderer(gl, geo, *size)
+        sp = SpriteRenderer(tr, coarse, visibility, guard_px=guard)
+        made.append((sp, tr, geo))
+        return sp
+
+    yield make
+    for sp, tr, geo in made:
+        sp.release()
+        tr.release()
+        geo.release()
+
+
+VP = look_at((0.0, -300.0, 1500.0), (0.0, 0.0, 0.0))
+VP2 = look_at((120.0, -380.0, 1450.0), (10.0, 0.0, 0.0))
+
+
+@pytest.mark.parametrize("visibility", ["coarse", "fragment"])
+def test_tiles_from_one_viewpoint_equal_the_whole_keyframe(build, visibility):
+    # Every tile rendered from one viewpoint: the keyframe image is the whole keyframe's
+    # (scissored tiles, chunks culled by sub-frusta), and the tiled spriteframe from a
+    # second viewpoint equals the whole-keyframe spriteframe.  Stated tolerance: 99.9 % of
+    # pixels within 1 grey level, mean difference under 0.05.
+    sp = build(visibility=visibility)
+    eng = TiledSpriteEngine(sp, 1.0, 3)
+    try:
+        f = eng.frame(VP)
+        assert f.type == KEYFRAME and eng.last_tiles == tuple(range(9))
+        tiled_key = eng.tiled.keyframe_color().astype(int)
+        eng.tiled.render_spriteframe(VP2)
+        tiled = sp.target.read_color().astype(int)
+        sp.render_keyframe(VP, 0.0)
+        key = sp.keyframe_color().astype(int)
+        sp.render_spriteframe(VP2)
+        whole = sp.target.read_color().astype(int)
+    finally:
+        eng.release()
+    for a, b in ((tiled_key, key), (tiled, whole)):
+        diff = np.abs(a - b).max(-1)
+        assert np.percentile(diff, 99.9) <= 1
+        assert diff.mean() < 0.05
+
+
+def test_a_tile_rendered_from_elsewhere_changes_only_its_rectangle(build):
+    # The scissor: re-rendering tile 4 from another viewpoint changes no pixel outside it.
+    sp = build()
+    eng = TiledSpriteEngine(sp, 1.0, 3)
+    try:
+        eng.frame(VP)
+        before = eng.tiled.target.read_color().astype(int)
+        from lodsprite.sprite.policy import KeyChoice
+
+        eng.render_tiles([4], KeyChoice(VP2, sp.terrain.projection(VP2), False))
+        after = eng.tiled.target.read_color().astype(int)
+    finally:
+        eng.release()
+    x0, y0, x1, y1 = eng.tiled.rects[4]
+    h = before.shape[0]
+    inside = np.zeros(before.shape[:2], bool)
+    inside[h - y1:h - y0, x0:x1] = True  # rows top-down
+    changed = np.abs(after - before).max(-1) > 0
+    assert changed[inside].any()
+    assert not changed[~inside].any()
+
+
+def test_the_replay_reproduces_the_timed_mosaic(build):
+    # A short flight with a small budget renders tiles from several viewpoints; an untimed
+    # replay of each frame's mosaic in a second engine gives the timed image exactly.
+    sp = build(coarse=16)
+    eng = TiledSpriteEngine(sp, 0.02, 3, tile_budget_ms=0.0)  # only forced tiles
+    path = [look_at((20.0 * i, -300.0 - 15 * i, 1500.0 - 10 * i), (8.0 * i, 0.0, 0.0))
+            for i in range(6)]
+    timed, records = [], []
+    try:
+        for vp in path:
+            f = eng.frame(vp)
+            timed.append(eng.read_image())
+            records.append((eng.mosaic.copy(), eng.shows_keyframe, f.type))
+        assert TILES in {r[2] for r in records}
+        assert len({tuple(r[0]) for r in records}) >= 3  # mosaics of several viewpoints
+        shown = np.full(eng.tiled.count, -1)
+        for vp, img, (mosaic, key, _) in zip(path, timed, records, strict=True):
+            again = eng.replay(vp, mosaic, key, shown)
+            assert np.array_equal(again, img)
+    finally:
+        eng.release()
+
+
+@pytest.mark.parametrize("name", ["sprite", "sprite-adaptive"])
+def test_the_technique_replay_draws_the_timed_mosaic(gl, name):
+    # Through the registry, in-memory and adaptive keyframes: each frame's image equals
+    # its replay, frames replayed out of order; tiles_rendered counts every tile drawn.
+    from lodsprite import Renderer, get_path, load_scene, techniques
+
+    scene = load_scene("fractal:64:3", grid=64)
+    path = get_path("chen1999", scene.hf, 12)
+    with Renderer(scene, (64, 64), ctx=gl.mgl) as renderer:
+        t = techniques.create(name, renderer, **techniques.get(name).bind(
+            {"lod": 8, "epsilon": 0.5, "key_sse": 1.0, "tiles": 2, "tile_budget_ms": 0.0}))
+        try:
+            t.warm_up(path.viewpoints[0])
+            frames, shown, decisions = [], [], []
+            for vp in path.viewpoints:
+                frames.append(t.frame(vp))
+                shown.append(t.read_image())
+                decisions.append(t.decision())
+            assert frames[0].kind == KEYFRAME and frames[0].extra["tiles"] == 4
+            assert TILES in {f.kind for f in frames}
+            s = t.summary(frames)
+            assert s["tiles_rendered"] == sum(len(d["tiles"]) for d in decisions)
+            assert s["tiles_rendered"] < 4 * len(frames)
+            order = [5, 0, 11, 3, 4, 10, 1]
+            for i in order:
+                assert np.array_equal(t.replay(path.viewpoints[i], decisions[i]), shown[i]), i
+            # the scissor holds for this technique's tile drawer too
+            eng = t.tiled
+            before = eng.tiled.target.read_color().astype(int)
+            eng.render_tiles([3], eng.updates[0])
+            changed = np.abs(eng.tiled.target.read_color().astype(int) - before).max(-1) > 0
+            x0, y0, x1, y1 = eng.tiled.rects[3]
+            h = changed.shape[0]
+            changed[h - y1:h - y0, x0:x1] = False
+            assert not changed.any()
+        finally:
+            t.release()
+
+
+def test_the_viewer_flies_tiled_lod_sprite(gl):
+    # The viewer's sprite mode with tiles: frames drawn to its framebuffer (the tiled
+    # keyframe's centre on the first), the status line names the tiles.
+    from lodsprite import techniques
+    from lodsprite.gl.target import RenderTarget
+    from lodsprite.scene import open_scene
+    from lodsprite.viewer.controls import CameraController
+    from lodsprite.viewer.core import ViewerCore
+
+    scene = open_scene("fractal:128:3", grid=128)
+    modes = techniques.factories(scene.layers, ("distributed",), lod=16, threaded=False,
+                                 tiles=3, tile_budget_ms=4.0)
+    core = ViewerCore(gl.mgl, scene, (64, 64), modes, "sprite",
+                      CameraController.from_home(scene.camera_home()))
+    core.toggles["hud"] = False
+    target = RenderTarget(gl, 64, 64)
+    try:
+        core.frame(1 / 30, target.fbo)
+        first = target.read_color()
+        assert np.array_equal(first, core.technique.read_image())  # the keyframe's centre
+        for _ in range(2):
+            core.frame(1 / 30, target.fbo)
+        assert "3x3 tiles" in core.technique.status()
+        assert (first != first[0, 0]).any(axis=2).mean() > 0.2  # terrain, not only sky
+    finally:
+        core.release()
+        target.release()
