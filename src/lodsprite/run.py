@@ -77,6 +77,8 @@ class RenderConfig:
     gpu_mb: float = 256.0     # adaptive: GPU tile cache budget
     host_mb: float = 512.0    # adaptive: host tile cache budget
     flip: bool = False        # with ground_truth: FLIP per frame too
+    cache_mb: float = 0.0     # sprite: keyframe cache budget, MB (0: off)
+    cache_policy: str = "lru"  # sprite: keyframe cache replacement, lru | benefit
 
     @property
     def technique(self) -> str:
@@ -88,7 +90,8 @@ class RenderConfig:
         return {"lod": self.lod, "epsilon": self.epsilon, "visibility": self.visibility,
                 "guard_px": self.guard_px, "border": self.border, "sse": self.sse,
                 "key_sse": self.key_sse, "gpu_mb": self.gpu_mb, "host_mb": self.host_mb,
-                "threaded": False}
+                "threaded": False, "cache_mb": self.cache_mb,
+                "cache_policy": self.cache_policy}
 
     def validate(self) -> None:
         modes = _modes()  # the registry's now: a technique registered later is one too
@@ -111,6 +114,9 @@ class RenderConfig:
             raise InputError(f"quality stride must be >= 1, got {self.quality_stride}")
         if self.key_sse is not None and (self.mode != "sprite" or not self.key_sse > 0):
             raise InputError("--key-sse goes with --mode sprite and must be > 0 pixels")
+        if not self.cache_mb >= 0 or self.cache_policy not in ("lru", "benefit"):
+            raise InputError(f"--cache-mb must be >= 0 and --cache-policy lru or benefit, "
+                             f"got {self.cache_mb}, {self.cache_policy!r}")
         if not (self.sse > 0 and self.gpu_mb > 0 and self.host_mb > 0):
             raise InputError(f"--sse, --gpu-mb and --host-mb must be > 0, got {self.sse}, "
                              f"{self.gpu_mb}, {self.host_mb}")

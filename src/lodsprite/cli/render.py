@@ -10,6 +10,8 @@ from rich.table import Table
 
 from lodsprite.cli.common import (
     BorderOpt,
+    CacheMbOpt,
+    CachePolicyOpt,
     EpsOpt,
     ExagOpt,
     FramesOpt,
@@ -124,6 +126,8 @@ def render(
         "--gpu-mb", help="adaptive: GPU tile cache budget (MB)")] = 256.0,
     host_mb: Annotated[float, typer.Option(
         "--host-mb", help="adaptive: host tile cache budget (MB)")] = 512.0,
+    cache_mb: CacheMbOpt = 0.0,
+    cache_policy: CachePolicyOpt = "lru",
 ) -> None:
     """Render a camera path; write DIR/frames.csv and DIR/summary.json (and PNG frames)."""
     from lodsprite import RenderConfig, render_path
@@ -136,7 +140,8 @@ def render(
                           exaggeration=exaggeration, save_frames=save_frames, epsilon=epsilon,
                           ground_truth=ground_truth, visibility=visibility, border=border,
                           guard_px=guard, sse=sse, gpu_mb=gpu_mb, host_mb=host_mb,
-                          key_sse=key_sse, flip=flip)
+                          key_sse=key_sse, flip=flip, cache_mb=cache_mb,
+                          cache_policy=cache_policy)
     with progress_bar(f"render {mode}") as update:
         if distributed:
             from lodsprite.distributed.run import parse_max_error, render_distributed
@@ -193,6 +198,10 @@ def view(
         "--sse", help="adaptive: screen-space error tolerance in pixels")] = None,
     key_sse: Annotated[float | None, typer.Option(
         "--key-sse", help="sprite-adaptive: its keyframes' tolerance in pixels")] = None,
+    cache_mb: Annotated[float, typer.Option(
+        "--cache-mb", help="sprite with --inline-keyframes: keyframe cache budget in MB "
+                           "(0: off)")] = 0.0,
+    cache_policy: CachePolicyOpt = "lru",
 ) -> None:
     """Fly through a terrain with live LOD-sprite, or round a lumigraph (WASD/QE, mouse, tab
     orbit)."""
@@ -204,7 +213,8 @@ def view(
                        epsilon=epsilon, size=parse_size(size), fps=fps, threaded=not inline,
                        play=play, frames=frames, screenshots=screenshots, every=every,
                        exit=exit_, out=out_dir, record=record, server=server,
-                       target_fps=target_fps, sse=sse, key_sse=key_sse)
+                       target_fps=target_fps, sse=sse, key_sse=key_sse, cache_mb=cache_mb,
+                       cache_policy=cache_policy)
     s = run_view(opts)
     if s:
         out.print(f"{s['frames']} frames, {s['mode']}: median {s['median_ms']:.2f} ms, "

@@ -52,6 +52,16 @@ def flyover(hf: HeightField, frames: int = CHEN1999_FRAMES, height_m: float = DE
     """The flight (module docstring): ``frames`` viewpoints evenly spaced along the track."""
     n = _check_frames(frames)
     length = min(track_m, 0.9 * hf.depth)
+    ys = np.linspace(-length / 2, length / 2, n)
+    return CameraPath(f"flyover:{height_m:g}:{track_m:g}", along_track(hf, ys, length,
+                                                                      height_m))
+
+
+def along_track(hf: HeightField, ys: np.ndarray, length: float,
+                height_m: float) -> tuple[Viewpoint, ...]:
+    """Viewpoints at ``ys (N,)`` metres north on the centre line of a track ``length``
+    metres long, ``height_m`` above its smoothed running maximum ground, looking north
+    pitched down by ``PITCH_DEG``."""
     y = np.linspace(-length / 2, length / 2, _SAMPLES)
     ground = hf.height_at(np.zeros_like(y), y)
     reach = max(1, int(math.ceil(height_m / (length / (_SAMPLES - 1)))))
@@ -59,11 +69,10 @@ def flyover(hf: HeightField, frames: int = CHEN1999_FRAMES, height_m: float = DE
     # ground within +-reach (every maximum averaged covers that window)
     floor = ndimage.maximum_filter1d(ground, 4 * reach + 1, mode="nearest")
     floor = ndimage.uniform_filter1d(floor, reach, mode="nearest")
-    ys = np.linspace(-length / 2, length / 2, n)
     zs = np.interp(ys, y, floor) + height_m
     p = math.radians(PITCH_DEG)
     d = np.array([0.0, -math.cos(p), math.sin(p)])  # the camera looks along -d
     up = np.array([0.0, math.sin(p), math.cos(p)])
     right = np.cross(up, d)
-    vps = tuple(Viewpoint(right, up, d, np.array([0.0, ys[i], zs[i]])) for i in range(n))
-    return CameraPath(f"flyover:{height_m:g}:{track_m:g}", vps)
+    return tuple(Viewpoint(right, up, d, np.array([0.0, ys[i], zs[i]]))
+                 for i in range(len(ys)))

@@ -46,12 +46,15 @@ class ViewOptions:
     target_fps: float | None = None  # a crowd's LOD feedback target
     sse: float | None = None      # adaptive: screen-space error, pixels
     key_sse: float | None = None  # sprite-adaptive: its keyframes' SSE, pixels
+    cache_mb: float = 0.0         # sprite (inline keyframes): keyframe cache budget, MB
+    cache_policy: str = "lru"     # keyframe cache replacement, lru | benefit
 
     def technique_options(self) -> dict:
         """The options of the command the registry's techniques pick theirs from."""
         return {"lod": self.lod, "epsilon": self.epsilon, "threaded": self.threaded,
                 "server": self.server, "target_fps": self.target_fps, "sse": self.sse,
-                "key_sse": self.key_sse}
+                "key_sse": self.key_sse, "cache_mb": self.cache_mb,
+                "cache_policy": self.cache_policy}
 
     def validate(self) -> None:
         if self.target_fps is not None and not self.target_fps > 0:
