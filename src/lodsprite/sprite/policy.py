@@ -140,7 +140,8 @@ class KeyframePolicy:
     for the look-ahead); ``epsilon_px``: the threshold ε in pixels; ``height_px``: the
     image height (sets the pixel angle β); ``projection(viewpoint)``: the frame projection;
     ``key_projection(projection)``: the projection a keyframe is rendered through (default:
-    the frame's); ``predict``: place due keyframes ahead of the viewer.
+    the frame's); ``predict``: place due keyframes ahead of the viewer; ``cache``: a
+    :class:`~lodsprite.sprite.cache.KeyframeCache` to keep keyframes in (None: one keyframe).
     """
 
     def __init__(self, metric: ErrorMetric, hf: HeightField, epsilon_px: float,
@@ -168,7 +169,8 @@ class KeyframePolicy:
     @classmethod
     def for_terrain(cls, hf: HeightField, lod: int, epsilon_px: float,
                     size: tuple[int, int], fov_y_deg: float = 45.0, guard_px: int = 0,
-                    predict: bool = True) -> KeyframePolicy:
+                    predict: bool = True,
+                    cache: KeyframeCache | None = None) -> KeyframePolicy:
         """The policy for ``hf`` at coarse level ``lod`` on ``size = (w, h)`` pixel images,
         with the projections the terrain renderer uses (near/far fitted to the terrain,
         keyframes widened by ``guard_px`` pixels on every side)."""
@@ -180,7 +182,7 @@ class KeyframePolicy:
             return fitted_projection(vp, fov_y_deg, w / h, lo, hi, ground)
 
         return cls(ErrorMetric.for_level(hf, lod), hf, epsilon_px, h, projection,
-                   lambda p: widened(p, w, h, guard_px), predict)
+                   lambda p: widened(p, w, h, guard_px), predict, cache)
 
     def error_px(self, c_prime: np.ndarray, viewpoint: Viewpoint,
                  projection: Projection) -> float:
