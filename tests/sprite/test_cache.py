@@ -42,11 +42,13 @@ def test_the_policy_shows_the_cached_keyframe_with_the_lowest_error():
                                         cache=cache)
     for y in (-1500.0, 0.0, 1500.0):  # under a tiny ε every frame is a keyframe
         assert policy.decide(_north(y)).type == KEYFRAME
-    policy.epsilon_px = 50.0
     here = _north(120.0)  # nearest the middle keyframe, which is not the one shown
     assert cache.shown.index == 2
     errors = [policy.error_px(e.c_prime, here, policy.projection(here)) for e in cache.entries]
     assert int(np.argmin(errors)) == 1 and errors[1] < 0.5 * min(errors[0], errors[2])
+    policy.epsilon_px = 2.5 * errors[2]  # under SWITCH_FRACTION ε the shown one stays
+    assert policy.best_cached(here, policy.projection(here))[0].index == 2
+    policy.epsilon_px = 1.5 * errors[2]  # the shown one serves, but above SWITCH_FRACTION
     best, err = policy.best_cached(here, policy.projection(here))
     assert best.index == 1 and err == pytest.approx(errors[1])
     d = policy.decide(here)

@@ -47,7 +47,7 @@ import numpy as np
 
 from lodsprite.camera import Projection, Viewpoint, fitted_projection, widened
 from lodsprite.errors import InputError
-from lodsprite.sprite.cache import CachedKeyframe, KeyframeCache
+from lodsprite.sprite.cache import SWITCH_FRACTION, CachedKeyframe, KeyframeCache
 from lodsprite.sprite.metric import ErrorMetric
 from lodsprite.sprite.predict import extrapolate
 from lodsprite.terrain.heightfield import HeightField
@@ -231,15 +231,26 @@ class KeyframePolicy:
     def best_cached(self, viewpoint: Viewpoint,
                     projection: Projection) -> tuple[CachedKeyframe | None, float]:
         """The cached keyframe with the lowest error at ``viewpoint`` and that error
-        (``(None, inf)`` when none is cached or none covers the view); the shown keyframe
-        needs no coverage test (its guard band serves it, as without a cache)."""
-        best, best_err = None, math.inf
-        for e in self.cache.candidates(viewpoint.o):
-            if e is not self.cache.shown and not self.metric.covers(
-                    viewpoint, projection, e.viewpoint, self.key_projection(e.projection)):
+        (``(None, inf)`` when none is cached); the shown keyframe needs no coverage test
+        (its guard band serves it, as without a cache) and, under ``SWITCH_FRACTION`` ε,
+        no search (:mod:`lodsprite.sprite.cache`: the cost and the prunings)."""
+        shown = self.cache.shown
+        if shown is None:
+            return None, math.inf
+        best, best_err = shown, self.error_px(shown.c_prime, viewpoint, projection)
+        if best_err < SWITCH_FRACTION * self.epsilon_px:
+            return best, best_err
+        here = None
+        for e in self.cache.candidates(viewpoint.o)[1:]:
+            if e.in_view is None:
+                e.in_view = self.metric.in_view_mask(e.viewpoint,
+                                                     self.key_projection(e.projection))
+            if here is None:
+                here = self.metric.in_view_mask(viewpoint, projection)
+            if not np.all(e.in_view[here]):
                 continue
             err = self.error_px(e.c_prime, viewpoint, projection)
-            if err < best_err or best is None:
+            if err < best_err:
                 best, best_err = e, err
         return best, best_err
 
