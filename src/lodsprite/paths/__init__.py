@@ -22,7 +22,7 @@ A :class:`CameraPath` is a sequence of :class:`~lodsprite.camera.Viewpoint`
 ``+y`` north, ``+z`` up, the terrain's horizontal centre at the origin.
 
 A fourth, :func:`patrol`, flies back and forth over one stretch (several passes, the case
-of the 1999 paper's keyframe cache, :mod:`lodsprite.paths.patrol`).
+of the 1999 paper's keyframe cache, :mod:`lodsprite.paths.flyover`).
 
 A third, :func:`flyover`, is not a paper's: a low flight of fixed height and length in
 metres, the same over a terrain of any size (for comparing renderers across sizes).
@@ -46,9 +46,8 @@ from lodsprite.paths.core import (
     _check_frames,
     load_path_json,
 )
-from lodsprite.paths.flyover import flyover, parse_flyover
+from lodsprite.paths.flyover import flyover, parse_flyover, parse_patrol, patrol
 from lodsprite.paths.papers import chen1999, swan2002
-from lodsprite.paths.patrol import parse_patrol, patrol
 from lodsprite.terrain.heightfield import HeightField
 
 __all__ = [
@@ -78,7 +77,7 @@ def get_path(spec: str | os.PathLike, hf: HeightField, frames: int | None = None
     600 frames), ``"flyover[:HEIGHT_M[:TRACK_M]]"`` (460 frames; a low flight of fixed
     height and length, :mod:`lodsprite.paths.flyover`),
     ``"patrol[:HEIGHT_M[:TRACK_M[:PASSES]]]"`` (460 frames; back and forth,
-    :mod:`lodsprite.paths.patrol`) or a JSON path file (module
+    :mod:`lodsprite.paths.flyover`) or a JSON path file (module
     docstring), which is resampled to ``frames`` when given
     (:meth:`CameraPath.resampled`).  A spec ending in ``.json`` that does not exist
     reports the missing file; any other unknown spec raises :class:`PathError`.
