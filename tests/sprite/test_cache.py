@@ -157,12 +157,12 @@ def test_cache_off_is_the_1999_loop_as_before(gl):
 @pytest.mark.parametrize("name", ["sprite", "sprite-adaptive"])
 @pytest.mark.parametrize("policy", ["lru", "benefit"])
 def test_with_the_cache_the_replay_draws_what_the_timed_run_showed(gl, name, policy):
-    """Along a patrol the cache serves frames from older keyframes; each frame's untimed
+    """Along chen1999 the cache serves some frames from older keyframes; each frame's untimed
     replay equals its timed image, and the GL pool stays within the budget."""
     from lodsprite import Renderer, get_path, load_scene, techniques
 
     scene = load_scene("fractal:64:3", grid=64)
-    path = get_path("patrol:300:1200:4", scene.hf, 80)
+    path = get_path("chen1999", scene.hf, 120)
     with Renderer(scene, (64, 64), ctx=gl.mgl) as renderer:
         budget = 6 * renderer.sprite(1.0, 8).sprite.keyframe_bytes() / 2 ** 20
         t = techniques.create(name, renderer, **techniques.get(name).bind(
@@ -175,6 +175,7 @@ def test_with_the_cache_the_replay_draws_what_the_timed_run_showed(gl, name, pol
                 shown.append(t.read_image())
                 decisions.append(t.decision())
             summary = t.summary(frames)
+            assert t.engine.predicted_keyframes > 0  # the look-ahead works with the cache
             sprite = t.sprite.sprite
             assert len(sprite.key_targets) * sprite.keyframe_bytes() <= budget * 2 ** 20
             for i, (vp, d) in enumerate(zip(path.viewpoints, decisions, strict=True)):

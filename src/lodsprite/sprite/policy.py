@@ -267,7 +267,7 @@ class KeyframePolicy:
         cached = None
         if self.cache is not None:
             cached, decision = self.best_cached(viewpoint, projection)
-            if cached is None and self.c_prime is None:
+            if cached is None:  # the first frame
                 decision = 0.0
         else:
             decision = (0.0 if self.c_prime is None
