@@ -15,8 +15,9 @@ that store (sprite with ``--key-sse``: keyframes by the adaptive renderer).  Per
 keyframes rendered, keyframe ms total (the timed frames that rendered one), median and
 p99 frame ms, cache hits and resident keyframes, and the RMSE of an untimed replay against
 full resolution (every ``--stride``-th frame).  Prints a table, writes ``--csv``, and per
-flight the keyframe-work cut of the best cache at an RMSE no higher than the cache off's
-(+ ``RMSE_TOL``) - the issue's target on patrol is 3x.  Times on a shared CPU are noisy.
+flight the keyframe-work cut of the cache run with the fewest keyframes at an RMSE no
+higher than the cache off's (+ ``RMSE_TOL``): keyframes rendered (deterministic) and
+keyframe ms (noisy on a shared CPU) - the issue's target on patrol is 3x.
 
     python benchmarks/keyframe_cache.py [--terrain jacksboro] [--store STORE.zarr] \
         [--frames 460] [--size 512x512] [--budgets 16 64] [--csv out/keyframe_cache.csv]
@@ -86,10 +87,12 @@ def cut(rows: list[dict]) -> str:
     fair = [r for r in rows if r["cache"] != "off" and r["rmse"] <= off["rmse"] + RMSE_TOL]
     if not fair:
         return f"no cache run at RMSE <= {off['rmse']:.3f} + {RMSE_TOL}"
-    best = max(fair, key=lambda r: off["keyframe_ms_total"] / max(r["keyframe_ms_total"], 1e-9))
-    return (f"keyframe work cut {off['keyframe_ms_total'] / best['keyframe_ms_total']:.2f}x "
-            f"(keyframes {off['keyframes']} -> {best['keyframes']}) by {best['cache']} at "
-            f"{best['cache_mb']:g} MB; RMSE {off['rmse']:.3f} -> {best['rmse']:.3f}")
+    best = min(fair, key=lambda r: (r["keyframes"], r["keyframe_ms_total"]))
+    return (f"keyframes cut {off['keyframes'] / max(best['keyframes'], 1):.2f}x "
+            f"({off['keyframes']} -> {best['keyframes']}), keyframe ms "
+            f"{off['keyframe_ms_total'] / max(best['keyframe_ms_total'], 1e-9):.2f}x, by "
+            f"{best['cache']} at {best['cache_mb']:g} MB; RMSE {off['rmse']:.3f} -> "
+            f"{best['rmse']:.3f}")
 
 
 def main() -> None:
