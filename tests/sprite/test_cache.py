@@ -176,6 +176,8 @@ def test_with_the_cache_the_replay_draws_what_the_timed_run_showed(gl, name, pol
                 decisions.append(t.decision())
             summary = t.summary(frames)
             assert t.engine.predicted_keyframes > 0  # the look-ahead works with the cache
+            if name == "sprite":
+                assert f"/{t.engine.cache.capacity} ({policy}" in t.status()
             sprite = t.sprite.sprite
             assert len(sprite.key_targets) * sprite.keyframe_bytes() <= budget * 2 ** 20
             for i, (vp, d) in enumerate(zip(path.viewpoints, decisions, strict=True)):

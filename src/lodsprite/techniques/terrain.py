@@ -194,7 +194,10 @@ class SpriteTechnique(Technique):
 
     def status(self) -> str:
         if not self.threaded:
-            return "keyframes: inline"
+            cache = self.engine.cache
+            return "keyframes: inline" + ("" if cache is None else (
+                f"; cache {len(cache.entries)}/{cache.capacity} ({cache.policy}, "
+                f"{cache.evicted} evicted)"))
         engine = self.engine
         w = engine.worker
         state = f"failed: {w.error}" if w.error is not None else (
