@@ -99,6 +99,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--terrain", default="jacksboro")
     ap.add_argument("--store", default=None, help="a terrain store (sprite --key-sse) too")
+    ap.add_argument("--store-only", action="store_true", help="skip --terrain")
     ap.add_argument("--key-sse", type=float, default=1.0)
     ap.add_argument("--flight", default=None, help="a recorded back-and-forth flight, .json")
     ap.add_argument("--frames", type=int, default=460)
@@ -108,7 +109,8 @@ def main() -> None:
     ap.add_argument("--stride", type=int, default=5, help="replay every Nth frame")
     ap.add_argument("--csv", type=Path, default=Path("out/keyframe_cache.csv"))
     a = ap.parse_args()
-    terrains = [(a.terrain, None)] + ([(a.store, a.key_sse)] if a.store else [])
+    terrains = ([] if a.store_only else [(a.terrain, None)]) + (
+        [(a.store, a.key_sse)] if a.store else [])
     table: list[dict] = []
     print(" ".join(COLUMNS))
     with tempfile.TemporaryDirectory() as tmp:
