@@ -31,6 +31,7 @@ from lodsprite.harness import RunResult, run_path, timing_summary, write_run
 from lodsprite.paths import CameraPath, get_path
 from lodsprite.progress import Progress
 from lodsprite.scene import Scene, load_scene
+from lodsprite.sprite.cache import POLICIES as CACHE_POLICIES
 from lodsprite.sprite.engine import DEFAULT_EPSILON_PX
 from lodsprite.terrain import DEFAULT_EXAGGERATION
 from lodsprite.terrain.lod import DEFAULT_COARSE, level_step
@@ -114,7 +115,7 @@ class RenderConfig:
             raise InputError(f"quality stride must be >= 1, got {self.quality_stride}")
         if self.key_sse is not None and (self.mode != "sprite" or not self.key_sse > 0):
             raise InputError("--key-sse goes with --mode sprite and must be > 0 pixels")
-        if not self.cache_mb >= 0 or self.cache_policy not in ("lru", "benefit"):
+        if not self.cache_mb >= 0 or self.cache_policy not in CACHE_POLICIES:
             raise InputError(f"--cache-mb must be >= 0 and --cache-policy lru or benefit, "
                              f"got {self.cache_mb}, {self.cache_policy!r}")
         if not (self.sse > 0 and self.gpu_mb > 0 and self.host_mb > 0):
