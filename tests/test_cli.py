@@ -87,6 +87,10 @@ def test_sprite_mode_with_ground_truth_reports_quality(tmp_path):
     (["render", *SMALL, "--texture", "/no/image.png"], "/no/image.png"),
     (["render", *SMALL, "--mode", "sprite", "--epsilon", "0"], "epsilon"),
     (["render", *SMALL, "--mode", "sprite", "--guard", "-1"], "guard"),
+    (["render", *SMALL, "--mode", "sprite", "--cache-mb", "-1"], "cache-mb"),
+    (["render", *SMALL, "--mode", "sprite", "--cache-policy", "fifo"], "cache-policy"),
+    (["render", *SMALL, "--mode", "sprite", "--cache-mb", "0.01"], "at least"),
+    (["render", *SMALL, "--path", "patrol:1:2:0"], "passes"),
     (["render", "--no-such-option"], "no-such-option"),
     (["reproduce", "nobody2000"], "nobody2000"),
 ])

@@ -36,6 +36,7 @@ from lodsprite.gl.paths import PathRenderer
 from lodsprite.gl.sprite import DEFAULT_GUARD_PX, DEFAULT_VISIBILITY, SpriteRenderer
 from lodsprite.gl.terrain import FrameStats
 from lodsprite.scene import Scene
+from lodsprite.sprite.cache import DEFAULT_POLICY
 from lodsprite.sprite.engine import DEFAULT_EPSILON_PX, LodSpriteEngine, SpriteFrame
 from lodsprite.sprite.threaded import ThreadedLodSpriteEngine
 from lodsprite.terrain.lod import DEFAULT_COARSE
@@ -139,14 +140,24 @@ class Renderer:
 
     def sprite(self, epsilon_px: float = DEFAULT_EPSILON_PX, lod: int = DEFAULT_COARSE,
                threaded: bool = False, visibility: str = DEFAULT_VISIBILITY,
-               guard_px: int = DEFAULT_GUARD_PX, border: bool = True) -> LodSprite:
+               guard_px: int = DEFAULT_GUARD_PX, border: bool = True, cache_mb: float = 0.0,
+               cache_policy: str = DEFAULT_POLICY) -> LodSprite:
         """A LOD-sprite engine on this renderer: error threshold ``epsilon_px`` pixels,
         coarse level ``lod`` quads per side.  ``threaded=True`` renders keyframes on a
         worker thread with its own context (:mod:`lodsprite.sprite.threaded`); otherwise a
-        keyframe is rendered inline in the frame that needs it (the 1999 algorithm)."""
+        keyframe is rendered inline in the frame that needs it (the 1999 algorithm).
+        ``cache_mb > 0`` keeps keyframes in a GPU cache of that many MB replaced by
+        ``cache_policy`` (``lru`` | ``benefit``; :mod:`lodsprite.sprite.cache`; inline
+        keyframes only)."""
         if not epsilon_px > 0:
             raise InputError(f"epsilon must be > 0 pixels, got {epsilon_px}")
-        sprite = LodSprite(self, epsilon_px, lod, threaded, visibility, guard_px, border)
+        if not cache_mb >= 0:
+            raise InputError(f"cache_mb must be >= 0 MB, got {cache_mb}")
+        if cache_mb > 0 and threaded:
+            raise InputError("the keyframe cache needs inline keyframes "
+                             "(--inline-keyframes)")
+        sprite = LodSprite(self, epsilon_px, lod, threaded, visibility, guard_px, border,
+                           cache_mb, cache_policy)
         self._sprites.append(sprite)
         return sprite
 
@@ -211,7 +222,8 @@ class LodSprite:
     """
 
     def __init__(self, renderer: Renderer, epsilon_px: float, lod: int, threaded: bool,
-                 visibility: str, guard_px: int, border: bool) -> None:
+                 visibility: str, guard_px: int, border: bool, cache_mb: float = 0.0,
+                 cache_policy: str = DEFAULT_POLICY) -> None:
         self.renderer = renderer
         self.threaded = threaded
         self.sprite = SpriteRenderer(renderer.paths.renderer, lod, visibility, border=border,
@@ -220,7 +232,8 @@ class LodSprite:
             self.engine: LodSpriteEngine | ThreadedLodSpriteEngine = (
                 ThreadedLodSpriteEngine(self.sprite, renderer.scene, renderer.fov_y_deg,
                                         epsilon_px) if threaded
-                else LodSpriteEngine(self.sprite, epsilon_px))
+                else LodSpriteEngine(self.sprite, epsilon_px, cache_mb=cache_mb,
+                                     cache_policy=cache_policy))
         except BaseException:
             self.sprite.release()
             raise

@@ -34,6 +34,7 @@ from lodsprite.harness import RunResult, run_path, timing_summary, write_run
 from lodsprite.paths import CameraPath, get_path
 from lodsprite.progress import Progress
 from lodsprite.scene import Scene, load_scene
+from lodsprite.sprite.cache import POLICIES as CACHE_POLICIES
 from lodsprite.sprite.engine import DEFAULT_EPSILON_PX
 from lodsprite.terrain import DEFAULT_EXAGGERATION
 from lodsprite.terrain.loaders import load_level0
@@ -87,6 +88,8 @@ class RenderConfig:
     shading: str = "auto"     # colour: auto (heights on a store) | texture | heights
     tiles: int = 1            # sprite: an N x N grid of keyframe tiles (1: whole keyframes)
     tile_budget_ms: float = 8.0  # sprite, tiles > 1: tile work per frame, ms
+    cache_mb: float = 0.0     # sprite: keyframe cache budget, MB (0: off)
+    cache_policy: str = "lru"  # sprite: keyframe cache replacement, lru | benefit
 
     @property
     def technique(self) -> str:
@@ -99,7 +102,8 @@ class RenderConfig:
                 "guard_px": self.guard_px, "border": self.border, "sse": self.sse,
                 "key_sse": self.key_sse, "gpu_mb": self.gpu_mb, "host_mb": self.host_mb,
                 "threaded": False, "shading": self.shading, "tiles": self.tiles,
-                "tile_budget_ms": self.tile_budget_ms}
+                "tile_budget_ms": self.tile_budget_ms, "cache_mb": self.cache_mb,
+                "cache_policy": self.cache_policy}
 
     def validate(self) -> None:
         modes = _modes()  # the registry's now: a technique registered later is one too
@@ -131,6 +135,9 @@ class RenderConfig:
                              f"--tile-budget-ms >= 0, got {self.tiles}, {self.tile_budget_ms}")
         if self.tiles > 1 and self.mode != "sprite":
             raise InputError("--tiles goes with --mode sprite")
+        if not self.cache_mb >= 0 or self.cache_policy not in CACHE_POLICIES:
+            raise InputError(f"--cache-mb must be >= 0 and --cache-policy lru or benefit, "
+                             f"got {self.cache_mb}, {self.cache_policy!r}")
         if not (self.sse > 0 and self.gpu_mb > 0 and self.host_mb > 0):
             raise InputError(f"--sse, --gpu-mb and --host-mb must be > 0, got {self.sse}, "
                              f"{self.gpu_mb}, {self.host_mb}")

@@ -27,7 +27,8 @@ TerrainOpt = Annotated[str, typer.Option(
 TextureOpt = Annotated[str, typer.Option(
     "--texture", help="terrain | checker[:K] | image FILE")]
 PathOpt = Annotated[str, typer.Option(
-    "--path", help="chen1999 | swan2002 | flyover[:HEIGHT_M[:TRACK_M]] | FILE.json")]
+    "--path", help="chen1999 | swan2002 | flyover[:HEIGHT_M[:TRACK_M]] | "
+                   "patrol[:HEIGHT_M[:TRACK_M[:PASSES]]] | FILE.json")]
 FramesOpt = Annotated[int | None, typer.Option(
     "--frames", help="frames along the path (default: the paper's 460 / 600, or the file's)")]
 SizeOpt = Annotated[str, typer.Option("--size", help="image size WxH in pixels")]
@@ -44,6 +45,11 @@ BorderOpt = Annotated[bool, typer.Option(
                                  "(border ribbons) with the coarse level")]
 GuardOpt = Annotated[int, typer.Option(
     "--guard", help="sprite mode: keyframe guard band in pixels on every side")]
+CacheMbOpt = Annotated[float, typer.Option(
+    "--cache-mb", help="sprite mode: keep keyframes in a GPU cache of this many MB and show "
+                       "the one with the lowest error (0: off, the 1999 algorithm)")]
+CachePolicyOpt = Annotated[str, typer.Option(
+    "--cache-policy", help="sprite mode: keyframe cache replacement: lru | benefit")]
 PaceOpt = Annotated[str, typer.Option(
     "--pace", help="distributed: needed (the server renders a keyframe when the shown one "
                    "nears ε) | continuous (back to back, the paper)")]

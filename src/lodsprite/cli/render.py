@@ -10,6 +10,8 @@ from rich.table import Table
 
 from lodsprite.cli.common import (
     BorderOpt,
+    CacheMbOpt,
+    CachePolicyOpt,
     EpsOpt,
     ExagOpt,
     FramesOpt,
@@ -139,6 +141,8 @@ def render(
     shading: ShadingOpt = "auto",
     tiles: TilesOpt = 1,
     tile_budget_ms: TileBudgetOpt = 8.0,
+    cache_mb: CacheMbOpt = 0.0,
+    cache_policy: CachePolicyOpt = "lru",
 ) -> None:
     """Render a camera path; write DIR/frames.csv and DIR/summary.json (and PNG frames)."""
     from lodsprite import RenderConfig, render_path
@@ -152,7 +156,8 @@ def render(
                           ground_truth=ground_truth, visibility=visibility, border=border,
                           guard_px=guard, sse=sse, gpu_mb=gpu_mb, host_mb=host_mb,
                           key_sse=key_sse, flip=flip, shading=shading, tiles=tiles,
-                          tile_budget_ms=tile_budget_ms)
+                          tile_budget_ms=tile_budget_ms, cache_mb=cache_mb,
+                          cache_policy=cache_policy)
     with progress_bar(f"render {mode}") as update:
         if distributed:
             from lodsprite.distributed.run import parse_max_error, render_distributed
@@ -212,6 +217,10 @@ def view(
     shading: ShadingOpt = "auto",
     tiles: TilesOpt = 1,
     tile_budget_ms: TileBudgetOpt = 8.0,
+    cache_mb: Annotated[float, typer.Option(
+        "--cache-mb", help="sprite with --inline-keyframes: keyframe cache budget in MB "
+                           "(0: off)")] = 0.0,
+    cache_policy: CachePolicyOpt = "lru",
 ) -> None:
     """Fly through a terrain with live LOD-sprite, or round a lumigraph (WASD/QE, mouse, tab
     orbit)."""
@@ -224,7 +233,8 @@ def view(
                        play=play, frames=frames, screenshots=screenshots, every=every,
                        exit=exit_, out=out_dir, record=record, server=server,
                        target_fps=target_fps, sse=sse, key_sse=key_sse, shading=shading,
-                       tiles=tiles, tile_budget_ms=tile_budget_ms)
+                       tiles=tiles, tile_budget_ms=tile_budget_ms, cache_mb=cache_mb,
+                       cache_policy=cache_policy)
     s = run_view(opts)
     if s:
         out.print(f"{s['frames']} frames, {s['mode']}: median {s['median_ms']:.2f} ms, "

@@ -255,7 +255,7 @@ class LodClient:
     def _check_fits(self, kf: Keyframe) -> None:
         """Raise :class:`ProtocolError` unless ``kf`` can be uploaded here: images of this
         client's keyframe size and a z-buffer its visibility rule reads."""
-        w, h = self.sprite.key_targets[0].size
+        w, h = self.sprite.key_size
         if kf.color.shape != (h, w, 3) or kf.depth.shape != (h, w):
             raise ProtocolError(f"keyframe images must be {w}x{h}, got colour "
                                 f"{kf.color.shape}, depth {kf.depth.shape}")

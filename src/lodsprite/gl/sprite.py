@@ -3,8 +3,11 @@
 A keyframe is rendered at full resolution straight into a render target whose
 colour texture *is* the sprite texture and whose depth texture is the
 keyframe z-buffer: no copy, no round trip through numpy (Chen et al. 1999 used
-glCopyTexImage2D for the same purpose).  Two keyframe targets alternate so a
-new keyframe never overwrites the one being shown.
+glCopyTexImage2D for the same purpose).  Keyframes live in a pool of slots
+(colour + depth target and coarse z-buffer each, made as first needed): without a
+keyframe cache two slots alternate so a new keyframe never overwrites the one being
+shown; with one (:mod:`lodsprite.sprite.cache`) the cache names the slot of each new
+keyframe and which kept one to show (:meth:`SpriteRenderer.show`).
 """
 
 from __future__ import annotations
@@ -93,24 +96,56 @@ class SpriteRenderer:
         self.program = self._program(visibility, {"u_vertex_tol": vertex_tol,
                                                   "u_fragment_tol": fragment_tol,
                                                   "u_coarse_tol": coarse_tol})
-        w, h = (n + 2 * guard_px for n in terrain.target.size)
-        self.key_targets = [RenderTarget(self.ctx, w, h), RenderTarget(self.ctx, w, h)]
-        self.coarse_targets = [RenderTarget(self.ctx, w, h, color=False),
-                               RenderTarget(self.ctx, w, h, color=False)]
-        for t in self.key_targets + self.coarse_targets:
-            t.depth.compare_func = ""  # sample raw depth values, no shadow comparison
-            # Window depth is affine across a triangle in screen space, so bilinear samples
-            # of a z-buffer are exact inside triangles: no moire where the keyframe sees a
-            # surface at a grazing angle (nearest samples there err by up to half a texel's
-            # depth slope, far beyond the tolerances).
-            t.depth.filter = (moderngl.LINEAR, moderngl.LINEAR)
-        self._next = 0
+        self.key_size: tuple[int, int] = tuple(n + 2 * guard_px for n in terrain.target.size)
+        self._slots: list[tuple[RenderTarget, RenderTarget]] = []  # (keyframe, coarse z)
+        self._kept: dict[int, GLKeyframe] = {}  # slot -> the keyframe it holds
+        self._shown = -1  # the slot of the keyframe shown
+        self.slot_targets(0), self.slot_targets(1)  # the two alternating slots, made up front
         self._vaos: dict[tuple[int, bool], moderngl.VertexArray] = {}
         self.keyframe: GLKeyframe | None = None
         self._uploads: list[moderngl.Texture] = []  # RGB sprite textures of uploaded keyframes
         # Mixed by its alpha into fragments that fell back to the terrain texture (the
         # viewer's tint toggle); alpha 0 draws them as they are.
         self.fallback_tint: tuple[float, float, float, float] = (1.0, 0.0, 1.0, 0.0)
+
+    def keyframe_bytes(self) -> int:
+        """GPU bytes of one keyframe slot: RGBA8 colour (4 B/texel, a third more with
+        mipmaps), its depth and the coarse depth (4 B/texel each: 24-bit depth is stored
+        in 32 bits) at the keyframe size ``(w + 2g) x (h + 2g)``."""
+        w, h = self.key_size
+        color = 4 * w * h * (4 if self.mipmaps else 3) // 3
+        return color + 2 * 4 * w * h
+
+    @property
+    def key_targets(self) -> list[RenderTarget]:
+        """The keyframe targets made so far (colour + depth), in slot order."""
+        return [key for key, _ in self._slots]
+
+    def slot_targets(self, i: int) -> tuple[RenderTarget, RenderTarget]:
+        """Slot ``i``'s targets, made (with every slot below it) when first asked for."""
+        while len(self._slots) <= i:
+            w, h = self.key_size
+            pair = (RenderTarget(self.ctx, w, h), RenderTarget(self.ctx, w, h, color=False))
+            for t in pair:
+                t.depth.compare_func = ""  # sample raw depth values, no shadow comparison
+                # Window depth is affine across a triangle in screen space, so bilinear
+                # samples of a z-buffer are exact inside triangles: no moire where the
+                # keyframe sees a surface at a grazing angle (nearest samples there err by
+                # up to half a texel's depth slope, far beyond the tolerances).
+                t.depth.filter = (moderngl.LINEAR, moderngl.LINEAR)
+            self._slots.append(pair)
+        return self._slots[i]
+
+    def _free_slot(self, slot: int | None) -> int:
+        """``slot``, or (None) the one of slots 0 and 1 not shown: they alternate.  (A
+        keyframe cache never names the slot of the keyframe it shows.)"""
+        if slot is None:
+            return 1 if self._shown == 0 else 0
+        return slot
+
+    def show(self, slot: int) -> None:
+        """Make the keyframe kept in ``slot`` the one spriteframes are drawn from."""
+        self.keyframe, self._shown = self._kept[slot], slot
 
     def _program(self, visibility: str, tols: dict[str, float]) -> moderngl.Program:
         mgl = self.ctx.mgl
@@ -136,17 +171,18 @@ class SpriteRenderer:
         w, h = self.target.size
         return widened(projection, w, h, self.guard_px)
 
-    def _keep(self, target: RenderTarget, coarse: RenderTarget, viewpoint: Viewpoint,
-              projection: Projection, t0: float, color: moderngl.Texture | None = None,
-              coarse_ready: bool = False) -> None:
+    def _keep(self, slot: int, viewpoint: Viewpoint, projection: Projection, t0: float,
+              color: moderngl.Texture | None = None, coarse_ready: bool = False) -> None:
+        target, coarse = self._slots[slot]
         if self.visibility == "coarse" and not coarse_ready:
             self.render_coarse_depth(viewpoint, projection, coarse)
         color = target.color if color is None else color
         if self.mipmaps:
             color.build_mipmaps()
             color.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
-        self.keyframe = GLKeyframe(target, coarse, viewpoint, projection,
-                                   projection.matrix() @ viewpoint.view_matrix(), t0, color)
+        self._kept[slot] = GLKeyframe(target, coarse, viewpoint, projection,
+                                      projection.matrix() @ viewpoint.view_matrix(), t0, color)
+        self.show(slot)
 
     def render_coarse_depth(self, viewpoint: Viewpoint, projection: Projection,
                             target: RenderTarget) -> None:
@@ -156,21 +192,23 @@ class SpriteRenderer:
                                   target)
 
     def render_keyframe(self, viewpoint: Viewpoint, t0: float,
-                        projection: Projection | None = None) -> FrameStats:
-        """Render the full-resolution terrain into the next keyframe target and keep it.
+                        projection: Projection | None = None,
+                        slot: int | None = None) -> FrameStats:
+        """Render the full-resolution terrain into keyframe slot ``slot`` (None: the one of
+        the two alternating slots not shown; never the slot shown) and show it.
 
         ``projection`` is the frame's; the keyframe is rendered through it widened by the
         guard band (``guard_px`` pixels on every side, same pixel angle), so that frames
         turning away from the keyframe still find their borders in the sprite.
         """
-        target, coarse = self.key_targets[self._next], self.coarse_targets[self._next]
-        self._next ^= 1
+        slot = self._free_slot(slot)
+        target = self.slot_targets(slot)[0]
         projection = self.key_projection(projection or self.terrain.projection(viewpoint))
         if self.keyframe_drawer is not None:
             stats = self.keyframe_drawer(viewpoint, projection, target)
         else:
             stats = self.terrain.render(viewpoint, None, projection, target)
-        self._keep(target, coarse, viewpoint, projection, t0)
+        self._keep(slot, viewpoint, projection, t0)
         return stats
 
     #: Draws keyframes instead of the full-resolution terrain when set:
@@ -191,7 +229,7 @@ class SpriteRenderer:
         are ``[::-1]`` views of contiguous rows (decoded keyframes) go to the textures
         without a copy.
         """
-        w, h = self.key_targets[0].size
+        w, h = self.key_size
         if color.shape != (h, w, 3) or depth.shape != (h, w):
             raise InputError(f"keyframe images must be {w}x{h}, got colour {color.shape}, "
                              f"depth {depth.shape}")
@@ -199,18 +237,18 @@ class SpriteRenderer:
                                                  and self.visibility != "coarse"):
             raise InputError(f"a {zbuffer!r} z-buffer does not serve the {self.visibility!r} "
                              "visibility rule")
-        target, coarse = self.key_targets[self._next], self.coarse_targets[self._next]
+        slot = self._free_slot(None)
+        target, coarse = self._slots[slot]
         if not self._uploads:
             self._uploads = [self.ctx.mgl.texture((w, h), 3, alignment=1) for _ in range(2)]
             for tex in self._uploads:
                 tex.repeat_x = tex.repeat_y = False
-        tex = self._uploads[self._next]
-        self._next ^= 1
+        tex = self._uploads[slot]
         tex.write(np.ascontiguousarray(color[::-1], dtype=np.uint8))  # GL rows: bottom-up
         if zbuffer == "coarse" or self.visibility != "coarse":  # else it is never read
             rows = np.ascontiguousarray(depth[::-1], dtype=np.float32)
             (coarse if zbuffer == "coarse" else target).depth.write(rows)
-        self._keep(target, coarse, viewpoint, projection, t0, tex, zbuffer == "coarse")
+        self._keep(slot, viewpoint, projection, t0, tex, zbuffer == "coarse")
 
     def keyframe_color(self) -> np.ndarray:
         """The current keyframe's colour without its guard band: ``(H, W, 3) uint8``, the
@@ -258,8 +296,11 @@ class SpriteRenderer:
             vao.release()
         self._vaos.clear()
         self.program.release()
-        for t in self.key_targets + self.coarse_targets:
-            t.release()
+        for pair in self._slots:
+            for t in pair:
+                t.release()
+        self._slots.clear()
+        self._kept.clear()
         for tex in self._uploads:
             tex.release()
         self._uploads.clear()

@@ -148,8 +148,8 @@ class TiledSpriteRenderer:
             raise InputError(f"1 to {MAX_TILES} tiles, got {count}")
         self.sprite = sprite
         self.ctx = sprite.ctx
-        self.target: RenderTarget = sprite.key_targets[0]
-        self.coarse: RenderTarget = sprite.coarse_targets[0]
+        # slot 0 of the keyframe pool: the tiled engine's one mosaic (no cache with tiles)
+        self.target, self.coarse = sprite.slot_targets(0)
         self.rects = np.asarray(rects)
         self.ndc = np.asarray(ndc, np.float64)
         self.viewpoints: list[Viewpoint | None] = [None] * count

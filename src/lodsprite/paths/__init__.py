@@ -21,6 +21,9 @@ A :class:`CameraPath` is a sequence of :class:`~lodsprite.camera.Viewpoint`
 :class:`~lodsprite.terrain.heightfield.HeightField`: metres, ``+x`` east,
 ``+y`` north, ``+z`` up, the terrain's horizontal centre at the origin.
 
+A fourth, :func:`patrol`, flies back and forth over one stretch (several passes, the case
+of the 1999 paper's keyframe cache, :mod:`lodsprite.paths.flyover`).
+
 A third, :func:`flyover`, is not a paper's: a low flight of fixed height and length in
 metres, the same over a terrain of any size (for comparing renderers across sizes).
 
@@ -43,7 +46,7 @@ from lodsprite.paths.core import (
     _check_frames,
     load_path_json,
 )
-from lodsprite.paths.flyover import flyover, parse_flyover
+from lodsprite.paths.flyover import flyover, parse_flyover, parse_patrol, patrol
 from lodsprite.paths.papers import chen1999, swan2002
 from lodsprite.terrain.heightfield import HeightField
 
@@ -58,6 +61,7 @@ __all__ = [
     "flyover",
     "get_path",
     "load_path_json",
+    "patrol",
     "swan2002",
 ]
 
@@ -71,7 +75,9 @@ def get_path(spec: str | os.PathLike, hf: HeightField, frames: int | None = None
 
     ``spec`` is ``"chen1999"`` (default 460 frames), ``"swan2002"`` (default
     600 frames), ``"flyover[:HEIGHT_M[:TRACK_M]]"`` (460 frames; a low flight of fixed
-    height and length, :mod:`lodsprite.paths.flyover`) or a JSON path file (module
+    height and length, :mod:`lodsprite.paths.flyover`),
+    ``"patrol[:HEIGHT_M[:TRACK_M[:PASSES]]]"`` (460 frames; back and forth,
+    :mod:`lodsprite.paths.flyover`) or a JSON path file (module
     docstring), which is resampled to ``frames`` when given
     (:meth:`CameraPath.resampled`).  A spec ending in ``.json`` that does not exist
     reports the missing file; any other unknown spec raises :class:`PathError`.
@@ -86,8 +92,12 @@ def get_path(spec: str | os.PathLike, hf: HeightField, frames: int | None = None
     low = parse_flyover(key)
     if low is not None:
         return flyover(hf, CHEN1999_FRAMES if frames is None else frames, *low)
+    back_and_forth = parse_patrol(key)
+    if back_and_forth is not None:
+        return patrol(hf, CHEN1999_FRAMES if frames is None else frames, *back_and_forth)
     if Path(key).is_file() or key.lower().endswith(".json"):
         path = load_path_json(key)
         return path if frames is None else path.resampled(frames)
     raise PathError(f"unknown path '{key}': use chen1999, swan2002, "
-                    "flyover[:HEIGHT_M[:TRACK_M]] or a .json file")
+                    "flyover[:HEIGHT_M[:TRACK_M]], patrol[:HEIGHT_M[:TRACK_M[:PASSES]]] "
+                    "or a .json file")

@@ -15,6 +15,11 @@ Keyframes are rendered with a guard band (:class:`~lodsprite.gl.sprite.SpriteRen
 ``guard_px``); a frame that is a keyframe shows the keyframe's centre.  A keyframe placed
 ahead of the viewer is followed, in the same frame, by a spriteframe from it.
 
+With a keyframe cache (``cache_mb > 0``, :mod:`lodsprite.sprite.cache`) the keyframes
+rendered stay in a pool of GPU slots within the budget, and a frame may show an older one
+(the policy's lowest error here): :attr:`SpriteFrame.keyframe` is then that keyframe's
+index in :attr:`LodSpriteEngine.keyframes`.
+
 A frame's time covers everything it costs: choosing the projection, the error
 metric, the GL work, ``C'`` for a new keyframe, and ``ctx.finish()``.
 """
@@ -28,6 +33,7 @@ import numpy as np
 
 from lodsprite.camera import Viewpoint
 from lodsprite.gl.sprite import SpriteRenderer
+from lodsprite.sprite.cache import DEFAULT_POLICY, KeyframeCache
 from lodsprite.sprite.metric import ErrorMetric
 from lodsprite.sprite.policy import (
     DEFAULT_EPSILON_PX,
@@ -62,18 +68,27 @@ class LodSpriteEngine:
     :class:`~lodsprite.sprite.policy.KeyframePolicy` (:attr:`policy`) decides."""
 
     def __init__(self, sprite: SpriteRenderer, epsilon_px: float = DEFAULT_EPSILON_PX,
-                 predict: bool = True) -> None:
+                 predict: bool = True, cache_mb: float = 0.0,
+                 cache_policy: str = DEFAULT_POLICY) -> None:
         self.sprite = sprite
         hf = sprite.terrain.geometry.full  # the terrain, or a store's level 0
+        cache = (KeyframeCache(cache_mb * 2 ** 20, sprite.keyframe_bytes(), cache_policy)
+                 if cache_mb > 0 else None)
         self.policy = KeyframePolicy(ErrorMetric.for_level(hf, sprite.coarse_quads), hf,
                                      epsilon_px, sprite.target.height,
-                                     sprite.terrain.projection, sprite.key_projection, predict)
+                                     sprite.terrain.projection, sprite.key_projection, predict,
+                                     cache)
         self._shows_keyframe = True
         # Called in every frame that draws no keyframe, inside its clock (None: nothing).
         self.between_keyframes = None
         # Every keyframe rendered, in order: its viewpoint, frame projection and whether
         # look-ahead placed it ahead of the viewer.
         self.keyframes: list[KeyChoice] = []
+
+    @property
+    def cache(self) -> KeyframeCache | None:
+        """The keyframe cache (None: off)."""
+        return self.policy.cache
 
     @property
     def metric(self) -> ErrorMetric:
@@ -110,8 +125,10 @@ class LodSpriteEngine:
         d = self.policy.decide(viewpoint)
         stats = None
         if d.key is not None:
-            stats = self.sprite.render_keyframe(d.key.viewpoint, t0, d.key.projection)
+            stats = self.sprite.render_keyframe(d.key.viewpoint, t0, d.key.projection, d.slot)
             self.keyframes.append(d.key)
+        elif d.slot is not None:
+            self.sprite.show(d.slot)  # a cached keyframe (binding only, no GL work)
         if not d.shows_keyframe:
             key_stats = stats
             stats = self.sprite.render_spriteframe(viewpoint, d.projection)
@@ -121,5 +138,8 @@ class LodSpriteEngine:
             self.between_keyframes()  # e.g. streaming for the next keyframe, timed here
         self._shows_keyframe = d.shows_keyframe
         self.sprite.terrain.ctx.finish()
-        return SpriteFrame(d.type, d.error_px, d.decision_error_px, stats.triangles,
-                           (time.perf_counter() - t0) * 1e3, len(self.keyframes) - 1)
+        ms = (time.perf_counter() - t0) * 1e3
+        if d.key is not None:
+            self.policy.keyframe_cost(ms)
+        shown = len(self.keyframes) - 1 if d.keyframe is None else d.keyframe
+        return SpriteFrame(d.type, d.error_px, d.decision_error_px, stats.triangles, ms, shown)

@@ -300,6 +300,10 @@ class ErrorMetric:
         key = in_view(self._centres_h, key_projection.matrix() @ key_viewpoint.view_matrix())
         return bool(np.all(key[cur]))
 
+    def in_view_mask(self, viewpoint, projection) -> np.ndarray:
+        """``(n*n,) bool``: the square centres in the view (what :meth:`covers` compares)."""
+        return in_view(self._centres_h, projection.matrix() @ viewpoint.view_matrix())
+
     def error_px(self, c_prime: np.ndarray, eye: np.ndarray, view_proj: np.ndarray,
                  pixel_angle_rad: float) -> float:
         """``sqrt(mean(θ²)) / β`` in pixels, over the square centres in view, or over the

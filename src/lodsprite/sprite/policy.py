@@ -26,6 +26,12 @@ against it is under ``PREDICT_MARGIN`` ε.  The current frame is then a spritefr
 it.  When no candidate passes, the keyframe is placed at the current viewpoint, as in the
 paper.
 
+Keyframe cache (``cache``, :mod:`lodsprite.sprite.cache`, the 1999 §5 proposal): every
+keyframe rendered is kept within a GPU byte budget; each frame shows the cached keyframe
+with the lowest error here (among the nearest-eyed candidates that cover the view) and a
+new keyframe is due only when that lowest error reaches ε.  Without a cache (None) the
+policy keeps one keyframe, as the paper does.
+
 Errors are plain floats compared with thresholds: an infinite error (nothing measurable,
 :meth:`~lodsprite.sprite.metric.ErrorMetric.error_px`) makes a keyframe due, and so
 does NaN.
@@ -41,6 +47,7 @@ import numpy as np
 
 from lodsprite.camera import Projection, Viewpoint, fitted_projection, widened
 from lodsprite.errors import InputError
+from lodsprite.sprite.cache import SWITCH_FRACTION, CachedKeyframe, KeyframeCache
 from lodsprite.sprite.metric import ErrorMetric
 from lodsprite.sprite.predict import extrapolate
 from lodsprite.terrain.heightfield import HeightField
@@ -107,7 +114,9 @@ class Decision:
     current viewpoint is shown as it is; one placed ahead is followed by a spriteframe from
     it.  ``error_px``: the error of the image shown (0 for a keyframe shown as it is);
     ``decision_error_px``: the error of the previous keyframe here, which decided (0 for
-    the first frame, which has none).
+    the first frame, which has none).  With a keyframe cache, ``slot`` is the GPU slot of
+    the keyframe shown (the new one's, or a cached one's) and ``keyframe`` its index among
+    the keyframes rendered; both None without a cache (the newest, in the next slot).
     """
 
     type: str
@@ -115,6 +124,8 @@ class Decision:
     key: KeyChoice | None
     error_px: float
     decision_error_px: float
+    slot: int | None = None
+    keyframe: int | None = None
 
     @property
     def shows_keyframe(self) -> bool:
@@ -129,12 +140,14 @@ class KeyframePolicy:
     for the look-ahead); ``epsilon_px``: the threshold ε in pixels; ``height_px``: the
     image height (sets the pixel angle β); ``projection(viewpoint)``: the frame projection;
     ``key_projection(projection)``: the projection a keyframe is rendered through (default:
-    the frame's); ``predict``: place due keyframes ahead of the viewer.
+    the frame's); ``predict``: place due keyframes ahead of the viewer; ``cache``: a
+    :class:`~lodsprite.sprite.cache.KeyframeCache` to keep keyframes in (None: one keyframe).
     """
 
     def __init__(self, metric: ErrorMetric, hf: HeightField, epsilon_px: float,
                  height_px: int, projection: ProjectionFn,
-                 key_projection: KeyProjectionFn | None = None, predict: bool = True) -> None:
+                 key_projection: KeyProjectionFn | None = None, predict: bool = True,
+                 cache: KeyframeCache | None = None) -> None:
         if not epsilon_px > 0:
             raise InputError(f"error threshold epsilon must be > 0 pixels, got {epsilon_px}")
         self.metric = metric
@@ -149,11 +162,15 @@ class KeyframePolicy:
         self._since_key = 0
         self._interval = 0          # frames between the last two keyframes
         self._prev: Viewpoint | None = None
+        self.cache = cache
+        self.rendered = 0           # keyframes decided so far (the next one's index)
+        self._frame = 0
 
     @classmethod
     def for_terrain(cls, hf: HeightField, lod: int, epsilon_px: float,
                     size: tuple[int, int], fov_y_deg: float = 45.0, guard_px: int = 0,
-                    predict: bool = True) -> KeyframePolicy:
+                    predict: bool = True,
+                    cache: KeyframeCache | None = None) -> KeyframePolicy:
         """The policy for ``hf`` at coarse level ``lod`` on ``size = (w, h)`` pixel images,
         with the projections the terrain renderer uses (near/far fitted to the terrain,
         keyframes widened by ``guard_px`` pixels on every side)."""
@@ -165,7 +182,7 @@ class KeyframePolicy:
             return fitted_projection(vp, fov_y_deg, w / h, lo, hi, ground)
 
         return cls(ErrorMetric.for_level(hf, lod), hf, epsilon_px, h, projection,
-                   lambda p: widened(p, w, h, guard_px), predict)
+                   lambda p: widened(p, w, h, guard_px), predict, cache)
 
     def error_px(self, c_prime: np.ndarray, viewpoint: Viewpoint,
                  projection: Projection) -> float:
@@ -211,12 +228,50 @@ class KeyframePolicy:
         o = viewpoint.o
         return bool(o[2] > float(self.hf.height_at(o[0], o[1])))
 
+    def best_cached(self, viewpoint: Viewpoint,
+                    projection: Projection) -> tuple[CachedKeyframe | None, float]:
+        """The cached keyframe with the lowest error at ``viewpoint`` and that error
+        (``(None, inf)`` when none is cached); the shown keyframe needs no coverage test
+        (its guard band serves it, as without a cache) and, under ``SWITCH_FRACTION`` ε,
+        no search (:mod:`lodsprite.sprite.cache`: the cost and the prunings)."""
+        shown = self.cache.shown
+        if shown is None:
+            return None, math.inf
+        best, best_err = shown, self.error_px(shown.c_prime, viewpoint, projection)
+        if best_err < SWITCH_FRACTION * self.epsilon_px:
+            return best, best_err
+        here = None
+        for e in self.cache.candidates(viewpoint.o)[1:]:
+            if e.in_view is None:
+                e.in_view = self.metric.in_view_mask(e.viewpoint,
+                                                     self.key_projection(e.projection))
+            if here is None:
+                here = self.metric.in_view_mask(viewpoint, projection)
+            if not np.all(e.in_view[here]):
+                continue
+            err = self.error_px(e.c_prime, viewpoint, projection)
+            if err < best_err:
+                best, best_err = e, err
+        return best, best_err
+
+    def keyframe_cost(self, ms: float) -> None:
+        """What the keyframe just rendered cost (ms): the ``benefit`` policy weighs it."""
+        if self.cache is not None and self.cache.shown is not None:
+            self.cache.shown.cost_ms = float(ms)
+
     def decide(self, viewpoint: Viewpoint) -> Decision:
         """The decision for the next frame, at ``viewpoint``; the policy then takes it as
         done (a new keyframe's ``C'`` becomes the current one)."""
+        self._frame += 1
         projection = self.projection(viewpoint)
-        decision = (0.0 if self.c_prime is None
-                    else self.error_px(self.c_prime, viewpoint, projection))
+        cached = None
+        if self.cache is not None:
+            cached, decision = self.best_cached(viewpoint, projection)
+            if cached is None:  # the first frame
+                decision = 0.0
+        else:
+            decision = (0.0 if self.c_prime is None
+                        else self.error_px(self.c_prime, viewpoint, projection))
         if self.c_prime is None or keyframe_due(decision, self.epsilon_px):
             ahead = self.lookahead(viewpoint, projection)
             if ahead is None:
@@ -227,9 +282,18 @@ class KeyframePolicy:
                 self.predicted_keyframes += 1
             kind = KEYFRAME
             self._interval, self._since_key = self._since_key + 1, 0
+            if self.cache is not None:
+                cached = self.cache.insert(self.rendered, key.viewpoint, key.projection,
+                                           self.c_prime, self._frame)
+            self.rendered += 1
         else:
             key, shown = None, decision
             kind = FIRST_SPRITE if self._since_key == 0 else SPRITE
             self._since_key += 1
+            if cached is not None:
+                self.cache.use(cached, self._frame)
+                self.c_prime = cached.c_prime
         self._prev = viewpoint
-        return Decision(kind, projection, key, shown, decision)
+        if cached is None:
+            return Decision(kind, projection, key, shown, decision)
+        return Decision(kind, projection, key, shown, decision, cached.slot, cached.index)

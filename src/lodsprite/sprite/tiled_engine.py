@@ -59,9 +59,9 @@ class TiledSpriteEngine:
         if not tile_budget_ms >= 0:
             raise InputError(f"--tile-budget-ms must be >= 0, got {tile_budget_ms}")
         self.sprite = sprite
-        rects = tile_rects(tiles, sprite.key_targets[0].size)
+        rects = tile_rects(tiles, sprite.key_size)
         self.tiled = TiledSpriteRenderer(sprite, rects, ndc_rects(rects,
-                                                                  sprite.key_targets[0].size))
+                                                                  sprite.key_size))
         self.tiles = tiles
         self.epsilon_px = float(epsilon_px)
         self.tile_budget_ms = float(tile_budget_ms)

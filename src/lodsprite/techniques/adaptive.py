@@ -151,7 +151,8 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
                  key_sse: float = 1.0, gpu_mb: float = 256.0, host_mb: float = 512.0,
                  visibility: str | None = None, guard_px: int | None = None,
                  border: bool = True, shading: str = "auto", tiles: int = 1,
-                 tile_budget_ms: float = 8.0) -> None:
+                 tile_budget_ms: float = 8.0, cache_mb: float = 0.0,
+                 cache_policy: str = "lru") -> None:
         from lodsprite.terrain.store import TerrainStore
         from lodsprite.terrain.storefield import store_field
 
@@ -163,7 +164,8 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
                 renderer.paths.geometry.set_full(field)
             # proxy, ribbons and C read from level 0 there, then only without blocking
             super().__init__(renderer, lod, epsilon, False, visibility, guard_px, border,
-                             shading=shading, tiles=tiles, tile_budget_ms=tile_budget_ms)
+                             shading=shading, tiles=tiles, tile_budget_ms=tile_budget_ms,
+                             cache_mb=cache_mb, cache_policy=cache_policy)
         except BaseException:
             self.adaptive.release()
             if field is not None:

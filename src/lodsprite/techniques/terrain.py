@@ -129,7 +129,8 @@ class SpriteTechnique(Technique):
                  epsilon: float = DEFAULT_EPSILON_PX, threaded: bool = False,
                  visibility: str | None = None, guard_px: int | None = None,
                  border: bool = True, shading: str = "auto", tiles: int = 1,
-                 tile_budget_ms: float = DEFAULT_TILE_BUDGET_MS) -> None:
+                 tile_budget_ms: float = DEFAULT_TILE_BUDGET_MS, cache_mb: float = 0.0,
+                 cache_policy: str = "lru") -> None:
         super().__init__(renderer)
         from lodsprite.gl.sprite import DEFAULT_GUARD_PX, DEFAULT_VISIBILITY
         from lodsprite.sprite.tiled_engine import TiledSpriteEngine
@@ -144,7 +145,9 @@ class SpriteTechnique(Technique):
         self.threaded = threaded
         self.sprite: LodSprite = renderer.sprite(
             epsilon, lod, threaded=threaded, visibility=visibility or DEFAULT_VISIBILITY,
-            guard_px=DEFAULT_GUARD_PX if guard_px is None else guard_px, border=border)
+            guard_px=DEFAULT_GUARD_PX if guard_px is None else guard_px, border=border,
+            cache_mb=cache_mb, cache_policy=cache_policy)
+        self.cache_mb = float(cache_mb)
         self._tint = False
         self._replayed: int | None = None
         self._last = None
@@ -271,7 +274,18 @@ class SpriteTechnique(Technique):
             out[f"mean_ms_{t}"] = float(np.mean(ms)) if ms else float("nan")
         out["keyframe_fraction"] = out["keyframes"] / max(1, len(frames))
         out["mean_error_px"] = float(np.mean([f.error_px for f in frames]))
-        return out
+        return {**out, **self.cache_summary(frames)}
+
+    def cache_summary(self, frames: list[Frame]) -> dict[str, Any]:
+        """``cache_hits`` (frames shown from a keyframe other than the newest rendered),
+        ``cache_keyframes`` (most keyframes resident at once) and ``cache_mb``."""
+        cache = None if self.threaded else self.engine.cache
+        if cache is None:  # two alternating slots; the newest keyframe is always shown
+            keys = sum(f.kind == KEYFRAME for f in frames)
+            return {"cache_hits": 0, "cache_keyframes": min(2, keys), "cache_mb": 0.0}
+        hits = sum(f.extra["keyframe"] != f.extra["keyframes"] - 1 for f in frames)
+        return {"cache_hits": int(hits), "cache_keyframes": cache.max_resident,
+                "cache_mb": self.cache_mb}
 
     def draw_to(self, framebuffer=None) -> None:
         if self.tiled is not None and self.tiled.shows_keyframe:
@@ -306,7 +320,10 @@ class SpriteTechnique(Technique):
             return (f"keyframes: {self.tiled.tiles}x{self.tiled.tiles} tiles, budget "
                     f"{self.tiled.tile_budget_ms:g} ms; last frame {len(self.tiled.last_tiles)}")
         if not self.threaded:
-            return "keyframes: inline"
+            cache = self.engine.cache
+            return "keyframes: inline" + ("" if cache is None else (
+                f"; cache {len(cache.entries)}/{cache.capacity} ({cache.policy}, "
+                f"{cache.evicted} evicted)"))
         engine = self.engine
         w = engine.worker
         state = f"failed: {w.error}" if w.error is not None else (

@@ -49,6 +49,8 @@ class ViewOptions:
     shading: str = "auto"         # terrain colour: auto | texture | heights
     tiles: int = 1                # sprite: N x N keyframe tiles (> 1: inline keyframes)
     tile_budget_ms: float = 8.0   # sprite, tiles > 1: tile work per frame, ms
+    cache_mb: float = 0.0         # sprite (inline keyframes): keyframe cache budget, MB
+    cache_policy: str = "lru"     # keyframe cache replacement, lru | benefit
 
     def technique_options(self) -> dict:
         """The options of the command the registry's techniques pick theirs from."""
@@ -56,7 +58,8 @@ class ViewOptions:
                 "threaded": self.threaded and self.tiles == 1,  # tiles are rendered inline
                 "server": self.server, "target_fps": self.target_fps, "sse": self.sse,
                 "key_sse": self.key_sse, "shading": self.shading, "tiles": self.tiles,
-                "tile_budget_ms": self.tile_budget_ms}
+                "tile_budget_ms": self.tile_budget_ms, "cache_mb": self.cache_mb,
+                "cache_policy": self.cache_policy}
 
     def validate(self) -> None:
         if self.target_fps is not None and not self.target_fps > 0:

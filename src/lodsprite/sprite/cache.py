@@ -1,0 +1,144 @@
+"""A cache of keyframes for moving back and forth in one region (Chen, Swan & Kaufman 1999,
+§5: "a cache of keyframes" kept and reused when the viewer returns), GL-free.
+
+The 1999 loop keeps one keyframe and replaces it as soon as its error (Eq. 2) reaches ε.
+With a cache, every keyframe rendered is kept (its slot on the GPU, its viewpoint,
+projection and ``C'``) until a byte budget forces one out; each frame the policy
+(:class:`~lodsprite.sprite.policy.KeyframePolicy`) shows the cached keyframe with the
+lowest error at the current view and renders a new one only when that lowest error is
+still ``>= ε``.
+
+Cost of the choice: one evaluation of the per-frame metric (Eq. 2 over the ``n x n``
+square centres, about 0.2 ms in numpy for n = 16) per candidate, and a coverage test (the
+centres in the current view must be in the keyframe's: a keyframe's own mask is computed
+once and kept, :attr:`CachedKeyframe.in_view`).  Two prunings bound it:
+
+* only the :data:`MAX_CANDIDATES` keyframes whose eyes are nearest the current eye are
+  evaluated (the shown keyframe always among them): Eq. 2's angles grow with the eye's
+  displacement from the keyframe's, so a far eye rarely wins, and the cost stays bounded
+  whatever the budget;
+* while the shown keyframe's error is under :data:`SWITCH_FRACTION` ε no other is
+  evaluated (one metric evaluation, as without a cache): switching then could lower an
+  error that is already small, but never saves a keyframe, which is due only at ε.
+
+Replacement, when the budget is full (never the keyframe shown):
+
+* ``lru``: the keyframe least recently shown goes first;
+* ``benefit``: the lowest benefit goes first, ``benefit = uses x cost_ms / age`` with
+  ``uses`` the frames it was shown, ``cost_ms`` what rendering it cost and ``age`` the
+  frames since it was last shown (+1): a keyframe that is often reused, dear to redo and
+  recently useful stays.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from lodsprite.camera import Projection, Viewpoint
+from lodsprite.errors import InputError
+
+POLICIES = ("lru", "benefit")
+DEFAULT_POLICY = "lru"
+MAX_CANDIDATES = 8  # keyframes (nearest eyes) whose error is evaluated per frame
+MIN_SLOTS = 2       # the keyframe shown and the one being rendered
+SWITCH_FRACTION = 0.5  # of ε: below it the shown keyframe is kept without a search
+
+
+@dataclass
+class CachedKeyframe:
+    """One keyframe in the cache: ``index`` in the engine's keyframe log, its ``viewpoint``
+    and frame ``projection`` (the renderer adds the guard band), ``c_prime`` (its
+    Reprojection, ``(n*n, 3)`` metres), GPU ``slot``, ``last_use`` (frame number), ``uses``
+    (frames shown), ``cost_ms`` (what rendering it cost) and ``born`` (frame number)."""
+
+    index: int
+    viewpoint: Viewpoint
+    projection: Projection
+    c_prime: np.ndarray
+    slot: int
+    last_use: int
+    born: int
+    uses: int = 0
+    cost_ms: float = 0.0
+    in_view: np.ndarray | None = None  # (n*n,) bool: square centres in its view, once made
+
+    def benefit(self, now: int) -> float:
+        """``uses x cost_ms / age`` with ``age = now - last_use + 1`` frames."""
+        return self.uses * max(self.cost_ms, 1e-3) / (now - self.last_use + 1)
+
+
+def capacity_for(budget_bytes: float, key_bytes: int) -> int:
+    """Keyframes that fit ``budget_bytes`` at ``key_bytes`` each; raises
+    :class:`InputError` below :data:`MIN_SLOTS`."""
+    n = int(budget_bytes // key_bytes)
+    if n < MIN_SLOTS:
+        raise InputError(f"--cache-mb {budget_bytes / 2 ** 20:g} holds {n} keyframe(s) of "
+                         f"{key_bytes / 2 ** 20:.2f} MB: give at least "
+                         f"{MIN_SLOTS * key_bytes / 2 ** 20:.2f} MB (or 0: no cache)")
+    return n
+
+
+@dataclass
+class KeyframeCache:
+    """Keyframes kept within ``budget_bytes`` of GPU memory, ``key_bytes`` each, replaced
+    by ``policy`` (:data:`POLICIES`).  Frame numbers are the caller's (one per frame)."""
+
+    budget_bytes: float
+    key_bytes: int
+    policy: str = DEFAULT_POLICY
+    entries: list[CachedKeyframe] = field(default_factory=list)
+    shown: CachedKeyframe | None = None
+    max_resident: int = 0
+    evicted: int = 0
+
+    def __post_init__(self) -> None:
+        if self.policy not in POLICIES:
+            raise InputError(f"unknown cache policy {self.policy!r}: use "
+                             f"{' or '.join(POLICIES)}")
+        self.capacity = capacity_for(self.budget_bytes, self.key_bytes)
+
+    @property
+    def resident_bytes(self) -> int:
+        """GPU bytes the cached keyframes hold."""
+        return len(self.entries) * self.key_bytes
+
+    def candidates(self, eye: np.ndarray) -> list[CachedKeyframe]:
+        """The keyframes worth evaluating at ``eye``: the :data:`MAX_CANDIDATES` nearest
+        eyes, the shown one first (ties keep it)."""
+        others = [e for e in self.entries if e is not self.shown]
+        if len(others) >= MAX_CANDIDATES:
+            dist = [float(np.sum((e.viewpoint.o - eye) ** 2)) for e in others]
+            order = np.argsort(dist, kind="stable")[:MAX_CANDIDATES - 1]
+            others = [others[i] for i in order]
+        return ([self.shown] if self.shown is not None else []) + others
+
+    def victim(self, now: int) -> CachedKeyframe:
+        """The keyframe to replace: never the shown one (lowest benefit or least recent)."""
+        pool = [e for e in self.entries if e is not self.shown]
+        if self.policy == "lru":
+            return min(pool, key=lambda e: (e.last_use, e.born))
+        return min(pool, key=lambda e: (e.benefit(now), e.last_use, e.born))
+
+    def insert(self, index: int, viewpoint: Viewpoint, projection: Projection,
+               c_prime: np.ndarray, now: int) -> CachedKeyframe:
+        """Keep a new keyframe (shown from now): a free slot, or the victim's; returns it."""
+        if len(self.entries) < self.capacity:
+            slot = len(self.entries)
+        else:
+            old = self.victim(now)
+            self.entries.remove(old)
+            self.evicted += 1
+            slot = old.slot
+        entry = CachedKeyframe(index, viewpoint, projection, c_prime, slot, now, now)
+        self.entries.append(entry)
+        self.max_resident = max(self.max_resident, len(self.entries))
+        self.use(entry, now)
+        return entry
+
+    def use(self, entry: CachedKeyframe, now: int) -> None:
+        """``entry`` is shown in frame ``now``."""
+        entry.uses += 1
+        entry.last_use = now
+        self.shown = entry
