@@ -139,14 +139,18 @@ class Renderer:
 
     def sprite(self, epsilon_px: float = DEFAULT_EPSILON_PX, lod: int = DEFAULT_COARSE,
                threaded: bool = False, visibility: str = DEFAULT_VISIBILITY,
-               guard_px: int = DEFAULT_GUARD_PX, border: bool = True) -> LodSprite:
+               guard_px: int = DEFAULT_GUARD_PX, border: bool = True,
+               metric: str = "warp") -> LodSprite:
         """A LOD-sprite engine on this renderer: error threshold ``epsilon_px`` pixels,
         coarse level ``lod`` quads per side.  ``threaded=True`` renders keyframes on a
         worker thread with its own context (:mod:`lodsprite.sprite.threaded`); otherwise a
-        keyframe is rendered inline in the frame that needs it (the 1999 algorithm)."""
+        keyframe is rendered inline in the frame that needs it (the 1999 algorithm).
+        ``metric``: ``"warp"`` (Eq. 1-2) or ``"resample"`` (adds the keyframe image's
+        resampling error, :mod:`lodsprite.sprite.resampling`)."""
         if not epsilon_px > 0:
             raise InputError(f"epsilon must be > 0 pixels, got {epsilon_px}")
-        sprite = LodSprite(self, epsilon_px, lod, threaded, visibility, guard_px, border)
+        sprite = LodSprite(self, epsilon_px, lod, threaded, visibility, guard_px, border,
+                           metric)
         self._sprites.append(sprite)
         return sprite
 
@@ -211,7 +215,7 @@ class LodSprite:
     """
 
     def __init__(self, renderer: Renderer, epsilon_px: float, lod: int, threaded: bool,
-                 visibility: str, guard_px: int, border: bool) -> None:
+                 visibility: str, guard_px: int, border: bool, metric: str = "warp") -> None:
         self.renderer = renderer
         self.threaded = threaded
         self.sprite = SpriteRenderer(renderer.paths.renderer, lod, visibility, border=border,
@@ -219,8 +223,8 @@ class LodSprite:
         try:
             self.engine: LodSpriteEngine | ThreadedLodSpriteEngine = (
                 ThreadedLodSpriteEngine(self.sprite, renderer.scene, renderer.fov_y_deg,
-                                        epsilon_px) if threaded
-                else LodSpriteEngine(self.sprite, epsilon_px))
+                                        epsilon_px, metric=metric) if threaded
+                else LodSpriteEngine(self.sprite, epsilon_px, metric=metric))
         except BaseException:
             self.sprite.release()
             raise

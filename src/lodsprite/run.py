@@ -32,6 +32,7 @@ from lodsprite.paths import CameraPath, get_path
 from lodsprite.progress import Progress
 from lodsprite.scene import Scene, load_scene
 from lodsprite.sprite.engine import DEFAULT_EPSILON_PX
+from lodsprite.sprite.policy import METRICS
 from lodsprite.terrain import DEFAULT_EXAGGERATION
 from lodsprite.terrain.lod import DEFAULT_COARSE, level_step
 from lodsprite.workers import peak_rss_mb
@@ -77,6 +78,7 @@ class RenderConfig:
     gpu_mb: float = 256.0     # adaptive: GPU tile cache budget
     host_mb: float = 512.0    # adaptive: host tile cache budget
     flip: bool = False        # with ground_truth: FLIP per frame too
+    metric: str = "warp"      # sprite: "warp" (Eq. 1-2) or "resample" (adds resampling)
 
     @property
     def technique(self) -> str:
@@ -88,7 +90,7 @@ class RenderConfig:
         return {"lod": self.lod, "epsilon": self.epsilon, "visibility": self.visibility,
                 "guard_px": self.guard_px, "border": self.border, "sse": self.sse,
                 "key_sse": self.key_sse, "gpu_mb": self.gpu_mb, "host_mb": self.host_mb,
-                "threaded": False}
+                "threaded": False, "metric": self.metric}
 
     def validate(self) -> None:
         modes = _modes()  # the registry's now: a technique registered later is one too
@@ -107,6 +109,9 @@ class RenderConfig:
         if not (isinstance(self.guard_px, int) and 0 <= self.guard_px <= MAX_GUARD_PX):
             raise InputError(f"--guard must be a whole number of pixels in 0..{MAX_GUARD_PX}, "
                              f"got {self.guard_px}")
+        if self.metric not in METRICS:
+            raise InputError(f"unknown metric '{self.metric}': use one of "
+                             f"{', '.join(METRICS)}")
         if self.quality_stride < 1:
             raise InputError(f"quality stride must be >= 1, got {self.quality_stride}")
         if self.key_sse is not None and (self.mode != "sprite" or not self.key_sse > 0):

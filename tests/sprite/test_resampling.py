@@ -156,3 +156,16 @@ def test_the_resample_policy_keys_earlier_on_a_zoom_out():
 def test_an_unknown_metric_is_refused():
     with pytest.raises(InputError, match="metric"):
         KeyframePolicy.for_terrain(make_field(16), 4, 1.0, SIZE, metric="sampling")
+
+
+def test_the_metric_option_reaches_the_sprite_techniques_and_is_checked():
+    from lodsprite.run import RenderConfig
+    from lodsprite.techniques import registry
+
+    for name in ("sprite", "sprite-adaptive"):
+        opts = {o.name: o for o in registry.get(name).options}
+        assert opts["metric"].default == "warp"
+    assert RenderConfig(mode="sprite", metric="resample").technique_options()["metric"] == \
+        "resample"
+    with pytest.raises(InputError, match="metric"):
+        RenderConfig(mode="sprite", metric="sampling").validate()

@@ -42,6 +42,9 @@ VisOpt = Annotated[str, typer.Option(
 BorderOpt = Annotated[bool, typer.Option(
     "--border/--no-border", help="sprite mode: draw the terrain's full-resolution outline "
                                  "(border ribbons) with the coarse level")]
+MetricOpt = Annotated[str, typer.Option(
+    "--metric", help="sprite mode: the keyframe error metric: warp (Chen et al. Eq. 1-2) | "
+                     "resample (adds the keyframe image's resampling error)")]
 GuardOpt = Annotated[int, typer.Option(
     "--guard", help="sprite mode: keyframe guard band in pixels on every side")]
 PaceOpt = Annotated[str, typer.Option(

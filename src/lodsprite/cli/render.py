@@ -17,6 +17,7 @@ from lodsprite.cli.common import (
     GuardOpt,
     LodOpt,
     MaxErrorOpt,
+    MetricOpt,
     PaceOpt,
     PathOpt,
     SizeOpt,
@@ -42,7 +43,8 @@ def info() -> None:
     out.print(t)
 
 
-def _check_mode(mode: str, ground_truth: bool, video: Path | None) -> bool:
+def _check_mode(mode: str, ground_truth: bool, video: Path | None,
+                metric: str = "warp") -> bool:
     """Check ``--mode`` and what goes with it; True for ``distributed``."""
     from lodsprite.errors import InputError
     from lodsprite.run import MODES
@@ -54,6 +56,9 @@ def _check_mode(mode: str, ground_truth: bool, video: Path | None) -> bool:
         raise InputError("--ground-truth replays a run's decisions: not for --mode distributed")
     if distributed and video is not None:
         raise InputError(f"--video is for --mode {', '.join(MODES)}")
+    if distributed and metric != "warp":
+        raise InputError("--metric resample is for --mode sprite: the distributed client "
+                         "and server decide with the 1999 metric")
     return distributed
 
 
@@ -113,6 +118,7 @@ def render(
     visibility: VisOpt = "coarse",
     border: BorderOpt = True,
     guard: GuardOpt = 32,
+    metric: MetricOpt = "warp",
     pace: PaceOpt = "needed",
     max_error: MaxErrorOpt = None,
     sse: Annotated[float, typer.Option(
@@ -129,14 +135,14 @@ def render(
     from lodsprite import RenderConfig, render_path
     from lodsprite.run import parse_size
 
-    distributed = _check_mode(mode, ground_truth, video)
+    distributed = _check_mode(mode, ground_truth, video, metric)
     config = RenderConfig(terrain=terrain, texture=texture, path=path,
                           mode="sprite" if distributed else mode, lod=lod,
                           size=parse_size(size), frames=frames, grid=grid,
                           exaggeration=exaggeration, save_frames=save_frames, epsilon=epsilon,
                           ground_truth=ground_truth, visibility=visibility, border=border,
                           guard_px=guard, sse=sse, gpu_mb=gpu_mb, host_mb=host_mb,
-                          key_sse=key_sse, flip=flip)
+                          key_sse=key_sse, flip=flip, metric=metric)
     with progress_bar(f"render {mode}") as update:
         if distributed:
             from lodsprite.distributed.run import parse_max_error, render_distributed
@@ -193,6 +199,7 @@ def view(
         "--sse", help="adaptive: screen-space error tolerance in pixels")] = None,
     key_sse: Annotated[float | None, typer.Option(
         "--key-sse", help="sprite-adaptive: its keyframes' tolerance in pixels")] = None,
+    metric: MetricOpt = "warp",
 ) -> None:
     """Fly through a terrain with live LOD-sprite, or round a lumigraph (WASD/QE, mouse, tab
     orbit)."""
@@ -204,7 +211,7 @@ def view(
                        epsilon=epsilon, size=parse_size(size), fps=fps, threaded=not inline,
                        play=play, frames=frames, screenshots=screenshots, every=every,
                        exit=exit_, out=out_dir, record=record, server=server,
-                       target_fps=target_fps, sse=sse, key_sse=key_sse)
+                       target_fps=target_fps, sse=sse, key_sse=key_sse, metric=metric)
     s = run_view(opts)
     if s:
         out.print(f"{s['frames']} frames, {s['mode']}: median {s['median_ms']:.2f} ms, "

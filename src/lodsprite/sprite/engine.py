@@ -37,6 +37,7 @@ from lodsprite.sprite.policy import (
     SPRITE,
     KeyChoice,
     KeyframePolicy,
+    resampling_metric,
 )
 
 __all__ = ["DEFAULT_EPSILON_PX", "FIRST_SPRITE", "FRAME_TYPES", "KEYFRAME", "SPRITE",
@@ -62,12 +63,14 @@ class LodSpriteEngine:
     :class:`~lodsprite.sprite.policy.KeyframePolicy` (:attr:`policy`) decides."""
 
     def __init__(self, sprite: SpriteRenderer, epsilon_px: float = DEFAULT_EPSILON_PX,
-                 predict: bool = True) -> None:
+                 predict: bool = True, metric: str = "warp") -> None:
         self.sprite = sprite
         hf = sprite.terrain.geometry.full  # the terrain, or a store's level 0
-        self.policy = KeyframePolicy(ErrorMetric.for_level(hf, sprite.coarse_quads), hf,
-                                     epsilon_px, sprite.target.height,
-                                     sprite.terrain.projection, sprite.key_projection, predict)
+        self.policy = KeyframePolicy(
+            ErrorMetric.for_level(hf, sprite.coarse_quads, resampling_metric(metric)), hf,
+            epsilon_px, sprite.target.height, sprite.terrain.projection,
+            sprite.key_projection, predict,
+            key_size=tuple(n + 2 * sprite.guard_px for n in sprite.target.size))
         self._shows_keyframe = True
         # Called in every frame that draws no keyframe, inside its clock (None: nothing).
         self.between_keyframes = None

@@ -125,7 +125,7 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
     def __init__(self, renderer: Renderer, lod: int = 16, epsilon: float = 1.0,
                  key_sse: float = 1.0, gpu_mb: float = 256.0, host_mb: float = 512.0,
                  visibility: str | None = None, guard_px: int | None = None,
-                 border: bool = True) -> None:
+                 border: bool = True, metric: str = "warp") -> None:
         from lodsprite.terrain.store import TerrainStore
         from lodsprite.terrain.storefield import store_field
 
@@ -133,7 +133,8 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
         try:
             if isinstance(self.adaptive.tree.p, TerrainStore):
                 renderer.paths.geometry.set_full(store_field(self.adaptive.tree.p))
-            super().__init__(renderer, lod, epsilon, False, visibility, guard_px, border)
+            super().__init__(renderer, lod, epsilon, False, visibility, guard_px, border,
+                             metric)
         except BaseException:
             self.adaptive.release()
             raise

@@ -14,6 +14,8 @@ EPSILON = Option("epsilon", float, 1.0, "LOD-sprite error threshold ε, pixels")
 VISIBILITY = Option("visibility", str, "coarse", "LOD-sprite visibility rule")
 GUARD = Option("guard_px", int, 32, "keyframe guard band, pixels")
 BORDER = Option("border", bool, True, "draw the coarse level's border ribbons")
+METRIC = Option("metric", str, "warp",
+                "LOD-sprite error metric: warp (Eq. 1-2) | resample (adds resampling)")
 THREADED = Option("threaded", bool, False, "render keyframes on a worker thread")
 SSE = Option("sse", float, 1.0, "adaptive: screen-space error tolerance, pixels")
 KEY_SSE = Option("key_sse", float, 1.0, "keyframes by the adaptive renderer at this SSE, px")
@@ -45,12 +47,14 @@ register(TechniqueSpec("full", f"{TERRAIN}:FullTechnique", (), ("terrain",),
 register(TechniqueSpec("lod", f"{TERRAIN}:LodTechnique", (LOD,), ("terrain",),
                        "one uniform coarse level"))
 register(TechniqueSpec("sprite", f"{TERRAIN}:SpriteTechnique",
-                       (LOD, EPSILON, THREADED, VISIBILITY, GUARD, BORDER), ("terrain",),
+                       (LOD, EPSILON, THREADED, VISIBILITY, GUARD, BORDER, METRIC),
+                       ("terrain",),
                        "LOD-sprite (Chen, Swan & Kaufman 1999)"))
 register(TechniqueSpec("adaptive", f"{ADAPTIVE}:AdaptiveTechnique", (SSE, GPU_MB, HOST_MB),
                        ("terrain",), "the adaptive (CDLOD-style) renderer, stores of any size"))
 register(TechniqueSpec("sprite-adaptive", f"{ADAPTIVE}:SpriteAdaptiveTechnique",
-                       (LOD, EPSILON, KEY_SSE, GPU_MB, HOST_MB, VISIBILITY, GUARD, BORDER),
+                       (LOD, EPSILON, KEY_SSE, GPU_MB, HOST_MB, VISIBILITY, GUARD, BORDER,
+                        METRIC),
                        ("terrain",), "LOD-sprite with keyframes by the adaptive renderer"))
 register(TechniqueSpec("distributed", "lodsprite.distributed.technique:create",
                        (SERVER, LOD, EPSILON, MAX_ERROR), ("terrain",),

@@ -79,15 +79,17 @@ class SpriteTechnique(Technique):
     def __init__(self, renderer: Renderer, lod: int = DEFAULT_COARSE,
                  epsilon: float = DEFAULT_EPSILON_PX, threaded: bool = False,
                  visibility: str | None = None, guard_px: int | None = None,
-                 border: bool = True) -> None:
+                 border: bool = True, metric: str = "warp") -> None:
         super().__init__(renderer)
         from lodsprite.gl.sprite import DEFAULT_GUARD_PX, DEFAULT_VISIBILITY
 
         level_step(renderer.scene.hf.quads, lod)
         self.threaded = threaded
+        self.metric = metric
         self.sprite: LodSprite = renderer.sprite(
             epsilon, lod, threaded=threaded, visibility=visibility or DEFAULT_VISIBILITY,
-            guard_px=DEFAULT_GUARD_PX if guard_px is None else guard_px, border=border)
+            guard_px=DEFAULT_GUARD_PX if guard_px is None else guard_px, border=border,
+            metric=metric)
         self._tint = False
         self._replayed: int | None = None
         self._last = None
@@ -156,6 +158,7 @@ class SpriteTechnique(Technique):
         """Keyframe count and fraction, mean time per frame kind (ms), mean error (px)."""
         out: dict[str, Any] = {"lod": self.sprite.lod, "epsilon": self.sprite.epsilon_px,
                                "visibility": self.sprite.sprite.visibility,
+                               "metric": self.metric,
                                "keyframes": sum(f.kind == KEYFRAME for f in frames)}
         for t in FRAME_TYPES:
             ms = [f.ms for f in frames if f.kind == t]

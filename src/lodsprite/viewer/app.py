@@ -46,18 +46,21 @@ class ViewOptions:
     target_fps: float | None = None  # a crowd's LOD feedback target
     sse: float | None = None      # adaptive: screen-space error, pixels
     key_sse: float | None = None  # sprite-adaptive: its keyframes' SSE, pixels
+    metric: str = "warp"          # sprite: warp (Eq. 1-2) | resample (adds resampling)
 
     def technique_options(self) -> dict:
         """The options of the command the registry's techniques pick theirs from."""
         return {"lod": self.lod, "epsilon": self.epsilon, "threaded": self.threaded,
                 "server": self.server, "target_fps": self.target_fps, "sse": self.sse,
-                "key_sse": self.key_sse}
+                "key_sse": self.key_sse, "metric": self.metric}
 
     def validate(self) -> None:
         if self.target_fps is not None and not self.target_fps > 0:
             raise InputError("--target-fps must be > 0")
         if self.mode == "distributed" and not self.server:
             raise InputError("--mode distributed needs --server HOST:PORT")
+        if self.metric not in ("warp", "resample"):
+            raise InputError(f"unknown metric '{self.metric}': use warp or resample")
         if self.every < 1:
             raise InputError(f"--every must be at least 1, got {self.every}")
         if not self.epsilon > 0:
