@@ -27,7 +27,8 @@ TerrainOpt = Annotated[str, typer.Option(
 TextureOpt = Annotated[str, typer.Option(
     "--texture", help="terrain | checker[:K] | image FILE")]
 PathOpt = Annotated[str, typer.Option(
-    "--path", help="chen1999 | swan2002 | flyover[:HEIGHT_M[:TRACK_M]] | FILE.json")]
+    "--path", help="chen1999 | swan2002 | flyover[:HEIGHT_M[:TRACK_M]] | "
+                   "bank[:HEIGHT_M[:TRACK_M]] | FILE.json")]
 FramesOpt = Annotated[int | None, typer.Option(
     "--frames", help="frames along the path (default: the paper's 460 / 600, or the file's)")]
 SizeOpt = Annotated[str, typer.Option("--size", help="image size WxH in pixels")]

@@ -23,6 +23,8 @@ A :class:`CameraPath` is a sequence of :class:`~lodsprite.camera.Viewpoint`
 
 A third, :func:`flyover`, is not a paper's: a low flight of fixed height and length in
 metres, the same over a terrain of any size (for comparing renderers across sizes).
+A fourth, :func:`bank` (:mod:`lodsprite.paths.bank`), is a low S-turn that rolls into its
+turns, in metres too (grazing views for the resampling metric).
 
 The JSON file format is documented in :mod:`lodsprite.paths.core`.
 """
@@ -33,6 +35,7 @@ import os
 from pathlib import Path
 
 from lodsprite.errors import PathError
+from lodsprite.paths.bank import bank, parse_bank
 from lodsprite.paths.core import (
     BUILTIN_PATHS,
     CHEN1999_FRAMES,
@@ -54,6 +57,7 @@ __all__ = [
     "PATH_VERSION",
     "SWAN2002_FRAMES",
     "CameraPath",
+    "bank",
     "chen1999",
     "flyover",
     "get_path",
@@ -71,8 +75,9 @@ def get_path(spec: str | os.PathLike, hf: HeightField, frames: int | None = None
 
     ``spec`` is ``"chen1999"`` (default 460 frames), ``"swan2002"`` (default
     600 frames), ``"flyover[:HEIGHT_M[:TRACK_M]]"`` (460 frames; a low flight of fixed
-    height and length, :mod:`lodsprite.paths.flyover`) or a JSON path file (module
-    docstring), which is resampled to ``frames`` when given
+    height and length, :mod:`lodsprite.paths.flyover`), ``"bank[:HEIGHT_M[:TRACK_M]]"``
+    (460 frames; a low banking S-turn, :mod:`lodsprite.paths.bank`) or a JSON path file
+    (module docstring), which is resampled to ``frames`` when given
     (:meth:`CameraPath.resampled`).  A spec ending in ``.json`` that does not exist
     reports the missing file; any other unknown spec raises :class:`PathError`.
     """
@@ -86,8 +91,11 @@ def get_path(spec: str | os.PathLike, hf: HeightField, frames: int | None = None
     low = parse_flyover(key)
     if low is not None:
         return flyover(hf, CHEN1999_FRAMES if frames is None else frames, *low)
+    banked = parse_bank(key)
+    if banked is not None:
+        return bank(hf, CHEN1999_FRAMES if frames is None else frames, *banked)
     if Path(key).is_file() or key.lower().endswith(".json"):
         path = load_path_json(key)
         return path if frames is None else path.resampled(frames)
     raise PathError(f"unknown path '{key}': use chen1999, swan2002, "
-                    "flyover[:HEIGHT_M[:TRACK_M]] or a .json file")
+                    "flyover[:HEIGHT_M[:TRACK_M]], bank[:HEIGHT_M[:TRACK_M]] or a .json file")
