@@ -169,3 +169,13 @@ def test_the_metric_option_reaches_the_sprite_techniques_and_is_checked():
         "resample"
     with pytest.raises(InputError, match="metric"):
         RenderConfig(mode="sprite", metric="sampling").validate()
+
+
+def test_a_reprojection_pickles_with_its_keyframe_matrix_and_size():
+    import pickle
+
+    _, key_vp, cp = terrain_case(True)
+    back = pickle.loads(pickle.dumps(cp))
+    np.testing.assert_array_equal(back.key_view_proj, cp.key_view_proj)
+    assert back.key_size == SIZE and np.array_equal(back.missed, cp.missed)
+    assert cp[:5].key_size == SIZE  # views keep them

@@ -69,6 +69,12 @@ better than it is:
 
 The fallback needs the keyframe eye: :meth:`ErrorMetric.reproject` returns a
 :class:`Reprojection`, an ``(n*n, 3)`` array of ``C'`` that also carries it.
+
+**Resampling** (``ErrorMetric(resampling=True)``, the technique option ``metric="resample"``;
+Chen et al. §5's double resampling): each sample's θ² gains ``(β e_res)²``, ``e_res`` the
+keyframe image's resampling error in pixels at ``C'`` on the coarse triangle there
+(:mod:`lodsprite.sprite.resampling`), so the error stays ``sqrt(mean θ²) / β``; the
+keyframe's matrix and size come with its :class:`Reprojection`.
 """
 
 from __future__ import annotations
