@@ -179,3 +179,12 @@ def test_a_reprojection_pickles_with_its_keyframe_matrix_and_size():
     np.testing.assert_array_equal(back.key_view_proj, cp.key_view_proj)
     assert back.key_size == SIZE and np.array_equal(back.missed, cp.missed)
     assert cp[:5].key_size == SIZE  # views keep them
+
+
+def test_the_distributed_mode_refuses_the_resample_metric():
+    from lodsprite.cli.render import _check_mode
+
+    assert _check_mode("distributed", False, None, "warp")
+    with pytest.raises(InputError, match="--metric resample"):
+        _check_mode("distributed", False, None, "resample")
+    assert not _check_mode("sprite", False, None, "resample")
