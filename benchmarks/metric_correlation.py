@@ -11,7 +11,8 @@ are computed (each keyframe's ``C'`` with its widened projection and image size)
 that show a keyframe as it is (error 0 by construction, RMSE 0) are left out, as are frames
 whose predicted error is not finite.  Printed per terrain and path: Pearson and Spearman
 correlation of each metric with RMSE and with FLIP, warp beside resample.  Written: a CSV of
-every measured frame and a scatter plot PNG.
+every measured frame (with diagnostics: the RMS blur and alias parts of the resampling term
+over the square centres in view, and the mean anisotropy ``s1/s2``) and a scatter plot PNG.
 
     python benchmarks/metric_correlation.py [--frames N] [--size WxH] [--stride K]
         [--terrains jacksboro,store] [--paths chen1999,flyover,bank] [--decide warp|resample]
@@ -33,8 +34,10 @@ from scipy import stats
 from lodsprite.api import Renderer
 from lodsprite.camera import widened
 from lodsprite.run import RenderConfig, field_of_view, parse_size, prepare, run_technique
-from lodsprite.sprite.metric import ErrorMetric
+from lodsprite.sprite.metric import ErrorMetric, in_view
 from lodsprite.sprite.policy import KEYFRAME, keyframe_error_px
+from lodsprite.sprite.raycast import coarse_normals
+from lodsprite.sprite.resampling import singular_values, texel_jacobian
 from lodsprite.terrain.store import build_store
 
 METRICS = ("warp", "resample")
@@ -65,8 +68,30 @@ def predicted(renderer: Renderer, config: RenderConfig, path, log, rows) -> list
                                                 (w + 2 * g, h + 2 * g))
             rec[f"{name}_px"] = keyframe_error_px(metric, cps[name, k], vp, tr.projection(vp),
                                                   h)
+        rec.update(terms(metrics["resample"], cps["resample", k], vp, tr.projection(vp),
+                         config.size))
         out.append(rec)
     return out
+
+
+def terms(metric: ErrorMetric, cp, vp, projection, size) -> dict[str, float]:
+    """Diagnostics: the RMS over the square centres in view (hits) of the resampling term's
+    two parts, ``blur = max(1/s2 - 1, 0)`` and ``alias = max(1 - 1/s1, 0)`` px, and the mean
+    anisotropy ``s1 / s2`` (the fallback sample is not included)."""
+    view_proj = projection.matrix() @ vp.view_matrix()
+    c = metric.squares.centres
+    vis = in_view(np.c_[c, np.ones(len(c))], view_proj)
+    pts = np.asarray(cp)[vis & ~cp.missed]
+    if len(pts) == 0:
+        return {"blur_px": float("nan"), "alias_px": float("nan"), "aniso": float("nan")}
+    j, ok = texel_jacobian(pts, coarse_normals(metric.squares, pts), cp.key_view_proj,
+                           cp.key_size, view_proj, size)
+    s1, s2 = singular_values(j[ok])
+    blur = np.maximum(1 / np.maximum(s2, 1e-9) - 1, 0)
+    alias = np.maximum(1 - 1 / np.maximum(s1, 1e-9), 0)
+    return {"blur_px": float(np.sqrt(np.mean(blur ** 2))),
+            "alias_px": float(np.sqrt(np.mean(alias ** 2))),
+            "aniso": float(np.mean(s1 / np.maximum(s2, 1e-9)))}
 
 
 def run_case(terrain: str, path_spec: str, args) -> list[dict]:
@@ -165,7 +190,7 @@ def main() -> None:
                 recs += case
                 results[name, p] = correlations(case)
     cols = ["terrain", "path", "frame", "kind", "keyframe", "decided_px", "warp_px",
-            "resample_px", "rmse", "flip"]
+            "resample_px", "blur_px", "alias_px", "aniso", "rmse", "flip"]
     with open(args.out / "metric_correlation.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=cols)
         w.writeheader()
