@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from lodsprite.sprite.resampling import cross
 from lodsprite.terrain.heightfield import HeightField
 from lodsprite.terrain.lod import level_indices, level_step
 
@@ -274,7 +275,7 @@ def coarse_normals(squares: CoarseSquares, points: np.ndarray) -> np.ndarray:
     u = (p[:, 0] - xs[col]) / (xs[col + 1] - xs[col])          # west -> east
     v = (ys[row] - p[:, 1]) / (ys[row] - ys[row + 1])          # north -> south
     tri = own[row * n + col, np.where(v >= u, 0, 1)]           # (K, 3, 3)
-    nrm = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    nrm = cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
     nrm *= np.where(nrm[:, 2:3] < 0, -1.0, 1.0)
     return nrm / np.linalg.norm(nrm, axis=1, keepdims=True)
 

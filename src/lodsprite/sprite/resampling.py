@@ -54,6 +54,13 @@ import numpy as np
 MAX_RESAMPLING_PX = 64.0  # e_res is clipped here (edge-on planes, points behind an eye)
 
 
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise cross products ``(K, 3)`` of ``a, b (K, 3)`` (np.cross costs more on
+    the few hundred rows of a frame)."""
+    return np.c_[a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1], a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
+                 a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0]]
+
+
 def tangent_basis(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Orthonormal tangents ``(t1, t2)`` ``(K, 3) float64`` of the planes with ``normals (K, 3)``
     (need not be unit; zero normals give the xy plane)."""
@@ -62,9 +69,9 @@ def tangent_basis(normals: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     n = np.where(length > 0, n / np.where(length > 0, length, 1.0), [0.0, 0.0, 1.0])
     # The world axis least aligned with n is never parallel to it.
     axis = np.eye(3)[np.argmin(np.abs(n), axis=1)]
-    t1 = np.cross(n, axis)
+    t1 = cross(n, axis)
     t1 /= np.linalg.norm(t1, axis=1, keepdims=True)
-    return t1, np.cross(n, t1)
+    return t1, cross(n, t1)
 
 
 def pixel_derivatives(points: np.ndarray, t1: np.ndarray, t2: np.ndarray,
