@@ -87,6 +87,8 @@ def test_sprite_mode_with_ground_truth_reports_quality(tmp_path):
     (["render", *SMALL, "--texture", "/no/image.png"], "/no/image.png"),
     (["render", *SMALL, "--mode", "sprite", "--epsilon", "0"], "epsilon"),
     (["render", *SMALL, "--mode", "sprite", "--guard", "-1"], "guard"),
+    (["render", *SMALL, "--mode", "sprite", "--metric", "sampling"], "metric"),
+    (["render", *SMALL, "--mode", "distributed", "--metric", "resample"], "metric"),
     (["render", "--no-such-option"], "no-such-option"),
     (["reproduce", "nobody2000"], "nobody2000"),
 ])
