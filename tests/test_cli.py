@@ -91,6 +91,8 @@ def test_sprite_mode_with_ground_truth_reports_quality(tmp_path):
     (["render", *SMALL, "--mode", "sprite", "--cache-policy", "fifo"], "cache-policy"),
     (["render", *SMALL, "--mode", "sprite", "--cache-mb", "0.01"], "at least"),
     (["render", *SMALL, "--path", "patrol:1:2:0"], "passes"),
+    (["render", *SMALL, "--mode", "sprite", "--metric", "sampling"], "metric"),
+    (["render", *SMALL, "--mode", "distributed", "--metric", "resample"], "metric"),
     (["render", "--no-such-option"], "no-such-option"),
     (["reproduce", "nobody2000"], "nobody2000"),
 ])

@@ -141,14 +141,15 @@ class Renderer:
     def sprite(self, epsilon_px: float = DEFAULT_EPSILON_PX, lod: int = DEFAULT_COARSE,
                threaded: bool = False, visibility: str = DEFAULT_VISIBILITY,
                guard_px: int = DEFAULT_GUARD_PX, border: bool = True, cache_mb: float = 0.0,
-               cache_policy: str = DEFAULT_POLICY) -> LodSprite:
+               cache_policy: str = DEFAULT_POLICY, metric: str = "warp") -> LodSprite:
         """A LOD-sprite engine on this renderer: error threshold ``epsilon_px`` pixels,
         coarse level ``lod`` quads per side.  ``threaded=True`` renders keyframes on a
         worker thread with its own context (:mod:`lodsprite.sprite.threaded`); otherwise a
         keyframe is rendered inline in the frame that needs it (the 1999 algorithm).
         ``cache_mb > 0`` keeps keyframes in a GPU cache of that many MB replaced by
         ``cache_policy`` (``lru`` | ``benefit``; :mod:`lodsprite.sprite.cache`; inline
-        keyframes only)."""
+        keyframes only).  ``metric``: ``"warp"`` (Eq. 1-2) or ``"resample"`` (adds the
+        keyframe image's resampling error, :mod:`lodsprite.sprite.resampling`)."""
         if not epsilon_px > 0:
             raise InputError(f"epsilon must be > 0 pixels, got {epsilon_px}")
         if not cache_mb >= 0:
@@ -157,7 +158,7 @@ class Renderer:
             raise InputError("the keyframe cache needs inline keyframes "
                              "(--inline-keyframes)")
         sprite = LodSprite(self, epsilon_px, lod, threaded, visibility, guard_px, border,
-                           cache_mb, cache_policy)
+                           cache_mb, cache_policy, metric)
         self._sprites.append(sprite)
         return sprite
 
@@ -223,7 +224,7 @@ class LodSprite:
 
     def __init__(self, renderer: Renderer, epsilon_px: float, lod: int, threaded: bool,
                  visibility: str, guard_px: int, border: bool, cache_mb: float = 0.0,
-                 cache_policy: str = DEFAULT_POLICY) -> None:
+                 cache_policy: str = DEFAULT_POLICY, metric: str = "warp") -> None:
         self.renderer = renderer
         self.threaded = threaded
         self.sprite = SpriteRenderer(renderer.paths.renderer, lod, visibility, border=border,
@@ -231,9 +232,9 @@ class LodSprite:
         try:
             self.engine: LodSpriteEngine | ThreadedLodSpriteEngine = (
                 ThreadedLodSpriteEngine(self.sprite, renderer.scene, renderer.fov_y_deg,
-                                        epsilon_px) if threaded
+                                        epsilon_px, metric=metric) if threaded
                 else LodSpriteEngine(self.sprite, epsilon_px, cache_mb=cache_mb,
-                                     cache_policy=cache_policy))
+                                     cache_policy=cache_policy, metric=metric))
         except BaseException:
             self.sprite.release()
             raise

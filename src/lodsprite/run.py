@@ -36,6 +36,7 @@ from lodsprite.progress import Progress
 from lodsprite.scene import Scene, load_scene
 from lodsprite.sprite.cache import POLICIES as CACHE_POLICIES
 from lodsprite.sprite.engine import DEFAULT_EPSILON_PX
+from lodsprite.sprite.policy import METRICS
 from lodsprite.terrain import DEFAULT_EXAGGERATION
 from lodsprite.terrain.loaders import load_level0
 from lodsprite.terrain.lod import DEFAULT_COARSE, level_step
@@ -90,6 +91,7 @@ class RenderConfig:
     tile_budget_ms: float = 8.0  # sprite, tiles > 1: tile work per frame, ms
     cache_mb: float = 0.0     # sprite: keyframe cache budget, MB (0: off)
     cache_policy: str = "lru"  # sprite: keyframe cache replacement, lru | benefit
+    metric: str = "warp"      # sprite: "warp" (Eq. 1-2) or "resample" (adds resampling)
 
     @property
     def technique(self) -> str:
@@ -103,7 +105,7 @@ class RenderConfig:
                 "key_sse": self.key_sse, "gpu_mb": self.gpu_mb, "host_mb": self.host_mb,
                 "threaded": False, "shading": self.shading, "tiles": self.tiles,
                 "tile_budget_ms": self.tile_budget_ms, "cache_mb": self.cache_mb,
-                "cache_policy": self.cache_policy}
+                "cache_policy": self.cache_policy, "metric": self.metric}
 
     def validate(self) -> None:
         modes = _modes()  # the registry's now: a technique registered later is one too
@@ -125,6 +127,9 @@ class RenderConfig:
         if self.shading not in SHADINGS:
             raise InputError(f"unknown shading '{self.shading}': use one of "
                              f"{', '.join(SHADINGS)}")
+        if self.metric not in METRICS:
+            raise InputError(f"unknown metric '{self.metric}': use one of "
+                             f"{', '.join(METRICS)}")
         if self.quality_stride < 1:
             raise InputError(f"quality stride must be >= 1, got {self.quality_stride}")
         if self.key_sse is not None and (self.mode != "sprite" or not self.key_sse > 0):

@@ -154,3 +154,30 @@ def test_frames_say_so_when_the_worker_has_died(gl, scene, sprite, monkeypatch):
                        "a frame that says the worker died", interval_s=0.002)
     finally:
         engine.close()
+
+
+def test_the_worker_gives_the_resample_metric_its_keyframe_matrix_and_size(gl, scene, sprite):
+    path = orbit(6, span_deg=10)
+    engine = ThreadedLodSpriteEngine(sprite, scene, 45.0, 1.0, metric="resample")
+    try:
+        frames = [engine.frame(vp) for vp in path]
+        cp = engine._c_prime
+    finally:
+        engine.close()
+    assert engine.metric.resampling
+    assert cp.key_size == (SIZE[0] + 8, SIZE[1] + 8) and cp.key_view_proj.shape == (4, 4)
+    # at the keyframe's own view the resampling term is 0 too (guard band included)
+    assert frames[0].error_px == pytest.approx(0.0, abs=1e-6)
+    assert all(np.isfinite(f.error_px) for f in frames)
+
+
+def test_the_inline_engine_decides_with_the_resample_metric(gl, scene, sprite):
+    path = orbit(12, span_deg=20)
+    warp, res = (LodSpriteEngine(sprite, 0.5, predict=False, metric=m)
+                 for m in ("warp", "resample"))
+    assert res.policy.key_size == (SIZE[0] + 8, SIZE[1] + 8) and res.metric.resampling
+    fw = [warp.frame(vp) for vp in path]
+    fr = [res.frame(vp) for vp in path]
+    # the same first keyframe; the resampling term only adds to the error of what follows
+    assert fw[1].decision_error_px < fr[1].decision_error_px
+    assert sum(f.type == KEYFRAME for f in fr) >= sum(f.type == KEYFRAME for f in fw)

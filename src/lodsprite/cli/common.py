@@ -28,7 +28,8 @@ TextureOpt = Annotated[str, typer.Option(
     "--texture", help="terrain | checker[:K] | image FILE")]
 PathOpt = Annotated[str, typer.Option(
     "--path", help="chen1999 | swan2002 | flyover[:HEIGHT_M[:TRACK_M]] | "
-                   "patrol[:HEIGHT_M[:TRACK_M[:PASSES]]] | FILE.json")]
+                   "patrol[:HEIGHT_M[:TRACK_M[:PASSES]]] | bank[:HEIGHT_M[:TRACK_M]] | "
+                   "FILE.json")]
 FramesOpt = Annotated[int | None, typer.Option(
     "--frames", help="frames along the path (default: the paper's 460 / 600, or the file's)")]
 SizeOpt = Annotated[str, typer.Option("--size", help="image size WxH in pixels")]
@@ -43,6 +44,9 @@ VisOpt = Annotated[str, typer.Option(
 BorderOpt = Annotated[bool, typer.Option(
     "--border/--no-border", help="sprite mode: draw the terrain's full-resolution outline "
                                  "(border ribbons) with the coarse level")]
+MetricOpt = Annotated[str, typer.Option(
+    "--metric", help="sprite mode: the keyframe error metric: warp (Chen et al. Eq. 1-2) | "
+                     "resample (adds the keyframe image's resampling error)")]
 GuardOpt = Annotated[int, typer.Option(
     "--guard", help="sprite mode: keyframe guard band in pixels on every side")]
 CacheMbOpt = Annotated[float, typer.Option(

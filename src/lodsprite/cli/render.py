@@ -19,6 +19,7 @@ from lodsprite.cli.common import (
     GuardOpt,
     LodOpt,
     MaxErrorOpt,
+    MetricOpt,
     PaceOpt,
     PathOpt,
     SizeOpt,
@@ -48,7 +49,8 @@ def info() -> None:
     out.print(t)
 
 
-def _check_mode(mode: str, ground_truth: bool, video: Path | None) -> bool:
+def _check_mode(mode: str, ground_truth: bool, video: Path | None,
+                metric: str = "warp") -> bool:
     """Check ``--mode`` and what goes with it; True for ``distributed``."""
     from lodsprite.errors import InputError
     from lodsprite.run import MODES
@@ -60,6 +62,9 @@ def _check_mode(mode: str, ground_truth: bool, video: Path | None) -> bool:
         raise InputError("--ground-truth replays a run's decisions: not for --mode distributed")
     if distributed and video is not None:
         raise InputError(f"--video is for --mode {', '.join(MODES)}")
+    if distributed and metric != "warp":
+        raise InputError("--metric resample is for --mode sprite: the distributed client "
+                         "and server decide with the 1999 metric")
     return distributed
 
 
@@ -127,6 +132,7 @@ def render(
     visibility: VisOpt = "coarse",
     border: BorderOpt = True,
     guard: GuardOpt = 32,
+    metric: MetricOpt = "warp",
     pace: PaceOpt = "needed",
     max_error: MaxErrorOpt = None,
     sse: Annotated[float, typer.Option(
@@ -148,7 +154,7 @@ def render(
     from lodsprite import RenderConfig, render_path
     from lodsprite.run import parse_size
 
-    distributed = _check_mode(mode, ground_truth, video)
+    distributed = _check_mode(mode, ground_truth, video, metric)
     config = RenderConfig(terrain=terrain, texture=texture, path=path,
                           mode="sprite" if distributed else mode, lod=lod,
                           size=parse_size(size), frames=frames, grid=grid,
@@ -157,7 +163,7 @@ def render(
                           guard_px=guard, sse=sse, gpu_mb=gpu_mb, host_mb=host_mb,
                           key_sse=key_sse, flip=flip, shading=shading, tiles=tiles,
                           tile_budget_ms=tile_budget_ms, cache_mb=cache_mb,
-                          cache_policy=cache_policy)
+                          cache_policy=cache_policy, metric=metric)
     with progress_bar(f"render {mode}") as update:
         if distributed:
             from lodsprite.distributed.run import parse_max_error, render_distributed
@@ -221,6 +227,7 @@ def view(
         "--cache-mb", help="sprite with --inline-keyframes: keyframe cache budget in MB "
                            "(0: off)")] = 0.0,
     cache_policy: CachePolicyOpt = "lru",
+    metric: MetricOpt = "warp",
 ) -> None:
     """Fly through a terrain with live LOD-sprite, or round a lumigraph (WASD/QE, mouse, tab
     orbit)."""
@@ -234,7 +241,7 @@ def view(
                        exit=exit_, out=out_dir, record=record, server=server,
                        target_fps=target_fps, sse=sse, key_sse=key_sse, shading=shading,
                        tiles=tiles, tile_budget_ms=tile_budget_ms, cache_mb=cache_mb,
-                       cache_policy=cache_policy)
+                       cache_policy=cache_policy, metric=metric)
     s = run_view(opts)
     if s:
         out.print(f"{s['frames']} frames, {s['mode']}: median {s['median_ms']:.2f} ms, "

@@ -26,6 +26,8 @@ of the 1999 paper's keyframe cache, :mod:`lodsprite.paths.flyover`).
 
 A third, :func:`flyover`, is not a paper's: a low flight of fixed height and length in
 metres, the same over a terrain of any size (for comparing renderers across sizes).
+A fourth, :func:`bank` (:mod:`lodsprite.paths.bank`), is a low S-turn that rolls into its
+turns, in metres too (grazing views for the resampling metric).
 
 The JSON file format is documented in :mod:`lodsprite.paths.core`.
 """
@@ -36,6 +38,7 @@ import os
 from pathlib import Path
 
 from lodsprite.errors import PathError
+from lodsprite.paths.bank import bank, parse_bank
 from lodsprite.paths.core import (
     BUILTIN_PATHS,
     CHEN1999_FRAMES,
@@ -57,6 +60,7 @@ __all__ = [
     "PATH_VERSION",
     "SWAN2002_FRAMES",
     "CameraPath",
+    "bank",
     "chen1999",
     "flyover",
     "get_path",
@@ -77,7 +81,8 @@ def get_path(spec: str | os.PathLike, hf: HeightField, frames: int | None = None
     600 frames), ``"flyover[:HEIGHT_M[:TRACK_M]]"`` (460 frames; a low flight of fixed
     height and length, :mod:`lodsprite.paths.flyover`),
     ``"patrol[:HEIGHT_M[:TRACK_M[:PASSES]]]"`` (460 frames; back and forth,
-    :mod:`lodsprite.paths.flyover`) or a JSON path file (module
+    :mod:`lodsprite.paths.flyover`), ``"bank[:HEIGHT_M[:TRACK_M]]"`` (460 frames; a low
+    banking S-turn, :mod:`lodsprite.paths.bank`) or a JSON path file (module
     docstring), which is resampled to ``frames`` when given
     (:meth:`CameraPath.resampled`).  A spec ending in ``.json`` that does not exist
     reports the missing file; any other unknown spec raises :class:`PathError`.
@@ -95,9 +100,12 @@ def get_path(spec: str | os.PathLike, hf: HeightField, frames: int | None = None
     back_and_forth = parse_patrol(key)
     if back_and_forth is not None:
         return patrol(hf, CHEN1999_FRAMES if frames is None else frames, *back_and_forth)
+    banked = parse_bank(key)
+    if banked is not None:
+        return bank(hf, CHEN1999_FRAMES if frames is None else frames, *banked)
     if Path(key).is_file() or key.lower().endswith(".json"):
         path = load_path_json(key)
         return path if frames is None else path.resampled(frames)
     raise PathError(f"unknown path '{key}': use chen1999, swan2002, "
-                    "flyover[:HEIGHT_M[:TRACK_M]], patrol[:HEIGHT_M[:TRACK_M[:PASSES]]] "
-                    "or a .json file")
+                    "flyover[:HEIGHT_M[:TRACK_M]], patrol[:HEIGHT_M[:TRACK_M[:PASSES]]], "
+                    "bank[:HEIGHT_M[:TRACK_M]] or a .json file")

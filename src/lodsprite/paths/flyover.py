@@ -62,6 +62,16 @@ def parse_flyover(spec: str) -> tuple[float, float] | None:
     return height, track
 
 
+def ground_floor(ground: np.ndarray, step_m: float, height_m: float) -> np.ndarray:
+    """A smooth floor ``(S,) metres`` under the ground heights ``ground (S,)`` sampled every
+    ``step_m`` metres along a track: the mean, over ``±reach/2``, of maxima over
+    ``±2 reach`` (``reach`` = ``height_m`` in samples), so at least the highest ground
+    within ``±height_m`` (every maximum averaged covers that window)."""
+    reach = max(1, int(math.ceil(height_m / step_m)))
+    floor = ndimage.maximum_filter1d(ground, 4 * reach + 1, mode="nearest")
+    return ndimage.uniform_filter1d(floor, reach, mode="nearest")
+
+
 def flyover(hf: HeightField, frames: int = CHEN1999_FRAMES, height_m: float = DEFAULT_HEIGHT_M,
             track_m: float = DEFAULT_TRACK_M) -> CameraPath:
     """The flight (module docstring): ``frames`` viewpoints evenly spaced along the track."""
@@ -79,11 +89,7 @@ def along_track(hf: HeightField, ys: np.ndarray, length: float,
     pitched down by ``PITCH_DEG``."""
     y = np.linspace(-length / 2, length / 2, _SAMPLES)
     ground = hf.height_at(np.zeros_like(y), y)
-    reach = max(1, int(math.ceil(height_m / (length / (_SAMPLES - 1)))))
-    # the mean, over +-reach/2, of maxima over +-2 reach: smooth, and at least the highest
-    # ground within +-reach (every maximum averaged covers that window)
-    floor = ndimage.maximum_filter1d(ground, 4 * reach + 1, mode="nearest")
-    floor = ndimage.uniform_filter1d(floor, reach, mode="nearest")
+    floor = ground_floor(ground, length / (_SAMPLES - 1), height_m)
     zs = np.interp(ys, y, floor) + height_m
     p = math.radians(PITCH_DEG)
     d = np.array([0.0, -math.cos(p), math.sin(p)])  # the camera looks along -d

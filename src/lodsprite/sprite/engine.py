@@ -43,6 +43,7 @@ from lodsprite.sprite.policy import (
     SPRITE,
     KeyChoice,
     KeyframePolicy,
+    resampling_metric,
 )
 
 __all__ = ["DEFAULT_EPSILON_PX", "FIRST_SPRITE", "FRAME_TYPES", "KEYFRAME", "SPRITE",
@@ -69,15 +70,15 @@ class LodSpriteEngine:
 
     def __init__(self, sprite: SpriteRenderer, epsilon_px: float = DEFAULT_EPSILON_PX,
                  predict: bool = True, cache_mb: float = 0.0,
-                 cache_policy: str = DEFAULT_POLICY) -> None:
+                 cache_policy: str = DEFAULT_POLICY, metric: str = "warp") -> None:
         self.sprite = sprite
         hf = sprite.terrain.geometry.full  # the terrain, or a store's level 0
         cache = (KeyframeCache(cache_mb * 2 ** 20, sprite.keyframe_bytes(), cache_policy)
                  if cache_mb > 0 else None)
-        self.policy = KeyframePolicy(ErrorMetric.for_level(hf, sprite.coarse_quads), hf,
-                                     epsilon_px, sprite.target.height,
-                                     sprite.terrain.projection, sprite.key_projection, predict,
-                                     cache)
+        self.policy = KeyframePolicy(
+            ErrorMetric.for_level(hf, sprite.coarse_quads, resampling_metric(metric)), hf,
+            epsilon_px, sprite.target.height, sprite.terrain.projection,
+            sprite.key_projection, predict, cache, key_size=sprite.key_size)
         self._shows_keyframe = True
         # Called in every frame that draws no keyframe, inside its clock (None: nothing).
         self.between_keyframes = None

@@ -71,6 +71,12 @@ better than it is:
 
 The fallback needs the keyframe eye: :meth:`ErrorMetric.reproject` returns a
 :class:`Reprojection`, an ``(n*n, 3)`` array of ``C'`` that also carries it.
+
+**Resampling** (``ErrorMetric(resampling=True)``, the technique option ``metric="resample"``;
+Chen et al. §5's double resampling): each sample's θ² gains ``(β e_res)²``, ``e_res`` the
+keyframe image's resampling error in pixels at ``C'`` on the coarse triangle there
+(:mod:`lodsprite.sprite.resampling`), so the error stays ``sqrt(mean θ²) / β``; the
+keyframe's matrix and size come with its :class:`Reprojection`.
 """
 
 from __future__ import annotations
@@ -86,10 +92,12 @@ from lodsprite.sprite.raycast import (
     FALLBACK_CACHE,
     CoarseSquares,
     Reprojection,
+    coarse_normals,
     coarse_squares,
     reproject_points,
     reprojected_centres,
 )
+from lodsprite.sprite.resampling import resampling_px
 from lodsprite.terrain.heightfield import HeightField
 from lodsprite.terrain.lod import level_indices
 
@@ -132,9 +140,15 @@ class ErrorMetric:
 
     ``C'`` depends only on the keyframe eye, so :meth:`reproject` runs once per
     keyframe (all squares); :meth:`error_px` is the cheap per-frame part.
+
+    ``resampling``: add the keyframe image's resampling error to each sample's angle,
+    ``θ² = θ_warp² + (β e_res)²`` (:mod:`lodsprite.sprite.resampling`, evaluated at ``C'``
+    on the coarse triangle there; misses add nothing before :func:`miss_floor`); False is
+    the 1999 metric.
     """
 
     squares: CoarseSquares
+    resampling: bool = False
 
     @cached_property
     def _centres_h(self) -> np.ndarray:
@@ -142,12 +156,16 @@ class ErrorMetric:
         return np.c_[c, np.ones(len(c))]
 
     @classmethod
-    def for_level(cls, hf: HeightField, level_quads: int) -> ErrorMetric:
-        return cls(coarse_squares(hf, level_quads))
+    def for_level(cls, hf: HeightField, level_quads: int,
+                  resampling: bool = False) -> ErrorMetric:
+        return cls(coarse_squares(hf, level_quads), resampling)
 
-    def reproject(self, key_eye: np.ndarray) -> Reprojection:
-        """``C' (n*n, 3)`` in metres for a keyframe rendered from ``key_eye``."""
-        return reprojected_centres(self.squares, key_eye)
+    def reproject(self, key_eye: np.ndarray, key_view_proj: np.ndarray | None = None,
+                  key_size: tuple[int, int] | None = None) -> Reprojection:
+        """``C' (n*n, 3)`` in metres for a keyframe rendered from ``key_eye`` through
+        ``key_view_proj (4, 4)`` on a ``key_size = (w, h)`` pixel image (guard band
+        included; both needed by the resampling term only)."""
+        return reprojected_centres(self.squares, key_eye, key_view_proj, key_size)
 
     def theta(self, c_prime: np.ndarray, eye: np.ndarray, view_proj: np.ndarray) -> np.ndarray:
         """θ (radians) of the squares whose centre ``C`` is in the current view (misses
@@ -155,12 +173,13 @@ class ErrorMetric:
         return self._theta(c_prime, eye, view_proj)[0]
 
     def _theta(self, c_prime: np.ndarray, eye: np.ndarray,
-               view_proj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+               view_proj: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """``(θ, missed, C')`` of the square centres in view."""
         vis = in_view(self._centres_h, view_proj)
-        th = angles_at_eye(np.asarray(eye, dtype=np.float64), self.squares.centres[vis],
-                           np.asarray(c_prime)[vis])
+        cp = np.asarray(c_prime)[vis]
+        th = angles_at_eye(np.asarray(eye, dtype=np.float64), self.squares.centres[vis], cp)
         missed = getattr(c_prime, "missed", None)
-        return th, (np.zeros(th.size, bool) if missed is None else missed[vis])
+        return th, (np.zeros(th.size, bool) if missed is None else missed[vis]), cp
 
     @cached_property
     def _square_boxes(self) -> tuple[np.ndarray, np.ndarray]:
@@ -260,10 +279,16 @@ class ErrorMetric:
 
         ``cache``: a keyframe's ``Reprojection.fallback_cache``; vertices reprojected
         before for that keyframe are taken from it (the same ``C'``, computed once)."""
+        return self.fallback_sample(key_eye, eye, view_proj, cache)[:2]
+
+    def fallback_sample(self, key_eye: np.ndarray, eye: np.ndarray, view_proj: np.ndarray,
+                        cache: dict | None = None
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`fallback_theta` with the fallback vertices' ``C' (K, 3)`` metres."""
         sq = self.squares
         rr, cc = self.fallback_grid(view_proj)
         if len(rr) == 0:
-            return np.zeros(0), np.zeros(0, bool)
+            return np.zeros(0), np.zeros(0, bool), np.zeros((0, 3))
         n, step = sq.level_quads, sq.step
         pts = sq.hf.points(rr, cc)
         lin = rr * sq.hf.cols + cc
@@ -292,7 +317,7 @@ class ErrorMetric:
                 order = np.argsort(keys, kind="stable")
                 cache[id(sq)] = (sq, keys[order], np.r_[entry[2], p_prime[keep]][order],
                                  np.r_[entry[3], missed[keep]][order])
-        return angles_at_eye(np.asarray(eye, dtype=np.float64), pts, p_prime), missed
+        return angles_at_eye(np.asarray(eye, dtype=np.float64), pts, p_prime), missed, p_prime
 
     def covers(self, viewpoint, projection, key_viewpoint, key_projection) -> bool:
         """Whether every square centre in the current view is also in the keyframe's view."""
@@ -305,23 +330,46 @@ class ErrorMetric:
         return in_view(self._centres_h, projection.matrix() @ viewpoint.view_matrix())
 
     def error_px(self, c_prime: np.ndarray, eye: np.ndarray, view_proj: np.ndarray,
-                 pixel_angle_rad: float) -> float:
+                 pixel_angle_rad: float, size: tuple[int, int] | None = None) -> float:
         """``sqrt(mean(θ²)) / β`` in pixels, over the square centres in view, or over the
         fallback sample when fewer than :data:`MIN_SAMPLES` centres are in view and
         ``c_prime`` is a :class:`Reprojection`; misses count as :func:`miss_floor` says;
         ``math.inf`` when nothing is measurable (a keyframe is due): no sample in view, or
         every sample in view missed.
 
+        With :attr:`resampling`, ``size = (w, h)`` is the current image's and ``c_prime``
+        a :class:`Reprojection` carrying ``key_view_proj`` and ``key_size`` (ValueError
+        otherwise); each hit's θ² gains ``(β e_res)²``.
+
         Eq. 2's test ``mean(θ²) >= (β ε)²`` is equivalent to ``error_px >= ε``.
         """
-        th, missed = self._theta(c_prime, eye, view_proj)
+        th, missed, cp = self._theta(c_prime, eye, view_proj)
         key_eye = getattr(c_prime, "key_eye", None)
         if th.size < MIN_SAMPLES and key_eye is not None:
-            fallback = self.fallback_theta(key_eye, eye, view_proj,
-                                           getattr(c_prime, "fallback_cache", None))
+            fallback = self.fallback_sample(key_eye, eye, view_proj,
+                                            getattr(c_prime, "fallback_cache", None))
             if fallback[0].size > th.size:
-                th, missed = fallback
+                th, missed, cp = fallback
         if th.size == 0 or missed.all():  # nothing in view, or nothing the sprite draws
             return math.inf
+        if self.resampling:
+            th = self._with_resampling(th, missed, cp, c_prime, view_proj, pixel_angle_rad,
+                                       size)
         th = miss_floor(th, missed)
         return float(np.sqrt(np.mean(th * th)) / pixel_angle_rad)
+
+    def _with_resampling(self, th: np.ndarray, missed: np.ndarray, cp: np.ndarray,
+                         c_prime: np.ndarray, view_proj: np.ndarray, beta: float,
+                         size: tuple[int, int] | None) -> np.ndarray:
+        """``sqrt(θ² + (β e_res)²)`` for the hits (``e_res`` at ``C' = cp (K, 3)`` on the
+        coarse triangle there); misses keep θ (the floor raises them)."""
+        key_view_proj = getattr(c_prime, "key_view_proj", None)
+        key_size = getattr(c_prime, "key_size", None)
+        if size is None or key_view_proj is None or key_size is None:
+            raise ValueError("the resampling metric needs the current image size and a "
+                             "Reprojection with key_view_proj and key_size")
+        hit = ~missed
+        e = np.zeros(len(th))
+        e[hit] = resampling_px(cp[hit], coarse_normals(self.squares, cp[hit]), key_view_proj,
+                               key_size, view_proj, size)
+        return np.sqrt(th * th + (beta * e) ** 2)

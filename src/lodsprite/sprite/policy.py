@@ -55,6 +55,7 @@ from lodsprite.terrain.heightfield import HeightField
 KEYFRAME, FIRST_SPRITE, SPRITE = "keyframe", "first_sprite", "sprite"
 FRAME_TYPES = (KEYFRAME, FIRST_SPRITE, SPRITE)
 DEFAULT_EPSILON_PX = 1.0
+METRICS = ("warp", "resample")  # the technique option ``metric``
 PREDICT_MARGIN = 0.9   # of ε: a look-ahead keyframe must serve the current frame under this
 LOOKAHEAD_AIM = 0.95   # aim a rescaled look-ahead at this fraction of the margin
 LOOKAHEAD_TRIES = 4
@@ -72,7 +73,30 @@ def keyframe_error_px(metric: ErrorMetric, c_prime: np.ndarray, viewpoint: Viewp
     image ``height_px`` pixels high.  May be ``inf`` (nothing measurable)."""
     view_proj = projection.matrix() @ viewpoint.view_matrix()
     beta = projection.pixel_angle_rad(height_px)
-    return metric.error_px(c_prime, viewpoint.o, view_proj, beta)
+    if not getattr(metric, "resampling", False):  # the 1999 metric (or a stand-in)
+        return metric.error_px(c_prime, viewpoint.o, view_proj, beta)
+    size = (max(1, round(projection.aspect * height_px)), int(height_px))
+    return metric.error_px(c_prime, viewpoint.o, view_proj, beta, size=size)
+
+
+def resampling_metric(metric: str) -> bool:
+    """Whether the technique option ``metric`` (one of :data:`METRICS`: ``"warp"``, the 1999
+    Eq. 1-2 metric, or ``"resample"``, which adds the resampling term) asks for the
+    resampling term; :class:`~lodsprite.errors.InputError` for any other value."""
+    if metric not in METRICS:
+        raise InputError(f"metric must be one of {', '.join(METRICS)}, got {metric!r}")
+    return metric == "resample"
+
+
+def key_image_size(projection: Projection, key_projection: Projection,
+                   height_px: int) -> tuple[int, int]:
+    """``(w, h)`` pixels of a keyframe rendered through ``key_projection`` at the pixel angle
+    of ``projection`` on ``height_px`` rows (a :func:`~lodsprite.camera.widened` one: the
+    image plus its guard band)."""
+    ratio = (math.tan(math.radians(key_projection.fov_y_deg) / 2)
+             / math.tan(math.radians(projection.fov_y_deg) / 2))
+    h = max(1, round(height_px * ratio))
+    return max(1, round(key_projection.aspect * h)), h
 
 
 def keyframe_due(error_px: float, limit_px: float) -> bool:
@@ -141,13 +165,18 @@ class KeyframePolicy:
     image height (sets the pixel angle β); ``projection(viewpoint)``: the frame projection;
     ``key_projection(projection)``: the projection a keyframe is rendered through (default:
     the frame's); ``predict``: place due keyframes ahead of the viewer; ``cache``: a
-    :class:`~lodsprite.sprite.cache.KeyframeCache` to keep keyframes in (None: one keyframe).
+    :class:`~lodsprite.sprite.cache.KeyframeCache` to keep keyframes in (None: one keyframe);
+    ``key_size``: the keyframe image's ``(w, h)`` pixels, guard band included (None: from
+    the widened projection at the frame's pixel angle, :func:`key_image_size`).  Each
+    keyframe's ``C'`` carries its view-projection matrix and size (the resampling term's
+    input).
     """
 
     def __init__(self, metric: ErrorMetric, hf: HeightField, epsilon_px: float,
                  height_px: int, projection: ProjectionFn,
                  key_projection: KeyProjectionFn | None = None, predict: bool = True,
-                 cache: KeyframeCache | None = None) -> None:
+                 cache: KeyframeCache | None = None,
+                 key_size: tuple[int, int] | None = None) -> None:
         if not epsilon_px > 0:
             raise InputError(f"error threshold epsilon must be > 0 pixels, got {epsilon_px}")
         self.metric = metric
@@ -157,6 +186,7 @@ class KeyframePolicy:
         self.projection = projection
         self.key_projection = key_projection or (lambda p: p)
         self.predict = predict
+        self.key_size = key_size
         self.c_prime: np.ndarray | None = None  # C' of the current keyframe, (n*n, 3) metres
         self.predicted_keyframes = 0
         self._since_key = 0
@@ -169,11 +199,12 @@ class KeyframePolicy:
     @classmethod
     def for_terrain(cls, hf: HeightField, lod: int, epsilon_px: float,
                     size: tuple[int, int], fov_y_deg: float = 45.0, guard_px: int = 0,
-                    predict: bool = True,
-                    cache: KeyframeCache | None = None) -> KeyframePolicy:
+                    predict: bool = True, cache: KeyframeCache | None = None,
+                    metric: str = "warp") -> KeyframePolicy:
         """The policy for ``hf`` at coarse level ``lod`` on ``size = (w, h)`` pixel images,
         with the projections the terrain renderer uses (near/far fitted to the terrain,
-        keyframes widened by ``guard_px`` pixels on every side)."""
+        keyframes widened by ``guard_px`` pixels on every side), deciding with ``metric``
+        (:func:`resampling_metric`)."""
         w, h = size
         lo, hi = hf.bounds()
 
@@ -181,8 +212,19 @@ class KeyframePolicy:
             ground = float(hf.height_at(vp.o[0], vp.o[1]))
             return fitted_projection(vp, fov_y_deg, w / h, lo, hi, ground)
 
-        return cls(ErrorMetric.for_level(hf, lod), hf, epsilon_px, h, projection,
-                   lambda p: widened(p, w, h, guard_px), predict, cache)
+        return cls(ErrorMetric.for_level(hf, lod, resampling_metric(metric)), hf, epsilon_px,
+                   h, projection, lambda p: widened(p, w, h, guard_px), predict, cache,
+                   (w + 2 * guard_px, h + 2 * guard_px))
+
+    def reproject(self, viewpoint: Viewpoint, projection: Projection) -> np.ndarray:
+        """``C'`` of a keyframe at ``viewpoint`` whose frame projection is ``projection``
+        (rendered through :attr:`key_projection` of it), with its matrix and size."""
+        if not getattr(self.metric, "resampling", False):  # the 1999 metric needs the eye only
+            return self.metric.reproject(viewpoint.o)
+        key_proj = self.key_projection(projection)
+        size = self.key_size or key_image_size(projection, key_proj, self.height_px)
+        return self.metric.reproject(viewpoint.o, key_proj.matrix() @ viewpoint.view_matrix(),
+                                     size)
 
     def error_px(self, c_prime: np.ndarray, viewpoint: Viewpoint,
                  projection: Projection) -> float:
@@ -215,7 +257,7 @@ class KeyframePolicy:
                                       self.key_projection(key_proj)):
                 steps *= 0.5
                 continue
-            c_prime = self.metric.reproject(ahead.o)
+            c_prime = self.reproject(ahead, key_proj)
             err = self.error_px(c_prime, viewpoint, projection)
             if not keyframe_due(err, limit):
                 return KeyChoice(ahead, key_proj, True), c_prime, err
@@ -276,7 +318,7 @@ class KeyframePolicy:
             ahead = self.lookahead(viewpoint, projection)
             if ahead is None:
                 key = KeyChoice(viewpoint, projection, False)
-                self.c_prime, shown = self.metric.reproject(viewpoint.o), 0.0
+                self.c_prime, shown = self.reproject(viewpoint, projection), 0.0
             else:
                 key, self.c_prime, shown = ahead
                 self.predicted_keyframes += 1

@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from lodsprite.sprite.resampling import cross
 from lodsprite.terrain.heightfield import HeightField
 from lodsprite.terrain.lod import level_indices, level_step
 
@@ -80,18 +81,30 @@ class Reprojection(np.ndarray):
     (:meth:`ErrorMetric.fallback_theta`), so that successive frames measuring the
     fallback sample reproject only the vertices they have not met yet; views share it,
     pickling drops it.
+
+    For the resampling term (:mod:`lodsprite.sprite.resampling`) it also carries the
+    keyframe's ``key_view_proj (4, 4) float64`` (the widened projection it was rendered
+    through, times its view matrix) and ``key_size (w, h)`` pixels (image plus guard band),
+    both None when unknown (the metric takes the normal at ``C'`` from
+    :func:`coarse_normals`).
     """
 
     key_eye: np.ndarray | None
     missed: np.ndarray | None
     fallback_cache: dict
+    key_view_proj: np.ndarray | None
+    key_size: tuple[int, int] | None
 
     def __new__(cls, c_prime: np.ndarray, key_eye: np.ndarray,
-                missed: np.ndarray | None = None) -> Reprojection:
+                missed: np.ndarray | None = None, key_view_proj: np.ndarray | None = None,
+                key_size: tuple[int, int] | None = None) -> Reprojection:
         obj = np.asarray(c_prime, dtype=np.float64).view(cls)
         obj.key_eye = np.array(key_eye, dtype=np.float64)
         obj.missed = None if missed is None else np.asarray(missed, dtype=bool)
         obj.fallback_cache = {}
+        obj.key_view_proj = (None if key_view_proj is None
+                             else np.array(key_view_proj, dtype=np.float64))
+        obj.key_size = None if key_size is None else (int(key_size[0]), int(key_size[1]))
         return obj
 
     def __array_finalize__(self, obj) -> None:
@@ -100,6 +113,8 @@ class Reprojection(np.ndarray):
         self.fallback_cache = {} if cache is None else cache
         missed = getattr(obj, "missed", None)
         self.missed = missed if missed is not None and obj.shape == self.shape else None
+        self.key_view_proj = getattr(obj, "key_view_proj", None)
+        self.key_size = getattr(obj, "key_size", None)
 
     def __array_wrap__(self, arr, context=None, return_scalar=False):
         # Results of ufuncs and reductions are plain arrays and scalars, not C'.
@@ -108,10 +123,11 @@ class Reprojection(np.ndarray):
 
     def __reduce__(self):
         fn, args, state = super().__reduce__()
-        return fn, args, (state, self.key_eye, self.missed)
+        return fn, args, (state, self.key_eye, self.missed, self.key_view_proj, self.key_size)
 
     def __setstate__(self, state) -> None:
-        array_state, self.key_eye, self.missed = state
+        array_state, self.key_eye, self.missed, *key = state
+        self.key_view_proj, self.key_size = (key + [None, None])[:2]
         self.fallback_cache = {}
         super().__setstate__(array_state)
 
@@ -233,11 +249,35 @@ def reproject_points(squares: CoarseSquares, key_eye: np.ndarray, points: np.nda
     return key_eye + t_best[:, None] * d, missed
 
 
-def reprojected_centres(squares: CoarseSquares, key_eye: np.ndarray) -> Reprojection:
+def reprojected_centres(squares: CoarseSquares, key_eye: np.ndarray,
+                        key_view_proj: np.ndarray | None = None,
+                        key_size: tuple[int, int] | None = None) -> Reprojection:
     """``C'`` for every square ``(n*n, 3)``: the ray ``key_eye -> C`` meeting the coarse
-    surface (:func:`reproject_points`), carrying ``key_eye`` and the misses."""
+    surface (:func:`reproject_points`), carrying ``key_eye``, the misses and the
+    keyframe's ``key_view_proj`` and ``key_size`` (None: unknown)."""
     c_prime, missed = reproject_points(squares, key_eye, squares.centres)
-    return Reprojection(c_prime, key_eye, missed)
+    return Reprojection(c_prime, key_eye, missed, key_view_proj, key_size)
+
+
+def coarse_normals(squares: CoarseSquares, points: np.ndarray) -> np.ndarray:
+    """Unit normals ``(K, 3) float64`` (pointing up) of the coarse triangles under
+    ``points (K, 3)`` metres: the square whose xy extent holds the point (clamped at the
+    borders) and the half of it on the point's side of the nw-se diagonal (the
+    renderer's split).  On a hit ``C'`` this is the triangle the ray met."""
+    own = squares.own  # (n*n, 2, 3, 3): (nw, sw, se) and (nw, se, ne)
+    n = squares.level_quads
+    grid = own.reshape(n, n, 2, 3, 3)
+    xs = np.r_[grid[0, :, 0, 0, 0], grid[0, -1, 1, 2, 0]]      # nw x per column, ne x last
+    ys = np.r_[grid[:, 0, 0, 0, 1], grid[-1, 0, 0, 1, 1]]      # nw y per row, sw y last
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    col = np.clip(np.searchsorted(xs, p[:, 0]) - 1, 0, n - 1)
+    row = np.clip(np.searchsorted(-ys, -p[:, 1]) - 1, 0, n - 1)
+    u = (p[:, 0] - xs[col]) / (xs[col + 1] - xs[col])          # west -> east
+    v = (ys[row] - p[:, 1]) / (ys[row] - ys[row + 1])          # north -> south
+    tri = own[row * n + col, np.where(v >= u, 0, 1)]           # (K, 3, 3)
+    nrm = cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    nrm *= np.where(nrm[:, 2:3] < 0, -1.0, 1.0)
+    return nrm / np.linalg.norm(nrm, axis=1, keepdims=True)
 
 
 def _neighbourhood(squares: CoarseSquares, index: np.ndarray, radius: int) -> np.ndarray:

@@ -35,6 +35,7 @@ from lodsprite.sprite.policy import (
     SPRITE,
     KeyChoice,
     keyframe_error_px,
+    resampling_metric,
 )
 from lodsprite.sprite.worker import KeyframeImage, KeyframeWorker, WorkerSettings
 
@@ -55,14 +56,15 @@ class ThreadedLodSpriteEngine:
     def __init__(self, sprite: SpriteRenderer, scene: Scene, fov_y_deg: float,
                  epsilon_px: float = DEFAULT_EPSILON_PX,
                  request_fraction: float = DEFAULT_REQUEST_FRACTION,
-                 predictor: str = "linear") -> None:
+                 predictor: str = "linear", metric: str = "warp") -> None:
         self.sprite = sprite
         self.epsilon_px = float(epsilon_px)
         self.request_fraction = float(request_fraction)
-        self.metric = ErrorMetric.for_level(scene.hf, sprite.coarse_quads)
+        resampling = resampling_metric(metric)
+        self.metric = ErrorMetric.for_level(scene.hf, sprite.coarse_quads, resampling)
         self.worker = KeyframeWorker(scene, WorkerSettings(
             sprite.target.size, fov_y_deg, sprite.coarse_quads, sprite.visibility,
-            sprite.border, sprite.guard_px, predictor))
+            sprite.border, sprite.guard_px, predictor, resampling=resampling))
         self.keyframes: list[KeyChoice] = []
         self.discarded = 0
         self._leads = 0

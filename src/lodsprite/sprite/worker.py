@@ -69,7 +69,8 @@ class KeyframeImage:
 class WorkerSettings:
     """How the worker renders: image size ``(w, h)`` pixels, vertical field of view
     (degrees), coarse level (quads per side), visibility rule, border ribbons, guard band
-    (pixels), predictor name and the nice increment of the worker thread."""
+    (pixels), predictor name, the nice increment of the worker thread and whether the
+    keyframes' ``C'`` are for the resampling metric (their matrix and size attached)."""
 
     size: tuple[int, int]
     fov_y_deg: float
@@ -79,6 +80,7 @@ class WorkerSettings:
     guard_px: int
     predictor: str = "linear"
     nice: int = DEFAULT_WORKER_NICE
+    resampling: bool = False
 
 
 class KeyframeWorker:
@@ -221,7 +223,7 @@ class _WorkerGL:
         except BaseException:
             self.paths.release()
             raise
-        self.metric = ErrorMetric.for_level(scene.hf, s.lod)
+        self.metric = ErrorMetric.for_level(scene.hf, s.lod, s.resampling)
         self.zbuffer = "coarse" if s.visibility == "coarse" else "full"
 
     def render(self, target: tuple[Viewpoint, bool], asked: float) -> KeyframeImage:
@@ -233,7 +235,8 @@ class _WorkerGL:
         key = self.sprite.keyframe
         color = key.target.read_color()
         depth = (key.coarse if self.zbuffer == "coarse" else key.target).read_depth()
-        c_prime = self.metric.reproject(vp.o)
+        c_prime = self.metric.reproject(vp.o, key.projection.matrix() @ vp.view_matrix(),
+                                        key.target.size)
         return KeyframeImage(vp, key.projection, frame_projection, color, depth, self.zbuffer,
                              c_prime, asked, (time.perf_counter() - t0) * 1e3, predicted)
 

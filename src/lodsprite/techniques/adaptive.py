@@ -152,7 +152,7 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
                  visibility: str | None = None, guard_px: int | None = None,
                  border: bool = True, shading: str = "auto", tiles: int = 1,
                  tile_budget_ms: float = 8.0, cache_mb: float = 0.0,
-                 cache_policy: str = "lru") -> None:
+                 cache_policy: str = "lru", metric: str = "warp") -> None:
         from lodsprite.terrain.store import TerrainStore
         from lodsprite.terrain.storefield import store_field
 
@@ -165,7 +165,7 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
             # proxy, ribbons and C read from level 0 there, then only without blocking
             super().__init__(renderer, lod, epsilon, False, visibility, guard_px, border,
                              shading=shading, tiles=tiles, tile_budget_ms=tile_budget_ms,
-                             cache_mb=cache_mb, cache_policy=cache_policy)
+                             cache_mb=cache_mb, cache_policy=cache_policy, metric=metric)
         except BaseException:
             self.adaptive.release()
             if field is not None:

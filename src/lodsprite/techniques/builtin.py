@@ -16,6 +16,8 @@ GUARD = Option("guard_px", int, 32, "keyframe guard band, pixels")
 BORDER = Option("border", bool, True, "draw the coarse level's border ribbons")
 CACHE_MB = Option("cache_mb", float, 0.0, "LOD-sprite keyframe cache budget, MB (0: off)")
 CACHE_POLICY = Option("cache_policy", str, "lru", "keyframe cache replacement: lru | benefit")
+METRIC = Option("metric", str, "warp",
+                "LOD-sprite error metric: warp (Eq. 1-2) | resample (adds resampling)")
 THREADED = Option("threaded", bool, False, "render keyframes on a worker thread")
 TILES = Option("tiles", int, 1, "LOD-sprite: N x N keyframe tiles (1: whole keyframes)")
 TILE_BUDGET = Option("tile_budget_ms", float, 8.0, "LOD-sprite tiles: tile work per frame, ms")
@@ -51,7 +53,7 @@ register(TechniqueSpec("lod", f"{TERRAIN}:LodTechnique", (LOD, SHADING), ("terra
                        "one uniform coarse level"))
 register(TechniqueSpec("sprite", f"{TERRAIN}:SpriteTechnique",
                        (LOD, EPSILON, THREADED, VISIBILITY, GUARD, BORDER, SHADING, TILES,
-                        TILE_BUDGET, CACHE_MB, CACHE_POLICY),
+                        TILE_BUDGET, CACHE_MB, CACHE_POLICY, METRIC),
                        ("terrain",),
                        "LOD-sprite (Chen, Swan & Kaufman 1999)"))
 register(TechniqueSpec("adaptive", f"{ADAPTIVE}:AdaptiveTechnique",
@@ -59,7 +61,7 @@ register(TechniqueSpec("adaptive", f"{ADAPTIVE}:AdaptiveTechnique",
                        "the adaptive (CDLOD-style) renderer, stores of any size"))
 register(TechniqueSpec("sprite-adaptive", f"{ADAPTIVE}:SpriteAdaptiveTechnique",
                        (LOD, EPSILON, KEY_SSE, GPU_MB, HOST_MB, VISIBILITY, GUARD, BORDER,
-                        SHADING, TILES, TILE_BUDGET, CACHE_MB, CACHE_POLICY),
+                        SHADING, TILES, TILE_BUDGET, CACHE_MB, CACHE_POLICY, METRIC),
                        ("terrain",), "LOD-sprite with keyframes by the adaptive renderer"))
 register(TechniqueSpec("distributed", "lodsprite.distributed.technique:create",
                        (SERVER, LOD, EPSILON, MAX_ERROR), ("terrain",),

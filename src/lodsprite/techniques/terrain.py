@@ -130,7 +130,7 @@ class SpriteTechnique(Technique):
                  visibility: str | None = None, guard_px: int | None = None,
                  border: bool = True, shading: str = "auto", tiles: int = 1,
                  tile_budget_ms: float = DEFAULT_TILE_BUDGET_MS, cache_mb: float = 0.0,
-                 cache_policy: str = "lru") -> None:
+                 cache_policy: str = "lru", metric: str = "warp") -> None:
         super().__init__(renderer)
         from lodsprite.gl.sprite import DEFAULT_GUARD_PX, DEFAULT_VISIBILITY
         from lodsprite.sprite.tiled_engine import TiledSpriteEngine
@@ -143,10 +143,11 @@ class SpriteTechnique(Technique):
 
         level_step(renderer.scene.hf.quads, lod)
         self.threaded = threaded
+        self.metric = metric
         self.sprite: LodSprite = renderer.sprite(
             epsilon, lod, threaded=threaded, visibility=visibility or DEFAULT_VISIBILITY,
             guard_px=DEFAULT_GUARD_PX if guard_px is None else guard_px, border=border,
-            cache_mb=cache_mb, cache_policy=cache_policy)
+            cache_mb=cache_mb, cache_policy=cache_policy, metric=metric)
         self.cache_mb = float(cache_mb)
         self._tint = False
         self._replayed: int | None = None
@@ -260,6 +261,7 @@ class SpriteTechnique(Technique):
         out: dict[str, Any] = {"lod": self.sprite.lod, "epsilon": self.sprite.epsilon_px,
                                "visibility": self.sprite.sprite.visibility,
                                "shading": self.shading,
+                               "metric": self.metric,
                                "keyframes": sum(f.kind == KEYFRAME for f in frames)}
         if self.tiled is None:
             out["tiles_rendered"] = out["keyframes"]  # a whole keyframe is 1 x 1 tile

@@ -51,6 +51,7 @@ class ViewOptions:
     tile_budget_ms: float = 8.0   # sprite, tiles > 1: tile work per frame, ms
     cache_mb: float = 0.0         # sprite (inline keyframes): keyframe cache budget, MB
     cache_policy: str = "lru"     # keyframe cache replacement, lru | benefit
+    metric: str = "warp"          # sprite: warp (Eq. 1-2) | resample (adds resampling)
 
     def technique_options(self) -> dict:
         """The options of the command the registry's techniques pick theirs from."""
@@ -59,13 +60,15 @@ class ViewOptions:
                 "server": self.server, "target_fps": self.target_fps, "sse": self.sse,
                 "key_sse": self.key_sse, "shading": self.shading, "tiles": self.tiles,
                 "tile_budget_ms": self.tile_budget_ms, "cache_mb": self.cache_mb,
-                "cache_policy": self.cache_policy}
+                "cache_policy": self.cache_policy, "metric": self.metric}
 
     def validate(self) -> None:
         if self.target_fps is not None and not self.target_fps > 0:
             raise InputError("--target-fps must be > 0")
         if self.mode == "distributed" and not self.server:
             raise InputError("--mode distributed needs --server HOST:PORT")
+        if self.metric not in ("warp", "resample"):
+            raise InputError(f"unknown metric '{self.metric}': use warp or resample")
         if self.every < 1:
             raise InputError(f"--every must be at least 1, got {self.every}")
         if not self.epsilon > 0:
