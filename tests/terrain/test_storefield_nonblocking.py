@@ -152,7 +152,7 @@ def test_sprite_adaptive_reads_no_store_inside_its_frames_and_converges(gl, flig
     scene = load_scene(str(store), grid=64)
     path = get_path("flyover:100", scene.hf, 30)
     fallbacks = []
-    theta = metric.ErrorMetric.fallback_theta
+    theta = metric.ErrorMetric.fallback_sample
 
     def counted(self, *args, **kwargs):
         fallbacks.append(reads.state["in_frame"])
@@ -163,7 +163,7 @@ def test_sprite_adaptive_reads_no_store_inside_its_frames_and_converges(gl, flig
             "sprite-adaptive").bind({"lod": 8, "epsilon": 1.0, "key_sse": 1.0}))
         h = t.heights
         proc = h.reader.worker._pipes.proc
-        monkeypatch.setattr(metric.ErrorMetric, "fallback_theta", counted)
+        monkeypatch.setattr(metric.ErrorMetric, "fallback_sample", counted)
         try:
             t.warm_up(path.viewpoints[0])
             setup_chunks = h.chunks_read
