@@ -18,31 +18,35 @@ import moderngl
 import numpy as np
 
 from lodsprite.gl.context import GLContext
+from lodsprite.gl.shaders import PROXY_VERTEX_COMMON
 from lodsprite.gl.terrain import SKY_RGB, mat_bytes
 from lodsprite.terrain.lod import grid_mesh
 
-ADAPTIVE_VS = """#version 330
-uniform mat4 u_view_proj;
+# The adaptive mesh's vertex position, shared by the adaptive renderer's own program and by
+# LOD-sprite programs drawing the mesh as a sprite proxy (AdaptiveProxy.twin swaps it in for
+# gl.shaders.PROXY_VERTEX_COMMON): per instance the node attributes, per vertex its grid
+# position; ``terrain_position`` geomorphs towards the parent by the distance from u_eye.
+ADAPTIVE_POSITION_COMMON = """
 uniform sampler2D u_atlas;
 uniform int u_per_row;
 uniform int u_grid;
 uniform vec3 u_eye;
 uniform vec4 u_extent;  // world x of column 0, y of row 0, width, depth (texture mapping)
-in vec2 in_uv;          // grid vertex: column, row (0..G)
+in vec2 in_grid;        // grid vertex: column, row (0..G)
 in vec4 in_node;        // world x, y of sample (0, 0); metres a sample east, south
 in vec4 in_slots;       // own slot, parent slot (-1: none), quadrant row, column
 in vec4 in_extra;       // morph start, end (metres); last valid row, column
 in vec4 in_parent;      // the parent's last valid row, column
-out vec3 v_normal;
-out float v_height;
-out vec2 v_uv;
 float fetch(float slot, vec2 rc) {
     int s = int(slot);
     ivec2 base = ivec2(s % u_per_row, s / u_per_row) * (u_grid + 1);
     return texelFetch(u_atlas, base + ivec2(int(rc.y), int(rc.x)), 0).r;
 }
-void main() {
-    vec2 rc = min(vec2(in_uv.y, in_uv.x), in_extra.zw);
+vec2 node_rc() {
+    return min(vec2(in_grid.y, in_grid.x), in_extra.zw);
+}
+vec3 terrain_position(out vec2 uv) {
+    vec2 rc = node_rc();
     vec2 xy = in_node.xy + vec2(rc.y * in_node.z, -rc.x * in_node.w);
     float h = fetch(in_slots.x, rc);
     if (in_slots.y >= 0.0) {
@@ -54,6 +58,21 @@ void main() {
         float m = clamp((d - in_extra.x) / max(in_extra.y - in_extra.x, 1e-6), 0.0, 1.0);
         h = mix(h, hc, m);
     }
+    uv = vec2((xy.x - u_extent.x) / u_extent.z, (u_extent.y - xy.y) / u_extent.w);
+    return vec3(xy, h);
+}
+"""
+ADAPTIVE_VS = (
+    "#version 330\n"
+    + ADAPTIVE_POSITION_COMMON
+    + """
+uniform mat4 u_view_proj;
+out vec3 v_normal;
+out float v_height;
+out vec2 v_uv;
+void main() {
+    vec3 p = terrain_position(v_uv);
+    vec2 rc = node_rc();
     vec2 e = vec2(min(rc.x + 1.0, in_extra.z), min(rc.y + 1.0, in_extra.w));
     vec2 w = vec2(max(rc.x - 1.0, 0.0), max(rc.y - 1.0, 0.0));
     float dzdx = (fetch(in_slots.x, vec2(rc.x, e.y)) - fetch(in_slots.x, vec2(rc.x, w.y)))
@@ -61,11 +80,11 @@ void main() {
     float dzdy = (fetch(in_slots.x, vec2(w.x, rc.y)) - fetch(in_slots.x, vec2(e.x, rc.y)))
                  / max((e.x - w.x) * in_node.w, 1e-6);
     v_normal = normalize(vec3(-dzdx, -dzdy, 1.0));
-    v_height = h;
-    v_uv = vec2((xy.x - u_extent.x) / u_extent.z, (u_extent.y - xy.y) / u_extent.w);
-    gl_Position = u_view_proj * vec4(xy, h, 1.0);
+    v_height = p.z;
+    gl_Position = u_view_proj * vec4(p, 1.0);
 }
 """
+)
 ADAPTIVE_FS = """#version 330
 uniform vec3 u_light;
 uniform vec2 u_range;   // lowest, highest height (metres)
@@ -111,11 +130,12 @@ class AdaptiveRenderer:
         self.index_count = tris.size
         self.instances = mgl.buffer(reserve=64 * 256)
         self.vao = mgl.vertex_array(self.program, [
-            (self.vbo, "2f", "in_uv"),
+            (self.vbo, "2f", "in_grid"),
             (self.instances, "4f 4f 4f 4f/i", "in_node", "in_slots", "in_extra",
              "in_parent")],
             index_buffer=self.ibo, index_element_size=4)
         self.triangles = 0
+        self._readback: moderngl.Framebuffer | None = None
 
     def upload(self, slot: int, heights: np.ndarray) -> None:
         """Node samples ``(rows, cols) float32`` (at most ``(G+1)²``) into ``slot``."""
@@ -159,6 +179,86 @@ class AdaptiveRenderer:
         self.triangles = n * self.index_count // 3
         mgl.disable(moderngl.DEPTH_TEST)
 
+    def read_tile(self, slot: int, rows: int, cols: int) -> np.ndarray:
+        """The samples ``(rows, cols) float32`` held in ``slot`` (a GPU read-back: for
+        tiles the host cache no longer holds; untimed or once per keyframe)."""
+        if self._readback is None:
+            self._readback = self.ctx.mgl.framebuffer(color_attachments=[self.atlas])
+        side = self.g + 1
+        x, y = (slot % self.per_row) * side, (slot // self.per_row) * side
+        data = self._readback.read(viewport=(x, y, cols, rows), components=1, dtype="f4")
+        return np.frombuffer(data, np.float32).reshape(rows, cols).copy()
+
     def release(self) -> None:
+        if self._readback is not None:
+            self._readback.release()
         for obj in (self.vao, self.instances, self.ibo, self.vbo, self.program, self.atlas):
             obj.release()
+
+
+ATLAS_UNIT = 5  # the texture unit a proxy binds the atlas to (sprite programs use 0-4)
+
+
+class AdaptiveProxy:
+    """A frozen selection of the adaptive mesh as LOD-sprite's proxy geometry (the object
+    :class:`~lodsprite.gl.sprite.SpriteRenderer` draws spriteframes and the coarse z-buffer
+    with): the node instances and the eye their morph factors are evaluated at (the
+    keyframe's), drawn from ``renderer``'s atlas and grid mesh with any program whose vertex
+    shader reads ``terrain_position`` (:meth:`twin`)."""
+
+    def __init__(self, renderer: AdaptiveRenderer,
+                 extent: tuple[float, float, float, float]) -> None:
+        self.renderer = renderer
+        self.extent = tuple(float(v) for v in extent)
+        self.instances = renderer.ctx.mgl.buffer(reserve=64 * 64)
+        self.count = 0
+        self.eye = (0.0, 0.0, 0.0)
+        self._vaos: dict[int, moderngl.VertexArray] = {}
+
+    @staticmethod
+    def twin(vertex_shader: str) -> str:
+        """``vertex_shader`` (reading ``PROXY_VERTEX_COMMON``) reading the adaptive mesh."""
+        if PROXY_VERTEX_COMMON not in vertex_shader:
+            raise ValueError("not a proxy vertex shader")
+        return vertex_shader.replace(PROXY_VERTEX_COMMON, ADAPTIVE_POSITION_COMMON)
+
+    def set(self, instances: np.ndarray, eye: np.ndarray) -> None:
+        """Freeze ``instances (N, 16) float32`` (the layout of :meth:`AdaptiveRenderer.draw`)
+        morphed by the distance from ``eye (3,)`` metres."""
+        data = np.ascontiguousarray(instances, dtype=np.float32)
+        if data.nbytes > self.instances.size:
+            self.instances.orphan(data.nbytes * 2)
+        if data.nbytes:
+            self.instances.write(data.tobytes())
+        self.count = len(data)
+        self.eye = tuple(float(v) for v in eye)
+
+    def draw(self, program: moderngl.Program, view_proj: np.ndarray) -> int:
+        """Draw the frozen nodes with ``program`` (other uniforms set) through
+        ``view_proj (4, 4)``; returns the triangles drawn."""
+        r = self.renderer
+        if program.glo not in self._vaos:
+            self._vaos[program.glo] = r.ctx.mgl.vertex_array(program, [
+                (r.vbo, "2f", "in_grid"),
+                (self.instances, "4f 4f 4f 4f/i", "in_node", "in_slots", "in_extra",
+                 "in_parent")], index_buffer=r.ibo, index_element_size=4)
+        values = {"u_mvp": None, "u_atlas": ATLAS_UNIT, "u_per_row": r.per_row,
+                  "u_grid": r.g, "u_eye": self.eye, "u_extent": self.extent}
+        for name, value in values.items():
+            if name in program:
+                if value is None:
+                    program[name].write(mat_bytes(view_proj))
+                else:
+                    program[name].value = value
+        if not self.count:
+            return 0
+        r.atlas.use(ATLAS_UNIT)
+        self._vaos[program.glo].render(moderngl.TRIANGLES, vertices=r.index_count,
+                                       instances=self.count)
+        return self.count * r.index_count // 3
+
+    def release(self) -> None:
+        for vao in self._vaos.values():
+            vao.release()
+        self._vaos.clear()
+        self.instances.release()
