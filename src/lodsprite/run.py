@@ -76,6 +76,7 @@ class RenderConfig:
     key_sse: float | None = None  # sprite: keyframes by the adaptive renderer at this SSE
     gpu_mb: float = 256.0     # adaptive: GPU tile cache budget
     host_mb: float = 512.0    # adaptive: host tile cache budget
+    proxy_sse: float | None = None  # sprite proxy: the adaptive mesh at this SSE (needs key_sse)
     flip: bool = False        # with ground_truth: FLIP per frame too
 
     @property
@@ -88,7 +89,7 @@ class RenderConfig:
         return {"lod": self.lod, "epsilon": self.epsilon, "visibility": self.visibility,
                 "guard_px": self.guard_px, "border": self.border, "sse": self.sse,
                 "key_sse": self.key_sse, "gpu_mb": self.gpu_mb, "host_mb": self.host_mb,
-                "threaded": False}
+                "proxy_sse": self.proxy_sse, "threaded": False}
 
     def validate(self) -> None:
         modes = _modes()  # the registry's now: a technique registered later is one too
@@ -111,6 +112,9 @@ class RenderConfig:
             raise InputError(f"quality stride must be >= 1, got {self.quality_stride}")
         if self.key_sse is not None and (self.mode != "sprite" or not self.key_sse > 0):
             raise InputError("--key-sse goes with --mode sprite and must be > 0 pixels")
+        if self.proxy_sse is not None and (self.key_sse is None or not self.proxy_sse > 0):
+            raise InputError("--proxy-sse needs adaptive keyframes (--mode sprite --key-sse PX, "
+                             "whose tile caches the proxy shares) and must be > 0 pixels")
         if not (self.sse > 0 and self.gpu_mb > 0 and self.host_mb > 0):
             raise InputError(f"--sse, --gpu-mb and --host-mb must be > 0, got {self.sse}, "
                              f"{self.gpu_mb}, {self.host_mb}")

@@ -120,6 +120,10 @@ def render(
     key_sse: Annotated[float | None, typer.Option(
         "--key-sse", help="sprite: render keyframes with the adaptive renderer at this "
                           "tolerance (pixels; 0.5 is a good start)")] = None,
+    proxy_sse: Annotated[float | None, typer.Option(
+        "--proxy-sse", help="sprite with --key-sse: spriteframes draw the adaptive mesh at "
+                            "this tolerance (pixels, e.g. 8-16), selected at each keyframe, "
+                            "instead of the uniform --lod level")] = None,
     gpu_mb: Annotated[float, typer.Option(
         "--gpu-mb", help="adaptive: GPU tile cache budget (MB)")] = 256.0,
     host_mb: Annotated[float, typer.Option(
@@ -136,7 +140,7 @@ def render(
                           exaggeration=exaggeration, save_frames=save_frames, epsilon=epsilon,
                           ground_truth=ground_truth, visibility=visibility, border=border,
                           guard_px=guard, sse=sse, gpu_mb=gpu_mb, host_mb=host_mb,
-                          key_sse=key_sse, flip=flip)
+                          key_sse=key_sse, proxy_sse=proxy_sse, flip=flip)
     with progress_bar(f"render {mode}") as update:
         if distributed:
             from lodsprite.distributed.run import parse_max_error, render_distributed
@@ -193,6 +197,9 @@ def view(
         "--sse", help="adaptive: screen-space error tolerance in pixels")] = None,
     key_sse: Annotated[float | None, typer.Option(
         "--key-sse", help="sprite-adaptive: its keyframes' tolerance in pixels")] = None,
+    proxy_sse: Annotated[float | None, typer.Option(
+        "--proxy-sse", help="sprite-adaptive: spriteframes draw the adaptive mesh at this "
+                            "tolerance (pixels) instead of the uniform --lod level")] = None,
 ) -> None:
     """Fly through a terrain with live LOD-sprite, or round a lumigraph (WASD/QE, mouse, tab
     orbit)."""
@@ -204,7 +211,8 @@ def view(
                        epsilon=epsilon, size=parse_size(size), fps=fps, threaded=not inline,
                        play=play, frames=frames, screenshots=screenshots, every=every,
                        exit=exit_, out=out_dir, record=record, server=server,
-                       target_fps=target_fps, sse=sse, key_sse=key_sse)
+                       target_fps=target_fps, sse=sse, key_sse=key_sse,
+                       proxy_sse=proxy_sse)
     s = run_view(opts)
     if s:
         out.print(f"{s['frames']} frames, {s['mode']}: median {s['median_ms']:.2f} ms, "

@@ -32,6 +32,7 @@ uniform int u_per_row;
 uniform int u_grid;
 uniform vec3 u_eye;
 uniform vec4 u_extent;  // world x of column 0, y of row 0, width, depth (texture mapping)
+uniform float u_stride; // node samples between mesh vertices (1; a coarser proxy mesh: more)
 in vec2 in_grid;        // grid vertex: column, row (0..G)
 in vec4 in_node;        // world x, y of sample (0, 0); metres a sample east, south
 in vec4 in_slots;       // own slot, parent slot (-1: none), quadrant row, column
@@ -43,16 +44,17 @@ float fetch(float slot, vec2 rc) {
     return texelFetch(u_atlas, base + ivec2(int(rc.y), int(rc.x)), 0).r;
 }
 vec2 node_rc() {
-    return min(vec2(in_grid.y, in_grid.x), in_extra.zw);
+    return min(vec2(in_grid.y, in_grid.x) * u_stride, in_extra.zw);
 }
 vec3 terrain_position(out vec2 uv) {
     vec2 rc = node_rc();
     vec2 xy = in_node.xy + vec2(rc.y * in_node.z, -rc.x * in_node.w);
     float h = fetch(in_slots.x, rc);
     if (in_slots.y >= 0.0) {
-        vec2 p = in_slots.zw * float(u_grid / 2) + rc * 0.5;
-        vec2 p1 = min(ceil(p), in_parent.xy);   // never past the parent's samples
-        float hc = 0.5 * (fetch(in_slots.y, min(floor(p), in_parent.xy))
+        // the parent's surface on its own mesh (every u_stride-th parent sample)
+        vec2 p = (in_slots.zw * float(u_grid / 2) + rc * 0.5) / u_stride;
+        vec2 p1 = min(ceil(p) * u_stride, in_parent.xy);   // never past the parent's samples
+        float hc = 0.5 * (fetch(in_slots.y, min(floor(p) * u_stride, in_parent.xy))
                           + fetch(in_slots.y, p1));
         float d = distance(u_eye, vec3(xy, h));
         float m = clamp((d - in_extra.x) / max(in_extra.y - in_extra.x, 1e-6), 0.0, 1.0);
@@ -167,6 +169,7 @@ class AdaptiveRenderer:
             p["u_eye"].value = tuple(float(v) for v in eye)
             p["u_per_row"].value = self.per_row
             p["u_grid"].value = self.g
+            p["u_stride"].value = 1.0
             p["u_range"].value = tuple(float(v) for v in height_range)
             p["u_atlas"].value = 0
             p["u_extent"].value = tuple(float(v) for v in extent)
@@ -206,11 +209,19 @@ class AdaptiveProxy:
     keyframe's), drawn from ``renderer``'s atlas and grid mesh with any program whose vertex
     shader reads ``terrain_position`` (:meth:`twin`)."""
 
-    def __init__(self, renderer: AdaptiveRenderer,
-                 extent: tuple[float, float, float, float]) -> None:
+    def __init__(self, renderer: AdaptiveRenderer, extent: tuple[float, float, float, float],
+                 stride: int = 1) -> None:
+        if stride < 1 or renderer.g % (2 * stride):
+            raise ValueError(f"a proxy stride must divide half the node grid, got {stride}")
         self.renderer = renderer
         self.extent = tuple(float(v) for v in extent)
-        self.instances = renderer.ctx.mgl.buffer(reserve=64 * 64)
+        self.stride = int(stride)
+        uv, tris = grid_mesh(renderer.g // self.stride)  # every stride-th node sample
+        mgl = renderer.ctx.mgl
+        self.vbo = mgl.buffer(uv.astype(np.float32).tobytes())
+        self.ibo = mgl.buffer(tris.astype(np.uint32).tobytes())
+        self.index_count = tris.size
+        self.instances = mgl.buffer(reserve=64 * 64)
         self.count = 0
         self.eye = (0.0, 0.0, 0.0)
         self._vaos: dict[int, moderngl.VertexArray] = {}
@@ -239,11 +250,12 @@ class AdaptiveProxy:
         r = self.renderer
         if program.glo not in self._vaos:
             self._vaos[program.glo] = r.ctx.mgl.vertex_array(program, [
-                (r.vbo, "2f", "in_grid"),
+                (self.vbo, "2f", "in_grid"),
                 (self.instances, "4f 4f 4f 4f/i", "in_node", "in_slots", "in_extra",
-                 "in_parent")], index_buffer=r.ibo, index_element_size=4)
+                 "in_parent")], index_buffer=self.ibo, index_element_size=4)
         values = {"u_mvp": None, "u_atlas": ATLAS_UNIT, "u_per_row": r.per_row,
-                  "u_grid": r.g, "u_eye": self.eye, "u_extent": self.extent}
+                  "u_grid": r.g, "u_eye": self.eye, "u_extent": self.extent,
+                  "u_stride": float(self.stride)}
         for name, value in values.items():
             if name in program:
                 if value is None:
@@ -253,12 +265,13 @@ class AdaptiveProxy:
         if not self.count:
             return 0
         r.atlas.use(ATLAS_UNIT)
-        self._vaos[program.glo].render(moderngl.TRIANGLES, vertices=r.index_count,
+        self._vaos[program.glo].render(moderngl.TRIANGLES, vertices=self.index_count,
                                        instances=self.count)
-        return self.count * r.index_count // 3
+        return self.count * self.index_count // 3
 
     def release(self) -> None:
         for vao in self._vaos.values():
             vao.release()
         self._vaos.clear()
-        self.instances.release()
+        for obj in (self.instances, self.ibo, self.vbo):
+            obj.release()

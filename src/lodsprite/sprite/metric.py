@@ -177,8 +177,10 @@ class ErrorMetric:
     def for_level(cls, hf: HeightField, level_quads: int) -> ErrorMetric:
         return cls(coarse_squares(hf, level_quads))
 
-    def reproject(self, key_eye: np.ndarray) -> Reprojection:
-        """``C' (n*n, 3)`` in metres for a keyframe rendered from ``key_eye``."""
+    def reproject(self, key_eye: np.ndarray, key_view_proj: np.ndarray | None = None,
+                  key_size: tuple[int, int] | None = None) -> Reprojection:
+        """``C' (n*n, 3)`` in metres for a keyframe rendered from ``key_eye`` (its view
+        ``key_view_proj`` and size are not needed here)."""
         return reprojected_centres(self.squares, key_eye)
 
     def theta(self, c_prime: np.ndarray, eye: np.ndarray, view_proj: np.ndarray) -> np.ndarray:

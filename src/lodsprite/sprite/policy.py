@@ -172,6 +172,13 @@ class KeyframePolicy:
         """:func:`keyframe_error_px` with this policy's metric and image height."""
         return keyframe_error_px(self.metric, c_prime, viewpoint, projection, self.height_px)
 
+    def reproject(self, key: Viewpoint, projection: Projection) -> np.ndarray:
+        """``C'`` of a keyframe at ``key`` whose frame projection is ``projection``: the
+        metric is told the keyframe's view (guard band included), which a view-dependent
+        proxy (:mod:`lodsprite.sprite.proxy_metric`) is selected for."""
+        key_view_proj = self.key_projection(projection).matrix() @ key.view_matrix()
+        return self.metric.reproject(key.o, key_view_proj=key_view_proj)
+
     def lookahead(self, viewpoint: Viewpoint,
                   projection: Projection) -> tuple[KeyChoice, np.ndarray, float] | None:
         """A keyframe ahead of ``viewpoint`` that serves it within the margin, as
@@ -198,7 +205,7 @@ class KeyframePolicy:
                                       self.key_projection(key_proj)):
                 steps *= 0.5
                 continue
-            c_prime = self.metric.reproject(ahead.o)
+            c_prime = self.reproject(ahead, key_proj)
             err = self.error_px(c_prime, viewpoint, projection)
             if not keyframe_due(err, limit):
                 return KeyChoice(ahead, key_proj, True), c_prime, err
@@ -221,7 +228,7 @@ class KeyframePolicy:
             ahead = self.lookahead(viewpoint, projection)
             if ahead is None:
                 key = KeyChoice(viewpoint, projection, False)
-                self.c_prime, shown = self.metric.reproject(viewpoint.o), 0.0
+                self.c_prime, shown = self.reproject(viewpoint, projection), 0.0
             else:
                 key, self.c_prime, shown = ahead
                 self.predicted_keyframes += 1

@@ -125,7 +125,7 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
     def __init__(self, renderer: Renderer, lod: int = 16, epsilon: float = 1.0,
                  key_sse: float = 1.0, gpu_mb: float = 256.0, host_mb: float = 512.0,
                  visibility: str | None = None, guard_px: int | None = None,
-                 border: bool = True) -> None:
+                 border: bool = True, proxy_sse: float | None = None) -> None:
         from lodsprite.terrain.store import TerrainStore
         from lodsprite.terrain.storefield import store_field
 
@@ -140,6 +140,25 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
         self.sprite.sprite.keyframe_drawer = self.adaptive.render_into
         self.engine.between_keyframes = self.adaptive.prefetch
         self._selections: dict[int, tuple] = {}  # keyframe -> (nodes drawn, morphed)
+        self.proxy = None if proxy_sse is None else self._adaptive_proxy(renderer, proxy_sse)
+        self._proxies: dict[int, tuple] = {}  # keyframe -> its frozen proxy selection
+
+    def _adaptive_proxy(self, renderer: Renderer, proxy_sse: float):
+        """Spriteframes, coarse z-buffers and the error metric on the adaptive mesh at
+        ``proxy_sse`` px (:mod:`lodsprite.techniques.sprite_proxy`)."""
+        from lodsprite.sprite.proxy_metric import ProxyMetric
+        from lodsprite.techniques.sprite_proxy import AdaptiveProxySource
+
+        source = AdaptiveProxySource(self.adaptive, proxy_sse, self.sprite.sprite.target.height)
+        self.sprite.sprite.set_proxy(source)
+        policy = self.engine.policy
+        policy.metric = ProxyMetric(source.nodes, renderer.paths.geometry.full, policy.metric)
+        return source
+
+    def warm_up(self, viewpoint: Viewpoint) -> None:
+        super().warm_up(viewpoint)
+        if self.proxy is not None:
+            self.proxy.triangles.clear()  # the timed run's keyframes only
 
     def decision(self) -> dict[str, Any]:
         """The keyframe shown; for a new one, the selection it was drawn with (recorded
@@ -148,6 +167,8 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
         if d["keyframe"] not in self._selections:
             self._selections[d["keyframe"]] = (tuple(self.adaptive.last_draw),
                                                self.adaptive.last_morphed)
+            if self.proxy is not None:
+                self._proxies[d["keyframe"]] = self.proxy.last
         return d
 
     def replay(self, viewpoint: Viewpoint, decision: dict[str, Any]) -> np.ndarray:
@@ -161,14 +182,23 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
             return FrameStats(0, len(draw), projection)
 
         s.keyframe_drawer = again
+        if self.proxy is not None:
+            self.proxy.force(self._proxies[decision["keyframe"]])
         try:
             return super().replay(viewpoint, decision)
         finally:
             s.keyframe_drawer = self.adaptive.render_into
+            if self.proxy is not None:
+                self.proxy.force(None)
 
     def summary(self, frames: list[Frame]) -> dict[str, Any]:
-        return {**super().summary(frames), "key_sse": self.adaptive.sse,
-                **tile_summary(self.adaptive)}
+        out = {**super().summary(frames), "key_sse": self.adaptive.sse,
+               **tile_summary(self.adaptive), "proxy_sse": None}
+        if self.proxy is not None:
+            tris = self.proxy.triangles
+            out.update(proxy_sse=self.proxy.sse,
+                       mean_proxy_triangles=float(np.mean(tris)) if tris else float("nan"))
+        return out
 
     def status(self) -> str:
         return f"keyframes: adaptive, sse {self.adaptive.sse:g} px; {tile_status(self.adaptive)}"
@@ -178,4 +208,6 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
 
     def release(self) -> None:
         super().release()
+        if self.proxy is not None:
+            self.proxy.release()
         self.adaptive.release()

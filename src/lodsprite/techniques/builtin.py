@@ -17,6 +17,8 @@ BORDER = Option("border", bool, True, "draw the coarse level's border ribbons")
 THREADED = Option("threaded", bool, False, "render keyframes on a worker thread")
 SSE = Option("sse", float, 1.0, "adaptive: screen-space error tolerance, pixels")
 KEY_SSE = Option("key_sse", float, 1.0, "keyframes by the adaptive renderer at this SSE, px")
+PROXY_SSE = Option("proxy_sse", float, None,
+                   "sprite proxy: the adaptive mesh at this SSE, px (None: the uniform --lod)")
 GPU_MB = Option("gpu_mb", float, 256.0, "adaptive: GPU tile cache budget, MB")
 HOST_MB = Option("host_mb", float, 512.0, "adaptive: host tile cache budget, MB")
 SERVER = Option("server", str, "", "the LOD server, HOST:PORT")
@@ -50,7 +52,8 @@ register(TechniqueSpec("sprite", f"{TERRAIN}:SpriteTechnique",
 register(TechniqueSpec("adaptive", f"{ADAPTIVE}:AdaptiveTechnique", (SSE, GPU_MB, HOST_MB),
                        ("terrain",), "the adaptive (CDLOD-style) renderer, stores of any size"))
 register(TechniqueSpec("sprite-adaptive", f"{ADAPTIVE}:SpriteAdaptiveTechnique",
-                       (LOD, EPSILON, KEY_SSE, GPU_MB, HOST_MB, VISIBILITY, GUARD, BORDER),
+                       (LOD, EPSILON, KEY_SSE, GPU_MB, HOST_MB, VISIBILITY, GUARD, BORDER,
+                        PROXY_SSE),
                        ("terrain",), "LOD-sprite with keyframes by the adaptive renderer"))
 register(TechniqueSpec("distributed", "lodsprite.distributed.technique:create",
                        (SERVER, LOD, EPSILON, MAX_ERROR), ("terrain",),

@@ -46,12 +46,13 @@ class ViewOptions:
     target_fps: float | None = None  # a crowd's LOD feedback target
     sse: float | None = None      # adaptive: screen-space error, pixels
     key_sse: float | None = None  # sprite-adaptive: its keyframes' SSE, pixels
+    proxy_sse: float | None = None  # sprite-adaptive: the adaptive sprite proxy's SSE, px
 
     def technique_options(self) -> dict:
         """The options of the command the registry's techniques pick theirs from."""
         return {"lod": self.lod, "epsilon": self.epsilon, "threaded": self.threaded,
                 "server": self.server, "target_fps": self.target_fps, "sse": self.sse,
-                "key_sse": self.key_sse}
+                "key_sse": self.key_sse, "proxy_sse": self.proxy_sse}
 
     def validate(self) -> None:
         if self.target_fps is not None and not self.target_fps > 0:
