@@ -92,12 +92,15 @@ class ProxySurface:
 
     def node_at(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """``(K,) intp`` index of the node holding each point, -1 off the proxy."""
-        c = np.floor((x - self.x0) / self.cell[0])
-        r = np.floor((self.y0 - y) / self.cell[1])
+        fc = (x - self.x0) / self.cell[0]
+        fr = (self.y0 - y) / self.cell[1]
         rows, cols = self.raster.shape
-        ok = (r >= 0) & (r < rows) & (c >= 0) & (c < cols)
+        eps = 1e-9
+        ok = (fr >= -eps) & (fr <= rows + eps) & (fc >= -eps) & (fc <= cols + eps)
+        r = np.clip(np.floor(fr[ok]), 0, rows - 1).astype(np.intp)  # edges belong in
+        c = np.clip(np.floor(fc[ok]), 0, cols - 1).astype(np.intp)
         out = np.full(x.shape, -1, np.intp)
-        out[ok] = self.raster[r[ok].astype(np.intp), c[ok].astype(np.intp)]
+        out[ok] = self.raster[r, c]
         return out
 
     def height(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -109,8 +112,11 @@ class ProxySurface:
         inside = i >= 0
         j = np.where(inside, i, 0)
         ext = nd.last[j]
-        u = np.clip((nd.origin[j, 1] - y) / nd.spacing[j, 1], 0, ext[:, 0])
-        v = np.clip((x - nd.origin[j, 0]) / nd.spacing[j, 0], 0, ext[:, 1])
+        u = (nd.origin[j, 1] - y) / nd.spacing[j, 1]
+        v = (x - nd.origin[j, 0]) / nd.spacing[j, 0]
+        eps = 1e-6  # a partly filled raster cell (an edge node narrower than a cell)
+        inside &= (u >= -eps) & (u <= ext[:, 0] + eps) & (v >= -eps) & (v <= ext[:, 1] + eps)
+        u, v = np.clip(u, 0, ext[:, 0]), np.clip(v, 0, ext[:, 1])
         top = np.maximum(np.ceil(ext - 1e-9) - 1, 0)  # the last cell's first vertex
         r = np.clip(np.floor(u), 0, top[:, 0]).astype(np.intp)
         c = np.clip(np.floor(v), 0, top[:, 1]).astype(np.intp)
