@@ -58,7 +58,7 @@ def test_the_proxy_height_is_the_meshes_triangulation():
 def test_on_a_flat_terrain_c_prime_is_c():
     hf = make_field(64, kind="flat")
     nodes = grid_proxy(hf, 2, 8)
-    pts = node_samples(hf, nodes.windows, 4)
+    pts = node_samples(hf, nodes.windows, np.full(len(nodes), 8), 4)
     cp, missed = reproject_onto(ProxySurface(nodes), np.array([100.0, -900.0, 700.0]), pts)
     assert not missed.any()
     assert np.array_equal(cp, pts)
@@ -69,7 +69,7 @@ def test_c_prime_lies_on_the_proxy_and_on_the_ray():
     nodes = grid_proxy(hf, 2, 8)
     surf = ProxySurface(nodes)
     eye = np.array([0.0, -1500.0, 1500.0])
-    pts = node_samples(hf, nodes.windows, 4)
+    pts = node_samples(hf, nodes.windows, np.full(len(nodes), 8), 4)
     cp, missed = reproject_onto(surf, eye, pts)
     assert (~missed).mean() > 0.9
     hit = ~missed
@@ -113,3 +113,14 @@ def test_the_error_is_zero_at_the_keyframe_and_grows_away():
     # nothing in view: a keyframe is due
     away = look_at((0.0, -1500.0, 1500.0), (0.0, -3000.0, 1600.0))
     assert metric.error_px(cp, away.o, *view(away)) == math.inf
+
+
+def test_samples_stand_at_mesh_cell_centres_never_on_proxy_vertices():
+    hf = make_field(512, kind="ridges", relief=150.0)
+    nodes = grid_proxy(hf, 32, 4)  # 1024 nodes: k shrinks to 2 under the sample limit
+    pts = node_samples(hf, nodes.windows, np.full(len(nodes), 4), 4, 4096)
+    assert len(pts) == 4096
+    rows, cols = hf.grid_index(pts[:, 0], pts[:, 1])
+    assert np.all(np.rint(rows) % 4 == 2) and np.all(np.rint(cols) % 4 == 2)
+    surf = ProxySurface(nodes)
+    assert np.abs(surf.height(pts[:, 0], pts[:, 1]) - pts[:, 2]).max() > 1.0

@@ -5,7 +5,8 @@ view-dependent proxy: the adaptive mesh frozen at each keyframe's viewpoint (the
 The quantities are the paper's, with the proxy in place of the coarse level:
 
 * ``C``  are full-resolution (level-0) samples: ``k x k`` per frozen proxy node, at the
-  centres of a ``k x k`` split of its level-0 window (at most ``MAX_SAMPLES`` in all);
+  centres of ``k x k`` of its mesh cells, evenly spread (at most ``MAX_SAMPLES`` in all;
+  on a proxy vertex ``C' = C`` up to the morph, as on a coarse vertex in the paper);
 * ``C'`` is where the ray from the keyframe eye ``v1`` through ``C`` meets the proxy
   surface, the point the sprite texture maps ``C``'s colour onto;
 * ``θ``  is the angle at the current eye ``v2`` between ``C`` and ``C'``; a keyframe is due
@@ -164,16 +165,25 @@ def reproject_onto(surface: ProxySurface, key_eye: np.ndarray,
     return c_prime, ~hit
 
 
-def node_samples(hf, windows: np.ndarray, per_node: int = SAMPLES_PER_NODE,
+def node_samples(hf, windows: np.ndarray, steps: np.ndarray, per_node: int = SAMPLES_PER_NODE,
                  limit: int = MAX_SAMPLES) -> np.ndarray:
     """Sample points ``C (K, 3) float64`` metres: level-0 samples of ``hf`` (``hf.points(
-    rows, cols)``) at the centres of a ``k x k`` split of each window ``(N, 4)`` (``r0, r1,
-    c0, c1`` inclusive), ``k = per_node`` or fewer so that ``K <= limit``."""
+    rows, cols)``) in each window ``(N, 4)`` (``r0, r1, c0, c1`` inclusive), at the centres
+    of ``k x k`` of its proxy mesh cells, evenly spread (``steps (N,)``: level-0 samples
+    between the node's mesh vertices; ``k = per_node`` or fewer so that ``K <= limit``).
+    Cell centres, as the paper's square centres: a sample on a proxy vertex would measure
+    nothing but the morph."""
     w = np.asarray(windows, np.int64)
+    st = np.maximum(np.asarray(steps, np.int64), 1)[:, None]
     k = max(1, min(per_node, int(math.isqrt(max(1, limit // max(1, len(w)))))))
     f = (np.arange(k) + 0.5) / k
-    rr = np.rint(w[:, 0, None] + f[None] * (w[:, 1] - w[:, 0])[:, None]).astype(np.intp)
-    cc = np.rint(w[:, 2, None] + f[None] * (w[:, 3] - w[:, 2])[:, None]).astype(np.intp)
+
+    def axis(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        cells = np.maximum(-(-(b - a)[:, None] // st), 1)
+        j = np.floor(f[None] * cells).astype(np.int64)
+        return a[:, None] + np.minimum(j * st + st // 2, (b - a)[:, None])
+
+    rr, cc = axis(w[:, 0], w[:, 1]), axis(w[:, 2], w[:, 3])
     rows = np.repeat(rr, k, axis=1).ravel()
     cols = np.tile(cc, (1, k)).ravel()
     return np.asarray(hf.points(rows, cols), np.float64)
@@ -184,11 +194,14 @@ class ProxyReprojection(Reprojection):
     sample points ``points (K, 3)`` (``C``) they belong to."""
 
     points: np.ndarray | None
+    points_h: np.ndarray | None  # (K, 4): the points with w = 1, for the per-frame test
 
     def __array_finalize__(self, obj) -> None:
         super().__array_finalize__(obj)
         pts = getattr(obj, "points", None)
-        self.points = pts if pts is not None and len(pts) == len(self) else None
+        same = pts is not None and len(pts) == len(self)
+        self.points = pts if same else None
+        self.points_h = getattr(obj, "points_h", None) if same else None
 
 
 #: The proxy frozen for a keyframe: ``(key_eye (3,), key_view_proj (4, 4) | None) ->
@@ -215,10 +228,11 @@ class ProxyMetric:
         """Freeze the keyframe's proxy and return ``C'`` of its samples (once a keyframe)."""
         eye = np.asarray(key_eye, np.float64)
         nodes = self.source(eye, key_view_proj)
-        points = node_samples(self.hf, nodes.windows, self.per_node, self.limit)
+        steps = np.rint(nodes.spacing[:, 0] / self.hf.dx).astype(np.int64)
+        points = node_samples(self.hf, nodes.windows, steps, self.per_node, self.limit)
         c_prime, missed = reproject_onto(ProxySurface(nodes), eye, points)
         out = ProxyReprojection(c_prime, eye, missed)
-        out.points = points
+        out.points, out.points_h = points, np.c_[points, np.ones(len(points))]
         return out
 
     def error_px(self, c_prime: ProxyReprojection, eye: np.ndarray, view_proj: np.ndarray,
@@ -227,7 +241,7 @@ class ProxyMetric:
         :func:`~lodsprite.sprite.metric.miss_floor` counts them); ``inf`` when none is in
         view or all missed."""
         pts = c_prime.points
-        vis = in_view(np.c_[pts, np.ones(len(pts))], view_proj)
+        vis = in_view(c_prime.points_h, view_proj)
         missed = c_prime.missed[vis]
         if not vis.any() or missed.all():
             return math.inf
