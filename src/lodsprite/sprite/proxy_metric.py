@@ -16,20 +16,24 @@ The quantities are the paper's, with the proxy in place of the coarse level:
 vertex heights geomorphed towards its parent by the distance from the keyframe eye (the
 morph frozen with the selection), linear over the mesh's triangles (squares split along
 their north-west/south-east diagonal).  The ray is solved for ``t`` in
-``P(t) = v1 + t (C - v1)``, ``f(t) = P_z(t) - z(P_xy(t)) = 0``, from ``t = 1`` (at ``C``):
-one vertical fixed-point step, then secant steps (``ITERATIONS`` in all), vectorised over
-all samples.  It finds the intersection nearest to ``C`` along the ray that the iteration
-reaches, as :mod:`lodsprite.sprite.metric` keeps the hit nearest to ``C``; on a piecewise
-linear surface the secant step is exact once two iterates lie on one triangle.  A sample
-converges when ``|f| <= TOLERANCE * |C - v1|`` (a vertical residual of 1e-4 of the ray's
-length: an angle of at most about 1e-4 rad at ``v1``, 0.07 px of a 512-pixel 45° image).
-On a flat proxy through ``C``, ``f(1) = 0`` and ``C' = C`` exactly.
+``P(t) = v1 + t (C - v1)``, ``f(t) = P_z(t) - z(P_xy(t)) = 0``, vectorised over all samples:
+from ``t = 1`` (at ``C``) it marches ``MARCH`` steps of half a proxy cell (along the ground)
+towards the eye, then ``MARCH`` even steps on to the eye, and as many away (to twice C's
+distance); it keeps the sign change nearest to ``C`` (towards the eye on a tie), as
+:mod:`lodsprite.sprite.metric` keeps the hit nearest to ``C``, and bisects it
+``BISECTIONS`` times: ``t`` to ``2^-16`` of a step, far below a pixel.  A root between two
+steps of one sign (the ray grazing a ridge thinner than a step) is not seen.  (Secant
+steps from ``t = 1`` missed 12 % of the samples of a 4k² flyover keyframe at
+``proxy_sse`` 8, 7 % after 100 steps, on the proxy's rough piecewise surface; this march
+misses 0.8 % there, mostly rays that leave the proxy.)  On a flat proxy through ``C``,
+``f(1) = 0`` and ``C' = C``.
 
-**Misses** are samples that did not converge, whose ray left the proxy's footprint or
-went behind ``v1``: the sprite maps their colour nowhere certain.  Their ``C'`` is ``C``
-itself and their θ is raised to the largest θ of the samples that hit
-(:func:`~lodsprite.sprite.metric.miss_floor`), as the uniform metric counts misses; when
-every sample in view missed, or none is in view, the error is ``inf`` (a keyframe is due).
+**Misses** are samples whose ray meets the proxy nowhere within the march (it leaves the
+proxy's footprint first, or stays above or below it): the sprite maps their colour
+nowhere certain.  Their ``C'`` is ``C`` itself and their θ is raised to the largest θ
+of the samples that hit (:func:`~lodsprite.sprite.metric.miss_floor`), as the uniform
+metric counts misses; when every sample in view missed, or none is in view, the error
+is ``inf`` (a keyframe is due).
 
 ``C'`` is computed once per keyframe (:meth:`ProxyMetric.reproject`); per frame only the
 angles (:meth:`ProxyMetric.error_px`).
@@ -48,8 +52,12 @@ from lodsprite.sprite.raycast import Reprojection
 
 MAX_SAMPLES = 8192   # sample points C per keyframe, at most
 SAMPLES_PER_NODE = 4  # k: a k x k subgrid per proxy node (fewer when nodes are many)
-ITERATIONS = 10
-TOLERANCE = 1e-4     # of the ray's length |C - v1|: the vertical residual of a hit
+MARCH = 32           # steps of half a proxy cell each way along the ray from C, then as
+                     # many even ones on to the eye (t = 0) and to FAR_T
+FAR_T = 2.0          # the march away from the eye ends at twice C's distance
+MAX_DT = 0.05        # of the ray's length: the longest step (rays seen from straight above)
+BISECTIONS = 16      # halvings of the bracket: t to 2^-16 of a step (1 mm a 60 m step)
+MARCH_BLOCK = 8      # march steps evaluated at once
 
 
 @dataclass(frozen=True)
@@ -87,6 +95,10 @@ class ProxySurface:
         r0 = np.round((self.y0 - nodes.origin[:, 1]) / self.cell[1]).astype(int)
         c1 = c0 + np.maximum(1, np.ceil(nodes.last[:, 1] * sx / self.cell[0] - 1e-9)).astype(int)
         r1 = r0 + np.maximum(1, np.ceil(nodes.last[:, 0] * sy / self.cell[1] - 1e-9)).astype(int)
+        top = np.maximum(np.ceil(nodes.last - 1e-9) - 1, 0)
+        self._params = np.c_[nodes.origin, nodes.spacing, nodes.last, top]
+        self._flat = np.ascontiguousarray(nodes.heights, np.float64).ravel()
+        self._flat_side = nodes.heights.shape[1]
         self.raster = np.full((r1.max(), c1.max()), -1, np.intp)
         for i in range(len(nodes)):
             self.raster[r0[i]:r1[i], c0[i]:c1[i]] = i
@@ -106,62 +118,102 @@ class ProxySurface:
 
     def height(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """The proxy's height ``(K,) float64`` metres at ``(x, y)``; NaN off the proxy."""
-        nd = self.nodes
         x = np.asarray(x, np.float64)
         y = np.asarray(y, np.float64)
         i = self.node_at(x, y)
         inside = i >= 0
         j = np.where(inside, i, 0)
-        ext = nd.last[j]
-        u = (nd.origin[j, 1] - y) / nd.spacing[j, 1]
-        v = (x - nd.origin[j, 0]) / nd.spacing[j, 0]
+        q = self._params[j]  # origin x, y; spacing x, y; last row, column
+        ext_r, ext_c = q[:, 4], q[:, 5]
+        u = (q[:, 1] - y) / q[:, 3]
+        v = (x - q[:, 0]) / q[:, 2]
         eps = 1e-6  # a partly filled raster cell (an edge node narrower than a cell)
-        inside &= (u >= -eps) & (u <= ext[:, 0] + eps) & (v >= -eps) & (v <= ext[:, 1] + eps)
-        u, v = np.clip(u, 0, ext[:, 0]), np.clip(v, 0, ext[:, 1])
-        top = np.maximum(np.ceil(ext - 1e-9) - 1, 0)  # the last cell's first vertex
-        r = np.clip(np.floor(u), 0, top[:, 0]).astype(np.intp)
-        c = np.clip(np.floor(v), 0, top[:, 1]).astype(np.intp)
-        r1, c1 = r + 1, c + 1
-        fu = (u - r) / np.maximum(np.minimum(r1, ext[:, 0]) - r, 1e-9)
-        fv = (v - c) / np.maximum(np.minimum(c1, ext[:, 1]) - c, 1e-9)
-        h = nd.heights
-        nw, se = h[j, r, c], h[j, r1, c1]
-        sw, ne = h[j, r1, c], h[j, r, c1]
+        inside &= (u >= -eps) & (u <= ext_r + eps) & (v >= -eps) & (v <= ext_c + eps)
+        u, v = np.clip(u, 0, ext_r), np.clip(v, 0, ext_c)
+        r = np.minimum(np.floor(u), q[:, 6])  # q[:, 6:8]: the last cell's first vertex
+        c = np.minimum(np.floor(v), q[:, 7])
+        fu = (u - r) / np.maximum(np.minimum(r + 1, ext_r) - r, 1e-9)
+        fv = (v - c) / np.maximum(np.minimum(c + 1, ext_c) - c, 1e-9)
+        side = self._flat_side
+        base = j * side * side + r.astype(np.intp) * side + c.astype(np.intp)
+        h = self._flat
+        nw, ne, sw, se = h[base], h[base + 1], h[base + side], h[base + side + 1]
         lower = fu >= fv  # the (nw, sw, se) triangle, else (nw, se, ne)
         z = np.where(lower, nw + fu * (sw - nw) + fv * (se - sw),
                      nw + fv * (ne - nw) + fu * (se - ne))
         return np.where(inside, z, np.nan)
 
 
-def reproject_onto(surface: ProxySurface, key_eye: np.ndarray,
-                   points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _march(dt: np.ndarray, side: float, end: float) -> np.ndarray:
+    """``t (K, 2 MARCH)`` of the march from ``t = 1`` on one side: ``MARCH`` steps of
+    ``dt (K,)``, then ``MARCH`` even ones on to ``end``."""
+    fine = 1.0 + side * dt[:, None] * np.arange(1, MARCH + 1)[None]
+    last = fine[:, -1:]
+    ts = np.concatenate([fine, last + (np.arange(1, MARCH + 1) / MARCH)[None] * (end - last)],
+                        axis=1)
+    return np.maximum(ts, 1e-3) if side < 0 else np.minimum(ts, FAR_T)
+
+
+def reproject_onto(surface: ProxySurface, key_eye: np.ndarray, points: np.ndarray,
+                   steps_m: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """``(C' (K, 3) float64 metres, missed (K,) bool)``: where the rays from ``key_eye
-    (3,)`` through ``points (K, 3)`` meet ``surface`` (module docstring); a missed
-    sample's ``C'`` is the sample itself."""
+    (3,)`` through ``points (K, 3)`` meet ``surface`` nearest to the points (module
+    docstring); a missed sample's ``C'`` is the sample itself.  ``steps_m (K,)``: the
+    marching step along the ground, metres (default: the proxy's finest vertex spacing)."""
     e = np.asarray(key_eye, np.float64)
     c = np.asarray(points, np.float64)
     d = c - e
+    k = len(c)
 
-    def f(t: np.ndarray) -> np.ndarray:
-        p = e + t[:, None] * d
-        return p[:, 2] - surface.height(p[:, 0], p[:, 1])
+    def f(t: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
+        dd = d if rows is None else d[rows]  # t (K,), or (len(rows), m) for those rays
+        p = e + t[..., None] * (dd if t.ndim == 1 else dd[:, None])
+        z = surface.height(p[..., 0].ravel(), p[..., 1].ravel()).reshape(t.shape)
+        return p[..., 2] - z
 
-    tol = TOLERANCE * np.linalg.norm(d, axis=1)
-    t0 = np.ones(len(c))
-    f0 = f(t0)
-    dz = np.where(np.abs(d[:, 2]) > 1e-9, d[:, 2], 1e-9)
-    t1 = np.where(np.abs(f0) <= tol, t0, t0 - f0 / dz)
-    f1 = f(t1)
-    for _ in range(ITERATIONS - 1):
-        done = ~(np.abs(f1) > tol)  # converged, or NaN (left the proxy): stop there
-        df = f1 - f0
-        step = np.where(np.abs(df) > 1e-12, f1 * (t1 - t0) / np.where(df == 0, 1, df), 0.0)
-        t2 = np.where(done, t1, t1 - step)
-        t0, f0 = t1, f1
-        t1 = t2
-        f1 = np.where(done, f1, f(t1))
-    hit = (np.abs(f1) <= tol) & (t1 > 0)
-    c_prime = np.where(hit[:, None], e + t1[:, None] * d, c)
+    if steps_m is None:
+        steps_m = np.full(k, surface.nodes.spacing.min())
+    ground = np.maximum(np.hypot(d[:, 0], d[:, 1]), 1e-9)
+    dt = np.minimum(0.5 * np.asarray(steps_m, np.float64) / ground, MAX_DT)
+    f0 = f(np.ones(k))
+    n = 2 * MARCH
+    best_j = np.full(k, n + 1)  # steps from C to the nearest bracket so far
+    lo, hi = np.ones(k), np.ones(k)
+    for side, end in ((-1.0, 1e-3), (1.0, FAR_T)):  # towards the eye, then away
+        ts = _march(dt, side, end)
+        prev_t, prev_f = np.ones(k), f0.copy()
+        open_ = ~np.isnan(f0)  # still marching on this side
+        for b0 in range(0, n, MARCH_BLOCK):  # in blocks: most rays bracket in the first
+            rows = np.flatnonzero(open_ & (b0 + 1 < best_j))
+            if rows.size == 0:
+                break
+            fs = f(ts[rows, b0:b0 + MARCH_BLOCK], rows)
+            nan = np.isnan(fs)
+            change = (np.sign(fs) != np.sign(prev_f[rows])[:, None]) & ~nan
+            change &= np.cumsum(nan, axis=1) == 0  # none past a point off the proxy
+            has = change.any(axis=1)
+            first = change.argmax(axis=1)
+            steps = b0 + first + 1
+            ok = has & (steps < best_j[rows])
+            r_ok = rows[ok]
+            before = np.where(first[ok] > 0,
+                              ts[r_ok, b0 + np.maximum(first[ok] - 1, 0)], prev_t[r_ok])
+            lo[r_ok], hi[r_ok] = before, ts[r_ok, b0 + first[ok]]
+            best_j[r_ok] = steps[ok]
+            stop = has | nan.any(axis=1)
+            open_[rows[stop]] = False
+            prev_t[rows], prev_f[rows] = ts[rows, b0 + fs.shape[1] - 1], fs[:, -1]
+    found = (best_j <= n) | (f0 == 0)
+    flo = f(lo)
+    for _ in range(BISECTIONS):  # the root stays between lo and hi (f is continuous)
+        mid = 0.5 * (lo + hi)
+        fm = f(mid)
+        left = np.sign(fm) == np.sign(flo)
+        lo, flo = np.where(left, mid, lo), np.where(left, fm, flo)
+        hi = np.where(left, hi, mid)
+    t = np.where(f0 == 0, 1.0, 0.5 * (lo + hi))
+    hit = found & ~np.isnan(f0)
+    c_prime = np.where(hit[:, None], e + t[:, None] * d, c)
     return c_prime, ~hit
 
 
@@ -230,7 +282,8 @@ class ProxyMetric:
         nodes = self.source(eye, key_view_proj)
         steps = np.rint(nodes.spacing[:, 0] / self.hf.dx).astype(np.int64)
         points = node_samples(self.hf, nodes.windows, steps, self.per_node, self.limit)
-        c_prime, missed = reproject_onto(ProxySurface(nodes), eye, points)
+        cell_m = np.repeat(nodes.spacing.min(axis=1), len(points) // max(1, len(nodes)))
+        c_prime, missed = reproject_onto(ProxySurface(nodes), eye, points, cell_m)
         out = ProxyReprojection(c_prime, eye, missed)
         out.points, out.points_h = points, np.c_[points, np.ones(len(points))]
         return out
