@@ -120,6 +120,10 @@ class SpriteRenderer:
     visibility branch).  ``mipmaps=True`` builds the sprite texture's mipmaps with each
     keyframe and samples it trilinearly, which can help only where a spriteframe shrinks the
     keyframe (flying away from it).
+
+    ``proxy`` is the geometry spriteframes and coarse z-buffers draw (a proxy geometry
+    object, :class:`UniformProxy`; default: the uniform coarse level of ``coarse_quads``
+    with its border ribbons); :meth:`set_proxy` changes it.
     """
 
     def __init__(self, terrain: TerrainRenderer, coarse_quads: int = 16,
@@ -127,7 +131,7 @@ class SpriteRenderer:
                  fragment_tol: float = DEFAULT_FRAGMENT_TOL,
                  coarse_tol: float = DEFAULT_COARSE_TOL, border: bool = True,
                  guard_px: int = DEFAULT_GUARD_PX,
-                 mipmaps: bool = DEFAULT_SPRITE_MIPMAPS) -> None:
+                 mipmaps: bool = DEFAULT_SPRITE_MIPMAPS, proxy=None) -> None:
         if visibility not in VISIBILITY_MODES:
             raise InputError(f"visibility must be one of {', '.join(VISIBILITY_MODES)}, "
                              f"got {visibility!r}")
@@ -142,8 +146,8 @@ class SpriteRenderer:
         self.mipmaps = bool(mipmaps)
         self._tols = {"u_vertex_tol": vertex_tol, "u_fragment_tol": fragment_tol,
                       "u_coarse_tol": coarse_tol}
-        self.proxy = UniformProxy(terrain, coarse_quads, border)
-        self._default_proxy = self.proxy
+        self._default_proxy = UniformProxy(terrain, coarse_quads, border)
+        self.proxy = self._default_proxy if proxy is None else proxy
         self.program = self._program(visibility, self._tols)
         self.depth_program = self.ctx.mgl.program(vertex_shader=PROXY_DEPTH_VS,
                                                   fragment_shader=PROXY_DEPTH_FS)

@@ -118,7 +118,10 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
     """LOD-sprite with keyframes drawn by the adaptive renderer at ``key_sse`` pixels
     (inline keyframes); it streams between keyframes.  Over a store the coarse proxy,
     ribbons and error metric come from the store's level 0.  Each keyframe's selection is
-    recorded; the replay draws it again with the same nodes (their tiles read then)."""
+    recorded; the replay draws it again with the same nodes (their tiles read then).
+    ``proxy_sse``: spriteframes draw the adaptive mesh at that tolerance, selected at each
+    keyframe and frozen (:mod:`lodsprite.techniques.sprite_proxy`), with the error metric
+    of :mod:`lodsprite.sprite.proxy_metric`; the replay freezes the recorded selection."""
 
     name = "sprite-adaptive"
 
