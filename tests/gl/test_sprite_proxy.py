@@ -77,9 +77,14 @@ def test_the_frozen_proxy_has_fewer_triangles_than_the_keyframe_and_stays_put(se
     key_tris = at.renderer.triangles  # the keyframe's own selection at 1 px
     proxy_tris = src.triangles[-1]
     assert 0 < proxy_tris < key_tris
-    # frozen: spriteframes from elsewhere draw the same triangles (no reselection)
+    # frozen: spriteframes from elsewhere draw the frozen nodes in their view (no
+    # reselection); a view away from the terrain draws none of them
+    before = src.last
     other = look_at((400.0, -2500.0, 2000.0), (0.0, 0.0, 0.0))
-    assert sp.render_spriteframe(other).triangles == proxy_tris
+    assert 0 < sp.render_spriteframe(other).triangles <= proxy_tris
+    sky = look_at((0.0, -3000.0, 2500.0), (0.0, -6000.0, 5000.0))
+    assert sp.render_spriteframe(sky).triangles == 0
+    assert src.last == before
     # its nodes (and the parents they morph to) are pinned in the GPU cache
     nodes, morphed = src.last
     assert set(nodes) <= at.pinned and all(n in at.slots for n in nodes)

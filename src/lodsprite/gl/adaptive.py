@@ -17,6 +17,7 @@ import math
 import moderngl
 import numpy as np
 
+from lodsprite.camera import boxes_in_frustum, frustum_planes
 from lodsprite.gl.context import GLContext
 from lodsprite.gl.shaders import PROXY_VERTEX_COMMON
 from lodsprite.gl.terrain import SKY_RGB, mat_bytes
@@ -224,6 +225,9 @@ class AdaptiveProxy:
         self.instances = mgl.buffer(reserve=64 * 64)
         self.count = 0
         self.eye = (0.0, 0.0, 0.0)
+        self._all = np.zeros((0, 16), np.float32)
+        self._boxes: tuple[np.ndarray, np.ndarray] | None = None
+        self._written: bytes | None = None
         self._vaos: dict[int, moderngl.VertexArray] = {}
 
     @staticmethod
@@ -233,16 +237,28 @@ class AdaptiveProxy:
             raise ValueError("not a proxy vertex shader")
         return vertex_shader.replace(PROXY_VERTEX_COMMON, ADAPTIVE_POSITION_COMMON)
 
-    def set(self, instances: np.ndarray, eye: np.ndarray) -> None:
+    def set(self, instances: np.ndarray, eye: np.ndarray,
+            boxes: tuple[np.ndarray, np.ndarray] | None = None) -> None:
         """Freeze ``instances (N, 16) float32`` (the layout of :meth:`AdaptiveRenderer.draw`)
-        morphed by the distance from ``eye (3,)`` metres."""
-        data = np.ascontiguousarray(instances, dtype=np.float32)
+        morphed by the distance from ``eye (3,)`` metres; ``boxes``: the nodes' bounds
+        ``(lo (N, 3), hi (N, 3))`` metres, to draw only those in each view."""
+        self._all = np.ascontiguousarray(instances, dtype=np.float32)
+        self._boxes = boxes
+        self._written: bytes | None = None
+        self.count = len(self._all)
+        self.eye = tuple(float(v) for v in eye)
+        self._write(np.ones(self.count, bool))
+
+    def _write(self, keep: np.ndarray) -> None:
+        key = np.packbits(keep).tobytes()
+        if key == self._written:
+            return
+        data = self._all[keep]
         if data.nbytes > self.instances.size:
             self.instances.orphan(data.nbytes * 2)
         if data.nbytes:
             self.instances.write(data.tobytes())
-        self.count = len(data)
-        self.eye = tuple(float(v) for v in eye)
+        self.count, self._written = len(data), key
 
     def draw(self, program: moderngl.Program, view_proj: np.ndarray) -> int:
         """Draw the frozen nodes with ``program`` (other uniforms set) through
@@ -262,6 +278,8 @@ class AdaptiveProxy:
                     program[name].write(mat_bytes(view_proj))
                 else:
                     program[name].value = value
+        if self._boxes is not None and len(self._all):
+            self._write(boxes_in_frustum(frustum_planes(view_proj), *self._boxes))
         if not self.count:
             return 0
         r.atlas.use(ATLAS_UNIT)

@@ -9,8 +9,9 @@ The design:
   quadtree selection (CDLOD ranges of ``proxy_sse``) is made at its eye and culled with its
   frustum widened ``WIDEN`` times (tangents of the half-angles, guard band included), so
   frames turning away from the keyframe still find geometry; morph factors are those at
-  the keyframe eye.  The keyframe's spriteframes draw that instance list, and its coarse
-  z-buffer (visibility rule ``coarse``) is the same mesh from the keyframe's view.
+  the keyframe eye.  The keyframe's spriteframes draw that instance list (each the nodes
+  whose boxes meet its own view), and its coarse z-buffer (visibility rule ``coarse``) is
+  the same mesh from the keyframe's view.
 * **The ordering.**  The error metric's ``C'`` needs the proxy, and the policy asks for
   ``C'`` (:meth:`ProxyMetric.reproject`) before the engine renders the keyframe.  So the
   selection is made in :meth:`AdaptiveProxySource.select`, called by the metric with the
@@ -182,7 +183,9 @@ class AdaptiveProxySource:
         old = self._frozen.get(id(slot))
         gl = old[2] if old is not None else self._gl()
         instances, _ = self.terrain.instances(list(nodes), morphed, self.r)
-        gl.set(instances, eye)
+        boxes = [self.terrain.tree.bounds(n) for n in nodes]
+        gl.set(instances, eye, (np.array([b[0] for b in boxes]).reshape(-1, 3),
+                                np.array([b[1] for b in boxes]).reshape(-1, 3)))
         self._frozen[id(slot)] = (nodes, morphed, gl)
         self._made = []  # this keyframe's selection is kept by _frozen now
         self._pin()
