@@ -56,16 +56,28 @@ def strided_errors(errors: np.ndarray, stride: int) -> np.ndarray:
     return np.where(k <= top, e[np.minimum(k, top)], e[top] * 2.0 ** (k - top))
 
 
+def parent_surfaces(pos: np.ndarray, quadrant: np.ndarray, parent: np.ndarray,
+                    top: np.ndarray, grid: int, stride: int) -> np.ndarray:
+    """Each parent's surface on its own proxy mesh (every ``stride``-th sample) at its
+    child's samples ``pos (N, ..., 2)`` (row, column), the child in ``quadrant (N, 2)``;
+    ``parent (N, R, C)`` the parents' samples, ``top (N, 2)`` their last valid row and
+    column: the vertex shader's morph target (:data:`lodsprite.gl.adaptive.
+    ADAPTIVE_POSITION_COMMON`)."""
+    extra = (1,) * (pos.ndim - 2)
+    q = np.asarray(quadrant).reshape(len(pos), *extra, 2)
+    cap = np.asarray(top).reshape(len(pos), *extra, 2)
+    p = (q * (grid // 2) + pos / 2.0) / stride
+    lo = np.minimum(np.floor(p).astype(np.intp) * stride, cap)
+    hi = np.minimum(np.ceil(p).astype(np.intp) * stride, cap)
+    idx = np.arange(len(pos)).reshape(len(pos), *extra)
+    return 0.5 * (parent[idx, lo[..., 0], lo[..., 1]] + parent[idx, hi[..., 0], hi[..., 1]])
+
+
 def parent_surface(pos: np.ndarray, quadrant: tuple[int, int], parent: np.ndarray,
                    grid: int, stride: int) -> np.ndarray:
-    """The parent's surface on its own proxy mesh (every ``stride``-th sample) at a node's
-    samples ``pos (..., 2)`` (row, column) in ``quadrant``: the vertex shader's morph
-    target (:data:`lodsprite.gl.adaptive.ADAPTIVE_POSITION_COMMON`)."""
-    p = (np.asarray(quadrant)[None, :] * (grid // 2) + pos / 2.0) / stride
-    top = np.array(parent.shape) - 1
-    lo = np.minimum(np.floor(p).astype(int) * stride, top)
-    hi = np.minimum(np.ceil(p).astype(int) * stride, top)
-    return 0.5 * (parent[lo[..., 0], lo[..., 1]] + parent[hi[..., 0], hi[..., 1]])
+    """:func:`parent_surfaces` of one node: ``pos (..., 2)``, ``parent (R, C)``."""
+    return parent_surfaces(np.asarray(pos)[None], np.asarray(quadrant)[None], parent[None],
+                           np.array([parent.shape]) - 1, grid, stride)[0]
 
 
 class AdaptiveProxySource:
@@ -138,31 +150,44 @@ class AdaptiveProxySource:
         nodes, morphed = self.select(eye, view_proj)
         t, g, st = self.terrain, self.terrain.tree.g, self.stride
         tree = t.tree
-        e = np.asarray(eye, np.float64)
         n_, nv = len(nodes), g // st
-        origin, spacing = np.zeros((n_, 2)), np.zeros((n_, 2))
-        last, windows = np.zeros((n_, 2)), np.zeros((n_, 4), np.intp)
-        heights = np.zeros((n_, nv + 1, nv + 1))
-        rc = np.stack(np.meshgrid(np.arange(nv + 1), np.arange(nv + 1), indexing="ij"), -1)
+        win = np.array([tree.samples(n) for n in nodes], np.intp).reshape(-1, 4)
+        k = np.array([n.k for n in nodes], np.intp)
+        s = (1 << k).astype(np.float64)
+        x, y = tree.world_xy(0, win[:, 0] * s, win[:, 2] * s)  # level-0 indices
+        origin = np.c_[x, y]
+        spacing = np.c_[st * s * tree.p.dx, st * s * tree.p.dy]
+        ext = np.minimum(g, np.c_[win[:, 1] - win[:, 0] - 1, win[:, 3] - win[:, 2] - 1])
+        windows = np.c_[win[:, 0], win[:, 0] + ext[:, 0], win[:, 2], win[:, 2] + ext[:, 1]]
+        windows = (windows * s[:, None]).astype(np.intp)
+        own = np.zeros((n_, g + 1, g + 1))
+        par = np.zeros((n_, g + 1, g + 1))
+        ptop = np.zeros((n_, 2), np.intp)
+        mask = np.array([n in morphed for n in nodes], bool)
         for i, n in enumerate(nodes):
-            r0, r1, c0, c1 = tree.samples(n)
-            s = 1 << n.k
-            x, y = tree.world_xy(n.k, np.array([r0]), np.array([c0]))
-            origin[i] = x[0], y[0]
-            spacing[i] = st * s * tree.p.dx, st * s * tree.p.dy
-            ext = np.array([min(g, r1 - r0 - 1), min(g, c1 - c0 - 1)])
-            last[i] = ext / st
-            windows[i] = r0 * s, (r0 + ext[0]) * s, c0 * s, (c0 + ext[1]) * s
-            own = np.asarray(t.node_heights(n), np.float64)
-            pos = np.minimum(rc * st, ext)  # the vertex shader clamps to the extent
-            h = own[pos[..., 0], pos[..., 1]]
-            if n in morphed:
-                parent = np.asarray(t.node_heights(n.parent()), np.float64)
-                hc = parent_surface(pos, (n.i % 2, n.j % 2), parent, g, st)
-                xy = origin[i] + pos[..., ::-1] / st * spacing[i] * np.array([1.0, -1.0])
-                d = np.sqrt(((np.dstack([xy, h]) - e) ** 2).sum(-1))
-                h = h + morph_factor(d, n.k, self.r) * (hc - h)
-            heights[i] = h
+            tile = t.node_heights(n)
+            own[i, :tile.shape[0], :tile.shape[1]] = tile
+            if mask[i]:
+                tile = t.node_heights(n.parent())
+                par[i, :tile.shape[0], :tile.shape[1]] = tile
+                ptop[i] = np.array(tile.shape) - 1
+        rc = np.stack(np.meshgrid(np.arange(nv + 1), np.arange(nv + 1), indexing="ij"), -1)
+        pos = np.minimum(rc[None] * st, ext[:, None, None, :])  # clamped as the shader does
+        idx = np.arange(n_)[:, None, None]
+        heights = own[idx, pos[..., 0], pos[..., 1]]
+        if mask.any():
+            quad = np.array([(n.i % 2, n.j % 2) for n in nodes], np.intp)
+            hc = parent_surfaces(pos, quad, par, ptop, g, st)
+            xy = origin[:, None, None, :] + pos[..., ::-1] * (
+                s[:, None] * np.array([tree.p.dx, -tree.p.dy]))[:, None, None, :]
+            d = np.sqrt(((np.concatenate([xy, heights[..., None]], -1)
+                          - np.asarray(eye, np.float64)) ** 2).sum(-1))
+            m = np.zeros_like(d)
+            for lev in np.unique(k[mask]):
+                sel = mask & (k == lev)
+                m[sel] = morph_factor(d[sel], int(lev), self.r)
+            heights = heights + m * (hc - heights)
+        last = ext / st
         return ProxyNodes(origin, spacing, last, heights, windows)
 
     def force(self, selection: tuple[tuple, frozenset] | None) -> None:
