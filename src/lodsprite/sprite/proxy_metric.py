@@ -36,7 +36,11 @@ metric counts misses; when every sample in view missed, or none is in view, the 
 is ``inf`` (a keyframe is due).
 
 ``C'`` is computed once per keyframe (:meth:`ProxyMetric.reproject`); per frame only the
-angles (:meth:`ProxyMetric.error_px`).
+angles (:meth:`ProxyMetric.error_px`).  ``C`` is read through ``hf.points(rows, cols)``:
+on a store, :class:`~lodsprite.terrain.storefield.LazyHeights`, whose reads of level-0
+chunks not cached yet block (a 16k² flyover keyframe read 2560 chunks, 9 s, for 2080
+samples spread over the widened frustum); the non-blocking ``LazyHeights`` of issue 22
+serves the same interface.
 """
 
 from __future__ import annotations
