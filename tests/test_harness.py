@@ -59,6 +59,30 @@ def test_the_replay_draws_what_the_timed_run_showed(gl, name):
             t.release()
 
 
+def test_the_adaptive_proxy_replay_draws_what_the_timed_run_showed(gl):
+    """sprite-adaptive with --proxy-sse: the replay freezes each keyframe's recorded proxy
+    selection (out of order too) and draws the images the timed run showed."""
+    scene = load_scene("fractal:256:3", grid=256)
+    path = get_path("chen1999", scene.hf, 16)
+    with Renderer(scene, (64, 64), ctx=gl.mgl) as renderer:
+        t = techniques.create("sprite-adaptive", renderer, lod=8, epsilon=1.0, key_sse=1.0,
+                              proxy_sse=8.0)
+        try:
+            t.warm_up(path.viewpoints[0])
+            shown, decisions = [], []
+            for vp in path.viewpoints:
+                t.frame(vp)
+                shown.append(t.read_image())
+                decisions.append(t.decision())
+            s = t.summary([])
+            assert s["proxy_sse"] == 8.0 and s["mean_proxy_triangles"] > 0
+            order = list(range(len(decisions)))[::-1]
+            for i in order:
+                assert np.array_equal(t.replay(path.viewpoints[i], decisions[i]), shown[i]), i
+        finally:
+            t.release()
+
+
 @pytest.mark.parametrize("name", ["lod", "sprite"])
 def test_a_run_writes_the_core_columns_and_keys(gl, tmp_path, name):
     scene = load_scene("fractal:64:3", grid=64)

@@ -85,6 +85,7 @@ class RenderConfig:
     key_sse: float | None = None  # sprite: keyframes by the adaptive renderer at this SSE
     gpu_mb: float = 256.0     # adaptive: GPU tile cache budget
     host_mb: float = 512.0    # adaptive: host tile cache budget
+    proxy_sse: float | None = None  # sprite proxy: the adaptive mesh at this SSE (needs key_sse)
     flip: bool = False        # with ground_truth: FLIP per frame too
     shading: str = "auto"     # colour: auto (heights on a store) | texture | heights
     tiles: int = 1            # sprite: an N x N grid of keyframe tiles (1: whole keyframes)
@@ -103,9 +104,10 @@ class RenderConfig:
         return {"lod": self.lod, "epsilon": self.epsilon, "visibility": self.visibility,
                 "guard_px": self.guard_px, "border": self.border, "sse": self.sse,
                 "key_sse": self.key_sse, "gpu_mb": self.gpu_mb, "host_mb": self.host_mb,
-                "threaded": False, "shading": self.shading, "tiles": self.tiles,
-                "tile_budget_ms": self.tile_budget_ms, "cache_mb": self.cache_mb,
-                "cache_policy": self.cache_policy, "metric": self.metric}
+                "proxy_sse": self.proxy_sse, "threaded": False, "shading": self.shading,
+                "tiles": self.tiles, "tile_budget_ms": self.tile_budget_ms,
+                "cache_mb": self.cache_mb, "cache_policy": self.cache_policy,
+                "metric": self.metric}
 
     def validate(self) -> None:
         modes = _modes()  # the registry's now: a technique registered later is one too
@@ -143,6 +145,9 @@ class RenderConfig:
         if not self.cache_mb >= 0 or self.cache_policy not in CACHE_POLICIES:
             raise InputError(f"--cache-mb must be >= 0 and --cache-policy lru or benefit, "
                              f"got {self.cache_mb}, {self.cache_policy!r}")
+        if self.proxy_sse is not None and (self.key_sse is None or not self.proxy_sse > 0):
+            raise InputError("--proxy-sse needs adaptive keyframes (--mode sprite --key-sse PX, "
+                             "whose tile caches the proxy shares) and must be > 0 pixels")
         if not (self.sse > 0 and self.gpu_mb > 0 and self.host_mb > 0):
             raise InputError(f"--sse, --gpu-mb and --host-mb must be > 0, got {self.sse}, "
                              f"{self.gpu_mb}, {self.host_mb}")

@@ -40,7 +40,7 @@ class DistanceMetric:
     def __init__(self, metres_per_px: float = 50.0, error: float | None = None) -> None:
         self.metres_per_px, self.fixed = metres_per_px, error
 
-    def reproject(self, key_eye):
+    def reproject(self, key_eye, **_):  # key_view_proj, key_size: unused here
         return np.asarray(key_eye, dtype=np.float64).copy()
 
     def error_px(self, c_prime, eye, view_proj, beta):

@@ -140,6 +140,10 @@ def render(
     key_sse: Annotated[float | None, typer.Option(
         "--key-sse", help="sprite: render keyframes with the adaptive renderer at this "
                           "tolerance (pixels; 0.5 is a good start)")] = None,
+    proxy_sse: Annotated[float | None, typer.Option(
+        "--proxy-sse", help="sprite with --key-sse: spriteframes draw the adaptive mesh at "
+                            "this tolerance (pixels, e.g. 8-16), selected at each keyframe, "
+                            "instead of the uniform --lod level")] = None,
     gpu_mb: Annotated[float, typer.Option(
         "--gpu-mb", help="adaptive: GPU tile cache budget (MB)")] = 256.0,
     host_mb: Annotated[float, typer.Option(
@@ -161,8 +165,8 @@ def render(
                           exaggeration=exaggeration, save_frames=save_frames, epsilon=epsilon,
                           ground_truth=ground_truth, visibility=visibility, border=border,
                           guard_px=guard, sse=sse, gpu_mb=gpu_mb, host_mb=host_mb,
-                          key_sse=key_sse, flip=flip, shading=shading, tiles=tiles,
-                          tile_budget_ms=tile_budget_ms, cache_mb=cache_mb,
+                          key_sse=key_sse, proxy_sse=proxy_sse, flip=flip, shading=shading,
+                          tiles=tiles, tile_budget_ms=tile_budget_ms, cache_mb=cache_mb,
                           cache_policy=cache_policy, metric=metric)
     with progress_bar(f"render {mode}") as update:
         if distributed:
@@ -228,6 +232,9 @@ def view(
                            "(0: off)")] = 0.0,
     cache_policy: CachePolicyOpt = "lru",
     metric: MetricOpt = "warp",
+    proxy_sse: Annotated[float | None, typer.Option(
+        "--proxy-sse", help="sprite-adaptive: spriteframes draw the adaptive mesh at this "
+                            "tolerance (pixels) instead of the uniform --lod level")] = None,
 ) -> None:
     """Fly through a terrain with live LOD-sprite, or round a lumigraph (WASD/QE, mouse, tab
     orbit)."""
@@ -239,8 +246,9 @@ def view(
                        epsilon=epsilon, size=parse_size(size), fps=fps, threaded=not inline,
                        play=play, frames=frames, screenshots=screenshots, every=every,
                        exit=exit_, out=out_dir, record=record, server=server,
-                       target_fps=target_fps, sse=sse, key_sse=key_sse, shading=shading,
-                       tiles=tiles, tile_budget_ms=tile_budget_ms, cache_mb=cache_mb,
+                       target_fps=target_fps, sse=sse, key_sse=key_sse,
+                       proxy_sse=proxy_sse, shading=shading, tiles=tiles,
+                       tile_budget_ms=tile_budget_ms, cache_mb=cache_mb,
                        cache_policy=cache_policy, metric=metric)
     s = run_view(opts)
     if s:

@@ -18,47 +18,68 @@ import math
 import moderngl
 import numpy as np
 
+from lodsprite.camera import boxes_in_frustum, frustum_planes
 from lodsprite.gl.context import GLContext
-from lodsprite.gl.shaders import HEIGHT_NORMAL, TERRAIN_SHADE
+from lodsprite.gl.shaders import HEIGHT_NORMAL, PROXY_VERTEX_COMMON, TERRAIN_SHADE
 from lodsprite.gl.terrain import SKY_RGB, mat_bytes
 from lodsprite.terrain.lod import grid_mesh
 
-ADAPTIVE_VS = """#version 330
-uniform mat4 u_view_proj;
+# The adaptive mesh's vertex position, shared by the adaptive renderer's own program and by
+# LOD-sprite programs drawing the mesh as a sprite proxy (AdaptiveProxy.twin swaps it in for
+# gl.shaders.PROXY_VERTEX_COMMON): per instance the node attributes, per vertex its grid
+# position; ``terrain_position`` geomorphs towards the parent by the distance from u_eye.
+ADAPTIVE_POSITION_COMMON = """
 uniform sampler2D u_atlas;
 uniform int u_per_row;
 uniform int u_grid;
 uniform vec3 u_eye;
 uniform vec4 u_extent;  // world x of column 0, y of row 0, width, depth (texture mapping)
-in vec2 in_uv;          // grid vertex: column, row (0..G)
+uniform float u_stride; // node samples between mesh vertices (1; a coarser proxy mesh: more)
+in vec2 in_grid;        // grid vertex: column, row (0..G)
 in vec4 in_node;        // world x, y of sample (0, 0); metres a sample east, south
 in vec4 in_slots;       // own slot, parent slot (-1: none), quadrant row, column
 in vec4 in_extra;       // morph start, end (metres); last valid row, column
 in vec4 in_parent;      // the parent's last valid row, column
+float fetch(float slot, vec2 rc) {
+    int s = int(slot);
+    ivec2 base = ivec2(s % u_per_row, s / u_per_row) * (u_grid + 1);
+    return texelFetch(u_atlas, base + ivec2(int(rc.y), int(rc.x)), 0).r;
+}
+vec2 node_rc() {
+    return min(vec2(in_grid.y, in_grid.x) * u_stride, in_extra.zw);
+}
+vec3 terrain_position(out vec2 uv) {
+    vec2 rc = node_rc();
+    vec2 xy = in_node.xy + vec2(rc.y * in_node.z, -rc.x * in_node.w);
+    float h = fetch(in_slots.x, rc);
+    if (in_slots.y >= 0.0) {
+        // the parent's surface on its own mesh (every u_stride-th parent sample)
+        vec2 p = (in_slots.zw * float(u_grid / 2) + rc * 0.5) / u_stride;
+        vec2 p1 = min(ceil(p) * u_stride, in_parent.xy);   // never past the parent's samples
+        float hc = 0.5 * (fetch(in_slots.y, min(floor(p) * u_stride, in_parent.xy))
+                          + fetch(in_slots.y, p1));
+        float d = distance(u_eye, vec3(xy, h));
+        float m = clamp((d - in_extra.x) / max(in_extra.y - in_extra.x, 1e-6), 0.0, 1.0);
+        h = mix(h, hc, m);
+    }
+    uv = vec2((xy.x - u_extent.x) / u_extent.z, (u_extent.y - xy.y) / u_extent.w);
+    return vec3(xy, h);
+}
+"""
+ADAPTIVE_VS = (
+    "#version 330\n"
+    + ADAPTIVE_POSITION_COMMON
+    + """
+uniform mat4 u_view_proj;
 out vec3 v_normal;
 out float v_height;
 out vec2 v_uv;
 flat out float v_slot;  // the node's atlas slot (heights shading: per-pixel normals)
 out vec2 v_rc;          // fractional (row, column) in the node's tile
 flat out vec4 v_tile;   // the tile's last valid row, column; metres a sample east, south
-float fetch(float slot, vec2 rc) {
-    int s = int(slot);
-    ivec2 base = ivec2(s % u_per_row, s / u_per_row) * (u_grid + 1);
-    return texelFetch(u_atlas, base + ivec2(int(rc.y), int(rc.x)), 0).r;
-}
 void main() {
-    vec2 rc = min(vec2(in_uv.y, in_uv.x), in_extra.zw);
-    vec2 xy = in_node.xy + vec2(rc.y * in_node.z, -rc.x * in_node.w);
-    float h = fetch(in_slots.x, rc);
-    if (in_slots.y >= 0.0) {
-        vec2 p = in_slots.zw * float(u_grid / 2) + rc * 0.5;
-        vec2 p1 = min(ceil(p), in_parent.xy);   // never past the parent's samples
-        float hc = 0.5 * (fetch(in_slots.y, min(floor(p), in_parent.xy))
-                          + fetch(in_slots.y, p1));
-        float d = distance(u_eye, vec3(xy, h));
-        float m = clamp((d - in_extra.x) / max(in_extra.y - in_extra.x, 1e-6), 0.0, 1.0);
-        h = mix(h, hc, m);
-    }
+    vec3 p = terrain_position(v_uv);
+    vec2 rc = node_rc();
     vec2 e = vec2(min(rc.x + 1.0, in_extra.z), min(rc.y + 1.0, in_extra.w));
     vec2 w = vec2(max(rc.x - 1.0, 0.0), max(rc.y - 1.0, 0.0));
     float dzdx = (fetch(in_slots.x, vec2(rc.x, e.y)) - fetch(in_slots.x, vec2(rc.x, w.y)))
@@ -66,14 +87,14 @@ void main() {
     float dzdy = (fetch(in_slots.x, vec2(w.x, rc.y)) - fetch(in_slots.x, vec2(e.x, rc.y)))
                  / max((e.x - w.x) * in_node.w, 1e-6);
     v_normal = normalize(vec3(-dzdx, -dzdy, 1.0));
-    v_height = h;
+    v_height = p.z;
     v_slot = in_slots.x;
     v_rc = rc;
     v_tile = vec4(in_extra.zw, in_node.zw);
-    v_uv = vec2((xy.x - u_extent.x) / u_extent.z, (u_extent.y - xy.y) / u_extent.w);
-    gl_Position = u_view_proj * vec4(xy, h, 1.0);
+    gl_Position = u_view_proj * vec4(p, 1.0);
 }
 """
+)
 # Coloured by the terrain's texture (as full resolution draws a scene's texture) ...
 ADAPTIVE_TEXTURE_FS = """#version 330
 uniform sampler2D u_color;
@@ -133,11 +154,12 @@ class AdaptiveRenderer:
         self.index_count = tris.size
         self.instances = mgl.buffer(reserve=64 * 256)
         self.vaos = {name: mgl.vertex_array(prog, [
-            (self.vbo, "2f", "in_uv"),
+            (self.vbo, "2f", "in_grid"),
             (self.instances, "4f 4f 4f 4f/i", "in_node", "in_slots", "in_extra",
              "in_parent")], index_buffer=self.ibo, index_element_size=4)
             for name, prog in self.programs.items()}
         self.triangles = 0
+        self._readback: moderngl.Framebuffer | None = None
 
     def upload(self, slot: int, heights: np.ndarray) -> None:
         """Node samples ``(rows, cols) float32`` (at most ``(G+1)²``) into ``slot``."""
@@ -173,7 +195,7 @@ class AdaptiveRenderer:
             p["u_grid"].value = self.g
             for name, value in (("u_range", tuple(float(v) for v in height_range)),
                                 ("u_atlas", 0), ("u_extent", tuple(float(v) for v in extent)),
-                                ("u_color", 1)):
+                                ("u_color", 1), ("u_stride", 1.0)):
                 if name in p:
                     p[name].value = value
             self.atlas.use(0)
@@ -183,7 +205,114 @@ class AdaptiveRenderer:
         self.triangles = n * self.index_count // 3
         mgl.disable(moderngl.DEPTH_TEST)
 
+    def read_tile(self, slot: int, rows: int, cols: int) -> np.ndarray:
+        """The samples ``(rows, cols) float32`` held in ``slot`` (a GPU read-back: for
+        tiles the host cache no longer holds; untimed or once per keyframe)."""
+        if self._readback is None:
+            self._readback = self.ctx.mgl.framebuffer(color_attachments=[self.atlas])
+        side = self.g + 1
+        x, y = (slot % self.per_row) * side, (slot // self.per_row) * side
+        data = self._readback.read(viewport=(x, y, cols, rows), components=1, dtype="f4")
+        return np.frombuffer(data, np.float32).reshape(rows, cols).copy()
+
     def release(self) -> None:
+        if self._readback is not None:
+            self._readback.release()
         for obj in (*self.vaos.values(), self.instances, self.ibo, self.vbo,
                     *self.programs.values(), self.atlas):
+            obj.release()
+
+
+ATLAS_UNIT = 5  # the texture unit a proxy binds the atlas to (sprite programs use 0-4)
+
+
+class AdaptiveProxy:
+    """A frozen selection of the adaptive mesh as LOD-sprite's proxy geometry (the object
+    :class:`~lodsprite.gl.sprite.SpriteRenderer` draws spriteframes and the coarse z-buffer
+    with): the node instances and the eye their morph factors are evaluated at (the
+    keyframe's), drawn from ``renderer``'s atlas and grid mesh with any program whose vertex
+    shader reads ``terrain_position`` (:meth:`twin`)."""
+
+    def __init__(self, renderer: AdaptiveRenderer, extent: tuple[float, float, float, float],
+                 stride: int = 1) -> None:
+        if stride < 1 or renderer.g % (2 * stride):
+            raise ValueError(f"a proxy stride must divide half the node grid, got {stride}")
+        self.renderer = renderer
+        self.extent = tuple(float(v) for v in extent)
+        self.stride = int(stride)
+        uv, tris = grid_mesh(renderer.g // self.stride)  # every stride-th node sample
+        mgl = renderer.ctx.mgl
+        self.vbo = mgl.buffer(uv.astype(np.float32).tobytes())
+        self.ibo = mgl.buffer(tris.astype(np.uint32).tobytes())
+        self.index_count = tris.size
+        self.instances = mgl.buffer(reserve=64 * 64)
+        self.count = 0
+        self.eye = (0.0, 0.0, 0.0)
+        self._all = np.zeros((0, 16), np.float32)
+        self._boxes: tuple[np.ndarray, np.ndarray] | None = None
+        self._written: bytes | None = None
+        self._vaos: dict[int, moderngl.VertexArray] = {}
+
+    @staticmethod
+    def twin(vertex_shader: str) -> str:
+        """``vertex_shader`` (reading ``PROXY_VERTEX_COMMON``) reading the adaptive mesh."""
+        if PROXY_VERTEX_COMMON not in vertex_shader:
+            raise ValueError("not a proxy vertex shader")
+        return vertex_shader.replace(PROXY_VERTEX_COMMON, ADAPTIVE_POSITION_COMMON)
+
+    def set(self, instances: np.ndarray, eye: np.ndarray,
+            boxes: tuple[np.ndarray, np.ndarray] | None = None) -> None:
+        """Freeze ``instances (N, 16) float32`` (the layout of :meth:`AdaptiveRenderer.draw`)
+        morphed by the distance from ``eye (3,)`` metres; ``boxes``: the nodes' bounds
+        ``(lo (N, 3), hi (N, 3))`` metres, to draw only those in each view."""
+        self._all = np.ascontiguousarray(instances, dtype=np.float32)
+        self._boxes = boxes
+        self._written: bytes | None = None
+        self.count = len(self._all)
+        self.eye = tuple(float(v) for v in eye)
+        self._write(np.ones(self.count, bool))
+
+    def _write(self, keep: np.ndarray) -> None:
+        key = np.packbits(keep).tobytes()
+        if key == self._written:
+            return
+        data = self._all[keep]
+        if data.nbytes > self.instances.size:
+            self.instances.orphan(data.nbytes * 2)
+        if data.nbytes:
+            self.instances.write(data.tobytes())
+        self.count, self._written = len(data), key
+
+    def draw(self, program: moderngl.Program, view_proj: np.ndarray) -> int:
+        """Draw the frozen nodes with ``program`` (other uniforms set) through
+        ``view_proj (4, 4)``; returns the triangles drawn."""
+        r = self.renderer
+        if program.glo not in self._vaos:
+            self._vaos[program.glo] = r.ctx.mgl.vertex_array(program, [
+                (self.vbo, "2f", "in_grid"),
+                (self.instances, "4f 4f 4f 4f/i", "in_node", "in_slots", "in_extra",
+                 "in_parent")], index_buffer=self.ibo, index_element_size=4)
+        values = {"u_mvp": None, "u_atlas": ATLAS_UNIT, "u_per_row": r.per_row,
+                  "u_grid": r.g, "u_eye": self.eye, "u_extent": self.extent,
+                  "u_stride": float(self.stride)}
+        for name, value in values.items():
+            if name in program:
+                if value is None:
+                    program[name].write(mat_bytes(view_proj))
+                else:
+                    program[name].value = value
+        if self._boxes is not None and len(self._all):
+            self._write(boxes_in_frustum(frustum_planes(view_proj), *self._boxes))
+        if not self.count:
+            return 0
+        r.atlas.use(ATLAS_UNIT)
+        self._vaos[program.glo].render(moderngl.TRIANGLES, vertices=self.index_count,
+                                       instances=self.count)
+        return self.count * self.index_count // 3
+
+    def release(self) -> None:
+        for vao in self._vaos.values():
+            vao.release()
+        self._vaos.clear()
+        for obj in (self.instances, self.ibo, self.vbo):
             obj.release()

@@ -20,7 +20,13 @@ import numpy as np
 from lodsprite.camera import Projection, Viewpoint, widened
 from lodsprite.errors import InputError
 from lodsprite.gl.context import GLContext
-from lodsprite.gl.shaders import SPRITE_FS, SPRITE_GS, SPRITE_VS, SPRITE_VS_FRAGMENT
+from lodsprite.gl.shaders import (
+    PROXY_VERTEX_COMMON,
+    SPRITE_FS,
+    SPRITE_GS,
+    SPRITE_VS,
+    SPRITE_VS_FRAGMENT,
+)
 from lodsprite.gl.target import RenderTarget
 from lodsprite.gl.terrain import SKY_RGB, FrameStats, TerrainRenderer, mat_bytes
 
@@ -31,6 +37,49 @@ VISIBILITY_MODES = {"triangle": 0, "fragment": 1, "coarse": 2}
 DEFAULT_VISIBILITY = "coarse"
 DEFAULT_GUARD_PX = 32
 DEFAULT_SPRITE_MIPMAPS = False  # benchmarks/sprite_mipmaps.py: see SpriteRenderer
+
+# The coarse z-buffer: a proxy's depth alone, from the keyframe's view.
+PROXY_DEPTH_VS = "#version 330\n" + PROXY_VERTEX_COMMON + """
+uniform mat4 u_mvp;
+out vec2 v_uv;  // unused but kept: every proxy's vertex layout stays bound
+void main() {
+    gl_Position = u_mvp * vec4(terrain_position(v_uv), 1.0);
+}
+"""
+PROXY_DEPTH_FS = """#version 330
+in vec2 v_uv;
+out vec4 f_color;
+void main() { f_color = vec4(v_uv, 0.0, 1.0); }
+"""
+
+
+class UniformProxy:
+    """The default sprite proxy geometry: the uniform coarse level of ``level_quads`` quads
+    (with its border ribbons if ``border``), :meth:`TerrainRenderer.draw_proxy`'s mesh.
+
+    A proxy geometry object has ``twin(vertex_shader) -> str`` (the shader reading its
+    vertices through ``terrain_position``, in place of ``PROXY_VERTEX_COMMON``) and
+    ``draw(program, view_proj) -> triangles``; it may have ``for_keyframe(slot, viewpoint,
+    projection) -> geometry``, the geometry frozen for the keyframe rendered into ``slot``
+    (a view-dependent proxy, :class:`lodsprite.gl.adaptive.AdaptiveProxy`)."""
+
+    def __init__(self, terrain: TerrainRenderer, level_quads: int, border: bool) -> None:
+        self.terrain, self.level_quads, self.border = terrain, level_quads, border
+        self._vaos: dict[int, dict] = {}  # program -> TerrainRenderer.draw_proxy's cache
+
+    @staticmethod
+    def twin(vertex_shader: str) -> str:
+        return vertex_shader  # the sprite shaders read PROXY_VERTEX_COMMON already
+
+    def draw(self, program: moderngl.Program, view_proj: np.ndarray) -> int:
+        return self.terrain.draw_proxy(program, self._vaos.setdefault(program.glo, {}),
+                                       view_proj, self.level_quads, self.border)
+
+    def release(self) -> None:
+        for cache in self._vaos.values():
+            for vao in cache.values():
+                vao.release()
+        self._vaos.clear()
 
 
 @dataclass(frozen=True)
@@ -47,6 +96,7 @@ class GLKeyframe:
     view_proj: np.ndarray
     t0: float
     color: moderngl.Texture
+    proxy: object = None  # the proxy geometry its spriteframes draw (frozen with it)
 
 
 class SpriteRenderer:
@@ -73,6 +123,10 @@ class SpriteRenderer:
     visibility branch).  ``mipmaps=True`` builds the sprite texture's mipmaps with each
     keyframe and samples it trilinearly, which can help only where a spriteframe shrinks the
     keyframe (flying away from it).
+
+    ``proxy`` is the geometry spriteframes and coarse z-buffers draw (a proxy geometry
+    object, :class:`UniformProxy`; default: the uniform coarse level of ``coarse_quads``
+    with its border ribbons); :meth:`set_proxy` changes it.
     """
 
     def __init__(self, terrain: TerrainRenderer, coarse_quads: int = 16,
@@ -80,7 +134,7 @@ class SpriteRenderer:
                  fragment_tol: float = DEFAULT_FRAGMENT_TOL,
                  coarse_tol: float = DEFAULT_COARSE_TOL, border: bool = True,
                  guard_px: int = DEFAULT_GUARD_PX,
-                 mipmaps: bool = DEFAULT_SPRITE_MIPMAPS) -> None:
+                 mipmaps: bool = DEFAULT_SPRITE_MIPMAPS, proxy=None) -> None:
         if visibility not in VISIBILITY_MODES:
             raise InputError(f"visibility must be one of {', '.join(VISIBILITY_MODES)}, "
                              f"got {visibility!r}")
@@ -93,15 +147,18 @@ class SpriteRenderer:
         self.border = border
         self.guard_px = guard_px
         self.mipmaps = bool(mipmaps)
-        self.program = self._program(visibility, {"u_vertex_tol": vertex_tol,
-                                                  "u_fragment_tol": fragment_tol,
-                                                  "u_coarse_tol": coarse_tol})
+        self._tols = {"u_vertex_tol": vertex_tol, "u_fragment_tol": fragment_tol,
+                      "u_coarse_tol": coarse_tol}
+        self._default_proxy = UniformProxy(terrain, coarse_quads, border)
+        self.proxy = self._default_proxy if proxy is None else proxy
+        self.program = self._program(visibility, self._tols)
+        self.depth_program = self.ctx.mgl.program(vertex_shader=PROXY_DEPTH_VS,
+                                                  fragment_shader=PROXY_DEPTH_FS)
         self.key_size: tuple[int, int] = tuple(n + 2 * guard_px for n in terrain.target.size)
         self._slots: list[tuple[RenderTarget, RenderTarget]] = []  # (keyframe, coarse z)
         self._kept: dict[int, GLKeyframe] = {}  # slot -> the keyframe it holds
         self._shown = -1  # the slot of the keyframe shown
         self.slot_targets(0), self.slot_targets(1)  # the two alternating slots, made up front
-        self._vaos: dict[tuple[int, bool], moderngl.VertexArray] = {}
         self.keyframe: GLKeyframe | None = None
         self._uploads: list[moderngl.Texture] = []  # RGB sprite textures of uploaded keyframes
         # Mixed by its alpha into fragments that fell back to the terrain texture (the
@@ -146,14 +203,29 @@ class SpriteRenderer:
     def show(self, slot: int) -> None:
         """Make the keyframe kept in ``slot`` the one spriteframes are drawn from."""
         self.keyframe, self._shown = self._kept[slot], slot
+    def set_proxy(self, proxy) -> None:
+        """Draw spriteframes and coarse z-buffers with ``proxy`` (a proxy geometry object,
+        :class:`UniformProxy`; None: the uniform coarse level again), from the next
+        keyframe on."""
+        proxy = self._default_proxy if proxy is None else proxy
+        if proxy is self.proxy:
+            return
+        self.proxy = proxy
+        for prog in (self.program, self.depth_program):
+            prog.release()
+        self.program = self._program(self.visibility, self._tols)
+        self.depth_program = self.ctx.mgl.program(vertex_shader=proxy.twin(PROXY_DEPTH_VS),
+                                                  fragment_shader=PROXY_DEPTH_FS)
 
     def _program(self, visibility: str, tols: dict[str, float]) -> moderngl.Program:
         mgl = self.ctx.mgl
+        twin = self.proxy.twin
         if visibility == "triangle":
-            prog = mgl.program(vertex_shader=SPRITE_VS, geometry_shader=SPRITE_GS,
+            prog = mgl.program(vertex_shader=twin(SPRITE_VS), geometry_shader=SPRITE_GS,
                                fragment_shader=SPRITE_FS)
         else:
-            prog = mgl.program(vertex_shader=SPRITE_VS_FRAGMENT, fragment_shader=SPRITE_FS)
+            prog = mgl.program(vertex_shader=twin(SPRITE_VS_FRAGMENT),
+                               fragment_shader=SPRITE_FS)
         prog["u_visibility"].value = VISIBILITY_MODES[visibility]
         units = {"u_color": 0, "u_sprite": 2, "u_key_depth": 3, "u_key_coarse": 4}
         for name, value in [*tols.items(), *units.items()]:
@@ -174,22 +246,28 @@ class SpriteRenderer:
     def _keep(self, slot: int, viewpoint: Viewpoint, projection: Projection, t0: float,
               color: moderngl.Texture | None = None, coarse_ready: bool = False) -> None:
         target, coarse = self._slots[slot]
+        freeze = getattr(self.proxy, "for_keyframe", None)
+        proxy = self.proxy if freeze is None else freeze(target, viewpoint, projection)
         if self.visibility == "coarse" and not coarse_ready:
-            self.render_coarse_depth(viewpoint, projection, coarse)
+            self.render_coarse_depth(viewpoint, projection, coarse, proxy)
         color = target.color if color is None else color
         if self.mipmaps:
             color.build_mipmaps()
             color.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
         self._kept[slot] = GLKeyframe(target, coarse, viewpoint, projection,
-                                      projection.matrix() @ viewpoint.view_matrix(), t0, color)
+                                      projection.matrix() @ viewpoint.view_matrix(), t0, color,
+                                      proxy)
         self.show(slot)
 
     def render_coarse_depth(self, viewpoint: Viewpoint, projection: Projection,
-                            target: RenderTarget) -> None:
-        """The z-buffer of the coarse level (and its border ribbons) from a keyframe's view
+                            target: RenderTarget, proxy=None) -> None:
+        """The z-buffer of the proxy (default: :attr:`proxy`; the uniform coarse level and
+        its border ribbons unless :meth:`set_proxy` chose another) from a keyframe's view
         into ``target``: what the ``coarse`` visibility rule compares against."""
-        self.terrain.render_proxy(viewpoint, self.coarse_quads, self.border, projection,
-                                  target)
+        target.use(SKY_RGB)
+        self.ctx.mgl.enable(moderngl.DEPTH_TEST)
+        (proxy or self.proxy).draw(self.depth_program,
+                                   projection.matrix() @ viewpoint.view_matrix())
 
     def render_keyframe(self, viewpoint: Viewpoint, t0: float,
                         projection: Projection | None = None,
@@ -286,16 +364,14 @@ class SpriteRenderer:
                             ("u_range", self.terrain.geometry.height_range)):
             if name in prog:
                 prog[name].value = value
-        tris = self.terrain.draw_proxy(prog, self._vaos,
-                                       projection.matrix() @ viewpoint.view_matrix(),
-                                       self.coarse_quads, self.border)
+        tris = (key.proxy or self.proxy).draw(prog, projection.matrix()
+                                              @ viewpoint.view_matrix())
         return FrameStats(tris, 1, projection)
 
     def release(self) -> None:
-        for vao in self._vaos.values():
-            vao.release()
-        self._vaos.clear()
+        self._default_proxy.release()
         self.program.release()
+        self.depth_program.release()
         for pair in self._slots:
             for t in pair:
                 t.release()

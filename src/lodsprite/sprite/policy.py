@@ -216,20 +216,22 @@ class KeyframePolicy:
                    h, projection, lambda p: widened(p, w, h, guard_px), predict, cache,
                    (w + 2 * guard_px, h + 2 * guard_px))
 
-    def reproject(self, viewpoint: Viewpoint, projection: Projection) -> np.ndarray:
-        """``C'`` of a keyframe at ``viewpoint`` whose frame projection is ``projection``
-        (rendered through :attr:`key_projection` of it), with its matrix and size."""
-        if not getattr(self.metric, "resampling", False):  # the 1999 metric needs the eye only
-            return self.metric.reproject(viewpoint.o)
-        key_proj = self.key_projection(projection)
-        size = self.key_size or key_image_size(projection, key_proj, self.height_px)
-        return self.metric.reproject(viewpoint.o, key_proj.matrix() @ viewpoint.view_matrix(),
-                                     size)
-
     def error_px(self, c_prime: np.ndarray, viewpoint: Viewpoint,
                  projection: Projection) -> float:
         """:func:`keyframe_error_px` with this policy's metric and image height."""
         return keyframe_error_px(self.metric, c_prime, viewpoint, projection, self.height_px)
+
+    def reproject(self, key: Viewpoint, projection: Projection) -> np.ndarray:
+        """``C'`` of a keyframe at ``key`` whose frame projection is ``projection``: the
+        metric is told the keyframe's view (guard band included), which a view-dependent
+        proxy (:mod:`lodsprite.sprite.proxy_metric`) is selected for, and, for the
+        resampling term, the keyframe image's size."""
+        key_proj = self.key_projection(projection)
+        key_view_proj = key_proj.matrix() @ key.view_matrix()
+        if not getattr(self.metric, "resampling", False):  # the 1999 metric needs the eye only
+            return self.metric.reproject(key.o, key_view_proj=key_view_proj)
+        size = self.key_size or key_image_size(projection, key_proj, self.height_px)
+        return self.metric.reproject(key.o, key_view_proj, size)
 
     def lookahead(self, viewpoint: Viewpoint,
                   projection: Projection) -> tuple[KeyChoice, np.ndarray, float] | None:

@@ -143,7 +143,10 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
     """LOD-sprite with keyframes drawn by the adaptive renderer at ``key_sse`` pixels
     (inline keyframes); it streams between keyframes.  Over a store the coarse proxy,
     ribbons and error metric come from the store's level 0.  Each keyframe's selection is
-    recorded; the replay draws it again with the same nodes (their tiles read then)."""
+    recorded; the replay draws it again with the same nodes (their tiles read then).
+    ``proxy_sse``: spriteframes draw the adaptive mesh at that tolerance, selected at each
+    keyframe and frozen (:mod:`lodsprite.techniques.sprite_proxy`), with the error metric
+    of :mod:`lodsprite.sprite.proxy_metric`; the replay freezes the recorded selection."""
 
     name = "sprite-adaptive"
 
@@ -152,7 +155,8 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
                  visibility: str | None = None, guard_px: int | None = None,
                  border: bool = True, shading: str = "auto", tiles: int = 1,
                  tile_budget_ms: float = 8.0, cache_mb: float = 0.0,
-                 cache_policy: str = "lru", metric: str = "warp") -> None:
+                 cache_policy: str = "lru", metric: str = "warp",
+                 proxy_sse: float | None = None) -> None:
         from lodsprite.terrain.store import TerrainStore
         from lodsprite.terrain.storefield import store_field
 
@@ -174,17 +178,14 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
         self.sprite.sprite.keyframe_drawer = self._draw_keyframe
         self.engine.between_keyframes = self._between_keyframes
         self._selections: dict[int, tuple] = {}  # keyframe -> (nodes drawn, morphed)
+        self.proxy = None if proxy_sse is None else self._adaptive_proxy(renderer, proxy_sse)
+        self._proxies: dict[int, tuple] = {}  # keyframe -> its frozen proxy selection
         if self.tiled is not None:
             self._drawn: list[tuple] = []  # this frame's tile selections, in draw order
             self._tile_selections: dict[tuple[int, int], tuple] = {}  # (update, tile) ->
             self.tiled.drawer = self._draw_tile
             self.tiled.between_keyframes = self._between_keyframes
             self.tiled.after_tiles = self.adaptive.request
-
-    def warm_up(self, viewpoint: Viewpoint) -> None:
-        super().warm_up(viewpoint)
-        if self.tiled is not None:
-            self._drawn.clear()  # the warm-up's tiles are no update's
 
     def _draw_tile(self, viewpoint, projection, target, cull):
         """A tile by the adaptive renderer, culled by its sub-frustum; its selection is
@@ -221,6 +222,25 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
         self._pump()
         return self.adaptive.prefetch()
 
+    def _adaptive_proxy(self, renderer: Renderer, proxy_sse: float):
+        """Spriteframes, coarse z-buffers and the error metric on the adaptive mesh at
+        ``proxy_sse`` px (:mod:`lodsprite.techniques.sprite_proxy`)."""
+        from lodsprite.sprite.proxy_metric import ProxyMetric
+        from lodsprite.techniques.sprite_proxy import AdaptiveProxySource
+
+        source = AdaptiveProxySource(self.adaptive, proxy_sse, self.sprite.sprite.target.height)
+        self.sprite.sprite.set_proxy(source)
+        policy = self.engine.policy
+        policy.metric = ProxyMetric(source.nodes, renderer.paths.geometry.full, policy.metric)
+        return source
+
+    def warm_up(self, viewpoint: Viewpoint) -> None:
+        super().warm_up(viewpoint)
+        if self.proxy is not None:
+            self.proxy.triangles.clear()  # the timed run's keyframes only
+        if self.tiled is not None:
+            self._drawn.clear()  # the warm-up's tiles are no update's
+
     def decision(self) -> dict[str, Any]:
         """The keyframe shown; for a new one, the selection it was drawn with (recorded
         here, after the frame's clock stopped: nothing draws between the two)."""
@@ -233,6 +253,8 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
         if d["keyframe"] not in self._selections:
             self._selections[d["keyframe"]] = (tuple(self.adaptive.last_draw),
                                                self.adaptive.last_morphed)
+            if self.proxy is not None:
+                self._proxies[d["keyframe"]] = self.proxy.last
         return d
 
     def replay(self, viewpoint: Viewpoint, decision: dict[str, Any]) -> np.ndarray:
@@ -248,15 +270,23 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
             return FrameStats(0, len(draw), projection)
 
         s.keyframe_drawer = again
+        if self.proxy is not None:
+            self.proxy.force(self._proxies[decision["keyframe"]])
         try:
             return super().replay(viewpoint, decision)
         finally:
             s.keyframe_drawer = self._draw_keyframe
+            if self.proxy is not None:
+                self.proxy.force(None)
 
     def summary(self, frames: list[Frame]) -> dict[str, Any]:
         out = {**super().summary(frames), "key_sse": self.adaptive.sse,
-               **tile_summary(self.adaptive), **level0_summary(self.heights)}
+               **tile_summary(self.adaptive), **level0_summary(self.heights), "proxy_sse": None}
         out["peak_rss_mb"] += out.get("peak_rss_mb_level0_reader", 0.0)
+        if self.proxy is not None:
+            tris = self.proxy.triangles
+            out.update(proxy_sse=self.proxy.sse,
+                       mean_proxy_triangles=float(np.mean(tris)) if tris else float("nan"))
         return out
 
     def status(self) -> str:
@@ -267,4 +297,6 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
 
     def release(self) -> None:
         super().release()  # the level-0 reader too
+        if self.proxy is not None:
+            self.proxy.release()
         self.adaptive.release()

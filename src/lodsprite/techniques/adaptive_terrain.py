@@ -75,6 +75,7 @@ class AdaptiveTerrain:
         self.last_draw: list[Node] = []        # the last frame's selection (for replays)
         self.last_morphed: frozenset = frozenset()
         self._keep: set = set()
+        self.pinned: set = set()  # nodes whose slots stay (a sprite proxy's frozen nodes)
         roots = self.roots = self.tree.roots()
         if len(roots) > self.slots.capacity:
             raise InputError("the GPU cache cannot hold the coarsest level: raise its budget")
@@ -141,7 +142,7 @@ class AdaptiveTerrain:
         # a root evicted (off-screen, LRU) comes back first: its region would be a hole
         want += [(float("inf"), n) for n in self.roots if n not in self.slots]
         self.loader.want(want)
-        keep = set(self.roots)
+        keep = set(self.roots) | self.pinned
         for n in draw:
             while n.k <= self.tree.top and n not in keep:
                 keep.add(n)
@@ -201,13 +202,7 @@ class AdaptiveTerrain:
         ``morphed`` (its :attr:`last_morphed`); tiles not resident are read now.  Into
         ``target`` through ``projection`` (a :class:`~lodsprite.camera.Projection`) when
         given, as :meth:`render_into` draws."""
-        need = list(draw) + [n.parent() for n in morphed]
-        keep = set(need) | set(self.roots)
-        for n in need:
-            if n not in self.slots:
-                data = self.loader.read_now(n)
-                if data is not None:
-                    self._upload(n, data, keep)
+        self.make_resident(list(draw) + [n.parent() for n in morphed])
         proj = self.projection(viewpoint) if projection is None else projection.matrix()
         view_proj = proj @ viewpoint.view_matrix()
         eye = np.asarray(viewpoint.o, dtype=np.float64)
@@ -216,10 +211,28 @@ class AdaptiveTerrain:
                            self.height_range, self.extent, self.color)
         self.gl.finish()
 
+    def make_resident(self, need: list[Node]) -> None:
+        """Read the nodes of ``need`` not resident now and upload them, keeping ``need``,
+        the roots and :attr:`pinned` (untimed replays only: this reads storage)."""
+        keep = set(need) | set(self.roots) | self.pinned
+        for n in need:
+            if n not in self.slots:
+                data = self.loader.read_now(n)
+                if data is not None:
+                    self._upload(n, data, keep)
+
     def _instances(self, draw: list[Node], morphed: frozenset | None = None) -> np.ndarray:
         """Per node: world origin, spacing, slots, quadrant, morph range, valid extent, and
         the parent's valid extent (a node morphs towards its parent when that is resident,
         or, in a replay, when it is in ``morphed``); :attr:`last_morphed` keeps which did."""
+        out, used = self.instances(draw, morphed, self.r)
+        self.last_morphed = used
+        return out
+
+    def instances(self, draw: list[Node], morphed: frozenset | None,
+                  r: np.ndarray) -> tuple[np.ndarray, frozenset]:
+        """``(instances (N, 16) float32, the nodes that morph)`` for ``draw`` with the
+        morph ranges of the range table ``r`` (metres per level): :meth:`_instances`."""
         out = np.zeros((len(draw), 16), np.float32)
         g = self.tree.g
         used = set()
@@ -233,8 +246,8 @@ class AdaptiveTerrain:
                                                                   or n in morphed):
                 used.add(n)
                 ps, qr, qc = self.slots.slot(parent), n.i % 2, n.j % 2
-                end = self.r[n.k + 1]
-                start = end - MORPH_SPAN * (self.r[n.k + 1] - self.r[n.k])
+                end = r[n.k + 1]
+                start = end - MORPH_SPAN * (r[n.k + 1] - r[n.k])
                 pr0, pr1, pc0, pc1 = self.tree.samples(parent)
                 prow, pcol = pr1 - pr0 - 1, pc1 - pc0 - 1
             else:
@@ -242,8 +255,16 @@ class AdaptiveTerrain:
             out[m] = (x[0], y[0], s * self.tree.p.dx, s * self.tree.p.dy,
                       self.slots.slot(n), ps, qr, qc, start, end,
                       min(g, r1 - r0 - 1), min(g, c1 - c0 - 1), prow, pcol, 0.0, 0.0)
-        self.last_morphed = frozenset(used)
-        return out
+        return out, frozenset(used)
+
+    def node_heights(self, n: Node) -> np.ndarray:
+        """A resident node's samples ``(rows, cols) float32``: from the host cache, else
+        read back from its GPU slot (never from storage)."""
+        data = self.loader.cache.get(n)
+        if data is None:
+            r0, r1, c0, c1 = self.tree.samples(n)
+            data = self.renderer.read_tile(self.slots.slot(n), r1 - r0, c1 - c0)
+        return data
 
     def release(self) -> None:
         self.loader.close()

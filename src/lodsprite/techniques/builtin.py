@@ -23,6 +23,8 @@ TILES = Option("tiles", int, 1, "LOD-sprite: N x N keyframe tiles (1: whole keyf
 TILE_BUDGET = Option("tile_budget_ms", float, 8.0, "LOD-sprite tiles: tile work per frame, ms")
 SSE = Option("sse", float, 1.0, "adaptive: screen-space error tolerance, pixels")
 KEY_SSE = Option("key_sse", float, 1.0, "keyframes by the adaptive renderer at this SSE, px")
+PROXY_SSE = Option("proxy_sse", float, None,
+                   "sprite proxy: the adaptive mesh at this SSE, px (None: the uniform --lod)")
 GPU_MB = Option("gpu_mb", float, 256.0, "adaptive: GPU tile cache budget, MB")
 SHADING = Option("shading", str, "auto", "colour: auto (heights on a store) | texture | heights")
 HOST_MB = Option("host_mb", float, 512.0, "adaptive: host tile cache budget, MB")
@@ -61,7 +63,8 @@ register(TechniqueSpec("adaptive", f"{ADAPTIVE}:AdaptiveTechnique",
                        "the adaptive (CDLOD-style) renderer, stores of any size"))
 register(TechniqueSpec("sprite-adaptive", f"{ADAPTIVE}:SpriteAdaptiveTechnique",
                        (LOD, EPSILON, KEY_SSE, GPU_MB, HOST_MB, VISIBILITY, GUARD, BORDER,
-                        SHADING, TILES, TILE_BUDGET, CACHE_MB, CACHE_POLICY, METRIC),
+                        SHADING, TILES, TILE_BUDGET, CACHE_MB, CACHE_POLICY, METRIC,
+                        PROXY_SSE),
                        ("terrain",), "LOD-sprite with keyframes by the adaptive renderer"))
 register(TechniqueSpec("distributed", "lodsprite.distributed.technique:create",
                        (SERVER, LOD, EPSILON, MAX_ERROR), ("terrain",),

@@ -52,6 +52,7 @@ class ViewOptions:
     cache_mb: float = 0.0         # sprite (inline keyframes): keyframe cache budget, MB
     cache_policy: str = "lru"     # keyframe cache replacement, lru | benefit
     metric: str = "warp"          # sprite: warp (Eq. 1-2) | resample (adds resampling)
+    proxy_sse: float | None = None  # sprite-adaptive: the adaptive sprite proxy's SSE, px
 
     def technique_options(self) -> dict:
         """The options of the command the registry's techniques pick theirs from."""
@@ -60,7 +61,8 @@ class ViewOptions:
                 "server": self.server, "target_fps": self.target_fps, "sse": self.sse,
                 "key_sse": self.key_sse, "shading": self.shading, "tiles": self.tiles,
                 "tile_budget_ms": self.tile_budget_ms, "cache_mb": self.cache_mb,
-                "cache_policy": self.cache_policy, "metric": self.metric}
+                "cache_policy": self.cache_policy, "metric": self.metric,
+                "proxy_sse": self.proxy_sse}
 
     def validate(self) -> None:
         if self.target_fps is not None and not self.target_fps > 0:

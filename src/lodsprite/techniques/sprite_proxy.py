@@ -1,0 +1,231 @@
+"""A view-dependent sprite proxy (Chen, Swan & Kaufman 1999 §5, "view-dependent LODs
+under the sprite"): LOD-sprite's spriteframes draw the adaptive mesh
+(:mod:`lodsprite.techniques.adaptive_terrain`) selected at a coarse tolerance
+``proxy_sse`` pixels, geomorphed, instead of one uniform coarse level.
+
+The design:
+
+* **Selected at the keyframe, frozen for its lifetime.**  When a keyframe is decided, the
+  quadtree selection (CDLOD ranges of ``proxy_sse``) is made at its eye and culled with its
+  frustum widened ``WIDEN`` times (tangents of the half-angles, guard band included), so
+  frames turning away from the keyframe still find geometry; morph factors are those at
+  the keyframe eye.  The keyframe's spriteframes draw that instance list (each the nodes
+  whose boxes meet its own view), and its coarse z-buffer (visibility rule ``coarse``) is
+  the same mesh from the keyframe's view.
+* **The ordering.**  The error metric's ``C'`` needs the proxy, and the policy asks for
+  ``C'`` (:meth:`ProxyMetric.reproject`) before the engine renders the keyframe.  So the
+  selection is made in :meth:`AdaptiveProxySource.select`, called by the metric with the
+  keyframe's eye and view; the GL freeze (:meth:`for_keyframe`, when the keyframe is
+  kept) takes the selection made for that same eye and view.  The selection is pinned at
+  once: its tiles (and the parents it morphs towards) stay in the GPU cache while the
+  keyframe may be shown.
+* **Tiles.**  Only resident nodes are selected (their descendants are selected only when
+  resident): coarse levels the keyframe's own selection holds, so nothing is read here.
+  The metric's CPU copy of a node's samples comes from the host cache, else from its GPU
+  slot (:meth:`~lodsprite.techniques.adaptive_terrain.AdaptiveTerrain.node_heights`).
+* **No border ribbons.**  The uniform proxy's ribbons (:mod:`lodsprite.terrain.proxy`)
+  hang from a coarse edge that stands below the full-resolution edge; the adaptive
+  proxy's edge is the adaptive mesh's, within ``proxy_sse`` pixels of the full edge at the
+  keyframe, so keyframe pixels above it are at most that far off.  They are not drawn:
+  those pixels show sky in a spriteframe, and the metric counts their samples' rays as
+  misses if they leave the proxy.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from lodsprite.camera import frustum_planes
+from lodsprite.errors import InputError
+from lodsprite.sprite.proxy_metric import ProxyNodes
+from lodsprite.terrain.quadtree import morph_factor, ranges
+
+WIDEN = 2.0     # the proxy's culling frustum: the keyframe's, tangents times this
+PROXY_GRID = 16  # quads per side of a proxy node's mesh (every G/16-th node sample)
+_CACHED = 4     # selections kept for the freeze (the look-ahead tries several eyes)
+_ALL = np.array([[0.0, 0.0, 0.0, 1.0]] * 6)  # planes every box is inside
+
+
+def strided_errors(errors: np.ndarray, stride: int) -> np.ndarray:
+    """Per level ``k``, the error (metres) of its nodes drawn with every ``stride``-th
+    sample: level ``k + log2 stride``'s (a decimated level), doubling per level past the
+    top (an extrapolation: the pyramid has no coarser level to measure)."""
+    e = np.asarray(errors, np.float64)
+    shift, top = int(round(np.log2(stride))), len(e) - 1
+    k = np.arange(len(e)) + shift
+    return np.where(k <= top, e[np.minimum(k, top)], e[top] * 2.0 ** (k - top))
+
+
+def parent_surfaces(pos: np.ndarray, quadrant: np.ndarray, parent: np.ndarray,
+                    top: np.ndarray, grid: int, stride: int) -> np.ndarray:
+    """Each parent's surface on its own proxy mesh (every ``stride``-th sample) at its
+    child's samples ``pos (N, ..., 2)`` (row, column), the child in ``quadrant (N, 2)``;
+    ``parent (N, R, C)`` the parents' samples, ``top (N, 2)`` their last valid row and
+    column: the vertex shader's morph target (:data:`lodsprite.gl.adaptive.
+    ADAPTIVE_POSITION_COMMON`)."""
+    extra = (1,) * (pos.ndim - 2)
+    q = np.asarray(quadrant).reshape(len(pos), *extra, 2)
+    cap = np.asarray(top).reshape(len(pos), *extra, 2)
+    p = (q * (grid // 2) + pos / 2.0) / stride
+    lo = np.minimum(np.floor(p).astype(np.intp) * stride, cap)
+    hi = np.minimum(np.ceil(p).astype(np.intp) * stride, cap)
+    idx = np.arange(len(pos)).reshape(len(pos), *extra)
+    return 0.5 * (parent[idx, lo[..., 0], lo[..., 1]] + parent[idx, hi[..., 0], hi[..., 1]])
+
+
+def parent_surface(pos: np.ndarray, quadrant: tuple[int, int], parent: np.ndarray,
+                   grid: int, stride: int) -> np.ndarray:
+    """:func:`parent_surfaces` of one node: ``pos (..., 2)``, ``parent (R, C)``."""
+    return parent_surfaces(np.asarray(pos)[None], np.asarray(quadrant)[None], parent[None],
+                           np.array([parent.shape]) - 1, grid, stride)[0]
+
+
+class AdaptiveProxySource:
+    """The view-dependent proxy of ``terrain`` (an
+    :class:`~lodsprite.techniques.adaptive_terrain.AdaptiveTerrain`, whose atlas, slots and
+    loader it shares) at ``proxy_sse`` pixels: a proxy geometry factory for
+    :meth:`lodsprite.gl.sprite.SpriteRenderer.set_proxy` and the source of
+    :class:`~lodsprite.sprite.proxy_metric.ProxyMetric`."""
+
+    def __init__(self, terrain, proxy_sse: float, height_px: int,
+                 grid: int = PROXY_GRID) -> None:
+        from lodsprite.gl.adaptive import AdaptiveProxy
+
+        if not proxy_sse > 0:
+            raise InputError(f"--proxy-sse must be > 0 pixels, got {proxy_sse}")
+        self.terrain, self.sse = terrain, float(proxy_sse)
+        tree = terrain.tree
+        self.stride = max(1, tree.g // max(2, min(int(grid), tree.g)))
+        self.r = ranges(strided_errors(tree.errors, self.stride), proxy_sse, height_px,
+                        terrain.fov, tree.node_diagonals())
+        self._made: list[tuple[bytes, tuple, frozenset]] = []  # (key, nodes, morphed)
+        self._frozen: dict[int, tuple[tuple, frozenset, object]] = {}  # target -> GL proxy
+        self._gl = lambda: AdaptiveProxy(terrain.renderer, terrain.extent, self.stride)
+        self.twin = AdaptiveProxy.twin
+        self.forced: tuple[tuple, frozenset] | None = None  # a replay's recorded selection
+        self.last: tuple[tuple, frozenset] = ((), frozenset())  # the last frozen selection
+        self.triangles: list[int] = []  # per keyframe frozen
+
+    @staticmethod
+    def _key(eye: np.ndarray, view_proj: np.ndarray | None) -> bytes:
+        vp = b"" if view_proj is None else np.asarray(view_proj, np.float64).tobytes()
+        return np.asarray(eye, np.float64).tobytes() + vp
+
+    def select(self, eye: np.ndarray, view_proj: np.ndarray | None) -> tuple[tuple, frozenset]:
+        """The proxy's nodes and the ones that morph, for a keyframe at ``eye (3,)`` seen
+        through ``view_proj (4, 4)`` (None: not culled); made once per eye and view."""
+        key = self._key(eye, view_proj)
+        for k, nodes, morphed in self._made:
+            if k == key:
+                return nodes, morphed
+        if self.forced is not None:
+            nodes, morphed = self.forced
+        else:
+            t = self.terrain
+            planes = _ALL
+            if view_proj is not None:
+                planes = frustum_planes(np.diag([1 / WIDEN, 1 / WIDEN, 1.0, 1.0]) @ view_proj)
+            found, _ = t.tree.select(np.asarray(eye, np.float64), planes, self.r,
+                                     t.slots.__contains__)
+            nodes = tuple(found)
+            morphed = frozenset(n for n in nodes
+                                if n.k < t.tree.top and n.parent() in t.slots)
+        self._made = [*self._made[-(_CACHED - 1):], (key, nodes, morphed)]
+        self._pin()
+        return nodes, morphed
+
+    def _pin(self) -> None:
+        pins = set()
+        groups = [(n, m) for _, n, m in self._made] + [v[:2] for v in self._frozen.values()]
+        if self.forced is not None:
+            groups.append(self.forced)
+        for nodes, morphed in groups:
+            pins.update(nodes)
+            pins.update(n.parent() for n in morphed)
+        self.terrain.pinned = pins
+
+    def nodes(self, eye: np.ndarray, view_proj: np.ndarray | None) -> ProxyNodes:
+        """The proxy of :meth:`select` as arrays (:class:`ProxyNodes`), heights morphed at
+        ``eye`` as the vertex shader morphs them: the metric's source."""
+        nodes, morphed = self.select(eye, view_proj)
+        t, g, st = self.terrain, self.terrain.tree.g, self.stride
+        tree = t.tree
+        n_, nv = len(nodes), g // st
+        win = np.array([tree.samples(n) for n in nodes], np.intp).reshape(-1, 4)
+        k = np.array([n.k for n in nodes], np.intp)
+        s = (1 << k).astype(np.float64)
+        x, y = tree.world_xy(0, win[:, 0] * s, win[:, 2] * s)  # level-0 indices
+        origin = np.c_[x, y]
+        spacing = np.c_[st * s * tree.p.dx, st * s * tree.p.dy]
+        ext = np.minimum(g, np.c_[win[:, 1] - win[:, 0] - 1, win[:, 3] - win[:, 2] - 1])
+        windows = np.c_[win[:, 0], win[:, 0] + ext[:, 0], win[:, 2], win[:, 2] + ext[:, 1]]
+        windows = (windows * s[:, None]).astype(np.intp)
+        own = np.zeros((n_, g + 1, g + 1))
+        par = np.zeros((n_, g + 1, g + 1))
+        ptop = np.zeros((n_, 2), np.intp)
+        mask = np.array([n in morphed for n in nodes], bool)
+        for i, n in enumerate(nodes):
+            tile = t.node_heights(n)
+            own[i, :tile.shape[0], :tile.shape[1]] = tile
+            if mask[i]:
+                tile = t.node_heights(n.parent())
+                par[i, :tile.shape[0], :tile.shape[1]] = tile
+                ptop[i] = np.array(tile.shape) - 1
+        rc = np.stack(np.meshgrid(np.arange(nv + 1), np.arange(nv + 1), indexing="ij"), -1)
+        pos = np.minimum(rc[None] * st, ext[:, None, None, :])  # clamped as the shader does
+        idx = np.arange(n_)[:, None, None]
+        heights = own[idx, pos[..., 0], pos[..., 1]]
+        if mask.any():
+            quad = np.array([(n.i % 2, n.j % 2) for n in nodes], np.intp)
+            hc = parent_surfaces(pos, quad, par, ptop, g, st)
+            xy = origin[:, None, None, :] + pos[..., ::-1] * (
+                s[:, None] * np.array([tree.p.dx, -tree.p.dy]))[:, None, None, :]
+            d = np.sqrt(((np.concatenate([xy, heights[..., None]], -1)
+                          - np.asarray(eye, np.float64)) ** 2).sum(-1))
+            m = np.zeros_like(d)
+            for lev in np.unique(k[mask]):
+                sel = mask & (k == lev)
+                m[sel] = morph_factor(d[sel], int(lev), self.r)
+            heights = heights + m * (hc - heights)
+        last = ext / st
+        return ProxyNodes(origin, spacing, last, heights, windows)
+
+    def force(self, selection: tuple[tuple, frozenset] | None) -> None:
+        """Freeze ``selection`` (a recorded :attr:`last`) for the next keyframes, its tiles
+        made resident now (an untimed replay); None: select again."""
+        self.forced, self._made = selection, []
+        self._pin()
+        if selection is not None:
+            nodes, morphed = selection
+            self.terrain.make_resident(list(nodes) + [n.parent() for n in morphed])
+
+    def for_keyframe(self, slot, viewpoint, projection):
+        """The GL proxy frozen for the keyframe rendered into ``slot`` (a render target)
+        from ``viewpoint`` through ``projection``: the selection made for that eye and view
+        (made now if the metric did not ask for it)."""
+        eye = np.asarray(viewpoint.o, np.float64)
+        nodes, morphed = self.select(eye, projection.matrix() @ viewpoint.view_matrix())
+        old = self._frozen.get(id(slot))
+        gl = old[2] if old is not None else self._gl()
+        instances, _ = self.terrain.instances(list(nodes), morphed, self.r)
+        boxes = [self.terrain.tree.bounds(n) for n in nodes]
+        gl.set(instances, eye, (np.array([b[0] for b in boxes]).reshape(-1, 3),
+                                np.array([b[1] for b in boxes]).reshape(-1, 3)))
+        self._frozen[id(slot)] = (nodes, morphed, gl)
+        self._made = []  # this keyframe's selection is kept by _frozen now
+        self._pin()
+        self.last = (nodes, morphed)
+        self.triangles.append(len(nodes) * 2 * (self.terrain.tree.g // self.stride) ** 2)
+        return gl
+
+    def draw(self, program, view_proj: np.ndarray) -> int:
+        """Draw the proxy last frozen (the proxy geometry interface)."""
+        if not self._frozen:
+            return 0
+        return list(self._frozen.values())[-1][2].draw(program, view_proj)
+
+    def release(self) -> None:
+        for _, _, gl in self._frozen.values():
+            gl.release()
+        self._frozen.clear()
+        self.terrain.pinned = set()
