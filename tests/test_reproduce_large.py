@@ -44,6 +44,7 @@ def test_results_hold_every_row_of_every_run_with_the_schemas_keys(large):
     assert r["sample_frames"] == [0, 3] and list(r["sizes"]) == ["256"]
     v = r["sizes"]["256"]
     assert v["side"] == 256 and v["sprite_lod"] == 16
+    assert v["scene_load"]["grid"] >= 256 and v["scene_load"]["scene_load_mb"] >= 0
     for p in ("chen1999", "flyover"):
         res, runs = v[p], out / "runs" / "256" / p
         assert set(ROW) <= set(res["adaptive"]) and res["adaptive"]["epsilon"] is None
@@ -96,7 +97,8 @@ def test_equal_error_is_the_one_the_rows_give_and_patrol_says_what_it_did(large)
     assert isinstance(pt.get("skipped"), str) or {"without_cache", "with_cache",
                                                   "keyframe_work_cut"} <= set(pt)
     report = (out / "report.md").read_text()
-    for heading in ("## Path flyover", "## At equal error", "## Reference", "## Patrol"):
+    for heading in ("## Path flyover", "## At equal error", "## Reference", "## Memory",
+                    "## Patrol"):
         assert heading in report
     assert report.count("| 256² | whole |") == 2 * len(EPS)  # every ε row, both paths
     assert (out / "large_scaling.png").stat().st_size > 2000

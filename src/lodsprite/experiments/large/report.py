@@ -133,6 +133,22 @@ def _skipped(r: dict) -> list[str]:
     return [f"- `{k}` skipped: {why}." for k, why in seen.items()]
 
 
+def memory_lines(r: dict) -> list[str]:
+    """What loading each store's scene adds to a run's peak memory (the in-memory working
+    grid ``render`` makes of a store; the adaptive renderer never draws it)."""
+    lines = ["Every run's peak RSS (its process and the tile reader's) includes the scene "
+             "``render`` loads for a store: an in-memory working grid resampled from the "
+             "finest level up to 4096², which the adaptive renderer never draws (only its "
+             "texture colours it). What that load adds to a process's peak:", ""]
+    for key, res in _stores(r):
+        s = res.get("scene_load")
+        if s:
+            lines.append(f"- {_label(key, res)}: +{f(s['scene_load_mb'], 0)} MB over "
+                         f"{f(s['peak_rss_mb_imports'], 0)} MB after the imports "
+                         f"(working grid {s['grid']}²).")
+    return lines
+
+
 def _patrol(r: dict) -> list[str]:
     pt = r["patrol"]
     if "skipped" in pt:
@@ -180,6 +196,7 @@ def write_outputs(r: dict, out_dir: Path) -> Path:
         lines += ["", f"## Path {p}", "", *path_rows(r, p)]
     lines += ["", "## At equal error", "", *equal_table(r), "", *_skipped(r),
               "", "## Reference", "", *reference_table(r),
+              "", "## Memory", "", *memory_lines(r),
               "", "## Patrol: the keyframe cache", "", *_patrol(r), *_jacksboro(r)]
     h = r["huge"]
     lines += ["", f"65536²: needs up to {f(h['need_gb'], 1)} GB of disk (float32, all levels); "

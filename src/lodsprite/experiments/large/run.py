@@ -238,9 +238,11 @@ def reproduce_large(cfg: LargeConfig, out_dir: Path, update: Update | None = Non
             built = build_store(spec, store)
         else:
             store, built, n = _store_for(spec, out_dir / "stores")
-        res: dict = {"side": n, "tile_s": built.get("seconds"),
-                     "tile_mb_per_s": built.get("mb_per_s"), "sprite_lod": sprite_lod(n)}
         safe = key if key.isdigit() else f"terrain{step}"
+        res: dict = {"side": n, "tile_s": built.get("seconds"),
+                     "tile_mb_per_s": built.get("mb_per_s"), "sprite_lod": sprite_lod(n),
+                     "scene_load": render_in_child({"probe": "scene", "terrain": str(store)},
+                                                   out_dir / "runs" / safe / "scene")}
         r["reference"][key], r["equal_error_speedup"][key] = {}, {}
         for p in cfg.paths:
             res[p], r["reference"][key][p] = run_path(store, n, cfg, p,
