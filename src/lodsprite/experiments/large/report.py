@@ -62,6 +62,10 @@ def _cell(v, digits: int) -> str:
     return "—" if v is None else f(v, digits)
 
 
+def _v(x: dict, key: str) -> str:
+    return "—" if x.get(key) is None else str(x[key])
+
+
 def _line(label: str, run: str, x: dict, ee: dict | None) -> str:
     speed = within = "—"
     if ee is not None:
@@ -70,11 +74,10 @@ def _line(label: str, run: str, x: dict, ee: dict | None) -> str:
     return (f"| {label} | {run} | {eps} | {_cell(x.get('median_ms'), 2)} / "
             f"{_cell(x.get('p99_ms'), 2)} | {_cell(x.get('total_s'), 2)} | "
             f"{_cell(x.get('rmse'), 2)} / {_cell(x.get('flip'), 3)} | "
-            f"{x.get('keyframes', '—')} | {x.get('tiles_rendered', '—')} | "
-            f"{x.get('cache_hits', '—')} | {speed} | {within} | "
+            f"{_v(x, 'keyframes')} | {_v(x, 'tiles_rendered')} | "
+            f"{_v(x, 'cache_hits')} | {speed} | {within} | "
             f"{_cell(x.get('peak_rss_mb'), 0)} | {_cell(x.get('first_frame_s'), 2)} | "
-            f"{x.get('tiles_loaded', '—')} / {x.get('tiles_bad', '—')} | "
-            f"{x.get('reader_restarts', '—')} |")
+            f"{_v(x, 'tiles_loaded')} / {_v(x, 'tiles_bad')} | {_v(x, 'reader_restarts')} |")
 
 
 def _label(key: str, res: dict) -> str:
