@@ -48,8 +48,12 @@ class LargeConfig:
     run (an estimate, not a measurement: about 15 s a timed run of 120 frames at 256²,
     10 of them per store and path, references, tiling 16k² in about 100 s, patrol and
     jacksboro; from the 40-minute run of the earlier default and per-run costs measured
-    on a shared, loaded CPU).  1k² does not fit beside them: it is in :meth:`full`, the
-    long sweep; :meth:`quick` is the tests'."""
+    on a shared, loaded CPU).  It assumes a 16k² LOD-sprite run costs about what a 4k²
+    one does: on this branch one 16k² flyover LOD-sprite run (ε 1) took 468 s to its
+    first frame and had a 14 s p99 on the loaded CPU, reading level-0 chunks for the
+    coarse squares' error metric; until reads stop blocking, the default runs over 20
+    minutes.  1k² does not fit beside 4k² and 16k²: it is in :meth:`full`, the long
+    sweep; :meth:`quick` is the tests'."""
 
     sizes: tuple[int, ...] = (4096, 16384)
     paths: tuple[str, ...] = ("chen1999", "flyover")
