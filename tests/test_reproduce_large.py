@@ -179,3 +179,39 @@ def test_quick_default_and_full_are_three_configs_and_save_every_is_checked():
         e.configure(Options(quick=True, full=True))
     with pytest.raises(InputError, match="save_every"):
         RenderConfig(save_every=0).validate()
+
+
+def test_the_level_zero_reference_is_used_where_it_draws_and_the_stand_in_elsewhere(
+        tmp_path, monkeypatch):
+    """The measure part's LevelZeroReference interface: ``image()`` None beyond its cap
+    takes the 0.25 px stand-in for that frame; the stand-in is checked against the frames
+    it does draw."""
+    from lodsprite import get_path, load_scene
+    from lodsprite.experiments.large import reference
+    from lodsprite.terrain.store import build_store
+
+    made = []
+
+    class Fake:
+        def __init__(self, ctx, store, size, fov_y_deg, shading):
+            made.append((size, shading))
+            self.size = size
+
+        def image(self, viewpoint, projection=None):
+            return None if viewpoint is path.viewpoints[3] else np.zeros(
+                (self.size[1], self.size[0], 3), np.uint8)
+
+        def describe(self):
+            return "fake level 0"
+
+    monkeypatch.setattr(reference, "level_zero_class", lambda: Fake)
+    store = tmp_path / "s.zarr"
+    build_store("fractal:128:1", store)
+    scene = load_scene(str(store))
+    path = get_path("chen1999", scene.hf, 6)
+    ref, how = reference.reference_images(store, scene, path, 32, [0, 3], 0.25, True)
+    assert made == [((32, 32), "auto")] and how["level0"] == "fake level 0"
+    assert how["level0_frames"] == 1 and how["stand_in_frames"] == 1
+    assert not ref[0].any() and ref[3].any()  # frame 3 is the stand-in's terrain and sky
+    # the stand-in against the (black) level-0 frame: its own mean grey level, not 0
+    assert how["stand_in_rmse"] > 10
