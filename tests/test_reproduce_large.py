@@ -33,7 +33,7 @@ def large(tmp_path_factory):
 
     out = tmp_path_factory.mktemp("large")
     cfg = LargeConfig(sizes=(256,), frames=6, image=48, sample_every=3, jacksboro=False,
-                      eps=EPS)
+                      eps=EPS, validate_sizes=(128, 256))
     r = reproduce_large(cfg, out)
     write_outputs(r, out)
     return out, json.loads((out / "results.json").read_text())
@@ -84,6 +84,11 @@ def test_the_reference_of_each_side_is_named_and_its_stand_in_checked(large):
         assert "0.25 px" in d["stand_in"] and d["level0"]
         # the 0.25 px stand-in at 256² on 48² pixels is level 0 (measured 0.0, 0.0)
         assert 0 <= d["stand_in_rmse"] < 0.5 and 0 <= d["stand_in_flip"] < 0.01
+        # a side checked without timed runs (256 is timed: not checked twice)
+        check = r["reference"]["128"][p]
+        assert check["timed"] is False and check["level0_frames"] == 2
+        assert 0 <= check["stand_in_rmse"] < 0.5 and "timed" not in d
+    assert list(r["reference"]) == ["256", "128"] and "128" not in r["sizes"]
 
 
 def test_equal_error_is_the_one_the_rows_give_and_patrol_says_what_it_did(large):
@@ -101,6 +106,7 @@ def test_equal_error_is_the_one_the_rows_give_and_patrol_says_what_it_did(large)
                     "## Patrol"):
         assert heading in report
     assert report.count("| 256² | whole |") == 2 * len(EPS)  # every ε row, both paths
+    assert report.count("| 128² (check only, no timed runs) |") == 2
     assert (out / "large_scaling.png").stat().st_size > 2000
 
 

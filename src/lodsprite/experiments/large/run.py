@@ -1,6 +1,7 @@
 """``lodsprite reproduce large``: LOD-sprite against the adaptive renderer at equal error
 on large terrain (issue 22, must-have 8): fractal stores of 4k² and 16k² (1k² and 2k²
-too with ``--full``), along the chen1999-shaped path and a low flyover.
+for the reference check alone; timed too with ``--full``), along the chen1999-shaped
+path and a low flyover.
 
 Each timed run is :func:`lodsprite.run.render_path` in a process of its own
 (:mod:`lodsprite.experiments.large.child`: its peak resident memory and time to first
@@ -44,16 +45,18 @@ Update = Callable[[str, int, int], None]
 
 @dataclass(frozen=True)
 class LargeConfig:
-    """The default run is estimated at about 17-18 minutes here once the three variants
+    """The default run is estimated at about 18-19 minutes here once the three variants
     run (an estimate, not a measurement: about 15 s a timed run of 120 frames at 256²,
-    10 of them per store and path, references, tiling 16k² in about 100 s, patrol and
+    10 of them per store and path, references (the 1k² and 2k² checks of the stand-in
+    included), tiling 16k² in about 100 s, patrol and
     jacksboro; from the 40-minute run of the earlier default and per-run costs measured
     on a shared, loaded CPU).  It assumes a 16k² LOD-sprite run costs about what a 4k²
     one does: on this branch one 16k² flyover LOD-sprite run (ε 1) took 468 s to its
     first frame and had a 14 s p99 on the loaded CPU, reading level-0 chunks for the
     coarse squares' error metric; until reads stop blocking, the default runs over 20
-    minutes.  1k² does not fit beside 4k² and 16k²: it is in :meth:`full`, the long
-    sweep; :meth:`quick` is the tests'."""
+    minutes.  Timed runs at 1k² do not fit beside 4k² and 16k² (1k² and 2k² get the
+    stand-in check alone): they are in :meth:`full`, the long sweep; :meth:`quick` is
+    the tests'."""
 
     sizes: tuple[int, ...] = (4096, 16384)
     paths: tuple[str, ...] = ("chen1999", "flyover")
@@ -67,6 +70,7 @@ class LargeConfig:
     variants: tuple[str, ...] = tuple(VARIANTS)
     full_max: int = 4096      # full resolution timed up to this side
     validate_max: int = 4096  # the 0.25 px stand-in checked against level 0 up to this side
+    validate_sizes: tuple[int, ...] = (1024, 2048)  # stores for that check alone, untimed
     patrol: bool = True       # the keyframe cache along the patrol path
     patrol_cache_mb: float = 64.0
     huge: bool = False       # also 65536² (needs the disk and time it names)
@@ -77,12 +81,12 @@ class LargeConfig:
     @classmethod
     def quick(cls) -> LargeConfig:
         return cls(sizes=(256, 512), frames=24, image=128, sample_every=8, quick_512=True,
-                   eps=(1.0, 0.5))
+                   eps=(1.0, 0.5), validate_sizes=())
 
     @classmethod
     def full(cls) -> LargeConfig:
         return cls(sizes=(1024, 2048, 4096, 16384), frames=230, image=512, sample_every=23,
-                   eps=(1.0, 0.7, 0.5, 0.35, 0.25))
+                   eps=(1.0, 0.7, 0.5, 0.35, 0.25), validate_sizes=())
 
     @property
     def sample_frames(self) -> list[int]:
@@ -223,6 +227,25 @@ def _jobs(cfg: LargeConfig) -> list[tuple[str, str]]:
     return [(str(n), f"fractal:{n}:1") for n in sizes] + [(t, t) for t in cfg.terrains]
 
 
+def validate_only(cfg: LargeConfig, out_dir: Path) -> dict:
+    """The stand-in checked against level 0 on the stores ``validate_sizes`` that are not
+    timed (``reference[side][path]``, with ``timed`` False)."""
+    from lodsprite import get_path, load_scene
+
+    out: dict = {}
+    for n in (n for n in cfg.validate_sizes if n not in cfg.sizes):
+        store = out_dir / "stores" / f"fractal_{n}.zarr"
+        build_store(f"fractal:{n}:1", store)
+        scene = load_scene(str(store))
+        out[str(n)] = {}
+        for p in cfg.paths:
+            path = get_path(p, scene.hf, cfg.frames)
+            _, how = reference_images(store, scene, path, cfg.image, cfg.sample_frames,
+                                      cfg.ref_sse, validate=True)
+            out[str(n)][p] = {**how, "timed": False}
+    return out
+
+
 def patrol_side(cfg: LargeConfig) -> int:
     """The fractal side the patrol runs over: the largest at most 4096, else the least."""
     small = [n for n in cfg.sizes if n <= 4096]
@@ -261,6 +284,7 @@ def reproduce_large(cfg: LargeConfig, out_dir: Path, update: Update | None = Non
             r["patrol"] = patrol(store, n, cfg, out_dir / "runs" / safe / "patrol")
         if update:
             update("stores", step + 1, len(jobs))
+    r["reference"].update(validate_only(cfg, out_dir))
     if cfg.jacksboro:
         r.update(_jacksboro(cfg, out_dir))
     return r
