@@ -93,6 +93,7 @@ class RenderConfig:
     cache_mb: float = 0.0     # sprite: keyframe cache budget, MB (0: off)
     cache_policy: str = "lru"  # sprite: keyframe cache replacement, lru | benefit
     metric: str = "warp"      # sprite: "warp" (Eq. 1-2) or "resample" (adds resampling)
+    save_every: int = 1       # with save_frames: save every n-th frame of the replay only
 
     @property
     def technique(self) -> str:
@@ -134,6 +135,8 @@ class RenderConfig:
                              f"{', '.join(METRICS)}")
         if self.quality_stride < 1:
             raise InputError(f"quality stride must be >= 1, got {self.quality_stride}")
+        if self.save_every < 1:
+            raise InputError(f"save_every must be >= 1, got {self.save_every}")
         if self.key_sse is not None and (self.mode != "sprite" or not self.key_sse > 0):
             raise InputError("--key-sse goes with --mode sprite and must be > 0 pixels")
         if not (isinstance(self.tiles, int) and 1 <= self.tiles <= MAX_TILE_GRID
@@ -248,9 +251,10 @@ def keyframe_records(keyframes: list, rows: list[dict]) -> list[dict]:
 
 def run_technique(renderer, path: CameraPath, config: RenderConfig,
                   progress: Progress | None = None, on_image=None,
-                  keyframes: list | None = None) -> RunResult:
+                  keyframes: list | None = None, image_frames=None) -> RunResult:
     """The registry's technique for ``config`` on ``renderer`` (a
-    :class:`~lodsprite.api.Renderer`) along ``path``, through the harness; a LOD-sprite
+    :class:`~lodsprite.api.Renderer`) along ``path``, through the harness (``on_image``
+    for the replayed frames ``image_frames``, default all); a LOD-sprite
     run's rows get ``key_x, key_y, key_z`` (the eye, metres, of the keyframe each frame
     shows) and ``keyframes``, if given, is extended with the engine's keyframe log."""
     from lodsprite import techniques
@@ -261,7 +265,7 @@ def run_technique(renderer, path: CameraPath, config: RenderConfig,
         result = run_path(technique, path, progress=progress,
                           ground_truth=config.ground_truth,
                           quality_stride=config.quality_stride, flip=config.flip,
-                          on_image=on_image)
+                          on_image=on_image, image_frames=image_frames)
         log = getattr(technique, "keyframe_log", None)  # tiled LOD-sprite: tile updates
         if log is None:
             log = getattr(getattr(technique, "sprite", None), "keyframes", None)
@@ -324,7 +328,9 @@ def render_path(config: RenderConfig, out_dir: Path, progress: Progress | None =
                 writer.append(image)
 
         wanted = on_image if config.save_frames or writer is not None else None
-        result = run_technique(renderer, path, config, progress, wanted, keyframes)
+        only = (range(0, len(path.viewpoints), config.save_every)
+                if writer is None and config.save_every > 1 else None)
+        result = run_technique(renderer, path, config, progress, wanted, keyframes, only)
         info = renderer.info
         renderer.gl.check_error("render_path")
     summary = {

@@ -241,76 +241,6 @@ def test_lod_sprite_with_adaptive_keyframes_stays_closer_than_the_plain_coarse_l
         RenderConfig(mode="full", key_sse=0.5).validate()
 
 
-def _rows(folder) -> list[dict]:
-    import csv
-
-    with open(folder / "frames.csv") as f:
-        return list(csv.DictReader(f))
-
-
-def _kind(row: dict) -> str:
-    """A frames.csv row's kind (issue 21's ``kind``; before it ``type``, or ``mode``)."""
-    return row.get("kind") or row.get("type") or row["mode"]
-
-
-def test_the_large_terrain_harness_measures_what_its_runs_wrote(tmp_path):
-    import json
-
-    from lodsprite.experiments.large.report import write_outputs
-    from lodsprite.experiments.large.run import LargeConfig, reproduce_large
-
-    cfg = LargeConfig(sizes=(256,), frames=6, image=48, sample_every=3, jacksboro=False,
-                      sweep_eps=())
-    r = reproduce_large(cfg, tmp_path)
-    write_outputs(r, tmp_path)
-    saved = json.loads((tmp_path / "results.json").read_text())
-    assert saved["sample_frames"] == [0, 3] and list(saved["sizes"]) == ["256"]
-    v = saved["sizes"]["256"]
-    assert v["side"] == 256 and v["sprite_lod"] == 16
-    for name, res in (("chen1999", v), ("flyover", v["flyover"])):
-        runs = tmp_path / "runs" / "256" / name
-        ad, sp = _rows(runs / "adaptive"), _rows(runs / "sprite")
-        # every run flew the whole path: one row per frame, of the kinds it draws
-        assert [int(x["frame"]) for x in ad] == [int(x["frame"]) for x in sp] == list(range(6))
-        assert {_kind(x) for x in ad} == {"adaptive"}, name
-        kinds = [_kind(x) for x in sp]
-        assert set(kinds) <= {"keyframe", "first_sprite", "sprite"}, name
-        assert res["keyframes_sprite"] >= kinds.count("keyframe") >= 0
-        # the timings are those of the rows (6 significant digits in the csv)
-        for run, rows in (("adaptive", ad), ("sprite", sp)):
-            ms = np.array([float(x["ms"]) for x in rows])
-            assert res[f"median_ms_{run}"] == pytest.approx(np.median(ms), rel=1e-4), run
-            assert res[f"p99_ms_{run}"] == pytest.approx(np.percentile(ms, 99), rel=1e-4)
-        assert res["speedup_sprite_vs_adaptive"] == pytest.approx(
-            res["total_s_adaptive"] / res["total_s_sprite"])
-        assert len(list((runs / "adaptive" / "frames").glob("frame_*.png"))) == 6
-        # errors against full resolution (the store's own samples).  A 256² store seen on
-        # 48² pixels is level 0 wherever 1 px asks: the adaptive renderer at 1 px and the
-        # 0.25 px stand-in are full resolution (measured 0.0 RMSE, 0.0 FLIP); LOD-sprite at
-        # 1 px stays within a few grey levels (measured 3.2 and 0.02 RMSE, FLIP <= 0.01)
-        assert res["reference"].startswith("full resolution")
-        assert 0 <= res["rmse_adaptive"] < 0.5 and 0 <= res["flip_adaptive"] < 0.01, name
-        assert 0 <= res["reference_vs_full_rmse"] < 0.5 and res["reference_vs_full_flip"] < 0.01
-        assert 0 <= res["rmse_sprite"] < 8 and 0 <= res["flip_sprite"] < 0.05, name
-        # the sweep is the ε = 1 px run, and the comparison at equal error follows it
-        (one,) = res["sprite_sweep"]
-        assert one["epsilon"] == 1.0 and one["rmse"] == res["rmse_sprite"]
-        assert one["total_s"] == res["total_s_sprite"]
-        if one["rmse"] <= res["rmse_adaptive"]:
-            assert res["equal_error"]["speedup"] == pytest.approx(
-                res["total_s_adaptive"] / one["total_s"])
-        else:
-            assert res["equal_error"] is None
-        # the store streamed; its process's own memory, not the harness's
-        assert res["tiles_loaded"] > 0 and 0 < res["first_frame_s"]
-        assert 20 < res["peak_rss_mb"] < 2000
-    report = (tmp_path / "report.md").read_text()
-    assert "## Path flyover" in report and "256" in report
-    # (the 512² jacksboro runs are the same render commands with --key-sse: covered by
-    # test_lod_sprite_with_adaptive_keyframes_stays_closer_than_the_plain_coarse_level)
-    assert (tmp_path / "large_scaling.png").stat().st_size > 2000
-
-
 def test_an_evicted_root_comes_back_and_the_loader_drops_stale_requests(gl):
     """Regressions: an off-screen root evicted from a full GPU cache was never requested
     again (a hole for good); the loader kept every request it was ever given."""
@@ -405,17 +335,6 @@ def test_a_low_flight_over_a_field_with_a_deep_pit_elsewhere_sees_the_ground_bel
     finally:
         a.release()
         t.release()
-
-
-def test_equal_error_takes_the_fastest_sprite_run_within_adaptives_rmse():
-    from lodsprite.experiments.large.run import equal_error
-
-    sweep = [{"epsilon": 1.0, "total_s": 1.0, "rmse": 5.0},
-             {"epsilon": 0.5, "total_s": 2.0, "rmse": 4.0},
-             {"epsilon": 0.25, "total_s": 4.0, "rmse": 3.0}]
-    e = equal_error(sweep, rmse_adaptive=4.5, total_s_adaptive=10.0)
-    assert e["epsilon"] == 0.5 and e["speedup"] == 5.0
-    assert equal_error(sweep, rmse_adaptive=2.0, total_s_adaptive=10.0) is None
 
 
 def test_prefetch_streams_between_keyframes_without_drawing(gl):

@@ -65,12 +65,15 @@ def reproduce(
     huge: Annotated[bool, typer.Option(
         "--huge", help="large: also a 65536² store (see report.md for the disk it needs)")
     ] = False,
+    full: Annotated[bool, typer.Option(
+        "--full", help="large: the long sweep (all sizes, more frames and ε; about an hour "
+                       "or more)")] = False,
 ) -> None:
     """Run a paper's experiment; write DIR/results.json, PNG plots and DIR/report.md."""
     options = Options(terrain=terrain, size=size, quick=quick, grid=grid, lod=lod,
                       epsilon=epsilon, visibility=visibility, border=border, guard=guard,
                       full_sample=full_sample, sweeps=sweeps, adopt=adopt, pace=pace,
-                      max_error=max_error, links=links, huge=huge)
+                      max_error=max_error, links=links, huge=huge, full=full)
     run_experiment(get(experiment), options, out_dir)
 
 

@@ -22,7 +22,8 @@ class Options:
     """The ``reproduce`` command's options; each experiment reads the ones it uses.
 
     ``size`` is the square image side in pixels; ``max_error`` None is the client's
-    default bound (swan2002); ``huge`` adds a 65536² store (large)."""
+    default bound (swan2002); ``huge`` adds a 65536² store (large); ``full`` is the long
+    sweep (large)."""
 
     terrain: str = "jacksboro"
     size: int = 512
@@ -40,6 +41,7 @@ class Options:
     max_error: float | None = None
     links: bool = True
     huge: bool = False
+    full: bool = False
 
 
 @dataclass

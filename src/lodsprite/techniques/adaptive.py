@@ -61,10 +61,34 @@ def reader_mb(terrain) -> float:
     return getattr(terrain.loader, "reader_peak_mb", lambda: 0.0)()
 
 
+def reader_restarts(terrain) -> int:
+    """How many times the tile reader process was started again after dying (0 without
+    a reader process)."""
+    worker = getattr(terrain.loader, "worker", None)
+    return 0 if worker is None else min(int(worker.deaths), int(worker.restarts))
+
+
+def process_age_s() -> float:
+    """Seconds since this process started (``/proc/self/stat`` starttime against
+    ``/proc/uptime``, clock-tick resolution); NaN where ``/proc`` cannot be read."""
+    import os
+
+    try:
+        with open("/proc/self/stat") as f:
+            start = int(f.read().rpartition(")")[2].split()[19])
+        with open("/proc/uptime") as f:
+            uptime = float(f.read().split()[0])
+    except (OSError, ValueError, IndexError):
+        return float("nan")
+    return uptime - start / os.sysconf("SC_CLK_TCK")
+
+
 def tile_summary(terrain) -> dict[str, Any]:
-    """Peak memory (with the tile reader process's) and the tile caches' counts."""
+    """Peak memory (with the tile reader process's), the tile caches' counts, tiles that
+    could not be read and the reader's restarts."""
     reader = reader_mb(terrain)
     return {"peak_rss_mb": peak_rss_mb() + reader, "peak_rss_mb_reader": reader,
+            "reader_restarts": reader_restarts(terrain),
             "tiles_resident": len(terrain.slots.slots), "tiles_loaded": terrain.loader.loaded,
             "tiles_evicted": terrain.slots.evicted, "tiles_bad": len(terrain.loader.bad),
             "gpu_cache_tiles": terrain.slots.capacity, "levels": terrain.tree.levels,
@@ -92,7 +116,8 @@ def level0_summary(heights) -> dict[str, Any]:
 class AdaptiveTechnique(Technique):
     """Every frame by the adaptive renderer at ``sse`` pixels of screen-space error,
     tiles through caches of ``gpu_mb`` and ``host_mb``.  No warm-up beyond the roots (the
-    first frame's time, from the technique's making, is ``first_frame_s``).  Records each
+    first frame's time, from the process's start, is ``first_frame_s``; from the
+    technique's making ``first_frame_s_technique``).  Records each
     frame's selection; its replay reads those tiles and draws the same selection."""
 
     name = "adaptive"
@@ -104,15 +129,16 @@ class AdaptiveTechnique(Technique):
         # the renderer's full resolution (the default reference) is coloured the same way
         self.shading = set_shading(renderer, shading)
         self.terrain = make_adaptive(renderer, sse, gpu_mb, host_mb, shading)
-        self.first_frame_s = float("nan")
+        self.first_frame_s = self.first_frame_s_technique = float("nan")
 
     def warm_up(self, viewpoint: Viewpoint) -> None:
         """Nothing: streaming from the roots is part of the measured run."""
 
     def frame(self, viewpoint: Viewpoint) -> Frame:
         f = self.terrain.frame(viewpoint)
-        if self.first_frame_s != self.first_frame_s:  # NaN: the first frame
-            self.first_frame_s = time.perf_counter() - self._t0
+        if self.first_frame_s_technique != self.first_frame_s_technique:  # NaN: first
+            self.first_frame_s_technique = time.perf_counter() - self._t0
+            self.first_frame_s = process_age_s()
         return Frame("adaptive", f.ms, f.triangles, extra={
             "nodes": f.nodes, "uploaded": f.uploaded, "resident": f.resident,
             "loaded": f.loaded, "evicted": f.evicted})
@@ -127,6 +153,7 @@ class AdaptiveTechnique(Technique):
     def summary(self, frames: list[Frame]) -> dict[str, Any]:
         return {"sse": self.terrain.sse, "first_frame_s": self.first_frame_s,
                 "shading": self.shading,
+                "first_frame_s_technique": self.first_frame_s_technique,
                 **tile_summary(self.terrain)}
 
     def status(self) -> str:
@@ -180,6 +207,7 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
         self._selections: dict[int, tuple] = {}  # keyframe -> (nodes drawn, morphed)
         self.proxy = None if proxy_sse is None else self._adaptive_proxy(renderer, proxy_sse)
         self._proxies: dict[int, tuple] = {}  # keyframe -> its frozen proxy selection
+        self.first_frame_s = float("nan")  # from the process's start
         if self.tiled is not None:
             self._drawn: list[tuple] = []  # this frame's tile selections, in draw order
             self._tile_selections: dict[tuple[int, int], tuple] = {}  # (update, tile) ->
@@ -241,6 +269,12 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
         if self.tiled is not None:
             self._drawn.clear()  # the warm-up's tiles are no update's
 
+    def frame(self, viewpoint: Viewpoint) -> Frame:
+        f = super().frame(viewpoint)
+        if self.first_frame_s != self.first_frame_s:  # NaN: the first frame
+            self.first_frame_s = process_age_s()
+        return f
+
     def decision(self) -> dict[str, Any]:
         """The keyframe shown; for a new one, the selection it was drawn with (recorded
         here, after the frame's clock stopped: nothing draws between the two)."""
@@ -281,7 +315,8 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
 
     def summary(self, frames: list[Frame]) -> dict[str, Any]:
         out = {**super().summary(frames), "key_sse": self.adaptive.sse,
-               **tile_summary(self.adaptive), **level0_summary(self.heights), "proxy_sse": None}
+               "first_frame_s": self.first_frame_s, **tile_summary(self.adaptive),
+               **level0_summary(self.heights), "proxy_sse": None}
         out["peak_rss_mb"] += out.get("peak_rss_mb_level0_reader", 0.0)
         if self.proxy is not None:
             tris = self.proxy.triangles

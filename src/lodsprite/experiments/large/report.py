@@ -1,5 +1,7 @@
 """Plots and a Markdown report for ``reproduce large``
-(:func:`lodsprite.experiments.large.run.reproduce_large`)."""
+(:func:`lodsprite.experiments.large.run.reproduce_large`): every ε row of every variant,
+the comparison at equal error, the reference of each side, tiles that could not be read
+and reader restarts, the patrol and the 512² jacksboro comparison."""
 
 from __future__ import annotations
 
@@ -7,28 +9,37 @@ from pathlib import Path
 
 from matplotlib.figure import Figure
 
+from lodsprite.experiments.large.variants import VARIANTS, equal_error
 from lodsprite.files import atomic_write_bytes, save_figure, write_json
 from lodsprite.report.values import fmt_fixed
 
+f = fmt_fixed
 
-def _series(r: dict, path: str) -> tuple[list[int], list[dict]]:
-    first = r["config"]["paths"][0]
-    sizes = sorted(r["sizes"], key=int)
-    rows = [r["sizes"][s] if path == first else r["sizes"][s][path] for s in sizes]
-    return [int(s) for s in sizes], rows
+
+def _stores(r: dict) -> list[tuple[str, dict]]:
+    return [*sorted(r["sizes"].items(), key=lambda kv: int(kv[0])),
+            *sorted(r.get("terrains", {}).items())]
 
 
 def _plot(r: dict, path: Path) -> Path:
+    """Median ms and RMSE against side for adaptive and each variant at the first ε,
+    and the adaptive run's peak memory; a line style a path."""
     fig = Figure(figsize=(13, 3.8), dpi=100)
     cost, err, mem = (fig.add_subplot(1, 3, i) for i in (1, 2, 3))
-    for p, style in zip(r["config"]["paths"], ("-", "--"), strict=False):
-        n, rows = _series(r, p)
-        for key, label in (("median_ms_adaptive", "adaptive 1 px"),
-                           ("median_ms_sprite", "LOD-sprite, adaptive keys")):
-            cost.plot(n, [v[key] for v in rows], "o" + style, label=f"{label} ({p})")
-        for key, label in (("rmse_adaptive", "adaptive"), ("rmse_sprite", "LOD-sprite")):
-            err.plot(n, [v[key] for v in rows], "o" + style, label=f"{label} ({p})")
-        mem.plot(n, [v["peak_rss_mb"] for v in rows], "o" + style, label=p)
+    sides = sorted(r["sizes"], key=int)
+    n = [int(s) for s in sides]
+    eps = r["config"]["eps"][0]
+    for p, style in zip(r["config"]["paths"], ("-", "--", ":"), strict=False):
+        series = {"adaptive": [r["sizes"][s][p]["adaptive"] for s in sides]}
+        for name in VARIANTS:
+            rows = [next((x for x in r["sizes"][s][p].get(name, []) if x["epsilon"] == eps),
+                         None) for s in sides]
+            if all(x is not None for x in rows) and rows:
+                series[f"{name} ε {eps:g}"] = rows
+        for label, rows in series.items():
+            cost.plot(n, [x["median_ms"] for x in rows], "o" + style, label=f"{label} ({p})")
+            err.plot(n, [x["rmse"] for x in rows], "o" + style, label=f"{label} ({p})")
+        mem.plot(n, [x["peak_rss_mb"] for x in series["adaptive"]], "o" + style, label=p)
     cost.set(xscale="log", xlabel="terrain side (samples)", ylabel="median ms",
              title="frame cost against terrain size")
     err.set(xscale="log", xlabel="terrain side (samples)", ylabel="RMSE (grey levels)",
@@ -36,85 +47,165 @@ def _plot(r: dict, path: Path) -> Path:
     mem.set(xscale="log", xlabel="terrain side (samples)", ylabel="MB",
             title="peak resident memory (adaptive run)")
     for ax in (cost, err, mem):
-        ax.legend(fontsize=7)
+        ax.legend(fontsize=6)
     fig.tight_layout()
     return save_figure(fig, path)
 
 
-def _row(label: str, v: dict, tile: str) -> str:
-    f = fmt_fixed
-    ref = v["reference"]
-    if "reference_vs_full_rmse" in v:
-        ref += (f"; 0.25 px stand-in vs full: RMSE {f(v['reference_vs_full_rmse'], 2)}, "
-                f"FLIP {f(v['reference_vs_full_flip'], 3)}")
-    full = f(v["median_ms_full"], 0) if "median_ms_full" in v else "—"
-    return (f"| {label} | {tile} | {full} | {f(v['median_ms_adaptive'], 2)} / "
-            f"{f(v['p99_ms_adaptive'], 2)} | {f(v['median_ms_sprite'], 2)} / "
-            f"{f(v['p99_ms_sprite'], 2)} | {f(v['speedup_sprite_vs_adaptive'], 2)}× | "
-            f"{f(v['rmse_adaptive'], 2)} / {f(v['flip_adaptive'], 3)} | "
-            f"{f(v['rmse_sprite'], 2)} / {f(v['flip_sprite'], 3)} | {v['keyframes_sprite']} | "
-            f"{_equal(v)} | {ref} | {f(v['peak_rss_mb'], 0)} | {f(v['first_frame_s'], 2)} | "
-            f"{v['tiles_loaded']} |")
+ROWS_HEAD = ["| side | run | ε | median / p99 ms | total s | RMSE / FLIP | keyframes | "
+             "tiles rendered | cache hits | speedup (total) | within adaptive's RMSE and "
+             "FLIP | peak RSS MB | first frame s | tiles loaded / bad | reader restarts |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
 
 
-def _equal(v: dict) -> str:
-    """LOD-sprite at adaptive's RMSE or lower: ε, speedup, RMSE; or why none."""
-    f = fmt_fixed
-    e = v.get("equal_error")
-    if e is None:
-        best = min(v.get("sprite_sweep", [{"rmse": v["rmse_sprite"]}]), key=lambda s: s["rmse"])
-        return f"none (lowest sprite RMSE {f(best['rmse'], 2)})"
-    return f"ε {e['epsilon']:g}: {f(e['speedup'], 2)}× (RMSE {f(e['rmse'], 2)})"
+def _cell(v, digits: int) -> str:
+    return "—" if v is None else f(v, digits)
 
 
-HEADER = ["| side | tile s (MB/s) | median ms full | adaptive median / p99 ms | sprite median "
-          "/ p99 ms | sprite speedup (total) | adaptive RMSE / FLIP | sprite RMSE / FLIP | "
-          "keyframes | sprite at equal RMSE | reference | peak RSS MB | first frame s | "
-          "tiles loaded |", "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+def _v(x: dict, key: str) -> str:
+    return "—" if x.get(key) is None else str(x[key])
 
 
-def _table(r: dict, path: str) -> list[str]:
-    f = fmt_fixed
-    first = r["config"]["paths"][0]
-    lines = list(HEADER)
-    groups = [(s, r["sizes"][s]) for s in sorted(r["sizes"], key=int)]
-    groups += sorted(r.get("terrains", {}).items())
-    for key, res in groups:
-        v = res if path == first else res[path]
-        tile = (f"{f(res['tile_s'], 1)} ({f(res['tile_mb_per_s'], 1)})"
-                if res.get("tile_s") and res.get("tile_mb_per_s") else "reused")
-        label = f"{key}²" if key.isdigit() else f"{key} ({res['side']} a side)"
-        lines.append(_row(label, v, tile))
+def _line(label: str, run: str, x: dict, ee: dict | None) -> str:
+    speed = within = "—"
+    if ee is not None:
+        speed, within = f"{f(ee['speedup'], 2)}×", "yes" if ee["within"] else "no"
+    eps = "—" if x.get("epsilon") is None else f"{x['epsilon']:g}"
+    return (f"| {label} | {run} | {eps} | {_cell(x.get('median_ms'), 2)} / "
+            f"{_cell(x.get('p99_ms'), 2)} | {_cell(x.get('total_s'), 2)} | "
+            f"{_cell(x.get('rmse'), 2)} / {_cell(x.get('flip'), 3)} | "
+            f"{_v(x, 'keyframes')} | {_v(x, 'tiles_rendered')} | "
+            f"{_v(x, 'cache_hits')} | {speed} | {within} | "
+            f"{_cell(x.get('peak_rss_mb'), 0)} | {_cell(x.get('first_frame_s'), 2)} | "
+            f"{_v(x, 'tiles_loaded')} / {_v(x, 'tiles_bad')} | {_v(x, 'reader_restarts')} |")
+
+
+def _label(key: str, res: dict) -> str:
+    return f"{key}²" if key.isdigit() else f"{key} ({res['side']} a side)"
+
+
+def path_rows(r: dict, path: str) -> list[str]:
+    """The table of one path: per store adaptive, full resolution, every variant and ε."""
+    lines = list(ROWS_HEAD)
+    for key, res in _stores(r):
+        v = res[path]
+        ee = {(e["variant"], e["epsilon"]): e for e in equal_error(v)["rows"]}
+        label = _label(key, res)
+        lines.append(_line(label, "adaptive 1 px", v["adaptive"], None))
+        full = v.get("full")
+        if full and "median_ms" in full:
+            lines.append(_line(label, "full resolution (sampled frames)", full, None))
+        for name in VARIANTS:
+            for x in v.get(name, []):
+                lines.append(_line(label, name, x, ee[(name, x["epsilon"])]))
     return lines
 
 
+def equal_table(r: dict) -> list[str]:
+    lines = ["| side | path | adaptive RMSE / FLIP | best LOD-sprite within both | rows "
+             "within / measured |", "|---|---|---|---|---|"]
+    for key, res in _stores(r):
+        for p, e in r["equal_error_speedup"].get(key, {}).items():
+            b = e["best"]
+            best = ("none" if b is None else f"{b['variant']} ε {b['epsilon']:g}: "
+                    f"{f(b['speedup'], 2)}× (RMSE {f(b['rmse'], 2)}, FLIP {f(b['flip'], 3)})")
+            ok = sum(x["within"] for x in e["rows"])
+            lines.append(f"| {_label(key, res)} | {p} | {f(e['adaptive_rmse'], 2)} / "
+                         f"{f(e['adaptive_flip'], 3)} | {best} | {ok} / {len(e['rows'])} |")
+    return lines
+
+
+def reference_table(r: dict) -> list[str]:
+    """How each side's reference was made and the stand-in against level 0 (sides checked
+    without timed runs too)."""
+    lines = ["| side | path | level 0 | frames level 0 / stand-in | stand-in | stand-in "
+             "vs level 0 RMSE / FLIP |", "|---|---|---|---|---|---|"]
+    sides = sorted((k for k in r["reference"] if k.isdigit()), key=int)
+    for key in [*sides, *sorted(k for k in r["reference"] if not k.isdigit())]:
+        label = f"{key}²" if key.isdigit() else key
+        for p, d in r["reference"][key].items():
+            check = ("—" if "stand_in_rmse" not in d else
+                     f"{f(d['stand_in_rmse'], 2)} / {f(d['stand_in_flip'], 3)}")
+            note = "" if d.get("timed", True) else " (check only, no timed runs)"
+            lines.append(f"| {label}{note} | {p} | {d['level0']} | "
+                         f"{d['level0_frames']} / {d['stand_in_frames']} | {d['stand_in']} | "
+                         f"{check} |")
+    return lines
+
+
+def _skipped(r: dict) -> list[str]:
+    seen: dict[str, str] = {}
+    for _, res in _stores(r):
+        for p in r["config"]["paths"]:
+            seen.update(res[p].get("skipped", {}))
+    return [f"- `{k}` skipped: {why}." for k, why in seen.items()]
+
+
+def memory_lines(r: dict) -> list[str]:
+    """What loading each store's scene adds to a run's peak memory (the in-memory working
+    grid ``render`` makes of a store; the adaptive renderer never draws it)."""
+    lines = ["Every run's peak RSS (its process and the tile reader's) includes the scene "
+             "``render`` loads for a store: an in-memory working grid resampled from the "
+             "finest level up to 4096², which the adaptive renderer never draws (only its "
+             "texture colours it). What that load adds to a process's peak:", ""]
+    for key, res in _stores(r):
+        s = res.get("scene_load")
+        if s:
+            lines.append(f"- {_label(key, res)}: +{f(s['scene_load_mb'], 0)} MB over "
+                         f"{f(s['peak_rss_mb_imports'], 0)} MB after the imports "
+                         f"(working grid {s['grid']}²).")
+    return lines
+
+
+def _patrol(r: dict) -> list[str]:
+    pt = r["patrol"]
+    if "skipped" in pt:
+        return [f"Skipped: {pt['skipped']}."]
+    a, b = pt["without_cache"], pt["with_cache"]
+    cut = "—" if pt["keyframe_work_cut"] is None else f"{f(pt['keyframe_work_cut'], 2)}×"
+    return [f"{pt['side']}², whole keyframes, ε {pt['epsilon']:g} px; {pt['work']} without "
+            f"the cache {a[pt['work']]}, with {pt['cache_mb']:g} MB {b[pt['work']]} "
+            f"(cut {cut}); cache hits {b.get('cache_hits', '—')}; total "
+            f"{f(a['total_s'], 2)} s against {f(b['total_s'], 2)} s "
+            f"({f(pt['speedup'], 2)}×); RMSE / FLIP {f(a['rmse'], 2)} / {f(a['flip'], 3)} "
+            f"without, {f(b['rmse'], 2)} / {f(b['flip'], 3)} with."]
+
+
+def _jacksboro(r: dict) -> list[str]:
+    j = r.get("jacksboro")
+    if j is None:
+        return []
+    return ["", "## 512² jacksboro, chen1999", "",
+            f"LOD-sprite with adaptive keyframes: {f(r['speedup_sprite_vs_full_512'], 2)}× "
+            f"faster than full resolution (plain LOD-sprite in the same run: "
+            f"{f(j['speedup_plain_sprite'], 2)}×); RMSE against the plain 16² level "
+            f"{f(r['rmse_ratio_sprite_vs_lod_512'], 3)} (plain LOD-sprite "
+            f"{f(j['rmse_ratio_plain_sprite'], 3)}); {j['keyframes']} keyframes of "
+            f"{f(j['mean_ms_keyframe'], 1)} ms, spriteframes {f(j['mean_ms_sprite'], 2)} ms."]
+
+
 def write_outputs(r: dict, out_dir: Path) -> Path:
+    """results.json, ``large_scaling.png`` and ``report.md`` into ``out_dir``."""
     out_dir = Path(out_dir)
     write_json(out_dir / "results.json", r)
     plot = _plot(r, out_dir / "large_scaling.png")
-    f = fmt_fixed
     c = r["config"]
     lines = ["# Large terrain — large", "",
              f"Fractal stores (tiled, seamless), {c['frames']} frames at {c['image']}² along "
-             "each path; adaptive at "
-             f"{c['sse']} px; LOD-sprite with keyframes by the adaptive renderer at "
-             f"{c['key_sse']} px (proxy, ribbons and error metric from the store's level 0; "
-             "coarse level of 16² up to 2k², then squares of 128 samples, at most 128²); "
-             f"errors (RMSE in grey levels / mean FLIP) on frames {r['sample_frames']} "
-             "against the reference named per row.  Sprite speedup: adaptive's total time "
-             "over LOD-sprite's at ε = 1 px; at equal RMSE: the fastest LOD-sprite run of "
-             f"ε in {[1.0, *c['sweep_eps']]} whose RMSE is at most adaptive's.  Full "
-             "resolution's median is timed on the sampled frames."]
+             f"each path; adaptive at {c['sse']} px; LOD-sprite with keyframes by the "
+             f"adaptive renderer at {c['key_sse']} px, each variant at ε in {c['eps']} px. "
+             "Timed runs write nothing per frame; errors (RMSE in grey levels / mean FLIP) "
+             f"on frames {r['sample_frames']} of the untimed replay, against the reference "
+             "of each side (below).  Speedups: adaptive's total time over the row's (the "
+             "whole path).  At equal error: the fastest row whose RMSE and FLIP are both at "
+             "most adaptive's; every row measured is in the tables.  First frame: from the "
+             "run's process start."]
     for p in c["paths"]:
-        lines += ["", f"## Path {p}", "", *_table(r, p)]
-    j = r.get("jacksboro")
-    lines += [] if j is None else ["", "## 512² jacksboro, chen1999", "",
-              f"LOD-sprite with adaptive keyframes: {f(r['speedup_sprite_vs_full_512'], 2)}× "
-              f"faster than full resolution (plain LOD-sprite in the same run: "
-              f"{f(j['speedup_plain_sprite'], 2)}×); RMSE against the plain 16² level "
-              f"{f(r['rmse_ratio_sprite_vs_lod_512'], 3)} (plain LOD-sprite "
-              f"{f(j['rmse_ratio_plain_sprite'], 3)}); {j['keyframes']} keyframes of "
-              f"{f(j['mean_ms_keyframe'], 1)} ms, spriteframes {f(j['mean_ms_sprite'], 2)} ms."]
+        lines += ["", f"## Path {p}", "", *path_rows(r, p)]
+    lines += ["", "## At equal error", "", *equal_table(r), "", *_skipped(r),
+              "", "## Reference", "", *reference_table(r),
+              "", "## Memory", "", *memory_lines(r),
+              "", "## Patrol: the keyframe cache", "", *_patrol(r), *_jacksboro(r)]
     h = r["huge"]
     lines += ["", f"65536²: needs up to {f(h['need_gb'], 1)} GB of disk (float32, all levels); "
                   f"{f(h['free_gb'], 1)} GB free here; run with `--huge`.", "",

@@ -1,22 +1,25 @@
-"""``lodsprite reproduce large``: how frame cost, memory and error scale with terrain size
-(fractal stores of 1k², 2k², 4k², 16k², ...), for the adaptive renderer at 1 px and LOD-sprite
-with adaptive keyframes, along the chen1999-shaped path and a low flyover.
+"""``lodsprite reproduce large``: LOD-sprite against the adaptive renderer at equal error
+on large terrain (issue 22, must-have 8): fractal stores of 4k² and 16k² (1k² and 2k²
+for the reference check alone; timed too with ``--full``), along the chen1999-shaped
+path and a low flyover.
 
 Each timed run is :func:`lodsprite.run.render_path` in a process of its own
-(:mod:`lodsprite.experiments.large.child`; so its peak resident memory and time to first
-frame are its own).  The paths: ``chen1999`` (the issue's path; it scales
-with the terrain, so over a large one it flies so high that coarse levels meet 1 px almost
-everywhere) and ``flyover`` (1 km above the ground along 10 km, the same in metres at every
-size).  The reference for the image error is *full resolution*, the store's own level-0
-samples everywhere (the adaptive renderer with every node at level 0, settled), where the
-store fits (sides up to ``FULL_MAX``); beyond, the adaptive renderer at 0.25 px, settled.
-That stand-in is validated against full resolution at every size where both exist (2k² and
-4k² included).  Errors (RMSE in grey levels, and FLIP) are measured on every
-``sample_every``-th frame; full resolution's frame time is measured on those frames too
-(``render --mode full`` on the working grid, the store's samples resampled to
-``(side+1)²``).  LOD-sprite runs at ε = 1 px (the paper's) and at each ``sweep_eps``; the
-comparison at equal error takes the fastest of those runs whose RMSE is at most the
-adaptive renderer's.
+(:mod:`lodsprite.experiments.large.child`: its peak resident memory and time to first
+frame, from the process's start, are its own).  Timed runs write nothing per frame: the
+sampled frames (every ``sample_every``-th) are saved by the untimed replay of the same
+decisions, and their RMSE (grey levels) and FLIP are taken against the reference
+(:mod:`lodsprite.experiments.large.reference`: level 0's own samples; the adaptive
+renderer at 0.25 px where those cannot be drawn, and that stand-in checked against level
+0 at 1k²–4k²).  The paths: ``chen1999`` (it scales with the terrain) and ``flyover``
+(1 km above the ground along 10 km, the same in metres at every size).
+
+Per side and path: the adaptive renderer at ``sse`` (1 px), full resolution timed on the
+sampled frames (up to ``full_max`` a side), and each LOD-sprite variant
+(:data:`~lodsprite.experiments.large.variants.VARIANTS`) at every ε of ``eps``; the
+comparison at equal error (:func:`~lodsprite.experiments.large.variants.equal_error`)
+lists every row.  ``patrol`` compares keyframe work with and without the keyframe cache
+along the ``patrol`` path (skipped, with the reason, where that path or ``cache_mb`` is
+not there).
 """
 
 from __future__ import annotations
@@ -26,27 +29,50 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
-
 from lodsprite.experiments.large.child import render_in_child
+from lodsprite.experiments.large.reference import errors, reference_images, saved_frames
+from lodsprite.experiments.large.variants import (
+    VARIANTS,
+    equal_error,
+    patrol_block,
+    row,
+    unavailable,
+)
 from lodsprite.terrain.store import build_store, estimate_bytes
 
-FULL_MAX = 4096
-FULL_SSE = 1e-6  # px: every node refined to level 0 (full resolution)
 Update = Callable[[str, int, int], None]
 
 
 @dataclass(frozen=True)
 class LargeConfig:
-    sizes: tuple[int, ...] = (1024, 2048, 4096, 16384)
+    """The default run is estimated at about 18-19 minutes here once the three variants
+    run (an estimate, not a measurement: about 15 s a timed run of 120 frames at 256²,
+    10 of them per store and path, references (the 1k² and 2k² checks of the stand-in
+    included), tiling 16k² in about 100 s, patrol and
+    jacksboro; from the 40-minute run of the earlier default and per-run costs measured
+    on a shared, loaded CPU).  It assumes a 16k² LOD-sprite run costs about what a 4k²
+    one does: on this branch one 16k² flyover LOD-sprite run (ε 1) took 468 s to its
+    first frame and had a 14 s p99 on the loaded CPU, reading level-0 chunks for the
+    coarse squares' error metric; until reads stop blocking, the default runs over 20
+    minutes.  Timed runs at 1k² do not fit beside 4k² and 16k² (1k² and 2k² get the
+    stand-in check alone): they are in :meth:`full`, the long sweep; :meth:`quick` is
+    the tests'."""
+
+    sizes: tuple[int, ...] = (4096, 16384)
     paths: tuple[str, ...] = ("chen1999", "flyover")
-    frames: int = 230
-    image: int = 512
+    frames: int = 120
+    image: int = 256
     sse: float = 1.0
     key_sse: float = 0.5
     ref_sse: float = 0.25
-    sample_every: int = 23
-    sweep_eps: tuple[float, ...] = (0.7, 0.5, 0.25)  # LOD-sprite also at these ε (equal error)
+    sample_every: int = 20
+    eps: tuple[float, ...] = (1.0, 0.5, 0.25)  # every LOD-sprite variant at each ε
+    variants: tuple[str, ...] = tuple(VARIANTS)
+    full_max: int = 4096      # full resolution timed up to this side
+    validate_max: int = 4096  # the 0.25 px stand-in checked against level 0 up to this side
+    validate_sizes: tuple[int, ...] = (1024, 2048)  # stores for that check alone, untimed
+    patrol: bool = True       # the keyframe cache along the patrol path
+    patrol_cache_mb: float = 64.0
     huge: bool = False       # also 65536² (needs the disk and time it names)
     quick_512: bool = False  # the jacksboro runs on ``frames`` frames, not the whole path
     jacksboro: bool = True   # the 512² jacksboro comparison (tests leave it out)
@@ -55,7 +81,16 @@ class LargeConfig:
     @classmethod
     def quick(cls) -> LargeConfig:
         return cls(sizes=(256, 512), frames=24, image=128, sample_every=8, quick_512=True,
-                   sweep_eps=(0.5,))
+                   eps=(1.0, 0.5), validate_sizes=())
+
+    @classmethod
+    def full(cls) -> LargeConfig:
+        return cls(sizes=(1024, 2048, 4096, 16384), frames=230, image=512, sample_every=23,
+                   eps=(1.0, 0.7, 0.5, 0.35, 0.25), validate_sizes=())
+
+    @property
+    def sample_frames(self) -> list[int]:
+        return list(range(0, self.frames, self.sample_every))
 
 
 def huge_needs() -> dict:
@@ -63,51 +98,6 @@ def huge_needs() -> dict:
     need = estimate_bytes(65536, 65536, "float32")
     free = shutil.disk_usage(Path.cwd()).free
     return {"need_gb": need / 2 ** 30, "free_gb": free / 2 ** 30}
-
-
-def _frames(folder: Path, keep: list[int]) -> dict[int, np.ndarray]:
-    from lodsprite.api import read_image
-
-    return {i: read_image(folder / "frames" / f"frame_{i:05d}.png") for i in keep}
-
-
-def errors(a: dict, b: dict) -> tuple[float, float]:
-    """Mean RMSE (grey levels) and mean FLIP of the images ``a`` against ``b``."""
-    from lodsprite.metrics import flip, rmse
-
-    return (float(np.mean([rmse(a[i], b[i]) for i in a])),
-            float(np.mean([flip(a[i], b[i]) for i in a])))
-
-
-def reference(store: Path, scene, path, cfg: LargeConfig, keep: list[int],
-              sse: float) -> dict:
-    """The settled adaptive frames at ``sse`` px (``FULL_SSE``: full resolution) of the
-    sampled viewpoints of ``path`` (a :class:`~lodsprite.paths.CameraPath` over
-    ``scene``, the store as ``render`` loads it, for its colours)."""
-    from lodsprite.gl.context import GLContext
-    from lodsprite.gl.target import RenderTarget
-    from lodsprite.gl.terrain import TerrainGeometry
-    from lodsprite.techniques.adaptive_terrain import AdaptiveTerrain
-    from lodsprite.terrain.store import TerrainStore
-
-    full = sse <= FULL_SSE
-    out = {}
-    with GLContext() as gl:
-        t = RenderTarget(gl, cfg.image, cfg.image)
-        geo = TerrainGeometry(gl, scene.hf, scene.texture)
-        # color None: the heights shading, as render colours a store (--shading auto)
-        a = AdaptiveTerrain(gl, TerrainStore(store), t, path.fov_y_deg, sse,
-                            gpu_mb=1024.0 if full else 256.0, host_mb=1024.0 if full else 512.0,
-                            upload_budget=4096 if full else 16, color=None)
-        try:
-            for i in keep:
-                a.settle(path.viewpoints[i])
-                out[i] = t.read_color()
-        finally:
-            a.release()
-            geo.release()
-            t.release()
-    return out
 
 
 def sprite_lod(side: int) -> int:
@@ -121,68 +111,101 @@ def sprite_lod(side: int) -> int:
     return q
 
 
-def run_path(store: Path, n: int, cfg: LargeConfig, path_spec: str, runs: Path) -> dict:
-    """Adaptive, LOD-sprite and the references of one store along one path."""
-    keep = list(range(0, cfg.frames, cfg.sample_every))
-    common = {"path": path_spec, "frames": cfg.frames, "size": [cfg.image, cfg.image],
-              "save_frames": True}
-    lod = {"lod": sprite_lod(n)}
+def _folder(variant: str, eps: float) -> str:
+    return f"{variant.replace('+', '-')}_eps{eps:g}"
+
+
+class PathRuns:
+    """The timed runs of one store along one path, each measured on the sampled frames
+    against ``ref`` (frame index -> reference image)."""
+
+    def __init__(self, store: Path, n: int, cfg: LargeConfig, spec: str, runs: Path,
+                 ref: dict) -> None:
+        self.store, self.n, self.cfg, self.runs, self.ref = store, n, cfg, runs, ref
+        self.keep = sorted(ref)
+        self.common = {"terrain": str(store), "path": spec, "frames": cfg.frames,
+                       "size": [cfg.image, cfg.image], "save_frames": True,
+                       "save_every": cfg.sample_every}
+
+    def timed(self, folder: str, **config) -> tuple[dict, tuple[float, float]]:
+        """One timed run (its summary) and its sampled frames' (RMSE, FLIP)."""
+        s = render_in_child({**self.common, **config}, self.runs / folder)
+        return s, errors(saved_frames(self.runs / folder, self.keep), self.ref)
+
+    def adaptive(self) -> dict:
+        s, q = self.timed("adaptive", mode="adaptive", sse=self.cfg.sse)
+        return {**row(s, q), "sse": self.cfg.sse, "tiles_evicted": s["tiles_evicted"],
+                "gpu_cache_mb": s["gpu_cache_mb"],
+                "first_frame_s_technique": s.get("first_frame_s_technique")}
+
+    def sprite(self, variant: str, eps: float, **extra) -> dict:
+        opts = {**VARIANTS[variant], **extra}
+        s, q = self.timed(_folder(variant, eps), mode="sprite", key_sse=self.cfg.key_sse,
+                          lod=sprite_lod(self.n), epsilon=eps, **opts)
+        return row(s, q, eps, int(opts.get("tiles", 1)))
+
+    def full(self, path) -> dict:
+        """Full resolution timed on the sampled frames (a path file of them), or why not."""
+        sampled = sampled_path(path, self.keep, self.runs / "sampled.json")
+        try:
+            s = render_in_child({"terrain": str(self.store), "mode": "full", "grid": self.n,
+                                 "path": str(sampled), "frames": len(self.keep),
+                                 "size": [self.cfg.image, self.cfg.image]},
+                                self.runs / "full")
+        except RuntimeError as exc:
+            return {"skipped": str(exc)}
+        return {"median_ms": s["median_ms"], "p99_ms": s["p99_ms"], "total_s": s["total_s"],
+                "frames": len(self.keep), "note": "timed on the sampled frames only"}
+
+
+def run_path(store: Path, n: int, cfg: LargeConfig, spec: str, runs: Path
+             ) -> tuple[dict, dict]:
+    """Adaptive, full resolution and every available LOD-sprite variant and ε of one
+    store along one path (results.json's ``sizes[side][path]``), and how its reference
+    was made (``reference[side][path]``)."""
     from lodsprite import get_path, load_scene
 
-    scene = load_scene(str(store))  # once: the references and the sampled path share it
-    path = get_path(path_spec, scene.hf, cfg.frames)
-    ad = render_in_child({"terrain": str(store), "mode": "adaptive", "sse": cfg.sse, **common},
-                         runs / "adaptive")
-    sp = render_in_child({"terrain": str(store), "mode": "sprite", "key_sse": cfg.key_sse,
-                          **lod, **common}, runs / "sprite")
-    res: dict = {}
-    ref = stand_in = reference(store, scene, path, cfg, keep, cfg.ref_sse)
-    res["reference"] = f"adaptive at {cfg.ref_sse} px, settled"
-    if n <= FULL_MAX:
-        ref = reference(store, scene, path, cfg, keep, FULL_SSE)
-        res["reference"] = "full resolution (level 0 everywhere, settled)"
-        res["reference_vs_full_rmse"], res["reference_vs_full_flip"] = errors(stand_in, ref)
-        sampled = sampled_path(path, keep, runs / "sampled.json")
-        fu = render_in_child({"terrain": str(store), "mode": "full", "grid": n,
-                              "path": str(sampled), "frames": len(keep),
-                              "size": [cfg.image, cfg.image]}, runs / "full")
-        res["median_ms_full"] = fu["median_ms"]
-    ea = errors(_frames(runs / "adaptive", keep), ref)
-    es = errors(_frames(runs / "sprite", keep), ref)
-    sweep = [{"epsilon": 1.0, "total_s": sp["total_s"], "median_ms": sp["median_ms"],
-              "keyframes": sp["keyframes"], "rmse": es[0], "flip": es[1]}]
-    for eps in cfg.sweep_eps:
-        folder = runs / f"sprite_eps{eps:g}"
-        s = render_in_child({"terrain": str(store), "mode": "sprite", "key_sse": cfg.key_sse,
-                             "epsilon": eps, **lod, **common}, folder)
-        e = errors(_frames(folder, keep), ref)
-        sweep.append({"epsilon": eps, "total_s": s["total_s"], "median_ms": s["median_ms"],
-                      "keyframes": s["keyframes"], "rmse": e[0], "flip": e[1]})
-    res["sprite_sweep"] = sweep
-    res["equal_error"] = equal_error(sweep, ea[0], ad["total_s"])
-    res.update(
-        median_ms_adaptive=ad["median_ms"],
-        p99_ms_adaptive=float(np.percentile(json_col(runs / "adaptive"), 99)),
-        median_ms_sprite=sp["median_ms"],
-        p99_ms_sprite=float(np.percentile(json_col(runs / "sprite"), 99)),
-        total_s_adaptive=ad["total_s"], total_s_sprite=sp["total_s"],
-        rmse_adaptive=ea[0], flip_adaptive=ea[1], rmse_sprite=es[0], flip_sprite=es[1],
-        peak_rss_mb=ad["peak_rss_mb"], first_frame_s=ad["first_frame_s"],
-        tiles_loaded=ad["tiles_loaded"], tiles_evicted=ad["tiles_evicted"],
-        gpu_cache_mb=ad["gpu_cache_mb"], keyframes_sprite=sp["keyframes"],
-        speedup_sprite_vs_adaptive=ad["total_s"] / sp["total_s"], sprite_lod=sprite_lod(n))
-    return res
+    scene = load_scene(str(store))  # the references' colours and the path
+    path = get_path(spec, scene.hf, cfg.frames)
+    ref, how = reference_images(store, scene, path, cfg.image, cfg.sample_frames,
+                                cfg.ref_sse, validate=n <= cfg.validate_max)
+    del scene
+    p = PathRuns(store, n, cfg, spec, runs, ref)
+    out: dict = {"adaptive": p.adaptive(), "skipped": {}}
+    if n <= cfg.full_max:
+        out["full"] = p.full(path)
+    for name in cfg.variants:
+        why = unavailable(VARIANTS[name])
+        if why:
+            out["skipped"][name] = why
+            continue
+        out[name] = [p.sprite(name, eps) for eps in cfg.eps]
+    return out, how
 
 
-def equal_error(sweep: list[dict], rmse_adaptive: float, total_s_adaptive: float
-                ) -> dict | None:
-    """The fastest LOD-sprite run of ``sweep`` whose RMSE is at most adaptive's, with its
-    speedup over adaptive (total times); None when no ε reaches adaptive's error."""
-    ok = [s for s in sweep if s["rmse"] <= rmse_adaptive]
-    if not ok:
-        return None
-    best = min(ok, key=lambda s: s["total_s"])
-    return {**best, "speedup": total_s_adaptive / best["total_s"]}
+def patrol(store: Path, n: int, cfg: LargeConfig, runs: Path) -> dict:
+    """Keyframe work and speed along the ``patrol`` path with the keyframe cache off
+    (``cache_mb`` 0) and on (``patrol_cache_mb``), whole keyframes at ε 1 px; or the
+    reason it is skipped."""
+    from lodsprite import get_path, load_scene
+
+    why = unavailable({"cache_mb": cfg.patrol_cache_mb})
+    if why:
+        return {"skipped": why}
+    scene = load_scene(str(store))
+    try:
+        path = get_path("patrol", scene.hf, cfg.frames)
+    except Exception as exc:  # noqa: BLE001 - any reason the path is not there is recorded
+        return {"skipped": f"no patrol path on this build ({exc})"}
+    ref, how = reference_images(store, scene, path, cfg.image, cfg.sample_frames,
+                                cfg.ref_sse, validate=False)
+    del scene
+    p = PathRuns(store, n, cfg, "patrol", runs, ref)
+    eps = 1.0
+    off = p.sprite("whole", eps, cache_mb=0.0)
+    on = p.sprite("whole", eps, cache_mb=cfg.patrol_cache_mb)
+    return {"side": n, "epsilon": eps, "reference": how,
+            **patrol_block(off, on, cfg.patrol_cache_mb)}
 
 
 def _store_for(spec: str, stores: Path) -> tuple[Path, dict, int]:
@@ -199,14 +222,45 @@ def _store_for(spec: str, stores: Path) -> tuple[Path, dict, int]:
     return p, built, max(TerrainStore(p).shape(0))
 
 
-def reproduce_large(cfg: LargeConfig, out_dir: Path, update: Update | None = None) -> dict:
-    out_dir = Path(out_dir)
+def _jobs(cfg: LargeConfig) -> list[tuple[str, str]]:
     sizes = list(cfg.sizes) + ([65536] if cfg.huge else [])
-    jobs = [(str(n), f"fractal:{n}:1") for n in sizes] + [(t, t) for t in cfg.terrains]
+    return [(str(n), f"fractal:{n}:1") for n in sizes] + [(t, t) for t in cfg.terrains]
+
+
+def validate_only(cfg: LargeConfig, out_dir: Path) -> dict:
+    """The stand-in checked against level 0 on the stores ``validate_sizes`` that are not
+    timed (``reference[side][path]``, with ``timed`` False)."""
+    from lodsprite import get_path, load_scene
+
+    out: dict = {}
+    for n in (n for n in cfg.validate_sizes if n not in cfg.sizes):
+        store = out_dir / "stores" / f"fractal_{n}.zarr"
+        build_store(f"fractal:{n}:1", store)
+        scene = load_scene(str(store))
+        out[str(n)] = {}
+        for p in cfg.paths:
+            path = get_path(p, scene.hf, cfg.frames)
+            _, how = reference_images(store, scene, path, cfg.image, cfg.sample_frames,
+                                      cfg.ref_sse, validate=True)
+            out[str(n)][p] = {**how, "timed": False}
+    return out
+
+
+def patrol_side(cfg: LargeConfig) -> int:
+    """The fractal side the patrol runs over: the largest at most 4096, else the least."""
+    small = [n for n in cfg.sizes if n <= 4096]
+    return max(small) if small else min(cfg.sizes)
+
+
+def reproduce_large(cfg: LargeConfig, out_dir: Path, update: Update | None = None) -> dict:
+    """Every store of ``cfg`` along every path, the patrol and the 512² jacksboro
+    comparison: results.json's dictionary (module docstring)."""
+    out_dir = Path(out_dir)
+    jobs = _jobs(cfg)
     r: dict = {"config": {k: (list(v) if isinstance(v, tuple) else v)
                           for k, v in cfg.__dict__.items()}, "sizes": {}, "terrains": {},
-               "huge": huge_needs(),
-               "sample_frames": list(range(0, cfg.frames, cfg.sample_every))}
+               "reference": {}, "equal_error_speedup": {}, "huge": huge_needs(),
+               "sample_frames": cfg.sample_frames, "patrol": {"skipped": "not run"}}
     for step, (key, spec) in enumerate(jobs):
         if update:
             update("stores", step, len(jobs))
@@ -215,16 +269,22 @@ def reproduce_large(cfg: LargeConfig, out_dir: Path, update: Update | None = Non
             built = build_store(spec, store)
         else:
             store, built, n = _store_for(spec, out_dir / "stores")
-        tile = {"tile_s": built.get("seconds"), "tile_mb_per_s": built.get("mb_per_s"),
-                "side": n}
         safe = key if key.isdigit() else f"terrain{step}"
-        per_path = {p: run_path(store, n, cfg, p, out_dir / "runs" / safe / p)
-                    for p in cfg.paths}
-        first, *rest = cfg.paths
-        res = {**tile, **per_path[first], **{p: per_path[p] for p in rest}}
+        res: dict = {"side": n, "tile_s": built.get("seconds"),
+                     "tile_mb_per_s": built.get("mb_per_s"), "sprite_lod": sprite_lod(n),
+                     "scene_load": render_in_child({"probe": "scene", "terrain": str(store)},
+                                                   out_dir / "runs" / safe / "scene")}
+        r["reference"][key], r["equal_error_speedup"][key] = {}, {}
+        for p in cfg.paths:
+            res[p], r["reference"][key][p] = run_path(store, n, cfg, p,
+                                                      out_dir / "runs" / safe / p)
+            r["equal_error_speedup"][key][p] = equal_error(res[p])
         (r["sizes"] if spec.startswith("fractal:") else r["terrains"])[key] = res
+        if cfg.patrol and spec.startswith("fractal:") and n == patrol_side(cfg):
+            r["patrol"] = patrol(store, n, cfg, out_dir / "runs" / safe / "patrol")
         if update:
             update("stores", step + 1, len(jobs))
+    r["reference"].update(validate_only(cfg, out_dir))
     if cfg.jacksboro:
         r.update(_jacksboro(cfg, out_dir))
     return r
@@ -268,10 +328,3 @@ def sampled_path(path, keep: list[int], file: Path) -> Path:
     CameraPath("sampled", tuple(path.viewpoints[i] for i in keep), path.fov_y_deg
                ).to_json(file)
     return file
-
-
-def json_col(folder: Path, column: str = "ms") -> list[float]:
-    import csv
-
-    with open(folder / "frames.csv") as f:
-        return [float(row[column]) for row in csv.DictReader(f)]

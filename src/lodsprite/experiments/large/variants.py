@@ -1,0 +1,91 @@
+"""The LOD-sprite variants ``reproduce large`` runs, the rows it keeps of each run, and
+the comparison with the adaptive renderer at equal error (issue 22, must-have 8).
+
+A variant is a set of technique options (:data:`VARIANTS`); one whose options the
+``sprite-adaptive`` technique or :class:`~lodsprite.run.RenderConfig` does not know is
+skipped with the reason (:func:`unavailable`), so the experiment runs on a branch that
+has not got them and picks them up once they are there.
+
+Equal error (:func:`equal_error`): among every LOD-sprite row of every variant and ε,
+those whose RMSE *and* FLIP are at most adaptive's at 1 px; the best is the one with the
+highest speedup in total time (``total_s``: adaptive's over the row's, the whole path
+each).  Every row is reported with its speedup and whether it is within both bounds.
+"""
+
+from __future__ import annotations
+
+from dataclasses import fields
+from typing import Any
+
+#: The LOD-sprite variants: name -> the technique options that make it.
+VARIANTS: dict[str, dict[str, Any]] = {
+    "whole": {},
+    "tiled": {"tiles": 4},
+    "tiled+cache": {"tiles": 4, "cache_mb": 64},
+}
+TIME_KEY = "total_s"  # what the speedups compare: the whole path's time
+#: What a row keeps of a run's summary.json, where the run has it.
+ROW_KEYS = ("median_ms", "p99_ms", "total_s", "first_frame_s", "peak_rss_mb", "tiles_loaded",
+            "tiles_bad", "reader_restarts", "cache_hits")
+
+
+def unavailable(options: dict[str, Any]) -> str | None:
+    """Why a LOD-sprite run with ``options`` cannot be made here (an option the
+    ``sprite-adaptive`` technique or RenderConfig does not know yet), or None."""
+    from lodsprite import techniques
+    from lodsprite.run import RenderConfig
+
+    known = set(techniques.get("sprite-adaptive").defaults())
+    config = {f.name for f in fields(RenderConfig)}
+    missing = sorted(k for k in options if k not in known or k not in config)
+    if missing:
+        return (f"the sprite-adaptive technique takes no option {', '.join(missing)} on "
+                "this build")
+    return None
+
+
+def row(summary: dict, quality: tuple[float, float], epsilon: float | None = None,
+        tiles: int = 1) -> dict:
+    """One row of results.json from a run's ``summary`` and its ``(rmse, flip)``:
+    ``median_ms, p99_ms, rmse, flip, epsilon, keyframes, tiles_rendered`` and the
+    :data:`ROW_KEYS` the run has.  ``tiles_rendered`` where the run does not count it:
+    its keyframes times ``tiles`` squared (a whole keyframe is every tile)."""
+    keyframes = summary.get("keyframes")
+    rendered = summary.get("tiles_rendered")
+    if rendered is None and keyframes is not None:
+        rendered = int(keyframes) * tiles * tiles
+    out = {"epsilon": epsilon, "keyframes": keyframes, "tiles_rendered": rendered,
+           "rmse": quality[0], "flip": quality[1]}
+    out.update({k: summary[k] for k in ROW_KEYS if k in summary})
+    return out
+
+
+def sprite_rows(per_path: dict) -> list[tuple[str, dict]]:
+    """``(variant, row)`` for every LOD-sprite row of one side and path."""
+    return [(name, r) for name in VARIANTS for r in per_path.get(name, [])]
+
+
+def equal_error(per_path: dict) -> dict:
+    """The comparison at equal error of one side and path (``per_path``: ``adaptive`` and
+    the variants' rows): every row with its speedup over adaptive (:data:`TIME_KEY`) and
+    ``within`` (RMSE and FLIP both at most adaptive's), and ``best``: the fastest row
+    within, or None when no row is."""
+    ad = per_path["adaptive"]
+    rows = [{"variant": name, "epsilon": r["epsilon"], "rmse": r["rmse"], "flip": r["flip"],
+             "speedup": ad[TIME_KEY] / r[TIME_KEY],
+             "within": r["rmse"] <= ad["rmse"] and r["flip"] <= ad["flip"]}
+            for name, r in sprite_rows(per_path)]
+    ok = [r for r in rows if r["within"]]
+    return {"time": TIME_KEY, "adaptive_rmse": ad["rmse"], "adaptive_flip": ad["flip"],
+            "best": max(ok, key=lambda r: r["speedup"]) if ok else None, "rows": rows}
+
+
+def patrol_block(without: dict, cached: dict, cache_mb: float) -> dict:
+    """The patrol comparison from its two rows (``cache_mb`` 0 and ``cache_mb``):
+    keyframe work (keyframes and tiles rendered) and speed with and without the cache,
+    and how many times less keyframe work the cache does."""
+    work = "tiles_rendered" if without.get("tiles_rendered") else "keyframes"
+    cut = (without[work] / cached[work]) if cached.get(work) else None
+    return {"cache_mb": cache_mb, "without_cache": without, "with_cache": cached,
+            "work": work, "keyframe_work_cut": cut,
+            "speedup": without[TIME_KEY] / cached[TIME_KEY]}

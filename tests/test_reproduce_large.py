@@ -1,0 +1,225 @@
+"""``reproduce large`` (issue 22, must-have 8): the schema of results.json, the rows being
+the runs' own, the comparison at equal error consistent with the rows, variants the build
+lacks skipped with their reason, and timed runs that save only the sampled frames."""
+
+from __future__ import annotations
+
+import csv
+import json
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from lodsprite.experiments.large.variants import VARIANTS, equal_error, row, unavailable
+
+ROW = ("median_ms", "p99_ms", "rmse", "flip", "epsilon", "keyframes", "tiles_rendered",
+       "total_s", "first_frame_s", "peak_rss_mb", "tiles_loaded", "tiles_bad",
+       "reader_restarts")
+EPS = (1.0, 0.5)
+
+
+def _rows(folder) -> list[dict]:
+    with open(folder / "frames.csv") as f:
+        return list(csv.DictReader(f))
+
+
+@pytest.fixture(scope="module")
+def large(tmp_path_factory):
+    from lodsprite.experiments.large.report import write_outputs
+    from lodsprite.experiments.large.run import LargeConfig, reproduce_large
+
+    out = tmp_path_factory.mktemp("large")
+    cfg = LargeConfig(sizes=(256,), frames=6, image=48, sample_every=3, jacksboro=False,
+                      eps=EPS, validate_sizes=(128, 256))
+    r = reproduce_large(cfg, out)
+    write_outputs(r, out)
+    return out, json.loads((out / "results.json").read_text())
+
+
+def test_results_hold_every_row_of_every_run_with_the_schemas_keys(large):
+    out, r = large
+    assert r["sample_frames"] == [0, 3] and list(r["sizes"]) == ["256"]
+    v = r["sizes"]["256"]
+    assert v["side"] == 256 and v["sprite_lod"] == 16
+    assert v["scene_load"]["grid"] >= 256 and v["scene_load"]["scene_load_mb"] >= 0
+    for p in ("chen1999", "flyover"):
+        res, runs = v[p], out / "runs" / "256" / p
+        assert set(ROW) <= set(res["adaptive"]) and res["adaptive"]["epsilon"] is None
+        assert "median_ms" in res["full"]
+        for name in VARIANTS:  # each variant: one row an ε, or skipped with its reason
+            if name in res["skipped"]:
+                assert "takes no option" in res["skipped"][name] and name not in res
+                continue
+            assert [x["epsilon"] for x in res[name]] == list(EPS), (p, name)
+            for x in res[name]:
+                assert set(ROW) <= set(x)
+                assert x["tiles_rendered"] >= x["keyframes"] >= 1
+        assert "whole" in res  # whole keyframes run on every build
+        # the rows are the runs' own: medians from their frames (6 digits in the csv)
+        ms = np.array([float(x["ms"]) for x in _rows(runs / "adaptive")])
+        assert len(ms) == 6 and res["adaptive"]["median_ms"] == pytest.approx(
+            np.median(ms), rel=1e-4)
+        ms = np.array([float(x["ms"]) for x in _rows(runs / "whole_eps0.5")])
+        assert res["whole"][1]["median_ms"] == pytest.approx(np.median(ms), rel=1e-4)
+        # timed runs write nothing per frame: the replay saved the sampled frames only
+        saved = sorted(q.name for q in (runs / "adaptive" / "frames").glob("*.png"))
+        assert saved == ["frame_00000.png", "frame_00003.png"]
+        # first frame from the process's start: after the imports and the scene load
+        a = res["adaptive"]
+        assert a["first_frame_s"] > a["first_frame_s_technique"] > 0
+        assert a["tiles_bad"] == 0 and a["reader_restarts"] == 0 and a["tiles_loaded"] > 0
+        # a 256² store on 48² pixels is level 0 wherever 1 px asks (measured 0.0 RMSE)
+        assert 0 <= a["rmse"] < 0.5 and 0 <= a["flip"] < 0.01
+        assert 0 <= res["whole"][0]["rmse"] < 8 and 0 <= res["whole"][0]["flip"] < 0.05
+
+
+def test_the_reference_of_each_side_is_named_and_its_stand_in_checked(large):
+    _, r = large
+    for p in ("chen1999", "flyover"):
+        d = r["reference"]["256"][p]
+        assert d["level0_frames"] == 2 and d["stand_in_frames"] == 0
+        assert "0.25 px" in d["stand_in"] and d["level0"]
+        # the 0.25 px stand-in at 256² on 48² pixels is level 0 (measured 0.0, 0.0)
+        assert 0 <= d["stand_in_rmse"] < 0.5 and 0 <= d["stand_in_flip"] < 0.01
+        # a side checked without timed runs (256 is timed: not checked twice)
+        check = r["reference"]["128"][p]
+        assert check["timed"] is False and check["level0_frames"] == 2
+        assert 0 <= check["stand_in_rmse"] < 0.5 and "timed" not in d
+    assert list(r["reference"]) == ["256", "128"] and "128" not in r["sizes"]
+
+
+def test_equal_error_is_the_one_the_rows_give_and_patrol_says_what_it_did(large):
+    out, r = large
+    for p in ("chen1999", "flyover"):
+        e = r["equal_error_speedup"]["256"][p]
+        assert e == json.loads(json.dumps(equal_error(r["sizes"]["256"][p])))
+        assert e["time"] == "total_s" and len(e["rows"]) == sum(
+            len(r["sizes"]["256"][p].get(name, [])) for name in VARIANTS)
+    pt = r["patrol"]
+    assert isinstance(pt.get("skipped"), str) or {"without_cache", "with_cache",
+                                                  "keyframe_work_cut"} <= set(pt)
+    report = (out / "report.md").read_text()
+    for heading in ("## Path flyover", "## At equal error", "## Reference", "## Memory",
+                    "## Patrol"):
+        assert heading in report
+    assert report.count("| 256² | whole |") == 2 * len(EPS)  # every ε row, both paths
+    assert report.count("| 128² (check only, no timed runs) |") == 2
+    assert (out / "large_scaling.png").stat().st_size > 2000
+
+
+def _row(rmse: float, flip: float, total: float) -> dict:
+    return {"rmse": rmse, "flip": flip, "total_s": total}
+
+
+ERR = st.floats(0.0, 10.0, allow_nan=False)
+SPRITE = st.tuples(ERR, st.floats(0.0, 1.0), st.floats(0.01, 100.0))
+
+
+@settings(max_examples=200, deadline=None)
+@given(ad=st.tuples(ERR, st.floats(0.0, 1.0), st.floats(0.01, 100.0)),
+       rows=st.dictionaries(st.sampled_from(list(VARIANTS)), st.lists(SPRITE, max_size=4)))
+def test_the_chosen_row_is_within_both_bounds_and_the_fastest_such(ad, rows):
+    per_path = {"adaptive": _row(*ad)}
+    for name, rs in rows.items():
+        per_path[name] = [{**_row(*x), "epsilon": 1.0 / (k + 1)} for k, x in enumerate(rs)]
+    e = equal_error(per_path)
+    assert len(e["rows"]) == sum(len(rs) for rs in rows.values())  # every row reported
+    within = [x for x in e["rows"] if x["rmse"] <= ad[0] and x["flip"] <= ad[1]]
+    assert [x["within"] for x in e["rows"]] == [x in within for x in e["rows"]]
+    if not within:
+        assert e["best"] is None
+        return
+    b = e["best"]
+    assert b["rmse"] <= ad[0] and b["flip"] <= ad[1]
+    assert b["speedup"] == max(x["speedup"] for x in within)
+    src = next(x for x in per_path[b["variant"]] if x["epsilon"] == b["epsilon"])
+    assert b["speedup"] == pytest.approx(ad[2] / src["total_s"])
+    assert all(src["total_s"] <= x["total_s"] for rs in rows.values() for x in
+               (_row(*y) for y in rs) if x["rmse"] <= ad[0] and x["flip"] <= ad[1])
+
+
+def test_a_variant_whose_option_the_technique_lacks_is_skipped_with_the_reason():
+    assert unavailable({}) is None
+    assert unavailable({"lod": 16, "epsilon": 0.5}) is None
+    why = unavailable({"no_such_option": 1, "lod": 16})
+    assert "no_such_option" in why and "lod" not in why
+
+
+def test_a_row_counts_whole_keyframes_as_every_tile():
+    s = {"keyframes": 3, "median_ms": 1.0, "p99_ms": 2.0, "total_s": 0.5, "other": 1}
+    x = row(s, (1.5, 0.02), 0.5, tiles=4)
+    assert x["tiles_rendered"] == 48 and x["epsilon"] == 0.5 and "other" not in x
+    assert row({**s, "tiles_rendered": 7}, (0.0, 0.0), 1.0, 4)["tiles_rendered"] == 7
+
+
+def test_reader_restarts_are_the_restarts_the_reader_had():
+    from lodsprite.techniques.adaptive import process_age_s, reader_restarts
+
+    def terrain(loader):
+        return SimpleNamespace(loader=loader)
+
+    w = SimpleNamespace(deaths=5, restarts=3)
+    assert reader_restarts(terrain(SimpleNamespace(worker=w))) == 3
+    w.deaths = 1
+    assert reader_restarts(terrain(SimpleNamespace(worker=w))) == 1
+    assert reader_restarts(terrain(SimpleNamespace())) == 0  # in-memory: no reader
+    with open("/proc/uptime") as f:
+        assert 0 < process_age_s() < float(f.read().split()[0])
+
+
+def test_quick_default_and_full_are_three_configs_and_save_every_is_checked():
+    from lodsprite import experiments
+    from lodsprite.errors import InputError
+    from lodsprite.experiments import Options
+    from lodsprite.run import RenderConfig
+
+    e = experiments.get("large")
+    quick, default, full = (e.configure(Options(quick=q, full=f))
+                            for q, f in ((True, False), (False, False), (False, True)))
+    assert quick.sizes == (256, 512) and {4096, 16384} <= set(default.sizes)
+    assert len(full.eps) > len(default.eps) and full.frames > default.frames
+    with pytest.raises(InputError, match="--quick and --full"):
+        e.configure(Options(quick=True, full=True))
+    with pytest.raises(InputError, match="save_every"):
+        RenderConfig(save_every=0).validate()
+
+
+def test_the_level_zero_reference_is_used_where_it_draws_and_the_stand_in_elsewhere(
+        tmp_path, monkeypatch):
+    """The measure part's LevelZeroReference interface: ``image()`` None beyond its cap
+    takes the 0.25 px stand-in for that frame; the stand-in is checked against the frames
+    it does draw."""
+    from lodsprite import get_path, load_scene
+    from lodsprite.experiments.large import reference
+    from lodsprite.terrain.store import build_store
+
+    made = []
+
+    class Fake:
+        def __init__(self, ctx, store, size, fov_y_deg, shading):
+            made.append((size, shading))
+            self.size = size
+
+        def image(self, viewpoint, projection=None):
+            return None if viewpoint is path.viewpoints[3] else np.zeros(
+                (self.size[1], self.size[0], 3), np.uint8)
+
+        def describe(self):
+            return "fake level 0"
+
+    import lodsprite.gl.reference as glref
+
+    monkeypatch.setattr(glref, "LevelZeroReference", Fake)
+    store = tmp_path / "s.zarr"
+    build_store("fractal:128:1", store)
+    scene = load_scene(str(store))
+    path = get_path("chen1999", scene.hf, 6)
+    ref, how = reference.reference_images(store, scene, path, 32, [0, 3], 0.25, True)
+    assert made == [((32, 32), "auto")] and how["level0"] == "fake level 0"
+    assert how["level0_frames"] == 1 and how["stand_in_frames"] == 1
+    assert not ref[0].any() and ref[3].any()  # frame 3 is the stand-in's terrain and sky
+    # the stand-in against the (black) level-0 frame: its own mean grey level, not 0
+    assert how["stand_in_rmse"] > 10
