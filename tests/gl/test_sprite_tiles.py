@@ -173,3 +173,33 @@ def test_the_viewer_flies_tiled_lod_sprite(gl):
     finally:
         core.release()
         target.release()
+
+
+@pytest.mark.parametrize("metric", ["warp", "resample"])
+def test_one_tile_measures_the_whole_keyframes_error(build, metric):
+    # One tile is a whole keyframe: its error at a second view equals the whole keyframe's
+    # (the policy's C', resampling term through the keyframe's view and size included)
+    # within 2 %; the resampling metric measures more than the warp alone there.
+    from lodsprite.sprite.metric import ErrorMetric
+    from lodsprite.sprite.policy import keyframe_error_px
+
+    sp = build()
+    eng = TiledSpriteEngine(sp, 1.0, 1, metric=metric)
+    try:
+        eng.frame(VP)
+        tiled = float(eng.errors(VP2)[0][0])
+    finally:
+        eng.release()
+    proj = sp.terrain.projection(VP)
+    key_view_proj = sp.key_projection(proj).matrix() @ VP.view_matrix()
+    metric_ = ErrorMetric.for_level(sp.terrain.geometry.full, sp.coarse_quads,
+                                    metric == "resample")
+    c_prime = metric_.reproject(VP.o, key_view_proj, sp.key_size)
+    whole = keyframe_error_px(metric_, c_prime, VP2, sp.terrain.projection(VP2),
+                              sp.target.height)
+    assert 0 < whole < 1e3
+    assert tiled == pytest.approx(whole, rel=0.02)
+    if metric == "resample":
+        warp = ErrorMetric.for_level(sp.terrain.geometry.full, sp.coarse_quads)
+        assert whole > keyframe_error_px(warp, warp.reproject(VP.o), VP2,
+                                         sp.terrain.projection(VP2), sp.target.height)

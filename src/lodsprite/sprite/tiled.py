@@ -98,15 +98,19 @@ def serving_tiles(points_h: np.ndarray, view_projs: np.ndarray, rects: np.ndarra
 
 def tile_errors(metric: ErrorMetric, c_primes: list, key_view_projs: np.ndarray,
                 rects: np.ndarray, eye: np.ndarray, view_proj: np.ndarray,
-                key_view_proj: np.ndarray, pixel_angle_rad: float
-                ) -> tuple[np.ndarray, np.ndarray]:
+                key_view_proj: np.ndarray, pixel_angle_rad: float,
+                size: tuple[int, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """``(errors (T,) px, served (T,) samples)`` of the tiles at the current view.
 
     ``c_primes``: each tile's ``C'`` (``(n*n, 3)``, a Reprojection; None: never rendered,
     error ``inf``); ``key_view_projs (T, 4, 4)``: each tile's key view-projection;
     ``rects (T, 4)``: NDC rectangles; ``view_proj``: the current frame's;
     ``key_view_proj``: the key projection at the current viewpoint (where samples no tile
-    serves are charged); ``pixel_angle_rad``: β.  Module docstring for the rule.
+    serves are charged); ``pixel_angle_rad``: β; ``size = (w, h)``: the current image's
+    pixels, needed when ``metric.resampling`` (each tile's ``C'`` then carries its key
+    view-projection and key size, :func:`reproject_in_key_view`, and every hit's θ² gains
+    the resampling term of :mod:`lodsprite.sprite.resampling` through that tile's key
+    view).  Module docstring for the rule.
     """
     t = len(rects)
     errors = np.full(t, math.inf)
@@ -128,37 +132,45 @@ def tile_errors(metric: ErrorMetric, c_primes: list, key_view_projs: np.ndarray,
         if served[i] < MIN_SAMPLES:
             key = id(c_primes[i])
             if key not in whole:
-                whole[key] = metric.error_px(c_primes[i], eye, view_proj, pixel_angle_rad)
+                whole[key] = metric.error_px(c_primes[i], eye, view_proj, pixel_angle_rad,
+                                             size=size)
             errors[i] = whole[key]
             continue
         idx = vis[mine]
-        th = angles_at_eye(eye, metric.squares.centres[idx], np.asarray(c_primes[i])[idx])
+        cp = np.asarray(c_primes[i])[idx]
+        th = angles_at_eye(eye, metric.squares.centres[idx], cp)
         missed = getattr(c_primes[i], "missed", None)
         missed = np.zeros(len(idx), bool) if missed is None else missed[idx].copy()
         gone = lost[mine]
         th[gone], missed[gone] = np.pi, True
         if missed.all():
             continue  # nothing this tile draws: inf
+        if getattr(metric, "resampling", False):
+            th = metric._with_resampling(th, missed, cp, c_primes[i], view_proj,
+                                         pixel_angle_rad, size)
         th = miss_floor(th, missed)
         errors[i] = float(np.sqrt(np.mean(th * th)) / pixel_angle_rad)
     return errors, served
 
 
 def reproject_in_key_view(metric: ErrorMetric, key_eye: np.ndarray,
-                          key_view_proj: np.ndarray) -> Reprojection:
+                          key_view_proj: np.ndarray,
+                          key_size: tuple[int, int] | None = None) -> Reprojection:
     """``C'`` of a tile update (:class:`~lodsprite.sprite.raycast.Reprojection`, ``(n*n,
     3)``) computed only for the centres inside its key view ``key_view_proj (4, 4)``: no
     tile of the update serves the others.  They count as misses (``C' = C``, floored to
     the worst hit by :func:`~lodsprite.sprite.metric.miss_floor`) should the whole-view
     error of a tile serving few samples meet them.  Ray casting grazing rays to centres
-    behind or beside a low keyframe eye was most of the cost of a full ``C'``."""
+    behind or beside a low keyframe eye was most of the cost of a full ``C'``.  The
+    Reprojection carries ``key_view_proj`` and ``key_size = (w, h)`` (the keyframe target's
+    pixels, guard band included) for the resampling term."""
     sq = metric.squares
     vis = np.flatnonzero(in_view(metric._centres_h, key_view_proj))
     c_prime = sq.centres.astype(np.float64).copy()
     missed = np.ones(len(c_prime), bool)
     if vis.size:
         c_prime[vis], missed[vis] = reproject_points(sq, key_eye, sq.centres[vis], vis)
-    return Reprojection(c_prime, key_eye, missed)
+    return Reprojection(c_prime, key_eye, missed, key_view_proj, key_size)
 
 
 def combined_error(errors: np.ndarray, served: np.ndarray) -> float:

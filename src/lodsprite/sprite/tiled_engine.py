@@ -28,7 +28,7 @@ from lodsprite.gl.sprite import SpriteRenderer
 from lodsprite.gl.sprite_tiles import TileDrawer, TiledSpriteRenderer
 from lodsprite.sprite.engine import SpriteFrame
 from lodsprite.sprite.metric import ErrorMetric
-from lodsprite.sprite.policy import KEYFRAME, SPRITE, KeyChoice
+from lodsprite.sprite.policy import KEYFRAME, SPRITE, KeyChoice, resampling_metric
 from lodsprite.sprite.tiled import (
     TILES,
     combined_error,
@@ -50,10 +50,12 @@ class TiledSpriteEngine:
     :attr:`updates` lists every viewpoint tiles were rendered from (a
     :class:`~lodsprite.sprite.policy.KeyChoice`); :attr:`mosaic` gives, per tile, the
     index in it of the update the tile shows now; :attr:`last_tiles` the tiles the last
-    frame re-rendered.  :attr:`drawer` draws a tile's terrain (None: full resolution)."""
+    frame re-rendered.  :attr:`drawer` draws a tile's terrain (None: full resolution).
+    ``metric``: ``"warp"`` (Eq. 1-2) or ``"resample"`` (the resampling term added per tile,
+    through each tile's key view: :func:`~lodsprite.sprite.tiled.tile_errors`)."""
 
     def __init__(self, sprite: SpriteRenderer, epsilon_px: float, tiles: int,
-                 tile_budget_ms: float = DEFAULT_TILE_BUDGET_MS) -> None:
+                 tile_budget_ms: float = DEFAULT_TILE_BUDGET_MS, metric: str = "warp") -> None:
         if not epsilon_px > 0:
             raise InputError(f"error threshold epsilon must be > 0 pixels, got {epsilon_px}")
         if not tile_budget_ms >= 0:
@@ -65,7 +67,8 @@ class TiledSpriteEngine:
         self.tiles = tiles
         self.epsilon_px = float(epsilon_px)
         self.tile_budget_ms = float(tile_budget_ms)
-        self.metric = ErrorMetric.for_level(sprite.terrain.geometry.full, sprite.coarse_quads)
+        self.metric = ErrorMetric.for_level(sprite.terrain.geometry.full, sprite.coarse_quads,
+                                            resampling_metric(metric))
         count = self.tiled.count
         self.c_primes: list = [None] * count
         self.costs_ms = np.zeros(count)
@@ -96,7 +99,7 @@ class TiledSpriteEngine:
         key = s.key_projection(projection)
         return tile_errors(self.metric, self.c_primes, self.tiled.view_projs, self.tiled.ndc,
                            viewpoint.o, view_proj, key.matrix() @ viewpoint.view_matrix(),
-                           projection.pixel_angle_rad(s.target.height))
+                           projection.pixel_angle_rad(s.target.height), s.target.size)
 
     def render_tiles(self, chosen: Iterable[int], key: KeyChoice,
                      drawer: TileDrawer | None = None, measure: bool = True) -> int:
@@ -136,7 +139,8 @@ class TiledSpriteEngine:
                 self.after_tiles(viewpoint, s.key_projection(projection))
             key_proj = s.key_projection(projection)
             c_prime = reproject_in_key_view(self.metric, viewpoint.o,
-                                            key_proj.matrix() @ viewpoint.view_matrix())
+                                            key_proj.matrix() @ viewpoint.view_matrix(),
+                                            s.key_size)
             for i in chosen:
                 self.c_primes[i] = c_prime
                 errors[i] = 0.0

@@ -156,7 +156,7 @@ class SpriteTechnique(Technique):
         if tiles > 1:
             try:
                 self.tiled = TiledSpriteEngine(self.sprite.sprite, epsilon, tiles,
-                                               tile_budget_ms)
+                                               tile_budget_ms, metric)
             except BaseException:
                 self.sprite.release()
                 raise
