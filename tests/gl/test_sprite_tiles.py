@@ -107,6 +107,17 @@ def test_the_replay_reproduces_the_timed_mosaic(build):
         eng.release()
 
 
+def _fly(t, viewpoints) -> tuple[list, list, list]:
+    """Warm ``t`` up, then fly it: ``(frames, images, decisions)``."""
+    t.warm_up(viewpoints[0])
+    frames, shown, decisions = [], [], []
+    for vp in viewpoints:
+        frames.append(t.frame(vp))
+        shown.append(t.read_image())
+        decisions.append(t.decision())
+    return frames, shown, decisions
+
+
 @pytest.mark.parametrize("name", ["sprite", "sprite-adaptive"])
 def test_the_technique_replay_draws_the_timed_mosaic(gl, name):
     # Through the registry, in-memory and adaptive keyframes: each frame's image equals
@@ -119,12 +130,7 @@ def test_the_technique_replay_draws_the_timed_mosaic(gl, name):
         t = techniques.create(name, renderer, **techniques.get(name).bind(
             {"lod": 8, "epsilon": 0.5, "key_sse": 1.0, "tiles": 2, "tile_budget_ms": 0.0}))
         try:
-            t.warm_up(path.viewpoints[0])
-            frames, shown, decisions = [], [], []
-            for vp in path.viewpoints:
-                frames.append(t.frame(vp))
-                shown.append(t.read_image())
-                decisions.append(t.decision())
+            frames, shown, decisions = _fly(t, path.viewpoints)
             assert frames[0].kind == KEYFRAME and frames[0].extra["tiles"] == 4
             assert TILES in {f.kind for f in frames}
             s = t.summary(frames)
@@ -203,3 +209,62 @@ def test_one_tile_measures_the_whole_keyframes_error(build, metric):
         warp = ErrorMetric.for_level(sp.terrain.geometry.full, sp.coarse_quads)
         assert whole > keyframe_error_px(warp, warp.reproject(VP.o), VP2,
                                          sp.terrain.projection(VP2), sp.target.height)
+
+
+def test_the_tile_cache_serves_the_best_render_back_and_replays_it(build):
+    # Tiles from VP, all re-rendered at VP2 (ε tiny, budget ample), then back at VP: every
+    # tile shows its cached VP render (copied back into the mosaic) instead of a new one,
+    # the image equals its replay (tiles re-rendered from VP) and the spriteframe of an
+    # engine without a cache with every tile from VP; the cache stays within its budget.
+    sp = build()
+    eng = TiledSpriteEngine(sp, 0.02, 2, tile_budget_ms=1e4, cache_mb=1.0)
+    plain = TiledSpriteEngine(sp, 0.02, 2, tile_budget_ms=1e4)
+    try:
+        assert eng.frame(VP).type == KEYFRAME
+        assert eng.frame(VP2).type == KEYFRAME and list(eng.mosaic) == [1] * 4
+        f = eng.frame(VP)
+        assert f.type != KEYFRAME and eng.last_tiles == ()
+        assert list(eng.mosaic) == [0] * 4 and eng.cache_tiles == 4
+        assert f.error_px < 0.02
+        timed = eng.read_image()
+        assert eng.cache.resident_bytes <= eng.cache.budget_bytes
+        assert eng.cache.resident == 8
+        again = eng.replay(VP, eng.mosaic.copy(), False, np.full(4, 1))
+        plain.frame(VP)
+        plain.tiled.render_spriteframe(VP)
+        fresh = sp.target.read_color()
+    finally:
+        eng.release()
+        plain.release()
+    assert np.array_equal(again, timed)
+    assert np.array_equal(fresh, timed)
+
+
+@pytest.mark.parametrize("name", ["sprite", "sprite-adaptive"])
+def test_tiled_cache_through_the_registry_replays_and_hits(gl, name):
+    # tiles + cache_mb + metric resample through the registry on the patrol path (back and
+    # forth): some tiles are served from the cache (cache_hits > 0), fewer tiles are
+    # rendered than without the cache, and every frame equals its replay.
+    from lodsprite import Renderer, get_path, load_scene, techniques
+
+    scene = load_scene("fractal:64:3", grid=64)
+    path = get_path("patrol", scene.hf, 16)
+    rendered = {}
+    with Renderer(scene, (64, 64), ctx=gl.mgl) as renderer:
+        for mb in (0.0, 4.0):
+            t = techniques.create(name, renderer, **techniques.get(name).bind(
+                {"lod": 8, "epsilon": 0.5, "key_sse": 1.0, "tiles": 2, "tile_budget_ms": 0.0,
+                 "cache_mb": mb, "metric": "resample"}))
+            try:
+                frames, shown, decisions = _fly(t, path.viewpoints)
+                s = t.summary(frames)
+                rendered[mb] = s["tiles_rendered"]
+                if mb:
+                    assert s["cache_hits"] > 0 and s["cache_keyframes"] >= 4
+                    assert t.tiled.cache.resident_bytes <= mb * 2 ** 20
+                for i in [7, 0, 15, 3, 12]:
+                    assert np.array_equal(t.replay(path.viewpoints[i], decisions[i]),
+                                          shown[i]), i
+            finally:
+                t.release()
+    assert rendered[4.0] < rendered[0.0], rendered

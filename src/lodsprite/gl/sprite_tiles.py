@@ -183,7 +183,6 @@ class TiledSpriteRenderer:
         widened one), scissored to its rectangle, the terrain culled by ``cull (4, 4)``
         (the tile's sub-frustum, :func:`lodsprite.sprite.tiled.sub_view_proj`); its coarse
         z-buffer too (``coarse`` rule).  Issues GL work only (no finish)."""
-        view_proj = projection.matrix() @ viewpoint.view_matrix()
         box = scissor_rect(self.rects[tile])
         drawer = drawer or self.default_drawer
         try:
@@ -195,9 +194,14 @@ class TiledSpriteRenderer:
         finally:
             self.target.fbo.scissor = None
             self.coarse.fbo.scissor = None
-        self.viewpoints[tile], self.projections[tile] = viewpoint, projection
-        self.view_projs[tile] = view_proj
+        self.set_tile(tile, viewpoint, projection)
         return stats
+
+    def set_tile(self, tile: int, viewpoint: Viewpoint, projection: Projection) -> None:
+        """Tile ``tile`` now holds a render from ``viewpoint`` through the key
+        ``projection`` (after :meth:`render_tile`, or a cached render copied in)."""
+        self.viewpoints[tile], self.projections[tile] = viewpoint, projection
+        self.view_projs[tile] = projection.matrix() @ viewpoint.view_matrix()
 
     def keyframe_color(self) -> np.ndarray:
         """The tiled keyframe image without its guard band, ``(H, W, 3) uint8``, row 0 at
@@ -236,6 +240,70 @@ class TiledSpriteRenderer:
             vao.release()
         self._vaos.clear()
         self.program.release()
+
+
+class TileSlots:
+    """A pool of GPU copies of tile renders (the tiled keyframe cache's storage,
+    :mod:`lodsprite.sprite.tile_cache`): slot ``(tile, k)`` holds a colour + depth target
+    and a coarse-depth target of the tile's size, made when first stored into.  The
+    mosaic (``mosaic``, ``coarse``: the tiled renderer's targets) holds the render each
+    tile shows; :meth:`store` copies a tile's rectangle from it into a slot and
+    :meth:`load` back, GPU-side through one pixel buffer (nothing is read to the host)."""
+
+    def __init__(self, ctx, mosaic: RenderTarget, coarse: RenderTarget,
+                 rects: np.ndarray) -> None:
+        self.ctx, self.mosaic, self.coarse = ctx, mosaic, coarse
+        self.rects = np.asarray(rects)
+        self.slots: dict[tuple[int, int], tuple[RenderTarget, RenderTarget]] = {}
+        w, h = (self.rects[:, 2:] - self.rects[:, :2]).max(axis=0)
+        self._buffer = ctx.mgl.buffer(reserve=int(w * h * 4))
+
+    @staticmethod
+    def tile_bytes(rect: np.ndarray) -> int:
+        """GPU bytes of one slot of the tile ``rect (x0, y0, x1, y1)``: RGBA8 colour, its
+        depth and the coarse depth, 4 B/texel each."""
+        x0, y0, x1, y1 = (int(v) for v in rect)
+        return 12 * (x1 - x0) * (y1 - y0)
+
+    def _slot(self, key: tuple[int, int]) -> tuple[RenderTarget, RenderTarget]:
+        if key not in self.slots:
+            _, _, w, h = scissor_rect(self.rects[key[0]])
+            self.slots[key] = (RenderTarget(self.ctx, w, h),
+                               RenderTarget(self.ctx, w, h, color=False))
+        return self.slots[key]
+
+    def _copy(self, src, src_box, dst_tex, dst_box, depth: bool) -> None:
+        kw = {"attachment": -1, "components": 1, "dtype": "f4"} if depth else \
+            {"components": 4}
+        src.read_into(self._buffer, viewport=src_box, alignment=1, **kw)
+        dst_tex.write(self._buffer, viewport=dst_box, alignment=1)
+
+    def _pairs(self, key: tuple[int, int]):
+        key_t, coarse_t = self._slot(key)
+        box = scissor_rect(self.rects[key[0]])
+        whole = (0, 0, box[2], box[3])
+        return ((self.mosaic, key_t, box, whole), (self.coarse, coarse_t, box, whole))
+
+    def store(self, key: tuple[int, int]) -> None:
+        """Copy tile ``key[0]``'s rectangle of the mosaic into slot ``key``."""
+        (m, k, box, whole), (c, kc, _, _) = self._pairs(key)
+        self._copy(m.fbo, box, k.color, whole, False)
+        self._copy(m.fbo, box, k.depth, whole, True)
+        self._copy(c.fbo, box, kc.depth, whole, True)
+
+    def load(self, key: tuple[int, int]) -> None:
+        """Copy slot ``key`` back into tile ``key[0]``'s rectangle of the mosaic."""
+        (m, k, box, whole), (c, kc, _, _) = self._pairs(key)
+        self._copy(k.fbo, whole, m.color, box, False)
+        self._copy(k.fbo, whole, m.depth, box, True)
+        self._copy(kc.fbo, whole, c.depth, box, True)
+
+    def release(self) -> None:
+        for pair in self.slots.values():
+            for t in pair:
+                t.release()
+        self.slots.clear()
+        self._buffer.release()
 
 
 def _write_array(uniform, values: np.ndarray) -> None:

@@ -136,21 +136,51 @@ def tile_errors(metric: ErrorMetric, c_primes: list, key_view_projs: np.ndarray,
                                              size=size)
             errors[i] = whole[key]
             continue
-        idx = vis[mine]
-        cp = np.asarray(c_primes[i])[idx]
-        th = angles_at_eye(eye, metric.squares.centres[idx], cp)
-        missed = getattr(c_primes[i], "missed", None)
-        missed = np.zeros(len(idx), bool) if missed is None else missed[idx].copy()
-        gone = lost[mine]
-        th[gone], missed[gone] = np.pi, True
-        if missed.all():
-            continue  # nothing this tile draws: inf
-        if getattr(metric, "resampling", False):
-            th = metric._with_resampling(th, missed, cp, c_primes[i], view_proj,
-                                         pixel_angle_rad, size)
-        th = miss_floor(th, missed)
-        errors[i] = float(np.sqrt(np.mean(th * th)) / pixel_angle_rad)
+        err = _rms_px(metric, c_primes[i], vis[mine], lost[mine], eye, view_proj,
+                      pixel_angle_rad, size)
+        if err is not None:
+            errors[i] = err
     return errors, served
+
+
+def _rms_px(metric: ErrorMetric, c_prime, idx: np.ndarray, gone: np.ndarray,
+            eye: np.ndarray, view_proj: np.ndarray, beta: float,
+            size: tuple[int, int] | None) -> float | None:
+    """``sqrt(mean θ²) / β`` px over the square centres ``idx`` a tile serves against its
+    ``c_prime`` (``gone``: samples no tile serves, ``θ = π``), misses floored, the
+    resampling term added with ``metric.resampling``; None when every sample missed."""
+    cp = np.asarray(c_prime)[idx]
+    th = angles_at_eye(eye, metric.squares.centres[idx], cp)
+    missed = getattr(c_prime, "missed", None)
+    missed = np.zeros(len(idx), bool) if missed is None else missed[idx].copy()
+    th[gone], missed[gone] = np.pi, True
+    if missed.all():
+        return None  # nothing this tile draws
+    if getattr(metric, "resampling", False):
+        th = metric._with_resampling(th, missed, cp, c_prime, view_proj, beta, size)
+    th = miss_floor(th, missed)
+    return float(np.sqrt(np.mean(th * th)) / beta)
+
+
+def render_error(metric: ErrorMetric, c_prime, key_view_proj: np.ndarray, rect: np.ndarray,
+                 eye: np.ndarray, view_proj: np.ndarray, pixel_angle_rad: float,
+                 size: tuple[int, int] | None = None) -> float:
+    """Error (px) at the current view of one render of a tile, alone: over the centres in
+    view that its key view ``key_view_proj (4, 4)`` maps into the tile's NDC ``rect (4,)``
+    (which tile serves a sample is ignored: the tiled cache compares renders of one tile
+    with it, :mod:`lodsprite.sprite.tile_cache`); the whole view's error with its ``C'``
+    below :data:`~lodsprite.sprite.metric.MIN_SAMPLES`; ``inf`` when nothing it draws is
+    in view."""
+    centres_h = metric._centres_h
+    vis = np.flatnonzero(in_view(centres_h, view_proj))
+    mine = vis[in_rects(centres_h[vis], np.asarray(key_view_proj)[None],
+                        np.asarray(rect)[None])[0]]
+    if mine.size < MIN_SAMPLES:
+        return metric.error_px(c_prime, np.asarray(eye, np.float64), view_proj,
+                               pixel_angle_rad, size=size)
+    err = _rms_px(metric, c_prime, mine, np.zeros(mine.size, bool), np.asarray(eye, np.float64),
+                  view_proj, pixel_angle_rad, size)
+    return math.inf if err is None else err
 
 
 def reproject_in_key_view(metric: ErrorMetric, key_eye: np.ndarray,

@@ -25,14 +25,17 @@ import numpy as np
 from lodsprite.camera import Viewpoint
 from lodsprite.errors import InputError
 from lodsprite.gl.sprite import SpriteRenderer
-from lodsprite.gl.sprite_tiles import TileDrawer, TiledSpriteRenderer
+from lodsprite.gl.sprite_tiles import TileDrawer, TiledSpriteRenderer, TileSlots
+from lodsprite.sprite.cache import SWITCH_FRACTION
 from lodsprite.sprite.engine import SpriteFrame
 from lodsprite.sprite.metric import ErrorMetric
 from lodsprite.sprite.policy import KEYFRAME, SPRITE, KeyChoice, resampling_metric
+from lodsprite.sprite.tile_cache import TileCache
 from lodsprite.sprite.tiled import (
     TILES,
     combined_error,
     ndc_rects,
+    render_error,
     reproject_in_key_view,
     select_tiles,
     sub_view_proj,
@@ -52,10 +55,17 @@ class TiledSpriteEngine:
     index in it of the update the tile shows now; :attr:`last_tiles` the tiles the last
     frame re-rendered.  :attr:`drawer` draws a tile's terrain (None: full resolution).
     ``metric``: ``"warp"`` (Eq. 1-2) or ``"resample"`` (the resampling term added per tile,
-    through each tile's key view: :func:`~lodsprite.sprite.tiled.tile_errors`)."""
+    through each tile's key view: :func:`~lodsprite.sprite.tiled.tile_errors`).
+
+    ``cache_mb > 0``: a cache of tile renders within that many MB of GPU memory, replaced
+    by ``cache_policy`` (:mod:`lodsprite.sprite.tile_cache`): each frame a tile at or over
+    half ε shows its cached render with the lowest error, and only tiles still over ε are
+    re-rendered; :attr:`cache_tiles` counts, per frame, the tiles shown from a render other
+    than their newest."""
 
     def __init__(self, sprite: SpriteRenderer, epsilon_px: float, tiles: int,
-                 tile_budget_ms: float = DEFAULT_TILE_BUDGET_MS, metric: str = "warp") -> None:
+                 tile_budget_ms: float = DEFAULT_TILE_BUDGET_MS, metric: str = "warp",
+                 cache_mb: float = 0.0, cache_policy: str = "lru") -> None:
         if not epsilon_px > 0:
             raise InputError(f"error threshold epsilon must be > 0 pixels, got {epsilon_px}")
         if not tile_budget_ms >= 0:
@@ -81,6 +91,17 @@ class TiledSpriteEngine:
         # adaptive renderer streams for the whole key view there).
         self.after_tiles = None
         self._shows_keyframe = False
+        self.cache: TileCache | None = None
+        self.slots: TileSlots | None = None
+        self.newest = np.full(count, -1, np.intp)  # per tile, the update last rendered
+        self.cache_tiles = 0  # the last frame's tiles shown from a render not their newest
+        self._now = 0
+        if not cache_mb >= 0:
+            raise InputError(f"cache_mb must be >= 0 MB, got {cache_mb}")
+        if cache_mb > 0:
+            self.cache = TileCache(cache_mb * 2 ** 20,
+                                   [TileSlots.tile_bytes(r) for r in rects], cache_policy)
+            self.slots = TileSlots(sprite.ctx, self.tiled.target, self.tiled.coarse, rects)
 
     @property
     def keyframes(self) -> list[KeyChoice]:
@@ -127,6 +148,9 @@ class TiledSpriteEngine:
         projection = s.terrain.projection(viewpoint)
         errors, served = self.errors(viewpoint)
         rendered = np.array([c is not None for c in self.c_primes])
+        self._now += 1
+        if self.cache is not None and rendered.all() and self._use_cache(viewpoint, errors):
+            errors, served = self.errors(viewpoint)
         decision = combined_error(errors, served) if rendered.any() else 0.0
         chosen = select_tiles(errors, self.epsilon_px, self.costs_ms, served,
                               self.tile_budget_ms, rendered)
@@ -144,10 +168,12 @@ class TiledSpriteEngine:
             for i in chosen:
                 self.c_primes[i] = c_prime
                 errors[i] = 0.0
-            self.mosaic[chosen] = len(self.updates) - 1
+            self.mosaic[chosen] = self.newest[chosen] = len(self.updates) - 1
+            self._cache_new(chosen, viewpoint, key_proj, c_prime)
         elif self.between_keyframes is not None:
             self.between_keyframes()
         self.last_tiles = tuple(int(i) for i in chosen)
+        self.cache_tiles = int(np.sum(self.mosaic != self.newest))
         whole = len(chosen) == self.tiled.count
         self._shows_keyframe = whole
         if not whole:
@@ -157,6 +183,41 @@ class TiledSpriteEngine:
         s.terrain.ctx.finish()
         return SpriteFrame(kind, shown, decision, tris, (time.perf_counter() - t0) * 1e3,
                            len(self.updates) - 1)
+
+    def _use_cache(self, viewpoint: Viewpoint, errors: np.ndarray) -> bool:
+        """Each tile at or over ``SWITCH_FRACTION`` ε shows its cached render with the
+        lowest error (copied into the mosaic when not the one shown); True if any changed."""
+        s = self.sprite
+        projection = s.terrain.projection(viewpoint)
+        view_proj = projection.matrix() @ viewpoint.view_matrix()
+        beta = projection.pixel_angle_rad(s.target.height)
+        changed = False
+        for i in range(self.tiled.count):
+            if errors[i] < SWITCH_FRACTION * self.epsilon_px:
+                self.cache.keep(i, self._now)
+                continue
+            shown = self.cache.caches[i].shown
+            entry, _ = self.cache.best(i, viewpoint.o, lambda e, i=i: render_error(
+                self.metric, e.c_prime, e.c_prime.key_view_proj, self.tiled.ndc[i],
+                viewpoint.o, view_proj, beta, s.target.size), self._now)
+            if entry is None or entry is shown:
+                continue
+            self.slots.load((i, entry.slot))
+            self.tiled.set_tile(i, entry.viewpoint, entry.projection)
+            self.c_primes[i] = entry.c_prime
+            self.mosaic[i] = entry.index
+            changed = True
+        return changed
+
+    def _cache_new(self, chosen: Iterable[int], viewpoint: Viewpoint, key_proj,
+                   c_prime) -> None:
+        """Keep the tiles just rendered in the cache: each copied into its slot."""
+        if self.cache is None:
+            return
+        for i in chosen:
+            entry = self.cache.insert(int(i), len(self.updates) - 1, viewpoint, key_proj,
+                                      c_prime, self._now)
+            self.slots.store((int(i), entry.slot))
 
     def read_image(self) -> np.ndarray:
         """The last frame's image, ``(H, W, 3) uint8``, row 0 at the top."""
@@ -183,4 +244,6 @@ class TiledSpriteEngine:
         return self.sprite.target.read_color()
 
     def release(self) -> None:
+        if self.slots is not None:
+            self.slots.release()
         self.tiled.release()

@@ -147,7 +147,8 @@ class SpriteTechnique(Technique):
         self.sprite: LodSprite = renderer.sprite(
             epsilon, lod, threaded=threaded, visibility=visibility or DEFAULT_VISIBILITY,
             guard_px=DEFAULT_GUARD_PX if guard_px is None else guard_px, border=border,
-            cache_mb=cache_mb, cache_policy=cache_policy, metric=metric)
+            cache_mb=0.0 if tiles > 1 else cache_mb, cache_policy=cache_policy,
+            metric=metric)  # with tiles, the tiled engine keeps the cache (of tile renders)
         self.cache_mb = float(cache_mb)
         self._tint = False
         self._replayed: int | None = None
@@ -156,7 +157,7 @@ class SpriteTechnique(Technique):
         if tiles > 1:
             try:
                 self.tiled = TiledSpriteEngine(self.sprite.sprite, epsilon, tiles,
-                                               tile_budget_ms, metric)
+                                               tile_budget_ms, metric, cache_mb, cache_policy)
             except BaseException:
                 self.sprite.release()
                 raise
@@ -205,7 +206,8 @@ class SpriteTechnique(Technique):
             f = self._last = self.tiled.frame(viewpoint)
             return Frame(f.type, f.ms, f.triangles, f.error_px,
                          {"keyframe": f.keyframe, "keyframes": len(self.tiled.updates),
-                          "tiles": len(self.tiled.last_tiles)})
+                          "tiles": len(self.tiled.last_tiles),
+                          "cache_tiles": self.tiled.cache_tiles})
         f = self.sprite.frame(viewpoint)
         self._last = f
         return Frame(f.type, f.ms, f.triangles, f.error_px,
@@ -280,8 +282,14 @@ class SpriteTechnique(Technique):
 
     def cache_summary(self, frames: list[Frame]) -> dict[str, Any]:
         """``cache_hits`` (frames shown from a keyframe other than the newest rendered),
-        ``cache_keyframes`` (most keyframes resident at once) and ``cache_mb``."""
-        cache = None if self.threaded else self.engine.cache
+        ``cache_keyframes`` (most keyframes resident at once) and ``cache_mb``.  With tiles:
+        ``cache_hits`` sums, over the frames, the tiles shown from a cached render other
+        than their newest; ``cache_keyframes`` is the most tile renders resident at once."""
+        if self.tiled is not None and self.tiled.cache is not None:
+            return {"cache_hits": sum(int(f.extra.get("cache_tiles", 0)) for f in frames),
+                    "cache_keyframes": self.tiled.cache.max_resident,
+                    "cache_mb": self.cache_mb}
+        cache = None if self.threaded or self.tiled is not None else self.engine.cache
         if cache is None:  # two alternating slots; the newest keyframe is always shown
             keys = sum(f.kind == KEYFRAME for f in frames)
             return {"cache_hits": 0, "cache_keyframes": min(2, keys), "cache_mb": 0.0}
@@ -319,8 +327,10 @@ class SpriteTechnique(Technique):
 
     def status(self) -> str:
         if self.tiled is not None:
+            cache = self.tiled.cache
             return (f"keyframes: {self.tiled.tiles}x{self.tiled.tiles} tiles, budget "
-                    f"{self.tiled.tile_budget_ms:g} ms; last frame {len(self.tiled.last_tiles)}")
+                    f"{self.tiled.tile_budget_ms:g} ms; last frame {len(self.tiled.last_tiles)}"
+                    + ("" if cache is None else f"; cache {cache.resident} tile renders"))
         if not self.threaded:
             cache = self.engine.cache
             return "keyframes: inline" + ("" if cache is None else (
