@@ -268,3 +268,16 @@ def test_tiled_cache_through_the_registry_replays_and_hits(gl, name):
             finally:
                 t.release()
     assert rendered[4.0] < rendered[0.0], rendered
+
+
+def test_the_api_refuses_the_proxy_with_tiles(gl):
+    # sprite-adaptive with proxy_sse and tiles > 1: one typed error, nothing built.
+    from lodsprite import Renderer, load_scene, techniques
+    from lodsprite.errors import InputError
+
+    scene = load_scene("fractal:64:3", grid=64)
+    with Renderer(scene, (64, 64), ctx=gl.mgl) as renderer:
+        opts = techniques.get("sprite-adaptive").bind(
+            {"lod": 8, "key_sse": 1.0, "tiles": 2, "proxy_sse": 8.0})
+        with pytest.raises(InputError, match="--proxy-sse does not compose with --tiles"):
+            techniques.create("sprite-adaptive", renderer, **opts)

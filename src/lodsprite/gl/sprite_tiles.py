@@ -11,7 +11,10 @@ depths there as the whole-keyframe spriteframe does (rules ``fragment`` and ``co
 ``triangle`` is taken as ``fragment``: the tile is chosen per fragment).  No mipmaps.
 
 It composes :class:`~lodsprite.gl.sprite.SpriteRenderer` (its key and coarse targets
-index 0 hold the tiles, its terrain and proxy draw the geometry).
+index 0 hold the tiles, its terrain draws the tiles; the spriteframe and the coarse
+z-buffers draw through its proxy geometry object, ``twin`` / ``draw``: the uniform coarse
+level, as a view-dependent proxy frozen per tile update is not supported with tiles,
+:mod:`lodsprite.techniques.adaptive` refuses ``proxy_sse`` with ``tiles > 1``).
 """
 
 from __future__ import annotations
@@ -157,7 +160,8 @@ class TiledSpriteRenderer:
         self.view_projs = np.tile(np.eye(4), (count, 1, 1))
         mode = 2 if sprite.visibility == "coarse" else 1
         vs, fs = tiled_sprite_shaders(count)
-        self.program = self.ctx.mgl.program(vertex_shader=vs, fragment_shader=fs)
+        self.program = self.ctx.mgl.program(vertex_shader=sprite.proxy.twin(vs),
+                                            fragment_shader=fs)
         prog = self.program
         values = {"u_visibility": mode, "u_color": 0, "u_sprite": 2, "u_key_depth": 3,
                   "u_key_coarse": 4,
@@ -166,7 +170,6 @@ class TiledSpriteRenderer:
         for name, value in values.items():
             if name in prog:
                 prog[name].value = value
-        self._vaos: dict = {}
 
     @property
     def count(self) -> int:
@@ -230,15 +233,10 @@ class TiledSpriteRenderer:
         _write_array(prog["u_near_far"], np.array([(p.near, p.far) for p in self.projections]))
         prog["u_color_levels"].value = s.terrain.geometry.color_tex_levels
         prog["u_fallback_tint"].value = s.fallback_tint
-        tris = s.terrain.draw_proxy(prog, self._vaos,
-                                    projection.matrix() @ viewpoint.view_matrix(),
-                                    s.coarse_quads, s.border)
+        tris = s.proxy.draw(prog, projection.matrix() @ viewpoint.view_matrix())
         return FrameStats(tris, 1, projection)
 
     def release(self) -> None:
-        for vao in self._vaos.values():
-            vao.release()
-        self._vaos.clear()
         self.program.release()
 
 
