@@ -8,7 +8,9 @@ terrain culled by the tile's sub-frustum.  The coarse z-buffer is rendered per t
 same way.  A tiled spriteframe picks, per fragment, the first tile whose key matrix maps
 the fragment's world position into that tile's rectangle, and samples the colour and the
 depths there as the whole-keyframe spriteframe does (rules ``fragment`` and ``coarse``;
-``triangle`` is taken as ``fragment``: the tile is chosen per fragment).  No mipmaps.
+``triangle`` is taken as ``fragment``: the tile is chosen per fragment); fragments no tile
+saw are coloured as there (the terrain texture, or ``terrain_shade`` with the heights
+shading).  No mipmaps.
 
 It composes :class:`~lodsprite.gl.sprite.SpriteRenderer` (its key and coarse targets
 index 0 hold the tiles, its terrain draws the tiles; the spriteframe and the coarse
@@ -26,7 +28,7 @@ import numpy as np
 
 from lodsprite.camera import Projection, Viewpoint
 from lodsprite.errors import InputError
-from lodsprite.gl.shaders import PROXY_VERTEX_COMMON
+from lodsprite.gl.shaders import PROXY_VERTEX_COMMON, TERRAIN_SHADE
 from lodsprite.gl.sprite import SpriteRenderer
 from lodsprite.gl.target import RenderTarget
 from lodsprite.gl.terrain import SKY_RGB, FrameStats
@@ -42,9 +44,11 @@ _TILED_VS = """
 uniform mat4 u_mvp;
 uniform mat4 u_key_mvp[N_TILES];
 out vec2 g_uv;
+out vec3 g_world;
 out vec4 g_key[N_TILES];
 void main() {
     vec3 p = terrain_position(g_uv);
+    g_world = p;
     gl_Position = u_mvp * vec4(p, 1.0);
     for (int i = 0; i < N_TILES; ++i) g_key[i] = u_key_mvp[i] * vec4(p, 1.0);
 }
@@ -62,7 +66,9 @@ uniform float u_fragment_tol;
 uniform float u_coarse_tol;
 uniform int u_color_levels;
 uniform vec4 u_fallback_tint;
+uniform int u_shading;             // fallback colour: 0 the terrain texture, 1 terrain_shade
 in vec2 g_uv;
+in vec3 g_world;
 in vec4 g_key[N_TILES];
 out vec4 f_color;
 float linear_depth(float window_z, vec2 nf) {
@@ -97,6 +103,8 @@ _TILED_FS_TAIL = """
     vec2 t_dy = dFdy(t);
     float rho2 = max(dot(t_dx, t_dx), dot(t_dy, t_dy));
     int level = clamp(int(floor(0.5 * log2(max(rho2, 1.0)) + 0.5)), 0, u_color_levels - 1);
+    vec3 n = cross(dFdx(g_world), dFdy(g_world));  // the proxy's normal, heights shading
+    n = n.z < 0.0 ? -n : n;
     bool sprite = false;
     if (found) {
         float z = k.z / k.w;
@@ -109,8 +117,9 @@ _TILED_FS_TAIL = """
         }
     }
     vec3 rgb = sprite ? textureGrad(u_sprite, key_uv, key_dx, key_dy).rgb
-                      : mix(terrain_fallback(g_uv, level), u_fallback_tint.rgb,
-                            u_fallback_tint.a);
+                      : mix(u_shading == 1 ? terrain_shade(g_world.z, n)
+                                           : terrain_fallback(g_uv, level),
+                            u_fallback_tint.rgb, u_fallback_tint.a);
     f_color = vec4(rgb, 1.0);
 }
 """
@@ -122,7 +131,7 @@ def tiled_sprite_shaders(count: int) -> tuple[str, str]:
     head = f"#version 330\n#define N_TILES {count}\n"
     tests = "".join(_TILED_FS_TILE.format(i=i) for i in reversed(range(count)))
     return (head + PROXY_VERTEX_COMMON + _TILED_VS,
-            head + _TILED_FS_HEAD + tests + _TILED_FS_TAIL)
+            head + TERRAIN_SHADE + _TILED_FS_HEAD + tests + _TILED_FS_TAIL)
 
 
 #: Draws a tile's full-resolution terrain: ``(viewpoint, projection, target, cull) ->
@@ -233,6 +242,10 @@ class TiledSpriteRenderer:
         _write_array(prog["u_near_far"], np.array([(p.near, p.far) for p in self.projections]))
         prog["u_color_levels"].value = s.terrain.geometry.color_tex_levels
         prog["u_fallback_tint"].value = s.fallback_tint
+        for name, value in (("u_shading", int(s.terrain.shading == "heights")),
+                            ("u_range", s.terrain.geometry.height_range)):
+            if name in prog:  # fragments no tile saw: the terrain texture or terrain_shade
+                prog[name].value = value
         tris = s.proxy.draw(prog, projection.matrix() @ viewpoint.view_matrix())
         return FrameStats(tris, 1, projection)
 
