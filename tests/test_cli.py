@@ -159,8 +159,6 @@ def test_reproduce_quick_writes_results_plots_and_report(tmp_path, cli, monkeypa
     (["--tiles", "9"], "--tiles must be a whole number in 1..4"),
     (["--tiles", "2", "--tile-budget-ms", "-1"], "--tile-budget-ms >= 0"),
     (["--tiles", "2", "--mode", "lod"], "--tiles goes with --mode sprite"),
-    (["--tiles", "2", "--key-sse", "1", "--proxy-sse", "8"],
-     "--proxy-sse does not compose with --tiles > 1"),
 ])
 def test_render_refuses_bad_tile_options(args, fragment):
     assert_user_error(lodsprite("render", *SMALL, "--mode", "sprite", "--frames", "2", *args),

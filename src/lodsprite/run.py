@@ -151,10 +151,6 @@ class RenderConfig:
         if self.proxy_sse is not None and (self.key_sse is None or not self.proxy_sse > 0):
             raise InputError("--proxy-sse needs adaptive keyframes (--mode sprite --key-sse PX, "
                              "whose tile caches the proxy shares) and must be > 0 pixels")
-        if self.proxy_sse is not None and self.tiles > 1:
-            from lodsprite.techniques.adaptive import PROXY_WITH_TILES
-
-            raise InputError(PROXY_WITH_TILES)
         if not (self.sse > 0 and self.gpu_mb > 0 and self.host_mb > 0):
             raise InputError(f"--sse, --gpu-mb and --host-mb must be > 0, got {self.sse}, "
                              f"{self.gpu_mb}, {self.host_mb}")

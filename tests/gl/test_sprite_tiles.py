@@ -275,14 +275,30 @@ def test_tiled_cache_through_the_registry_replays_and_hits(gl, name):
     assert rendered[4.0] < rendered[0.0], rendered
 
 
-def test_the_api_refuses_the_proxy_with_tiles(gl):
-    # sprite-adaptive with proxy_sse and tiles > 1: one typed error, nothing built.
-    from lodsprite import Renderer, load_scene, techniques
-    from lodsprite.errors import InputError
+@pytest.mark.parametrize("cache_mb", [0.0, 4.0])
+def test_tiles_draw_the_view_dependent_proxy_and_replay(gl, cache_mb):
+    # sprite-adaptive with --proxy-sse and tiles (and the cache): the proxy is frozen at
+    # each tile update (mean_proxy_triangles counts them), tile errors use the proxy
+    # metric (finite, its own samples), and every frame equals its replay out of order.
+    from lodsprite import Renderer, get_path, load_scene, techniques
+    from lodsprite.sprite.proxy_metric import ProxyMetric
 
-    scene = load_scene("fractal:64:3", grid=64)
+    scene = load_scene("fractal:256:3", grid=256)
+    path = get_path("chen1999", scene.hf, 14)
     with Renderer(scene, (64, 64), ctx=gl.mgl) as renderer:
-        opts = techniques.get("sprite-adaptive").bind(
-            {"lod": 8, "key_sse": 1.0, "tiles": 2, "proxy_sse": 8.0})
-        with pytest.raises(InputError, match="--proxy-sse does not compose with --tiles"):
-            techniques.create("sprite-adaptive", renderer, **opts)
+        t = techniques.create("sprite-adaptive", renderer, **techniques.get(
+            "sprite-adaptive").bind({"lod": 8, "epsilon": 1.0, "key_sse": 1.0, "tiles": 2,
+                                     "tile_budget_ms": 0.0, "proxy_sse": 8.0,
+                                     "cache_mb": cache_mb}))
+        try:
+            assert isinstance(t.tiled.metric, ProxyMetric)
+            frames, shown, decisions = _fly(t, path.viewpoints)
+            assert TILES in {f.kind for f in frames}
+            assert all(np.isfinite(f.error_px) for f in frames)
+            s = t.summary(frames)
+            assert s["proxy_sse"] == 8.0 and s["mean_proxy_triangles"] > 0
+            assert len(t.proxy.triangles) == len(t.tiled.updates)
+            for i in [6, 0, 13, 2, 9]:
+                assert np.array_equal(t.replay(path.viewpoints[i], decisions[i]), shown[i]), i
+        finally:
+            t.release()

@@ -14,9 +14,10 @@ shading).  No mipmaps.
 
 It composes :class:`~lodsprite.gl.sprite.SpriteRenderer` (its key and coarse targets
 index 0 hold the tiles, its terrain draws the tiles; the spriteframe and the coarse
-z-buffers draw through its proxy geometry object, ``twin`` / ``draw``: the uniform coarse
-level, as a view-dependent proxy frozen per tile update is not supported with tiles,
-:mod:`lodsprite.techniques.adaptive` refuses ``proxy_sse`` with ``tiles > 1``).
+z-buffers draw through its proxy geometry object, ``twin`` / ``draw``; a view-dependent
+one is frozen at each tile update, :meth:`TiledSpriteRenderer.freeze`: that update's
+coarse z-buffers and the spriteframes from then on draw it, so tiles of older updates
+are textured onto the newest proxy).
 """
 
 from __future__ import annotations
@@ -167,18 +168,37 @@ class TiledSpriteRenderer:
         self.viewpoints: list[Viewpoint | None] = [None] * count
         self.projections: list[Projection | None] = [None] * count
         self.view_projs = np.tile(np.eye(4), (count, 1, 1))
-        mode = 2 if sprite.visibility == "coarse" else 1
-        vs, fs = tiled_sprite_shaders(count)
-        self.program = self.ctx.mgl.program(vertex_shader=sprite.proxy.twin(vs),
-                                            fragment_shader=fs)
-        prog = self.program
-        values = {"u_visibility": mode, "u_color": 0, "u_sprite": 2, "u_key_depth": 3,
-                  "u_key_coarse": 4,
+        self.proxy_gl = None  # the proxy frozen for the latest tile update (None: sprite's)
+        self.program = self._program()
+
+    def _program(self):
+        """The tiled spriteframe's program, reading the sprite renderer's proxy geometry."""
+        sprite = self.sprite
+        vs, fs = tiled_sprite_shaders(self.count)
+        prog = self.ctx.mgl.program(vertex_shader=sprite.proxy.twin(vs), fragment_shader=fs)
+        values = {"u_visibility": 2 if sprite.visibility == "coarse" else 1, "u_color": 0,
+                  "u_sprite": 2, "u_key_depth": 3, "u_key_coarse": 4,
                   "u_fragment_tol": sprite.program["u_fragment_tol"].value,
                   "u_coarse_tol": sprite.program["u_coarse_tol"].value}
         for name, value in values.items():
             if name in prog:
                 prog[name].value = value
+        return prog
+
+    def use_proxy(self) -> None:
+        """Read the sprite renderer's proxy geometry again (after its ``set_proxy``)."""
+        self.program.release()
+        self.program = self._program()
+        self.proxy_gl = None
+
+    def freeze(self, viewpoint: Viewpoint, projection: Projection) -> None:
+        """A tile update from ``viewpoint`` through the key ``projection``: a view-dependent
+        proxy (one with ``for_keyframe``) is frozen for it; the update's coarse z-buffers
+        and the spriteframes from then on draw that geometry.  Nothing for the uniform
+        proxy."""
+        freeze = getattr(self.sprite.proxy, "for_keyframe", None)
+        if freeze is not None:
+            self.proxy_gl = freeze(self.target, viewpoint, projection)
 
     @property
     def count(self) -> int:
@@ -202,7 +222,8 @@ class TiledSpriteRenderer:
             stats = drawer(viewpoint, projection, self.target, cull)
             if self.sprite.visibility == "coarse":
                 self.coarse.fbo.scissor = box
-                self.sprite.render_coarse_depth(viewpoint, projection, self.coarse)
+                self.sprite.render_coarse_depth(viewpoint, projection, self.coarse,
+                                                self.proxy_gl)
         finally:
             self.target.fbo.scissor = None
             self.coarse.fbo.scissor = None
@@ -246,7 +267,8 @@ class TiledSpriteRenderer:
                             ("u_range", s.terrain.geometry.height_range)):
             if name in prog:  # fragments no tile saw: the terrain texture or terrain_shade
                 prog[name].value = value
-        tris = s.proxy.draw(prog, projection.matrix() @ viewpoint.view_matrix())
+        tris = (self.proxy_gl or s.proxy).draw(prog, projection.matrix()
+                                               @ viewpoint.view_matrix())
         return FrameStats(tris, 1, projection)
 
     def release(self) -> None:

@@ -13,6 +13,9 @@ projection there (the tile is its sub-rectangle), its own ``C'`` and its error.
   beyond every tile's keyframe) is charged to the tile whose rectangle holds it in the
   current view's key projection, with ``θ = π`` (a miss): that tile, re-rendered now,
   serves it.
+* **Samples.**  The metric's square centres, or, with a view-dependent proxy
+  (:class:`~lodsprite.sprite.proxy_metric.ProxyMetric`), each update's own samples (its
+  ``C'`` carries them, :func:`samples`): a tile's are those of its own ``C'`` it serves.
 * **Error per tile** (:func:`tile_errors`): ``sqrt(mean θ²) / β`` over the samples it
   serves, ``θ`` measured against the tile's own ``C'`` (misses floored as in
   :func:`~lodsprite.sprite.metric.miss_floor`).  A tile serving fewer than
@@ -115,42 +118,62 @@ def tile_errors(metric: ErrorMetric, c_primes: list, key_view_projs: np.ndarray,
     t = len(rects)
     errors = np.full(t, math.inf)
     served = np.zeros(t, np.intp)
-    centres_h = metric._centres_h
-    vis = np.flatnonzero(in_view(centres_h, view_proj))
-    pts_h = centres_h[vis]
-    owner = serving_tiles(pts_h, key_view_projs, rects)
-    lost = owner < 0
-    if lost.any():
-        owner[lost] = serving_tiles(pts_h[lost], key_view_proj[None].repeat(t, 0), rects)
     eye = np.asarray(eye, np.float64)
-    whole: dict[int, float] = {}  # whole-view error per C' (tiles of one update share it)
+    groups: dict[int, tuple] = {}  # per C' (tiles of one update share it): its samples
     for i in range(t):
         if c_primes[i] is None:
             continue
+        key = id(c_primes[i])
+        if key not in groups:
+            points, points_h = samples(metric, c_primes[i])
+            vis = np.flatnonzero(in_view(points_h, view_proj))
+            owner = serving_tiles(points_h[vis], key_view_projs, rects)
+            lost = owner < 0
+            if lost.any():
+                owner[lost] = serving_tiles(points_h[vis[lost]],
+                                            key_view_proj[None].repeat(t, 0), rects)
+            groups[key] = (points, vis, owner, lost, None)
+        points, vis, owner, lost, whole = groups[key]
         mine = owner == i
         served[i] = int(mine.sum())
         if served[i] < MIN_SAMPLES:
-            key = id(c_primes[i])
-            if key not in whole:
-                whole[key] = metric.error_px(c_primes[i], eye, view_proj, pixel_angle_rad,
-                                             size=size)
-            errors[i] = whole[key]
+            if whole is None:
+                whole = _whole_px(metric, c_primes[i], eye, view_proj, pixel_angle_rad, size)
+                groups[key] = (points, vis, owner, lost, whole)
+            errors[i] = whole
             continue
-        err = _rms_px(metric, c_primes[i], vis[mine], lost[mine], eye, view_proj,
+        err = _rms_px(metric, c_primes[i], points, vis[mine], lost[mine], eye, view_proj,
                       pixel_angle_rad, size)
         if err is not None:
             errors[i] = err
     return errors, served
 
 
-def _rms_px(metric: ErrorMetric, c_prime, idx: np.ndarray, gone: np.ndarray,
-            eye: np.ndarray, view_proj: np.ndarray, beta: float,
+def samples(metric, c_prime) -> tuple[np.ndarray, np.ndarray]:
+    """``(points (K, 3), points_h (K, 4))``: the samples ``C`` of ``c_prime``: its own
+    (a view-dependent proxy's :class:`~lodsprite.sprite.proxy_metric.ProxyReprojection`),
+    else the metric's square centres."""
+    points = getattr(c_prime, "points", None)
+    if points is not None:
+        return points, c_prime.points_h
+    return metric.squares.centres, metric._centres_h
+
+
+def _whole_px(metric, c_prime, eye, view_proj, beta, size) -> float:
+    """The whole view's error of ``c_prime`` (the metric's own rule)."""
+    if getattr(metric, "resampling", False):
+        return metric.error_px(c_prime, eye, view_proj, beta, size=size)
+    return metric.error_px(c_prime, eye, view_proj, beta)
+
+
+def _rms_px(metric: ErrorMetric, c_prime, points: np.ndarray, idx: np.ndarray,
+            gone: np.ndarray, eye: np.ndarray, view_proj: np.ndarray, beta: float,
             size: tuple[int, int] | None) -> float | None:
-    """``sqrt(mean θ²) / β`` px over the square centres ``idx`` a tile serves against its
+    """``sqrt(mean θ²) / β`` px over the samples ``points[idx]`` a tile serves against its
     ``c_prime`` (``gone``: samples no tile serves, ``θ = π``), misses floored, the
     resampling term added with ``metric.resampling``; None when every sample missed."""
     cp = np.asarray(c_prime)[idx]
-    th = angles_at_eye(eye, metric.squares.centres[idx], cp)
+    th = angles_at_eye(eye, points[idx], cp)
     missed = getattr(c_prime, "missed", None)
     missed = np.zeros(len(idx), bool) if missed is None else missed[idx].copy()
     th[gone], missed[gone] = np.pi, True
@@ -171,15 +194,15 @@ def render_error(metric: ErrorMetric, c_prime, key_view_proj: np.ndarray, rect: 
     with it, :mod:`lodsprite.sprite.tile_cache`); the whole view's error with its ``C'``
     below :data:`~lodsprite.sprite.metric.MIN_SAMPLES`; ``inf`` when nothing it draws is
     in view."""
-    centres_h = metric._centres_h
-    vis = np.flatnonzero(in_view(centres_h, view_proj))
-    mine = vis[in_rects(centres_h[vis], np.asarray(key_view_proj)[None],
+    points, points_h = samples(metric, c_prime)
+    vis = np.flatnonzero(in_view(points_h, view_proj))
+    mine = vis[in_rects(points_h[vis], np.asarray(key_view_proj)[None],
                         np.asarray(rect)[None])[0]]
+    eye = np.asarray(eye, np.float64)
     if mine.size < MIN_SAMPLES:
-        return metric.error_px(c_prime, np.asarray(eye, np.float64), view_proj,
-                               pixel_angle_rad, size=size)
-    err = _rms_px(metric, c_prime, mine, np.zeros(mine.size, bool), np.asarray(eye, np.float64),
-                  view_proj, pixel_angle_rad, size)
+        return _whole_px(metric, c_prime, eye, view_proj, pixel_angle_rad, size)
+    err = _rms_px(metric, c_prime, points, mine, np.zeros(mine.size, bool), eye, view_proj,
+                  pixel_angle_rad, size)
     return math.inf if err is None else err
 
 
@@ -193,7 +216,11 @@ def reproject_in_key_view(metric: ErrorMetric, key_eye: np.ndarray,
     error of a tile serving few samples meet them.  Ray casting grazing rays to centres
     behind or beside a low keyframe eye was most of the cost of a full ``C'``.  The
     Reprojection carries ``key_view_proj`` and ``key_size = (w, h)`` (the keyframe target's
-    pixels, guard band included) for the resampling term."""
+    pixels, guard band included) for the resampling term.  A metric without square centres
+    (a view-dependent proxy's, :class:`~lodsprite.sprite.proxy_metric.ProxyMetric`, whose
+    samples are the proxy's nodes culled by the key view) gives its own ``reproject``."""
+    if not hasattr(metric, "squares"):
+        return metric.reproject(key_eye, key_view_proj, key_size)
     sq = metric.squares
     vis = np.flatnonzero(in_view(metric._centres_h, key_view_proj))
     c_prime = sq.centres.astype(np.float64).copy()

@@ -95,6 +95,7 @@ class TiledSpriteEngine:
         self.slots: TileSlots | None = None
         self.newest = np.full(count, -1, np.intp)  # per tile, the update last rendered
         self.cache_tiles = 0  # the last frame's tiles shown from a render not their newest
+        self.proxy_selections: list = []  # per update, a view-dependent proxy's selection
         self._now = 0
         if not cache_mb >= 0:
             raise InputError(f"cache_mb must be >= 0 MB, got {cache_mb}")
@@ -130,6 +131,7 @@ class TiledSpriteEngine:
         view_proj = key_proj.matrix() @ key.viewpoint.view_matrix()
         tris = 0
         ctx = self.sprite.terrain.ctx
+        self.tiled.freeze(key.viewpoint, key_proj)  # a view-dependent proxy, for the update
         for i in chosen:
             t = time.perf_counter()
             stats = self.tiled.render_tile(int(i), key.viewpoint, key_proj,
@@ -158,13 +160,15 @@ class TiledSpriteEngine:
         if len(chosen):
             key = KeyChoice(viewpoint, projection, False)
             self.updates.append(key)
-            tris += self.render_tiles(chosen, key)
-            if self.after_tiles is not None:
-                self.after_tiles(viewpoint, s.key_projection(projection))
             key_proj = s.key_projection(projection)
+            # C' first: a view-dependent proxy is selected for it, then frozen by the tiles
             c_prime = reproject_in_key_view(self.metric, viewpoint.o,
                                             key_proj.matrix() @ viewpoint.view_matrix(),
                                             s.key_size)
+            tris += self.render_tiles(chosen, key)
+            self.proxy_selections.append(getattr(s.proxy, "last", None))
+            if self.after_tiles is not None:
+                self.after_tiles(viewpoint, key_proj)
             for i in chosen:
                 self.c_primes[i] = c_prime
                 errors[i] = 0.0
@@ -198,7 +202,8 @@ class TiledSpriteEngine:
                 continue
             shown = self.cache.caches[i].shown
             entry, _ = self.cache.best(i, viewpoint.o, lambda e, i=i: render_error(
-                self.metric, e.c_prime, e.c_prime.key_view_proj, self.tiled.ndc[i],
+                self.metric, e.c_prime, e.projection.matrix() @ e.viewpoint.view_matrix(),
+                self.tiled.ndc[i],
                 viewpoint.o, view_proj, beta, s.target.size), self._now)
             if entry is None or entry is shown:
                 continue
@@ -227,21 +232,36 @@ class TiledSpriteEngine:
 
     def replay(self, viewpoint: Viewpoint, mosaic: Sequence[int], shows_keyframe: bool,
                shown: np.ndarray,
-               drawer_for: Callable[[int, int], TileDrawer | None] | None = None
-               ) -> np.ndarray:
+               drawer_for: Callable[[int, int], TileDrawer | None] | None = None,
+               latest: int | None = None) -> np.ndarray:
         """Untimed: bring every tile to the update ``mosaic[t]`` of :attr:`updates` (tiles
         whose ``shown[t]`` already is that update are kept; ``shown`` is updated) and
         return the frame's image.  ``drawer_for(update, tile)``: the drawer that renders
-        the tile as that update did (None, or returning None: :attr:`drawer`)."""
-        for t, u in enumerate(mosaic):
-            if shown[t] != u:
-                drawer = None if drawer_for is None else drawer_for(int(u), t)
-                self.render_tiles([t], self.updates[u], drawer, measure=False)
-                shown[t] = u
-        if shows_keyframe:
-            return self.tiled.keyframe_color()
-        self.tiled.render_spriteframe(viewpoint)
-        return self.sprite.target.read_color()
+        the tile as that update did (None, or returning None: :attr:`drawer`).  With a
+        view-dependent proxy, each update's recorded selection is frozen again for its
+        tiles, and the spriteframe draws that of update ``latest`` (the frame's newest;
+        default the mosaic's newest)."""
+        force = getattr(self.sprite.proxy, "force", None)
+        try:
+            for t, u in enumerate(mosaic):
+                if shown[t] != u:
+                    drawer = None if drawer_for is None else drawer_for(int(u), t)
+                    if force is not None:
+                        force(self.proxy_selections[u])
+                    self.render_tiles([t], self.updates[u], drawer, measure=False)
+                    shown[t] = u
+            if shows_keyframe:
+                return self.tiled.keyframe_color()
+            if force is not None:
+                u = int(max(mosaic)) if latest is None else int(latest)
+                force(self.proxy_selections[u])
+                key = self.updates[u]
+                self.tiled.freeze(key.viewpoint, self.sprite.key_projection(key.projection))
+            self.tiled.render_spriteframe(viewpoint)
+            return self.sprite.target.read_color()
+        finally:
+            if force is not None:
+                force(None)
 
     def release(self) -> None:
         if self.slots is not None:

@@ -13,7 +13,6 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from lodsprite.errors import InputError
 from lodsprite.techniques.base import Frame, Technique
 from lodsprite.techniques.terrain import SpriteTechnique, resolve_shading, set_shading
 from lodsprite.workers import peak_rss_mb
@@ -21,10 +20,6 @@ from lodsprite.workers import peak_rss_mb
 if TYPE_CHECKING:
     from lodsprite.api import Renderer
     from lodsprite.camera import Viewpoint
-
-#: Why ``proxy_sse`` with ``tiles > 1`` is refused (one line: the CLI's exit-2 message).
-PROXY_WITH_TILES = ("--proxy-sse does not compose with --tiles > 1 (the view-dependent proxy "
-                    "is frozen per whole keyframe): use --tiles 1 or drop --proxy-sse")
 
 
 def scene_pyramid(scene):
@@ -179,9 +174,9 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
     ``proxy_sse``: spriteframes draw the adaptive mesh at that tolerance, selected at each
     keyframe and frozen (:mod:`lodsprite.techniques.sprite_proxy`), with the error metric
     of :mod:`lodsprite.sprite.proxy_metric`; the replay freezes the recorded selection.
-    ``proxy_sse`` with ``tiles > 1`` is refused (:data:`PROXY_WITH_TILES`): the proxy is
-    frozen per keyframe, and a tiled mosaic holds tiles of several updates whose metric
-    samples and coarse z-buffers would each need their own frozen proxy."""
+    With ``tiles > 1`` the proxy is selected and frozen at each tile update (its coarse
+    z-buffers and the spriteframes from then on draw it) and every tile's error is the proxy
+    metric over the samples it serves (:mod:`lodsprite.sprite.tiled_engine`)."""
 
     name = "sprite-adaptive"
 
@@ -195,8 +190,6 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
         from lodsprite.terrain.store import TerrainStore
         from lodsprite.terrain.storefield import store_field
 
-        if proxy_sse is not None and isinstance(tiles, int) and tiles > 1:
-            raise InputError(PROXY_WITH_TILES)
         self.adaptive = make_adaptive(renderer, key_sse, gpu_mb, host_mb, shading)
         field = None
         try:
@@ -270,6 +263,10 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
         self.sprite.sprite.set_proxy(source)
         policy = self.engine.policy
         policy.metric = ProxyMetric(source.nodes, renderer.paths.geometry.full, policy.metric)
+        if self.tiled is not None:  # tiles: the proxy frozen per update, its metric per tile
+            self.tiled.tiled.use_proxy()
+            self.tiled.metric = ProxyMetric(source.nodes, renderer.paths.geometry.full,
+                                            self.tiled.metric)
         return source
 
     def warm_up(self, viewpoint: Viewpoint) -> None:

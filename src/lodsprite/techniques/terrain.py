@@ -231,7 +231,7 @@ class SpriteTechnique(Technique):
         if self.tiled is not None:
             return self.tiled.replay(viewpoint, decision["mosaic"],
                                      decision["shows_keyframe"], self._shown,
-                                     self.tile_drawer)
+                                     self.tile_drawer, decision["keyframe"])
         s = self.sprite.sprite
         k = decision["keyframe"]
         if k != self._replayed:
