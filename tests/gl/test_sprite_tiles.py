@@ -302,3 +302,33 @@ def test_tiles_draw_the_view_dependent_proxy_and_replay(gl, cache_mb):
                 assert np.array_equal(t.replay(path.viewpoints[i], decisions[i]), shown[i]), i
         finally:
             t.release()
+
+
+def test_one_tile_on_the_proxy_measures_the_whole_keyframes_proxy_error(gl):
+    # The proxy metric per tile: one tile from VP is the whole keyframe there, so its error
+    # at a nearby view equals the proxy metric's error of the keyframe's C' within 5 %
+    # (the tile charges samples its key view lost with θ = π; near VP they are few).
+    from lodsprite import Renderer, get_path, load_scene, techniques
+    from lodsprite.sprite.policy import keyframe_error_px
+
+    scene = load_scene("fractal:256:3", grid=256)
+    vps = get_path("chen1999", scene.hf, 64).viewpoints
+    with Renderer(scene, (64, 64), ctx=gl.mgl) as renderer:
+        t = techniques.create("sprite-adaptive", renderer, lod=8, epsilon=1.0, key_sse=1.0,
+                              proxy_sse=8.0)
+        sp = t.sprite.sprite
+        eng = TiledSpriteEngine(sp, 1.0, 1)
+        try:
+            eng.metric = metric = t.engine.policy.metric
+            eng.tiled.use_proxy()
+            eng.frame(vps[0])
+            tiled = float(eng.errors(vps[1])[0][0])
+            assert eng.tiled.proxy_gl is not None
+            c_prime = eng.c_primes[0]
+            whole = keyframe_error_px(metric, c_prime, vps[1], sp.terrain.projection(vps[1]),
+                                      sp.target.height)
+        finally:
+            eng.release()
+            t.release()
+    assert len(c_prime.points) > 16 and 0 < whole < 1e3
+    assert tiled == pytest.approx(whole, rel=0.05), (tiled, whole)
