@@ -9,7 +9,7 @@ import pytest
 
 from lodsprite.camera import Projection, Viewpoint
 from lodsprite.errors import InputError
-from lodsprite.sprite.tile_cache import TileCache
+from lodsprite.sprite.cache import TileCache
 
 KB = 1024
 PROJ = Projection(45.0, 1.0, 1.0, 1e5)

@@ -277,7 +277,7 @@ class TiledSpriteRenderer:
 
 class TileSlots:
     """A pool of GPU copies of tile renders (the tiled keyframe cache's storage,
-    :mod:`lodsprite.sprite.tile_cache`): slot ``(tile, k)`` holds a colour + depth target
+    :class:`lodsprite.sprite.cache.TileCache`): slot ``(tile, k)`` holds a colour + depth target
     and a coarse-depth target of the tile's size, made when first stored into.  The
     mosaic (``mosaic``, ``coarse``: the tiled renderer's targets) holds the render each
     tile shows; :meth:`store` copies a tile's rectangle from it into a slot and

@@ -191,7 +191,7 @@ def render_error(metric: ErrorMetric, c_prime, key_view_proj: np.ndarray, rect: 
     """Error (px) at the current view of one render of a tile, alone: over the centres in
     view that its key view ``key_view_proj (4, 4)`` maps into the tile's NDC ``rect (4,)``
     (which tile serves a sample is ignored: the tiled cache compares renders of one tile
-    with it, :mod:`lodsprite.sprite.tile_cache`); the whole view's error with its ``C'``
+    with it, :class:`lodsprite.sprite.cache.TileCache`); the whole view's error with its ``C'``
     below :data:`~lodsprite.sprite.metric.MIN_SAMPLES`; ``inf`` when nothing it draws is
     in view."""
     points, points_h = samples(metric, c_prime)

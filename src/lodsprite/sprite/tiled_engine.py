@@ -26,11 +26,10 @@ from lodsprite.camera import Viewpoint
 from lodsprite.errors import InputError
 from lodsprite.gl.sprite import SpriteRenderer
 from lodsprite.gl.sprite_tiles import TileDrawer, TiledSpriteRenderer, TileSlots
-from lodsprite.sprite.cache import SWITCH_FRACTION
+from lodsprite.sprite.cache import SWITCH_FRACTION, TileCache
 from lodsprite.sprite.engine import SpriteFrame
 from lodsprite.sprite.metric import ErrorMetric
 from lodsprite.sprite.policy import KEYFRAME, SPRITE, KeyChoice, resampling_metric
-from lodsprite.sprite.tile_cache import TileCache
 from lodsprite.sprite.tiled import (
     TILES,
     combined_error,
@@ -58,7 +57,7 @@ class TiledSpriteEngine:
     through each tile's key view: :func:`~lodsprite.sprite.tiled.tile_errors`).
 
     ``cache_mb > 0``: a cache of tile renders within that many MB of GPU memory, replaced
-    by ``cache_policy`` (:mod:`lodsprite.sprite.tile_cache`): each frame a tile at or over
+    by ``cache_policy`` (:class:`lodsprite.sprite.cache.TileCache`): each frame a tile at or over
     half ε shows its cached render with the lowest error, and only tiles still over ε are
     re-rendered; :attr:`cache_tiles` counts, per frame, the tiles shown from a render other
     than their newest."""
