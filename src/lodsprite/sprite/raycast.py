@@ -87,6 +87,11 @@ class Reprojection(np.ndarray):
     through, times its view matrix) and ``key_size (w, h)`` pixels (image plus guard band),
     both None when unknown (the metric takes the normal at ``C'`` from
     :func:`coarse_normals`).
+
+    ``points (n*n, 3)``: the keyframe's own ``C`` when the metric takes it from the
+    surface the keyframe shows (``ErrorMetric.surface``; None: the squares' centres), with
+    ``points_h`` (w = 1) and that surface's height function ``surface(x, y) -> z`` (for
+    the fallback sample); views of the same shape keep them, pickling drops them.
     """
 
     key_eye: np.ndarray | None
@@ -94,6 +99,9 @@ class Reprojection(np.ndarray):
     fallback_cache: dict
     key_view_proj: np.ndarray | None
     key_size: tuple[int, int] | None
+    points: np.ndarray | None
+    points_h: np.ndarray | None
+    surface: object | None
 
     def __new__(cls, c_prime: np.ndarray, key_eye: np.ndarray,
                 missed: np.ndarray | None = None, key_view_proj: np.ndarray | None = None,
@@ -105,7 +113,14 @@ class Reprojection(np.ndarray):
         obj.key_view_proj = (None if key_view_proj is None
                              else np.array(key_view_proj, dtype=np.float64))
         obj.key_size = None if key_size is None else (int(key_size[0]), int(key_size[1]))
+        obj.points = obj.points_h = obj.surface = None
         return obj
+
+    def set_points(self, points: np.ndarray, surface=None) -> None:
+        """Carry the keyframe's own ``C (K, 3)`` (and the surface it was taken from)."""
+        self.points = np.asarray(points, np.float64)
+        self.points_h = np.c_[self.points, np.ones(len(self.points))]
+        self.surface = surface
 
     def __array_finalize__(self, obj) -> None:
         self.key_eye = getattr(obj, "key_eye", None)
@@ -115,6 +130,11 @@ class Reprojection(np.ndarray):
         self.missed = missed if missed is not None and obj.shape == self.shape else None
         self.key_view_proj = getattr(obj, "key_view_proj", None)
         self.key_size = getattr(obj, "key_size", None)
+        pts = getattr(obj, "points", None)
+        same = pts is not None and len(pts) == len(self) and obj.shape == self.shape
+        self.points = pts if same else None
+        self.points_h = getattr(obj, "points_h", None) if same else None
+        self.surface = getattr(obj, "surface", None)
 
     def __array_wrap__(self, arr, context=None, return_scalar=False):
         # Results of ufuncs and reductions are plain arrays and scalars, not C'.
@@ -129,6 +149,7 @@ class Reprojection(np.ndarray):
         array_state, self.key_eye, self.missed, *key = state
         self.key_view_proj, self.key_size = (key + [None, None])[:2]
         self.fallback_cache = {}
+        self.points = self.points_h = self.surface = None
         super().__setstate__(array_state)
 
 

@@ -111,6 +111,8 @@ class LazyHeights:
         self.approximate = 0     # samples served from the coarse level so far
         self.bad: set[int] = set()  # chunks the reader could not read (stay approximate)
         self._users = 0          # start_reader calls not yet closed
+        self._setup = False      # inside from_coarse(): every sample from the coarse level
+        self.setup_samples = 0   # samples served from the coarse level inside from_coarse()
 
     def __getitem__(self, key) -> np.ndarray:
         rows, cols = self._indices(key)
@@ -140,6 +142,9 @@ class LazyHeights:
         where the chunks are resident (or read, when blocking), else from :attr:`coarse`
         (counted in :attr:`approximate`; the chunks are asked for)."""
         fr, fc = self._clip(fr, fc)
+        if self._setup:  # setup: the coarse level alone, nothing read or asked for
+            self.setup_samples += fr.size
+            return self._coarse_at(fr, fc).astype(np.float32)
         corners = self._corners(fr, fc)
         ok = None
         if not self.blocking:
@@ -266,6 +271,15 @@ class LazyHeights:
         self._users += 1
         if self.reader is not None:
             return
+        k = self.hold_coarse(coarse_side)
+        self.reader = ChunkReader(self.store, self._window, in_flight, self.capacity, k)
+        self.blocking = False
+
+    def hold_coarse(self, coarse_side: int = COARSE_SIDE) -> int:
+        """Read the coarse level (:meth:`start_reader`) whole into :attr:`coarse` unless
+        held already (this blocks: setup only); returns its level."""
+        if self.coarse is not None:
+            return self.coarse_level
         k = min(max(1, self.store.level_for(coarse_side)), self.store.levels - 1)
         r, c = self.store.shape(k)
         coarse = np.asarray(self.store.read(k, 0, r, 0, c), np.float32)
@@ -273,8 +287,21 @@ class LazyHeights:
             raise TerrainError(f"{self.store.path}: level {k} holds unwritten or invalid "
                                "heights")
         self.coarse, self.coarse_level = coarse, k
-        self.reader = ChunkReader(self.store, self._window, in_flight, self.capacity, k)
-        self.blocking = False
+        return k
+
+    @contextmanager
+    def from_coarse(self, coarse_side: int = COARSE_SIDE):
+        """Inside the block every sample is the coarse level's (:meth:`hold_coarse`,
+        bilinear at the same world position; counted in :attr:`setup_samples`), and no
+        level-0 chunk is read or asked for: what LOD-sprite's setup takes over a store
+        (the uniform proxy's vertices and ribbons, the metric's coarse triangles and
+        first centres; a wholesale level-0 read took 468 s over a 16k² store)."""
+        self.hold_coarse(coarse_side)
+        before, self._setup = self._setup, True
+        try:
+            yield self
+        finally:
+            self._setup = before
 
     def _request(self, ids: np.ndarray) -> None:
         if self.reader is not None and len(ids):
@@ -342,7 +369,7 @@ class LazyHeights:
         """Undo one :meth:`start_reader`; the last ends the reader process and reads block
         again (the coarse level is dropped)."""
         self._users = max(0, self._users - 1)
-        if self._users:
+        if self._users or self._setup:
             return
         if self.reader is not None:
             self.reader.close()
