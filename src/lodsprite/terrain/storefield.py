@@ -19,9 +19,12 @@ origin, x east, y north, metres.
 
 Nothing in a timed frame waits for storage (issue 22, must-have 6: the metric's fallback
 reading level-0 chunks inside the frame gave a 3.5 s p99 spriteframe on the 16k²
-flyover).  Reads block only while :attr:`LazyHeights.blocking` holds: during setup (the
-proxy's vertices, the border ribbons and the metric's centres ``C`` are read exactly,
-before the first frame) and in untimed use (:meth:`LazyHeights.waiting`).  After
+flyover), and setup reads no level 0 wholesale: inside :meth:`LazyHeights.from_coarse`
+every sample is the coarse level's below (``sprite-adaptive`` builds the proxy's vertices,
+the border ribbons and the metric's coarse triangles there; through level 0 they read
+about every level-0 chunk of a 16k² store, 468 s before the first frame).  Reads block
+only while :attr:`LazyHeights.blocking` holds and no ``from_coarse`` block is open: a
+technique made outside one, and untimed use (:meth:`LazyHeights.waiting`).  After
 :meth:`LazyHeights.start_reader` a sample whose level-0 chunks are not resident is
 answered at once from a coarser level of the store held whole in memory (the finest
 below level 0 of at most :data:`COARSE_SIDE` a side, read once then), bilinearly at the
