@@ -64,10 +64,11 @@ better than it is:
   the fallback (culling the ``n²`` square boxes, enumerating candidates, reprojecting
   the vertices not yet cached).  Ray casting (:mod:`lodsprite.sprite.raycast`): a ray
   that misses its 3x3 neighbourhood is tested against the wider ones of
-  ``SEARCH_RADII`` and, missing those, against all ``2 n²`` coarse triangles; every
-  stage runs in blocks of ``RAY_PAIRS`` ray-triangle pairs, so its memory is bounded
-  (about 32 MB of temporaries) while its time grows with ``misses × n²``.  The results
-  are those of the unblocked search, bit for bit.
+  ``SEARCH_RADII`` and, missing those, against the coarse triangles under its ground
+  track (:func:`~lodsprite.sprite.raycast.crossed_triangles`, about ``12 n``; no other
+  triangle can meet it); every stage runs in blocks of ``RAY_PAIRS`` ray-triangle pairs,
+  so its memory is bounded (about 32 MB of temporaries) while its time grows with
+  ``misses × n``.  The results are those of the unblocked search, bit for bit.
 
 The fallback needs the keyframe eye: :meth:`ErrorMetric.reproject` returns a
 :class:`Reprojection`, an ``(n*n, 3)`` array of ``C'`` that also carries it.
