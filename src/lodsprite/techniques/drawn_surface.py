@@ -98,21 +98,24 @@ class DrawnSurface:
         row = np.clip((tree.rows0 - 1) / 2.0 - y / tree.p.dy, 0, tree.rows0 - 1)
         z = np.full(x.shape, np.nan)
         todo = np.ones(x.shape, bool)
+        resident: dict[int, list[Node]] = {}
+        for n in t.slots.slots:  # the GPU cache's nodes, by level
+            resident.setdefault(n.k, []).append(n)
         for k in range(tree.levels):  # finest first
             if not todo.any():
                 break
             br, bc = tree.blocks(k)
             i = np.minimum((row / (g << k)).astype(np.intp), br - 1)
             j = np.minimum((col / (g << k)).astype(np.intp), bc - 1)
-            cand = np.unique(np.c_[i[todo], j[todo]], axis=0)
-            have = [Node(k, int(a), int(b)) for a, b in cand if Node(k, int(a), int(b))
-                    in t.slots]
-            if not have:
+            lin = i * bc + j
+            level = resident.get(k, [])
+            ids = np.array([n.i * bc + n.j for n in level], np.intp)
+            used = np.isin(ids, lin[todo])
+            if not used.any():
                 continue
-            mine = np.zeros(x.shape, bool)
-            keys = {(n.i, n.j) for n in have}
-            mine[todo] = [(a, b) in keys for a, b in zip(i[todo], j[todo], strict=True)]
-            level = ProxySurface(frozen_nodes(t, have, frozenset(), eye, 1, t.r))
-            z[mine] = level.height(x[mine], y[mine])
+            have = [n for n, u in zip(level, used, strict=True) if u]
+            mine = todo & np.isin(lin, ids[used])
+            surface = ProxySurface(frozen_nodes(t, have, frozenset(), eye, 1, t.r))
+            z[mine] = surface.height(x[mine], y[mine])
             todo &= ~mine | np.isnan(z)
         return z
