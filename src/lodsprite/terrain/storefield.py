@@ -248,15 +248,21 @@ class LazyHeights:
         """``(lo, hi) (n, n)`` bounds of the heights in each square of ``step`` working
         quads (edges included), from the level-0 chunks each square overlaps."""
         mm = self._minmax
-        lo, hi = np.empty((n, n)), np.empty((n, n))
-        sr, sc = self.scale
         c = self.chunk
-        for a in range(n):
-            ra, rb = int(a * step * sr) // c, int(np.ceil((a + 1) * step * sr)) // c + 1
-            for b in range(n):
-                ca, cb = int(b * step * sc) // c, int(np.ceil((b + 1) * step * sc)) // c + 1
-                block = mm[ra:rb, ca:cb]
-                lo[a, b], hi[a, b] = block[..., 0].min(), block[..., 1].max()
+
+        def spans(scale: float, size: int) -> tuple[np.ndarray, np.ndarray]:
+            a = np.arange(n)
+            first = np.floor(a * step * scale).astype(np.intp) // c
+            last = np.minimum(np.ceil((a + 1) * step * scale).astype(np.intp) // c, size - 1)
+            return first, np.maximum(last, first)
+
+        (r0, r1), (c0, c1) = spans(self.scale[0], mm.shape[0]), spans(self.scale[1], mm.shape[1])
+        lo, hi = np.full((n, n), np.inf), np.full((n, n), -np.inf)
+        for dr in range(int((r1 - r0).max()) + 1):  # the chunks each square overlaps
+            rr = np.minimum(r0 + dr, r1)
+            for dc in range(int((c1 - c0).max()) + 1):
+                block = mm[rr[:, None], np.minimum(c0 + dc, c1)[None, :]]
+                lo, hi = np.minimum(lo, block[..., 0]), np.maximum(hi, block[..., 1])
         return lo, hi
 
     # -- non-blocking reads: a reader process, driven from the frame's thread --------
