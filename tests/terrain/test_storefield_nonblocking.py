@@ -139,9 +139,10 @@ def flight(tmp_path_factory):
 
 def test_sprite_adaptive_reads_no_store_inside_its_frames_and_converges(gl, flight, reads,
                                                                          monkeypatch):
-    """A low flyover over a coarse level of 8² squares: the metric's fallback sample
-    (fewer than 4 centres in view) takes level-0 heights inside frames; none is read in
-    this process while a frame runs, and once the reader is idle they are exact."""
+    """A low flyover over a coarse level of 8² squares: the metric's fallback grid
+    (fewer than 4 centres in view) takes level-0 heights inside frames (its candidates'
+    view test; their C is the keyframe's drawn surface); none is read in this process
+    while a frame runs, and once the reader is idle they are exact."""
     from lodsprite import techniques
     from lodsprite.api import Renderer
     from lodsprite.paths import get_path
