@@ -364,3 +364,27 @@ def test_when_every_sample_misses_a_keyframe_is_due():
     vpm = proj.matrix() @ vp.view_matrix()
     assert metric.theta(cp, vp.o, vpm).size == 16
     assert metric.error_px(cp, vp.o, vpm, proj.pixel_angle_rad(512)) == math.inf  # was 84.6 px
+
+
+@pytest.mark.parametrize("key", [(0.0, -150.0, 160.0), (400.0, 500.0, 90.0),
+                                 (-30.0, 20.0, 400.0)])
+def test_the_whole_level_stage_tests_the_squares_under_the_ray_as_every_square(key):
+    # Grazing keys (inside and outside the footprint, and a high one with near-vertical
+    # rays): the rays reaching the whole-level stage meet the same nearest triangle among
+    # the squares their ground track crosses as among all 2 n² (exactly, the same t).
+    hf = make_field(64, relief=300.0, spacing=10.0, kind="ridges")
+    sq = coarse_squares(hf, 32)
+    key = np.array(key)
+    pts = np.r_[sq.centres, sq.centres * np.array([1.0, 1.0, -0.5]),
+                np.c_[sq.centres[:8, :2], np.full(8, 900.0)], [[key[0], key[1], -5.0]]]
+    d = pts - key
+    every = sq.own.reshape(-1, 3, 3)
+    crossed = raycast.crossed_triangles(sq, key, d)
+    assert crossed.shape[1] < len(every) / 4  # far fewer than the whole level
+    fast = raycast.nearest_hits(key, d, lambda k0, k1, j0, j1: every[crossed[k0:k1, j0:j1]],
+                                crossed.shape[1])
+    brute = raycast.nearest_hits(
+        key, d, lambda k0, k1, j0, j1: np.broadcast_to(every[None, j0:j1],
+                                                       (k1 - k0, j1 - j0, 3, 3)), len(every))
+    assert np.isfinite(brute).sum() > 100 and np.isnan(brute).any()
+    np.testing.assert_array_equal(fast, brute)

@@ -139,9 +139,10 @@ def flight(tmp_path_factory):
 
 def test_sprite_adaptive_reads_no_store_inside_its_frames_and_converges(gl, flight, reads,
                                                                          monkeypatch):
-    """A low flyover over a coarse level of 8² squares: the metric's fallback sample
-    (fewer than 4 centres in view) takes level-0 heights inside frames; none is read in
-    this process while a frame runs, and once the reader is idle they are exact."""
+    """A low flyover over a coarse level of 8² squares: the metric's fallback grid
+    (fewer than 4 centres in view) takes level-0 heights inside frames (its candidates'
+    view test; their C is the keyframe's drawn surface); none is read in this process
+    while a frame runs, and once the reader is idle they are exact."""
     from lodsprite import techniques
     from lodsprite.api import Renderer
     from lodsprite.paths import get_path
@@ -224,3 +225,73 @@ def test_a_sprite_made_over_the_same_level_0_keeps_the_reader_until_it_is_releas
             second.release()
     proc.wait(timeout=10)
     assert h.reader is None and h.blocking
+
+
+def _level0_reads(reads) -> int:
+    return sum(1 for kind, k, _, _ in reads.log if kind == "read" and k == 0)
+
+
+@pytest.mark.parametrize("proxy_sse", [None, 8.0])
+def test_sprite_adaptive_setup_reads_no_level_0_and_its_c_is_the_drawn_surface(
+        gl, flight, reads, proxy_sse):
+    """Setup over a store of 1024 small chunks: the uniform proxy, its ribbons and the
+    metric's coarse triangles come from the coarse level held whole (at most 64 level-0
+    chunk reads allowed; 0 made; read through level 0 they were 846); no frame reads the
+    store; each keyframe's C (uniform or proxy metric) is taken from the nodes that
+    keyframe then draws (tests/gl/test_drawn_surface.py: those are the GPU's mesh)."""
+    from lodsprite import techniques
+    from lodsprite.api import Renderer
+    from lodsprite.paths import get_path
+    from lodsprite.scene import load_scene
+
+    scene = load_scene(str(flight[0]), grid=64)
+    path = get_path("flyover:100", scene.hf, 24)
+    with Renderer(scene, (64, 64), ctx=gl.mgl) as renderer:
+        before = _level0_reads(reads)
+        t = techniques.create("sprite-adaptive", renderer, lod=8, key_sse=1.0,
+                              proxy_sse=proxy_sse)
+        try:
+            assert _level0_reads(reads) - before <= 64
+            assert _level0_reads(reads) == before and t.heights.chunks_read == 0
+            assert t.heights.setup_samples > 0  # the setup's samples: the coarse level's
+            calls = []
+            heights = t.surface.heights
+
+            def recorded(eye, view_proj):
+                f = heights(eye, view_proj)
+                calls.append((np.array(eye), set(t.surface.last), f))
+                return f
+
+            t.surface.heights = recorded
+            t.engine.policy.metric = _with_surface(t.engine.policy.metric, recorded)
+            t.warm_up(path.viewpoints[0])
+            checked = 0
+            for vp in path.viewpoints:
+                reads.state["in_frame"] = True
+                f = t.frame(vp)
+                reads.state["in_frame"] = False
+                if f.kind != "keyframe":
+                    continue
+                key = t.engine.keyframes[-1].viewpoint.o
+                made = [c for c in calls if np.array_equal(c[0], key)]
+                assert made and made[-1][1] == set(t.adaptive.last_draw)
+                cp = t.engine.policy.c_prime
+                pts = cp.points
+                # stated tolerance: C's heights are the drawn surface's to 1 µm
+                np.testing.assert_allclose(pts[:, 2], made[-1][2](pts[:, 0], pts[:, 1]),
+                                           atol=1e-6)
+                checked += 1
+            assert checked >= 2
+            assert [r for r in reads.log if r[2]] == []
+        finally:
+            t.release()
+
+
+def _with_surface(metric, surface):
+    """``metric`` taking C from ``surface``: the uniform metric is replaced; the proxy
+    metric's points come from the technique's surface's ``heights``, replaced already."""
+    from dataclasses import replace
+
+    from lodsprite.sprite.proxy_metric import ProxyMetric
+
+    return metric if isinstance(metric, ProxyMetric) else replace(metric, surface=surface)

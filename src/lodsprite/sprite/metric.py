@@ -64,10 +64,11 @@ better than it is:
   the fallback (culling the ``n²`` square boxes, enumerating candidates, reprojecting
   the vertices not yet cached).  Ray casting (:mod:`lodsprite.sprite.raycast`): a ray
   that misses its 3x3 neighbourhood is tested against the wider ones of
-  ``SEARCH_RADII`` and, missing those, against all ``2 n²`` coarse triangles; every
-  stage runs in blocks of ``RAY_PAIRS`` ray-triangle pairs, so its memory is bounded
-  (about 32 MB of temporaries) while its time grows with ``misses × n²``.  The results
-  are those of the unblocked search, bit for bit.
+  ``SEARCH_RADII`` and, missing those, against the coarse triangles under its ground
+  track (:func:`~lodsprite.sprite.raycast.crossed_triangles`, about ``12 n``; no other
+  triangle can meet it); every stage runs in blocks of ``RAY_PAIRS`` ray-triangle pairs,
+  so its memory is bounded (about 32 MB of temporaries) while its time grows with
+  ``misses × n``.  The results are those of the unblocked search, bit for bit.
 
 The fallback needs the keyframe eye: :meth:`ErrorMetric.reproject` returns a
 :class:`Reprojection`, an ``(n*n, 3)`` array of ``C'`` that also carries it.
@@ -82,6 +83,7 @@ keyframe's matrix and size come with its :class:`Reprojection`.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -100,6 +102,10 @@ from lodsprite.sprite.raycast import (
 from lodsprite.sprite.resampling import resampling_px
 from lodsprite.terrain.heightfield import HeightField
 from lodsprite.terrain.lod import level_indices
+
+#: A keyframe's drawn surface: ``(key_eye (3,), key_view_proj (4, 4) | None) ->
+#: height``, ``height(x (K,), y (K,)) -> z (K,) float64`` metres (NaN: unknown there).
+SurfaceSource = Callable[[np.ndarray, "np.ndarray | None"], Callable]
 
 MIN_SAMPLES = 4       # fewer square centres in view than this: measure the fallback sample
 MAX_FALLBACK = 256    # at most this many fallback vertices are measured (evenly chosen)
@@ -145,10 +151,18 @@ class ErrorMetric:
     ``θ² = θ_warp² + (β e_res)²`` (:mod:`lodsprite.sprite.resampling`, evaluated at ``C'``
     on the coarse triangle there; misses add nothing before :func:`miss_floor`); False is
     the 1999 metric.
+
+    ``surface`` (:data:`SurfaceSource`): each keyframe's ``C`` is the surface that keyframe
+    shows at the square centres' ``x, y`` (and at the fallback vertices), not the
+    squares' own ``C``: ``sprite-adaptive`` gives the adaptive renderer's selection at
+    ``--key-sse`` (:class:`~lodsprite.techniques.drawn_surface.DrawnSurface`), resident, so
+    neither setup nor a frame reads a store's level 0 for it.  None: the 1999 metric's
+    exact full-resolution ``C``.
     """
 
     squares: CoarseSquares
     resampling: bool = False
+    surface: SurfaceSource | None = None
 
     @cached_property
     def _centres_h(self) -> np.ndarray:
@@ -165,7 +179,16 @@ class ErrorMetric:
         """``C' (n*n, 3)`` in metres for a keyframe rendered from ``key_eye`` through
         ``key_view_proj (4, 4)`` on a ``key_size = (w, h)`` pixel image (guard band
         included; both needed by the resampling term only)."""
-        return reprojected_centres(self.squares, key_eye, key_view_proj, key_size)
+        if self.surface is None:
+            return reprojected_centres(self.squares, key_eye, key_view_proj, key_size)
+        height = self.surface(np.asarray(key_eye, np.float64), key_view_proj)
+        points = self.squares.centres.copy()
+        z = height(points[:, 0], points[:, 1])
+        points[:, 2] = np.where(np.isnan(z), points[:, 2], z)  # none resident: the squares'
+        c_prime, missed = reproject_points(self.squares, key_eye, points)
+        out = Reprojection(c_prime, key_eye, missed, key_view_proj, key_size)
+        out.set_points(points, height)
+        return out
 
     def theta(self, c_prime: np.ndarray, eye: np.ndarray, view_proj: np.ndarray) -> np.ndarray:
         """θ (radians) of the squares whose centre ``C`` is in the current view (misses
@@ -175,9 +198,14 @@ class ErrorMetric:
     def _theta(self, c_prime: np.ndarray, eye: np.ndarray,
                view_proj: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(θ, missed, C')`` of the square centres in view."""
-        vis = in_view(self._centres_h, view_proj)
+        points = getattr(c_prime, "points", None)
+        if points is None:  # the squares' own centres
+            points, points_h = self.squares.centres, self._centres_h
+        else:
+            points_h = c_prime.points_h
+        vis = in_view(points_h, view_proj)
         cp = np.asarray(c_prime)[vis]
-        th = angles_at_eye(np.asarray(eye, dtype=np.float64), self.squares.centres[vis], cp)
+        th = angles_at_eye(np.asarray(eye, dtype=np.float64), points[vis], cp)
         missed = getattr(c_prime, "missed", None)
         return th, (np.zeros(th.size, bool) if missed is None else missed[vis]), cp
 
@@ -282,15 +310,17 @@ class ErrorMetric:
         return self.fallback_sample(key_eye, eye, view_proj, cache)[:2]
 
     def fallback_sample(self, key_eye: np.ndarray, eye: np.ndarray, view_proj: np.ndarray,
-                        cache: dict | None = None
+                        cache: dict | None = None, surface=None
                         ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """:meth:`fallback_theta` with the fallback vertices' ``C' (K, 3)`` metres."""
+        """:meth:`fallback_theta` with the fallback vertices' ``C' (K, 3)`` metres;
+        ``surface(x, y) -> z``: the keyframe's drawn surface their ``C`` is taken from
+        (a :class:`Reprojection`'s ``surface``; None: the full-resolution field)."""
         sq = self.squares
         rr, cc = self.fallback_grid(view_proj)
         if len(rr) == 0:
             return np.zeros(0), np.zeros(0, bool), np.zeros((0, 3))
         n, step = sq.level_quads, sq.step
-        pts = sq.hf.points(rr, cc)
+        pts = self._fallback_points(rr, cc, surface)
         lin = rr * sq.hf.cols + cc
         entry = None if cache is None else cache.get(id(sq))
         if entry is not None and entry[0] is not sq:
@@ -308,7 +338,7 @@ class ErrorMetric:
                       + np.minimum(cc[new] // step, n - 1))
             p_prime[new], missed[new] = reproject_points(sq, key_eye, pts[new], square)
             # a store's heights not resident yet are approximate: not cached, taken again
-            exact = getattr(sq.hf.heights, "exact", None)
+            exact = None if surface is not None else getattr(sq.hf.heights, "exact", None)
             keep = new if exact is None else new & exact(rr, cc)
             if cache is not None and keep.any():
                 if entry is None or len(entry[1]) + int(keep.sum()) > FALLBACK_CACHE:
@@ -318,6 +348,18 @@ class ErrorMetric:
                 cache[id(sq)] = (sq, keys[order], np.r_[entry[2], p_prime[keep]][order],
                                  np.r_[entry[3], missed[keep]][order])
         return angles_at_eye(np.asarray(eye, dtype=np.float64), pts, p_prime), missed, p_prime
+
+    def _fallback_points(self, rr: np.ndarray, cc: np.ndarray, surface) -> np.ndarray:
+        """Points ``(K, 3)`` of the fallback vertices: on ``surface`` where it has a
+        height, else the full-resolution field's."""
+        hf = self.squares.hf
+        if surface is None:
+            return hf.points(rr, cc)
+        x, y = hf.world_xy(rr, cc)
+        z = surface(x, y)
+        if np.isnan(z).any():
+            z = np.where(np.isnan(z), hf.points(rr, cc)[:, 2], z)
+        return np.c_[x, y, z]
 
     def covers(self, viewpoint, projection, key_viewpoint, key_projection) -> bool:
         """Whether every square centre in the current view is also in the keyframe's view."""
@@ -347,7 +389,8 @@ class ErrorMetric:
         key_eye = getattr(c_prime, "key_eye", None)
         if th.size < MIN_SAMPLES and key_eye is not None:
             fallback = self.fallback_sample(key_eye, eye, view_proj,
-                                            getattr(c_prime, "fallback_cache", None))
+                                            getattr(c_prime, "fallback_cache", None),
+                                            surface=getattr(c_prime, "surface", None))
             if fallback[0].size > th.size:
                 th, missed, cp = fallback
         if th.size == 0 or missed.all():  # nothing in view, or nothing the sprite draws

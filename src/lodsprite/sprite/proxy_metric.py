@@ -36,11 +36,12 @@ metric counts misses; when every sample in view missed, or none is in view, the 
 is ``inf`` (a keyframe is due).
 
 ``C'`` is computed once per keyframe (:meth:`ProxyMetric.reproject`); per frame only the
-angles (:meth:`ProxyMetric.error_px`).  ``C`` is read through ``hf.points(rows, cols)``:
-on a store, :class:`~lodsprite.terrain.storefield.LazyHeights`, whose reads of level-0
-chunks not cached yet block (a 16k² flyover keyframe read 2560 chunks, 9 s, for 2080
-samples spread over the widened frustum); the non-blocking ``LazyHeights`` of issue 22
-serves the same interface.
+angles (:meth:`ProxyMetric.error_px`).  ``C`` is the surface the keyframe shows when
+``points`` is given: ``sprite-adaptive`` gives the adaptive renderer's selection at
+``--key-sse`` (:class:`~lodsprite.techniques.drawn_surface.DrawnSurface`), whose tiles are
+resident, so no keyframe reads storage (through level 0, a 16k² flyover keyframe read
+2560 chunks, 9 s, for 2080 samples spread over the widened frustum).  Without it ``C`` is
+``hf.points(rows, cols)``: level 0's samples.
 """
 
 from __future__ import annotations
@@ -245,19 +246,24 @@ def node_samples(hf, windows: np.ndarray, steps: np.ndarray, per_node: int = SAM
     return np.asarray(hf.points(rows, cols), np.float64)
 
 
+#: The keyframe's own ``C``: ``(key_eye (3,), key_view_proj (4, 4) | None) -> points``,
+#: ``points(rows, cols) -> (K, 3) float64`` metres at level-0 sample indices (e.g. the
+#: surface the keyframe shows, :class:`~lodsprite.techniques.drawn_surface.DrawnSurface`).
+PointSource = Callable[[np.ndarray, "np.ndarray | None"], Callable]
+
+
+class _Points:
+    """``points(rows, cols)`` as the ``hf.points`` :func:`node_samples` calls."""
+
+    def __init__(self, points: Callable) -> None:
+        self.points = points
+
+
 class ProxyReprojection(Reprojection):
     """A keyframe's ``C' (K, 3)`` on its proxy, with the keyframe eye, the misses and the
-    sample points ``points (K, 3)`` (``C``) they belong to."""
-
-    points: np.ndarray | None
-    points_h: np.ndarray | None  # (K, 4): the points with w = 1, for the per-frame test
-
-    def __array_finalize__(self, obj) -> None:
-        super().__array_finalize__(obj)
-        pts = getattr(obj, "points", None)
-        same = pts is not None and len(pts) == len(self)
-        self.points = pts if same else None
-        self.points_h = getattr(obj, "points_h", None) if same else None
+    sample points ``points (K, 3)`` (``C``) they belong to, and ``points_h (K, 4)`` with
+    w = 1 for the per-frame test
+    (:meth:`~lodsprite.sprite.raycast.Reprojection.set_points` keeps them)."""
 
 
 #: The proxy frozen for a keyframe: ``(key_eye (3,), key_view_proj (4, 4) | None) ->
@@ -272,12 +278,16 @@ class ProxyMetric:
     ``source`` freezes the proxy for a keyframe (its selection is made there, and the GL
     side draws that same selection); ``hf`` gives level-0 samples; ``coarse`` is a uniform
     level's :class:`~lodsprite.sprite.metric.ErrorMetric`, whose square centres
-    :meth:`covers` tests (a look-ahead keyframe's proxy is not selected yet)."""
+    :meth:`covers` tests (a look-ahead keyframe's proxy is not selected yet).  ``points``
+    (:data:`PointSource`): ``C`` from the surface the keyframe shows instead of ``hf``
+    (what ``sprite-adaptive`` gives: nothing is read from storage)."""
 
     def __init__(self, source: ProxySource, hf, coarse: ErrorMetric,
-                 per_node: int = SAMPLES_PER_NODE, limit: int = MAX_SAMPLES) -> None:
+                 per_node: int = SAMPLES_PER_NODE, limit: int = MAX_SAMPLES,
+                 points: PointSource | None = None) -> None:
         self.source, self.hf, self.coarse = source, hf, coarse
         self.per_node, self.limit = int(per_node), int(limit)
+        self.points = points
 
     def reproject(self, key_eye: np.ndarray, key_view_proj: np.ndarray | None = None,
                   key_size=None) -> ProxyReprojection:
@@ -285,11 +295,12 @@ class ProxyMetric:
         eye = np.asarray(key_eye, np.float64)
         nodes = self.source(eye, key_view_proj)
         steps = np.rint(nodes.spacing[:, 0] / self.hf.dx).astype(np.int64)
-        points = node_samples(self.hf, nodes.windows, steps, self.per_node, self.limit)
+        hf = self.hf if self.points is None else _Points(self.points(eye, key_view_proj))
+        points = node_samples(hf, nodes.windows, steps, self.per_node, self.limit)
         cell_m = np.repeat(nodes.spacing.min(axis=1), len(points) // max(1, len(nodes)))
         c_prime, missed = reproject_onto(ProxySurface(nodes), eye, points, cell_m)
         out = ProxyReprojection(c_prime, eye, missed)
-        out.points, out.points_h = points, np.c_[points, np.ones(len(points))]
+        out.set_points(points)
         return out
 
     def error_px(self, c_prime: ProxyReprojection, eye: np.ndarray, view_proj: np.ndarray,

@@ -3,7 +3,8 @@
 ``C'`` is where the ray from the keyframe eye through a full-resolution vertex ``C`` meets
 the coarse surface.  It is computed exactly (Möller & Trumbore 1997, vectorised): against
 the two coarse triangles of the vertex's square and its eight neighbours, then wider
-neighbourhoods (:data:`SEARCH_RADII`), finally every coarse triangle; the hit in front of
+neighbourhoods (:data:`SEARCH_RADII`), finally every coarse triangle under the ray's
+ground track (:func:`crossed_triangles`: no other can meet it); the hit in front of
 the eye nearest to ``C`` along the ray is kept.  A ray that meets nothing ends where it
 leaves the terrain's footprint (a miss, see :mod:`lodsprite.sprite.metric`).  Every stage
 runs in blocks of at most :data:`RAY_PAIRS` ray-triangle pairs, so memory stays bounded
@@ -22,6 +23,7 @@ from lodsprite.terrain.lod import level_indices, level_step
 
 SEARCH_RADII = (3, 8, 1 << 30)
 RAY_PAIRS = 1 << 17   # ray-triangle pairs intersected at once (about 32 MB of temporaries)
+TRACK_RAYS = 256      # rays whose ground tracks are gathered at once (whole-level stage)
 FALLBACK_CACHE = 1 << 15  # reprojected fallback vertices kept per keyframe and level
 
 
@@ -87,6 +89,11 @@ class Reprojection(np.ndarray):
     through, times its view matrix) and ``key_size (w, h)`` pixels (image plus guard band),
     both None when unknown (the metric takes the normal at ``C'`` from
     :func:`coarse_normals`).
+
+    ``points (n*n, 3)``: the keyframe's own ``C`` when the metric takes it from the
+    surface the keyframe shows (``ErrorMetric.surface``; None: the squares' centres), with
+    ``points_h`` (w = 1) and that surface's height function ``surface(x, y) -> z`` (for
+    the fallback sample); views of the same shape keep them, pickling drops them.
     """
 
     key_eye: np.ndarray | None
@@ -94,6 +101,9 @@ class Reprojection(np.ndarray):
     fallback_cache: dict
     key_view_proj: np.ndarray | None
     key_size: tuple[int, int] | None
+    points: np.ndarray | None
+    points_h: np.ndarray | None
+    surface: object | None
 
     def __new__(cls, c_prime: np.ndarray, key_eye: np.ndarray,
                 missed: np.ndarray | None = None, key_view_proj: np.ndarray | None = None,
@@ -105,7 +115,14 @@ class Reprojection(np.ndarray):
         obj.key_view_proj = (None if key_view_proj is None
                              else np.array(key_view_proj, dtype=np.float64))
         obj.key_size = None if key_size is None else (int(key_size[0]), int(key_size[1]))
+        obj.points = obj.points_h = obj.surface = None
         return obj
+
+    def set_points(self, points: np.ndarray, surface=None) -> None:
+        """Carry the keyframe's own ``C (K, 3)`` (and the surface it was taken from)."""
+        self.points = np.asarray(points, np.float64)
+        self.points_h = np.c_[self.points, np.ones(len(self.points))]
+        self.surface = surface
 
     def __array_finalize__(self, obj) -> None:
         self.key_eye = getattr(obj, "key_eye", None)
@@ -115,6 +132,11 @@ class Reprojection(np.ndarray):
         self.missed = missed if missed is not None and obj.shape == self.shape else None
         self.key_view_proj = getattr(obj, "key_view_proj", None)
         self.key_size = getattr(obj, "key_size", None)
+        pts = getattr(obj, "points", None)
+        same = pts is not None and len(pts) == len(self) and obj.shape == self.shape
+        self.points = pts if same else None
+        self.points_h = getattr(obj, "points_h", None) if same else None
+        self.surface = getattr(obj, "surface", None)
 
     def __array_wrap__(self, arr, context=None, return_scalar=False):
         # Results of ufuncs and reductions are plain arrays and scalars, not C'.
@@ -129,6 +151,7 @@ class Reprojection(np.ndarray):
         array_state, self.key_eye, self.missed, *key = state
         self.key_view_proj, self.key_size = (key + [None, None])[:2]
         self.fallback_cache = {}
+        self.points = self.points_h = self.surface = None
         super().__setstate__(array_state)
 
 
@@ -219,8 +242,10 @@ def reproject_points(squares: CoarseSquares, key_eye: np.ndarray, points: np.nda
     the eye nearest to the point along the ray is kept.  A ray that meets no coarse
     triangle is ``missed``; its ``C'`` is where it leaves the terrain's footprint.
     Every stage runs in blocks of at most :data:`RAY_PAIRS` ray-triangle pairs
-    (:func:`nearest_hits`): the whole level costs ``2 n²`` tests per ray that reaches it,
-    but never more memory than one block.
+    (:func:`nearest_hits`): the whole level costs about ``12 n`` tests per ray that
+    reaches it (the squares its ground track crosses, :func:`crossed_triangles`; every
+    ``2 n²`` triangles before: 4 s a keyframe at ``n = 128``), never more memory than one
+    block.
     """
     key_eye = np.asarray(key_eye, dtype=np.float64)
     d = points - key_eye  # the point at t = 1
@@ -235,10 +260,14 @@ def reproject_points(squares: CoarseSquares, key_eye: np.ndarray, points: np.nda
         if missing.size == 0:
             break
         at = index[missing]
-        if radius >= n:  # the whole level, in blocks (RAY_PAIRS) to bound the memory
-            def tris(k0, k1, j0, j1):
-                return np.broadcast_to(every[None, j0:j1], (k1 - k0, j1 - j0, 3, 3))
-            t_best[missing] = nearest_hits(key_eye, d[missing], tris, len(every))
+        if radius >= n:  # the whole level: the squares under the ray only, in blocks
+            for b in range(0, len(missing), TRACK_RAYS):  # bounded index arrays
+                rays = missing[b:b + TRACK_RAYS]
+                crossed = crossed_triangles(squares, key_eye, d[rays])
+
+                def tris(k0, k1, j0, j1, crossed=crossed):
+                    return every[crossed[k0:k1, j0:j1]]
+                t_best[rays] = nearest_hits(key_eye, d[rays], tris, crossed.shape[1])
             break
         def tris(k0, k1, j0, j1, at=at, radius=radius):
             return _neighbourhood(squares, at[k0:k1], radius)[:, j0:j1]
@@ -247,6 +276,48 @@ def reproject_points(squares: CoarseSquares, key_eye: np.ndarray, points: np.nda
     if missed.any():
         t_best[missed] = _exit_t(squares, key_eye, d[missed])
     return key_eye + t_best[:, None] * d, missed
+
+
+def crossed_triangles(squares: CoarseSquares, origin: np.ndarray,
+                      d: np.ndarray) -> np.ndarray:
+    """``(K, M) intp`` indices into ``squares.own.reshape(-1, 3, 3)``: for each ray
+    ``origin + t d (K, 3)``, ``t > 0``, the triangles of every coarse square its ground
+    track crosses inside the footprint (no triangle elsewhere can meet it), rows padded
+    with repeats.  The track is sampled every half square, and the 3x3 squares around
+    each sample are taken (a square the track only clips at a corner neighbours a
+    sample): about ``2 n`` squares a ray instead of the whole level's ``n²``."""
+    n = squares.level_quads
+    lo, hi = squares.hf.bounds()
+    size = (hi[:2] - lo[:2]) / n  # a square's extent, x and y
+    o, dd = np.asarray(origin, np.float64)[:2], d[:, :2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ta, tb = (lo[:2] - o) / dd, (hi[:2] - o) / dd
+        t_in = np.nanmax(np.where(dd != 0, np.minimum(ta, tb), -np.inf), axis=1)
+        t_out = np.nanmin(np.where(dd != 0, np.maximum(ta, tb), np.inf), axis=1)
+    # a vertical ray (no ground track) or a track that never enters: one point, C's own
+    flat = ~np.isfinite(t_out)
+    t_in = np.where(flat, 1.0, np.maximum(t_in, 0.0))
+    t_out = np.where(flat, 1.0, np.maximum(t_out, t_in))
+    span = np.hypot(*((t_out - t_in)[:, None] * dd / size).T)  # track length in squares
+    steps = int(np.clip(np.ceil(2 * span.max(initial=0.0)), 1, 4 * n)) + 1
+    f = np.linspace(0.0, 1.0, steps)
+    t = t_in[:, None] + f[None] * (t_out - t_in)[:, None]  # (K, S)
+    x = o[0] + t * dd[:, 0:1]
+    y = o[1] + t * dd[:, 1:2]
+    col = np.clip(np.floor((x - lo[0]) / size[0]), 0, n - 1).astype(np.intp)
+    row = np.clip(np.floor((hi[1] - y) / size[1]), 0, n - 1).astype(np.intp)  # row 0 north
+    off = np.array([-1, 0, 1])
+    rr = np.clip(row[:, :, None, None] + off[None, None, :, None], 0, n - 1)
+    cc = np.clip(col[:, :, None, None] + off[None, None, None, :], 0, n - 1)
+    sq = np.sort((rr * n + cc).reshape(len(d), -1), axis=1)
+    keep = np.ones(sq.shape, bool)
+    keep[:, 1:] = sq[:, 1:] != sq[:, :-1]
+    width = int(keep.sum(axis=1).max(initial=1))
+    order = np.argsort(~keep, axis=1, kind="stable")[:, :width]  # the unique ones first
+    uniq = np.take_along_axis(sq, order, axis=1)
+    valid = np.take_along_axis(keep, order, axis=1)
+    uniq = np.where(valid, uniq, uniq[:, :1])  # padded with the first square
+    return (2 * uniq[:, :, None] + np.array([0, 1])).reshape(len(d), -1)
 
 
 def reprojected_centres(squares: CoarseSquares, key_eye: np.ndarray,

@@ -218,8 +218,10 @@ def reproject_in_key_view(metric: ErrorMetric, key_eye: np.ndarray,
     Reprojection carries ``key_view_proj`` and ``key_size = (w, h)`` (the keyframe target's
     pixels, guard band included) for the resampling term.  A metric without square centres
     (a view-dependent proxy's, :class:`~lodsprite.sprite.proxy_metric.ProxyMetric`, whose
-    samples are the proxy's nodes culled by the key view) gives its own ``reproject``."""
-    if not hasattr(metric, "squares"):
+    samples are the proxy's nodes culled by the key view) gives its own ``reproject``, and
+    so does one taking its ``C`` from the surface the keyframe shows (``metric.surface``,
+    over a store: :class:`~lodsprite.techniques.drawn_surface.DrawnSurface`)."""
+    if not hasattr(metric, "squares") or getattr(metric, "surface", None) is not None:
         return metric.reproject(key_eye, key_view_proj, key_size)
     sq = metric.squares
     vis = np.flatnonzero(in_view(metric._centres_h, key_view_proj))

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from contextlib import nullcontext
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -169,7 +170,10 @@ class AdaptiveTechnique(Technique):
 class SpriteAdaptiveTechnique(SpriteTechnique):
     """LOD-sprite with keyframes drawn by the adaptive renderer at ``key_sse`` pixels
     (inline keyframes); it streams between keyframes.  Over a store the coarse proxy,
-    ribbons and error metric come from the store's level 0.  Each keyframe's selection is
+    ribbons and the metric's coarse triangles come from the store's coarse level held
+    whole (:meth:`~lodsprite.terrain.storefield.LazyHeights.from_coarse`: no level-0 chunk
+    is read at setup), and the metric's ``C`` from each keyframe's own drawn nodes
+    (:mod:`lodsprite.techniques.drawn_surface`).  Each keyframe's selection is
     recorded; the replay draws it again with the same nodes (their tiles read then).
     ``proxy_sse``: spriteframes draw the adaptive mesh at that tolerance, selected at each
     keyframe and frozen (:mod:`lodsprite.techniques.sprite_proxy`), with the error metric
@@ -196,10 +200,12 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
             if isinstance(self.adaptive.tree.p, TerrainStore):
                 field = store_field(self.adaptive.tree.p)
                 renderer.paths.geometry.set_full(field)
-            # proxy, ribbons and C read from level 0 there, then only without blocking
-            super().__init__(renderer, lod, epsilon, False, visibility, guard_px, border,
-                             shading=shading, tiles=tiles, tile_budget_ms=tile_budget_ms,
-                             cache_mb=cache_mb, cache_policy=cache_policy, metric=metric)
+            # the proxy, ribbons and the metric's coarse triangles from the store's coarse
+            # level held whole (no level-0 chunk at setup), then level 0 without blocking
+            with nullcontext() if field is None else field.heights.from_coarse():
+                super().__init__(renderer, lod, epsilon, False, visibility, guard_px, border,
+                                 shading=shading, tiles=tiles, tile_budget_ms=tile_budget_ms,
+                                 cache_mb=cache_mb, cache_policy=cache_policy, metric=metric)
         except BaseException:
             self.adaptive.release()
             if field is not None:
@@ -207,6 +213,17 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
             raise
         self.sprite.sprite.keyframe_drawer = self._draw_keyframe
         self.engine.between_keyframes = self._between_keyframes
+        self.surface = None  # over a store: the metric's C from the keyframe's drawn nodes
+        if field is not None:
+            from dataclasses import replace
+
+            from lodsprite.techniques.drawn_surface import DrawnSurface
+
+            self.surface = DrawnSurface(self.adaptive)
+            policy = self.engine.policy
+            policy.metric = replace(policy.metric, surface=self.surface.heights)
+            if self.tiled is not None:  # each tile update's C on the surface it shows
+                self.tiled.metric = replace(self.tiled.metric, surface=self.surface.heights)
         self._selections: dict[int, tuple] = {}  # keyframe -> (nodes drawn, morphed)
         self.proxy = None if proxy_sse is None else self._adaptive_proxy(renderer, proxy_sse)
         self._proxies: dict[int, tuple] = {}  # keyframe -> its frozen proxy selection
@@ -262,11 +279,13 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
         source = AdaptiveProxySource(self.adaptive, proxy_sse, self.sprite.sprite.target.height)
         self.sprite.sprite.set_proxy(source)
         policy = self.engine.policy
-        policy.metric = ProxyMetric(source.nodes, renderer.paths.geometry.full, policy.metric)
+        points = None if self.surface is None else self.surface.points
+        policy.metric = ProxyMetric(source.nodes, renderer.paths.geometry.full, policy.metric,
+                                    points=points)
         if self.tiled is not None:  # tiles: the proxy frozen per update, its metric per tile
             self.tiled.tiled.use_proxy()
             self.tiled.metric = ProxyMetric(source.nodes, renderer.paths.geometry.full,
-                                            self.tiled.metric)
+                                            self.tiled.metric, points=points)
         return source
 
     def warm_up(self, viewpoint: Viewpoint) -> None:

@@ -80,6 +80,56 @@ def parent_surface(pos: np.ndarray, quadrant: tuple[int, int], parent: np.ndarra
                            np.array([parent.shape]) - 1, grid, stride)[0]
 
 
+def frozen_nodes(terrain, nodes, morphed: frozenset, eye: np.ndarray, stride: int,
+                 r: np.ndarray) -> ProxyNodes:
+    """``nodes`` of ``terrain`` (an :class:`~lodsprite.techniques.adaptive_terrain.
+    AdaptiveTerrain`; resident) as :class:`ProxyNodes`: every ``stride``-th sample, those
+    in ``morphed`` geomorphed towards their parents at ``eye (3,)`` by the range table
+    ``r`` as the vertex shader morphs them (heights from the host cache or the GPU slots,
+    :meth:`~lodsprite.techniques.adaptive_terrain.AdaptiveTerrain.node_heights`)."""
+    t, g, st = terrain, terrain.tree.g, stride
+    tree = t.tree
+    n_, nv = len(nodes), g // st
+    win = np.array([tree.samples(n) for n in nodes], np.intp).reshape(-1, 4)
+    k = np.array([n.k for n in nodes], np.intp)
+    s = (1 << k).astype(np.float64)
+    x, y = tree.world_xy(0, win[:, 0] * s, win[:, 2] * s)  # level-0 indices
+    origin = np.c_[x, y]
+    spacing = np.c_[st * s * tree.p.dx, st * s * tree.p.dy]
+    ext = np.minimum(g, np.c_[win[:, 1] - win[:, 0] - 1, win[:, 3] - win[:, 2] - 1])
+    windows = np.c_[win[:, 0], win[:, 0] + ext[:, 0], win[:, 2], win[:, 2] + ext[:, 1]]
+    windows = (windows * s[:, None]).astype(np.intp)
+    own = np.zeros((n_, g + 1, g + 1))
+    par = np.zeros((n_, g + 1, g + 1))
+    ptop = np.zeros((n_, 2), np.intp)
+    mask = np.array([n in morphed for n in nodes], bool)
+    for i, n in enumerate(nodes):
+        tile = t.node_heights(n)
+        own[i, :tile.shape[0], :tile.shape[1]] = tile
+        if mask[i]:
+            tile = t.node_heights(n.parent())
+            par[i, :tile.shape[0], :tile.shape[1]] = tile
+            ptop[i] = np.array(tile.shape) - 1
+    rc = np.stack(np.meshgrid(np.arange(nv + 1), np.arange(nv + 1), indexing="ij"), -1)
+    pos = np.minimum(rc[None] * st, ext[:, None, None, :])  # clamped as the shader does
+    idx = np.arange(n_)[:, None, None]
+    heights = own[idx, pos[..., 0], pos[..., 1]]
+    if mask.any():
+        quad = np.array([(n.i % 2, n.j % 2) for n in nodes], np.intp)
+        hc = parent_surfaces(pos, quad, par, ptop, g, st)
+        xy = origin[:, None, None, :] + pos[..., ::-1] * (
+            s[:, None] * np.array([tree.p.dx, -tree.p.dy]))[:, None, None, :]
+        d = np.sqrt(((np.concatenate([xy, heights[..., None]], -1)
+                      - np.asarray(eye, np.float64)) ** 2).sum(-1))
+        m = np.zeros_like(d)
+        for lev in np.unique(k[mask]):
+            sel = mask & (k == lev)
+            m[sel] = morph_factor(d[sel], int(lev), r)
+        heights = heights + m * (hc - heights)
+    last = ext / st
+    return ProxyNodes(origin, spacing, last, heights, windows)
+
+
 class AdaptiveProxySource:
     """The view-dependent proxy of ``terrain`` (an
     :class:`~lodsprite.techniques.adaptive_terrain.AdaptiveTerrain`, whose atlas, slots and
@@ -148,47 +198,7 @@ class AdaptiveProxySource:
         """The proxy of :meth:`select` as arrays (:class:`ProxyNodes`), heights morphed at
         ``eye`` as the vertex shader morphs them: the metric's source."""
         nodes, morphed = self.select(eye, view_proj)
-        t, g, st = self.terrain, self.terrain.tree.g, self.stride
-        tree = t.tree
-        n_, nv = len(nodes), g // st
-        win = np.array([tree.samples(n) for n in nodes], np.intp).reshape(-1, 4)
-        k = np.array([n.k for n in nodes], np.intp)
-        s = (1 << k).astype(np.float64)
-        x, y = tree.world_xy(0, win[:, 0] * s, win[:, 2] * s)  # level-0 indices
-        origin = np.c_[x, y]
-        spacing = np.c_[st * s * tree.p.dx, st * s * tree.p.dy]
-        ext = np.minimum(g, np.c_[win[:, 1] - win[:, 0] - 1, win[:, 3] - win[:, 2] - 1])
-        windows = np.c_[win[:, 0], win[:, 0] + ext[:, 0], win[:, 2], win[:, 2] + ext[:, 1]]
-        windows = (windows * s[:, None]).astype(np.intp)
-        own = np.zeros((n_, g + 1, g + 1))
-        par = np.zeros((n_, g + 1, g + 1))
-        ptop = np.zeros((n_, 2), np.intp)
-        mask = np.array([n in morphed for n in nodes], bool)
-        for i, n in enumerate(nodes):
-            tile = t.node_heights(n)
-            own[i, :tile.shape[0], :tile.shape[1]] = tile
-            if mask[i]:
-                tile = t.node_heights(n.parent())
-                par[i, :tile.shape[0], :tile.shape[1]] = tile
-                ptop[i] = np.array(tile.shape) - 1
-        rc = np.stack(np.meshgrid(np.arange(nv + 1), np.arange(nv + 1), indexing="ij"), -1)
-        pos = np.minimum(rc[None] * st, ext[:, None, None, :])  # clamped as the shader does
-        idx = np.arange(n_)[:, None, None]
-        heights = own[idx, pos[..., 0], pos[..., 1]]
-        if mask.any():
-            quad = np.array([(n.i % 2, n.j % 2) for n in nodes], np.intp)
-            hc = parent_surfaces(pos, quad, par, ptop, g, st)
-            xy = origin[:, None, None, :] + pos[..., ::-1] * (
-                s[:, None] * np.array([tree.p.dx, -tree.p.dy]))[:, None, None, :]
-            d = np.sqrt(((np.concatenate([xy, heights[..., None]], -1)
-                          - np.asarray(eye, np.float64)) ** 2).sum(-1))
-            m = np.zeros_like(d)
-            for lev in np.unique(k[mask]):
-                sel = mask & (k == lev)
-                m[sel] = morph_factor(d[sel], int(lev), self.r)
-            heights = heights + m * (hc - heights)
-        last = ext / st
-        return ProxyNodes(origin, spacing, last, heights, windows)
+        return frozen_nodes(self.terrain, nodes, morphed, eye, self.stride, self.r)
 
     def force(self, selection: tuple[tuple, frozenset] | None) -> None:
         """Freeze ``selection`` (a recorded :attr:`last`) for the next keyframes, its tiles

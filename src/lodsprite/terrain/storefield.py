@@ -19,9 +19,12 @@ origin, x east, y north, metres.
 
 Nothing in a timed frame waits for storage (issue 22, must-have 6: the metric's fallback
 reading level-0 chunks inside the frame gave a 3.5 s p99 spriteframe on the 16k²
-flyover).  Reads block only while :attr:`LazyHeights.blocking` holds: during setup (the
-proxy's vertices, the border ribbons and the metric's centres ``C`` are read exactly,
-before the first frame) and in untimed use (:meth:`LazyHeights.waiting`).  After
+flyover), and setup reads no level 0 wholesale: inside :meth:`LazyHeights.from_coarse`
+every sample is the coarse level's below (``sprite-adaptive`` builds the proxy's vertices,
+the border ribbons and the metric's coarse triangles there; through level 0 they read
+about every level-0 chunk of a 16k² store, 468 s before the first frame).  Reads block
+only while :attr:`LazyHeights.blocking` holds and no ``from_coarse`` block is open: a
+technique made outside one, and untimed use (:meth:`LazyHeights.waiting`).  After
 :meth:`LazyHeights.start_reader` a sample whose level-0 chunks are not resident is
 answered at once from a coarser level of the store held whole in memory (the finest
 below level 0 of at most :data:`COARSE_SIDE` a side, read once then), bilinearly at the
@@ -111,6 +114,8 @@ class LazyHeights:
         self.approximate = 0     # samples served from the coarse level so far
         self.bad: set[int] = set()  # chunks the reader could not read (stay approximate)
         self._users = 0          # start_reader calls not yet closed
+        self._setup = False      # inside from_coarse(): every sample from the coarse level
+        self.setup_samples = 0   # samples served from the coarse level inside from_coarse()
 
     def __getitem__(self, key) -> np.ndarray:
         rows, cols = self._indices(key)
@@ -140,6 +145,9 @@ class LazyHeights:
         where the chunks are resident (or read, when blocking), else from :attr:`coarse`
         (counted in :attr:`approximate`; the chunks are asked for)."""
         fr, fc = self._clip(fr, fc)
+        if self._setup:  # setup: the coarse level alone, nothing read or asked for
+            self.setup_samples += fr.size
+            return self._coarse_at(fr, fc).astype(np.float32)
         corners = self._corners(fr, fc)
         ok = None
         if not self.blocking:
@@ -240,15 +248,21 @@ class LazyHeights:
         """``(lo, hi) (n, n)`` bounds of the heights in each square of ``step`` working
         quads (edges included), from the level-0 chunks each square overlaps."""
         mm = self._minmax
-        lo, hi = np.empty((n, n)), np.empty((n, n))
-        sr, sc = self.scale
         c = self.chunk
-        for a in range(n):
-            ra, rb = int(a * step * sr) // c, int(np.ceil((a + 1) * step * sr)) // c + 1
-            for b in range(n):
-                ca, cb = int(b * step * sc) // c, int(np.ceil((b + 1) * step * sc)) // c + 1
-                block = mm[ra:rb, ca:cb]
-                lo[a, b], hi[a, b] = block[..., 0].min(), block[..., 1].max()
+
+        def spans(scale: float, size: int) -> tuple[np.ndarray, np.ndarray]:
+            a = np.arange(n)
+            first = np.floor(a * step * scale).astype(np.intp) // c
+            last = np.minimum(np.ceil((a + 1) * step * scale).astype(np.intp) // c, size - 1)
+            return first, np.maximum(last, first)
+
+        (r0, r1), (c0, c1) = spans(self.scale[0], mm.shape[0]), spans(self.scale[1], mm.shape[1])
+        lo, hi = np.full((n, n), np.inf), np.full((n, n), -np.inf)
+        for dr in range(int((r1 - r0).max()) + 1):  # the chunks each square overlaps
+            rr = np.minimum(r0 + dr, r1)
+            for dc in range(int((c1 - c0).max()) + 1):
+                block = mm[rr[:, None], np.minimum(c0 + dc, c1)[None, :]]
+                lo, hi = np.minimum(lo, block[..., 0]), np.maximum(hi, block[..., 1])
         return lo, hi
 
     # -- non-blocking reads: a reader process, driven from the frame's thread --------
@@ -266,6 +280,15 @@ class LazyHeights:
         self._users += 1
         if self.reader is not None:
             return
+        k = self.hold_coarse(coarse_side)
+        self.reader = ChunkReader(self.store, self._window, in_flight, self.capacity, k)
+        self.blocking = False
+
+    def hold_coarse(self, coarse_side: int = COARSE_SIDE) -> int:
+        """Read the coarse level (:meth:`start_reader`) whole into :attr:`coarse` unless
+        held already (this blocks: setup only); returns its level."""
+        if self.coarse is not None:
+            return self.coarse_level
         k = min(max(1, self.store.level_for(coarse_side)), self.store.levels - 1)
         r, c = self.store.shape(k)
         coarse = np.asarray(self.store.read(k, 0, r, 0, c), np.float32)
@@ -273,8 +296,21 @@ class LazyHeights:
             raise TerrainError(f"{self.store.path}: level {k} holds unwritten or invalid "
                                "heights")
         self.coarse, self.coarse_level = coarse, k
-        self.reader = ChunkReader(self.store, self._window, in_flight, self.capacity, k)
-        self.blocking = False
+        return k
+
+    @contextmanager
+    def from_coarse(self, coarse_side: int = COARSE_SIDE):
+        """Inside the block every sample is the coarse level's (:meth:`hold_coarse`,
+        bilinear at the same world position; counted in :attr:`setup_samples`), and no
+        level-0 chunk is read or asked for: what LOD-sprite's setup takes over a store
+        (the uniform proxy's vertices and ribbons, the metric's coarse triangles and
+        first centres; a wholesale level-0 read took 468 s over a 16k² store)."""
+        self.hold_coarse(coarse_side)
+        before, self._setup = self._setup, True
+        try:
+            yield self
+        finally:
+            self._setup = before
 
     def _request(self, ids: np.ndarray) -> None:
         if self.reader is not None and len(ids):
@@ -342,7 +378,7 @@ class LazyHeights:
         """Undo one :meth:`start_reader`; the last ends the reader process and reads block
         again (the coarse level is dropped)."""
         self._users = max(0, self._users - 1)
-        if self._users:
+        if self._users or self._setup:
             return
         if self.reader is not None:
             self.reader.close()
