@@ -101,17 +101,21 @@ class RenderConfig:
     # terrain's default (resolved(); lodsprite.techniques.defaults), a value is kept
     save_every: int = 1       # with save_frames: save every n-th frame of the replay only
 
-    def resolved(self) -> RenderConfig:
+    def resolved(self, store: bool | None = None) -> RenderConfig:
         """This config with every option left None filled from the terrain's defaults
         (:func:`lodsprite.techniques.defaults.fill_defaults`: LOD-sprite on a store gets
-        the store's, any other mode or terrain the 1999 options); values given are kept."""
+        the store's, any other mode or terrain the 1999 options; ``store=False``: the
+        1999 options whatever the terrain, as the distributed client); values given are
+        kept."""
         from lodsprite.techniques.defaults import DEFAULTED, fill_defaults
 
         given = {k: getattr(self, k) for k in DEFAULTED}
         if all(v is not None for k, v in given.items() if k not in ("key_sse", "proxy_sse")) \
-                and (self.key_sse is not None or self.mode != "sprite"):
+                and (self.key_sse is not None or self.mode != "sprite" or store is False):
             return self  # nothing to fill
-        filled = fill_defaults(self.terrain, given, None if self.mode == "sprite" else False)
+        if self.mode != "sprite":
+            store = False
+        filled = fill_defaults(self.terrain, given, store)
         return replace(self, **filled)
 
     @property
@@ -193,20 +197,22 @@ def parse_size(text: str) -> tuple[int, int]:
     return vals[0], vals[1]
 
 
-def prepare(config: RenderConfig) -> tuple[Scene, CameraPath]:
+def prepare(config: RenderConfig, light: bool = True) -> tuple[Scene, CameraPath]:
     """Validate the config and load scene and path (all user errors surface here).
 
     Over a store, the modes that draw the store itself (:data:`LIGHT_TECHNIQUES`) get a
     light scene (:func:`~lodsprite.scene.load_scene` ``light=True``; not with
     ``ground_truth``, whose reference is the scene's own grid), and no colour texture
-    where frames are shaded from heights."""
+    where frames are shaded from heights.  ``light=False``: the working grid from level 0
+    whatever the mode (the distributed client, whose server loads the scene so)."""
     config = config.resolved()
     config.validate()
     level0 = None
     store = is_store(config.terrain)
     if config.mode == "full" and store:  # level 0's own samples, whole
         level0 = load_level0(config.terrain, config.exaggeration)  # (refused if too large)
-    light = store and config.technique in LIGHT_TECHNIQUES and not config.ground_truth
+    light = (light and store and config.technique in LIGHT_TECHNIQUES
+             and not config.ground_truth)
     textured = resolve_shading(Scene(terrain_spec=config.terrain), config.shading) == "texture"
     scene = load_scene(config.terrain, config.texture, config.grid, config.exaggeration,
                        light=light, textured=textured or not light)

@@ -166,13 +166,6 @@ def render(
     from lodsprite.run import parse_size
 
     distributed = _check_mode(mode, ground_truth, video, metric)
-    if distributed:  # the distributed client: the 1999 options, whatever the terrain
-        from lodsprite.techniques.defaults import fill_defaults
-
-        o = fill_defaults(terrain, {"lod": lod, "tiles": tiles, "tile_budget_ms": tile_budget_ms,
-                                    "cache_mb": cache_mb, "metric": metric}, store=False)
-        lod, tiles, tile_budget_ms, cache_mb, metric = (o[k] for k in (
-            "lod", "tiles", "tile_budget_ms", "cache_mb", "metric"))
     config = RenderConfig(terrain=terrain, texture=texture, path=path,
                           mode="sprite" if distributed else mode, lod=lod,
                           size=parse_size(size), frames=frames, grid=grid,

@@ -155,11 +155,13 @@ SCENE_KINDS: list[tuple[Callable[[str], bool], str]] = [
 
 
 def open_scene(spec: str, texture: str = "terrain", grid: int | None = None,
-               exaggeration: float = DEFAULT_EXAGGERATION, **options: Any) -> Scene:
+               exaggeration: float = DEFAULT_EXAGGERATION, light: bool = False,
+               **options: Any) -> Scene:
     """The scene ``spec`` names: a lumigraph folder, ``crowd[:OBJECTS[:TREES]]``, or a
-    terrain (DEM, store, ``fractal:N``...; ``texture``, ``grid``, ``exaggeration`` apply)."""
+    terrain (DEM, store, ``fractal:N``...; ``texture``, ``grid``, ``exaggeration`` and
+    ``light`` apply, see :func:`load_scene`)."""
     for claims, opener in SCENE_KINDS:
         if claims(spec):
             module, _, attr = opener.partition(":")
             return getattr(importlib.import_module(module), attr)(spec, **options)
-    return load_scene(spec, texture, grid, exaggeration)
+    return load_scene(spec, texture, grid, exaggeration, light=light)

@@ -119,7 +119,8 @@ def view(o: ViewOptions) -> dict:
     """Run the viewer; returns the summary of the frames shown (empty if none)."""
     o = o.resolved()
     o.validate()
-    scene = open_scene(o.terrain, o.texture, o.grid, target_fps=o.target_fps)
+    # a store's grid from a coarse level: its default modes draw the store itself
+    scene = open_scene(o.terrain, o.texture, o.grid, light=True, target_fps=o.target_fps)
     if o.server and "terrain" not in scene.layers:
         raise InputError("--server goes with a terrain")
     if o.target_fps is not None and "objects" not in scene.layers:
