@@ -31,6 +31,7 @@ from lodsprite.terrain import (
     make_texture,
 )
 from lodsprite.terrain.loaders import STORE_MAX_SIDE
+from lodsprite.terrain.storefield import COARSE_SIDE
 
 if TYPE_CHECKING:
     from lodsprite.camera import Viewpoint
@@ -114,8 +115,10 @@ class Scene:
 
 
 #: ``load_scene(light=True)`` on a store: the working grid is resampled from the store's
-#: finest level of at most this many samples a side (or the grid's own, if larger).
-LIGHT_SIDE = 1025
+#: finest level of at most this many samples a side (or the grid's own, if larger): the
+#: level LOD-sprite's level-0 reader holds whole anyway (:data:`~lodsprite.terrain.
+#: storefield.COARSE_SIDE`).
+LIGHT_SIDE = COARSE_SIDE
 
 
 def load_scene(terrain: str = "jacksboro", texture: str = "terrain", grid: int | None = None,
