@@ -116,9 +116,9 @@ def render(
     texture: TextureOpt = "terrain",
     path: PathOpt = "chen1999",
     mode: Annotated[str, typer.Option(
-        "--mode", help="a technique of the registry: full | lod | sprite (--key-sse: "
-                       "adaptive keyframes) | adaptive (view-dependent, --sse) | "
-                       "distributed (starts a local LOD server)")] = "full",
+        "--mode", help="a technique of the registry: full | lod | sprite (adaptive "
+                       "keyframes on a store or with --key-sse) | adaptive (view-dependent, "
+                       "--sse) | distributed (starts a local LOD server)")] = "full",
     lod: TerrainLodOpt = None,
     size: SizeOpt = "512x512",
     frames: FramesOpt = None,
