@@ -37,13 +37,16 @@ from lodsprite.scene import Scene, load_scene
 from lodsprite.sprite.cache import POLICIES as CACHE_POLICIES
 from lodsprite.sprite.engine import DEFAULT_EPSILON_PX
 from lodsprite.sprite.policy import METRICS
+from lodsprite.techniques.terrain import resolve_shading
 from lodsprite.terrain import DEFAULT_EXAGGERATION
 from lodsprite.terrain.loaders import load_level0
-from lodsprite.terrain.lod import DEFAULT_COARSE, level_step
+from lodsprite.terrain.lod import level_step
 from lodsprite.terrain.store import is_store
 from lodsprite.workers import peak_rss_mb
 
 MAX_TILE_GRID = math.isqrt(MAX_TILES)  # --tiles N: N x N keyframe tiles
+#: The techniques that draw a store itself, never the scene's in-memory grid (full: level 0).
+LIGHT_TECHNIQUES = ("adaptive", "sprite-adaptive", "full")
 
 
 def _modes() -> tuple[str, ...]:
@@ -68,7 +71,7 @@ class RenderConfig:
     texture: str = "terrain"
     path: str = "chen1999"
     mode: str = "full"
-    lod: int = DEFAULT_COARSE
+    lod: int | None = None    # None: the terrain's default (lodsprite.techniques.defaults)
     size: tuple[int, int] = (512, 512)
     frames: int | None = None
     grid: int | None = None
@@ -83,25 +86,47 @@ class RenderConfig:
     guard_px: int = DEFAULT_GUARD_PX
     sse: float = 1.0          # adaptive: screen-space error tolerance, pixels
     key_sse: float | None = None  # sprite: keyframes by the adaptive renderer at this SSE
+    #                             (None: the terrain's default, 0.5 px on a store)
     gpu_mb: float = 256.0     # adaptive: GPU tile cache budget
     host_mb: float = 512.0    # adaptive: host tile cache budget
     proxy_sse: float | None = None  # sprite proxy: the adaptive mesh at this SSE (needs key_sse)
     flip: bool = False        # with ground_truth: FLIP per frame too
     shading: str = "auto"     # colour: auto (heights on a store) | texture | heights
-    tiles: int = 1            # sprite: an N x N grid of keyframe tiles (1: whole keyframes)
-    tile_budget_ms: float = 8.0  # sprite, tiles > 1: tile work per frame, ms
-    cache_mb: float = 0.0     # sprite: keyframe cache budget, MB (0: off)
+    tiles: int | None = None  # sprite: an N x N grid of keyframe tiles (1: whole keyframes)
+    tile_budget_ms: float | None = None  # sprite, tiles > 1: tile work per frame, ms
+    cache_mb: float | None = None  # sprite: keyframe cache budget, MB (0: off)
     cache_policy: str = "lru"  # sprite: keyframe cache replacement, lru | benefit
-    metric: str = "warp"      # sprite: "warp" (Eq. 1-2) or "resample" (adds resampling)
+    metric: str | None = None  # sprite: "warp" (Eq. 1-2) or "resample" (adds resampling)
+    # lod, key_sse, proxy_sse, tiles, tile_budget_ms, cache_mb, metric: None is the
+    # terrain's default (resolved(); lodsprite.techniques.defaults), a value is kept
     save_every: int = 1       # with save_frames: save every n-th frame of the replay only
+
+    def resolved(self, store: bool | None = None) -> RenderConfig:
+        """This config with every option left None filled from the terrain's defaults
+        (:func:`lodsprite.techniques.defaults.fill_defaults`: LOD-sprite on a store gets
+        the store's, any other mode or terrain the 1999 options; ``store=False``: the
+        1999 options whatever the terrain, as the distributed client); values given are
+        kept."""
+        from lodsprite.techniques.defaults import DEFAULTED, fill_defaults
+
+        given = {k: getattr(self, k) for k in DEFAULTED}
+        if all(v is not None for k, v in given.items() if k not in ("key_sse", "proxy_sse")) \
+                and (self.key_sse is not None or self.mode != "sprite" or store is False):
+            return self  # nothing to fill
+        if self.mode != "sprite":
+            store = False
+        filled = fill_defaults(self.terrain, given, store)
+        return replace(self, **filled)
 
     @property
     def technique(self) -> str:
         """The registry's name of what this config renders."""
-        return "sprite-adaptive" if self.mode == "sprite" and self.key_sse else self.mode
+        c = self.resolved()
+        return "sprite-adaptive" if c.mode == "sprite" and c.key_sse else c.mode
 
     def technique_options(self) -> dict:
         """The options of the config the technique declares (the registry picks them)."""
+        self = self.resolved()
         return {"lod": self.lod, "epsilon": self.epsilon, "visibility": self.visibility,
                 "guard_px": self.guard_px, "border": self.border, "sse": self.sse,
                 "key_sse": self.key_sse, "gpu_mb": self.gpu_mb, "host_mb": self.host_mb,
@@ -111,6 +136,8 @@ class RenderConfig:
                 "metric": self.metric}
 
     def validate(self) -> None:
+        """Raise :class:`InputError` for a bad option (checked with the defaults filled)."""
+        self = self.resolved()
         modes = _modes()  # the registry's now: a technique registered later is one too
         if self.mode not in modes:
             raise InputError(f"unknown mode '{self.mode}': use one of {', '.join(modes)}")
@@ -170,13 +197,25 @@ def parse_size(text: str) -> tuple[int, int]:
     return vals[0], vals[1]
 
 
-def prepare(config: RenderConfig) -> tuple[Scene, CameraPath]:
-    """Validate the config and load scene and path (all user errors surface here)."""
+def prepare(config: RenderConfig, light: bool = True) -> tuple[Scene, CameraPath]:
+    """Validate the config and load scene and path (all user errors surface here).
+
+    Over a store, the modes that draw the store itself (:data:`LIGHT_TECHNIQUES`) get a
+    light scene (:func:`~lodsprite.scene.load_scene` ``light=True``; not with
+    ``ground_truth``, whose reference is the scene's own grid), and no colour texture
+    where frames are shaded from heights.  ``light=False``: the working grid from level 0
+    whatever the mode (the distributed client, whose server loads the scene so)."""
+    config = config.resolved()
     config.validate()
     level0 = None
-    if config.mode == "full" and is_store(config.terrain):  # level 0's own samples, whole
+    store = is_store(config.terrain)
+    if config.mode == "full" and store:  # level 0's own samples, whole
         level0 = load_level0(config.terrain, config.exaggeration)  # (refused if too large)
-    scene = load_scene(config.terrain, config.texture, config.grid, config.exaggeration)
+    light = (light and store and config.technique in LIGHT_TECHNIQUES
+             and not config.ground_truth)
+    textured = resolve_shading(Scene(terrain_spec=config.terrain), config.shading) == "texture"
+    scene = load_scene(config.terrain, config.texture, config.grid, config.exaggeration,
+                       light=light, textured=textured or not light)
     if level0 is not None:  # the texture stays the working grid's: the same extent
         scene = replace(scene, hf=level0)
     if config.mode in ("lod", "sprite"):  # the level checked before any GL work
@@ -309,6 +348,7 @@ def render_path(config: RenderConfig, out_dir: Path, progress: Progress | None =
 
     if video is not None:
         check_video_path(video)
+    config = config.resolved()
     scene, path = prepare(config)
     out_dir = Path(out_dir)
     keyframes: list = []

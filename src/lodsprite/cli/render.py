@@ -10,16 +10,13 @@ from rich.table import Table
 
 from lodsprite.cli.common import (
     BorderOpt,
-    CacheMbOpt,
     CachePolicyOpt,
     EpsOpt,
     ExagOpt,
     FramesOpt,
     GridOpt,
     GuardOpt,
-    LodOpt,
     MaxErrorOpt,
-    MetricOpt,
     PaceOpt,
     PathOpt,
     SizeOpt,
@@ -50,7 +47,7 @@ def info() -> None:
 
 
 def _check_mode(mode: str, ground_truth: bool, video: Path | None,
-                metric: str = "warp") -> bool:
+                metric: str | None = None) -> bool:
     """Check ``--mode`` and what goes with it; True for ``distributed``."""
     from lodsprite.errors import InputError
     from lodsprite.run import MODES
@@ -62,7 +59,7 @@ def _check_mode(mode: str, ground_truth: bool, video: Path | None,
         raise InputError("--ground-truth replays a run's decisions: not for --mode distributed")
     if distributed and video is not None:
         raise InputError(f"--video is for --mode {', '.join(MODES)}")
-    if distributed and metric != "warp":
+    if distributed and metric not in (None, "warp"):
         raise InputError("--metric resample is for --mode sprite: the distributed client "
                          "and server decide with the 1999 metric")
     return distributed
@@ -97,12 +94,21 @@ def _print_render(s: dict, out_dir: Path) -> None:
               f"{out_dir / 'summary.json'}")
 
 
-TilesOpt = Annotated[int, typer.Option(
+_DEF = " (default: the terrain's, lodsprite.techniques.defaults)"
+TilesOpt = Annotated[int | None, typer.Option(
     "--tiles", help="sprite: refresh keyframes tile by tile on an N x N grid of screen "
-                    "tiles (1: whole keyframes; inline keyframes only)")]
-TileBudgetOpt = Annotated[float, typer.Option(
+                    "tiles (1: whole keyframes; inline keyframes only)" + _DEF)]
+TileBudgetOpt = Annotated[float | None, typer.Option(
     "--tile-budget-ms", help="sprite with --tiles > 1: tile work per frame (ms); a tile "
-                             "over 2 epsilon is rendered even beyond it")]
+                             "over 2 epsilon is rendered even beyond it" + _DEF)]
+TerrainLodOpt = Annotated[int | None, typer.Option(
+    "--lod", help="coarse level: N x N quads over the terrain" + _DEF)]
+TerrainMetricOpt = Annotated[str | None, typer.Option(
+    "--metric", help="sprite mode: the keyframe error metric: warp (Chen et al. Eq. 1-2) | "
+                     "resample (adds the keyframe image's resampling error)" + _DEF)]
+TerrainCacheMbOpt = Annotated[float | None, typer.Option(
+    "--cache-mb", help="sprite mode: keep keyframes in a GPU cache of this many MB and show "
+                       "the one with the lowest error (0: off, the 1999 algorithm)" + _DEF)]
 
 
 def render(
@@ -110,10 +116,10 @@ def render(
     texture: TextureOpt = "terrain",
     path: PathOpt = "chen1999",
     mode: Annotated[str, typer.Option(
-        "--mode", help="a technique of the registry: full | lod | sprite (--key-sse: "
-                       "adaptive keyframes) | adaptive (view-dependent, --sse) | "
-                       "distributed (starts a local LOD server)")] = "full",
-    lod: LodOpt = 16,
+        "--mode", help="a technique of the registry: full | lod | sprite (adaptive "
+                       "keyframes on a store or with --key-sse) | adaptive (view-dependent, "
+                       "--sse) | distributed (starts a local LOD server)")] = "full",
+    lod: TerrainLodOpt = None,
     size: SizeOpt = "512x512",
     frames: FramesOpt = None,
     out_dir: Annotated[Path, typer.Option("--out", help="output folder")] = Path("out"),
@@ -132,26 +138,27 @@ def render(
     visibility: VisOpt = "coarse",
     border: BorderOpt = True,
     guard: GuardOpt = 32,
-    metric: MetricOpt = "warp",
+    metric: TerrainMetricOpt = None,
     pace: PaceOpt = "needed",
     max_error: MaxErrorOpt = None,
     sse: Annotated[float, typer.Option(
         "--sse", help="adaptive: screen-space error tolerance in pixels")] = 1.0,
     key_sse: Annotated[float | None, typer.Option(
         "--key-sse", help="sprite: render keyframes with the adaptive renderer at this "
-                          "tolerance (pixels; 0.5 is a good start)")] = None,
+                          "tolerance in pixels (default: the terrain's, 0.5 on a store, "
+                          "none in memory; lodsprite.techniques.defaults)")] = None,
     proxy_sse: Annotated[float | None, typer.Option(
         "--proxy-sse", help="sprite with --key-sse: spriteframes draw the adaptive mesh at "
                             "this tolerance (pixels, e.g. 8-16), selected at each keyframe, "
-                            "instead of the uniform --lod level")] = None,
+                            "instead of the uniform --lod level" + _DEF)] = None,
     gpu_mb: Annotated[float, typer.Option(
         "--gpu-mb", help="adaptive: GPU tile cache budget (MB)")] = 256.0,
     host_mb: Annotated[float, typer.Option(
         "--host-mb", help="adaptive: host tile cache budget (MB)")] = 512.0,
     shading: ShadingOpt = "auto",
-    tiles: TilesOpt = 1,
-    tile_budget_ms: TileBudgetOpt = 8.0,
-    cache_mb: CacheMbOpt = 0.0,
+    tiles: TilesOpt = None,
+    tile_budget_ms: TileBudgetOpt = None,
+    cache_mb: TerrainCacheMbOpt = None,
     cache_policy: CachePolicyOpt = "lru",
 ) -> None:
     """Render a camera path; write DIR/frames.csv and DIR/summary.json (and PNG frames)."""
@@ -186,12 +193,13 @@ def view(
     texture: TextureOpt = "terrain",
     grid: GridOpt = None,
     mode: Annotated[str | None, typer.Option(
-        "--mode", help="terrain: full | lod | sprite (default) | adaptive | "
-                       "sprite-adaptive | distributed (needs --server); lumigraph: "
+        "--mode", help="terrain: full | lod | sprite (default; on a store "
+                       "sprite-adaptive) | adaptive | sprite-adaptive | distributed "
+                       "(needs --server); lumigraph: "
                        "critical (default) | full | arbitrary | fixed | line | "
                        "projective | progressive | subsample; crowd: manager (default) | "
                        "independent | discrete; keys 1-9 switch")] = None,
-    lod: LodOpt = 16,
+    lod: TerrainLodOpt = None,
     epsilon: EpsOpt = 1.0,
     size: Annotated[str, typer.Option("--size", help="window size WxH")] = "1024x768",
     fps: Annotated[float, typer.Option(
@@ -223,18 +231,18 @@ def view(
     sse: Annotated[float | None, typer.Option(
         "--sse", help="adaptive: screen-space error tolerance in pixels")] = None,
     key_sse: Annotated[float | None, typer.Option(
-        "--key-sse", help="sprite-adaptive: its keyframes' tolerance in pixels")] = None,
+        "--key-sse", help="sprite-adaptive: its keyframes' tolerance in pixels" + _DEF)] = None,
     shading: ShadingOpt = "auto",
-    tiles: TilesOpt = 1,
-    tile_budget_ms: TileBudgetOpt = 8.0,
-    cache_mb: Annotated[float, typer.Option(
+    tiles: TilesOpt = None,
+    tile_budget_ms: TileBudgetOpt = None,
+    cache_mb: Annotated[float | None, typer.Option(
         "--cache-mb", help="sprite with --inline-keyframes: keyframe cache budget in MB "
-                           "(0: off)")] = 0.0,
+                           "(0: off)" + _DEF)] = None,
     cache_policy: CachePolicyOpt = "lru",
-    metric: MetricOpt = "warp",
+    metric: TerrainMetricOpt = None,
     proxy_sse: Annotated[float | None, typer.Option(
         "--proxy-sse", help="sprite-adaptive: spriteframes draw the adaptive mesh at this "
-                            "tolerance (pixels) instead of the uniform --lod level")] = None,
+                            "tolerance (pixels) instead of the uniform --lod level" + _DEF)] = None,
 ) -> None:
     """Fly through a terrain with live LOD-sprite, or round a lumigraph (WASD/QE, mouse, tab
     orbit)."""

@@ -72,8 +72,9 @@ class Replayer:
     def __init__(self, config: RenderConfig, stride: int = DEFAULT_STRIDE) -> None:
         if stride < 1:
             raise InputError(f"stride must be >= 1, got {stride}")
+        config = config.resolved(store=False)  # options not given: the 1999 algorithm's
         self.config, self.stride = config, stride
-        scene, self.path = prepare(config)
+        scene, self.path = prepare(config, light=False)  # the grid the server draws
         self.paths = PathRenderer(scene, config.size, field_of_view(config, self.path))
         self.sprite = SpriteRenderer(self.paths.renderer, config.lod, config.visibility,
                                      border=config.border, guard_px=0)

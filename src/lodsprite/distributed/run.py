@@ -132,8 +132,8 @@ def render_distributed(config: RenderConfig, out_dir: Path,
     by a client with keyframes from a LOD server started here on free loopback ports;
     writes what :func:`run_client` writes and returns its summary.  Input errors are
     reported before the server starts."""
-    config = replace(config, mode="sprite")
-    prepare(config)
+    config = replace(config, mode="sprite").resolved(store=False)  # the 1999 options
+    prepare(config, light=False)
     check_client_options(pace, adopt, max_error)
     with local_server() as address:
         return run_client(config, [address], Path(out_dir), progress, adopt=adopt, pace=pace,
@@ -157,8 +157,9 @@ def run_client(config: RenderConfig, servers: list[str], out_dir: Path,
     from lodsprite.distributed.technique import DistributedTechnique
     from lodsprite.harness import run_path, write_run
 
+    config = config.resolved(store=False)  # options not given: the 1999 algorithm's
     max_error = check_client_options(pace, adopt, max_error)
-    scene, path = prepare(replace(config, mode="sprite"))
+    scene, path = prepare(replace(config, mode="sprite"), light=False)  # the server's grid
     args = scene_args(config.terrain, config.texture, config.grid, config.exaggeration,
                       config.size, field_of_view(config, path))
     client = LodClient(scene, args, servers, config.size, config.lod, config.visibility,

@@ -23,7 +23,15 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from lodsprite.terrain import DEFAULT_EXAGGERATION, HeightField, load_terrain, make_texture
+from lodsprite.terrain import (
+    DEFAULT_EXAGGERATION,
+    DEFAULT_GRID,
+    HeightField,
+    load_terrain,
+    make_texture,
+)
+from lodsprite.terrain.loaders import STORE_MAX_SIDE
+from lodsprite.terrain.storefield import COARSE_SIDE
 
 if TYPE_CHECKING:
     from lodsprite.camera import Viewpoint
@@ -106,11 +114,31 @@ class Scene:
         return get_path(spec, self.hf, frames)
 
 
+#: ``load_scene(light=True)`` on a store: the working grid is resampled from the store's
+#: finest level of at most this many samples a side (or the grid's own, if larger): the
+#: level LOD-sprite's level-0 reader holds whole anyway (:data:`~lodsprite.terrain.
+#: storefield.COARSE_SIDE`).
+LIGHT_SIDE = COARSE_SIDE
+
+
 def load_scene(terrain: str = "jacksboro", texture: str = "terrain", grid: int | None = None,
-               exaggeration: float = DEFAULT_EXAGGERATION) -> Scene:
-    """Load, resample and texture a terrain (raises :class:`~lodsprite.TerrainError`)."""
-    hf = load_terrain(terrain, grid=grid, exaggeration=exaggeration)
-    return Scene(hf, make_texture(texture, hf), terrain, texture)
+               exaggeration: float = DEFAULT_EXAGGERATION, light: bool = False,
+               textured: bool = True) -> Scene:
+    """Load, resample and texture a terrain (raises :class:`~lodsprite.TerrainError`).
+
+    ``light=True`` is for techniques that draw a store itself (the adaptive modes, full
+    resolution over level 0): the scene's working grid (``grid + 1`` squared samples,
+    for paths, camera, near planes and ground clamps) is resampled from the store's
+    finest level of at most :data:`LIGHT_SIDE` a side, not from level 0 up to 4096²
+    (issue 22: +411 MB peak and ~8 s of load for a 4k² store).  No effect on other
+    terrains.  ``textured=False``: no colour texture (frames shaded from heights)."""
+    from lodsprite.terrain.store import is_store
+
+    side = STORE_MAX_SIDE
+    if light and is_store(terrain):
+        side = max(LIGHT_SIDE, (DEFAULT_GRID if grid is None else grid) + 1)
+    hf = load_terrain(terrain, grid=grid, exaggeration=exaggeration, store_side=side)
+    return Scene(hf, make_texture(texture, hf) if textured else None, terrain, texture)
 
 
 def _is_lumigraph(spec: str) -> bool:
@@ -130,11 +158,13 @@ SCENE_KINDS: list[tuple[Callable[[str], bool], str]] = [
 
 
 def open_scene(spec: str, texture: str = "terrain", grid: int | None = None,
-               exaggeration: float = DEFAULT_EXAGGERATION, **options: Any) -> Scene:
+               exaggeration: float = DEFAULT_EXAGGERATION, light: bool = False,
+               **options: Any) -> Scene:
     """The scene ``spec`` names: a lumigraph folder, ``crowd[:OBJECTS[:TREES]]``, or a
-    terrain (DEM, store, ``fractal:N``...; ``texture``, ``grid``, ``exaggeration`` apply)."""
+    terrain (DEM, store, ``fractal:N``...; ``texture``, ``grid``, ``exaggeration`` and
+    ``light`` apply, see :func:`load_scene`)."""
     for claims, opener in SCENE_KINDS:
         if claims(spec):
             module, _, attr = opener.partition(":")
             return getattr(importlib.import_module(module), attr)(spec, **options)
-    return load_scene(spec, texture, grid, exaggeration)
+    return load_scene(spec, texture, grid, exaggeration, light=light)

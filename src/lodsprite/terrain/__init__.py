@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from lodsprite.terrain.generators import fractal
 from lodsprite.terrain.heightfield import DEFAULT_EXAGGERATION, DEFAULT_GRID, HeightField
-from lodsprite.terrain.loaders import load_heightfield, parse_fractal_spec
+from lodsprite.terrain.loaders import STORE_MAX_SIDE, load_heightfield, parse_fractal_spec
 from lodsprite.terrain.textures import hillshade, make_texture
 
 __all__ = [
@@ -26,15 +26,18 @@ __all__ = [
 
 
 def load_terrain(spec: str, grid: int | None = None,
-                 exaggeration: float = DEFAULT_EXAGGERATION) -> HeightField:
+                 exaggeration: float = DEFAULT_EXAGGERATION,
+                 store_side: int = STORE_MAX_SIDE) -> HeightField:
     """Load ``spec``, resample to ``grid`` quads per side, exaggerate heights.
 
     The result has ``(grid+1, grid+1)`` float32 heights in metres times
     ``exaggeration`` over the source's full extent.  ``grid=None`` means the
     fractal's own SIZE for ``fractal:SIZE`` specs and ``DEFAULT_GRID`` (512)
-    otherwise.  Raises :class:`~lodsprite.errors.TerrainError` on bad input.
+    otherwise.  A terrain store is resampled from its finest level of at most
+    ``store_side`` samples a side.  Raises :class:`~lodsprite.errors.TerrainError` on bad
+    input.
     """
-    hf = load_heightfield(spec)
+    hf = load_heightfield(spec, store_side)
     if grid is None:
         parsed = parse_fractal_spec(spec) if isinstance(spec, str) else None
         grid = parsed[0] if parsed is not None else DEFAULT_GRID

@@ -88,12 +88,14 @@ def load_level0(spec: str | os.PathLike, exaggeration: float = 1.0,
                                   store.path.name, meta)
 
 
-def load_heightfield(spec: str | os.PathLike) -> HeightField:
+def load_heightfield(spec: str | os.PathLike,
+                     store_side: int = STORE_MAX_SIDE) -> HeightField:
     """Load the raw height field named by ``spec`` (see the module docstring).
 
     Returns a :class:`HeightField` with ``heights (rows, cols) float32`` metres,
     row 0 north, and ``dx``, ``dy`` in metres; ``meta`` records the source,
-    ``filled_fraction`` (share of nodata samples filled) and any assumptions.
+    ``filled_fraction`` (share of nodata samples filled) and any assumptions.  A terrain
+    store gives its finest level of at most ``store_side`` samples a side, whole.
     """
     if isinstance(spec, os.PathLike):
         spec = os.fspath(spec)
@@ -111,7 +113,7 @@ def load_heightfield(spec: str | os.PathLike) -> HeightField:
 
     if is_store(path):
         try:
-            return TerrainStore(path).heightfield(STORE_MAX_SIDE)
+            return TerrainStore(path).heightfield(store_side)
         except InputError as exc:
             raise TerrainError(str(exc)) from exc
     if not path.exists():

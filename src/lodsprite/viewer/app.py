@@ -29,7 +29,9 @@ class ViewOptions:
     texture: str = "terrain"
     grid: int | None = None
     mode: str | None = None  # default: the scene's (sprite, critical, manager)
-    lod: int = 16
+    # lod, key_sse, proxy_sse, tiles, tile_budget_ms, cache_mb, metric: None is the
+    # terrain's default (lodsprite.techniques.defaults; a store's LOD-sprite variant)
+    lod: int | None = None
     epsilon: float = 1.0
     size: tuple[int, int] = (1024, 768)
     fps: float = 60.0
@@ -47,15 +49,32 @@ class ViewOptions:
     sse: float | None = None      # adaptive: screen-space error, pixels
     key_sse: float | None = None  # sprite-adaptive: its keyframes' SSE, pixels
     shading: str = "auto"         # terrain colour: auto | texture | heights
-    tiles: int = 1                # sprite: N x N keyframe tiles (> 1: inline keyframes)
-    tile_budget_ms: float = 8.0   # sprite, tiles > 1: tile work per frame, ms
-    cache_mb: float = 0.0         # sprite (inline keyframes): keyframe cache budget, MB
+    tiles: int | None = None      # sprite: N x N keyframe tiles (> 1: inline keyframes)
+    tile_budget_ms: float | None = None  # sprite, tiles > 1: tile work per frame, ms
+    cache_mb: float | None = None  # sprite (inline keyframes): keyframe cache budget, MB
     cache_policy: str = "lru"     # keyframe cache replacement, lru | benefit
-    metric: str = "warp"          # sprite: warp (Eq. 1-2) | resample (adds resampling)
+    metric: str | None = None     # sprite: warp (Eq. 1-2) | resample (adds resampling)
     proxy_sse: float | None = None  # sprite-adaptive: the adaptive sprite proxy's SSE, px
+
+    def resolved(self) -> ViewOptions:
+        """These options with every one left None filled from the terrain's defaults
+        (:func:`lodsprite.techniques.defaults.fill_defaults`); values given are kept.
+        A store's ``key_sse`` default makes ``sprite`` (and no ``--mode``) mean
+        ``sprite-adaptive``: on a store, LOD-sprite's keyframes are adaptive."""
+        from dataclasses import replace
+
+        from lodsprite.techniques.defaults import DEFAULTED, fill_defaults, terrain_defaults
+
+        given = {k: getattr(self, k) for k in DEFAULTED}
+        out = replace(self, **fill_defaults(self.terrain, given))
+        store_keys = terrain_defaults(self.terrain)["key_sse"] is not None
+        if store_keys and self.mode in (None, "sprite") and out.key_sse is not None:
+            out = replace(out, mode="sprite-adaptive")
+        return out
 
     def technique_options(self) -> dict:
         """The options of the command the registry's techniques pick theirs from."""
+        self = self.resolved()
         return {"lod": self.lod, "epsilon": self.epsilon,
                 "threaded": self.threaded and self.tiles == 1,  # tiles are rendered inline
                 "server": self.server, "target_fps": self.target_fps, "sse": self.sse,
@@ -69,7 +88,7 @@ class ViewOptions:
             raise InputError("--target-fps must be > 0")
         if self.mode == "distributed" and not self.server:
             raise InputError("--mode distributed needs --server HOST:PORT")
-        if self.metric not in ("warp", "resample"):
+        if self.metric not in (None, "warp", "resample"):
             raise InputError(f"unknown metric '{self.metric}': use warp or resample")
         if self.every < 1:
             raise InputError(f"--every must be at least 1, got {self.every}")
@@ -98,8 +117,10 @@ def factories(o: ViewOptions, scene: Scene) -> dict[str, TechniqueFactory]:
 
 def view(o: ViewOptions) -> dict:
     """Run the viewer; returns the summary of the frames shown (empty if none)."""
+    o = o.resolved()
     o.validate()
-    scene = open_scene(o.terrain, o.texture, o.grid, target_fps=o.target_fps)
+    # a store's grid from a coarse level: its default modes draw the store itself
+    scene = open_scene(o.terrain, o.texture, o.grid, light=True, target_fps=o.target_fps)
     if o.server and "terrain" not in scene.layers:
         raise InputError("--server goes with a terrain")
     if o.target_fps is not None and "objects" not in scene.layers:
