@@ -142,3 +142,21 @@ def test_the_hit_nearest_to_c_is_kept_behind_a_ridge_the_secant_would_cross():
     cp, missed = reproject_onto(surf, eye, c)
     assert not missed[0]
     assert cp[0, 0] > 0 and abs(cp[0, 0] - 300.0) < 100.0  # the far flank, near C
+
+
+def test_a_keyframe_whose_proxy_has_no_node_is_due_not_a_crash():
+    """A look-ahead keyframe looking off the terrain selects no proxy node: its ``C'`` is
+    empty and its error ``inf`` (a keyframe is due), where the reprojection raised
+    ValueError on the empty node arrays."""
+    hf = make_field(64, kind="ridges", relief=150.0)
+    full = grid_proxy(hf, 2, 8)
+    empty = ProxyNodes(full.origin[:0], full.spacing[:0], full.last[:0], full.heights[:0],
+                       full.windows[:0])
+    metric = ProxyMetric(Fixed(empty), hf, ErrorMetric.for_level(hf, 8))
+    key = look_at((0.0, -1500.0, 1500.0), (0.0, -3000.0, 1600.0))
+    lo, hi = hf.bounds()
+    p = fitted_projection(key, 45.0, 1.0, lo, hi, 0.0)
+    kvp = p.matrix() @ key.view_matrix()
+    cp = metric.reproject(key.o, key_view_proj=kvp)
+    assert len(cp) == 0
+    assert metric.error_px(cp, key.o, kvp, p.pixel_angle_rad(256)) == math.inf

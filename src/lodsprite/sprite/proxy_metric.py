@@ -294,6 +294,10 @@ class ProxyMetric:
         """Freeze the keyframe's proxy and return ``C'`` of its samples (once a keyframe)."""
         eye = np.asarray(key_eye, np.float64)
         nodes = self.source(eye, key_view_proj)
+        if len(nodes) == 0:  # no proxy node in the keyframe's view: nothing measurable
+            out = ProxyReprojection(np.zeros((0, 3)), eye, np.zeros(0, bool))
+            out.set_points(np.zeros((0, 3)))
+            return out
         steps = np.rint(nodes.spacing[:, 0] / self.hf.dx).astype(np.int64)
         hf = self.hf if self.points is None else _Points(self.points(eye, key_view_proj))
         points = node_samples(hf, nodes.windows, steps, self.per_node, self.limit)

@@ -17,11 +17,15 @@ from __future__ import annotations
 from dataclasses import fields
 from typing import Any
 
-#: The LOD-sprite variants: name -> the technique options that make it.
+#: The LOD-sprite variants: name -> the technique options that make it.  Every option a
+#: variant differs in is given, so none takes the store defaults of
+#: :mod:`lodsprite.techniques.defaults` (which the reproduction sets); all draw their
+#: spriteframes on the view-dependent proxy at ``PROXY_SSE`` px.
+PROXY_SSE = 8.0
 VARIANTS: dict[str, dict[str, Any]] = {
-    "whole": {},
-    "tiled": {"tiles": 4},
-    "tiled+cache": {"tiles": 4, "cache_mb": 64},
+    "whole": {"tiles": 1, "cache_mb": 0.0, "proxy_sse": PROXY_SSE},
+    "tiled": {"tiles": 4, "cache_mb": 0.0, "proxy_sse": PROXY_SSE},
+    "tiled+cache": {"tiles": 4, "cache_mb": 64.0, "proxy_sse": PROXY_SSE},
 }
 TIME_KEY = "total_s"  # what the speedups compare: the whole path's time
 #: What a row keeps of a run's summary.json, where the run has it.
