@@ -321,5 +321,10 @@ class ProxyMetric:
         th = miss_floor(th, missed)
         return float(np.sqrt(np.mean(th * th)) / pixel_angle_rad)
 
+    def in_view_mask(self, viewpoint, projection):
+        """The uniform level's square centres in view (the keyframe cache's test of which
+        cached keyframe's view holds the current one, as :meth:`covers` tests)."""
+        return self.coarse.in_view_mask(viewpoint, projection)
+
     def covers(self, viewpoint, projection, key_viewpoint, key_projection) -> bool:
         return self.coarse.covers(viewpoint, projection, key_viewpoint, key_projection)
