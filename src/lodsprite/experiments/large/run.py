@@ -45,18 +45,13 @@ Update = Callable[[str, int, int], None]
 
 @dataclass(frozen=True)
 class LargeConfig:
-    """The default run is estimated at about 18-19 minutes here once the three variants
-    run (an estimate, not a measurement: about 15 s a timed run of 120 frames at 256²,
-    10 of them per store and path, references (the 1k² and 2k² checks of the stand-in
-    included), tiling 16k² in about 100 s, patrol and
-    jacksboro; from the 40-minute run of the earlier default and per-run costs measured
-    on a shared, loaded CPU).  It assumes a 16k² LOD-sprite run costs about what a 4k²
-    one does: on this branch one 16k² flyover LOD-sprite run (ε 1) took 468 s to its
-    first frame and had a 14 s p99 on the loaded CPU, reading level-0 chunks for the
-    coarse squares' error metric; until reads stop blocking, the default runs over 20
-    minutes.  Timed runs at 1k² do not fit beside 4k² and 16k² (1k² and 2k² get the
-    stand-in check alone): they are in :meth:`full`, the long sweep; :meth:`quick` is
-    the tests'."""
+    """The default run is estimated at about 18-19 minutes here (an estimate, not a
+    measurement: about 15 s a timed run of 120 frames at 256², 10 of them per store and
+    path, references (the 1k² and 2k² checks of the stand-in included), tiling 16k² in
+    about 100 s, patrol and jacksboro).  LOD-sprite's setup over a 16k² store reads no
+    level-0 chunk (first frame 7-11 s, was 188-468 s).  Timed runs at 1k² do not fit
+    beside 4k² and 16k² (1k² and 2k² get the stand-in check alone): they are in
+    :meth:`full`, the long sweep; :meth:`quick` is the tests'."""
 
     sizes: tuple[int, ...] = (4096, 16384)
     paths: tuple[str, ...] = ("chen1999", "flyover")
