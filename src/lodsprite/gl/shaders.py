@@ -231,8 +231,45 @@ void main() {
 }
 """
 
-SPRITE_FS = (
-    "#version 330\n"
+# Shared by the spriteframe fragment shaders (whole keyframes: SPRITE_FS; tiles:
+# gl.sprite_tiles); reads u_color, u_shading, u_fallback_tint, g_uv and g_world, declared
+# before it, and terrain_shade (TERRAIN_SHADE).
+SPRITE_FRAGMENT_COMMON = """
+// The terrain texture where the keyframe did not see the surface, sampled nearest-mipmap-
+// nearest with one texelFetch at a level chosen before the branch: software rasterisers
+// shade both sides of a branch for every fragment, and a trilinear lookup cost 0.3 ms per
+// 512x512 frame on llvmpipe for the few hundred fragments that use it.
+vec3 terrain_fallback(vec2 uv, int level) {
+    ivec2 size = textureSize(u_color, level);
+    return texelFetch(u_color, clamp(ivec2(uv * vec2(size)), ivec2(0), size - 1), level).rgb;
+}
+// A fragment the keyframe did not see: the terrain texture or terrain_shade, tinted.
+vec3 fallback_rgb(int level, vec3 n) {
+    return mix(u_shading == 1 ? terrain_shade(g_world.z, n) : terrain_fallback(g_uv, level),
+               u_fallback_tint.rgb, u_fallback_tint.a);
+}
+"""
+
+# The first statements of a spriteframe's main(), on keyframe clip coordinates ``k``: every
+# derivative is taken here, in uniform control flow (GLSL leaves dFdx/dFdy, and the
+# implicit ones of texture(), undefined inside a branch that the neighbouring fragments of
+# a 2x2 quad may not take): the sprite's coordinates and their derivatives (sampled with
+# textureGrad), the terrain texture's level, and the proxy's own normal (screen
+# derivatives of its world position, for heights shading).
+SPRITE_DERIVATIVES = """
+    vec2 key_uv = k.xy / k.w * 0.5 + 0.5;
+    vec2 key_dx = dFdx(key_uv);
+    vec2 key_dy = dFdy(key_uv);
+    vec2 t = g_uv * vec2(textureSize(u_color, 0));
+    vec2 t_dx = dFdx(t);
+    vec2 t_dy = dFdy(t);
+    float rho2 = max(dot(t_dx, t_dx), dot(t_dy, t_dy));
+    int level = clamp(int(floor(0.5 * log2(max(rho2, 1.0)) + 0.5)), 0, u_color_levels - 1);
+    vec3 n = cross(dFdx(g_world), dFdy(g_world));
+    n = n.z < 0.0 ? -n : n;
+"""
+
+SPRITE_FS = (    "#version 330\n"
     + _LINEAR_DEPTH
     + TERRAIN_SHADE
     + """
@@ -251,29 +288,14 @@ in vec4 g_key;
 in vec3 g_world;
 flat in int g_sprite;
 out vec4 f_color;
-// The terrain texture where the keyframe did not see the surface, sampled nearest-mipmap-
-// nearest with one texelFetch at a level chosen before the branch: software rasterisers
-// shade both sides of a branch for every fragment, and a trilinear lookup cost 0.3 ms per
-// 512x512 frame on llvmpipe for the few hundred fragments that use it.
-vec3 terrain_fallback(vec2 uv, int level) {
-    ivec2 size = textureSize(u_color, level);
-    return texelFetch(u_color, clamp(ivec2(uv * vec2(size)), ivec2(0), size - 1), level).rgb;
-}
+"""
+    + SPRITE_FRAGMENT_COMMON
+    + """
 void main() {
-    // Every derivative is taken here, in uniform control flow: GLSL leaves dFdx/dFdy (and
-    // the implicit ones of texture()) undefined inside a branch that the neighbouring
-    // fragments of a 2x2 quad may not take.  The sprite is then sampled with textureGrad.
-    vec2 key_uv = g_key.xy / g_key.w * 0.5 + 0.5;
-    vec2 key_dx = dFdx(key_uv);
-    vec2 key_dy = dFdy(key_uv);
-    vec2 t = g_uv * vec2(textureSize(u_color, 0));
-    vec2 t_dx = dFdx(t);
-    vec2 t_dy = dFdy(t);
-    float rho2 = max(dot(t_dx, t_dx), dot(t_dy, t_dy));
-    int level = clamp(int(floor(0.5 * log2(max(rho2, 1.0)) + 0.5)), 0, u_color_levels - 1);
-    // the proxy's own normal (screen derivatives of its world position), for heights shading
-    vec3 n = cross(dFdx(g_world), dFdy(g_world));
-    n = n.z < 0.0 ? -n : n;
+    vec4 k = g_key;
+"""
+    + SPRITE_DERIVATIVES
+    + """
     bool sprite;
     if (u_visibility == 0) {
         sprite = g_sprite == 1;
@@ -283,9 +305,7 @@ void main() {
         sprite = seen_by_keyframe(g_key, u_key_coarse, u_coarse_tol) > 0.5;
     }
     vec3 rgb = sprite ? textureGrad(u_sprite, key_uv, key_dx, key_dy).rgb
-                      : mix(u_shading == 1 ? terrain_shade(g_world.z, n)
-                                           : terrain_fallback(g_uv, level),
-                            u_fallback_tint.rgb, u_fallback_tint.a);
+                      : fallback_rgb(level, n);
     f_color = vec4(rgb, 1.0);
 }
 """

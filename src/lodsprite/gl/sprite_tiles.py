@@ -29,7 +29,12 @@ import numpy as np
 
 from lodsprite.camera import Projection, Viewpoint
 from lodsprite.errors import InputError
-from lodsprite.gl.shaders import PROXY_VERTEX_COMMON, TERRAIN_SHADE
+from lodsprite.gl.shaders import (
+    PROXY_VERTEX_COMMON,
+    SPRITE_DERIVATIVES,
+    SPRITE_FRAGMENT_COMMON,
+    TERRAIN_SHADE,
+)
 from lodsprite.gl.sprite import SpriteRenderer
 from lodsprite.gl.target import RenderTarget
 from lodsprite.gl.terrain import SKY_RGB, FrameStats
@@ -75,10 +80,8 @@ out vec4 f_color;
 float linear_depth(float window_z, vec2 nf) {
     return 2.0 * nf.x * nf.y / (nf.y + nf.x - (2.0 * window_z - 1.0) * (nf.y - nf.x));
 }
-vec3 terrain_fallback(vec2 uv, int level) {
-    ivec2 size = textureSize(u_color, level);
-    return texelFetch(u_color, clamp(ivec2(uv * vec2(size)), ivec2(0), size - 1), level).rgb;
-}
+"""
+_TILED_FS_HOLDS = """
 bool holds(vec4 c, vec4 r) {  // c.xy / c.w in [r.xy, r.zw), without the divide
     vec4 e = r * c.w;
     return c.w > 0.0 && c.x >= e.x && c.x < e.z && c.y >= e.y && c.y < e.w;
@@ -96,16 +99,6 @@ _TILED_FS_TILE = """    if (holds(g_key[{i}], u_rect[{i}])) {{
 """
 
 _TILED_FS_TAIL = """
-    vec2 key_uv = k.xy / k.w * 0.5 + 0.5;
-    vec2 key_dx = dFdx(key_uv);
-    vec2 key_dy = dFdy(key_uv);
-    vec2 t = g_uv * vec2(textureSize(u_color, 0));
-    vec2 t_dx = dFdx(t);
-    vec2 t_dy = dFdy(t);
-    float rho2 = max(dot(t_dx, t_dx), dot(t_dy, t_dy));
-    int level = clamp(int(floor(0.5 * log2(max(rho2, 1.0)) + 0.5)), 0, u_color_levels - 1);
-    vec3 n = cross(dFdx(g_world), dFdy(g_world));  // the proxy's normal, heights shading
-    n = n.z < 0.0 ? -n : n;
     bool sprite = false;
     if (found) {
         float z = k.z / k.w;
@@ -118,9 +111,7 @@ _TILED_FS_TAIL = """
         }
     }
     vec3 rgb = sprite ? textureGrad(u_sprite, key_uv, key_dx, key_dy).rgb
-                      : mix(u_shading == 1 ? terrain_shade(g_world.z, n)
-                                           : terrain_fallback(g_uv, level),
-                            u_fallback_tint.rgb, u_fallback_tint.a);
+                      : fallback_rgb(level, n);
     f_color = vec4(rgb, 1.0);
 }
 """
@@ -132,7 +123,8 @@ def tiled_sprite_shaders(count: int) -> tuple[str, str]:
     head = f"#version 330\n#define N_TILES {count}\n"
     tests = "".join(_TILED_FS_TILE.format(i=i) for i in reversed(range(count)))
     return (head + PROXY_VERTEX_COMMON + _TILED_VS,
-            head + TERRAIN_SHADE + _TILED_FS_HEAD + tests + _TILED_FS_TAIL)
+            head + TERRAIN_SHADE + _TILED_FS_HEAD + SPRITE_FRAGMENT_COMMON + _TILED_FS_HOLDS
+            + tests + SPRITE_DERIVATIVES + _TILED_FS_TAIL)
 
 
 #: Draws a tile's full-resolution terrain: ``(viewpoint, projection, target, cull) ->
