@@ -17,6 +17,17 @@ ROOT = Path(__file__).resolve().parents[1]
 TERRAIN = ("full", "lod", "sprite", "adaptive", "sprite-adaptive")
 
 
+def timed_run(t, path) -> tuple[list, list]:
+    """Warm ``t`` up, then run ``path``: each frame's image as shown and its decision."""
+    t.warm_up(path.viewpoints[0])
+    shown, decisions = [], []
+    for vp in path.viewpoints:
+        t.frame(vp)
+        shown.append(t.read_image())
+        decisions.append(t.decision())
+    return shown, decisions
+
+
 def test_every_builtin_technique_is_registered_lazily():
     assert set(TERRAIN) | {"distributed", "manager", "independent", "discrete"} <= set(
         techniques.names())
@@ -68,12 +79,7 @@ def test_the_adaptive_proxy_replay_draws_what_the_timed_run_showed(gl):
         t = techniques.create("sprite-adaptive", renderer, lod=8, epsilon=1.0, key_sse=1.0,
                               proxy_sse=8.0)
         try:
-            t.warm_up(path.viewpoints[0])
-            shown, decisions = [], []
-            for vp in path.viewpoints:
-                t.frame(vp)
-                shown.append(t.read_image())
-                decisions.append(t.decision())
+            shown, decisions = timed_run(t, path)
             s = t.summary([])
             assert s["proxy_sse"] == 8.0 and s["mean_proxy_triangles"] > 0
             order = list(range(len(decisions)))[::-1]
@@ -128,12 +134,7 @@ def test_the_crowd_replay_draws_what_the_timed_run_showed(gl, mode):
     with Renderer(scene, (64, 48), path.fov_y_deg, ctx=gl.mgl) as renderer:
         t = techniques.create(mode, renderer, slots=4, active=20)
         try:
-            t.warm_up(path.viewpoints[0])
-            shown, decisions = [], []
-            for vp in path.viewpoints:
-                t.frame(vp)
-                shown.append(t.read_image())
-                decisions.append(t.decision())
+            shown, decisions = timed_run(t, path)
             for i in (7, 2, 3, 9):  # out of order: a replay restarts from frame 0's state
                 assert np.array_equal(t.replay(path.viewpoints[i], decisions[i]), shown[i])
         finally:
@@ -151,12 +152,7 @@ def test_the_lumigraph_replay_shows_the_frames_the_timed_run_reconstructed(gl, t
         t = techniques.create("lumigraph-critical", renderer)
         try:
             t.plan_replay({1, 4})
-            t.warm_up(path.viewpoints[0])
-            shown, decisions = [], []
-            for vp in path.viewpoints:
-                t.frame(vp)
-                shown.append(t.read_image())
-                decisions.append(t.decision())
+            shown, decisions = timed_run(t, path)
             for i in (4, 1):
                 assert np.array_equal(t.replay(path.viewpoints[i], decisions[i]), shown[i])
         finally:
