@@ -76,3 +76,27 @@ def test_points_outside_the_selection_take_the_finest_resident_node(terrain):
     # the coarsest level's surface there, within its own error (metres)
     err = np.abs(z - hf.height_at(x, y))
     assert err.max() < at.tree.errors[at.tree.top] + 1e-6
+
+
+def test_pointwise_heights_equal_the_whole_frozen_surface(terrain):
+    """``drawn_heights_at`` evaluates the drawn surface at the points' cell corners only;
+    it must give the surface built from every sample of every node (to float rounding)."""
+    from lodsprite.sprite.proxy_metric import ProxySurface
+    from lodsprite.techniques.sprite_proxy import drawn_heights_at, frozen_nodes
+
+    hf, at, tr = terrain
+    vp = look_at((300.0, -4000.0, 1500.0), (0.0, 0.0, 0.0))
+    at.settle(vp)
+    surface = DrawnSurface(at)
+    eye = np.asarray(vp.o, np.float64)
+    nodes, morphed = surface.selection(eye, at.projection(vp) @ vp.view_matrix())
+    assert morphed and len({n.k for n in nodes}) > 1
+    rng = np.random.default_rng(3)
+    x = rng.uniform(-hf.width / 2, hf.width / 2, 4000)
+    y = rng.uniform(-hf.depth / 2, hf.depth / 2, 4000)
+    whole = ProxySurface(frozen_nodes(at, nodes, morphed, eye, 1, at.r)).height(x, y)
+    points = drawn_heights_at(at, nodes, morphed, eye, at.r, x, y)
+    assert np.isfinite(whole).sum() > 1000  # most points on the selection
+    np.testing.assert_array_equal(np.isnan(points), np.isnan(whole))
+    ok = ~np.isnan(whole)
+    assert np.abs(points[ok] - whole[ok]).max() < 1e-9

@@ -90,13 +90,18 @@ def test_the_frozen_proxy_has_fewer_triangles_than_the_keyframe_and_stays_put(se
     assert set(nodes) <= at.pinned and all(n in at.slots for n in nodes)
 
 
-def test_the_proxy_metric_is_zero_at_the_keyframe_eye_and_grows_away(setup):
+def _proxy_metric(setup):
+    """A settled key view and the proxy metric over its frozen proxy."""
     hf, sp, at, src = setup()
     vp = key_view()
     at.settle(vp)
     proj = sp.terrain.projection(vp)
     metric = ProxyMetric(src.nodes, hf, ErrorMetric.for_level(hf, 8))
-    vp_key = proj.matrix() @ vp.view_matrix()
+    return hf, sp, at, src, vp, proj, metric, proj.matrix() @ vp.view_matrix()
+
+
+def test_the_proxy_metric_is_zero_at_the_keyframe_eye_and_grows_away(setup):
+    hf, sp, at, src, vp, proj, metric, vp_key = _proxy_metric(setup)
     c_prime = metric.reproject(vp.o, key_view_proj=vp_key)
     beta = proj.pixel_angle_rad(SIZE)
     assert len(c_prime.points) > 100 and (~c_prime.missed).mean() > 0.9
@@ -111,6 +116,29 @@ def test_the_proxy_metric_is_zero_at_the_keyframe_eye_and_grows_away(setup):
     chosen = src.select(vp.o, vp_key)
     sp.render_keyframe(vp, 0.0, proj)
     assert src.last == chosen
+
+
+def test_a_tile_updates_c_prime_holds_the_samples_of_its_tiles_alone(setup):
+    """``within`` (a tile update's sub-frustum): C' of the samples whose proxy nodes meet
+    it, the same C' as the whole view's for those samples (the proxy frozen for the
+    whole key view either way)."""
+    from lodsprite.sprite.tiled import sub_view_proj
+
+    hf, sp, at, src, vp, proj, metric, vp_key = _proxy_metric(setup)
+    whole = metric.reproject(vp.o, key_view_proj=vp_key)
+    corner = sub_view_proj(vp_key, np.array([0.0, 0.0, 1.0, 1.0]))  # the top-right quarter
+    part = metric.reproject(vp.o, key_view_proj=vp_key, within=corner)
+    assert 0 < len(part.points) < 0.6 * len(whole.points)
+    # every sample of the part is one of the whole view's, with the same C'
+    index = {tuple(np.round(p, 6)): i for i, p in enumerate(whole.points)}
+    rows = [index[tuple(np.round(p, 6))] for p in part.points]
+    np.testing.assert_allclose(np.asarray(part), np.asarray(whole)[rows], atol=1e-6)
+    # and the samples in that quarter of the image are all there
+    clip = whole.points_h @ corner.T
+    ndc = clip[:, :2] / clip[:, 3:]
+    inside = (clip[:, 3] > 0) & (np.abs(ndc) <= 0.95).all(axis=1)
+    assert inside.any()
+    assert set(np.flatnonzero(inside)) <= set(rows)
 
 
 def test_the_proxy_morphs_to_its_parent_as_the_quadtree_does():

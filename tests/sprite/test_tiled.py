@@ -149,3 +149,12 @@ def test_the_update_c_prime_is_the_full_one_inside_the_key_view():
     np.testing.assert_array_equal(part.missed[vis], full.missed[vis])
     assert part.missed[~vis].all()
     np.testing.assert_array_equal(part.key_eye, full.key_eye)
+
+
+def test_combined_error_ignores_tiles_that_serve_no_sample():
+    """A tile serving no sample may have an infinite error of its own (no sample of its
+    update's C' in view): the image's error is the served tiles' RMS, never NaN."""
+    errors = np.array([math.inf, 0.5, 1.5])
+    served = np.array([0.0, 10.0, 30.0])
+    got = combined_error(errors, served)
+    assert got == math.sqrt((10 * 0.25 + 30 * 2.25) / 40)

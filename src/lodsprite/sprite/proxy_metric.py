@@ -52,6 +52,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from lodsprite.camera import boxes_in_frustum, frustum_planes
 from lodsprite.sprite.metric import ErrorMetric, angles_at_eye, in_view, miss_floor
 from lodsprite.sprite.raycast import Reprojection
 
@@ -88,12 +89,15 @@ class ProxyNodes:
 
 class ProxySurface:
     """The height function of a :class:`ProxyNodes` proxy: which node holds a point (a
-    raster of the finest node's size) and its triangulated, morphed height there."""
+    raster of the finest node's size) and its triangulated, morphed height there.
 
-    def __init__(self, nodes: ProxyNodes) -> None:
+    ``side``: the nodes' vertex grid ``G`` when ``nodes.heights`` holds none (a locator
+    only: :meth:`cells` works, :meth:`height` needs the heights)."""
+
+    def __init__(self, nodes: ProxyNodes, side: int | None = None) -> None:
         self.nodes = nodes
         sx, sy = nodes.spacing[:, 0], nodes.spacing[:, 1]
-        g = nodes.heights.shape[1] - 1
+        g = nodes.heights.shape[1] - 1 if side is None else int(side)
         self.cell = np.array([g * sx.min(), g * sy.min()])
         self.x0, self.y0 = nodes.origin[:, 0].min(), nodes.origin[:, 1].max()
         c0 = np.round((nodes.origin[:, 0] - self.x0) / self.cell[0]).astype(int)
@@ -121,8 +125,11 @@ class ProxySurface:
         out[ok] = self.raster[r, c]
         return out
 
-    def height(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-        """The proxy's height ``(K,) float64`` metres at ``(x, y)``; NaN off the proxy."""
+    def cells(self, x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, ...]:
+        """Where points ``(x, y) (K,)`` fall: ``(node (K,) intp, row (K,), column (K,)
+        intp of the cell's first vertex, fu, fv (K,) float64 within the cell, inside (K,)
+        bool)``; a point off the proxy has ``inside`` False (its other values are node 0's,
+        meaningless)."""
         x = np.asarray(x, np.float64)
         y = np.asarray(y, np.float64)
         i = self.node_at(x, y)
@@ -139,14 +146,26 @@ class ProxySurface:
         c = np.minimum(np.floor(v), q[:, 7])
         fu = (u - r) / np.maximum(np.minimum(r + 1, ext_r) - r, 1e-9)
         fv = (v - c) / np.maximum(np.minimum(c + 1, ext_c) - c, 1e-9)
+        return j, r.astype(np.intp), c.astype(np.intp), fu, fv, inside
+
+    def height(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """The proxy's height ``(K,) float64`` metres at ``(x, y)``; NaN off the proxy."""
+        j, r, c, fu, fv, inside = self.cells(x, y)
         side = self._flat_side
-        base = j * side * side + r.astype(np.intp) * side + c.astype(np.intp)
+        base = j * side * side + r * side + c
         h = self._flat
-        nw, ne, sw, se = h[base], h[base + 1], h[base + side], h[base + side + 1]
-        lower = fu >= fv  # the (nw, sw, se) triangle, else (nw, se, ne)
-        z = np.where(lower, nw + fu * (sw - nw) + fv * (se - sw),
-                     nw + fv * (ne - nw) + fu * (se - ne))
+        z = triangle_height(h[base], h[base + 1], h[base + side], h[base + side + 1], fu, fv)
         return np.where(inside, z, np.nan)
+
+
+def triangle_height(nw: np.ndarray, ne: np.ndarray, sw: np.ndarray, se: np.ndarray,
+                    fu: np.ndarray, fv: np.ndarray) -> np.ndarray:
+    """The height in a square cell at ``(fu, fv)`` (row, column fractions) from its corner
+    heights, linear over its two triangles as the GPU draws them (split along the
+    north-west/south-east diagonal: ``(nw, sw, se)`` where ``fu >= fv``, else
+    ``(nw, se, ne)``)."""
+    return np.where(fu >= fv, nw + fu * (sw - nw) + fv * (se - sw),
+                    nw + fv * (ne - nw) + fu * (se - ne))
 
 
 def _march(dt: np.ndarray, side: float, end: float) -> np.ndarray:
@@ -271,6 +290,18 @@ class ProxyReprojection(Reprojection):
 ProxySource = Callable[[np.ndarray, "np.ndarray | None"], ProxyNodes]
 
 
+def nodes_in_view(nodes: ProxyNodes, view_proj: np.ndarray) -> np.ndarray:
+    """``(N,) bool``: the nodes whose bounding boxes (their vertices' extent, heights as
+    drawn) meet the frustum of ``view_proj (4, 4)`` (conservative)."""
+    x0, y1 = nodes.origin[:, 0], nodes.origin[:, 1]
+    x1 = x0 + nodes.last[:, 1] * nodes.spacing[:, 0]
+    y0 = y1 - nodes.last[:, 0] * nodes.spacing[:, 1]
+    h = nodes.heights.reshape(len(nodes), -1)
+    mins = np.c_[x0, y0, h.min(axis=1)]
+    maxs = np.c_[x1, y1, h.max(axis=1)]
+    return boxes_in_frustum(frustum_planes(view_proj), mins, maxs)
+
+
 class ProxyMetric:
     """The interface :class:`~lodsprite.sprite.policy.KeyframePolicy` uses
     (:meth:`reproject`, :meth:`error_px`, :meth:`covers`) over a view-dependent proxy.
@@ -290,18 +321,24 @@ class ProxyMetric:
         self.points = points
 
     def reproject(self, key_eye: np.ndarray, key_view_proj: np.ndarray | None = None,
-                  key_size=None) -> ProxyReprojection:
-        """Freeze the keyframe's proxy and return ``C'`` of its samples (once a keyframe)."""
+                  key_size=None, within: np.ndarray | None = None) -> ProxyReprojection:
+        """Freeze the keyframe's proxy and return ``C'`` of its samples (once a keyframe).
+        ``within (4, 4)``: a view whose frustum the samples' nodes must meet (a tile
+        update's tiles, :func:`~lodsprite.sprite.tiled.sub_view_proj`): ``C'`` of those
+        alone, the proxy still frozen for the whole key view."""
         eye = np.asarray(key_eye, np.float64)
         nodes = self.source(eye, key_view_proj)
-        if len(nodes) == 0:  # no proxy node in the keyframe's view: nothing measurable
+        keep = np.ones(len(nodes), bool) if within is None else nodes_in_view(nodes, within)
+        if not keep.any():  # no proxy node in the view: nothing measurable
             out = ProxyReprojection(np.zeros((0, 3)), eye, np.zeros(0, bool))
             out.set_points(np.zeros((0, 3)))
             return out
-        steps = np.rint(nodes.spacing[:, 0] / self.hf.dx).astype(np.int64)
-        hf = self.hf if self.points is None else _Points(self.points(eye, key_view_proj))
-        points = node_samples(hf, nodes.windows, steps, self.per_node, self.limit)
-        cell_m = np.repeat(nodes.spacing.min(axis=1), len(points) // max(1, len(nodes)))
+        steps = np.rint(nodes.spacing[keep, 0] / self.hf.dx).astype(np.int64)
+        view = key_view_proj if within is None else within
+        hf = self.hf if self.points is None else _Points(self.points(eye, view))
+        points = node_samples(hf, nodes.windows[keep], steps, self.per_node, self.limit)
+        cell_m = np.repeat(nodes.spacing[keep].min(axis=1),
+                           len(points) // max(1, int(keep.sum())))
         c_prime, missed = reproject_onto(ProxySurface(nodes), eye, points, cell_m)
         out = ProxyReprojection(c_prime, eye, missed)
         out.set_points(points)

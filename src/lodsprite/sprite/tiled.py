@@ -208,7 +208,8 @@ def render_error(metric: ErrorMetric, c_prime, key_view_proj: np.ndarray, rect: 
 
 def reproject_in_key_view(metric: ErrorMetric, key_eye: np.ndarray,
                           key_view_proj: np.ndarray,
-                          key_size: tuple[int, int] | None = None) -> Reprojection:
+                          key_size: tuple[int, int] | None = None,
+                          within: np.ndarray | None = None) -> Reprojection:
     """``C'`` of a tile update (:class:`~lodsprite.sprite.raycast.Reprojection`, ``(n*n,
     3)``) computed only for the centres inside its key view ``key_view_proj (4, 4)``: no
     tile of the update serves the others.  They count as misses (``C' = C``, floored to
@@ -220,11 +221,18 @@ def reproject_in_key_view(metric: ErrorMetric, key_eye: np.ndarray,
     (a view-dependent proxy's, :class:`~lodsprite.sprite.proxy_metric.ProxyMetric`, whose
     samples are the proxy's nodes culled by the key view) gives its own ``reproject``, and
     so does one taking its ``C`` from the surface the keyframe shows (``metric.surface``,
-    over a store: :class:`~lodsprite.techniques.drawn_surface.DrawnSurface`)."""
-    if not hasattr(metric, "squares") or getattr(metric, "surface", None) is not None:
+    over a store: :class:`~lodsprite.techniques.drawn_surface.DrawnSurface`).
+
+    ``within (4, 4)``: the sub-frustum of the tiles the update re-renders
+    (:func:`sub_view_proj`): only samples there are reprojected (the other tiles keep
+    their own ``C'``); a view-dependent proxy's metric takes it too."""
+    if not hasattr(metric, "squares"):
+        return metric.reproject(key_eye, key_view_proj, key_size, within=within)
+    if getattr(metric, "surface", None) is not None:
         return metric.reproject(key_eye, key_view_proj, key_size)
     sq = metric.squares
-    vis = np.flatnonzero(in_view(metric._centres_h, key_view_proj))
+    vis = np.flatnonzero(in_view(metric._centres_h, key_view_proj if within is None
+                                 else within))
     c_prime = sq.centres.astype(np.float64).copy()
     missed = np.ones(len(c_prime), bool)
     if vis.size:
@@ -239,9 +247,10 @@ def combined_error(errors: np.ndarray, served: np.ndarray) -> float:
     w = np.asarray(served, np.float64)
     if w.sum() <= 0:
         return float(errors.max()) if errors.size else 0.0
-    if np.any(~np.isfinite(errors[w > 0])):
+    on = w > 0
+    if np.any(~np.isfinite(errors[on])):
         return math.inf
-    return float(np.sqrt((w * errors * errors).sum() / w.sum()))
+    return float(np.sqrt((w[on] * errors[on] ** 2).sum() / w.sum()))
 
 
 def select_tiles(errors: np.ndarray, epsilon_px: float, costs_ms: np.ndarray,

@@ -161,9 +161,9 @@ class TiledSpriteEngine:
             self.updates.append(key)
             key_proj = s.key_projection(projection)
             # C' first: a view-dependent proxy is selected for it, then frozen by the tiles
-            c_prime = reproject_in_key_view(self.metric, viewpoint.o,
-                                            key_proj.matrix() @ viewpoint.view_matrix(),
-                                            s.key_size)
+            key_vp = key_proj.matrix() @ viewpoint.view_matrix()
+            c_prime = reproject_in_key_view(self.metric, viewpoint.o, key_vp, s.key_size,
+                                            self._within(chosen, key_vp))
             tris += self.render_tiles(chosen, key)
             self.proxy_selections.append(getattr(s.proxy, "last", None))
             if self.after_tiles is not None:
@@ -186,6 +186,15 @@ class TiledSpriteEngine:
         s.terrain.ctx.finish()
         return SpriteFrame(kind, shown, decision, tris, (time.perf_counter() - t0) * 1e3,
                            len(self.updates) - 1)
+
+    def _within(self, chosen: Sequence[int], key_vp: np.ndarray) -> np.ndarray | None:
+        """The sub-frustum of the tiles ``chosen`` (their NDC bounding rectangle), whose
+        samples alone the update's ``C'`` needs; None when every tile is chosen."""
+        if len(chosen) == self.tiled.count:
+            return None
+        r = self.tiled.ndc[np.asarray(chosen, np.intp)]
+        box = np.array([r[:, 0].min(), r[:, 1].min(), r[:, 2].max(), r[:, 3].max()])
+        return sub_view_proj(key_vp, box)
 
     def _use_cache(self, viewpoint: Viewpoint, errors: np.ndarray) -> bool:
         """Each tile at or over ``SWITCH_FRACTION`` ε shows its cached render with the

@@ -37,7 +37,7 @@ import numpy as np
 
 from lodsprite.camera import frustum_planes
 from lodsprite.errors import InputError
-from lodsprite.sprite.proxy_metric import ProxyNodes
+from lodsprite.sprite.proxy_metric import ProxyNodes, ProxySurface, triangle_height
 from lodsprite.terrain.quadtree import morph_factor, ranges
 
 WIDEN = 2.0     # the proxy's culling frustum: the keyframe's, tangents times this
@@ -57,19 +57,22 @@ def strided_errors(errors: np.ndarray, stride: int) -> np.ndarray:
 
 
 def parent_surfaces(pos: np.ndarray, quadrant: np.ndarray, parent: np.ndarray,
-                    top: np.ndarray, grid: int, stride: int) -> np.ndarray:
+                    top: np.ndarray, grid: int, stride: int,
+                    which: np.ndarray | None = None) -> np.ndarray:
     """Each parent's surface on its own proxy mesh (every ``stride``-th sample) at its
     child's samples ``pos (N, ..., 2)`` (row, column), the child in ``quadrant (N, 2)``;
     ``parent (N, R, C)`` the parents' samples, ``top (N, 2)`` their last valid row and
     column: the vertex shader's morph target (:data:`lodsprite.gl.adaptive.
-    ADAPTIVE_POSITION_COMMON`)."""
+    ADAPTIVE_POSITION_COMMON`).  ``which (N,) intp``: the row of ``parent`` each child
+    reads (default: its own, ``parent`` and ``top`` then have ``N`` rows too)."""
     extra = (1,) * (pos.ndim - 2)
     q = np.asarray(quadrant).reshape(len(pos), *extra, 2)
-    cap = np.asarray(top).reshape(len(pos), *extra, 2)
+    rows = np.arange(len(pos)) if which is None else np.asarray(which, np.intp)
+    cap = np.asarray(top)[rows].reshape(len(pos), *extra, 2)
     p = (q * (grid // 2) + pos / 2.0) / stride
     lo = np.minimum(np.floor(p).astype(np.intp) * stride, cap)
     hi = np.minimum(np.ceil(p).astype(np.intp) * stride, cap)
-    idx = np.arange(len(pos)).reshape(len(pos), *extra)
+    idx = rows.reshape(len(pos), *extra)
     return 0.5 * (parent[idx, lo[..., 0], lo[..., 1]] + parent[idx, hi[..., 0], hi[..., 1]])
 
 
@@ -80,6 +83,62 @@ def parent_surface(pos: np.ndarray, quadrant: tuple[int, int], parent: np.ndarra
                            np.array([parent.shape]) - 1, grid, stride)[0]
 
 
+def node_layout(tree, nodes, stride: int) -> tuple[np.ndarray, ...]:
+    """Where ``nodes`` of ``tree`` stand, drawn with every ``stride``-th sample: ``(origin
+    (N, 2) metres, spacing (N, 2) metres, ext (N, 2) intp: the last valid sample row and
+    column within the node, windows (N, 4) intp level-0 windows, k (N,) levels, s (N,)
+    level scales 2^k)``."""
+    win = np.array([tree.samples(n) for n in nodes], np.intp).reshape(-1, 4)
+    k = np.array([n.k for n in nodes], np.intp)
+    s = (1 << k).astype(np.float64)
+    x, y = tree.world_xy(0, win[:, 0] * s, win[:, 2] * s)  # level-0 indices
+    origin = np.c_[x, y]
+    spacing = np.c_[stride * s * tree.p.dx, stride * s * tree.p.dy]
+    ext = np.minimum(tree.g, np.c_[win[:, 1] - win[:, 0] - 1, win[:, 3] - win[:, 2] - 1])
+    windows = np.c_[win[:, 0], win[:, 0] + ext[:, 0], win[:, 2], win[:, 2] + ext[:, 1]]
+    windows = (windows * s[:, None]).astype(np.intp)
+    return origin, spacing, ext, windows, k, s
+
+
+def _stacked(terrain, nodes) -> tuple[np.ndarray, np.ndarray]:
+    """The resident samples of ``nodes`` as ``(heights (N, G+1, G+1) float64, top (N, 2)
+    intp: each one's last row and column)``."""
+    g = terrain.tree.g
+    out = np.zeros((len(nodes), g + 1, g + 1))
+    top = np.zeros((len(nodes), 2), np.intp)
+    for i, n in enumerate(nodes):
+        tile = terrain.node_heights(n)
+        out[i, :tile.shape[0], :tile.shape[1]] = tile
+        top[i] = np.array(tile.shape) - 1
+    return out, top
+
+
+def _morphed(terrain, nodes, which: np.ndarray, mask: np.ndarray, pos: np.ndarray,
+             xy: np.ndarray, heights: np.ndarray, eye: np.ndarray, stride: int,
+             r: np.ndarray) -> np.ndarray:
+    """``heights (M, ...)`` at samples ``pos (M, ..., 2)`` (world ``xy (M, ..., 2)``) of
+    the nodes ``which (M,)`` indexes in ``nodes``, those with ``mask (M,)`` geomorphed
+    towards their parents at ``eye`` as the vertex shader morphs them."""
+    if not mask.any():
+        return heights
+    sub = np.unique(which[mask])
+    par, ptop = _stacked(terrain, [nodes[i].parent() for i in sub])
+    rows = np.searchsorted(sub, which[mask])
+    quad = np.array([(nodes[i].i % 2, nodes[i].j % 2) for i in which[mask]],
+                    np.intp).reshape(-1, 2)
+    hc = parent_surfaces(pos[mask], quad, par, ptop, terrain.tree.g, stride, rows)
+    h = heights[mask]
+    d = np.sqrt(((np.concatenate([xy[mask], h[..., None]], -1) - eye) ** 2).sum(-1))
+    m = np.zeros_like(d)
+    k = np.array([nodes[i].k for i in which[mask]], np.intp)
+    for lev in np.unique(k):
+        sel = k == lev
+        m[sel] = morph_factor(d[sel], int(lev), r)
+    out = heights.copy()
+    out[mask] = h + m * (hc - h)
+    return out
+
+
 def frozen_nodes(terrain, nodes, morphed: frozenset, eye: np.ndarray, stride: int,
                  r: np.ndarray) -> ProxyNodes:
     """``nodes`` of ``terrain`` (an :class:`~lodsprite.techniques.adaptive_terrain.
@@ -87,47 +146,47 @@ def frozen_nodes(terrain, nodes, morphed: frozenset, eye: np.ndarray, stride: in
     in ``morphed`` geomorphed towards their parents at ``eye (3,)`` by the range table
     ``r`` as the vertex shader morphs them (heights from the host cache or the GPU slots,
     :meth:`~lodsprite.techniques.adaptive_terrain.AdaptiveTerrain.node_heights`)."""
-    t, g, st = terrain, terrain.tree.g, stride
-    tree = t.tree
-    n_, nv = len(nodes), g // st
-    win = np.array([tree.samples(n) for n in nodes], np.intp).reshape(-1, 4)
-    k = np.array([n.k for n in nodes], np.intp)
-    s = (1 << k).astype(np.float64)
-    x, y = tree.world_xy(0, win[:, 0] * s, win[:, 2] * s)  # level-0 indices
-    origin = np.c_[x, y]
-    spacing = np.c_[st * s * tree.p.dx, st * s * tree.p.dy]
-    ext = np.minimum(g, np.c_[win[:, 1] - win[:, 0] - 1, win[:, 3] - win[:, 2] - 1])
-    windows = np.c_[win[:, 0], win[:, 0] + ext[:, 0], win[:, 2], win[:, 2] + ext[:, 1]]
-    windows = (windows * s[:, None]).astype(np.intp)
-    own = np.zeros((n_, g + 1, g + 1))
-    par = np.zeros((n_, g + 1, g + 1))
-    ptop = np.zeros((n_, 2), np.intp)
-    mask = np.array([n in morphed for n in nodes], bool)
-    for i, n in enumerate(nodes):
-        tile = t.node_heights(n)
-        own[i, :tile.shape[0], :tile.shape[1]] = tile
-        if mask[i]:
-            tile = t.node_heights(n.parent())
-            par[i, :tile.shape[0], :tile.shape[1]] = tile
-            ptop[i] = np.array(tile.shape) - 1
+    tree, st = terrain.tree, stride
+    nv = tree.g // st
+    origin, spacing, ext, windows, _, s = node_layout(tree, nodes, st)
+    own, _ = _stacked(terrain, nodes)
     rc = np.stack(np.meshgrid(np.arange(nv + 1), np.arange(nv + 1), indexing="ij"), -1)
     pos = np.minimum(rc[None] * st, ext[:, None, None, :])  # clamped as the shader does
-    idx = np.arange(n_)[:, None, None]
-    heights = own[idx, pos[..., 0], pos[..., 1]]
-    if mask.any():
-        quad = np.array([(n.i % 2, n.j % 2) for n in nodes], np.intp)
-        hc = parent_surfaces(pos, quad, par, ptop, g, st)
-        xy = origin[:, None, None, :] + pos[..., ::-1] * (
-            s[:, None] * np.array([tree.p.dx, -tree.p.dy]))[:, None, None, :]
-        d = np.sqrt(((np.concatenate([xy, heights[..., None]], -1)
-                      - np.asarray(eye, np.float64)) ** 2).sum(-1))
-        m = np.zeros_like(d)
-        for lev in np.unique(k[mask]):
-            sel = mask & (k == lev)
-            m[sel] = morph_factor(d[sel], int(lev), r)
-        heights = heights + m * (hc - heights)
-    last = ext / st
-    return ProxyNodes(origin, spacing, last, heights, windows)
+    which = np.arange(len(nodes))
+    heights = own[which[:, None, None], pos[..., 0], pos[..., 1]]
+    xy = origin[:, None, None, :] + pos[..., ::-1] * (
+        s[:, None] * np.array([tree.p.dx, -tree.p.dy]))[:, None, None, :]
+    mask = np.array([n in morphed for n in nodes], bool)
+    heights = _morphed(terrain, nodes, which, mask, pos, xy, heights,
+                       np.asarray(eye, np.float64), st, r)
+    return ProxyNodes(origin, spacing, ext / st, heights, windows)
+
+
+def drawn_heights_at(terrain, nodes, morphed: frozenset, eye: np.ndarray, r: np.ndarray,
+                     x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """The surface ``nodes`` draw at full resolution (stride 1), geomorphed at ``eye``:
+    the heights ``(K,) float64`` metres at world ``(x, y) (K,)``, NaN off the nodes.  The
+    same values as ``ProxySurface(frozen_nodes(..., stride=1)).height(x, y)``, evaluated at
+    the points' cell corners alone (not every sample of every node)."""
+    tree = terrain.tree
+    origin, spacing, ext, windows, _, s = node_layout(tree, nodes, 1)
+    heights = np.zeros((len(nodes), 1, 1))
+    surface = ProxySurface(ProxyNodes(origin, spacing, ext.astype(np.float64), heights,
+                                      windows), side=tree.g)
+    j, row, col, fu, fv, inside = surface.cells(x, y)
+    j, row, col = j[inside], row[inside], col[inside]
+    corner = np.array([[0, 0], [0, 1], [1, 0], [1, 1]], np.intp)  # nw, ne, sw, se
+    pos = np.minimum(np.stack([row, col], -1)[:, None] + corner[None], ext[j][:, None])
+    sub, rows = np.unique(j, return_inverse=True)
+    own, _ = _stacked(terrain, [nodes[i] for i in sub])
+    h = own[rows[:, None], pos[..., 0], pos[..., 1]]
+    xy = origin[j][:, None] + pos[..., ::-1] * (
+        s[j, None] * np.array([tree.p.dx, -tree.p.dy]))[:, None]
+    mask = np.array([nodes[i] in morphed for i in j], bool)
+    h = _morphed(terrain, nodes, j, mask, pos, xy, h, np.asarray(eye, np.float64), 1, r)
+    z = np.full(np.shape(x), np.nan)
+    z[inside] = triangle_height(h[:, 0], h[:, 1], h[:, 2], h[:, 3], fu[inside], fv[inside])
+    return z
 
 
 class AdaptiveProxySource:
