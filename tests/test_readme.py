@@ -20,7 +20,8 @@ README = ROOT / "README.md"
 DOCS = ROOT / "docs"
 TIMEOUT_S = 240
 INSTALL_AND_DEMO = 'python3 -m pip install -e . && lodsprite demo'
-INSTALL_AND_TEST = 'python3 -m pip install -e ".[test]" && python3 -m pytest -q'
+INSTALL_AND_TEST = ('python3 -m pip install -e ".[test]" && '
+                    'python3 -m pytest -q -n 2 --dist loadfile')
 # Each command's page under docs/commands/ (the subcommands of one group share one).
 PAGES = {"keys": "serve", "lumigraph capture": "lumigraph", "lumigraph import": "lumigraph",
          "lumigraph render": "lumigraph"}

@@ -50,7 +50,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial.transform import Slerp
 
 from lodsprite.camera import DEFAULT_FOV_Y_DEG, Viewpoint, look_at, rotated_viewpoint, view_rotation
 from lodsprite.errors import InputError, PathError
@@ -124,6 +123,8 @@ class CameraPath:
             return CameraPath(self.name, (self.viewpoints[0],) * n, self.fov_y_deg)
         eyes = self.eyes()
         rots = view_rotation(self.axes())
+        from scipy.spatial.transform import Slerp  # on first use: a slow import
+
         slerp = Slerp(np.arange(count, dtype=np.float64), rots)
         rotations = slerp(u)
         pos = eyes[i0] * (1.0 - w)[:, None] + eyes[i0 + 1] * w[:, None]

@@ -33,7 +33,6 @@ Cost: O(N log N) in the number of samples; about 3 s for ``size=4096`` and
 from __future__ import annotations
 
 import numpy as np
-import scipy.fft
 
 from lodsprite.errors import TerrainError
 from lodsprite.terrain.heightfield import HeightField, is_power_of_two
@@ -175,6 +174,8 @@ def _to_field(spec: np.ndarray, m: int, size: int) -> np.ndarray:
     ``ifft`` then a row ``irfft`` (zero-padding the missing columns) on the
     kept rows only.
     """
+    import scipy.fft  # on first use: 0.3 s at every process start otherwise
+
     n = size + 1
     half = scipy.fft.ifft(spec, axis=0, workers=-1)[:n]
     f = scipy.fft.irfft(half, n=m, axis=1, workers=-1)[:, :n]

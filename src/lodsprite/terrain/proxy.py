@@ -27,7 +27,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from skimage.measure import approximate_polygon
 
 from lodsprite.errors import InputError
 from lodsprite.terrain.heightfield import HeightField
@@ -86,7 +85,7 @@ def _kept_samples(full: np.ndarray, step: int, spacing: float, tol: float) -> np
     keep = [np.arange(0, len(full), step)]
     for a in range(0, len(full) - 1, step):
         pts = np.stack([np.arange(step + 1) * spacing, full[a:a + step + 1]], axis=1)
-        keep.append(a + np.rint(approximate_polygon(pts, tol)[:, 0] / spacing).astype(np.intp))
+        keep.append(a + np.rint(_approximate_polygon(pts, tol)[:, 0] / spacing).astype(np.intp))
     return np.unique(np.concatenate(keep))
 
 
@@ -140,3 +139,12 @@ def proxy_mesh(hf: HeightField, level_quads: int, border: bool = True,
                      np.concatenate([level.uv, rib.uv]),
                      np.concatenate([level.tris, rib.tris + len(level.positions)]).astype(
                          np.uint32), level.level_triangles)
+
+
+def _approximate_polygon(points: np.ndarray, tolerance: float) -> np.ndarray:
+    """scikit-image's Douglas-Peucker ``approximate_polygon``, imported on first use:
+    ``skimage.measure`` pulls in ``scipy.signal`` and ``scipy.stats`` (0.7 s at every
+    process start that imports the GL terrain code, the CLI's included)."""
+    from skimage.measure import approximate_polygon
+
+    return approximate_polygon(points, tolerance)
