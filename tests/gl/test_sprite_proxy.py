@@ -141,6 +141,48 @@ def test_a_tile_updates_c_prime_holds_the_samples_of_its_tiles_alone(setup):
     assert set(np.flatnonzero(inside)) <= set(rows)
 
 
+def test_the_proxy_metric_adds_the_resampling_term_when_asked(setup):
+    """``metric="resample"`` on the view-dependent proxy: zero at the keyframe's own view
+    (J = I), and above the warp-only error once the eye moves in (magnification)."""
+    hf, sp, at, src = setup()
+    vp = key_view()
+    at.settle(vp)
+    proj = sp.terrain.projection(vp)
+    vp_key = proj.matrix() @ vp.view_matrix()
+    beta = proj.pixel_angle_rad(SIZE)
+    warp = ProxyMetric(src.nodes, hf, ErrorMetric.for_level(hf, 8))
+    both = ProxyMetric(src.nodes, hf, ErrorMetric.for_level(hf, 8, resampling=True))
+    assert both.resampling and not warp.resampling
+    c_warp = warp.reproject(vp.o, vp_key, (SIZE, SIZE))
+    c_both = both.reproject(vp.o, vp_key, (SIZE, SIZE))
+    assert c_both.normals.shape == (len(c_both), 3)
+    assert both.error_px(c_both, vp.o, vp_key, beta, size=(SIZE, SIZE)) == pytest.approx(
+        0.0, abs=1e-6)
+    closer = look_at((0.0, -1800.0, 1500.0), (0.0, 0.0, 0.0))  # 40 % nearer, same line
+    p2 = sp.terrain.projection(closer)
+    vp2 = p2.matrix() @ closer.view_matrix()
+    e_warp = warp.error_px(c_warp, closer.o, vp2, beta)
+    e_both = both.error_px(c_both, closer.o, vp2, beta, size=(SIZE, SIZE))
+    # magnification 1/0.6: blur = 0.67 px at the view centre, more nearer the eye
+    assert e_both > e_warp + 0.3
+
+
+def test_proxy_normals_are_the_planes_normal():
+    from lodsprite.sprite.proxy_metric import ProxyNodes, surface_normals
+
+    g = 4
+    rows, cols = np.mgrid[0:g + 1, 0:g + 1].astype(np.float64)
+    x, y = cols * 10.0, 100.0 - rows * 10.0  # origin (0, 100), 10 m east and south
+    heights = (0.3 * x - 0.2 * y)[None]  # z = 0.3 x - 0.2 y
+    nodes = ProxyNodes(np.array([[0.0, 100.0]]), np.array([[10.0, 10.0]]),
+                       np.array([[g, g]], np.float64), heights, np.array([[0, g, 0, g]]))
+    pts = np.array([[15.0, 75.0, 0.0], [33.0, 62.0, 0.0], [500.0, 500.0, 0.0]])
+    n = surface_normals(ProxySurface(nodes), pts)
+    want = np.array([-0.3, 0.2, 1.0]) / np.linalg.norm([-0.3, 0.2, 1.0])
+    np.testing.assert_allclose(n[:2], [want, want], atol=1e-9)
+    np.testing.assert_allclose(n[2], [0.0, 0.0, 1.0])  # off the proxy
+
+
 def test_the_proxy_morphs_to_its_parent_as_the_quadtree_does():
     # stride 1 is the adaptive renderer's own morph target; stride s the parent's mesh of
     # every s-th sample (even fine vertices land on it, odd ones halfway)

@@ -403,9 +403,12 @@ class ErrorMetric:
 
     def _with_resampling(self, th: np.ndarray, missed: np.ndarray, cp: np.ndarray,
                          c_prime: np.ndarray, view_proj: np.ndarray, beta: float,
-                         size: tuple[int, int] | None) -> np.ndarray:
+                         size: tuple[int, int] | None,
+                         idx: np.ndarray | None = None) -> np.ndarray:
         """``sqrt(θ² + (β e_res)²)`` for the hits (``e_res`` at ``C' = cp (K, 3)`` on the
-        coarse triangle there); misses keep θ (the floor raises them)."""
+        coarse triangle there); misses keep θ (the floor raises them).  ``idx``: which
+        samples of ``c_prime`` ``cp`` are (unused here: the coarse normals come from
+        ``cp``; a view-dependent proxy's metric reads its own normals by it)."""
         key_view_proj = getattr(c_prime, "key_view_proj", None)
         key_size = getattr(c_prime, "key_size", None)
         if size is None or key_view_proj is None or key_size is None:

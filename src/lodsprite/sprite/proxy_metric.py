@@ -55,6 +55,7 @@ import numpy as np
 from lodsprite.camera import boxes_in_frustum, frustum_planes
 from lodsprite.sprite.metric import ErrorMetric, angles_at_eye, in_view, miss_floor
 from lodsprite.sprite.raycast import Reprojection
+from lodsprite.sprite.resampling import resampling_px
 
 MAX_SAMPLES = 8192   # sample points C per keyframe, at most
 SAMPLES_PER_NODE = 4  # k: a k x k subgrid per proxy node (fewer when nodes are many)
@@ -241,6 +242,30 @@ def reproject_onto(surface: ProxySurface, key_eye: np.ndarray, points: np.ndarra
     return c_prime, ~hit
 
 
+def surface_normals(surface: ProxySurface, points: np.ndarray) -> np.ndarray:
+    """Unit normals ``(K, 3)`` of the proxy ``surface`` at ``points (K, 3)`` metres, by
+    central differences of a quarter of the local vertex spacing (``(0, 0, 1)`` off the
+    proxy): the plane whose homography the resampling term measures
+    (:mod:`lodsprite.sprite.resampling`)."""
+    x, y = points[:, 0], points[:, 1]
+    j, *_, inside = surface.cells(x, y)
+    d = 0.25 * surface.nodes.spacing[j]
+    z = surface.height(x, y)
+
+    def slope(dx: np.ndarray, dy: np.ndarray, step: np.ndarray) -> np.ndarray:
+        """Central difference; one-sided where a side is off the proxy (an edge)."""
+        up, down = surface.height(x + dx, y + dy), surface.height(x - dx, y - dy)
+        out = (up - down) / (2 * step)
+        out = np.where(np.isnan(up), (z - down) / step, out)
+        out = np.where(np.isnan(down), (up - z) / step, out)
+        return np.nan_to_num(out)
+
+    zero = np.zeros(len(x))
+    n = np.c_[-slope(d[:, 0], zero, d[:, 0]), -slope(zero, d[:, 1], d[:, 1]), np.ones(len(x))]
+    n[~inside] = (0.0, 0.0, 1.0)
+    return n / np.linalg.norm(n, axis=1, keepdims=True)
+
+
 def node_samples(hf, windows: np.ndarray, steps: np.ndarray, per_node: int = SAMPLES_PER_NODE,
                  limit: int = MAX_SAMPLES) -> np.ndarray:
     """Sample points ``C (K, 3) float64`` metres: level-0 samples of ``hf`` (``hf.points(
@@ -339,24 +364,55 @@ class ProxyMetric:
         points = node_samples(hf, nodes.windows[keep], steps, self.per_node, self.limit)
         cell_m = np.repeat(nodes.spacing[keep].min(axis=1),
                            len(points) // max(1, int(keep.sum())))
-        c_prime, missed = reproject_onto(ProxySurface(nodes), eye, points, cell_m)
-        out = ProxyReprojection(c_prime, eye, missed)
+        surface = ProxySurface(nodes)
+        c_prime, missed = reproject_onto(surface, eye, points, cell_m)
+        out = ProxyReprojection(c_prime, eye, missed, key_view_proj, key_size)
         out.set_points(points)
+        if self.resampling:
+            out.normals = surface_normals(surface, c_prime)
         return out
 
+    @property
+    def resampling(self) -> bool:
+        """Whether the error adds the keyframe image's resampling term (the uniform
+        metric's setting, ``metric="resample"``)."""
+        return bool(getattr(self.coarse, "resampling", False))
+
     def error_px(self, c_prime: ProxyReprojection, eye: np.ndarray, view_proj: np.ndarray,
-                 pixel_angle_rad: float) -> float:
+                 pixel_angle_rad: float, size: tuple[int, int] | None = None) -> float:
         """``sqrt(mean θ²) / β`` pixels over the samples in the current view (misses as
         :func:`~lodsprite.sprite.metric.miss_floor` counts them); ``inf`` when none is in
-        view or all missed."""
+        view or all missed.  With :attr:`resampling`, each hit's θ² gains ``(β e_res)²``
+        (``size = (w, h)``: the current image's pixels), the normal at ``C'`` the proxy's."""
         pts = c_prime.points
         vis = in_view(c_prime.points_h, view_proj)
         missed = c_prime.missed[vis]
         if not vis.any() or missed.all():
             return math.inf
-        th = angles_at_eye(np.asarray(eye, np.float64), pts[vis], np.asarray(c_prime)[vis])
+        cp = np.asarray(c_prime)[vis]
+        th = angles_at_eye(np.asarray(eye, np.float64), pts[vis], cp)
+        if self.resampling:
+            th = self._with_resampling(th, missed, cp, c_prime, view_proj, pixel_angle_rad,
+                                       size, np.flatnonzero(vis))
         th = miss_floor(th, missed)
         return float(np.sqrt(np.mean(th * th)) / pixel_angle_rad)
+
+    def _with_resampling(self, th: np.ndarray, missed: np.ndarray, cp: np.ndarray,
+                         c_prime: ProxyReprojection, view_proj: np.ndarray, beta: float,
+                         size: tuple[int, int] | None, idx: np.ndarray) -> np.ndarray:
+        """``sqrt(θ² + (β e_res)²)`` for the hits among the samples ``idx`` of ``c_prime``
+        (``cp``: their ``C'``), the normals the proxy's there (made at :meth:`reproject`);
+        misses keep θ."""
+        normals = getattr(c_prime, "normals", None)
+        if size is None or c_prime.key_view_proj is None or c_prime.key_size is None \
+                or normals is None:
+            raise ValueError("the resampling metric needs the current image size and a "
+                             "keyframe's key_view_proj, key_size and proxy normals")
+        hit = ~missed
+        e = np.zeros(len(th))
+        e[hit] = resampling_px(cp[hit], normals[idx][hit], c_prime.key_view_proj,
+                               c_prime.key_size, view_proj, size)
+        return np.sqrt(th * th + (beta * e) ** 2)
 
     def in_view_mask(self, viewpoint, projection):
         """The uniform level's square centres in view (the keyframe cache's test of which

@@ -180,7 +180,7 @@ def _rms_px(metric: ErrorMetric, c_prime, points: np.ndarray, idx: np.ndarray,
     if missed.all():
         return None  # nothing this tile draws
     if getattr(metric, "resampling", False):
-        th = metric._with_resampling(th, missed, cp, c_prime, view_proj, beta, size)
+        th = metric._with_resampling(th, missed, cp, c_prime, view_proj, beta, size, idx)
     th = miss_floor(th, missed)
     return float(np.sqrt(np.mean(th * th)) / beta)
 
