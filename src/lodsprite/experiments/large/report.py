@@ -193,7 +193,8 @@ def write_outputs(r: dict, out_dir: Path) -> Path:
     lines = ["# Large terrain — large", "",
              f"Fractal stores (tiled, seamless), {c['frames']} frames at {c['image']}² along "
              f"each path; adaptive at {c['sse']} px; LOD-sprite with keyframes by the "
-             f"adaptive renderer at {c['key_sse']} px, each variant at ε in {c['eps']} px. "
+             f"adaptive renderer at {c['key_sse']} px, each variant at ε in {c['eps']} px "
+             f"({_variants_line()}). "
              "Timed runs write nothing per frame; errors (RMSE in grey levels / mean FLIP) "
              f"on frames {r['sample_frames']} of the untimed replay, against the reference "
              "of each side (below).  Speedups: adaptive's total time over the row's (the "
@@ -216,3 +217,13 @@ def write_outputs(r: dict, out_dir: Path) -> Path:
     report = out_dir / "report.md"
     atomic_write_bytes(report, "\n".join(lines).encode())
     return report
+
+
+def _variants_line() -> str:
+    """What each LOD-sprite variant is, in a few words."""
+    def one(name: str, o: dict) -> str:
+        tiles = f"{o['tiles']}×{o['tiles']} tiles" if o.get("tiles", 1) > 1 else "whole keyframes"
+        cache = f", a {o['cache_mb']:g} MB cache" if o.get("cache_mb") else ""
+        return (f"`{name}`: {tiles}{cache}, proxy at {o.get('proxy_sse')} px, metric "
+                f"{o.get('metric', 'warp')}")
+    return "; ".join(one(k, v) for k, v in VARIANTS.items())
