@@ -11,8 +11,10 @@ triangulated surface the full-resolution mesh draws.
 * :func:`scatter` - ``count`` anchors uniform over the extent (inset by the group's
   radius), with uniform headings, from ``numpy.random.default_rng(seed)``: the same seed
   gives the same scene.
-* :func:`read_points` - a points file: one ``x,y`` (world metres) a line; blank lines and
-  ``#`` comments skipped; at most :data:`~lodsprite.scene.file.MAX_POINTS_ROWS` rows.
+* :func:`read_points` - a points file: one ``x,y`` (world metres) or ``x,y,yaw_deg`` (the
+  heading, degrees counter-clockwise from east; seeded when absent) a line; blank lines,
+  ``#`` comments and an ``x,y`` header skipped; at most
+  :data:`~lodsprite.scene.file.MAX_POINTS_ROWS` rows.
 * :func:`expand` - every member of a group at every anchor, turned by the anchor's heading.
 """
 
@@ -53,9 +55,10 @@ def headings(count: int, seed: int) -> np.ndarray:
     return np.random.default_rng(seed).uniform(-np.pi, np.pi, size=count)
 
 
-def read_points(path: str | Path, field: str) -> tuple[np.ndarray, np.ndarray]:
-    """A points file's ``xy (k, 2) float64`` and the line number of each row ``(k,)``.
-    Raises :class:`SceneFileError` naming ``field`` (and the line) for anything malformed."""
+def read_points(path: str | Path, field: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A points file's ``xy (k, 2) float64`` metres, headings ``(k,) float64`` radians (NaN
+    where a row gives none) and the line number of each row ``(k,)``.  Raises
+    :class:`SceneFileError` naming ``field`` (and the line) for anything malformed."""
     p = Path(path)
     rows, lines = [], []
     with p.open(encoding="utf-8", errors="replace") as fh:
@@ -65,24 +68,25 @@ def read_points(path: str | Path, field: str) -> tuple[np.ndarray, np.ndarray]:
                 continue
             cells = text.split(",")
             try:
-                if len(cells) != 2:
+                if len(cells) not in (2, 3):
                     raise ValueError
-                rows.append((float(cells[0]), float(cells[1])))
+                rows.append((float(cells[0]), float(cells[1]),
+                             np.radians(float(cells[2])) if len(cells) == 3 else np.nan))
             except ValueError:
                 if not rows and number == 1 and cells[0].strip().lower() == "x":
                     continue  # an "x,y" header
-                raise SceneFileError(f"{field}: {p.name} line {number}: expected x,y "
-                                     f"(two numbers), got {text[:40]!r}") from None
+                raise SceneFileError(f"{field}: {p.name} line {number}: expected x,y or "
+                                     f"x,y,yaw_deg (numbers), got {text[:40]!r}") from None
             lines.append(number)
             if len(rows) > MAX_POINTS_ROWS:
                 raise SceneFileError(f"{field}: {p.name} has more than {MAX_POINTS_ROWS} rows")
     if not rows:
         raise SceneFileError(f"{field}: {p.name} holds no points")
-    xy = np.asarray(rows, dtype=np.float64)
-    bad = np.flatnonzero(~np.isfinite(xy).all(axis=1))
+    table = np.asarray(rows, dtype=np.float64)
+    bad = np.flatnonzero(~np.isfinite(table[:, :2]).all(axis=1) | np.isinf(table[:, 2]))
     if len(bad):
         raise SceneFileError(f"{field}: {p.name} line {lines[bad[0]]}: not finite")
-    return xy, np.asarray(lines)
+    return table[:, :2], table[:, 2], np.asarray(lines)
 
 
 def check_inside(xy: np.ndarray, lo: np.ndarray, hi: np.ndarray, field: str,

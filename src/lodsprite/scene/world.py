@@ -188,10 +188,10 @@ def _anchors(o: ObjectSection, at: str, lo: np.ndarray, hi: np.ndarray
         return xy, yaw, None
     if o.points is None:
         return np.zeros((1, 2)), np.zeros(1), ["the origin"]
-    xy, lines = read_points(o.points, f"{at}.points")
+    xy, yaw, lines = read_points(o.points, f"{at}.points")
     where = [f"line {n}" for n in lines]
     check_inside(xy, lo, hi, f"{at}.points", where)
-    return xy, headings(len(xy), o.seed), where
+    return xy, np.where(np.isnan(yaw), headings(len(xy), o.seed), yaw), where
 
 
 def _group(o: ObjectSection, field: str) -> Group:
