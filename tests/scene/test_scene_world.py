@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from lodsprite.errors import SceneFileError
 from lodsprite.scene import placement
 from lodsprite.scene.walk import walk
 from lodsprite.scene.world import World, load_world
@@ -158,6 +159,21 @@ def test_walkers_stay_inside_and_keep_their_speed(tmp_path: Path) -> None:
         checked += int(straight.sum())
     assert checked > 11_000
     assert np.abs(w.poses(2000.0)[:, :2] - w.poses(0.0)[:, :2]).max() > 100.0   # they went
+
+
+def test_an_area_holds_its_scatter_and_its_walkers(tmp_path: Path) -> None:
+    body = ('[[objects]]\nmesh = "cube.off"\nheight_m = 2.0\ncount = 400\nwalk_mps = 3.0\n'
+            'area = [-100.0, 0.0, 50.0, 300.0]\n'
+            '[[objects]]\nmesh = "cube.off"\nheight_m = 2.0\ncount = 100\nwalk_mps = 3.0\n')
+    w = world_of(tmp_path, body)
+    lo, hi = np.array([-100.0, 0.0]), np.array([50.0, 300.0])
+    for t in (0.0, 77.0, 500.0):
+        xy = w.poses(t)[:400, :2]
+        assert ((xy >= lo - 1e-3) & (xy <= hi + 1e-3)).all()
+    assert (np.abs(w.poses(500.0)[400:, :2]) > 300.0).any()      # the others roam the terrain
+    bad = body.replace("300.0]", "600.0]")
+    with pytest.raises(SceneFileError, match=r"objects\[0\]\.area: \(50, 600\) is outside"):
+        world_of(tmp_path, bad)
 
 
 def test_a_walker_turns_back_at_the_edge() -> None:

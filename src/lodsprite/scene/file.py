@@ -74,6 +74,7 @@ class ObjectSection(msgspec.Struct, forbid_unknown_fields=True):
     walk_mps: float = 0.0
     lod: Literal["profile", "linear"] = "linear"
     up: Literal["y", "z"] | None = None
+    area: tuple[float, float, float, float] | None = None
 
 
 class LightFieldSection(msgspec.Struct, forbid_unknown_fields=True):
@@ -239,6 +240,9 @@ class _Checker:
             self.fail(f"{at}.seed", "must be >= 0")
         if not 0 <= o.walk_mps <= MAX_WALK_MPS:
             self.fail(f"{at}.walk_mps", f"must be >= 0 and <= {MAX_WALK_MPS:g}")
+        if o.area is not None and not (all(map(_finite, o.area)) and o.area[0] < o.area[2]
+                                       and o.area[1] < o.area[3]):
+            self.fail(f"{at}.area", "expected [x0, y0, x1, y1], finite, x0 < x1 and y0 < y1")
 
     def lightfield(self, lf: LightFieldSection, at: str) -> None:
         source = self.file(lf.source, f"{at}.source", folder_ok=True)

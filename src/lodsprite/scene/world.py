@@ -49,13 +49,15 @@ __all__ = ["Instances", "LightFieldPlacement", "ObjectType", "World", "load_worl
 class Instances:
     """The instances of one type: ``xy (k, 2) float64`` world metres (the terrain's world),
     ``yaw (k,) float64`` radians about ``+z`` (their headings when they walk), ``walk_mps``
-    (0: static) and the section's ``seed``."""
+    (0: static), the section's ``seed`` and ``area`` ``(x0, y0, x1, y1)`` metres, the
+    rectangle its walkers stay in (None: the terrain)."""
 
     type_index: int
     xy: np.ndarray
     yaw: np.ndarray
     walk_mps: float = 0.0
     seed: int = 0
+    area: tuple[float, float, float, float] | None = None
 
     def __len__(self) -> int:
         return len(self.xy)
@@ -116,13 +118,24 @@ class World:
         xy0 = np.concatenate([i.xy for i in self.instances])
         yaw0 = np.concatenate([i.yaw for i in self.instances])
         speed = np.concatenate([np.full(len(i), i.walk_mps) for i in self.instances])
-        lo, hi = self.extent
+        lo, hi = self._bounds()
         xy, yaw = walk(xy0, yaw0, speed, t, lo, hi)
         out = np.empty((len(xy), 4), np.float32)
         out[:, :2] = xy
         out[:, 2] = self.ground(xy)
         out[:, 3] = yaw
         return out
+
+    def _bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Each instance's walking rectangle ``lo, hi (count, 2)`` (or the terrain's
+        ``(2,)`` when no section has an area)."""
+        lo, hi = self.extent
+        if all(i.area is None for i in self.instances):
+            return lo, hi
+        boxes = [np.tile(np.r_[lo, hi] if i.area is None else i.area, (len(i), 1))
+                 for i in self.instances]
+        box = np.concatenate(boxes).astype(np.float64)
+        return box[:, :2], box[:, 2:]
 
     def summary(self) -> list[str]:
         """One line per layer: terrain, objects (types, instances), light fields."""
@@ -166,23 +179,36 @@ def load_world(path: str | os.PathLike, **scene_options: Any) -> World:
     for i, (o, (xy, yaw, where)) in enumerate(zip(sf.objects, anchors, strict=True)):
         at = f"{label}: objects[{i}]"
         group = _group(o, f"{at}.mesh")
+        a_lo, a_hi = _area(o, lo, hi)
         if o.count is not None and group_radius(group) > 0:  # members stay inside
-            inset = min(group_radius(group), 0.49 * float(np.min(hi - lo)))
-            xy, yaw = scatter(len(xy), o.seed, lo, hi, inset)
+            inset = min(group_radius(group), 0.49 * float(np.min(a_hi - a_lo)))
+            xy, yaw = scatter(len(xy), o.seed, a_lo, a_hi, inset)
         for k, (mxy, myaw, index) in enumerate(expand(group, xy, yaw)):
-            check_inside(mxy, lo, hi, f"{at}.{'mesh' if o.points is None else 'points'}",
+            check_inside(mxy, a_lo, a_hi, f"{at}.{'mesh' if o.points is None else 'points'}",
                          None if where is None else [where[a] for a in index])
-            instances.append(Instances(len(types) + k, mxy, myaw, o.walk_mps, o.seed))
+            instances.append(Instances(len(types) + k, mxy, myaw, o.walk_mps, o.seed,
+                                       o.area))
         types.extend(group.types)
         if sum(len(n) for n in instances) > MAX_INSTANCES:
             raise SceneFileError(f"{at}: more than {MAX_INSTANCES} instances in all")
     return World(scene, types, instances, lights, sf.view.path, sf.view, Path(path))
 
 
+def _area(o: ObjectSection, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A section's rectangle ``lo, hi (2,)``: its ``area`` or the terrain's extent."""
+    if o.area is None:
+        return lo, hi
+    return np.array(o.area[:2], np.float64), np.array(o.area[2:], np.float64)
+
+
 def _anchors(o: ObjectSection, at: str, lo: np.ndarray, hi: np.ndarray
              ) -> tuple[np.ndarray, np.ndarray, list[str] | None]:
     """A section's anchors ``xy (a, 2)``, headings ``(a,)`` and, for a points file, each
-    anchor's ``"line N"``; no count nor points: one anchor at the origin."""
+    anchor's ``"line N"`` (inside the section's area, itself on the terrain); no count
+    nor points: one anchor at the origin."""
+    if o.area is not None:
+        check_inside(np.reshape(o.area, (2, 2)), lo, hi, f"{at}.area")
+        lo, hi = _area(o, lo, hi)
     if o.count is not None:
         xy, yaw = scatter(o.count, o.seed, lo, hi)
         return xy, yaw, None
