@@ -199,3 +199,12 @@ def test_poses_are_one_vectorised_pass(tmp_path: Path, monkeypatch: pytest.Monke
     xy, yaw = walk(one.xy[5:6], one.yaw[5:6], np.array([1.0]), 12.5, lo, hi)
     np.testing.assert_allclose(poses[5, :2], xy[0], atol=1e-3)
     np.testing.assert_allclose(poses[5, 3], yaw[0], atol=1e-6)
+
+
+def test_the_example_battlefield_loads() -> None:
+    example = Path(__file__).resolve().parents[2] / "examples" / "battlefield.toml"
+    w = load_world(example, textured=False)
+    assert [t.name for t in w.types] == ["ogre", "tree"]
+    assert w.count == 3100 and int(w.moving().sum()) == 3000
+    xy = w.poses(60.0)[:3000, :2]
+    assert (np.abs(xy) <= 400.0 + 1e-3).all()                  # the crowd keeps its area
