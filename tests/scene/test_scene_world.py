@@ -86,6 +86,8 @@ def test_a_gltf_group_gives_a_type_per_mesh_and_instances_at_its_nodes(tmp_path:
     turn = translation_matrix([-4.0, 0.0, -6.0]) @ rotation_matrix(np.pi / 2, [0, 1, 0])
     scene.add_geometry(trimesh.creation.box((4.0, 6.0, 1.0)), node_name="tower",
                        geom_name="tower", transform=turn)
+    scene.graph.update(frame_to="hut2", frame_from=scene.graph.base_frame, geometry="hut",
+                       matrix=translation_matrix([0.0, 0.0, 10.0]))  # the hut again
     scene.export(tmp_path / "camp.glb")
     (tmp_path / "at.csv").write_text("100,50,0\n")             # heading 0: as laid out
     w = world_of(tmp_path, '[[objects]]\nmesh = "camp.glb"\npoints = "at.csv"\n')
@@ -95,20 +97,21 @@ def test_a_gltf_group_gives_a_type_per_mesh_and_instances_at_its_nodes(tmp_path:
     assert hut.height_m == pytest.approx(2.0) and tower.height_m == pytest.approx(6.0)
     by_type = {i.type_index: i for i in w.instances}
     # hut at glTF (5, 0, 3) -> world offset (5, -3); tower at (-4, 0, -6) -> (-4, 6)
-    np.testing.assert_allclose(by_type[0].xy, [[105.0, 47.0]], atol=1e-9)
+    np.testing.assert_allclose(by_type[0].xy, [[105.0, 47.0], [100.0, 40.0]], atol=1e-9)
     np.testing.assert_allclose(by_type[1].xy, [[96.0, 56.0]], atol=1e-9)
     # the tower's node turns +90° about glTF +y (up), i.e. +90° about world +z (up)
     assert by_type[0].yaw[0] == pytest.approx(0.0, abs=1e-9)
     assert by_type[1].yaw[0] == pytest.approx(np.pi / 2, abs=1e-9)
     (tmp_path / "at.csv").write_text("100,50,90\n")            # the group turned by 90°
     turned = world_of(tmp_path, '[[objects]]\nmesh = "camp.glb"\npoints = "at.csv"\n')
-    np.testing.assert_allclose(turned.instances[0].xy, [[103.0, 55.0]], atol=1e-9)
+    np.testing.assert_allclose(turned.instances[0].xy, [[103.0, 55.0], [110.0, 50.0]],
+                               atol=1e-9)
     assert abs(turned.instances[1].yaw[0]) == pytest.approx(np.pi, abs=1e-9)
     # scaled as a whole: the tallest type to height_m, the offsets with it
     scaled = world_of(tmp_path, '[[objects]]\nmesh = "camp.glb"\nheight_m = 3.0\n')
     assert [t.height_m for t in scaled.types] == pytest.approx([1.0, 3.0])
     offsets = np.concatenate([i.xy for i in scaled.instances])
-    np.testing.assert_allclose(offsets, [[2.5, -1.5], [-2.0, 3.0]], atol=1e-9)
+    np.testing.assert_allclose(offsets, [[2.5, -1.5], [0.0, -5.0], [-2.0, 3.0]], atol=1e-9)
 
 
 def test_scatter_stays_inside_and_repeats_by_seed(tmp_path: Path) -> None:
