@@ -104,6 +104,12 @@ class World:
         """Ground heights ``(k,) float64`` metres under ``xy (k, 2)`` world metres."""
         return ground(self.scene.hf, xy)
 
+    def type_indices(self) -> np.ndarray:
+        """``(count,) intp``: each instance's type (an index into :attr:`types`), in
+        :attr:`instances` order."""
+        return np.concatenate([np.full(len(i), i.type_index, np.intp) for i in self.instances]
+                              or [np.zeros(0, np.intp)])
+
     def moving(self) -> np.ndarray:
         """``(count,) bool``: which instances walk, in :attr:`instances` order."""
         return np.concatenate([np.full(len(i), i.walk_mps > 0) for i in self.instances]
