@@ -140,7 +140,9 @@ def test_instances_stand_on_the_ground(tmp_path: Path) -> None:
     np.testing.assert_allclose(w.poses(0.0)[200:, :2], [[0, 0], [-480, 480], [479.9, -123.4],
                                                         [17.3, -200.1]], atol=1e-4)
     assert list(w.moving()) == [False] * 200 + [True] * 4
-    assert list(w.type_indices()) == [0] * 200 + [1] * 4
+    assert len(w.types) == 1                        # one mesh, one height: one shared type
+    assert list(w.type_indices()) == [0] * 204
+    assert [i.walk_mps for i in w.instances] == [0.0, 2.0]
     np.testing.assert_array_equal(w.poses(0.0)[:200], w.poses(99.0)[:200])   # static
 
 

@@ -180,11 +180,24 @@ def load_world(path: str | os.PathLike, **scene_options: Any) -> World:
         check_inside(np.array([lf.position]), lo, hi, f"{label}: lightfields[{i}].position")
         lights.append(LightFieldPlacement(Path(lf.source), lf.position, lf.height_m))
     _check_path(scene, sf, label)
+    types, instances = _place(sf, label, lo, hi, anchors)
+    return World(scene, types, instances, lights, sf.view.path, sf.view, Path(path))
+
+
+def _place(sf: SceneFile, label: str, lo: np.ndarray, hi: np.ndarray, anchors: list
+           ) -> tuple[list[ObjectType], list[Instances]]:
+    """Every section's types and instances.  Sections of the same mesh, height, LOD kind
+    and up axis share their types (one mesh, one set of LODs)."""
     types: list[ObjectType] = []
     instances: list[Instances] = []
+    loaded: dict[tuple, tuple[Group, int]] = {}
     for i, (o, (xy, yaw, where)) in enumerate(zip(sf.objects, anchors, strict=True)):
         at = f"{label}: objects[{i}]"
-        group = _group(o, f"{at}.mesh")
+        key = (o.mesh, o.height_m, o.lod, o.up)
+        if key not in loaded:
+            loaded[key] = (_group(o, f"{at}.mesh"), len(types))
+            types.extend(loaded[key][0].types)
+        group, first = loaded[key]
         a_lo, a_hi = _area(o, lo, hi)
         if o.count is not None and group_radius(group) > 0:  # members stay inside
             inset = min(group_radius(group), 0.49 * float(np.min(a_hi - a_lo)))
@@ -192,12 +205,10 @@ def load_world(path: str | os.PathLike, **scene_options: Any) -> World:
         for k, (mxy, myaw, index) in enumerate(expand(group, xy, yaw)):
             check_inside(mxy, a_lo, a_hi, f"{at}.{'mesh' if o.points is None else 'points'}",
                          None if where is None else [where[a] for a in index])
-            instances.append(Instances(len(types) + k, mxy, myaw, o.walk_mps, o.seed,
-                                       o.area))
-        types.extend(group.types)
+            instances.append(Instances(first + k, mxy, myaw, o.walk_mps, o.seed, o.area))
         if sum(len(n) for n in instances) > MAX_INSTANCES:
             raise SceneFileError(f"{at}: more than {MAX_INSTANCES} instances in all")
-    return World(scene, types, instances, lights, sf.view.path, sf.view, Path(path))
+    return types, instances
 
 
 def _area(o: ObjectSection, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
