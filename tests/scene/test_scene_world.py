@@ -214,3 +214,17 @@ def test_the_example_battlefield_loads() -> None:
     assert w.count == 3100 and int(w.moving().sum()) == 3000
     xy = w.poses(60.0)[:3000, :2]
     assert (np.abs(xy) <= 400.0 + 1e-3).all()                  # the crowd keeps its area
+
+
+def test_light_fields_stand_where_the_file_puts_them(tmp_path: Path) -> None:
+    for name in ("statue.lf", "tree.lf"):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "lumigraph.json").write_text("{}")
+    body = "".join(f'[[lightfields]]\nsource = "{n}"\nposition = [{x}, -30.0]\nheight_m = 30\n'
+                   for n, x in (("statue.lf", 120.0), ("tree.lf", -400.0)))
+    w = world_of(tmp_path, body)
+    assert [(lf.source, lf.position, lf.height_m) for lf in w.lightfields] == [
+        (tmp_path / "statue.lf", (120.0, -30.0), 30.0), (tmp_path / "tree.lf", (-400.0, -30.0),
+                                                         30.0)]
+    assert w.summary()[2] == ("lightfields: 2 (statue.lf at (120, -30), 30 m; tree.lf at "
+                              "(-400, -30), 30 m)")

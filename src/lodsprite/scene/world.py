@@ -153,8 +153,14 @@ class World:
                 f"{hf.heights.max():.0f} m)",
                 f"objects: {len(self.types)} types, {self.count} instances ({walkers} "
                 f"walking), {sum(len(t.faces) for t in self.types):,} triangles in the types",
-                f"lightfields: {len(self.lightfields)}",
+                _lightfields_line(self.lightfields),
                 f"view: path {self.path}"]
+
+
+def _lightfields_line(lights: list[LightFieldPlacement]) -> str:
+    each = "; ".join(f"{lf.source.name} at ({lf.position[0]:g}, {lf.position[1]:g}), "
+                     f"{lf.height_m:g} m" for lf in lights)
+    return f"lightfields: {len(lights)}" + (f" ({each})" if lights else "")
 
 
 def load_world(path: str | os.PathLike, **scene_options: Any) -> World:
