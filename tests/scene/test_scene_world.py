@@ -177,6 +177,11 @@ def test_an_area_holds_its_scatter_and_its_walkers(tmp_path: Path) -> None:
         xy = w.poses(t)[:400, :2]
         assert ((xy >= lo - 1e-3) & (xy <= hi + 1e-3)).all()
     assert (np.abs(w.poses(500.0)[400:, :2]) > 300.0).any()      # the others roam the terrain
+    (tmp_path / "p.csv").write_text("0,10\n60,10\n")
+    points = body.replace("count = 400", 'points = "p.csv"')
+    with pytest.raises(SceneFileError, match=r"objects\[0\]\.points: line 2: \(60, 10\) is "
+                                             "outside its area"):
+        world_of(tmp_path, points)
     bad = body.replace("300.0]", "600.0]")
     with pytest.raises(SceneFileError, match=r"objects\[0\]\.area: \(50, 600\) is outside"):
         world_of(tmp_path, bad)

@@ -90,9 +90,10 @@ def read_points(path: str | Path, field: str) -> tuple[np.ndarray, np.ndarray, n
 
 
 def check_inside(xy: np.ndarray, lo: np.ndarray, hi: np.ndarray, field: str,
-                 where: list[str] | None = None) -> None:
+                 where: list[str] | None = None, region: str = "the terrain") -> None:
     """Raise :class:`SceneFileError` naming ``field`` (and ``where[i]`` of the first point
-    out, e.g. its line) when a point of ``xy (k, 2)`` lies outside ``[lo, hi]``."""
+    out, e.g. its line) when a point of ``xy (k, 2)`` lies outside ``[lo, hi]``
+    (``region``, as the message calls it)."""
     xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
     tol = 1e-9 * float(np.max(hi - lo))
     out = np.flatnonzero(((xy < lo - tol) | (xy > hi + tol)).any(axis=1))
@@ -100,7 +101,7 @@ def check_inside(xy: np.ndarray, lo: np.ndarray, hi: np.ndarray, field: str,
         i = int(out[0])
         at = f"{where[i]}: " if where is not None else ""
         raise SceneFileError(
-            f"{field}: {at}({xy[i, 0]:g}, {xy[i, 1]:g}) is outside the terrain "
+            f"{field}: {at}({xy[i, 0]:g}, {xy[i, 1]:g}) is outside {region} "
             f"(x {lo[0]:g}..{hi[0]:g}, y {lo[1]:g}..{hi[1]:g} m)")
 
 

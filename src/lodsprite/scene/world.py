@@ -205,12 +205,13 @@ def _place(sf: SceneFile, label: str, lo: np.ndarray, hi: np.ndarray, anchors: l
             types.extend(loaded[key][0].types)
         group, first = loaded[key]
         a_lo, a_hi = _area(o, lo, hi)
+        region = "the terrain" if o.area is None else "its area"
         if o.count is not None and group_radius(group) > 0:  # members stay inside
             inset = min(group_radius(group), 0.49 * float(np.min(a_hi - a_lo)))
             xy, yaw = scatter(len(xy), o.seed, a_lo, a_hi, inset)
         for k, (mxy, myaw, index) in enumerate(expand(group, xy, yaw)):
             check_inside(mxy, a_lo, a_hi, f"{at}.{'mesh' if o.points is None else 'points'}",
-                         None if where is None else [where[a] for a in index])
+                         None if where is None else [where[a] for a in index], region)
             instances.append(Instances(first + k, mxy, myaw, o.walk_mps, o.seed, o.area))
         if sum(len(n) for n in instances) > MAX_INSTANCES:
             raise SceneFileError(f"{at}: more than {MAX_INSTANCES} instances in all")
@@ -239,7 +240,8 @@ def _anchors(o: ObjectSection, at: str, lo: np.ndarray, hi: np.ndarray
         return np.zeros((1, 2)), np.zeros(1), ["the origin"]
     xy, yaw, lines = read_points(o.points, f"{at}.points")
     where = [f"line {n}" for n in lines]
-    check_inside(xy, lo, hi, f"{at}.points", where)
+    check_inside(xy, lo, hi, f"{at}.points", where,
+                 "the terrain" if o.area is None else "its area")
     return xy, np.where(np.isnan(yaw), headings(len(xy), o.seed), yaw), where
 
 
