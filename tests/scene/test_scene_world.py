@@ -63,6 +63,10 @@ def test_a_mesh_file_is_normalised_and_scaled(tmp_path: Path, box_obj: Path) -> 
     assert t.vertices.dtype == np.float32 and t.faces.dtype == np.int32
     assert t.colours.shape == t.vertices.shape and t.source == box_obj
     assert t.height_m == pytest.approx(8.0) and t.lod == "linear"
+    y_up = world_of(tmp_path, '[[objects]]\nmesh = "box.obj"\nheight_m = 8.0\nup = "y"\n')
+    v = y_up.types[0].vertices                        # (x, y, z) -> (x, -z, y): 1 m -> 8 m
+    np.testing.assert_allclose(v.min(0), [-8.0, -16.0, 0.0], atol=1e-4)
+    np.testing.assert_allclose(v.max(0), [8.0, 16.0, 8.0], atol=1e-4)
 
 
 def test_the_built_in_ogre_stands_on_its_base(tmp_path: Path) -> None:
