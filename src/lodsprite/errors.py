@@ -30,3 +30,8 @@ class GLUnavailableError(LodspriteError, RuntimeError):
 
 class MeshError(InputError):
     """A mesh file or model spec could not be loaded or is unusable."""
+
+
+class SceneFileError(InputError):
+    """A scene file (TOML, :mod:`lodsprite.scene.file`) is malformed or names something
+    unusable; the message is one line naming the file and the field."""

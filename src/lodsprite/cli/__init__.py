@@ -1,8 +1,9 @@
 """The ``lodsprite`` command line: parses, calls the library, prints.
 
 One module per command group: :mod:`.render` (info, render, view), :mod:`.lumigraph`,
-:mod:`.terrain` (tile), :mod:`.crowd`, :mod:`.profile`, :mod:`.reproduce` (reproduce,
-demo), :mod:`.distributed` (serve, keys, client); :mod:`.common` holds what they share.
+:mod:`.terrain` (tile), :mod:`.crowd`, :mod:`.scene` (scene check), :mod:`.profile`,
+:mod:`.reproduce` (reproduce, demo), :mod:`.distributed` (serve, keys, client); :mod:`.common`
+holds what they share.
 
 User errors (bad files, bad options) print one line on stderr and exit with
 code 2; an interrupted run exits with 130.  No traceback reaches the user for
@@ -15,7 +16,16 @@ import sys
 
 import typer
 
-from lodsprite.cli import crowd, distributed, lumigraph, profile, render, reproduce, terrain
+from lodsprite.cli import (
+    crowd,
+    distributed,
+    lumigraph,
+    profile,
+    render,
+    reproduce,
+    scene,
+    terrain,
+)
 from lodsprite.cli.common import err, one_line, out
 from lodsprite.errors import GLUnavailableError, LodspriteError
 
@@ -28,6 +38,7 @@ for command in (render.info, render.render, render.view, terrain.tile, crowd.cro
 app.command(name="keys")(distributed.keys_command)
 app.command()(distributed.client)
 app.add_typer(lumigraph.lumigraph_app, name="lumigraph")
+app.add_typer(scene.scene_app, name="scene")
 
 
 def _click_error(exc: Exception) -> None:

@@ -1,0 +1,260 @@
+"""A world: the terrain scene, object types, their instances and light fields (GL-free).
+
+:func:`load_world` turns a scene file (:mod:`lodsprite.scene.file`) into a
+:class:`World`: it reads and validates the file, loads the terrain
+(:func:`lodsprite.scene.load_scene`), checks that every point and position lies on the
+terrain, loads the meshes (:mod:`lodsprite.scene.objects`) and places the instances
+(:mod:`lodsprite.scene.placement`).  Every user error is one
+:class:`~lodsprite.errors.SceneFileError` line naming the field, raised before anything
+is drawn or written.  :meth:`World.poses` gives every instance's ``x, y, z, yaw`` at a
+time: walkers (:mod:`lodsprite.scene.walk`) move, and all stand on the ground.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lodsprite.errors import InputError, SceneFileError
+from lodsprite.scene import Scene, load_scene
+from lodsprite.scene.file import (
+    MAX_INSTANCES,
+    ObjectSection,
+    SceneFile,
+    ViewSection,
+    read_scene_file,
+)
+from lodsprite.scene.objects import Group, ObjectType, builtin_type, load_group
+from lodsprite.scene.placement import (
+    check_inside,
+    expand,
+    extent,
+    ground,
+    group_radius,
+    headings,
+    read_points,
+    scatter,
+)
+from lodsprite.scene.walk import walk
+
+__all__ = ["Instances", "LightFieldPlacement", "ObjectType", "World", "load_world",
+           "read_scene_file"]
+
+
+@dataclass
+class Instances:
+    """The instances of one type: ``xy (k, 2) float64`` world metres (the terrain's world),
+    ``yaw (k,) float64`` radians about ``+z`` (their headings when they walk), ``walk_mps``
+    (0: static), the section's ``seed`` and ``area`` ``(x0, y0, x1, y1)`` metres, the
+    rectangle its walkers stay in (None: the terrain)."""
+
+    type_index: int
+    xy: np.ndarray
+    yaw: np.ndarray
+    walk_mps: float = 0.0
+    seed: int = 0
+    area: tuple[float, float, float, float] | None = None
+
+    def __len__(self) -> int:
+        return len(self.xy)
+
+
+@dataclass
+class LightFieldPlacement:
+    """A lumigraph folder (as ``lodsprite lumigraph`` writes) standing at ``position``
+    (world metres ``x, y``; on the ground) ``height_m`` tall."""
+
+    source: Path
+    position: tuple[float, float]
+    height_m: float
+
+
+@dataclass
+class World:
+    """Everything a scene file puts in one world.
+
+    ``scene``: the terrain layer (as :func:`~lodsprite.scene.load_scene` gives); ``types``
+    and ``instances`` (each naming its type by index); ``lightfields``; ``path`` the
+    ``[view]`` path spec (``view`` the whole section); ``file`` the scene file.
+    """
+
+    scene: Scene
+    types: list[ObjectType]
+    instances: list[Instances]
+    lightfields: list[LightFieldPlacement]
+    path: str = "flyover"
+    view: ViewSection = field(default_factory=ViewSection)
+    file: Path | None = None
+
+    @property
+    def extent(self) -> tuple[np.ndarray, np.ndarray]:
+        """The terrain's horizontal extent ``lo (2,)``, ``hi (2,)`` in world metres."""
+        return extent(self.scene.hf)
+
+    @property
+    def count(self) -> int:
+        """Instances in all."""
+        return sum(len(i) for i in self.instances)
+
+    def ground(self, xy: np.ndarray) -> np.ndarray:
+        """Ground heights ``(k,) float64`` metres under ``xy (k, 2)`` world metres."""
+        return ground(self.scene.hf, xy)
+
+    def type_indices(self) -> np.ndarray:
+        """``(count,) intp``: each instance's type (an index into :attr:`types`), in
+        :attr:`instances` order."""
+        return np.concatenate([np.full(len(i), i.type_index, np.intp) for i in self.instances]
+                              or [np.zeros(0, np.intp)])
+
+    def moving(self) -> np.ndarray:
+        """``(count,) bool``: which instances walk, in :attr:`instances` order."""
+        return np.concatenate([np.full(len(i), i.walk_mps > 0) for i in self.instances]
+                              or [np.zeros(0, bool)])
+
+    def poses(self, t: float) -> np.ndarray:
+        """``(count, 4) float32`` ``x, y, z, yaw`` (metres, radians) of every instance at
+        time ``t`` seconds, in :attr:`instances` order: walkers moved along their headings
+        (reflected at the terrain's edge), every instance standing on the ground."""
+        if not self.instances:
+            return np.zeros((0, 4), np.float32)
+        xy0 = np.concatenate([i.xy for i in self.instances])
+        yaw0 = np.concatenate([i.yaw for i in self.instances])
+        speed = np.concatenate([np.full(len(i), i.walk_mps) for i in self.instances])
+        lo, hi = self._bounds()
+        xy, yaw = walk(xy0, yaw0, speed, t, lo, hi)
+        out = np.empty((len(xy), 4), np.float32)
+        out[:, :2] = xy
+        out[:, 2] = self.ground(xy)
+        out[:, 3] = yaw
+        return out
+
+    def _bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Each instance's walking rectangle ``lo, hi (count, 2)`` (or the terrain's
+        ``(2,)`` when no section has an area)."""
+        lo, hi = self.extent
+        if all(i.area is None for i in self.instances):
+            return lo, hi
+        boxes = [np.tile(np.r_[lo, hi] if i.area is None else i.area, (len(i), 1))
+                 for i in self.instances]
+        box = np.concatenate(boxes).astype(np.float64)
+        return box[:, :2], box[:, 2:]
+
+    def summary(self) -> list[str]:
+        """One line per layer: terrain, objects (types, instances), light fields."""
+        hf = self.scene.hf
+        lo, hi = self.extent
+        walkers = int(self.moving().sum())
+        return [f"terrain: {self.scene.terrain_spec} ({hf.cols}x{hf.rows} samples, "
+                f"{hi[0] - lo[0]:g} x {hi[1] - lo[1]:g} m, z {hf.heights.min():.0f}.."
+                f"{hf.heights.max():.0f} m)",
+                f"objects: {len(self.types)} types, {self.count} instances ({walkers} "
+                f"walking), {sum(len(t.faces) for t in self.types):,} triangles in the types",
+                _lightfields_line(self.lightfields),
+                f"view: path {self.path}"]
+
+
+def _lightfields_line(lights: list[LightFieldPlacement]) -> str:
+    each = "; ".join(f"{lf.source.name} at ({lf.position[0]:g}, {lf.position[1]:g}), "
+                     f"{lf.height_m:g} m" for lf in lights)
+    return f"lightfields: {len(lights)}" + (f" ({each})" if lights else "")
+
+
+def load_world(path: str | os.PathLike, **scene_options: Any) -> World:
+    """Read the scene file at ``path`` and build its :class:`World`.
+
+    ``scene_options`` go to :func:`~lodsprite.scene.load_scene` over the file's
+    ``[terrain]`` values (``grid``, ``exaggeration``, ``texture``, ``light``,
+    ``textured``).  Raises :class:`~lodsprite.errors.SceneFileError`.
+    """
+    label = os.fspath(path)
+    sf = read_scene_file(path)
+    t = sf.terrain
+    options = {"texture": t.texture, "grid": t.grid, "exaggeration": t.exaggeration,
+               **scene_options}
+    try:
+        scene = load_scene(t.source, **options)
+    except InputError as exc:
+        raise SceneFileError(f"{label}: terrain: {exc}") from None
+    lo, hi = extent(scene.hf)
+    anchors = [_anchors(o, f"{label}: objects[{i}]", lo, hi) for i, o in enumerate(sf.objects)]
+    lights = []
+    for i, lf in enumerate(sf.lightfields):
+        check_inside(np.array([lf.position]), lo, hi, f"{label}: lightfields[{i}].position")
+        lights.append(LightFieldPlacement(Path(lf.source), lf.position, lf.height_m))
+    _check_path(scene, sf, label)
+    types, instances = _place(sf, label, lo, hi, anchors)
+    return World(scene, types, instances, lights, sf.view.path, sf.view, Path(path))
+
+
+def _place(sf: SceneFile, label: str, lo: np.ndarray, hi: np.ndarray, anchors: list
+           ) -> tuple[list[ObjectType], list[Instances]]:
+    """Every section's types and instances.  Sections of the same mesh, height, LOD kind
+    and up axis share their types (one mesh, one set of LODs)."""
+    types: list[ObjectType] = []
+    instances: list[Instances] = []
+    loaded: dict[tuple, tuple[Group, int]] = {}
+    for i, (o, (xy, yaw, where)) in enumerate(zip(sf.objects, anchors, strict=True)):
+        at = f"{label}: objects[{i}]"
+        key = (o.mesh, o.height_m, o.lod, o.up)
+        if key not in loaded:
+            loaded[key] = (_group(o, f"{at}.mesh"), len(types))
+            types.extend(loaded[key][0].types)
+        group, first = loaded[key]
+        a_lo, a_hi = _area(o, lo, hi)
+        region = "the terrain" if o.area is None else "its area"
+        if o.count is not None and group_radius(group) > 0:  # members stay inside
+            inset = min(group_radius(group), 0.49 * float(np.min(a_hi - a_lo)))
+            xy, yaw = scatter(len(xy), o.seed, a_lo, a_hi, inset)
+        for k, (mxy, myaw, index) in enumerate(expand(group, xy, yaw)):
+            check_inside(mxy, a_lo, a_hi, f"{at}.{'mesh' if o.points is None else 'points'}",
+                         None if where is None else [where[a] for a in index], region)
+            instances.append(Instances(first + k, mxy, myaw, o.walk_mps, o.seed, o.area))
+        if sum(len(n) for n in instances) > MAX_INSTANCES:
+            raise SceneFileError(f"{at}: more than {MAX_INSTANCES} instances in all")
+    return types, instances
+
+
+def _area(o: ObjectSection, lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A section's rectangle ``lo, hi (2,)``: its ``area`` or the terrain's extent."""
+    if o.area is None:
+        return lo, hi
+    return np.array(o.area[:2], np.float64), np.array(o.area[2:], np.float64)
+
+
+def _anchors(o: ObjectSection, at: str, lo: np.ndarray, hi: np.ndarray
+             ) -> tuple[np.ndarray, np.ndarray, list[str] | None]:
+    """A section's anchors ``xy (a, 2)``, headings ``(a,)`` and, for a points file, each
+    anchor's ``"line N"`` (inside the section's area, itself on the terrain); no count
+    nor points: one anchor at the origin."""
+    if o.area is not None:
+        check_inside(np.reshape(o.area, (2, 2)), lo, hi, f"{at}.area")
+        lo, hi = _area(o, lo, hi)
+    if o.count is not None:
+        xy, yaw = scatter(o.count, o.seed, lo, hi)
+        return xy, yaw, None
+    if o.points is None:
+        return np.zeros((1, 2)), np.zeros(1), ["the origin"]
+    xy, yaw, lines = read_points(o.points, f"{at}.points")
+    where = [f"line {n}" for n in lines]
+    check_inside(xy, lo, hi, f"{at}.points", where,
+                 "the terrain" if o.area is None else "its area")
+    return xy, np.where(np.isnan(yaw), headings(len(xy), o.seed), yaw), where
+
+
+def _group(o: ObjectSection, field: str) -> Group:
+    if o.mesh in ("ogre", "tree"):
+        t = builtin_type(o.mesh, o.height_m, o.lod)
+        return Group([t], np.zeros(1, np.intp), np.zeros((1, 2)), np.zeros(1))
+    return load_group(o.mesh, o.height_m, o.lod, o.up, field)
+
+
+def _check_path(scene: Scene, sf: SceneFile, label: str) -> None:
+    """The ``[view]`` path must be one the terrain can fly (built cheaply, 2 frames)."""
+    try:
+        scene.path(sf.view.path, 2)
+    except InputError as exc:
+        raise SceneFileError(f"{label}: view.path: {exc}") from None
