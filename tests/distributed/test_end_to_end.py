@@ -14,7 +14,6 @@ from lodsprite.camera import Viewpoint
 from lodsprite.distributed.client import DEFAULT_MAX_ERROR, LodClient
 from lodsprite.distributed.render import scene_args
 from lodsprite.distributed.run import free_ports
-from lodsprite.experiments.swan2002.run import LINK_SETUPS, SETUPS
 from lodsprite.run import RenderConfig, prepare
 
 SMALL = RenderConfig(terrain="fractal:64:2", size=(64, 64), lod=8, frames=40,
@@ -258,45 +257,6 @@ def test_interrupted_client_writes_complete_statistics(tmp_path):
     rows = list(csv.DictReader((out / "frames.csv").open()))
     summary = json.loads((out / "summary.json").read_text())
     assert summary["interrupted"] is True and summary["frames"] == len(rows) >= 3
-
-
-def test_reproduce_swan2002_quick_writes_all_setups(tmp_path):
-    out = tmp_path / "s"
-    proc = subprocess.run([sys.executable, "-c", "from lodsprite.cli import main; main()",
-                           "reproduce", "swan2002", "--quick", "--terrain", "fractal:64:2",
-                           "--no-links", "--out", str(out)], capture_output=True, text=True,
-                          timeout=300)
-    assert proc.returncode == 0, proc.stderr
-    results = json.loads((out / "results.json").read_text())
-    for setup in SETUPS:
-        r = results[setup]
-        if "skipped" in r:
-            assert setup in LINK_SETUPS and "--no-links" in r["skipped"]
-            continue
-        for key in ("client_ms_mean", "client_ms_std", "client_ms_p99", "client_ms_median",
-                    "sprites_per_keyframe"):
-            assert key in r
-        if setup != "inline":
-            assert r["production_ms_mean"] > 0
-        if setup == "two_servers":
-            assert r["servers"] == 2
-    assert "linear" in results["prediction"] and "kalman" in results["prediction"]
-    for setup in ("inline", "separate"):
-        image = results[setup]["image"]
-        assert image["replayed_frames"] > 0 and image["rmse_sprite_mean"] > 0
-    # Both client policies side by side; the bounded one's frames all replayed (its own
-    # keyframes logged), none at or above its bound.
-    pairs = {p["setup"]: p for p in results["policies"]}
-    assert set(pairs) == {"separate", "same_cores"}
-    bounded = results["separate_bounded"]
-    assert bounded["max_error"] == DEFAULT_MAX_ERROR and bounded["rejected_keyframes"] == 0
-    assert bounded["image"]["replayed_frames"] == len(bounded["per_frame_ms"])
-    assert bounded["image"]["error_px_max"] < DEFAULT_MAX_ERROR
-    assert pairs["separate"]["paper"]["client_ms_std"] == results["separate"]["client_ms_std"]
-    report = (out / "report.md").read_text()
-    assert report.count("61.9") >= 1 and "`separate` ÷ `same_cores`" in report
-    assert "## Image error, replayed" in report and (out / "image_error.png").exists()
-    assert "## The client's policies" in report and (out / "policies.png").exists()
 
 
 def test_curve_keys_admit_the_right_client_and_refuse_a_wrong_one(scene, tmp_path):
