@@ -44,6 +44,27 @@ def serve(
     allow_shutdown: Annotated[bool, typer.Option(
         "--allow-shutdown", help="carry out a `shutdown` message from the client holding "
                                  "the server (refused otherwise)")] = False,
+    web: Annotated[str | None, typer.Option(
+        "--web", help="[HOST:]PORT: also serve the web page and its WebSocket there "
+                      "(host 127.0.0.1 unless given; PORT 0: any free port)")] = None,
+    renderers: Annotated[int, typer.Option(
+        "--renderers", help="renderer processes for web sessions", min=1, max=64)] = 1,
+    token: Annotated[str | None, typer.Option(
+        "--token", help="the web page's access token (default: a random one, printed in "
+                        "the page's URL)")] = None,
+    cert: Annotated[Path | None, typer.Option(
+        "--cert", help="TLS certificate (PEM) for the web page: serve https and wss")] = None,
+    key: Annotated[Path | None, typer.Option(
+        "--key", help="TLS private key (PEM) matching --cert")] = None,
+    session_jobs: Annotated[int, typer.Option(
+        "--session-jobs", help="keyframe renders in flight per web session", min=1,
+        max=16)] = 1,
+    session_queue: Annotated[int, typer.Option(
+        "--session-queue", help="keyframes queued per web session; when full the oldest "
+                                "is dropped", min=1, max=64)] = 2,
+    rate: Annotated[float, typer.Option(
+        "--rate", help="messages a second a web session may send; excess dropped",
+        min=1.0, max=100000.0)] = 240.0,
 ) -> None:
     """The LOD server: renders keyframes for LOD clients; driven entirely by messages."""
     import logging
@@ -58,7 +79,37 @@ def serve(
     if server_keys is None and allow_remote:
         logging.warning("serving beyond loopback without --keys: anyone who can reach "
                         "the port can drive this server")
-    server.run()
+    if web is None:
+        server.run()
+        return
+    from lodsprite.distributed.web.security import make_token, parse_web_address, tls_context
+    from lodsprite.distributed.web.server import WebConfig
+    from lodsprite.distributed.web.sessions import Caps
+
+    host, port = parse_web_address(web, allow_remote)
+    config = WebConfig(host, port, make_token(token), data, renderers,
+                       Caps(session_jobs, session_queue, rate), codec, tls_context(cert, key))
+    _serve_both(server, config)
+
+
+def _say_url(url: str) -> None:
+    out.print(f"web page: {url}", soft_wrap=True, highlight=False)
+    out.file.flush()  # a script reading our stdout through a pipe waits for this line
+
+
+def _serve_both(server, config) -> None:
+    """The ZeroMQ server on a thread, the web server on this one, until a signal."""
+    import threading
+
+    from lodsprite.distributed.web.server import serve_web
+
+    zmq_thread = threading.Thread(target=server.run, daemon=True, name="zmq-server")
+    zmq_thread.start()
+    try:
+        serve_web(config, _say_url)
+    finally:
+        server.shutdown()
+        zmq_thread.join(timeout=5.0)
 
 
 def keys_command(
