@@ -25,8 +25,11 @@ log = logging.getLogger("lodsprite.web")
 
 __all__ = ["Job", "Result", "StandinPool"]
 
-MAX_RENDERERS_CACHED = 2
-"""Scenes a renderer process keeps loaded (one renderer each)."""
+MAX_RENDERERS_CACHED = 1
+"""Scenes a renderer process keeps loaded.  One: with two KeyframeRenderers alive in one
+process the older one draws the newer one's scene (seen here: moderngl standalone
+contexts of one process are not made current by each renderer), so a process releases
+its scene before it loads another."""
 
 
 class Job(Struct):
