@@ -65,6 +65,9 @@ def serve(
     rate: Annotated[float, typer.Option(
         "--rate", help="messages a second a web session may send; excess dropped",
         min=1.0, max=100000.0)] = 240.0,
+    public_host: Annotated[list[str] | None, typer.Option(
+        "--public-host", help="a name the page is served under by a reverse proxy "
+                              "(accepted in Host and Origin); repeat for several")] = None,
 ) -> None:
     """The LOD server: renders keyframes for LOD clients; driven entirely by messages."""
     import logging
@@ -72,6 +75,10 @@ def serve(
     from lodsprite.distributed.keys import ServerKeys
     from lodsprite.distributed.server import LodServer
 
+    config = None
+    if web is not None:  # every web option checked before anything starts
+        config = _web_config(web, allow_remote, token, data, renderers, codec, cert, key,
+                             (session_jobs, session_queue, rate), public_host)
     server_keys = ServerKeys.load(keys) if keys is not None else None
     server = LodServer(bind, predictor, codec, server_keys, data_dir=data,
                        allow_remote=allow_remote, allow_shutdown=allow_shutdown)
@@ -79,17 +86,24 @@ def serve(
     if server_keys is None and allow_remote:
         logging.warning("serving beyond loopback without --keys: anyone who can reach "
                         "the port can drive this server")
-    if web is None:
+    if config is None:
         server.run()
-        return
+    else:
+        _serve_both(server, config)
+
+
+def _web_config(web, allow_remote, token, data, renderers, codec, cert, key, caps,
+                public_host):
+    """The web server's configuration from ``serve``'s options (raises InputError)."""
+    from lodsprite.distributed.datasets import Datasets
     from lodsprite.distributed.web.security import make_token, parse_web_address, tls_context
     from lodsprite.distributed.web.server import WebConfig
     from lodsprite.distributed.web.sessions import Caps
 
     host, port = parse_web_address(web, allow_remote)
-    config = WebConfig(host, port, make_token(token), data, renderers,
-                       Caps(session_jobs, session_queue, rate), codec, tls_context(cert, key))
-    _serve_both(server, config)
+    Datasets(data)  # a missing data folder: one line before anything starts
+    return WebConfig(host, port, make_token(token), data, renderers, Caps(*caps), codec,
+                     tls_context(cert, key), tuple(public_host or ()))
 
 
 def _say_url(url: str) -> None:

@@ -11,7 +11,8 @@
   another site's page (even one that knows the token) cannot open the WebSocket.  A
   request without ``Origin`` is not from a browser page (scripts, benchmarks); it is let
   in on the token alone.  ``Host`` must be a loopback name or the bound host when the
-  server binds a named host (a DNS-rebinding page reaches it with its own name).
+  server binds a named host, or a ``--public-host`` name (a DNS-rebinding page reaches
+  it under its own name).
 * **Rate.** :class:`RateLimit`: a token bucket per session (``--rate`` messages/s, a
   second's worth of burst); messages over it are dropped and counted.
 """
@@ -60,15 +61,16 @@ def token_ok(given: str | None, token: str) -> bool:
     return given is not None and secrets.compare_digest(given.encode(), token.encode())
 
 
-def check_host(host_header: str | None, bound: str) -> bool:
-    """Whether a request's ``Host`` header names this server: a loopback name, or the
-    bound host (any host when bound to all interfaces)."""
+def check_host(host_header: str | None, bound: str, public: tuple[str, ...] = ()) -> bool:
+    """Whether a request's ``Host`` header names this server: a loopback name, the
+    bound host (any host when bound to all interfaces), or one of the ``public`` names
+    (``--public-host``: the name a reverse proxy serves it under)."""
     if not host_header:
         return False
     name = host_header.rsplit(":", 1)[0] if not host_header.endswith("]") else host_header
     name = name.strip("[]")
     return (name in LOOPBACK_NAMES or bound in ("0.0.0.0", "::", "")
-            or name == bound.strip("[]"))
+            or name == bound.strip("[]") or name in public)
 
 
 def check_origin(origin: str | None, host_header: str | None) -> bool:

@@ -48,7 +48,8 @@ NO_STORE = {"Cache-Control": "no-store", "Referrer-Policy": "no-referrer",
 class WebConfig:
     """What ``serve --web`` was given: ``host``/``port`` (0: any free port), the
     ``token``, ``data_dir``, ``renderers`` local renderer processes, per-session ``caps``,
-    keyframe ``codec``, and an optional TLS context."""
+    keyframe ``codec``, an optional TLS context and the ``public_hosts`` names a reverse
+    proxy serves the page under (accepted as ``Host``)."""
 
     host: str = "127.0.0.1"
     port: int = 0
@@ -58,6 +59,7 @@ class WebConfig:
     caps: Caps = field(default_factory=Caps)
     codec: str = "raw"
     tls: ssl.SSLContext | None = None
+    public_hosts: tuple[str, ...] = ()
 
 
 class WebServer:
@@ -117,7 +119,7 @@ class WebServer:
     # ---------------------------------------------------------------------- routes
 
     async def _index(self, request: web.Request) -> web.StreamResponse:
-        if not check_host(request.host, self.config.host):
+        if not check_host(request.host, self.config.host, self.config.public_hosts):
             return web.Response(status=403, text="unknown host", headers=NO_STORE)
         if not token_ok(request.query.get("token"), self.config.token):
             return web.Response(status=401, text="a valid ?token= is required",
@@ -127,7 +129,7 @@ class WebServer:
     async def _ws(self, request: web.Request) -> web.StreamResponse:
         if not token_ok(request.query.get("token"), self.config.token):
             return web.Response(status=403, text="a valid ?token= is required")
-        if not check_host(request.host, self.config.host):
+        if not check_host(request.host, self.config.host, self.config.public_hosts):
             return web.Response(status=403, text="unknown host")
         if not check_origin(request.headers.get("Origin"), request.host):
             return web.Response(status=403, text="foreign origin")
