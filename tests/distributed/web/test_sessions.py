@@ -153,3 +153,11 @@ def test_round_robin_serves_a_greedy_session_no_more_than_a_modest_one():
         return order
 
     assert asyncio.run(run()) == ["a", "b", "a", "b"]
+
+
+def test_a_request_with_a_bad_viewpoint_is_refused_before_any_render():
+    s = Session(FakeHub(), Caps(rate=1e9))
+    s.load = LoadArgs()
+    skew = {**VP, "y": [0.5, 1.0, 0.0]}  # axes not orthonormal
+    s.handle(pack(encode({"kind": "request", "seq": 3, "t": 0.0, "viewpoint": skew})))
+    assert not s.pending and s.counts["rejected"] == 1 and replies(s)[-1].ok is False

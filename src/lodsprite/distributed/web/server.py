@@ -40,6 +40,8 @@ __all__ = ["STATIC_DIR", "WebConfig", "WebServer", "serve_web"]
 
 STATIC_DIR = Path(__file__).parent / "static"
 HEARTBEAT_S = 20.0
+MAX_SESSIONS = 256
+"""WebSockets served at once; one more is answered 503."""
 NO_STORE = {"Cache-Control": "no-store", "Referrer-Policy": "no-referrer",
             "X-Content-Type-Options": "nosniff"}
 
@@ -133,6 +135,8 @@ class WebServer:
             return web.Response(status=403, text="unknown host")
         if not check_origin(request.headers.get("Origin"), request.host):
             return web.Response(status=403, text="foreign origin")
+        if len(self.hub.sessions) >= MAX_SESSIONS:
+            return web.Response(status=503, text="too many sessions")
         ws = web.WebSocketResponse(max_msg_size=MAX_PAGE_MESSAGE, heartbeat=HEARTBEAT_S,
                                    compress=False)
         await ws.prepare(request)

@@ -36,6 +36,7 @@ from lodsprite.distributed.protocol import (
     ProtocolError,
     Request,
     ViewpointMessage,
+    viewpoint_from_wire,
 )
 from lodsprite.distributed.web.security import RateLimit
 from lodsprite.distributed.web.wire import decode_web, pack, pack_message
@@ -135,6 +136,12 @@ class Session:
         self.counts["requests"] += 1
         if self.load is None:
             self.reply(msg.seq, False, "request: load a scene first")
+            return
+        try:
+            viewpoint_from_wire(msg.viewpoint)  # axes orthonormal: checked before a render
+        except ProtocolError as exc:
+            self.counts["rejected"] += 1
+            self.reply(msg.seq, False, f"request: {exc}")
             return
         if len(self.pending) >= self.caps.session_jobs:
             self.pending.popleft()

@@ -25,11 +25,11 @@ log = logging.getLogger("lodsprite.web")
 
 __all__ = ["Job", "Result", "StandinPool"]
 
-MAX_RENDERERS_CACHED = 1
-"""Scenes a renderer process keeps loaded.  One: with two KeyframeRenderers alive in one
-process the older one draws the newer one's scene (seen here: moderngl standalone
-contexts of one process are not made current by each renderer), so a process releases
-its scene before it loads another."""
+MAX_RENDERERS_CACHED = 2
+"""Scenes a renderer process keeps loaded, each a KeyframeRenderer with its own GL
+context.  A renderer does not make its context current by itself: with two alive in one
+process the older one drew the newer one's scene until each draw and release was done
+with its own context made current (:func:`_current`)."""
 
 
 class Job(Struct):
@@ -68,16 +68,23 @@ def _worker(jobs, results, codec: str) -> None:
             r = renderers.pop(key, None)
             if r is None:
                 if len(renderers) >= MAX_RENDERERS_CACHED:
-                    renderers.pop(next(iter(renderers))).release()
+                    _release(renderers.pop(next(iter(renderers))))
                 r = KeyframeRenderer(job.load)
             renderers[key] = r  # most recently used last
-            kf = r.render(viewpoint_from_wire(job.viewpoint), job.job, job.t)
+            with r.paths.ctx.mgl:  # this renderer's context current while it draws
+                kf = r.render(viewpoint_from_wire(job.viewpoint), job.job, job.t)
             parts = [bytes(memoryview(p).cast("B")) for p in encode_keyframe(kf, codec)]
             results.put(Result(job.job, job.session, True, "", parts))
         except Exception as exc:  # noqa: BLE001 - a failed job is reported, not fatal
             results.put(Result(job.job, job.session, False, f"{type(exc).__name__}: {exc}"))
     for r in renderers.values():
-        r.release()
+        _release(r)
+
+
+def _release(renderer) -> None:
+    """Release ``renderer`` with its own context current (its GL names are its own)."""
+    renderer.paths.ctx.mgl.__enter__()  # no __exit__: the context is gone after this
+    renderer.release()
 
 
 class StandinPool:
