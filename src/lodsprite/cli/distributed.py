@@ -112,18 +112,30 @@ def _say_url(url: str) -> None:
 
 
 def _serve_both(server, config) -> None:
-    """The ZeroMQ server on a thread, the web server on this one, until a signal."""
+    """The ZeroMQ server on a thread, the web server on this one, until a signal; a
+    ZeroMQ server that cannot start (its ports taken) stops both, with its reason."""
     import threading
 
     from lodsprite.distributed.web.server import serve_web
+    from lodsprite.errors import LodspriteError
 
-    zmq_thread = threading.Thread(target=server.run, daemon=True, name="zmq-server")
+    failed: list[LodspriteError] = []
+
+    def run_zmq() -> None:
+        try:
+            server.run()
+        except LodspriteError as exc:
+            failed.append(exc)  # the web server's loop stops on it
+
+    zmq_thread = threading.Thread(target=run_zmq, daemon=True, name="zmq-server")
     zmq_thread.start()
     try:
-        serve_web(config, _say_url)
+        serve_web(config, _say_url, lambda: bool(failed))
     finally:
         server.shutdown()
         zmq_thread.join(timeout=5.0)
+    if failed:
+        raise failed[0]
 
 
 def keys_command(

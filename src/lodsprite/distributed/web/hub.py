@@ -141,9 +141,11 @@ class Hub:
                 while len(self._scenes) > SCENES_CACHED:
                     self._scenes.popitem(last=False)
             self._scenes.move_to_end(key)
-        except (LodspriteError, MemoryError, OSError, ValueError) as exc:
+        except Exception as exc:  # noqa: BLE001 - any dataset's failure is the page's reply
             if self._generation.get(session.id) == gen:
-                session.reply(seq, False, f"load: {exc}")
+                reason = exc if isinstance(exc, LodspriteError | OSError | ValueError) else (
+                    f"internal error: {type(exc).__name__}")
+                session.reply(seq, False, f"load: {reason}")
             return
         if session.closed or self._generation.get(session.id) != gen:
             return  # a newer load of this session, or a closed one: this one is moot

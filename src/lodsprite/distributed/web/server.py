@@ -169,7 +169,7 @@ def _closed_on_error(task: asyncio.Task, ws: web.WebSocketResponse) -> None:
     asyncio.get_running_loop().create_task(ws.close())
 
 
-async def _serve(config: WebConfig, on_url) -> None:
+async def _serve(config: WebConfig, on_url, stopped) -> None:
     server = WebServer(config)
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
@@ -178,11 +178,15 @@ async def _serve(config: WebConfig, on_url) -> None:
             loop.add_signal_handler(sig, stop.set)
     try:
         on_url(await server.start())
-        await stop.wait()
+        while not stopped():
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(stop.wait(), 0.2)
+                return
     finally:
         await server.stop()
 
 
-def serve_web(config: WebConfig, on_url=log.info) -> None:
-    """Serve until SIGINT or SIGTERM; ``on_url(url)`` is called once serving."""
-    asyncio.run(_serve(config, on_url))
+def serve_web(config: WebConfig, on_url=log.info, stopped=lambda: False) -> None:
+    """Serve until SIGINT or SIGTERM, or until ``stopped()`` (polled) says so;
+    ``on_url(url)`` is called once serving."""
+    asyncio.run(_serve(config, on_url, stopped))
