@@ -20,6 +20,7 @@ import zmq
 
 from lodsprite.distributed.hostile import hostile_frames
 from lodsprite.distributed.protocol import (
+    ProtocolError,
     Reply,
     SceneMessage,
     decode_keyframe,
@@ -41,12 +42,14 @@ VP = {"x": [1.0, 0.0, 0.0], "y": [0.0, 0.6, 0.8], "z": [0.0, -0.8, 0.6],
 
 
 @pytest.fixture(scope="module")
-def server():
+def server(tmp_path_factory):
+    data = tmp_path_factory.mktemp("data")
+    np.save(data / "hill.npy", load_scene("fractal:64:5", "terrain", 64, 1.0).hf.heights)
     zport = free_ports()
     proc = subprocess.Popen(
         [sys.executable, "-c", "from lodsprite.cli import main; main()", "serve",
          "--web", "127.0.0.1:0", "--bind", f"127.0.0.1:{zport}", "--token", TOKEN,
-         "--rate", "100000", "--renderers", "1"],
+         "--rate", "100000", "--renderers", "1", "--data", str(data)],
         stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     lines: queue.Queue = queue.Queue()
     threading.Thread(target=lambda: [lines.put(x) for x in proc.stdout], daemon=True).start()
@@ -143,6 +146,23 @@ def test_sessions_do_not_see_each_other_s_scene(server):
     assert not np.array_equal(sa.heights, sb.heights)
     np.testing.assert_array_equal(ka1.color, ka2.color)  # b's load left a's scene alone
     assert np.abs(ka1.color.astype(int) - kb.color.astype(int)).mean() > 1.0
+
+
+def test_pages_name_files_by_the_data_rule(server):
+    async def go():
+        async with aiohttp.ClientSession() as http:
+            page = await connect(http, server)
+            refused = []
+            for name in ("../hill.npy", "/etc/passwd", "missing.npy"):
+                with pytest.raises(ProtocolError) as err:
+                    await page.load({**LOAD, "terrain": name})
+                refused.append(str(err.value))
+            return refused, await loaded(page, {**LOAD, "terrain": "hill.npy"}), \
+                await keyframe(page)
+
+    refused, scene, kf = run(go())
+    assert all(r.startswith("load:") for r in refused), refused
+    assert scene.heights.shape == (9, 9) and kf.color.std() > 1.0
 
 
 def stalled_page(port: int, stop: threading.Event) -> socket.socket:

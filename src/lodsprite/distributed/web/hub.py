@@ -12,6 +12,8 @@ render pool.
   ``session_jobs`` in flight, one job per live worker at a time, so that a session asking
   often gets no more renders than one asking when it needs to.  A job not answered in
   :data:`JOB_TIMEOUT_S` is forgotten (counted ``failed``).
+* Jobs carry the page's names (validated here); a worker resolves them by its own
+  ``--data`` rule (local workers share the server's data folder).
 * Results: the keyframe a renderer encoded (the ZeroMQ ``keyframe`` message) goes to its
   session with the request's ``seq`` and ``t0`` set to the request's ``t`` (the page's
   clock); the images are not touched.
@@ -149,7 +151,7 @@ class Hub:
             return
         if session.closed or self._generation.get(session.id) != gen:
             return  # a newer load of this session, or a closed one: this one is moot
-        session.load = resolved
+        session.load = args  # jobs carry the names: each worker resolves them by its --data
         session.pending.clear()
         header = msgspec.msgpack.decode(parts[0])
         session.push_reply(pack(encode({**header, "seq": seq}, *parts[1:])))

@@ -75,7 +75,7 @@ class WebServer:
         if pool is None:
             from lodsprite.distributed.web.standin import StandinPool
 
-            pool = StandinPool(config.codec)
+            pool = StandinPool(config.codec, config.data_dir)
             pool.spawn_local(config.renderers)
         self.pool = pool
         self.hub: Hub | None = None

@@ -54,12 +54,16 @@ class Result(Struct):
     parts: list[bytes] = []
 
 
-def _worker(jobs, results, codec: str) -> None:
-    """A renderer process: render jobs until it gets None."""
+def _worker(jobs, results, codec: str, data_dir) -> None:
+    """A renderer process: render jobs until it gets None (names resolved by the
+    ``--data`` rule with ``data_dir``)."""
     import msgspec
 
+    from lodsprite.distributed.datasets import Datasets
     from lodsprite.distributed.protocol import encode_keyframe, viewpoint_from_wire
     from lodsprite.distributed.render import KeyframeRenderer
+
+    datasets = Datasets(data_dir)
 
     renderers: dict[bytes, KeyframeRenderer] = {}
     while (job := jobs.get()) is not None:
@@ -69,7 +73,9 @@ def _worker(jobs, results, codec: str) -> None:
             if r is None:
                 if len(renderers) >= MAX_RENDERERS_CACHED:
                     _release(renderers.pop(next(iter(renderers))))
-                r = KeyframeRenderer(job.load)
+                r = KeyframeRenderer(msgspec.structs.replace(
+                    job.load, terrain=datasets.terrain(job.load.terrain).spec,
+                    texture=datasets.texture(job.load.texture).spec))
             renderers[key] = r  # most recently used last
             with r.paths.ctx.mgl:  # this renderer's context current while it draws
                 kf = r.render(viewpoint_from_wire(job.viewpoint), job.job, job.t)
@@ -91,11 +97,12 @@ class StandinPool:
     """Local renderer processes behind the Broker's interface (submit, poll, fileno,
     spawn_local, workers, close)."""
 
-    def __init__(self, codec: str = "raw") -> None:
+    def __init__(self, codec: str = "raw", data_dir=None) -> None:
         self._ctx = mp.get_context("spawn")
         self._jobs = self._ctx.Queue()
         self._results = self._ctx.Queue()
         self._codec = codec
+        self._data_dir = data_dir
         self._procs: list = []
         self._done: deque[Result] = deque()
         self._read, self._write = os.pipe()
@@ -115,7 +122,8 @@ class StandinPool:
     def spawn_local(self, n: int) -> None:
         """Start ``n`` renderer processes."""
         for _ in range(n):
-            p = self._ctx.Process(target=_worker, args=(self._jobs, self._results, self._codec),
+            p = self._ctx.Process(target=_worker, args=(self._jobs, self._results, self._codec,
+                                                          self._data_dir),
                                   daemon=True)
             p.start()
             self._procs.append(p)
