@@ -138,7 +138,7 @@ def test_round_robin_serves_a_greedy_session_no_more_than_a_modest_one():
         hub = Hub(pool, datasets=None, caps=Caps(session_jobs=1))
         a, b = hub.open_session("a"), hub.open_session("b")
         for s in (a, b):
-            s.load = LoadArgs()
+            s.load = s.named = LoadArgs()
         for i in range(6):  # a asks six times as often as b
             a.pending.append(Pending(i, 0.0, VP, 0.0))
             if i % 3 == 0:

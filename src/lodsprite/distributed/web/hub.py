@@ -151,7 +151,8 @@ class Hub:
             return
         if session.closed or self._generation.get(session.id) != gen:
             return  # a newer load of this session, or a closed one: this one is moot
-        session.load = args  # jobs carry the names: each worker resolves them by its --data
+        session.load = resolved
+        session.named = args  # jobs carry the names: each worker resolves them by its --data
         session.pending.clear()
         header = msgspec.msgpack.decode(parts[0])
         session.push_reply(pack(encode({**header, "seq": seq}, *parts[1:])))
@@ -184,7 +185,7 @@ class Hub:
             n = len(order)
             for i in range(n):
                 s = order[(self._turn + i) % n]
-                if s.pending and len(s.inflight) < self.caps.session_jobs and s.load:
+                if s.pending and len(s.inflight) < self.caps.session_jobs and s.named:
                     self._turn = (self._turn + i + 1) % n
                     self._submit(s, s.pending.popleft())
                     free -= 1
@@ -196,7 +197,7 @@ class Hub:
         job = next(self._ids)
         s.inflight[job] = p
         self.jobs[job] = (s, p, time.monotonic())
-        self.pool.submit(Job(job, s.id, s.load, p.viewpoint, p.t))
+        self.pool.submit(Job(job, s.id, s.named, p.viewpoint, p.t))
 
     def drain(self) -> None:
         """Take the pool's results to their sessions; never raises."""

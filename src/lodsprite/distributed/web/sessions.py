@@ -89,6 +89,7 @@ class Session:
         self.caps = caps or Caps()
         self.clock = clock
         self.load: LoadArgs | None = None  # resolved (loader specs), after a good load
+        self.named: LoadArgs | None = None  # the same as the page named it (for workers)
         self.pending: deque[Pending] = deque()
         self.inflight: dict[int, Pending] = {}
         self.counts = dict.fromkeys(COUNTS, 0)
@@ -166,7 +167,7 @@ class Session:
             if op in ("stop", "release"):
                 self.pending.clear()
             if op == "release":
-                self.load = None
+                self.load = self.named = None
             self.reply(msg.seq, True)
 
     # ------------------------------------------------------------------------ out
