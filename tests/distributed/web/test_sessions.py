@@ -11,10 +11,10 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from lodsprite.distributed.hostile import hostile_frames, valid_header
+from lodsprite.distributed.pool import Result
 from lodsprite.distributed.protocol import LoadArgs, ProtocolError, decode_message, encode
 from lodsprite.distributed.web.hub import Hub
 from lodsprite.distributed.web.sessions import MAX_REPLIES, Caps, Pending, Session
-from lodsprite.distributed.web.standin import Result
 from lodsprite.distributed.web.wire import MAX_PAGE_MESSAGE, MAX_PARTS, pack, unpack
 
 VP = {"x": [1.0, 0.0, 0.0], "y": [0.0, 1.0, 0.0], "z": [0.0, 0.0, 1.0], "o": [0.0, 0.0, 500.0]}

@@ -31,6 +31,7 @@ from typing import Any
 import msgspec
 
 from lodsprite.distributed.datasets import Datasets
+from lodsprite.distributed.pool import Job
 from lodsprite.distributed.protocol import (
     MAX_SCENE_COARSE,
     KeyframeMessage,
@@ -43,7 +44,6 @@ from lodsprite.distributed.render import estimate_scene_bytes, memory_available,
 from lodsprite.distributed.server import MEMORY_FRACTION
 from lodsprite.distributed.web.scene import build_scene, scene_key
 from lodsprite.distributed.web.sessions import Caps, Pending, Session
-from lodsprite.distributed.web.standin import Job
 from lodsprite.distributed.web.wire import pack
 from lodsprite.errors import InputError, LodspriteError
 

@@ -50,8 +50,11 @@ NO_STORE = {"Cache-Control": "no-store", "Referrer-Policy": "no-referrer",
 class WebConfig:
     """What ``serve --web`` was given: ``host``/``port`` (0: any free port), the
     ``token``, ``data_dir``, ``renderers`` local renderer processes, per-session ``caps``,
-    keyframe ``codec``, an optional TLS context and the ``public_hosts`` names a reverse
-    proxy serves the page under (accepted as ``Host``)."""
+    keyframe ``codec``, an optional TLS context, the ``public_hosts`` names a reverse
+    proxy serves the page under (accepted as ``Host``), and where render workers of other
+    hosts join the pool: ``workers_bind`` (``tcp://HOST:PORT``, None: local renderers
+    only) with CURVE ``worker_keys`` (:class:`~lodsprite.distributed.keys.ServerKeys`)
+    or ``allow_remote``."""
 
     host: str = "127.0.0.1"
     port: int = 0
@@ -62,20 +65,26 @@ class WebConfig:
     codec: str = "raw"
     tls: ssl.SSLContext | None = None
     public_hosts: tuple[str, ...] = ()
+    workers_bind: str | None = None
+    worker_keys: Any = None
+    allow_remote: bool = False
 
 
 class WebServer:
     """The aiohttp application, its hub and pool.  ``pool``: an object with the Broker's
-    interface (None: a local pool with ``config.renderers`` processes)."""
+    interface (None: a :class:`~lodsprite.distributed.pool.Broker` with
+    ``config.renderers`` local renderer processes; raises
+    :class:`~lodsprite.errors.LodspriteError` when its endpoint cannot be bound)."""
 
     def __init__(self, config: WebConfig, pool: Any = None) -> None:
         self.config = config
         self.datasets = Datasets(config.data_dir)
         self._own_pool = pool is None
         if pool is None:
-            from lodsprite.distributed.web.standin import StandinPool
+            from lodsprite.distributed.pool import Broker
 
-            pool = StandinPool(config.codec, config.data_dir)
+            pool = Broker(config.workers_bind, config.worker_keys, config.codec,
+                          config.data_dir, config.allow_remote)
             pool.spawn_local(config.renderers)
         self.pool = pool
         self.hub: Hub | None = None
