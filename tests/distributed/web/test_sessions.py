@@ -161,3 +161,25 @@ def test_a_request_with_a_bad_viewpoint_is_refused_before_any_render():
     skew = {**VP, "y": [0.5, 1.0, 0.0]}  # axes not orthonormal
     s.handle(pack(encode({"kind": "request", "seq": 3, "t": 0.0, "viewpoint": skew})))
     assert not s.pending and s.counts["rejected"] == 1 and replies(s)[-1].ok is False
+
+
+def test_a_send_that_never_completes_ends_the_writer(monkeypatch):
+    from lodsprite.distributed.web import sessions
+
+    monkeypatch.setattr(sessions, "SEND_TIMEOUT_S", 0.05)
+    s = Session(FakeHub())
+    sent = []
+
+    async def stuck(data):
+        sent.append(data)
+        await asyncio.Event().wait()  # a page that never reads
+
+    async def run():
+        s.reply(1, True)
+        task = asyncio.get_running_loop().create_task(s.run_writer(stuck))
+        await asyncio.wait({task}, timeout=10.0)  # a deadline against a hang only
+        return task
+
+    task = asyncio.run(run())
+    assert task.done() and isinstance(task.exception(), TimeoutError)
+    assert len(sent) == 1
