@@ -65,6 +65,10 @@ def serve(
     rate: Annotated[float, typer.Option(
         "--rate", help="messages a second a web session may send; excess dropped",
         min=1.0, max=100000.0)] = 240.0,
+    workers_bind: Annotated[str | None, typer.Option(
+        "--workers-bind", help="tcp://HOST:PORT where render workers of other hosts join "
+                               "the web sessions' pool (`lodsprite render-worker`; CURVE "
+                               "with --keys)")] = None,
     public_host: Annotated[list[str] | None, typer.Option(
         "--public-host", help="a name the page is served under by a reverse proxy "
                               "(accepted in Host and Origin); repeat for several")] = None,
@@ -75,11 +79,12 @@ def serve(
     from lodsprite.distributed.keys import ServerKeys
     from lodsprite.distributed.server import LodServer
 
+    server_keys = ServerKeys.load(keys) if keys is not None else None
     config = None
     if web is not None:  # every web option checked before anything starts
         config = _web_config(web, allow_remote, token, data, renderers, codec, cert, key,
                              (session_jobs, session_queue, rate), public_host)
-    server_keys = ServerKeys.load(keys) if keys is not None else None
+        config.workers_bind, config.worker_keys = workers_bind, server_keys
     server = LodServer(bind, predictor, codec, server_keys, data_dir=data,
                        allow_remote=allow_remote, allow_shutdown=allow_shutdown)
     logging.basicConfig(level=logging.INFO, format="lodsprite serve: %(message)s")
@@ -103,7 +108,8 @@ def _web_config(web, allow_remote, token, data, renderers, codec, cert, key, cap
     host, port = parse_web_address(web, allow_remote)
     Datasets(data)  # a missing data folder: one line before anything starts
     return WebConfig(host, port, make_token(token), data, renderers, Caps(*caps), codec,
-                     tls_context(cert, key), tuple(public_host or ()))
+                     tls_context(cert, key), tuple(public_host or ()),
+                     allow_remote=allow_remote)
 
 
 def _say_url(url: str) -> None:
@@ -112,18 +118,30 @@ def _say_url(url: str) -> None:
 
 
 def _serve_both(server, config) -> None:
-    """The ZeroMQ server on a thread, the web server on this one, until a signal."""
+    """The ZeroMQ server on a thread, the web server on this one, until a signal; a
+    ZeroMQ server that cannot start (its ports taken) stops both, with its reason."""
     import threading
 
     from lodsprite.distributed.web.server import serve_web
+    from lodsprite.errors import LodspriteError
 
-    zmq_thread = threading.Thread(target=server.run, daemon=True, name="zmq-server")
+    failed: list[LodspriteError] = []
+
+    def run_zmq() -> None:
+        try:
+            server.run()
+        except LodspriteError as exc:
+            failed.append(exc)  # the web server's loop stops on it
+
+    zmq_thread = threading.Thread(target=run_zmq, daemon=True, name="zmq-server")
     zmq_thread.start()
     try:
-        serve_web(config, _say_url)
+        serve_web(config, _say_url, lambda: bool(failed))
     finally:
         server.shutdown()
         zmq_thread.join(timeout=5.0)
+    if failed:
+        raise failed[0]
 
 
 def keys_command(

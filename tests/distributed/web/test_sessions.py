@@ -11,10 +11,10 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from lodsprite.distributed.hostile import hostile_frames, valid_header
+from lodsprite.distributed.pool import Result
 from lodsprite.distributed.protocol import LoadArgs, ProtocolError, decode_message, encode
 from lodsprite.distributed.web.hub import Hub
 from lodsprite.distributed.web.sessions import MAX_REPLIES, Caps, Pending, Session
-from lodsprite.distributed.web.standin import Result
 from lodsprite.distributed.web.wire import MAX_PAGE_MESSAGE, MAX_PARTS, pack, unpack
 
 VP = {"x": [1.0, 0.0, 0.0], "y": [0.0, 1.0, 0.0], "z": [0.0, 0.0, 1.0], "o": [0.0, 0.0, 500.0]}
@@ -138,7 +138,7 @@ def test_round_robin_serves_a_greedy_session_no_more_than_a_modest_one():
         hub = Hub(pool, datasets=None, caps=Caps(session_jobs=1))
         a, b = hub.open_session("a"), hub.open_session("b")
         for s in (a, b):
-            s.load = LoadArgs()
+            s.load = s.named = LoadArgs()
         for i in range(6):  # a asks six times as often as b
             a.pending.append(Pending(i, 0.0, VP, 0.0))
             if i % 3 == 0:
@@ -153,3 +153,33 @@ def test_round_robin_serves_a_greedy_session_no_more_than_a_modest_one():
         return order
 
     assert asyncio.run(run()) == ["a", "b", "a", "b"]
+
+
+def test_a_request_with_a_bad_viewpoint_is_refused_before_any_render():
+    s = Session(FakeHub(), Caps(rate=1e9))
+    s.load = LoadArgs()
+    skew = {**VP, "y": [0.5, 1.0, 0.0]}  # axes not orthonormal
+    s.handle(pack(encode({"kind": "request", "seq": 3, "t": 0.0, "viewpoint": skew})))
+    assert not s.pending and s.counts["rejected"] == 1 and replies(s)[-1].ok is False
+
+
+def test_a_send_that_never_completes_ends_the_writer(monkeypatch):
+    from lodsprite.distributed.web import sessions
+
+    monkeypatch.setattr(sessions, "SEND_TIMEOUT_S", 0.05)
+    s = Session(FakeHub())
+    sent = []
+
+    async def stuck(data):
+        sent.append(data)
+        await asyncio.Event().wait()  # a page that never reads
+
+    async def run():
+        s.reply(1, True)
+        task = asyncio.get_running_loop().create_task(s.run_writer(stuck))
+        await asyncio.wait({task}, timeout=10.0)  # a deadline against a hang only
+        return task
+
+    task = asyncio.run(run())
+    assert task.done() and isinstance(task.exception(), TimeoutError)
+    assert len(sent) == 1

@@ -96,3 +96,28 @@ def test_a_public_host_is_accepted_as_host_behind_a_proxy():
     got = asyncio.run(statuses(config, [(f"/?token={TOKEN}", {"Host": "lod.example"}),
                                         (f"/?token={TOKEN}", {"Host": "other.example"})]))
     assert got == [200, 403]
+
+
+def test_the_page_is_served_with_its_security_headers():
+    async def go():
+        server = WebServer(WebConfig(token=TOKEN), pool=NoPool())
+        await server.start()
+        try:
+            async with aiohttp.ClientSession() as http, http.get(
+                    f"http://127.0.0.1:{server.port}/?token={TOKEN}") as r:
+                return r.headers
+        finally:
+            await server.stop()
+
+    headers = asyncio.run(go())
+    assert "script-src 'self'" in headers["Content-Security-Policy"]
+    assert "frame-ancestors 'none'" in headers["Content-Security-Policy"]
+    assert headers["Referrer-Policy"] == "no-referrer" and headers["Cache-Control"] == "no-store"
+
+
+def test_static_files_stay_inside_the_static_folder():
+    got = asyncio.run(statuses(WebConfig(token=TOKEN), [
+        ("/static/index.html", {}), ("/static/../server.py", {}),
+        ("/static/%2e%2e/server.py", {}), ("/static/", {}), ("/server.py", {}),
+        ("/favicon.ico", {})]))
+    assert got == [200, 404, 404, 403, 404, 204]

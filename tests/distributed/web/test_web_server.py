@@ -20,6 +20,7 @@ import zmq
 
 from lodsprite.distributed.hostile import hostile_frames
 from lodsprite.distributed.protocol import (
+    ProtocolError,
     Reply,
     SceneMessage,
     decode_keyframe,
@@ -28,8 +29,9 @@ from lodsprite.distributed.protocol import (
 )
 from lodsprite.distributed.run import free_ports
 from lodsprite.distributed.server import endpoints
-from lodsprite.distributed.web.scene import decode_scene
-from lodsprite.distributed.web.wire import MAX_PAGE_MESSAGE, MAX_PARTS, pack, unpack
+from lodsprite.distributed.web.client import WebPage
+from lodsprite.distributed.web.client import connect as web_connect
+from lodsprite.distributed.web.wire import MAX_PAGE_MESSAGE, MAX_PARTS, pack
 from lodsprite.scene import load_scene
 
 TOKEN = "test-token"
@@ -40,12 +42,14 @@ VP = {"x": [1.0, 0.0, 0.0], "y": [0.0, 0.6, 0.8], "z": [0.0, -0.8, 0.6],
 
 
 @pytest.fixture(scope="module")
-def server():
+def server(tmp_path_factory):
+    data = tmp_path_factory.mktemp("data")
+    np.save(data / "hill.npy", load_scene("fractal:64:5", "terrain", 64, 1.0).hf.heights)
     zport = free_ports()
     proc = subprocess.Popen(
         [sys.executable, "-c", "from lodsprite.cli import main; main()", "serve",
          "--web", "127.0.0.1:0", "--bind", f"127.0.0.1:{zport}", "--token", TOKEN,
-         "--rate", "100000", "--renderers", "1"],
+         "--rate", "100000", "--renderers", "1", "--data", str(data)],
         stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     lines: queue.Queue = queue.Queue()
     threading.Thread(target=lambda: [lines.put(x) for x in proc.stdout], daemon=True).start()
@@ -63,53 +67,24 @@ def run(coro):
     return asyncio.run(asyncio.wait_for(coro, DEADLINE_S))
 
 
-class Page:
-    """A WebSocket client speaking the web wire."""
-
-    def __init__(self, ws):
-        self.ws, self.seq = ws, 0
-
-    async def send(self, header: dict, *buffers) -> int:
-        self.seq += 1
-        await self.ws.send_bytes(pack(encode({"seq": self.seq, **header}, *buffers)))
-        return self.seq
-
-    async def recv(self, kind=None):
-        while True:
-            msg = await self.ws.receive()
-            assert msg.type == aiohttp.WSMsgType.BINARY, msg
-            parts = unpack(msg.data, 2**31)
-            header, _ = decode_message(parts)
-            if kind is None or header.__struct_config__.tag == kind:
-                return header, parts
-
-    async def load(self, args: dict):
-        seq = await self.send({"kind": "control", "op": "load", "args": args})
-        scene = decode_scene((await self.recv("scene"))[1])
-        reply, _ = await self.recv("reply")
-        assert reply.ok and reply.seq == seq and scene.header.seq == seq, reply
-        return scene
-
-    async def keyframe(self, vp=VP, t=1.25):
-        seq = await self.send({"kind": "request", "t": t, "viewpoint": vp})
-        kf = decode_keyframe((await self.recv("keyframe"))[1])
-        assert kf.seq == seq and kf.t0 == t
-        return kf
-
-    async def stats(self) -> dict:
-        seq = await self.send({"kind": "control", "op": "stats"})
-        while True:  # past the replies to earlier messages
-            reply, _ = await self.recv("reply")
-            if reply.seq == seq and "session" in reply.data:
-                return reply.data
-
-
 def ws_url(server, token=TOKEN) -> str:
     return f"http://127.0.0.1:{server['port']}/ws" + (f"?token={token}" if token else "")
 
 
-async def connect(http, server, **kw) -> Page:
-    return Page(await http.ws_connect(ws_url(server), max_msg_size=0, **kw))
+async def connect(http, server, **kw) -> WebPage:
+    return await web_connect(http, f"http://127.0.0.1:{server['port']}", TOKEN, **kw)
+
+
+async def loaded(page: WebPage, args: dict):
+    scene = await page.load(args)
+    assert scene.header.seq == page.seq
+    return scene
+
+
+async def keyframe(page: WebPage, t=1.25):
+    kf = await page.keyframe(VP, t)
+    assert kf.seq == page.seq and kf.t0 == t
+    return kf
 
 
 def test_token_origin_and_host_are_checked(server):
@@ -142,7 +117,7 @@ def test_load_gives_the_scene_and_a_request_a_keyframe(server):
     async def go():
         async with aiohttp.ClientSession() as http:
             page = await connect(http, server)
-            return await page.load(LOAD), await page.keyframe(), await page.stats()
+            return await loaded(page, LOAD), await keyframe(page), await page.stats()
 
     scene, kf, stats = run(go())
     hf = load_scene("fractal:64:1", "terrain", 64, 1.0).hf
@@ -161,16 +136,33 @@ def test_sessions_do_not_see_each_other_s_scene(server):
     async def go():
         async with aiohttp.ClientSession() as http:
             a, b = await connect(http, server), await connect(http, server)
-            sa = await a.load(LOAD)
-            ka1 = await a.keyframe()
-            sb = await b.load(other)
-            kb = await b.keyframe()
-            return sa, sb, ka1, kb, await a.keyframe()
+            sa = await loaded(a, LOAD)
+            ka1 = await keyframe(a)
+            sb = await loaded(b, other)
+            kb = await keyframe(b)
+            return sa, sb, ka1, kb, await keyframe(a)
 
     sa, sb, ka1, kb, ka2 = run(go())
     assert not np.array_equal(sa.heights, sb.heights)
     np.testing.assert_array_equal(ka1.color, ka2.color)  # b's load left a's scene alone
     assert np.abs(ka1.color.astype(int) - kb.color.astype(int)).mean() > 1.0
+
+
+def test_pages_name_files_by_the_data_rule(server):
+    async def go():
+        async with aiohttp.ClientSession() as http:
+            page = await connect(http, server)
+            refused = []
+            for name in ("../hill.npy", "/etc/passwd", "missing.npy"):
+                with pytest.raises(ProtocolError) as err:
+                    await page.load({**LOAD, "terrain": name})
+                refused.append(str(err.value))
+            return refused, await loaded(page, {**LOAD, "terrain": "hill.npy"}), \
+                await keyframe(page)
+
+    refused, scene, kf = run(go())
+    assert all(r.startswith("load:") for r in refused), refused
+    assert scene.heights.shape == (9, 9) and kf.color.std() > 1.0
 
 
 def stalled_page(port: int, stop: threading.Event) -> socket.socket:
@@ -219,13 +211,13 @@ def test_a_page_that_stops_reading_does_not_stall_another(server):
     async def go():
         async with aiohttp.ClientSession() as http:
             page = await connect(http, server)
-            await page.load(LOAD)
+            await loaded(page, LOAD)
             while True:  # until the stalled page's queue overflows (its writer is blocked)
-                await page.keyframe()
+                await keyframe(page)
                 rows = (await page.stats())["server"]["per_session"]
                 if any(r["keyframes_dropped"] > 0 for r in rows):
                     break
-            return [await page.keyframe() for _ in range(3)], rows
+            return [await keyframe(page) for _ in range(3)], rows
 
     try:
         kfs, rows = run(go())
@@ -256,8 +248,8 @@ def test_a_live_fuzz_leaves_a_server_that_still_serves(server):
             await big.ws.send_bytes(b"\x00" * (MAX_PAGE_MESSAGE + 1))
             closed = await big.ws.receive()
             page = await connect(http, server)
-            await page.load(LOAD)
-            return stats, closed, await page.keyframe()
+            await loaded(page, LOAD)
+            return stats, closed, await keyframe(page)
 
     stats, closed, kf = run(go())
     assert stats["session"]["rejected"] > 1000 and stats["session"]["internal"] == 0

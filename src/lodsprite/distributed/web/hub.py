@@ -12,6 +12,8 @@ render pool.
   ``session_jobs`` in flight, one job per live worker at a time, so that a session asking
   often gets no more renders than one asking when it needs to.  A job not answered in
   :data:`JOB_TIMEOUT_S` is forgotten (counted ``failed``).
+* Jobs carry the page's names (validated here); a worker resolves them by its own
+  ``--data`` rule (local workers share the server's data folder).
 * Results: the keyframe a renderer encoded (the ZeroMQ ``keyframe`` message) goes to its
   session with the request's ``seq`` and ``t0`` set to the request's ``t`` (the page's
   clock); the images are not touched.
@@ -29,6 +31,7 @@ from typing import Any
 import msgspec
 
 from lodsprite.distributed.datasets import Datasets
+from lodsprite.distributed.pool import Job
 from lodsprite.distributed.protocol import (
     MAX_SCENE_COARSE,
     KeyframeMessage,
@@ -43,7 +46,6 @@ from lodsprite.distributed.server import MEMORY_FRACTION
 from lodsprite.distributed.web.path import send_path
 from lodsprite.distributed.web.scene import build_scene, scene_key
 from lodsprite.distributed.web.sessions import Caps, Pending, Session
-from lodsprite.distributed.web.standin import Job
 from lodsprite.distributed.web.wire import pack
 from lodsprite.errors import InputError, LodspriteError
 
@@ -143,13 +145,16 @@ class Hub:
                 while len(self._scenes) > SCENES_CACHED:
                     self._scenes.popitem(last=False)
             self._scenes.move_to_end(key)
-        except (LodspriteError, MemoryError, OSError, ValueError) as exc:
+        except Exception as exc:  # noqa: BLE001 - any dataset's failure is the page's reply
             if self._generation.get(session.id) == gen:
-                session.reply(seq, False, f"load: {exc}")
+                reason = exc if isinstance(exc, LodspriteError | OSError | ValueError) else (
+                    f"internal error: {type(exc).__name__}")
+                session.reply(seq, False, f"load: {reason}")
             return
         if session.closed or self._generation.get(session.id) != gen:
             return  # a newer load of this session, or a closed one: this one is moot
         session.load = resolved
+        session.named = args  # jobs carry the names: each worker resolves them by its --data
         session.pending.clear()
         header = msgspec.msgpack.decode(parts[0])
         session.push_reply(pack(encode({**header, "seq": seq}, *parts[1:])))
@@ -188,7 +193,7 @@ class Hub:
             n = len(order)
             for i in range(n):
                 s = order[(self._turn + i) % n]
-                if s.pending and len(s.inflight) < self.caps.session_jobs and s.load:
+                if s.pending and len(s.inflight) < self.caps.session_jobs and s.named:
                     self._turn = (self._turn + i + 1) % n
                     self._submit(s, s.pending.popleft())
                     free -= 1
@@ -200,7 +205,7 @@ class Hub:
         job = next(self._ids)
         s.inflight[job] = p
         self.jobs[job] = (s, p, time.monotonic())
-        self.pool.submit(Job(job, s.id, s.load, p.viewpoint, p.t))
+        self.pool.submit(Job(job, s.id, s.named, p.viewpoint, p.t))
 
     def drain(self) -> None:
         """Take the pool's results to their sessions; never raises."""

@@ -40,6 +40,13 @@ __all__ = ["STATIC_DIR", "WebConfig", "WebServer", "serve_web"]
 
 STATIC_DIR = Path(__file__).parent / "static"
 HEARTBEAT_S = 20.0
+MAX_SESSIONS = 256
+"""WebSockets served at once; one more is answered 503."""
+CSP = ("default-src 'self'; script-src 'self'; style-src 'self' 'unsafe-inline'; "
+       "img-src 'self' data: blob:; connect-src 'self' ws: wss:; worker-src 'self' blob:; "
+       "frame-ancestors 'none'; base-uri 'none'; form-action 'none'")
+"""The page's Content-Security-Policy: its own modules only (no inline or foreign
+script), WebSockets, and no framing by another site."""
 NO_STORE = {"Cache-Control": "no-store", "Referrer-Policy": "no-referrer",
             "X-Content-Type-Options": "nosniff"}
 
@@ -48,8 +55,11 @@ NO_STORE = {"Cache-Control": "no-store", "Referrer-Policy": "no-referrer",
 class WebConfig:
     """What ``serve --web`` was given: ``host``/``port`` (0: any free port), the
     ``token``, ``data_dir``, ``renderers`` local renderer processes, per-session ``caps``,
-    keyframe ``codec``, an optional TLS context and the ``public_hosts`` names a reverse
-    proxy serves the page under (accepted as ``Host``)."""
+    keyframe ``codec``, an optional TLS context, the ``public_hosts`` names a reverse
+    proxy serves the page under (accepted as ``Host``), and where render workers of other
+    hosts join the pool: ``workers_bind`` (``tcp://HOST:PORT``, None: local renderers
+    only) with CURVE ``worker_keys`` (:class:`~lodsprite.distributed.keys.ServerKeys`)
+    or ``allow_remote``."""
 
     host: str = "127.0.0.1"
     port: int = 0
@@ -60,20 +70,26 @@ class WebConfig:
     codec: str = "raw"
     tls: ssl.SSLContext | None = None
     public_hosts: tuple[str, ...] = ()
+    workers_bind: str | None = None
+    worker_keys: Any = None
+    allow_remote: bool = False
 
 
 class WebServer:
     """The aiohttp application, its hub and pool.  ``pool``: an object with the Broker's
-    interface (None: a local pool with ``config.renderers`` processes)."""
+    interface (None: a :class:`~lodsprite.distributed.pool.Broker` with
+    ``config.renderers`` local renderer processes; raises
+    :class:`~lodsprite.errors.LodspriteError` when its endpoint cannot be bound)."""
 
     def __init__(self, config: WebConfig, pool: Any = None) -> None:
         self.config = config
         self.datasets = Datasets(config.data_dir)
         self._own_pool = pool is None
         if pool is None:
-            from lodsprite.distributed.web.standin import StandinPool
+            from lodsprite.distributed.pool import Broker
 
-            pool = StandinPool(config.codec)
+            pool = Broker(config.workers_bind, config.worker_keys, config.codec,
+                          config.data_dir, config.allow_remote)
             pool.spawn_local(config.renderers)
         self.pool = pool
         self.hub: Hub | None = None
@@ -92,6 +108,7 @@ class WebServer:
         app = web.Application(client_max_size=MAX_PAGE_MESSAGE)
         app.router.add_get("/", self._index)
         app.router.add_get("/ws", self._ws)
+        app.router.add_get("/favicon.ico", _no_icon)
         app.router.add_static("/static/", STATIC_DIR, follow_symlinks=False,
                               show_index=False)
         return app
@@ -124,7 +141,8 @@ class WebServer:
         if not token_ok(request.query.get("token"), self.config.token):
             return web.Response(status=401, text="a valid ?token= is required",
                                 headers=NO_STORE)
-        return web.FileResponse(STATIC_DIR / "index.html", headers=NO_STORE)
+        return web.FileResponse(STATIC_DIR / "index.html",
+                                headers={**NO_STORE, "Content-Security-Policy": CSP})
 
     async def _ws(self, request: web.Request) -> web.StreamResponse:
         if not token_ok(request.query.get("token"), self.config.token):
@@ -133,6 +151,8 @@ class WebServer:
             return web.Response(status=403, text="unknown host")
         if not check_origin(request.headers.get("Origin"), request.host):
             return web.Response(status=403, text="foreign origin")
+        if len(self.hub.sessions) >= MAX_SESSIONS:
+            return web.Response(status=503, text="too many sessions")
         ws = web.WebSocketResponse(max_msg_size=MAX_PAGE_MESSAGE, heartbeat=HEARTBEAT_S,
                                    compress=False)
         await ws.prepare(request)
@@ -156,6 +176,11 @@ class WebServer:
         return ws
 
 
+async def _no_icon(request: web.Request) -> web.Response:
+    """No icon (204), so a browser's console stays free of a 404."""
+    return web.Response(status=204)
+
+
 def _closed_on_error(task: asyncio.Task, ws: web.WebSocketResponse) -> None:
     """A writer that failed (a page that stopped reading for too long, a broken
     connection) closes its WebSocket."""
@@ -165,7 +190,7 @@ def _closed_on_error(task: asyncio.Task, ws: web.WebSocketResponse) -> None:
     asyncio.get_running_loop().create_task(ws.close())
 
 
-async def _serve(config: WebConfig, on_url) -> None:
+async def _serve(config: WebConfig, on_url, stopped) -> None:
     server = WebServer(config)
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
@@ -174,11 +199,15 @@ async def _serve(config: WebConfig, on_url) -> None:
             loop.add_signal_handler(sig, stop.set)
     try:
         on_url(await server.start())
-        await stop.wait()
+        while not stopped():
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(stop.wait(), 0.2)
+                return
     finally:
         await server.stop()
 
 
-def serve_web(config: WebConfig, on_url=log.info) -> None:
-    """Serve until SIGINT or SIGTERM; ``on_url(url)`` is called once serving."""
-    asyncio.run(_serve(config, on_url))
+def serve_web(config: WebConfig, on_url=log.info, stopped=lambda: False) -> None:
+    """Serve until SIGINT or SIGTERM, or until ``stopped()`` (polled) says so;
+    ``on_url(url)`` is called once serving."""
+    asyncio.run(_serve(config, on_url, stopped))

@@ -36,6 +36,7 @@ from lodsprite.distributed.protocol import (
     ProtocolError,
     Request,
     ViewpointMessage,
+    viewpoint_from_wire,
 )
 from lodsprite.distributed.web.security import RateLimit
 from lodsprite.distributed.web.wire import decode_web, pack, pack_message
@@ -88,6 +89,7 @@ class Session:
         self.caps = caps or Caps()
         self.clock = clock
         self.load: LoadArgs | None = None  # resolved (loader specs), after a good load
+        self.named: LoadArgs | None = None  # the same as the page named it (for workers)
         self.pending: deque[Pending] = deque()
         self.inflight: dict[int, Pending] = {}
         self.counts = dict.fromkeys(COUNTS, 0)
@@ -136,6 +138,12 @@ class Session:
         if self.load is None:
             self.reply(msg.seq, False, "request: load a scene first")
             return
+        try:
+            viewpoint_from_wire(msg.viewpoint)  # axes orthonormal: checked before a render
+        except ProtocolError as exc:
+            self.counts["rejected"] += 1
+            self.reply(msg.seq, False, f"request: {exc}")
+            return
         if len(self.pending) >= self.caps.session_jobs:
             self.pending.popleft()
             self.counts["superseded"] += 1
@@ -161,7 +169,7 @@ class Session:
             if op in ("stop", "release"):
                 self.pending.clear()
             if op == "release":
-                self.load = None
+                self.load = self.named = None
             self.reply(msg.seq, True)
 
     # ------------------------------------------------------------------------ out
