@@ -16,6 +16,7 @@ import subprocess
 import sys
 import tempfile
 import threading
+import time
 import urllib.error
 import urllib.request
 from pathlib import Path
@@ -61,7 +62,7 @@ def server():
     proc = subprocess.Popen(
         [sys.executable, "-c", "from lodsprite.cli import main; main()", "serve",
          "--web", "127.0.0.1:0", "--bind", f"127.0.0.1:{free_ports()}", "--token", TOKEN,
-         "--rate", "100000", "--renderers", "1"],
+         "--rate", "100000", "--renderers", "1", "--codec", "zlib"],  # the page inflates
         stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     lines: queue.Queue = queue.Queue()
     threading.Thread(target=lambda: [lines.put(x) for x in proc.stdout], daemon=True).start()
@@ -94,6 +95,17 @@ def browser():
     finally:
         driver.quit()
         shutil.rmtree(profile, ignore_errors=True)
+
+
+def wait_for(browser, script: str, deadline_s: float = DEADLINE_S):
+    """Poll ``script`` (a JS expression) in the page until truthy; its value."""
+    end = time.monotonic() + deadline_s
+    while time.monotonic() < end:
+        value = browser.execute_script(f"return {script}")
+        if value:
+            return value
+        time.sleep(0.05)
+    raise AssertionError(f"not within {deadline_s} s: {script}")
 
 
 def page_url(server, token=TOKEN, query=QUERY) -> str:
@@ -161,6 +173,23 @@ def test_the_page_plays_the_path_and_its_held_frame_matches_the_offscreen_render
     assert shown.shape == last.shape == (SIZE, SIZE, 3)
     assert rmse(shown, last) <= RMSE_TOL, rmse(shown, last)
     assert rmse(shown, first) > 3 * RMSE_TOL  # the comparison tells views apart
+
+
+def test_the_page_flies_with_the_keyboard(server, browser):
+    from selenium.webdriver.common.action_chains import ActionChains
+
+    browser.get(page_url(server, query=QUERY.split("&path=")[0]))  # no path: flying
+    wait_for(browser, "window.lodsprite && window.lodsprite.stats().keyframes >= 1")
+    before = browser.execute_script("return window.lodsprite.viewpoint()")
+    kf = browser.execute_script("return window.lodsprite.stats().keyframes")
+    ActionChains(browser).key_down("w").pause(0.4).key_up("w").perform()
+    after = browser.execute_script("return window.lodsprite.viewpoint()")
+    step = np.subtract(after["o"], before["o"])
+    forward = -np.asarray(before["z"])
+    assert step @ forward > 0.9 * np.linalg.norm(step) > 0  # moved along the view
+    wait_for(browser, f"window.lodsprite.stats().keyframes > {kf}")  # asked for one
+    hud = browser.find_element("id", "hud").text
+    assert "fps" in hud and "keyframes" in hud and "latency" in hud, hud
 
 
 def test_after_a_live_fuzz_a_page_still_plays(server, browser):

@@ -155,7 +155,6 @@ const api = {
   pixels: () => renderer.pixels(),
   viewpoint: () => controls && controls.vp,
   state: () => state,
-  debug: () => ({ keyEye, vp: controls && controls.vp, inflight: predictor && predictor.inflight, settled: predictor && predictor.settled, pathIndex }),
   finished,
 };
 api.ready = start().then(() => true, (e) => { state = `failed: ${e.message}`; hud.update(Infinity, api.stats(), state); throw e; });
