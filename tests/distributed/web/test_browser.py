@@ -188,6 +188,10 @@ def test_the_page_flies_with_the_keyboard(server, browser):
     forward = -np.asarray(before["z"])
     assert step @ forward > 0.9 * np.linalg.norm(step) > 0  # moved along the view
     wait_for(browser, f"window.lodsprite.stats().keyframes > {kf}")  # asked for one
+    session = browser.execute_async_script(
+        "window.lodsprite.serverStats().then(arguments[arguments.length - 1])")["session"]
+    assert session["rejected"] == 0 and session["internal"] == 0, session  # all valid
+    assert session["viewpoints"] >= 1 and session["requests"] >= 2, session
     hud = browser.find_element("id", "hud").text
     assert "fps" in hud and "keyframes" in hud and "latency" in hud, hud
 

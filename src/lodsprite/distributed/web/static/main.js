@@ -10,7 +10,7 @@
 // pixels; 512x512), lod (coarse quads a side; 16), grid (working grid), epsilon (pixels;
 // 1).  For tests and tools: window.lodsprite.ready (a Promise: scene loaded),
 // .finished (a Promise: the path played and the held view's keyframe shown), .stats(),
-// .pixels(), .viewpoint().
+// .pixels(), .viewpoint(), .serverStats() (a Promise: the `stats` op's reply data).
 
 import { pack, unpack, image } from './wire.js';
 import { SpriteRenderer } from './gl.js';
@@ -131,7 +131,8 @@ function frame(now) {
     predictor.sent(t, want); predictor.inflight.seq = s;
   } else if (now - lastSample > VIEWPOINT_MS) {
     lastSample = now;
-    send({ kind: 'viewpoint', t: now / 1000, viewpoint: vp });
+    const shown = keyEye ? { eye: keyEye, slot: 0 } : undefined;  // as the ZeroMQ client
+    send({ kind: 'viewpoint', t: now / 1000, viewpoint: vp, shown });
   }
   renderer.draw(predictor.viewProj(vp));
   stats.error_px = predictor.errorPx(metric, keyEye, vp);
@@ -155,6 +156,7 @@ const api = {
   pixels: () => renderer.pixels(),
   viewpoint: () => controls && controls.vp,
   state: () => state,
+  serverStats: () => call('stats').then((r) => r.data),
   finished,
 };
 api.ready = start().then(() => true, (e) => { state = `failed: ${e.message}`; hud.update(Infinity, api.stats(), state); throw e; });
