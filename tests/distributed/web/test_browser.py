@@ -145,6 +145,9 @@ def test_the_page_needs_the_token(server):
     with pytest.raises(urllib.error.HTTPError) as refused:
         urllib.request.urlopen(page_url(server, token="wrong"), timeout=DEADLINE_S)
     assert refused.value.code == 401
+    with pytest.raises(urllib.error.HTTPError) as refused:
+        urllib.request.urlopen(f"http://127.0.0.1:{server['port']}/?{QUERY}", timeout=DEADLINE_S)
+    assert refused.value.code == 401
     with urllib.request.urlopen(page_url(server), timeout=DEADLINE_S) as r:
         assert r.status == 200 and b"/static/main.js" in r.read()
     for module in ("main", "wire", "gl", "camera", "predictor", "hud"):  # no token needed

@@ -19,6 +19,8 @@
 
 import { add, clip, cross, dot, mul, norm, scale, sub, unit, viewMatrix, perspective } from './camera.js';
 
+const MAX_CENTRES = 4096;  // square centres measured a frame (a finer coarse level: evenly)
+
 export class ErrorMetric {
   constructor(scene, heights) {
     const n = scene.coarse, m = n + 1;
@@ -28,6 +30,8 @@ export class ErrorMetric {
       this.centres.push([scene.origin[0] + (j + 0.5) * scene.spacing, scene.origin[1] + (i + 0.5) * scene.spacing_y, h]);
     }
     this.relief = scene.relief || 0;
+    const stride = Math.ceil(this.centres.length / MAX_CENTRES);  // evenly, row-major
+    if (stride > 1) this.centres = this.centres.filter((_, k) => k % stride === 0);
   }
 
   // Error in pixels of the keyframe seen from `keyEye` shown at viewpoint `vp` through
