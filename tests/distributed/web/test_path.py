@@ -15,8 +15,7 @@ from lodsprite.distributed.protocol import (
     decode_message,
     encode,
 )
-from lodsprite.distributed.web.path import path_data, send_path
-from lodsprite.distributed.web.scene import relief
+from lodsprite.distributed.web.scene import path_data, relief, send_path
 from lodsprite.distributed.web.sessions import Session
 from lodsprite.distributed.web.wire import pack_message, unpack
 

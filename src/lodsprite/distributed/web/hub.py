@@ -43,8 +43,7 @@ from lodsprite.distributed.protocol import (
 )
 from lodsprite.distributed.render import estimate_scene_bytes, memory_available, working_grid
 from lodsprite.distributed.server import MEMORY_FRACTION
-from lodsprite.distributed.web.path import send_path
-from lodsprite.distributed.web.scene import build_scene, scene_key
+from lodsprite.distributed.web.scene import build_scene, scene_key, send_path
 from lodsprite.distributed.web.sessions import Caps, Pending, Session
 from lodsprite.distributed.web.wire import pack
 from lodsprite.errors import InputError, LodspriteError
@@ -161,7 +160,7 @@ class Hub:
         session.reply(seq, True, data={"coarse": resolved.lod, "size": list(resolved.size)})
 
     def path(self, session: Session, args: PathArgs, seq: int) -> None:
-        """Answer ``path`` for ``session`` (later: :func:`~.path.send_path`)."""
+        """Answer ``path`` for ``session`` (later: :func:`~.scene.send_path`)."""
         task = asyncio.get_running_loop().create_task(send_path(session, args, seq))
         self._tasks.add(task)
         task.add_done_callback(self._tasks.discard)

@@ -1,13 +1,24 @@
 """The ``scene`` message a web page draws spriteframes from (Swan et al. 2002, §3.2: the
-client holds the coarse model and renders spriteframes from it and the last keyframe).
+client holds the coarse model and renders spriteframes from it and the last keyframe),
+and the answer to its ``path`` op.
 
 Computed in the server process, GL-free, from the dataset a ``load`` names: the working
 height field (:func:`lodsprite.scene.load_scene`, as every renderer loads it), its coarse
 level (an exact subsample, ``lod`` quads a side, as the sprite renderer's proxy) and the
 terrain texture, both turned so row 0 is south (the page's ``y`` grows with the row).
+
+``path`` (after a ``load``): the viewpoints of a built-in camera path
+(:func:`lodsprite.paths.get_path`: Chen, Swan & Kaufman 1999 Figure 7's orbit, Swan et
+al. 2002's fly-in, ...) over the session's terrain, computed here so that the page plays
+exactly the path the Python side plays (one implementation of the paths, not a second in
+JavaScript).  The reply's ``data``: ``viewpoints`` (12 numbers a frame: the camera axes
+``x, y, z`` then the eye ``o``, metres, as :class:`~lodsprite.camera.Viewpoint`) and
+``fov`` (the path's vertical field of view, degrees).
 """
 
 from __future__ import annotations
+
+from typing import Any
 
 import numpy as np
 
@@ -15,6 +26,7 @@ from lodsprite.distributed.protocol import (
     MAX_IMAGE_SIDE,
     MAX_SCENE_COARSE,
     LoadArgs,
+    PathArgs,
     ProtocolError,
     SceneMessage,
     decode_message,
@@ -22,7 +34,8 @@ from lodsprite.distributed.protocol import (
     inflate,
 )
 
-__all__ = ["SceneData", "build_scene", "decode_scene", "relief", "scene_key"]
+__all__ = ["SceneData", "build_scene", "decode_scene", "path_data", "relief", "scene_key",
+           "send_path"]
 
 SCENE_FIELDS = ("terrain", "texture", "grid", "exaggeration", "lod", "size", "fov_y_deg",
                 "epsilon", "visibility")
@@ -119,3 +132,36 @@ def decode_scene(parts: list) -> SceneData:
         raise ProtocolError(f"heights: shape {heights.shape}, expected {(n, n)}")
     texture = _image(msg.texture, buffers[1], "uint8", 3, "texture")
     return SceneData(msg, heights, texture)
+
+
+def path_data(load: LoadArgs, args: PathArgs) -> dict:
+    """The reply data of ``path`` for a session whose resolved ``load`` is ``load``
+    (terrain as a loader spec); raises :class:`~lodsprite.errors.LodspriteError` for a
+    path the terrain cannot give."""
+    from lodsprite.paths import get_path
+    from lodsprite.scene import load_scene
+
+    scene = load_scene(load.terrain, load.texture, load.grid, load.exaggeration)
+    path = get_path(args.spec, scene.hf, args.frames)
+    rows = np.array([np.concatenate([vp.x, vp.y, vp.z, vp.o]) for vp in path.viewpoints],
+                    dtype=np.float64)
+    return {"viewpoints": rows.tolist(), "fov": float(path.fov_y_deg)}
+
+
+async def send_path(session: Any, args: PathArgs, seq: int) -> None:
+    """Answer a session's ``path`` request (in a thread: the terrain may take a moment)."""
+    import asyncio
+
+    from lodsprite.errors import LodspriteError
+
+    load = session.load
+    if load is None:
+        session.reply(seq, False, "path: load a scene first")
+        return
+    try:
+        data = await asyncio.to_thread(path_data, load, args)
+    except (LodspriteError, MemoryError, OSError, ValueError) as exc:
+        session.reply(seq, False, f"path: {exc}")
+        return
+    if not session.closed:
+        session.reply(seq, True, data=data)
