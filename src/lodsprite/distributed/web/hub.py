@@ -111,10 +111,12 @@ class Hub:
         return len(self.pool.workers())
 
     def summary(self) -> dict:
-        """Server-wide figures: sessions, workers, jobs in flight, and each session's
-        keyframes sent and dropped."""
+        """Server-wide figures: sessions, workers, jobs in flight, the pool's counts
+        (Broker.stats: jobs, results, failed, requeued, dead workers, ...) and each
+        session's keyframes sent and dropped."""
+        pool_stats = getattr(self.pool, "stats", None)
         return {"sessions": len(self.sessions), "workers": self.workers_count(),
-                "inflight": len(self.jobs),
+                "inflight": len(self.jobs), "pool": pool_stats() if pool_stats else {},
                 "per_session": [{"session": s.id, "keyframes_sent": s.counts["keyframes_sent"],
                                  "keyframes_dropped": s.counts["keyframes_dropped"],
                                  "requests": s.counts["requests"]}
