@@ -17,7 +17,7 @@ public key file lies in the keys folder get in).  One thread owns the sockets:
   ``zmq.MAXMSGSIZE``, decoded and validated (:func:`~.jobs.decode_pool`; a keyframe by
   :func:`~lodsprite.distributed.protocol.decode_keyframe`); a bad message is counted
   (``stats()['rejected']``) and dropped, a result for a job the worker does not hold is
-  ignored, and a worker that sends a bad keyframe fails its job and is disconnected.
+  ignored, and a worker that sends a bad keyframe is disconnected and its job re-queued.
   Nothing a worker sends stops the broker.
 
 :meth:`Broker.submit` and :meth:`Broker.poll` never block; :meth:`Broker.fileno` is a
@@ -275,7 +275,7 @@ class Broker:
         beat = time.monotonic() + HEARTBEAT_S
         while not self._stop.is_set():
             try:
-                events = dict(poller.poll(max(0.0, beat - time.monotonic()) * 1000))
+                events = dict(poller.poll(self._timeout(beat) * 1000))
                 for i, s in enumerate(self._socks):
                     if s in events:
                         self._receive(i, s)
@@ -293,6 +293,11 @@ class Broker:
             except Exception as exc:  # noqa: BLE001 - a bug must not stop the pool
                 log.error("render pool broker: internal error %r", exc)
         self._broadcast(Disconnect(POOL_VERSION, "broker closing", stop=True))
+
+    def _timeout(self, beat: float) -> float:
+        """Seconds until the next heartbeat or the next worker's expiry."""
+        due = min((p.seen + LIVENESS_S for p in self._peers.values()), default=beat)
+        return max(0.0, min(beat, due + 1e-3) - time.monotonic())
 
     def _receive(self, index: int, sock: zmq.Socket) -> None:
         for _ in range(1000):  # bounded: heartbeats and dispatch still run under a flood
@@ -336,23 +341,24 @@ class Broker:
         if job is None or job.job != msg.job:
             self._stats["ignored"] += 1
             return
-        peer.job, peer.idle_since = None, time.monotonic()
+        worker = key[1].hex()
         if not msg.ok:
-            self._finish(Result(job.job, job.session, False, msg.error))
+            peer.job, peer.idle_since = None, time.monotonic()
+            self._finish(Result(job.job, job.session, False, msg.error, worker=worker))
             return
         data = [bytes(p) for p in parts]
         try:
             kf = decode_keyframe(data)
             if kf.seq != job.job:
                 raise ProtocolError(f"keyframe seq {kf.seq} for job {job.job}")
-        except ProtocolError as exc:
+        except ProtocolError as exc:  # the worker is broken or hostile: the job goes on
             self._reject(exc)
-            self._finish(Result(job.job, job.session, False, f"bad keyframe: {exc}"))
             self._send(key, Disconnect(POOL_VERSION, "bad keyframe"))
-            self._peers.pop(key, None)
+            self._lose(key, "sent a bad keyframe")
             return
+        peer.job, peer.idle_since = None, time.monotonic()
         peer.scenes.append(job_key(job.load))
-        self._finish(Result(job.job, job.session, True, "", data))
+        self._finish(Result(job.job, job.session, True, "", data, worker))
 
     def _finish(self, result: Result) -> None:
         self._stats["results" if result.ok else "failed"] += 1
@@ -374,7 +380,7 @@ class Broker:
             tries = peer.tries + 1
             if tries >= MAX_TRIES:
                 self._finish(Result(peer.job.job, peer.job.session, False,
-                                    f"{tries} workers died rendering this job"))
+                                    f"{tries} workers were lost rendering this job"))
             else:
                 self._stats["requeued"] += 1
                 self._queue.appendleft((peer.job, tries))

@@ -77,13 +77,15 @@ class Result(Struct):
     """A job's outcome: ``ok`` and on success ``parts``, the keyframe message's frames
     (header, colour, depth; :func:`~lodsprite.distributed.protocol.decode_keyframe` reads
     them, their ``seq`` is the job id); otherwise ``error`` says why (the worker's load or
-    render error, or a job given up after its workers died)."""
+    render error, or a job given up after its workers died); ``worker``: the hex id of
+    the worker that answered ("" when none did)."""
 
     job: int
     session: str
     ok: bool
     error: str = ""
     parts: list[bytes] = field(default_factory=list)
+    worker: str = ""
 
 
 class PoolMessage(Struct, forbid_unknown_fields=True, omit_defaults=True, tag_field="kind"):
