@@ -29,6 +29,7 @@ from lodsprite.distributed.pool.jobs import (
     encode_pool,
 )
 from lodsprite.distributed.protocol import LoadArgs, WireViewpoint, decode_keyframe
+from lodsprite.errors import InputError
 
 SCENE = LoadArgs(terrain="fractal:64:1", size=(64, 64), lod=16)
 OTHER = LoadArgs(terrain="fractal:64:2", texture="checker:4", size=(64, 64), lod=16)
@@ -85,6 +86,31 @@ def test_jobs_round_trip_through_two_local_workers(broker: Broker) -> None:
     # Four jobs at once on two idle workers: both took some.
     assert {r.worker for r in got.values()} == {w.id for w in broker.workers()}
     assert broker.stats()["results"] == 4
+
+
+def test_workers_follow_the_data_rule_and_jobs_are_checked_on_submit(broker: Broker) -> None:
+    import msgspec
+
+    broker.submit(job(40, msgspec.structs.replace(SCENE, terrain="dem.npy")))
+    broker.submit(job(41, msgspec.structs.replace(SCENE, texture="/etc/hosts")))
+    got = results(broker, 2)
+    assert not got[40].ok and "serves no files" in got[40].error
+    assert not got[41].ok and "serves no files" in got[41].error
+    with pytest.raises(InputError, match="bad job"):
+        broker.submit(job(42, session="x" * 500))
+    with pytest.raises(InputError, match="takes a Job"):
+        broker.submit({"job": 1})
+
+
+@pytest.mark.parametrize(("args", "says"), [
+    (["--connect", "localhost:5"], "--connect must be tcp://"),
+    (["--connect", "tcp://127.0.0.1:5", "--server-key", "/no/server.key"], "not found"),
+    (["--connect", "tcp://127.0.0.1:5", "--client-key", "/x"], "needs --server-key"),
+    (["--connect", "tcp://127.0.0.1:5", "--data", "/no/such/folder"], "data folder"),
+])
+def test_render_worker_refusals_exit_2(cli, args: list[str], says: str) -> None:
+    r = cli("render-worker", *args)
+    assert r.returncode == 2 and says in r.stderr
 
 
 def test_hostile_frames_do_not_stop_the_broker(broker: Broker) -> None:
