@@ -15,7 +15,7 @@ from lodsprite.errors import LodspriteError
 PROTOCOL_VERSION = 4
 """4: the web wire's ``request`` and ``scene`` kinds (:mod:`lodsprite.distributed.web`)."""
 KINDS = ("control", "reply", "viewpoint", "keyframe", "ack", "request", "scene")
-CONTROL_OPS = ("start", "stop", "load", "stats", "shutdown", "ping", "release")
+CONTROL_OPS = ("start", "stop", "load", "stats", "shutdown", "ping", "release", "path")
 CODECS = ("raw", "zlib")
 ZBUFFERS = ("full", "coarse")
 VISIBILITY = ("triangle", "fragment", "coarse")  # lodsprite.gl.sprite.VISIBILITY_MODES
@@ -114,6 +114,21 @@ class LoadArgs(Struct, forbid_unknown_fields=True, omit_defaults=True):
             raise ValueError(f"slot {self.slot} is not below slots {self.slots}")
 
 
+MAX_PATH_FRAMES = 20000
+"""Most viewpoints a ``path`` reply carries."""
+PATH_SPEC = r"^(?:chen1999|swan2002|(?:flyover|patrol|bank)(?::[0-9.]{1,12}){0,3})$"
+"""The paths a web page may ask for: the built-in ones (never a file: a page names none)."""
+
+
+class PathArgs(Struct, forbid_unknown_fields=True):
+    """Arguments of ``path`` (web pages only): a built-in path ``spec``
+    (:func:`lodsprite.paths.get_path`) sampled at ``frames`` viewpoints (None: its own
+    default) over the session's loaded terrain."""
+
+    spec: Annotated[str, Meta(pattern=PATH_SPEC)] = "chen1999"
+    frames: Annotated[int, Meta(ge=2, le=MAX_PATH_FRAMES)] | None = None
+
+
 class NoArgs(Struct, forbid_unknown_fields=True):
     """Arguments of every op other than ``load``: none (an empty map)."""
 
@@ -188,8 +203,9 @@ class SceneMessage(Message, tag="scene"):
     metres; row i at ``y = origin[1] + i * spacing_y``, column j at ``x = origin[0] +
     j * spacing``), the terrain texture ``(H, W, 3) uint8`` over the same extent (row 0
     south), keyframe ``size`` (w, h) px, ``fov`` (vertical, degrees), a ``near``/``far``
-    covering the terrain, ``epsilon`` px and ``visibility`` (the z-buffer keyframes
-    carry)."""
+    covering the terrain, ``epsilon`` px, ``visibility`` (the z-buffer keyframes
+    carry) and ``relief`` (metres: the RMS height of the full-resolution square centres
+    above or below the coarse surface, what the page's error estimate needs of them)."""
 
     coarse: Annotated[int, Meta(ge=1, le=MAX_SCENE_COARSE)]
     origin: tuple[Coord, Coord]
@@ -203,11 +219,12 @@ class SceneMessage(Message, tag="scene"):
     visibility: Literal[ZBUFFERS]  # type: ignore[valid-type]
     heights: ImageSpec
     texture: ImageSpec
+    relief: Annotated[float, Meta(ge=0.0, le=MAX_COORD)] = 0.0
 
 
 ANY_MESSAGE = (Control | Reply | ViewpointMessage | KeyframeMessage | Ack | Request
                | SceneMessage)
 BUFFERS = {"control": 0, "reply": 0, "viewpoint": 0, "keyframe": 2, "ack": 0, "request": 0,
            "scene": 2}
-OP_ARGS: dict[str, type[Struct]] = {op: LoadArgs if op == "load" else NoArgs
+OP_ARGS: dict[str, type[Struct]] = {op: {"load": LoadArgs, "path": PathArgs}.get(op, NoArgs)
                                      for op in CONTROL_OPS}

@@ -13,10 +13,11 @@ version, :data:`PROTOCOL_VERSION`), ``kind`` and ``seq`` (a sequence number in
 kind       header fields (ranges)                            buffers
 =========  ================================================  ==================================
 control    ``op`` (start, stop, load, stats, shutdown,       none
-           ping, release), ``args`` (the op's arguments:
-           :class:`LoadArgs` for ``load``, an empty map
-           otherwise), ``client`` (the sender's id: 16-64
-           lowercase hex digits, or "" for anonymous)
+           ping, release, path), ``args`` (op arguments:
+           :class:`LoadArgs` for ``load``, ``PathArgs``
+           for ``path``, an empty map otherwise),
+           ``client`` (the sender's id: 16-64 lowercase
+           hex digits, or "" for anonymous)
 reply      ``ok`` (bool), ``error`` (str, <= 4096 chars),    none
            ``data`` (map)
 viewpoint  ``t`` (client clock, s, ``|t| <= 1e12``),         none
@@ -96,6 +97,7 @@ from lodsprite.distributed.messages import (
     Message,
     Name,
     NoArgs,
+    PathArgs,
     ProtocolError,
     Reply,
     Request,
@@ -351,8 +353,9 @@ __all__ = ["ANY_MESSAGE", "Ack", "BUFFERS", "CODECS", "CONTROL_OPS", "ClientId",
            "MAX_KEYFRAME_FRAME_BYTES", "MAX_NAME", "MAX_REPLY_BYTES", "MAX_REQUEST_BYTES",
            "MAX_SCENE_BYTES", "MAX_SCENE_COARSE", "MAX_SLOTS", "MAX_TIME", "MAX_VIEWPOINT_BYTES",
            "Matrix", "Message", "Name", "NoArgs", "OP_ARGS", "PACE_NAMES", "PROTOCOL_VERSION",
-           "ProtocolError", "Reply", "Request", "SceneMessage", "Seq", "Shown", "Side", "Slot",
-           "Time", "VISIBILITY", "Vec3", "ViewpointMessage", "WireViewpoint", "ZBUFFERS",
+           "PathArgs", "ProtocolError", "Reply", "Request", "SceneMessage", "Seq", "Shown",
+           "Side", "Slot", "Time", "VISIBILITY", "Vec3", "ViewpointMessage", "WireViewpoint",
+           "ZBUFFERS",
            "check_load_args", "decode", "decode_keyframe", "decode_message", "encode",
            "encode_keyframe", "inflate", "shown_from_wire", "viewpoint_from_wire",
            "viewpoint_to_wire"]

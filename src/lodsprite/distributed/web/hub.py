@@ -36,12 +36,14 @@ from lodsprite.distributed.protocol import (
     MAX_SCENE_COARSE,
     KeyframeMessage,
     LoadArgs,
+    PathArgs,
     ProtocolError,
     decode_message,
     encode,
 )
 from lodsprite.distributed.render import estimate_scene_bytes, memory_available, working_grid
 from lodsprite.distributed.server import MEMORY_FRACTION
+from lodsprite.distributed.web.path import send_path
 from lodsprite.distributed.web.scene import build_scene, scene_key
 from lodsprite.distributed.web.sessions import Caps, Pending, Session
 from lodsprite.distributed.web.wire import pack
@@ -159,6 +161,12 @@ class Hub:
         header = msgspec.msgpack.decode(parts[0])
         session.push_reply(pack(encode({**header, "seq": seq}, *parts[1:])))
         session.reply(seq, True, data={"coarse": resolved.lod, "size": list(resolved.size)})
+
+    def path(self, session: Session, args: PathArgs, seq: int) -> None:
+        """Answer ``path`` for ``session`` (later: :func:`~.path.send_path`)."""
+        task = asyncio.get_running_loop().create_task(send_path(session, args, seq))
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
 
     def _resolve(self, args: LoadArgs) -> LoadArgs:
         """``args`` with the terrain and texture resolved to loader specs; raises

@@ -22,7 +22,7 @@ from lodsprite.distributed.protocol import (
     inflate,
 )
 
-__all__ = ["SceneData", "build_scene", "decode_scene", "scene_key"]
+__all__ = ["SceneData", "build_scene", "decode_scene", "relief", "scene_key"]
 
 SCENE_FIELDS = ("terrain", "texture", "grid", "exaggeration", "lod", "size", "fov_y_deg",
                 "epsilon", "visibility")
@@ -39,6 +39,20 @@ def _spec(a: np.ndarray, codec: str) -> tuple[dict, bytes | np.ndarray]:
     data = np.ascontiguousarray(a)
     spec = {"shape": list(a.shape), "dtype": str(a.dtype), "codec": codec}
     return spec, (zlib.compress(data, 1) if codec == "zlib" else data)
+
+
+def relief(heights: np.ndarray, step: int) -> float:
+    """RMS height (metres) of the full-resolution square centres of the coarse level
+    (``step`` samples a side) above or below the mean of their square's four corners:
+    the deviation of the terrain from its coarse level that makes a spriteframe's error
+    (Chen, Swan & Kaufman 1999, Eq. 1: ``C`` against ``C'``)."""
+    if step < 2:
+        return 0.0
+    h = np.asarray(heights, dtype=np.float64)
+    corners = h[::step, ::step]
+    mean = 0.25 * (corners[:-1, :-1] + corners[1:, :-1] + corners[:-1, 1:] + corners[1:, 1:])
+    centres = h[step // 2::step, step // 2::step][:mean.shape[0], :mean.shape[1]]
+    return float(np.sqrt(np.mean((centres - mean) ** 2)))
 
 
 def build_scene(args: LoadArgs, codec: str = "raw") -> list:
@@ -69,7 +83,8 @@ def build_scene(args: LoadArgs, codec: str = "raw") -> list:
               "near": far / 1e4, "far": far,
               "epsilon": args.epsilon,
               "visibility": "coarse" if args.visibility == "coarse" else "full",
-              "heights": h_spec, "texture": t_spec}
+              "heights": h_spec, "texture": t_spec,
+              "relief": relief(hf.heights, step)}
     return encode(header, h_data, t_data)
 
 

@@ -161,6 +161,8 @@ class Session:
         elif op == "stats":
             self.reply(msg.seq, True, data={"session": self.stats(),
                                             "server": self.hub.summary()})
+        elif op == "path":
+            self.hub.path(self, msg.args, msg.seq)
         elif op == "shutdown":
             self.reply(msg.seq, False, "shutdown: a web page cannot stop the server")
         else:  # start, stop: keyframes come only for requests; release drops the scene
