@@ -183,3 +183,23 @@ def test_a_send_that_never_completes_ends_the_writer(monkeypatch):
     task = asyncio.run(run())
     assert task.done() and isinstance(task.exception(), TimeoutError)
     assert len(sent) == 1
+
+
+def test_a_job_the_pool_refuses_is_answered_and_frees_its_place():
+    from lodsprite.errors import InputError
+
+    class Refusing(FakePool):
+        def submit(self, job):
+            raise InputError("bad job")
+
+    async def run():
+        hub = Hub(Refusing(1), datasets=None)
+        s = hub.open_session("a")
+        s.load = s.named = LoadArgs()
+        s.pending.append(Pending(5, 0.0, VP, 0.0))
+        hub.schedule()
+        return hub, s
+
+    hub, s = asyncio.run(run())
+    assert not hub.jobs and not s.inflight and s.counts["failed"] == 1
+    assert replies(s)[-1].seq == 5 and "bad job" in replies(s)[-1].error

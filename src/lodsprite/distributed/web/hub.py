@@ -205,9 +205,14 @@ class Hub:
 
     def _submit(self, s: Session, p: Pending) -> None:
         job = next(self._ids)
+        try:
+            self.pool.submit(Job(job, s.id, s.named, p.viewpoint, p.t))
+        except LodspriteError as exc:  # the pool refused the job: the page hears why
+            s.counts["failed"] += 1
+            s.reply(p.seq, False, f"request: {exc}")
+            return
         s.inflight[job] = p
         self.jobs[job] = (s, p, time.monotonic())
-        self.pool.submit(Job(job, s.id, s.named, p.viewpoint, p.t))
 
     def drain(self) -> None:
         """Take the pool's results to their sessions; never raises."""
