@@ -203,3 +203,24 @@ def test_a_job_the_pool_refuses_is_answered_and_frees_its_place():
     hub, s = asyncio.run(run())
     assert not hub.jobs and not s.inflight and s.counts["failed"] == 1
     assert replies(s)[-1].seq == 5 and "bad job" in replies(s)[-1].error
+
+
+def test_loads_superseded_while_waiting_build_nothing(monkeypatch):
+    from lodsprite.distributed.datasets import Datasets
+    from lodsprite.distributed.web import hub as hub_module
+
+    built = []
+    monkeypatch.setattr(hub_module, "build_scene",
+                        lambda args, codec: built.append(args.terrain) or encode(
+                            {"kind": "reply", "seq": 0, "ok": True}))
+
+    async def run():
+        hub = Hub(FakePool(1), Datasets(None))
+        s = hub.open_session("a")
+        for seed in range(5):  # five loads in a row: only the last one counts
+            hub.load(s, LoadArgs(terrain=f"fractal:64:{seed}", lod=8), seed)
+        await asyncio.gather(*hub._tasks)
+        return s
+
+    s = asyncio.run(run())
+    assert built == ["fractal:64:4"] and s.load.terrain == "fractal:64:4"

@@ -141,6 +141,8 @@ class Hub:
             parts = self._scenes.get(key)
             if parts is None:
                 async with self._builds:  # one scene built at a time
+                    if session.closed or self._generation.get(session.id) != gen:
+                        return  # superseded while waiting: build nothing for it
                     parts = self._scenes.get(key) or await asyncio.to_thread(
                         build_scene, resolved, self.codec)
                 self._scenes[key] = parts
