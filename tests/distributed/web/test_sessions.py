@@ -57,7 +57,7 @@ def test_wire_round_trip_and_caps():
         pack([b""] * (MAX_PARTS + 1))
 
 
-@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(st.binary(max_size=3000) | st.builds(lambda b: struct.pack("<I", 1) + b,
                                             st.binary(max_size=300)))
 def test_the_handler_never_raises_on_random_bytes(data):
@@ -68,7 +68,7 @@ def test_the_handler_never_raises_on_random_bytes(data):
         + s.counts["requests"] + len(s.hub.loads) + len(s._replies) >= 1
 
 
-@settings(max_examples=300, deadline=None)
+@settings(max_examples=200, deadline=None)
 @given(st.integers(0, 2**32 - 1))
 def test_the_handler_never_raises_on_hostile_messages(seed):
     rng = np.random.default_rng(seed)
