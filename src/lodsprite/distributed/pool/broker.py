@@ -14,22 +14,19 @@ public key file lies in the keys folder get in).  One thread owns the sockets:
 * jobs go one at a time to idle workers, first to one that has the job's scene loaded,
   else to the one idle longest;
 * every message is received frame by frame with a cap (:mod:`..frames`), each frame under
-  ``zmq.MAXMSGSIZE``, decoded and validated (:func:`~.jobs.decode_pool`; a keyframe by
-  :func:`~lodsprite.distributed.protocol.decode_keyframe`); a bad message is counted
+  ``zmq.MAXMSGSIZE``, and validated (:func:`~.jobs.decode_pool`, a keyframe by
+  :func:`~lodsprite.distributed.protocol.decode_keyframe`); a bad one is counted
   (``stats()['rejected']``) and dropped, a result for a job the worker does not hold is
-  ignored, and a worker that sends a bad keyframe fails its job and is disconnected.
-  Nothing a worker sends stops the broker.
+  ignored, a worker that sends a bad keyframe is disconnected and its job re-queued.
 
 :meth:`Broker.submit` and :meth:`Broker.poll` never block; :meth:`Broker.fileno` is a
-pipe readable while results wait (``loop.add_reader`` in an asyncio loop).
-:meth:`Broker.close` stops the thread and terminates the local workers (killing any that
-do not exit); local workers also exit by themselves when their parent process is gone.
+pipe readable while results wait (``loop.add_reader``).  :meth:`Broker.close` terminates
+the local workers, which also exit by themselves when their parent process is gone.
 """
 
 from __future__ import annotations
 
 import logging
-import multiprocessing as mp
 import os
 import shutil
 import tempfile
@@ -56,32 +53,24 @@ from lodsprite.distributed.pool.jobs import (
     Ready,
     Result,
     ResultMessage,
+    WorkerInfo,
+    check_bind,
+    check_job,
     decode_pool,
     encode_pool,
     job_key,
 )
+from lodsprite.distributed.pool.worker import end_processes, spawn_workers
 from lodsprite.distributed.protocol import CODECS, ProtocolError, decode_keyframe
 from lodsprite.errors import InputError, LodspriteError
 
 log = logging.getLogger("lodsprite.pool")
 
-__all__ = ["MAX_TRIES", "Broker", "WorkerInfo"]
+__all__ = ["JOB_TIMEOUT_S", "MAX_TRIES", "Broker", "WorkerInfo"]
 
+JOB_TIMEOUT_S = 120.0
 MAX_TRIES = 3
 """Workers a job may see die under it before it fails."""
-LOOPBACK = ("127.0.0.1", "localhost", "::1", "[::1]")
-
-
-@dataclass(frozen=True)
-class WorkerInfo:
-    """A connected worker: ``id`` (hex routing id), ``pid``, ``name``, ``remote`` (came in
-    over ``tcp://``), ``job`` (the job id it renders, or None)."""
-
-    id: str
-    pid: int
-    name: str
-    remote: bool
-    job: int | None
 
 
 @dataclass
@@ -92,6 +81,7 @@ class _Peer:
     seen: float
     job: Job | None = None
     tries: int = 0
+    since: float = 0.0
     idle_since: float = 0.0
     scenes: deque = field(default_factory=lambda: deque(maxlen=4))
 
@@ -105,12 +95,13 @@ class Broker:
 
     def __init__(self, bind: str | None = None, curve: ServerKeys | None = None,
                  codec: str = "raw", data_dir: Path | str | None = None,
-                 allow_remote: bool = False) -> None:
+                 allow_remote: bool = False, job_timeout_s: float = JOB_TIMEOUT_S) -> None:
         if codec not in CODECS:
             raise InputError(f"unknown codec '{codec}': use {', '.join(CODECS)}")
         if bind is not None:
-            _check_bind(bind, curve is not None or allow_remote)
+            check_bind(bind, curve is not None or allow_remote)
         self.codec = codec
+        self.job_timeout_s = float(job_timeout_s)
         self.data_dir = None if data_dir is None else str(Path(data_dir).resolve())
         self.curve = curve
         self._dir = tempfile.mkdtemp(prefix="lodsprite-pool-")
@@ -125,8 +116,8 @@ class Broker:
         self._done: deque[Result] = deque()
         self._peers: dict[tuple[int, bytes], _Peer] = {}
         self._snapshot: list[WorkerInfo] = []
-        self._stats = {"jobs": 0, "results": 0, "failed": 0, "requeued": 0, "dead": 0,
-                       "rejected": 0, "ignored": 0}
+        self._stats = dict.fromkeys(("jobs", "results", "failed", "requeued", "dead",
+                                     "rejected", "ignored"), 0)
         self._stop = threading.Event()
         self._wake_r, self._wake_w = os.pipe()
         self._ready_r, self._ready_w = os.pipe()
@@ -141,23 +132,16 @@ class Broker:
         self._thread = threading.Thread(target=self._run, daemon=True, name="pool-broker")
         self._thread.start()
 
-    # ------------------------------------------------------------------------ public
-
     def submit(self, job: Job) -> None:
         """Queue ``job`` (never blocks; thread-safe)."""
-        if not isinstance(job, Job):
-            raise InputError(f"submit takes a Job, got {type(job).__name__}")
-        self._inbox.append(job)
-        self._signal(self._wake_w)
+        self._inbox.append(check_job(job))
+        _signal(self._wake_w)
 
     def poll(self) -> list[Result]:
         """The results (successes and failures) that arrived since the last call; never
         blocks."""
         _drain(self._ready_r)
-        out = []
-        while self._done:
-            out.append(self._done.popleft())
-        return out
+        return [self._done.popleft() for _ in range(len(self._done))]
 
     def fileno(self) -> int:
         """A descriptor readable while :meth:`poll` has results (level-triggered)."""
@@ -175,26 +159,16 @@ class Broker:
     def wait_workers(self, n: int, timeout: float) -> bool:
         """Wait until at least ``n`` workers are connected (at most ``timeout`` s)."""
         deadline = time.monotonic() + timeout
-        while len(self._snapshot) < n:
-            if time.monotonic() > deadline:
-                return False
+        while len(self._snapshot) < n and time.monotonic() < deadline:
             time.sleep(0.02)
-        return True
+        return len(self._snapshot) >= n
 
     def spawn_local(self, n: int, cache: int = 2) -> list[int]:
         """Start ``n`` worker processes (multiprocessing spawn, each with its own GL
         context) connecting over the private ``ipc://`` endpoint; their pids."""
-        from lodsprite.distributed.pool.worker import run_local_worker
-
-        ctx = mp.get_context("spawn")
-        pids = []
-        for _ in range(n):
-            p = ctx.Process(target=run_local_worker, daemon=True, name="lodsprite-worker",
-                            args=(self.local_endpoint, self.data_dir, cache, os.getpid()))
-            p.start()
-            self._procs.append(p)
-            pids.append(p.pid)
-        return pids
+        procs = spawn_workers(n, self.local_endpoint, self.data_dir, cache)
+        self._procs += procs
+        return [p.pid for p in procs]
 
     def local_processes(self) -> list:
         """The ``multiprocessing.Process`` objects :meth:`spawn_local` started."""
@@ -210,14 +184,14 @@ class Broker:
         self._stop.set()
         thread = getattr(self, "_thread", None)
         if thread is not None:
-            self._signal(self._wake_w)
+            _signal(self._wake_w)
             thread.join(timeout=5.0)
         for s in self._socks:
             s.close(linger=0)
         if self._auth is not None:
             self._auth.stop()
         self._ctx.term()
-        _end_processes(self._procs)
+        end_processes(self._procs)
         for fd in (self._wake_r, self._wake_w, self._ready_r, self._ready_w):
             os.close(fd)
         shutil.rmtree(self._dir, ignore_errors=True)
@@ -258,13 +232,6 @@ class Broker:
             raise LodspriteError(f"render pool: cannot bind {address}: {exc}") from exc
         return sock
 
-    @staticmethod
-    def _signal(fd: int) -> None:
-        try:
-            os.write(fd, b"\x01")
-        except (BlockingIOError, OSError):
-            pass  # the pipe is full (a wake-up is pending anyway) or closed
-
     # ----------------------------------------------------------------------- thread
 
     def _run(self) -> None:
@@ -275,7 +242,7 @@ class Broker:
         beat = time.monotonic() + HEARTBEAT_S
         while not self._stop.is_set():
             try:
-                events = dict(poller.poll(max(0.0, beat - time.monotonic()) * 1000))
+                events = dict(poller.poll(self._timeout(beat) * 1000))
                 for i, s in enumerate(self._socks):
                     if s in events:
                         self._receive(i, s)
@@ -289,10 +256,17 @@ class Broker:
                     self._broadcast(Heartbeat(POOL_VERSION))
                     beat = now + HEARTBEAT_S
                 self._dispatch(now)
-                self._snapshot = [_info(p) for p in self._peers.values()]
+                self._snapshot = [WorkerInfo(p.ident.hex(), p.info.pid, p.info.name,
+                                             p.sock > 0, p.job and p.job.job)
+                                  for p in self._peers.values()]
             except Exception as exc:  # noqa: BLE001 - a bug must not stop the pool
                 log.error("render pool broker: internal error %r", exc)
         self._broadcast(Disconnect(POOL_VERSION, "broker closing", stop=True))
+
+    def _timeout(self, beat: float) -> float:
+        """Seconds until the next heartbeat or the next worker's expiry."""
+        due = min((p.seen + LIVENESS_S for p in self._peers.values()), default=beat)
+        return max(0.0, min(beat, due + 1e-3) - time.monotonic())
 
     def _receive(self, index: int, sock: zmq.Socket) -> None:
         for _ in range(1000):  # bounded: heartbeats and dispatch still run under a flood
@@ -311,7 +285,7 @@ class Broker:
 
     def _reject(self, exc: Exception) -> None:
         self._stats["rejected"] += 1
-        if self._stats["rejected"] == 1:
+        if self._stats["rejected"] == 1:  # said once: a flood must not flood the log
             log.warning("render pool: a bad message from a worker: %s", exc)
 
     def _handle(self, key: tuple[int, bytes], msg, parts: list) -> None:
@@ -336,32 +310,37 @@ class Broker:
         if job is None or job.job != msg.job:
             self._stats["ignored"] += 1
             return
-        peer.job, peer.idle_since = None, time.monotonic()
+        worker = key[1].hex()
         if not msg.ok:
-            self._finish(Result(job.job, job.session, False, msg.error))
+            peer.job, peer.idle_since = None, time.monotonic()
+            self._finish(Result(job.job, job.session, False, msg.error, worker=worker))
             return
         data = [bytes(p) for p in parts]
         try:
             kf = decode_keyframe(data)
             if kf.seq != job.job:
                 raise ProtocolError(f"keyframe seq {kf.seq} for job {job.job}")
-        except ProtocolError as exc:
+        except ProtocolError as exc:  # the worker is broken or hostile: the job goes on
             self._reject(exc)
-            self._finish(Result(job.job, job.session, False, f"bad keyframe: {exc}"))
             self._send(key, Disconnect(POOL_VERSION, "bad keyframe"))
-            self._peers.pop(key, None)
+            self._lose(key, "sent a bad keyframe")
             return
+        peer.job, peer.idle_since = None, time.monotonic()
         peer.scenes.append(job_key(job.load))
-        self._finish(Result(job.job, job.session, True, "", data))
+        self._finish(Result(job.job, job.session, True, "", data, worker))
 
     def _finish(self, result: Result) -> None:
         self._stats["results" if result.ok else "failed"] += 1
         self._done.append(result)
-        self._signal(self._ready_w)
+        _signal(self._ready_w)
 
     def _purge(self, now: float) -> None:
         for key in [k for k, p in self._peers.items() if now - p.seen > LIVENESS_S]:
             self._lose(key, "silent")
+        for key in [k for k, p in self._peers.items()
+                    if p.job is not None and now - p.since > self.job_timeout_s]:
+            self._send(key, Disconnect(POOL_VERSION, "job timed out"))
+            self._lose(key, "timed out")
 
     def _lose(self, key: tuple[int, bytes], why: str) -> None:
         """Forget a worker; its job goes back to the front of the queue."""
@@ -374,7 +353,7 @@ class Broker:
             tries = peer.tries + 1
             if tries >= MAX_TRIES:
                 self._finish(Result(peer.job.job, peer.job.session, False,
-                                    f"{tries} workers died rendering this job"))
+                                    f"{tries} workers were lost rendering this job"))
             else:
                 self._stats["requeued"] += 1
                 self._queue.appendleft((peer.job, tries))
@@ -388,10 +367,9 @@ class Broker:
             scene = job_key(job.load)
             warm = [p for p in idle if scene in p.scenes]
             peer = min(warm or idle, key=lambda p: p.idle_since)
-            peer.job, peer.tries = job, tries
-            if not self._send((peer.sock, peer.ident),
-                              JobMessage(POOL_VERSION, job, self.codec)):
-                continue  # _send lost the peer and re-queued the job
+            peer.job, peer.tries, peer.since = job, tries, now
+            # Unreachable: _send loses the peer and puts the job back in front.
+            self._send((peer.sock, peer.ident), JobMessage(POOL_VERSION, job, self.codec))
 
     def _send(self, key: tuple[int, bytes], msg) -> bool:
         try:
@@ -406,9 +384,11 @@ class Broker:
             self._send(key, msg)
 
 
-def _info(p: _Peer) -> WorkerInfo:
-    return WorkerInfo(p.ident.hex(), p.info.pid, p.info.name, p.sock > 0,
-                      None if p.job is None else p.job.job)
+def _signal(fd: int) -> None:
+    try:
+        os.write(fd, b"\x01")
+    except (BlockingIOError, OSError):
+        pass  # the pipe is full (a wake-up is pending anyway) or closed
 
 
 def _drain(fd: int) -> None:
@@ -417,26 +397,3 @@ def _drain(fd: int) -> None:
             pass
     except (BlockingIOError, OSError):
         pass
-
-
-def _check_bind(bind: str, protected: bool) -> None:
-    if not bind.startswith("tcp://"):
-        raise InputError(f"workers bind must be tcp://HOST:PORT, got {bind!r}")
-    host = bind[len("tcp://"):].rpartition(":")[0]
-    if host not in LOOPBACK and not protected:
-        raise InputError(f"binding {bind} lets any host join as a render worker: give "
-                         "CURVE keys (--keys) or allow it explicitly")
-
-
-def _end_processes(procs: list) -> None:
-    """Wait for local workers to exit (they were told), then terminate, then kill."""
-    deadline = time.monotonic() + 2.0
-    for p in procs:
-        p.join(timeout=max(0.0, deadline - time.monotonic()))
-    for p in procs:
-        if p.is_alive():
-            p.terminate()
-            p.join(timeout=1.0)
-        if p.is_alive():
-            p.kill()
-            p.join(timeout=1.0)

@@ -25,6 +25,7 @@ gives (the web server's interface, issue 24's contract).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Annotated, Literal
 
 import msgspec
@@ -39,10 +40,12 @@ from lodsprite.distributed.messages import (
     Time,
     WireViewpoint,
 )
+from lodsprite.errors import InputError
 
 __all__ = ["HEARTBEAT_S", "LIVENESS_S", "MAX_JOB_BYTES", "MAX_RESULT_FRAME_BYTES",
            "POOL_VERSION", "Disconnect", "Heartbeat", "Job", "JobMessage", "PoolMessage",
-           "Ready", "Result", "ResultMessage", "decode_pool", "encode_pool"]
+           "Ready", "Result", "ResultMessage", "WorkerInfo", "check_bind", "check_job",
+           "decode_pool", "encode_pool", "job_key"]
 
 POOL_VERSION = 1
 HEARTBEAT_S = 0.25
@@ -77,13 +80,15 @@ class Result(Struct):
     """A job's outcome: ``ok`` and on success ``parts``, the keyframe message's frames
     (header, colour, depth; :func:`~lodsprite.distributed.protocol.decode_keyframe` reads
     them, their ``seq`` is the job id); otherwise ``error`` says why (the worker's load or
-    render error, or a job given up after its workers died)."""
+    render error, or a job given up after its workers died); ``worker``: the hex id of
+    the worker that answered ("" when none did)."""
 
     job: int
     session: str
     ok: bool
     error: str = ""
     parts: list[bytes] = field(default_factory=list)
+    worker: str = ""
 
 
 class PoolMessage(Struct, forbid_unknown_fields=True, omit_defaults=True, tag_field="kind"):
@@ -154,3 +159,46 @@ def decode_pool(frames: list) -> tuple[PoolMessage, list]:
 def job_key(load: LoadArgs) -> bytes:
     """A hashable key of a scene (Structs are not hashable): its msgpack encoding."""
     return _encoder.encode(load)
+
+
+def check_job(job: Job) -> Job:
+    """``job`` validated as a worker will decode it (Structs check their constraints only
+    when decoded); raises :class:`InputError`."""
+    if not isinstance(job, Job):
+        raise InputError(f"submit takes a Job, got {type(job).__name__}")
+    try:
+        return _job_decoder.decode(_job_encoder.encode(job))
+    except (msgspec.ValidationError, msgspec.DecodeError) as exc:
+        raise InputError(f"bad job: {exc}") from None
+
+
+_job_decoder = msgspec.msgpack.Decoder(Job)
+_job_encoder = msgspec.msgpack.Encoder()
+
+
+LOOPBACK = ("127.0.0.1", "localhost", "::1", "[::1]")
+
+
+def check_bind(bind: str, protected: bool) -> None:
+    """Refuse a workers bind that is not ``tcp://`` or, unless ``protected`` (CURVE or
+    explicitly allowed), one beyond loopback; raises :class:`InputError`."""
+    if not bind.startswith("tcp://"):
+        raise InputError(f"workers bind must be tcp://HOST:PORT, got {bind!r}")
+    host = bind[len("tcp://"):].rpartition(":")[0]
+    if host not in LOOPBACK and not protected:
+        raise InputError(f"binding {bind} lets any host join as a render worker: give "
+                         "CURVE keys (--keys) or allow it explicitly")
+
+
+@dataclass(frozen=True)
+class WorkerInfo:
+    """A connected worker: ``id`` (hex routing id), ``pid``, ``name``, ``remote`` (came in
+    over ``tcp://``), ``job`` (the job id it renders, or None)."""
+
+    id: str
+    pid: int
+    name: str
+    remote: bool
+    job: int | None
+
+

@@ -53,7 +53,8 @@ from lodsprite.distributed.protocol import LoadArgs, ProtocolError
 
 log = logging.getLogger("lodsprite.pool")
 
-__all__ = ["BACKOFF_MAX_S", "Worker", "resolve_load", "run_local_worker"]
+__all__ = ["BACKOFF_MAX_S", "Worker", "end_processes", "resolve_load", "run_local_worker",
+           "spawn_workers"]
 
 BACKOFF_MAX_S = 4.0
 MEMORY_FRACTION = 0.8  # as the LOD server: a scene may take this share of MemAvailable
@@ -274,3 +275,32 @@ def run_local_worker(connect: str, data_dir: str | None, cache: int, parent_pid:
     """Entry point of a local worker process (:meth:`Broker.spawn_local`)."""
     logging.basicConfig(level=logging.WARNING, format="lodsprite worker: %(message)s")
     Worker(connect, None, data_dir, cache, f"local-{os.getpid()}", parent_pid).run()
+
+
+def spawn_workers(n: int, connect: str, data_dir: str | None, cache: int) -> list:
+    """Start ``n`` local worker processes (multiprocessing spawn: a fresh interpreter,
+    its own GL context) connecting to ``connect``; their ``Process`` objects."""
+    import multiprocessing as mp
+
+    ctx = mp.get_context("spawn")
+    procs = []
+    for _ in range(n):
+        p = ctx.Process(target=run_local_worker, daemon=True, name="lodsprite-worker",
+                        args=(connect, data_dir, cache, os.getpid()))
+        p.start()
+        procs.append(p)
+    return procs
+
+
+def end_processes(procs: list) -> None:
+    """Wait for local workers to exit (they were told), then terminate, then kill."""
+    deadline = time.monotonic() + 2.0
+    for p in procs:
+        p.join(timeout=max(0.0, deadline - time.monotonic()))
+    for p in procs:
+        if p.is_alive():
+            p.terminate()
+            p.join(timeout=1.0)
+        if p.is_alive():
+            p.kill()
+            p.join(timeout=1.0)

@@ -112,10 +112,12 @@ class Hub:
         return len(self.pool.workers())
 
     def summary(self) -> dict:
-        """Server-wide figures: sessions, workers, jobs in flight, and each session's
-        keyframes sent and dropped."""
+        """Server-wide figures: sessions, workers, jobs in flight, the pool's counts
+        (Broker.stats: jobs, results, failed, requeued, dead workers, ...) and each
+        session's keyframes sent and dropped."""
+        pool_stats = getattr(self.pool, "stats", None)
         return {"sessions": len(self.sessions), "workers": self.workers_count(),
-                "inflight": len(self.jobs),
+                "inflight": len(self.jobs), "pool": pool_stats() if pool_stats else {},
                 "per_session": [{"session": s.id, "keyframes_sent": s.counts["keyframes_sent"],
                                  "keyframes_dropped": s.counts["keyframes_dropped"],
                                  "requests": s.counts["requests"]}
@@ -138,6 +140,8 @@ class Hub:
             parts = self._scenes.get(key)
             if parts is None:
                 async with self._builds:  # one scene built at a time
+                    if session.closed or self._generation.get(session.id) != gen:
+                        return  # superseded while waiting: build nothing for it
                     parts = self._scenes.get(key) or await asyncio.to_thread(
                         build_scene, resolved, self.codec)
                 self._scenes[key] = parts
@@ -202,9 +206,14 @@ class Hub:
 
     def _submit(self, s: Session, p: Pending) -> None:
         job = next(self._ids)
+        try:
+            self.pool.submit(Job(job, s.id, s.named, p.viewpoint, p.t))
+        except LodspriteError as exc:  # the pool refused the job: the page hears why
+            s.counts["failed"] += 1
+            s.reply(p.seq, False, f"request: {exc}")
+            return
         s.inflight[job] = p
         self.jobs[job] = (s, p, time.monotonic())
-        self.pool.submit(Job(job, s.id, s.named, p.viewpoint, p.t))
 
     def drain(self) -> None:
         """Take the pool's results to their sessions; never raises."""
