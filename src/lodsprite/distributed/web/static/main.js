@@ -8,7 +8,8 @@
 // jacksboro), path (a built-in path: chen1999, swan2002, flyover..., played one viewpoint
 // a frame, then held), frames (the path's viewpoints), size (WxH keyframe and canvas
 // pixels; 512x512), lod (coarse quads a side; 16), grid (working grid), epsilon (pixels;
-// 1).  For tests and tools: window.lodsprite.ready (a Promise: scene loaded),
+// 1), visibility (the load's rule: coarse, the default, or fragment/triangle: the full
+// z-buffer).  For tests and tools: window.lodsprite.ready (a Promise: scene loaded),
 // .finished (a Promise: the path played and the held view's keyframe shown), .stats(),
 // .pixels(), .viewpoint(), .serverStats() (a Promise: the `stats` op's reply data).
 
@@ -25,6 +26,7 @@ const opts = {
   token: q.get('token') || '', terrain: q.get('terrain') || 'jacksboro', path: q.get('path'),
   frames: int('frames', undefined), lod: int('lod', 16), grid: int('grid', undefined),
   epsilon: q.has('epsilon') ? parseFloat(q.get('epsilon')) : 1.0,
+  visibility: q.get('visibility') || undefined,
 };
 const RESTING_MS = 250;   // no input this long: the viewer rests (one exact keyframe)
 const VIEWPOINT_MS = 33;  // viewpoint samples to the server at most this often
@@ -77,7 +79,10 @@ const finished = new Promise((r) => { finishedResolve = r; });
 
 async function start() {
   await new Promise((resolve, reject) => { ws.onopen = resolve; ws.onerror = () => reject(new Error('no WebSocket')); });
-  const args = { terrain: opts.terrain, size: [width, height], lod: opts.lod, epsilon: opts.epsilon, grid: opts.grid };
+  const args = {
+    terrain: opts.terrain, size: [width, height], lod: opts.lod, epsilon: opts.epsilon, grid: opts.grid,
+    visibility: opts.visibility,
+  };
   const reply = await call('load', args);
   if (!reply.ok) throw new Error(reply.error);
   const scene = await sceneArrived;
