@@ -55,28 +55,8 @@ QUERY = (f"terrain={TERRAIN['terrain']}&grid=64&lod=8&size={SIZE}x{SIZE}&path=ch
 RMSE_TOL = 4.0
 
 
-@pytest.fixture(scope="module")
-def server():
-    from lodsprite.distributed.run import free_ports
-
-    proc = subprocess.Popen(
-        [sys.executable, "-c", "from lodsprite.cli import main; main()", "serve",
-         "--web", "127.0.0.1:0", "--bind", f"127.0.0.1:{free_ports()}", "--token", TOKEN,
-         "--rate", "100000", "--renderers", "1", "--codec", "zlib"],  # the page inflates
-        stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
-    lines: queue.Queue = queue.Queue()
-    threading.Thread(target=lambda: [lines.put(x) for x in proc.stdout], daemon=True).start()
-    try:
-        line = lines.get(timeout=DEADLINE_S)
-        assert line.startswith("web page: http://127.0.0.1:"), line
-        yield {"port": int(line.split(":")[3].split("/")[0]), "proc": proc}
-    finally:
-        proc.terminate()
-        proc.wait(timeout=15)
-
-
-@pytest.fixture(scope="module")
-def browser():
+def start_browser():
+    """Headless chromium through the system chromedriver; (driver, profile folder)."""
     from selenium.webdriver.chrome.service import Service
 
     options = webdriver.ChromeOptions()
@@ -90,11 +70,44 @@ def browser():
     driver = webdriver.Chrome(service=Service(executable_path=str(CHROMEDRIVER)),
                               options=options)
     driver.set_script_timeout(DEADLINE_S)
+    return driver, profile
+
+
+@pytest.fixture(scope="module")
+def stack():
+    """The server (a subprocess) and the browser, the browser started while the server
+    boots; ({port, proc}, driver)."""
+    from lodsprite.distributed.run import free_ports
+
+    proc = subprocess.Popen(
+        [sys.executable, "-c", "from lodsprite.cli import main; main()", "serve",
+         "--web", "127.0.0.1:0", "--bind", f"127.0.0.1:{free_ports()}", "--token", TOKEN,
+         "--rate", "100000", "--renderers", "1", "--codec", "zlib"],  # the page inflates
+        stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    lines: queue.Queue = queue.Queue()
+    threading.Thread(target=lambda: [lines.put(x) for x in proc.stdout], daemon=True).start()
+    driver = profile = None
     try:
-        yield driver
+        driver, profile = start_browser()
+        line = lines.get(timeout=DEADLINE_S)
+        assert line.startswith("web page: http://127.0.0.1:"), line
+        yield {"port": int(line.split(":")[3].split("/")[0]), "proc": proc}, driver
     finally:
-        driver.quit()
-        shutil.rmtree(profile, ignore_errors=True)
+        if driver is not None:
+            driver.quit()
+            shutil.rmtree(profile, ignore_errors=True)
+        proc.terminate()
+        proc.wait(timeout=15)
+
+
+@pytest.fixture(scope="module")
+def server(stack):
+    return stack[0]
+
+
+@pytest.fixture(scope="module")
+def browser(stack):
+    return stack[1]
 
 
 def wait_for(browser, script: str, deadline_s: float = DEADLINE_S):
@@ -197,6 +210,17 @@ def test_the_page_flies_with_the_keyboard(server, browser):
     assert session["viewpoints"] >= 1 and session["requests"] >= 2, session
     hud = browser.find_element("id", "hud").text
     assert "fps" in hud and "keyframes" in hud and "latency" in hud, hud
+
+
+def test_a_page_asking_for_an_unknown_terrain_says_why(server, browser):
+    browser.get(page_url(server, query="terrain=no-such-terrain.npy&size=32x32"))
+    error = browser.execute_async_script("""
+        const done = arguments[arguments.length - 1];
+        const wait = () => window.lodsprite ? window.lodsprite.ready.then(
+            () => done(''), (e) => done(String(e))) : setTimeout(wait, 20);
+        wait();""")
+    assert "load" in error and "no-such-terrain" in error, error
+    assert "failed" in browser.find_element("id", "hud").text
 
 
 def test_after_a_live_fuzz_a_page_still_plays(server, browser):

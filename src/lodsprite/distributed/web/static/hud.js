@@ -3,10 +3,11 @@
 
 export class Hud {
   constructor(el) { this.el = el; this.last = 0; }
-  // Update at most four times a second from stats() (see main.js).
-  update(now, s, state) {
+  // Update at most four times a second from stats() (see main.js), called only then.
+  update(now, stats, state) {
     if (now - this.last < 250) return;
     this.last = now;
+    const s = stats();
     const f = (x, d = 1) => (x === null || x === undefined || !Number.isFinite(x) ? '–' : x.toFixed(d));
     const fps = s.median_ms ? 1000 / s.median_ms : null;
     this.el.textContent = [

@@ -145,7 +145,7 @@ function frame(now) {
   if (path && pathIndex === path.length && keyEye && norm(sub(keyEye, vp.o)) <= 1e-6 * (1 + norm(vp.o))) {
     finishedResolve(stats.frames);
   }
-  hud.update(now, api.stats(), state);
+  hud.update(now, api.stats, state);
   requestAnimationFrame(frame);
 }
 
@@ -164,5 +164,5 @@ const api = {
   serverStats: () => call('stats').then((r) => r.data),
   finished,
 };
-api.ready = start().then(() => true, (e) => { state = `failed: ${e.message}`; hud.update(Infinity, api.stats(), state); throw e; });
+api.ready = start().then(() => true, (e) => { state = `failed: ${e.message}`; hud.update(Infinity, api.stats, state); throw e; });
 window.lodsprite = api;
