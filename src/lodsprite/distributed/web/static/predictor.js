@@ -13,8 +13,8 @@
 //
 // The linear predictor: the eye and the axes extrapolated linearly from the last two
 // samples (the axes re-orthonormalised).  A request goes out for the viewpoint the viewer
-// will be at one measured keyframe latency ahead, when the shown keyframe's error there
-// reaches epsilon/2, and never with a request in flight; when the viewer rests, one more
+// will be at one measured keyframe latency ahead (at most 1 s), when the shown keyframe's
+// error there reaches epsilon/2, and never with a request in flight; when the viewer rests, one more
 // request at the resting viewpoint makes the shown keyframe exact.
 
 import { add, clip, cross, dot, mul, norm, scale, sub, unit, viewMatrix, perspective } from './camera.js';
@@ -54,6 +54,7 @@ export class ErrorMetric {
   }
 }
 
+const MAX_AHEAD_S = 1;  // look at most this far ahead (s): a line strays from a curve
 const LOST_S = 5;  // a request unanswered this long (seconds) is given up
 
 function orthonormal(x, y) {  // axes from approximate x, y (Gram-Schmidt; z = x cross y)
@@ -94,7 +95,7 @@ export class Predictor {
       return now;
     }
     this.settled = false;
-    const ahead = this.predict(t + this.latency);
+    const ahead = this.predict(t + Math.min(this.latency, MAX_AHEAD_S));
     return this.errorPx(metric, keyEye, ahead) >= 0.5 * this.epsilon ? ahead : null;
   }
   sent(t, vp) { this.inflight = { t, vp }; }
