@@ -137,10 +137,12 @@ async def client(i: int, url: str, token: str, load: dict, path: list[Viewpoint]
         page = await connect(http, url, token)
         scene = await page.load(load)
         metric, pred = ErrorMetric(scene), Predictor(scene)
-        phase = (i * len(path)) // 7
+        phase = (i * len(path)) // 7 % len(path)
         # Warm-up, untimed: the renderers load the scene (each keeps it) before the clock.
-        first = await page.keyframe(path[phase].to_dict(), 0.0)
-        ready.release()
+        try:
+            first = await asyncio.wait_for(page.keyframe(path[phase].to_dict(), 0.0), 300.0)
+        finally:
+            ready.release()  # also on failure: gather() then reports it
         await start.wait()
         clock0 = time.monotonic()
         state = {"eye": first.viewpoint.o, "keyframes": 0, "latencies": []}
@@ -203,6 +205,16 @@ def start_server(renderers: int, token: str, extra: list[str] = ()) -> tuple:
     raise SystemExit("the server did not start within 60 s")
 
 
+def stop(proc: subprocess.Popen) -> None:
+    """SIGTERM, then SIGKILL after 30 s (the server waits for open WebSockets)."""
+    proc.terminate()
+    try:
+        proc.wait(timeout=30)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait(timeout=10)
+
+
 def tree_cpu_s(pid: int) -> float:
     """User + system CPU seconds of ``pid`` and its live descendants (psutil, else
     /proc of the process itself and its reaped children)."""
@@ -244,8 +256,7 @@ async def run(args) -> dict:
         got = await asyncio.gather(*tasks)
         cpu = tree_cpu_s(proc.pid) - cpu0
     finally:
-        proc.terminate()
-        proc.wait(timeout=20)
+        stop(proc)
     lat = np.concatenate([g["latencies_ms"] for g in got]) if got else np.zeros(0)
     err = np.concatenate([g["errors_px"] for g in got])
     shown = err[np.isfinite(err)]
@@ -257,7 +268,7 @@ async def run(args) -> dict:
             "latency_ms_p50": float(np.percentile(lat, 50)) if len(lat) else None,
             "latency_ms_p99": float(np.percentile(lat, 99)) if len(lat) else None,
             "error_px_mean": float(shown.mean()) if len(shown) else None,
-            "frames_without_keyframe": int((~np.isfinite(err)).sum()),
+            "frames_without_estimate": int((~np.isfinite(err)).sum()),
             "server_cpu_s": cpu}
 
 
