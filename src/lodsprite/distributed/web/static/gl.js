@@ -81,7 +81,9 @@ function texture(gl, unit, internal, format, type, w, h, data, filter, mipmaps =
 }
 
 // The coarse mesh ((n+1)^2 vertices: row i at y = origin_y + i * spacing_y, column j at
-// x = origin_x + j * spacing, z from `heights`) and its texture coordinates (row 0 south).
+// x = origin_x + j * spacing, z from `heights`) and its texture coordinates (row 0 south);
+// each square split along its north-west to south-east diagonal, as the server's coarse
+// level (lodsprite.terrain.proxy.level_mesh), so the coarse z-buffer test agrees with it.
 export function coarseMesh(scene, heights) {
   const n = scene.coarse, m = n + 1;
   const pos = new Float32Array(3 * m * m), uv = new Float32Array(2 * m * m);
@@ -96,7 +98,7 @@ export function coarseMesh(scene, heights) {
   let at = 0;
   for (let i = 0; i < n; i++) for (let j = 0; j < n; j++) {
     const a = i * m + j, b = a + 1, c = a + m, d = c + 1;
-    index.set([a, b, d, a, d, c], at); at += 6;
+    index.set([c, a, b, c, b, d], at); at += 6;  // split nw-se, as lodsprite.terrain.proxy
   }
   return { pos, uv, index };
 }
