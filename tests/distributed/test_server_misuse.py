@@ -197,3 +197,9 @@ def test_a_sample_of_the_previous_holder_is_not_kept_after_a_new_holders_reset(s
     assert views.take(frames) is False
     assert views._last_t is None and not views.have.is_set()
     assert server.stats.ignored == {"viewpoint_not_holder": 1}
+
+
+def test_the_web_pages_path_op_is_refused_by_the_zeromq_server(server):
+    reply = control(server, "path", {"spec": "chen1999", "frames": 5})
+    assert reply["ok"] is False and "web page" in reply["error"]
+    assert server.stats.refused["path"] == 1

@@ -44,6 +44,34 @@ def serve(
     allow_shutdown: Annotated[bool, typer.Option(
         "--allow-shutdown", help="carry out a `shutdown` message from the client holding "
                                  "the server (refused otherwise)")] = False,
+    web: Annotated[str | None, typer.Option(
+        "--web", help="[HOST:]PORT: also serve the web page and its WebSocket there "
+                      "(host 127.0.0.1 unless given; PORT 0: any free port)")] = None,
+    renderers: Annotated[int, typer.Option(
+        "--renderers", help="renderer processes for web sessions", min=1, max=64)] = 1,
+    token: Annotated[str | None, typer.Option(
+        "--token", help="the web page's access token (default: a random one, printed in "
+                        "the page's URL)")] = None,
+    cert: Annotated[Path | None, typer.Option(
+        "--cert", help="TLS certificate (PEM) for the web page: serve https and wss")] = None,
+    key: Annotated[Path | None, typer.Option(
+        "--key", help="TLS private key (PEM) matching --cert")] = None,
+    session_jobs: Annotated[int, typer.Option(
+        "--session-jobs", help="keyframe renders in flight per web session", min=1,
+        max=16)] = 1,
+    session_queue: Annotated[int, typer.Option(
+        "--session-queue", help="keyframes queued per web session; when full the oldest "
+                                "is dropped", min=1, max=64)] = 2,
+    rate: Annotated[float, typer.Option(
+        "--rate", help="messages a second a web session may send; excess dropped",
+        min=1.0, max=100000.0)] = 240.0,
+    workers_bind: Annotated[str | None, typer.Option(
+        "--workers-bind", help="tcp://HOST:PORT where render workers of other hosts join "
+                               "the web sessions' pool (`lodsprite render-worker`; CURVE "
+                               "with --keys)")] = None,
+    public_host: Annotated[list[str] | None, typer.Option(
+        "--public-host", help="a name the page is served under by a reverse proxy "
+                              "(accepted in Host and Origin); repeat for several")] = None,
 ) -> None:
     """The LOD server: renders keyframes for LOD clients; driven entirely by messages."""
     import logging
@@ -52,13 +80,68 @@ def serve(
     from lodsprite.distributed.server import LodServer
 
     server_keys = ServerKeys.load(keys) if keys is not None else None
+    config = None
+    if web is not None:  # every web option checked before anything starts
+        config = _web_config(web, allow_remote, token, data, renderers, codec, cert, key,
+                             (session_jobs, session_queue, rate), public_host)
+        config.workers_bind, config.worker_keys = workers_bind, server_keys
     server = LodServer(bind, predictor, codec, server_keys, data_dir=data,
                        allow_remote=allow_remote, allow_shutdown=allow_shutdown)
     logging.basicConfig(level=logging.INFO, format="lodsprite serve: %(message)s")
     if server_keys is None and allow_remote:
         logging.warning("serving beyond loopback without --keys: anyone who can reach "
                         "the port can drive this server")
-    server.run()
+    if config is None:
+        server.run()
+    else:
+        _serve_both(server, config)
+
+
+def _web_config(web, allow_remote, token, data, renderers, codec, cert, key, caps,
+                public_host):
+    """The web server's configuration from ``serve``'s options (raises InputError)."""
+    from lodsprite.distributed.datasets import Datasets
+    from lodsprite.distributed.web.security import make_token, parse_web_address, tls_context
+    from lodsprite.distributed.web.server import WebConfig
+    from lodsprite.distributed.web.sessions import Caps
+
+    host, port = parse_web_address(web, allow_remote)
+    Datasets(data)  # a missing data folder: one line before anything starts
+    return WebConfig(host, port, make_token(token), data, renderers, Caps(*caps), codec,
+                     tls_context(cert, key), tuple(public_host or ()),
+                     allow_remote=allow_remote)
+
+
+def _say_url(url: str) -> None:
+    out.print(f"web page: {url}", soft_wrap=True, highlight=False)
+    out.file.flush()  # a script reading our stdout through a pipe waits for this line
+
+
+def _serve_both(server, config) -> None:
+    """The ZeroMQ server on a thread, the web server on this one, until a signal; a
+    ZeroMQ server that cannot start (its ports taken) stops both, with its reason."""
+    import threading
+
+    from lodsprite.distributed.web.server import serve_web
+    from lodsprite.errors import LodspriteError
+
+    failed: list[LodspriteError] = []
+
+    def run_zmq() -> None:
+        try:
+            server.run()
+        except LodspriteError as exc:
+            failed.append(exc)  # the web server's loop stops on it
+
+    zmq_thread = threading.Thread(target=run_zmq, daemon=True, name="zmq-server")
+    zmq_thread.start()
+    try:
+        serve_web(config, _say_url, lambda: bool(failed))
+    finally:
+        server.shutdown()
+        zmq_thread.join(timeout=5.0)
+    if failed:
+        raise failed[0]
 
 
 def keys_command(

@@ -85,6 +85,9 @@ def valid_header(kind: str, rng: np.random.Generator, client: str = "") -> dict:
         if rng.random() < 0.5:
             h["shown"] = {"eye": [0.0, 0.0, 100.0], "slot": int(rng.integers(0, 3))}
         return h
+    if kind == "request":
+        return {"v": PROTOCOL_VERSION, "kind": "request", "seq": seq,
+                "t": float(rng.random()), "viewpoint": _viewpoint(rng), "client": client}
     return {"v": PROTOCOL_VERSION, "kind": "ack", "seq": seq, "t": float(rng.random())}
 
 
@@ -116,7 +119,8 @@ def _pack(value) -> bytes:
 
 def hostile_frames(kind: str, rng: np.random.Generator, max_bytes: int = MAX_CONTROL_BYTES
                    ) -> list[bytes]:
-    """One hostile multipart message for socket ``kind`` (control, viewpoint, keyframe)."""
+    """One hostile multipart message for socket ``kind`` (control, viewpoint, keyframe, or
+    web: the parts of one web-page WebSocket message, :mod:`lodsprite.distributed.web`)."""
     sort = int(rng.integers(0, 10))
     if sort == 0:
         return [rng.bytes(int(rng.integers(0, 200)))]
@@ -125,16 +129,16 @@ def hostile_frames(kind: str, rng: np.random.Generator, max_bytes: int = MAX_CON
     if sort == 2:  # deep nesting
         return [b"\x91" * int(rng.integers(100, 5000)) + b"\xc0"]
     if sort == 3:  # a valid header of another socket's kind, or another version
-        other = valid_header(str(rng.choice(["control", "viewpoint", "ack"])), rng)
+        other = valid_header(str(rng.choice(["control", "viewpoint", "ack", "request"])), rng)
         if rng.random() < 0.5:
-            other["v"] = int(rng.choice([0, 1, 2, 4, -1]))
+            other["v"] = int(rng.choice([0, PROTOCOL_VERSION - 1, PROTOCOL_VERSION + 1, -1]))
         return [_pack(other)]
     if sort == 4:  # extra frames
-        return [_pack(valid_header(_kind(kind), rng)),
+        return [_pack(valid_header(_kind(kind, rng), rng)),
                 *[rng.bytes(int(rng.integers(0, 100))) for _ in range(int(rng.integers(1, 4)))]]
     if sort == 5 and rng.random() < 0.05:  # over the socket's size cap
         return [b"\x00" * (max_bytes + 1)]
-    header = valid_header(_kind(kind), rng)
+    header = valid_header(_kind(kind, rng), rng)
     for _ in range(int(rng.integers(1, 4))):
         header = mutate(header, rng)
     try:
@@ -143,7 +147,9 @@ def hostile_frames(kind: str, rng: np.random.Generator, max_bytes: int = MAX_CON
         return [rng.bytes(16)]
 
 
-def _kind(socket: str) -> str:
+def _kind(socket: str, rng: np.random.Generator) -> str:
+    if socket == "web":  # a web page's one WebSocket carries every page-to-server kind
+        return _pick(rng, ["control", "viewpoint", "ack", "request"])
     return {"control": "control", "viewpoint": "viewpoint", "keyframe": "ack"}[socket]
 
 

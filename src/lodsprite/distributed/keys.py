@@ -67,8 +67,15 @@ class ClientKeys:
 
     @classmethod
     def load(cls, keys_dir: Path) -> ClientKeys:
-        public, secret = _load(Path(keys_dir) / "client.key_secret", True)
-        server_public, _ = _load(Path(keys_dir) / "server.key", False)
+        return cls.from_files(Path(keys_dir) / "client.key_secret",
+                              Path(keys_dir) / "server.key")
+
+    @classmethod
+    def from_files(cls, secret_file: Path, server_file: Path) -> ClientKeys:
+        """The pair in ``secret_file`` (a ``.key_secret``) and the server's public key in
+        ``server_file``; raises :class:`InputError` naming a missing or unreadable file."""
+        public, secret = _load(Path(secret_file), True)
+        server_public, _ = _load(Path(server_file), False)
         return cls(public, secret, server_public)
 
     def apply(self, sock: zmq.Socket) -> None:

@@ -12,9 +12,10 @@ from msgspec import Meta, Struct, field
 from lodsprite.distributed.pacing import DEFAULT_PACE
 from lodsprite.errors import LodspriteError
 
-PROTOCOL_VERSION = 3
-KINDS = ("control", "reply", "viewpoint", "keyframe", "ack")
-CONTROL_OPS = ("start", "stop", "load", "stats", "shutdown", "ping", "release")
+PROTOCOL_VERSION = 4
+"""4: the web wire's ``request`` and ``scene`` kinds (:mod:`lodsprite.distributed.web`)."""
+KINDS = ("control", "reply", "viewpoint", "keyframe", "ack", "request", "scene")
+CONTROL_OPS = ("start", "stop", "load", "stats", "shutdown", "ping", "release", "path")
 CODECS = ("raw", "zlib")
 ZBUFFERS = ("full", "coarse")
 VISIBILITY = ("triangle", "fragment", "coarse")  # lodsprite.gl.sprite.VISIBILITY_MODES
@@ -36,10 +37,16 @@ MAX_TIME = 1e12
 MAX_CONTROL_BYTES = 64 * 1024
 MAX_VIEWPOINT_BYTES = 4 * 1024
 MAX_ACK_BYTES = 4 * 1024
+MAX_REQUEST_BYTES = 4 * 1024
 MAX_REPLY_BYTES = 64 * 1024 * 1024  # a stats reply: at most 8 x 10,000 timings, under 1 MiB
 MAX_KEYFRAME_FRAME_BYTES = (MAX_IMAGE_SIDE**2 * 4 * 102) // 100 + 65536
 """Largest frame of a keyframe message: the depth image at the largest size (4 bytes a
 pixel), plus zlib's worst-case expansion of incompressible data and the header."""
+MAX_SCENE_COARSE = 2048
+"""Largest coarse level (quads a side) a ``scene`` message carries."""
+MAX_SCENE_BYTES = (MAX_IMAGE_SIDE**2 * 3 + (MAX_SCENE_COARSE + 1) ** 2 * 4) * 102 // 100 + 65536
+"""Largest ``scene`` message: the texture at the largest side (RGB) and the coarse heights,
+with zlib's worst-case expansion and the header."""
 
 
 class ProtocolError(LodspriteError, ValueError):
@@ -107,6 +114,21 @@ class LoadArgs(Struct, forbid_unknown_fields=True, omit_defaults=True):
             raise ValueError(f"slot {self.slot} is not below slots {self.slots}")
 
 
+MAX_PATH_FRAMES = 20000
+"""Most viewpoints a ``path`` reply carries."""
+PATH_SPEC = r"^(?:chen1999|swan2002|(?:flyover|patrol|bank)(?::[0-9.]{1,12}){0,3})$"
+"""The paths a web page may ask for: the built-in ones (never a file: a page names none)."""
+
+
+class PathArgs(Struct, forbid_unknown_fields=True):
+    """Arguments of ``path`` (web pages only): a built-in path ``spec``
+    (:func:`lodsprite.paths.get_path`) sampled at ``frames`` viewpoints (None: its own
+    default) over the session's loaded terrain."""
+
+    spec: Annotated[str, Meta(pattern=PATH_SPEC)] = "chen1999"
+    frames: Annotated[int, Meta(ge=2, le=MAX_PATH_FRAMES)] | None = None
+
+
 class NoArgs(Struct, forbid_unknown_fields=True):
     """Arguments of every op other than ``load``: none (an empty map)."""
 
@@ -166,7 +188,43 @@ class Ack(Message, tag="ack"):
     t: Time = 0.0
 
 
-ANY_MESSAGE = Control | Reply | ViewpointMessage | KeyframeMessage | Ack
-BUFFERS = {"control": 0, "reply": 0, "viewpoint": 0, "keyframe": 2, "ack": 0}
-OP_ARGS: dict[str, type[Struct]] = {op: LoadArgs if op == "load" else NoArgs
+class Request(Message, tag="request"):
+    """A web page asks for a keyframe at ``viewpoint`` (its predicted viewpoint at its
+    clock's ``t``, seconds); the keyframe comes back with this ``seq`` and ``t0 = t``."""
+
+    t: Time
+    viewpoint: WireViewpoint
+    client: ClientId = ""
+
+
+class SceneMessage(Message, tag="scene"):
+    """What a web page draws spriteframes from, after its ``load``: the coarse level
+    (``coarse`` quads a side) as heights ``(coarse+1, coarse+1) float32`` (world z,
+    metres; row i at ``y = origin[1] + i * spacing_y``, column j at ``x = origin[0] +
+    j * spacing``), the terrain texture ``(H, W, 3) uint8`` over the same extent (row 0
+    south), keyframe ``size`` (w, h) px, ``fov`` (vertical, degrees), a ``near``/``far``
+    covering the terrain, ``epsilon`` px, ``visibility`` (the z-buffer keyframes
+    carry) and ``relief`` (metres: the RMS height of the full-resolution square centres
+    above or below the coarse surface, what the page's error estimate needs of them)."""
+
+    coarse: Annotated[int, Meta(ge=1, le=MAX_SCENE_COARSE)]
+    origin: tuple[Coord, Coord]
+    spacing: Annotated[float, Meta(gt=0.0, le=MAX_COORD)]
+    spacing_y: Annotated[float, Meta(gt=0.0, le=MAX_COORD)]
+    size: tuple[Side, Side]
+    fov: Annotated[float, Meta(gt=0.0, lt=180.0)]
+    near: Annotated[float, Meta(gt=0.0, le=MAX_COORD)]
+    far: Annotated[float, Meta(gt=0.0, le=1e12)]
+    epsilon: Annotated[float, Meta(gt=0.0, le=10000.0)]
+    visibility: Literal[ZBUFFERS]  # type: ignore[valid-type]
+    heights: ImageSpec
+    texture: ImageSpec
+    relief: Annotated[float, Meta(ge=0.0, le=MAX_COORD)] = 0.0
+
+
+ANY_MESSAGE = (Control | Reply | ViewpointMessage | KeyframeMessage | Ack | Request
+               | SceneMessage)
+BUFFERS = {"control": 0, "reply": 0, "viewpoint": 0, "keyframe": 2, "ack": 0, "request": 0,
+           "scene": 2}
+OP_ARGS: dict[str, type[Struct]] = {op: {"load": LoadArgs, "path": PathArgs}.get(op, NoArgs)
                                      for op in CONTROL_OPS}

@@ -13,10 +13,11 @@ version, :data:`PROTOCOL_VERSION`), ``kind`` and ``seq`` (a sequence number in
 kind       header fields (ranges)                            buffers
 =========  ================================================  ==================================
 control    ``op`` (start, stop, load, stats, shutdown,       none
-           ping, release), ``args`` (the op's arguments:
-           :class:`LoadArgs` for ``load``, an empty map
-           otherwise), ``client`` (the sender's id: 16-64
-           lowercase hex digits, or "" for anonymous)
+           ping, release, path), ``args`` (op arguments:
+           :class:`LoadArgs` for ``load``, ``PathArgs``
+           for ``path``, an empty map otherwise),
+           ``client`` (the sender's id: 16-64 lowercase
+           hex digits, or "" for anonymous)
 reply      ``ok`` (bool), ``error`` (str, <= 4096 chars),    none
            ``data`` (map)
 viewpoint  ``t`` (client clock, s, ``|t| <= 1e12``),         none
@@ -33,6 +34,10 @@ keyframe   ``t0`` (server clock when rendering began),       colour (H, W, 3) ui
            z-buffer, ``coarse``: the coarse level's),        or zlib compressed (``codec``);
            ``color``/``depth`` ({shape, dtype, codec})       zlib output bounded to the size
 ack        ``t`` (client clock)                              none
+request    ``t`` (page clock), ``viewpoint``, ``client``:    none
+           a web page asks for a keyframe there
+scene      a web page's coarse level and texture after       heights (n+1, n+1) float32;
+           its ``load`` (:class:`SceneMessage`)               texture (H, W, 3) uint8
 =========  ================================================  ==================================
 
 Buffers are not copied on the way through: :func:`decode_message` hands out memoryviews
@@ -70,6 +75,9 @@ from lodsprite.distributed.messages import (
     MAX_KEYFRAME_FRAME_BYTES,
     MAX_NAME,
     MAX_REPLY_BYTES,
+    MAX_REQUEST_BYTES,
+    MAX_SCENE_BYTES,
+    MAX_SCENE_COARSE,
     MAX_SLOTS,
     MAX_TIME,
     MAX_VIEWPOINT_BYTES,
@@ -89,8 +97,11 @@ from lodsprite.distributed.messages import (
     Message,
     Name,
     NoArgs,
+    PathArgs,
     ProtocolError,
     Reply,
+    Request,
+    SceneMessage,
     Seq,
     Shown,
     Side,
@@ -338,11 +349,13 @@ def decode_keyframe(frames: list) -> Keyframe:
 
 __all__ = ["ANY_MESSAGE", "Ack", "BUFFERS", "CODECS", "CONTROL_OPS", "ClientId", "Control",
            "Coord", "ImageSpec", "KINDS", "Keyframe", "KeyframeMessage", "LoadArgs",
-           "MAX_ACK_BYTES", "MAX_CONTROL_BYTES", "MAX_COORD", "MAX_GRID",
-           "MAX_IMAGE_SIDE", "MAX_KEYFRAME_FRAME_BYTES", "MAX_NAME", "MAX_REPLY_BYTES",
-           "MAX_SLOTS", "MAX_TIME", "MAX_VIEWPOINT_BYTES", "Matrix", "Message", "Name",
-           "NoArgs", "OP_ARGS", "PACE_NAMES", "PROTOCOL_VERSION", "ProtocolError",
-           "Reply", "Seq", "Shown", "Side", "Slot", "Time", "VISIBILITY", "Vec3",
-           "ViewpointMessage", "WireViewpoint", "ZBUFFERS", "check_load_args", "decode",
-           "decode_keyframe", "decode_message", "encode", "encode_keyframe", "inflate",
-           "shown_from_wire", "viewpoint_from_wire", "viewpoint_to_wire"]
+           "MAX_ACK_BYTES", "MAX_CONTROL_BYTES", "MAX_COORD", "MAX_GRID", "MAX_IMAGE_SIDE",
+           "MAX_KEYFRAME_FRAME_BYTES", "MAX_NAME", "MAX_REPLY_BYTES", "MAX_REQUEST_BYTES",
+           "MAX_SCENE_BYTES", "MAX_SCENE_COARSE", "MAX_SLOTS", "MAX_TIME", "MAX_VIEWPOINT_BYTES",
+           "Matrix", "Message", "Name", "NoArgs", "OP_ARGS", "PACE_NAMES", "PROTOCOL_VERSION",
+           "PathArgs", "ProtocolError", "Reply", "Request", "SceneMessage", "Seq", "Shown",
+           "Side", "Slot", "Time", "VISIBILITY", "Vec3", "ViewpointMessage", "WireViewpoint",
+           "ZBUFFERS",
+           "check_load_args", "decode", "decode_keyframe", "decode_message", "encode",
+           "encode_keyframe", "inflate", "shown_from_wire", "viewpoint_from_wire",
+           "viewpoint_to_wire"]

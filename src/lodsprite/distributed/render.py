@@ -12,6 +12,7 @@ from __future__ import annotations
 from lodsprite.camera import Viewpoint
 from lodsprite.distributed.pacing import KeyframePacer
 from lodsprite.distributed.protocol import Keyframe, LoadArgs, check_load_args
+from lodsprite.gl.context import GLContext
 from lodsprite.gl.paths import PathRenderer
 from lodsprite.gl.target import RenderTarget
 from lodsprite.scene import load_scene
@@ -77,13 +78,16 @@ def memory_available() -> int | None:
 class KeyframeRenderer:
     """Full-resolution renderer of one scene, created and used on one thread."""
 
-    def __init__(self, args: LoadArgs | dict) -> None:
+    def __init__(self, args: LoadArgs | dict, ctx: GLContext | None = None) -> None:
         """``args``: the ``load`` arguments, terrain and texture as loader specs (the
-        server resolves the names a client sends first, :mod:`.datasets`)."""
+        server resolves the names a client sends first, :mod:`.datasets`).  ``ctx``: a
+        context to share (None: its own).  Several renderers alive in one process must
+        share one: each standalone context is not made current again before drawing, so
+        with two the older would draw into the newer's (render workers keep a few)."""
         args = check_load_args(args)
         scene = load_scene(args.terrain, args.texture, args.grid, args.exaggeration)
         size = tuple(args.size)
-        self.paths = PathRenderer(scene, size, args.fov_y_deg)
+        self.paths = PathRenderer(scene, size, args.fov_y_deg, ctx)
         try:
             self.lod = args.lod
             self.border = args.border

@@ -317,6 +317,8 @@ class LodServer:
             if mine:
                 self._hold.drop()
                 self._running.clear()
+        elif op == "path":
+            return "path: only a web page's session (serve --web) sends a path"
         elif op == "shutdown":
             if not self.allow_shutdown:
                 return ("shutdown: not allowed (this server was started without "

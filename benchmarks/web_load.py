@@ -1,0 +1,296 @@
+"""Many web clients on one server: N simulated pages against ``lodsprite serve --web``
+with R renderer processes (issue 24, "16 clients on 2 renderers").
+
+The server runs as its own process (``lodsprite serve --web``), so its CPU time and its
+renderers' are measured apart from the clients' (psutil, over the process tree, from
+the first load to the end).  The N clients share this process's asyncio loop, each on
+its own WebSocket (aiohttp) and its own path (the built-in paths in turn, each started
+at its own phase), and each runs the page's logic (``static/predictor.js``, ported
+here): the linear predictor asks for the viewpoint one measured keyframe latency ahead
+once the shown keyframe's error there reaches ε/2, never with a request in flight; the
+error of the shown keyframe at every frame is the page's estimate (Chen et al. 1999,
+Eq. 1-2 at the coarse squares' centres raised by the scene's relief).
+
+Writes ``DIR/results.json``: ``keyframes_per_client`` (list), ``latency_ms_p50``,
+``latency_ms_p99`` (request sent to keyframe received), ``error_px_mean`` (over frames
+that showed a keyframe), ``server_cpu_s``, and the set-up.
+
+    python benchmarks/web_load.py --clients 16 --renderers 2 --out out/web_load
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import os
+import secrets
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from lodsprite.camera import Projection, Viewpoint
+from lodsprite.paths import get_path
+from lodsprite.scene import load_scene
+
+PATHS = ("chen1999", "swan2002", "flyover", "patrol", "bank")
+LOST_S = 5.0
+MAX_AHEAD_S = 1.0  # predictor.js: look at most this far ahead (s)
+
+
+class ErrorMetric:
+    """The page's error estimate (predictor.js ``ErrorMetric``), vectorised."""
+
+    def __init__(self, scene) -> None:
+        h, hdr = np.asarray(scene.heights, np.float64), scene.header
+        n = hdr.coarse
+        mid = 0.25 * (h[:-1, :-1] + h[:-1, 1:] + h[1:, :-1] + h[1:, 1:])
+        jj, ii = np.meshgrid(np.arange(n) + 0.5, np.arange(n) + 0.5)
+        self.base = np.stack([hdr.origin[0] + jj * hdr.spacing,
+                              hdr.origin[1] + ii * hdr.spacing_y, mid], -1).reshape(-1, 3)
+        self.relief = float(hdr.relief)
+
+    def error_px(self, key_eye, vp: Viewpoint, view_proj: np.ndarray, beta: float) -> float:
+        if key_eye is None:
+            return float("inf")
+        c = self.base + [0.0, 0.0, self.relief]
+        k = np.c_[c, np.ones(len(c))] @ view_proj.T
+        w = k[:, 3]
+        inside = (w > 0) & (np.abs(k[:, :3]) <= w[:, None]).all(1)
+        c, base_z = c[inside], self.base[inside, 2]
+        if not len(c):
+            return float("inf")
+        ray = c - key_eye
+        flat = np.abs(ray[:, 2]) <= 1e-9 * np.linalg.norm(ray, axis=1)
+        s = np.where(flat, -1.0 if self.relief else 1.0,
+                     (base_z - key_eye[2]) / np.where(flat, 1.0, ray[:, 2]))
+        hit = s > 0
+        if not hit.any():
+            return float("inf")
+        a = _unit(c[hit] - vp.o)
+        b = _unit(key_eye + ray[hit] * s[hit, None] - vp.o)
+        theta = np.arctan2(np.linalg.norm(np.cross(a, b), axis=1), (a * b).sum(1))
+        misses = int((~hit).sum())
+        total = (theta**2).sum() + misses * theta.max() ** 2
+        return float(np.sqrt(total / (hit.sum() + misses)) / beta)
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+class Predictor:
+    """The page's request logic (predictor.js ``Predictor``)."""
+
+    def __init__(self, scene) -> None:
+        hdr = scene.header
+        w, h = hdr.size
+        self.epsilon = hdr.epsilon
+        self.proj = Projection(hdr.fov, w / h, hdr.near, hdr.far).matrix()
+        self.beta = np.radians(hdr.fov) / h
+        self.samples: list[tuple[float, Viewpoint]] = []
+        self.latency = 0.1
+        self.inflight: float | None = None
+
+    def sample(self, t: float, vp: Viewpoint) -> None:
+        self.samples = [*self.samples[-1:], (t, vp)]
+
+    def predict(self, t: float) -> Viewpoint:
+        if len(self.samples) < 2 or self.samples[1][0] <= self.samples[0][0]:
+            return self.samples[-1][1]
+        (t0, a), (t1, b) = self.samples
+        f = (t - t1) / (t1 - t0)
+        x = _unit(b.x + (b.x - a.x) * f)
+        y = b.y + (b.y - a.y) * f
+        y = _unit(y - x * (y @ x))
+        return Viewpoint(x, y, np.cross(x, y), b.o + (b.o - a.o) * f)
+
+    def error_px(self, metric: ErrorMetric, key_eye, vp: Viewpoint) -> float:
+        return metric.error_px(key_eye, vp, self.proj @ vp.view_matrix(), self.beta)
+
+    def want(self, metric: ErrorMetric, key_eye, t: float) -> Viewpoint | None:
+        if self.inflight is not None and t - self.inflight > LOST_S:
+            self.inflight = None
+        if self.inflight is not None:
+            return None
+        ahead = self.predict(t + min(self.latency, MAX_AHEAD_S))
+        return ahead if self.error_px(metric, key_eye, ahead) >= 0.5 * self.epsilon else None
+
+    def arrived(self, t0: float, now: float) -> None:
+        if self.inflight == t0:
+            self.latency = 0.7 * self.latency + 0.3 * max(0.0, now - t0)
+            self.inflight = None
+
+
+async def client(i: int, url: str, token: str, load: dict, path: list[Viewpoint],
+                 fps: float, start: asyncio.Event, ready: asyncio.Semaphore) -> dict:
+    """One simulated page: loads, plays ``path`` at ``fps``; its keyframes, latencies and
+    per-frame errors."""
+    import aiohttp
+
+    from lodsprite.distributed.web.client import connect
+
+    async with aiohttp.ClientSession() as http:
+        page = await connect(http, url, token)
+        scene = await page.load(load)
+        metric, pred = ErrorMetric(scene), Predictor(scene)
+        phase = (i * len(path)) // 7 % len(path)
+        # Warm-up, untimed: the renderers load the scene (each keeps it) before the clock.
+        try:
+            first = await asyncio.wait_for(page.keyframe(path[phase].to_dict(), 0.0), 300.0)
+        finally:
+            ready.release()  # also on failure: gather() then reports it
+        await start.wait()
+        clock0 = time.monotonic()
+        state = {"eye": first.viewpoint.o, "keyframes": 0, "latencies": []}
+
+        async def reader() -> None:
+            while True:
+                header, parts = await page.recv()
+                if header.__struct_config__.tag != "keyframe":
+                    continue
+                now = time.monotonic() - clock0
+                state["keyframes"] += 1
+                state["latencies"].append(1000.0 * (now - header.t0))
+                state["eye"] = np.array(header.viewpoint.o, np.float64)
+                pred.arrived(header.t0, now)
+
+        task = asyncio.create_task(reader())
+        errors = []
+        try:
+            for k in range(len(path)):
+                await asyncio.sleep(max(0.0, clock0 + k / fps - time.monotonic()))
+                t = time.monotonic() - clock0
+                vp = path[(k + phase) % len(path)]
+                pred.sample(t, vp)
+                errors.append(pred.error_px(metric, state["eye"], vp))
+                want = pred.want(metric, state["eye"], t)
+                if want is not None:
+                    pred.inflight = t
+                    await page.request(want.to_dict(), t)
+        finally:
+            task.cancel()
+            await page.close()
+    return {"keyframes": state["keyframes"], "latencies_ms": state["latencies"],
+            "errors_px": errors}
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def start_server(renderers: int, token: str, extra: list[str] = ()) -> tuple:
+    """``lodsprite serve --web`` as a process; (Popen, page URL)."""
+    port, zport = free_port(), free_port()
+    cmd = [sys.executable, "-c", "from lodsprite.cli import main; main()", "serve",
+           "--bind", f"127.0.0.1:{zport}", "--web", f"127.0.0.1:{port}", "--renderers",
+           str(renderers), "--token", token, *extra]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    url = f"http://127.0.0.1:{port}"
+    deadline = time.monotonic() + 60.0
+    while time.monotonic() < deadline:
+        try:
+            socket.create_connection(("127.0.0.1", port), timeout=0.2).close()
+            return proc, url
+        except OSError:
+            if proc.poll() is not None:
+                raise SystemExit(f"the server exited with {proc.returncode}") from None
+            time.sleep(0.1)
+    proc.kill()
+    raise SystemExit("the server did not start within 60 s")
+
+
+def stop(proc: subprocess.Popen) -> None:
+    """SIGTERM, then SIGKILL after 30 s (the server waits for open WebSockets)."""
+    proc.terminate()
+    try:
+        proc.wait(timeout=30)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait(timeout=10)
+
+
+def tree_cpu_s(pid: int) -> float:
+    """User + system CPU seconds of ``pid`` and its live descendants (psutil, else
+    /proc of the process itself and its reaped children)."""
+    try:
+        import psutil
+    except ImportError:
+        with open(f"/proc/{pid}/stat") as f:
+            fields = f.read().rpartition(")")[2].split()
+        return sum(int(x) for x in fields[11:15]) / os.sysconf("SC_CLK_TCK")
+    p = psutil.Process(pid)
+    procs = [p, *p.children(recursive=True)]
+    total = 0.0
+    for q in procs:
+        try:
+            c = q.cpu_times()
+            total += c.user + c.system
+        except psutil.Error:
+            pass
+    return total
+
+
+async def run(args) -> dict:
+    token = secrets.token_urlsafe(16)
+    proc, url = start_server(args.renderers, token)
+    hf = load_scene(args.terrain, "terrain", None, 1.0).hf
+    paths = {spec: list(get_path(spec, hf, args.frames).viewpoints)
+             for spec in PATHS[:args.clients]}
+    load = {"terrain": args.terrain, "size": [args.size, args.size], "lod": args.lod,
+            "epsilon": args.epsilon}
+    try:
+        start, ready = asyncio.Event(), asyncio.Semaphore(0)
+        tasks = [asyncio.create_task(client(i, url, token, load, paths[PATHS[i % len(PATHS)]],
+                                            args.fps, start, ready))
+                 for i in range(args.clients)]
+        for _ in tasks:  # every page loaded and warmed up
+            await asyncio.wait_for(ready.acquire(), 600.0)
+        cpu0 = tree_cpu_s(proc.pid)
+        start.set()
+        got = await asyncio.gather(*tasks)
+        cpu = tree_cpu_s(proc.pid) - cpu0
+    finally:
+        stop(proc)
+    lat = np.concatenate([g["latencies_ms"] for g in got]) if got else np.zeros(0)
+    err = np.concatenate([g["errors_px"] for g in got])
+    shown = err[np.isfinite(err)]
+    per = [g["keyframes"] for g in got]
+    return {"clients": args.clients, "renderers": args.renderers, "terrain": args.terrain,
+            "size": args.size, "lod": args.lod, "epsilon": args.epsilon,
+            "frames": args.frames, "fps": args.fps, "keyframes_per_client": per,
+            "most_over_least": max(per) / max(1, min(per)),
+            "latency_ms_p50": float(np.percentile(lat, 50)) if len(lat) else None,
+            "latency_ms_p99": float(np.percentile(lat, 99)) if len(lat) else None,
+            "error_px_mean": float(shown.mean()) if len(shown) else None,
+            "frames_without_estimate": int((~np.isfinite(err)).sum()),
+            "server_cpu_s": cpu}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--clients", type=int, default=16)
+    ap.add_argument("--renderers", type=int, default=2)
+    ap.add_argument("--terrain", default="fractal:256")
+    ap.add_argument("--size", type=int, default=256, help="keyframe side, px")
+    ap.add_argument("--lod", type=int, default=32)
+    ap.add_argument("--epsilon", type=float, default=2.0)
+    ap.add_argument("--frames", type=int, default=300, help="frames of each path")
+    ap.add_argument("--fps", type=float, default=30.0)
+    ap.add_argument("--out", type=Path, default=Path("out/web_load"))
+    args = ap.parse_args()
+    results = asyncio.run(run(args))
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "results.json").write_text(json.dumps(results, indent=2) + "\n")
+    print(json.dumps({k: v for k, v in results.items() if k != "keyframes_per_client"}))
+    print("keyframes per client:", results["keyframes_per_client"])
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,399 @@
+"""The render pool's broker: the Paranoid Pirate queue of the ZeroMQ guide (Hintjens,
+*ZeroMQ*, ch. 4, "Robust Reliable Queuing") between a keyframe submitter (the web server)
+and render workers (:mod:`.worker`).
+
+A ROUTER socket, bound to a private ``ipc://`` endpoint for the workers this process
+starts (:meth:`Broker.spawn_local`) and, with ``bind``, to ``tcp://HOST:PORT`` for workers
+on other hosts (``lodsprite render-worker``; CURVE with ``curve`` keys: only workers whose
+public key file lies in the keys folder get in).  One thread owns the sockets:
+
+* a worker says ``ready``; the broker sends heartbeats to every worker each
+  :data:`~.jobs.HEARTBEAT_S`; a worker silent for more than :data:`~.jobs.LIVENESS_S` is
+  dead, and its job is re-queued at the front (a job whose workers died
+  :data:`MAX_TRIES` times fails instead: it may be what kills them);
+* jobs go one at a time to idle workers, first to one that has the job's scene loaded,
+  else to the one idle longest;
+* every message is received frame by frame with a cap (:mod:`..frames`), each frame under
+  ``zmq.MAXMSGSIZE``, and validated (:func:`~.jobs.decode_pool`, a keyframe by
+  :func:`~lodsprite.distributed.protocol.decode_keyframe`); a bad one is counted
+  (``stats()['rejected']``) and dropped, a result for a job the worker does not hold is
+  ignored, a worker that sends a bad keyframe is disconnected and its job re-queued.
+
+:meth:`Broker.submit` and :meth:`Broker.poll` never block; :meth:`Broker.fileno` is a
+pipe readable while results wait (``loop.add_reader``).  :meth:`Broker.close` terminates
+the local workers, which also exit by themselves when their parent process is gone.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import shutil
+import tempfile
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import zmq
+
+from lodsprite.distributed.frames import check_frames, recv_frames
+from lodsprite.distributed.keys import ServerKeys
+from lodsprite.distributed.pool.jobs import (
+    HEARTBEAT_S,
+    KEYFRAME_PARTS,
+    LIVENESS_S,
+    MAX_RESULT_FRAME_BYTES,
+    POOL_VERSION,
+    Disconnect,
+    Heartbeat,
+    Job,
+    JobMessage,
+    Ready,
+    Result,
+    ResultMessage,
+    WorkerInfo,
+    check_bind,
+    check_job,
+    decode_pool,
+    encode_pool,
+    job_key,
+)
+from lodsprite.distributed.pool.worker import end_processes, spawn_workers
+from lodsprite.distributed.protocol import CODECS, ProtocolError, decode_keyframe
+from lodsprite.errors import InputError, LodspriteError
+
+log = logging.getLogger("lodsprite.pool")
+
+__all__ = ["JOB_TIMEOUT_S", "MAX_TRIES", "Broker", "WorkerInfo"]
+
+JOB_TIMEOUT_S = 120.0
+MAX_TRIES = 3
+"""Workers a job may see die under it before it fails."""
+
+
+@dataclass
+class _Peer:
+    sock: int
+    ident: bytes
+    info: Ready
+    seen: float
+    job: Job | None = None
+    tries: int = 0
+    since: float = 0.0
+    idle_since: float = 0.0
+    scenes: deque = field(default_factory=lambda: deque(maxlen=4))
+
+
+class Broker:
+    """The pool's broker.  ``bind``: ``tcp://HOST:PORT`` for remote workers (None: local
+    workers only); a host beyond loopback needs ``curve`` or ``allow_remote``.
+    ``curve``: the server's CURVE keys (:class:`~lodsprite.distributed.keys.ServerKeys`).
+    ``codec``: keyframe images ``raw`` or ``zlib``.  ``data_dir``: the data folder local
+    workers serve (the web server's ``--data``)."""
+
+    def __init__(self, bind: str | None = None, curve: ServerKeys | None = None,
+                 codec: str = "raw", data_dir: Path | str | None = None,
+                 allow_remote: bool = False, job_timeout_s: float = JOB_TIMEOUT_S) -> None:
+        if codec not in CODECS:
+            raise InputError(f"unknown codec '{codec}': use {', '.join(CODECS)}")
+        if bind is not None:
+            check_bind(bind, curve is not None or allow_remote)
+        self.codec = codec
+        self.job_timeout_s = float(job_timeout_s)
+        self.data_dir = None if data_dir is None else str(Path(data_dir).resolve())
+        self.curve = curve
+        self._dir = tempfile.mkdtemp(prefix="lodsprite-pool-")
+        self.local_endpoint = f"ipc://{self._dir}/workers"
+        self.endpoints = [self.local_endpoint]
+        self._ctx = zmq.Context()
+        self._auth = None
+        self._socks: list[zmq.Socket] = []
+        self._procs: list = []
+        self._queue: deque[tuple[Job, int]] = deque()
+        self._inbox: deque[Job] = deque()
+        self._done: deque[Result] = deque()
+        self._peers: dict[tuple[int, bytes], _Peer] = {}
+        self._snapshot: list[WorkerInfo] = []
+        self._stats = dict.fromkeys(("jobs", "results", "failed", "requeued", "dead",
+                                     "rejected", "ignored"), 0)
+        self._stop = threading.Event()
+        self._wake_r, self._wake_w = os.pipe()
+        self._ready_r, self._ready_w = os.pipe()
+        for fd in (self._wake_r, self._wake_w, self._ready_r, self._ready_w):
+            os.set_blocking(fd, False)
+        self._closed = False
+        try:
+            self._open(bind)
+        except BaseException:
+            self.close()
+            raise
+        self._thread = threading.Thread(target=self._run, daemon=True, name="pool-broker")
+        self._thread.start()
+
+    def submit(self, job: Job) -> None:
+        """Queue ``job`` (never blocks; thread-safe)."""
+        self._inbox.append(check_job(job))
+        _signal(self._wake_w)
+
+    def poll(self) -> list[Result]:
+        """The results (successes and failures) that arrived since the last call; never
+        blocks."""
+        _drain(self._ready_r)
+        return [self._done.popleft() for _ in range(len(self._done))]
+
+    def fileno(self) -> int:
+        """A descriptor readable while :meth:`poll` has results (level-triggered)."""
+        return self._ready_r
+
+    def workers(self) -> list[WorkerInfo]:
+        """The workers connected now."""
+        return list(self._snapshot)
+
+    def stats(self) -> dict[str, int]:
+        """Counts: jobs submitted, results, failed, requeued, dead workers, rejected
+        messages, ignored (results for jobs a worker did not hold)."""
+        return dict(self._stats)
+
+    def wait_workers(self, n: int, timeout: float) -> bool:
+        """Wait until at least ``n`` workers are connected (at most ``timeout`` s)."""
+        deadline = time.monotonic() + timeout
+        while len(self._snapshot) < n and time.monotonic() < deadline:
+            time.sleep(0.02)
+        return len(self._snapshot) >= n
+
+    def spawn_local(self, n: int, cache: int = 2) -> list[int]:
+        """Start ``n`` worker processes (multiprocessing spawn, each with its own GL
+        context) connecting over the private ``ipc://`` endpoint; their pids."""
+        procs = spawn_workers(n, self.local_endpoint, self.data_dir, cache)
+        self._procs += procs
+        return [p.pid for p in procs]
+
+    def local_processes(self) -> list:
+        """The ``multiprocessing.Process`` objects :meth:`spawn_local` started."""
+        return list(self._procs)
+
+    def close(self) -> None:
+        """Stop the broker: tell the workers, stop the thread, terminate the local worker
+        processes (killed if they do not exit within 2 s), remove the ipc folder.
+        Idempotent."""
+        if self._closed:
+            return
+        self._closed = True
+        self._stop.set()
+        thread = getattr(self, "_thread", None)
+        if thread is not None:
+            _signal(self._wake_w)
+            thread.join(timeout=5.0)
+        for s in self._socks:
+            s.close(linger=0)
+        if self._auth is not None:
+            self._auth.stop()
+        self._ctx.term()
+        end_processes(self._procs)
+        for fd in (self._wake_r, self._wake_w, self._ready_r, self._ready_w):
+            os.close(fd)
+        shutil.rmtree(self._dir, ignore_errors=True)
+
+    def __enter__(self) -> Broker:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # ---------------------------------------------------------------------- sockets
+
+    def _open(self, bind: str | None) -> None:
+        self._socks.append(self._router(self.local_endpoint, None))
+        if bind is not None:
+            if self.curve is not None:
+                from zmq.auth.thread import ThreadAuthenticator
+
+                self._auth = ThreadAuthenticator(self._ctx)
+                self._auth.start()
+                self._auth.configure_curve(domain="*",
+                                           location=str(self.curve.clients_dir))
+            sock = self._router(bind, self.curve)
+            self._socks.append(sock)
+            self.endpoints.append(sock.getsockopt_string(zmq.LAST_ENDPOINT))
+
+    def _router(self, address: str, curve: ServerKeys | None) -> zmq.Socket:
+        sock = self._ctx.socket(zmq.ROUTER)
+        sock.setsockopt(zmq.LINGER, 0)
+        sock.setsockopt(zmq.MAXMSGSIZE, MAX_RESULT_FRAME_BYTES)
+        sock.setsockopt(zmq.ROUTER_MANDATORY, 1)  # a departed worker: an error, not a drop
+        if curve is not None:
+            curve.apply(sock)
+        try:
+            sock.bind(address)
+        except zmq.ZMQError as exc:
+            sock.close(linger=0)
+            raise LodspriteError(f"render pool: cannot bind {address}: {exc}") from exc
+        return sock
+
+    # ----------------------------------------------------------------------- thread
+
+    def _run(self) -> None:
+        poller = zmq.Poller()
+        for s in self._socks:
+            poller.register(s, zmq.POLLIN)
+        poller.register(self._wake_r, zmq.POLLIN)
+        beat = time.monotonic() + HEARTBEAT_S
+        while not self._stop.is_set():
+            try:
+                events = dict(poller.poll(self._timeout(beat) * 1000))
+                for i, s in enumerate(self._socks):
+                    if s in events:
+                        self._receive(i, s)
+                _drain(self._wake_r)
+                while self._inbox:
+                    self._queue.append((self._inbox.popleft(), 0))
+                    self._stats["jobs"] += 1
+                now = time.monotonic()
+                self._purge(now)
+                if now >= beat:
+                    self._broadcast(Heartbeat(POOL_VERSION))
+                    beat = now + HEARTBEAT_S
+                self._dispatch(now)
+                self._snapshot = [WorkerInfo(p.ident.hex(), p.info.pid, p.info.name,
+                                             p.sock > 0, p.job and p.job.job)
+                                  for p in self._peers.values()]
+            except Exception as exc:  # noqa: BLE001 - a bug must not stop the pool
+                log.error("render pool broker: internal error %r", exc)
+        self._broadcast(Disconnect(POOL_VERSION, "broker closing", stop=True))
+
+    def _timeout(self, beat: float) -> float:
+        """Seconds until the next heartbeat or the next worker's expiry."""
+        due = min((p.seen + LIVENESS_S for p in self._peers.values()), default=beat)
+        return max(0.0, min(beat, due + 1e-3) - time.monotonic())
+
+    def _receive(self, index: int, sock: zmq.Socket) -> None:
+        for _ in range(1000):  # bounded: heartbeats and dispatch still run under a flood
+            try:
+                frames = recv_frames(sock, 2 + KEYFRAME_PARTS)
+            except zmq.Again:
+                return
+            key = (index, bytes(frames[0]))
+            try:
+                check_frames(frames)
+                msg, parts = decode_pool(frames[1:])
+            except ProtocolError as exc:
+                self._reject(exc)
+                continue
+            self._handle(key, msg, parts)
+
+    def _reject(self, exc: Exception) -> None:
+        self._stats["rejected"] += 1
+        if self._stats["rejected"] == 1:  # said once: a flood must not flood the log
+            log.warning("render pool: a bad message from a worker: %s", exc)
+
+    def _handle(self, key: tuple[int, bytes], msg, parts: list) -> None:
+        now = time.monotonic()
+        peer = self._peers.get(key)
+        if isinstance(msg, Ready):
+            if peer is None and len(self._peers) < 4096:
+                self._peers[key] = _Peer(key[0], key[1], msg, now, idle_since=now)
+            return
+        if peer is None:  # a worker from before a restart, or a stranger: start over
+            if not isinstance(msg, Disconnect):
+                self._send(key, Disconnect(POOL_VERSION, "unknown worker: say ready"))
+            return
+        peer.seen = now
+        if isinstance(msg, Disconnect):
+            self._lose(key, "disconnected")
+        elif isinstance(msg, ResultMessage):
+            self._result(key, peer, msg, parts)
+
+    def _result(self, key, peer: _Peer, msg: ResultMessage, parts: list) -> None:
+        job = peer.job
+        if job is None or job.job != msg.job:
+            self._stats["ignored"] += 1
+            return
+        worker = key[1].hex()
+        if not msg.ok:
+            peer.job, peer.idle_since = None, time.monotonic()
+            self._finish(Result(job.job, job.session, False, msg.error, worker=worker))
+            return
+        data = [bytes(p) for p in parts]
+        try:
+            kf = decode_keyframe(data)
+            if kf.seq != job.job:
+                raise ProtocolError(f"keyframe seq {kf.seq} for job {job.job}")
+        except ProtocolError as exc:  # the worker is broken or hostile: the job goes on
+            self._reject(exc)
+            self._send(key, Disconnect(POOL_VERSION, "bad keyframe"))
+            self._lose(key, "sent a bad keyframe")
+            return
+        peer.job, peer.idle_since = None, time.monotonic()
+        peer.scenes.append(job_key(job.load))
+        self._finish(Result(job.job, job.session, True, "", data, worker))
+
+    def _finish(self, result: Result) -> None:
+        self._stats["results" if result.ok else "failed"] += 1
+        self._done.append(result)
+        _signal(self._ready_w)
+
+    def _purge(self, now: float) -> None:
+        for key in [k for k, p in self._peers.items() if now - p.seen > LIVENESS_S]:
+            self._lose(key, "silent")
+        for key in [k for k, p in self._peers.items()
+                    if p.job is not None and now - p.since > self.job_timeout_s]:
+            self._send(key, Disconnect(POOL_VERSION, "job timed out"))
+            self._lose(key, "timed out")
+
+    def _lose(self, key: tuple[int, bytes], why: str) -> None:
+        """Forget a worker; its job goes back to the front of the queue."""
+        peer = self._peers.pop(key, None)
+        if peer is None:
+            return
+        self._stats["dead"] += why != "disconnected"
+        log.info("render pool: worker %s (pid %d) %s", key[1].hex(), peer.info.pid, why)
+        if peer.job is not None:
+            tries = peer.tries + 1
+            if tries >= MAX_TRIES:
+                self._finish(Result(peer.job.job, peer.job.session, False,
+                                    f"{tries} workers were lost rendering this job"))
+            else:
+                self._stats["requeued"] += 1
+                self._queue.appendleft((peer.job, tries))
+
+    def _dispatch(self, now: float) -> None:
+        while self._queue:
+            idle = [p for p in self._peers.values() if p.job is None]
+            if not idle:
+                return
+            job, tries = self._queue.popleft()
+            scene = job_key(job.load)
+            warm = [p for p in idle if scene in p.scenes]
+            peer = min(warm or idle, key=lambda p: p.idle_since)
+            peer.job, peer.tries, peer.since = job, tries, now
+            # Unreachable: _send loses the peer and puts the job back in front.
+            self._send((peer.sock, peer.ident), JobMessage(POOL_VERSION, job, self.codec))
+
+    def _send(self, key: tuple[int, bytes], msg) -> bool:
+        try:
+            self._socks[key[0]].send_multipart([key[1], *encode_pool(msg)], zmq.NOBLOCK)
+            return True
+        except zmq.ZMQError:  # gone (ROUTER_MANDATORY) or not keeping up
+            self._lose(key, "unreachable")
+            return False
+
+    def _broadcast(self, msg) -> None:
+        for key in list(self._peers):
+            self._send(key, msg)
+
+
+def _signal(fd: int) -> None:
+    try:
+        os.write(fd, b"\x01")
+    except (BlockingIOError, OSError):
+        pass  # the pipe is full (a wake-up is pending anyway) or closed
+
+
+def _drain(fd: int) -> None:
+    try:
+        while os.read(fd, 4096):
+            pass
+    except (BlockingIOError, OSError):
+        pass

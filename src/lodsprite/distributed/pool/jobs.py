@@ -1,0 +1,204 @@
+"""The render pool's messages: what the broker and its workers say to each other.
+
+The pool follows the ZeroMQ guide's Paranoid Pirate pattern (Hintjens, *ZeroMQ*, ch. 4,
+"Robust Reliable Queuing"): a ROUTER broker, DEALER workers, a worker announces itself
+with ``ready``, both sides send a ``heartbeat`` every :data:`HEARTBEAT_S` and count the
+other dead after :data:`LIVENESS_S` of silence.  Every header is a :class:`msgspec.Struct`
+tagged by ``kind`` (msgpack), validated here by :func:`decode_pool` and nothing else:
+
+==========  ======================  ==============================================  =======
+kind        direction               fields                                          buffers
+==========  ======================  ==============================================  =======
+ready       worker -> broker        ``pid``, ``name``, ``cache`` (scenes it keeps)  0
+heartbeat   both                    none                                            0
+job         broker -> worker        ``job`` (:class:`Job`), ``codec``               0
+result      worker -> broker        ``job`` id, ``ok``, ``error``; on success the   0 or 3
+                                    keyframe message's frames
+                                    (:func:`~lodsprite.distributed.protocol.
+                                    encode_keyframe`)
+disconnect  both                    ``reason``                                      0
+==========  ======================  ==============================================  =======
+
+The public :class:`Job` and :class:`Result` are what :class:`~.broker.Broker` takes and
+gives (the web server's interface, issue 24's contract).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Annotated, Literal
+
+import msgspec
+from msgspec import Meta, Struct, field
+
+from lodsprite.distributed.messages import (
+    CODECS,
+    MAX_KEYFRAME_FRAME_BYTES,
+    LoadArgs,
+    ProtocolError,
+    Seq,
+    Time,
+    WireViewpoint,
+)
+from lodsprite.errors import InputError
+
+__all__ = ["HEARTBEAT_S", "LIVENESS_S", "MAX_JOB_BYTES", "MAX_RESULT_FRAME_BYTES",
+           "POOL_VERSION", "Disconnect", "Heartbeat", "Job", "JobMessage", "PoolMessage",
+           "Ready", "Result", "ResultMessage", "WorkerInfo", "check_bind", "check_job",
+           "decode_pool", "encode_pool", "job_key"]
+
+POOL_VERSION = 1
+HEARTBEAT_S = 0.25
+"""Seconds between heartbeats, each way."""
+LIVENESS_S = 1.0
+"""Seconds of silence after which a peer is dead (four heartbeats missed)."""
+MAX_JOB_BYTES = 64 * 1024
+"""Largest frame a worker accepts (a job header; the broker sends nothing bigger)."""
+MAX_RESULT_FRAME_BYTES = MAX_KEYFRAME_FRAME_BYTES
+"""Largest frame the broker accepts (a keyframe image)."""
+KEYFRAME_PARTS = 3
+"""Frames of an encoded keyframe: header, colour, depth."""
+
+SessionId = Annotated[str, Meta(max_length=128)]
+Text = Annotated[str, Meta(max_length=4096)]
+
+
+class Job(Struct, forbid_unknown_fields=True):
+    """One keyframe to render: ``job`` id, ``session`` id (the submitter's), the ``load``
+    arguments (terrain and texture as names, resolved by the worker's ``--data`` rule, or
+    loader specs inside a local worker's data folder), the ``viewpoint`` and ``t`` (the
+    submitter's clock, s; the keyframe's ``t0``)."""
+
+    job: Seq
+    session: SessionId
+    load: LoadArgs
+    viewpoint: WireViewpoint
+    t: Time
+
+
+class Result(Struct):
+    """A job's outcome: ``ok`` and on success ``parts``, the keyframe message's frames
+    (header, colour, depth; :func:`~lodsprite.distributed.protocol.decode_keyframe` reads
+    them, their ``seq`` is the job id); otherwise ``error`` says why (the worker's load or
+    render error, or a job given up after its workers died); ``worker``: the hex id of
+    the worker that answered ("" when none did)."""
+
+    job: int
+    session: str
+    ok: bool
+    error: str = ""
+    parts: list[bytes] = field(default_factory=list)
+    worker: str = ""
+
+
+class PoolMessage(Struct, forbid_unknown_fields=True, omit_defaults=True, tag_field="kind"):
+    v: Literal[POOL_VERSION]  # type: ignore[valid-type]
+
+
+class Ready(PoolMessage, tag="ready"):
+    pid: Annotated[int, Meta(ge=0, le=2**31)] = 0
+    name: Annotated[str, Meta(max_length=256)] = ""
+    cache: Annotated[int, Meta(ge=1, le=64)] = 1
+
+
+class Heartbeat(PoolMessage, tag="heartbeat"):
+    pass
+
+
+class JobMessage(PoolMessage, tag="job"):
+    job: Job
+    codec: Literal[CODECS] = "raw"  # type: ignore[valid-type]
+
+
+class ResultMessage(PoolMessage, tag="result"):
+    job: Seq
+    ok: bool
+    error: Text = ""
+
+
+class Disconnect(PoolMessage, tag="disconnect"):
+    """``reason``; ``stop``: the broker is closing for good (its local workers exit,
+    remote ones keep trying to reconnect)."""
+
+    reason: Text = ""
+    stop: bool = False
+
+
+ANY_POOL = Ready | Heartbeat | JobMessage | ResultMessage | Disconnect
+_decoder = msgspec.msgpack.Decoder(ANY_POOL)
+_encoder = msgspec.msgpack.Encoder()
+
+
+def encode_pool(msg: PoolMessage, *buffers) -> list:
+    """The frames of ``msg`` (then ``buffers`` as they are)."""
+    return [_encoder.encode(msg), *buffers]
+
+
+def decode_pool(frames: list) -> tuple[PoolMessage, list]:
+    """The header and buffer frames of one pool message (``bytes`` or ``zmq.Frame``);
+    raises :class:`ProtocolError` and nothing else.  A result must carry either no
+    buffers (a failure) or the keyframe's three (a success); others none."""
+    try:
+        if not frames:
+            raise ProtocolError("empty message")
+        try:
+            msg = _decoder.decode(memoryview(frames[0]))
+        except (msgspec.DecodeError, msgspec.ValidationError) as exc:
+            raise ProtocolError(f"pool message: {exc}") from None
+        extra = len(frames) - 1
+        want = (KEYFRAME_PARTS if msg.ok else 0) if isinstance(msg, ResultMessage) else 0
+        if extra != want:
+            raise ProtocolError(f"{type(msg).__name__}: {extra} buffers, expected {want}")
+        return msg, list(frames[1:])
+    except ProtocolError:
+        raise
+    except (RecursionError, MemoryError, ValueError, TypeError, OverflowError) as exc:
+        raise ProtocolError(f"undecodable pool message: {type(exc).__name__}") from None
+
+
+def job_key(load: LoadArgs) -> bytes:
+    """A hashable key of a scene (Structs are not hashable): its msgpack encoding."""
+    return _encoder.encode(load)
+
+
+def check_job(job: Job) -> Job:
+    """``job`` validated as a worker will decode it (Structs check their constraints only
+    when decoded); raises :class:`InputError`."""
+    if not isinstance(job, Job):
+        raise InputError(f"submit takes a Job, got {type(job).__name__}")
+    try:
+        return _job_decoder.decode(_job_encoder.encode(job))
+    except (msgspec.ValidationError, msgspec.DecodeError) as exc:
+        raise InputError(f"bad job: {exc}") from None
+
+
+_job_decoder = msgspec.msgpack.Decoder(Job)
+_job_encoder = msgspec.msgpack.Encoder()
+
+
+LOOPBACK = ("127.0.0.1", "localhost", "::1", "[::1]")
+
+
+def check_bind(bind: str, protected: bool) -> None:
+    """Refuse a workers bind that is not ``tcp://`` or, unless ``protected`` (CURVE or
+    explicitly allowed), one beyond loopback; raises :class:`InputError`."""
+    if not bind.startswith("tcp://"):
+        raise InputError(f"workers bind must be tcp://HOST:PORT, got {bind!r}")
+    host = bind[len("tcp://"):].rpartition(":")[0]
+    if host not in LOOPBACK and not protected:
+        raise InputError(f"binding {bind} lets any host join as a render worker: give "
+                         "CURVE keys (--keys) or allow it explicitly")
+
+
+@dataclass(frozen=True)
+class WorkerInfo:
+    """A connected worker: ``id`` (hex routing id), ``pid``, ``name``, ``remote`` (came in
+    over ``tcp://``), ``job`` (the job id it renders, or None)."""
+
+    id: str
+    pid: int
+    name: str
+    remote: bool
+    job: int | None
+
+

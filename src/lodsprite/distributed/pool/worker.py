@@ -1,0 +1,306 @@
+"""A render worker: the Paranoid Pirate worker of the ZeroMQ guide (Hintjens, *ZeroMQ*,
+ch. 4) rendering keyframes for a :class:`~.broker.Broker`.
+
+A DEALER connects to the broker and says ``ready``.  Two threads: the I/O thread (here,
+:meth:`Worker.run`) owns the socket, sends a heartbeat every :data:`~.jobs.HEARTBEAT_S`,
+takes jobs and forwards results; the render thread owns the GL context and renders one job
+at a time with :class:`~lodsprite.distributed.render.KeyframeRenderer`, so heartbeats go on
+while a scene loads or a keyframe renders.  A broker silent for :data:`~.jobs.LIVENESS_S`
+is dead: the worker closes its socket and connects again after a backoff (0.25 s doubling
+to 4 s, reset by the broker's first message); a result of a job from a lost connection is
+dropped.
+
+Scenes are kept by their ``load`` arguments, least recently used dropped first (``cache``,
+all sharing the worker's one GL context).  Names follow the ``--data`` rule of
+:mod:`lodsprite.distributed.datasets` on the worker: built-ins, files relative to the
+worker's own data folder, or absolute paths inside it (what a local web server's
+resolution gives).  A scene the machine cannot hold (its memory estimate against
+``MemAvailable``) is refused before anything loads.  Every message is validated
+(:func:`~.jobs.decode_pool`); a bad one is counted and ignored, never fatal.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import queue
+import threading
+import time
+from collections import OrderedDict
+from pathlib import Path
+
+import msgspec
+import zmq
+
+from lodsprite.distributed.datasets import Datasets
+from lodsprite.distributed.frames import check_frames, recv_frames
+from lodsprite.distributed.keys import ClientKeys
+from lodsprite.distributed.pool.jobs import (
+    HEARTBEAT_S,
+    LIVENESS_S,
+    MAX_JOB_BYTES,
+    POOL_VERSION,
+    Disconnect,
+    Heartbeat,
+    JobMessage,
+    Ready,
+    ResultMessage,
+    decode_pool,
+    encode_pool,
+    job_key,
+)
+from lodsprite.distributed.protocol import LoadArgs, ProtocolError
+
+log = logging.getLogger("lodsprite.pool")
+
+__all__ = ["BACKOFF_MAX_S", "Worker", "end_processes", "resolve_load", "run_local_worker",
+           "spawn_workers"]
+
+BACKOFF_MAX_S = 4.0
+MEMORY_FRACTION = 0.8  # as the LOD server: a scene may take this share of MemAvailable
+
+
+def resolve_load(load: LoadArgs, datasets: Datasets) -> LoadArgs:
+    """``load`` with terrain and texture resolved to loader specs by ``datasets``' rule;
+    raises :class:`~lodsprite.errors.InputError` for a name it refuses or a scene this
+    machine cannot hold.  An absolute path inside the data folder is taken as the name
+    relative to it (and checked again, symlinks included)."""
+    from lodsprite.distributed.render import estimate_scene_bytes, memory_available
+    from lodsprite.errors import InputError
+
+    def local(name: str) -> str:
+        root = datasets.data_dir
+        if root is not None and os.path.isabs(name) and Path(name).is_relative_to(root):
+            return Path(name).relative_to(root).as_posix()
+        return name
+
+    terrain = datasets.terrain(local(load.terrain))
+    texture = datasets.texture(local(load.texture))
+    resolved = msgspec.structs.replace(load, terrain=terrain.spec, texture=texture.spec)
+    need = estimate_scene_bytes(resolved, terrain.shape, texture.shape)
+    available = memory_available()
+    if available is not None and need > MEMORY_FRACTION * available:
+        raise InputError(f"the scene needs about {need / 2**20:.0f} MiB, this worker has "
+                         f"{available / 2**20:.0f} MiB available")
+    return resolved
+
+
+class _Renderer(threading.Thread):
+    """The render thread: jobs in from a queue, result frames out over an inproc PAIR."""
+
+    def __init__(self, zctx: zmq.Context, address: str, datasets: Datasets,
+                 cache: int) -> None:
+        super().__init__(daemon=True, name="pool-render")
+        self.jobs: queue.Queue[JobMessage | None] = queue.Queue()
+        self.out = zctx.socket(zmq.PAIR)
+        self.out.setsockopt(zmq.LINGER, 0)
+        self.out.connect(address)
+        self.datasets = datasets
+        self.cache = cache
+        self.scenes: OrderedDict[bytes, object] = OrderedDict()
+        self.gl = None
+
+    def run(self) -> None:
+        try:
+            while (msg := self.jobs.get()) is not None:
+                self.out.send_multipart(self._render(msg))
+        finally:
+            for r in self.scenes.values():
+                r.release()
+            if self.gl is not None:
+                self.gl.release()
+            self.out.close(linger=0)
+
+    def _render(self, msg: JobMessage) -> list:
+        """The result frames of one job; never raises."""
+        job = msg.job
+        key = job_key(job.load)
+        try:
+            from lodsprite.distributed.protocol import encode_keyframe, viewpoint_from_wire
+
+            r = self._scene(key, job.load)
+            kf = r.render(viewpoint_from_wire(job.viewpoint), job.job, job.t)
+            frames = encode_keyframe(kf, msg.codec)
+            return encode_pool(ResultMessage(POOL_VERSION, job.job, True), *frames)
+        except Exception as exc:  # noqa: BLE001 - MemoryError, GL errors: reported, not fatal
+            dropped = self.scenes.pop(key, None)
+            if dropped is not None:
+                dropped.release()
+            error = f"{type(exc).__name__}: {exc}"[:4000]
+            return encode_pool(ResultMessage(POOL_VERSION, job.job, False, error))
+
+    def _scene(self, key: bytes, load: LoadArgs):
+        from lodsprite.distributed.render import KeyframeRenderer
+        from lodsprite.gl.context import GLContext
+
+        r = self.scenes.pop(key, None)
+        if r is None:
+            resolved = resolve_load(load, self.datasets)
+            while len(self.scenes) >= self.cache:
+                self.scenes.popitem(last=False)[1].release()
+            if self.gl is None:
+                self.gl = GLContext()
+            r = KeyframeRenderer(resolved, self.gl)
+        self.scenes[key] = r  # most recently used last
+        return r
+
+
+class Worker:
+    """One render worker connecting to ``connect`` (``tcp://HOST:PORT`` or ``ipc://…``).
+
+    ``keys``: CURVE keys (the worker's pair and the broker's public key; None: plain).
+    ``data_dir``: the folder whose files jobs may name (None: built-ins only).  ``cache``:
+    scenes kept loaded.  ``parent_pid``: exit when this process is no longer the parent
+    (local workers never outlive their broker's process)."""
+
+    def __init__(self, connect: str, keys: ClientKeys | None = None,
+                 data_dir: Path | str | None = None, cache: int = 2, name: str = "",
+                 parent_pid: int | None = None) -> None:
+        self.connect = connect
+        self.keys = keys
+        self.datasets = Datasets(data_dir)
+        self.cache = max(1, min(int(cache), 64))
+        self.name = name[:256]
+        self.parent_pid = parent_pid
+        self.rejected = 0
+        self.connections = 0
+        self._stop = threading.Event()
+
+    def stop(self) -> None:
+        """Make :meth:`run` return (thread-safe)."""
+        self._stop.set()
+
+    def run(self) -> None:
+        """Serve the broker until :meth:`stop`, a ``disconnect`` is not followed by a
+        broker again (it reconnects), or the parent process goes away."""
+        zctx = zmq.Context()
+        address = f"inproc://pool-render-{id(self)}"
+        pipe = zctx.socket(zmq.PAIR)
+        pipe.bind(address)
+        renderer = _Renderer(zctx, address, self.datasets, self.cache)
+        renderer.start()
+        backoff = HEARTBEAT_S
+        try:
+            while not self._should_stop():
+                heard = self._session(zctx, pipe, renderer)
+                backoff = HEARTBEAT_S if heard else min(2 * backoff, BACKOFF_MAX_S)
+                self._stop.wait(backoff)
+        finally:
+            renderer.jobs.put(None)
+            renderer.join(timeout=10.0)
+            pipe.close(linger=0)
+            zctx.term()
+
+    def _should_stop(self) -> bool:
+        if self.parent_pid is not None and os.getppid() != self.parent_pid:
+            return True
+        return self._stop.is_set()
+
+    def _session(self, zctx: zmq.Context, pipe: zmq.Socket, renderer: _Renderer) -> bool:
+        """One connection to the broker, until it is silent too long or says disconnect;
+        whether it heard the broker at all."""
+        sock = zctx.socket(zmq.DEALER)
+        sock.setsockopt(zmq.LINGER, 0)
+        sock.setsockopt(zmq.MAXMSGSIZE, MAX_JOB_BYTES)
+        if self.keys is not None:
+            self.keys.apply(sock)
+        sock.connect(self.connect)
+        self.connections += 1
+        sock.send_multipart(encode_pool(Ready(POOL_VERSION, os.getpid(), self.name,
+                                              self.cache)))
+        poller = zmq.Poller()
+        poller.register(sock, zmq.POLLIN)
+        poller.register(pipe, zmq.POLLIN)
+        mine: set[int] = set()  # jobs of this connection
+        heard = False
+        now = time.monotonic()
+        deadline, beat = now + LIVENESS_S, now + HEARTBEAT_S
+        try:
+            while not self._should_stop():
+                events = dict(poller.poll(max(0.0, beat - time.monotonic()) * 1000))
+                if sock in events:
+                    alive = self._from_broker(sock, renderer, mine)
+                    if alive is False:
+                        return heard
+                    if alive:
+                        heard = True
+                        deadline = time.monotonic() + LIVENESS_S
+                if pipe in events:
+                    frames = pipe.recv_multipart(copy=False)
+                    job = msgspec.msgpack.decode(frames[0].buffer, type=ResultMessage).job
+                    if job in mine:
+                        mine.discard(job)
+                        sock.send_multipart(frames, copy=False)
+                now = time.monotonic()
+                if now >= beat:
+                    sock.send_multipart(encode_pool(Heartbeat(POOL_VERSION)))
+                    beat = now + HEARTBEAT_S
+                if now > deadline:
+                    log.info("render worker: broker %s silent, reconnecting", self.connect)
+                    return heard
+            sock.send_multipart(encode_pool(Disconnect(POOL_VERSION, "worker stopping")))
+            return heard
+        finally:
+            sock.close(linger=0)
+
+    def _from_broker(self, sock: zmq.Socket, renderer: _Renderer,
+                     mine: set[int]) -> bool | None:
+        """Handle the waiting messages: True if the broker spoke, False if it said
+        disconnect, None if only bad messages came."""
+        heard = None
+        while True:
+            try:
+                frames = recv_frames(sock, 1)
+            except zmq.Again:
+                return heard
+            try:
+                check_frames(frames)
+                msg, _ = decode_pool(frames)
+            except ProtocolError as exc:
+                self.rejected += 1
+                if self.rejected == 1:
+                    log.warning("render worker: a bad message from the broker: %s", exc)
+                continue
+            if isinstance(msg, Disconnect):
+                if msg.stop and self.parent_pid is not None:
+                    self._stop.set()  # a local worker ends with its broker
+                return False
+            heard = True
+            if isinstance(msg, JobMessage):
+                mine.add(msg.job.job)
+                renderer.jobs.put(msg)
+
+
+def run_local_worker(connect: str, data_dir: str | None, cache: int, parent_pid: int) -> None:
+    """Entry point of a local worker process (:meth:`Broker.spawn_local`)."""
+    logging.basicConfig(level=logging.WARNING, format="lodsprite worker: %(message)s")
+    Worker(connect, None, data_dir, cache, f"local-{os.getpid()}", parent_pid).run()
+
+
+def spawn_workers(n: int, connect: str, data_dir: str | None, cache: int) -> list:
+    """Start ``n`` local worker processes (multiprocessing spawn: a fresh interpreter,
+    its own GL context) connecting to ``connect``; their ``Process`` objects."""
+    import multiprocessing as mp
+
+    ctx = mp.get_context("spawn")
+    procs = []
+    for _ in range(n):
+        p = ctx.Process(target=run_local_worker, daemon=True, name="lodsprite-worker",
+                        args=(connect, data_dir, cache, os.getpid()))
+        p.start()
+        procs.append(p)
+    return procs
+
+
+def end_processes(procs: list) -> None:
+    """Wait for local workers to exit (they were told), then terminate, then kill."""
+    deadline = time.monotonic() + 2.0
+    for p in procs:
+        p.join(timeout=max(0.0, deadline - time.monotonic()))
+    for p in procs:
+        if p.is_alive():
+            p.terminate()
+            p.join(timeout=1.0)
+        if p.is_alive():
+            p.kill()
+            p.join(timeout=1.0)

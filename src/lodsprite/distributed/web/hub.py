@@ -1,0 +1,257 @@
+"""The web server's core: sessions, their scenes, and fair keyframe scheduling over the
+render pool.
+
+* ``load``: the names resolve by the ``--data`` rule (:class:`~lodsprite.distributed.
+  datasets.Datasets`, as for ZeroMQ clients); a scene the machine cannot hold is refused
+  before anything is allocated (:func:`~lodsprite.distributed.render.estimate_scene_bytes`
+  against ``MemAvailable``); the ``scene`` message is built in a thread of the server
+  process (GL-free, :mod:`.scene`), cached by its arguments, and sent, then the reply.
+  Only the session's newest ``load`` takes effect; one session's load never changes
+  another's (jobs carry their session's arguments; renderers cache scenes by them).
+* Scheduling: round robin over the sessions with waiting requests and fewer than
+  ``session_jobs`` in flight, one job per live worker at a time, so that a session asking
+  often gets no more renders than one asking when it needs to.  A job not answered in
+  :data:`JOB_TIMEOUT_S` is forgotten (counted ``failed``).
+* Jobs carry the page's names (validated here); a worker resolves them by its own
+  ``--data`` rule (local workers share the server's data folder).
+* Results: the keyframe a renderer encoded (the ZeroMQ ``keyframe`` message) goes to its
+  session with the request's ``seq`` and ``t0`` set to the request's ``t`` (the page's
+  clock); the images are not touched.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import itertools
+import logging
+import time
+from collections import OrderedDict
+from typing import Any
+
+import msgspec
+
+from lodsprite.distributed.datasets import Datasets
+from lodsprite.distributed.pool import Job
+from lodsprite.distributed.protocol import (
+    MAX_SCENE_COARSE,
+    KeyframeMessage,
+    LoadArgs,
+    PathArgs,
+    ProtocolError,
+    decode_message,
+    encode,
+)
+from lodsprite.distributed.render import estimate_scene_bytes, memory_available, working_grid
+from lodsprite.distributed.server import MEMORY_FRACTION
+from lodsprite.distributed.web.scene import build_scene, scene_key, send_path
+from lodsprite.distributed.web.sessions import Caps, Pending, Session
+from lodsprite.distributed.web.wire import pack
+from lodsprite.errors import InputError, LodspriteError
+
+log = logging.getLogger("lodsprite.web")
+
+__all__ = ["JOB_TIMEOUT_S", "SCENES_CACHED", "Hub"]
+
+JOB_TIMEOUT_S = 30.0
+SCENES_CACHED = 4
+TICK_S = 0.05
+
+
+class Hub:
+    """Sessions and the pool (Broker interface: submit, poll, fileno, workers).  Start
+    with :meth:`start` inside the running event loop; :meth:`stop` ends its tasks."""
+
+    def __init__(self, pool: Any, datasets: Datasets, caps: Caps | None = None,
+                 codec: str = "raw") -> None:
+        self.pool = pool
+        self.datasets = datasets
+        self.caps = caps or Caps()
+        self.codec = codec
+        self.sessions: OrderedDict[str, Session] = OrderedDict()
+        self.jobs: dict[int, tuple[Session, Pending, float]] = {}
+        self._ids = itertools.count(1)
+        self._turn = 0
+        self._scenes: OrderedDict[tuple, list] = OrderedDict()
+        self._builds = asyncio.Semaphore(1)
+        self._generation: dict[str, int] = {}
+        self._tasks: set[asyncio.Task] = set()
+        self._ticker: asyncio.Task | None = None
+
+    # ------------------------------------------------------------------- lifetime
+
+    def start(self) -> None:
+        loop = asyncio.get_running_loop()
+        loop.add_reader(self.pool.fileno(), self.drain)
+        self._ticker = loop.create_task(self._tick())
+
+    async def stop(self) -> None:
+        asyncio.get_running_loop().remove_reader(self.pool.fileno())
+        for task in [self._ticker, *self._tasks]:
+            if task is not None:
+                task.cancel()
+        for s in list(self.sessions.values()):
+            s.close()
+
+    async def _tick(self) -> None:
+        while True:  # the pool's descriptor may be edge-triggered: poll it regularly too
+            await asyncio.sleep(TICK_S)
+            self.drain()
+            self._expire()
+
+    def open_session(self, sid: str | None = None) -> Session:
+        s = Session(self, self.caps, sid)
+        self.sessions[s.id] = s
+        return s
+
+    def close_session(self, s: Session) -> None:
+        s.close()
+        self.sessions.pop(s.id, None)
+        self._generation.pop(s.id, None)
+
+    def workers_count(self) -> int:
+        return len(self.pool.workers())
+
+    def summary(self) -> dict:
+        """Server-wide figures: sessions, workers, jobs in flight, the pool's counts
+        (Broker.stats: jobs, results, failed, requeued, dead workers, ...) and each
+        session's keyframes sent and dropped."""
+        pool_stats = getattr(self.pool, "stats", None)
+        return {"sessions": len(self.sessions), "workers": self.workers_count(),
+                "inflight": len(self.jobs), "pool": pool_stats() if pool_stats else {},
+                "per_session": [{"session": s.id, "keyframes_sent": s.counts["keyframes_sent"],
+                                 "keyframes_dropped": s.counts["keyframes_dropped"],
+                                 "requests": s.counts["requests"]}
+                                for s in self.sessions.values()]}
+
+    # ------------------------------------------------------------------------ load
+
+    def load(self, session: Session, args: LoadArgs, seq: int) -> None:
+        """Start loading ``args`` for ``session`` (the reply comes later)."""
+        gen = self._generation.get(session.id, 0) + 1
+        self._generation[session.id] = gen
+        task = asyncio.get_running_loop().create_task(self._load(session, args, seq, gen))
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+
+    async def _load(self, session: Session, args: LoadArgs, seq: int, gen: int) -> None:
+        try:
+            resolved = self._resolve(args)
+            key = scene_key(resolved)
+            parts = self._scenes.get(key)
+            if parts is None:
+                async with self._builds:  # one scene built at a time
+                    if session.closed or self._generation.get(session.id) != gen:
+                        return  # superseded while waiting: build nothing for it
+                    parts = self._scenes.get(key) or await asyncio.to_thread(
+                        build_scene, resolved, self.codec)
+                self._scenes[key] = parts
+                while len(self._scenes) > SCENES_CACHED:
+                    self._scenes.popitem(last=False)
+            self._scenes.move_to_end(key)
+        except Exception as exc:  # noqa: BLE001 - any dataset's failure is the page's reply
+            if self._generation.get(session.id) == gen:
+                reason = exc if isinstance(exc, LodspriteError | OSError | ValueError) else (
+                    f"internal error: {type(exc).__name__}")
+                session.reply(seq, False, f"load: {reason}")
+            return
+        if session.closed or self._generation.get(session.id) != gen:
+            return  # a newer load of this session, or a closed one: this one is moot
+        session.load = resolved
+        session.named = args  # jobs carry the names: each worker resolves them by its --data
+        session.pending.clear()
+        header = msgspec.msgpack.decode(parts[0])
+        session.push_reply(pack(encode({**header, "seq": seq}, *parts[1:])))
+        session.reply(seq, True, data={"coarse": resolved.lod, "size": list(resolved.size)})
+
+    def path(self, session: Session, args: PathArgs, seq: int) -> None:
+        """Answer ``path`` for ``session`` (later: :func:`~.scene.send_path`)."""
+        task = asyncio.get_running_loop().create_task(send_path(session, args, seq))
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+
+    def _resolve(self, args: LoadArgs) -> LoadArgs:
+        """``args`` with the terrain and texture resolved to loader specs; raises
+        :class:`InputError` for a name, a size or a scene this server refuses."""
+        terrain = self.datasets.terrain(args.terrain)
+        texture = self.datasets.texture(args.texture)
+        grid = working_grid(args)
+        if args.lod > grid:
+            raise InputError(f"lod {args.lod} exceeds the working grid {grid}")
+        if args.lod > MAX_SCENE_COARSE:
+            raise InputError(f"lod {args.lod}: at most {MAX_SCENE_COARSE} for a web page")
+        need = estimate_scene_bytes(args, terrain.shape, texture.shape)
+        available = memory_available()
+        if available is not None and need > MEMORY_FRACTION * available:
+            raise InputError(f"the scene needs about {need / 2**20:.0f} MiB, this machine "
+                             f"has {available / 2**20:.0f} MiB available")
+        return msgspec.structs.replace(args, terrain=terrain.spec, texture=texture.spec)
+
+    # ------------------------------------------------------------------ scheduling
+
+    def schedule(self) -> None:
+        """Hand waiting requests to free workers, one session at a time in turn."""
+        free = self.workers_count() - len(self.jobs)
+        order = list(self.sessions.values())
+        while free > 0 and order:
+            n = len(order)
+            for i in range(n):
+                s = order[(self._turn + i) % n]
+                if s.pending and len(s.inflight) < self.caps.session_jobs and s.named:
+                    self._turn = (self._turn + i + 1) % n
+                    self._submit(s, s.pending.popleft())
+                    free -= 1
+                    break
+            else:
+                return
+
+    def _submit(self, s: Session, p: Pending) -> None:
+        job = next(self._ids)
+        try:
+            self.pool.submit(Job(job, s.id, s.named, p.viewpoint, p.t))
+        except LodspriteError as exc:  # the pool refused the job: the page hears why
+            s.counts["failed"] += 1
+            s.reply(p.seq, False, f"request: {exc}")
+            return
+        s.inflight[job] = p
+        self.jobs[job] = (s, p, time.monotonic())
+
+    def drain(self) -> None:
+        """Take the pool's results to their sessions; never raises."""
+        try:
+            results = self.pool.poll()
+        except Exception as exc:  # noqa: BLE001 - a broken pool must not stop the loop
+            log.error("render pool: %r", exc)
+            return
+        for r in results:
+            entry = self.jobs.pop(r.job, None)
+            if entry is None:
+                continue  # expired, or its session closed
+            s, p, _ = entry
+            s.inflight.pop(r.job, None)
+            if s.closed:
+                continue
+            if not r.ok:
+                s.counts["failed"] += 1
+                s.reply(p.seq, False, f"render: {r.error}")
+                continue
+            try:
+                s.push_keyframe(_restamp(r.parts, p), p)
+            except ProtocolError as exc:
+                s.counts["failed"] += 1
+                s.reply(p.seq, False, f"render: {exc}")
+        self.schedule()
+
+    def _expire(self) -> None:
+        now = time.monotonic()
+        for job, (s, _, start) in list(self.jobs.items()):
+            if now - start > JOB_TIMEOUT_S or s.closed:
+                del self.jobs[job]
+                s.inflight.pop(job, None)
+                s.counts["failed"] += 0 if s.closed else 1
+        self.schedule()
+
+
+def _restamp(parts: list, p: Pending) -> list:
+    """The keyframe message ``parts`` with ``seq`` and ``t0`` of the request ``p``."""
+    msg, _ = decode_message(parts, KeyframeMessage)
+    return [*encode(msgspec.structs.replace(msg, seq=p.seq, t0=p.t)), *parts[1:]]

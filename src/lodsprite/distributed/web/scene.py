@@ -1,0 +1,167 @@
+"""The ``scene`` message a web page draws spriteframes from (Swan et al. 2002, §3.2: the
+client holds the coarse model and renders spriteframes from it and the last keyframe),
+and the answer to its ``path`` op.
+
+Computed in the server process, GL-free, from the dataset a ``load`` names: the working
+height field (:func:`lodsprite.scene.load_scene`, as every renderer loads it), its coarse
+level (an exact subsample, ``lod`` quads a side, as the sprite renderer's proxy) and the
+terrain texture, both turned so row 0 is south (the page's ``y`` grows with the row).
+
+``path`` (after a ``load``): the viewpoints of a built-in camera path
+(:func:`lodsprite.paths.get_path`: Chen, Swan & Kaufman 1999 Figure 7's orbit, Swan et
+al. 2002's fly-in, ...) over the session's terrain, computed here so that the page plays
+exactly the path the Python side plays (one implementation of the paths, not a second in
+JavaScript).  The reply's ``data``: ``viewpoints`` (12 numbers a frame: the camera axes
+``x, y, z`` then the eye ``o``, metres, as :class:`~lodsprite.camera.Viewpoint`) and
+``fov`` (the path's vertical field of view, degrees).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from lodsprite.distributed.protocol import (
+    MAX_IMAGE_SIDE,
+    MAX_SCENE_COARSE,
+    LoadArgs,
+    PathArgs,
+    ProtocolError,
+    SceneMessage,
+    decode_message,
+    encode,
+    inflate,
+)
+
+__all__ = ["SceneData", "build_scene", "decode_scene", "path_data", "relief", "scene_key",
+           "send_path"]
+
+SCENE_FIELDS = ("terrain", "texture", "grid", "exaggeration", "lod", "size", "fov_y_deg",
+                "epsilon", "visibility")
+
+
+def scene_key(args: LoadArgs) -> tuple:
+    """What a scene message depends on (the cache key of :func:`build_scene`)."""
+    return tuple((k, getattr(args, k)) for k in SCENE_FIELDS)
+
+
+def _spec(a: np.ndarray, codec: str) -> tuple[dict, bytes | np.ndarray]:
+    import zlib
+
+    data = np.ascontiguousarray(a)
+    spec = {"shape": list(a.shape), "dtype": str(a.dtype), "codec": codec}
+    return spec, (zlib.compress(data, 1) if codec == "zlib" else data)
+
+
+def relief(heights: np.ndarray, step: int) -> float:
+    """RMS height (metres) of the full-resolution square centres of the coarse level
+    (``step`` samples a side) above or below the mean of their square's four corners:
+    the deviation of the terrain from its coarse level that makes a spriteframe's error
+    (Chen, Swan & Kaufman 1999, Eq. 1: ``C`` against ``C'``)."""
+    if step < 2:
+        return 0.0
+    h = np.asarray(heights, dtype=np.float64)
+    corners = h[::step, ::step]
+    mean = 0.25 * (corners[:-1, :-1] + corners[1:, :-1] + corners[:-1, 1:] + corners[1:, 1:])
+    centres = h[step // 2::step, step // 2::step][:mean.shape[0], :mean.shape[1]]
+    return float(np.sqrt(np.mean((centres - mean) ** 2)))
+
+
+def build_scene(args: LoadArgs, codec: str = "raw") -> list:
+    """The parts (header, heights, texture) of the scene message for resolved ``load``
+    arguments ``args`` (terrain and texture as loader specs); raises
+    :class:`~lodsprite.errors.LodspriteError` when the dataset does not load."""
+    from lodsprite.errors import InputError
+    from lodsprite.scene import load_scene
+
+    if args.lod > MAX_SCENE_COARSE:
+        raise InputError(f"lod {args.lod}: a web page's coarse level is at most "
+                         f"{MAX_SCENE_COARSE} quads a side")
+    scene = load_scene(args.terrain, args.texture, args.grid, args.exaggeration)
+    hf = scene.hf
+    step = hf.quads // args.lod
+    heights = np.ascontiguousarray(hf.heights[::step, ::step][::-1], dtype=np.float32)
+    texture = scene.texture
+    k = -(-max(texture.shape[:2]) // MAX_IMAGE_SIDE)  # keep within the image side cap
+    texture = np.ascontiguousarray(texture[::k, ::k][::-1], dtype=np.uint8)
+    lo, hi = hf.bounds()
+    far = 2.0 * float(np.linalg.norm(hi - lo))  # any eye over the terrain sees all of it
+    h_spec, h_data = _spec(heights, codec)
+    t_spec, t_data = _spec(texture, codec)
+    header = {"kind": "scene", "seq": 0, "coarse": args.lod,
+              "origin": [float(lo[0]), float(lo[1])],
+              "spacing": hf.dx * step, "spacing_y": hf.dy * step,
+              "size": list(args.size), "fov": args.fov_y_deg,
+              "near": far / 1e4, "far": far,
+              "epsilon": args.epsilon,
+              "visibility": "coarse" if args.visibility == "coarse" else "full",
+              "heights": h_spec, "texture": t_spec,
+              "relief": relief(hf.heights, step)}
+    return encode(header, h_data, t_data)
+
+
+class SceneData:
+    """A decoded scene message: ``header`` (:class:`SceneMessage`), ``heights``
+    ``(n+1, n+1) float32`` (row 0 south) and ``texture (H, W, 3) uint8`` (row 0 south)."""
+
+    def __init__(self, header: SceneMessage, heights: np.ndarray, texture: np.ndarray) -> None:
+        self.header = header
+        self.heights = heights
+        self.texture = texture
+
+
+def _image(spec, data, dtype: str, ndim: int, name: str) -> np.ndarray:
+    if spec.dtype != dtype or len(spec.shape) != ndim or (ndim == 3 and spec.shape[2] != 3):
+        raise ProtocolError(f"{name}: expected {dtype} of {ndim} dimensions, got "
+                            f"{spec.dtype} {spec.shape}")
+    size = int(np.prod(spec.shape)) * np.dtype(dtype).itemsize
+    if spec.codec == "zlib":
+        data = inflate(data, size, name)
+    elif len(data) != size:
+        raise ProtocolError(f"{name}: {len(data)} bytes, expected {size}")
+    return np.frombuffer(data, dtype=dtype).reshape(spec.shape)
+
+
+def decode_scene(parts: list) -> SceneData:
+    """A :class:`SceneData` from a scene message's parts; raises :class:`ProtocolError`."""
+    msg, buffers = decode_message(parts, SceneMessage)
+    n = msg.coarse + 1
+    heights = _image(msg.heights, buffers[0], "float32", 2, "heights")
+    if heights.shape != (n, n):
+        raise ProtocolError(f"heights: shape {heights.shape}, expected {(n, n)}")
+    texture = _image(msg.texture, buffers[1], "uint8", 3, "texture")
+    return SceneData(msg, heights, texture)
+
+
+def path_data(load: LoadArgs, args: PathArgs) -> dict:
+    """The reply data of ``path`` for a session whose resolved ``load`` is ``load``
+    (terrain as a loader spec); raises :class:`~lodsprite.errors.LodspriteError` for a
+    path the terrain cannot give."""
+    from lodsprite.paths import get_path
+    from lodsprite.scene import load_scene
+
+    scene = load_scene(load.terrain, load.texture, load.grid, load.exaggeration)
+    path = get_path(args.spec, scene.hf, args.frames)
+    rows = np.array([np.concatenate([vp.x, vp.y, vp.z, vp.o]) for vp in path.viewpoints],
+                    dtype=np.float64)
+    return {"viewpoints": rows.tolist(), "fov": float(path.fov_y_deg)}
+
+
+async def send_path(session: Any, args: PathArgs, seq: int) -> None:
+    """Answer a session's ``path`` request (in a thread: the terrain may take a moment)."""
+    import asyncio
+
+    from lodsprite.errors import LodspriteError
+
+    load = session.load
+    if load is None:
+        session.reply(seq, False, "path: load a scene first")
+        return
+    try:
+        data = await asyncio.to_thread(path_data, load, args)
+    except (LodspriteError, MemoryError, OSError, ValueError) as exc:
+        session.reply(seq, False, f"path: {exc}")
+        return
+    if not session.closed:
+        session.reply(seq, True, data=data)

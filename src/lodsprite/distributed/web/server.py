@@ -1,0 +1,213 @@
+"""``lodsprite serve --web``: the LOD server for web pages (Swan et al. 2002's server, its
+client a WebGL2 page), an aiohttp application beside the ZeroMQ server.
+
+Routes: ``GET /?token=T&...`` the page (``static/index.html``; 401 without the token),
+``GET /static/...`` its modules (no token: they hold no data), ``GET /ws?token=T`` the
+WebSocket (403 without the token, for a foreign ``Origin`` or a foreign ``Host``;
+:mod:`.security`).  Each WebSocket is a :class:`~.sessions.Session` of the
+:class:`~.hub.Hub`, which renders its keyframes on the render pool.  Messages: :mod:`.wire`.
+
+:func:`serve_web` runs it until a signal; :class:`WebServer` starts and stops it inside a
+running event loop (tests, benchmarks).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import signal
+import ssl
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from aiohttp import WSMsgType, web
+
+from lodsprite.distributed.datasets import Datasets
+from lodsprite.distributed.web.hub import Hub
+from lodsprite.distributed.web.security import (
+    check_host,
+    check_origin,
+    token_ok,
+)
+from lodsprite.distributed.web.sessions import Caps
+from lodsprite.distributed.web.wire import MAX_PAGE_MESSAGE
+
+log = logging.getLogger("lodsprite.web")
+
+__all__ = ["STATIC_DIR", "WebConfig", "WebServer", "serve_web"]
+
+STATIC_DIR = Path(__file__).parent / "static"
+HEARTBEAT_S = 20.0
+MAX_SESSIONS = 256
+"""WebSockets served at once; one more is answered 503."""
+CSP = ("default-src 'self'; script-src 'self'; style-src 'self' 'unsafe-inline'; "
+       "img-src 'self' data: blob:; connect-src 'self' ws: wss:; worker-src 'self' blob:; "
+       "frame-ancestors 'none'; base-uri 'none'; form-action 'none'")
+"""The page's Content-Security-Policy: its own modules only (no inline or foreign
+script), WebSockets, and no framing by another site."""
+NO_STORE = {"Cache-Control": "no-store", "Referrer-Policy": "no-referrer",
+            "X-Content-Type-Options": "nosniff"}
+
+
+@dataclass
+class WebConfig:
+    """What ``serve --web`` was given: ``host``/``port`` (0: any free port), the
+    ``token``, ``data_dir``, ``renderers`` local renderer processes, per-session ``caps``,
+    keyframe ``codec``, an optional TLS context, the ``public_hosts`` names a reverse
+    proxy serves the page under (accepted as ``Host``), and where render workers of other
+    hosts join the pool: ``workers_bind`` (``tcp://HOST:PORT``, None: local renderers
+    only) with CURVE ``worker_keys`` (:class:`~lodsprite.distributed.keys.ServerKeys`)
+    or ``allow_remote``."""
+
+    host: str = "127.0.0.1"
+    port: int = 0
+    token: str = ""
+    data_dir: Path | None = None
+    renderers: int = 1
+    caps: Caps = field(default_factory=Caps)
+    codec: str = "raw"
+    tls: ssl.SSLContext | None = None
+    public_hosts: tuple[str, ...] = ()
+    workers_bind: str | None = None
+    worker_keys: Any = None
+    allow_remote: bool = False
+
+
+class WebServer:
+    """The aiohttp application, its hub and pool.  ``pool``: an object with the Broker's
+    interface (None: a :class:`~lodsprite.distributed.pool.Broker` with
+    ``config.renderers`` local renderer processes; raises
+    :class:`~lodsprite.errors.LodspriteError` when its endpoint cannot be bound)."""
+
+    def __init__(self, config: WebConfig, pool: Any = None) -> None:
+        self.config = config
+        self.datasets = Datasets(config.data_dir)
+        self._own_pool = pool is None
+        if pool is None:
+            from lodsprite.distributed.pool import Broker
+
+            pool = Broker(config.workers_bind, config.worker_keys, config.codec,
+                          config.data_dir, config.allow_remote)
+            pool.spawn_local(config.renderers)
+        self.pool = pool
+        self.hub: Hub | None = None
+        self._runner: web.AppRunner | None = None
+        self.port: int | None = None
+
+    @property
+    def url(self) -> str:
+        """The page's full URL (token included)."""
+        scheme = "https" if self.config.tls is not None else "http"
+        host = self.config.host
+        host = f"[{host}]" if ":" in host else host
+        return f"{scheme}://{host}:{self.port}/?token={self.config.token}"
+
+    def app(self) -> web.Application:
+        app = web.Application(client_max_size=MAX_PAGE_MESSAGE)
+        app.router.add_get("/", self._index)
+        app.router.add_get("/ws", self._ws)
+        app.router.add_get("/favicon.ico", _no_icon)
+        app.router.add_static("/static/", STATIC_DIR, follow_symlinks=False,
+                              show_index=False)
+        return app
+
+    async def start(self) -> str:
+        """Bind and start serving (inside the running loop); the page's URL."""
+        self.hub = Hub(self.pool, self.datasets, self.config.caps, self.config.codec)
+        self.hub.start()
+        self._runner = web.AppRunner(self.app(), access_log=None)
+        await self._runner.setup()
+        site = web.TCPSite(self._runner, self.config.host, self.config.port,
+                           ssl_context=self.config.tls)
+        await site.start()
+        self.port = site._server.sockets[0].getsockname()[1]  # the bound port (0: chosen)
+        return self.url
+
+    async def stop(self) -> None:
+        if self.hub is not None:
+            await self.hub.stop()
+        if self._runner is not None:
+            await self._runner.cleanup()
+        if self._own_pool:
+            await asyncio.to_thread(self.pool.close)
+
+    # ---------------------------------------------------------------------- routes
+
+    async def _index(self, request: web.Request) -> web.StreamResponse:
+        if not check_host(request.host, self.config.host, self.config.public_hosts):
+            return web.Response(status=403, text="unknown host", headers=NO_STORE)
+        if not token_ok(request.query.get("token"), self.config.token):
+            return web.Response(status=401, text="a valid ?token= is required",
+                                headers=NO_STORE)
+        return web.FileResponse(STATIC_DIR / "index.html",
+                                headers={**NO_STORE, "Content-Security-Policy": CSP})
+
+    async def _ws(self, request: web.Request) -> web.StreamResponse:
+        if not token_ok(request.query.get("token"), self.config.token):
+            return web.Response(status=403, text="a valid ?token= is required")
+        if not check_host(request.host, self.config.host, self.config.public_hosts):
+            return web.Response(status=403, text="unknown host")
+        if not check_origin(request.headers.get("Origin"), request.host):
+            return web.Response(status=403, text="foreign origin")
+        if len(self.hub.sessions) >= MAX_SESSIONS:
+            return web.Response(status=503, text="too many sessions")
+        ws = web.WebSocketResponse(max_msg_size=MAX_PAGE_MESSAGE, heartbeat=HEARTBEAT_S,
+                                   compress=False)
+        await ws.prepare(request)
+        hub = self.hub
+        session = hub.open_session()
+        writer = asyncio.get_running_loop().create_task(session.run_writer(ws.send_bytes))
+        writer.add_done_callback(lambda t: _closed_on_error(t, ws))
+        try:
+            async for msg in ws:
+                if msg.type == WSMsgType.BINARY:
+                    session.handle(msg.data)
+                elif msg.type == WSMsgType.TEXT:
+                    session.handle(b"")  # counted and refused: the wire is binary only
+                elif msg.type == WSMsgType.ERROR:
+                    break
+        finally:
+            hub.close_session(session)
+            writer.cancel()
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await writer
+        return ws
+
+
+async def _no_icon(request: web.Request) -> web.Response:
+    """No icon (204), so a browser's console stays free of a 404."""
+    return web.Response(status=204)
+
+
+def _closed_on_error(task: asyncio.Task, ws: web.WebSocketResponse) -> None:
+    """A writer that failed (a page that stopped reading for too long, a broken
+    connection) closes its WebSocket."""
+    if task.cancelled() or task.exception() is None:
+        return
+    log.info("closing a session: %r", task.exception())
+    asyncio.get_running_loop().create_task(ws.close())
+
+
+async def _serve(config: WebConfig, on_url, stopped) -> None:
+    server = WebServer(config)
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        with contextlib.suppress(NotImplementedError, RuntimeError):
+            loop.add_signal_handler(sig, stop.set)
+    try:
+        on_url(await server.start())
+        while not stopped():
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(stop.wait(), 0.2)
+                return
+    finally:
+        await server.stop()
+
+
+def serve_web(config: WebConfig, on_url=log.info, stopped=lambda: False) -> None:
+    """Serve until SIGINT or SIGTERM, or until ``stopped()`` (polled) says so;
+    ``on_url(url)`` is called once serving."""
+    asyncio.run(_serve(config, on_url, stopped))

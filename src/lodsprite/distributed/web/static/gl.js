@@ -1,0 +1,193 @@
+// WebGL2 spriteframes (Chen, Swan & Kaufman 1999 §3.1, §3.3; Swan et al. 2002 §3.2): the
+// coarse level of the terrain, textured from the last keyframe by projective texture
+// mapping (bias * P_key * V_key, divide by w) where the keyframe saw the surface, and
+// from the terrain texture where it did not.  Visibility as lodsprite.gl.sprite's
+// per-fragment rules: a fragment takes the sprite when it lies in the keyframe's frustum
+// and not behind the keyframe's z-buffer by more than a tolerance relative to its depth
+// (the coarse level's z-buffer for the "coarse" rule, tolerance 0.002; the full z-buffer
+// for "full", 0.03: lodsprite.gl.sprite's DEFAULT_COARSE_TOL and DEFAULT_FRAGMENT_TOL).
+// The paper's per-triangle rule needs a geometry shader, which WebGL2 lacks: a "full"
+// scene is drawn with the per-fragment rule.
+
+import { mul } from './camera.js';
+
+export const SKY_RGB = [0.62, 0.74, 0.86];  // lodsprite.gl.terrain.SKY_RGB
+export const TOLERANCE = { coarse: 0.002, full: 0.03 };
+
+const VS = `#version 300 es
+layout(location = 0) in vec3 a_pos;
+layout(location = 1) in vec2 a_uv;
+uniform mat4 u_mvp;
+uniform mat4 u_key_mvp;
+out vec2 v_uv;
+out vec4 v_key;
+void main() {
+  v_uv = a_uv;
+  v_key = u_key_mvp * vec4(a_pos, 1.0);
+  gl_Position = u_mvp * vec4(a_pos, 1.0);
+}`;
+
+const FS = `#version 300 es
+precision highp float;
+precision highp sampler2D;
+uniform sampler2D u_color;      // terrain texture
+uniform sampler2D u_sprite;     // keyframe colour
+uniform sampler2D u_key_depth;  // keyframe z-buffer (window depth in [0, 1])
+uniform int u_has_key;
+uniform float u_tol;
+uniform vec2 u_key_near_far;
+in vec2 v_uv;
+in vec4 v_key;
+out vec4 f_color;
+float linear_depth(float z) {
+  float n = u_key_near_far.x, f = u_key_near_far.y;
+  return 2.0 * n * f / (f + n - (2.0 * z - 1.0) * (f - n));
+}
+void main() {
+  vec2 key_uv = v_key.xy / v_key.w * 0.5 + 0.5;  // derivatives in uniform control flow
+  vec2 key_dx = dFdx(key_uv), key_dy = dFdy(key_uv);
+  vec3 fallback = texture(u_color, v_uv).rgb;
+  bool seen = false;
+  if (u_has_key == 1 && v_key.w > 0.0) {
+    vec3 ndc = v_key.xyz / v_key.w;
+    if (all(lessThanEqual(abs(ndc), vec3(1.0)))) {
+      float zb = textureLod(u_key_depth, ndc.xy * 0.5 + 0.5, 0.0).r;
+      seen = linear_depth(ndc.z * 0.5 + 0.5) <= linear_depth(zb) * (1.0 + u_tol);
+    }
+  }
+  vec3 rgb = seen ? textureGrad(u_sprite, key_uv, key_dx, key_dy).rgb : fallback;
+  f_color = vec4(rgb, 1.0);
+}`;
+
+function compile(gl, type, src) {
+  const s = gl.createShader(type);
+  gl.shaderSource(s, src); gl.compileShader(s);
+  if (!gl.getShaderParameter(s, gl.COMPILE_STATUS)) throw new Error(gl.getShaderInfoLog(s));
+  return s;
+}
+
+function texture(gl, unit, internal, format, type, w, h, data, filter, mipmaps = false) {
+  const t = gl.createTexture();
+  gl.activeTexture(gl.TEXTURE0 + unit);
+  gl.bindTexture(gl.TEXTURE_2D, t);
+  gl.pixelStorei(gl.UNPACK_ALIGNMENT, 1);
+  gl.texImage2D(gl.TEXTURE_2D, 0, internal, w, h, 0, format, type, data);
+  if (mipmaps) gl.generateMipmap(gl.TEXTURE_2D);
+  gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MIN_FILTER, mipmaps ? gl.LINEAR_MIPMAP_LINEAR : filter);
+  gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_MAG_FILTER, filter);
+  gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_WRAP_S, gl.CLAMP_TO_EDGE);
+  gl.texParameteri(gl.TEXTURE_2D, gl.TEXTURE_WRAP_T, gl.CLAMP_TO_EDGE);
+  return t;
+}
+
+// The coarse mesh ((n+1)^2 vertices: row i at y = origin_y + i * spacing_y, column j at
+// x = origin_x + j * spacing, z from `heights`) and its texture coordinates (row 0 south);
+// each square split along its north-west to south-east diagonal, as the server's coarse
+// level (lodsprite.terrain.proxy.level_mesh), so the coarse z-buffer test agrees with it.
+export function coarseMesh(scene, heights) {
+  const n = scene.coarse, m = n + 1;
+  const pos = new Float32Array(3 * m * m), uv = new Float32Array(2 * m * m);
+  for (let i = 0; i < m; i++) for (let j = 0; j < m; j++) {
+    const k = i * m + j;
+    pos[3 * k] = scene.origin[0] + j * scene.spacing;
+    pos[3 * k + 1] = scene.origin[1] + i * scene.spacing_y;
+    pos[3 * k + 2] = heights[k];
+    uv[2 * k] = j / n; uv[2 * k + 1] = i / n;
+  }
+  const index = new Uint32Array(6 * n * n);
+  let at = 0;
+  for (let i = 0; i < n; i++) for (let j = 0; j < n; j++) {
+    const a = i * m + j, b = a + 1, c = a + m, d = c + 1;
+    index.set([c, a, b, c, b, d], at); at += 6;  // split nw-se, as lodsprite.terrain.proxy
+  }
+  return { pos, uv, index };
+}
+
+export class SpriteRenderer {
+  constructor(canvas) {
+    const gl = canvas.getContext('webgl2', { antialias: false, preserveDrawingBuffer: true });
+    if (!gl) throw new Error('this browser has no WebGL2');
+    this.gl = gl;
+    const p = gl.createProgram();
+    gl.attachShader(p, compile(gl, gl.VERTEX_SHADER, VS));
+    gl.attachShader(p, compile(gl, gl.FRAGMENT_SHADER, FS));
+    gl.linkProgram(p);
+    if (!gl.getProgramParameter(p, gl.LINK_STATUS)) throw new Error(gl.getProgramInfoLog(p));
+    this.program = p;
+    this.u = {};
+    for (const name of ['u_mvp', 'u_key_mvp', 'u_color', 'u_sprite', 'u_key_depth', 'u_has_key', 'u_tol', 'u_key_near_far']) {
+      this.u[name] = gl.getUniformLocation(p, name);
+    }
+    this.key = null;
+  }
+
+  // The scene message (header, heights Float32Array, texture Uint8Array).
+  setScene(scene, heights, tex) {
+    const gl = this.gl;
+    const mesh = coarseMesh(scene, heights);
+    this.vao = gl.createVertexArray();
+    gl.bindVertexArray(this.vao);
+    const buffer = (target, data) => { const b = gl.createBuffer(); gl.bindBuffer(target, b); gl.bufferData(target, data, gl.STATIC_DRAW); };
+    buffer(gl.ARRAY_BUFFER, mesh.pos);
+    gl.enableVertexAttribArray(0); gl.vertexAttribPointer(0, 3, gl.FLOAT, false, 0, 0);
+    buffer(gl.ARRAY_BUFFER, mesh.uv);
+    gl.enableVertexAttribArray(1); gl.vertexAttribPointer(1, 2, gl.FLOAT, false, 0, 0);
+    buffer(gl.ELEMENT_ARRAY_BUFFER, mesh.index);
+    gl.bindVertexArray(null);
+    this.count = mesh.index.length;
+    const [th, tw] = scene.texture.shape;
+    this.colorTex = texture(gl, 0, gl.RGB8, gl.RGB, gl.UNSIGNED_BYTE, tw, th, tex, gl.LINEAR, true);
+    this.tol = TOLERANCE[scene.visibility] ?? TOLERANCE.full;
+    this.triangles = 2 * scene.coarse * scene.coarse;
+  }
+
+  // A keyframe message: header (view, proj row-major; near, far), colour (H, W, 3) uint8
+  // and depth (H, W) float32, rows bottom-up as WebGL's textures want them.
+  setKeyframe(header, color, depth) {
+    const gl = this.gl;
+    const [h, w] = header.color.shape;
+    if (this.key) { gl.deleteTexture(this.key.sprite); gl.deleteTexture(this.key.depth); }
+    const [dh, dw] = header.depth.shape;
+    this.key = {
+      sprite: texture(gl, 1, gl.RGB8, gl.RGB, gl.UNSIGNED_BYTE, w, h, color, gl.LINEAR),
+      depth: texture(gl, 2, gl.R32F, gl.RED, gl.FLOAT, dw, dh, depth, gl.NEAREST),
+      mvp: mul(header.proj, header.view),
+      nearFar: [header.near, header.far],
+    };
+  }
+
+  // Draw a spriteframe at view-projection `viewProj` (row-major) into the canvas.
+  draw(viewProj) {
+    const gl = this.gl, u = this.u;
+    gl.viewport(0, 0, gl.drawingBufferWidth, gl.drawingBufferHeight);
+    gl.clearColor(...SKY_RGB, 1);
+    gl.clear(gl.COLOR_BUFFER_BIT | gl.DEPTH_BUFFER_BIT);
+    if (!this.vao) return 0;
+    gl.enable(gl.DEPTH_TEST);
+    gl.useProgram(this.program);
+    gl.uniformMatrix4fv(u.u_mvp, true, viewProj);
+    const key = this.key;
+    gl.uniform1i(u.u_has_key, key ? 1 : 0);
+    gl.uniformMatrix4fv(u.u_key_mvp, true, key ? key.mvp : viewProj);
+    gl.uniform2fv(u.u_key_near_far, key ? key.nearFar : [1, 2]);
+    gl.uniform1f(u.u_tol, this.tol);
+    gl.activeTexture(gl.TEXTURE0); gl.bindTexture(gl.TEXTURE_2D, this.colorTex);
+    gl.activeTexture(gl.TEXTURE1); gl.bindTexture(gl.TEXTURE_2D, key ? key.sprite : this.colorTex);
+    gl.activeTexture(gl.TEXTURE2); gl.bindTexture(gl.TEXTURE_2D, key ? key.depth : null);
+    gl.uniform1i(u.u_color, 0); gl.uniform1i(u.u_sprite, 1); gl.uniform1i(u.u_key_depth, 2);
+    gl.bindVertexArray(this.vao);
+    gl.drawElements(gl.TRIANGLES, this.count, gl.UNSIGNED_INT, 0);
+    gl.bindVertexArray(null);
+    return this.triangles;
+  }
+
+  // The canvas's pixels, RGBA rows bottom-up, base64 (for tests).
+  pixels() {
+    const gl = this.gl, w = gl.drawingBufferWidth, h = gl.drawingBufferHeight;
+    const out = new Uint8Array(4 * w * h);
+    gl.readPixels(0, 0, w, h, gl.RGBA, gl.UNSIGNED_BYTE, out);
+    let s = '';
+    for (let i = 0; i < out.length; i += 8192) s += String.fromCharCode(...out.subarray(i, i + 8192));
+    return { width: w, height: h, rgba: btoa(s) };
+  }
+}

@@ -1,0 +1,168 @@
+// The lodsprite web page (Swan et al. 2002's LOD client in a browser): it loads the coarse
+// level and the terrain texture from `lodsprite serve --web`, draws a spriteframe every
+// display frame from the last keyframe (gl.js), asks the server for keyframes ahead of the
+// viewer (predictor.js), flies with the keyboard, mouse and touch (camera.js) or plays a
+// camera path the server computes, and shows a HUD (hud.js).
+//
+// Query string: token (required), terrain (a name as a ZeroMQ client gives it; default
+// jacksboro), path (a built-in path: chen1999, swan2002, flyover..., played one viewpoint
+// a frame, then held), frames (the path's viewpoints), size (WxH keyframe and canvas
+// pixels; 512x512), lod (coarse quads a side; 16), grid (working grid), epsilon (pixels;
+// 1), visibility (the load's rule: coarse, the default, or fragment/triangle: the full
+// z-buffer).  For tests and tools: window.lodsprite.ready (a Promise: scene loaded),
+// .finished (a Promise: the path played and the held view's keyframe shown), .stats(),
+// .pixels(), .viewpoint(), .serverStats() (a Promise: the `stats` op's reply data).
+
+import { pack, unpack, image } from './wire.js';
+import { SpriteRenderer } from './gl.js';
+import { FlyControls, lookAt, norm, sub } from './camera.js';
+import { ErrorMetric, Predictor } from './predictor.js';
+import { Hud } from './hud.js';
+
+const q = new URLSearchParams(location.search);
+const int = (name, fallback) => (q.has(name) ? parseInt(q.get(name), 10) : fallback);
+const [width, height] = (q.get('size') || '512x512').split('x').map((s) => parseInt(s, 10));
+const opts = {
+  token: q.get('token') || '', terrain: q.get('terrain') || 'jacksboro', path: q.get('path'),
+  frames: int('frames', undefined), lod: int('lod', 16), grid: int('grid', undefined),
+  epsilon: q.has('epsilon') ? parseFloat(q.get('epsilon')) : 1.0,
+  visibility: q.get('visibility') || undefined,
+};
+const RESTING_MS = 250;   // no input this long: the viewer rests (one exact keyframe)
+const VIEWPOINT_MS = 33;  // viewpoint samples to the server at most this often
+const KEEP = 2000;        // frame intervals and latencies kept for stats()
+
+const canvas = document.getElementById('view');
+canvas.width = width; canvas.height = height;
+const hud = new Hud(document.getElementById('hud'));
+const stats = { frames: 0, keyframes: 0, intervals: [], latencies: [], error_px: null };
+let state = 'connecting';
+let seq = 0;
+const waiting = new Map();  // control seq -> resolve
+let sceneResolve;
+const sceneArrived = new Promise((r) => { sceneResolve = r; });
+let pendingKey = null;
+
+function percentile(values, p) {
+  if (!values.length) return null;
+  const s = [...values].sort((a, b) => a - b);
+  return s[Math.min(s.length - 1, Math.floor(p * (s.length - 1) + 0.5))];
+}
+function keep(list, x) { list.push(x); if (list.length > KEEP) list.shift(); }
+
+const ws = new WebSocket(`${location.protocol === 'https:' ? 'wss' : 'ws'}://${location.host}/ws?token=${encodeURIComponent(opts.token)}`);
+ws.binaryType = 'arraybuffer';
+const send = (header) => { seq += 1; ws.send(pack({ seq, ...header })); return seq; };
+const call = (op, args = {}) => new Promise((resolve) => { waiting.set(send({ kind: 'control', op, args }), resolve); });
+
+ws.onmessage = async (event) => {
+  let msg;
+  try { msg = unpack(event.data); } catch (e) { state = `bad message: ${e.message}`; return; }
+  const { header, buffers } = msg;
+  if (header.kind === 'reply') {
+    const resolve = waiting.get(header.seq);
+    if (resolve) { waiting.delete(header.seq); resolve(header); return; }
+    if (!header.ok) { state = header.error; predictor?.failed(header.seq); }
+  } else if (header.kind === 'scene') {
+    const [heights, texture] = await Promise.all([image(header.heights, buffers[0]), image(header.texture, buffers[1])]);
+    sceneResolve({ header, heights, texture });
+  } else if (header.kind === 'keyframe') {
+    const [color, depth] = await Promise.all([image(header.color, buffers[0]), image(header.depth, buffers[1])]);
+    pendingKey = { header, color, depth };
+  }
+};
+ws.onclose = () => { state = 'disconnected'; };
+
+let renderer, metric, predictor, controls, path = null, pathIndex = 0;
+let keyEye = null, finishedResolve, lastFrame = null, lastSample = -Infinity;
+const finished = new Promise((r) => { finishedResolve = r; });
+
+async function start() {
+  await new Promise((resolve, reject) => { ws.onopen = resolve; ws.onerror = () => reject(new Error('no WebSocket')); });
+  const args = {
+    terrain: opts.terrain, size: [width, height], lod: opts.lod, epsilon: opts.epsilon, grid: opts.grid,
+    visibility: opts.visibility,
+  };
+  const reply = await call('load', args);
+  if (!reply.ok) throw new Error(reply.error);
+  const scene = await sceneArrived;
+  const h = scene.header;
+  renderer = new SpriteRenderer(canvas);
+  renderer.setScene(h, scene.heights, scene.texture);
+  metric = new ErrorMetric(h, scene.heights);
+  predictor = new Predictor(h.epsilon, h.fov, width / height, h.near, h.far, height);
+  predictor.failed = (s) => { if (predictor.inflight && predictor.inflight.seq === s) predictor.inflight = null; };
+  const extent = h.coarse * h.spacing;
+  const centre = [h.origin[0] + extent / 2, h.origin[1] + extent / 2, 0];
+  controls = new FlyControls(canvas, lookAt([centre[0], centre[1] - 1.2 * extent, 0.6 * extent], centre), 0.25 * extent);
+  if (opts.path) {
+    const p = await call('path', { spec: opts.path, frames: opts.frames });
+    if (!p.ok) throw new Error(p.error);
+    path = p.data.viewpoints.map((r) => ({ x: r.slice(0, 3), y: r.slice(3, 6), z: r.slice(6, 9), o: r.slice(9, 12) }));
+  }
+  state = path ? `playing ${opts.path}` : 'flying';
+  requestAnimationFrame(frame);
+}
+
+function adopt(now) {
+  const { header, color, depth } = pendingKey;
+  pendingKey = null;
+  renderer.setKeyframe(header, color, depth);
+  keyEye = header.viewpoint.o;
+  stats.keyframes += 1;
+  keep(stats.latencies, now - 1000 * header.t0);
+  predictor.arrived(header.t0, now / 1000);
+}
+
+function frame(now) {
+  const dt = lastFrame === null ? 0 : (now - lastFrame) / 1000;
+  if (lastFrame !== null) keep(stats.intervals, now - lastFrame);
+  lastFrame = now;
+  let vp, resting;
+  if (path && pathIndex < path.length) {
+    vp = path[pathIndex++];
+    resting = pathIndex === path.length;
+    if (resting) { controls.set(vp); state = 'path played: holding'; }
+  } else {
+    vp = controls.step(dt);
+    resting = now - controls.moved > RESTING_MS;
+  }
+  predictor.sample(now / 1000, vp);
+  if (pendingKey) adopt(now);
+  const want = predictor.want(metric, keyEye, now / 1000, resting);
+  if (want) {
+    const t = now / 1000;
+    const s = send({ kind: 'request', t, viewpoint: want });
+    predictor.sent(t, want); predictor.inflight.seq = s;
+  } else if (now - lastSample > VIEWPOINT_MS) {
+    lastSample = now;
+    const shown = keyEye ? { eye: keyEye, slot: 0 } : undefined;  // as the ZeroMQ client
+    send({ kind: 'viewpoint', t: now / 1000, viewpoint: vp, shown });
+  }
+  renderer.draw(predictor.viewProj(vp));
+  stats.error_px = predictor.errorPx(metric, keyEye, vp);
+  stats.frames += 1;
+  if (path && pathIndex === path.length && keyEye && norm(sub(keyEye, vp.o)) <= 1e-6 * (1 + norm(vp.o))) {
+    finishedResolve(stats.frames);
+  }
+  hud.update(now, api.stats, state);
+  requestAnimationFrame(frame);
+}
+
+const api = {
+  stats() {
+    const lat = percentile(stats.latencies, 0.5);
+    return {
+      frames: stats.frames, keyframes: stats.keyframes,
+      median_ms: percentile(stats.intervals, 0.5), p99_ms: percentile(stats.intervals, 0.99),
+      error_px: Number.isFinite(stats.error_px) ? stats.error_px : null, latency_ms: lat,
+    };
+  },
+  pixels: () => renderer.pixels(),
+  viewpoint: () => controls && controls.vp,
+  state: () => state,
+  serverStats: () => call('stats').then((r) => r.data),
+  finished,
+};
+api.ready = start().then(() => true, (e) => { state = `failed: ${e.message}`; hud.update(Infinity, api.stats, state); throw e; });
+window.lodsprite = api;

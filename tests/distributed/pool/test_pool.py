@@ -1,0 +1,271 @@
+"""The render pool: jobs through local workers, a worker killed mid-keyframe, a remote
+worker over tcp:// with CURVE, hostile frames to the broker, and no process left behind.
+
+One broker with two local workers serves the module's tests in order (round trip,
+hostile frames, kill, close); the CURVE test and the orphan test start their own."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+
+import numpy as np
+import pytest
+import zmq
+
+from conftest import wait_until
+from lodsprite.camera import look_at
+from lodsprite.distributed.keys import ServerKeys, make_keys
+from lodsprite.distributed.pool import LIVENESS_S, Broker, Job
+from lodsprite.distributed.pool.jobs import (
+    POOL_VERSION,
+    Heartbeat,
+    Ready,
+    ResultMessage,
+    encode_pool,
+)
+from lodsprite.distributed.protocol import LoadArgs, WireViewpoint, decode_keyframe
+from lodsprite.errors import InputError
+
+SCENE = LoadArgs(terrain="fractal:64:1", size=(64, 64), lod=16)
+OTHER = LoadArgs(terrain="fractal:64:2", texture="checker:4", size=(64, 64), lod=16)
+VIEW = WireViewpoint(**look_at((0.0, -900.0, 500.0), (0.0, 0.0, 0.0)).to_dict())
+SLACK_S = 0.5
+"""Scheduling slack on this loaded machine beyond the 1 s liveness (a stated tolerance)."""
+
+
+def job(i: int, load: LoadArgs = SCENE, session: str = "s") -> Job:
+    return Job(i, session, load, VIEW, float(i))
+
+
+def results(broker: Broker, n: int, timeout_s: float = 20.0) -> dict:
+    got: dict = {}
+
+    def more():
+        for r in broker.poll():
+            got[r.job] = r
+        return len(got) >= n
+
+    wait_until(more, timeout_s, f"{n} results")
+    return got
+
+
+def gone(pid: int) -> bool:
+    """The process ``pid`` is not running (absent, or a zombie waiting to be reaped)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rpartition(")")[2].split()[0] in ("Z", "X")
+    except OSError:
+        return True
+
+
+@pytest.fixture(scope="module")
+def broker():
+    b = Broker()
+    b.spawn_local(2)
+    wait_until(lambda: len(b.workers()) == 2, 30.0, "two local workers connecting")
+    yield b
+    b.close()
+
+
+def test_jobs_round_trip_through_two_local_workers(broker: Broker) -> None:
+    for i in range(4):
+        broker.submit(job(i))
+    got = results(broker, 4)
+    assert sorted(got) == [0, 1, 2, 3]
+    for i, r in got.items():
+        assert r.ok and r.session == "s", r.error
+        kf = decode_keyframe(r.parts)
+        assert kf.seq == i and kf.t0 == float(i)
+        assert kf.color.shape == (64, 64, 3) and kf.depth.shape == (64, 64)
+        assert kf.color.std() > 1.0  # terrain drawn, not a cleared target
+    # Four jobs at once on two idle workers: both took some.
+    assert {r.worker for r in got.values()} == {w.id for w in broker.workers()}
+    assert broker.stats()["results"] == 4
+
+
+def test_workers_follow_the_data_rule_and_jobs_are_checked_on_submit(broker: Broker) -> None:
+    import msgspec
+
+    broker.submit(job(40, msgspec.structs.replace(SCENE, terrain="dem.npy")))
+    broker.submit(job(41, msgspec.structs.replace(SCENE, texture="/etc/hosts")))
+    got = results(broker, 2)
+    assert not got[40].ok and "serves no files" in got[40].error
+    assert not got[41].ok and "serves no files" in got[41].error
+    with pytest.raises(InputError, match="bad job"):
+        broker.submit(job(42, session="x" * 500))
+    with pytest.raises(InputError, match="takes a Job"):
+        broker.submit({"job": 1})
+
+
+@pytest.mark.parametrize(("args", "says"), [
+    (["--connect", "localhost:5"], "--connect must be tcp://"),
+    (["--connect", "tcp://127.0.0.1:5", "--server-key", "/no/server.key"], "not found"),
+    (["--connect", "tcp://127.0.0.1:5", "--client-key", "/x"], "needs --server-key"),
+    (["--connect", "tcp://127.0.0.1:5", "--data", "/no/such/folder"], "data folder"),
+])
+def test_render_worker_refusals_exit_2(cli, args: list[str], says: str) -> None:
+    r = cli("render-worker", *args)
+    assert r.returncode == 2 and says in r.stderr
+
+
+def test_hostile_frames_do_not_stop_the_broker(broker: Broker) -> None:
+    rng = np.random.default_rng(7)
+    sock = zmq.Context.instance().socket(zmq.DEALER)
+    sock.setsockopt(zmq.LINGER, 0)
+    sock.connect(broker.local_endpoint)
+    hostile = [[rng.bytes(int(n))] for n in rng.integers(0, 300, 200)]
+    hostile += [[b""], [b"\x81\xa1v\x01"], [b"\xc1"], [b"x"] * 200,  # many frames
+                encode_pool(Ready(POOL_VERSION, cache=1)) + [b"extra"],
+                [b'\x82\xa1v\x63\xa4kind\xa5ready'],                    # wrong version
+                encode_pool(ResultMessage(POOL_VERSION, 99, True)),     # no keyframe parts
+                encode_pool(ResultMessage(POOL_VERSION, 99, False, "x" * 5000))]
+    for frames in hostile:
+        sock.send_multipart(frames)
+    # A worker that says ready, takes a job and answers garbage: disconnected, its job
+    # re-queued and rendered by a real worker.
+    sock.send_multipart(encode_pool(Ready(POOL_VERSION, name="liar")))
+    wait_until(lambda: len(broker.workers()) == 3, 5.0, "the liar joining")
+    for i in (10, 11, 12):  # the real two are busy, the liar gets one
+        broker.submit(job(i))
+    poller = zmq.Poller()
+    poller.register(sock, zmq.POLLIN)
+    deadline = time.monotonic() + 10.0
+    lied = False
+    while not lied and time.monotonic() < deadline:
+        if poller.poll(100):
+            msg = sock.recv_multipart()
+            if b"job" in msg[0]:
+                import msgspec
+
+                jid = msgspec.msgpack.decode(msg[0])["job"]["job"]
+                sock.send_multipart(encode_pool(ResultMessage(POOL_VERSION, jid, True),
+                                                b"\x00" * 10, b"junk", b"more junk"))
+                lied = True
+            else:
+                sock.send_multipart(encode_pool(Heartbeat(POOL_VERSION)))
+    assert lied, "the liar was never given a job"
+    got = results(broker, 3)
+    assert all(r.ok for r in got.values())
+    assert {r.worker for r in got.values()} <= {w.id for w in broker.workers()}
+    assert all(w.name != "liar" for w in broker.workers())
+    stats = broker.stats()
+    assert stats["rejected"] >= 200 and stats["requeued"] >= 1
+    sock.close(linger=0)
+    broker.submit(job(13))  # still serving
+    assert results(broker, 1)[13].ok
+
+
+def test_a_silent_worker_is_dead_after_a_second_and_rejoins_when_it_wakes(
+        broker: Broker) -> None:
+    """SIGSTOP keeps the connection open: only the heartbeats' absence tells."""
+    broker.submit(job(30, LoadArgs(terrain="fractal:1024:4", size=(64, 64), lod=16)))
+    busy = wait_until(lambda: [w for w in broker.workers() if w.job == 30], 5.0,
+                      "job 30 dispatched")[0]
+    os.kill(busy.pid, signal.SIGSTOP)
+    stopped = time.monotonic()
+    try:
+        wait_until(lambda: busy.id not in {w.id for w in broker.workers()},
+                   LIVENESS_S + SLACK_S, "the silent worker declared dead")
+        assert time.monotonic() - stopped >= LIVENESS_S - 0.25  # one heartbeat's grace
+        r = results(broker, 1, 30.0)[30]
+        assert r.ok and r.worker != busy.id, r.error
+    finally:
+        os.kill(busy.pid, signal.SIGCONT)
+    wait_until(lambda: busy.pid in {w.pid for w in broker.workers()}, 10.0,
+               "the woken worker rejoining")
+    assert len(broker.workers()) == 2
+
+
+def test_a_worker_killed_mid_keyframe_is_noticed_and_its_job_done_by_another(
+        broker: Broker) -> None:
+    big = LoadArgs(terrain="fractal:1024:3", size=(64, 64), lod=16)  # a slow first load
+    broker.submit(job(20, big))
+    busy = wait_until(lambda: [w for w in broker.workers() if w.job == 20], 5.0,
+                      "job 20 dispatched")[0]
+    os.kill(busy.pid, signal.SIGKILL)
+    killed = time.monotonic()
+    wait_until(lambda: busy.id not in {w.id for w in broker.workers()},
+               LIVENESS_S + SLACK_S, "the killed worker noticed")
+    assert time.monotonic() - killed <= LIVENESS_S + SLACK_S
+    r = results(broker, 1, 30.0)[20]
+    assert r.ok, r.error
+    assert r.worker != busy.id
+    assert broker.stats()["dead"] >= 1 and broker.stats()["requeued"] >= 2
+
+
+def test_close_leaves_no_process(broker: Broker) -> None:
+    pids = [p.pid for p in broker.local_processes()]
+    assert len(pids) == 2
+    broker.close()
+    assert all(gone(pid) for pid in pids)
+    broker.close()  # idempotent
+
+
+def test_a_remote_worker_over_tcp_with_curve_keeps_two_scenes_apart(tmp_path) -> None:
+    keys = tmp_path / "keys"
+    make_keys(keys)
+    b = Broker(bind="tcp://127.0.0.1:*", curve=ServerKeys.load(keys))
+    intruder_keys = tmp_path / "other"
+    make_keys(intruder_keys)  # a pair the broker does not know
+    cmd = [sys.executable, "-c", "from lodsprite.cli import main; main()", "render-worker",
+           "--connect", b.endpoints[1], "--server-key", str(keys / "server.key")]
+    worker = subprocess.Popen(cmd, stderr=subprocess.DEVNULL)
+    intruder = subprocess.Popen(cmd[:-1] + [str(keys / "server.key"), "--client-key",
+                                             str(intruder_keys / "client.key_secret")],
+                                stderr=subprocess.DEVNULL)
+    try:
+        w = wait_until(b.workers, 30.0, "the remote worker connecting")[0]
+        assert w.remote and w.pid == worker.pid
+        got = {}
+        for i, load in enumerate((SCENE, OTHER, SCENE)):  # one worker, two cached scenes
+            b.submit(job(i, load))
+            got.update(results(b, 1))
+        a1, other, a2 = (decode_keyframe(got[i].parts).color for i in range(3))
+        assert np.array_equal(a1, a2)  # the first scene again, not the second's drawing
+        assert np.abs(a1.astype(int) - other).mean() > 5.0
+        assert [x.pid for x in b.workers()] == [worker.pid]  # the intruder never got in
+        endpoint = b.endpoints[1]
+        b.close()  # the server goes away and comes back: the worker reconnects
+        b = Broker(bind=endpoint, curve=ServerKeys.load(keys))
+        wait_until(lambda: [x.pid for x in b.workers()] == [worker.pid], 10.0,
+                   "the worker reconnecting")
+        b.submit(job(5, OTHER))
+        assert results(b, 1)[5].ok
+    finally:
+        for p in (worker, intruder):
+            p.kill()
+            p.wait(timeout=10)
+        b.close()
+
+
+ORPHAN = textwrap.dedent("""
+    from lodsprite.distributed.pool import Broker
+    if __name__ == "__main__":
+        b = Broker()
+        print(*b.spawn_local(1), flush=True)
+        b.wait_workers(1, 30.0)
+        print("ready", flush=True)
+        import time; time.sleep(60)
+""")
+
+
+def test_local_workers_exit_when_their_broker_process_is_killed(tmp_path) -> None:
+    script = tmp_path / "parent.py"
+    script.write_text(ORPHAN)
+    parent = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE,
+                              text=True)
+    try:
+        pid = int(parent.stdout.readline())
+        assert parent.stdout.readline().strip() == "ready"
+        parent.kill()
+        parent.wait(timeout=10)
+        wait_until(lambda: gone(pid), 5.0, "the orphaned worker exiting")
+    finally:
+        parent.kill()
+        if not gone(pid):
+            os.kill(pid, signal.SIGKILL)
