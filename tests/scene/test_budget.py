@@ -13,6 +13,7 @@ from lodsprite.errors import InputError
 from lodsprite.scene.budget import (
     FrameScheduler,
     IndependentFeedback,
+    LayerBudget,
     LayerControl,
     greedy_plan,
     make_schedule,
@@ -188,3 +189,23 @@ def test_bad_schedules_are_refused():
         FrameScheduler(0.0)
     with pytest.raises(InputError, match="layer"):
         default_model("sky", (1.0,))
+
+
+def test_layer_budget_sets_knobs_and_reports_shares():
+    applied = []
+    cs = [LayerControl("terrain", EPS, EPS[0], applied.append),
+          LayerControl("objects", EXPONENTS, EXPONENTS[0], lambda v: None)]
+    budget = LayerBudget("scheduler", 20.0)
+    for _ in range(40):
+        plan = budget.before(cs)
+        layers = {c.name: (plan[c.name], true_ms(c.name, plan[c.name]), None) for c in cs}
+        frame_ms = sum(ms for _, ms, _ in layers.values()) + 1.0   # 1 ms outside the layers
+        cols = budget.after(layers, frame_ms)
+    assert applied and applied[-1] == cs[0].value            # set() was called
+    assert cols["predicted_ms_terrain"] == pytest.approx(layers["terrain"][1], rel=0.05)
+    assert budget.schedule.overhead_ms == pytest.approx(1.0, rel=0.1)
+    s = budget.summary()
+    assert s["schedule"] == "scheduler" and s["target_ms"] == 20.0
+    assert s["share_terrain"] + s["share_objects"] < 1.0
+    assert 0 < s["budget_share_terrain"] < 1.0
+    assert LayerBudget().summary()["schedule"] == "none"

@@ -17,6 +17,8 @@ is clearly better (their hysteresis against the oscillation that reactive feedba
 * :class:`IndependentFeedback` - the baseline, today's behaviour: each layer's own
   reactive feedback moves its knob towards a fixed share of the target.
 * :class:`NoSchedule` - nothing turns: every knob stays where it is.
+* :class:`LayerBudget` - what a layered technique runs: a schedule, a model per layer,
+  the frame's measurements fed back, the summary's shares.
 * :func:`steadiness` - oscillation measures: knob changes, std of the knob and of frame ms.
 """
 
@@ -28,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from lodsprite.errors import InputError
-from lodsprite.scene.costs import LayerModel
+from lodsprite.scene.costs import LayerModel, default_model
 
 SCHEDULES = ("scheduler", "independent", "none")
 #: :class:`IndependentFeedback`'s default shares of the target by layer (normalised over
@@ -262,6 +264,68 @@ def make_schedule(kind: str, target_ms: float | None,
     if kind == "scheduler":
         return FrameScheduler(target_ms)
     return IndependentFeedback(target_ms, shares)
+
+
+class LayerBudget:
+    """The budget a layered technique runs each frame: the ``schedule`` (:data:`SCHEDULES`)
+    under ``target_ms``, a :class:`~lodsprite.scene.costs.LayerModel` per layer (priors
+    from :func:`~lodsprite.scene.costs.default_model`, made on the layer's first frame),
+    and the per-layer sums :meth:`summary` reports.
+
+    Per frame: ``before(controls)`` sets every knob, the layers draw, then ``after({name:
+    (value, ms, work)}, frame_ms)`` feeds the measurements back and returns the frame's
+    ``predicted_ms_<layer>`` columns.  A layer may refine its benefit model between
+    frames (``models["objects"].benefit.update(lin, cov)``, ``benefit.coverage = ...``)."""
+
+    def __init__(self, schedule: str = "none", target_ms: float | None = None,
+                 shares: Mapping[str, float] | None = None) -> None:
+        self.kind = schedule
+        self.schedule = make_schedule(schedule, target_ms, shares)
+        self.models: dict[str, LayerModel] = {}
+        self.ms_sums: dict[str, float] = {}
+        self.frame_ms_sum = 0.0
+        self.frames = 0
+
+    @property
+    def target_ms(self) -> float:
+        return self.schedule.target_ms
+
+    def before(self, controls: Iterable[LayerControl]) -> dict[str, float]:
+        """Plan and apply every layer's knob for the coming frame."""
+        controls = list(controls)
+        for c in controls:
+            if c.name not in self.models:
+                self.models[c.name] = default_model(c.name, tuple(c.values))
+        return self.schedule.plan(controls, self.models)
+
+    def after(self, layers: Mapping[str, tuple[float, float, float | None]],
+              frame_ms: float) -> dict[str, float]:
+        """The frame's measurements: ``layers[name] = (knob value, ms, work counter or
+        None)``, ``frame_ms`` the whole frame; returns ``predicted_ms_<layer>`` (what the
+        cost model predicted for the setting drawn, before this frame's correction)."""
+        out = {f"predicted_ms_{n}": float(self.models[n].cost.predict(v))
+               for n, (v, _, _) in layers.items() if n in self.models}
+        for name, (value, ms, work) in layers.items():
+            self.schedule.observe(name, value, ms, work)
+            self.ms_sums[name] = self.ms_sums.get(name, 0.0) + float(ms)
+        self.schedule.observe_frame(frame_ms, sum(ms for _, ms, _ in layers.values()))
+        self.frame_ms_sum += float(frame_ms)
+        self.frames += 1
+        return out
+
+    def summary(self) -> dict[str, float | str]:
+        """``schedule``, ``target_ms`` (NaN without one), ``share_<layer>`` (the layer's
+        measured fraction of the frame time, mean ms over mean frame ms) and, under a
+        schedule, ``budget_share_<layer>`` (the share of the target it was given: the
+        scheduler's mean planned share, the independent feedback's fixed share)."""
+        out: dict[str, float | str] = {"schedule": self.kind,
+                                       "target_ms": float(self.target_ms)}
+        total = max(self.frame_ms_sum, 1e-9)
+        for name, ms in self.ms_sums.items():
+            out[f"share_{name}"] = ms / total
+        for name, share in self.schedule.shares().items():
+            out[f"budget_share_{name}"] = float(share)
+        return out
 
 
 def steadiness(knobs: np.ndarray, frame_ms: np.ndarray) -> dict[str, float]:
