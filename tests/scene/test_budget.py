@@ -34,17 +34,39 @@ def controls() -> list[LayerControl]:
     return out
 
 
+#: the synthetic scene: per layer (alpha, work at knob 1, a ms, b ms per unit of work)
+TRUTH = {"terrain": (-1.0, 2e5, 1.0, 5e-5), "objects": (-0.5, 1e5, 2.0, 4e-5),
+         "lightfields": (1.0, 1.0, 1.0, 0.15)}
+
+
+def true_work(name: str, v: float) -> float:
+    alpha, w1, _, _ = TRUTH[name]
+    return w1 * v ** alpha
+
+
 def true_ms(name: str, v: float) -> float:
     """The synthetic scene's real cost of each layer."""
-    return {"terrain": lambda: 1.0 + 24.0 / v ** 2, "objects": lambda: 2.0 + 6.0 / (v + 0.5),
-            "lightfields": lambda: 1.0 + 0.15 * v}[name]()
+    _, _, a, b = TRUTH[name]
+    return a + b * true_work(name, v)
 
 
-def run(schedule, frames: int, k: float = 1.0, noise: float = 0.0, seed: int = 0):
-    """Fly ``frames`` synthetic frames; measured ms = k x true x (1 + noise)."""
+def true_models() -> dict[str, LayerModel]:
+    """Cost models of the right shape (what the per-component rescale starts from)."""
+    out = {}
+    for c in controls():
+        alpha, w1, a, b = TRUTH[c.name]
+        out[c.name] = LayerModel(CostModel(PowerWork(alpha, 1.0, w1, fit=False), a, b),
+                                 default_model(c.name, c.values).benefit)
+    return out
+
+
+def run(schedule, frames: int, k: float = 1.0, noise: float = 0.0, seed: int = 0,
+        models: dict[str, LayerModel] | None = None, counters: bool = False):
+    """Fly ``frames`` synthetic frames; measured ms = k x true x (1 + noise); the layers
+    report their work counter with ``counters``."""
     rng = np.random.default_rng(seed)
     cs = controls()
-    models = {c.name: default_model(c.name, c.values) for c in cs}
+    models = true_models() if models is None else models
     knobs, totals, predicted = [], [], []
     for _ in range(frames):
         plan = schedule.plan(cs, models)
@@ -53,8 +75,9 @@ def run(schedule, frames: int, k: float = 1.0, noise: float = 0.0, seed: int = 0
             predicted.append(sum(schedule.predicted.values()))
         total = 0.0
         for c in cs:
-            ms = k * true_ms(c.name, plan[c.name]) * (1 + noise * rng.standard_normal())
-            schedule.observe(c.name, plan[c.name], ms)
+            v = plan[c.name]
+            ms = k * true_ms(c.name, v) * (1 + noise * rng.standard_normal())
+            schedule.observe(c.name, v, ms, true_work(c.name, v) if counters else None)
             total += ms
         schedule.observe_frame(total, total)
         totals.append(total)
@@ -102,7 +125,7 @@ def test_plan_skips_a_non_convex_setting():
     assert greedy_plan(costs, benefits, 6.0) == [2]
 
 
-@pytest.mark.parametrize("k", [0.5, 2.0, 3.0])
+@pytest.mark.parametrize("k", [0.5, 1.5, 2.0])
 def test_scheduler_converges_when_costs_are_k_times_the_model(k):
     target = 20.0
     knobs, totals, predicted, _ = run(FrameScheduler(target), 100, k=k)
@@ -113,13 +136,26 @@ def test_scheduler_converges_when_costs_are_k_times_the_model(k):
     assert np.all(knobs[50:] == knobs[-1])
 
 
-@pytest.mark.parametrize("target", [16.0, 16.5, 18.0])
+def test_scheduler_learns_the_costs_from_priors_and_counters():
+    # wrong priors (default_model) but the layers report their work counters: the work
+    # exponents and a + b·work are fitted online, prediction meets measurement
+    cs = controls()
+    priors = {c.name: default_model(c.name, c.values) for c in cs}
+    knobs, totals, predicted, models = run(FrameScheduler(16.0), 150, models=priors,
+                                           counters=True)
+    assert models["terrain"].cost.work.alpha == pytest.approx(-1.0, abs=0.1)
+    assert np.allclose(predicted[100:], totals[100:], rtol=0.05)
+    assert np.median(totals[100:]) <= 16.0 * 1.03
+
+
+@pytest.mark.parametrize("target", [14.0, 16.0, 22.0])
 def test_scheduler_is_steady_on_a_steady_scene(target):
-    # 5 % noise on every layer's time; 16-16.5 ms lies on a setting's edge
+    # 5 % noise on every layer's time; these targets lie on a setting's edge (without
+    # hysteresis the plan flips there: test_without_hysteresis_the_scheduler_flips)
     for seed in range(3):
         knobs, totals, _, _ = run(FrameScheduler(target), 100, noise=0.05, seed=seed)
         changes = sum(steadiness(knobs[:, i], totals)["changes"] for i in range(3))
-        assert changes <= 8, (seed, changes)
+        assert changes <= 5, (seed, changes)
         assert np.median(totals[20:]) <= target * 1.03
 
 
@@ -196,9 +232,10 @@ def test_layer_budget_sets_knobs_and_reports_shares():
     cs = [LayerControl("terrain", EPS, EPS[0], applied.append),
           LayerControl("objects", EXPONENTS, EXPONENTS[0], lambda v: None)]
     budget = LayerBudget("scheduler", 20.0)
-    for _ in range(40):
+    for _ in range(80):
         plan = budget.before(cs)
-        layers = {c.name: (plan[c.name], true_ms(c.name, plan[c.name]), None) for c in cs}
+        layers = {c.name: (plan[c.name], true_ms(c.name, plan[c.name]),
+                           true_work(c.name, plan[c.name])) for c in cs}
         frame_ms = sum(ms for _, ms, _ in layers.values()) + 1.0   # 1 ms outside the layers
         cols = budget.after(layers, frame_ms)
     assert applied and applied[-1] == cs[0].value            # set() was called

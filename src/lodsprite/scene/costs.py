@@ -11,9 +11,10 @@ a scene frame and the "levels" the settings of each layer's knob
 * :class:`PowerWork` - the layer's work (its own counter) at a knob value, predicted
   from the last measured one: ``work(v) = w_ref · (v / v_ref) ** alpha`` with ``alpha``
   refitted from pairs of measurements (terrain: triangles against ε or the tolerance,
-  ``alpha ≈ -2``; LOD-sprite: keyframes a frame against ε; objects: triangles against the
-  LODManager's exponent, ``alpha < 0``; light fields: nodes drawn against the node
-  budget, ``alpha = 1``).
+  ``alpha < 0``: -2 for a fine mesh in the limit, -0.2 measured on a small one;
+  LOD-sprite: keyframes a frame against ε; objects: triangles against the LODManager's
+  exponent, ``alpha < 0``; light fields: nodes drawn against the node budget, ``alpha =
+  1``).
 * :class:`CostModel` - ``ms(v) = scale · (a + b · work(v))``: ``a``, ``b`` fitted by least
   squares over the recent ``(work, ms)`` samples once they span a range of work (the
   lumigraph's ``raster_base + raster_node · nodes``, the adaptive renderer's ms per
@@ -205,11 +206,14 @@ def default_model(name: str, values: tuple[float, ...]) -> LayerModel:
     LayeredTechnique gives) whose knob takes ``values``; measurements correct them."""
     if not values:
         raise InputError(f"layer {name!r} offers no knob settings")
-    if name == "terrain":    # triangles ~ ε^-2, ~10 M triangles/s on llvmpipe
-        return LayerModel(CostModel(PowerWork(-2.0, min(values), 2e5), 1.0, 1e-4),
+    # priors from ``benchmarks/scene_budget.py calibrate`` (llvmpipe, 128², loaded
+    # machine): ~0.15-0.3 µs a triangle for both; triangles ~ ε^-0.2 on fractal:1024's
+    # few levels, ~ p^-0.15 for the 300-ogre crowd (the online fit takes over)
+    if name == "terrain":
+        return LayerModel(CostModel(PowerWork(-0.5, min(values), 2e5), 1.0, 2e-4),
                           TerrainBenefit(min(values)))
-    if name == "objects":    # triangles ~ Σ lin^p, a shallow power of p
-        return LayerModel(CostModel(PowerWork(-0.7, 1.0, 2e5), 1.0, 5e-5),
+    if name == "objects":
+        return LayerModel(CostModel(PowerWork(-0.2, 1.0, 2e5), 1.0, 2e-4),
                           ObjectsBenefit())
     if name == "lightfields":  # raster_base + raster_node · nodes
         return LayerModel(CostModel(PowerWork(1.0, 1.0, 1.0, fit=False), 1.0, 0.2),
