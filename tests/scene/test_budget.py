@@ -245,4 +245,5 @@ def test_layer_budget_sets_knobs_and_reports_shares():
     assert s["schedule"] == "scheduler" and s["target_ms"] == 20.0
     assert s["share_terrain"] + s["share_objects"] < 1.0
     assert 0 < s["budget_share_terrain"] < 1.0
+    assert 1 <= s["knob_changes_terrain"] <= 8      # it moved while learning, then held
     assert LayerBudget().summary()["schedule"] == "none"

@@ -283,6 +283,8 @@ class LayerBudget:
         self.schedule = make_schedule(schedule, target_ms, shares)
         self.models: dict[str, LayerModel] = {}
         self.ms_sums: dict[str, float] = {}
+        self.last_knob: dict[str, float] = {}
+        self.changes: dict[str, int] = {}
         self.frame_ms_sum = 0.0
         self.frames = 0
 
@@ -308,21 +310,26 @@ class LayerBudget:
         for name, (value, ms, work) in layers.items():
             self.schedule.observe(name, value, ms, work)
             self.ms_sums[name] = self.ms_sums.get(name, 0.0) + float(ms)
+            last = self.last_knob.get(name, value)
+            self.changes[name] = self.changes.get(name, 0) + int(value != last)
+            self.last_knob[name] = value
         self.schedule.observe_frame(frame_ms, sum(ms for _, ms, _ in layers.values()))
         self.frame_ms_sum += float(frame_ms)
         self.frames += 1
         return out
 
-    def summary(self) -> dict[str, float | str]:
+    def summary(self) -> dict[str, float | int | str]:
         """``schedule``, ``target_ms`` (NaN without one), ``share_<layer>`` (the layer's
         measured fraction of the frame time, mean ms over mean frame ms) and, under a
         schedule, ``budget_share_<layer>`` (the share of the target it was given: the
-        scheduler's mean planned share, the independent feedback's fixed share)."""
-        out: dict[str, float | str] = {"schedule": self.kind,
+        scheduler's mean planned share, the independent feedback's fixed share);
+        ``knob_changes_<layer>``: frames whose knob differed from the frame before."""
+        out: dict[str, float | int | str] = {"schedule": self.kind,
                                        "target_ms": float(self.target_ms)}
         total = max(self.frame_ms_sum, 1e-9)
         for name, ms in self.ms_sums.items():
             out[f"share_{name}"] = ms / total
+            out[f"knob_changes_{name}"] = self.changes.get(name, 0)
         for name, share in self.schedule.shares().items():
             out[f"budget_share_{name}"] = float(share)
         return out
