@@ -188,3 +188,32 @@ def test_render_scene_writes_the_layers_columns_and_shares(tmp_path):
     assert s["frames"] == 5 and {"median_ms", "p99_ms", "rmse_mean"} <= set(s)
     assert 0 < s["share_terrain"] < 1 and 0 < s["share_objects"] < 1
     assert s["share_terrain"] + s["share_objects"] <= 1.0 + 1e-9
+
+
+def test_the_viewer_opens_a_scene_file_and_flies_its_layers(gl, tmp_path):
+    from lodsprite.gl.target import RenderTarget
+    from lodsprite.scene import open_scene
+    from lodsprite.viewer.app import ViewOptions, factories
+    from lodsprite.viewer.controls import CameraController
+    from lodsprite.viewer.core import ViewerCore
+
+    (tmp_path / "p0.csv").write_text(f"{FRONT[0]},{FRONT[1]}\n")
+    path = scene_file(tmp_path, '[[objects]]\nmesh = "cube.off"\nheight_m = 50.0\n'
+                                'points = "p0.csv"\n')
+    scene = open_scene(str(path))
+    assert scene.mode == "scene" and scene.objects.count == 1
+    modes = factories(ViewOptions(terrain=str(path)), scene)
+    assert "scene" in modes and "manager" not in modes  # no crowd modes on a world
+    core = ViewerCore(gl.mgl, scene, (64, 48), modes, "scene",
+                      CameraController.from_home(scene.camera_home()))
+    target = RenderTarget(gl, 64, 48)
+    try:
+        for _ in range(2):
+            core.frame(1 / 30, target.fbo)
+            core.log_frame()
+        assert "1 objects" in core.technique.status()
+        img = core.technique.read_image()
+        assert (img != img[0, 0]).any(axis=2).mean() > 0.2  # terrain, not only sky
+    finally:
+        core.release()
+        target.release()

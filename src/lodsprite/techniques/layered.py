@@ -208,3 +208,14 @@ def create(renderer: Renderer, world: World | None = None, **options: Any
         raise InputError("the scene technique needs a world (a scene file: "
                          "lodsprite.scene.world.load_world)")
     return LayeredTechnique(renderer, world, **options)
+
+
+def open_scene(spec: str, **_: object):
+    """The scene of a scene file (``lodsprite view SCENE.toml``): its terrain, with the
+    world as its object set; the ``scene`` technique to start with."""
+    from dataclasses import replace
+
+    from lodsprite.scene.world import load_world
+
+    world = load_world(spec)
+    return replace(world.scene, objects=world, mode="scene", label=spec)
