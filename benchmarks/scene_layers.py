@@ -43,8 +43,8 @@ def run(scene_file: Path, holds: str, frames: int, size: int, epsilon: float) ->
     from lodsprite import techniques
     from lodsprite.api import Renderer
     from lodsprite.harness import run_path
+    from lodsprite.layered.technique import reference
     from lodsprite.scene.world import load_world
-    from lodsprite.techniques.layered import reference
 
     world = load_world(scene_file)
     cam = world.scene.path(world.path, frames)

@@ -156,7 +156,7 @@ def _is_scene_file(spec: str) -> bool:
 
 
 SCENE_KINDS: list[tuple[Callable[[str], bool], str]] = [
-    (_is_scene_file, "lodsprite.techniques.layered:open_scene"),
+    (_is_scene_file, "lodsprite.layered.technique:open_scene"),
     (_is_lumigraph, "lodsprite.lumigraph.technique:open_scene"),
     (_is_crowd, "lodsprite.manager.technique:open_scene"),
 ]

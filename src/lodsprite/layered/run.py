@@ -1,6 +1,6 @@
 """``lodsprite render --scene FILE``: a scene file's layers along its path, timed; with
 ``ground_truth`` every frame replayed untimed against the full-detail scene
-(:func:`lodsprite.techniques.layered.reference`).  Writes ``frames.csv`` (the core
+(:func:`lodsprite.layered.technique.reference`).  Writes ``frames.csv`` (the core
 columns, ``ms_terrain``, ``ms_objects``, ``ms_lightfields``, ``knob_<layer>`` ...) and
 ``summary.json`` (the core keys, ``share_<layer>``, the budget's keys)."""
 
@@ -23,8 +23,8 @@ def render_scene(scene_file: str | Path, out_dir: Path, size: tuple[int, int] = 
     from lodsprite import techniques
     from lodsprite.api import Renderer
     from lodsprite.harness import run_path, write_run
+    from lodsprite.layered.technique import reference
     from lodsprite.scene.world import load_world
-    from lodsprite.techniques.layered import reference
 
     if target_fps is not None and not target_fps > 0:
         raise InputError(f"--target-fps must be > 0, got {target_fps}")

@@ -31,8 +31,8 @@ import numpy as np
 
 from lodsprite.camera import Viewpoint
 from lodsprite.errors import InputError
+from lodsprite.layered.layers import Layer, LayerFrame
 from lodsprite.scene.budget import LayerControl
-from lodsprite.techniques.layers import Layer, LayerFrame
 
 if TYPE_CHECKING:
     from lodsprite.scene.world import LightFieldPlacement, World

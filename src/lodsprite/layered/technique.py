@@ -5,11 +5,11 @@ entities and note it suits architectures that decompose a scene into layers).
 :class:`LayeredTechnique` (registered as ``scene``) draws, every frame, into the
 renderer's one framebuffer and depth buffer:
 
-1. the terrain by any terrain technique (:class:`~lodsprite.techniques.layers.
+1. the terrain by any terrain technique (:class:`~lodsprite.layered.layers.
    TerrainLayer`: ``full``, ``lod``, ``adaptive``, ``sprite``, ``sprite-adaptive``);
-2. the objects by the LODManager engine (:class:`~lodsprite.techniques.layer_objects.
+2. the objects by the LODManager engine (:class:`~lodsprite.layered.objects.
    ObjectsLayer`), poses from the world at the frame's time;
-3. the light fields (:class:`~lodsprite.techniques.layer_lightfields.LightFieldLayer`),
+3. the light fields (:class:`~lodsprite.layered.lightfields.LightFieldLayer`),
    each reconstructed in its own target and composited through its proxy's depth.
 
 What LOD-sprite's keyframes hold (``keyframes``): ``static`` (the default) renders the
@@ -36,8 +36,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from lodsprite.errors import InputError
+from lodsprite.layered.layers import Layer, TerrainLayer, timed
 from lodsprite.techniques.base import Frame, Technique
-from lodsprite.techniques.layers import Layer, TerrainLayer, timed
 
 if TYPE_CHECKING:
     from lodsprite.api import Renderer
@@ -61,9 +61,9 @@ class LayeredTechnique(Technique):
                  ground_truth: bool = False, frame_s: float = FRAME_S,
                  **terrain_options: Any) -> None:
         super().__init__(renderer)
+        from lodsprite.layered.lightfields import LightFieldLayer
+        from lodsprite.layered.objects import ObjectsLayer
         from lodsprite.scene.budget import LayerBudget
-        from lodsprite.techniques.layer_lightfields import LightFieldLayer
-        from lodsprite.techniques.layer_objects import ObjectsLayer
 
         if keyframes not in KEYFRAME_HOLDS:
             raise InputError(f"unknown keyframes {keyframes!r}: use one of "
