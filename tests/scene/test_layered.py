@@ -217,3 +217,15 @@ def test_the_viewer_opens_a_scene_file_and_flies_its_layers(gl, tmp_path):
     finally:
         core.release()
         target.release()
+
+
+def test_render_scene_refuses_bad_input_in_one_line(cli, tmp_path):
+    for args, words in ((("--target-fps", "30"), "--scene"),
+                        (("--scene", str(tmp_path / "none.toml")), "none.toml"),
+                        (("--scene", str(scene_file(tmp_path, "")), "--target-fps", "-1"),
+                         "--target-fps")):
+        done = cli("render", *args, "--out", str(tmp_path / "run"))
+        assert done.returncode == 2, (args, done.stdout, done.stderr)
+        text = (done.stdout + done.stderr).strip()
+        assert words in text and len(text.splitlines()) <= 2, text
+    assert not (tmp_path / "run").exists()

@@ -100,8 +100,6 @@ class ObjectsLayer(Layer):
         if self._seen is None:
             return None
         viewpoint, projection = self._seen
-        if projection is None:
-            projection = self.renderer.projection(viewpoint).matrix()
         e = self.engine
         planes = frustum_planes(projection @ viewpoint.view_matrix())
         visible = spheres_in_frustum(planes, e.centres, e.radii)
@@ -121,7 +119,9 @@ class ObjectsLayer(Layer):
         self._engine_frame(viewpoint, 0.0, projection, np.zeros(len(self.crowd), bool))
         self._warm, self._log = self._log[0], []
 
-    def draw(self, viewpoint: Viewpoint, t: float, projection: np.ndarray) -> LayerFrame:
+    def draw(self, viewpoint: Viewpoint, t: float, projection: np.ndarray | None = None
+             ) -> LayerFrame:
+        projection = self.projection_at(viewpoint, projection)
         f, self._last = self._engine_frame(viewpoint, t, projection, self.subset)
         self._seen = (viewpoint, projection)
         return LayerFrame(f.ms, f.triangles, work=float(max(f.triangles, 1)),
