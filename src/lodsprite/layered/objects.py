@@ -31,7 +31,7 @@ if TYPE_CHECKING:
     from lodsprite.scene.world import World
 
 #: LOD exponents, ascending quality (coarse to fine).
-EXPONENTS = (4.0, 2.0, 1.0, 0.5, 0.25)
+EXPONENTS = (8.0, 5.7, 4.0, 2.8, 2.0, 1.4, 1.0, 0.7, 0.5, 0.35, 0.25)
 
 
 def world_crowd(world: World) -> Crowd:
