@@ -254,8 +254,10 @@ def test_layer_budget_sets_knobs_and_reports_shares():
     cs = [LayerControl("terrain", EPS, EPS[0], applied.append),
           LayerControl("objects", EXPONENTS, EXPONENTS[0], lambda v: None)]
     budget = LayerBudget("scheduler", 20.0)
+    seen = []
     for _ in range(80):
         plan = budget.before(cs)
+        seen.append(plan["terrain"])
         layers = {c.name: (plan[c.name], true_ms(c.name, plan[c.name]),
                            true_work(c.name, plan[c.name])) for c in cs}
         frame_ms = sum(ms for _, ms, _ in layers.values()) + 1.0   # 1 ms outside the layers
@@ -268,4 +270,6 @@ def test_layer_budget_sets_knobs_and_reports_shares():
     assert s["share_terrain"] + s["share_objects"] < 1.0
     assert 0 < s["budget_share_terrain"] < 1.0
     assert 1 <= s["knob_changes_terrain"] <= 8      # it moved while learning, then held
+    assert s["knob_std_terrain"] == pytest.approx(np.std(seen), abs=1e-9)
+    assert s["knob_std_terrain"] > 0
     assert LayerBudget().summary()["schedule"] == "none"
