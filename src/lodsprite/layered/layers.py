@@ -56,20 +56,10 @@ class Layer:
     ``lightfields``."""
 
     name = "layer"
-    renderer: Renderer
 
-    def draw(self, viewpoint: Viewpoint, t: float, projection: np.ndarray | None = None
-             ) -> LayerFrame:
-        """Draw the layer at time ``t`` (seconds) through ``projection (4, 4)`` (default:
-        :meth:`projection_at`)."""
+    def draw(self, viewpoint: Viewpoint, t: float, projection: np.ndarray) -> LayerFrame:
+        """Draw the layer at time ``t`` (seconds) through ``projection (4, 4)``."""
         raise NotImplementedError
-
-    def projection_at(self, viewpoint: Viewpoint, projection: np.ndarray | None = None
-                      ) -> np.ndarray:
-        """``projection``, or the renderer's frame projection at ``viewpoint``."""
-        if projection is not None:
-            return projection
-        return self.renderer.projection(viewpoint).matrix()
 
     def control(self) -> LayerControl:
         """What the budget may turn on this layer."""
@@ -152,8 +142,7 @@ class TerrainLayer(Layer):
     def warm_up(self, viewpoint: Viewpoint, projection: np.ndarray) -> None:
         self.technique.warm_up(viewpoint)
 
-    def draw(self, viewpoint: Viewpoint, t: float, projection: np.ndarray | None = None
-             ) -> LayerFrame:
+    def draw(self, viewpoint: Viewpoint, t: float, projection: np.ndarray) -> LayerFrame:
         f = self._last = self.technique.frame(viewpoint)
         self._spriteframe(viewpoint)
         extra = {"terrain_kind": f.kind}

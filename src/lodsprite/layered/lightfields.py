@@ -157,9 +157,7 @@ class LightFieldLayer(Layer):
         for item in self.items:
             item.reconstruct(viewpoint, projection)
 
-    def draw(self, viewpoint: Viewpoint, t: float, projection: np.ndarray | None = None
-             ) -> LayerFrame:
-        projection = self.projection_at(viewpoint, projection)
+    def draw(self, viewpoint: Viewpoint, t: float, projection: np.ndarray) -> LayerFrame:
         images = tris = 0
         for item in self.items:
             self.set_nodes(self.nodes)  # a slab switch makes a new method
