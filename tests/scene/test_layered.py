@@ -154,7 +154,7 @@ def test_walkers_move_while_keyframes_hold_the_static_objects(gl, tmp_path):
         assert np.abs(img[static].astype(int) - bare[static]).max() > 30
 
 
-@pytest.mark.parametrize("mode", ["sprite", "adaptive"])
+@pytest.mark.parametrize("mode", ["sprite", "sprite-adaptive", "adaptive"])
 def test_the_replay_draws_the_timed_frames(gl, tmp_path, lf_folder, mode):
     lfs = f'[[lightfields]]\nsource = "{lf_folder}"\nposition = [0.0, -200.0]\nheight_m = 80.0\n'
     world = world_with(tmp_path, [([FRONT], 0.0), ([(60.0, -300.0)], 40.0)], lfs)
