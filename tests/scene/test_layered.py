@@ -110,6 +110,9 @@ def test_a_light_field_shows_only_where_its_proxy_is_in_front(gl, tmp_path, lf_f
         t = techniques.create("scene", r, world=world, terrain_mode="full")
         try:
             (img,), _ = run(t, [vp])
+            assert t.lightfields.in_view(vp, t.projection(vp)).all()
+            back = look_at(EYE, (0.0, -900.0, 40.0))  # both behind the eye: neither drawn
+            assert not t.lightfields.in_view(back, t.projection(back)).any()
             items = t.lightfields.items
             proxy_px = []
             target = r.paths.renderer.target
