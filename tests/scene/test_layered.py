@@ -110,6 +110,9 @@ def test_a_light_field_shows_only_where_its_proxy_is_in_front(gl, tmp_path, lf_f
         t = techniques.create("scene", r, world=world, terrain_mode="full")
         try:
             (img,), _ = run(t, [vp])
+            assert t.lightfields.in_view(vp, t.projection(vp)).all()
+            back = look_at(EYE, (0.0, -900.0, 40.0))  # both behind the eye: neither drawn
+            assert not t.lightfields.in_view(back, t.projection(back)).any()
             items = t.lightfields.items
             proxy_px = []
             target = r.paths.renderer.target
@@ -154,7 +157,7 @@ def test_walkers_move_while_keyframes_hold_the_static_objects(gl, tmp_path):
         assert np.abs(img[static].astype(int) - bare[static]).max() > 30
 
 
-@pytest.mark.parametrize("mode", ["sprite", "adaptive"])
+@pytest.mark.parametrize("mode", ["sprite", "sprite-adaptive", "adaptive"])
 def test_the_replay_draws_the_timed_frames(gl, tmp_path, lf_folder, mode):
     lfs = f'[[lightfields]]\nsource = "{lf_folder}"\nposition = [0.0, -200.0]\nheight_m = 80.0\n'
     world = world_with(tmp_path, [([FRONT], 0.0), ([(60.0, -300.0)], 40.0)], lfs)

@@ -56,20 +56,10 @@ class Layer:
     ``lightfields``."""
 
     name = "layer"
-    renderer: Renderer
 
-    def draw(self, viewpoint: Viewpoint, t: float, projection: np.ndarray | None = None
-             ) -> LayerFrame:
-        """Draw the layer at time ``t`` (seconds) through ``projection (4, 4)`` (default:
-        :meth:`projection_at`)."""
+    def draw(self, viewpoint: Viewpoint, t: float, projection: np.ndarray) -> LayerFrame:
+        """Draw the layer at time ``t`` (seconds) through ``projection (4, 4)``."""
         raise NotImplementedError
-
-    def projection_at(self, viewpoint: Viewpoint, projection: np.ndarray | None = None
-                      ) -> np.ndarray:
-        """``projection``, or the renderer's frame projection at ``viewpoint``."""
-        if projection is not None:
-            return projection
-        return self.renderer.projection(viewpoint).matrix()
 
     def control(self) -> LayerControl:
         """What the budget may turn on this layer."""
@@ -131,17 +121,11 @@ class TerrainLayer(Layer):
         terrain of every keyframe, into the keyframe (static layers); False without."""
         if self.sprite is None:
             return False
-        s = self.sprite.sprite
-        prev = s.keyframe_drawer
-        terrain = self.renderer.paths.renderer
 
-        def drawer(viewpoint, projection, target):
-            stats = (prev(viewpoint, projection, target) if prev is not None
-                     else terrain.render(viewpoint, None, projection, target))
+        def after(viewpoint, projection, target) -> None:
             draw(viewpoint, projection.matrix(), target.fbo)
-            return stats
 
-        s.keyframe_drawer = drawer
+        self.sprite.sprite.after_keyframe = after
         return True
 
     def _spriteframe(self, viewpoint: Viewpoint) -> None:
@@ -152,8 +136,7 @@ class TerrainLayer(Layer):
     def warm_up(self, viewpoint: Viewpoint, projection: np.ndarray) -> None:
         self.technique.warm_up(viewpoint)
 
-    def draw(self, viewpoint: Viewpoint, t: float, projection: np.ndarray | None = None
-             ) -> LayerFrame:
+    def draw(self, viewpoint: Viewpoint, t: float, projection: np.ndarray) -> LayerFrame:
         f = self._last = self.technique.frame(viewpoint)
         self._spriteframe(viewpoint)
         extra = {"terrain_kind": f.kind}

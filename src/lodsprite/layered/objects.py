@@ -119,9 +119,7 @@ class ObjectsLayer(Layer):
         self._engine_frame(viewpoint, 0.0, projection, np.zeros(len(self.crowd), bool))
         self._warm, self._log = self._log[0], []
 
-    def draw(self, viewpoint: Viewpoint, t: float, projection: np.ndarray | None = None
-             ) -> LayerFrame:
-        projection = self.projection_at(viewpoint, projection)
+    def draw(self, viewpoint: Viewpoint, t: float, projection: np.ndarray) -> LayerFrame:
         f, self._last = self._engine_frame(viewpoint, t, projection, self.subset)
         self._seen = (viewpoint, projection)
         return LayerFrame(f.ms, f.triangles, work=float(max(f.triangles, 1)),
