@@ -223,6 +223,14 @@ def test_benefits_are_coverage_weighted_detail():
     assert o(0.25) > o(4.0) and o(1.0) == pytest.approx(0.2 * (10 + 0.5 + 0.1) / 12)
 
 
+def test_terrain_benefit_follows_quality_order_for_either_knob():
+    for values in (EPS, (8.0, 16.0, 32.0, 64.0)):      # ε falls, a LOD level rises
+        m = default_model("terrain", values)
+        cost, ben = m.tables(values)
+        assert np.all(np.diff(ben) > 0) and ben[-1] == pytest.approx(1.0)
+        assert np.all(np.diff(cost) > 0)                 # finer costs more (the prior)
+
+
 def test_object_detail_weighs_near_objects_by_their_screen_area():
     centres = np.array([[0.0, 10.0, 0.0], [0.0, 100.0, 0.0], [0.0, 200.0, 0.0]])
     lin, cov, coverage = object_detail(centres, np.ones(3), np.zeros(3),

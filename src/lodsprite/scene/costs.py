@@ -147,14 +147,19 @@ class CostModel:
 
 @dataclass
 class TerrainBenefit:
-    """Terrain: ``coverage · min(1, finest / ε)``; ``ε`` the knob (screen-space error or
-    tolerance, pixels; smaller is finer), ``finest`` the smallest setting offered."""
+    """Terrain: ``coverage · min(1, finest / ε)`` for an error knob (ε or tolerance,
+    pixels: smaller is finer), ``coverage · min(1, level / finest)`` for a resolution knob
+    (``resolution=True``: LOD level in quads, larger is finer); ``finest`` the finest
+    setting offered."""
 
     finest: float
     coverage: float = 1.0
+    resolution: bool = False
 
     def __call__(self, value: float) -> float:
-        return self.coverage * min(1.0, self.finest / max(float(value), 1e-9))
+        v = max(float(value), 1e-9)
+        q = v / self.finest if self.resolution else self.finest / v
+        return self.coverage * min(1.0, q)
 
 
 @dataclass
@@ -232,10 +237,13 @@ def default_model(name: str, values: tuple[float, ...]) -> LayerModel:
         raise InputError(f"layer {name!r} offers no knob settings")
     # priors from ``benchmarks/scene_budget.py calibrate`` (llvmpipe, 128², loaded
     # machine): ~0.15-0.3 µs a triangle for both; triangles ~ ε^-0.2 on fractal:1024's
-    # few levels, ~ p^-0.15 for the 300-ogre crowd (the online fit takes over)
-    if name == "terrain":
-        return LayerModel(CostModel(PowerWork(-0.5, min(values), 2e5), 1.0, 2e-4),
-                          TerrainBenefit(min(values)))
+    # few levels, ~ p^-0.15 for the 300-ogre crowd, ~ level² for a LOD level (the
+    # online fit takes over)
+    if name == "terrain":    # values ascending in quality: ε falls, a LOD level rises
+        resolution = len(values) > 1 and values[-1] > values[0]
+        return LayerModel(CostModel(PowerWork(2.0 if resolution else -0.5, values[-1], 2e5),
+                                    1.0, 2e-4),
+                          TerrainBenefit(values[-1], resolution=resolution))
     if name == "objects":
         return LayerModel(CostModel(PowerWork(-0.2, 1.0, 2e5), 1.0, 2e-4),
                           ObjectsBenefit())
