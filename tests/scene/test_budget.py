@@ -201,9 +201,29 @@ def test_independent_moves_each_knob_toward_its_share():
 def test_cost_model_refits_from_spread_samples():
     m = CostModel(PowerWork(1.0, 1.0, 1.0, fit=False), a=5.0, b=0.0, refit_every=8)
     for n in range(1, 17):
-        m.observe(float(n), 2.0 + 0.5 * n, work=float(n))
+        for _ in range(3):        # the first frame at a new setting is a switch
+            m.observe(float(n), 2.0 + 0.5 * n, work=float(n))
     assert m.a == pytest.approx(2.0, abs=1e-6) and m.b == pytest.approx(0.5, abs=1e-6)
     assert m.predict(30.0) == pytest.approx(17.0, rel=1e-6)
+
+
+def test_a_switch_costs_apart_from_the_steady_cost():
+    # 10 ms steady at either setting, 6 ms more on the frame the setting changes
+    m = CostModel(PowerWork(1.0, 1.0, 1.0, fit=False), a=10.0, b=0.0)
+    for k in range(60):
+        v = 1.0 if (k // 5) % 2 else 2.0
+        switched = k % 5 == 0 and k > 0
+        m.observe(v, 16.0 if switched else 10.0, work=1.0)
+    assert m.switch_ms == pytest.approx(6.0, rel=0.05)
+    assert m.scale == pytest.approx(1.0, abs=1e-6)      # spikes kept out of the scale
+    # the scheduler charges the switch: at the coarse setting under a 14 ms target the
+    # finer one (10 ms steady, 16 ms the frame it switches) does not fit; under 20 it does
+    model = LayerModel(m, default_model("objects", (2.0, 1.0)).benefit)
+    for target, after in ((14.0, 2.0), (20.0, 1.0)):
+        c = LayerControl("objects", (2.0, 1.0), 2.0, lambda v: None)
+        sched = FrameScheduler(target)
+        plans = [sched.plan([c], {"objects": model})["objects"] for _ in range(4)]
+        assert plans[-1] == after, (target, plans)
 
 
 def test_power_work_fits_its_exponent():

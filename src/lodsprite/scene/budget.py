@@ -125,9 +125,12 @@ class FrameScheduler:
         controls = list(controls)
         self.models = models
         tables = [models[c.name].tables(c.values) for c in controls]
-        costs, benefits = [t[0] for t in tables], [t[1] for t in tables]
-        budget = self.budget_ms
         cur = [c.index() for c in controls]
+        # a setting other than the current one costs its switch too (CostModel.switch_ms)
+        costs = [t[0] + models[c.name].cost.switch_ms * (np.arange(len(t[0])) != k)
+                 for t, c, k in zip(tables, controls, cur, strict=True)]
+        benefits = [t[1] for t in tables]
+        budget = self.budget_ms
         pick = self._hysteresis(cur, costs, benefits, budget)
         out = {}
         for c, k, cost in zip(controls, pick, costs, strict=True):

@@ -86,7 +86,13 @@ class CostModel:
     measured / unscaled prediction, and every ``refit_every`` samples whose work spans at
     least ``spread``× ``a`` and ``b`` are refitted (least squares over the last ``window``
     samples, ``b >= 0``, ``a >= a_min``: no layer is free, and a layer with nothing to draw
-    must not blow its scale up) and ``scale`` restarts at 1."""
+    must not blow its scale up) and ``scale`` restarts at 1.
+
+    A frame whose knob differs from the last one observed is a switch: what it costs over
+    the prediction (the LODManager's extractions after a new exponent, a new ε's tiles)
+    moves ``switch_ms`` (``switch_gain`` of the way) and neither the scale nor the fit:
+    the transient is kept apart from the steady cost, and the scheduler adds it to any
+    setting but the current one."""
 
     work: PowerWork
     a: float = 0.5
@@ -97,8 +103,11 @@ class CostModel:
     window: int = 64
     refit_every: int = 32
     spread: float = 1.5
+    switch_ms: float = 0.0
+    switch_gain: float = 0.3
     samples: deque = field(default_factory=deque, repr=False)
     _since_fit: int = field(default=0, repr=False)
+    _value: float | None = field(default=None, repr=False)
 
     def raw(self, work: float) -> float:
         """Unscaled ms at ``work`` units."""
@@ -115,6 +124,12 @@ class CostModel:
         if work is not None:
             self.work.observe(value, work)
         w = self.work.predict(value) if work is None else float(work)
+        switched = self._value is not None and value != self._value
+        self._value = value
+        if switched:
+            excess = max(float(ms) - self.scale * max(self.raw(w), self.a_min), 0.0)
+            self.switch_ms += self.switch_gain * (excess - self.switch_ms)
+            return
         ratio = float(np.clip(ms / max(self.raw(w), self.a_min), 0.02, 50.0))
         self.scale = float(np.exp((1 - self.gain) * np.log(self.scale)
                                   + self.gain * np.log(ratio)))
