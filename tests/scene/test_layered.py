@@ -232,3 +232,28 @@ def test_render_scene_refuses_bad_input_in_one_line(cli, tmp_path):
         text = (done.stdout + done.stderr).strip()
         assert words in text and len(text.splitlines()) <= 2, text
     assert not (tmp_path / "run").exists()
+
+
+def test_the_reference_is_the_scene_at_full_detail(gl, tmp_path):
+    from lodsprite.harness import run_path
+    from lodsprite.layered.technique import reference
+    from lodsprite.paths import CameraPath
+
+    world = world_with(tmp_path, [([FRONT, BEHIND], 0.0), ([(60.0, -300.0)], 20.0)])
+    path = CameraPath("t", tuple(look_at((x, -470.0, 40.0), (x, 0.0, 40.0))
+                                 for x in (0.0, 20.0, 40.0)), 45.0)
+    with Renderer(world.scene, SIZE, 45.0, ctx=gl.mgl) as r:
+        truth, ref = reference(r, world, path)
+        runs = {}
+        try:
+            for exponent in (0.0, 8.0):  # full meshes, then the coarsest LODs
+                t = techniques.create("scene", r, world=world, terrain_mode="full",
+                                      exponent=exponent)
+                try:
+                    runs[exponent] = run_path(t, path, ground_truth=True, reference=truth)
+                finally:
+                    t.release()
+        finally:
+            ref.release()
+    assert runs[0.0].summary["rmse_mean"] == 0.0      # the same scene: no error at all
+    assert runs[8.0].summary["rmse_mean"] > 0.0       # coarse LODs differ from it
