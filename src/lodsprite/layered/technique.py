@@ -1,0 +1,275 @@
+"""A whole scene in one frame: terrain, objects and light fields composited by depth
+(issue 23; Chen, Swan & Kaufman 1999 built LOD-sprite for a battlefield of terrain and
+entities and note it suits architectures that decompose a scene into layers).
+
+:class:`LayeredTechnique` (registered as ``scene``) draws, every frame, into the
+renderer's one framebuffer and depth buffer:
+
+1. the terrain by any terrain technique (:class:`~lodsprite.layered.layers.
+   TerrainLayer`: ``full``, ``lod``, ``adaptive``, ``sprite``, ``sprite-adaptive``);
+2. the objects by the LODManager engine (:class:`~lodsprite.layered.objects.
+   ObjectsLayer`), poses from the world at the frame's time;
+3. the light fields (:class:`~lodsprite.layered.lightfields.LightFieldLayer`),
+   each reconstructed in its own target and composited through its proxy's depth.
+
+What LOD-sprite's keyframes hold (``keyframes``): ``static`` (the default) renders the
+static objects (``walk_mps = 0``) into every keyframe after its terrain, so spriteframes
+warp them with the terrain and a frame draws only the moving objects, depth tested
+against the spriteframe's (the proxy's) depth; ``terrain`` keeps keyframes terrain only
+and draws every object every frame.  Light fields are view dependent: never in keyframes.
+``benchmarks/scene_layers.py`` measures the two (docs/scenes.md).
+
+Per frame ``Frame.extra`` holds ``ms_terrain``, ``ms_objects``, ``ms_lightfields`` (each
+layer between two ``ctx.finish()``), ``knob_<layer>`` (each layer's setting) and the
+budget's ``predicted_ms_<layer>``; the budget (:class:`~lodsprite.scene.budget.
+LayerBudget`, ``schedule`` ``none`` | ``scheduler`` | ``independent`` under
+``target_fps``) turns the knobs before each frame.  ``ground_truth=True`` is the
+full-detail reference: full-resolution terrain, full meshes (LOD exponent 0), every
+lumigraph node.
+
+:func:`render_scene` is ``lodsprite render --scene FILE``: the technique over a scene
+file's world along its ``[view]`` path, ``frames.csv`` with the per-layer columns and
+``summary.json`` with the core keys and ``share_<layer>``; with ``ground_truth`` every frame
+replayed untimed against the full-detail scene (:func:`reference`).
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from lodsprite.errors import InputError
+from lodsprite.layered.layers import Layer, TerrainLayer, timed
+from lodsprite.techniques.base import Frame, Technique
+
+if TYPE_CHECKING:
+    from lodsprite.api import Renderer
+    from lodsprite.camera import Viewpoint
+    from lodsprite.paths import CameraPath
+    from lodsprite.scene.world import World
+
+#: The time between frames (s): frame ``i`` shows the world at ``i * FRAME_S``.
+FRAME_S = 1.0 / 30.0
+KEYFRAME_HOLDS = ("static", "terrain")
+#: Objects whose LOD the manager updates a frame (its active list).
+ACTIVE = 300
+
+
+class LayeredTechnique(Technique):
+    """A world's layers in one frame (module doc)."""
+
+    name = "scene"
+
+    def __init__(self, renderer: Renderer, world: World, terrain_mode: str = "adaptive",
+                 schedule: str = "none", target_fps: float | None = None,
+                 keyframes: str = "static", exponent: float = 1.0, nodes: int = 8,
+                 ground_truth: bool = False, frame_s: float = FRAME_S,
+                 **terrain_options: Any) -> None:
+        super().__init__(renderer)
+        from lodsprite.layered.lightfields import LightFieldLayer
+        from lodsprite.layered.objects import ObjectsLayer
+        from lodsprite.scene.budget import LayerBudget
+
+        if keyframes not in KEYFRAME_HOLDS:
+            raise InputError(f"unknown keyframes {keyframes!r}: use one of "
+                             f"{', '.join(KEYFRAME_HOLDS)}")
+        if ground_truth:
+            terrain_mode, exponent, schedule = "full", 0.0, "none"
+        self.world, self.frame_s, self.keyframes = world, float(frame_s), keyframes
+        self.budget = LayerBudget(schedule, None if target_fps is None else 1e3 / target_fps)
+        self.layers: list[Layer] = []
+        try:
+            self.terrain = TerrainLayer(renderer, terrain_mode, **terrain_options)
+            self.layers.append(self.terrain)
+            # the LODManager's active list (§4.2): 300 objects' LODs updated a frame, as the
+            # crowd's default; the reference updates every object at once
+            self.objects = (ObjectsLayer(renderer, world, exponent,
+                                         None if ground_truth else ACTIVE)
+                            if world.count else None)
+            if self.objects is not None:
+                self.layers.append(self.objects)
+            self.lightfields = (LightFieldLayer(renderer, world,
+                                                "full" if ground_truth else "arbitrary",
+                                                nodes) if world.lightfields else None)
+            if self.lightfields is not None:
+                self.layers.append(self.lightfields)
+        except BaseException:
+            self.release()
+            raise
+        self.static_in_keyframes = (keyframes == "static" and self.objects is not None
+                                    and self.terrain.keyframe_hook(self.objects.draw_static))
+        if self.static_in_keyframes:
+            self.objects.subset = world.moving()
+        self.index = 0
+        self._last: dict[str, Any] = {}
+
+    def projection(self, viewpoint: Viewpoint) -> np.ndarray:
+        """The frame's projection ``(4, 4)`` (the terrain technique's)."""
+        return self.terrain.projection(viewpoint)
+
+    def warm_up(self, viewpoint: Viewpoint) -> None:
+        proj = self.projection(viewpoint)
+        for layer in sorted(self.layers, key=lambda x: x is self.terrain):  # objects first
+            layer.warm_up(viewpoint, proj)
+        self.renderer.gl.finish()
+
+    def plan_replay(self, frames: set[int]) -> None:
+        self.terrain.technique.plan_replay(frames)
+        if self.lightfields is not None:
+            self.lightfields.plan_replay(frames)
+
+    def frame(self, viewpoint: Viewpoint) -> Frame:
+        t = self.index * self.frame_s
+        t0 = time.perf_counter()
+        self.budget.before([layer.control() for layer in self.layers])
+        proj = self.projection(viewpoint)
+        finish = self.renderer.gl.finish
+        drawn = {layer.name: timed(finish, lambda la=layer: la.draw(viewpoint, t, proj))
+                 for layer in self.layers}
+        ms = (time.perf_counter() - t0) * 1e3
+        knobs = {layer.name: layer.control().value for layer in self.layers}
+        extra: dict[str, Any] = {"t": t}
+        for name, f in drawn.items():
+            extra[f"ms_{name}"] = f.ms
+            extra[f"knob_{name}"] = knobs[name]
+            extra.update(f.extra)
+        extra.update(self.budget.after({n: (knobs[n], f.ms, f.work)
+                                        for n, f in drawn.items()}, ms))
+        self._last = {"t": t, **{n: layer.decision() for n, layer in
+                                 zip(drawn, self.layers, strict=True)}}
+        self.index += 1
+        terrain = drawn["terrain"]
+        return Frame(terrain.extra.get("terrain_kind", "scene"), ms,
+                     sum(f.triangles for f in drawn.values()), terrain.error_px, extra)
+
+    def decision(self) -> dict[str, Any]:
+        return self._last
+
+    def replay(self, viewpoint: Viewpoint, decision: dict[str, Any]) -> np.ndarray:
+        proj = self.projection(viewpoint)
+        t = decision["t"]
+        if self.objects is not None:
+            self.objects.replaying = decision  # keyframes redraw their recorded objects
+        try:
+            for layer in self.layers:
+                layer.replay(viewpoint, t, proj, decision[layer.name])
+        finally:
+            if self.objects is not None:
+                self.objects.replaying = None
+        self.renderer.gl.finish()
+        return self.read_image()
+
+    def summary(self, frames: list[Frame]) -> dict[str, Any]:
+        """The budget's ``share_<layer>`` (fraction of frame ms), ``schedule``,
+        ``target_ms``; mean ms per layer; the terrain mode and what keyframes held."""
+        out: dict[str, Any] = {**self.budget.summary(), "terrain_mode": self.terrain.mode,
+                               "keyframe_holds": ("static" if self.static_in_keyframes
+                                                  else "terrain"),
+                               "layers": [layer.name for layer in self.layers],
+                               "instances": self.world.count,
+                               "lightfields": len(self.world.lightfields)}
+        for layer in self.layers:
+            col = [f.extra[f"ms_{layer.name}"] for f in frames]
+            out[f"mean_ms_{layer.name}"] = float(np.mean(col)) if col else float("nan")
+        out["keyframes"] = int(sum(f.kind == "keyframe" for f in frames))
+        return out
+
+    def params(self):
+        return self.terrain.technique.params()
+
+    def set_param(self, name: str, value: float) -> None:
+        self.terrain.technique.set_param(name, value)
+
+    def status(self) -> str:
+        e = self._last
+        return (f"scene t {e.get('t', 0.0):.1f} s, {self.world.count} objects, "
+                f"{len(self.world.lightfields)} light fields")
+
+    def release(self) -> None:
+        for layer in reversed(self.layers):
+            layer.release()
+        self.layers = []
+
+
+def reference(renderer: Renderer, world: World, path: CameraPath, frame_s: float = FRAME_S):
+    """The full-detail reference of a run along ``path``: ``(viewpoint -> image, the
+    reference technique)`` (release it after the run); a viewpoint's time is its index
+    along ``path`` (matched by identity) times ``frame_s``."""
+    ref = LayeredTechnique(renderer, world, ground_truth=True, frame_s=frame_s)
+    ref.warm_up(path.viewpoints[0])
+    index = {id(vp): i for i, vp in enumerate(path.viewpoints)}
+
+    def image(viewpoint: Viewpoint) -> np.ndarray:
+        ref.index = index.get(id(viewpoint), 0)
+        ref.frame(viewpoint)
+        return ref.read_image()
+
+    return image, ref
+
+
+def create(renderer: Renderer, world: World | None = None, **options: Any
+           ) -> LayeredTechnique:
+    """The registry's factory of ``scene``: ``world`` (default: the scene's, a scene
+    opened from a scene file holds its world as its object set)."""
+    if world is None:
+        world = getattr(renderer.scene, "objects", None)
+    if world is None or not hasattr(world, "poses"):
+        raise InputError("the scene technique needs a world (a scene file: "
+                         "lodsprite.scene.world.load_world)")
+    return LayeredTechnique(renderer, world, **options)
+
+
+def open_scene(spec: str, **_: object):
+    """The scene of a scene file (``lodsprite view SCENE.toml``): its terrain, with the
+    world as its object set; the ``scene`` technique to start with."""
+    from dataclasses import replace
+
+    from lodsprite.scene.world import load_world
+
+    world = load_world(spec)
+    return replace(world.scene, objects=world, mode="scene", label=spec)
+
+
+def render_scene(scene_file: str | os.PathLike, out_dir: str | os.PathLike,
+                 size: tuple[int, int] = (512, 512), frames: int | None = None,
+                 terrain_mode: str = "adaptive",
+                 target_fps: float | None = None, ground_truth: bool = False,
+                 flip: bool = False, path: str | None = None, progress=None,
+                 **options: Any) -> dict[str, Any]:
+    """Run the ``scene`` technique over the world of ``scene_file`` along its ``[view]``
+    path (or ``path``) and write the run to ``out_dir``; returns the summary.
+    ``target_fps`` runs the budget's scheduler (none without)."""
+    from lodsprite import techniques
+    from lodsprite.api import Renderer
+    from lodsprite.harness import run_path, write_run
+    from lodsprite.layered.technique import reference
+    from lodsprite.scene.world import load_world
+
+    if target_fps is not None and not target_fps > 0:
+        raise InputError(f"--target-fps must be > 0, got {target_fps}")
+    world = load_world(scene_file)
+    cam = world.scene.path(path or world.path, frames)
+    schedule = "scheduler" if target_fps is not None else "none"
+    with Renderer(world.scene, size, cam.fov_y_deg) as renderer:
+        t = techniques.create("scene", renderer, world=world, terrain_mode=terrain_mode,
+                              schedule=schedule, target_fps=target_fps, **options)
+        ref = None
+        try:
+            image = None
+            if ground_truth:
+                image, ref = reference(renderer, world, cam, t.frame_s)
+            result = run_path(t, cam, progress=progress, ground_truth=ground_truth,
+                              reference=image, flip=flip)
+        finally:
+            t.release()
+            if ref is not None:
+                ref.release()
+        summary = {**result.summary, "mode": "scene", "scene": str(scene_file),
+                   "terrain": world.scene.terrain_spec, "path": path or world.path,
+                   "size": list(size), "gl_version": renderer.info.version}
+    write_run(Path(out_dir), result, summary)
+    return summary
