@@ -18,6 +18,7 @@ index buffer they draw, one instanced draw a group.  Times stop after ``ctx.fini
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -104,6 +105,10 @@ class CrowdEngine:
                                          axis=1).astype(np.float32)
         self.last_orders: list[tuple[int, int, float]] = []  # the last frame's extractions
         self.last_using: np.ndarray | None = None
+        # Per-object desired factors from elsewhere (e.g. a scene's profile LOD,
+        # lodsprite.scene.profile_lod.ProfileLod): (viewpoint, transforms (N, 4),
+        # desired (N,), exponent) -> (N,) factors; None: the distance-linear ones.
+        self.desired_hook: Callable[..., np.ndarray] | None = None
 
     def reset_indices(self) -> None:
         """Every type's index buffer on its base LOD (the state before the first frame)."""
@@ -131,6 +136,9 @@ class CrowdEngine:
                              )[self.crowd.types] + self.level
         else:
             desired = desired_lod(dist, *self.range, self.feedback.exponent)
+            if self.desired_hook is not None:
+                desired = self.desired_hook(viewpoint, self.transforms, desired,
+                                            self.feedback.exponent)
             active = active_list(desired, self.manager.lod, visible, self.n_active,
                                  self.manager.n_slots, self.penalty, self.dist)
             orders = self.manager.update(active, desired)
