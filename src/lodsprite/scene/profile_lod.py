@@ -321,3 +321,18 @@ class ProfileLod:
             out[idx] = lod_factors(self.profiles[k], viewpoint.o, transforms[idx],
                                    self.fov_y_deg, self.height_px, threshold)
         return out
+
+
+def profile_hook(types: list[ObjectType], models: list[Any], object_types: np.ndarray,
+                 fov_y_deg: float, height_px: int, threshold: float = DEFAULT_THRESHOLD,
+                 settings: ProfileSettings = SCENE_SETTINGS,
+                 factors: tuple[float, ...] = PROFILE_FACTORS) -> ProfileLod | None:
+    """The objects layer's hook: a :class:`ProfileLod` over the ``lod = "profile"`` types
+    of ``types`` (their profiles read or built now, before any timed frame, from
+    ``models``, the LOD models the layer draws them with; ``object_types (N,)`` each
+    object's type), or None when no type is."""
+    profiles = {k: type_profile(t, models[k], settings, factors) for k, t in enumerate(types)
+                if t.lod == "profile"}
+    if not profiles:
+        return None
+    return ProfileLod(profiles, object_types, fov_y_deg, height_px, threshold)
