@@ -205,3 +205,10 @@ def test_the_layer_hook_covers_the_profile_types_only(gl, tmp_path, counts):
                            settings=TINY, factors=FACTORS)
     assert set(hook.profiles) == {1} and counts["built"] == 1
     assert list(hook.members[1]) == [1, 2]
+
+
+def test_a_gltf_part_is_cached_beside_its_file_by_part_name(tmp_path):
+    t = ObjectType("town.glb:house 1", np.zeros((3, 3), np.float32),
+                   np.zeros((1, 3), np.int32), np.zeros((3, 3), np.float32), 1.0, "profile",
+                   tmp_path / "town.glb")
+    assert pl.cache_path(t, "cd" * 32) == tmp_path / f"town.glb.house_1.{'cd' * 8}{pl.SUFFIX}"

@@ -113,14 +113,19 @@ def cache_key(t: ObjectType, model: Any, settings: ProfileSettings,
 
 
 def cache_path(t: ObjectType, key: str) -> Path:
-    """Beside the mesh file (``<mesh>.<key16>.lodprofile.npz``), or in the user cache
-    folder for a built-in (``<name>.<key16>.lodprofile.npz``)."""
-    safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in t.name)[:80]
+    """Beside the mesh file (``<mesh>.<key16>.lodprofile.npz``; a glTF group's part
+    ``<mesh>.<part>.<key16>.lodprofile.npz``), or in the user cache folder for a
+    built-in (``<name>.<key16>.lodprofile.npz``)."""
     if t.source is None:
-        return user_cache_dir() / f"{safe}.{key[:16]}{SUFFIX}"
+        return user_cache_dir() / f"{_safe(t.name)}.{key[:16]}{SUFFIX}"
     src = Path(t.source)
-    part = "" if t.name == src.name else "." + safe.rpartition(":")[2]
+    part = "" if t.name == src.name else "." + _safe(t.name.rpartition(":")[2])
     return src.with_name(f"{src.name}{part}.{key[:16]}{SUFFIX}")
+
+
+def _safe(name: str) -> str:
+    """``name`` as a file-name part: letters, digits, ``-_.``; at most 80 characters."""
+    return "".join(c if c.isalnum() or c in "-_." else "_" for c in name)[:80]
 
 
 def _triangles(t: ObjectType, model: Any, factors: tuple[float, ...]) -> list[int]:
