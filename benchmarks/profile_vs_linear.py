@@ -19,10 +19,10 @@ import json
 import time
 
 from lodsprite.gl.context import GLContext
-from lodsprite.manager.profile_compare import profile_vs_linear
+from lodsprite.manager.profile_compare import profile_vs_linear, type_profiles
 from lodsprite.manager.scene import build_crowd, walkthrough
 from lodsprite.scene.objects import builtin_type
-from lodsprite.scene.profile_lod import DEFAULT_THRESHOLD, stats, type_profile
+from lodsprite.scene.profile_lod import DEFAULT_THRESHOLD, stats
 
 
 def main() -> None:
@@ -35,7 +35,7 @@ def main() -> None:
     a = ap.parse_args()
     t0 = time.perf_counter()
     types = [builtin_type("ogre", None, "profile"), builtin_type("tree", None, "profile")]
-    profiles = {i: type_profile(t) for i, t in enumerate(types)}
+    profiles = type_profiles(types, [t.model for t in types])
     setup_s = time.perf_counter() - t0
     crowd = build_crowd([types[0].model], objects=a.objects, trees=a.trees,
                         tree_model=types[1].model)

@@ -13,6 +13,8 @@
 Every frame: frustum culling (bounding spheres), LOD work (timed as ``lod_ms``: the
 decisions, the extractions and their uploads), then the visible objects grouped by the
 index buffer they draw, one instanced draw a group.  Times stop after ``ctx.finish()``.
+A :attr:`CrowdEngine.desired_hook` may replace the distance-linear desired factors of
+some objects (a scene's profile LOD: :class:`lodsprite.scene.profile_lod.ProfileLod`).
 """
 
 from __future__ import annotations

@@ -27,11 +27,12 @@ from lodsprite.camera import frustum_planes, perspective
 from lodsprite.errors import InputError
 from lodsprite.manager.core import desired_lod
 from lodsprite.manager.scene import spheres_in_frustum
-from lodsprite.scene.profile_lod import DEFAULT_THRESHOLD, TypeProfile, lod_factors
+from lodsprite.scene.profile_lod import DEFAULT_THRESHOLD, TypeProfile, lod_factors, type_profile
 
 if TYPE_CHECKING:
     from lodsprite.camera import Viewpoint
     from lodsprite.manager.scene import Crowd
+    from lodsprite.scene.objects import ObjectType
 
 #: Linear factors are rounded to this step (at most 1 / FACTOR_STEP + 1 LODs a type).
 FACTOR_STEP = 1.0 / 32.0
@@ -73,6 +74,13 @@ class _Views:
         self.visible = [spheres_in_frustum(frustum_planes(m), centres, radii)
                         for m in self.view_proj]
         self.dist = [np.linalg.norm(centres - vp.o, axis=1) for vp in viewpoints]
+
+
+def type_profiles(types: list[ObjectType], models: list[Any]) -> dict[int, TypeProfile]:
+    """Every type's profile (read from its cache or built), by type index, from the LOD
+    models the crowd draws (``models[k]`` for ``types[k]``), whatever each type's ``lod``:
+    the comparison selects every type both ways."""
+    return {k: type_profile(t, m) for k, (t, m) in enumerate(zip(types, models, strict=True))}
 
 
 def _triangles(crowd: Crowd, views: _Views, factors: list[np.ndarray]) -> int:
