@@ -288,14 +288,32 @@ def lod_factors(t: ObjectType | TypeProfile, eye: np.ndarray, positions: np.ndar
     :func:`~lodsprite.profiles.select.select_profile`) from ``eye (3,)`` world metres, on a
     camera of vertical field of view ``fov_y_deg`` over ``height_px`` rows; instances at
     ``positions`` as :func:`instance_models` takes them."""
-    from lodsprite.profiles.select import select_profile
+    from lodsprite.profiles.select import select_views
 
     profile = profile_of(t)
     if len(positions) == 0:
         return np.zeros(0)
-    lod = select_profile(profile.table, instance_models(positions), np.asarray(eye, float),
-                         fov_y_deg, height_px, threshold, csf=True)
+    phi, theta, dist = instance_views(positions, eye, profile.table.centre)
+    lod = select_views(profile.table, phi, theta, dist, fov_y_deg, height_px, threshold)
     return profile.factors[lod]
+
+
+def instance_views(positions: np.ndarray, eye: np.ndarray, centre: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`lodsprite.profiles.select.object_views` for instances that are turned and
+    moved only (no scale), without a matrix inverse: the eye ``(3,)`` in each instance's
+    frame is ``R(-yaw) (eye - position)``.  Returns ``phi_deg``, ``theta_deg``,
+    ``distance`` ``(k,)`` (degrees, metres) from the frame's ``centre (3,)``."""
+    p = np.asarray(positions, np.float64).reshape(len(positions), -1)
+    yaw = p[:, 3] if p.shape[1] > 3 else np.zeros(len(p))
+    rel = np.asarray(eye, np.float64)[None, :] - p[:, :3]
+    c, s = np.cos(yaw), np.sin(yaw)
+    v = np.stack([c * rel[:, 0] + s * rel[:, 1], c * rel[:, 1] - s * rel[:, 0], rel[:, 2]],
+                 axis=1) - np.asarray(centre, np.float64)
+    dist = np.linalg.norm(v, axis=1)
+    phi = np.degrees(np.arctan2(v[:, 1], v[:, 0])) % 360.0
+    theta = np.degrees(np.arcsin(np.clip(v[:, 2] / np.where(dist > 0, dist, 1.0), -1, 1)))
+    return phi, theta, dist
 
 
 class ProfileLod:
