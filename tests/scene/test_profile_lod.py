@@ -103,7 +103,7 @@ def built(tmp_path_factory):
 
 @pytest.mark.parametrize("hostile", ["wrong key", "string errors", "float faces",
                                      "negative error", "extra member", "oversized",
-                                     "declared huge"])
+                                     "declared huge", "nested meta", "text fov"])
 def test_a_hostile_cache_is_refused(tmp_path, built, hostile):
     t, p = built
     key = pl.cache_key(t, None, TINY, FACTORS)
@@ -120,6 +120,14 @@ def test_a_hostile_cache_is_refused(tmp_path, built, hostile):
         _rewrite(path, faces=table.faces.astype(np.float64))
     elif hostile == "negative error":
         _rewrite(path, error_csf=-table.error_csf - 1.0)
+    elif hostile == "nested meta":
+        with np.load(path, allow_pickle=False) as d:
+            members = {k: d[k] for k in d.files}
+        members["meta"] = np.array("[" * 100_000 + "]" * 100_000)
+        with open(path, "wb") as f:
+            np.savez(f, **members)
+    elif hostile == "text fov":
+        _rewrite(path, meta={**table.meta, "fov_deg": "wide"})
     elif hostile == "extra member":
         _rewrite(path, payload=np.zeros(4))
     elif hostile == "oversized":
