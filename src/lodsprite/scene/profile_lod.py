@@ -228,10 +228,9 @@ def type_profile(t: ObjectType, model: Any = None, settings: ProfileSettings = S
                  ) -> TypeProfile:
     """The type's profile: read from its cache if valid, else built and cached (beside
     the mesh; the user cache folder for a built-in or an unwritable folder; nowhere,
-    ``path`` None, when neither can be written).  ``model``:
-    the LOD model the objects layer draws the type with (``extract(f)``,
-    ``triangles(f)``, ``vertices``; default the type's own, else levels simplified from
-    its mesh)."""
+    ``path`` None, when neither can be written).  ``model``: the LOD model the objects
+    layer draws the type with (``extract(f)``, ``triangles(f)``, ``vertices``; default
+    the type's own, else levels simplified from its mesh)."""
     factors = tuple(float(f) for f in factors)
     if len(factors) < 2 or factors[-1] != 1.0 or np.any(np.diff(factors) <= 0):
         raise InputError(f"profile LOD factors must increase to 1, got {factors}")
