@@ -198,6 +198,42 @@ def test_a_worker_killed_mid_keyframe_is_noticed_and_its_job_done_by_another(
     assert broker.stats()["dead"] >= 1 and broker.stats()["requeued"] >= 2
 
 
+def test_a_worker_announcing_a_large_result_gets_time_to_send_it() -> None:
+    """ZeroMQ delivers a message whole: heartbeats wait behind a big keyframe on a slow
+    link.  A result announced by its size is given time at 1 MB/s (here 3 s)."""
+    import msgspec
+
+    from lodsprite.camera import Projection
+    from lodsprite.distributed.protocol import Keyframe, encode_keyframe, viewpoint_from_wire
+
+    with Broker() as b:
+        sock = zmq.Context.instance().socket(zmq.DEALER)
+        sock.setsockopt(zmq.LINGER, 0)
+        sock.connect(b.local_endpoint)
+        sock.send_multipart(encode_pool(Ready(POOL_VERSION, name="slow link")))
+        wait_until(b.workers, 5.0, "the worker joining")
+        b.submit(job(50))
+        deadline = time.monotonic() + 5.0
+        while time.monotonic() < deadline:  # answer heartbeats until the job comes
+            msg = msgspec.msgpack.decode(sock.recv_multipart()[0])
+            if msg["kind"] == "job":
+                break
+            sock.send_multipart(encode_pool(Heartbeat(POOL_VERSION)))
+        assert msg["kind"] == "job"
+        sock.send_multipart(encode_pool(Heartbeat(POOL_VERSION, sending=3_000_000)))
+        silent = time.monotonic()
+        while time.monotonic() - silent < LIVENESS_S + SLACK_S:  # the "transfer"
+            time.sleep(0.05)
+        assert [w.job for w in b.workers()] == [50]  # not declared dead
+        kf = Keyframe(50, 50.0, viewpoint_from_wire(VIEW), Projection(45.0, 1.0, 1.0, 100.0),
+                      np.zeros((8, 8, 3), np.uint8), np.zeros((8, 8), np.float32), "coarse")
+        sock.send_multipart(encode_pool(ResultMessage(POOL_VERSION, 50, True),
+                                        *encode_keyframe(kf)))
+        r = results(b, 1)[50]
+        assert r.ok and decode_keyframe(r.parts).color.shape == (8, 8, 3)
+        sock.close(linger=0)
+
+
 def test_close_leaves_no_process(broker: Broker) -> None:
     pids = [p.pid for p in broker.local_processes()]
     assert len(pids) == 2

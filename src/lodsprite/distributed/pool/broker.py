@@ -7,9 +7,9 @@ starts (:meth:`Broker.spawn_local`) and, with ``bind``, to ``tcp://HOST:PORT`` f
 on other hosts (``lodsprite render-worker``; CURVE with ``curve`` keys: only workers whose
 public key file lies in the keys folder get in).  One thread owns the sockets:
 
-* a worker says ``ready``; the broker sends heartbeats to every worker each
-  :data:`~.jobs.HEARTBEAT_S`; a worker silent for more than :data:`~.jobs.LIVENESS_S` is
-  dead, and its job is re-queued at the front (a job whose workers died
+* a worker says ``ready``; the broker heartbeats each :data:`~.jobs.HEARTBEAT_S`; a
+  worker silent for more than :data:`~.jobs.LIVENESS_S` (plus the transfer time of a
+  result it announced) is dead, its job re-queued at the front (a job whose workers died
   :data:`MAX_TRIES` times fails instead: it may be what kills them);
 * jobs go one at a time to idle workers, first to one that has the job's scene loaded,
   else to the one idle longest;
@@ -44,7 +44,9 @@ from lodsprite.distributed.pool.jobs import (
     HEARTBEAT_S,
     KEYFRAME_PARTS,
     LIVENESS_S,
+    MAX_GRACE_S,
     MAX_RESULT_FRAME_BYTES,
+    MIN_LINK_BYTES_S,
     POOL_VERSION,
     Disconnect,
     Heartbeat,
@@ -82,6 +84,7 @@ class _Peer:
     job: Job | None = None
     tries: int = 0
     since: float = 0.0
+    grace: float = 0.0
     idle_since: float = 0.0
     scenes: deque = field(default_factory=lambda: deque(maxlen=4))
 
@@ -138,8 +141,7 @@ class Broker:
         _signal(self._wake_w)
 
     def poll(self) -> list[Result]:
-        """The results (successes and failures) that arrived since the last call; never
-        blocks."""
+        """The results (successes and failures) since the last call; never blocks."""
         _drain(self._ready_r)
         return [self._done.popleft() for _ in range(len(self._done))]
 
@@ -152,8 +154,7 @@ class Broker:
         return list(self._snapshot)
 
     def stats(self) -> dict[str, int]:
-        """Counts: jobs submitted, results, failed, requeued, dead workers, rejected
-        messages, ignored (results for jobs a worker did not hold)."""
+        """Counts: jobs, results, failed, requeued, dead, rejected, ignored."""
         return dict(self._stats)
 
     def wait_workers(self, n: int, timeout: float) -> bool:
@@ -175,9 +176,8 @@ class Broker:
         return list(self._procs)
 
     def close(self) -> None:
-        """Stop the broker: tell the workers, stop the thread, terminate the local worker
-        processes (killed if they do not exit within 2 s), remove the ipc folder.
-        Idempotent."""
+        """Stop: tell the workers, end the thread, terminate the local workers (killed
+        if they do not exit within 2 s), remove the ipc folder.  Idempotent."""
         if self._closed:
             return
         self._closed = True
@@ -211,12 +211,10 @@ class Broker:
                 from zmq.auth.thread import ThreadAuthenticator
 
                 self._auth = ThreadAuthenticator(self._ctx)
-                self._auth.start()
-                self._auth.configure_curve(domain="*",
-                                           location=str(self.curve.clients_dir))
-            sock = self._router(bind, self.curve)
-            self._socks.append(sock)
-            self.endpoints.append(sock.getsockopt_string(zmq.LAST_ENDPOINT))
+                self._auth.start()  # admits the public keys in the keys folder only
+                self._auth.configure_curve(domain="*", location=str(self.curve.clients_dir))
+            self._socks.append(self._router(bind, self.curve))
+            self.endpoints.append(self._socks[-1].getsockopt_string(zmq.LAST_ENDPOINT))
 
     def _router(self, address: str, curve: ServerKeys | None) -> zmq.Socket:
         sock = self._ctx.socket(zmq.ROUTER)
@@ -265,7 +263,8 @@ class Broker:
 
     def _timeout(self, beat: float) -> float:
         """Seconds until the next heartbeat or the next worker's expiry."""
-        due = min((p.seen + LIVENESS_S for p in self._peers.values()), default=beat)
+        due = min((p.seen + LIVENESS_S + p.grace for p in self._peers.values()),
+                  default=beat)
         return max(0.0, min(beat, due + 1e-3) - time.monotonic())
 
     def _receive(self, index: int, sock: zmq.Socket) -> None:
@@ -300,6 +299,8 @@ class Broker:
                 self._send(key, Disconnect(POOL_VERSION, "unknown worker: say ready"))
             return
         peer.seen = now
+        sending = isinstance(msg, Heartbeat) and msg.sending and peer.job is not None
+        peer.grace = min(msg.sending / MIN_LINK_BYTES_S, MAX_GRACE_S) if sending else 0.0
         if isinstance(msg, Disconnect):
             self._lose(key, "disconnected")
         elif isinstance(msg, ResultMessage):
@@ -335,7 +336,8 @@ class Broker:
         _signal(self._ready_w)
 
     def _purge(self, now: float) -> None:
-        for key in [k for k, p in self._peers.items() if now - p.seen > LIVENESS_S]:
+        for key in [k for k, p in self._peers.items()
+                    if now - p.seen > LIVENESS_S + p.grace]:
             self._lose(key, "silent")
         for key in [k for k, p in self._peers.items()
                     if p.job is not None and now - p.since > self.job_timeout_s]:
@@ -371,13 +373,11 @@ class Broker:
             # Unreachable: _send loses the peer and puts the job back in front.
             self._send((peer.sock, peer.ident), JobMessage(POOL_VERSION, job, self.codec))
 
-    def _send(self, key: tuple[int, bytes], msg) -> bool:
+    def _send(self, key: tuple[int, bytes], msg) -> None:
         try:
             self._socks[key[0]].send_multipart([key[1], *encode_pool(msg)], zmq.NOBLOCK)
-            return True
         except zmq.ZMQError:  # gone (ROUTER_MANDATORY) or not keeping up
             self._lose(key, "unreachable")
-            return False
 
     def _broadcast(self, msg) -> None:
         for key in list(self._peers):

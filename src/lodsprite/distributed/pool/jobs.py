@@ -42,7 +42,8 @@ from lodsprite.distributed.messages import (
 )
 from lodsprite.errors import InputError
 
-__all__ = ["HEARTBEAT_S", "LIVENESS_S", "MAX_JOB_BYTES", "MAX_RESULT_FRAME_BYTES",
+__all__ = ["HEARTBEAT_S", "LIVENESS_S", "MAX_GRACE_S", "MAX_JOB_BYTES", "MAX_RESULT_FRAME_BYTES",
+           "MIN_LINK_BYTES_S",
            "POOL_VERSION", "Disconnect", "Heartbeat", "Job", "JobMessage", "PoolMessage",
            "Ready", "Result", "ResultMessage", "WorkerInfo", "check_bind", "check_job",
            "decode_pool", "encode_pool", "job_key"]
@@ -52,6 +53,10 @@ HEARTBEAT_S = 0.25
 """Seconds between heartbeats, each way."""
 LIVENESS_S = 1.0
 """Seconds of silence after which a peer is dead (four heartbeats missed)."""
+MIN_LINK_BYTES_S = 1_000_000
+"""The slowest link (bytes/s, 8 Mbit/s) a result announced by a heartbeat is given time
+for, beyond :data:`LIVENESS_S`, up to :data:`MAX_GRACE_S`."""
+MAX_GRACE_S = 60.0
 MAX_JOB_BYTES = 64 * 1024
 """Largest frame a worker accepts (a job header; the broker sends nothing bigger)."""
 MAX_RESULT_FRAME_BYTES = MAX_KEYFRAME_FRAME_BYTES
@@ -102,7 +107,11 @@ class Ready(PoolMessage, tag="ready"):
 
 
 class Heartbeat(PoolMessage, tag="heartbeat"):
-    pass
+    """``sending``: the bytes of a result the worker sends next (0: none).  ZeroMQ
+    delivers a message whole, so its heartbeats wait behind a large keyframe on a slow
+    link: the broker allows the transfer :data:`MIN_LINK_BYTES_S` more time."""
+
+    sending: Annotated[int, Meta(ge=0, le=2**40)] = 0
 
 
 class JobMessage(PoolMessage, tag="job"):

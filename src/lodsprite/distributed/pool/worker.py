@@ -230,6 +230,8 @@ class Worker:
                     job = msgspec.msgpack.decode(frames[0].buffer, type=ResultMessage).job
                     if job in mine:
                         mine.discard(job)
+                        size = sum(len(f) for f in frames)
+                        sock.send_multipart(encode_pool(Heartbeat(POOL_VERSION, size)))
                         sock.send_multipart(frames, copy=False)
                 now = time.monotonic()
                 if now >= beat:
