@@ -75,6 +75,9 @@ class ObjectsLayer(Layer):
         self._warm: list = []
         self._last: dict[str, Any] = {}
         self.keyframe_draws: list[tuple[Any, dict]] = []  # (keyframe viewpoint, decision)
+        # whether a replay will come (the harness says so; the viewer never replays):
+        # without, no extraction orders nor keyframe draws are kept
+        self.recording = False
         self._seen: tuple[Any, np.ndarray] | None = None  # the last draw's view, projection
 
     @property
@@ -110,7 +113,7 @@ class ObjectsLayer(Layer):
                       subset: np.ndarray | None, fbo=None) -> tuple[Any, dict]:
         self.engine.set_poses(self.world.poses(t))
         f = self.engine.frame(viewpoint, projection=projection, subset=subset, fbo=fbo)
-        self._log.append(list(self.engine.last_orders))
+        self._log.append(list(self.engine.last_orders) if self.recording else [])
         return f, {"entry": len(self._log) - 1, "using": self.engine.last_using.copy(),
                    "t": t}
 
@@ -134,7 +137,8 @@ class ObjectsLayer(Layer):
             self.engine.redraw(viewpoint, d["using"], [], projection, ~self.moving, fbo)
             return
         _, d = self._engine_frame(viewpoint, 0.0, projection, ~self.moving, fbo)
-        self.keyframe_draws.append((viewpoint, d))
+        if self.recording:
+            self.keyframe_draws.append((viewpoint, d))
 
     replaying: dict | None = None  # set while a replay redraws keyframes
 

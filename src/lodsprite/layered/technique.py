@@ -121,6 +121,8 @@ class LayeredTechnique(Technique):
 
     def plan_replay(self, frames: set[int]) -> None:
         self.terrain.technique.plan_replay(frames)
+        if self.objects is not None:
+            self.objects.recording = bool(frames)
         if self.lightfields is not None:
             self.lightfields.plan_replay(frames)
 
