@@ -160,10 +160,21 @@ def render(
     tile_budget_ms: TileBudgetOpt = None,
     cache_mb: TerrainCacheMbOpt = None,
     cache_policy: CachePolicyOpt = "lru",
+    scene: Annotated[Path | None, typer.Option(
+        "--scene", help="a scene file (TOML): its terrain (drawn by --mode), objects and "
+                        "light fields composited by depth along its [view] path")] = None,
+    target_fps: Annotated[float | None, typer.Option(
+        "--target-fps", help="with --scene: one frame budget over the layers "
+                             "(the scheduler) at this frame rate")] = None,
 ) -> None:
     """Render a camera path; write DIR/frames.csv and DIR/summary.json (and PNG frames)."""
     from lodsprite import RenderConfig, render_path
     from lodsprite.run import parse_size
+
+    if scene is not None or target_fps is not None:
+        _render_scene(scene, out_dir, parse_size(size), frames, mode, target_fps,
+                      ground_truth, flip, epsilon=epsilon, sse=sse, lod=lod)
+        return
 
     distributed = _check_mode(mode, ground_truth, video, metric)
     config = RenderConfig(terrain=terrain, texture=texture, path=path,
@@ -184,6 +195,24 @@ def render(
         else:
             s = render_path(config, out_dir, update, video)
     _print_render(s, out_dir)
+
+
+def _render_scene(scene: Path | None, out_dir: Path, size: tuple[int, int],
+                  frames: int | None, mode: str, target_fps: float | None,
+                  ground_truth: bool, flip: bool, **options) -> None:
+    """``render --scene``: the layered technique over a scene file's world."""
+    from lodsprite.errors import InputError
+    from lodsprite.techniques.layered_run import render_scene
+
+    if scene is None:
+        raise InputError("--target-fps is for --scene SCENE.toml")
+    with progress_bar("render scene") as update:
+        s = render_scene(scene, out_dir, size, frames, mode, target_fps, ground_truth,
+                         flip, progress=update,
+                         **{k: v for k, v in options.items() if v is not None})
+    shares = ", ".join(f"{k[6:]} {v:.0%}" for k, v in s.items() if k.startswith("share_"))
+    out.print(f"{s['frames']} frames of {scene}: median {s['median_ms']:.1f} ms, p99 "
+              f"{s['p99_ms']:.1f} ms; shares: {shares}; wrote {out_dir}")
 
 
 def view(

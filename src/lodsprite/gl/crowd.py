@@ -130,17 +130,20 @@ class CrowdRenderer:
             self.instances.write(padded.tobytes(), viewport=(0, 0, ROW, rows))
 
     def draw(self, view_proj: np.ndarray, fbo: moderngl.Framebuffer,
-             groups: list[tuple[int, int, int]]) -> None:
-        """Clear ``fbo``, draw the ground, then each ``(buffer, first instance, instances)``
-        group as one instanced draw; counts :attr:`draw_calls` and :attr:`triangles`."""
+             groups: list[tuple[int, int, int]], ground: bool = True) -> None:
+        """Clear ``fbo`` and draw the ground (``ground=False``: neither, drawing over what
+        ``fbo`` holds, depth tested against its depth buffer: a scene's terrain), then each
+        ``(buffer, first instance, instances)`` group as one instanced draw; counts
+        :attr:`draw_calls` and :attr:`triangles`."""
         mgl = self.ctx.mgl
         fbo.use()
-        fbo.clear(*SKY, 1.0, depth=1.0)
         mgl.enable(moderngl.DEPTH_TEST)
         mgl.disable(moderngl.CULL_FACE | moderngl.BLEND)
         vp = mat_bytes(view_proj)
-        self.ground_prog["u_view_proj"].write(vp)
-        self.ground.render(moderngl.TRIANGLES)
+        if ground:
+            fbo.clear(*SKY, 1.0, depth=1.0)
+            self.ground_prog["u_view_proj"].write(vp)
+            self.ground.render(moderngl.TRIANGLES)
         p = self.program
         p["u_view_proj"].write(vp)
         p["u_instances"].value = 0
@@ -155,7 +158,7 @@ class CrowdRenderer:
             vao.render(moderngl.TRIANGLES, vertices=n, instances=int(count))
             calls += 1
             tris += n // 3 * int(count)
-        self.draw_calls, self.triangles = calls + 1, tris
+        self.draw_calls, self.triangles = calls + int(ground), tris
         mgl.disable(moderngl.DEPTH_TEST)
 
     def _drop(self, buffer: int) -> None:

@@ -73,7 +73,7 @@ class CrowdEngine:
     def __init__(self, gl, crowd: Crowd, target, mode: str = "manager", slots: int = 16,
                  active: int = 300, target_fps: float | None = None, range_near: float = 5.0,
                  range_far: float = 150.0, dist=linear, fov_y_deg: float = 60.0,
-                 penalty: float = 0.25) -> None:
+                 penalty: float = 0.25, ground: bool = True) -> None:
         from lodsprite.gl.crowd import CrowdRenderer
 
         if mode not in MODES:
@@ -83,6 +83,7 @@ class CrowdEngine:
         if not (0 <= range_near < range_far):
             raise InputError(f"LOD ranges need 0 <= near < far, got {range_near}, {range_far}")
         self.gl, self.crowd, self.target, self.mode = gl, crowd, target, mode
+        self.ground = bool(ground)  # False: no clear, no ground; drawn over target's depth
         self.n_active, self.penalty, self.dist = int(active), float(penalty), dist
         self.range = (float(range_near), float(range_far))
         self.feedback = Feedback(target_fps)
@@ -113,11 +114,26 @@ class CrowdEngine:
     def _discrete_id(self, t: int, k: int) -> int:
         return len(self.crowd.models) + t * len(DISCRETE_LEVELS) + k
 
-    def frame(self, viewpoint: Viewpoint, extra_ms: float = 0.0) -> CrowdFrame:
-        """Select, extract and draw one frame from ``viewpoint``."""
+    def set_poses(self, poses: np.ndarray) -> None:
+        """Every object's ``(x, y, z, yaw)`` now, ``(N, 4)`` metres and radians (moving
+        objects: a scene's walkers); the bounding spheres follow."""
+        self.transforms = np.ascontiguousarray(poses, np.float32)
+        lift = self.centres - self.crowd.positions  # half each object's height
+        self.crowd.positions = np.asarray(poses[:, :3], np.float64)
+        self.centres = self.crowd.positions + lift
+
+    def frame(self, viewpoint: Viewpoint, extra_ms: float = 0.0,
+              projection: np.ndarray | None = None, subset: np.ndarray | None = None,
+              fbo=None) -> CrowdFrame:
+        """Select, extract and draw one frame from ``viewpoint``: through ``projection``
+        (``(4, 4)``; default the engine's own), of the objects in ``subset`` (``(N,)
+        bool``; default all) into ``fbo`` (default the target's)."""
         t0 = time.perf_counter()
-        view_proj = self.projection @ viewpoint.view_matrix()
+        view_proj = (self.projection if projection is None else projection
+                     ) @ viewpoint.view_matrix()
         visible = spheres_in_frustum(frustum_planes(view_proj), self.centres, self.radii)
+        if subset is not None:
+            visible &= subset
         dist = np.linalg.norm(self.centres - viewpoint.o, axis=1)
         t_lod = time.perf_counter()
         switches = extractions = 0
@@ -143,7 +159,7 @@ class CrowdEngine:
         lod_ms = (time.perf_counter() - t_lod) * 1e3
         idx = np.flatnonzero(visible)
         self.last_using = using
-        self._draw(view_proj, using, idx)
+        self._draw(view_proj, using, idx, fbo)
         self.gl.finish()
         ms = (time.perf_counter() - t0) * 1e3
         exponent = self.feedback.exponent
@@ -151,25 +167,31 @@ class CrowdEngine:
         return CrowdFrame(ms, lod_ms, extractions, self.renderer.draw_calls,
                           self.renderer.triangles, len(idx), exponent, switches)
 
-    def _draw(self, view_proj: np.ndarray, using: np.ndarray, idx: np.ndarray) -> None:
+    def _draw(self, view_proj: np.ndarray, using: np.ndarray, idx: np.ndarray,
+              fbo=None) -> None:
         order = idx[np.argsort(using[idx], kind="stable")]
         buffers, first, counts = np.unique(using[order], return_index=True, return_counts=True)
         self.renderer.upload_instances(self.transforms[order])
-        self.renderer.draw(view_proj, self.target.fbo, list(zip(buffers.tolist(),
-                                                                first.tolist(),
-                                                                counts.tolist(), strict=True)))
+        self.renderer.draw(view_proj, self.target.fbo if fbo is None else fbo,
+                           list(zip(buffers.tolist(), first.tolist(), counts.tolist(),
+                                    strict=True)), ground=self.ground)
 
     def redraw(self, viewpoint: Viewpoint, using: np.ndarray,
-               orders: list[tuple[int, int, float]]) -> None:
+               orders: list[tuple[int, int, float]], projection: np.ndarray | None = None,
+               subset: np.ndarray | None = None, fbo=None) -> None:
         """Draw a recorded frame again (an untimed replay): first the extraction
         ``orders`` ``(buffer, type, lod)`` since the last frame drawn this way, then every
-        visible object from the index buffer ``using`` names."""
+        visible object (of ``subset``) from the index buffer ``using`` names
+        (``projection``, ``fbo`` as in :meth:`frame`)."""
         for buffer, type_index, lod in orders:
             self.renderer.set_indices(buffer, type_index,
                                       self.crowd.models[type_index].extract(lod))
-        view_proj = self.projection @ viewpoint.view_matrix()
+        view_proj = (self.projection if projection is None else projection
+                     ) @ viewpoint.view_matrix()
         visible = spheres_in_frustum(frustum_planes(view_proj), self.centres, self.radii)
-        self._draw(view_proj, using, np.flatnonzero(visible))
+        if subset is not None:
+            visible &= subset
+        self._draw(view_proj, using, np.flatnonzero(visible), fbo)
         self.gl.finish()
 
     def release(self) -> None:

@@ -86,6 +86,16 @@ class AdaptiveTerrain:
                                  "store is unreadable")
             self._upload(n, data, set())
 
+    def set_sse(self, sse_px: float) -> None:
+        """A new screen-space error tolerance (pixels): the LOD ranges recomputed."""
+        from lodsprite.errors import InputError
+
+        if not sse_px > 0:
+            raise InputError(f"--sse must be > 0 pixels, got {sse_px}")
+        self.sse = float(sse_px)
+        self.r = ranges(self.tree.errors, self.sse, self.target.size[1], self.fov,
+                        self.tree.node_diagonals())
+
     def projection(self, viewpoint: Viewpoint) -> np.ndarray:
         w, h = self.target.size
         ground = self.ground_below(viewpoint.o)

@@ -88,3 +88,19 @@ for _method, _text in LUMIGRAPH_METHODS.items():
     register(TechniqueSpec(f"lumigraph-{_method}", "lodsprite.lumigraph.technique:create",
                            LF_OPTIONS, ("lightfield",), _text, mode=_method,
                            fixed={"method": _method}))
+
+SCENE_OPTIONS = (
+    Option("world", object, None, "the world (default: the scene file's)"),
+    Option("terrain_mode", str, "adaptive", "scene: the terrain's technique: full | lod | "
+                                            "adaptive | sprite | sprite-adaptive"),
+    Option("schedule", str, "none", "scene: the frame budget: none | scheduler | independent"),
+    Option("target_fps", float, None, "scene: the frame-rate target of the budget"),
+    Option("keyframes", str, "static", "scene, LOD-sprite: keyframes hold the static layers "
+                                       "(static) or the terrain only (terrain)"),
+    Option("exponent", float, 1.0, "scene: the objects' LOD exponent (0: full meshes)"),
+    Option("nodes", int, 8, "scene: the light fields' node budget"),
+    Option("ground_truth", bool, False, "scene: the full-detail reference"),
+    LOD, EPSILON, SSE, SHADING, GPU_MB, HOST_MB)
+register(TechniqueSpec("scene", "lodsprite.techniques.layered:create", SCENE_OPTIONS,
+                       ("terrain", "objects"),
+                       "terrain, objects and light fields composited by depth (issue 23)"))

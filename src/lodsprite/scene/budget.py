@@ -1,0 +1,345 @@
+"""One frame budget over a scene's layers (Funkhouser & Séquin 1993, adaptive display).
+
+Funkhouser & Séquin choose every object's level of detail each frame *predictively*: from
+the predicted cost and benefit of each level (:mod:`lodsprite.scene.costs`) they pick the
+levels that maximise total benefit subject to the predicted frame time staying within
+the target, a multiple-choice knapsack they solve greedily, raising whichever object's
+level gives the most benefit per unit cost (§4.2), and keep a setting until another one
+is clearly better (their hysteresis against the oscillation that reactive feedback shows).
+
+* :class:`LayerControl` - what the budget may turn on a layer: one knob, its settings in
+  ascending quality (and cost).
+* :func:`greedy_plan` - the knapsack: from the cheapest setting of every layer, the
+  increment with the highest benefit/cost ratio that fits, until none fits.
+* :class:`FrameScheduler` - every frame :meth:`~FrameScheduler.plan` (the knapsack under
+  ``target_ms`` minus the frame's measured overhead, with hysteresis), then
+  :meth:`~FrameScheduler.observe` each layer's measured ms to rescale its cost model.
+* :class:`IndependentFeedback` - the baseline, today's behaviour: each layer's own
+  reactive feedback moves its knob towards a fixed share of the target.
+* :class:`NoSchedule` - nothing turns: every knob stays where it is.
+* :class:`LayerBudget` - what a layered technique runs: a schedule, a model per layer,
+  the frame's measurements fed back, the summary's shares.
+* :func:`steadiness` - oscillation measures: knob changes, std of the knob and of frame ms.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+from lodsprite.errors import InputError
+from lodsprite.scene.costs import LayerModel, default_model
+
+SCHEDULES = ("scheduler", "independent", "none")
+#: :class:`IndependentFeedback`'s default shares of the target by layer (normalised over
+#: the layers present).
+DEFAULT_SHARES = {"terrain": 0.5, "objects": 0.35, "lightfields": 0.15}
+
+
+@dataclass
+class LayerControl:
+    """One layer's knob: ``values`` its settings in ascending quality (and cost; e.g. a
+    terrain's ε from coarse to fine, ``(8, 4, 2, 1)`` pixels), ``value`` the current one,
+    ``set`` applies a setting to the layer."""
+
+    name: str
+    values: tuple[float, ...]
+    value: float
+    set: Callable[[float], None]
+
+    def index(self, value: float | None = None) -> int:
+        """The index in :attr:`values` of ``value`` (default: the current one), or of the
+        nearest setting."""
+        v = self.value if value is None else value
+        return int(np.argmin(np.abs(np.asarray(self.values, np.float64) - v)))
+
+
+def greedy_plan(costs: list[np.ndarray], benefits: list[np.ndarray], budget_ms: float
+                ) -> list[int]:
+    """The multiple-choice knapsack, greedily: ``costs[i]``, ``benefits[i]`` ``(n_i,)`` the
+    predicted ms and benefit of layer ``i``'s settings (ascending quality).  Every layer
+    starts at setting 0; each step takes the move ``j -> k > j`` of one layer with the
+    highest ``Δbenefit / Δcost`` whose cost keeps the total within ``budget_ms``
+    (ties: the larger ``Δbenefit``), until none does.  Returns each layer's index; if the
+    cheapest settings already exceed the budget, all zeros."""
+    pick = [0] * len(costs)
+    total = float(sum(c[0] for c in costs))
+    while True:
+        best: tuple[float, float, int, int] | None = None
+        for i, (c, b) in enumerate(zip(costs, benefits, strict=True)):
+            j = pick[i]
+            dc = c[j + 1:] - c[j]
+            db = b[j + 1:] - b[j]
+            ok = (db > 0) & (total + dc <= budget_ms + 1e-9)
+            for k in np.flatnonzero(ok):
+                ratio = db[k] / dc[k] if dc[k] > 0 else np.inf
+                key = (ratio, db[k], i, j + 1 + int(k))
+                if best is None or key[:2] > best[:2]:
+                    best = key
+        if best is None:
+            return pick
+        _, _, i, k = best
+        total += float(costs[i][k] - costs[i][pick[i]])
+        pick[i] = k
+
+
+class FrameScheduler:
+    """Predictive benefit/cost selection of every layer's knob under ``target_ms``.
+
+    ``hysteresis``: a plan replaces the current settings only if it is over budget
+    (predicted above ``target · (1 + tolerance)``) or the new plan's benefit is at least
+    ``1 + hysteresis`` times the current one's for ``dwell`` frames running.
+    ``overhead_gain``: the moving average of the frame's time outside the layers
+    (:meth:`observe_frame`), taken off the budget."""
+
+    def __init__(self, target_ms: float, hysteresis: float = 0.03, tolerance: float = 0.03,
+                 dwell: int = 3, overhead_gain: float = 0.1) -> None:
+        if not (target_ms > 0):
+            raise InputError(f"the frame budget must be > 0 ms, got {target_ms}")
+        self.target_ms = float(target_ms)
+        self.hysteresis, self.tolerance, self.dwell = hysteresis, tolerance, int(dwell)
+        self.overhead_gain = overhead_gain
+        self.overhead_ms = 0.0
+        self.models: Mapping[str, LayerModel] = {}
+        self.predicted: dict[str, float] = {}
+        self.share_sums: dict[str, float] = {}
+        self.plans = 0
+        self._wanting = 0
+
+    @property
+    def budget_ms(self) -> float:
+        """The layers' budget this frame: the target less the measured overhead."""
+        return max(self.target_ms - self.overhead_ms, 0.0)
+
+    def plan(self, controls: Iterable[LayerControl], models: Mapping[str, LayerModel]
+             ) -> dict[str, float]:
+        """Each layer's knob setting for the next frame (also applied with ``set``)."""
+        controls = list(controls)
+        self.models = models
+        tables = [models[c.name].tables(c.values) for c in controls]
+        costs, benefits = [t[0] for t in tables], [t[1] for t in tables]
+        budget = self.budget_ms
+        new = greedy_plan(costs, benefits, budget)
+        cur = [c.index() for c in controls]
+        pick = self._hysteresis(cur, new, costs, benefits, budget)
+        out = {}
+        for c, k, cost in zip(controls, pick, costs, strict=True):
+            v = c.values[k]
+            if v != c.value:
+                c.set(v)
+                c.value = v
+            out[c.name] = v
+            self.predicted[c.name] = float(cost[k])
+            self.share_sums[c.name] = self.share_sums.get(c.name, 0.0) + cost[k] / self.target_ms
+        self.plans += 1
+        return out
+
+    def _hysteresis(self, cur: list[int], new: list[int], costs, benefits, budget: float
+                    ) -> list[int]:
+        def totals(pick):
+            return (sum(float(c[k]) for c, k in zip(costs, pick, strict=True)),
+                    sum(float(b[k]) for b, k in zip(benefits, pick, strict=True)))
+
+        (cost_cur, ben_cur), (_, ben_new) = totals(cur), totals(new)
+        if cost_cur > budget * (1 + self.tolerance):
+            self._wanting = 0
+            return new                                   # over budget: change now
+        if ben_new > ben_cur * (1 + self.hysteresis) + 1e-12:
+            self._wanting += 1
+            if self._wanting >= self.dwell:
+                self._wanting = 0
+                return new
+        else:
+            self._wanting = 0
+        return cur
+
+    def observe(self, layer: str, value: float, ms: float, work: float | None = None
+                ) -> None:
+        """After the frame: layer ``layer`` took ``ms`` at knob ``value`` (``work``: its
+        counter, e.g. triangles); rescales that layer's cost model."""
+        if layer in self.models:
+            self.models[layer].cost.observe(value, ms, work)
+
+    def observe_frame(self, frame_ms: float, layers_ms: float) -> None:
+        """After the frame: the whole frame took ``frame_ms``, its layers ``layers_ms``."""
+        extra = max(frame_ms - layers_ms, 0.0)
+        self.overhead_ms += self.overhead_gain * (extra - self.overhead_ms)
+
+    def shares(self) -> dict[str, float]:
+        """Each layer's mean planned share of the target so far (fractions)."""
+        return {k: v / max(self.plans, 1) for k, v in self.share_sums.items()}
+
+
+class IndependentFeedback:
+    """Today's behaviour, the baseline: each layer's own reactive feedback drives its knob
+    towards ``shares[layer] · target_ms`` (shares default to :data:`DEFAULT_SHARES`
+    normalised over the layers planned).  After each frame the knob's position (in
+    settings, ascending quality) moves by ``-gain · log2(ms / share_ms)`` (the LODManager's
+    log-domain frame-rate feedback), and the nearest setting is used."""
+
+    def __init__(self, target_ms: float, shares: Mapping[str, float] | None = None,
+                 gain: float = 0.5) -> None:
+        if not (target_ms > 0):
+            raise InputError(f"the frame budget must be > 0 ms, got {target_ms}")
+        if shares is not None and any(not (s > 0) for s in shares.values()):
+            raise InputError(f"layer shares must be > 0, got {dict(shares)}")
+        self.target_ms, self.gain = float(target_ms), float(gain)
+        self.fixed = dict(shares) if shares is not None else None
+        self.position: dict[str, float] = {}
+        self.controls: dict[str, LayerControl] = {}
+
+    def share(self, layer: str) -> float:
+        """``layer``'s fixed share of the target (fraction)."""
+        names = list(self.controls) or [layer]
+        base = self.fixed if self.fixed is not None else {
+            n: DEFAULT_SHARES.get(n, 0.2) for n in names}
+        total = sum(base.get(n, 0.0) for n in names) or 1.0
+        return base.get(layer, 0.0) / total
+
+    def plan(self, controls: Iterable[LayerControl],
+             models: Mapping[str, LayerModel] | None = None) -> dict[str, float]:
+        """Each layer's knob setting from its own feedback (``models`` unused)."""
+        out = {}
+        for c in controls:
+            self.controls[c.name] = c
+            pos = self.position.setdefault(c.name, float(c.index()))
+            v = c.values[int(np.clip(round(pos), 0, len(c.values) - 1))]
+            if v != c.value:
+                c.set(v)
+                c.value = v
+            out[c.name] = v
+        return out
+
+    def observe(self, layer: str, value: float, ms: float, work: float | None = None
+                ) -> None:
+        """After the frame: move ``layer``'s knob position towards its share."""
+        c = self.controls.get(layer)
+        if c is None or not (ms > 0):
+            return
+        share_ms = self.share(layer) * self.target_ms
+        step = -self.gain * float(np.log2(ms / max(share_ms, 1e-6)))
+        self.position[layer] = float(np.clip(self.position[layer] + step, 0,
+                                             len(c.values) - 1))
+
+    def observe_frame(self, frame_ms: float, layers_ms: float) -> None:
+        """No use for the whole frame's time: each layer watches its own."""
+
+    def shares(self) -> dict[str, float]:
+        return {n: self.share(n) for n in self.controls}
+
+
+class NoSchedule:
+    """No budget: every knob stays at its setting."""
+
+    target_ms = float("nan")
+
+    def plan(self, controls: Iterable[LayerControl],
+             models: Mapping[str, LayerModel] | None = None) -> dict[str, float]:
+        return {c.name: c.value for c in controls}
+
+    def observe(self, layer: str, value: float, ms: float, work: float | None = None
+                ) -> None:
+        pass
+
+    def observe_frame(self, frame_ms: float, layers_ms: float) -> None:
+        pass
+
+    def shares(self) -> dict[str, float]:
+        return {}
+
+
+def make_schedule(kind: str, target_ms: float | None,
+                  shares: Mapping[str, float] | None = None
+                  ) -> FrameScheduler | IndependentFeedback | NoSchedule:
+    """The schedule ``kind`` names (:data:`SCHEDULES`); ``target_ms`` is required unless
+    ``kind`` is ``none``."""
+    if kind not in SCHEDULES:
+        raise InputError(f"unknown schedule {kind!r}: use one of {', '.join(SCHEDULES)}")
+    if kind == "none":
+        return NoSchedule()
+    if target_ms is None:
+        raise InputError(f"schedule {kind!r} needs a target frame rate (--target-fps)")
+    if kind == "scheduler":
+        return FrameScheduler(target_ms)
+    return IndependentFeedback(target_ms, shares)
+
+
+class LayerBudget:
+    """The budget a layered technique runs each frame: the ``schedule`` (:data:`SCHEDULES`)
+    under ``target_ms``, a :class:`~lodsprite.scene.costs.LayerModel` per layer (priors
+    from :func:`~lodsprite.scene.costs.default_model`, made on the layer's first frame),
+    and the per-layer sums :meth:`summary` reports.
+
+    Per frame: ``before(controls)`` sets every knob, the layers draw, then ``after({name:
+    (value, ms, work)}, frame_ms)`` feeds the measurements back and returns the frame's
+    ``predicted_ms_<layer>`` columns.  A layer may refine its benefit model between
+    frames (``models["objects"].benefit.update(lin, cov)``, ``benefit.coverage = ...``)."""
+
+    def __init__(self, schedule: str = "none", target_ms: float | None = None,
+                 shares: Mapping[str, float] | None = None) -> None:
+        self.kind = schedule
+        self.schedule = make_schedule(schedule, target_ms, shares)
+        self.models: dict[str, LayerModel] = {}
+        self.ms_sums: dict[str, float] = {}
+        self.last_knob: dict[str, float] = {}
+        self.changes: dict[str, int] = {}
+        self.frame_ms_sum = 0.0
+        self.frames = 0
+
+    @property
+    def target_ms(self) -> float:
+        return self.schedule.target_ms
+
+    def before(self, controls: Iterable[LayerControl]) -> dict[str, float]:
+        """Plan and apply every layer's knob for the coming frame."""
+        controls = list(controls)
+        for c in controls:
+            if c.name not in self.models:
+                self.models[c.name] = default_model(c.name, tuple(c.values))
+        return self.schedule.plan(controls, self.models)
+
+    def after(self, layers: Mapping[str, tuple[float, float, float | None]],
+              frame_ms: float) -> dict[str, float]:
+        """The frame's measurements: ``layers[name] = (knob value, ms, work counter or
+        None)``, ``frame_ms`` the whole frame; returns ``predicted_ms_<layer>`` (what the
+        cost model predicted for the setting drawn, before this frame's correction)."""
+        out = {f"predicted_ms_{n}": float(self.models[n].cost.predict(v))
+               for n, (v, _, _) in layers.items() if n in self.models}
+        for name, (value, ms, work) in layers.items():
+            self.schedule.observe(name, value, ms, work)
+            self.ms_sums[name] = self.ms_sums.get(name, 0.0) + float(ms)
+            last = self.last_knob.get(name, value)
+            self.changes[name] = self.changes.get(name, 0) + int(value != last)
+            self.last_knob[name] = value
+        self.schedule.observe_frame(frame_ms, sum(ms for _, ms, _ in layers.values()))
+        self.frame_ms_sum += float(frame_ms)
+        self.frames += 1
+        return out
+
+    def summary(self) -> dict[str, float | int | str]:
+        """``schedule``, ``target_ms`` (NaN without one), ``share_<layer>`` (the layer's
+        measured fraction of the frame time, mean ms over mean frame ms) and, under a
+        schedule, ``budget_share_<layer>`` (the share of the target it was given: the
+        scheduler's mean planned share, the independent feedback's fixed share);
+        ``knob_changes_<layer>``: frames whose knob differed from the frame before."""
+        out: dict[str, float | int | str] = {"schedule": self.kind,
+                                       "target_ms": float(self.target_ms)}
+        total = max(self.frame_ms_sum, 1e-9)
+        for name, ms in self.ms_sums.items():
+            out[f"share_{name}"] = ms / total
+            out[f"knob_changes_{name}"] = self.changes.get(name, 0)
+        for name, share in self.schedule.shares().items():
+            out[f"budget_share_{name}"] = float(share)
+        return out
+
+
+def steadiness(knobs: np.ndarray, frame_ms: np.ndarray) -> dict[str, float]:
+    """Oscillation of a run: ``knobs (frames,)`` one layer's knob settings,
+    ``frame_ms (frames,)`` frame times -> ``changes`` (frames whose knob differs from the
+    one before), ``knob_std`` and ``ms_std`` (standard deviations)."""
+    k = np.asarray(knobs, np.float64)
+    return {"changes": float(np.count_nonzero(np.diff(k))) if len(k) else 0.0,
+            "knob_std": float(k.std()) if len(k) else 0.0,
+            "ms_std": float(np.std(frame_ms)) if len(frame_ms) else 0.0}

@@ -1,0 +1,208 @@
+"""The light-field layer of a scene: each placed lumigraph (Sloan, Cohen & Gortler 1997)
+reconstructed into its own target and composited into the frame by its proxy's depth.
+
+Placement: a lumigraph's world is ``+y`` up (:data:`~lodsprite.lumigraph.technique.
+VIEWER_TO_LUMIGRAPH`); its object (the proxy mesh's bounds) is turned ``+y -> +z``,
+scaled uniformly to ``height_m``, its base centre put on the ground at ``position``:
+``M = T(x, y, ground) · s · B · T(-base)`` (lumigraph -> world, :func:`placement`).  The
+frame's viewpoint is taken into the lumigraph's world by ``M``'s inverse (rotation and
+eye; the scale moves into the projection's depth terms, so the reconstruction's pixels
+and window depth are the frame's).
+
+Reconstruction: the ``arbitrary`` method (the ``nodes`` nearest the eye, the layer's knob,
+its node budget) or, for the full-detail reference, ``full`` (every node); several slabs
+through :class:`~lodsprite.lumigraph.methods.MultiSlabMethod`.  Each reconstruction has
+a target of its own at the frame's size (a crop to the object's screen rectangle would
+cut its cost; not done).  Compositing: :class:`~lodsprite.gl.composite.ProxyCompositor`
+draws the proxy placed in the world with the reconstruction projected onto it, depth
+tested and written in the frame's one depth buffer (no ``gl_FragDepth``: the proxy's own
+rasterised depth is exact and keeps early depth testing).
+
+Light fields are view dependent, so LOD-sprite keyframes never hold them: they are drawn
+every frame.  A method's node cache cannot be rewound, so the replay composites a GPU copy
+of each frame's reconstruction made after the timed frame (as the lumigraph technique's).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from lodsprite.camera import Viewpoint
+from lodsprite.errors import InputError
+from lodsprite.scene.budget import LayerControl
+from lodsprite.techniques.layers import Layer, LayerFrame
+
+if TYPE_CHECKING:
+    from lodsprite.scene.world import LightFieldPlacement, World
+
+#: Node budgets, ascending quality.
+NODES = (2.0, 4.0, 8.0, 16.0)
+
+
+def placement(vertices: np.ndarray, position: tuple[float, float], ground_z: float,
+              height_m: float) -> tuple[np.ndarray, float]:
+    """``M (4, 4)`` lumigraph -> world for a proxy of ``vertices (n, 3)`` (lumigraph
+    world, y up) standing at ``position`` on ground ``ground_z``, ``height_m`` tall; and
+    the scale ``s``."""
+    from lodsprite.lumigraph.technique import VIEWER_TO_LUMIGRAPH
+
+    lo, hi = vertices.min(0), vertices.max(0)
+    if not hi[1] - lo[1] > 0:
+        raise InputError("a light field's proxy has no height (flat along +y)")
+    s = float(height_m) / float(hi[1] - lo[1])
+    base = np.array([(lo[0] + hi[0]) / 2, lo[1], (lo[2] + hi[2]) / 2])
+    m = np.eye(4)
+    m[:3, :3] = s * VIEWER_TO_LUMIGRAPH.T
+    m[:3, 3] = np.array([position[0], position[1], ground_z]) - m[:3, :3] @ base
+    return m, s
+
+
+def to_local(viewpoint: Viewpoint, m: np.ndarray, s: float) -> Viewpoint:
+    """``viewpoint`` (world) in the lumigraph's world of ``M = m`` (scale ``s``)."""
+    r = m[:3, :3] / s
+    return Viewpoint(r.T @ viewpoint.x, r.T @ viewpoint.y, r.T @ viewpoint.z,
+                     r.T @ (viewpoint.o - m[:3, 3]) / s)
+
+
+def local_projection(projection: np.ndarray, s: float) -> np.ndarray:
+    """The frame's projection for eye coordinates scaled by ``1 / s`` (same window
+    positions and depths): the depth translation term divided by ``s``."""
+    p = np.array(projection, dtype=np.float64)
+    p[2, 3] /= s
+    return p
+
+
+class PlacedLightField:
+    """One lumigraph in the world: its method, depth-correction proxy and compositor."""
+
+    def __init__(self, gl, size: tuple[int, int], where: LightFieldPlacement,
+                 ground_z: float, method: str, nodes: int) -> None:
+        from lodsprite.gl.composite import ProxyCompositor
+        from lodsprite.gl.lumigraph import ColorMeshRenderer
+        from lodsprite.lumigraph.methods import Context, MultiSlabMethod, make_method
+        from lodsprite.lumigraph.store import Lumigraph
+
+        self.lf = Lumigraph(where.source)
+        mesh = self.lf.proxy()
+        self.m, self.s = placement(mesh.vertices, where.position, ground_z, where.height_m)
+        self.max_nodes = int(min(nodes, self.lf.slabs[0].n_st ** 2))
+        self.proxy = ColorMeshRenderer(gl, mesh.vertices, mesh.faces, mesh.colors,
+                                       mesh.normals)
+        self.compositor = ProxyCompositor(gl, mesh.vertices, mesh.faces, mesh.colors,
+                                          mesh.normals)
+        ctx = Context(gl, self.lf, 0, size, self.proxy)
+        options = {"nodes": self.max_nodes} if method == "arbitrary" else {}
+        self.method = (make_method(method, ctx, **options) if len(self.lf.slabs) == 1
+                       else MultiSlabMethod(ctx, method, options))
+        self.index = 0
+
+    def set_nodes(self, n: int) -> None:
+        target = getattr(self.method, "current", self.method)
+        if target is not None and hasattr(target, "count"):
+            target.count = int(np.clip(n, 1, self.max_nodes))
+
+    def reconstruct(self, viewpoint: Viewpoint, projection: np.ndarray):
+        f = self.method.frame(self.index, to_local(viewpoint, self.m, self.s),
+                              local_projection(projection, self.s))
+        self.index += 1
+        return f
+
+    def composite(self, projection: np.ndarray, viewpoint: Viewpoint, image, fbo) -> int:
+        mvp = projection @ viewpoint.view_matrix() @ self.m
+        return self.compositor.draw(mvp, image, fbo)
+
+    def release(self) -> None:
+        self.method.release()
+        self.proxy.release()
+        self.compositor.release()
+
+
+class LightFieldLayer(Layer):
+    """Every light field of ``world`` on ``renderer``'s terrain target (module doc);
+    ``method``: ``arbitrary`` (knob: nodes) or ``full`` (the reference)."""
+
+    name = "lightfields"
+
+    def __init__(self, renderer, world: World, method: str = "arbitrary",
+                 nodes: int = 8) -> None:
+        self.renderer = renderer
+        self.fbo = renderer.paths.renderer.target.fbo
+        self.nodes = float(nodes)
+        self.items: list[PlacedLightField] = []
+        self._pool: list = []
+        self._snaps: dict[int, list] = {}
+        try:
+            for where in world.lightfields:
+                z = float(world.ground(np.array([where.position], np.float64))[0])
+                self.items.append(PlacedLightField(renderer.gl, renderer.size, where, z,
+                                                   method, int(max(NODES))))
+        except BaseException:
+            self.release()
+            raise
+        self.set_nodes(nodes)
+        self._keep: set[int] = set()
+        self._frame = -1
+
+    def set_nodes(self, value: float) -> None:
+        self.nodes = float(value)
+        for item in self.items:
+            item.set_nodes(int(value))
+
+    def control(self) -> LayerControl:
+        return LayerControl("lightfields", NODES, self.nodes, self.set_nodes)
+
+    def warm_up(self, viewpoint: Viewpoint, projection: np.ndarray) -> None:
+        for item in self.items:
+            item.reconstruct(viewpoint, projection)
+
+    def draw(self, viewpoint: Viewpoint, t: float, projection: np.ndarray) -> LayerFrame:
+        images = tris = 0
+        for item in self.items:
+            self.set_nodes(self.nodes)  # a slab switch makes a new method
+            f = item.reconstruct(viewpoint, projection)
+            images += f.images
+            tris += item.composite(projection, viewpoint, item.method.output.color, self.fbo)
+        self._frame += 1
+        return LayerFrame(0.0, tris, work=float(max(images, 1)), extra={"lf_images": images})
+
+    def plan_replay(self, frames: set[int]) -> None:
+        """GPU copies for the reconstructions of ``frames`` (made now, filled after each
+        timed frame by :meth:`decision`)."""
+        from lodsprite.gl.lumigraph import FloatTarget
+
+        for snap in self._pool:
+            snap.release()
+        self._keep = set(frames)
+        self._pool = [FloatTarget(self.renderer.gl, *self.renderer.size)
+                      for _ in range(len(self._keep) * len(self.items))]
+
+    def decision(self) -> dict[str, Any]:
+        i = self._frame
+        if i in self._keep and len(self._pool) >= len(self.items):
+            mgl = self.renderer.gl.mgl
+            snaps = [self._pool.pop() for _ in self.items]
+            for snap, item in zip(snaps, self.items, strict=True):
+                mgl.copy_framebuffer(snap.fbo, item.method.output.fbo)
+            self.renderer.gl.finish()
+            self._snaps[i] = snaps
+        return {"frame": i}
+
+    def replay(self, viewpoint: Viewpoint, t: float, projection: np.ndarray,
+               decision: dict[str, Any]) -> None:
+        if not self.items:
+            return
+        snaps = self._snaps.get(decision["frame"])
+        if snaps is None:
+            raise InputError(f"frame {decision['frame']} was not kept for a replay")
+        for snap, item in zip(snaps, self.items, strict=True):
+            item.composite(projection, viewpoint, snap.color, self.fbo)
+
+    def release(self) -> None:
+        for snap in [*getattr(self, "_pool", []),
+                     *(s for v in getattr(self, "_snaps", {}).values() for s in v)]:
+            snap.release()
+        for item in self.items:
+            item.release()
+        self.items = []

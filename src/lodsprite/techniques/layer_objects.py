@@ -1,0 +1,150 @@
+"""The objects layer of a scene: a world's mesh instances by the LODManager engine
+(Gumbau et al.: shared LODs, instancing), standing and walking on the terrain.
+
+The world's object types become the crowd's LOD models (a built-in keeps its own; a mesh
+file becomes a progressive mesh), its instances the crowd's objects; every frame their
+poses come from :meth:`~lodsprite.scene.world.World.poses` at the frame's time (walkers
+follow the ground).  The engine draws without its own ground and without clearing, into
+the terrain's framebuffer, through the frame's projection, depth tested against what the
+terrain left (:class:`~lodsprite.manager.engine.CrowdEngine` ``ground=False``).
+
+The knob is the LOD exponent ``p`` of §4.2 (``lod = (1 - (d - near) / (far - near)) ** p``;
+larger is coarser); the LOD ranges scale with the tallest type.  ``p = 0`` is every object
+at its full mesh (the full-detail reference).  With LOD-sprite keyframes holding the
+static objects, a frame draws the moving ones only and each keyframe the static ones
+(``subset``); the replay re-applies the recorded extraction orders up to the frame, as
+the crowd technique's replay does.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from lodsprite.scene.budget import LayerControl
+from lodsprite.techniques.layers import Layer, LayerFrame
+
+if TYPE_CHECKING:
+    from lodsprite.camera import Viewpoint
+    from lodsprite.manager.scene import Crowd
+    from lodsprite.scene.world import World
+
+#: LOD exponents, ascending quality (coarse to fine).
+EXPONENTS = (4.0, 2.0, 1.0, 0.5, 0.25)
+
+
+def world_crowd(world: World) -> Crowd:
+    """The world's instances as a crowd (positions at ``t = 0``); its extent the terrain's
+    half width."""
+    from lodsprite.manager.models import ProgressiveMesh
+    from lodsprite.manager.scene import Crowd
+
+    models = [t.model if t.model is not None else
+              ProgressiveMesh(t.name, t.vertices, t.faces, t.colours) for t in world.types]
+    poses = world.poses(0.0).astype(np.float64)
+    lo, hi = world.extent
+    return Crowd(models, world.type_indices().astype(np.int64), poses[:, :3].copy(),
+                 poses[:, 3].copy(), float(np.max(hi - lo)) / 2)
+
+
+class ObjectsLayer(Layer):
+    """A world's instances on ``renderer``'s terrain target (see the module doc).
+    ``exponent``: the starting LOD exponent; ``active``: objects whose LOD is updated a
+    frame (default: all); ``slots``: LOD slots per type."""
+
+    name = "objects"
+
+    def __init__(self, renderer, world: World, exponent: float = 1.0,
+                 active: int | None = None, slots: int = 16) -> None:
+        from lodsprite.manager.engine import CrowdEngine
+
+        self.world, self.renderer = world, renderer
+        self.crowd = world_crowd(world)
+        self.moving = world.moving()
+        height = max((t.height_m for t in world.types), default=2.0)
+        target = renderer.paths.renderer.target
+        self.engine = CrowdEngine(renderer.gl, self.crowd, target, "manager", slots=slots,
+                                  active=active or max(1, len(self.crowd)),
+                                  range_near=2.0 * height, range_far=150.0 * height,
+                                  fov_y_deg=renderer.fov_y_deg, ground=False)
+        self.engine.feedback.exponent = float(exponent)
+        self.subset: np.ndarray | None = None  # None: every object each frame
+        self._log: list[list] = []             # extraction orders of every engine frame
+        self._applied: int | None = None       # replay: orders applied up to this entry
+        self._warm: list = []
+        self._last: dict[str, Any] = {}
+        self.keyframe_draws: list[tuple[Any, dict]] = []  # (keyframe viewpoint, decision)
+
+    @property
+    def exponent(self) -> float:
+        return self.engine.feedback.exponent
+
+    def set_exponent(self, value: float) -> None:
+        """The LOD exponent (>= 0; 0: full meshes)."""
+        self.engine.feedback.exponent = max(0.0, float(value))
+
+    def control(self) -> LayerControl:
+        return LayerControl("objects", EXPONENTS, self.exponent, self.set_exponent)
+
+    def _engine_frame(self, viewpoint: Viewpoint, t: float, projection: np.ndarray,
+                      subset: np.ndarray | None, fbo=None) -> tuple[Any, dict]:
+        self.engine.set_poses(self.world.poses(t))
+        f = self.engine.frame(viewpoint, projection=projection, subset=subset, fbo=fbo)
+        self._log.append(list(self.engine.last_orders))
+        return f, {"entry": len(self._log) - 1, "using": self.engine.last_using.copy(),
+                   "t": t}
+
+    def warm_up(self, viewpoint: Viewpoint, projection: np.ndarray) -> None:
+        """Untimed: the first LODs extracted (kept as the replay's starting state)."""
+        self._engine_frame(viewpoint, 0.0, projection, np.zeros(len(self.crowd), bool))
+        self._warm, self._log = self._log[0], []
+
+    def draw(self, viewpoint: Viewpoint, t: float, projection: np.ndarray) -> LayerFrame:
+        f, self._last = self._engine_frame(viewpoint, t, projection, self.subset)
+        return LayerFrame(f.ms, f.triangles, work=float(max(f.triangles, 1)),
+                          extra={"extractions": f.extractions, "draw_calls": f.draw_calls,
+                                 "visible": f.visible})
+
+    def draw_static(self, viewpoint: Viewpoint, projection: np.ndarray, fbo) -> None:
+        """The static objects into a keyframe's framebuffer (LOD-sprite's static layer)."""
+        if self.replaying is not None:
+            d = self._keyframe_decision(viewpoint)
+            self._restore(d["entry"])
+            self.engine.redraw(viewpoint, d["using"], [], projection, ~self.moving, fbo)
+            return
+        _, d = self._engine_frame(viewpoint, 0.0, projection, ~self.moving, fbo)
+        self.keyframe_draws.append((viewpoint, d))
+
+    replaying: dict | None = None  # set while a replay redraws keyframes
+
+    def _keyframe_decision(self, viewpoint: Viewpoint) -> dict:
+        for vp, d in reversed(self.keyframe_draws):
+            if vp is viewpoint or (np.array_equal(vp.o, viewpoint.o)
+                                   and np.array_equal(vp.z, viewpoint.z)):
+                return d
+        raise LookupError("no keyframe drawn from this viewpoint")
+
+    def decision(self) -> dict[str, Any]:
+        return self._last
+
+    def _restore(self, entry: int) -> None:
+        """The index buffers as they were after log entry ``entry``."""
+        if self._applied is None or entry < self._applied:  # from before the first frame
+            self.engine.reset_indices()
+            pending = self._warm + [o for e in self._log[:entry + 1] for o in e]
+        else:
+            pending = [o for e in self._log[self._applied + 1:entry + 1] for o in e]
+        for buffer, type_index, lod in pending:
+            self.engine.renderer.set_indices(buffer, type_index,
+                                             self.crowd.models[type_index].extract(lod))
+        self._applied = entry
+
+    def replay(self, viewpoint: Viewpoint, t: float, projection: np.ndarray,
+               decision: dict[str, Any]) -> None:
+        self.engine.set_poses(self.world.poses(decision["t"]))
+        self._restore(decision["entry"])
+        self.engine.redraw(viewpoint, decision["using"], [], projection, self.subset)
+
+    def release(self) -> None:
+        self.engine.release()

@@ -1,0 +1,210 @@
+"""A whole scene in one frame: terrain, objects and light fields composited by depth
+(issue 23; Chen, Swan & Kaufman 1999 built LOD-sprite for a battlefield of terrain and
+entities and note it suits architectures that decompose a scene into layers).
+
+:class:`LayeredTechnique` (registered as ``scene``) draws, every frame, into the
+renderer's one framebuffer and depth buffer:
+
+1. the terrain by any terrain technique (:class:`~lodsprite.techniques.layers.
+   TerrainLayer`: ``full``, ``lod``, ``adaptive``, ``sprite``, ``sprite-adaptive``);
+2. the objects by the LODManager engine (:class:`~lodsprite.techniques.layer_objects.
+   ObjectsLayer`), poses from the world at the frame's time;
+3. the light fields (:class:`~lodsprite.techniques.layer_lightfields.LightFieldLayer`),
+   each reconstructed in its own target and composited through its proxy's depth.
+
+What LOD-sprite's keyframes hold (``keyframes``): ``static`` (the default) renders the
+static objects (``walk_mps = 0``) into every keyframe after its terrain, so spriteframes
+warp them with the terrain and a frame draws only the moving objects, depth tested
+against the spriteframe's (the proxy's) depth; ``terrain`` keeps keyframes terrain only
+and draws every object every frame.  Light fields are view dependent: never in keyframes.
+``benchmarks/scene_layers.py`` measures the two (docs/scenes.md).
+
+Per frame ``Frame.extra`` holds ``ms_terrain``, ``ms_objects``, ``ms_lightfields`` (each
+layer between two ``ctx.finish()``), ``knob_<layer>`` (each layer's setting) and the
+budget's ``predicted_ms_<layer>``; the budget (:class:`~lodsprite.scene.budget.
+LayerBudget`, ``schedule`` ``none`` | ``scheduler`` | ``independent`` under
+``target_fps``) turns the knobs before each frame.  ``ground_truth=True`` is the
+full-detail reference: full-resolution terrain, full meshes (LOD exponent 0), every
+lumigraph node.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from lodsprite.errors import InputError
+from lodsprite.techniques.base import Frame, Technique
+from lodsprite.techniques.layers import Layer, TerrainLayer, timed
+
+if TYPE_CHECKING:
+    from lodsprite.api import Renderer
+    from lodsprite.camera import Viewpoint
+    from lodsprite.paths import CameraPath
+    from lodsprite.scene.world import World
+
+#: The time between frames (s): frame ``i`` shows the world at ``i * FRAME_S``.
+FRAME_S = 1.0 / 30.0
+KEYFRAME_HOLDS = ("static", "terrain")
+
+
+class LayeredTechnique(Technique):
+    """A world's layers in one frame (module doc)."""
+
+    name = "scene"
+
+    def __init__(self, renderer: Renderer, world: World, terrain_mode: str = "adaptive",
+                 schedule: str = "none", target_fps: float | None = None,
+                 keyframes: str = "static", exponent: float = 1.0, nodes: int = 8,
+                 ground_truth: bool = False, frame_s: float = FRAME_S,
+                 **terrain_options: Any) -> None:
+        super().__init__(renderer)
+        from lodsprite.scene.budget import LayerBudget
+        from lodsprite.techniques.layer_lightfields import LightFieldLayer
+        from lodsprite.techniques.layer_objects import ObjectsLayer
+
+        if keyframes not in KEYFRAME_HOLDS:
+            raise InputError(f"unknown keyframes {keyframes!r}: use one of "
+                             f"{', '.join(KEYFRAME_HOLDS)}")
+        if ground_truth:
+            terrain_mode, exponent, schedule = "full", 0.0, "none"
+        self.world, self.frame_s, self.keyframes = world, float(frame_s), keyframes
+        self.budget = LayerBudget(schedule, None if target_fps is None else 1e3 / target_fps)
+        self.layers: list[Layer] = []
+        try:
+            self.terrain = TerrainLayer(renderer, terrain_mode, **terrain_options)
+            self.layers.append(self.terrain)
+            self.objects = ObjectsLayer(renderer, world, exponent) if world.count else None
+            if self.objects is not None:
+                self.layers.append(self.objects)
+            self.lightfields = (LightFieldLayer(renderer, world,
+                                                "full" if ground_truth else "arbitrary",
+                                                nodes) if world.lightfields else None)
+            if self.lightfields is not None:
+                self.layers.append(self.lightfields)
+        except BaseException:
+            self.release()
+            raise
+        self.static_in_keyframes = (keyframes == "static" and self.objects is not None
+                                    and self.terrain.keyframe_hook(self.objects.draw_static))
+        if self.static_in_keyframes:
+            self.objects.subset = world.moving()
+        self.index = 0
+        self._last: dict[str, Any] = {}
+
+    def projection(self, viewpoint: Viewpoint) -> np.ndarray:
+        """The frame's projection ``(4, 4)`` (the terrain technique's)."""
+        return self.terrain.projection(viewpoint)
+
+    def warm_up(self, viewpoint: Viewpoint) -> None:
+        proj = self.projection(viewpoint)
+        for layer in sorted(self.layers, key=lambda x: x is self.terrain):  # objects first
+            layer.warm_up(viewpoint, proj)
+        self.renderer.gl.finish()
+
+    def plan_replay(self, frames: set[int]) -> None:
+        self.terrain.technique.plan_replay(frames)
+        if self.lightfields is not None:
+            self.lightfields.plan_replay(frames)
+
+    def frame(self, viewpoint: Viewpoint) -> Frame:
+        t = self.index * self.frame_s
+        t0 = time.perf_counter()
+        self.budget.before([layer.control() for layer in self.layers])
+        proj = self.projection(viewpoint)
+        finish = self.renderer.gl.finish
+        drawn = {layer.name: timed(finish, lambda la=layer: la.draw(viewpoint, t, proj))
+                 for layer in self.layers}
+        ms = (time.perf_counter() - t0) * 1e3
+        knobs = {layer.name: layer.control().value for layer in self.layers}
+        extra: dict[str, Any] = {"t": t}
+        for name, f in drawn.items():
+            extra[f"ms_{name}"] = f.ms
+            extra[f"knob_{name}"] = knobs[name]
+            extra.update(f.extra)
+        extra.update(self.budget.after({n: (knobs[n], f.ms, f.work)
+                                        for n, f in drawn.items()}, ms))
+        self._last = {"t": t, **{n: layer.decision() for n, layer in
+                                 zip(drawn, self.layers, strict=True)}}
+        self.index += 1
+        terrain = drawn["terrain"]
+        return Frame(terrain.extra.get("terrain_kind", "scene"), ms,
+                     sum(f.triangles for f in drawn.values()), terrain.error_px, extra)
+
+    def decision(self) -> dict[str, Any]:
+        return self._last
+
+    def replay(self, viewpoint: Viewpoint, decision: dict[str, Any]) -> np.ndarray:
+        proj = self.projection(viewpoint)
+        t = decision["t"]
+        if self.objects is not None:
+            self.objects.replaying = decision  # keyframes redraw their recorded objects
+        try:
+            for layer in self.layers:
+                layer.replay(viewpoint, t, proj, decision[layer.name])
+        finally:
+            if self.objects is not None:
+                self.objects.replaying = None
+        self.renderer.gl.finish()
+        return self.read_image()
+
+    def summary(self, frames: list[Frame]) -> dict[str, Any]:
+        """The budget's ``share_<layer>`` (fraction of frame ms), ``schedule``,
+        ``target_ms``; mean ms per layer; the terrain mode and what keyframes held."""
+        out: dict[str, Any] = {**self.budget.summary(), "terrain_mode": self.terrain.mode,
+                               "keyframe_holds": ("static" if self.static_in_keyframes
+                                                  else "terrain"),
+                               "layers": [layer.name for layer in self.layers],
+                               "instances": self.world.count,
+                               "lightfields": len(self.world.lightfields)}
+        for layer in self.layers:
+            col = [f.extra[f"ms_{layer.name}"] for f in frames]
+            out[f"mean_ms_{layer.name}"] = float(np.mean(col)) if col else float("nan")
+        out["keyframes"] = int(sum(f.kind == "keyframe" for f in frames))
+        return out
+
+    def params(self):
+        return self.terrain.technique.params()
+
+    def set_param(self, name: str, value: float) -> None:
+        self.terrain.technique.set_param(name, value)
+
+    def status(self) -> str:
+        e = self._last
+        return (f"scene t {e.get('t', 0.0):.1f} s, {self.world.count} objects, "
+                f"{len(self.world.lightfields)} light fields")
+
+    def release(self) -> None:
+        for layer in reversed(self.layers):
+            layer.release()
+        self.layers = []
+
+
+def reference(renderer: Renderer, world: World, path: CameraPath, frame_s: float = FRAME_S):
+    """The full-detail reference of a run along ``path``: ``(viewpoint -> image, the
+    reference technique)`` (release it after the run); a viewpoint's time is its index
+    along ``path`` (matched by identity) times ``frame_s``."""
+    ref = LayeredTechnique(renderer, world, ground_truth=True, frame_s=frame_s)
+    ref.warm_up(path.viewpoints[0])
+    index = {id(vp): i for i, vp in enumerate(path.viewpoints)}
+
+    def image(viewpoint: Viewpoint) -> np.ndarray:
+        ref.index = index.get(id(viewpoint), 0)
+        ref.frame(viewpoint)
+        return ref.read_image()
+
+    return image, ref
+
+
+def create(renderer: Renderer, world: World | None = None, **options: Any
+           ) -> LayeredTechnique:
+    """The registry's factory of ``scene``: ``world`` (default: the scene's, a scene
+    opened from a scene file holds its world as its object set)."""
+    if world is None:
+        world = getattr(renderer.scene, "objects", None)
+    if world is None or not hasattr(world, "poses"):
+        raise InputError("the scene technique needs a world (a scene file: "
+                         "lodsprite.scene.world.load_world)")
+    return LayeredTechnique(renderer, world, **options)

@@ -1,0 +1,176 @@
+"""The layers of a scene frame (issue 23; Chen, Swan & Kaufman 1999 §1 on decomposing a
+scene into layers): :class:`Layer`, what each layer's frame was (:class:`LayerFrame`),
+and the terrain layer (:class:`TerrainLayer`).
+
+Every layer draws into the renderer's one framebuffer and depth buffer, in the order
+terrain, objects, light fields, through the frame's projection (the terrain technique's
+own, near/far fitted to the terrain).  Each layer's time is measured with
+``ctx.finish()`` before its clock starts and after its draw (GL time queries would not
+include the CPU work of LOD selection and extraction, which is most of a layer's cost on
+llvmpipe).
+
+The terrain layer is any terrain technique of the registry (``full``, ``lod``,
+``adaptive``, ``sprite``, ``sprite-adaptive``), made on the same renderer, not copied.
+LOD-sprite shows a keyframe as it is on the frame that renders it (no spriteframe, no
+proxy depth); in a scene the layer draws the spriteframe of that keyframe on such a frame
+too, so that every frame's depth buffer is the proxy's and later layers test against it.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from lodsprite.scene.budget import LayerControl
+
+if TYPE_CHECKING:
+    from lodsprite.api import Renderer
+    from lodsprite.camera import Viewpoint
+    from lodsprite.techniques.base import Technique
+
+TERRAIN_MODES = ("full", "lod", "adaptive", "sprite", "sprite-adaptive")
+#: Knob settings, ascending quality: ε (sprite, px), tolerance (adaptive, px), level (lod).
+EPSILONS = (16.0, 8.0, 4.0, 2.0, 1.0)
+LEVELS = (8.0, 16.0, 32.0, 64.0)
+
+
+@dataclass(frozen=True)
+class LayerFrame:
+    """One layer's part of a frame: ``ms`` (GL finished), ``triangles`` drawn,
+    ``error_px`` (NaN where the layer measures none), ``work`` (the layer's own counter
+    for its cost model: triangles, nodes; None: none) and its own ``extra`` columns."""
+
+    ms: float
+    triangles: int = 0
+    error_px: float = float("nan")
+    work: float | None = None
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+class Layer:
+    """One layer of a frame (see the module doc).  ``name``: ``terrain``, ``objects`` or
+    ``lightfields``."""
+
+    name = "layer"
+
+    def draw(self, viewpoint: Viewpoint, t: float, projection: np.ndarray) -> LayerFrame:
+        """Draw the layer at time ``t`` (seconds) through ``projection (4, 4)``."""
+        raise NotImplementedError
+
+    def control(self) -> LayerControl:
+        """What the budget may turn on this layer."""
+        raise NotImplementedError
+
+    def decision(self) -> dict[str, Any]:
+        """What the last draw decided (cheap: no GPU reads)."""
+        return {}
+
+    def replay(self, viewpoint: Viewpoint, t: float, projection: np.ndarray,
+               decision: dict[str, Any]) -> None:
+        """Draw a recorded decision again, untimed, to the same pixels."""
+        self.draw(viewpoint, t, projection)
+
+    def warm_up(self, viewpoint: Viewpoint, projection: np.ndarray) -> None:
+        """Untimed work before the first timed frame."""
+
+    def release(self) -> None:
+        """Release what the layer made."""
+
+
+def timed(finish: Callable[[], None], draw: Callable[[], LayerFrame]) -> LayerFrame:
+    """``draw()`` between two ``finish()`` calls; its frame with ``ms`` measured here."""
+    finish()
+    t0 = time.perf_counter()
+    f = draw()
+    finish()
+    return replace(f, ms=(time.perf_counter() - t0) * 1e3)
+
+
+class TerrainLayer(Layer):
+    """The terrain by a registered terrain technique ``mode`` on ``renderer`` (options go
+    to it); its knob: ε (sprite), tolerance (adaptive), level (lod), none (full)."""
+
+    name = "terrain"
+
+    def __init__(self, renderer: Renderer, mode: str = "adaptive", **options: Any) -> None:
+        from lodsprite import techniques
+        from lodsprite.errors import InputError
+
+        if mode not in TERRAIN_MODES:
+            raise InputError(f"unknown terrain mode {mode!r}: use one of "
+                             f"{', '.join(TERRAIN_MODES)}")
+        self.renderer, self.mode = renderer, mode
+        spec = techniques.get(mode)
+        self.technique: Technique = spec.create(renderer, **spec.bind(options))
+        self.sprite = getattr(self.technique, "sprite", None)  # a LodSprite or None
+        self._last = None
+
+    def projection(self, viewpoint: Viewpoint) -> np.ndarray:
+        """The frame's projection ``(4, 4)``: the terrain technique's own."""
+        adaptive = getattr(self.technique, "terrain", None)
+        if self.mode == "adaptive":
+            return adaptive.projection(viewpoint)
+        return self.renderer.projection(viewpoint).matrix()
+
+    def keyframe_hook(self, draw: Callable[[Viewpoint, np.ndarray, Any], None]) -> bool:
+        """With LOD-sprite: ``draw(viewpoint, projection (4, 4), fbo)`` runs after the
+        terrain of every keyframe, into the keyframe (static layers); False without."""
+        if self.sprite is None:
+            return False
+        s = self.sprite.sprite
+        prev = s.keyframe_drawer
+        terrain = self.renderer.paths.renderer
+
+        def drawer(viewpoint, projection, target):
+            stats = (prev(viewpoint, projection, target) if prev is not None
+                     else terrain.render(viewpoint, None, projection, target))
+            draw(viewpoint, projection.matrix(), target.fbo)
+            return stats
+
+        s.keyframe_drawer = drawer
+        return True
+
+    def _spriteframe(self, viewpoint: Viewpoint) -> None:
+        """A keyframe shown as it is: its spriteframe drawn too (the proxy's depth)."""
+        if self.sprite is not None and self.sprite.engine.shows_keyframe:
+            self.sprite.sprite.render_spriteframe(viewpoint)
+
+    def warm_up(self, viewpoint: Viewpoint, projection: np.ndarray) -> None:
+        self.technique.warm_up(viewpoint)
+
+    def draw(self, viewpoint: Viewpoint, t: float, projection: np.ndarray) -> LayerFrame:
+        f = self._last = self.technique.frame(viewpoint)
+        self._spriteframe(viewpoint)
+        extra = {"terrain_kind": f.kind}
+        if "keyframes" in f.extra:
+            extra["keyframes"] = f.extra["keyframes"]
+        return LayerFrame(f.ms, f.triangles, f.error_px, float(max(f.triangles, 1)), extra)
+
+    def decision(self) -> dict[str, Any]:
+        return self.technique.decision()
+
+    def replay(self, viewpoint: Viewpoint, t: float, projection: np.ndarray,
+               decision: dict[str, Any]) -> None:
+        if self.sprite is not None and "shows_keyframe" in decision:
+            decision = {**decision, "shows_keyframe": False}  # the spriteframe, as drawn
+        self.technique.replay(viewpoint, decision)
+
+    def control(self) -> LayerControl:
+        t = self.technique
+        if self.sprite is not None:
+            return LayerControl("terrain", EPSILONS, float(self.sprite.epsilon_px),
+                                lambda v: t.set_param("epsilon", v))
+        if self.mode == "adaptive":
+            return LayerControl("terrain", EPSILONS, float(t.terrain.sse), t.terrain.set_sse)
+        if self.mode == "lod":
+            levels = tuple(v for v in LEVELS if v <= self.renderer.scene.hf.quads) or (2.0,)
+            return LayerControl("terrain", levels, float(t.lod),
+                                lambda v: t.set_param("lod", v))
+        return LayerControl("terrain", (1.0,), 1.0, lambda v: None)
+
+    def release(self) -> None:
+        self.technique.release()
