@@ -45,7 +45,7 @@ EDGES = importgraph.imports()
 #: Packages of techniques, experiments and front ends: gl/ draws for them and knows none.
 ABOVE_GL = {"sprite", "lumigraph", "manager", "profiles", "distributed", "adaptive", "viewer",
             "cli", "experiments", "api", "run", "harness", "techniques", "technique", "scene",
-            "report"}
+            "report", "layered"}
 
 
 def runtime_edges(source_unit: str | None = None):

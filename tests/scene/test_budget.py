@@ -19,7 +19,14 @@ from lodsprite.scene.budget import (
     make_schedule,
     steadiness,
 )
-from lodsprite.scene.costs import CostModel, LayerModel, PowerWork, TerrainBenefit, default_model
+from lodsprite.scene.costs import (
+    CostModel,
+    LayerModel,
+    PowerWork,
+    TerrainBenefit,
+    default_model,
+    object_detail,
+)
 
 EPS = (8.0, 4.0, 2.0, 1.5, 1.0)          # terrain ε, ascending quality
 EXPONENTS = (4.0, 2.0, 1.0, 0.5, 0.25)  # objects' LOD exponent, ascending quality
@@ -214,6 +221,21 @@ def test_benefits_are_coverage_weighted_detail():
     o = default_model("objects", EXPONENTS).benefit
     o.update(np.array([1.0, 0.5, 0.1]), np.array([10.0, 1.0, 1.0]), coverage=0.2)
     assert o(0.25) > o(4.0) and o(1.0) == pytest.approx(0.2 * (10 + 0.5 + 0.1) / 12)
+
+
+def test_object_detail_weighs_near_objects_by_their_screen_area():
+    centres = np.array([[0.0, 10.0, 0.0], [0.0, 100.0, 0.0], [0.0, 200.0, 0.0]])
+    lin, cov, coverage = object_detail(centres, np.ones(3), np.zeros(3),
+                                       np.array([True, True, False]), 5.0, 150.0, 90.0,
+                                       (100, 100))
+    assert lin == pytest.approx([1 - 5 / 145, 1 - 95 / 145])
+    # focal 50 px: a 1 m sphere at 10 m covers π·5² px, at 100 m π·0.5²
+    assert cov == pytest.approx([np.pi * 25, np.pi * 0.25])
+    assert coverage == pytest.approx(np.pi * 25.25 / 1e4)
+    b = default_model("objects", EXPONENTS).benefit
+    b.update(lin, cov, coverage)
+    # the near object dominates: coarsening (p 0.25 -> 4) loses little of its detail
+    assert b(4.0) / b(0.25) > 0.85
 
 
 def test_bad_schedules_are_refused():

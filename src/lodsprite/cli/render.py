@@ -202,7 +202,7 @@ def _render_scene(scene: Path | None, out_dir: Path, size: tuple[int, int],
                   ground_truth: bool, flip: bool, **options) -> None:
     """``render --scene``: the layered technique over a scene file's world."""
     from lodsprite.errors import InputError
-    from lodsprite.techniques.layered_run import render_scene
+    from lodsprite.layered.technique import render_scene
 
     if scene is None:
         raise InputError("--target-fps is for --scene SCENE.toml")

@@ -286,6 +286,8 @@ class SpriteRenderer:
             stats = self.keyframe_drawer(viewpoint, projection, target)
         else:
             stats = self.terrain.render(viewpoint, None, projection, target)
+        if self.after_keyframe is not None:
+            self.after_keyframe(viewpoint, projection, target)
         self._keep(slot, viewpoint, projection, t0)
         return stats
 
@@ -293,6 +295,9 @@ class SpriteRenderer:
     #: ``(viewpoint, projection, target) -> FrameStats`` (the adaptive renderer's
     #: :meth:`~lodsprite.techniques.adaptive_terrain.AdaptiveTerrain.render_into`).
     keyframe_drawer = None
+    #: Draws over each keyframe after its terrain when set (a scene's static layers):
+    #: ``(viewpoint, projection, target) -> None``, whichever drawer drew the terrain.
+    after_keyframe = None
 
     def upload_keyframe(self, viewpoint: Viewpoint, projection: Projection, color: np.ndarray,
                         depth: np.ndarray, t0: float, zbuffer: str = "full") -> None:

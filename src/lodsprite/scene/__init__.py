@@ -151,7 +151,12 @@ def _is_crowd(spec: str) -> bool:
 
 #: Scene kinds other than terrain: (test of the spec, opener ``"module:callable"`` taking
 #: ``(spec, **options)``).  A spec no test claims is a terrain (:func:`load_scene`).
+def _is_scene_file(spec: str) -> bool:
+    return spec.lower().endswith(".toml")
+
+
 SCENE_KINDS: list[tuple[Callable[[str], bool], str]] = [
+    (_is_scene_file, "lodsprite.layered.technique:open_scene"),
     (_is_lumigraph, "lodsprite.lumigraph.technique:open_scene"),
     (_is_crowd, "lodsprite.manager.technique:open_scene"),
 ]

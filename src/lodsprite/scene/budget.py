@@ -292,6 +292,13 @@ class LayerBudget:
     def target_ms(self) -> float:
         return self.schedule.target_ms
 
+    def objects_seen(self, lin: np.ndarray, cov: np.ndarray, coverage: float) -> None:
+        """The objects layer's visible objects this frame (:func:`~lodsprite.scene.costs.
+        object_detail`), for its benefit model; ignored before its first plan."""
+        model = self.models.get("objects")
+        if model is not None and hasattr(model.benefit, "update"):
+            model.benefit.update(lin, cov, coverage)
+
     def before(self, controls: Iterable[LayerControl]) -> dict[str, float]:
         """Plan and apply every layer's knob for the coming frame."""
         controls = list(controls)

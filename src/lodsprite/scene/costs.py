@@ -177,6 +177,24 @@ class ObjectsBenefit:
         return self.coverage * float((self.cov * self.lin ** p).sum() / self.cov.sum())
 
 
+def object_detail(centres: np.ndarray, radii: np.ndarray, eye: np.ndarray,
+                  visible: np.ndarray, range_near: float, range_far: float, fov_y_deg: float,
+                  size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, float]:
+    """What :class:`ObjectsBenefit` weighs, for the visible objects: ``centres (N, 3)``,
+    ``radii (N,)`` bounding spheres (metres), ``eye (3,)``, ``visible (N,) bool``, the
+    LODManager's ranges (metres), the vertical field of view and the image ``size`` (w, h)
+    -> ``lin (k,)`` distance-linear LOD factors in 0..1 (§4.2 of Gumbau et al.), ``cov
+    (k,)`` projected sphere areas (pixels) and the fraction of the screen they cover
+    (their sum over the image's area, overlaps ignored, at most 1)."""
+    c = np.asarray(centres, np.float64)[visible]
+    r = np.asarray(radii, np.float64)[visible]
+    d = np.maximum(np.linalg.norm(c - np.asarray(eye, np.float64), axis=1), 1e-3)
+    lin = np.clip(1.0 - (d - range_near) / max(range_far - range_near, 1e-9), 0.0, 1.0)
+    focal = size[1] / 2 / np.tan(np.radians(fov_y_deg) / 2)
+    cov = np.pi * (r * focal / d) ** 2
+    return lin, cov, float(min(1.0, cov.sum() / (size[0] * size[1])))
+
+
 @dataclass
 class LightfieldBenefit:
     """Light fields: ``coverage · (1 - 2 ** (-n / n_half))`` for a node budget ``n``."""

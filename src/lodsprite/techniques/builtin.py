@@ -100,7 +100,8 @@ SCENE_OPTIONS = (
     Option("exponent", float, 1.0, "scene: the objects' LOD exponent (0: full meshes)"),
     Option("nodes", int, 8, "scene: the light fields' node budget"),
     Option("ground_truth", bool, False, "scene: the full-detail reference"),
+    Option("frame_s", float, 1.0 / 30.0, "scene: seconds of world time a frame"),
     LOD, EPSILON, SSE, SHADING, GPU_MB, HOST_MB)
-register(TechniqueSpec("scene", "lodsprite.techniques.layered:create", SCENE_OPTIONS,
+register(TechniqueSpec("scene", "lodsprite.layered.technique:create", SCENE_OPTIONS,
                        ("terrain", "objects"),
                        "terrain, objects and light fields composited by depth (issue 23)"))

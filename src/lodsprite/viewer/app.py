@@ -111,8 +111,10 @@ class ViewOptions:
 def factories(o: ViewOptions, scene: Scene) -> dict[str, TechniqueFactory]:
     """The viewer's modes: the registry's techniques that draw ``scene``'s layers, with the
     command's options (``distributed`` only with a server)."""
-    return techniques.factories(scene.layers, () if o.server else ("distributed",),
-                                **o.technique_options())
+    skip = () if o.server else ("distributed",)
+    if hasattr(scene.objects, "poses"):  # a scene file's world: the crowd modes need a crowd
+        skip = (*skip, "manager", "independent", "discrete")
+    return techniques.factories(scene.layers, skip, **o.technique_options())
 
 
 def view(o: ViewOptions) -> dict:

@@ -121,17 +121,11 @@ class TerrainLayer(Layer):
         terrain of every keyframe, into the keyframe (static layers); False without."""
         if self.sprite is None:
             return False
-        s = self.sprite.sprite
-        prev = s.keyframe_drawer
-        terrain = self.renderer.paths.renderer
 
-        def drawer(viewpoint, projection, target):
-            stats = (prev(viewpoint, projection, target) if prev is not None
-                     else terrain.render(viewpoint, None, projection, target))
+        def after(viewpoint, projection, target) -> None:
             draw(viewpoint, projection.matrix(), target.fbo)
-            return stats
 
-        s.keyframe_drawer = drawer
+        self.sprite.sprite.after_keyframe = after
         return True
 
     def _spriteframe(self, viewpoint: Viewpoint) -> None:

@@ -19,8 +19,10 @@ tested and written in the frame's one depth buffer (no ``gl_FragDepth``: the pro
 rasterised depth is exact and keeps early depth testing).
 
 Light fields are view dependent, so LOD-sprite keyframes never hold them: they are drawn
-every frame.  A method's node cache cannot be rewound, so the replay composites a GPU copy
-of each frame's reconstruction made after the timed frame (as the lumigraph technique's).
+every frame, those whose placed proxy box is in the frustum (the others are neither
+reconstructed nor composited).  A method's node cache cannot be rewound, so the replay
+composites a GPU copy of each frame's reconstruction made after the timed frame (as the
+lumigraph technique's).
 """
 
 from __future__ import annotations
@@ -31,8 +33,8 @@ import numpy as np
 
 from lodsprite.camera import Viewpoint
 from lodsprite.errors import InputError
+from lodsprite.layered.layers import Layer, LayerFrame
 from lodsprite.scene.budget import LayerControl
-from lodsprite.techniques.layers import Layer, LayerFrame
 
 if TYPE_CHECKING:
     from lodsprite.scene.world import LightFieldPlacement, World
@@ -87,6 +89,7 @@ class PlacedLightField:
         self.lf = Lumigraph(where.source)
         mesh = self.lf.proxy()
         self.m, self.s = placement(mesh.vertices, where.position, ground_z, where.height_m)
+        self.proxy_vertices = np.asarray(mesh.vertices, np.float64)
         self.max_nodes = int(min(nodes, self.lf.slabs[0].n_st ** 2))
         self.proxy = ColorMeshRenderer(gl, mesh.vertices, mesh.faces, mesh.colors,
                                        mesh.normals)
@@ -97,6 +100,11 @@ class PlacedLightField:
         self.method = (make_method(method, ctx, **options) if len(self.lf.slabs) == 1
                        else MultiSlabMethod(ctx, method, options))
         self.index = 0
+
+    def box(self) -> tuple[np.ndarray, np.ndarray]:
+        """The placed proxy's world box ``lo (3,)``, ``hi (3,)`` metres."""
+        v = self.proxy_vertices @ self.m[:3, :3].T + self.m[:3, 3]
+        return v.min(0), v.max(0)
 
     def set_nodes(self, n: int) -> None:
         target = getattr(self.method, "current", self.method)
@@ -142,6 +150,10 @@ class LightFieldLayer(Layer):
             self.release()
             raise
         self.set_nodes(nodes)
+        corners = [item.box() for item in self.items]
+        self._lo = np.array([c[0] for c in corners]).reshape(-1, 3)
+        self._hi = np.array([c[1] for c in corners]).reshape(-1, 3)
+        self._drawn = np.zeros(len(self.items), bool)
         self._keep: set[int] = set()
         self._frame = -1
 
@@ -157,15 +169,29 @@ class LightFieldLayer(Layer):
         for item in self.items:
             item.reconstruct(viewpoint, projection)
 
+    def in_view(self, viewpoint: Viewpoint, projection: np.ndarray) -> np.ndarray:
+        """``(items,) bool``: whose placed proxy box is not wholly outside the frustum."""
+        from lodsprite.camera import boxes_in_frustum, frustum_planes
+
+        if not self.items:
+            return np.zeros(0, bool)
+        planes = frustum_planes(projection @ viewpoint.view_matrix())
+        return boxes_in_frustum(planes, self._lo, self._hi)
+
     def draw(self, viewpoint: Viewpoint, t: float, projection: np.ndarray) -> LayerFrame:
+        """Reconstruct and composite every light field in view (the others cost nothing)."""
         images = tris = 0
-        for item in self.items:
+        self._drawn = self.in_view(viewpoint, projection)
+        for item, shown in zip(self.items, self._drawn, strict=True):
+            if not shown:
+                continue
             self.set_nodes(self.nodes)  # a slab switch makes a new method
             f = item.reconstruct(viewpoint, projection)
             images += f.images
             tris += item.composite(projection, viewpoint, item.method.output.color, self.fbo)
         self._frame += 1
-        return LayerFrame(0.0, tris, work=float(max(images, 1)), extra={"lf_images": images})
+        return LayerFrame(0.0, tris, work=float(max(images, 1)),
+                          extra={"lf_images": images, "lf_drawn": int(self._drawn.sum())})
 
     def plan_replay(self, frames: set[int]) -> None:
         """GPU copies for the reconstructions of ``frames`` (made now, filled after each
@@ -187,7 +213,7 @@ class LightFieldLayer(Layer):
                 mgl.copy_framebuffer(snap.fbo, item.method.output.fbo)
             self.renderer.gl.finish()
             self._snaps[i] = snaps
-        return {"frame": i}
+        return {"frame": i, "drawn": tuple(bool(d) for d in self._drawn)}
 
     def replay(self, viewpoint: Viewpoint, t: float, projection: np.ndarray,
                decision: dict[str, Any]) -> None:
@@ -196,8 +222,9 @@ class LightFieldLayer(Layer):
         snaps = self._snaps.get(decision["frame"])
         if snaps is None:
             raise InputError(f"frame {decision['frame']} was not kept for a replay")
-        for snap, item in zip(snaps, self.items, strict=True):
-            item.composite(projection, viewpoint, snap.color, self.fbo)
+        for snap, item, shown in zip(snaps, self.items, decision["drawn"], strict=True):
+            if shown:
+                item.composite(projection, viewpoint, snap.color, self.fbo)
 
     def release(self) -> None:
         for snap in [*getattr(self, "_pool", []),

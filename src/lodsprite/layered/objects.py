@@ -22,8 +22,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from lodsprite.layered.layers import Layer, LayerFrame
 from lodsprite.scene.budget import LayerControl
-from lodsprite.techniques.layers import Layer, LayerFrame
 
 if TYPE_CHECKING:
     from lodsprite.camera import Viewpoint

@@ -5,11 +5,11 @@ entities and note it suits architectures that decompose a scene into layers).
 :class:`LayeredTechnique` (registered as ``scene``) draws, every frame, into the
 renderer's one framebuffer and depth buffer:
 
-1. the terrain by any terrain technique (:class:`~lodsprite.techniques.layers.
+1. the terrain by any terrain technique (:class:`~lodsprite.layered.layers.
    TerrainLayer`: ``full``, ``lod``, ``adaptive``, ``sprite``, ``sprite-adaptive``);
-2. the objects by the LODManager engine (:class:`~lodsprite.techniques.layer_objects.
+2. the objects by the LODManager engine (:class:`~lodsprite.layered.objects.
    ObjectsLayer`), poses from the world at the frame's time;
-3. the light fields (:class:`~lodsprite.techniques.layer_lightfields.LightFieldLayer`),
+3. the light fields (:class:`~lodsprite.layered.lightfields.LightFieldLayer`),
    each reconstructed in its own target and composited through its proxy's depth.
 
 What LOD-sprite's keyframes hold (``keyframes``): ``static`` (the default) renders the
@@ -26,18 +26,25 @@ LayerBudget`, ``schedule`` ``none`` | ``scheduler`` | ``independent`` under
 ``target_fps``) turns the knobs before each frame.  ``ground_truth=True`` is the
 full-detail reference: full-resolution terrain, full meshes (LOD exponent 0), every
 lumigraph node.
+
+:func:`render_scene` is ``lodsprite render --scene FILE``: the technique over a scene
+file's world along its ``[view]`` path, ``frames.csv`` with the per-layer columns and
+``summary.json`` with the core keys and ``share_<layer>``; with ``ground_truth`` every frame
+replayed untimed against the full-detail scene (:func:`reference`).
 """
 
 from __future__ import annotations
 
+import os
 import time
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from lodsprite.errors import InputError
+from lodsprite.layered.layers import Layer, TerrainLayer, timed
 from lodsprite.techniques.base import Frame, Technique
-from lodsprite.techniques.layers import Layer, TerrainLayer, timed
 
 if TYPE_CHECKING:
     from lodsprite.api import Renderer
@@ -61,9 +68,9 @@ class LayeredTechnique(Technique):
                  ground_truth: bool = False, frame_s: float = FRAME_S,
                  **terrain_options: Any) -> None:
         super().__init__(renderer)
+        from lodsprite.layered.lightfields import LightFieldLayer
+        from lodsprite.layered.objects import ObjectsLayer
         from lodsprite.scene.budget import LayerBudget
-        from lodsprite.techniques.layer_lightfields import LightFieldLayer
-        from lodsprite.techniques.layer_objects import ObjectsLayer
 
         if keyframes not in KEYFRAME_HOLDS:
             raise InputError(f"unknown keyframes {keyframes!r}: use one of "
@@ -208,3 +215,55 @@ def create(renderer: Renderer, world: World | None = None, **options: Any
         raise InputError("the scene technique needs a world (a scene file: "
                          "lodsprite.scene.world.load_world)")
     return LayeredTechnique(renderer, world, **options)
+
+
+def open_scene(spec: str, **_: object):
+    """The scene of a scene file (``lodsprite view SCENE.toml``): its terrain, with the
+    world as its object set; the ``scene`` technique to start with."""
+    from dataclasses import replace
+
+    from lodsprite.scene.world import load_world
+
+    world = load_world(spec)
+    return replace(world.scene, objects=world, mode="scene", label=spec)
+
+
+def render_scene(scene_file: str | os.PathLike, out_dir: str | os.PathLike,
+                 size: tuple[int, int] = (512, 512), frames: int | None = None,
+                 terrain_mode: str = "adaptive",
+                 target_fps: float | None = None, ground_truth: bool = False,
+                 flip: bool = False, path: str | None = None, progress=None,
+                 **options: Any) -> dict[str, Any]:
+    """Run the ``scene`` technique over the world of ``scene_file`` along its ``[view]``
+    path (or ``path``) and write the run to ``out_dir``; returns the summary.
+    ``target_fps`` runs the budget's scheduler (none without)."""
+    from lodsprite import techniques
+    from lodsprite.api import Renderer
+    from lodsprite.harness import run_path, write_run
+    from lodsprite.layered.technique import reference
+    from lodsprite.scene.world import load_world
+
+    if target_fps is not None and not target_fps > 0:
+        raise InputError(f"--target-fps must be > 0, got {target_fps}")
+    world = load_world(scene_file)
+    cam = world.scene.path(path or world.path, frames)
+    schedule = "scheduler" if target_fps is not None else "none"
+    with Renderer(world.scene, size, cam.fov_y_deg) as renderer:
+        t = techniques.create("scene", renderer, world=world, terrain_mode=terrain_mode,
+                              schedule=schedule, target_fps=target_fps, **options)
+        ref = None
+        try:
+            image = None
+            if ground_truth:
+                image, ref = reference(renderer, world, cam, t.frame_s)
+            result = run_path(t, cam, progress=progress, ground_truth=ground_truth,
+                              reference=image, flip=flip)
+        finally:
+            t.release()
+            if ref is not None:
+                ref.release()
+        summary = {**result.summary, "mode": "scene", "scene": str(scene_file),
+                   "terrain": world.scene.terrain_spec, "path": path or world.path,
+                   "size": list(size), "gl_version": renderer.info.version}
+    write_run(Path(out_dir), result, summary)
+    return summary

@@ -1,0 +1,234 @@
+"""The scene technique (issue 23, must-have 2): layers composited by depth in one frame.
+
+An analytic scene: a flat terrain with a ridge across it (``y`` in -60..60 m, 200 m high),
+the camera low in the south looking north.  A cube in front of the ridge shows; one
+behind it is hidden; a light field's pixels appear only where its proxy is in front.
+Moving objects move between frames while LOD-sprite's keyframes hold the static ones;
+the untimed replay draws the timed frame's image; ``render --scene`` writes its run."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from lodsprite import techniques
+from lodsprite.api import Renderer
+from lodsprite.camera import look_at, project_points
+from lodsprite.scene.world import load_world
+
+N, SPACING_M = 32, 30.0          # 960 m square, x and y in -480..480
+SIZE = (96, 64)
+EYE, AIM = (0.0, -470.0, 40.0), (0.0, 0.0, 40.0)
+FRONT, BEHIND = (-60.0, -300.0), (60.0, 250.0)
+
+
+def ridge_terrain(folder: Path) -> None:
+    r, c = np.mgrid[0:N + 1, 0:N + 1].astype(np.float64)
+    y = N * SPACING_M / 2 - r * SPACING_M
+    np.save(folder / "ridge.npy", np.where(np.abs(y) <= 60.0, 200.0, 0.0).astype(np.float32))
+
+
+def scene_file(folder: Path, body: str) -> Path:
+    import trimesh
+
+    ridge_terrain(folder)
+    box = trimesh.creation.box((1.0, 1.0, 1.0))
+    for _ in range(3):  # 768 triangles: a progressive mesh to extract LODs from
+        box = box.subdivide()
+    box.export(folder / "cube.off")
+    p = folder / "scene.toml"
+    p.write_text(f'[terrain]\nsource = "ridge.npy"\ngrid = {N}\ntexture = "checker:4"\n'
+                 + body)
+    return p
+
+
+def world_with(folder: Path, objects: list[tuple[list, float]], lightfields: str = ""):
+    body = ""
+    for k, (points, walk) in enumerate(objects):
+        (folder / f"p{k}.csv").write_text("\n".join(f"{x},{y}" for x, y in points) + "\n")
+        body += (f'[[objects]]\nmesh = "cube.off"\nheight_m = 50.0\npoints = "p{k}.csv"\n'
+                 f"walk_mps = {walk}\n")
+    return load_world(scene_file(folder, body + lightfields))
+
+
+def pixel(renderer, vp, xyz) -> tuple[int, int]:
+    view_proj = renderer.projection(vp).matrix() @ vp.view_matrix()
+    px = project_points(np.array([xyz], np.float64), view_proj, *SIZE)[0][0]
+    return int(px[1]), int(px[0])  # row, column
+
+
+def run(technique, viewpoints):
+    technique.warm_up(viewpoints[0])
+    shown, decisions = [], []
+    for vp in viewpoints:
+        technique.frame(vp)
+        shown.append(technique.read_image())
+        decisions.append(technique.decision())
+    return shown, decisions
+
+
+def test_an_object_in_front_of_the_ridge_shows_and_one_behind_it_is_hidden(gl, tmp_path):
+    world = world_with(tmp_path, [([FRONT, BEHIND], 0.0)])
+    vp = look_at(EYE, AIM)
+    with Renderer(world.scene, SIZE, 45.0, ctx=gl.mgl) as r:
+        r.render(vp, None)
+        bare = r.read_color().astype(int)
+        t = techniques.create("scene", r, world=world, terrain_mode="full")
+        try:
+            (img,), _ = run(t, [vp])
+        finally:
+            t.release()
+        img = img.astype(int)
+        front, behind = pixel(r, vp, (*FRONT, 25.0)), pixel(r, vp, (*BEHIND, 25.0))
+    assert 0 <= behind[0] < SIZE[1] and 0 <= behind[1] < SIZE[0]  # on screen, behind
+    assert np.abs(img[front] - bare[front]).max() > 30      # the cube covers the terrain
+    assert np.abs(img[behind] - bare[behind]).max() <= 2    # the ridge covers the cube
+    changed = np.abs(img - bare).max(axis=2) > 2
+    assert changed.sum() < 0.2 * changed.size               # only the front cube's pixels
+
+
+@pytest.fixture(scope="module")
+def lf_folder(tmp_path_factory) -> Path:
+    from lodsprite.lumigraph.run import capture_lumigraph
+
+    folder = tmp_path_factory.mktemp("lf") / "lf"
+    capture_lumigraph("still-life", folder, n_st=4, n_uv=32, codec="png")
+    return folder
+
+
+def test_a_light_field_shows_only_where_its_proxy_is_in_front(gl, tmp_path, lf_folder):
+    lfs = "".join(f'[[lightfields]]\nsource = "{lf_folder}"\nposition = [{x}, {y}]\n'
+                  f"height_m = 120.0\n" for x, y in (FRONT, BEHIND))
+    world = world_with(tmp_path, [], lfs)
+    vp = look_at(EYE, AIM)
+    with Renderer(world.scene, SIZE, 45.0, ctx=gl.mgl) as r:
+        r.render(vp, None)
+        bare = r.read_color().astype(int)
+        t = techniques.create("scene", r, world=world, terrain_mode="full")
+        try:
+            (img,), _ = run(t, [vp])
+            assert t.lightfields.in_view(vp, t.projection(vp)).all()
+            back = look_at(EYE, (0.0, -900.0, 40.0))  # both behind the eye: neither drawn
+            assert not t.lightfields.in_view(back, t.projection(back)).any()
+            items = t.lightfields.items
+            proxy_px = []
+            target = r.paths.renderer.target
+            for item in items:  # each proxy's own silhouette, alone on magenta
+                target.use((1.0, 0.0, 1.0))
+                item.compositor.draw(t.projection(vp) @ vp.view_matrix() @ item.m,
+                                     item.method.output.color, target.fbo)
+                proxy_px.append((r.read_color() != [255, 0, 255]).any(axis=2))
+        finally:
+            t.release()
+    changed = np.abs(img.astype(int) - bare).max(axis=2) > 2
+    front, behind = proxy_px
+    assert changed[front].mean() > 0.9 and front.sum() > 20  # the front one shows
+    assert not changed[~front].any()                         # nothing outside its proxy
+    assert behind.sum() > 0 and not (changed & behind & ~front).any()  # hidden by the ridge
+
+
+def test_walkers_move_while_keyframes_hold_the_static_objects(gl, tmp_path):
+    world = world_with(tmp_path, [([FRONT], 0.0), ([(60.0, -300.0)], 100.0)])
+    vps = [look_at(EYE, AIM)] * 3
+    with Renderer(world.scene, SIZE, 45.0, ctx=gl.mgl) as r:
+        t = techniques.create("scene", r, world=world, terrain_mode="sprite", epsilon=64.0,
+                              lod=8, frame_s=1.0)
+        try:
+            shown, _ = run(t, vps)
+            assert t.static_in_keyframes and t.summary([])["keyframe_holds"] == "static"
+            key = t.terrain.sprite.sprite.keyframe_color().astype(int)
+            r.render(vps[0], None)
+            bare = r.read_color().astype(int)
+            p0 = world.poses(0.0)[1]
+            p1 = world.poses(1.0)[1]
+            static = pixel(r, vps[0], (*FRONT, 25.0))
+            walker0 = pixel(r, vps[0], (p0[0], p0[1], p0[2] + 25.0))
+        finally:
+            t.release()
+    assert np.linalg.norm(p1[:2] - p0[:2]) > 90.0
+    assert np.abs(key[static] - bare[static]).max() > 30    # the static cube: in the keyframe
+    assert np.abs(key[walker0] - bare[walker0]).max() <= 8  # the walker: not in it
+    assert np.abs(shown[0][walker0].astype(int) - bare[walker0]).max() > 30
+    assert not np.array_equal(shown[0], shown[2])           # the walker moved
+    for img in shown:                                       # the static cube stays
+        assert np.abs(img[static].astype(int) - bare[static]).max() > 30
+
+
+@pytest.mark.parametrize("mode", ["sprite", "sprite-adaptive", "adaptive"])
+def test_the_replay_draws_the_timed_frames(gl, tmp_path, lf_folder, mode):
+    lfs = f'[[lightfields]]\nsource = "{lf_folder}"\nposition = [0.0, -200.0]\nheight_m = 80.0\n'
+    world = world_with(tmp_path, [([FRONT], 0.0), ([(60.0, -300.0)], 40.0)], lfs)
+    vps = [look_at((x, -470.0, 40.0), (x, 0.0, 40.0)) for x in np.linspace(0, 60, 4)]
+    with Renderer(world.scene, SIZE, 45.0, ctx=gl.mgl) as r:
+        t = techniques.create("scene", r, world=world, terrain_mode=mode, epsilon=2.0, lod=8)
+        try:
+            t.plan_replay({0, 1, 2, 3})
+            shown, decisions = run(t, vps)
+            for i in (3, 1, 2, 0):
+                assert np.abs(t.replay(vps[i], decisions[i]).astype(int)
+                              - shown[i]).max() <= 1, i
+        finally:
+            t.release()
+
+
+def test_render_scene_writes_the_layers_columns_and_shares(tmp_path):
+    from conftest import run_cli
+
+    scene = scene_file(tmp_path, '[[objects]]\nmesh = "ogre"\nheight_m = 30.0\ncount = 8\n'
+                                 'seed = 1\nwalk_mps = 5.0\n[view]\npath = "flyover"\n')
+    out = tmp_path / "run"
+    done = run_cli("render", "--scene", str(scene), "--size", "64x64", "--frames", "5",
+                   "--mode", "lod", "--out", str(out), "--ground-truth")
+    assert done.returncode == 0, done.stderr
+    header = (out / "frames.csv").read_text().splitlines()
+    assert len(header) == 6
+    for col in ("ms_terrain", "ms_objects", "knob_terrain", "knob_objects", "rmse"):
+        assert col in header[0].split(",")
+    s = json.loads((out / "summary.json").read_text())
+    assert s["frames"] == 5 and {"median_ms", "p99_ms", "rmse_mean"} <= set(s)
+    assert 0 < s["share_terrain"] < 1 and 0 < s["share_objects"] < 1
+    assert s["share_terrain"] + s["share_objects"] <= 1.0 + 1e-9
+
+
+def test_the_viewer_opens_a_scene_file_and_flies_its_layers(gl, tmp_path):
+    from lodsprite.gl.target import RenderTarget
+    from lodsprite.scene import open_scene
+    from lodsprite.viewer.app import ViewOptions, factories
+    from lodsprite.viewer.controls import CameraController
+    from lodsprite.viewer.core import ViewerCore
+
+    (tmp_path / "p0.csv").write_text(f"{FRONT[0]},{FRONT[1]}\n")
+    path = scene_file(tmp_path, '[[objects]]\nmesh = "cube.off"\nheight_m = 50.0\n'
+                                'points = "p0.csv"\n')
+    scene = open_scene(str(path))
+    assert scene.mode == "scene" and scene.objects.count == 1
+    modes = factories(ViewOptions(terrain=str(path)), scene)
+    assert "scene" in modes and "manager" not in modes  # no crowd modes on a world
+    core = ViewerCore(gl.mgl, scene, (64, 48), modes, "scene",
+                      CameraController.from_home(scene.camera_home()))
+    target = RenderTarget(gl, 64, 48)
+    try:
+        for _ in range(2):
+            core.frame(1 / 30, target.fbo)
+            core.log_frame()
+        assert "1 objects" in core.technique.status()
+        img = core.technique.read_image()
+        assert (img != img[0, 0]).any(axis=2).mean() > 0.2  # terrain, not only sky
+    finally:
+        core.release()
+        target.release()
+
+
+def test_render_scene_refuses_bad_input_in_one_line(cli, tmp_path):
+    for args, words in ((("--target-fps", "30"), "--scene"),
+                        (("--scene", str(tmp_path / "none.toml")), "none.toml"),
+                        (("--scene", str(scene_file(tmp_path, "")), "--target-fps", "-1"),
+                         "--target-fps")):
+        done = cli("render", *args, "--out", str(tmp_path / "run"))
+        assert done.returncode == 2, (args, done.stdout, done.stderr)
+        text = (done.stdout + done.stderr).strip()
+        assert words in text and len(text.splitlines()) <= 2, text
+    assert not (tmp_path / "run").exists()
