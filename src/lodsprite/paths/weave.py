@@ -8,7 +8,8 @@ centre (at most 45 % of the terrain's smaller side), weaving east and west ``tur
 times (``x = 0.6 half_m sin(pi turns s)``, ``s`` from 0 to 1 along the track, so the
 camera crosses the crowd's middle and its sides), ``height_m`` above a smoothed running
 maximum of the ground under the track (:func:`~lodsprite.paths.flyover.ground_floor`,
-so never below the ground within ``height_m`` of it), looking along the direction of
+so about the highest ground within ``height_m`` along it, and never less than the ground
+under the eye), looking along the direction of
 travel pitched down by ``PITCH_DEG``.  The default height, 8 m, is 2-5 times the height
 of a person-sized object (2.2 m, the built-in ogre); metres, whatever the terrain's size.
 """
@@ -75,7 +76,7 @@ def weave(hf: HeightField, frames: int = CHEN1999_FRAMES, height_m: float = WEAV
     ahead = weave_track(half, turns, np.minimum(si + 1e-3, 1.0)) - weave_track(
         half, turns, np.maximum(si - 1e-3, 0.0))
     heading = ahead / np.linalg.norm(ahead, axis=1, keepdims=True)
-    z = np.interp(si, s, floor) + height_m
+    z = np.maximum(np.interp(si, s, floor), hf.height_at(at[:, 0], at[:, 1])) + height_m
     p = math.radians(PITCH_DEG)
     views = []
     for i in range(n):

@@ -1,6 +1,6 @@
 """``lodsprite reproduce battlefield``: a whole scene under one frame budget (issue 23,
 must-have 5): the battlefield of Chen, Swan & Kaufman 1999 (terrain with entities on it)
-with the layers of :class:`~lodsprite.techniques.layered.LayeredTechnique` and the
+with the layers of :class:`~lodsprite.layered.technique.LayeredTechnique` and the
 budget of Funkhouser & Séquin 1993 (:mod:`lodsprite.scene.budget`).
 
 The scene (:mod:`.scene`): a 4k² fractal store (or ``--terrain``), ``instances`` walking
@@ -12,7 +12,7 @@ ogres and ``trees`` trees (LODManager engine, Gumbau et al.), two light fields
 * ``scheduler`` and ``independent``: the budget's predictive scheduler against today's
   independent per-layer feedback, both at ``target_fps``, timed, every
   ``sample_every``-th frame replayed untimed against the full-detail scene (every layer
-  at full detail: :func:`~lodsprite.techniques.layered.reference`, rendered once per
+  at full detail: :func:`~lodsprite.layered.technique.reference`, rendered once per
   path) for RMSE (grey levels) and FLIP;
 * ``manager`` and ``no_manager``: the LOD exponent fixed at ``exponent``, the crowd
   engine's LODManager sharing LODs against every object extracting its own (the same
@@ -71,8 +71,9 @@ class BattlefieldConfig:
 
     @classmethod
     def quick(cls, **kw) -> BattlefieldConfig:
-        return cls(**{**dict(terrain="fractal:256:1", instances=120, trees=3, lf_st=4,
-                             lf_uv=32, lf_slabs=1, frames=12, image=64, target_fps=30.0,
+        return cls(**{**dict(terrain="fractal:256:1", instances=120, trees=3, area_m=120.0,
+                             lf_st=4,
+                             lf_uv=32, lf_slabs=6, frames=12, image=64, target_fps=30.0,
                              sample_every=4, match_steps=2), **kw})
 
     @property
@@ -97,6 +98,7 @@ def _row(result, target_ms: float | None) -> dict:
     q = [r for r in rows if "rmse" in r]
     cols = {k: [r.get(k) for r in rows] for k in rows[0]
             if k.startswith(("ms_", "knob_")) or k in ("triangles", "extractions")}
+    cols.update({k: [r.get(k) for r in rows] for k in ("rmse", "flip") if q})
     s = result.summary
     return {"target_ms": target_ms, **_stats(ms),
             "rmse": float(np.mean([r["rmse"] for r in q])) if q else None,
@@ -113,7 +115,7 @@ class PathRuns:
     sampled frames (rendered once, then the reference is released)."""
 
     def __init__(self, renderer, world, cam, cfg: BattlefieldConfig) -> None:
-        from lodsprite.techniques.layered import reference
+        from lodsprite.layered.technique import reference
 
         self.renderer, self.world, self.cam, self.cfg = renderer, world, cam, cfg
         image, ref = reference(renderer, world, cam)
@@ -129,8 +131,8 @@ class PathRuns:
         """One run of the ``scene`` technique (see the module doc); ``sampled``: the
         sampled frames only, each at its own time."""
         from lodsprite.harness import run_path
+        from lodsprite.layered.technique import FRAME_S, LayeredTechnique
         from lodsprite.paths import CameraPath
-        from lodsprite.techniques.layered import FRAME_S, LayeredTechnique
 
         cfg, cam = self.cfg, self.cam
         frame_s, stride = FRAME_S, cfg.sample_every

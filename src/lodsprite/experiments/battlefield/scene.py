@@ -41,7 +41,8 @@ def terrain_source(spec: str, stores: Path) -> tuple[str, dict]:
 
 
 def _ogre_mesh(path: Path) -> Path:
-    """The built-in ogre as a coloured PLY file (what the lumigraph capture reads)."""
+    """The built-in ogre as a coloured PLY file (what the lumigraph capture reads), turned
+    ``+z`` up (a scene type's frame) to ``+y`` up (a lumigraph's world)."""
     import trimesh
 
     from lodsprite.scene.objects import builtin_type
@@ -50,7 +51,9 @@ def _ogre_mesh(path: Path) -> Path:
         return path
     t = builtin_type("ogre", 2.2, "linear")
     colours = (np.clip(t.colours, 0, 1) * 255).astype(np.uint8)
-    mesh = trimesh.Trimesh(t.vertices, t.faces, vertex_colors=colours, process=False)
+    v = t.vertices
+    y_up = np.stack([v[:, 0], v[:, 2], -v[:, 1]], axis=1)
+    mesh = trimesh.Trimesh(y_up, t.faces, vertex_colors=colours, process=False)
     path.parent.mkdir(parents=True, exist_ok=True)
     atomic_write_bytes(path, mesh.export(file_type="ply"))
     return path
