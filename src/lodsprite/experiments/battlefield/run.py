@@ -6,7 +6,8 @@ budget of Funkhouser & Séquin 1993 (:mod:`lodsprite.scene.budget`).
 The scene (:mod:`.scene`): a 4k² fractal store (or ``--terrain``), ``instances`` walking
 ogres and ``trees`` trees (LODManager engine, Gumbau et al.), two light fields
 (lumigraphs, Sloan et al. 1997) captured of built-in objects; along each path of
-``paths`` (``flyover``: 1 km up along 10 km; ``weave``: 8 m up, weaving among the crowd,
+``paths`` (``flyover:300:3000``: 300 m up along 3 km over the crowd; ``weave``: 8 m up,
+weaving among the crowd,
 :mod:`lodsprite.paths.weave`), ``frames`` frames each, on one renderer:
 
 * ``scheduler`` and ``independent``: the budget's predictive scheduler against today's
@@ -60,7 +61,7 @@ class BattlefieldConfig:
     lf_st: int = 8
     lf_uv: int = 64
     lf_slabs: int = 6
-    paths: tuple[str, ...] = ("flyover", "weave")
+    paths: tuple[str, ...] = ("flyover:300:3000", "weave")
     frames: int = 300
     image: int = 256
     target_fps: float = 10.0
