@@ -12,6 +12,8 @@ import ctypes
 import ctypes.util
 import functools
 import os
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 
 import moderngl
@@ -60,6 +62,42 @@ def gl_draw_elements_instanced():
                        ctypes.c_int]
         fn.restype = None
     return fn
+
+
+@functools.cache
+def _egl():
+    """libEGL with the four calls :func:`keep_current` needs typed, or None."""
+    for name in filter(None, ["libEGL.so.1", ctypes.util.find_library("EGL")]):
+        try:
+            lib = ctypes.CDLL(name)
+        except OSError:
+            continue
+        for fn in ("eglGetCurrentContext", "eglGetCurrentDisplay"):
+            getattr(lib, fn).restype = ctypes.c_void_p
+        lib.eglGetCurrentSurface.restype = ctypes.c_void_p
+        lib.eglGetCurrentSurface.argtypes = [ctypes.c_int]
+        lib.eglMakeCurrent.argtypes = [ctypes.c_void_p] * 4
+        lib.eglMakeCurrent.restype = ctypes.c_uint
+        return lib
+    return None
+
+
+@contextmanager
+def keep_current() -> Iterator[None]:
+    """Run a block that creates, enters or releases other contexts (in-process LOD
+    profile generation) and make the EGL context current before it current again after
+    it (creating a standalone context makes the new one current; the caller's GL objects
+    would otherwise be drawn on the wrong context).  Without EGL: a plain block."""
+    egl = _egl()
+    saved = None
+    if egl is not None and egl.eglGetCurrentContext():
+        saved = (egl.eglGetCurrentDisplay(), egl.eglGetCurrentSurface(0x3059),  # EGL_DRAW
+                 egl.eglGetCurrentSurface(0x305A), egl.eglGetCurrentContext())  # EGL_READ
+    try:
+        yield
+    finally:
+        if saved is not None:
+            egl.eglMakeCurrent(*saved)
 
 
 class GLError(LodspriteError, RuntimeError):

@@ -13,11 +13,14 @@
 Every frame: frustum culling (bounding spheres), LOD work (timed as ``lod_ms``: the
 decisions, the extractions and their uploads), then the visible objects grouped by the
 index buffer they draw, one instanced draw a group.  Times stop after ``ctx.finish()``.
+A :attr:`CrowdEngine.desired_hook` may replace the distance-linear desired factors of
+some objects (a scene's profile LOD: :class:`lodsprite.scene.profile_lod.ProfileLod`).
 """
 
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -105,6 +108,10 @@ class CrowdEngine:
                                          axis=1).astype(np.float32)
         self.last_orders: list[tuple[int, int, float]] = []  # the last frame's extractions
         self.last_using: np.ndarray | None = None
+        # Per-object desired factors from elsewhere (e.g. a scene's profile LOD,
+        # lodsprite.scene.profile_lod.ProfileLod): (viewpoint, transforms (N, 4),
+        # desired (N,), exponent) -> (N,) factors; None: the distance-linear ones.
+        self.desired_hook: Callable[..., np.ndarray] | None = None
 
     def reset_indices(self) -> None:
         """Every type's index buffer on its base LOD (the state before the first frame)."""
@@ -147,6 +154,9 @@ class CrowdEngine:
                              )[self.crowd.types] + self.level
         else:
             desired = desired_lod(dist, *self.range, self.feedback.exponent)
+            if self.desired_hook is not None:
+                desired = self.desired_hook(viewpoint, self.transforms, desired,
+                                            self.feedback.exponent)
             active = active_list(desired, self.manager.lod, visible, self.n_active,
                                  self.manager.n_slots, self.penalty, self.dist)
             orders = self.manager.update(active, desired)

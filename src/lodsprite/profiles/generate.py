@@ -146,7 +146,9 @@ def _release(entry: tuple) -> None:
 
 def release_cached() -> None:
     """Release the GL objects that in-process profile generation keeps for reuse."""
-    with _CACHE_LOCK:
+    from lodsprite.gl.context import keep_current
+
+    with _CACHE_LOCK, keep_current():
         for key in list(_CACHE):
             _release(_CACHE.pop(key))
 
@@ -210,9 +212,12 @@ def _run_views(key: str, levels: list, setup: ViewSetup, views: list[tuple[float
                 done(n)
         return results
     if workers <= 1:
-        for n, view in enumerate(views, 1):
-            results[n - 1] = view_errors(key, levels, setup, *view)
-            done(n)
+        from lodsprite.gl.context import keep_current
+
+        with keep_current():  # the caller's context stays current
+            for n, view in enumerate(views, 1):
+                results[n - 1] = view_errors(key, levels, setup, *view)
+                done(n)
         return results
     with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn"),
                              initializer=_init_worker, initargs=(key, levels, setup)) as pool:

@@ -83,9 +83,18 @@ def coarsest_within(errors: np.ndarray, threshold: float) -> np.ndarray:
 def select_profile(table: ProfileTable, models: np.ndarray, eye: np.ndarray, fov_y_deg: float,
                    height_px: int, threshold: float, csf: bool = True) -> np.ndarray:
     """LOD index ``(K,) int64`` of each object chosen from the error profile."""
+    phi, theta, dist = object_views(models, eye, table.centre)
+    return select_views(table, phi, theta, dist, fov_y_deg, height_px, threshold, csf)
+
+
+def select_views(table: ProfileTable, phi_deg: np.ndarray, theta_deg: np.ndarray,
+                 distance: np.ndarray, fov_y_deg: float, height_px: int, threshold: float,
+                 csf: bool = True) -> np.ndarray:
+    """:func:`select_profile` from each object's view already in object space
+    (``phi_deg``, ``theta_deg``, ``distance`` ``(K,)`` as :func:`object_views` gives)."""
     if not threshold >= 0:
         raise InputError(f"error threshold must be >= 0, got {threshold}")
-    phi, theta, dist = object_views(models, eye, table.centre)
+    phi, theta, dist = phi_deg, theta_deg, distance
     z_eff = effective_distance(table, dist, fov_y_deg, height_px)
     i_phi, i_theta = nearest_views(table, phi, theta)
     i_z = np.searchsorted(table.z, z_eff * (1 + 1e-9), side="right") - 1
