@@ -22,9 +22,11 @@ def battlefield(tmp_path_factory):
     from lodsprite.experiments.battlefield.run import BattlefieldConfig, reproduce_battlefield
 
     out = tmp_path_factory.mktemp("battlefield")
-    cfg = BattlefieldConfig.quick(paths=("weave",), instances=60, trees=1, frames=6,
+    cfg = BattlefieldConfig.quick(paths=("weave",), instances=60, trees=0, frames=6,
                                   sample_every=3, match_steps=2)
-    r = reproduce_battlefield(cfg, out)
+    with pytest.MonkeyPatch.context() as mp:  # the built-ins' profiles: built here
+        mp.setenv("LODSPRITE_CACHE", str(tmp_path_factory.mktemp("profiles")))
+        r = reproduce_battlefield(cfg, out)
     report = write_outputs(r, out)
     return out, json.loads((out / "results.json").read_text()), report
 
@@ -44,7 +46,7 @@ def test_results_hold_the_issues_keys_and_the_runs_own_figures(battlefield):
         for layer in ("terrain", "objects", "lightfields"):  # every layer drew every frame
             assert len(run["columns"][f"ms_{layer}"]) == 6
     assert PVL_KEYS <= set(r["profile_vs_linear"])
-    assert r["sample_frames"] == [0, 3] and r["instances"] == 61
+    assert r["sample_frames"] == [0, 3] and r["instances"] == 60
     assert len(r["lightfields"]) == 2 and (out / "battlefield.toml").is_file()
     assert r["terrain"]["tiled"] and (out / "stores").is_dir()
 
@@ -66,6 +68,9 @@ def test_the_linear_run_kept_is_the_closest_to_the_profile_runs_triangles(battle
     assert abs(x["linear"]["triangles_mean"] - goal) == pytest.approx(best)
     assert x["linear_exponent"] in x["exponents_tried"]
     assert r["profile_vs_linear"]["triangles_profile"] == pytest.approx(goal)
+    # the profile run drew with the profile LOD hook, the linear runs without it
+    assert x["profile"]["profile_lod"] and not x["linear"]["profile_lod"]
+    assert r["profile_vs_linear"]["profile_lod_available"]
 
 
 def test_report_names_the_measured_figures_beside_the_targets(battlefield):

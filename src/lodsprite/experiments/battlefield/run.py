@@ -19,7 +19,8 @@ weaving among the crowd,
   engine's LODManager sharing LODs against every object extracting its own (the same
   engine with ``share`` off): extractions counted by the engine;
 * ``profile`` and ``linear``: every object type's ``lod`` set to ``profile`` (Scoggins
-  et al. 2000 error profiles, where the build has them) then ``linear`` (distance-linear),
+  et al. 2000 error profiles: :func:`profile_hook` on the crowd engine, where the objects
+  layer does not wire it itself) then ``linear`` (distance-linear),
   on the sampled frames only (each at its own time along the path), the linear run's
   exponent searched (``match_steps`` runs at most, a secant on log triangles) so that its
   triangles match the profile run's: RMSE and FLIP at equal triangles.
@@ -87,6 +88,18 @@ def profile_lod_available() -> bool:
     return importlib.util.find_spec("lodsprite.scene.profile_lod") is not None
 
 
+def profile_hook(world, objects, renderer):
+    """The profile LOD of the world's ``lod = "profile"`` types on the objects layer's
+    crowd engine (:func:`lodsprite.scene.profile_lod.profile_hook`, profiles built on
+    first use and cached), or None: no such type, or a build without it."""
+    if not profile_lod_available():
+        return None
+    from lodsprite.scene.profile_lod import profile_hook as hook
+
+    return hook(world.types, objects.crowd.models, world.type_indices(), renderer.fov_y_deg,
+                renderer.size[1])
+
+
 def _stats(ms: np.ndarray) -> dict:
     return {"median_ms": float(np.median(ms)), "p99_ms": float(np.percentile(ms, 99)),
             "std_ms": float(ms.std()), "mean_ms": float(ms.mean()), "frames": int(ms.size)}
@@ -145,14 +158,21 @@ class PathRuns:
                              schedule=schedule, target_fps=target_fps,
                              exponent=cfg.exponent if exponent is None else exponent,
                              frame_s=frame_s)
-        if not share and t.objects is not None:
-            t.objects.engine.manager.share = False  # every object extracts its own LODs
+        hooked = False
         try:
+            if t.objects is not None:
+                if t.objects.engine.desired_hook is None:  # the layer does not wire it
+                    t.objects.engine.desired_hook = profile_hook(self.world, t.objects,
+                                                                 self.renderer)
+                hooked = t.objects.engine.desired_hook is not None
+                if not share:
+                    t.objects.engine.manager.share = False  # each object extracts its own
             result = run_path(t, cam, ground_truth=quality, quality_stride=stride, flip=True,
                               reference=lambda vp: self.images[id(vp)])
         finally:
             t.release()
-        return _row(result, None if target_fps is None else 1e3 / target_fps)
+        return {**_row(result, None if target_fps is None else 1e3 / target_fps),
+                "profile_lod": hooked}
 
     def with_lod(self, kind: str, **kw) -> dict:
         """A run with every object type's ``lod`` set to ``kind``."""
@@ -281,7 +301,7 @@ def results(cfg: BattlefieldConfig, per_path: dict, made: dict, world, scene_fil
             "flip_profile": mean("profile", "flip"), "flip_linear": mean("linear", "flip"),
             "triangles_profile": mean("profile", "triangles_mean"),
             "triangles_linear": mean("linear", "triangles_mean"),
-            "profile_lod_available": profile_lod_available()},
+            "profile_lod_available": all(x["profile"]["profile_lod"] for x in pvl)},
         "extractions_with_manager": int(sum(p["manager"]["extractions"]
                                             for p in per_path.values())),
         "extractions_without_manager": int(sum(p["no_manager"]["extractions"]
