@@ -232,3 +232,63 @@ def test_render_scene_refuses_bad_input_in_one_line(cli, tmp_path):
         text = (done.stdout + done.stderr).strip()
         assert words in text and len(text.splitlines()) <= 2, text
     assert not (tmp_path / "run").exists()
+
+
+def test_the_reference_is_the_scene_at_full_detail(gl, tmp_path):
+    from lodsprite.harness import run_path
+    from lodsprite.layered.technique import reference
+    from lodsprite.paths import CameraPath
+
+    world = world_with(tmp_path, [([FRONT, BEHIND], 0.0), ([(60.0, -300.0)], 20.0)])
+    path = CameraPath("t", tuple(look_at((x, -470.0, 40.0), (x, 0.0, 40.0))
+                                 for x in (0.0, 20.0, 40.0)), 45.0)
+    with Renderer(world.scene, SIZE, 45.0, ctx=gl.mgl) as r:
+        truth, ref = reference(r, world, path)
+        runs = {}
+        try:
+            for exponent in (0.0, 8.0):  # full meshes, then the coarsest LODs
+                t = techniques.create("scene", r, world=world, terrain_mode="full",
+                                      exponent=exponent)
+                try:
+                    runs[exponent] = run_path(t, path, ground_truth=True, reference=truth)
+                finally:
+                    t.release()
+        finally:
+            ref.release()
+    assert runs[0.0].summary["rmse_mean"] == 0.0      # the same scene: no error at all
+    assert runs[8.0].summary["rmse_mean"] > 0.0       # coarse LODs differ from it
+
+
+def test_the_cropped_reconstruction_matches_a_whole_frame_one(gl, tmp_path, lf_folder,
+                                                              monkeypatch):
+    """The small target through the cropped projection shows what a frame-size target
+    through the frame's own projection shows (from where the lumigraph was captured)."""
+    import lodsprite.layered.lightfields as lfl
+    from lodsprite.lumigraph.paths import default_path
+    from lodsprite.lumigraph.store import Lumigraph
+
+    lfs = f'[[lightfields]]\nsource = "{lf_folder}"\nposition = [0.0, -300.0]\nheight_m = 120.0\n'
+    world = world_with(tmp_path, [], lfs)
+    lf = Lumigraph(lf_folder)
+    eye, centre = default_path(lf, 2).viewpoints[0].o, lf.slabs[0].frame[:3, 3]
+    images = []
+    with Renderer(world.scene, (96, 96), 45.0, ctx=gl.mgl) as r:
+        r.render(look_at((0.0, -470.0, 40.0), (0.0, 0.0, 40.0)), None)
+        for whole in (False, True):
+            if whole:
+                monkeypatch.setattr(lfl, "TARGET_SCALE", 1.0)
+                monkeypatch.setattr(lfl, "screen_rect", lambda *a: (0.0, 0.0, 1.0, 1.0))
+            t = techniques.create("scene", r, world=world, terrain_mode="full", nodes=16)
+            try:
+                m = t.lightfields.items[0].m
+                vp = look_at(m[:3, :3] @ eye + m[:3, 3], m[:3, :3] @ centre + m[:3, 3])
+                (img,), _ = run(t, [vp])
+                if not whole:
+                    x0, y0, w, h = t.lightfields.items[0].rect
+                    assert 0 < w * h < 0.9  # a crop, not the whole frame
+                images.append(img.astype(float))
+            finally:
+                t.release()
+    cropped, whole = images
+    assert np.abs(cropped - whole).mean() < 4.0          # the same picture, resampled
+    assert np.abs(cropped - whole).max(axis=2).mean() < 8.0

@@ -1,9 +1,10 @@
 """Depth compositing of an image-based object into a frame: its reconstruction projected
 onto its proxy geometry, drawn into the frame's own depth buffer.
 
-A light-field object (Sloan, Cohen & Gortler 1997) is reconstructed into a target of its
-own through the frame's view and projection, so that pixel ``(x, y)`` of the
-reconstruction is the object seen through pixel ``(x, y)`` of the frame.
+A light-field object (Sloan, Cohen & Gortler 1997) is reconstructed into a small target
+of its own through the frame's view and a projection cropped to the object's screen
+rectangle ``rect``, so that the reconstruction's texel at ``(p - rect.xy) / rect.wh`` is
+the object seen through the frame's window position ``p``.
 :class:`ProxyCompositor` then draws the object's approximate geometry (the proxy mesh the
 reconstruction's depth correction uses), placed in the world by a model matrix, into the
 frame with the depth test on and depth writes on: each proxy fragment that is in front of
@@ -36,14 +37,15 @@ void main() {
 }
 """
 PROXY_FS = """#version 330
-uniform sampler2D u_image;   // the reconstruction, premultiplied RGBA, the frame's size
+uniform sampler2D u_image;   // the reconstruction, premultiplied RGBA
 uniform vec2 u_viewport;
+uniform vec4 u_rect;         // the window region it covers: x0, y0, width, height in 0..1
 uniform vec3 u_light;
 in vec3 v_color;
 in vec3 v_normal;
 out vec4 f_color;
 void main() {
-    vec4 c = texture(u_image, gl_FragCoord.xy / u_viewport);
+    vec4 c = texture(u_image, (gl_FragCoord.xy / u_viewport - u_rect.xy) / u_rect.zw);
     vec3 own = v_color * (0.35 + 0.65 * abs(dot(normalize(v_normal), u_light)));
     f_color = vec4(c.a > 0.02 ? c.rgb / c.a : own, 1.0);
 }
@@ -69,11 +71,12 @@ class ProxyCompositor:
                                     index_buffer=self.ibo, index_element_size=4)
         self.triangles = len(faces)
 
-    def draw(self, mvp: np.ndarray, image: moderngl.Texture, fbo: moderngl.Framebuffer
-             ) -> int:
+    def draw(self, mvp: np.ndarray, image: moderngl.Texture, fbo: moderngl.Framebuffer,
+             rect: tuple[float, float, float, float] = (0.0, 0.0, 1.0, 1.0)) -> int:
         """Draw over ``fbo`` (no clear; depth tested and written) through ``mvp (4, 4)``
-        (object -> the frame's clip space), coloured from ``image`` (a texture of
-        ``fbo``'s size); returns the triangles drawn."""
+        (object -> the frame's clip space), coloured from ``image``, which covers the
+        window region ``rect`` (``x0, y0, width, height``, fractions of ``fbo``'s
+        viewport, GL's bottom-up rows); returns the triangles drawn."""
         mgl = self.ctx.mgl
         fbo.use()
         mgl.enable(moderngl.DEPTH_TEST)
@@ -81,6 +84,7 @@ class ProxyCompositor:
         image.use(0)
         self.program["u_image"].value = 0
         self.program["u_viewport"].value = (float(fbo.viewport[2]), float(fbo.viewport[3]))
+        self.program["u_rect"].value = tuple(float(v) for v in rect)
         self.program["u_mvp"].write(mat_bytes(mvp))
         self.vao.render(moderngl.TRIANGLES)
         mgl.disable(moderngl.DEPTH_TEST)

@@ -12,11 +12,14 @@ and window depth are the frame's).
 Reconstruction: the ``arbitrary`` method (the ``nodes`` nearest the eye, the layer's knob,
 its node budget) or, for the full-detail reference, ``full`` (every node); several slabs
 through :class:`~lodsprite.lumigraph.methods.MultiSlabMethod`.  Each reconstruction has
-a target of its own at the frame's size (a crop to the object's screen rectangle would
-cut its cost; not done).  Compositing: :class:`~lodsprite.gl.composite.ProxyCompositor`
-draws the proxy placed in the world with the reconstruction projected onto it, depth
-tested and written in the frame's one depth buffer (no ``gl_FragDepth``: the proxy's own
-rasterised depth is exact and keeps early depth testing).
+a small target of its own (half the frame's side, :data:`TARGET_SCALE`) through the
+frame's projection cropped to the placed proxy's screen rectangle (:func:`crop`): an
+object smaller than half the frame gets more texels than its screen pixels, a larger one
+fewer, and a reconstruction costs at most a quarter of the frame's pixels.  Compositing:
+:class:`~lodsprite.gl.composite.ProxyCompositor` draws the proxy placed in the world with
+the reconstruction projected onto it, depth tested and written in the frame's one depth
+buffer (no ``gl_FragDepth``: the proxy's own rasterised depth is exact and keeps early
+depth testing).
 
 Light fields are view dependent, so LOD-sprite keyframes never hold them: they are drawn
 every frame, those whose placed proxy box is in the frustum (the others are neither
@@ -41,6 +44,35 @@ if TYPE_CHECKING:
 
 #: Node budgets, ascending quality.
 NODES = (2.0, 4.0, 8.0, 16.0)
+#: A reconstruction target's side, as a fraction of the frame's.
+TARGET_SCALE = 0.5
+
+
+def screen_rect(view_proj: np.ndarray, lo: np.ndarray, hi: np.ndarray
+                ) -> tuple[float, float, float, float]:
+    """The window region ``(x0, y0, width, height)`` (fractions, bottom-up) the box
+    ``lo..hi (3,)`` covers through ``view_proj``, clipped to the window; the whole window
+    when a corner is behind the eye."""
+    corners = np.array([[x, y, z, 1.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                        for z in (lo[2], hi[2])])
+    clip = corners @ view_proj.T
+    if (clip[:, 3] <= 1e-6).any():
+        return 0.0, 0.0, 1.0, 1.0
+    ndc = clip[:, :2] / clip[:, 3:]
+    a = np.clip((ndc.min(0) + 1) / 2, 0.0, 1.0)
+    b = np.clip((ndc.max(0) + 1) / 2, 0.0, 1.0)
+    size = np.maximum(b - a, 1e-3)
+    return float(a[0]), float(a[1]), float(size[0]), float(size[1])
+
+
+def crop(projection: np.ndarray, rect: tuple[float, float, float, float]) -> np.ndarray:
+    """``projection`` followed by the window-region ``rect`` stretched over the whole
+    target (a linear map of clip space: window depth unchanged)."""
+    x0, y0, w, h = rect
+    c = np.eye(4)
+    c[0, 0], c[1, 1] = 1.0 / w, 1.0 / h
+    c[0, 3], c[1, 3] = (1.0 - 2.0 * x0) / w - 1.0, (1.0 - 2.0 * y0) / h - 1.0
+    return c @ projection
 
 
 def placement(vertices: np.ndarray, position: tuple[float, float], ground_z: float,
@@ -95,7 +127,9 @@ class PlacedLightField:
                                        mesh.normals)
         self.compositor = ProxyCompositor(gl, mesh.vertices, mesh.faces, mesh.colors,
                                           mesh.normals)
-        ctx = Context(gl, self.lf, 0, size, self.proxy)
+        self.size = (max(8, int(size[0] * TARGET_SCALE)), max(8, int(size[1] * TARGET_SCALE)))
+        self.rect = (0.0, 0.0, 1.0, 1.0)
+        ctx = Context(gl, self.lf, 0, self.size, self.proxy)
         options = {"nodes": self.max_nodes} if method == "arbitrary" else {}
         self.method = (make_method(method, ctx, **options) if len(self.lf.slabs) == 1
                        else MultiSlabMethod(ctx, method, options))
@@ -112,14 +146,18 @@ class PlacedLightField:
             target.count = int(np.clip(n, 1, self.max_nodes))
 
     def reconstruct(self, viewpoint: Viewpoint, projection: np.ndarray):
+        """Reconstruct through ``projection`` cropped to the proxy's screen rectangle
+        (:attr:`rect`) into the method's small target."""
+        self.rect = screen_rect(projection @ viewpoint.view_matrix(), *self.box())
         f = self.method.frame(self.index, to_local(viewpoint, self.m, self.s),
-                              local_projection(projection, self.s))
+                              local_projection(crop(projection, self.rect), self.s))
         self.index += 1
         return f
 
-    def composite(self, projection: np.ndarray, viewpoint: Viewpoint, image, fbo) -> int:
+    def composite(self, projection: np.ndarray, viewpoint: Viewpoint, image, fbo,
+                  rect: tuple[float, float, float, float] | None = None) -> int:
         mvp = projection @ viewpoint.view_matrix() @ self.m
-        return self.compositor.draw(mvp, image, fbo)
+        return self.compositor.draw(mvp, image, fbo, self.rect if rect is None else rect)
 
     def release(self) -> None:
         self.method.release()
@@ -201,19 +239,20 @@ class LightFieldLayer(Layer):
         for snap in self._pool:
             snap.release()
         self._keep = set(frames)
-        self._pool = [FloatTarget(self.renderer.gl, *self.renderer.size)
-                      for _ in range(len(self._keep) * len(self.items))]
+        self._pool = [FloatTarget(self.renderer.gl, *item.size)
+                      for _ in range(len(self._keep)) for item in self.items]
 
     def decision(self) -> dict[str, Any]:
         i = self._frame
         if i in self._keep and len(self._pool) >= len(self.items):
             mgl = self.renderer.gl.mgl
-            snaps = [self._pool.pop() for _ in self.items]
+            snaps = [self._pool.pop() for _ in self.items][::-1]  # made in items order
             for snap, item in zip(snaps, self.items, strict=True):
                 mgl.copy_framebuffer(snap.fbo, item.method.output.fbo)
             self.renderer.gl.finish()
             self._snaps[i] = snaps
-        return {"frame": i, "drawn": tuple(bool(d) for d in self._drawn)}
+        return {"frame": i, "drawn": tuple(bool(d) for d in self._drawn),
+                "rects": tuple(item.rect for item in self.items)}
 
     def replay(self, viewpoint: Viewpoint, t: float, projection: np.ndarray,
                decision: dict[str, Any]) -> None:
@@ -222,9 +261,10 @@ class LightFieldLayer(Layer):
         snaps = self._snaps.get(decision["frame"])
         if snaps is None:
             raise InputError(f"frame {decision['frame']} was not kept for a replay")
-        for snap, item, shown in zip(snaps, self.items, decision["drawn"], strict=True):
+        for snap, item, shown, rect in zip(snaps, self.items, decision["drawn"],
+                                           decision["rects"], strict=True):
             if shown:
-                item.composite(projection, viewpoint, snap.color, self.fbo)
+                item.composite(projection, viewpoint, snap.color, self.fbo, rect)
 
     def release(self) -> None:
         for snap in [*getattr(self, "_pool", []),

@@ -31,7 +31,7 @@ if TYPE_CHECKING:
     from lodsprite.scene.world import World
 
 #: LOD exponents, ascending quality (coarse to fine).
-EXPONENTS = (4.0, 2.0, 1.0, 0.5, 0.25)
+EXPONENTS = (8.0, 5.7, 4.0, 2.8, 2.0, 1.4, 1.0, 0.7, 0.5, 0.35, 0.25)
 
 
 def world_crowd(world: World) -> Crowd:
@@ -75,6 +75,7 @@ class ObjectsLayer(Layer):
         self._warm: list = []
         self._last: dict[str, Any] = {}
         self.keyframe_draws: list[tuple[Any, dict]] = []  # (keyframe viewpoint, decision)
+        self._seen: tuple[Any, np.ndarray] | None = None  # the last draw's view, projection
 
     @property
     def exponent(self) -> float:
@@ -85,7 +86,25 @@ class ObjectsLayer(Layer):
         self.engine.feedback.exponent = max(0.0, float(value))
 
     def control(self) -> LayerControl:
-        return LayerControl("objects", EXPONENTS, self.exponent, self.set_exponent)
+        return LayerControl("objects", EXPONENTS, self.exponent, self.set_exponent,
+                            detail=self.detail)
+
+    def detail(self) -> tuple[np.ndarray, np.ndarray, float] | None:
+        """The last frame's visible objects for the budget's benefit model: their
+        distance-linear LOD factors, projected areas and screen coverage
+        (:func:`~lodsprite.scene.costs.object_detail`); None before a frame."""
+        from lodsprite.camera import frustum_planes
+        from lodsprite.manager.scene import spheres_in_frustum
+        from lodsprite.scene.costs import object_detail
+
+        if self._seen is None:
+            return None
+        viewpoint, projection = self._seen
+        e = self.engine
+        planes = frustum_planes(projection @ viewpoint.view_matrix())
+        visible = spheres_in_frustum(planes, e.centres, e.radii)
+        return object_detail(e.centres, e.radii, viewpoint.o, visible, *e.range,
+                             e.fov_y_deg, e.target.size)
 
     def _engine_frame(self, viewpoint: Viewpoint, t: float, projection: np.ndarray,
                       subset: np.ndarray | None, fbo=None) -> tuple[Any, dict]:
@@ -102,6 +121,7 @@ class ObjectsLayer(Layer):
 
     def draw(self, viewpoint: Viewpoint, t: float, projection: np.ndarray) -> LayerFrame:
         f, self._last = self._engine_frame(viewpoint, t, projection, self.subset)
+        self._seen = (viewpoint, projection)
         return LayerFrame(f.ms, f.triangles, work=float(max(f.triangles, 1)),
                           extra={"extractions": f.extractions, "draw_calls": f.draw_calls,
                                  "visible": f.visible})

@@ -55,6 +55,8 @@ if TYPE_CHECKING:
 #: The time between frames (s): frame ``i`` shows the world at ``i * FRAME_S``.
 FRAME_S = 1.0 / 30.0
 KEYFRAME_HOLDS = ("static", "terrain")
+#: Objects whose LOD the manager updates a frame (its active list).
+ACTIVE = 300
 
 
 class LayeredTechnique(Technique):
@@ -83,7 +85,11 @@ class LayeredTechnique(Technique):
         try:
             self.terrain = TerrainLayer(renderer, terrain_mode, **terrain_options)
             self.layers.append(self.terrain)
-            self.objects = ObjectsLayer(renderer, world, exponent) if world.count else None
+            # the LODManager's active list (§4.2): 300 objects' LODs updated a frame, as the
+            # crowd's default; the reference updates every object at once
+            self.objects = (ObjectsLayer(renderer, world, exponent,
+                                         None if ground_truth else ACTIVE)
+                            if world.count else None)
             if self.objects is not None:
                 self.layers.append(self.objects)
             self.lightfields = (LightFieldLayer(renderer, world,

@@ -4,8 +4,11 @@ Funkhouser & Séquin choose every object's level of detail each frame *predictiv
 the predicted cost and benefit of each level (:mod:`lodsprite.scene.costs`) they pick the
 levels that maximise total benefit subject to the predicted frame time staying within
 the target, a multiple-choice knapsack they solve greedily, raising whichever object's
-level gives the most benefit per unit cost (§4.2), and keep a setting until another one
-is clearly better (their hysteresis against the oscillation that reactive feedback shows).
+level gives the most benefit per unit cost (§4.2); predicting, rather than correcting
+after a missed frame, is what removes the oscillation of reactive feedback.  A dead band
+round the budget (this module's, against flipping between two neighbouring settings when
+predictions are noisy) keeps the current settings unless they are over budget or a
+better plan leaves headroom.
 
 * :class:`LayerControl` - what the budget may turn on a layer: one knob, its settings in
   ascending quality (and cost).
@@ -42,12 +45,15 @@ DEFAULT_SHARES = {"terrain": 0.5, "objects": 0.35, "lightfields": 0.15}
 class LayerControl:
     """One layer's knob: ``values`` its settings in ascending quality (and cost; e.g. a
     terrain's ε from coarse to fine, ``(8, 4, 2, 1)`` pixels), ``value`` the current one,
-    ``set`` applies a setting to the layer."""
+    ``set`` applies a setting to the layer; ``detail`` (optional, the objects layer's)
+    gives what its benefit model weighs, ``(lin, cov, coverage)`` of
+    :func:`~lodsprite.scene.costs.object_detail`, called before each plan."""
 
     name: str
     values: tuple[float, ...]
     value: float
     set: Callable[[float], None]
+    detail: Callable[[], tuple[np.ndarray, np.ndarray, float]] | None = None
 
     def index(self, value: float | None = None) -> int:
         """The index in :attr:`values` of ``value`` (default: the current one), or of the
@@ -88,9 +94,9 @@ def greedy_plan(costs: list[np.ndarray], benefits: list[np.ndarray], budget_ms: 
 class FrameScheduler:
     """Predictive benefit/cost selection of every layer's knob under ``target_ms``.
 
-    ``hysteresis``: a plan replaces the current settings only if it is over budget
-    (predicted above ``target · (1 + tolerance)``) or the new plan's benefit is at least
-    ``1 + hysteresis`` times the current one's for ``dwell`` frames running.
+    Hysteresis, a dead band round the budget: the current settings are replaced at once
+    if predicted over ``budget · (1 + tolerance)``, and by a plan of more benefit only if
+    that one fits ``budget · (1 - hysteresis)`` for ``dwell`` frames running.
     ``overhead_gain``: the moving average of the frame's time outside the layers
     (:meth:`observe_frame`), taken off the budget."""
 
@@ -121,9 +127,8 @@ class FrameScheduler:
         tables = [models[c.name].tables(c.values) for c in controls]
         costs, benefits = [t[0] for t in tables], [t[1] for t in tables]
         budget = self.budget_ms
-        new = greedy_plan(costs, benefits, budget)
         cur = [c.index() for c in controls]
-        pick = self._hysteresis(cur, new, costs, benefits, budget)
+        pick = self._hysteresis(cur, costs, benefits, budget)
         out = {}
         for c, k, cost in zip(controls, pick, costs, strict=True):
             v = c.values[k]
@@ -136,21 +141,21 @@ class FrameScheduler:
         self.plans += 1
         return out
 
-    def _hysteresis(self, cur: list[int], new: list[int], costs, benefits, budget: float
-                    ) -> list[int]:
-        def totals(pick):
-            return (sum(float(c[k]) for c, k in zip(costs, pick, strict=True)),
-                    sum(float(b[k]) for b, k in zip(benefits, pick, strict=True)))
-
-        (cost_cur, ben_cur), (_, ben_new) = totals(cur), totals(new)
+    def _hysteresis(self, cur: list[int], costs, benefits, budget: float) -> list[int]:
+        """A dead band round the budget: over ``budget · (1 + tolerance)`` the plan under
+        the budget replaces the current settings at once; a plan of more benefit under
+        ``budget · (1 - hysteresis)`` (headroom) replaces them after ``dwell`` frames."""
+        cost_cur = sum(float(c[k]) for c, k in zip(costs, cur, strict=True))
         if cost_cur > budget * (1 + self.tolerance):
             self._wanting = 0
-            return new                                   # over budget: change now
-        if ben_new > ben_cur * (1 + self.hysteresis) + 1e-12:
+            return greedy_plan(costs, benefits, budget)  # over budget: change now
+        up = greedy_plan(costs, benefits, budget * (1 - self.hysteresis))
+        gain = sum(float(b[k]) - float(b[j]) for b, k, j in zip(benefits, up, cur, strict=True))
+        if gain > 1e-12:
             self._wanting += 1
             if self._wanting >= self.dwell:
                 self._wanting = 0
-                return new
+                return up
         else:
             self._wanting = 0
         return cur
@@ -292,19 +297,17 @@ class LayerBudget:
     def target_ms(self) -> float:
         return self.schedule.target_ms
 
-    def objects_seen(self, lin: np.ndarray, cov: np.ndarray, coverage: float) -> None:
-        """The objects layer's visible objects this frame (:func:`~lodsprite.scene.costs.
-        object_detail`), for its benefit model; ignored before its first plan."""
-        model = self.models.get("objects")
-        if model is not None and hasattr(model.benefit, "update"):
-            model.benefit.update(lin, cov, coverage)
-
     def before(self, controls: Iterable[LayerControl]) -> dict[str, float]:
         """Plan and apply every layer's knob for the coming frame."""
         controls = list(controls)
         for c in controls:
             if c.name not in self.models:
                 self.models[c.name] = default_model(c.name, tuple(c.values))
+            benefit = self.models[c.name].benefit
+            if c.detail is not None and hasattr(benefit, "update"):
+                seen = c.detail()
+                if seen is not None:
+                    benefit.update(*seen)
         return self.schedule.plan(controls, self.models)
 
     def after(self, layers: Mapping[str, tuple[float, float, float | None]],

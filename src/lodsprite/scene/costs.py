@@ -18,9 +18,10 @@ a scene frame and the "levels" the settings of each layer's knob
 * :class:`CostModel` - ``ms(v) = scale · (a + b · work(v))``: ``a``, ``b`` fitted by least
   squares over the recent ``(work, ms)`` samples once they span a range of work (the
   lumigraph's ``raster_base + raster_node · nodes``, the adaptive renderer's ms per
-  triangle), and ``scale`` the component's own factor, an exponential moving average of
-  measured over predicted ms in the log domain (the lumigraph's per-component rescale,
-  Sloan et al. 1997 §5.2: one factor for everything caused spikes).
+  triangle), and ``scale`` the component's own factor, an exponential moving average
+  (gain 0.25; the lumigraph's is 0.3) of measured over predicted ms in the log domain
+  (the lumigraph's per-component rescale, Sloan et al. 1997 §5.2: one factor for
+  everything caused spikes).
 * Benefit models in one unit, *coverage-weighted detail fraction*: ``coverage`` (the
   fraction of the screen the layer covers, 0..1, Funkhouser's ``Size``) times a quality
   ``q(v)`` in 0..1, 1 at full detail (Funkhouser's ``Accuracy``).
@@ -53,7 +54,7 @@ class PowerWork:
     w_ref: float = 1.0
     fit: bool = True
     alpha_range: tuple[float, float] = (-4.0, 4.0)
-    gain: float = 0.3
+    gain: float = 0.5
     _last: tuple[float, float] | None = field(default=None, repr=False)
 
     def predict(self, value: float) -> float:
@@ -83,13 +84,15 @@ class CostModel:
     ``observe`` takes the measured ms (and the layer's counter, if it has one): the work
     model follows the counter, ``scale`` moves ``gain`` of the way (log domain) towards
     measured / unscaled prediction, and every ``refit_every`` samples whose work spans at
-    least ``spread``× ``a`` and ``b`` are refitted (non-negative least squares over the
-    last ``window`` samples) and ``scale`` restarts at 1."""
+    least ``spread``× ``a`` and ``b`` are refitted (least squares over the last ``window``
+    samples, ``b >= 0``, ``a >= a_min``: no layer is free, and a layer with nothing to draw
+    must not blow its scale up) and ``scale`` restarts at 1."""
 
     work: PowerWork
     a: float = 0.5
     b: float = 1e-4
-    gain: float = 0.1
+    gain: float = 0.25
+    a_min: float = 0.2
     scale: float = 1.0
     window: int = 64
     refit_every: int = 32
@@ -112,7 +115,7 @@ class CostModel:
         if work is not None:
             self.work.observe(value, work)
         w = self.work.predict(value) if work is None else float(work)
-        ratio = float(np.clip(ms / max(self.raw(w), 1e-6), 0.02, 50.0))
+        ratio = float(np.clip(ms / max(self.raw(w), self.a_min), 0.02, 50.0))
         self.scale = float(np.exp((1 - self.gain) * np.log(self.scale)
                                   + self.gain * np.log(ratio)))
         self.samples.append((w, float(ms)))
@@ -134,7 +137,10 @@ class CostModel:
         b, a = np.polyfit(w, ms, 1)
         if b < 0:
             a, b = float(np.median(ms)), 0.0
-        self.a, self.b = max(float(a), 0.0), float(b)
+        elif a < self.a_min:   # no layer is free: through (0, a_min) instead
+            a = self.a_min
+            b = float(max(((ms - a) * w).sum() / (w * w).sum(), 0.0))
+        self.a, self.b = float(a), float(b)
         self.scale = 1.0
         return True
 
