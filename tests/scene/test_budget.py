@@ -201,9 +201,29 @@ def test_independent_moves_each_knob_toward_its_share():
 def test_cost_model_refits_from_spread_samples():
     m = CostModel(PowerWork(1.0, 1.0, 1.0, fit=False), a=5.0, b=0.0, refit_every=8)
     for n in range(1, 17):
-        m.observe(float(n), 2.0 + 0.5 * n, work=float(n))
+        for _ in range(3):        # the first frame at a new setting is a switch
+            m.observe(float(n), 2.0 + 0.5 * n, work=float(n))
     assert m.a == pytest.approx(2.0, abs=1e-6) and m.b == pytest.approx(0.5, abs=1e-6)
     assert m.predict(30.0) == pytest.approx(17.0, rel=1e-6)
+
+
+def test_a_switch_costs_apart_from_the_steady_cost():
+    # 10 ms steady at either setting, 6 ms more on the frame the setting changes
+    m = CostModel(PowerWork(1.0, 1.0, 1.0, fit=False), a=10.0, b=0.0)
+    for k in range(60):
+        v = 1.0 if (k // 5) % 2 else 2.0
+        switched = k % 5 == 0 and k > 0
+        m.observe(v, 16.0 if switched else 10.0, work=1.0)
+    assert m.switch_ms == pytest.approx(6.0, rel=0.05)
+    assert m.scale == pytest.approx(1.0, abs=1e-6)      # spikes kept out of the scale
+    # the scheduler charges the switch: at the coarse setting under a 14 ms target the
+    # finer one (10 ms steady, 16 ms the frame it switches) does not fit; under 20 it does
+    model = LayerModel(m, default_model("objects", (2.0, 1.0)).benefit)
+    for target, after in ((14.0, 2.0), (20.0, 1.0)):
+        c = LayerControl("objects", (2.0, 1.0), 2.0, lambda v: None)
+        sched = FrameScheduler(target)
+        plans = [sched.plan([c], {"objects": model})["objects"] for _ in range(4)]
+        assert plans[-1] == after, (target, plans)
 
 
 def test_power_work_fits_its_exponent():
@@ -221,6 +241,14 @@ def test_benefits_are_coverage_weighted_detail():
     o = default_model("objects", EXPONENTS).benefit
     o.update(np.array([1.0, 0.5, 0.1]), np.array([10.0, 1.0, 1.0]), coverage=0.2)
     assert o(0.25) > o(4.0) and o(1.0) == pytest.approx(0.2 * (10 + 0.5 + 0.1) / 12)
+
+
+def test_terrain_benefit_follows_quality_order_for_either_knob():
+    for values in (EPS, (8.0, 16.0, 32.0, 64.0)):      # ε falls, a LOD level rises
+        m = default_model("terrain", values)
+        cost, ben = m.tables(values)
+        assert np.all(np.diff(ben) > 0) and ben[-1] == pytest.approx(1.0)
+        assert np.all(np.diff(cost) > 0)                 # finer costs more (the prior)
 
 
 def test_object_detail_weighs_near_objects_by_their_screen_area():
@@ -254,8 +282,10 @@ def test_layer_budget_sets_knobs_and_reports_shares():
     cs = [LayerControl("terrain", EPS, EPS[0], applied.append),
           LayerControl("objects", EXPONENTS, EXPONENTS[0], lambda v: None)]
     budget = LayerBudget("scheduler", 20.0)
+    seen = []
     for _ in range(80):
         plan = budget.before(cs)
+        seen.append(plan["terrain"])
         layers = {c.name: (plan[c.name], true_ms(c.name, plan[c.name]),
                            true_work(c.name, plan[c.name])) for c in cs}
         frame_ms = sum(ms for _, ms, _ in layers.values()) + 1.0   # 1 ms outside the layers
@@ -268,4 +298,6 @@ def test_layer_budget_sets_knobs_and_reports_shares():
     assert s["share_terrain"] + s["share_objects"] < 1.0
     assert 0 < s["budget_share_terrain"] < 1.0
     assert 1 <= s["knob_changes_terrain"] <= 8      # it moved while learning, then held
+    assert s["knob_std_terrain"] == pytest.approx(np.std(seen), abs=1e-9)
+    assert s["knob_std_terrain"] > 0
     assert LayerBudget().summary()["schedule"] == "none"

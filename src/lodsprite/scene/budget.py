@@ -125,9 +125,12 @@ class FrameScheduler:
         controls = list(controls)
         self.models = models
         tables = [models[c.name].tables(c.values) for c in controls]
-        costs, benefits = [t[0] for t in tables], [t[1] for t in tables]
-        budget = self.budget_ms
         cur = [c.index() for c in controls]
+        # a setting other than the current one costs its switch too (CostModel.switch_ms)
+        costs = [t[0] + models[c.name].cost.switch_ms * (np.arange(len(t[0])) != k)
+                 for t, c, k in zip(tables, controls, cur, strict=True)]
+        benefits = [t[1] for t in tables]
+        budget = self.budget_ms
         pick = self._hysteresis(cur, costs, benefits, budget)
         out = {}
         for c, k, cost in zip(controls, pick, costs, strict=True):
@@ -290,6 +293,7 @@ class LayerBudget:
         self.ms_sums: dict[str, float] = {}
         self.last_knob: dict[str, float] = {}
         self.changes: dict[str, int] = {}
+        self.knob_sums: dict[str, np.ndarray] = {}   # (n, Σ value, Σ value²) a layer
         self.frame_ms_sum = 0.0
         self.frames = 0
 
@@ -323,6 +327,7 @@ class LayerBudget:
             last = self.last_knob.get(name, value)
             self.changes[name] = self.changes.get(name, 0) + int(value != last)
             self.last_knob[name] = value
+            self.knob_sums.setdefault(name, np.zeros(3))[:] += (1.0, value, value * value)
         self.schedule.observe_frame(frame_ms, sum(ms for _, ms, _ in layers.values()))
         self.frame_ms_sum += float(frame_ms)
         self.frames += 1
@@ -333,13 +338,16 @@ class LayerBudget:
         measured fraction of the frame time, mean ms over mean frame ms) and, under a
         schedule, ``budget_share_<layer>`` (the share of the target it was given: the
         scheduler's mean planned share, the independent feedback's fixed share);
-        ``knob_changes_<layer>``: frames whose knob differed from the frame before."""
+        ``knob_changes_<layer>``: frames whose knob differed from the frame before, and
+        ``knob_std_<layer>`` the standard deviation of its setting (oscillation)."""
         out: dict[str, float | int | str] = {"schedule": self.kind,
                                        "target_ms": float(self.target_ms)}
         total = max(self.frame_ms_sum, 1e-9)
         for name, ms in self.ms_sums.items():
             out[f"share_{name}"] = ms / total
             out[f"knob_changes_{name}"] = self.changes.get(name, 0)
+            n, s1, s2 = self.knob_sums[name]
+            out[f"knob_std_{name}"] = float(np.sqrt(max(s2 / n - (s1 / n) ** 2, 0.0)))
         for name, share in self.schedule.shares().items():
             out[f"budget_share_{name}"] = float(share)
         return out

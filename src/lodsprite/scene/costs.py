@@ -86,7 +86,13 @@ class CostModel:
     measured / unscaled prediction, and every ``refit_every`` samples whose work spans at
     least ``spread``× ``a`` and ``b`` are refitted (least squares over the last ``window``
     samples, ``b >= 0``, ``a >= a_min``: no layer is free, and a layer with nothing to draw
-    must not blow its scale up) and ``scale`` restarts at 1."""
+    must not blow its scale up) and ``scale`` restarts at 1.
+
+    A frame whose knob differs from the last one observed is a switch: what it costs over
+    the prediction (the LODManager's extractions after a new exponent, a new ε's tiles)
+    moves ``switch_ms`` (``switch_gain`` of the way) and neither the scale nor the fit:
+    the transient is kept apart from the steady cost, and the scheduler adds it to any
+    setting but the current one."""
 
     work: PowerWork
     a: float = 0.5
@@ -97,8 +103,11 @@ class CostModel:
     window: int = 64
     refit_every: int = 32
     spread: float = 1.5
+    switch_ms: float = 0.0
+    switch_gain: float = 0.3
     samples: deque = field(default_factory=deque, repr=False)
     _since_fit: int = field(default=0, repr=False)
+    _value: float | None = field(default=None, repr=False)
 
     def raw(self, work: float) -> float:
         """Unscaled ms at ``work`` units."""
@@ -115,6 +124,12 @@ class CostModel:
         if work is not None:
             self.work.observe(value, work)
         w = self.work.predict(value) if work is None else float(work)
+        switched = self._value is not None and value != self._value
+        self._value = value
+        if switched:
+            excess = max(float(ms) - self.scale * max(self.raw(w), self.a_min), 0.0)
+            self.switch_ms += self.switch_gain * (excess - self.switch_ms)
+            return
         ratio = float(np.clip(ms / max(self.raw(w), self.a_min), 0.02, 50.0))
         self.scale = float(np.exp((1 - self.gain) * np.log(self.scale)
                                   + self.gain * np.log(ratio)))
@@ -147,14 +162,19 @@ class CostModel:
 
 @dataclass
 class TerrainBenefit:
-    """Terrain: ``coverage · min(1, finest / ε)``; ``ε`` the knob (screen-space error or
-    tolerance, pixels; smaller is finer), ``finest`` the smallest setting offered."""
+    """Terrain: ``coverage · min(1, finest / ε)`` for an error knob (ε or tolerance,
+    pixels: smaller is finer), ``coverage · min(1, level / finest)`` for a resolution knob
+    (``resolution=True``: LOD level in quads, larger is finer); ``finest`` the finest
+    setting offered."""
 
     finest: float
     coverage: float = 1.0
+    resolution: bool = False
 
     def __call__(self, value: float) -> float:
-        return self.coverage * min(1.0, self.finest / max(float(value), 1e-9))
+        v = max(float(value), 1e-9)
+        q = v / self.finest if self.resolution else self.finest / v
+        return self.coverage * min(1.0, q)
 
 
 @dataclass
@@ -232,10 +252,13 @@ def default_model(name: str, values: tuple[float, ...]) -> LayerModel:
         raise InputError(f"layer {name!r} offers no knob settings")
     # priors from ``benchmarks/scene_budget.py calibrate`` (llvmpipe, 128², loaded
     # machine): ~0.15-0.3 µs a triangle for both; triangles ~ ε^-0.2 on fractal:1024's
-    # few levels, ~ p^-0.15 for the 300-ogre crowd (the online fit takes over)
-    if name == "terrain":
-        return LayerModel(CostModel(PowerWork(-0.5, min(values), 2e5), 1.0, 2e-4),
-                          TerrainBenefit(min(values)))
+    # few levels, ~ p^-0.15 for the 300-ogre crowd, ~ level² for a LOD level (the
+    # online fit takes over)
+    if name == "terrain":    # values ascending in quality: ε falls, a LOD level rises
+        resolution = len(values) > 1 and values[-1] > values[0]
+        return LayerModel(CostModel(PowerWork(2.0 if resolution else -0.5, values[-1], 2e5),
+                                    1.0, 2e-4),
+                          TerrainBenefit(values[-1], resolution=resolution))
     if name == "objects":
         return LayerModel(CostModel(PowerWork(-0.2, 1.0, 2e5), 1.0, 2e-4),
                           ObjectsBenefit())
