@@ -13,7 +13,7 @@ import trimesh
 from lodsprite.camera import look_at
 from lodsprite.gl.target import RenderTarget
 from lodsprite.profiles.generate import ProfileSettings
-from lodsprite.profiles.select import select_profile
+from lodsprite.profiles.select import object_views, select_profile
 from lodsprite.profiles.table import ProfileTable
 from lodsprite.scene import profile_lod as pl
 from lodsprite.scene.objects import ObjectType
@@ -103,7 +103,7 @@ def built(tmp_path_factory):
 
 @pytest.mark.parametrize("hostile", ["wrong key", "string errors", "float faces",
                                      "negative error", "extra member", "oversized",
-                                     "declared huge"])
+                                     "declared huge", "nested meta", "text fov"])
 def test_a_hostile_cache_is_refused(tmp_path, built, hostile):
     t, p = built
     key = pl.cache_key(t, None, TINY, FACTORS)
@@ -120,6 +120,14 @@ def test_a_hostile_cache_is_refused(tmp_path, built, hostile):
         _rewrite(path, faces=table.faces.astype(np.float64))
     elif hostile == "negative error":
         _rewrite(path, error_csf=-table.error_csf - 1.0)
+    elif hostile == "nested meta":
+        with np.load(path, allow_pickle=False) as d:
+            members = {k: d[k] for k in d.files}
+        members["meta"] = np.array("[" * 100_000 + "]" * 100_000)
+        with open(path, "wb") as f:
+            np.savez(f, **members)
+    elif hostile == "text fov":
+        _rewrite(path, meta={**table.meta, "fov_deg": "wide"})
     elif hostile == "extra member":
         _rewrite(path, payload=np.zeros(4))
     elif hostile == "oversized":
@@ -212,3 +220,13 @@ def test_a_gltf_part_is_cached_beside_its_file_by_part_name(tmp_path):
                    np.zeros((1, 3), np.int32), np.zeros((3, 3), np.float32), 1.0, "profile",
                    tmp_path / "town.glb")
     assert pl.cache_path(t, "cd" * 32) == tmp_path / f"town.glb.house_1.{'cd' * 8}{pl.SUFFIX}"
+
+
+def test_instance_views_equal_select_py_object_views():
+    rng = np.random.default_rng(5)
+    poses = np.c_[rng.uniform(-50, 50, (200, 3)), rng.uniform(-7, 7, 200)]
+    eye, centre = np.array([3.0, -20.0, 8.0]), np.array([0.1, -0.2, 1.1])
+    got = pl.instance_views(poses, eye, centre)
+    want = object_views(pl.instance_models(poses), eye, centre)
+    for g, w in zip(got, want, strict=True):
+        assert np.allclose(g, w, atol=1e-9)

@@ -182,10 +182,10 @@ def read_cached(path: Path, key: str, settings: ProfileSettings,
         if any(k != ("i" if n == "faces" else "f") for n, k in kinds.items()):
             return None
         table = ProfileTable.load(path)
-    except (OSError, ValueError, TypeError, KeyError, EOFError, zipfile.BadZipFile,
-            ProfileError):
+        return table if _fits(table, key, settings, factors) else None
+    except (OSError, ValueError, TypeError, KeyError, EOFError, RecursionError,
+            zipfile.BadZipFile, ProfileError):
         return None
-    return table if _fits(table, key, settings, factors) else None
 
 
 def _fits(table: ProfileTable, key: str, settings: ProfileSettings,
