@@ -62,7 +62,7 @@ class BattlefieldConfig:
     lf_st: int = 8
     lf_uv: int = 64
     lf_slabs: int = 6
-    paths: tuple[str, ...] = ("flyover:300:3000", "weave")
+    paths: tuple[str, ...] = ("flyover:300:3000", "weave:8:400:3")  # weave: over the crowd
     frames: int = 300
     image: int = 256
     target_fps: float = 10.0
@@ -74,7 +74,7 @@ class BattlefieldConfig:
     @classmethod
     def quick(cls, **kw) -> BattlefieldConfig:
         return cls(**{**dict(terrain="fractal:256:1", instances=120, trees=3, area_m=120.0,
-                             lf_st=4,
+                             paths=("flyover:300:3000", "weave:8:120:3"), lf_st=4,
                              lf_uv=32, lf_slabs=6, frames=12, image=64, target_fps=30.0,
                              sample_every=4, match_steps=2), **kw})
 
