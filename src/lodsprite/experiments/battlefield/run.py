@@ -15,7 +15,9 @@ weaving among the crowd,
   ``sample_every``-th frame replayed untimed against the full-detail scene (every layer
   at full detail: :func:`~lodsprite.layered.technique.reference`, rendered once per
   path) for RMSE (grey levels) and FLIP;
-* ``manager`` and ``no_manager``: the LOD exponent fixed at ``exponent``, the crowd
+* ``manager`` and ``no_manager``, on the first ``extraction_frames`` frames (every object
+  extracting its own LODs is slow: about 0.8 s a frame here): the LOD exponent fixed at
+  ``exponent``, the crowd
   engine's LODManager sharing LODs against every object extracting its own (the same
   engine with ``share`` off): extractions counted by the engine;
 * ``profile`` and ``linear``: every object type's ``lod`` set to ``profile`` (Scoggins
@@ -44,9 +46,10 @@ Update = Callable[[str, int, int], None]
 @dataclass(frozen=True)
 class BattlefieldConfig:
     """The default run: a 4k² store, 3000 walking ogres, 100 trees, two light fields of
-    6 slabs of 8² nodes of 64² pixels, 300 frames along each of two paths at 256², a 10 fps
-    target; estimated at about 10 minutes here (2 shared cores; an estimate from a 30-frame
-    probe at 512², not a measurement of the whole run).  :meth:`quick` is the tests'."""
+    6 slabs of 8² nodes of 64² pixels, 300 frames along each of two paths at 256², a 5 fps
+    target; estimated at about 10-12 minutes here (2 shared cores), scaled from a measured
+    run of 100 frames a path (471 s, every run on all 100 frames; ``extraction_frames``
+    since).  :meth:`quick` is the tests'."""
 
     terrain: str = "fractal:4096:1"
     instances: int = 3000
@@ -65,7 +68,8 @@ class BattlefieldConfig:
     paths: tuple[str, ...] = ("flyover:300:3000", "weave:8:400:3")  # weave: over the crowd
     frames: int = 300
     image: int = 256
-    target_fps: float = 10.0
+    target_fps: float = 5.0     # binds: a 100-frame run's fixed-exponent frames took 221-319 ms
+    extraction_frames: int = 100  # the manager / no_manager runs: the first frames of a path
     sample_every: int = 30
     terrain_mode: str = "adaptive"
     exponent: float = 1.0       # the fixed-exponent runs' LOD exponent
@@ -75,6 +79,7 @@ class BattlefieldConfig:
     def quick(cls, **kw) -> BattlefieldConfig:
         return cls(**{**dict(terrain="fractal:256:1", instances=120, trees=3, area_m=120.0,
                              paths=("flyover:300:3000", "weave:8:120:3"), lf_st=4,
+                             extraction_frames=12,
                              lf_uv=32, lf_slabs=6, frames=12, image=64, target_fps=30.0,
                              sample_every=4, match_steps=2), **kw})
 
@@ -141,9 +146,9 @@ class PathRuns:
 
     def run(self, *, schedule: str = "none", target_fps: float | None = None,
             exponent: float | None = None, share: bool = True, quality: bool = True,
-            sampled: bool = False) -> dict:
+            sampled: bool = False, first: int | None = None) -> dict:
         """One run of the ``scene`` technique (see the module doc); ``sampled``: the
-        sampled frames only, each at its own time."""
+        sampled frames only, each at its own time; ``first``: the first frames only."""
         from lodsprite.harness import run_path
         from lodsprite.layered.technique import FRAME_S, LayeredTechnique
         from lodsprite.paths import CameraPath
@@ -154,6 +159,8 @@ class PathRuns:
             cam = CameraPath(cam.name, tuple(cam.viewpoints[i] for i in cfg.sample_frames),
                              cam.fov_y_deg)
             frame_s, stride = FRAME_S * cfg.sample_every, 1
+        elif first is not None:
+            cam = CameraPath(cam.name, cam.viewpoints[:first], cam.fov_y_deg)
         t = LayeredTechnique(self.renderer, self.world, terrain_mode=cfg.terrain_mode,
                              schedule=schedule, target_fps=target_fps,
                              exponent=cfg.exponent if exponent is None else exponent,
@@ -244,8 +251,9 @@ def run_path_set(renderer, world, spec: str, cfg: BattlefieldConfig,
     for name, kw in (("scheduler", {"schedule": "scheduler", "target_fps": cfg.target_fps}),
                      ("independent", {"schedule": "independent",
                                       "target_fps": cfg.target_fps}),
-                     ("manager", {"quality": False}),
-                     ("no_manager", {"quality": False, "share": False})):
+                     ("manager", {"quality": False, "first": cfg.extraction_frames}),
+                     ("no_manager", {"quality": False, "share": False,
+                                     "first": cfg.extraction_frames})):
         step(f"{spec}: {name}")
         out[name] = p.run(**kw)
     step(f"{spec}: profile vs linear")

@@ -3,7 +3,9 @@ of terrain and entities; issue 23): a terrain store, light fields captured of bu
 objects and the scene file that puts them with a crowd and trees on the terrain.
 
 * the terrain: a fractal spec (``fractal:4096:1``) tiled into ``OUT/stores`` with the
-  store builder (:func:`~lodsprite.terrain.store.build_store`), or ``--terrain`` as given
+  store builder (:func:`~lodsprite.terrain.store.build_store`), the scene's working grid
+  the store's own side (4097² heights in memory: the ground the instances stand on and
+  the paths clear is level 0's), or ``--terrain`` as given
   (a store is used as it is; ``jacksboro``, a DEM or another spec is read by the scene);
 * the light fields: small lumigraphs (:func:`~lodsprite.lumigraph.run.
   capture_lumigraph`) of the built-in still life and of the built-in ogre (its mesh
@@ -33,11 +35,14 @@ def terrain_source(spec: str, stores: Path) -> tuple[str, dict]:
     from lodsprite.terrain.store import build_store, is_store
 
     if not spec.startswith("fractal:") or is_store(Path(spec)):
-        return spec, {"tiled": False}
+        return spec, {"tiled": False, "grid": None}
     name = spec.replace(":", "_")
     out = stores / f"{name}.zarr"
     built = build_store(spec, out)
-    return str(out.resolve()), {"tiled": True, "store": str(out), "tile_s": built.get("seconds")}
+    side = int(spec.split(":")[1])
+    grid = side if side >= 16 and side & (side - 1) == 0 else None
+    return str(out.resolve()), {"tiled": True, "store": str(out), "grid": grid,
+                                "tile_s": built.get("seconds")}
 
 
 def _ogre_mesh(path: Path) -> Path:
@@ -82,12 +87,15 @@ def capture_lightfields(folder: Path, st: int, uv: int, slabs: int, count: int) 
     return out
 
 
-def scene_text(source: str, cfg, lightfields: list[dict]) -> str:
-    """The scene file's text: the terrain, the crowd (``cfg.instances`` walking ogres in
-    ``cfg.area_m``), ``cfg.trees`` trees round them, the light fields."""
+def scene_text(source: str, cfg, lightfields: list[dict], grid: int | None = None) -> str:
+    """The scene file's text: the terrain (``grid``: its working grid, the store's own
+    side, so that instances and paths stand on level 0's ground, not a 512² grid's), the
+    crowd (``cfg.instances`` walking ogres in ``cfg.area_m``), ``cfg.trees`` trees round
+    them, the light fields."""
     a, b = cfg.area_m, 1.5 * cfg.area_m
     lines = ["# The battlefield of lodsprite reproduce battlefield (written by the run).",
-             "[terrain]", f"source = {json.dumps(source)}", "",
+             "[terrain]", f"source = {json.dumps(source)}",
+             *([f"grid = {grid}"] if grid else []), "",
              "[[objects]]", 'mesh = "ogre"', f"height_m = {cfg.ogre_m}",
              f"count = {cfg.instances}", "seed = 1", f"walk_mps = {cfg.walk_mps}",
              f"area = [{-a}, {-a}, {a}, {a}]", f'lod = "{cfg.ogre_lod}"', ""]
@@ -109,6 +117,6 @@ def write_scene(cfg, out_dir: Path) -> tuple[Path, dict]:
     lights = capture_lightfields(out_dir / "lightfields", cfg.lf_st, cfg.lf_uv, cfg.lf_slabs,
                                  cfg.lightfields)
     path = out_dir / "battlefield.toml"
-    atomic_write_bytes(path, scene_text(source, cfg, lights).encode())
+    atomic_write_bytes(path, scene_text(source, cfg, lights, how["grid"]).encode())
     return path, {"terrain": {"spec": cfg.terrain, "source": source, **how},
                   "lightfields": lights}
