@@ -47,9 +47,8 @@ Update = Callable[[str, int, int], None]
 class BattlefieldConfig:
     """The default run: a 4k² store, 3000 walking ogres, 100 trees, two light fields of
     6 slabs of 8² nodes of 64² pixels, 300 frames along each of two paths at 256², a 5 fps
-    target; estimated at about 10-12 minutes here (2 shared cores), scaled from a measured
-    run of 100 frames a path (471 s, every run on all 100 frames; ``extraction_frames``
-    since).  :meth:`quick` is the tests'."""
+    target; 738 s here in one run (2 shared cores, load about 4).  :meth:`quick` is the
+    tests'."""
 
     terrain: str = "fractal:4096:1"
     instances: int = 3000
