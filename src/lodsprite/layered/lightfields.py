@@ -40,6 +40,7 @@ from lodsprite.layered.layers import Layer, LayerFrame
 from lodsprite.scene.budget import LayerControl
 
 if TYPE_CHECKING:
+    from lodsprite.lumigraph.base import MethodFrame
     from lodsprite.scene.world import LightFieldPlacement, World
 
 #: Node budgets, ascending quality.
@@ -145,7 +146,7 @@ class PlacedLightField:
         if target is not None and hasattr(target, "count"):
             target.count = int(np.clip(n, 1, self.max_nodes))
 
-    def reconstruct(self, viewpoint: Viewpoint, projection: np.ndarray):
+    def reconstruct(self, viewpoint: Viewpoint, projection: np.ndarray) -> MethodFrame:
         """Reconstruct through ``projection`` cropped to the proxy's screen rectangle
         (:attr:`rect`) into the method's small target."""
         self.rect = screen_rect(projection @ viewpoint.view_matrix(), *self.box())

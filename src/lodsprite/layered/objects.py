@@ -8,6 +8,8 @@ follow the ground).  The engine draws without its own ground and without clearin
 the terrain's framebuffer, through the frame's projection, depth tested against what the
 terrain left (:class:`~lodsprite.manager.engine.CrowdEngine` ``ground=False``).
 
+Types with ``lod = "profile"`` take their desired LOD from their error profile (the
+engine's ``desired_hook``, :func:`profile_lod`); the others are distance-linear.
 The knob is the LOD exponent ``p`` of §4.2 (``lod = (1 - (d - near) / (far - near)) ** p``;
 larger is coarser); the LOD ranges scale with the tallest type.  ``p = 0`` is every object
 at its full mesh (the full-detail reference).  With LOD-sprite keyframes holding the
@@ -48,6 +50,21 @@ def world_crowd(world: World) -> Crowd:
                  poses[:, 3].copy(), float(np.max(hi - lo)) / 2)
 
 
+def profile_lod(world: World, crowd: Crowd, renderer):
+    """The profile-LOD hook (Scoggins et al. 2000) over the world's ``lod = "profile"``
+    types, for :attr:`~lodsprite.manager.engine.CrowdEngine.desired_hook`
+    (:func:`lodsprite.scene.profile_lod.profile_hook`, built now, untimed), or None: no
+    profile type, or a tree without the profile-LOD part (the distance-linear LOD then)."""
+    if not any(t.lod == "profile" for t in world.types):
+        return None
+    try:
+        from lodsprite.scene.profile_lod import profile_hook
+    except ImportError:  # the profile-LOD part not merged yet
+        return None
+    return profile_hook(world.types, crowd.models, crowd.types, renderer.fov_y_deg,
+                        renderer.size[1])
+
+
 class ObjectsLayer(Layer):
     """A world's instances on ``renderer``'s terrain target (see the module doc).
     ``exponent``: the starting LOD exponent; ``active``: objects whose LOD is updated a
@@ -69,12 +86,16 @@ class ObjectsLayer(Layer):
                                   range_near=2.0 * height, range_far=150.0 * height,
                                   fov_y_deg=renderer.fov_y_deg, ground=False)
         self.engine.feedback.exponent = float(exponent)
+        self.engine.desired_hook = profile_lod(world, self.crowd, renderer)
         self.subset: np.ndarray | None = None  # None: every object each frame
         self._log: list[list] = []             # extraction orders of every engine frame
         self._applied: int | None = None       # replay: orders applied up to this entry
         self._warm: list = []
         self._last: dict[str, Any] = {}
         self.keyframe_draws: list[tuple[Any, dict]] = []  # (keyframe viewpoint, decision)
+        # whether a replay will come (the harness says so; the viewer never replays):
+        # without, no extraction orders nor keyframe draws are kept
+        self.recording = False
         self._seen: tuple[Any, np.ndarray] | None = None  # the last draw's view, projection
 
     @property
@@ -110,7 +131,7 @@ class ObjectsLayer(Layer):
                       subset: np.ndarray | None, fbo=None) -> tuple[Any, dict]:
         self.engine.set_poses(self.world.poses(t))
         f = self.engine.frame(viewpoint, projection=projection, subset=subset, fbo=fbo)
-        self._log.append(list(self.engine.last_orders))
+        self._log.append(list(self.engine.last_orders) if self.recording else [])
         return f, {"entry": len(self._log) - 1, "using": self.engine.last_using.copy(),
                    "t": t}
 
@@ -134,7 +155,8 @@ class ObjectsLayer(Layer):
             self.engine.redraw(viewpoint, d["using"], [], projection, ~self.moving, fbo)
             return
         _, d = self._engine_frame(viewpoint, 0.0, projection, ~self.moving, fbo)
-        self.keyframe_draws.append((viewpoint, d))
+        if self.recording:
+            self.keyframe_draws.append((viewpoint, d))
 
     replaying: dict | None = None  # set while a replay redraws keyframes
 

@@ -37,6 +37,7 @@ from __future__ import annotations
 
 import os
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -44,12 +45,13 @@ import numpy as np
 
 from lodsprite.errors import InputError
 from lodsprite.layered.layers import Layer, TerrainLayer, timed
-from lodsprite.techniques.base import Frame, Technique
+from lodsprite.techniques.base import Frame, Param, Technique
 
 if TYPE_CHECKING:
     from lodsprite.api import Renderer
     from lodsprite.camera import Viewpoint
     from lodsprite.paths import CameraPath
+    from lodsprite.scene import Scene
     from lodsprite.scene.world import World
 
 #: The time between frames (s): frame ``i`` shows the world at ``i * FRAME_S``.
@@ -119,6 +121,8 @@ class LayeredTechnique(Technique):
 
     def plan_replay(self, frames: set[int]) -> None:
         self.terrain.technique.plan_replay(frames)
+        if self.objects is not None:
+            self.objects.recording = bool(frames)
         if self.lightfields is not None:
             self.lightfields.plan_replay(frames)
 
@@ -178,7 +182,7 @@ class LayeredTechnique(Technique):
         out["keyframes"] = int(sum(f.kind == "keyframe" for f in frames))
         return out
 
-    def params(self):
+    def params(self) -> dict[str, Param]:
         return self.terrain.technique.params()
 
     def set_param(self, name: str, value: float) -> None:
@@ -195,7 +199,8 @@ class LayeredTechnique(Technique):
         self.layers = []
 
 
-def reference(renderer: Renderer, world: World, path: CameraPath, frame_s: float = FRAME_S):
+def reference(renderer: Renderer, world: World, path: CameraPath, frame_s: float = FRAME_S
+              ) -> tuple[Callable[[Viewpoint], np.ndarray], LayeredTechnique]:
     """The full-detail reference of a run along ``path``: ``(viewpoint -> image, the
     reference technique)`` (release it after the run); a viewpoint's time is its index
     along ``path`` (matched by identity) times ``frame_s``."""
@@ -223,7 +228,7 @@ def create(renderer: Renderer, world: World | None = None, **options: Any
     return LayeredTechnique(renderer, world, **options)
 
 
-def open_scene(spec: str, **_: object):
+def open_scene(spec: str, **_: object) -> Scene:
     """The scene of a scene file (``lodsprite view SCENE.toml``): its terrain, with the
     world as its object set; the ``scene`` technique to start with."""
     from dataclasses import replace
