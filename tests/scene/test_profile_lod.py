@@ -230,3 +230,19 @@ def test_instance_views_equal_select_py_object_views():
     want = object_views(pl.instance_models(poses), eye, centre)
     for g, w in zip(got, want, strict=True):
         assert np.allclose(g, w, atol=1e-9)
+
+
+def test_an_unwritable_mesh_folder_caches_in_the_user_folder(gl, tmp_path, counts,
+                                                              monkeypatch):
+    t = sphere_type(tmp_path)
+    blocker = tmp_path / "not-a-folder"
+    blocker.write_text("")
+    t.source = blocker / "ball.obj"                     # its folder cannot be made
+    monkeypatch.setenv(pl.CACHE_ENV, str(tmp_path / "user"))
+    first = profile(t)
+    assert first.path.parent == tmp_path / "user" and counts["built"] == 1
+    assert profile(t).path == first.path and counts == {"built": 1, "loaded": 1,
+                                                        "rebuilt": 0}
+    monkeypatch.setenv(pl.CACHE_ENV, str(blocker))      # nowhere to write: used uncached
+    t.vertices = t.vertices * np.float32(1.5)
+    assert profile(t).path is None and counts["built"] == 2

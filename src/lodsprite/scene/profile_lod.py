@@ -227,29 +227,33 @@ def type_profile(t: ObjectType, model: Any = None, settings: ProfileSettings = S
                  factors: tuple[float, ...] = PROFILE_FACTORS, workers: int = 1
                  ) -> TypeProfile:
     """The type's profile: read from its cache if valid, else built and cached (beside
-    the mesh; the user cache folder for a built-in or an unwritable folder).  ``model``:
-    the LOD model the objects layer draws the type with (``extract(f)``,
-    ``triangles(f)``, ``vertices``; default the type's own, else levels simplified from
-    its mesh)."""
+    the mesh; the user cache folder for a built-in or an unwritable folder; nowhere,
+    ``path`` None, when neither can be written).  ``model``: the LOD model the objects
+    layer draws the type with (``extract(f)``, ``triangles(f)``, ``vertices``; default
+    the type's own, else levels simplified from its mesh)."""
     factors = tuple(float(f) for f in factors)
     if len(factors) < 2 or factors[-1] != 1.0 or np.any(np.diff(factors) <= 0):
         raise InputError(f"profile LOD factors must increase to 1, got {factors}")
     model = _model_of(t, model)
     key = cache_key(t, model, settings, factors)
     path = cache_path(t, key)
-    table = read_cached(path, key, settings, factors)
-    if table is not None:
-        stats["loaded"] += 1
-        return TypeProfile(table, np.asarray(table.meta["factors"]), path)
-    if path.exists():
+    # A mesh in a folder that could not be written has its profile in the user cache.
+    places = [path] + ([user_cache_dir() / path.name] if t.source is not None else [])
+    for place in places:
+        table = read_cached(place, key, settings, factors)
+        if table is not None:
+            stats["loaded"] += 1
+            return TypeProfile(table, np.asarray(table.meta["factors"]), place)
+    if any(p.exists() for p in places):
         stats["rebuilt"] += 1
     table = build_profile(t, model, key, settings, factors, workers)
-    try:
-        table.save(path)
-    except OSError:  # the mesh's folder is read-only: the user cache folder instead
-        path = user_cache_dir() / path.name
-        table.save(path)
-    return TypeProfile(table, np.asarray(table.meta["factors"]), path)
+    for place in places:
+        try:
+            table.save(place)
+            return TypeProfile(table, np.asarray(table.meta["factors"]), place)
+        except OSError:  # cannot be written: the next place, else used uncached
+            continue
+    return TypeProfile(table, np.asarray(table.meta["factors"]), None)
 
 
 # --- run time: Eq. 17 per instance, in the manager's factors --------------------------------
