@@ -21,8 +21,8 @@ weaving among the crowd,
   engine's LODManager sharing LODs against every object extracting its own (the same
   engine with ``share`` off): extractions counted by the engine;
 * ``profile`` and ``linear``: every object type's ``lod`` set to ``profile`` (Scoggins
-  et al. 2000 error profiles: :func:`profile_hook` on the crowd engine, where the objects
-  layer does not wire it itself) then ``linear`` (distance-linear),
+  et al. 2000 error profiles, which the objects layer hooks on the crowd engine) then
+  ``linear`` (distance-linear),
   on the sampled frames only (each at its own time along the path), the linear run's
   exponent searched (``match_steps`` runs at most, a secant on log triangles) so that its
   triangles match the profile run's: RMSE and FLIP at equal triangles.
@@ -33,7 +33,6 @@ The scheduler's and the independent feedback's figures pool the frames of every 
 
 from __future__ import annotations
 
-import importlib.util
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -85,23 +84,6 @@ class BattlefieldConfig:
     @property
     def sample_frames(self) -> list[int]:
         return list(range(0, self.frames, self.sample_every))
-
-
-def profile_lod_available() -> bool:
-    """Whether this build has the profile LOD of scene object types."""
-    return importlib.util.find_spec("lodsprite.scene.profile_lod") is not None
-
-
-def profile_hook(world, objects, renderer):
-    """The profile LOD of the world's ``lod = "profile"`` types on the objects layer's
-    crowd engine (:func:`lodsprite.scene.profile_lod.profile_hook`, profiles built on
-    first use and cached), or None: no such type, or a build without it."""
-    if not profile_lod_available():
-        return None
-    from lodsprite.scene.profile_lod import profile_hook as hook
-
-    return hook(world.types, objects.crowd.models, world.type_indices(), renderer.fov_y_deg,
-                renderer.size[1])
 
 
 def _stats(ms: np.ndarray) -> dict:
@@ -166,10 +148,7 @@ class PathRuns:
                              frame_s=frame_s)
         hooked = False
         try:
-            if t.objects is not None:
-                if t.objects.engine.desired_hook is None:  # the layer does not wire it
-                    t.objects.engine.desired_hook = profile_hook(self.world, t.objects,
-                                                                 self.renderer)
+            if t.objects is not None:  # the layer wires profile LOD for lod = "profile"
                 hooked = t.objects.engine.desired_hook is not None
                 if not share:
                     t.objects.engine.manager.share = False  # each object extracts its own
