@@ -29,7 +29,7 @@ TextureOpt = Annotated[str, typer.Option(
 PathOpt = Annotated[str, typer.Option(
     "--path", help="chen1999 | swan2002 | flyover[:HEIGHT_M[:TRACK_M]] | "
                    "patrol[:HEIGHT_M[:TRACK_M[:PASSES]]] | bank[:HEIGHT_M[:TRACK_M]] | "
-                   "FILE.json")]
+                   "weave[:HEIGHT_M[:HALF_M[:TURNS]]] | FILE.json")]
 FramesOpt = Annotated[int | None, typer.Option(
     "--frames", help="frames along the path (default: the paper's 460 / 600, or the file's)")]
 SizeOpt = Annotated[str, typer.Option("--size", help="image size WxH in pixels")]

@@ -15,7 +15,6 @@ from lodsprite.cli.common import (
     GuardOpt,
     LodOpt,
     PaceOpt,
-    TerrainOpt,
     VisOpt,
     print_summary,
     progress_bars,
@@ -35,8 +34,11 @@ def reproduce(
     experiment: Annotated[str, typer.Argument(help=" | ".join(names()))],
     out_dir: Annotated[Path | None, typer.Option(
         "--out", help="output folder (default: out/EXPERIMENT)")] = None,
-    terrain: TerrainOpt = "jacksboro",
-    size: Annotated[int, typer.Option("--size", help="image size in pixels (square)")] = 512,
+    terrain: Annotated[str | None, typer.Option(
+        "--terrain", help="jacksboro | fractal:SIZE[:SEED] | FILE (.tif/.tiff/.png/.npy) | "
+                          "a store (default jacksboro; battlefield: fractal:4096:1)")] = None,
+    size: Annotated[int | None, typer.Option(
+        "--size", help="image size in pixels (square; default 512, battlefield 256)")] = None,
     quick: Annotated[bool, typer.Option("--quick", help="a short run: 256², 115 frames, "
                                                         "fewer sweep points, quality on "
                                                         "every third frame")] = False,
@@ -70,7 +72,9 @@ def reproduce(
                        "or more)")] = False,
 ) -> None:
     """Run a paper's experiment; write DIR/results.json, PNG plots and DIR/report.md."""
-    options = Options(terrain=terrain, size=size, quick=quick, grid=grid, lod=lod,
+    options = Options(terrain=terrain or "jacksboro", size=size or 512,
+                      terrain_given=terrain is not None, size_given=size is not None,
+                      quick=quick, grid=grid, lod=lod,
                       epsilon=epsilon, visibility=visibility, border=border, guard=guard,
                       full_sample=full_sample, sweeps=sweeps, adopt=adopt, pace=pace,
                       max_error=max_error, links=links, huge=huge, full=full)

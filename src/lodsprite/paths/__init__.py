@@ -28,6 +28,8 @@ A third, :func:`flyover`, is not a paper's: a low flight of fixed height and len
 metres, the same over a terrain of any size (for comparing renderers across sizes).
 A fourth, :func:`bank` (:mod:`lodsprite.paths.bank`), is a low S-turn that rolls into its
 turns, in metres too (grazing views for the resampling metric).
+A fifth, :func:`weave` (:mod:`lodsprite.paths.weave`), flies low among a scene's objects,
+weaving east and west as it crosses the terrain's centre.
 
 The JSON file format is documented in :mod:`lodsprite.paths.core`.
 """
@@ -51,6 +53,7 @@ from lodsprite.paths.core import (
 )
 from lodsprite.paths.flyover import flyover, parse_flyover, parse_patrol, patrol
 from lodsprite.paths.papers import chen1999, swan2002
+from lodsprite.paths.weave import parse_weave, weave
 from lodsprite.terrain.heightfield import HeightField
 
 __all__ = [
@@ -67,6 +70,7 @@ __all__ = [
     "load_path_json",
     "patrol",
     "swan2002",
+    "weave",
 ]
 
 
@@ -82,7 +86,9 @@ def get_path(spec: str | os.PathLike, hf: HeightField, frames: int | None = None
     height and length, :mod:`lodsprite.paths.flyover`),
     ``"patrol[:HEIGHT_M[:TRACK_M[:PASSES]]]"`` (460 frames; back and forth,
     :mod:`lodsprite.paths.flyover`), ``"bank[:HEIGHT_M[:TRACK_M]]"`` (460 frames; a low
-    banking S-turn, :mod:`lodsprite.paths.bank`) or a JSON path file (module
+    banking S-turn, :mod:`lodsprite.paths.bank`),
+    ``"weave[:HEIGHT_M[:HALF_M[:TURNS]]]"`` (460 frames; low among the objects,
+    :mod:`lodsprite.paths.weave`) or a JSON path file (module
     docstring), which is resampled to ``frames`` when given
     (:meth:`CameraPath.resampled`).  A spec ending in ``.json`` that does not exist
     reports the missing file; any other unknown spec raises :class:`PathError`.
@@ -103,9 +109,13 @@ def get_path(spec: str | os.PathLike, hf: HeightField, frames: int | None = None
     banked = parse_bank(key)
     if banked is not None:
         return bank(hf, CHEN1999_FRAMES if frames is None else frames, *banked)
+    among = parse_weave(key)
+    if among is not None:
+        return weave(hf, CHEN1999_FRAMES if frames is None else frames, *among)
     if Path(key).is_file() or key.lower().endswith(".json"):
         path = load_path_json(key)
         return path if frames is None else path.resampled(frames)
     raise PathError(f"unknown path '{key}': use chen1999, swan2002, "
                     "flyover[:HEIGHT_M[:TRACK_M]], patrol[:HEIGHT_M[:TRACK_M[:PASSES]]], "
-                    "bank[:HEIGHT_M[:TRACK_M]] or a .json file")
+                    "bank[:HEIGHT_M[:TRACK_M]], weave[:HEIGHT_M[:HALF_M[:TURNS]]] "
+                    "or a .json file")

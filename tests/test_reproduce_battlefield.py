@@ -1,0 +1,105 @@
+"""``reproduce battlefield`` (issue 23, must-have 5): results.json's keys, the pooled
+figures being the runs' own, the profile/linear match, the extraction counts of the crowd
+engine with and without the manager, the report and plots, and the options."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from lodsprite.experiments.base import Options
+
+RUN_KEYS = {"target_ms", "median_ms", "p99_ms", "std_ms", "rmse", "flip"}
+PVL_KEYS = {"rmse_profile", "rmse_linear", "flip_profile", "flip_linear",
+            "triangles_profile", "triangles_linear"}
+
+
+@pytest.fixture(scope="module")
+def battlefield(tmp_path_factory):
+    from lodsprite.experiments.battlefield.report import write_outputs
+    from lodsprite.experiments.battlefield.run import BattlefieldConfig, reproduce_battlefield
+
+    out = tmp_path_factory.mktemp("battlefield")
+    cfg = BattlefieldConfig.quick(paths=("weave",), instances=60, trees=0, frames=6,
+                                  sample_every=3, match_steps=2)
+    with pytest.MonkeyPatch.context() as mp:  # the built-ins' profiles: built here
+        mp.setenv("LODSPRITE_CACHE", str(tmp_path_factory.mktemp("profiles")))
+        r = reproduce_battlefield(cfg, out)
+    report = write_outputs(r, out)
+    return out, json.loads((out / "results.json").read_text()), report
+
+
+def test_results_hold_the_issues_keys_and_the_runs_own_figures(battlefield):
+    out, r, _ = battlefield
+    for name in ("scheduler", "independent"):
+        assert RUN_KEYS <= set(r[name]), name
+        run = r["paths"]["weave"][name]
+        ms = np.array(run["columns"]["ms"])
+        assert len(ms) == 6 and r[name]["frames"] == 6
+        assert r[name]["median_ms"] == pytest.approx(np.median(ms), rel=1e-9)
+        assert r[name]["p99_ms"] == pytest.approx(np.percentile(ms, 99), rel=1e-9)
+        assert r[name]["target_ms"] == pytest.approx(1e3 / r["config"]["target_fps"])
+        assert run["quality_frames"] == 2  # frames 0 and 3 against the full-detail scene
+        assert 0 <= r[name]["rmse"] < 40 and 0 <= r[name]["flip"] <= 1
+        for layer in ("terrain", "objects", "lightfields"):  # every layer drew every frame
+            assert len(run["columns"][f"ms_{layer}"]) == 6
+    assert PVL_KEYS <= set(r["profile_vs_linear"])
+    assert r["sample_frames"] == [0, 3] and r["instances"] == 60
+    assert len(r["lightfields"]) == 2 and (out / "battlefield.toml").is_file()
+    assert r["terrain"]["tiled"] and (out / "stores").is_dir()
+
+
+def test_extractions_are_the_crowd_engines_with_and_without_sharing(battlefield):
+    _, r, _ = battlefield
+    p = r["paths"]["weave"]
+    assert r["extractions_with_manager"] == sum(p["manager"]["columns"]["extractions"])
+    assert r["extractions_without_manager"] == sum(p["no_manager"]["columns"]["extractions"])
+    # every object extracting its own LODs does more of them than objects sharing them
+    assert r["extractions_without_manager"] > r["extractions_with_manager"] >= 0
+
+
+def test_the_linear_run_kept_is_the_closest_to_the_profile_runs_triangles(battlefield):
+    _, r, _ = battlefield
+    x = r["paths"]["weave"]["profile_vs_linear"]
+    goal = x["profile"]["triangles_mean"]
+    best = min(abs(t - goal) for t in x["triangles_tried"])
+    assert abs(x["linear"]["triangles_mean"] - goal) == pytest.approx(best)
+    assert x["linear_exponent"] in x["exponents_tried"]
+    assert r["profile_vs_linear"]["triangles_profile"] == pytest.approx(goal)
+    # the profile run drew with the profile LOD hook, the linear runs without it
+    assert x["profile"]["profile_lod"] and not x["linear"]["profile_lod"]
+    assert r["profile_vs_linear"]["profile_lod_available"]
+
+
+def test_report_names_the_measured_figures_beside_the_targets(battlefield):
+    out, r, report = battlefield
+    text = report.read_text()
+    assert f"{r['scheduler']['median_ms']:.1f}" in text
+    assert f"{r['independent']['p99_ms']:.1f}" in text
+    assert "target within 5 %" in text and "at most 1.25×" in text
+    assert f"{r['extractions_without_manager']:,}" in text
+    assert (out / "frame_times.png").stat().st_size > 0
+    assert (out / "profile_vs_linear.png").stat().st_size > 0
+
+
+def test_next_exponent_coarsens_when_there_are_too_many_triangles():
+    from lodsprite.experiments.battlefield.run import _next_exponent
+
+    assert _next_exponent([(1.0, {"triangles_mean": 2000.0})], 1000.0) > 1.0
+    assert _next_exponent([(1.0, {"triangles_mean": 500.0})], 1000.0) < 1.0
+    # a secant on log triangles: exact when triangles fall as exp(-e)
+    tried = [(e, {"triangles_mean": 1e5 * np.exp(-e)}) for e in (1.0, 2.0)]
+    assert _next_exponent(tried, 1e5 * np.exp(-1.5)) == pytest.approx(1.5)
+
+
+def test_options_choose_the_terrain_and_size_only_when_given():
+    from lodsprite.experiments import get
+
+    exp = get("battlefield")
+    cfg = exp.configure(Options(quick=True))
+    assert cfg.terrain == "fractal:256:1" and cfg.image == 64
+    cfg = exp.configure(Options(terrain="jacksboro", terrain_given=True, size=96,
+                                size_given=True))
+    assert cfg.terrain == "jacksboro" and cfg.image == 96 and cfg.instances == 3000
