@@ -14,8 +14,14 @@ store side and path, the variant (``whole``, ``tiled``, ``tiled+cache``) and ε 
 best speedup over adaptive at 1 px at RMSE and FLIP at most adaptive's; the options of
 the variant that wins at 4k² and 16k² on both paths go into :data:`STORE_DEFAULTS` by
 hand, with the run's date beside them (never read from a results file at run time).
-Until that finding is in: adaptive keyframes at 0.5 px (``key_sse``), whole keyframes,
-no cache, the uniform 16² proxy and the 1999 metric.
+Set from the default ``reproduce large`` of 2026-12-02 (4k² and 16k² fractal stores,
+chen1999 and flyover, 120 frames at 256²; figures in ``docs/figures.md``): no variant was
+3× faster at equal error; the fastest rows within adaptive's RMSE and FLIP were whole
+keyframes on the view-dependent proxy with the resampling metric at 4k² (ε 0.5: 1.49×
+on the flyover, 0.82× on chen1999) and at 16k² along chen1999 (ε 0.25, 0.42×), tiles only
+on the 16k² flyover (ε 0.25, 0.81×).  So a store gets whole keyframes drawn by the
+adaptive renderer at 0.5 px, spriteframes on the proxy at 8 px, the resampling metric, no
+cache; ε stays the user's (1 px unless given).
 """
 
 from __future__ import annotations
@@ -31,10 +37,10 @@ DEFAULTED = ("lod", "key_sse", "proxy_sse", "tiles", "tile_budget_ms", "cache_mb
 #: LOD-sprite on a terrain store.  ``key_sse``: keyframes drawn by the adaptive renderer
 #: from the store at this tolerance, pixels (on a store, sprite mode means adaptive
 #: keyframes; whole keyframes of the in-memory grid would draw a resampled copy).
-#: Set from ``reproduce large`` (module docstring); not yet measured: key_sse 0.5 only.
+#: Set from ``reproduce large`` (module docstring): the ``whole`` variant.
 STORE_DEFAULTS: dict[str, Any] = {
-    "lod": DEFAULT_COARSE, "key_sse": 0.5, "proxy_sse": None, "tiles": 1,
-    "tile_budget_ms": DEFAULT_TILE_BUDGET_MS, "cache_mb": 0.0, "metric": "warp",
+    "lod": DEFAULT_COARSE, "key_sse": 0.5, "proxy_sse": 8.0, "tiles": 1,
+    "tile_budget_ms": DEFAULT_TILE_BUDGET_MS, "cache_mb": 0.0, "metric": "resample",
 }
 
 #: LOD-sprite on an in-memory terrain (a DEM file, ``fractal:N``, ``jacksboro``): the

@@ -68,6 +68,8 @@ class LargeConfig:
     validate_sizes: tuple[int, ...] = (1024, 2048)  # stores for that check alone, untimed
     patrol: bool = True       # the keyframe cache along the patrol path
     patrol_cache_mb: float = 64.0
+    patrol_passes: int = 3    # the patrol flies this many times ``frames`` (its passes repeat)
+    patrol_eps: float = 0.5   # ε of the patrol runs (at 1 px a 4k² patrol took one keyframe)
     huge: bool = False       # also 65536² (needs the disk and time it names)
     quick_512: bool = False  # the jacksboro runs on ``frames`` frames, not the whole path
     jacksboro: bool = True   # the 512² jacksboro comparison (tests leave it out)
@@ -76,7 +78,7 @@ class LargeConfig:
     @classmethod
     def quick(cls) -> LargeConfig:
         return cls(sizes=(256, 512), frames=24, image=128, sample_every=8, quick_512=True,
-                   eps=(1.0, 0.5), validate_sizes=())
+                   eps=(1.0, 0.5), validate_sizes=(), patrol_passes=1)
 
     @classmethod
     def full(cls) -> LargeConfig:
@@ -179,10 +181,16 @@ def run_path(store: Path, n: int, cfg: LargeConfig, spec: str, runs: Path
 
 
 def patrol(store: Path, n: int, cfg: LargeConfig, runs: Path) -> dict:
-    """Keyframe work and speed along the ``patrol`` path with the keyframe cache off
-    (``cache_mb`` 0) and on (``patrol_cache_mb``), whole keyframes at ε 1 px; or the
-    reason it is skipped."""
+    """Keyframe work and speed along the ``patrol`` path (``patrol_passes`` times
+    ``frames`` frames) with the keyframe cache off (``cache_mb`` 0) and on
+    (``patrol_cache_mb``), whole keyframes at ``patrol_eps``; or the reason it is
+    skipped."""
+    from dataclasses import replace
+
     from lodsprite import get_path, load_scene
+
+    cfg = replace(cfg, frames=cfg.frames * cfg.patrol_passes,
+                  sample_every=cfg.sample_every * cfg.patrol_passes)
 
     why = unavailable({"cache_mb": cfg.patrol_cache_mb})
     if why:
@@ -196,7 +204,7 @@ def patrol(store: Path, n: int, cfg: LargeConfig, runs: Path) -> dict:
                                 cfg.ref_sse, validate=False)
     del scene
     p = PathRuns(store, n, cfg, "patrol", runs, ref)
-    eps = 1.0
+    eps = cfg.patrol_eps
     off = p.sprite("whole", eps, cache_mb=0.0)
     on = p.sprite("whole", eps, cache_mb=cfg.patrol_cache_mb)
     return {"side": n, "epsilon": eps, "reference": how,
