@@ -45,12 +45,10 @@ Update = Callable[[str, int, int], None]
 
 @dataclass(frozen=True)
 class LargeConfig:
-    """The default run is estimated at about 18-19 minutes here (an estimate, not a
-    measurement: about 15 s a timed run of 120 frames at 256², 10 of them per store and
-    path, references (the 1k² and 2k² checks of the stand-in included), tiling 16k² in
-    about 100 s, patrol and jacksboro).  LOD-sprite's setup over a 16k² store reads no
-    level-0 chunk (first frame 7-11 s, was 188-468 s).  Timed runs at 1k² do not fit
-    beside 4k² and 16k² (1k² and 2k² get the stand-in check alone): they are in
+    """The default run took 18 min 56 s here (2026-12-02, with the one-pass patrol at
+    1 px; the three-pass patrol at ε 0.5 took 39 s alone).  LOD-sprite's setup over a
+    16k² store reads no level-0 chunk (first frame 7-11 s, was 188-468 s).  Timed runs at
+    1k² do not fit beside 4k² and 16k² (1k² and 2k² get the stand-in check alone): they are in
     :meth:`full`, the long sweep; :meth:`quick` is the tests'."""
 
     sizes: tuple[int, ...] = (4096, 16384)
