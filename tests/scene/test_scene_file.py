@@ -89,6 +89,14 @@ def test_terrain_fields_are_named(tmp_path: Path) -> None:
     assert ": terrain: required" in refusal(write(tmp_path, "[view]\npath = 'flyover'\n"))
 
 
+def test_grid_is_capped_and_deep_nesting_is_one_line(tmp_path: Path) -> None:
+    # review finding 5: grid had no upper cap; deep nesting escaped as RecursionError
+    message = refusal(write(tmp_path, TERRAIN + "grid = 1073741824\n"))
+    assert ": terrain.grid: must be a power of two >= 16 and <= 8192" in message, message
+    deep = TERRAIN + "x = " + "[" * 20000 + "]" * 20000 + "\n"
+    assert ": nested too deeply" in refusal(write(tmp_path, deep))
+
+
 def test_a_mesh_file_other_than_gltf_needs_its_height(tmp_path: Path, box_off: Path) -> None:
     message = refusal(write(tmp_path, TERRAIN + '[[objects]]\nmesh = "box.off"\n'))
     assert ": objects[0].height_m: required for a mesh file other than glTF" in message

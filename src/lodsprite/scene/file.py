@@ -48,6 +48,7 @@ MAX_MESH_BYTES = 256 << 20
 MAX_MESH_FACES = 2_000_000
 MAX_HEIGHT_M = 10_000.0
 MAX_WALK_MPS = 100.0
+MAX_GRID = 8192                  # [terrain] grid, quads a side (as the server's cap)
 #: Mesh names that are built in (:mod:`lodsprite.manager.builtins`), not files.
 BUILTIN_MESHES = ("ogre", "tree")
 TERRAIN_BUILTINS = ("jacksboro",)
@@ -119,10 +120,14 @@ def read_scene_file(path: str | os.PathLike) -> SceneFile:
         raise SceneFileError(f"{label}: not UTF-8 text ({exc.reason})") from None
     except tomllib.TOMLDecodeError as exc:
         raise SceneFileError(f"{label}: {_syntax(str(exc))}") from None
+    except (RecursionError, MemoryError):
+        raise SceneFileError(f"{label}: nested too deeply (or too large) to read") from None
     try:
         scene = msgspec.convert(data, SceneFile)
     except msgspec.ValidationError as exc:
         raise SceneFileError(f"{label}: {_field_message(str(exc))}") from None
+    except (RecursionError, MemoryError):
+        raise SceneFileError(f"{label}: nested too deeply (or too large) to read") from None
     _Checker(label, p.resolve().parent).check(scene)
     return scene
 
@@ -214,8 +219,8 @@ class _Checker:
             self.fail("terrain.source", str(exc))
         if not builtin:
             t.source = self.file(source, "terrain.source", folder_ok=True)
-        if t.grid is not None and not (t.grid >= 16 and is_power_of_two(t.grid)):
-            self.fail("terrain.grid", "must be a power of two >= 16")
+        if t.grid is not None and not (16 <= t.grid <= MAX_GRID and is_power_of_two(t.grid)):
+            self.fail("terrain.grid", f"must be a power of two >= 16 and <= {MAX_GRID}")
         self.positive(t.exaggeration, "terrain.exaggeration", 1000.0)
         name = t.texture.strip().lower()
         if not (name == "terrain" or name == "checker" or name.startswith("checker:")):
