@@ -118,6 +118,79 @@ def test_a_gltf_group_gives_a_type_per_mesh_and_instances_at_its_nodes(tmp_path:
     np.testing.assert_allclose(offsets, [[2.5, -1.5], [0.0, -5.0], [-2.0, 3.0]], atol=1e-9)
 
 
+def camp_glb(folder: Path) -> Path:
+    """A glTF of three nodes, each a box of 12 triangles, 10 m apart."""
+    import trimesh
+    from trimesh.transformations import translation_matrix
+
+    scene = trimesh.Scene()
+    for k in range(3):
+        scene.add_geometry(trimesh.creation.box((1.0, 2.0, 1.0)), node_name=f"n{k}",
+                           geom_name=f"g{k}", transform=translation_matrix([10.0 * k, 0, 0]))
+    scene.export(folder / "camp.glb")
+    return folder / "camp.glb"
+
+
+def test_a_group_over_the_instance_cap_is_refused_before_it_is_scattered(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # review finding 6: nodes x anchors checked before scatter/expand allocate them
+    from lodsprite.scene import world as world_module
+
+    def never(*args: object, **kwargs: object) -> None:
+        raise AssertionError("allocated before the cap was checked")
+
+    camp_glb(tmp_path)
+    monkeypatch.setattr(world_module, "expand", never)
+    monkeypatch.setattr(world_module, "scatter", never)
+    with pytest.raises(SceneFileError, match="more than 200000 instances in all"):
+        world_of(tmp_path, '[[objects]]\nmesh = "camp.glb"\ncount = 70000\n')
+
+
+def test_gltf_nodes_and_faces_are_capped_while_reading(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # review finding 6: a node cap, and the faces cap checked node by node (before copies)
+    from lodsprite.scene import file as scene_file
+    from lodsprite.scene import objects
+
+    camp_glb(tmp_path)
+    body = '[[objects]]\nmesh = "camp.glb"\n'
+    monkeypatch.setattr(scene_file, "MAX_GLTF_NODES", 2)
+    with pytest.raises(SceneFileError, match="objects.0..mesh: camp.glb has 3 mesh nodes, "
+                                             "over 2"):
+        world_of(tmp_path, body)
+    monkeypatch.setattr(scene_file, "MAX_GLTF_NODES", 10)
+    monkeypatch.setattr(scene_file, "MAX_MESH_FACES", 20)
+    copied = []
+    colours = objects._colours
+    monkeypatch.setattr(objects, "_colours", lambda tm, n: copied.append(n) or colours(tm, n))
+    with pytest.raises(SceneFileError, match="over 20 triangles"):
+        world_of(tmp_path, body)
+    assert len(copied) == 1                       # the second node's 12 faces: refused
+
+
+def test_each_mesh_is_read_and_each_section_scattered_once(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # review finding 15: a mesh file was loaded twice, a group's scatter drawn twice
+    import trimesh
+
+    from lodsprite.scene import world as world_module
+
+    camp_glb(tmp_path)
+    loads, scatters = [], []
+    load, scatter = trimesh.load, world_module.scatter
+    monkeypatch.setattr(trimesh, "load", lambda *a, **k: loads.append(a[0]) or load(*a, **k))
+    monkeypatch.setattr(world_module, "scatter",
+                        lambda *a, **k: scatters.append(a[0]) or scatter(*a, **k))
+    w = world_of(tmp_path, '[[objects]]\nmesh = "cube.off"\nheight_m = 2.0\ncount = 5\n'
+                           '[[objects]]\nmesh = "camp.glb"\ncount = 4\n')
+    assert sorted(Path(p).name for p in loads) == ["camp.glb", "cube.off"]
+    assert scatters == [5, 4]
+    assert [len(i) for i in w.instances] == [5, 4, 4, 4]
+    lo, hi = w.extent
+    xy = np.concatenate([i.xy for i in w.instances])
+    assert ((xy >= lo) & (xy <= hi)).all()
+
+
 def test_scatter_stays_inside_and_repeats_by_seed(tmp_path: Path) -> None:
     body = '[[objects]]\nmesh = "cube.off"\nheight_m = 3.0\ncount = 500\nseed = {}\n'
     a, b, c = (world_of(tmp_path, body.format(s)) for s in (7, 7, 8))

@@ -46,6 +46,7 @@ MAX_POINTS_BYTES = 16 << 20
 MAX_POINTS_ROWS = 200_000
 MAX_MESH_BYTES = 256 << 20
 MAX_MESH_FACES = 2_000_000
+MAX_GLTF_NODES = 20_000          # mesh nodes in one glTF (each is a group member)
 MAX_HEIGHT_M = 10_000.0
 MAX_WALK_MPS = 100.0
 MAX_GRID = 8192                  # [terrain] grid, quads a side (as the server's cap)

@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from lodsprite.errors import MeshError, SceneFileError
+from lodsprite.errors import SceneFileError
 
 #: Colour of a mesh that has none (grey-green, linear 0..1).
 DEFAULT_COLOUR = (0.55, 0.6, 0.5)
@@ -150,41 +150,67 @@ def _colours(tm: Any, n: int) -> np.ndarray:
 
 
 def _whole_mesh(p: Path, field: str) -> tuple:
-    """One part: the whole file as one mesh (trimesh, ``force="mesh"``)."""
+    """One part: the whole file as one mesh (trimesh, ``force="mesh"``), read once."""
+    from lodsprite.meshes import MESH_EXTENSIONS
+
+    if p.suffix.lower() not in MESH_EXTENSIONS:
+        raise SceneFileError(f"{field}: unsupported mesh format {p.suffix or '(none)'} for "
+                             f"{p.name} (supported: {', '.join(MESH_EXTENSIONS)})")
+    tm = _trimesh_load(p, field, "mesh")
+    v, f = _arrays(tm)
+    if len(f) == 0:
+        raise SceneFileError(f"{field}: {p.name} has no triangles")
+    _check_part(v, f, p, p.stem, field)
+    return p.stem, np.eye(4), v, f, _colours(tm, len(v))
+
+
+def _trimesh_load(p: Path, field: str, force: str) -> Any:
+    """``trimesh.load(p, force=force, process=False)``; anything wrong is one line."""
     import trimesh
 
-    from lodsprite.meshes import load_mesh
-
     try:
-        load_mesh(p)  # validation: one clear line for anything wrong
-        tm = trimesh.load(str(p), force="mesh", process=False)
-    except MeshError as exc:
-        raise SceneFileError(f"{field}: {exc}") from None
-    v = np.asarray(tm.vertices, np.float64)
-    return p.stem, np.eye(4), v, np.asarray(tm.faces, np.int64), _colours(tm, len(v))
-
-
-def _gltf_parts(p: Path, field: str) -> list[tuple]:
-    """Every node with a mesh: ``(mesh name, 4x4 world transform, vertices, faces,
-    colours)``, sorted by node name."""
-    import trimesh
-
-    try:
-        scene = trimesh.load(str(p), force="scene", process=False)
+        return trimesh.load(str(p), force=force, process=False)
     except Exception as exc:  # trimesh raises anything from ValueError to KeyError
         raise SceneFileError(f"{field}: could not read {p.name}: "
                              f"{str(exc).splitlines()[0] if str(exc) else type(exc).__name__}"
                              ) from None
-    parts = []
-    for node in sorted(scene.graph.nodes_geometry):
+
+
+def _arrays(tm: Any) -> tuple[np.ndarray, np.ndarray]:
+    """A trimesh geometry's ``vertices (n, 3) float64`` and ``faces (m, 3) int64``."""
+    v = np.asarray(getattr(tm, "vertices", np.zeros((0, 3))), np.float64).reshape(-1, 3)
+    f = np.asarray(getattr(tm, "faces", np.zeros((0, 3))), np.int64).reshape(-1, 3)
+    return v, f
+
+
+def _check_part(v: np.ndarray, f: np.ndarray, p: Path, name: str, field: str) -> None:
+    if not np.isfinite(v).all() or f.min() < 0 or f.max() >= len(v):
+        raise SceneFileError(f"{field}: {p.name}: mesh {name!r} is malformed")
+
+
+def _gltf_parts(p: Path, field: str) -> list[tuple]:
+    """Every node with a mesh: ``(mesh name, 4x4 world transform, vertices, faces,
+    colours)``, sorted by node name.  The node count (``MAX_GLTF_NODES``) and the faces
+    summed over the nodes (``MAX_MESH_FACES``) are checked before anything is copied."""
+    from lodsprite.scene.file import MAX_GLTF_NODES, MAX_MESH_FACES
+
+    scene = _trimesh_load(p, field, "scene")
+    nodes = scene.graph.nodes_geometry
+    if len(nodes) > MAX_GLTF_NODES:
+        raise SceneFileError(f"{field}: {p.name} has {len(nodes)} mesh nodes, over "
+                             f"{MAX_GLTF_NODES}")
+    parts, faces = [], 0
+    for node in sorted(nodes):
         transform, name = scene.graph[node]
         tm = scene.geometry[name]
-        v = np.asarray(getattr(tm, "vertices", np.zeros((0, 3))), np.float64).reshape(-1, 3)
-        f = np.asarray(getattr(tm, "faces", np.zeros((0, 3))), np.int64).reshape(-1, 3)
+        v, f = _arrays(tm)
         if len(f) == 0:
             continue  # a point cloud or path: nothing to draw
-        if not np.isfinite(v).all() or f.min() < 0 or f.max() >= len(v):
-            raise SceneFileError(f"{field}: {p.name}: mesh {name!r} is malformed")
+        faces += len(f)
+        if faces > MAX_MESH_FACES:
+            raise SceneFileError(f"{field}: {p.name} has over {MAX_MESH_FACES} triangles "
+                                 "(its nodes' meshes summed)")
+        _check_part(v, f, p, name, field)
         parts.append((name, np.asarray(transform, np.float64), v, f, _colours(tm, len(v))))
     if not parts:
         raise SceneFileError(f"{field}: {p.name} has no triangles")

@@ -206,15 +206,16 @@ def _place(sf: SceneFile, label: str, lo: np.ndarray, hi: np.ndarray, anchors: l
         group, first = loaded[key]
         a_lo, a_hi = _area(o, lo, hi)
         region = "the terrain" if o.area is None else "its area"
-        if o.count is not None and group_radius(group) > 0:  # members stay inside
+        total = sum(len(n) for n in instances)
+        if total + len(group.member_type) * (o.count or len(xy)) > MAX_INSTANCES:
+            raise SceneFileError(f"{at}: more than {MAX_INSTANCES} instances in all")
+        if o.count is not None:  # scattered here, once: a group's members stay inside
             inset = min(group_radius(group), 0.49 * float(np.min(a_hi - a_lo)))
-            xy, yaw = scatter(len(xy), o.seed, a_lo, a_hi, inset)
+            xy, yaw = scatter(o.count, o.seed, a_lo, a_hi, inset)
         for k, (mxy, myaw, index) in enumerate(expand(group, xy, yaw)):
             check_inside(mxy, a_lo, a_hi, f"{at}.{'mesh' if o.points is None else 'points'}",
                          None if where is None else [where[a] for a in index], region)
             instances.append(Instances(first + k, mxy, myaw, o.walk_mps, o.seed, o.area))
-        if sum(len(n) for n in instances) > MAX_INSTANCES:
-            raise SceneFileError(f"{at}: more than {MAX_INSTANCES} instances in all")
     return types, instances
 
 
@@ -229,13 +230,12 @@ def _anchors(o: ObjectSection, at: str, lo: np.ndarray, hi: np.ndarray
              ) -> tuple[np.ndarray, np.ndarray, list[str] | None]:
     """A section's anchors ``xy (a, 2)``, headings ``(a,)`` and, for a points file, each
     anchor's ``"line N"`` (inside the section's area, itself on the terrain); no count
-    nor points: one anchor at the origin."""
+    nor points: one anchor at the origin; a count: none yet (:func:`_place` scatters)."""
     if o.area is not None:
         check_inside(np.reshape(o.area, (2, 2)), lo, hi, f"{at}.area")
         lo, hi = _area(o, lo, hi)
-    if o.count is not None:
-        xy, yaw = scatter(o.count, o.seed, lo, hi)
-        return xy, yaw, None
+    if o.count is not None:  # scattered by _place, which knows the group's radius
+        return np.zeros((0, 2)), np.zeros(0), None
     if o.points is None:
         return np.zeros((1, 2)), np.zeros(1), ["the origin"]
     xy, yaw, lines = read_points(o.points, f"{at}.points")
