@@ -292,3 +292,50 @@ def test_the_cropped_reconstruction_matches_a_whole_frame_one(gl, tmp_path, lf_f
     cropped, whole = images
     assert np.abs(cropped - whole).mean() < 4.0          # the same picture, resampled
     assert np.abs(cropped - whole).max(axis=2).mean() < 8.0
+
+
+VIEW = '[view]\npath = "flyover"\nsize = "48x32"\nfov = 30.0\ntarget_fps = 50.0\n'
+
+
+def test_render_scene_takes_size_fov_and_target_fps_from_view(tmp_path, monkeypatch):
+    # review finding 7: [view] size, fov and target_fps were validated but never used
+    import lodsprite.api
+    from lodsprite.layered.technique import render_scene
+
+    scene = scene_file(tmp_path, VIEW)
+    opened, created = [], []
+    renderer, create = lodsprite.api.Renderer, techniques.create
+
+    def spy_renderer(scene_, size, fov, *args, **kwargs):
+        opened.append((tuple(size), fov))
+        return renderer(scene_, size, fov, *args, **kwargs)
+
+    def spy_create(name, r, **options):
+        created.append(options)
+        return create(name, r, **options)
+
+    monkeypatch.setattr(lodsprite.api, "Renderer", spy_renderer)
+    monkeypatch.setattr(techniques, "create", spy_create)
+    s = render_scene(scene, tmp_path / "a", frames=2, terrain_mode="lod")
+    assert s["size"] == [48, 32] and opened[-1] == ((48, 32), 30.0)
+    assert created[-1]["target_fps"] == 50.0 and created[-1]["schedule"] == "scheduler"
+    s = render_scene(scene, tmp_path / "b", (40, 24), frames=2, terrain_mode="lod",
+                     target_fps=20.0)                       # what the command gives wins
+    assert s["size"] == [40, 24] and created[-1]["target_fps"] == 20.0
+
+
+def test_the_viewer_takes_size_fov_and_target_fps_from_view(tmp_path):
+    from lodsprite.scene import open_scene
+    from lodsprite.viewer.app import ViewOptions, with_scene_view
+
+    path = scene_file(tmp_path, VIEW)
+    scene = open_scene(str(path))
+    o, fov = with_scene_view(ViewOptions(terrain=str(path)), scene)
+    assert o.size == (48, 32) and o.target_fps == 50.0 and fov == 30.0
+    assert o.technique_options()["schedule"] == "scheduler"
+    o, _ = with_scene_view(ViewOptions(terrain=str(path), size=(100, 80), target_fps=20.0),
+                           scene)
+    assert o.size == (100, 80) and o.target_fps == 20.0
+    bare = open_scene(str(scene_file(tmp_path, "")))
+    o, fov = with_scene_view(ViewOptions(terrain=str(path)), bare)
+    assert o.size == (1024, 768) and o.target_fps is None and fov is None

@@ -19,7 +19,6 @@ from lodsprite.cli.common import (
     MaxErrorOpt,
     PaceOpt,
     PathOpt,
-    SizeOpt,
     TerrainOpt,
     TextureOpt,
     VisOpt,
@@ -120,7 +119,9 @@ def render(
                        "keyframes on a store or with --key-sse) | adaptive (view-dependent, "
                        "--sse) | distributed (starts a local LOD server)")] = "full",
     lod: TerrainLodOpt = None,
-    size: SizeOpt = "512x512",
+    size: Annotated[str | None, typer.Option(
+        "--size", help="image size WxH in pixels (default 512x512; with --scene the "
+                       "file's [view] size if it gives one)")] = None,
     frames: FramesOpt = None,
     out_dir: Annotated[Path, typer.Option("--out", help="output folder")] = Path("out"),
     save_frames: Annotated[bool, typer.Option("--save-frames", help="write PNG frames")] = False,
@@ -172,14 +173,14 @@ def render(
     from lodsprite.run import parse_size
 
     if scene is not None or target_fps is not None:
-        _render_scene(scene, out_dir, parse_size(size), frames, mode, target_fps,
-                      ground_truth, flip, epsilon=epsilon, sse=sse, lod=lod)
+        _render_scene(scene, out_dir, None if size is None else parse_size(size), frames,
+                      mode, target_fps, ground_truth, flip, epsilon=epsilon, sse=sse, lod=lod)
         return
 
     distributed = _check_mode(mode, ground_truth, video, metric)
     config = RenderConfig(terrain=terrain, texture=texture, path=path,
                           mode="sprite" if distributed else mode, lod=lod,
-                          size=parse_size(size), frames=frames, grid=grid,
+                          size=parse_size(size or "512x512"), frames=frames, grid=grid,
                           exaggeration=exaggeration, save_frames=save_frames, epsilon=epsilon,
                           ground_truth=ground_truth, visibility=visibility, border=border,
                           guard_px=guard, sse=sse, gpu_mb=gpu_mb, host_mb=host_mb,
@@ -197,7 +198,7 @@ def render(
     _print_render(s, out_dir)
 
 
-def _render_scene(scene: Path | None, out_dir: Path, size: tuple[int, int],
+def _render_scene(scene: Path | None, out_dir: Path, size: tuple[int, int] | None,
                   frames: int | None, mode: str, target_fps: float | None,
                   ground_truth: bool, flip: bool, **options) -> None:
     """``render --scene``: the layered technique over a scene file's world."""
@@ -230,7 +231,9 @@ def view(
                        "independent | discrete; keys 1-9 switch")] = None,
     lod: TerrainLodOpt = None,
     epsilon: EpsOpt = 1.0,
-    size: Annotated[str, typer.Option("--size", help="window size WxH")] = "1024x768",
+    size: Annotated[str | None, typer.Option(
+        "--size", help="window size WxH (default 1024x768; a scene file's [view] size if it "
+                       "gives one)")] = None,
     fps: Annotated[float, typer.Option(
         "--fps", help="frame rate cap (0: none); the keyframe worker uses the time left")] = 60,
     inline: Annotated[bool, typer.Option(
@@ -280,7 +283,8 @@ def view(
     from lodsprite.viewer.app import view as run_view
 
     opts = ViewOptions(terrain=terrain, texture=texture, grid=grid, mode=mode, lod=lod,
-                       epsilon=epsilon, size=parse_size(size), fps=fps, threaded=not inline,
+                       epsilon=epsilon, size=None if size is None else parse_size(size),
+                       fps=fps, threaded=not inline,
                        play=play, frames=frames, screenshots=screenshots, every=every,
                        exit=exit_, out=out_dir, record=record, server=server,
                        target_fps=target_fps, sse=sse, key_sse=key_sse,

@@ -57,6 +57,8 @@ if TYPE_CHECKING:
 #: The time between frames (s): frame ``i`` shows the world at ``i * FRAME_S``.
 FRAME_S = 1.0 / 30.0
 KEYFRAME_HOLDS = ("static", "terrain")
+#: ``render --scene``'s image size when neither the command nor ``[view]`` gives one.
+DEFAULT_SIZE = (512, 512)
 #: Objects whose LOD the manager updates a frame (its active list).
 ACTIVE = 300
 
@@ -239,15 +241,25 @@ def open_scene(spec: str, **_: object) -> Scene:
     return replace(world.scene, objects=world, mode="scene", label=spec)
 
 
+def with_view_fov(cam: CameraPath, world: World) -> CameraPath:
+    """``cam`` with the vertical field of view of the world's ``[view] fov`` (degrees), if
+    the scene file gives one."""
+    from dataclasses import replace
+
+    return cam if world.view.fov is None else replace(cam, fov_y_deg=float(world.view.fov))
+
+
 def render_scene(scene_file: str | os.PathLike, out_dir: str | os.PathLike,
-                 size: tuple[int, int] = (512, 512), frames: int | None = None,
+                 size: tuple[int, int] | None = None, frames: int | None = None,
                  terrain_mode: str = "adaptive",
                  target_fps: float | None = None, ground_truth: bool = False,
                  flip: bool = False, path: str | None = None, progress=None,
                  **options: Any) -> dict[str, Any]:
     """Run the ``scene`` technique over the world of ``scene_file`` along its ``[view]``
     path (or ``path``) and write the run to ``out_dir``; returns the summary.
-    ``target_fps`` runs the budget's scheduler (none without)."""
+    ``target_fps`` runs the budget's scheduler (none without).  ``size`` and
+    ``target_fps`` left None are the file's ``[view]`` values (else 512x512 and none); its
+    ``fov`` replaces the path's."""
     from lodsprite import techniques
     from lodsprite.api import Renderer
     from lodsprite.harness import run_path, write_run
@@ -257,7 +269,9 @@ def render_scene(scene_file: str | os.PathLike, out_dir: str | os.PathLike,
     if target_fps is not None and not target_fps > 0:
         raise InputError(f"--target-fps must be > 0, got {target_fps}")
     world = load_world(scene_file)
-    cam = world.scene.path(path or world.path, frames)
+    size = size or world.view.size_px() or DEFAULT_SIZE
+    target_fps = target_fps if target_fps is not None else world.view.target_fps
+    cam = with_view_fov(world.scene.path(path or world.path, frames), world)
     schedule = "scheduler" if target_fps is not None else "none"
     with Renderer(world.scene, size, cam.fov_y_deg) as renderer:
         t = techniques.create("scene", renderer, world=world, terrain_mode=terrain_mode,

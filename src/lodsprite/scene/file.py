@@ -53,6 +53,7 @@ MAX_GRID = 8192                  # [terrain] grid, quads a side (as the server's
 #: Mesh names that are built in (:mod:`lodsprite.manager.builtins`), not files.
 BUILTIN_MESHES = ("ogre", "tree")
 TERRAIN_BUILTINS = ("jacksboro",)
+_SIZE = r"\s*(\d+)\s*[xX]\s*(\d+)\s*"     # [view] size: WxH
 
 
 class TerrainSection(msgspec.Struct, forbid_unknown_fields=True):
@@ -95,6 +96,11 @@ class ViewSection(msgspec.Struct, forbid_unknown_fields=True):
     size: str | None = None
     fov: float | None = None
     target_fps: float | None = None
+
+    def size_px(self) -> tuple[int, int] | None:
+        """``size`` as ``(width, height)`` pixels, or None when the file gives none."""
+        m = None if self.size is None else re.fullmatch(_SIZE, self.size)
+        return None if m is None else (int(m.group(1)), int(m.group(2)))
 
 
 class SceneFile(msgspec.Struct, forbid_unknown_fields=True):
@@ -263,7 +269,7 @@ class _Checker:
         if v.path.strip().lower().endswith(".json"):
             v.path = self.file(v.path, "view.path")
         if v.size is not None:
-            m = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", v.size)
+            m = re.fullmatch(_SIZE, v.size)
             if m is None or not all(16 <= int(g) <= 8192 for g in m.groups()):
                 self.fail("view.size", "expected WxH, each 16..8192 pixels")
         if v.fov is not None and not 1.0 <= v.fov <= 170.0:

@@ -10,7 +10,7 @@ opens; with no display the error is :class:`~lodsprite.viewer.window.NoDisplayEr
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from lodsprite import techniques
@@ -19,6 +19,9 @@ from lodsprite.scene import Scene, open_scene
 from lodsprite.techniques import TechniqueFactory
 from lodsprite.viewer.core import PlayPlan
 from lodsprite.viewer.window import WindowOptions, check_display, run_viewer
+
+#: The window size when neither ``--size`` nor a scene file's ``[view]`` gives one.
+WINDOW = (1024, 768)
 
 
 @dataclass(frozen=True)
@@ -33,7 +36,7 @@ class ViewOptions:
     # terrain's default (lodsprite.techniques.defaults; a store's LOD-sprite variant)
     lod: int | None = None
     epsilon: float = 1.0
-    size: tuple[int, int] = (1024, 768)
+    size: tuple[int, int] | None = None  # None: a scene file's [view] size, else WINDOW
     fps: float = 60.0
     threaded: bool = True
     play: str | None = None
@@ -61,8 +64,6 @@ class ViewOptions:
         (:func:`lodsprite.techniques.defaults.fill_defaults`); values given are kept.
         A store's ``key_sse`` default makes ``sprite`` (and no ``--mode``) mean
         ``sprite-adaptive``: on a store, LOD-sprite's keyframes are adaptive."""
-        from dataclasses import replace
-
         from lodsprite.techniques.defaults import DEFAULTED, fill_defaults, terrain_defaults
 
         given = {k: getattr(self, k) for k in DEFAULTED}
@@ -81,7 +82,8 @@ class ViewOptions:
                 "key_sse": self.key_sse, "shading": self.shading, "tiles": self.tiles,
                 "tile_budget_ms": self.tile_budget_ms, "cache_mb": self.cache_mb,
                 "cache_policy": self.cache_policy, "metric": self.metric,
-                "proxy_sse": self.proxy_sse}
+                "proxy_sse": self.proxy_sse,
+                "schedule": "none" if self.target_fps is None else "scheduler"}  # scene
 
     def validate(self) -> None:
         if self.target_fps is not None and not self.target_fps > 0:
@@ -98,7 +100,7 @@ class ViewOptions:
             raise InputError(f"unknown shading '{self.shading}': use auto, texture or heights")
         if not (self.fps >= 0):
             raise InputError(f"--fps must be >= 0 (0: no cap), got {self.fps}")
-        w, h = self.size
+        w, h = self.size or WINDOW
         if not (64 <= w <= 8192 and 64 <= h <= 8192):
             raise InputError(f"window size must be between 64 and 8192 pixels, got {w}x{h}")
         if self.play is None and (self.exit or self.out is not None or self.frames is not None):
@@ -123,6 +125,7 @@ def view(o: ViewOptions) -> dict:
     o.validate()
     # a store's grid from a coarse level: its default modes draw the store itself
     scene = open_scene(o.terrain, o.texture, o.grid, light=True, target_fps=o.target_fps)
+    o, view_fov = with_scene_view(o, scene)
     if o.server and "terrain" not in scene.layers:
         raise InputError("--server goes with a terrain")
     if o.target_fps is not None and "objects" not in scene.layers:
@@ -133,12 +136,25 @@ def view(o: ViewOptions) -> dict:
         raise InputError(f"unknown mode '{mode}': use one of {', '.join(modes)}")
     check_display()
     home = scene.camera_home()
-    plan, fov = None, home.fov_y_deg or o.fov_y_deg
+    plan, fov = None, view_fov or home.fov_y_deg or o.fov_y_deg
     if o.play is not None:
         path = scene.path(o.play, o.frames)
+        if view_fov is not None:
+            path = replace(path, fov_y_deg=view_fov)
         plan, fov = PlayPlan(path, o.out, o.screenshots, o.every, o.exit), path.fov_y_deg
     return run_viewer(scene, modes, mode, WindowOptions(o.size, fps=o.fps), plan, o.record,
                       fov, o.screenshots or Path("screenshots"))
+
+
+def with_scene_view(o: ViewOptions, scene: Scene) -> tuple[ViewOptions, float | None]:
+    """``o`` with a scene file's ``[view]`` size and ``target_fps`` where the command gave
+    none (the window :data:`WINDOW` when neither does), and its ``fov`` (degrees, None
+    when it gives none or ``scene`` is no scene file's), which replaces the path's."""
+    v = getattr(scene.objects, "view", None)
+    if v is None or not hasattr(v, "size_px"):
+        return replace(o, size=o.size or WINDOW), None
+    target = o.target_fps if o.target_fps is not None else v.target_fps
+    return replace(o, size=o.size or v.size_px() or WINDOW, target_fps=target), v.fov
 
 
 def view_scene(scene, techniques: dict[str, TechniqueFactory], mode: str | None = None,
