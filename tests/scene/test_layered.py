@@ -174,6 +174,38 @@ def test_the_replay_draws_the_timed_frames(gl, tmp_path, lf_folder, mode):
             t.release()
 
 
+def test_planned_replays_keep_host_copies_not_a_gpu_target_per_frame(gl, tmp_path, lf_folder,
+                                                                      monkeypatch):
+    # review finding 4: plan_replay made a GPU target per frame per light field up front,
+    # and a second plan never freed the first's
+    import lodsprite.gl.lumigraph as gl_lumigraph
+
+    made = []
+
+    class Counted(gl_lumigraph.FloatTarget):
+        def __init__(self, *args, **kwargs):
+            made.append(args[1:])
+            super().__init__(*args, **kwargs)
+
+    lfs = f'[[lightfields]]\nsource = "{lf_folder}"\nposition = [0.0, -200.0]\nheight_m = 80.0\n'
+    world = world_with(tmp_path, [], lfs)
+    vps = [look_at((x, -470.0, 40.0), (x, 0.0, 40.0)) for x in (0.0, 20.0, 40.0)]
+    with Renderer(world.scene, SIZE, 45.0, ctx=gl.mgl) as r:
+        t = techniques.create("scene", r, world=world, terrain_mode="full")
+        try:
+            monkeypatch.setattr(gl_lumigraph, "FloatTarget", Counted)
+            t.plan_replay(set(range(500)))
+            t.plan_replay({0, 1, 2})
+            assert made == []
+            shown, decisions = run(t, vps)
+            for i in (2, 0, 1):
+                assert np.abs(t.replay(vps[i], decisions[i]).astype(int)
+                              - shown[i]).max() <= 1, i
+            assert len(made) <= len(t.lightfields.items)   # one replay target per item
+        finally:
+            t.release()
+
+
 def test_render_scene_writes_the_layers_columns_and_shares(tmp_path):
     from conftest import run_cli
 

@@ -178,7 +178,7 @@ class LightFieldLayer(Layer):
         self.fbo = renderer.paths.renderer.target.fbo
         self.nodes = float(nodes)
         self.items: list[PlacedLightField] = []
-        self._pool: list = []
+        self._pool: list = []             # per item: its one replay target (or None)
         self._snaps: dict[int, list] = {}
         try:
             for where in world.lightfields:
@@ -233,25 +233,17 @@ class LightFieldLayer(Layer):
                           extra={"lf_images": images, "lf_drawn": int(self._drawn.sum())})
 
     def plan_replay(self, frames: set[int]) -> None:
-        """GPU copies for the reconstructions of ``frames`` (made now, filled after each
-        timed frame by :meth:`decision`)."""
-        from lodsprite.gl.lumigraph import FloatTarget
-
-        for snap in self._pool:
-            snap.release()
+        """Keep the reconstructions of ``frames`` for a replay: each read back to host
+        memory after its timed frame (:meth:`decision`; the small cropped images, raw
+        half floats); the copies of an earlier plan are dropped."""
         self._keep = set(frames)
-        self._pool = [FloatTarget(self.renderer.gl, *item.size)
-                      for _ in range(len(self._keep)) for item in self.items]
+        self._snaps = {}
 
     def decision(self) -> dict[str, Any]:
         i = self._frame
-        if i in self._keep and len(self._pool) >= len(self.items):
-            mgl = self.renderer.gl.mgl
-            snaps = [self._pool.pop() for _ in self.items][::-1]  # made in items order
-            for snap, item in zip(snaps, self.items, strict=True):
-                mgl.copy_framebuffer(snap.fbo, item.method.output.fbo)
-            self.renderer.gl.finish()
-            self._snaps[i] = snaps
+        if i in self._keep:
+            self._snaps[i] = [(item.method.output.size, item.method.output.color.read(
+                alignment=1)) for item in self.items]
         return {"frame": i, "drawn": tuple(bool(d) for d in self._drawn),
                 "rects": tuple(item.rect for item in self.items)}
 
@@ -262,15 +254,30 @@ class LightFieldLayer(Layer):
         snaps = self._snaps.get(decision["frame"])
         if snaps is None:
             raise InputError(f"frame {decision['frame']} was not kept for a replay")
-        for snap, item, shown, rect in zip(snaps, self.items, decision["drawn"],
-                                           decision["rects"], strict=True):
+        for k, ((size, data), item, shown, rect) in enumerate(zip(
+                snaps, self.items, decision["drawn"], decision["rects"], strict=True)):
             if shown:
-                item.composite(projection, viewpoint, snap.color, self.fbo, rect)
+                texture = self._upload(k, size, data)
+                item.composite(projection, viewpoint, texture, self.fbo, rect)
+
+    def _upload(self, k: int, size: tuple[int, int], data: bytes):
+        """Item ``k``'s kept reconstruction in its one replay texture (made once)."""
+        from lodsprite.gl.lumigraph import FloatTarget
+
+        while len(self._pool) <= k:
+            self._pool.append(None)
+        if self._pool[k] is None or self._pool[k].size != tuple(size):
+            if self._pool[k] is not None:
+                self._pool[k].release()
+            self._pool[k] = FloatTarget(self.renderer.gl, *size)
+        self._pool[k].color.write(data, alignment=1)
+        return self._pool[k].color
 
     def release(self) -> None:
-        for snap in [*getattr(self, "_pool", []),
-                     *(s for v in getattr(self, "_snaps", {}).values() for s in v)]:
-            snap.release()
+        for target in getattr(self, "_pool", []):
+            if target is not None:
+                target.release()
+        self._pool, self._snaps = [], {}
         for item in self.items:
             item.release()
         self.items = []
