@@ -206,6 +206,23 @@ def test_planned_replays_keep_host_copies_not_a_gpu_target_per_frame(gl, tmp_pat
             t.release()
 
 
+def test_frames_without_a_planned_replay_log_nothing(gl, tmp_path):
+    # review finding 10: the objects layer appended a list a frame even with no replay
+    world = world_with(tmp_path, [([FRONT], 0.0), ([(60.0, -300.0)], 40.0)])
+    vps = [look_at(EYE, AIM)] * 4
+    with Renderer(world.scene, SIZE, 45.0, ctx=gl.mgl) as r:
+        t = techniques.create("scene", r, world=world, terrain_mode="full")
+        try:
+            run(t, vps)
+            assert t.objects._log == []
+            t.plan_replay({0, 1})
+            shown, decisions = run(t, vps[:2])
+            assert len(t.objects._log) == 2
+            assert np.abs(t.replay(vps[0], decisions[0]).astype(int) - shown[0]).max() <= 1
+        finally:
+            t.release()
+
+
 def test_render_scene_writes_the_layers_columns_and_shares(tmp_path):
     from conftest import run_cli
 

@@ -246,3 +246,19 @@ def test_an_unwritable_mesh_folder_caches_in_the_user_folder(gl, tmp_path, count
     monkeypatch.setenv(pl.CACHE_ENV, str(blocker))      # nowhere to write: used uncached
     t.vertices = t.vertices * np.float32(1.5)
     assert profile(t).path is None and counts["built"] == 2
+
+
+def test_the_profile_memo_keeps_no_type_alive(tmp_path, monkeypatch):
+    # review finding 10: _MEMO held every ObjectType (and its profile) forever
+    import gc
+
+    built = []
+    monkeypatch.setattr(pl, "type_profile", lambda t, model=None: built.append(t.name) or
+                        pl.TypeProfile(None, np.zeros(0), None))
+    before = len(pl._MEMO)
+    t = sphere_type(tmp_path)
+    first = pl.profile_of(t)
+    assert pl.profile_of(t) is first and built == ["ball.obj"]   # memoised while it lives
+    del t
+    gc.collect()
+    assert len(pl._MEMO) == before

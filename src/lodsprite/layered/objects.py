@@ -128,17 +128,22 @@ class ObjectsLayer(Layer):
                              e.fov_y_deg, e.target.size)
 
     def _engine_frame(self, viewpoint: Viewpoint, t: float, projection: np.ndarray,
-                      subset: np.ndarray | None, fbo=None) -> tuple[Any, dict]:
+                      subset: np.ndarray | None, fbo=None, keep: bool = False
+                      ) -> tuple[Any, dict]:
+        """One engine frame; its extraction orders logged only when a replay will come
+        (``recording``) or ``keep`` (the warm-up's): never a list a frame otherwise."""
         self.engine.set_poses(self.world.poses(t))
         f = self.engine.frame(viewpoint, projection=projection, subset=subset, fbo=fbo)
-        self._log.append(list(self.engine.last_orders) if self.recording else [])
+        if self.recording or keep:
+            self._log.append(list(self.engine.last_orders))
         return f, {"entry": len(self._log) - 1, "using": self.engine.last_using.copy(),
                    "t": t}
 
     def warm_up(self, viewpoint: Viewpoint, projection: np.ndarray) -> None:
         """Untimed: the first LODs extracted (kept as the replay's starting state)."""
-        self._engine_frame(viewpoint, 0.0, projection, np.zeros(len(self.crowd), bool))
-        self._warm, self._log = self._log[0], []
+        self._engine_frame(viewpoint, 0.0, projection, np.zeros(len(self.crowd), bool),
+                           keep=True)
+        self._warm, self._log = self._log[-1], []
 
     def draw(self, viewpoint: Viewpoint, t: float, projection: np.ndarray) -> LayerFrame:
         f, self._last = self._engine_frame(viewpoint, t, projection, self.subset)

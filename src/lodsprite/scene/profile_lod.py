@@ -35,6 +35,7 @@ import hashlib
 import json
 import os
 import sys
+import weakref
 import zipfile
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -258,17 +259,26 @@ def type_profile(t: ObjectType, model: Any = None, settings: ProfileSettings = S
 
 # --- run time: Eq. 17 per instance, in the manager's factors --------------------------------
 
-_MEMO: dict[int, tuple[Any, TypeProfile]] = {}
+#: Each live type's profile by ``id``: the type held weakly, its entry gone with it.
+_MEMO: dict[int, tuple[weakref.ref, TypeProfile]] = {}
 
 
 def profile_of(t: ObjectType | TypeProfile, model: Any = None) -> TypeProfile:
-    """A :class:`TypeProfile` as is, or the type's (built or read once per process)."""
+    """A :class:`TypeProfile` as is, or the type's (built or read once per process while
+    the type lives; the memo keeps no type alive)."""
     if isinstance(t, TypeProfile):
         return t
     held = _MEMO.get(id(t))
-    if held is None or held[0] is not t:
-        held = _MEMO[id(t)] = (t, type_profile(t, model))
+    if held is None or held[0]() is not t:
+        held = _MEMO[id(t)] = (weakref.ref(t), type_profile(t, model))
+        weakref.finalize(t, _forget, id(t), held[0])
     return held[1]
+
+
+def _forget(key: int, ref: weakref.ref) -> None:
+    """Drop ``_MEMO[key]`` if it is still the entry of the type ``ref`` held."""
+    if key in _MEMO and _MEMO[key][0] is ref:
+        del _MEMO[key]
 
 
 def instance_models(positions: np.ndarray) -> np.ndarray:
