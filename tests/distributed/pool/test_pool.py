@@ -311,3 +311,39 @@ def test_local_workers_exit_when_their_broker_process_is_killed(tmp_path) -> Non
         parent.kill()
         if not gone(pid):
             os.kill(pid, signal.SIGKILL)
+
+
+def test_a_reconnecting_worker_forgets_the_jobs_of_its_last_connection() -> None:
+    """Jobs queued for the render thread when a connection ended went back to the
+    broker's queue: a new connection starts with none of them."""
+    import threading
+
+    from lodsprite.distributed.datasets import Datasets
+    from lodsprite.distributed.pool.jobs import Disconnect
+    from lodsprite.distributed.pool.worker import Worker, _Renderer
+
+    zctx = zmq.Context()
+    router = zctx.socket(zmq.ROUTER)
+    router.setsockopt(zmq.LINGER, 0)
+    router.bind("inproc://test-broker")
+    pipe = zctx.socket(zmq.PAIR)
+    pipe.setsockopt(zmq.LINGER, 0)
+    pipe.bind("inproc://test-render")
+    renderer = _Renderer(zctx, "inproc://test-render", Datasets(None), 1)  # not started
+    renderer.jobs.put("left over from the last connection")
+    worker = Worker("inproc://test-broker")
+    session = threading.Thread(target=worker._session, args=(zctx, pipe, renderer))
+    session.start()
+    try:
+        assert router.poll(5000), "the worker never said ready"
+        peer = router.recv_multipart()[0]
+        router.send_multipart([peer, *encode_pool(Disconnect(POOL_VERSION, "test"))])
+        session.join(timeout=5.0)
+        assert not session.is_alive() and renderer.jobs.empty()
+    finally:
+        worker.stop()
+        session.join(timeout=5.0)
+        renderer.out.close(linger=0)
+        for sock in (router, pipe):
+            sock.close(linger=0)
+        zctx.term()
