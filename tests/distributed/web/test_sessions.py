@@ -271,7 +271,7 @@ def test_a_result_of_an_old_load_is_dropped(monkeypatch):
 
     hub, s = asyncio.run(run())
     assert s.load.terrain == "fractal:64:2" and not s._keyframes and not hub.jobs
-    assert s.counts["keyframes_sent"] == 0
+    assert s.counts["keyframes_sent"] == 0 and s.counts["stale"] == 1
 
 
 def test_a_stale_pending_is_dropped_even_if_its_job_is_still_known():

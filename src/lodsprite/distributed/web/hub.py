@@ -15,9 +15,9 @@ render pool.
   slow, and fails it after ``MAX_TRIES`` workers); the hub forgets a job (counted
   ``failed``) only after all those tries and :data:`JOB_GRACE_S` more, as a backstop
   against a pool that never answers, so it never resubmits while a worker still renders.
-* Generations: each applied ``load`` starts a new generation of its session; the jobs of
-  the older one are forgotten and a result that still comes for one is dropped (counted
-  ``stale``), so a page never gets a keyframe of the terrain it left.
+* Generations: each applied ``load`` starts a new generation of its session; its requests
+  of the older one are forgotten and a result that still comes for one is dropped
+  (counted ``stale``), so a page never gets a keyframe of the terrain it left.
 * ``path``: one in flight per session (another is refused), built under the same
   semaphore as scenes, from the height field cached with the session's scene.
 * Jobs carry the page's names (validated here); a worker resolves them by its own
@@ -175,13 +175,12 @@ class Hub:
 
     def _apply(self, session: Session, named: LoadArgs, resolved: LoadArgs, gen: int) -> None:
         """Make ``resolved`` the session's scene (generation ``gen``): its waiting and
-        in-flight requests, all of the old scene, are forgotten."""
+        in-flight requests, all of the old scene, are forgotten by the session (a worker
+        still rendering one stays busy in :attr:`jobs`; its result is dropped)."""
         session.load = resolved
         session.named = named  # jobs carry the names: each worker resolves them by its --data
         session.generation = gen
         session.pending.clear()
-        for job in session.inflight:
-            self.jobs.pop(job, None)
         session.inflight.clear()
 
     def path(self, session: Session, args: PathArgs, seq: int) -> None:
