@@ -112,7 +112,7 @@ def test_full_queues_drop_the_oldest():
     for i in range(5):
         s.push_keyframe([b"%d" % i], Pending(i, 0.0, None, 0.0))
     assert s.counts["keyframes_dropped"] == 3
-    assert [bytes(unpack(d)[0]) for d, _ in s._keyframes] == [b"3", b"4"]
+    assert [bytes(parts[0]) for parts, _ in s._keyframes] == [b"3", b"4"]
     for i in range(MAX_REPLIES + 3):
         s.reply(i, True)
     assert s.counts["replies_dropped"] == 3 and replies(s)[0].seq == 3

@@ -42,7 +42,7 @@ from lodsprite.distributed.protocol import (
     viewpoint_from_wire,
 )
 from lodsprite.distributed.web.security import RateLimit
-from lodsprite.distributed.web.wire import decode_web, pack, pack_message
+from lodsprite.distributed.web.wire import MAX_PARTS, decode_web, pack, pack_message
 
 if TYPE_CHECKING:
     from lodsprite.distributed.protocol import LoadArgs, WireViewpoint
@@ -105,7 +105,7 @@ class Session:
         self.closed = False
         self._rate = RateLimit(self.caps.rate, clock)
         self._replies: deque[bytes | list] = deque()  # a list: a scene's parts
-        self._keyframes: deque[tuple[bytes, float]] = deque()
+        self._keyframes: deque[tuple[list, float]] = deque()  # parts, arrived
         self._wake = asyncio.Event()
         self._said: set[str] = set()
 
@@ -206,12 +206,15 @@ class Session:
         self.push_reply(parts)
 
     def push_keyframe(self, parts: list, pending: Pending) -> None:
-        """Queue a keyframe (its message parts) answering ``pending``; when the queue is
-        full the oldest queued keyframe is dropped."""
+        """Queue a keyframe (its message parts, kept: joined when sent) answering
+        ``pending``; when the queue is full the oldest queued keyframe is dropped.  Raises
+        :class:`ProtocolError` for more parts than a web message has."""
+        if not 1 <= len(parts) <= MAX_PARTS:
+            raise ProtocolError(f"{len(parts)} parts: a web message has 1..{MAX_PARTS}")
         if len(self._keyframes) >= self.caps.queue:
             self._keyframes.popleft()
             self.counts["keyframes_dropped"] += 1
-        self._keyframes.append((pack(parts), pending.arrived))
+        self._keyframes.append((parts, pending.arrived))
         self._wake.set()
 
     def close(self) -> None:
@@ -227,13 +230,11 @@ class Session:
             self._wake.clear()
             while not self.closed and (self._replies or self._keyframes):
                 if self._replies:
-                    data = self._replies.popleft()
-                    if isinstance(data, list):  # a scene: joined off the event loop
-                        data = await asyncio.to_thread(pack, data)
+                    data = await _joined(self._replies.popleft())
                     await asyncio.wait_for(send(data), SEND_TIMEOUT_S)
                     continue
-                data, arrived = self._keyframes.popleft()
-                await asyncio.wait_for(send(data), SEND_TIMEOUT_S)
+                parts, arrived = self._keyframes.popleft()
+                await asyncio.wait_for(send(await _joined(parts)), SEND_TIMEOUT_S)
                 self.counts["keyframes_sent"] += 1
                 self.latencies.append((self.clock() - arrived) * 1e3)
 
@@ -253,3 +254,8 @@ class Session:
             self._said.add(key)
             log.log(level, fmt, self.id, arg)
 
+
+async def _joined(item: bytes | list) -> bytes:
+    """A queued item as one web message: a scene's or keyframe's parts are joined in a
+    thread (megabytes: never a copy on the event loop), a reply is already bytes."""
+    return await asyncio.to_thread(pack, item) if isinstance(item, list) else item
