@@ -182,3 +182,20 @@ def test_the_hub_waits_for_the_pools_own_job_timeout(monkeypatch):
 
     kept, hub, s = asyncio.run(run())
     assert kept == 1 and not hub.jobs and s.counts["failed"] == 1
+
+
+def test_only_the_newest_built_scene_keeps_its_height_field(monkeypatch):
+    from lodsprite.distributed.datasets import Datasets
+
+    fake_scene(monkeypatch, [])
+
+    async def run():
+        hub = Hub(FakePool(1), Datasets(None))
+        s = hub.open_session("a")
+        for seed in (1, 2, 3):
+            hub.load(s, LoadArgs(terrain=f"fractal:64:{seed}", lod=8), seed)
+            await asyncio.gather(*hub._tasks)
+        return hub
+
+    fields = [hf for _, hf in asyncio.run(run())._scenes.values()]
+    assert fields == [None, None, "hf of fractal:64:3"]  # the scene cache stays 4 deep

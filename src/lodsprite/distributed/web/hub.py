@@ -19,7 +19,8 @@ render pool.
   of the older one are forgotten and a result that still comes for one is dropped
   (counted ``stale``), so a page never gets a keyframe of the terrain it left.
 * ``path``: one in flight per session (another is refused), built under the same
-  semaphore as scenes, from the height field cached with the session's scene.
+  semaphore as scenes, from the height field cached with the session's scene (the
+  newest built scene's only; another's is loaded again).
 * Jobs carry the page's names (validated here); a worker resolves them by its own
   ``--data`` rule (local workers share the server's data folder).
 * Results: the keyframe a renderer encoded (the ZeroMQ ``keyframe`` message) goes to its
@@ -158,6 +159,9 @@ class Hub:
                 self._scenes[key] = cached
                 while len(self._scenes) > SCENES_CACHED:
                     self._scenes.popitem(last=False)
+                for other, (parts, hf) in self._scenes.items():  # one working field kept:
+                    if other != key and hf is not None:  # up to 268 MB at the grid cap
+                        self._scenes[other] = (parts, None)
             self._scenes.move_to_end(key)
         except Exception as exc:  # noqa: BLE001 - any dataset's failure is the page's reply
             if self._generation.get(session.id) == gen:
