@@ -161,7 +161,7 @@ const go = () => get() ? get().%s.then(() => done(true), (e) => done(String(e)))
                        : setTimeout(go, 20);
 go();"""
 SAMPLE_JS = {
-    "sprite": "const l = window.lodsprite; return {k: l.debug().pathIndex - 1, "
+    "sprite": "const l = window.lodsprite; return {k: l.pathIndex() - 1, "
               "p: l.pixels(), flip: true};",
     "stream": "return window.stream.sample();",
 }

@@ -14,7 +14,6 @@ from zmq.utils.monitor import recv_monitor_message
 from conftest import wait_until
 from lodsprite.camera import Viewpoint, look_at
 from lodsprite.distributed import producer as producer_module
-from lodsprite.distributed import server as server_module
 from lodsprite.distributed.datasets import MAX_FRACTAL_SIZE, Datasets
 from lodsprite.distributed.protocol import decode, decode_keyframe, encode
 from lodsprite.distributed.run import free_ports
@@ -218,7 +217,9 @@ def test_a_load_naming_a_path_is_refused_with_ok_false(data_dir):
 # ------------------------------------------------------------------------ memory, limits
 
 def test_a_scene_the_machine_cannot_hold_is_refused_before_loading(server, monkeypatch):
-    monkeypatch.setattr(server_module, "memory_available", lambda: 200 * 2**20)
+    from lodsprite.distributed import render  # the one memory check (server, hub, worker)
+
+    monkeypatch.setattr(render, "memory_available", lambda: 200 * 2**20)
     reply = control(server, "load", {**SMALL, "terrain": "fractal:4096:1", "grid": 4096})
     assert reply["ok"] is False and "MiB" in reply["error"]
     assert server._producer.pending is None and server._producer.state == "idle"

@@ -16,6 +16,8 @@ PROTOCOL_VERSION = 4
 """4: the web wire's ``request`` and ``scene`` kinds (:mod:`lodsprite.distributed.web`)."""
 KINDS = ("control", "reply", "viewpoint", "keyframe", "ack", "request", "scene")
 CONTROL_OPS = ("start", "stop", "load", "stats", "shutdown", "ping", "release", "path")
+LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "::1", "[::1]")
+"""Host names that mean this machine (binds that need no token, keys or --allow-remote)."""
 CODECS = ("raw", "zlib")
 ZBUFFERS = ("full", "coarse")
 VISIBILITY = ("triangle", "fragment", "coarse")  # lodsprite.gl.sprite.VISIBILITY_MODES

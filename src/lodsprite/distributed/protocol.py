@@ -67,6 +67,7 @@ from lodsprite.distributed.messages import (
     CODECS,
     CONTROL_OPS,
     KINDS,
+    LOOPBACK_HOSTS,
     MAX_ACK_BYTES,
     MAX_CONTROL_BYTES,
     MAX_COORD,
@@ -348,7 +349,8 @@ def decode_keyframe(frames: list) -> Keyframe:
 
 
 __all__ = ["ANY_MESSAGE", "Ack", "BUFFERS", "CODECS", "CONTROL_OPS", "ClientId", "Control",
-           "Coord", "ImageSpec", "KINDS", "Keyframe", "KeyframeMessage", "LoadArgs",
+           "Coord", "ImageSpec", "KINDS", "Keyframe", "KeyframeMessage", "LOOPBACK_HOSTS",
+           "LoadArgs",
            "MAX_ACK_BYTES", "MAX_CONTROL_BYTES", "MAX_COORD", "MAX_GRID", "MAX_IMAGE_SIDE",
            "MAX_KEYFRAME_FRAME_BYTES", "MAX_NAME", "MAX_REPLY_BYTES", "MAX_REQUEST_BYTES",
            "MAX_SCENE_BYTES", "MAX_SCENE_COARSE", "MAX_SLOTS", "MAX_TIME", "MAX_VIEWPOINT_BYTES",

@@ -18,8 +18,11 @@ from lodsprite.gl.target import RenderTarget
 from lodsprite.scene import load_scene
 from lodsprite.terrain.heightfield import DEFAULT_GRID
 
-__all__ = ["KeyframeRenderer", "check_load_args", "estimate_scene_bytes", "memory_available",
-           "scene_args"]
+__all__ = ["MEMORY_FRACTION", "KeyframeRenderer", "check_load_args", "check_scene_memory",
+           "estimate_scene_bytes", "memory_available", "scene_args"]
+
+MEMORY_FRACTION = 0.8
+"""Share of the available memory a scene may take (its estimate)."""
 
 SCENE_KEYS = ("terrain", "texture", "grid", "exaggeration", "size", "fov_y_deg")
 SPRITE_KEYS = ("lod", "visibility", "border", "epsilon", "pace")
@@ -72,6 +75,20 @@ def memory_available() -> int | None:
                     return int(line.split()[1]) * 1024
     except (OSError, ValueError, IndexError):
         return None
+    return None
+
+
+def check_scene_memory(args: LoadArgs, source: tuple[int, int] | None,
+                       texture: tuple[int, int] | None, held: int = 0,
+                       who: str = "this machine") -> str | None:
+    """Why ``who`` cannot hold the scene of ``args`` (source and texture shapes as
+    :func:`estimate_scene_bytes` takes), or None; ``held``: bytes of a scene that goes
+    first (counted as available).  The one memory check of server, web hub and worker."""
+    need = estimate_scene_bytes(args, source, texture)
+    available = memory_available()
+    if available is not None and need > MEMORY_FRACTION * (available + held):
+        return (f"the scene needs about {need / 2**20:.0f} MiB, {who} has "
+                f"{(available + held) / 2**20:.0f} MiB available")
     return None
 
 

@@ -75,6 +75,7 @@ from lodsprite.distributed.keys import ServerKeys
 from lodsprite.distributed.producer import STATES, KeyframeProducer
 from lodsprite.distributed.protocol import (
     CODECS,
+    LOOPBACK_HOSTS,
     MAX_ACK_BYTES,
     MAX_CONTROL_BYTES,
     MAX_VIEWPOINT_BYTES,
@@ -86,7 +87,12 @@ from lodsprite.distributed.protocol import (
     encode,
 )
 from lodsprite.distributed.queue import KeyframeQueue
-from lodsprite.distributed.render import estimate_scene_bytes, memory_available, working_grid
+from lodsprite.distributed.render import (
+    MEMORY_FRACTION,
+    check_scene_memory,
+    estimate_scene_bytes,
+    working_grid,
+)
 from lodsprite.distributed.server_stats import MAX_SAMPLES, ServerStats, Tally
 from lodsprite.distributed.transmitter import ACK_TIMEOUT_S, KeyframeTransmitter
 from lodsprite.distributed.viewpoints import MAX_ELAPSED_S, MIN_SAMPLE_SPACING_S, ViewpointReceiver
@@ -100,9 +106,6 @@ __all__ = ["ACK_TIMEOUT_S", "DEFAULT_BIND", "LEASE_S", "LOOPBACK_HOSTS", "MAX_EL
 log = logging.getLogger("lodsprite.server")
 
 DEFAULT_BIND = "127.0.0.1:5555"
-LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "::1", "[::1]")
-MEMORY_FRACTION = 0.8
-"""Share of the available memory a scene may take (its estimate)."""
 CONTROL_FRAMES = 1
 """Frames of a control message (a header); the server keeps no more of one."""
 
@@ -339,7 +342,7 @@ class LodServer:
         if args.lod > grid:
             return f"load: lod {args.lod} exceeds the working grid {grid}"
         need = estimate_scene_bytes(args, terrain.shape, texture.shape)
-        error = self._too_big(args, grid, texture.shape, need)
+        error = self._too_big(args, grid, terrain.shape, texture.shape)
         if error is not None:
             return error
         resolved = msgspec.structs.replace(args, terrain=terrain.spec, texture=texture.spec)
@@ -349,10 +352,10 @@ class LodServer:
         self._loaded = True
         return None
 
-    def _too_big(self, args: LoadArgs, grid: int, texture_shape: tuple,
-                 need: int) -> str | None:
-        """Why this machine cannot hold the scene (working grid ``grid``, about ``need``
-        bytes), or None: sides against the GL maximum texture size, memory."""
+    def _too_big(self, args: LoadArgs, grid: int, source: tuple | None,
+                 texture_shape: tuple | None) -> str | None:
+        """Why this machine cannot hold the scene (working grid ``grid``, source and
+        texture shapes), or None: sides against the GL maximum texture size, memory."""
         max_tex = self._producer.max_texture
         if max_tex is not None:
             sides = {"working grid": grid + 1, "keyframe": max(args.size),
@@ -361,10 +364,6 @@ class LodServer:
                 if side > max_tex:
                     return (f"load: {what} side {side} exceeds this GL driver's maximum "
                             f"texture size {max_tex}")
-        available = memory_available()
-        if available is not None:
-            available += self._producer.scene_bytes  # the current scene goes first
-            if need > MEMORY_FRACTION * available:
-                return (f"load: the scene needs about {need / 2**20:.0f} MiB, this machine "
-                        f"has {available / 2**20:.0f} MiB available")
-        return None
+        # the current scene goes first: its memory counts as available
+        reason = check_scene_memory(args, source, texture_shape, self._producer.scene_bytes)
+        return None if reason is None else f"load: {reason}"

@@ -2,7 +2,6 @@
 viewpoints, so the page plays the Python side's path) and the scene's ``relief`` (the
 page's error estimate): what they answer, and what they refuse."""
 
-import asyncio
 
 import msgspec
 import numpy as np
@@ -15,7 +14,7 @@ from lodsprite.distributed.protocol import (
     decode_message,
     encode,
 )
-from lodsprite.distributed.web.scene import path_data, relief, send_path
+from lodsprite.distributed.web.scene import path_data, relief
 from lodsprite.distributed.web.sessions import Session
 from lodsprite.distributed.web.wire import pack_message, unpack
 
@@ -73,7 +72,9 @@ def test_a_session_hands_path_to_the_hub_and_refuses_it_before_a_load():
     s.handle(pack_message({"kind": "control", "seq": 5, "op": "path",
                            "args": {"spec": "chen1999", "frames": 9}}))
     assert hub.paths == [(PathArgs("chen1999", 9), 5)] and s.counts["internal"] == 0
-    asyncio.run(send_path(s, PathArgs(), 6))  # no load yet: refused, not raised
+    from lodsprite.distributed.web.hub import Hub as RealHub
+
+    RealHub(None, None).path(s, PathArgs(), 6)  # no load yet: refused, not raised
     reply = msgspec.msgpack.decode(unpack(s._replies[-1])[0])
     assert reply["seq"] == 6 and reply["ok"] is False and "load" in reply["error"]
 

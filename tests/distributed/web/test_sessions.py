@@ -40,7 +40,8 @@ class FakeHub:
 
 
 def replies(session: Session) -> list:
-    return [decode_message(unpack(d, 2**30))[0] for d in session._replies]
+    return [decode_message(unpack(d, 2**30))[0] for d in session._replies
+            if not isinstance(d, list)]  # a list: a queued scene's parts
 
 
 def test_wire_round_trip_and_caps():
@@ -111,7 +112,7 @@ def test_full_queues_drop_the_oldest():
     for i in range(5):
         s.push_keyframe([b"%d" % i], Pending(i, 0.0, None, 0.0))
     assert s.counts["keyframes_dropped"] == 3
-    assert [bytes(unpack(d)[0]) for d, _ in s._keyframes] == [b"3", b"4"]
+    assert [bytes(parts[0]) for parts, _ in s._keyframes] == [b"3", b"4"]
     for i in range(MAX_REPLIES + 3):
         s.reply(i, True)
     assert s.counts["replies_dropped"] == 3 and replies(s)[0].seq == 3
@@ -130,6 +131,17 @@ class FakePool:
     def poll(self):
         out, self.results = self.results, []
         return out
+
+
+def scheduled(pool) -> tuple[Hub, Session]:
+    """A hub over ``pool`` and a loaded session whose one request was scheduled (call
+    inside a running loop)."""
+    hub = Hub(pool, datasets=None)
+    s = hub.open_session("a")
+    s.load = s.named = LoadArgs()
+    s.pending.append(Pending(5, 0.0, VP, 0.0))
+    hub.schedule()
+    return hub, s
 
 
 def test_round_robin_serves_a_greedy_session_no_more_than_a_modest_one():
@@ -193,12 +205,7 @@ def test_a_job_the_pool_refuses_is_answered_and_frees_its_place():
             raise InputError("bad job")
 
     async def run():
-        hub = Hub(Refusing(1), datasets=None)
-        s = hub.open_session("a")
-        s.load = s.named = LoadArgs()
-        s.pending.append(Pending(5, 0.0, VP, 0.0))
-        hub.schedule()
-        return hub, s
+        return scheduled(Refusing(1))
 
     hub, s = asyncio.run(run())
     assert not hub.jobs and not s.inflight and s.counts["failed"] == 1
@@ -210,9 +217,9 @@ def test_loads_superseded_while_waiting_build_nothing(monkeypatch):
     from lodsprite.distributed.web import hub as hub_module
 
     built = []
-    monkeypatch.setattr(hub_module, "build_scene",
-                        lambda args, codec: built.append(args.terrain) or encode(
-                            {"kind": "reply", "seq": 0, "ok": True}))
+    monkeypatch.setattr(hub_module, "build_scene_field",
+                        lambda args, codec: built.append(args.terrain) or (encode(
+                            {"kind": "reply", "seq": 0, "ok": True}), None))
 
     async def run():
         hub = Hub(FakePool(1), Datasets(None))

@@ -282,3 +282,25 @@ def test_the_zeromq_client_s_server_runs_beside_it(server):
         assert kf.color.shape == (64, 64, 3)
     finally:
         ctx.destroy(linger=0)
+
+
+def test_the_web_benchmark_calls_only_what_the_page_exposes():
+    """benchmarks/web_vs_streaming.py drives the page through window.lodsprite: every
+    member its scripts use must be one of the page's api (a page change broke it once)."""
+    import importlib.util
+    import re
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[3]
+    spec = importlib.util.spec_from_file_location(
+        "web_vs_streaming", root / "benchmarks" / "web_vs_streaming.py")
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    main = (root / "src/lodsprite/distributed/web/static/main.js").read_text()
+    api = main[main.index("const api = {"):main.index("window.lodsprite = api")]
+    exposed = set(re.findall(r"^\s+(\w+)(?:\(|:|,$)", api, re.M))  # name(), name: or name,
+    exposed |= set(re.findall(r"^api\.(\w+) =", api, re.M))
+    used = set(re.findall(r"\bl\.(\w+)", bench.SAMPLE_JS["sprite"]))
+    used |= set(re.findall(r"get\(\)\.(\w+)", bench.WAIT_JS)) - {"%s"}
+    used |= {"ready", "finished", "stats"}  # WAIT_JS's % arguments and play()'s stats()
+    assert used and used <= exposed, used - exposed

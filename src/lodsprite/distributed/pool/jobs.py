@@ -33,6 +33,7 @@ from msgspec import Meta, Struct, field
 
 from lodsprite.distributed.messages import (
     CODECS,
+    LOOPBACK_HOSTS,
     MAX_KEYFRAME_FRAME_BYTES,
     LoadArgs,
     ProtocolError,
@@ -185,7 +186,6 @@ _job_decoder = msgspec.msgpack.Decoder(Job)
 _job_encoder = msgspec.msgpack.Encoder()
 
 
-LOOPBACK = ("127.0.0.1", "localhost", "::1", "[::1]")
 
 
 def check_bind(bind: str, protected: bool) -> None:
@@ -194,7 +194,7 @@ def check_bind(bind: str, protected: bool) -> None:
     if not bind.startswith("tcp://"):
         raise InputError(f"workers bind must be tcp://HOST:PORT, got {bind!r}")
     host = bind[len("tcp://"):].rpartition(":")[0]
-    if host not in LOOPBACK and not protected:
+    if host not in LOOPBACK_HOSTS and not protected:
         raise InputError(f"binding {bind} lets any host join as a render worker: give "
                          "CURVE keys (--keys) or allow it explicitly")
 

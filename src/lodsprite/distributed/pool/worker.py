@@ -57,7 +57,6 @@ __all__ = ["BACKOFF_MAX_S", "Worker", "end_processes", "resolve_load", "run_loca
            "spawn_workers"]
 
 BACKOFF_MAX_S = 4.0
-MEMORY_FRACTION = 0.8  # as the LOD server: a scene may take this share of MemAvailable
 
 
 def resolve_load(load: LoadArgs, datasets: Datasets) -> LoadArgs:
@@ -65,7 +64,7 @@ def resolve_load(load: LoadArgs, datasets: Datasets) -> LoadArgs:
     raises :class:`~lodsprite.errors.InputError` for a name it refuses or a scene this
     machine cannot hold.  An absolute path inside the data folder is taken as the name
     relative to it (and checked again, symlinks included)."""
-    from lodsprite.distributed.render import estimate_scene_bytes, memory_available
+    from lodsprite.distributed.render import check_scene_memory
     from lodsprite.errors import InputError
 
     def local(name: str) -> str:
@@ -77,11 +76,9 @@ def resolve_load(load: LoadArgs, datasets: Datasets) -> LoadArgs:
     terrain = datasets.terrain(local(load.terrain))
     texture = datasets.texture(local(load.texture))
     resolved = msgspec.structs.replace(load, terrain=terrain.spec, texture=texture.spec)
-    need = estimate_scene_bytes(resolved, terrain.shape, texture.shape)
-    available = memory_available()
-    if available is not None and need > MEMORY_FRACTION * available:
-        raise InputError(f"the scene needs about {need / 2**20:.0f} MiB, this worker has "
-                         f"{available / 2**20:.0f} MiB available")
+    reason = check_scene_memory(resolved, terrain.shape, texture.shape, who="this worker")
+    if reason is not None:
+        raise InputError(reason)
     return resolved
 
 
@@ -99,6 +96,16 @@ class _Renderer(threading.Thread):
         self.cache = cache
         self.scenes: OrderedDict[bytes, object] = OrderedDict()
         self.gl = None
+
+    def drop_jobs(self) -> int:
+        """Forget the jobs not yet started (a reconnect or a stop); how many."""
+        n = 0
+        while True:
+            try:
+                self.jobs.get_nowait()
+            except queue.Empty:
+                return n
+            n += 1
 
     def run(self) -> None:
         try:
@@ -186,10 +193,12 @@ class Worker:
                 backoff = HEARTBEAT_S if heard else min(2 * backoff, BACKOFF_MAX_S)
                 self._stop.wait(backoff)
         finally:
-            renderer.jobs.put(None)
+            renderer.drop_jobs()
+            renderer.jobs.put(None)  # behind nothing: the render thread ends after its job
             renderer.join(timeout=10.0)
             pipe.close(linger=0)
-            zctx.term()
+            if not renderer.is_alive():  # a thread stuck in a render still holds a socket
+                zctx.term()
 
     def _should_stop(self) -> bool:
         if self.parent_pid is not None and os.getppid() != self.parent_pid:
@@ -206,6 +215,7 @@ class Worker:
             self.keys.apply(sock)
         sock.connect(self.connect)
         self.connections += 1
+        renderer.drop_jobs()  # the last connection's jobs went back to the broker's queue
         sock.send_multipart(encode_pool(Ready(POOL_VERSION, os.getpid(), self.name,
                                               self.cache)))
         poller = zmq.Poller()

@@ -10,8 +10,17 @@ render pool.
   another's (jobs carry their session's arguments; renderers cache scenes by them).
 * Scheduling: round robin over the sessions with waiting requests and fewer than
   ``session_jobs`` in flight, one job per live worker at a time, so that a session asking
-  often gets no more renders than one asking when it needs to.  A job not answered in
-  :data:`JOB_TIMEOUT_S` is forgotten (counted ``failed``).
+  often gets no more renders than one asking when it needs to.  The pool owns the job
+  timeout (the broker's ``job_timeout_s``: it re-queues a job whose worker is silent or too
+  slow, and fails it after ``MAX_TRIES`` workers); the hub forgets a job (counted
+  ``failed``) only after all those tries and :data:`JOB_GRACE_S` more, as a backstop
+  against a pool that never answers, so it never resubmits while a worker still renders.
+* Generations: each applied ``load`` starts a new generation of its session; its requests
+  of the older one are forgotten and a result that still comes for one is dropped
+  (counted ``stale``), so a page never gets a keyframe of the terrain it left.
+* ``path``: one in flight per session (another is refused), built under the same
+  semaphore as scenes, from the height field cached with the session's scene (the
+  newest built scene's only; another's is loaded again).
 * Jobs carry the page's names (validated here); a worker resolves them by its own
   ``--data`` rule (local workers share the server's data folder).
 * Results: the keyframe a renderer encoded (the ZeroMQ ``keyframe`` message) goes to its
@@ -32,6 +41,7 @@ import msgspec
 
 from lodsprite.distributed.datasets import Datasets
 from lodsprite.distributed.pool import Job
+from lodsprite.distributed.pool.broker import JOB_TIMEOUT_S, MAX_TRIES
 from lodsprite.distributed.protocol import (
     MAX_SCENE_COARSE,
     KeyframeMessage,
@@ -41,18 +51,18 @@ from lodsprite.distributed.protocol import (
     decode_message,
     encode,
 )
-from lodsprite.distributed.render import estimate_scene_bytes, memory_available, working_grid
-from lodsprite.distributed.server import MEMORY_FRACTION
-from lodsprite.distributed.web.scene import build_scene, scene_key, send_path
+from lodsprite.distributed.render import working_grid
+from lodsprite.distributed.server import check_scene_memory
+from lodsprite.distributed.web.scene import build_scene_field, path_data, scene_key
 from lodsprite.distributed.web.sessions import Caps, Pending, Session
-from lodsprite.distributed.web.wire import pack
 from lodsprite.errors import InputError, LodspriteError
 
 log = logging.getLogger("lodsprite.web")
 
-__all__ = ["JOB_TIMEOUT_S", "SCENES_CACHED", "Hub"]
+__all__ = ["JOB_GRACE_S", "SCENES_CACHED", "Hub"]
 
-JOB_TIMEOUT_S = 30.0
+JOB_GRACE_S = 10.0
+"""Seconds past the pool's last try after which the hub forgets a job."""
 SCENES_CACHED = 4
 TICK_S = 0.05
 
@@ -71,11 +81,13 @@ class Hub:
         self.jobs: dict[int, tuple[Session, Pending, float]] = {}
         self._ids = itertools.count(1)
         self._turn = 0
-        self._scenes: OrderedDict[tuple, list] = OrderedDict()
+        self._scenes: OrderedDict[tuple, tuple[list, Any]] = OrderedDict()  # parts, hf
         self._builds = asyncio.Semaphore(1)
         self._generation: dict[str, int] = {}
         self._tasks: set[asyncio.Task] = set()
         self._ticker: asyncio.Task | None = None
+        timeout = getattr(pool, "job_timeout_s", JOB_TIMEOUT_S)  # the broker's: one timeout
+        self.job_timeout_s = timeout * MAX_TRIES + JOB_GRACE_S
 
     # ------------------------------------------------------------------- lifetime
 
@@ -135,18 +147,21 @@ class Hub:
 
     async def _load(self, session: Session, args: LoadArgs, seq: int, gen: int) -> None:
         try:
-            resolved = self._resolve(args)
+            resolved = await asyncio.to_thread(self._resolve, args)  # opens files: not here
             key = scene_key(resolved)
-            parts = self._scenes.get(key)
-            if parts is None:
+            cached = self._scenes.get(key)
+            if cached is None:
                 async with self._builds:  # one scene built at a time
                     if session.closed or self._generation.get(session.id) != gen:
                         return  # superseded while waiting: build nothing for it
-                    parts = self._scenes.get(key) or await asyncio.to_thread(
-                        build_scene, resolved, self.codec)
-                self._scenes[key] = parts
+                    cached = self._scenes.get(key) or await asyncio.to_thread(
+                        build_scene_field, resolved, self.codec)
+                self._scenes[key] = cached
                 while len(self._scenes) > SCENES_CACHED:
                     self._scenes.popitem(last=False)
+                for other, (parts, hf) in self._scenes.items():  # one working field kept:
+                    if other != key and hf is not None:  # up to 268 MB at the grid cap
+                        self._scenes[other] = (parts, None)
             self._scenes.move_to_end(key)
         except Exception as exc:  # noqa: BLE001 - any dataset's failure is the page's reply
             if self._generation.get(session.id) == gen:
@@ -156,18 +171,49 @@ class Hub:
             return
         if session.closed or self._generation.get(session.id) != gen:
             return  # a newer load of this session, or a closed one: this one is moot
-        session.load = resolved
-        session.named = args  # jobs carry the names: each worker resolves them by its --data
-        session.pending.clear()
+        self._apply(session, args, resolved, gen)
+        parts = cached[0]
         header = msgspec.msgpack.decode(parts[0])
-        session.push_reply(pack(encode({**header, "seq": seq}, *parts[1:])))
+        session.push_scene(encode({**header, "seq": seq}, *parts[1:]))  # the cached buffers
         session.reply(seq, True, data={"coarse": resolved.lod, "size": list(resolved.size)})
 
+    def _apply(self, session: Session, named: LoadArgs, resolved: LoadArgs, gen: int) -> None:
+        """Make ``resolved`` the session's scene (generation ``gen``): its waiting and
+        in-flight requests, all of the old scene, are forgotten by the session (a worker
+        still rendering one stays busy in :attr:`jobs`; its result is dropped)."""
+        session.load = resolved
+        session.named = named  # jobs carry the names: each worker resolves them by its --data
+        session.generation = gen
+        session.pending.clear()
+        session.inflight.clear()
+
     def path(self, session: Session, args: PathArgs, seq: int) -> None:
-        """Answer ``path`` for ``session`` (later: :func:`~.scene.send_path`)."""
-        task = asyncio.get_running_loop().create_task(send_path(session, args, seq))
+        """Answer ``path`` for ``session`` (later, from a thread); one at a time."""
+        if session.load is None:
+            session.reply(seq, False, "path: load a scene first")
+            return
+        if session.path_busy:
+            session.reply(seq, False, "path: another path of this session is being computed")
+            return
+        session.path_busy = True
+        task = asyncio.get_running_loop().create_task(self._path(session, args, seq))
         self._tasks.add(task)
         task.add_done_callback(self._tasks.discard)
+
+    async def _path(self, session: Session, args: PathArgs, seq: int) -> None:
+        load = session.load
+        try:
+            async with self._builds:  # server-wide: as scene builds
+                cached = self._scenes.get(scene_key(load))
+                hf = cached[1] if cached is not None else None
+                data = await asyncio.to_thread(path_data, load, args, hf)
+        except (LodspriteError, MemoryError, OSError, ValueError) as exc:
+            session.reply(seq, False, f"path: {exc}")
+            return
+        finally:
+            session.path_busy = False
+        if not session.closed:
+            session.reply(seq, True, data=data)
 
     def _resolve(self, args: LoadArgs) -> LoadArgs:
         """``args`` with the terrain and texture resolved to loader specs; raises
@@ -179,11 +225,9 @@ class Hub:
             raise InputError(f"lod {args.lod} exceeds the working grid {grid}")
         if args.lod > MAX_SCENE_COARSE:
             raise InputError(f"lod {args.lod}: at most {MAX_SCENE_COARSE} for a web page")
-        need = estimate_scene_bytes(args, terrain.shape, texture.shape)
-        available = memory_available()
-        if available is not None and need > MEMORY_FRACTION * available:
-            raise InputError(f"the scene needs about {need / 2**20:.0f} MiB, this machine "
-                             f"has {available / 2**20:.0f} MiB available")
+        reason = check_scene_memory(args, terrain.shape, texture.shape)
+        if reason is not None:
+            raise InputError(reason)
         return msgspec.structs.replace(args, terrain=terrain.spec, texture=texture.spec)
 
     # ------------------------------------------------------------------ scheduling
@@ -214,6 +258,7 @@ class Hub:
             return
         s.inflight[job] = p
         self.jobs[job] = (s, p, time.monotonic())
+        p.generation = s.generation
 
     def drain(self) -> None:
         """Take the pool's results to their sessions; never raises."""
@@ -230,6 +275,9 @@ class Hub:
             s.inflight.pop(r.job, None)
             if s.closed:
                 continue
+            if p.generation != s.generation:
+                s.counts["stale"] += 1  # a keyframe of the scene the page left
+                continue
             if not r.ok:
                 s.counts["failed"] += 1
                 s.reply(p.seq, False, f"render: {r.error}")
@@ -244,7 +292,7 @@ class Hub:
     def _expire(self) -> None:
         now = time.monotonic()
         for job, (s, _, start) in list(self.jobs.items()):
-            if now - start > JOB_TIMEOUT_S or s.closed:
+            if now - start > self.job_timeout_s or s.closed:
                 del self.jobs[job]
                 s.inflight.pop(job, None)
                 s.counts["failed"] += 0 if s.closed else 1

@@ -34,8 +34,8 @@ from lodsprite.distributed.protocol import (
     inflate,
 )
 
-__all__ = ["SceneData", "build_scene", "decode_scene", "path_data", "relief", "scene_key",
-           "send_path"]
+__all__ = ["SceneData", "build_scene", "build_scene_field", "decode_scene", "path_data",
+           "relief", "scene_key"]
 
 SCENE_FIELDS = ("terrain", "texture", "grid", "exaggeration", "lod", "size", "fov_y_deg",
                 "epsilon", "visibility")
@@ -72,6 +72,12 @@ def build_scene(args: LoadArgs, codec: str = "raw") -> list:
     """The parts (header, heights, texture) of the scene message for resolved ``load``
     arguments ``args`` (terrain and texture as loader specs); raises
     :class:`~lodsprite.errors.LodspriteError` when the dataset does not load."""
+    return build_scene_field(args, codec)[0]
+
+
+def build_scene_field(args: LoadArgs, codec: str = "raw") -> tuple[list, Any]:
+    """:func:`build_scene`'s parts and the working height field they came from
+    (:class:`~lodsprite.terrain.HeightField`, kept for :func:`path_data`)."""
     from lodsprite.errors import InputError
     from lodsprite.scene import load_scene
 
@@ -98,7 +104,7 @@ def build_scene(args: LoadArgs, codec: str = "raw") -> list:
               "visibility": "coarse" if args.visibility == "coarse" else "full",
               "heights": h_spec, "texture": t_spec,
               "relief": relief(hf.heights, step)}
-    return encode(header, h_data, t_data)
+    return encode(header, h_data, t_data), hf
 
 
 class SceneData:
@@ -134,34 +140,18 @@ def decode_scene(parts: list) -> SceneData:
     return SceneData(msg, heights, texture)
 
 
-def path_data(load: LoadArgs, args: PathArgs) -> dict:
+def path_data(load: LoadArgs, args: PathArgs, hf: Any = None) -> dict:
     """The reply data of ``path`` for a session whose resolved ``load`` is ``load``
-    (terrain as a loader spec); raises :class:`~lodsprite.errors.LodspriteError` for a
-    path the terrain cannot give."""
+    (terrain as a loader spec), over ``hf`` (its working height field, None: loaded
+    here); raises :class:`~lodsprite.errors.LodspriteError` for a path the terrain
+    cannot give."""
     from lodsprite.paths import get_path
-    from lodsprite.scene import load_scene
 
-    scene = load_scene(load.terrain, load.texture, load.grid, load.exaggeration)
-    path = get_path(args.spec, scene.hf, args.frames)
+    if hf is None:
+        from lodsprite.scene import load_scene
+
+        hf = load_scene(load.terrain, load.texture, load.grid, load.exaggeration).hf
+    path = get_path(args.spec, hf, args.frames)
     rows = np.array([np.concatenate([vp.x, vp.y, vp.z, vp.o]) for vp in path.viewpoints],
                     dtype=np.float64)
     return {"viewpoints": rows.tolist(), "fov": float(path.fov_y_deg)}
-
-
-async def send_path(session: Any, args: PathArgs, seq: int) -> None:
-    """Answer a session's ``path`` request (in a thread: the terrain may take a moment)."""
-    import asyncio
-
-    from lodsprite.errors import LodspriteError
-
-    load = session.load
-    if load is None:
-        session.reply(seq, False, "path: load a scene first")
-        return
-    try:
-        data = await asyncio.to_thread(path_data, load, args)
-    except (LodspriteError, MemoryError, OSError, ValueError) as exc:
-        session.reply(seq, False, f"path: {exc}")
-        return
-    if not session.closed:
-        session.reply(seq, True, data=data)

@@ -24,13 +24,14 @@ import ssl
 import time
 from pathlib import Path
 
+from lodsprite.distributed.messages import LOOPBACK_HOSTS
 from lodsprite.errors import InputError
 
 __all__ = ["DEFAULT_WEB_HOST", "LOOPBACK_NAMES", "RateLimit", "check_host", "check_origin",
            "make_token", "parse_web_address", "tls_context", "token_ok"]
 
 DEFAULT_WEB_HOST = "127.0.0.1"
-LOOPBACK_NAMES = ("127.0.0.1", "localhost", "::1", "[::1]")
+LOOPBACK_NAMES = LOOPBACK_HOSTS
 
 
 def parse_web_address(address: str, allow_remote: bool = False) -> tuple[str, int]:

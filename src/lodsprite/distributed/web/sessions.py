@@ -9,11 +9,14 @@ dataset and sends the ``scene``), ``request`` waits in :attr:`Session.pending` (
 until the hub's round robin hands it to a renderer.
 
 Out: replies and scenes wait in a queue of :data:`MAX_REPLIES` (oldest dropped,
-``replies_dropped``), keyframes in one of ``queue`` keyframes (default 2): when it is
-full the OLDEST queued keyframe is dropped (``keyframes_dropped``), so a page always gets
-the newest.  One writer task per session sends them (:meth:`Session.run_writer`); a page
-that stops reading blocks only its own writer (aiohttp waits for the socket to drain),
-never the event loop or another session; a send that takes over :data:`SEND_TIMEOUT_S`
+``replies_dropped``); at most one scene waits there (a newer one replaces it,
+``scenes_replaced``), queued as the hub's cached parts, not a copy: it is joined into one
+WebSocket message (in a thread) only when its turn to be sent comes.  Keyframes wait in
+one of ``queue`` keyframes (default 2): when it is full the OLDEST queued keyframe is
+dropped (``keyframes_dropped``), so a page always gets the newest.  One writer task per
+session sends them (:meth:`Session.run_writer`); a page that stops reading blocks only its
+own writer (aiohttp waits for the socket to drain), never the event loop or another
+session; a send that takes over :data:`SEND_TIMEOUT_S`
 closes that session.
 """
 
@@ -39,7 +42,7 @@ from lodsprite.distributed.protocol import (
     viewpoint_from_wire,
 )
 from lodsprite.distributed.web.security import RateLimit
-from lodsprite.distributed.web.wire import decode_web, pack, pack_message
+from lodsprite.distributed.web.wire import MAX_PARTS, decode_web, pack, pack_message
 
 if TYPE_CHECKING:
     from lodsprite.distributed.protocol import LoadArgs, WireViewpoint
@@ -54,7 +57,8 @@ SEND_TIMEOUT_S = 20.0
 """A send that waits longer for the page to read closes the session."""
 MAX_LATENCIES = 1000
 COUNTS = ("received", "rejected", "rate_dropped", "requests", "superseded", "keyframes_sent",
-          "keyframes_dropped", "failed", "replies_dropped", "viewpoints", "acks", "internal")
+          "keyframes_dropped", "failed", "replies_dropped", "viewpoints", "acks", "internal",
+          "stale", "scenes_replaced")
 
 
 @dataclass(frozen=True)
@@ -75,6 +79,8 @@ class Pending:
     t: float
     viewpoint: WireViewpoint
     arrived: float
+    generation: int = 0
+    """The session's load generation when it was handed to the pool."""
 
 
 class Session:
@@ -90,14 +96,16 @@ class Session:
         self.clock = clock
         self.load: LoadArgs | None = None  # resolved (loader specs), after a good load
         self.named: LoadArgs | None = None  # the same as the page named it (for workers)
+        self.generation = 0  # of the applied load (the hub's count)
+        self.path_busy = False  # a path is being computed
         self.pending: deque[Pending] = deque()
         self.inflight: dict[int, Pending] = {}
         self.counts = dict.fromkeys(COUNTS, 0)
         self.latencies: deque[float] = deque(maxlen=MAX_LATENCIES)
         self.closed = False
         self._rate = RateLimit(self.caps.rate, clock)
-        self._replies: deque[bytes] = deque()
-        self._keyframes: deque[tuple[bytes, float]] = deque()
+        self._replies: deque[bytes | list] = deque()  # a list: a scene's parts
+        self._keyframes: deque[tuple[list, float]] = deque()  # parts, arrived
         self._wake = asyncio.Event()
         self._said: set[str] = set()
 
@@ -179,21 +187,34 @@ class Session:
         self.push_reply(pack_message({"kind": "reply", "seq": seq, "ok": ok,
                                       "error": error[:4000], "data": data or {}}))
 
-    def push_reply(self, data: bytes) -> None:
-        """Queue a reply or scene message (bounded: the oldest is dropped)."""
+    def push_reply(self, data: bytes | list) -> None:
+        """Queue a reply (or :meth:`push_scene`'s parts; bounded: the oldest is dropped)."""
         if len(self._replies) >= MAX_REPLIES:
             self._replies.popleft()
             self.counts["replies_dropped"] += 1
         self._replies.append(data)
         self._wake.set()
 
+    def push_scene(self, parts: list) -> None:
+        """Queue a scene message's ``parts`` (kept, not copied); an older scene still
+        waiting is dropped."""
+        for i, item in enumerate(self._replies):
+            if isinstance(item, list):
+                del self._replies[i]
+                self.counts["scenes_replaced"] += 1
+                break
+        self.push_reply(parts)
+
     def push_keyframe(self, parts: list, pending: Pending) -> None:
-        """Queue a keyframe (its message parts) answering ``pending``; when the queue is
-        full the oldest queued keyframe is dropped."""
+        """Queue a keyframe (its message parts, kept: joined when sent) answering
+        ``pending``; when the queue is full the oldest queued keyframe is dropped.  Raises
+        :class:`ProtocolError` for more parts than a web message has."""
+        if not 1 <= len(parts) <= MAX_PARTS:
+            raise ProtocolError(f"{len(parts)} parts: a web message has 1..{MAX_PARTS}")
         if len(self._keyframes) >= self.caps.queue:
             self._keyframes.popleft()
             self.counts["keyframes_dropped"] += 1
-        self._keyframes.append((pack(parts), pending.arrived))
+        self._keyframes.append((parts, pending.arrived))
         self._wake.set()
 
     def close(self) -> None:
@@ -209,10 +230,11 @@ class Session:
             self._wake.clear()
             while not self.closed and (self._replies or self._keyframes):
                 if self._replies:
-                    await asyncio.wait_for(send(self._replies.popleft()), SEND_TIMEOUT_S)
+                    data = await _joined(self._replies.popleft())
+                    await asyncio.wait_for(send(data), SEND_TIMEOUT_S)
                     continue
-                data, arrived = self._keyframes.popleft()
-                await asyncio.wait_for(send(data), SEND_TIMEOUT_S)
+                parts, arrived = self._keyframes.popleft()
+                await asyncio.wait_for(send(await _joined(parts)), SEND_TIMEOUT_S)
                 self.counts["keyframes_sent"] += 1
                 self.latencies.append((self.clock() - arrived) * 1e3)
 
@@ -232,3 +254,8 @@ class Session:
             self._said.add(key)
             log.log(level, fmt, self.id, arg)
 
+
+async def _joined(item: bytes | list) -> bytes:
+    """A queued item as one web message: a scene's or keyframe's parts are joined in a
+    thread (megabytes: never a copy on the event loop), a reply is already bytes."""
+    return await asyncio.to_thread(pack, item) if isinstance(item, list) else item

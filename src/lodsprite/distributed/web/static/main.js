@@ -11,7 +11,8 @@
 // 1), visibility (the load's rule: coarse, the default, or fragment/triangle: the full
 // z-buffer).  For tests and tools: window.lodsprite.ready (a Promise: scene loaded),
 // .finished (a Promise: the path played and the held view's keyframe shown), .stats(),
-// .pixels(), .viewpoint(), .serverStats() (a Promise: the `stats` op's reply data).
+// .pixels(), .viewpoint(), .pathIndex() (path viewpoints drawn so far: the one shown is
+// pathIndex() - 1), .serverStats() (a Promise: the `stats` op's reply data).
 
 import { pack, unpack, image } from './wire.js';
 import { SpriteRenderer } from './gl.js';
@@ -160,6 +161,7 @@ const api = {
   },
   pixels: () => renderer.pixels(),
   viewpoint: () => controls && controls.vp,
+  pathIndex: () => pathIndex,
   state: () => state,
   serverStats: () => call('stats').then((r) => r.data),
   finished,
