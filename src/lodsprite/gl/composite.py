@@ -21,21 +21,11 @@ import moderngl
 import numpy as np
 
 from lodsprite.gl.context import GLContext
+from lodsprite.gl.lumigraph import COLOR_MESH_VS, LIGHT
 from lodsprite.gl.terrain import mat_bytes
 
-PROXY_VS = """#version 330
-uniform mat4 u_mvp;          // object (proxy) -> clip, the frame's
-in vec3 in_pos;
-in vec3 in_normal;
-in vec3 in_color;
-out vec3 v_color;
-out vec3 v_normal;
-void main() {
-    v_color = in_color;
-    v_normal = in_normal;
-    gl_Position = u_mvp * vec4(in_pos, 1.0);
-}
-"""
+# The proxy's vertices as the lumigraph's colour meshes pass them (position, normal, colour).
+PROXY_VS = COLOR_MESH_VS
 PROXY_FS = """#version 330
 uniform sampler2D u_image;   // the reconstruction, premultiplied RGBA
 uniform vec2 u_viewport;
@@ -50,7 +40,6 @@ void main() {
     f_color = vec4(c.a > 0.02 ? c.rgb / c.a : own, 1.0);
 }
 """
-LIGHT = np.array([0.4, 0.5, 0.77]) / np.linalg.norm([0.4, 0.5, 0.77])
 
 
 class ProxyCompositor:
