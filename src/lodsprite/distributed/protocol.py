@@ -317,8 +317,11 @@ def inflate(data: memoryview | bytes, size: int, name: str = "image") -> bytes:
     return out
 
 
-def _image(spec: ImageSpec, data: memoryview, dtype: str, channels: int | None,
-           name: str) -> np.ndarray:
+def decode_image(spec: ImageSpec, data: memoryview, dtype: str, channels: int | None,
+                 name: str, bottom_up: bool = True) -> np.ndarray:
+    """The image a buffer holds, checked against its declared ``spec`` (dtype, shape,
+    ``channels`` 3 or None, size; a zlib stream inflated within that size): ``(H, W[, 3])``,
+    row 0 at the top when the rows arrive ``bottom_up`` (keyframes), else as they came."""
     want = (3,) if channels else ()
     if spec.dtype != dtype or len(spec.shape) != 2 + len(want) or (
             channels and spec.shape[2] != channels):
@@ -329,7 +332,8 @@ def _image(spec: ImageSpec, data: memoryview, dtype: str, channels: int | None,
         data = inflate(data, size, name)
     elif len(data) != size:
         raise ProtocolError(f"{name}: {len(data)} bytes, expected {size}")
-    return np.frombuffer(data, dtype=dtype).reshape(spec.shape)[::-1]  # rows arrive bottom-up
+    image = np.frombuffer(data, dtype=dtype).reshape(spec.shape)
+    return image[::-1] if bottom_up else image
 
 
 def decode_keyframe(frames: list) -> Keyframe:
@@ -341,8 +345,8 @@ def decode_keyframe(frames: list) -> Keyframe:
         proj.matrix()
     except (InputError, ValueError, ZeroDivisionError) as exc:
         raise ProtocolError(f"bad projection: {exc}") from None
-    color = _image(msg.color, buffers[0], "uint8", 3, "color")
-    depth = _image(msg.depth, buffers[1], "float32", None, "depth")
+    color = decode_image(msg.color, buffers[0], "uint8", 3, "color")
+    depth = decode_image(msg.depth, buffers[1], "float32", None, "depth")
     if color.shape[:2] != depth.shape:
         raise ProtocolError("colour and depth sizes differ")
     return Keyframe(msg.seq, msg.t0, vp, proj, color, depth, msg.zbuffer)

@@ -29,9 +29,9 @@ from lodsprite.distributed.protocol import (
     PathArgs,
     ProtocolError,
     SceneMessage,
+    decode_image,
     decode_message,
     encode,
-    inflate,
 )
 
 __all__ = ["SceneData", "build_scene", "build_scene_field", "decode_scene", "path_data",
@@ -117,26 +117,14 @@ class SceneData:
         self.texture = texture
 
 
-def _image(spec, data, dtype: str, ndim: int, name: str) -> np.ndarray:
-    if spec.dtype != dtype or len(spec.shape) != ndim or (ndim == 3 and spec.shape[2] != 3):
-        raise ProtocolError(f"{name}: expected {dtype} of {ndim} dimensions, got "
-                            f"{spec.dtype} {spec.shape}")
-    size = int(np.prod(spec.shape)) * np.dtype(dtype).itemsize
-    if spec.codec == "zlib":
-        data = inflate(data, size, name)
-    elif len(data) != size:
-        raise ProtocolError(f"{name}: {len(data)} bytes, expected {size}")
-    return np.frombuffer(data, dtype=dtype).reshape(spec.shape)
-
-
 def decode_scene(parts: list) -> SceneData:
     """A :class:`SceneData` from a scene message's parts; raises :class:`ProtocolError`."""
     msg, buffers = decode_message(parts, SceneMessage)
     n = msg.coarse + 1
-    heights = _image(msg.heights, buffers[0], "float32", 2, "heights")
+    heights = decode_image(msg.heights, buffers[0], "float32", None, "heights", False)
     if heights.shape != (n, n):
         raise ProtocolError(f"heights: shape {heights.shape}, expected {(n, n)}")
-    texture = _image(msg.texture, buffers[1], "uint8", 3, "texture")
+    texture = decode_image(msg.texture, buffers[1], "uint8", 3, "texture", False)
     return SceneData(msg, heights, texture)
 
 
