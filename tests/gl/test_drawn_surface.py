@@ -79,10 +79,10 @@ def test_points_outside_the_selection_take_the_finest_resident_node(terrain):
 
 
 def test_pointwise_heights_equal_the_whole_frozen_surface(terrain):
-    """``drawn_heights_at`` evaluates the drawn surface at the points' cell corners only;
+    """``drawn_heights`` evaluates the drawn surface at the points' cell corners only;
     it must give the surface built from every sample of every node (to float rounding)."""
     from lodsprite.sprite.proxy_metric import ProxySurface
-    from lodsprite.techniques.sprite_proxy import drawn_heights_at, frozen_nodes
+    from lodsprite.techniques.sprite_proxy import drawn_heights, frozen_nodes
 
     hf, at, tr = terrain
     vp = look_at((300.0, -4000.0, 1500.0), (0.0, 0.0, 0.0))
@@ -95,7 +95,7 @@ def test_pointwise_heights_equal_the_whole_frozen_surface(terrain):
     x = rng.uniform(-hf.width / 2, hf.width / 2, 4000)
     y = rng.uniform(-hf.depth / 2, hf.depth / 2, 4000)
     whole = ProxySurface(frozen_nodes(at, nodes, morphed, eye, 1, at.r)).height(x, y)
-    points = drawn_heights_at(at, nodes, morphed, eye, at.r, x, y)
+    points = drawn_heights(at, nodes, morphed, eye, at.r)(x, y)
     assert np.isfinite(whole).sum() > 1000  # most points on the selection
     np.testing.assert_array_equal(np.isnan(points), np.isnan(whole))
     ok = ~np.isnan(whole)

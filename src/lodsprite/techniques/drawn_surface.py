@@ -6,7 +6,7 @@ With keyframes drawn adaptively at ``--key-sse``, the surface in that image *is*
 adaptive renderer's selection at the keyframe's eye and view: each drawn node's samples,
 triangulated as the GPU draws them (squares split along the north-west/south-east
 diagonal) and geomorphed towards the parent at the keyframe eye
-(:func:`~lodsprite.techniques.sprite_proxy.drawn_heights_at`: the surface of
+(:func:`~lodsprite.techniques.sprite_proxy.drawn_heights`: the surface of
 :func:`~lodsprite.techniques.sprite_proxy.frozen_nodes` at stride 1, evaluated at the
 metric's points alone: building every drawn node's morphed samples took 250 ms a 4k²
 keyframe).  Its tiles are resident (host
@@ -29,7 +29,7 @@ import numpy as np
 
 from lodsprite.camera import frustum_planes
 from lodsprite.sprite.proxy_metric import ProxySurface
-from lodsprite.techniques.sprite_proxy import drawn_heights_at, frozen_nodes
+from lodsprite.techniques.sprite_proxy import drawn_heights, frozen_nodes
 from lodsprite.terrain.quadtree import Node
 
 #: ``(x (K,), y (K,)) -> z (K,) float64`` metres: a keyframe's drawn surface.
@@ -64,12 +64,12 @@ class DrawnSurface:
         nodes, morphed = self.selection(eye, view_proj)
         self.last = tuple(nodes)
         t = self.terrain
+        drawn = drawn_heights(t, nodes, morphed, eye, t.r) if nodes else None
 
         def height(x: np.ndarray, y: np.ndarray) -> np.ndarray:
             x = np.asarray(x, np.float64).ravel()
             y = np.asarray(y, np.float64).ravel()
-            z = (drawn_heights_at(t, nodes, morphed, eye, t.r, x, y) if nodes
-                 else np.full(x.shape, np.nan))
+            z = np.full(x.shape, np.nan) if drawn is None else drawn(x, y)
             off = np.isnan(z)
             if off.any():
                 z[off] = self.resident(x[off], y[off], eye)

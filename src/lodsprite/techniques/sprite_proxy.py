@@ -33,6 +33,8 @@ The design:
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from lodsprite.camera import frustum_planes
@@ -162,31 +164,37 @@ def frozen_nodes(terrain, nodes, morphed: frozenset, eye: np.ndarray, stride: in
     return ProxyNodes(origin, spacing, ext / st, heights, windows)
 
 
-def drawn_heights_at(terrain, nodes, morphed: frozenset, eye: np.ndarray, r: np.ndarray,
-                     x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """The surface ``nodes`` draw at full resolution (stride 1), geomorphed at ``eye``:
-    the heights ``(K,) float64`` metres at world ``(x, y) (K,)``, NaN off the nodes.  The
-    same values as ``ProxySurface(frozen_nodes(..., stride=1)).height(x, y)``, evaluated at
-    the points' cell corners alone (not every sample of every node)."""
+def drawn_heights(terrain, nodes, morphed: frozenset, eye: np.ndarray, r: np.ndarray
+                  ) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+    """The surface ``nodes`` draw at full resolution (stride 1), geomorphed at ``eye``, as
+    a height function ``(x (K,), y (K,)) -> z (K,) float64`` metres (NaN off the nodes):
+    the same values as ``ProxySurface(frozen_nodes(..., stride=1)).height``, evaluated at
+    the points' cell corners alone (not every sample of every node).  The nodes' layout
+    and locator are made once here; each call reads only the nodes its points fall in."""
     tree = terrain.tree
     origin, spacing, ext, windows, _, s = node_layout(tree, nodes, 1)
-    heights = np.zeros((len(nodes), 1, 1))
-    surface = ProxySurface(ProxyNodes(origin, spacing, ext.astype(np.float64), heights,
-                                      windows), side=tree.g)
-    j, row, col, fu, fv, inside = surface.cells(x, y)
-    j, row, col = j[inside], row[inside], col[inside]
+    surface = ProxySurface(ProxyNodes(origin, spacing, ext.astype(np.float64),
+                                      np.zeros((len(nodes), 1, 1)), windows), side=tree.g)
+    is_morphed = np.array([n in morphed for n in nodes], bool)
+    eye = np.asarray(eye, np.float64)
     corner = np.array([[0, 0], [0, 1], [1, 0], [1, 1]], np.intp)  # nw, ne, sw, se
-    pos = np.minimum(np.stack([row, col], -1)[:, None] + corner[None], ext[j][:, None])
-    sub, rows = np.unique(j, return_inverse=True)
-    own, _ = _stacked(terrain, [nodes[i] for i in sub])
-    h = own[rows[:, None], pos[..., 0], pos[..., 1]]
-    xy = origin[j][:, None] + pos[..., ::-1] * (
-        s[j, None] * np.array([tree.p.dx, -tree.p.dy]))[:, None]
-    mask = np.array([nodes[i] in morphed for i in j], bool)
-    h = _morphed(terrain, nodes, j, mask, pos, xy, h, np.asarray(eye, np.float64), 1, r)
-    z = np.full(np.shape(x), np.nan)
-    z[inside] = triangle_height(h[:, 0], h[:, 1], h[:, 2], h[:, 3], fu[inside], fv[inside])
-    return z
+    step = np.array([tree.p.dx, -tree.p.dy])
+
+    def height(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        j, row, col, fu, fv, inside = surface.cells(x, y)
+        j, row, col = j[inside], row[inside], col[inside]
+        pos = np.minimum(np.stack([row, col], -1)[:, None] + corner[None], ext[j][:, None])
+        sub, rows = np.unique(j, return_inverse=True)
+        own, _ = _stacked(terrain, [nodes[i] for i in sub])
+        h = own[rows[:, None], pos[..., 0], pos[..., 1]]
+        xy = origin[j][:, None] + pos[..., ::-1] * (s[j, None] * step)[:, None]
+        h = _morphed(terrain, nodes, j, is_morphed[j], pos, xy, h, eye, 1, r)
+        z = np.full(np.shape(x), np.nan)
+        z[inside] = triangle_height(h[:, 0], h[:, 1], h[:, 2], h[:, 3], fu[inside],
+                                    fv[inside])
+        return z
+
+    return height
 
 
 class AdaptiveProxySource:
