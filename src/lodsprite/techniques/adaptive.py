@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from lodsprite.errors import InputError
 from lodsprite.techniques.base import Frame, Technique
 from lodsprite.techniques.terrain import SpriteTechnique, resolve_shading, set_shading
 from lodsprite.workers import peak_rss_mb
@@ -36,18 +37,26 @@ def scene_pyramid(scene):
     return MemoryPyramid.from_heightfield(scene.hf)
 
 
+#: Node grids the adaptive renderer takes (quads a node side); 64 is the default.
+GRIDS = (16, 32, 64, 128)
+
+
 def make_adaptive(renderer: Renderer, sse: float, gpu_mb: float, host_mb: float,
-                  shading: str = "auto"):
+                  shading: str = "auto", grid: int = 64):
     """An :class:`~lodsprite.techniques.adaptive_terrain.AdaptiveTerrain` on ``renderer``'s context
     and target, coloured with the scene's texture or shaded from its heights (``shading``,
-    :func:`~lodsprite.techniques.terrain.resolve_shading`)."""
+    :func:`~lodsprite.techniques.terrain.resolve_shading`); ``grid`` quads a node side
+    (:data:`GRIDS`: a smaller grid has smaller nodes, so a coarser tolerance draws fewer
+    triangles, at more draws a frame)."""
     from lodsprite.techniques.adaptive_terrain import AdaptiveTerrain
 
+    if int(grid) != grid or int(grid) not in GRIDS:
+        raise InputError(f"grid must be one of {', '.join(map(str, GRIDS))} quads, got {grid}")
     pr = renderer.paths
     heights = resolve_shading(renderer.scene, shading) == "heights"
     return AdaptiveTerrain(pr.ctx, scene_pyramid(renderer.scene), pr.renderer.target,
-                           renderer.fov_y_deg, sse, gpu_mb=gpu_mb, host_mb=host_mb,
-                           color=None if heights else pr.geometry.color_tex)
+                           renderer.fov_y_deg, sse, grid=int(grid), gpu_mb=gpu_mb,
+                           host_mb=host_mb, color=None if heights else pr.geometry.color_tex)
 
 
 def tile_status(terrain) -> str:
@@ -116,20 +125,20 @@ def level0_summary(heights) -> dict[str, Any]:
 
 class AdaptiveTechnique(Technique):
     """Every frame by the adaptive renderer at ``sse`` pixels of screen-space error,
-    tiles through caches of ``gpu_mb`` and ``host_mb``.  No warm-up beyond the roots (the
-    first frame's time, from the process's start, is ``first_frame_s``; from the
-    technique's making ``first_frame_s_technique``).  Records each
-    frame's selection; its replay reads those tiles and draws the same selection."""
+    tiles through caches of ``gpu_mb`` and ``host_mb``, nodes of ``grid`` quads a side.
+    No warm-up beyond the roots (the first frame's time, from the process's start, is
+    ``first_frame_s``; from the technique's making ``first_frame_s_technique``).  Records
+    each frame's selection; its replay reads those tiles and draws the same selection."""
 
     name = "adaptive"
 
     def __init__(self, renderer: Renderer, sse: float = 1.0, gpu_mb: float = 256.0,
-                 host_mb: float = 512.0, shading: str = "auto") -> None:
+                 host_mb: float = 512.0, shading: str = "auto", grid: int = 64) -> None:
         super().__init__(renderer)
         self._t0 = time.perf_counter()
         # the renderer's full resolution (the default reference) is coloured the same way
         self.shading = set_shading(renderer, shading)
-        self.terrain = make_adaptive(renderer, sse, gpu_mb, host_mb, shading)
+        self.terrain = make_adaptive(renderer, sse, gpu_mb, host_mb, shading, grid)
         self.first_frame_s = self.first_frame_s_technique = float("nan")
 
     def warm_up(self, viewpoint: Viewpoint) -> None:

@@ -28,6 +28,7 @@ PROXY_SSE = Option("proxy_sse", float, None,
 GPU_MB = Option("gpu_mb", float, 256.0, "adaptive: GPU tile cache budget, MB")
 SHADING = Option("shading", str, "auto", "colour: auto (heights on a store) | texture | heights")
 HOST_MB = Option("host_mb", float, 512.0, "adaptive: host tile cache budget, MB")
+GRID = Option("grid", int, 64, "adaptive: node grid, quads a side (16 | 32 | 64 | 128)")
 SERVER = Option("server", str, "", "the LOD server, HOST:PORT")
 MAX_ERROR = Option("max_error", float, 4.0, "distributed: largest error shown, pixels")
 FOLDER = Option("folder", str, "", "the lumigraph folder (default: the scene's)")
@@ -59,7 +60,7 @@ register(TechniqueSpec("sprite", f"{TERRAIN}:SpriteTechnique",
                        ("terrain",),
                        "LOD-sprite (Chen, Swan & Kaufman 1999)"))
 register(TechniqueSpec("adaptive", f"{ADAPTIVE}:AdaptiveTechnique",
-                       (SSE, GPU_MB, HOST_MB, SHADING), ("terrain",),
+                       (SSE, GPU_MB, HOST_MB, SHADING, GRID), ("terrain",),
                        "the adaptive (CDLOD-style) renderer, stores of any size"))
 register(TechniqueSpec("sprite-adaptive", f"{ADAPTIVE}:SpriteAdaptiveTechnique",
                        (LOD, EPSILON, KEY_SSE, GPU_MB, HOST_MB, VISIBILITY, GUARD, BORDER,
