@@ -301,3 +301,49 @@ def test_layer_budget_sets_knobs_and_reports_shares():
     assert s["knob_std_terrain"] == pytest.approx(np.std(seen), abs=1e-9)
     assert s["knob_std_terrain"] > 0
     assert LayerBudget().summary()["schedule"] == "none"
+
+
+def test_predicted_triangles_sum_each_settings_lods_and_drop_the_culled():
+    """The objects layer's work table: triangles linear in each object's factor, and a
+    draw-count setting leaves out the objects under its projected height."""
+    from lodsprite.layered.objects import CULL, predicted_triangles, setting
+
+    size = np.array([2.0, 5.0, 50.0])            # projected heights, px
+    least, full = np.array([10.0, 10.0, 100.0]), np.array([110.0, 110.0, 1100.0])
+    lin = np.array([0.0, 0.5, 1.0])
+    values = (32.0, 22.6, 1.0, 0.5)
+    got = predicted_triangles(lambda p: lin ** p, size, least, full, values)
+    f32 = lin ** 32.0
+    # 32: only objects >= 8 px (the third); 22.6: >= 4 px (second and third)
+    assert got[0] == pytest.approx(100 + f32[2] * 1000)
+    f22 = lin ** 22.6
+    assert got[1] == pytest.approx(10 + f22[1] * 100 + 100 + f22[2] * 1000)
+    assert got[2] == pytest.approx(10 + 10 + 0.5 * 100 + 1100)
+    assert got[3] == pytest.approx(10 + 10 + 0.5 ** 0.5 * 100 + 1100)
+    assert np.all(np.diff(got) > 0)                      # ascending quality costs more
+    assert setting(CULL[0][0]) == (CULL[0][0], CULL[0][1]) and setting(1.0) == (1.0, 0.0)
+
+
+def test_culled_objects_add_no_benefit():
+    from lodsprite.layered.objects import SETTINGS, setting
+
+    b = default_model("objects", SETTINGS).benefit
+    b.update(np.array([0.2, 0.9]), np.array([1.0, 100.0]), 0.5, setting,
+             np.array([3.0, 20.0]))
+    q = np.array([b(v) for v in SETTINGS])
+    assert np.all(np.diff(q) >= -1e-12)                  # ascending quality, ascending benefit
+    # at 32 (>= 8 px) only the large object counts; at 16 (>= 2 px) both
+    assert b(32.0) == pytest.approx(0.5 * 100 * 0.9 ** 32 / 101)
+    assert b(16.0) == pytest.approx(0.5 * (0.2 ** 16 + 100 * 0.9 ** 16) / 101)
+
+
+def test_a_work_table_replaces_the_power_law_and_is_corrected_by_measurement():
+    m = default_model("objects", (4.0, 1.0))
+    m.work_table = ((4.0, 1.0), np.array([1e5, 4e5]))
+    a, b = m.cost.a, m.cost.b
+    assert m.predict(1.0) == pytest.approx(m.cost.scale * (a + b * 4e5))
+    for _ in range(40):          # the layer draws twice what the table says, every frame
+        m.observe_work(4.0, 2e5)
+    assert m.work_ratio == pytest.approx(2.0, rel=0.01)
+    assert m.predict(1.0) == pytest.approx(m.cost.scale * (a + b * 8e5), rel=0.01)
+    assert m.predict(2.0) == pytest.approx(m.cost.predict(2.0))   # not in the table

@@ -399,3 +399,41 @@ def test_the_viewer_takes_size_fov_and_target_fps_from_view(tmp_path):
     bare = open_scene(str(scene_file(tmp_path, "")))
     o, fov = with_scene_view(ViewOptions(terrain=str(path)), bare)
     assert o.size == (1024, 768) and o.target_fps is None and fov is None
+
+
+def test_a_draw_count_setting_leaves_out_the_objects_under_its_height(gl, tmp_path):
+    """The objects knob's draw counts (``CULL``): at 32 only objects whose height projects
+    to 8 px or more are drawn.  The near cube (about 20 px) is, the far one (about 5 px) is
+    not: the frame is that of a world without the far cube, triangles included, and at 1
+    (no culling) the far cube's triangles are drawn."""
+    from lodsprite.layered.objects import projected_height
+
+    near, far = (0.0, -300.0), (0.0, 250.0)
+    vp = look_at(EYE, AIM)
+
+    def frames(folder: Path, points) -> dict:
+        folder.mkdir()
+        world = world_with(folder, [(points, 0.0)], ridge_m=0.0)
+        out = {}
+        with Renderer(world.scene, SIZE, 45.0, ctx=gl.mgl) as r:
+            t = techniques.create("scene", r, world=world, terrain_mode="full")
+            try:
+                t.warm_up(vp)
+                out["heights"] = projected_height(t.objects.engine.centres,
+                                                  np.full(len(points), 50.0), vp.o, 45.0,
+                                                  SIZE[1])
+                for knob in (1.0, 32.0):
+                    t.objects.set_exponent(knob)
+                    f = t.frame(vp)
+                    out[knob] = (f.extra["visible"], t.read_image().astype(int),
+                                 f.triangles)
+            finally:
+                t.release()
+        return out
+
+    both, alone = frames(tmp_path / "both", [near, far]), frames(tmp_path / "near", [near])
+    assert both["heights"][0] > 8.0 > both["heights"][1]
+    assert both[1.0][0] == 2 and both[32.0][0] == 1
+    assert np.abs(both[32.0][1] - alone[32.0][1]).max() <= 1     # the far cube left out
+    assert both[32.0][2] == alone[32.0][2]
+    assert both[1.0][2] > alone[1.0][2]                           # ... and drawn at 1

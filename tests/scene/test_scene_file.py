@@ -55,6 +55,8 @@ BAD = [  # (the file after [terrain], the field the message must name, what it s
     ('[[objects]]\nmesh = "ogre"\ncount = 5\npoints = "p.csv"\n', "objects[0].points",
      "not both"),
     ('[[objects]]\nmesh = "ogre"\nwalk_mps = -1.0\n', "objects[0].walk_mps", ">= 0"),
+    ('[[objects]]\nmesh = "ogre"\nlod_floor = 0.0\n', "objects[0].lod_floor", ">= 0.005"),
+    ('[[objects]]\nmesh = "ogre"\nlod_floor = 1.5\n', "objects[0].lod_floor", "<= 1"),
     ('[[objects]]\nmesh = "armadillo.off"\nheight_m = 2.0\n', "objects[0].mesh",
      "no such file"),
     ('[[objects]]\nmesh = "../box.off"\nheight_m = 2.0\n', "objects[0].mesh",

@@ -310,3 +310,27 @@ def test_light_fields_stand_where_the_file_puts_them(tmp_path: Path) -> None:
                                                          30.0)]
     assert w.summary()[2] == ("lightfields: 2 (statue.lf at (120, -30), 30 m; tree.lf at "
                               "(-400, -30), 30 m)")
+
+
+def test_lod_floor_sets_the_coarsest_lod_of_built_ins_and_meshes(tmp_path):
+    """``lod_floor``: the fraction of a type's triangles its coarsest LOD keeps, for a
+    built-in and for a mesh file (the objects layer's progressive mesh)."""
+    import trimesh
+
+    from lodsprite.layered.objects import world_crowd
+
+    box = trimesh.creation.box((1.0, 1.0, 1.0))
+    for _ in range(4):
+        box = box.subdivide()
+    box.export(tmp_path / "cube.off")
+    body = ('[terrain]\nsource = "fractal:64"\n'
+            '[[objects]]\nmesh = "ogre"\ncount = 2\nlod_floor = 0.02\n'
+            '[[objects]]\nmesh = "cube.off"\nheight_m = 3.0\ncount = 2\nlod_floor = 0.05\n'
+            '[[objects]]\nmesh = "tree"\ncount = 2\n')
+    (tmp_path / "scene.toml").write_text(body)
+    crowd = world_crowd(load_world(tmp_path / "scene.toml"))
+    floors = [m.triangles(0.0) / m.triangles(1.0) for m in crowd.models]
+    assert floors[0] == pytest.approx(0.02, abs=0.005)
+    assert floors[1] == pytest.approx(0.05, abs=0.01)
+    assert len(floors) == 3
+    assert floors[2] == pytest.approx(0.1, abs=0.02)        # the default, the paper's

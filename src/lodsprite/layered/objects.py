@@ -11,15 +11,23 @@ terrain left (:class:`~lodsprite.manager.engine.CrowdEngine` ``ground=False``).
 Types with ``lod = "profile"`` take their desired LOD from their error profile (the
 engine's ``desired_hook``, :func:`profile_lod`); the others are distance-linear.
 The knob is the LOD exponent ``p`` of §4.2 (``lod = (1 - (d - near) / (far - near)) ** p``;
-larger is coarser); the LOD ranges scale with the tallest type.  ``p = 0`` is every object
-at its full mesh (the full-detail reference).  With LOD-sprite keyframes holding the
-static objects, a frame draws the moving ones only and each keyframe the static ones
+larger is coarser) and, below the coarsest exponent, the draw count: settings of
+:data:`CULL` (``p`` 11.3 to 32) draw only the objects whose type's height projects to at
+least so many pixels (contribution culling, the "not drawn" level of Funkhouser
+& Séquin 1993 and Unity's culled LOD), so that a crowd's cost has no floor at its
+coarsest meshes (100 trees at 10 % of their triangles cost more than a 5 fps frame here;
+a type's ``lod_floor`` sets that fraction).  The LOD ranges scale with the tallest type.
+``p = 0`` is every object at its full mesh (the full-detail reference).
+:meth:`ObjectsLayer.work` predicts the triangles of every setting from the objects seen
+last frame, the scheduler's cost model.  With LOD-sprite keyframes holding the static
+objects, a frame draws the moving ones only and each keyframe the static ones
 (``subset``); the replay re-applies the recorded extraction orders up to the frame, as
 the crowd technique's replay does.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -34,6 +42,47 @@ if TYPE_CHECKING:
 
 #: LOD exponents, ascending quality (coarse to fine).
 EXPONENTS = (8.0, 5.7, 4.0, 2.8, 2.0, 1.4, 1.0, 0.7, 0.5, 0.35, 0.25)
+#: The draw-count settings below the coarsest exponent, ascending quality: ``(knob value,
+#: smallest projected height drawn, px)``; the value is also the LOD exponent they draw at.
+CULL = ((32.0, 8.0), (22.6, 4.0), (16.0, 2.0), (11.3, 1.0))
+#: Every knob setting of the objects layer, ascending quality.
+SETTINGS = tuple(v for v, _ in CULL) + EXPONENTS
+
+
+def setting(value: float) -> tuple[float, float]:
+    """A knob value's ``(LOD exponent, smallest projected height drawn, px)``."""
+    for v, px in CULL:
+        if abs(value - v) < 1e-6:
+            return float(v), px
+    return float(value), 0.0
+
+
+def projected_height(centres: np.ndarray, heights: np.ndarray, eye: np.ndarray,
+                     fov_y_deg: float, height_px: int) -> np.ndarray:
+    """Objects' projected heights, px: ``centres (N, 3)``, ``heights (N,)`` metres (their
+    type's), ``eye (3,)`` -> ``(N,)`` float64."""
+    d = np.maximum(np.linalg.norm(np.asarray(centres, np.float64) - eye, axis=1), 1e-3)
+    focal = height_px / 2 / np.tan(np.radians(fov_y_deg) / 2)
+    return np.asarray(heights, np.float64) * focal / d
+
+
+def predicted_triangles(factor: Callable[[float], np.ndarray], size: np.ndarray,
+                        least: np.ndarray, full: np.ndarray, values: tuple[float, ...]
+                        ) -> np.ndarray:
+    """Triangles the visible objects draw at each knob value: ``factor(p) (k,)`` their LOD
+    factors in 0..1 under exponent ``p`` (called once an exponent), ``size (k,)`` their
+    projected heights (px), ``least``, ``full (k,)`` their type's coarsest and full
+    triangle counts -> ``(len(values),)`` float64 (triangles linear in the factor, as the
+    models count them)."""
+    out = np.empty(len(values))
+    factors: dict[float, np.ndarray] = {}
+    for i, v in enumerate(values):
+        p, px = setting(v)
+        if p not in factors:
+            factors[p] = np.asarray(factor(p), np.float64)
+        f, keep = factors[p], size >= px
+        out[i] = float((least[keep] + f[keep] * (full[keep] - least[keep])).sum())
+    return out
 
 
 def world_crowd(world: World) -> Crowd:
@@ -43,7 +92,8 @@ def world_crowd(world: World) -> Crowd:
     from lodsprite.manager.scene import Crowd
 
     models = [t.model if t.model is not None else
-              ProgressiveMesh(t.name, t.vertices, t.faces, t.colours) for t in world.types]
+              ProgressiveMesh(t.name, t.vertices, t.faces, t.colours, t.lod_floor)
+              for t in world.types]
     poses = world.poses(0.0).astype(np.float64)
     lo, hi = world.extent
     return Crowd(models, world.type_indices().astype(np.int64), poses[:, :3].copy(),
@@ -85,7 +135,15 @@ class ObjectsLayer(Layer):
                                   active=active or max(1, len(self.crowd)),
                                   range_near=2.0 * height, range_far=150.0 * height,
                                   fov_y_deg=renderer.fov_y_deg, ground=False)
+        self.knob = float(exponent)
+        self.min_px = 0.0
         self.engine.feedback.exponent = float(exponent)
+        n = len(self.crowd)
+        tri = [(m.triangles(0.0), m.triangles(1.0)) for m in self.crowd.models]
+        self._least = np.array([tri[k][0] for k in self.crowd.types[:n]], np.float64)
+        self._full = np.array([tri[k][1] for k in self.crowd.types[:n]], np.float64)
+        self._heights = np.array([world.types[k].height_m for k in self.crowd.types[:n]],
+                                 np.float64)
         self.engine.desired_hook = profile_lod(world, self.crowd, renderer)
         self.subset: np.ndarray | None = None  # None: every object each frame
         self._log: list[list] = []             # extraction orders of every engine frame
@@ -103,41 +161,95 @@ class ObjectsLayer(Layer):
         return self.engine.feedback.exponent
 
     def set_exponent(self, value: float) -> None:
-        """The LOD exponent (>= 0; 0: full meshes)."""
-        self.engine.feedback.exponent = max(0.0, float(value))
+        """The knob: a LOD exponent (>= 0; 0: full meshes); those of :data:`CULL` also
+        leave the objects under their projected height undrawn."""
+        self.knob = max(0.0, float(value))
+        p, self.min_px = setting(self.knob)
+        self.engine.feedback.exponent = p
 
     def control(self) -> LayerControl:
-        return LayerControl("objects", EXPONENTS, self.exponent, self.set_exponent,
-                            detail=self.detail)
+        return LayerControl("objects", SETTINGS, self.knob, self.set_exponent,
+                            detail=self.detail, work=self.work)
 
-    def detail(self) -> tuple[np.ndarray, np.ndarray, float] | None:
-        """The last frame's visible objects for the budget's benefit model: their
-        distance-linear LOD factors, projected areas and screen coverage
-        (:func:`~lodsprite.scene.costs.object_detail`); None before a frame."""
+    def _visible(self) -> np.ndarray | None:
+        """The last frame's objects in the frustum (and in :attr:`subset`), ``(N,)`` bool;
+        None before a frame."""
         from lodsprite.camera import frustum_planes
         from lodsprite.manager.scene import spheres_in_frustum
-        from lodsprite.scene.costs import object_detail
 
         if self._seen is None:
             return None
         viewpoint, projection = self._seen
         e = self.engine
-        planes = frustum_planes(projection @ viewpoint.view_matrix())
-        visible = spheres_in_frustum(planes, e.centres, e.radii)
-        return object_detail(e.centres, e.radii, viewpoint.o, visible, *e.range,
-                             e.fov_y_deg, e.target.size)
+        visible = spheres_in_frustum(frustum_planes(projection @ viewpoint.view_matrix()),
+                                     e.centres, e.radii)
+        return visible if self.subset is None else visible & self.subset
+
+    def detail(self) -> tuple | None:
+        """The last frame's visible objects for the budget's benefit model: their
+        distance-linear LOD factors, projected areas, screen coverage
+        (:func:`~lodsprite.scene.costs.object_detail`) and the knob's :func:`setting`;
+        None before a frame."""
+        from lodsprite.scene.costs import object_detail
+
+        visible = self._visible()
+        if visible is None:
+            return None
+        e, eye = self.engine, self._seen[0].o
+        lin, cov, coverage = object_detail(e.centres, e.radii, eye, visible,
+                                           *e.range, e.fov_y_deg, e.target.size)
+        size = projected_height(e.centres[visible], self._heights[visible], eye,
+                                e.fov_y_deg, e.target.size[1])
+        return lin, cov, coverage, setting, size
+
+    def work(self) -> np.ndarray | None:
+        """Predicted triangles at every setting of :data:`SETTINGS` ``(n,)`` from the
+        last frame's visible objects (:func:`predicted_triangles`; the profile types'
+        factors from their profiles, as the engine's hook gives them); None before a
+        frame."""
+        from lodsprite.manager.core import desired_lod
+
+        visible = self._visible()
+        if visible is None:
+            return None
+        e, vp = self.engine, self._seen[0]
+        dist = np.linalg.norm(e.centres - vp.o, axis=1)
+        size = projected_height(e.centres[visible], self._heights[visible], vp.o,
+                                e.fov_y_deg, e.target.size[1])
+
+        def factor(p: float) -> np.ndarray:
+            f = desired_lod(dist, *e.range, p)
+            if e.desired_hook is not None:
+                f = e.desired_hook(vp, e.transforms, f, p)
+            return np.asarray(f, np.float64)[visible]
+
+        return predicted_triangles(factor, size, self._least[visible], self._full[visible],
+                                   SETTINGS)
+
+    def _drawn(self, viewpoint: Viewpoint, subset: np.ndarray | None) -> np.ndarray | None:
+        """The objects of ``subset`` (None: all) a frame draws: those at least
+        :attr:`min_px` across (all of them without a draw-count setting)."""
+        if self.min_px <= 0:
+            return subset
+        e = self.engine
+        big = projected_height(e.centres, self._heights, viewpoint.o, e.fov_y_deg,
+                               e.target.size[1]) >= self.min_px
+        return big if subset is None else big & subset
 
     def _engine_frame(self, viewpoint: Viewpoint, t: float, projection: np.ndarray,
-                      subset: np.ndarray | None, fbo=None, keep: bool = False
-                      ) -> tuple[Any, dict]:
-        """One engine frame; its extraction orders logged only when a replay will come
+                      subset: np.ndarray | None, fbo=None, keep: bool = False,
+                      cull: bool = False) -> tuple[Any, dict]:
+        """One engine frame of ``subset`` (``cull``: less the objects under
+        :attr:`min_px`); its extraction orders logged only when a replay will come
         (``recording``) or ``keep`` (the warm-up's): never a list a frame otherwise."""
         self.engine.set_poses(self.world.poses(t))
+        if cull:
+            subset = self._drawn(viewpoint, subset)
         f = self.engine.frame(viewpoint, projection=projection, subset=subset, fbo=fbo)
         if self.recording or keep:
             self._log.append(list(self.engine.last_orders))
         return f, {"entry": len(self._log) - 1, "using": self.engine.last_using.copy(),
-                   "t": t}
+                   "t": t, "drawn": subset}
 
     def warm_up(self, viewpoint: Viewpoint, projection: np.ndarray) -> None:
         """Untimed: the first LODs extracted (kept as the replay's starting state)."""
@@ -146,7 +258,7 @@ class ObjectsLayer(Layer):
         self._warm, self._log = self._log[-1], []
 
     def draw(self, viewpoint: Viewpoint, t: float, projection: np.ndarray) -> LayerFrame:
-        f, self._last = self._engine_frame(viewpoint, t, projection, self.subset)
+        f, self._last = self._engine_frame(viewpoint, t, projection, self.subset, cull=True)
         self._seen = (viewpoint, projection)
         return LayerFrame(f.ms, f.triangles, work=float(max(f.triangles, 1)),
                           extra={"extractions": f.extractions, "draw_calls": f.draw_calls,
@@ -191,7 +303,8 @@ class ObjectsLayer(Layer):
                decision: dict[str, Any]) -> None:
         self.engine.set_poses(self.world.poses(decision["t"]))
         self._restore(decision["entry"])
-        self.engine.redraw(viewpoint, decision["using"], [], projection, self.subset)
+        self.engine.redraw(viewpoint, decision["using"], [], projection,
+                           decision.get("drawn", self.subset))
 
     def release(self) -> None:
         self.engine.release()

@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from lodsprite.errors import InputError
-from lodsprite.manager.models import LeafCollapseTree, ProgressiveMesh
+from lodsprite.manager.models import MIN_FRACTION, LeafCollapseTree, ProgressiveMesh
 
 OGRE_HEIGHT_M = 2.2
 TREE_HEIGHT_M = 9.0
@@ -38,8 +38,9 @@ def _merge(parts):
     return np.concatenate(vs), np.concatenate(fs), np.concatenate(cs)
 
 
-def ogre() -> ProgressiveMesh:
-    """The built-in crowd member (about 2,000 triangles)."""
+def ogre(min_fraction: float = MIN_FRACTION) -> ProgressiveMesh:
+    """The built-in crowd member (about 2,000 triangles; its coarsest LOD ``min_fraction``
+    of them)."""
     import trimesh
     from trimesh.transformations import rotation_matrix, translation_matrix
 
@@ -62,11 +63,13 @@ def ogre() -> ProgressiveMesh:
                            @ rotation_matrix(side * 0.5, [1, 0, 0])))
     v, f, c = _merge(parts)
     v[:, 2] -= v[:, 2].min()
-    return ProgressiveMesh("ogre", v, f, c)
+    return ProgressiveMesh("ogre", v, f, c, min_fraction)
 
 
-def tree(leaves: int = 47_000, seed: int = 7) -> LeafCollapseTree:
-    """The built-in tree (about 97,000 triangles at full detail)."""
+def tree(leaves: int = 47_000, seed: int = 7, min_fraction: float = MIN_FRACTION
+         ) -> LeafCollapseTree:
+    """The built-in tree (about 97,000 triangles at full detail; its coarsest LOD keeps
+    ``min_fraction`` of the leaves)."""
     rng = np.random.default_rng(seed)
     tv, tf, tips = _trunk(rng)
     per = leaves // len(tips)
@@ -83,7 +86,7 @@ def tree(leaves: int = 47_000, seed: int = 7) -> LeafCollapseTree:
                       centres + a * half + c * half, centres - a * half + c * half], axis=1)
     green = np.array([0.22, 0.5, 0.16]) * rng.uniform(0.7, 1.25, (n, 1))
     return LeafCollapseTree("tree", quads, np.clip(green, 0, 1), (tv, tf, np.tile(
-        [0.4, 0.28, 0.18], (len(tv), 1))))
+        [0.4, 0.28, 0.18], (len(tv), 1))), min_fraction)
 
 
 def _trunk(rng):

@@ -46,14 +46,17 @@ class LayerControl:
     """One layer's knob: ``values`` its settings in ascending quality (and cost; e.g. a
     terrain's ε from coarse to fine, ``(8, 4, 2, 1)`` pixels), ``value`` the current one,
     ``set`` applies a setting to the layer; ``detail`` (optional, the objects layer's)
-    gives what its benefit model weighs, ``(lin, cov, coverage)`` of
-    :func:`~lodsprite.scene.costs.object_detail`, called before each plan."""
+    gives what its benefit model weighs, ``(lin, cov, coverage[, setting])`` of
+    :func:`~lodsprite.scene.costs.object_detail`, called before each plan; ``work``
+    (optional, the objects layer's) the layer's predicted counter at every setting
+    ``(n,)``, the cost model's work in place of its power law."""
 
     name: str
     values: tuple[float, ...]
     value: float
     set: Callable[[float], None]
-    detail: Callable[[], tuple[np.ndarray, np.ndarray, float]] | None = None
+    detail: Callable[[], tuple | None] | None = None
+    work: Callable[[], np.ndarray | None] | None = None
 
     def index(self, value: float | None = None) -> int:
         """The index in :attr:`values` of ``value`` (default: the current one), or of the
@@ -312,6 +315,10 @@ class LayerBudget:
                 seen = c.detail()
                 if seen is not None:
                     benefit.update(*seen)
+            if c.work is not None:
+                w = c.work()
+                self.models[c.name].work_table = (None if w is None else
+                                                  (tuple(c.values), np.asarray(w, np.float64)))
         return self.schedule.plan(controls, self.models)
 
     def after(self, layers: Mapping[str, tuple[float, float, float | None]],
@@ -319,10 +326,12 @@ class LayerBudget:
         """The frame's measurements: ``layers[name] = (knob value, ms, work counter or
         None)``, ``frame_ms`` the whole frame; returns ``predicted_ms_<layer>`` (what the
         cost model predicted for the setting drawn, before this frame's correction)."""
-        out = {f"predicted_ms_{n}": float(self.models[n].cost.predict(v))
+        out = {f"predicted_ms_{n}": float(self.models[n].predict(v))
                for n, (v, _, _) in layers.items() if n in self.models}
         for name, (value, ms, work) in layers.items():
             self.schedule.observe(name, value, ms, work)
+            if name in self.models and work is not None:
+                self.models[name].observe_work(value, work)
             self.ms_sums[name] = self.ms_sums.get(name, 0.0) + float(ms)
             last = self.last_knob.get(name, value)
             self.changes[name] = self.changes.get(name, 0) + int(value != last)

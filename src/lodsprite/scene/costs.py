@@ -36,6 +36,7 @@ a scene frame and the "levels" the settings of each layer's knob
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -179,28 +180,41 @@ class TerrainBenefit:
 
 @dataclass
 class ObjectsBenefit:
-    """Objects: ``coverage · Σ cov_i · lin_i ** p / Σ cov_i`` for LOD exponent ``p``.
+    """Objects: ``coverage · Σ_drawn cov_i · lin_i ** p / Σ cov_i`` for LOD exponent ``p``.
 
     ``lin (k,)``: each visible object's distance-linear LOD factor in 0..1, ``cov (k,)``
-    its projected screen area (any unit), set by :meth:`update` from the layer's frame;
-    before the first update a uniform spread of factors stands in (``q = 1 / (p + 1)``)."""
+    its projected screen area (pixels), set by :meth:`update` from the layer's frame;
+    before the first update a uniform spread of factors stands in (``q = 1 / (p + 1)``).
+    ``setting`` maps a knob value to ``(p, smallest size drawn, px)`` (the objects layer's
+    draw counts: an object culled adds nothing), ``size (k,)`` each object's projected
+    size (px; default the diameter of its ``cov``); default ``(value, 0)``."""
 
     coverage: float = 0.1
     lin: np.ndarray | None = None
     cov: np.ndarray | None = None
+    setting: Callable[[float], tuple[float, float]] | None = None
+    size: np.ndarray | None = None
 
-    def update(self, lin: np.ndarray, cov: np.ndarray, coverage: float | None = None) -> None:
-        """The visible objects' LOD factors and screen areas this frame."""
+    def update(self, lin: np.ndarray, cov: np.ndarray, coverage: float | None = None,
+               setting: Callable[[float], tuple[float, float]] | None = None,
+               size: np.ndarray | None = None) -> None:
+        """The visible objects' LOD factors, screen areas (and sizes) this frame."""
         self.lin = np.clip(np.asarray(lin, np.float64), 0.0, 1.0)
         self.cov = np.asarray(cov, np.float64)
+        self.size = (2.0 * np.sqrt(self.cov / np.pi) if size is None
+                     else np.asarray(size, np.float64))
         if coverage is not None:
             self.coverage = float(coverage)
+        if setting is not None:
+            self.setting = setting
 
     def __call__(self, value: float) -> float:
-        p = max(float(value), 1e-6)
+        p, px = (float(value), 0.0) if self.setting is None else self.setting(float(value))
+        p = max(p, 1e-6)
         if self.lin is None or self.cov is None or not len(self.lin) or self.cov.sum() <= 0:
             return self.coverage / (p + 1.0)
-        return self.coverage * float((self.cov * self.lin ** p).sum() / self.cov.sum())
+        drawn = self.size >= px
+        return self.coverage * float((self.cov * self.lin ** p)[drawn].sum() / self.cov.sum())
 
 
 def object_detail(centres: np.ndarray, radii: np.ndarray, eye: np.ndarray,
@@ -234,14 +248,51 @@ class LightfieldBenefit:
 
 @dataclass
 class LayerModel:
-    """What the scheduler knows of a layer: its ``cost`` and ``benefit`` models."""
+    """What the scheduler knows of a layer: its ``cost`` and ``benefit`` models, and
+    ``work_table`` (``(values, work (n,))``, optional): the layer's own prediction of its
+    counter at every setting (the objects layer's triangles from the objects in view),
+    which replaces the power law of ``cost.work`` where given (Funkhouser & Séquin's cost
+    from each level's triangle count), times ``work_ratio``: the moving average (log
+    domain, gain ``work_gain``) of the counter measured over the table's prediction for
+    the setting drawn (what the table misses: LODs still being updated, a type's own
+    LOD rule)."""
 
     cost: CostModel
     benefit: TerrainBenefit | ObjectsBenefit | LightfieldBenefit
+    work_table: tuple[tuple[float, ...], np.ndarray] | None = None
+    work_ratio: float = 1.0
+    work_gain: float = 0.3
+
+    def table_work(self, value: float) -> float | None:
+        """The work table's counter at ``value``, uncorrected (None: no table, or no such
+        setting in it)."""
+        if self.work_table is None:
+            return None
+        values, work = self.work_table
+        for v, w in zip(values, work, strict=True):
+            if abs(v - value) < 1e-9:
+                return float(w)
+        return None
+
+    def observe_work(self, value: float, work: float) -> None:
+        """The counter measured at ``value``: corrects :attr:`work_ratio`."""
+        w = self.table_work(value)
+        if w is None or not (w > 0 and work > 0):
+            return
+        ratio = float(np.clip(work / w, 0.05, 20.0))
+        self.work_ratio = float(np.exp((1 - self.work_gain) * np.log(self.work_ratio)
+                                       + self.work_gain * np.log(ratio)))
+
+    def predict(self, value: float) -> float:
+        """Predicted ms at knob ``value``."""
+        w = self.table_work(value)
+        if w is not None:
+            return self.cost.scale * max(self.cost.raw(w * self.work_ratio), self.cost.a_min)
+        return self.cost.predict(value)
 
     def tables(self, values: tuple[float, ...]) -> tuple[np.ndarray, np.ndarray]:
         """Predicted ms and benefit of every knob setting, two ``(n,)`` float64 arrays."""
-        return (np.array([self.cost.predict(v) for v in values]),
+        return (np.array([self.predict(v) for v in values]),
                 np.array([self.benefit(v) for v in values]))
 
 

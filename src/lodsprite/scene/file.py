@@ -49,6 +49,7 @@ MAX_MESH_FACES = 2_000_000
 MAX_GLTF_NODES = 20_000          # mesh nodes in one glTF (each is a group member)
 MAX_HEIGHT_M = 10_000.0
 MAX_WALK_MPS = 100.0
+MIN_LOD_FLOOR = 0.005            # [[objects]] lod_floor: the coarsest LOD's fraction
 MAX_GRID = 8192                  # [terrain] grid, quads a side (as the server's cap)
 #: Mesh names that are built in (:mod:`lodsprite.manager.builtins`), not files.
 BUILTIN_MESHES = ("ogre", "tree")
@@ -76,6 +77,7 @@ class ObjectSection(msgspec.Struct, forbid_unknown_fields=True):
     points: str | None = None
     walk_mps: float = 0.0
     lod: Literal["profile", "linear"] = "linear"
+    lod_floor: float = 0.1
     up: Literal["y", "z"] | None = None
     area: tuple[float, float, float, float] | None = None
 
@@ -252,6 +254,9 @@ class _Checker:
             self.fail(f"{at}.seed", "must be >= 0")
         if not 0 <= o.walk_mps <= MAX_WALK_MPS:
             self.fail(f"{at}.walk_mps", f"must be >= 0 and <= {MAX_WALK_MPS:g}")
+        if not MIN_LOD_FLOOR <= o.lod_floor <= 1.0:
+            self.fail(f"{at}.lod_floor", f"must be >= {MIN_LOD_FLOOR:g} and <= 1 (the "
+                      "fraction of the triangles the coarsest LOD keeps)")
         if o.area is not None and not (all(map(_finite, o.area)) and o.area[0] < o.area[2]
                                        and o.area[1] < o.area[3]):
             self.fail(f"{at}.area", "expected [x0, y0, x1, y1], finite, x0 < x1 and y0 < y1")

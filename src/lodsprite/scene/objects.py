@@ -41,7 +41,8 @@ class ObjectType:
     ``faces (m, 3) int32``, ``colours (n, 3) float32`` in 0..1; ``lod`` ``"profile"`` or
     ``"linear"``; ``source`` the mesh file (None for a built-in, whose ``name`` is the
     built-in's); ``model`` the built-in's own LOD model (a
-    :class:`~lodsprite.manager.models.LodModel`, scaled) or None.
+    :class:`~lodsprite.manager.models.LodModel`, scaled) or None; ``lod_floor`` the
+    fraction of the triangles its coarsest LOD keeps.
     """
 
     name: str
@@ -52,6 +53,7 @@ class ObjectType:
     lod: str = "linear"
     source: Path | None = None
     model: Any = None
+    lod_floor: float = 0.1
 
 
 @dataclass
@@ -66,10 +68,12 @@ class Group:
     yaws: np.ndarray
 
 
-def builtin_type(name: str, height_m: float | None, lod: str) -> ObjectType:
-    """The built-in ``name`` (``ogre`` or ``tree``), scaled to ``height_m`` if given."""
+def builtin_type(name: str, height_m: float | None, lod: str, lod_floor: float = 0.1
+                 ) -> ObjectType:
+    """The built-in ``name`` (``ogre`` or ``tree``), scaled to ``height_m`` if given, its
+    coarsest LOD ``lod_floor`` of its triangles."""
     module, _, attr = BUILTINS[name].partition(":")
-    model = getattr(importlib.import_module(module), attr)()
+    model = getattr(importlib.import_module(module), attr)(min_fraction=lod_floor)
     faces = np.asarray(model.extract(1.0), dtype=np.int64).reshape(-1, 3)
     used, inverse = np.unique(faces, return_inverse=True)
     v = np.asarray(model.vertices, dtype=np.float64)
@@ -81,7 +85,7 @@ def builtin_type(name: str, height_m: float | None, lod: str) -> ObjectType:
     return ObjectType(name, v[used].astype(np.float32),
                       inverse.reshape(-1, 3).astype(np.int32),
                       np.asarray(model.colors, np.float32)[used], native * scale, lod,
-                      None, model)
+                      None, model, lod_floor)
 
 
 def load_group(path: str, height_m: float | None, lod: str, up: str | None,

@@ -247,9 +247,12 @@ def _anchors(o: ObjectSection, at: str, lo: np.ndarray, hi: np.ndarray
 
 def _group(o: ObjectSection, field: str) -> Group:
     if o.mesh in ("ogre", "tree"):
-        t = builtin_type(o.mesh, o.height_m, o.lod)
+        t = builtin_type(o.mesh, o.height_m, o.lod, o.lod_floor)
         return Group([t], np.zeros(1, np.intp), np.zeros((1, 2)), np.zeros(1))
-    return load_group(o.mesh, o.height_m, o.lod, o.up, field)
+    group = load_group(o.mesh, o.height_m, o.lod, o.up, field)
+    for t in group.types:
+        t.lod_floor = o.lod_floor
+    return group
 
 
 def _check_path(scene: Scene, sf: SceneFile, label: str) -> None:
