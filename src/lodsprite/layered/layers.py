@@ -34,7 +34,7 @@ if TYPE_CHECKING:
 
 TERRAIN_MODES = ("full", "lod", "adaptive", "sprite", "sprite-adaptive")
 #: Knob settings, ascending quality: ε (sprite, px), tolerance (adaptive, px), level (lod).
-EPSILONS = (16.0, 11.3, 8.0, 5.7, 4.0, 2.8, 2.0, 1.4, 1.0)
+EPSILONS = (16.0, 11.3, 8.0, 5.7, 4.0, 2.8, 2.0, 1.4, 1.0, 0.7, 0.5)
 LEVELS = (8.0, 16.0, 32.0, 64.0)
 
 

@@ -70,6 +70,8 @@ class BattlefieldConfig:
     extraction_frames: int = 100  # the manager / no_manager runs: the first frames of a path
     sample_every: int = 30
     terrain_mode: str = "adaptive"
+    terrain_grid: int = 32      # the adaptive renderer's nodes: 32² quads (docs/scenes.md)
+    lod_floor: float = 0.02     # the coarsest LOD of ogres and trees: 2 % of their triangles
     exponent: float = 1.0       # the fixed-exponent runs' LOD exponent
     match_steps: int = 4        # linear runs at most, matching the profile run's triangles
 
@@ -145,7 +147,7 @@ class PathRuns:
         t = LayeredTechnique(self.renderer, self.world, terrain_mode=cfg.terrain_mode,
                              schedule=schedule, target_fps=target_fps,
                              exponent=cfg.exponent if exponent is None else exponent,
-                             frame_s=frame_s)
+                             frame_s=frame_s, grid=cfg.terrain_grid)
         hooked = False
         try:
             if t.objects is not None:  # the layer wires profile LOD for lod = "profile"

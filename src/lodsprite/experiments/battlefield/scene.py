@@ -98,11 +98,12 @@ def scene_text(source: str, cfg, lightfields: list[dict], grid: int | None = Non
              *([f"grid = {grid}"] if grid else []), "",
              "[[objects]]", 'mesh = "ogre"', f"height_m = {cfg.ogre_m}",
              f"count = {cfg.instances}", "seed = 1", f"walk_mps = {cfg.walk_mps}",
-             f"area = [{-a}, {-a}, {a}, {a}]", f'lod = "{cfg.ogre_lod}"', ""]
+             f"area = [{-a}, {-a}, {a}, {a}]", f'lod = "{cfg.ogre_lod}"',
+             f"lod_floor = {cfg.lod_floor}", ""]
     if cfg.trees:
         lines += ["[[objects]]", 'mesh = "tree"', f"height_m = {cfg.tree_m}",
                   f"count = {cfg.trees}", "seed = 2", f"area = [{-b}, {-b}, {b}, {b}]",
-                  f'lod = "{cfg.tree_lod}"', ""]
+                  f'lod = "{cfg.tree_lod}"', f"lod_floor = {cfg.lod_floor}", ""]
     for lf, (_, (fx, fy)) in zip(lightfields, LIGHTFIELD_OBJECTS, strict=False):
         lines += ["[[lightfields]]", f"source = {json.dumps(str(Path(lf['folder']).resolve()))}",
                   f"position = [{fx * a}, {fy * a}]", f"height_m = {cfg.lightfield_m}", ""]
