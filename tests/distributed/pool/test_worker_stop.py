@@ -1,7 +1,9 @@
 """`lodsprite render-worker` processes (real GL, EGL llvmpipe) joined over tcp://:
 stopped by SIGINT while idle and SIGTERM while it holds a job, a worker leaves the pool
 with a ``disconnect`` (not by going silent), releases its scenes and GL context and exits
-0 without a traceback, and the job it held is done by another worker."""
+0 without a traceback, and the job it held is done by another worker.  A job a worker
+refuses (a dataset its --data lacks) goes to a worker that has it; one no worker can do
+fails with code ``refused``."""
 
 from __future__ import annotations
 
@@ -9,12 +11,15 @@ import signal
 import subprocess
 import sys
 
+import msgspec
+import numpy as np
 import pytest
 
 from conftest import wait_until
 from lodsprite.camera import look_at
 from lodsprite.distributed.pool import Broker, Job
-from lodsprite.distributed.protocol import LoadArgs, WireViewpoint
+from lodsprite.distributed.protocol import LoadArgs, WireViewpoint, decode_keyframe
+from lodsprite.scene import load_scene
 
 SCENE = LoadArgs(terrain="fractal:64:1", size=(64, 64), lod=16)
 BIG = LoadArgs(terrain="fractal:1024:3", size=(64, 64), lod=16)  # a slow first load
@@ -99,6 +104,38 @@ def test_a_worker_stopped_idle_or_mid_job_leaves_the_pool_cleanly(broker: Broker
             stopped(c, signal.SIGTERM)
     finally:
         for p in (a, b):
+            if p.poll() is None:
+                p.kill()
+                p.communicate(timeout=10)
+
+
+def test_a_job_a_worker_refuses_is_done_by_one_that_can(broker: Broker, tmp_path) -> None:
+    full, empty = tmp_path / "full", tmp_path / "empty"
+    full.mkdir()
+    empty.mkdir()
+    np.save(full / "hill.npy", load_scene("fractal:64:5", "terrain", 64, 1.0).hf.heights)
+    hill = msgspec.structs.replace(SCENE, terrain="hill.npy")
+    has, lacks = worker(broker.endpoints[1], full), worker(broker.endpoints[1], empty)
+    try:
+        has_id, _ = pid_of(broker, has), pid_of(broker, lacks)
+        for i in range(4):  # two idle workers: the one that lacks the file gets some
+            broker.submit(job(i, hill))
+        got = results(broker, 4)
+        assert all(r.ok and r.worker == has_id for r in got.values()), got
+        assert all(decode_keyframe(r.parts).color.std() > 1.0 for r in got.values())
+        assert broker.stats()["declined"] >= 1  # it was refused, then retried
+        broker.submit(job(9, msgspec.structs.replace(SCENE, terrain="none.npy")))
+        r = results(broker, 1)[9]  # no worker has it: a typed failure, not a hang
+        assert not r.ok and r.code == "refused", r
+        assert "by 2 render worker(s)" in r.error and "none.npy" in r.error
+        stopped(has, signal.SIGTERM)  # the only worker that has it leaves
+        wait_until(lambda: has_id not in {w.id for w in broker.workers()}, STOP_DEADLINE_S,
+                   "the broker seeing the worker leave")
+        broker.submit(job(10, hill))
+        r = results(broker, 1)[10]
+        assert not r.ok and r.code == "refused" and "by 1 render worker(s)" in r.error, r
+    finally:
+        for p in (has, lacks):
             if p.poll() is None:
                 p.kill()
                 p.communicate(timeout=10)

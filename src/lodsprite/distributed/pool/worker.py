@@ -134,6 +134,8 @@ class _Renderer(threading.Thread):
 
     def _render(self, msg: JobMessage) -> list:
         """The result frames of one job; never raises."""
+        from lodsprite.errors import InputError
+
         job = msg.job
         key = job_key(job.load)
         try:
@@ -148,7 +150,8 @@ class _Renderer(threading.Thread):
             if dropped is not None:
                 dropped.release()
             error = f"{type(exc).__name__}: {exc}"[:4000]
-            return encode_pool(ResultMessage(POOL_VERSION, job.job, False, error))
+            return encode_pool(ResultMessage(POOL_VERSION, job.job, False, error,
+                                             refused=isinstance(exc, InputError)))
 
     def _scene(self, key: bytes, load: LoadArgs):
         from lodsprite.distributed.render import KeyframeRenderer
