@@ -14,6 +14,7 @@ import sys
 import msgspec
 import numpy as np
 import pytest
+from test_pool import results
 
 from conftest import wait_until
 from lodsprite.camera import look_at
@@ -38,18 +39,6 @@ def worker(endpoint: str, data=None) -> subprocess.Popen:
     cmd = [sys.executable, "-c", "from lodsprite.cli import main; main()", "render-worker",
            "--connect", endpoint, *(["--data", str(data)] if data else [])]
     return subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True)
-
-
-def results(broker: Broker, n: int, timeout_s: float = DEADLINE_S) -> dict:
-    got: dict = {}
-
-    def more():
-        for r in broker.poll():
-            got[r.job] = r
-        return len(got) >= n
-
-    wait_until(more, timeout_s, f"{n} results")
-    return got
 
 
 def pid_of(broker: Broker, proc: subprocess.Popen) -> str:
@@ -82,7 +71,7 @@ def test_a_worker_stopped_idle_or_mid_job_leaves_the_pool_cleanly(broker: Broker
         a_id, b_id = pid_of(broker, a), pid_of(broker, b)
         broker.submit(job(1))
         broker.submit(job(2))  # both render: each holds a GL context and a scene
-        assert all(r.ok for r in results(broker, 2).values())
+        assert all(r.ok for r in results(broker, 2, DEADLINE_S).values())
         before = broker.stats()
         stopped(a, signal.SIGINT)  # idle
         wait_until(lambda: a_id not in {w.id for w in broker.workers()}, STOP_DEADLINE_S,
@@ -98,7 +87,7 @@ def test_a_worker_stopped_idle_or_mid_job_leaves_the_pool_cleanly(broker: Broker
         assert after["requeued"] == before["requeued"] + 1  # job 3 back in the queue
         c = worker(broker.endpoints[1])  # another worker does it
         try:
-            r = results(broker, 1)[3]
+            r = results(broker, 1, DEADLINE_S)[3]
             assert r.ok and r.worker == pid_of(broker, c), r.error
         finally:
             stopped(c, signal.SIGTERM)
@@ -120,19 +109,19 @@ def test_a_job_a_worker_refuses_is_done_by_one_that_can(broker: Broker, tmp_path
         has_id, _ = pid_of(broker, has), pid_of(broker, lacks)
         for i in range(4):  # two idle workers: the one that lacks the file gets some
             broker.submit(job(i, hill))
-        got = results(broker, 4)
+        got = results(broker, 4, DEADLINE_S)
         assert all(r.ok and r.worker == has_id for r in got.values()), got
         assert all(decode_keyframe(r.parts).color.std() > 1.0 for r in got.values())
         assert broker.stats()["declined"] >= 1  # it was refused, then retried
         broker.submit(job(9, msgspec.structs.replace(SCENE, terrain="none.npy")))
-        r = results(broker, 1)[9]  # no worker has it: a typed failure, not a hang
+        r = results(broker, 1, DEADLINE_S)[9]  # no worker has it: a typed failure, not a hang
         assert not r.ok and r.code == "refused", r
         assert "by 2 render worker(s)" in r.error and "none.npy" in r.error
         stopped(has, signal.SIGTERM)  # the only worker that has it leaves
         wait_until(lambda: has_id not in {w.id for w in broker.workers()}, STOP_DEADLINE_S,
                    "the broker seeing the worker leave")
         broker.submit(job(10, hill))
-        r = results(broker, 1)[10]
+        r = results(broker, 1, DEADLINE_S)[10]
         assert not r.ok and r.code == "refused" and "by 1 render worker(s)" in r.error, r
     finally:
         for p in (has, lacks):

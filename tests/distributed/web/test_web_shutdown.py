@@ -15,7 +15,7 @@ import threading
 import aiohttp
 import pytest
 
-from conftest import wait_until
+from conftest import gone, wait_until
 from lodsprite.distributed.run import free_ports
 from lodsprite.distributed.web.client import connect as web_connect
 
@@ -49,14 +49,6 @@ def descendants(pid: int) -> set[int]:
             todo += list(kids - found)
             found |= kids
     return found
-
-
-def gone(pid: int) -> bool:
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            return f.read().rpartition(")")[2].split()[0] in ("Z", "X")
-    except OSError:
-        return True
 
 
 def start_server() -> tuple[subprocess.Popen, int, queue.Queue]:
