@@ -3,22 +3,32 @@ stopped by SIGINT while idle and SIGTERM while it holds a job, a worker leaves t
 with a ``disconnect`` (not by going silent), releases its scenes and GL context and exits
 0 without a traceback, and the job it held is done by another worker.  A job a worker
 refuses (a dataset its --data lacks) goes to a worker that has it; one no worker can do
-fails with code ``refused``."""
+fails with code ``refused``, also when the last worker that could take it leaves."""
 
 from __future__ import annotations
 
 import signal
 import subprocess
 import sys
+import time
 
 import msgspec
 import numpy as np
 import pytest
+import zmq
 from test_pool import results
 
 from conftest import wait_until
 from lodsprite.camera import look_at
 from lodsprite.distributed.pool import Broker, Job
+from lodsprite.distributed.pool.jobs import (
+    POOL_VERSION,
+    Disconnect,
+    Heartbeat,
+    Ready,
+    ResultMessage,
+    encode_pool,
+)
 from lodsprite.distributed.protocol import LoadArgs, WireViewpoint, decode_keyframe
 from lodsprite.scene import load_scene
 
@@ -128,3 +138,47 @@ def test_a_job_a_worker_refuses_is_done_by_one_that_can(broker: Broker, tmp_path
             if p.poll() is None:
                 p.kill()
                 p.communicate(timeout=10)
+
+
+def next_job(sock: zmq.Socket, timeout_s: float = 5.0) -> int:
+    """Play a worker on ``sock``: answer heartbeats until a job comes; its id."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if sock.poll(100):
+            msg = msgspec.msgpack.decode(sock.recv_multipart()[0])
+            if msg["kind"] == "job":
+                return msg["job"]["job"]
+        sock.send_multipart(encode_pool(Heartbeat(POOL_VERSION)))
+    pytest.fail(f"no job within {timeout_s} s", pytrace=False)
+
+
+def test_a_declined_job_fails_when_the_last_worker_that_could_take_it_leaves() -> None:
+    """Two workers (played on DEALER sockets) hold jobs 1 and 2; the one with job 1
+    refuses it, which leaves job 1 waiting for the other; that one leaves: job 1 fails
+    (refused), job 2 goes to the worker that is left."""
+    with Broker() as b:
+        socks = []
+        for name in ("x", "y"):
+            s = zmq.Context.instance().socket(zmq.DEALER)
+            s.setsockopt(zmq.LINGER, 0)
+            s.connect(b.local_endpoint)
+            s.send_multipart(encode_pool(Ready(POOL_VERSION, name=name)))
+            socks.append(s)
+        try:
+            wait_until(lambda: len(b.workers()) == 2, 5.0, "both workers joining")
+            b.submit(job(1))
+            b.submit(job(2))
+            held = {next_job(s): s for s in socks}
+            assert sorted(held) == [1, 2]
+            x, y = held[1], held[2]
+            x.send_multipart(encode_pool(ResultMessage(POOL_VERSION, 1, False,
+                                                       "InputError: no such file",
+                                                       refused=True)))
+            y.send_multipart(encode_pool(Disconnect(POOL_VERSION, "stopping")))
+            r = results(b, 1, DEADLINE_S)[1]
+            assert not r.ok and r.code == "refused" and "no such file" in r.error, r
+            assert next_job(x) == 2  # the job the leaving worker held: to the one left
+            assert b.stats()["declined"] == 1 and b.stats()["requeued"] == 1
+        finally:
+            for s in socks:
+                s.close(linger=0)
