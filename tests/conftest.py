@@ -61,6 +61,15 @@ def wait_until(pred: Callable[[], T], timeout_s: float, what: str,
         time.sleep(interval_s)
 
 
+def gone(pid: int) -> bool:
+    """The process ``pid`` is not running (absent, or a zombie waiting to be reaped)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rpartition(")")[2].split()[0] in ("Z", "X")
+    except OSError:
+        return True
+
+
 @pytest.fixture
 def cli(capsys):
     """``cli(*args)`` runs ``lodsprite ARGS`` in this process, as the console script does

@@ -29,11 +29,12 @@ def render_worker(
         max=16)] = 2,
 ) -> None:
     """A render worker: renders keyframes for a `lodsprite serve --web` pool until
-    interrupted; reconnects with backoff when the server goes away."""
+    SIGTERM or SIGINT (it then leaves the pool, finishes the render in progress, releases
+    GL and exits 0); reconnects with backoff when the server goes away."""
     import logging
 
     from lodsprite.distributed.keys import ClientKeys
-    from lodsprite.distributed.pool.worker import Worker
+    from lodsprite.distributed.pool.worker import Worker, stop_on_signals
 
     if not connect.startswith(("tcp://", "ipc://")):
         raise InputError(f"--connect must be tcp://HOST:PORT, got {connect!r}")
@@ -45,8 +46,10 @@ def render_worker(
         raise InputError("--client-key needs --server-key")
     logging.basicConfig(level=logging.INFO, format="lodsprite render-worker: %(message)s")
     worker = Worker(connect, keys, data, cache, name=f"{_host()}-{_pid()}")
+    stop_on_signals(worker)
     logging.info("rendering for %s%s", connect, " (CURVE)" if keys else "")
     worker.run()
+    logging.info("stopped")
 
 
 def _host() -> str:

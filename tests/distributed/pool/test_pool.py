@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 import zmq
 
-from conftest import wait_until
+from conftest import gone, wait_until
 from lodsprite.camera import look_at
 from lodsprite.distributed.keys import ServerKeys, make_keys
 from lodsprite.distributed.pool import LIVENESS_S, Broker, Job
@@ -52,15 +52,6 @@ def results(broker: Broker, n: int, timeout_s: float = 20.0) -> dict:
 
     wait_until(more, timeout_s, f"{n} results")
     return got
-
-
-def gone(pid: int) -> bool:
-    """The process ``pid`` is not running (absent, or a zombie waiting to be reaped)."""
-    try:
-        with open(f"/proc/{pid}/stat") as f:
-            return f.read().rpartition(")")[2].split()[0] in ("Z", "X")
-    except OSError:
-        return True
 
 
 @pytest.fixture(scope="module")

@@ -3,10 +3,11 @@ system chromedriver (never Selenium Manager, which would reach for the network),
 with software WebGL2 (ANGLE on SwiftShader).  One server (``lodsprite serve --web`` as a
 subprocess) and one browser for the module.
 
-The page must load only with the token, connect, receive keyframes and draw, play the
-chen1999 path the server computes and hold its last frame; that frame must match
-lodsprite's own offscreen render of the same viewpoint (the server's KeyframeRenderer);
-and after a live fuzz of hostile frames another page must still play."""
+The page must load only with the token, connect, receive keyframes (decoded by its Web
+Worker) and draw, play the chen1999 path the server computes and hold its last frame;
+that frame must match lodsprite's own offscreen render of the same viewpoint (the
+server's KeyframeRenderer); and after a live fuzz of hostile frames another page must
+still play."""
 
 import asyncio
 import base64
@@ -132,7 +133,8 @@ def play(browser, server) -> dict:
         const done = arguments[arguments.length - 1];
         const wait = () => window.lodsprite ? window.lodsprite.ready.then(
             () => window.lodsprite.finished).then(() => done({stats: window.lodsprite.stats(),
-            pixels: window.lodsprite.pixels()}), (e) => done({error: String(e)}))
+            pixels: window.lodsprite.pixels(), decoded: window.lodsprite.decoded()}),
+            (e) => done({error: String(e)}))
             : setTimeout(wait, 20);
         wait();""")
 
@@ -163,7 +165,7 @@ def test_the_page_needs_the_token(server):
     assert refused.value.code == 401
     with urllib.request.urlopen(page_url(server), timeout=DEADLINE_S) as r:
         assert r.status == 200 and b"/static/main.js" in r.read()
-    for module in ("main", "wire", "gl", "camera", "predictor", "hud"):  # no token needed
+    for module in ("main", "wire", "gl", "camera", "predictor", "hud", "decode"):  # no token
         url = f"http://127.0.0.1:{server['port']}/static/{module}.js"
         with urllib.request.urlopen(url, timeout=DEADLINE_S) as r:
             assert r.status == 200 and b"export" in r.read() or module == "main"
@@ -180,6 +182,7 @@ def test_the_page_plays_the_path_and_its_held_frame_matches_the_offscreen_render
     assert s["keyframes"] >= 1 and s["frames"] >= FRAMES, s
     assert s["error_px"] is not None and s["error_px"] < 1e-6  # held on its own keyframe
     assert s["median_ms"] > 0 and s["p99_ms"] >= s["median_ms"] and s["latency_ms"] >= 0
+    assert got["decoded"] >= s["keyframes"]  # each drawn one decoded off the page's thread
     p = got["pixels"]
     shown = np.frombuffer(base64.b64decode(p["rgba"]), np.uint8)
     shown = shown.reshape(p["height"], p["width"], 4)[..., :3]  # rows bottom-up (readPixels)

@@ -161,8 +161,7 @@ def test_one_path_at_a_time_per_session_from_the_cached_height_field(monkeypatch
 
 def test_the_hub_waits_for_the_pools_own_job_timeout(monkeypatch):
     """The broker re-queues a slow job itself: the hub must not give up (and resubmit)
-    before the broker's timeout times its tries."""
-    from lodsprite.distributed.pool.broker import MAX_TRIES
+    before the broker's timeout times its tries (lost and declined workers)."""
     from lodsprite.distributed.web import hub as hub_module
 
     class Slow(FakePool):
@@ -173,7 +172,7 @@ def test_the_hub_waits_for_the_pools_own_job_timeout(monkeypatch):
 
     async def run():
         hub, s = scheduled(Slow(1))
-        now[0] += 100.0 * MAX_TRIES - 1.0  # the broker still owns the job
+        now[0] += 100.0 * hub_module.POOL_TRIES - 1.0  # the broker still owns the job
         hub._expire()
         kept = len(hub.jobs)
         now[0] += 1.0 + hub_module.JOB_GRACE_S + 1.0

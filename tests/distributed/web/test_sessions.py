@@ -231,3 +231,19 @@ def test_loads_superseded_while_waiting_build_nothing(monkeypatch):
 
     s = asyncio.run(run())
     assert built == ["fractal:64:4"] and s.load.terrain == "fractal:64:4"
+
+
+def test_a_job_the_pool_gave_up_on_is_answered_with_its_code():
+    async def run():
+        pool = FakePool(1)
+        hub, s = scheduled(pool)
+        job = pool.submitted[-1]
+        pool.results.append(Result(job.job, job.session, False, "refused by 2 render "
+                                   "worker(s): no such file", code="refused"))
+        hub.drain()
+        return hub, s
+
+    hub, s = asyncio.run(run())
+    last = replies(s)[-1]
+    assert (last.seq, last.ok, last.data) == (5, False, {"code": "refused"})
+    assert "no such file" in last.error and not hub.jobs and s.counts["failed"] == 1

@@ -11,8 +11,14 @@ public key file lies in the keys folder get in).  One thread owns the sockets:
   worker silent for more than :data:`~.jobs.LIVENESS_S` (plus the transfer time of a
   result it announced) is dead, its job re-queued at the front (a job whose workers died
   :data:`MAX_TRIES` times fails instead: it may be what kills them);
-* jobs go one at a time to idle workers, first to one that has the job's scene loaded,
-  else to the one idle longest;
+* a worker that declines a job (``result`` not ok: it refuses the job, a dataset its
+  ``--data`` lacks or a scene its machine cannot hold, or its render failed) does not fail
+  it while another connected worker has not declined it: the job goes back to the front
+  of the queue for one of those; declined by :data:`MAX_TRIES` workers, or by every worker
+  connected, it fails with :attr:`~.jobs.Result.code` ``refused`` (all refusals) or
+  ``failed``, and the workers' reasons;
+* jobs go one at a time to idle workers that have not declined them, first to one that
+  has the job's scene loaded, else to the one idle longest;
 * every message is received frame by frame with a cap (:mod:`..frames`), each frame under
   ``zmq.MAXMSGSIZE``, and validated (:func:`~.jobs.decode_pool`, a keyframe by
   :func:`~lodsprite.distributed.protocol.decode_keyframe`); a bad one is counted
@@ -75,18 +81,32 @@ MAX_TRIES = 3
 """Workers a job may see die under it before it fails."""
 
 
+@dataclass(eq=False)  # queued entries are told apart by identity
+class _Queued:
+    """A job in the broker's hands: ``tries`` workers lost under it, the workers that
+    declined it (their key: their reason) and whether each of those refused it."""
+
+    job: Job
+    tries: int = 0
+    declined: dict[tuple[int, bytes], str] = field(default_factory=dict)
+    refused: bool = True
+
+
 @dataclass
 class _Peer:
     sock: int
     ident: bytes
     info: Ready
     seen: float
-    job: Job | None = None
-    tries: int = 0
+    entry: _Queued | None = None
     since: float = 0.0
     grace: float = 0.0
     idle_since: float = 0.0
     scenes: deque = field(default_factory=lambda: deque(maxlen=4))
+
+    @property
+    def job(self) -> Job | None:
+        return None if self.entry is None else self.entry.job
 
 
 class Broker:
@@ -114,13 +134,13 @@ class Broker:
         self._auth = None
         self._socks: list[zmq.Socket] = []
         self._procs: list = []
-        self._queue: deque[tuple[Job, int]] = deque()
+        self._queue: deque[_Queued] = deque()
         self._inbox: deque[Job] = deque()
         self._done: deque[Result] = deque()
         self._peers: dict[tuple[int, bytes], _Peer] = {}
         self._snapshot: list[WorkerInfo] = []
-        self._stats = dict.fromkeys(("jobs", "results", "failed", "requeued", "dead",
-                                     "rejected", "ignored"), 0)
+        self._stats = dict.fromkeys(("jobs", "results", "failed", "requeued", "declined",
+                                     "dead", "rejected", "ignored"), 0)
         self._stop = threading.Event()
         self._wake_r, self._wake_w = os.pipe()
         self._ready_r, self._ready_w = os.pipe()
@@ -154,7 +174,8 @@ class Broker:
         return list(self._snapshot)
 
     def stats(self) -> dict[str, int]:
-        """Counts: jobs, results, failed, requeued, dead, rejected, ignored."""
+        """Counts: jobs, results, failed, requeued (after a lost worker), declined
+        (results not ok, each retried elsewhere or failed), dead, rejected, ignored."""
         return dict(self._stats)
 
     def wait_workers(self, n: int, timeout: float) -> bool:
@@ -246,7 +267,7 @@ class Broker:
                         self._receive(i, s)
                 _drain(self._wake_r)
                 while self._inbox:
-                    self._queue.append((self._inbox.popleft(), 0))
+                    self._queue.append(_Queued(self._inbox.popleft()))
                     self._stats["jobs"] += 1
                 now = time.monotonic()
                 self._purge(now)
@@ -313,8 +334,13 @@ class Broker:
             return
         worker = key[1].hex()
         if not msg.ok:
-            peer.job, peer.idle_since = None, time.monotonic()
-            self._finish(Result(job.job, job.session, False, msg.error, worker=worker))
+            entry = peer.entry
+            peer.entry, peer.idle_since = None, time.monotonic()
+            self._stats["declined"] += 1
+            entry.declined[key] = msg.error
+            entry.refused = entry.refused and msg.refused
+            if not self._fail_if_stuck(entry):
+                self._queue.appendleft(entry)  # another worker may render it
             return
         data = [bytes(p) for p in parts]
         try:
@@ -326,7 +352,7 @@ class Broker:
             self._send(key, Disconnect(POOL_VERSION, "bad keyframe"))
             self._lose(key, "sent a bad keyframe")
             return
-        peer.job, peer.idle_since = None, time.monotonic()
+        peer.entry, peer.idle_since = None, time.monotonic()
         peer.scenes.append(job_key(job.load))
         self._finish(Result(job.job, job.session, True, "", data, worker))
 
@@ -351,27 +377,50 @@ class Broker:
             return
         self._stats["dead"] += why != "disconnected"
         log.info("render pool: worker %s (pid %d) %s", key[1].hex(), peer.info.pid, why)
-        if peer.job is not None:
-            tries = peer.tries + 1
-            if tries >= MAX_TRIES:
-                self._finish(Result(peer.job.job, peer.job.session, False,
-                                    f"{tries} workers were lost rendering this job"))
+        entry = peer.entry
+        if entry is not None:
+            entry.tries += 1
+            if entry.tries >= MAX_TRIES:
+                self._finish(Result(entry.job.job, entry.job.session, False,
+                                    f"{entry.tries} workers were lost rendering this job",
+                                    code="lost"))
             else:
                 self._stats["requeued"] += 1
-                self._queue.appendleft((peer.job, tries))
+                self._queue.appendleft(entry)
+        for waiting in [q for q in self._queue if q.declined]:  # their last hope gone?
+            if self._fail_if_stuck(waiting):
+                self._queue.remove(waiting)
+
+    def _fail_if_stuck(self, entry: _Queued) -> bool:
+        """Fail ``entry`` (and say True) if :data:`MAX_TRIES` workers declined it or
+        every connected worker did."""
+        if len(entry.declined) < MAX_TRIES and any(
+                k not in entry.declined for k in self._peers):
+            return False
+        reasons = sorted(set(entry.declined.values()))
+        code = "refused" if entry.refused else "failed"
+        self._finish(Result(entry.job.job, entry.job.session, False,
+                            f"{code} by {len(entry.declined)} render worker(s): "
+                            + "; ".join(reasons), code=code))
+        return True
 
     def _dispatch(self, now: float) -> None:
-        while self._queue:
-            idle = [p for p in self._peers.values() if p.job is None]
+        """Each queued job, in order, to an idle worker that has not declined it."""
+        for entry in list(self._queue):
+            idle = [p for p in self._peers.values() if p.entry is None]
             if not idle:
                 return
-            job, tries = self._queue.popleft()
-            scene = job_key(job.load)
+            idle = [p for p in idle if (p.sock, p.ident) not in entry.declined]
+            if not idle:
+                continue  # a busy worker may take it later
+            self._queue.remove(entry)
+            scene = job_key(entry.job.load)
             warm = [p for p in idle if scene in p.scenes]
             peer = min(warm or idle, key=lambda p: p.idle_since)
-            peer.job, peer.tries, peer.since = job, tries, now
+            peer.entry, peer.since = entry, now
             # Unreachable: _send loses the peer and puts the job back in front.
-            self._send((peer.sock, peer.ident), JobMessage(POOL_VERSION, job, self.codec))
+            self._send((peer.sock, peer.ident),
+                       JobMessage(POOL_VERSION, entry.job, self.codec))
 
     def _send(self, key: tuple[int, bytes], msg) -> None:
         try:

@@ -12,8 +12,8 @@ kind        direction               fields                                      
 ready       worker -> broker        ``pid``, ``name``, ``cache`` (scenes it keeps)  0
 heartbeat   both                    none                                            0
 job         broker -> worker        ``job`` (:class:`Job`), ``codec``               0
-result      worker -> broker        ``job`` id, ``ok``, ``error``; on success the   0 or 3
-                                    keyframe message's frames
+result      worker -> broker        ``job`` id, ``ok``, ``error``, ``refused``; on  0 or 3
+                                    success the keyframe message's frames
                                     (:func:`~lodsprite.distributed.protocol.
                                     encode_keyframe`)
 disconnect  both                    ``reason``                                      0
@@ -49,7 +49,8 @@ __all__ = ["HEARTBEAT_S", "LIVENESS_S", "MAX_GRACE_S", "MAX_JOB_BYTES", "MAX_RES
            "Ready", "Result", "ResultMessage", "WorkerInfo", "check_bind", "check_job",
            "decode_pool", "encode_pool", "job_key"]
 
-POOL_VERSION = 1
+POOL_VERSION = 2
+"""2: ``result`` says whether the worker ``refused`` the job."""
 HEARTBEAT_S = 0.25
 """Seconds between heartbeats, each way."""
 LIVENESS_S = 1.0
@@ -86,8 +87,11 @@ class Result(Struct):
     """A job's outcome: ``ok`` and on success ``parts``, the keyframe message's frames
     (header, colour, depth; :func:`~lodsprite.distributed.protocol.decode_keyframe` reads
     them, their ``seq`` is the job id); otherwise ``error`` says why (the worker's load or
-    render error, or a job given up after its workers died); ``worker``: the hex id of
-    the worker that answered ("" when none did)."""
+    render error, or a job given up after its workers died) and ``code`` what kind of
+    failure: ``refused`` (every worker that tried refused it: a dataset its ``--data``
+    lacks, a scene its machine cannot hold), ``failed`` (a worker's render failed) or
+    ``lost`` (its workers died); ``worker``: the hex id of the worker that answered (""
+    when none did)."""
 
     job: int
     session: str
@@ -95,6 +99,7 @@ class Result(Struct):
     error: str = ""
     parts: list[bytes] = field(default_factory=list)
     worker: str = ""
+    code: Literal["", "refused", "failed", "lost"] = ""
 
 
 class PoolMessage(Struct, forbid_unknown_fields=True, omit_defaults=True, tag_field="kind"):
@@ -121,9 +126,13 @@ class JobMessage(PoolMessage, tag="job"):
 
 
 class ResultMessage(PoolMessage, tag="result"):
+    """``refused``: not ok because this worker cannot take the job (its data rule or its
+    memory), not because a render failed."""
+
     job: Seq
     ok: bool
     error: Text = ""
+    refused: bool = False
 
 
 class Disconnect(PoolMessage, tag="disconnect"):

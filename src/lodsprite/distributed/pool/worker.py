@@ -17,6 +17,13 @@ worker's own data folder, or absolute paths inside it (what a local web server's
 resolution gives).  A scene the machine cannot hold (its memory estimate against
 ``MemAvailable``) is refused before anything loads.  Every message is validated
 (:func:`~.jobs.decode_pool`); a bad one is counted and ignored, never fatal.
+
+Stopping (:meth:`Worker.stop`; SIGTERM or SIGINT with :func:`stop_on_signals`): the I/O
+thread says ``disconnect`` to the broker, which re-queues the job this worker held at
+once, the render thread finishes the render it is in (if any; its result is dropped),
+releases its scenes and GL context, and :meth:`Worker.run` returns.  A local worker
+ignores SIGINT (a terminal's Ctrl-C reaches the whole process group: its web server stops
+it) and stops on SIGTERM.
 """
 
 from __future__ import annotations
@@ -24,6 +31,7 @@ from __future__ import annotations
 import logging
 import os
 import queue
+import signal
 import threading
 import time
 from collections import OrderedDict
@@ -54,7 +62,7 @@ from lodsprite.distributed.protocol import LoadArgs, ProtocolError
 log = logging.getLogger("lodsprite.pool")
 
 __all__ = ["BACKOFF_MAX_S", "Worker", "end_processes", "resolve_load", "run_local_worker",
-           "spawn_workers"]
+           "spawn_workers", "stop_on_signals"]
 
 BACKOFF_MAX_S = 4.0
 
@@ -112,14 +120,22 @@ class _Renderer(threading.Thread):
             while (msg := self.jobs.get()) is not None:
                 self.out.send_multipart(self._render(msg))
         finally:
+            released = len(self.scenes)
             for r in self.scenes.values():
                 r.release()
-            if self.gl is not None:
+            self.scenes.clear()
+            had_gl = self.gl is not None
+            if had_gl:
                 self.gl.release()
+                self.gl = None
             self.out.close(linger=0)
+            log.info("render worker: %d scene(s) and %s", released,
+                     "the GL context released" if had_gl else "no GL context made")
 
     def _render(self, msg: JobMessage) -> list:
         """The result frames of one job; never raises."""
+        from lodsprite.errors import InputError
+
         job = msg.job
         key = job_key(job.load)
         try:
@@ -134,7 +150,8 @@ class _Renderer(threading.Thread):
             if dropped is not None:
                 dropped.release()
             error = f"{type(exc).__name__}: {exc}"[:4000]
-            return encode_pool(ResultMessage(POOL_VERSION, job.job, False, error))
+            return encode_pool(ResultMessage(POOL_VERSION, job.job, False, error,
+                                             refused=isinstance(exc, InputError)))
 
     def _scene(self, key: bytes, load: LoadArgs):
         from lodsprite.distributed.render import KeyframeRenderer
@@ -283,10 +300,25 @@ class Worker:
                 renderer.jobs.put(msg)
 
 
+def stop_on_signals(worker: Worker, signums: tuple[int, ...] = (signal.SIGTERM,
+                                                                 signal.SIGINT)) -> None:
+    """Make the signals ``signums`` stop ``worker`` (its :meth:`Worker.run` returns
+    within a heartbeat, after the render in progress); call from the main thread."""
+    def handler(signum: int, frame: object) -> None:
+        worker.stop()
+
+    for signum in signums:
+        signal.signal(signum, handler)
+
+
 def run_local_worker(connect: str, data_dir: str | None, cache: int, parent_pid: int) -> None:
-    """Entry point of a local worker process (:meth:`Broker.spawn_local`)."""
+    """Entry point of a local worker process (:meth:`Broker.spawn_local`): SIGINT
+    ignored (the parent stops it), SIGTERM stops it."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     logging.basicConfig(level=logging.WARNING, format="lodsprite worker: %(message)s")
-    Worker(connect, None, data_dir, cache, f"local-{os.getpid()}", parent_pid).run()
+    worker = Worker(connect, None, data_dir, cache, f"local-{os.getpid()}", parent_pid)
+    stop_on_signals(worker, (signal.SIGTERM,))
+    worker.run()
 
 
 def spawn_workers(n: int, connect: str, data_dir: str | None, cache: int) -> list:

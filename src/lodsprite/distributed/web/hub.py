@@ -12,9 +12,13 @@ render pool.
   ``session_jobs`` in flight, one job per live worker at a time, so that a session asking
   often gets no more renders than one asking when it needs to.  The pool owns the job
   timeout (the broker's ``job_timeout_s``: it re-queues a job whose worker is silent or too
-  slow, and fails it after ``MAX_TRIES`` workers); the hub forgets a job (counted
-  ``failed``) only after all those tries and :data:`JOB_GRACE_S` more, as a backstop
-  against a pool that never answers, so it never resubmits while a worker still renders.
+  slow, and fails it after ``MAX_TRIES`` workers; a job a worker declines goes to another
+  worker, up to ``MAX_TRIES`` of them); the hub forgets a job (counted ``failed``) only
+  after all those tries and :data:`JOB_GRACE_S` more, as a backstop against a pool that
+  never answers, so it never resubmits while a worker still renders.
+* A failed job's ``reply`` (not ok) carries ``data.code``: ``refused`` (every worker that
+  tried refused it: a dataset or a scene size it does not serve), ``failed`` (a render
+  failed) or ``lost`` (its workers died).
 * Generations: each applied ``load`` starts a new generation of its session; its requests
   of the older one are forgotten and a result that still comes for one is dropped
   (counted ``stale``), so a page never gets a keyframe of the terrain it left.
@@ -59,10 +63,12 @@ from lodsprite.errors import InputError, LodspriteError
 
 log = logging.getLogger("lodsprite.web")
 
-__all__ = ["JOB_GRACE_S", "SCENES_CACHED", "Hub"]
+__all__ = ["JOB_GRACE_S", "POOL_TRIES", "SCENES_CACHED", "Hub"]
 
 JOB_GRACE_S = 10.0
 """Seconds past the pool's last try after which the hub forgets a job."""
+POOL_TRIES = 2 * MAX_TRIES
+"""Workers the pool may give a job: MAX_TRIES lost ones and MAX_TRIES that declined."""
 SCENES_CACHED = 4
 TICK_S = 0.05
 
@@ -87,7 +93,7 @@ class Hub:
         self._tasks: set[asyncio.Task] = set()
         self._ticker: asyncio.Task | None = None
         timeout = getattr(pool, "job_timeout_s", JOB_TIMEOUT_S)  # the broker's: one timeout
-        self.job_timeout_s = timeout * MAX_TRIES + JOB_GRACE_S
+        self.job_timeout_s = timeout * POOL_TRIES + JOB_GRACE_S
 
     # ------------------------------------------------------------------- lifetime
 
@@ -280,7 +286,8 @@ class Hub:
                 continue
             if not r.ok:
                 s.counts["failed"] += 1
-                s.reply(p.seq, False, f"render: {r.error}")
+                s.reply(p.seq, False, f"render: {r.error}",
+                        {"code": r.code or "failed"})
                 continue
             try:
                 s.push_keyframe(_restamp(r.parts, p), p)

@@ -8,7 +8,11 @@ WebSocket (403 without the token, for a foreign ``Origin`` or a foreign ``Host``
 :class:`~.hub.Hub`, which renders its keyframes on the render pool.  Messages: :mod:`.wire`.
 
 :func:`serve_web` runs it until a signal; :class:`WebServer` starts and stops it inside a
-running event loop (tests, benchmarks).
+running event loop (tests, benchmarks).  Stopping (SIGTERM, SIGINT, :meth:`WebServer.stop`)
+refuses new WebSockets (503), closes the open ones with a close frame of code 1001 (going
+away; each given :data:`CLOSE_S` s, a page that stopped reading is cut off after it), ends
+the sessions, then the HTTP server (requests still running get :data:`SHUTDOWN_S` s), then
+the render pool (its local renderer processes are told to stop, terminated after 2 s).
 """
 
 from __future__ import annotations
@@ -22,7 +26,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from aiohttp import WSMsgType, web
+from aiohttp import WSCloseCode, WSMsgType, web
 
 from lodsprite.distributed.datasets import Datasets
 from lodsprite.distributed.web.hub import Hub
@@ -40,6 +44,10 @@ __all__ = ["STATIC_DIR", "WebConfig", "WebServer", "serve_web"]
 
 STATIC_DIR = Path(__file__).parent / "static"
 HEARTBEAT_S = 20.0
+CLOSE_S = 2.0
+"""Seconds a WebSocket's close handshake may take when the server stops."""
+SHUTDOWN_S = 3.0
+"""Seconds HTTP requests still running get when the server stops."""
 MAX_SESSIONS = 256
 """WebSockets served at once; one more is answered 503."""
 CSP = ("default-src 'self'; script-src 'self'; style-src 'self' 'unsafe-inline'; "
@@ -94,6 +102,8 @@ class WebServer:
         self.pool = pool
         self.hub: Hub | None = None
         self._runner: web.AppRunner | None = None
+        self._sockets: set[web.WebSocketResponse] = set()
+        self._stopping = False
         self.port: int | None = None
 
     @property
@@ -117,7 +127,7 @@ class WebServer:
         """Bind and start serving (inside the running loop); the page's URL."""
         self.hub = Hub(self.pool, self.datasets, self.config.caps, self.config.codec)
         self.hub.start()
-        self._runner = web.AppRunner(self.app(), access_log=None)
+        self._runner = web.AppRunner(self.app(), access_log=None, shutdown_timeout=SHUTDOWN_S)
         await self._runner.setup()
         site = web.TCPSite(self._runner, self.config.host, self.config.port,
                            ssl_context=self.config.tls)
@@ -126,6 +136,12 @@ class WebServer:
         return self.url
 
     async def stop(self) -> None:
+        """Close the WebSockets (code 1001), the sessions, the HTTP server and the pool
+        (idempotent; at most about CLOSE_S + SHUTDOWN_S + 2 s)."""
+        if self._stopping:
+            return
+        self._stopping = True
+        await asyncio.gather(*(_going_away(ws) for ws in list(self._sockets)))
         if self.hub is not None:
             await self.hub.stop()
         if self._runner is not None:
@@ -151,11 +167,14 @@ class WebServer:
             return web.Response(status=403, text="unknown host")
         if not check_origin(request.headers.get("Origin"), request.host):
             return web.Response(status=403, text="foreign origin")
+        if self._stopping:
+            return web.Response(status=503, text="server stopping")
         if len(self.hub.sessions) >= MAX_SESSIONS:
             return web.Response(status=503, text="too many sessions")
         ws = web.WebSocketResponse(max_msg_size=MAX_PAGE_MESSAGE, heartbeat=HEARTBEAT_S,
-                                   compress=False)
+                                   compress=False, timeout=CLOSE_S)
         await ws.prepare(request)
+        self._sockets.add(ws)
         hub = self.hub
         session = hub.open_session()
         writer = asyncio.get_running_loop().create_task(session.run_writer(ws.send_bytes))
@@ -169,6 +188,7 @@ class WebServer:
                 elif msg.type == WSMsgType.ERROR:
                     break
         finally:
+            self._sockets.discard(ws)
             hub.close_session(session)
             writer.cancel()
             with contextlib.suppress(asyncio.CancelledError, Exception):
@@ -179,6 +199,16 @@ class WebServer:
 async def _no_icon(request: web.Request) -> web.Response:
     """No icon (204), so a browser's console stays free of a 404."""
     return web.Response(status=204)
+
+
+async def _going_away(ws: web.WebSocketResponse) -> None:
+    """Close ``ws`` with code 1001 (going away); a peer that does not answer within
+    :data:`CLOSE_S` s (or stopped reading) has its connection cut."""
+    try:
+        await asyncio.wait_for(ws.close(code=WSCloseCode.GOING_AWAY,
+                                        message=b"server stopping"), CLOSE_S)
+    except (TimeoutError, ConnectionError, RuntimeError):
+        pass  # aiohttp closed the transport (a timeout) or it was gone already
 
 
 def _closed_on_error(task: asyncio.Task, ws: web.WebSocketResponse) -> None:

@@ -141,20 +141,33 @@ export class SpriteRenderer {
     this.triangles = 2 * scene.coarse * scene.coarse;
   }
 
-  // A keyframe message: header (view, proj row-major; near, far), colour (H, W, 3) uint8
-  // and depth (H, W) float32, rows bottom-up as WebGL's textures want them.
-  setKeyframe(header, color, depth) {
+  // A keyframe's textures, uploaded now (when its decode resolves, not in a frame): header
+  // (view, proj row-major; near, far), colour an ImageBitmap of its (H, W) RGBA rows
+  // bottom-up (decode.js; closed here) and depth (H, W) float32 rows bottom-up, as WebGL's
+  // textures want them.  Drawn once adopted (useKeyframe) or dropped (dropKeyframe).
+  prepareKeyframe(header, bitmap, depth) {
     const gl = this.gl;
-    const [h, w] = header.color.shape;
-    if (this.key) { gl.deleteTexture(this.key.sprite); gl.deleteTexture(this.key.depth); }
     const [dh, dw] = header.depth.shape;
-    this.key = {
-      sprite: texture(gl, 1, gl.RGB8, gl.RGB, gl.UNSIGNED_BYTE, w, h, color, gl.LINEAR),
+    gl.pixelStorei(gl.UNPACK_FLIP_Y_WEBGL, false);  // the bitmap's rows as they came
+    gl.pixelStorei(gl.UNPACK_PREMULTIPLY_ALPHA_WEBGL, false);
+    gl.pixelStorei(gl.UNPACK_COLORSPACE_CONVERSION_WEBGL, gl.NONE);
+    const key = {
+      sprite: texture(gl, 1, gl.RGBA8, gl.RGBA, gl.UNSIGNED_BYTE, bitmap.width, bitmap.height, bitmap, gl.LINEAR),
       depth: texture(gl, 2, gl.R32F, gl.RED, gl.FLOAT, dw, dh, depth, gl.NEAREST),
       mvp: mul(header.proj, header.view),
       nearFar: [header.near, header.far],
     };
+    bitmap.close();
+    return key;
   }
+
+  // Draw the prepared keyframe `key` from now on (the previous one's textures deleted).
+  useKeyframe(key) {
+    if (this.key) this.dropKeyframe(this.key);
+    this.key = key;
+  }
+
+  dropKeyframe(key) { this.gl.deleteTexture(key.sprite); this.gl.deleteTexture(key.depth); }
 
   // Draw a spriteframe at view-projection `viewProj` (row-major) into the canvas.
   draw(viewProj) {

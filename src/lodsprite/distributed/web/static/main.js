@@ -12,7 +12,12 @@
 // z-buffer).  For tests and tools: window.lodsprite.ready (a Promise: scene loaded),
 // .finished (a Promise: the path played and the held view's keyframe shown), .stats(),
 // .pixels(), .viewpoint(), .pathIndex() (path viewpoints drawn so far: the one shown is
-// pathIndex() - 1), .serverStats() (a Promise: the `stats` op's reply data).
+// pathIndex() - 1), .serverStats() (a Promise: the `stats` op's reply data),
+// .decoded() (keyframes decoded by the decode worker).
+//
+// Keyframes are decoded by a Web Worker (decode.js: inflate, checks, an ImageBitmap of the
+// colour) and uploaded when their decode resolves; a frame only adopts the newest one
+// uploaded, so it never waits for a decode or an upload.
 
 import { pack, unpack, image } from './wire.js';
 import { SpriteRenderer } from './gl.js';
@@ -42,7 +47,22 @@ let seq = 0;
 const waiting = new Map();  // control seq -> resolve
 let sceneResolve;
 const sceneArrived = new Promise((r) => { sceneResolve = r; });
-let pendingKey = null;
+let pendingKey = null;  // the newest keyframe uploaded, not yet drawn: {header, key}
+let keyframesIn = 0, newestDecoded = 0, decoded = 0;
+const keyframeHeaders = new Map();  // decode id -> header
+const decoder = new Worker(new URL('./decode.js', import.meta.url), { type: 'module' });
+decoder.onmessage = ({ data }) => {
+  const header = keyframeHeaders.get(data.id);
+  keyframeHeaders.delete(data.id);
+  if (data.error) { state = `bad keyframe: ${data.error}`; return; }
+  decoded += 1;
+  if (!renderer || !header || data.id < newestDecoded) { data.bitmap.close(); return; }  // older than one uploaded
+  newestDecoded = data.id;
+  const key = renderer.prepareKeyframe(header, data.bitmap, data.depth);
+  if (pendingKey) renderer.dropKeyframe(pendingKey.key);  // superseded before a frame drew it
+  pendingKey = { header, key };
+};
+decoder.onerror = (e) => { state = `keyframe decoder: ${e.message}`; };
 
 function percentile(values, p) {
   if (!values.length) return null;
@@ -68,8 +88,9 @@ ws.onmessage = async (event) => {
     const [heights, texture] = await Promise.all([image(header.heights, buffers[0]), image(header.texture, buffers[1])]);
     sceneResolve({ header, heights, texture });
   } else if (header.kind === 'keyframe') {
-    const [color, depth] = await Promise.all([image(header.color, buffers[0]), image(header.depth, buffers[1])]);
-    pendingKey = { header, color, depth };
+    keyframesIn += 1;
+    keyframeHeaders.set(keyframesIn, header);
+    decoder.postMessage({ id: keyframesIn, header, color: buffers[0], depth: buffers[1] }, [event.data]);
   }
 };
 ws.onclose = () => { state = 'disconnected'; };
@@ -106,9 +127,9 @@ async function start() {
 }
 
 function adopt(now) {
-  const { header, color, depth } = pendingKey;
+  const { header, key } = pendingKey;
   pendingKey = null;
-  renderer.setKeyframe(header, color, depth);
+  renderer.useKeyframe(key);
   keyEye = header.viewpoint.o;
   stats.keyframes += 1;
   keep(stats.latencies, now - 1000 * header.t0);
@@ -164,6 +185,7 @@ const api = {
   pathIndex: () => pathIndex,
   state: () => state,
   serverStats: () => call('stats').then((r) => r.data),
+  decoded: () => decoded,
   finished,
 };
 api.ready = start().then(() => true, (e) => { state = `failed: ${e.message}`; hud.update(Infinity, api.stats, state); throw e; });

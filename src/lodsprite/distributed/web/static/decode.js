@@ -1,0 +1,39 @@
+// The page's keyframe decoder, a module Web Worker: a keyframe's images are inflated
+// (zlib), checked against their declared shapes and made into what WebGL uploads here,
+// off the page's thread, so a frame never waits for a decode.  The colour, (H, W, 3)
+// uint8 RGB rows bottom-up as the wire sends it (lodsprite.distributed.protocol's
+// keyframe), becomes an ImageBitmap of the same rows in the same order (RGBA, alpha 255;
+// no colour-space conversion, no premultiplication, no flip), which texImage2D uploads
+// as it did the bytes: row 0 of the buffer is row 0 of the texture.  The depth, (H, W)
+// float32, comes back as its Float32Array (ImageBitmaps hold 8-bit colour only).
+//
+// In: {id, header, color, depth} (the two image buffers as the wire gave them).
+// Out: {id, bitmap, depth} (both transferred) or {id, error}.
+
+import { image } from './wire.js';
+
+export const BITMAP_OPTIONS = { imageOrientation: 'none', premultiplyAlpha: 'none', colorSpaceConversion: 'none' };
+
+// (H, W, 3) RGB bytes as an (H, W) RGBA ImageData, rows in the same order.
+export function rgbaImage(rgb, w, h) {
+  const rgba = new Uint8ClampedArray(4 * w * h);
+  for (let i = 0, j = 0; j < rgba.length; i += 3, j += 4) {
+    rgba[j] = rgb[i]; rgba[j + 1] = rgb[i + 1]; rgba[j + 2] = rgb[i + 2]; rgba[j + 3] = 255;
+  }
+  return new ImageData(rgba, w, h);
+}
+
+if (typeof WorkerGlobalScope !== 'undefined' && self instanceof WorkerGlobalScope) {
+  self.onmessage = async ({ data }) => {
+    const { id, header, color, depth } = data;
+    try {
+      const [rgb, z] = await Promise.all([image(header.color, color), image(header.depth, depth)]);
+      const [h, w, c] = header.color.shape;
+      if (c !== 3) throw new Error(`keyframe colour of ${c} channels`);
+      const bitmap = await createImageBitmap(rgbaImage(rgb, w, h), BITMAP_OPTIONS);
+      self.postMessage({ id, bitmap, depth: z }, [bitmap, z.buffer]);
+    } catch (e) {
+      self.postMessage({ id, error: String(e.message || e) });
+    }
+  };
+}
