@@ -33,8 +33,11 @@ if TYPE_CHECKING:
     from lodsprite.techniques.base import Technique
 
 TERRAIN_MODES = ("full", "lod", "adaptive", "sprite", "sprite-adaptive")
-#: Knob settings, ascending quality: ε (sprite, px), tolerance (adaptive, px), level (lod).
-EPSILONS = (16.0, 11.3, 8.0, 5.7, 4.0, 2.8, 2.0, 1.4, 1.0, 0.7, 0.5)
+#: Knob settings, ascending quality: ε (sprite, px), tolerance (adaptive, px), level (lod);
+#: ε in √2 steps to 4 px, then 2^(1/4) steps (the terrain's triangles rise faster than 1/ε
+#: below a few pixels, so the finer steps keep a setting near any budget).
+EPSILONS = (16.0, 11.3, 8.0, 5.7, 4.0, 3.4, 2.8, 2.4, 2.0, 1.7, 1.4, 1.2, 1.0, 0.84, 0.71,
+            0.59, 0.5)
 LEVELS = (8.0, 16.0, 32.0, 64.0)
 
 

@@ -27,6 +27,7 @@ better plan leaves headroom.
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
 
@@ -101,10 +102,20 @@ class FrameScheduler:
     if predicted over ``budget · (1 + tolerance)``, and by a plan of more benefit only if
     that one fits ``budget · (1 - hysteresis)`` for ``dwell`` frames running.
     ``overhead_gain``: the moving average of the frame's time outside the layers
-    (:meth:`observe_frame`), taken off the budget."""
+    (:meth:`observe_frame`), taken off the budget.
+
+    The median trim (``trim_gain``; 0: off): settings are discrete and the plan fits under
+    the budget, so frames come in under the target by up to a setting's step and by what
+    the models over-predict.  After each frame, when the median of the last
+    ``trim_window`` frames lies outside ``[1 - trim_band, 1 + trim_band / 2]`` of the
+    target, the budget's factor ``1 + trim`` moves ``trim_gain`` of that relative miss
+    (``trim`` within ``trim_range``): a slow correction of the predictions' bias toward a
+    median at the target, outside the band only, so that a steady scene stays steady."""
 
     def __init__(self, target_ms: float, hysteresis: float = 0.03, tolerance: float = 0.03,
-                 dwell: int = 3, overhead_gain: float = 0.1) -> None:
+                 dwell: int = 3, overhead_gain: float = 0.1, trim_gain: float = 0.05,
+                 trim_window: int = 30, trim_band: float = 0.03,
+                 trim_range: tuple[float, float] = (-0.3, 0.3)) -> None:
         if not (target_ms > 0):
             raise InputError(f"the frame budget must be > 0 ms, got {target_ms}")
         self.target_ms = float(target_ms)
@@ -116,11 +127,15 @@ class FrameScheduler:
         self.share_sums: dict[str, float] = {}
         self.plans = 0
         self._wanting = 0
+        self.trim_gain, self.trim_band = float(trim_gain), float(trim_band)
+        self.trim_range = trim_range
+        self.trim = 0.0
+        self._recent: deque[float] = deque(maxlen=max(1, int(trim_window)))
 
     @property
     def budget_ms(self) -> float:
-        """The layers' budget this frame: the target less the measured overhead."""
-        return max(self.target_ms - self.overhead_ms, 0.0)
+        """The layers' budget this frame: the trimmed target less the measured overhead."""
+        return max(self.target_ms * (1.0 + self.trim) - self.overhead_ms, 0.0)
 
     def plan(self, controls: Iterable[LayerControl], models: Mapping[str, LayerModel]
              ) -> dict[str, float]:
@@ -177,6 +192,12 @@ class FrameScheduler:
         """After the frame: the whole frame took ``frame_ms``, its layers ``layers_ms``."""
         extra = max(frame_ms - layers_ms, 0.0)
         self.overhead_ms += self.overhead_gain * (extra - self.overhead_ms)
+        self._recent.append(float(frame_ms))
+        if self.trim_gain > 0 and len(self._recent) == self._recent.maxlen:
+            m = float(np.median(self._recent)) / self.target_ms
+            if m < 1.0 - self.trim_band or m > 1.0 + self.trim_band / 2:
+                self.trim = float(np.clip(self.trim + self.trim_gain * (1.0 - m),
+                                          *self.trim_range))
 
     def shares(self) -> dict[str, float]:
         """Each layer's mean planned share of the target so far (fractions)."""
