@@ -18,6 +18,7 @@ from lodsprite.terrain.quadtree import (
     morph_factor,
     ranges,
     screen_error_px,
+    selection_counts,
 )
 from lodsprite.terrain.store import coarse_error
 from lodsprite.terrain.streaming import SlotCache, TileLoader
@@ -57,6 +58,30 @@ def test_a_node_is_refined_exactly_while_its_screen_error_exceeds_the_tolerance(
         err = screen_error_px(p.level_errors[k], eye[2] - hi[2], 512, 45.0)
         assert refined or err <= 1.0
         assert r[k] >= p.level_errors[k] * 512 / (2 * math.tan(math.radians(22.5))) - 1e-6
+
+
+@pytest.mark.parametrize("grid", [16, 32, 64])
+def test_selection_counts_match_select_at_every_tolerance(grid):
+    """One traversal counts, for every tolerance, the nodes select() draws with every
+    node resident: the scene budget's terrain work table."""
+    from lodsprite.camera import Projection, frustum_planes, look_at
+
+    p = MemoryPyramid(rough(), 30.0, 30.0)
+    q = Quadtree(p, grid=grid)
+    tolerances = (16.0, 8.0, 4.0, 2.0, 1.4, 1.0, 0.7, 0.5)
+    diag = q.node_diagonals()
+    R = np.array([ranges(p.level_errors, t, 256, 60.0, diag) for t in tolerances])
+    for eye, aim in (((0.0, -9000.0, 2500.0), (0.0, 0.0, 0.0)),
+                     ((-3000.0, -3000.0, 400.0), (3000.0, 3000.0, 0.0))):
+        vp = look_at(eye, aim)
+        planes = frustum_planes(Projection(60.0, 1.0, 10.0, 40000.0).matrix()
+                                @ vp.view_matrix())
+        got = selection_counts(q, vp.o, planes, R)
+        want = [len(q.select(vp.o, planes, r, lambda n: True)[0]) for r in R]
+        assert got.tolist() == want
+        assert want[0] < want[-1]                      # the tolerances do differ
+    with pytest.raises(ValueError, match="must not shrink"):
+        selection_counts(q, vp.o, planes, R[::-1])
 
 
 def test_a_parent_is_drawn_while_its_children_load_and_they_are_requested():

@@ -39,6 +39,9 @@ TERRAIN_MODES = ("full", "lod", "adaptive", "sprite", "sprite-adaptive")
 EPSILONS = (16.0, 11.3, 8.0, 5.7, 4.0, 3.4, 2.8, 2.4, 2.0, 1.7, 1.4, 1.2, 1.0, 0.84, 0.71,
             0.59, 0.5)
 LEVELS = (8.0, 16.0, 32.0, 64.0)
+#: The adaptive terrain's work table (triangles at every ε) is recomputed every this many
+#: plans; the budget's measured/predicted ratio corrects it between.
+WORK_EVERY = 4
 
 
 @dataclass(frozen=True)
@@ -111,6 +114,9 @@ class TerrainLayer(Layer):
         self.technique: Technique = spec.create(renderer, **spec.bind(options))
         self.sprite = getattr(self.technique, "sprite", None)  # a LodSprite or None
         self._last = None
+        self._seen: Viewpoint | None = None       # the last frame's viewpoint
+        self._table: np.ndarray | None = None     # the adaptive work table, and its age
+        self._plans = 0
 
     def projection(self, viewpoint: Viewpoint) -> np.ndarray:
         """The frame's projection ``(4, 4)``: the terrain technique's own."""
@@ -138,8 +144,21 @@ class TerrainLayer(Layer):
 
     def warm_up(self, viewpoint: Viewpoint, projection: np.ndarray) -> None:
         self.technique.warm_up(viewpoint)
+        self._seen = viewpoint  # the first plan predicts from this view
+
+    def _adaptive_work(self) -> np.ndarray | None:
+        """The adaptive renderer's triangles at every tolerance of :data:`EPSILONS` from
+        the last frame's viewpoint (one traversal of its quadtree), every
+        ``WORK_EVERY``-th plan; between, the table kept (None before a frame)."""
+        if self._seen is None:
+            return None
+        self._plans += 1
+        if self._table is None or self._plans % WORK_EVERY == 0:
+            self._table = self.technique.terrain.triangles_at(self._seen, EPSILONS)
+        return self._table
 
     def draw(self, viewpoint: Viewpoint, t: float, projection: np.ndarray) -> LayerFrame:
+        self._seen = viewpoint
         f = self._last = self.technique.frame(viewpoint)
         self._spriteframe(viewpoint)
         extra = {"terrain_kind": f.kind}
@@ -162,7 +181,8 @@ class TerrainLayer(Layer):
             return LayerControl("terrain", EPSILONS, float(self.sprite.epsilon_px),
                                 lambda v: t.set_param("epsilon", v))
         if self.mode == "adaptive":
-            return LayerControl("terrain", EPSILONS, float(t.terrain.sse), t.terrain.set_sse)
+            return LayerControl("terrain", EPSILONS, float(t.terrain.sse), t.terrain.set_sse,
+                                work=self._adaptive_work)
         if self.mode == "lod":
             levels = tuple(v for v in LEVELS if v <= self.renderer.scene.hf.quads) or (2.0,)
             return LayerControl("terrain", levels, float(t.lod),

@@ -256,6 +256,7 @@ class ObjectsLayer(Layer):
         self._engine_frame(viewpoint, 0.0, projection, np.zeros(len(self.crowd), bool),
                            keep=True)
         self._warm, self._log = self._log[-1], []
+        self._seen = (viewpoint, projection)  # the first plan predicts from this view
 
     def draw(self, viewpoint: Viewpoint, t: float, projection: np.ndarray) -> LayerFrame:
         f, self._last = self._engine_frame(viewpoint, t, projection, self.subset, cull=True)

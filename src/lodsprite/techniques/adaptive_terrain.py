@@ -21,7 +21,14 @@ import numpy as np
 
 from lodsprite.camera import Viewpoint, fitted_projection, frustum_planes
 from lodsprite.errors import InputError
-from lodsprite.terrain.quadtree import DEFAULT_GRID, MORPH_SPAN, Node, Quadtree, ranges
+from lodsprite.terrain.quadtree import (
+    DEFAULT_GRID,
+    MORPH_SPAN,
+    Node,
+    Quadtree,
+    ranges,
+    selection_counts,
+)
 from lodsprite.terrain.streaming import SlotCache, tile_loader
 
 
@@ -95,6 +102,22 @@ class AdaptiveTerrain:
         self.sse = float(sse_px)
         self.r = ranges(self.tree.errors, self.sse, self.target.size[1], self.fov,
                         self.tree.node_diagonals())
+
+    def triangles_at(self, viewpoint: Viewpoint, tolerances: tuple[float, ...]) -> np.ndarray:
+        """The triangles a frame from ``viewpoint`` would draw at each tolerance (pixels)
+        once its tiles are resident, ``(len(tolerances),) float64``, from one traversal
+        (:func:`~lodsprite.terrain.quadtree.selection_counts`): the scene budget's
+        prediction of the terrain's work at every setting."""
+        key = tuple(float(t) for t in tolerances)
+        if getattr(self, "_ranges_key", None) != key:
+            diag = self.tree.node_diagonals()
+            self._ranges = np.array([ranges(self.tree.errors, t, self.target.size[1],
+                                            self.fov, diag) for t in key])
+            self._ranges_key = key
+        view_proj = self.projection(viewpoint) @ viewpoint.view_matrix()
+        nodes = selection_counts(self.tree, np.asarray(viewpoint.o, np.float64),
+                                 frustum_planes(view_proj), self._ranges)
+        return nodes * 2.0 * self.tree.g ** 2
 
     def projection(self, viewpoint: Viewpoint) -> np.ndarray:
         w, h = self.target.size

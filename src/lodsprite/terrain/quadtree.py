@@ -24,6 +24,7 @@ children still loading, its edge against their loaded neighbours may show T-junc
 from __future__ import annotations
 
 import math
+from bisect import bisect_right
 from dataclasses import dataclass
 
 import numpy as np
@@ -98,6 +99,14 @@ class Quadtree:
         """Node rows and columns at level ``k``."""
         r, c = self.p.shape(k)
         return max(1, -(-(r - 1) // self.g)), max(1, -(-(c - 1) // self.g))
+
+    def kids(self, n: Node) -> list[Node]:
+        """``n``'s children that exist (computed once a node)."""
+        cache = self.__dict__.setdefault("_kids", {})
+        out = cache.get(n)
+        if out is None:
+            out = cache[n] = [c for c in n.children() if self.exists(c)]
+        return out
 
     def roots(self) -> list[Node]:
         br, bc = self.blocks(self.top)
@@ -191,6 +200,50 @@ class Quadtree:
                 want.extend((urgency, c) for c in missing)
             draw.append(n)
         return draw, want
+
+
+def selection_counts(tree: Quadtree, eye: np.ndarray, planes: np.ndarray,
+                     ranges_by_setting: np.ndarray) -> np.ndarray:
+    """How many nodes :meth:`Quadtree.select` would draw under each of several range sets
+    (every node resident), in one traversal: ``ranges_by_setting (s, levels)`` the ``R_k``
+    of each setting, non-decreasing down the settings (finer tolerances, longer ranges:
+    :func:`ranges` of descending tolerances), ``planes (6, 4)`` the frustum -> ``(s,)
+    int64`` nodes drawn (the scene budget's terrain cost model: triangles are these times
+    ``2 · grid²``).  A node is split where ``d < R_k``; since the ranges grow down the
+    settings, the settings that reach a node, and those that split it, are each a suffix
+    ``i >= j``: a node reached from ``j`` and split from ``i0`` is drawn by ``j <= i <
+    i0``.  Breadth first, one frustum test a level."""
+    R = np.asarray(ranges_by_setting, np.float64)
+    if np.any(np.diff(R, axis=0) < 0):
+        raise ValueError("ranges must not shrink down the settings")
+    s_count = R.shape[0]
+    by_level = [R[:, k].tolist() for k in range(R.shape[1])]
+    diff = [0] * (s_count + 1)   # drawn from j to i0: +1 at j, -1 at i0
+    level = [(n, 0) for n in tree.roots()]
+    eye = np.asarray(eye, np.float64)
+    while level:
+        boxes = [tree.bounds(n) for n, _ in level]
+        lo = np.array([b[0] for b in boxes])
+        hi = np.array([b[1] for b in boxes])
+        inside = boxes_in_frustum(planes, lo, hi).tolist()
+        dist = np.linalg.norm(np.clip(eye, lo, hi) - eye, axis=1).tolist()
+        nxt = []
+        for (n, j), d, seen in zip(level, dist, inside, strict=True):
+            if not seen:
+                continue
+            i0 = s_count
+            if n.k > 0:
+                i0 = max(j, bisect_right(by_level[n.k], d))
+                if i0 < s_count:
+                    kids = tree.kids(n)
+                    if kids:
+                        nxt.extend((c, i0) for c in kids)
+                    else:
+                        i0 = s_count
+            diff[j] += 1
+            diff[i0] -= 1
+        level = nxt
+    return np.cumsum(diff[:-1]).astype(np.int64)
 
 
 def morph_factor(distance: np.ndarray, k: int, r: np.ndarray) -> np.ndarray:
