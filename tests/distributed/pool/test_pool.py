@@ -347,3 +347,34 @@ def test_a_reconnecting_worker_forgets_the_jobs_of_its_last_connection() -> None
         for sock in (router, pipe):
             sock.close(linger=0)
         zctx.term()
+
+
+def test_a_worker_renders_without_pacing_what_it_is_asked_for() -> None:
+    """The submitter decides when a keyframe is due: a worker's renderer never paces
+    (no per-keyframe reprojection for a pacer), even when the job's load says
+    ``pace="needed"`` (the default), and the keyframe it returns is the job's."""
+    from lodsprite.distributed.datasets import Datasets
+    from lodsprite.distributed.pool.jobs import JobMessage, decode_pool, job_key
+    from lodsprite.distributed.pool.worker import _Renderer
+
+    assert SCENE.pace == "needed"
+    zctx = zmq.Context()
+    pipe = zctx.socket(zmq.PAIR)
+    pipe.setsockopt(zmq.LINGER, 0)
+    pipe.bind("inproc://test-pace")
+    renderer = _Renderer(zctx, "inproc://test-pace", Datasets(None), 1)  # not started
+    try:
+        frames = renderer._render(JobMessage(POOL_VERSION, job(7), "raw"))
+        msg, parts = decode_pool(frames)
+        assert msg.ok, msg.error
+        assert decode_keyframe(parts).seq == 7
+        kept = renderer.scenes[job_key(SCENE)]
+        assert kept.pacer.pace == "continuous" and kept.pacer.metric is None
+    finally:
+        for r in renderer.scenes.values():
+            r.release()
+        if renderer.gl is not None:
+            renderer.gl.release()
+        renderer.out.close(linger=0)
+        pipe.close(linger=0)
+        zctx.term()
