@@ -33,97 +33,13 @@ from pathlib import Path
 
 import numpy as np
 
-from lodsprite.camera import Projection, Viewpoint
+from lodsprite.camera import Viewpoint
+from lodsprite.distributed.web.estimate import ErrorMetric, Predictor
 from lodsprite.paths import get_path
 from lodsprite.scene import load_scene
+from lodsprite.sprite.metric import ErrorMetric as ExactMetric
 
 PATHS = ("chen1999", "swan2002", "flyover", "patrol", "bank")
-LOST_S = 5.0
-MAX_AHEAD_S = 1.0  # predictor.js: look at most this far ahead (s)
-
-
-class ErrorMetric:
-    """The page's error estimate (predictor.js ``ErrorMetric``), vectorised."""
-
-    def __init__(self, scene) -> None:
-        h, hdr = np.asarray(scene.heights, np.float64), scene.header
-        n = hdr.coarse
-        mid = 0.25 * (h[:-1, :-1] + h[:-1, 1:] + h[1:, :-1] + h[1:, 1:])
-        jj, ii = np.meshgrid(np.arange(n) + 0.5, np.arange(n) + 0.5)
-        self.base = np.stack([hdr.origin[0] + jj * hdr.spacing,
-                              hdr.origin[1] + ii * hdr.spacing_y, mid], -1).reshape(-1, 3)
-        self.relief = float(hdr.relief)
-
-    def error_px(self, key_eye, vp: Viewpoint, view_proj: np.ndarray, beta: float) -> float:
-        if key_eye is None:
-            return float("inf")
-        c = self.base + [0.0, 0.0, self.relief]
-        k = np.c_[c, np.ones(len(c))] @ view_proj.T
-        w = k[:, 3]
-        inside = (w > 0) & (np.abs(k[:, :3]) <= w[:, None]).all(1)
-        c, base_z = c[inside], self.base[inside, 2]
-        if not len(c):
-            return float("inf")
-        ray = c - key_eye
-        flat = np.abs(ray[:, 2]) <= 1e-9 * np.linalg.norm(ray, axis=1)
-        s = np.where(flat, -1.0 if self.relief else 1.0,
-                     (base_z - key_eye[2]) / np.where(flat, 1.0, ray[:, 2]))
-        hit = s > 0
-        if not hit.any():
-            return float("inf")
-        a = _unit(c[hit] - vp.o)
-        b = _unit(key_eye + ray[hit] * s[hit, None] - vp.o)
-        theta = np.arctan2(np.linalg.norm(np.cross(a, b), axis=1), (a * b).sum(1))
-        misses = int((~hit).sum())
-        total = (theta**2).sum() + misses * theta.max() ** 2
-        return float(np.sqrt(total / (hit.sum() + misses)) / beta)
-
-
-def _unit(v: np.ndarray) -> np.ndarray:
-    return v / np.linalg.norm(v, axis=-1, keepdims=True)
-
-
-class Predictor:
-    """The page's request logic (predictor.js ``Predictor``)."""
-
-    def __init__(self, scene) -> None:
-        hdr = scene.header
-        w, h = hdr.size
-        self.epsilon = hdr.epsilon
-        self.proj = Projection(hdr.fov, w / h, hdr.near, hdr.far).matrix()
-        self.beta = np.radians(hdr.fov) / h
-        self.samples: list[tuple[float, Viewpoint]] = []
-        self.latency = 0.1
-        self.inflight: float | None = None
-
-    def sample(self, t: float, vp: Viewpoint) -> None:
-        self.samples = [*self.samples[-1:], (t, vp)]
-
-    def predict(self, t: float) -> Viewpoint:
-        if len(self.samples) < 2 or self.samples[1][0] <= self.samples[0][0]:
-            return self.samples[-1][1]
-        (t0, a), (t1, b) = self.samples
-        f = (t - t1) / (t1 - t0)
-        x = _unit(b.x + (b.x - a.x) * f)
-        y = b.y + (b.y - a.y) * f
-        y = _unit(y - x * (y @ x))
-        return Viewpoint(x, y, np.cross(x, y), b.o + (b.o - a.o) * f)
-
-    def error_px(self, metric: ErrorMetric, key_eye, vp: Viewpoint) -> float:
-        return metric.error_px(key_eye, vp, self.proj @ vp.view_matrix(), self.beta)
-
-    def want(self, metric: ErrorMetric, key_eye, t: float) -> Viewpoint | None:
-        if self.inflight is not None and t - self.inflight > LOST_S:
-            self.inflight = None
-        if self.inflight is not None:
-            return None
-        ahead = self.predict(t + min(self.latency, MAX_AHEAD_S))
-        return ahead if self.error_px(metric, key_eye, ahead) >= 0.5 * self.epsilon else None
-
-    def arrived(self, t0: float, now: float) -> None:
-        if self.inflight == t0:
-            self.latency = 0.7 * self.latency + 0.3 * max(0.0, now - t0)
-            self.inflight = None
 
 
 async def client(i: int, url: str, token: str, load: dict, path: list[Viewpoint],
@@ -160,23 +76,58 @@ async def client(i: int, url: str, token: str, load: dict, path: list[Viewpoint]
                 pred.arrived(header.t0, now)
 
         task = asyncio.create_task(reader())
-        errors = []
+        shown = []
         try:
             for k in range(len(path)):
                 await asyncio.sleep(max(0.0, clock0 + k / fps - time.monotonic()))
                 t = time.monotonic() - clock0
                 vp = path[(k + phase) % len(path)]
                 pred.sample(t, vp)
-                errors.append(pred.error_px(metric, state["eye"], vp))
+                shown.append(state["eye"])  # its error is measured after the run
                 want = pred.want(metric, state["eye"], t)
                 if want is not None:
-                    pred.inflight = t
+                    pred.sent(t)
                     await page.request(want.to_dict(), t)
         finally:
             task.cancel()
             await page.close()
     return {"keyframes": state["keyframes"], "latencies_ms": state["latencies"],
-            "errors_px": errors}
+            "shown_eyes": shown, "phase": phase, "metric": metric, "pred": pred,
+            "beta": pred.beta, "proj": pred.proj}
+
+
+def estimates(got: dict, path: list[Viewpoint]) -> np.ndarray:
+    """The page's estimate (what its HUD shows) of every frame a client showed, px."""
+    pred, metric = got["pred"], got["metric"]
+    return np.asarray([pred.error_px(metric, eye, path[(k + got["phase"]) % len(path)])
+                       for k, eye in enumerate(got["shown_eyes"])], np.float64)
+
+
+def exact_errors(got: dict, path: list[Viewpoint], exact: ExactMetric) -> np.ndarray:
+    """lodsprite's own metric (:mod:`lodsprite.sprite.metric`: the full-resolution
+    centres, ``C'`` cast on the coarse level) of every frame a client showed, px."""
+    out, rep, last = [], None, None
+    for k, eye in enumerate(got["shown_eyes"]):
+        if last is None or not np.array_equal(eye, last):
+            rep, last = exact.reproject(eye), eye
+        vp = path[(k + got["phase"]) % len(path)]
+        out.append(exact.error_px(rep, vp.o, got["proj"] @ vp.view_matrix(), got["beta"]))
+    return np.asarray(out, np.float64)
+
+
+async def pool_stats(url: str, token: str) -> dict:
+    """The render pool's figures (the ``stats`` op's ``server.pool``) over a WebSocket
+    of its own."""
+    import aiohttp
+
+    from lodsprite.distributed.web.client import connect
+
+    async with aiohttp.ClientSession() as http:
+        page = await connect(http, url, token)
+        try:
+            return (await page.stats())["server"]["pool"]
+        finally:
+            await page.close()
 
 
 def free_port() -> int:
@@ -252,16 +203,28 @@ async def run(args) -> dict:
                  for i in range(args.clients)]
         for _ in tasks:  # every page loaded and warmed up
             await asyncio.wait_for(ready.acquire(), 600.0)
-        cpu0 = tree_cpu_s(proc.pid)
+        cpu0, pool0 = tree_cpu_s(proc.pid), await pool_stats(url, token)
+        t0 = time.monotonic()
         start.set()
         got = await asyncio.gather(*tasks)
-        cpu = tree_cpu_s(proc.pid) - cpu0
+        wall = time.monotonic() - t0
+        cpu, pool1 = tree_cpu_s(proc.pid) - cpu0, await pool_stats(url, token)
     finally:
         stop(proc)
+    for i, g in enumerate(got):  # measured after the run: no CPU taken from the server
+        g["errors_px"] = estimates(g, paths[PATHS[i % len(PATHS)]])
     lat = np.concatenate([g["latencies_ms"] for g in got]) if got else np.zeros(0)
     err = np.concatenate([g["errors_px"] for g in got])
     shown = err[np.isfinite(err)]
     per = [g["keyframes"] for g in got]
+    exact = ExactMetric.for_level(hf, args.lod)
+    ex = [exact_errors(g, paths[PATHS[i % len(PATHS)]], exact) for i, g in enumerate(got)]
+    exact_all = np.concatenate(ex)
+    by_path = {}
+    for i, g in enumerate(got):
+        e = np.asarray(g["errors_px"], np.float64)
+        by_path.setdefault(PATHS[i % len(PATHS)], []).append((e[np.isfinite(e)],
+                                                              ex[i][np.isfinite(ex[i])]))
     return {"clients": args.clients, "renderers": args.renderers, "terrain": args.terrain,
             "size": args.size, "lod": args.lod, "epsilon": args.epsilon,
             "frames": args.frames, "fps": args.fps, "keyframes_per_client": per,
@@ -270,7 +233,22 @@ async def run(args) -> dict:
             "latency_ms_p99": float(np.percentile(lat, 99)) if len(lat) else None,
             "error_px_mean": float(shown.mean()) if len(shown) else None,
             "frames_without_estimate": int((~np.isfinite(err)).sum()),
-            "server_cpu_s": cpu}
+            "error_px_exact_mean": _finite_mean(exact_all),
+            "error_px_mean_by_path": {
+                k: {"estimate": _finite_mean(np.concatenate([a for a, _ in v])),
+                    "exact": _finite_mean(np.concatenate([b for _, b in v]))}
+                for k, v in by_path.items()},
+            "server_cpu_s": cpu,
+            # the render capacity (the pool's own measure): keyframes served a second,
+            # a job's dispatch-to-answer time, and how busy the renderers were
+            "play_s": wall, "keyframes_per_s": sum(per) / wall,
+            "job_ms_p50": pool1.get("job_ms_p50"), "job_ms_p90": pool1.get("job_ms_p90"),
+            "renderer_busy": (pool1["busy_s"] - pool0["busy_s"]) / (args.renderers * wall)}
+
+
+def _finite_mean(a: np.ndarray) -> float | None:
+    a = a[np.isfinite(a)]
+    return float(a.mean()) if len(a) else None
 
 
 def main() -> None:

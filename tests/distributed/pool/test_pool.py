@@ -92,7 +92,11 @@ def test_jobs_round_trip_through_two_local_workers(broker: Broker) -> None:
         assert kf.color.std() > 1.0  # terrain drawn, not a cleared target
     # Four jobs at once on two idle workers: both took some.
     assert {r.worker for r in got.values()} == {w.id for w in broker.workers()}
-    assert grew(before, broker.stats(), "results") == 4
+    after = broker.stats()
+    assert grew(before, after, "results") == 4
+    # The render capacity is measured: four answered jobs took time on the workers.
+    assert after["busy_s"] > before["busy_s"] and after["job_ms_p50"] > 0.0
+    assert after["job_ms_p90"] >= after["job_ms_p50"]
 
 
 def test_workers_follow_the_data_rule_and_jobs_are_checked_on_submit(broker: Broker) -> None:
