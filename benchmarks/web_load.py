@@ -49,10 +49,24 @@ from lodsprite.scene import load_scene
 from lodsprite.sprite.metric import ErrorMetric as ExactMetric
 
 PATHS = ("chen1999", "swan2002", "flyover", "patrol", "bank")
+_CAST: ErrorMetric | None = None  # in a cast process: the scene's estimate
+
+
+def _cast_init(scene) -> None:
+    global _CAST
+    _CAST = ErrorMetric(scene)
+
+
+def _cast(eye: np.ndarray):
+    """``C'`` of a keyframe eye, in a cast process (a page casts it in its own thread
+    in a millisecond or two; numpy here takes longer, and 16 pages in one event loop
+    would fall behind their frames)."""
+    return _CAST.reproject(eye)
 
 
 async def client(i: int, url: str, token: str, load: dict, path: list[Viewpoint],
-                 fps: float, start: asyncio.Event, ready: asyncio.Semaphore) -> dict:
+                 fps: float, start: asyncio.Event, ready: asyncio.Semaphore,
+                 casts: dict) -> dict:
     """One simulated page: loads, plays ``path`` at ``fps``; its keyframes, latencies and
     per-frame errors."""
     import aiohttp
@@ -63,6 +77,13 @@ async def client(i: int, url: str, token: str, load: dict, path: list[Viewpoint]
         page = await connect(http, url, token)
         scene = await page.load(load)
         metric, pred = ErrorMetric(scene), Predictor(scene)
+        if "pool" not in casts:  # the pages load one scene: one pool casts for all
+            import multiprocessing as mp
+            from concurrent.futures import ProcessPoolExecutor
+
+            casts["pool"] = ProcessPoolExecutor(1, mp.get_context("spawn"),
+                                                initializer=_cast_init, initargs=(scene,))
+        loop = asyncio.get_running_loop()
         phase = (i * len(path)) // 7 % len(path)
         # Warm-up, untimed: the renderers load the scene (each keeps it) before the clock.
         try:
@@ -72,6 +93,7 @@ async def client(i: int, url: str, token: str, load: dict, path: list[Viewpoint]
         await start.wait()
         clock0 = time.monotonic()
         state = {"eye": first.viewpoint.o, "keyframes": 0, "latencies": []}
+        metric.keep(await loop.run_in_executor(casts["pool"], _cast, state["eye"]))
 
         async def reader() -> None:
             while True:
@@ -81,8 +103,11 @@ async def client(i: int, url: str, token: str, load: dict, path: list[Viewpoint]
                 now = time.monotonic() - clock0
                 state["keyframes"] += 1
                 state["latencies"].append(1000.0 * (now - header.t0))
-                state["eye"] = np.array(header.viewpoint.o, np.float64)
+                eye = state["eye"] = np.array(header.viewpoint.o, np.float64)
                 pred.arrived(header.t0, now)
+                rep = await loop.run_in_executor(casts["pool"], _cast, eye)
+                if state["eye"] is eye:
+                    metric.keep(rep)  # what want() measures with, once it is cast
 
         task = asyncio.create_task(reader())
         shown = []  # (frame, the shown keyframe's eye)
@@ -98,7 +123,7 @@ async def client(i: int, url: str, token: str, load: dict, path: list[Viewpoint]
                 pred.sample(t, vp)
                 shown.append((k, state["eye"]))  # its error is measured after the run
                 k += 1
-                want = pred.want(metric, state["eye"], t)
+                want = pred.want(metric, state["eye"], t) if metric.cached(state["eye"]) else None
                 if want is not None:
                     pred.sent(t)
                     await page.request(want.to_dict(), t)
@@ -202,6 +227,24 @@ def tree_cpu_s(pid: int) -> float:
     return total
 
 
+def pages_cpu_s(server_pid: int) -> float | None:
+    """CPU seconds of the simulated pages: this process and its children other than
+    the server's tree (the cast process); None without psutil."""
+    try:
+        import psutil
+    except ImportError:
+        return None
+    me = psutil.Process()
+    total = sum(me.cpu_times()[:2])
+    for q in me.children():
+        if q.pid != server_pid:
+            try:
+                total += sum(q.cpu_times()[:2])
+            except psutil.Error:
+                pass
+    return total
+
+
 async def run(args) -> dict:
     token = secrets.token_urlsafe(16)
     proc, url = start_server(args.renderers, token)
@@ -211,20 +254,24 @@ async def run(args) -> dict:
     load = {"terrain": args.terrain, "size": [args.size, args.size], "lod": args.lod,
             "epsilon": args.epsilon}
     try:
-        start, ready = asyncio.Event(), asyncio.Semaphore(0)
+        start, ready, casts = asyncio.Event(), asyncio.Semaphore(0), {}
         tasks = [asyncio.create_task(client(i, url, token, load, paths[PATHS[i % len(PATHS)]],
-                                            args.fps, start, ready))
+                                            args.fps, start, ready, casts))
                  for i in range(args.clients)]
         for _ in tasks:  # every page loaded and warmed up
             await asyncio.wait_for(ready.acquire(), 600.0)
         cpu0, pool0 = tree_cpu_s(proc.pid), await pool_stats(url, token)
+        own0 = pages_cpu_s(proc.pid)
         t0 = time.monotonic()
         start.set()
         got = await asyncio.gather(*tasks)
         wall = time.monotonic() - t0
+        own = pages_cpu_s(proc.pid) - own0
         cpu, pool1 = tree_cpu_s(proc.pid) - cpu0, await pool_stats(url, token)
     finally:
         stop(proc)
+        if "pool" in casts:
+            casts["pool"].shutdown()
     for i, g in enumerate(got):  # measured after the run: no CPU taken from the server
         g["errors_px"] = estimates(g, paths[PATHS[i % len(PATHS)]])
     lat = np.concatenate([g["latencies_ms"] for g in got]) if got else np.zeros(0)
@@ -252,13 +299,14 @@ async def run(args) -> dict:
                 k: {"estimate": _finite_mean(np.concatenate([a for a, _ in v])),
                     "exact": _finite_mean(np.concatenate([b for _, b in v]))}
                 for k, v in by_path.items()},
-            "server_cpu_s": cpu,
+            "server_cpu_s": cpu, "pages_cpu_s": own,
             # the render capacity (the pool's own measure): keyframes served a second,
             # a job's dispatch-to-answer time, and how busy the renderers were
             "play_s": wall, "keyframes_per_s": sum(per) / wall,
             "frames_shown": sum(len(g["shown_eyes"]) for g in got),
             "job_ms_p50": pool1.get("job_ms_p50"), "job_ms_p90": pool1.get("job_ms_p90"),
-            "renderer_busy": (pool1["busy_s"] - pool0["busy_s"]) / (args.renderers * wall)}
+            "renderer_busy": (pool1["busy_s"] - pool0["busy_s"]) / (args.renderers * wall)
+            if "busy_s" in pool1 else None}
 
 
 def _finite_mean(a: np.ndarray) -> float | None:
@@ -266,16 +314,21 @@ def _finite_mean(a: np.ndarray) -> float | None:
     return float(a.mean()) if len(a) else None
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--clients", type=int, default=16)
-    ap.add_argument("--renderers", type=int, default=2)
+def scene_options(ap: argparse.ArgumentParser) -> None:
+    """The scene and flight options (also ``web_predictor.py``'s)."""
     ap.add_argument("--terrain", default="fractal:256")
     ap.add_argument("--size", type=int, default=256, help="keyframe side, px")
     ap.add_argument("--lod", type=int, default=32)
     ap.add_argument("--epsilon", type=float, default=2.0)
     ap.add_argument("--frames", type=int, default=300, help="frames of each path")
     ap.add_argument("--fps", type=float, default=30.0)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--clients", type=int, default=16)
+    ap.add_argument("--renderers", type=int, default=2)
+    scene_options(ap)
     ap.add_argument("--out", type=Path, default=Path("out/web_load"))
     args = ap.parse_args()
     results = asyncio.run(run(args))

@@ -375,10 +375,6 @@ def test_a_worker_renders_without_pacing_what_it_is_asked_for() -> None:
         kept = renderer.scenes[job_key(SCENE)]
         assert kept.pacer.pace == "continuous" and kept.pacer.metric is None
     finally:
-        for r in renderer.scenes.values():
-            r.release()
-        if renderer.gl is not None:
-            renderer.gl.release()
-        renderer.out.close(linger=0)
+        renderer.release()
         pipe.close(linger=0)
         zctx.term()

@@ -115,11 +115,18 @@ class _Renderer(threading.Thread):
             while (msg := self.jobs.get()) is not None:
                 self.out.send_multipart(self._render(msg))
         finally:
-            for r in self.scenes.values():
-                r.release()
-            if self.gl is not None:
-                self.gl.release()
-            self.out.close(linger=0)
+            self.release()
+
+    def release(self) -> None:
+        """Free the scenes, the GL context and the result socket (on the thread that
+        rendered)."""
+        for r in self.scenes.values():
+            r.release()
+        self.scenes.clear()
+        if self.gl is not None:
+            self.gl.release()
+            self.gl = None
+        self.out.close(linger=0)
 
     def _render(self, msg: JobMessage) -> list:
         """The result frames of one job; never raises."""

@@ -123,9 +123,8 @@ class ErrorMetric:
         """``C'`` of every centre for the keyframe eye ``key_eye (3,)`` metres (the last
         eye's is cached)."""
         key_eye = np.asarray(key_eye, np.float64)
-        last = self._last
-        if last is not None and np.array_equal(last.key_eye, key_eye):
-            return last
+        if self.cached(key_eye):
+            return self._last
         d = self.centres - key_eye  # C at t = 1
         t = _hits(key_eye, d[:, None], self._near)  # (K, 18)
         best = _nearest_one(np.where(self._near_ok, t, np.nan))
@@ -137,6 +136,17 @@ class ErrorMetric:
         c_prime = key_eye + d * np.where(missed, 1.0, best)[:, None]
         self._last = Reprojection(key_eye, c_prime, missed)
         return self._last
+
+    def cached(self, key_eye: np.ndarray) -> bool:
+        """Whether ``C'`` of ``key_eye`` is cast already (:meth:`reproject` is then
+        free)."""
+        last = self._last
+        return last is not None and np.array_equal(last.key_eye, key_eye)
+
+    def keep(self, rep: Reprojection) -> None:
+        """Take ``rep``, a :meth:`reproject` of this scene cast elsewhere (another
+        process), as the cached one."""
+        self._last = rep
 
     def _along_track(self, eye: np.ndarray, d: np.ndarray) -> np.ndarray:
         """``t (R,)`` of the hit nearest ``t = 1`` among the squares the rays' ground
