@@ -5,15 +5,24 @@ The server runs as its own process (``lodsprite serve --web``), so its CPU time 
 renderers' are measured apart from the clients' (psutil, over the process tree, from
 the first load to the end).  The N clients share this process's asyncio loop, each on
 its own WebSocket (aiohttp) and its own path (the built-in paths in turn, each started
-at its own phase), and each runs the page's logic (``static/predictor.js``, ported
-here): the linear predictor asks for the viewpoint one measured keyframe latency ahead
-once the shown keyframe's error there reaches ε/2, never with a request in flight; the
-error of the shown keyframe at every frame is the page's estimate (Chen et al. 1999,
-Eq. 1-2 at the coarse squares' centres raised by the scene's relief).
+at its own phase), and each runs the page's logic (``static/predictor.js``; its Python
+side is :mod:`lodsprite.distributed.web.estimate`): the linear predictor asks for the
+viewpoint one measured keyframe latency ahead once the shown keyframe's error there
+reaches ε/2, never with a request in flight.  A frame is shown every 1/fps s of the
+clock; a loop that falls behind (a loaded machine) skips frames, so the flight keeps its
+speed.  The error of every frame shown is measured after the run (no CPU taken from the
+server while it plays): the page's estimate (Chen et al. 1999, Eq. 1-2, ``C'`` cast on
+the coarse mesh) and lodsprite's own metric (:mod:`lodsprite.sprite.metric`: the
+full-resolution centres).
 
-Writes ``DIR/results.json``: ``keyframes_per_client`` (list), ``latency_ms_p50``,
-``latency_ms_p99`` (request sent to keyframe received), ``error_px_mean`` (over frames
-that showed a keyframe), ``server_cpu_s``, and the set-up.
+Writes ``DIR/results.json``: ``keyframes_per_client`` (list), ``most_over_least``,
+``latency_ms_p50``, ``latency_ms_p99`` (request sent to keyframe received),
+``error_px_mean`` (the page's estimate, over frames that showed a keyframe),
+``error_px_exact_mean`` (lodsprite's metric over the same frames),
+``error_px_mean_by_path`` (both, per path), ``server_cpu_s``, the render capacity
+(``keyframes_per_s`` served, the pool's ``job_ms_p50``/``job_ms_p90`` dispatch to
+answer, ``renderer_busy``: the fraction of the play time the renderers rendered),
+``play_s``, ``frames_shown`` and the set-up.
 
     python benchmarks/web_load.py --clients 16 --renderers 2 --out out/web_load
 """
@@ -33,101 +42,31 @@ from pathlib import Path
 
 import numpy as np
 
-from lodsprite.camera import Projection, Viewpoint
+from lodsprite.camera import Viewpoint
+from lodsprite.distributed.web.estimate import ErrorMetric, Predictor
 from lodsprite.paths import get_path
 from lodsprite.scene import load_scene
+from lodsprite.sprite.metric import ErrorMetric as ExactMetric
 
 PATHS = ("chen1999", "swan2002", "flyover", "patrol", "bank")
-LOST_S = 5.0
-MAX_AHEAD_S = 1.0  # predictor.js: look at most this far ahead (s)
+_CAST: ErrorMetric | None = None  # in a cast process: the scene's estimate
 
 
-class ErrorMetric:
-    """The page's error estimate (predictor.js ``ErrorMetric``), vectorised."""
-
-    def __init__(self, scene) -> None:
-        h, hdr = np.asarray(scene.heights, np.float64), scene.header
-        n = hdr.coarse
-        mid = 0.25 * (h[:-1, :-1] + h[:-1, 1:] + h[1:, :-1] + h[1:, 1:])
-        jj, ii = np.meshgrid(np.arange(n) + 0.5, np.arange(n) + 0.5)
-        self.base = np.stack([hdr.origin[0] + jj * hdr.spacing,
-                              hdr.origin[1] + ii * hdr.spacing_y, mid], -1).reshape(-1, 3)
-        self.relief = float(hdr.relief)
-
-    def error_px(self, key_eye, vp: Viewpoint, view_proj: np.ndarray, beta: float) -> float:
-        if key_eye is None:
-            return float("inf")
-        c = self.base + [0.0, 0.0, self.relief]
-        k = np.c_[c, np.ones(len(c))] @ view_proj.T
-        w = k[:, 3]
-        inside = (w > 0) & (np.abs(k[:, :3]) <= w[:, None]).all(1)
-        c, base_z = c[inside], self.base[inside, 2]
-        if not len(c):
-            return float("inf")
-        ray = c - key_eye
-        flat = np.abs(ray[:, 2]) <= 1e-9 * np.linalg.norm(ray, axis=1)
-        s = np.where(flat, -1.0 if self.relief else 1.0,
-                     (base_z - key_eye[2]) / np.where(flat, 1.0, ray[:, 2]))
-        hit = s > 0
-        if not hit.any():
-            return float("inf")
-        a = _unit(c[hit] - vp.o)
-        b = _unit(key_eye + ray[hit] * s[hit, None] - vp.o)
-        theta = np.arctan2(np.linalg.norm(np.cross(a, b), axis=1), (a * b).sum(1))
-        misses = int((~hit).sum())
-        total = (theta**2).sum() + misses * theta.max() ** 2
-        return float(np.sqrt(total / (hit.sum() + misses)) / beta)
+def _cast_init(scene) -> None:
+    global _CAST
+    _CAST = ErrorMetric(scene)
 
 
-def _unit(v: np.ndarray) -> np.ndarray:
-    return v / np.linalg.norm(v, axis=-1, keepdims=True)
-
-
-class Predictor:
-    """The page's request logic (predictor.js ``Predictor``)."""
-
-    def __init__(self, scene) -> None:
-        hdr = scene.header
-        w, h = hdr.size
-        self.epsilon = hdr.epsilon
-        self.proj = Projection(hdr.fov, w / h, hdr.near, hdr.far).matrix()
-        self.beta = np.radians(hdr.fov) / h
-        self.samples: list[tuple[float, Viewpoint]] = []
-        self.latency = 0.1
-        self.inflight: float | None = None
-
-    def sample(self, t: float, vp: Viewpoint) -> None:
-        self.samples = [*self.samples[-1:], (t, vp)]
-
-    def predict(self, t: float) -> Viewpoint:
-        if len(self.samples) < 2 or self.samples[1][0] <= self.samples[0][0]:
-            return self.samples[-1][1]
-        (t0, a), (t1, b) = self.samples
-        f = (t - t1) / (t1 - t0)
-        x = _unit(b.x + (b.x - a.x) * f)
-        y = b.y + (b.y - a.y) * f
-        y = _unit(y - x * (y @ x))
-        return Viewpoint(x, y, np.cross(x, y), b.o + (b.o - a.o) * f)
-
-    def error_px(self, metric: ErrorMetric, key_eye, vp: Viewpoint) -> float:
-        return metric.error_px(key_eye, vp, self.proj @ vp.view_matrix(), self.beta)
-
-    def want(self, metric: ErrorMetric, key_eye, t: float) -> Viewpoint | None:
-        if self.inflight is not None and t - self.inflight > LOST_S:
-            self.inflight = None
-        if self.inflight is not None:
-            return None
-        ahead = self.predict(t + min(self.latency, MAX_AHEAD_S))
-        return ahead if self.error_px(metric, key_eye, ahead) >= 0.5 * self.epsilon else None
-
-    def arrived(self, t0: float, now: float) -> None:
-        if self.inflight == t0:
-            self.latency = 0.7 * self.latency + 0.3 * max(0.0, now - t0)
-            self.inflight = None
+def _cast(eye: np.ndarray):
+    """``C'`` of a keyframe eye, in a cast process (a page casts it in its own thread
+    in a millisecond or two; numpy here takes longer, and 16 pages in one event loop
+    would fall behind their frames)."""
+    return _CAST.reproject(eye)
 
 
 async def client(i: int, url: str, token: str, load: dict, path: list[Viewpoint],
-                 fps: float, start: asyncio.Event, ready: asyncio.Semaphore) -> dict:
+                 fps: float, start: asyncio.Event, ready: asyncio.Semaphore,
+                 casts: dict) -> dict:
     """One simulated page: loads, plays ``path`` at ``fps``; its keyframes, latencies and
     per-frame errors."""
     import aiohttp
@@ -138,6 +77,13 @@ async def client(i: int, url: str, token: str, load: dict, path: list[Viewpoint]
         page = await connect(http, url, token)
         scene = await page.load(load)
         metric, pred = ErrorMetric(scene), Predictor(scene)
+        if "pool" not in casts:  # the pages load one scene: one pool casts for all
+            import multiprocessing as mp
+            from concurrent.futures import ProcessPoolExecutor
+
+            casts["pool"] = ProcessPoolExecutor(1, mp.get_context("spawn"),
+                                                initializer=_cast_init, initargs=(scene,))
+        loop = asyncio.get_running_loop()
         phase = (i * len(path)) // 7 % len(path)
         # Warm-up, untimed: the renderers load the scene (each keeps it) before the clock.
         try:
@@ -147,6 +93,7 @@ async def client(i: int, url: str, token: str, load: dict, path: list[Viewpoint]
         await start.wait()
         clock0 = time.monotonic()
         state = {"eye": first.viewpoint.o, "keyframes": 0, "latencies": []}
+        metric.keep(await loop.run_in_executor(casts["pool"], _cast, state["eye"]))
 
         async def reader() -> None:
             while True:
@@ -156,27 +103,70 @@ async def client(i: int, url: str, token: str, load: dict, path: list[Viewpoint]
                 now = time.monotonic() - clock0
                 state["keyframes"] += 1
                 state["latencies"].append(1000.0 * (now - header.t0))
-                state["eye"] = np.array(header.viewpoint.o, np.float64)
+                eye = state["eye"] = np.array(header.viewpoint.o, np.float64)
                 pred.arrived(header.t0, now)
+                rep = await loop.run_in_executor(casts["pool"], _cast, eye)
+                if state["eye"] is eye:
+                    metric.keep(rep)  # what want() measures with, once it is cast
 
         task = asyncio.create_task(reader())
-        errors = []
+        shown = []  # (frame, the shown keyframe's eye)
+        k = 0
         try:
-            for k in range(len(path)):
+            while k < len(path):
                 await asyncio.sleep(max(0.0, clock0 + k / fps - time.monotonic()))
                 t = time.monotonic() - clock0
+                k = max(k, int(t * fps))  # a late loop skips frames: the flight keeps
+                if k >= len(path):        # its speed whatever this machine's load
+                    break
                 vp = path[(k + phase) % len(path)]
                 pred.sample(t, vp)
-                errors.append(pred.error_px(metric, state["eye"], vp))
-                want = pred.want(metric, state["eye"], t)
+                shown.append((k, state["eye"]))  # its error is measured after the run
+                k += 1
+                want = pred.want(metric, state["eye"], t) if metric.cached(state["eye"]) else None
                 if want is not None:
-                    pred.inflight = t
+                    pred.sent(t)
                     await page.request(want.to_dict(), t)
         finally:
             task.cancel()
             await page.close()
     return {"keyframes": state["keyframes"], "latencies_ms": state["latencies"],
-            "errors_px": errors}
+            "shown_eyes": shown, "phase": phase, "metric": metric, "pred": pred,
+            "beta": pred.beta, "proj": pred.proj}
+
+
+def estimates(got: dict, path: list[Viewpoint]) -> np.ndarray:
+    """The page's estimate (what its HUD shows) of every frame a client showed, px."""
+    pred, metric = got["pred"], got["metric"]
+    return np.asarray([pred.error_px(metric, eye, path[(k + got["phase"]) % len(path)])
+                       for k, eye in got["shown_eyes"]], np.float64)
+
+
+def exact_errors(got: dict, path: list[Viewpoint], exact: ExactMetric) -> np.ndarray:
+    """lodsprite's own metric (:mod:`lodsprite.sprite.metric`: the full-resolution
+    centres, ``C'`` cast on the coarse level) of every frame a client showed, px."""
+    out, rep, last = [], None, None
+    for k, eye in got["shown_eyes"]:
+        if last is None or not np.array_equal(eye, last):
+            rep, last = exact.reproject(eye), eye
+        vp = path[(k + got["phase"]) % len(path)]
+        out.append(exact.error_px(rep, vp.o, got["proj"] @ vp.view_matrix(), got["beta"]))
+    return np.asarray(out, np.float64)
+
+
+async def pool_stats(url: str, token: str) -> dict:
+    """The render pool's figures (the ``stats`` op's ``server.pool``) over a WebSocket
+    of its own."""
+    import aiohttp
+
+    from lodsprite.distributed.web.client import connect
+
+    async with aiohttp.ClientSession() as http:
+        page = await connect(http, url, token)
+        try:
+            return (await page.stats())["server"]["pool"]
+        finally:
+            await page.close()
 
 
 def free_port() -> int:
@@ -237,6 +227,24 @@ def tree_cpu_s(pid: int) -> float:
     return total
 
 
+def pages_cpu_s(server_pid: int) -> float | None:
+    """CPU seconds of the simulated pages: this process and its children other than
+    the server's tree (the cast process); None without psutil."""
+    try:
+        import psutil
+    except ImportError:
+        return None
+    me = psutil.Process()
+    total = sum(me.cpu_times()[:2])
+    for q in me.children():
+        if q.pid != server_pid:
+            try:
+                total += sum(q.cpu_times()[:2])
+            except psutil.Error:
+                pass
+    return total
+
+
 async def run(args) -> dict:
     token = secrets.token_urlsafe(16)
     proc, url = start_server(args.renderers, token)
@@ -246,22 +254,38 @@ async def run(args) -> dict:
     load = {"terrain": args.terrain, "size": [args.size, args.size], "lod": args.lod,
             "epsilon": args.epsilon}
     try:
-        start, ready = asyncio.Event(), asyncio.Semaphore(0)
+        start, ready, casts = asyncio.Event(), asyncio.Semaphore(0), {}
         tasks = [asyncio.create_task(client(i, url, token, load, paths[PATHS[i % len(PATHS)]],
-                                            args.fps, start, ready))
+                                            args.fps, start, ready, casts))
                  for i in range(args.clients)]
         for _ in tasks:  # every page loaded and warmed up
             await asyncio.wait_for(ready.acquire(), 600.0)
-        cpu0 = tree_cpu_s(proc.pid)
+        cpu0, pool0 = tree_cpu_s(proc.pid), await pool_stats(url, token)
+        own0 = pages_cpu_s(proc.pid)
+        t0 = time.monotonic()
         start.set()
         got = await asyncio.gather(*tasks)
-        cpu = tree_cpu_s(proc.pid) - cpu0
+        wall = time.monotonic() - t0
+        own = pages_cpu_s(proc.pid) - own0
+        cpu, pool1 = tree_cpu_s(proc.pid) - cpu0, await pool_stats(url, token)
     finally:
         stop(proc)
+        if "pool" in casts:
+            casts["pool"].shutdown()
+    for i, g in enumerate(got):  # measured after the run: no CPU taken from the server
+        g["errors_px"] = estimates(g, paths[PATHS[i % len(PATHS)]])
     lat = np.concatenate([g["latencies_ms"] for g in got]) if got else np.zeros(0)
     err = np.concatenate([g["errors_px"] for g in got])
     shown = err[np.isfinite(err)]
     per = [g["keyframes"] for g in got]
+    exact = ExactMetric.for_level(hf, args.lod)
+    ex = [exact_errors(g, paths[PATHS[i % len(PATHS)]], exact) for i, g in enumerate(got)]
+    exact_all = np.concatenate(ex)
+    by_path = {}
+    for i, g in enumerate(got):
+        e = np.asarray(g["errors_px"], np.float64)
+        by_path.setdefault(PATHS[i % len(PATHS)], []).append((e[np.isfinite(e)],
+                                                              ex[i][np.isfinite(ex[i])]))
     return {"clients": args.clients, "renderers": args.renderers, "terrain": args.terrain,
             "size": args.size, "lod": args.lod, "epsilon": args.epsilon,
             "frames": args.frames, "fps": args.fps, "keyframes_per_client": per,
@@ -270,19 +294,41 @@ async def run(args) -> dict:
             "latency_ms_p99": float(np.percentile(lat, 99)) if len(lat) else None,
             "error_px_mean": float(shown.mean()) if len(shown) else None,
             "frames_without_estimate": int((~np.isfinite(err)).sum()),
-            "server_cpu_s": cpu}
+            "error_px_exact_mean": _finite_mean(exact_all),
+            "error_px_mean_by_path": {
+                k: {"estimate": _finite_mean(np.concatenate([a for a, _ in v])),
+                    "exact": _finite_mean(np.concatenate([b for _, b in v]))}
+                for k, v in by_path.items()},
+            "server_cpu_s": cpu, "pages_cpu_s": own,
+            # the render capacity (the pool's own measure): keyframes served a second,
+            # a job's dispatch-to-answer time, and how busy the renderers were
+            "play_s": wall, "keyframes_per_s": sum(per) / wall,
+            "frames_shown": sum(len(g["shown_eyes"]) for g in got),
+            "job_ms_p50": pool1.get("job_ms_p50"), "job_ms_p90": pool1.get("job_ms_p90"),
+            "renderer_busy": (pool1["busy_s"] - pool0["busy_s"]) / (args.renderers * wall)
+            if "busy_s" in pool1 else None}
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--clients", type=int, default=16)
-    ap.add_argument("--renderers", type=int, default=2)
+def _finite_mean(a: np.ndarray) -> float | None:
+    a = a[np.isfinite(a)]
+    return float(a.mean()) if len(a) else None
+
+
+def scene_options(ap: argparse.ArgumentParser) -> None:
+    """The scene and flight options (also ``web_predictor.py``'s)."""
     ap.add_argument("--terrain", default="fractal:256")
     ap.add_argument("--size", type=int, default=256, help="keyframe side, px")
     ap.add_argument("--lod", type=int, default=32)
     ap.add_argument("--epsilon", type=float, default=2.0)
     ap.add_argument("--frames", type=int, default=300, help="frames of each path")
     ap.add_argument("--fps", type=float, default=30.0)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--clients", type=int, default=16)
+    ap.add_argument("--renderers", type=int, default=2)
+    scene_options(ap)
     ap.add_argument("--out", type=Path, default=Path("out/web_load"))
     args = ap.parse_args()
     results = asyncio.run(run(args))

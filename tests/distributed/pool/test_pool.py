@@ -83,7 +83,11 @@ def test_jobs_round_trip_through_two_local_workers(broker: Broker) -> None:
         assert kf.color.std() > 1.0  # terrain drawn, not a cleared target
     # Four jobs at once on two idle workers: both took some.
     assert {r.worker for r in got.values()} == {w.id for w in broker.workers()}
-    assert grew(before, broker.stats(), "results") == 4
+    after = broker.stats()
+    assert grew(before, after, "results") == 4
+    # The render capacity is measured: four answered jobs took time on the workers.
+    assert after["busy_s"] > before["busy_s"] and after["job_ms_p50"] > 0.0
+    assert after["job_ms_p90"] >= after["job_ms_p50"]
 
 
 def test_workers_follow_the_data_rule_and_jobs_are_checked_on_submit(broker: Broker) -> None:
@@ -337,4 +341,31 @@ def test_a_reconnecting_worker_forgets_the_jobs_of_its_last_connection() -> None
         renderer.out.close(linger=0)
         for sock in (router, pipe):
             sock.close(linger=0)
+        zctx.term()
+
+
+def test_a_worker_renders_without_pacing_what_it_is_asked_for() -> None:
+    """The submitter decides when a keyframe is due: a worker's renderer never paces
+    (no per-keyframe reprojection for a pacer), even when the job's load says
+    ``pace="needed"`` (the default), and the keyframe it returns is the job's."""
+    from lodsprite.distributed.datasets import Datasets
+    from lodsprite.distributed.pool.jobs import JobMessage, decode_pool, job_key
+    from lodsprite.distributed.pool.worker import _Renderer
+
+    assert SCENE.pace == "needed"
+    zctx = zmq.Context()
+    pipe = zctx.socket(zmq.PAIR)
+    pipe.setsockopt(zmq.LINGER, 0)
+    pipe.bind("inproc://test-pace")
+    renderer = _Renderer(zctx, "inproc://test-pace", Datasets(None), 1)  # not started
+    try:
+        frames = renderer._render(JobMessage(POOL_VERSION, job(7), "raw"))
+        msg, parts = decode_pool(frames)
+        assert msg.ok, msg.error
+        assert decode_keyframe(parts).seq == 7
+        kept = renderer.scenes[job_key(SCENE)]
+        assert kept.pacer.pace == "continuous" and kept.pacer.metric is None
+    finally:
+        renderer.release()
+        pipe.close(linger=0)
         zctx.term()

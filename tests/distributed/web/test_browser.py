@@ -251,3 +251,49 @@ def test_after_a_live_fuzz_a_page_still_plays(server, browser):
     got = play(browser, server)
     assert "error" not in got, got
     assert got["stats"]["keyframes"] >= 1 and got["stats"]["frames"] >= FRAMES
+
+
+def test_the_pages_error_estimate_is_the_python_sides(server, browser):
+    """``static/predictor.js`` and ``lodsprite.distributed.web.estimate`` (what the load
+    benchmark's pages run) are one algorithm: the same errors, in the browser and here,
+    for keyframes a few frames old along two paths (misses and views without a centre
+    included)."""
+    from lodsprite.distributed.protocol import LoadArgs
+    from lodsprite.distributed.web.estimate import ErrorMetric, Predictor
+    from lodsprite.distributed.web.scene import build_scene_field, decode_scene
+    from lodsprite.paths import get_path
+
+    parts, hf = build_scene_field(LoadArgs(**TERRAIN, size=(SIZE, SIZE)))
+    scene = decode_scene(parts)
+    metric, pred = ErrorMetric(scene), Predictor(scene)
+    cases, want = [], []
+    for spec in ("chen1999", "swan2002"):
+        path = get_path(spec, hf, 40).viewpoints
+        for k in range(0, 36, 3):
+            vp = path[k + 3]
+            cases.append({"key": path[k].o.tolist(),
+                          "vp": {a: getattr(vp, a).tolist() for a in "xyzo"}})
+            want.append(pred.error_px(metric, path[k].o, vp))
+    h = scene.header
+    doc = {"scene": {"coarse": h.coarse, "origin": list(h.origin), "spacing": h.spacing,
+                     "spacing_y": h.spacing_y, "relief": h.relief},
+           "heights": scene.heights.astype(float).ravel().tolist(), "cases": cases,
+           "camera": [h.epsilon, h.fov, h.size[0] / h.size[1], h.near, h.far, h.size[1]]}
+    browser.get(page_url(server, query=QUERY.split("&path=")[0]))
+    got = browser.execute_async_script("""
+        const [doc, done] = arguments;
+        import('/static/predictor.js').then((m) => {
+          const metric = new m.ErrorMetric(doc.scene, doc.heights);
+          const pred = new m.Predictor(...doc.camera);
+          done(doc.cases.map((c) => {
+            const e = pred.errorPx(metric, c.key, c.vp);
+            return Number.isFinite(e) ? e : null;
+          }));
+        }, (e) => done(String(e)));""", doc)
+    assert isinstance(got, list), got
+    want = [w if np.isfinite(w) else None for w in want]
+    assert [g is None for g in got] == [w is None for w in want]
+    assert any(w is not None and w > 0.1 for w in want)
+    for g, w in zip(got, want, strict=True):
+        if w is not None:
+            assert g == pytest.approx(w, rel=1e-9, abs=1e-12)

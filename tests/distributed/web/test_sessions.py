@@ -247,3 +247,27 @@ def test_a_job_the_pool_gave_up_on_is_answered_with_its_code():
     last = replies(s)[-1]
     assert (last.seq, last.ok, last.data) == (5, False, {"code": "refused"})
     assert "no such file" in last.error and not hub.jobs and s.counts["failed"] == 1
+
+
+def test_a_request_superseded_before_its_render_is_never_rendered():
+    """Coalescing: while the one renderer is busy, a session's newer request replaces its
+    waiting one (counted ``superseded``); only the newest reaches the pool."""
+    async def run():
+        pool = FakePool(1)
+        hub = Hub(pool, datasets=None, caps=Caps(session_jobs=1, rate=1e9))
+        busy, s = hub.open_session("busy"), hub.open_session("s")
+        for x in (busy, s):
+            x.load = x.named = LoadArgs()
+        busy.pending.append(Pending(1, 0.0, VP, 0.0))
+        hub.schedule()  # the renderer is taken
+        for seq in (10, 11, 12):  # s asks three times meanwhile
+            s.handle(pack(encode({"kind": "request", "seq": seq, "t": seq / 10,
+                                  "viewpoint": VP})))
+        first = pool.submitted[-1]
+        pool.results.append(Result(first.job, first.session, False, "x"))
+        hub.drain()  # the renderer is free: s's waiting request goes
+        return pool, s
+
+    pool, s = asyncio.run(run())
+    assert [(j.session, j.t) for j in pool.submitted] == [("busy", 0.0), ("s", 1.2)]
+    assert s.counts["superseded"] == 2 and not s.pending

@@ -77,6 +77,8 @@ log = logging.getLogger("lodsprite.pool")
 __all__ = ["JOB_TIMEOUT_S", "MAX_TRIES", "Broker", "WorkerInfo"]
 
 JOB_TIMEOUT_S = 120.0
+JOB_TIMES = 1000
+"""Jobs whose dispatch-to-answer time :meth:`Broker.stats` keeps."""
 MAX_TRIES = 3
 """Workers a job may see die under it before it fails."""
 
@@ -141,6 +143,8 @@ class Broker:
         self._snapshot: list[WorkerInfo] = []
         self._stats = dict.fromkeys(("jobs", "results", "failed", "requeued", "declined",
                                      "dead", "rejected", "ignored"), 0)
+        self._busy_s = 0.0  # seconds workers spent on jobs they answered
+        self._job_s: deque[float] = deque(maxlen=JOB_TIMES)  # dispatch -> answer, s
         self._stop = threading.Event()
         self._wake_r, self._wake_w = os.pipe()
         self._ready_r, self._ready_w = os.pipe()
@@ -173,10 +177,21 @@ class Broker:
         """The workers connected now."""
         return list(self._snapshot)
 
-    def stats(self) -> dict[str, int]:
+    def stats(self) -> dict[str, float]:
         """Counts: jobs, results, failed, requeued (after a lost worker), declined
-        (results not ok, each retried elsewhere or failed), dead, rejected, ignored."""
-        return dict(self._stats)
+        (results not ok, each retried elsewhere or failed), dead, rejected, ignored; and
+        the render capacity: ``busy_s`` (seconds workers spent on the jobs they answered,
+        dispatch to answer, all workers together: over a wall-clock window and the
+        worker count it gives their utilisation) and ``job_ms_p50``/``job_ms_p90`` (a
+        job's dispatch to answer, ms, over the last :data:`JOB_TIMES`; None before
+        one)."""
+        times = sorted(self._job_s)
+
+        def pct(q: float) -> float | None:
+            return 1e3 * times[min(len(times) - 1, int(q * len(times)))] if times else None
+
+        return {**self._stats, "busy_s": self._busy_s, "job_ms_p50": pct(0.5),
+                "job_ms_p90": pct(0.9)}
 
     def wait_workers(self, n: int, timeout: float) -> bool:
         """Wait until at least ``n`` workers are connected (at most ``timeout`` s)."""
@@ -333,6 +348,9 @@ class Broker:
             self._stats["ignored"] += 1
             return
         worker = key[1].hex()
+        took = max(0.0, time.monotonic() - peer.since)
+        self._busy_s += took
+        self._job_s.append(took)
         if not msg.ok:
             entry = peer.entry
             peer.entry, peer.idle_since = None, time.monotonic()

@@ -10,7 +10,10 @@ is dead: the worker closes its socket and connects again after a backoff (0.25 s
 to 4 s, reset by the broker's first message); a result of a job from a lost connection is
 dropped.
 
-Scenes are kept by their ``load`` arguments, least recently used dropped first (``cache``,
+Workers render every job they are given: the submitter (the web page) decides when a
+keyframe is due, so a worker's renderer does not pace (``pace="continuous"``: no
+per-keyframe reprojection for a pacer nobody asks).  Scenes are kept by their ``load``
+arguments, least recently used dropped first (``cache``,
 all sharing the worker's one GL context).  Names follow the ``--data`` rule of
 :mod:`lodsprite.distributed.datasets` on the worker: built-ins, files relative to the
 worker's own data folder, or absolute paths inside it (what a local web server's
@@ -120,17 +123,22 @@ class _Renderer(threading.Thread):
             while (msg := self.jobs.get()) is not None:
                 self.out.send_multipart(self._render(msg))
         finally:
-            released = len(self.scenes)
-            for r in self.scenes.values():
-                r.release()
-            self.scenes.clear()
-            had_gl = self.gl is not None
-            if had_gl:
-                self.gl.release()
-                self.gl = None
-            self.out.close(linger=0)
-            log.info("render worker: %d scene(s) and %s", released,
-                     "the GL context released" if had_gl else "no GL context made")
+            self.release()
+
+    def release(self) -> None:
+        """Free the scenes, the GL context and the result socket (on the thread that
+        rendered), and log what was released."""
+        released = len(self.scenes)
+        for r in self.scenes.values():
+            r.release()
+        self.scenes.clear()
+        had_gl = self.gl is not None
+        if had_gl:
+            self.gl.release()
+            self.gl = None
+        self.out.close(linger=0)
+        log.info("render worker: %d scene(s) and %s", released,
+                 "the GL context released" if had_gl else "no GL context made")
 
     def _render(self, msg: JobMessage) -> list:
         """The result frames of one job; never raises."""
@@ -164,7 +172,10 @@ class _Renderer(threading.Thread):
                 self.scenes.popitem(last=False)[1].release()
             if self.gl is None:
                 self.gl = GLContext()
-            r = KeyframeRenderer(resolved, self.gl)
+            # A pool worker renders what it is asked for and never paces: the submitter
+            # decides when a keyframe is due, so the pacer's per-keyframe reprojection
+            # (the exact metric's C', ~20% of a 256² keyframe's time) is not computed.
+            r = KeyframeRenderer(msgspec.structs.replace(resolved, pace="continuous"), self.gl)
         self.scenes[key] = r  # most recently used last
         return r
 

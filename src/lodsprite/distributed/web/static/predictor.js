@@ -5,47 +5,136 @@
 //
 // The page holds only the coarse level, so C is estimated: each coarse square's centre
 // at the mean of its corners, raised by the scene's `relief` (the RMS height of the
-// full-resolution centres off the coarse surface, computed by the server), and C' is
-// where the keyframe eye's ray through C meets the horizontal plane through the square's
-// centre (in front of the keyframe eye; otherwise a miss, counted as the worst hit, as
+// full-resolution centres off the coarse surface, computed by the server).  C' is where
+// the keyframe eye's ray through C meets the coarse mesh (the triangles the page draws,
+// split north-west to south-east): first among the triangles of C's square and its eight
+// neighbours, else among those of the squares the ray's ground track crosses inside the
+// terrain; of the hits in front of the keyframe eye, the one nearest to C along the ray
+// (as lodsprite.sprite.raycast).  C' depends only on the keyframe eye: it is cast once a
+// keyframe (the last eye's is kept), and a frame measures theta for the centres in view.
+// A ray meeting no triangle is a miss, counted as the worst hit (as
 // lodsprite.sprite.metric does).  At the keyframe's own eye the error is 0, as in the
 // paper; it grows with the parallax the coarse level cannot show.
 //
 // The linear predictor: the eye and the axes extrapolated linearly from the last two
 // samples (the axes re-orthonormalised).  A request goes out for the viewpoint the viewer
 // will be at one measured keyframe latency ahead (at most 1 s), when the shown keyframe's
-// error there reaches epsilon/2, and never with a request in flight; when the viewer rests, one more
-// request at the resting viewpoint makes the shown keyframe exact.
+// error there reaches epsilon/2, and never with a request in flight; when the viewer
+// rests, one more request at the resting viewpoint makes the shown keyframe exact.
+//
+// lodsprite.distributed.web.estimate is this module in Python (the load benchmark's
+// pages); the two are one algorithm.
 
 import { add, clip, cross, dot, mul, norm, scale, sub, unit, viewMatrix, perspective } from './camera.js';
 
 const MAX_CENTRES = 4096;  // square centres measured a frame (a finer coarse level: evenly)
+const T_MIN = 1e-6;  // hits nearer the keyframe eye (in units of eye to C) are not in front
+const EDGE_TOL = 1e-9;
+
+// Moller-Trumbore: t where the ray o + t d meets the triangle (p0, e1, e2), or NaN.
+function hit(o, d, p0, e1, e2) {
+  const pv = cross(d, e2), det = dot(e1, pv);
+  if (!(Math.abs(det) > 1e-300)) return NaN;
+  const inv = 1 / det, s = sub(o, p0), u = dot(s, pv) * inv;
+  const q = cross(s, e1), v = dot(d, q) * inv, t = dot(e2, q) * inv;
+  return u >= -EDGE_TOL && v >= -EDGE_TOL && u + v <= 1 + EDGE_TOL && t > T_MIN ? t : NaN;
+}
 
 export class ErrorMetric {
   constructor(scene, heights) {
     const n = scene.coarse, m = n + 1;
-    this.centres = [];
-    for (let i = 0; i < n; i++) for (let j = 0; j < n; j++) {
-      const h = 0.25 * (heights[i * m + j] + heights[i * m + j + 1] + heights[(i + 1) * m + j] + heights[(i + 1) * m + j + 1]);
-      this.centres.push([scene.origin[0] + (j + 0.5) * scene.spacing, scene.origin[1] + (i + 0.5) * scene.spacing_y, h]);
-    }
+    this.n = n;
+    this.origin = scene.origin;
+    this.step = [scene.spacing, scene.spacing_y];
     this.relief = scene.relief || 0;
-    const stride = Math.ceil(this.centres.length / MAX_CENTRES);  // evenly, row-major
-    if (stride > 1) this.centres = this.centres.filter((_, k) => k % stride === 0);
+    const vertex = (i, j) => [scene.origin[0] + j * scene.spacing, scene.origin[1] + i * scene.spacing_y, heights[i * m + j]];
+    this.tris = [];  // square (i, j) at 2 (i n + j) and +1: [p0, e1, e2], split nw-se as gl.js
+    for (let i = 0; i < n; i++) for (let j = 0; j < n; j++) {
+      const a = vertex(i, j), b = vertex(i, j + 1), c = vertex(i + 1, j), d = vertex(i + 1, j + 1);
+      this.tris.push([c, sub(a, c), sub(b, c)], [c, sub(b, c), sub(d, c)]);
+    }
+    this.centres = [];  // [C, i, j]
+    const stride = Math.ceil(n * n / MAX_CENTRES);  // evenly, row-major
+    for (let k = 0; k < n * n; k += stride) {
+      const i = Math.floor(k / n), j = k % n;
+      const h = 0.25 * (heights[i * m + j] + heights[i * m + j + 1] + heights[(i + 1) * m + j] + heights[(i + 1) * m + j + 1]);
+      this.centres.push([[scene.origin[0] + (j + 0.5) * scene.spacing, scene.origin[1] + (i + 0.5) * scene.spacing_y, h + this.relief], i, j]);
+    }
+    this.last = null;  // {eye, cPrime (C' or null: a miss)}
+  }
+
+  // t nearest 1 of the ray eye + t d against the triangles of square (i, j), given the
+  // best so far; squares outside the grid have none.
+  nearest(eye, d, i, j, best) {
+    if (i < 0 || j < 0 || i >= this.n || j >= this.n) return best;
+    for (let s = 0; s < 2; s++) {
+      const [p0, e1, e2] = this.tris[2 * (i * this.n + j) + s];
+      const t = hit(eye, d, p0, e1, e2);
+      if (!Number.isNaN(t) && (Number.isNaN(best) || Math.abs(t - 1) < Math.abs(best - 1))) best = t;
+    }
+    return best;
+  }
+
+  // The squares the ray's ground track crosses inside the terrain (t > 0): t nearest 1.
+  alongTrack(eye, d) {
+    const n = this.n, lo = this.origin, hi = [lo[0] + n * this.step[0], lo[1] + n * this.step[1]];
+    let a = 0, b = Infinity;
+    const big = Math.max(Math.abs(d[0]), Math.abs(d[1]), Math.abs(d[2]));
+    for (let k = 0; k < 2; k++) {
+      if (Math.abs(d[k]) <= 1e-12 * big) {
+        if (eye[k] < lo[k] || eye[k] > hi[k]) return NaN;
+        continue;
+      }
+      const t0 = (lo[k] - eye[k]) / d[k], t1 = (hi[k] - eye[k]) / d[k];
+      a = Math.max(a, Math.min(t0, t1)); b = Math.min(b, Math.max(t0, t1));
+    }
+    if (!(b > a) || !Number.isFinite(b)) return NaN;
+    const ts = [a, b];
+    for (let k = 0; k < 2; k++) {
+      if (Math.abs(d[k]) <= 1e-12 * big) continue;
+      for (let l = 0; l <= n; l++) {
+        const t = (lo[k] + l * this.step[k] - eye[k]) / d[k];
+        if (t > a && t < b) ts.push(t);
+      }
+    }
+    ts.sort((x, y) => x - y);
+    let best = NaN;
+    for (let k = 0; k + 1 < ts.length; k++) {
+      const t = 0.5 * (ts[k] + ts[k + 1]);
+      const j = Math.min(n - 1, Math.max(0, Math.floor((eye[0] + t * d[0] - lo[0]) / this.step[0])));
+      const i = Math.min(n - 1, Math.max(0, Math.floor((eye[1] + t * d[1] - lo[1]) / this.step[1])));
+      best = this.nearest(eye, d, i, j, best);
+    }
+    return best;
+  }
+
+  // C' of every centre for the keyframe eye `keyEye` (the last eye's is kept).
+  reproject(keyEye) {
+    const last = this.last;
+    if (last && last.eye[0] === keyEye[0] && last.eye[1] === keyEye[1] && last.eye[2] === keyEye[2]) return last.cPrime;
+    const cPrime = this.centres.map(([c, i, j]) => {
+      const d = sub(c, keyEye);
+      let best = NaN;
+      for (let di = -1; di <= 1; di++) for (let dj = -1; dj <= 1; dj++) best = this.nearest(keyEye, d, i + di, j + dj, best);
+      if (Number.isNaN(best)) best = this.alongTrack(keyEye, d);
+      return Number.isNaN(best) ? null : add(keyEye, scale(d, best));
+    });
+    this.last = { eye: [...keyEye], cPrime };
+    return cPrime;
   }
 
   // Error in pixels of the keyframe seen from `keyEye` shown at viewpoint `vp` through
-  // view-projection `viewProj`, `beta` radians a pixel; Infinity when no centre is in view.
+  // view-projection `viewProj`, `beta` radians a pixel; Infinity when no centre is in view
+  // or every one in view missed.
   errorPx(keyEye, vp, viewProj, beta) {
+    const cPrime = this.reproject(keyEye);
     let sum = 0, hits = 0, misses = 0, worst = 0;
-    for (const base of this.centres) {
-      const c = [base[0], base[1], base[2] + this.relief];
-      const k = clip(viewProj, c);
-      if (k[3] <= 0 || Math.abs(k[0]) > k[3] || Math.abs(k[1]) > k[3] || Math.abs(k[2]) > k[3]) continue;
-      const ray = sub(c, keyEye);
-      const s = Math.abs(ray[2]) > 1e-9 * norm(ray) ? (base[2] - keyEye[2]) / ray[2] : (this.relief ? -1 : 1);
-      if (!(s > 0)) { misses++; continue; }  // C' behind the keyframe eye: never seen
-      const a = unit(sub(c, vp.o)), b = unit(sub(add(keyEye, scale(ray, s)), vp.o));
+    for (let k = 0; k < this.centres.length; k++) {
+      const c = this.centres[k][0];
+      const q = clip(viewProj, c);
+      if (q[3] <= 0 || Math.abs(q[0]) > q[3] || Math.abs(q[1]) > q[3] || Math.abs(q[2]) > q[3]) continue;
+      if (cPrime[k] === null) { misses++; continue; }  // the keyframe maps C nowhere
+      const a = unit(sub(c, vp.o)), b = unit(sub(cPrime[k], vp.o));
       const theta = Math.atan2(norm(cross(a, b)), dot(a, b));
       sum += theta * theta; hits++; worst = Math.max(worst, theta);
     }
@@ -56,6 +145,7 @@ export class ErrorMetric {
 
 const MAX_AHEAD_S = 1;  // look at most this far ahead (s): a line strays from a curve
 const LOST_S = 5;  // a request unanswered this long (seconds) is given up
+const SMOOTHING = 0.3;  // weight of a new latency in its exponential mean
 
 function orthonormal(x, y) {  // axes from approximate x, y (Gram-Schmidt; z = x cross y)
   const ux = unit(x);
@@ -82,6 +172,8 @@ export class Predictor {
     const lerp = (p, q) => add(q, scale(sub(q, p), f));
     return { ...orthonormal(lerp(a.x, b.x), lerp(a.y, b.y)), o: lerp(a.o, b.o) };
   }
+  // Seconds ahead a request looks: the measured latency, at most MAX_AHEAD_S.
+  lead() { return Math.min(this.latency, MAX_AHEAD_S); }
   viewProj(vp) { return mul(this.proj, viewMatrix(vp)); }
   errorPx(metric, keyEye, vp) { return keyEye ? metric.errorPx(keyEye, vp, this.viewProj(vp), this.beta) : Infinity; }
   // What to request now (a viewpoint) or null; `keyEye`: the shown keyframe's eye.
@@ -95,13 +187,13 @@ export class Predictor {
       return now;
     }
     this.settled = false;
-    const ahead = this.predict(t + Math.min(this.latency, MAX_AHEAD_S));
+    const ahead = this.predict(t + this.lead());
     return this.errorPx(metric, keyEye, ahead) >= 0.5 * this.epsilon ? ahead : null;
   }
   sent(t, vp) { this.inflight = { t, vp }; }
   arrived(t0, now) {
     if (this.inflight && this.inflight.t === t0) {
-      this.latency = 0.7 * this.latency + 0.3 * Math.max(0, now - t0);
+      this.latency += SMOOTHING * (Math.max(0, now - t0) - this.latency);
       this.inflight = null;
     }
   }
