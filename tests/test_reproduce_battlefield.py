@@ -63,9 +63,12 @@ def test_extractions_are_the_crowd_engines_with_and_without_sharing(battlefield)
 def test_the_linear_run_kept_is_the_closest_to_the_profile_runs_triangles(battlefield):
     _, r, _ = battlefield
     x = r["paths"]["weave"]["profile_vs_linear"]
-    goal = x["profile"]["triangles_mean"]
+    goal = x["profile"]["triangles_objects_mean"]  # the objects' (the same terrain)
     best = min(abs(t - goal) for t in x["triangles_tried"])
-    assert abs(x["linear"]["triangles_mean"] - goal) == pytest.approx(best)
+    assert abs(x["linear"]["triangles_objects_mean"] - goal) == pytest.approx(best)
+    # the sampled runs draw the reference's full-resolution terrain: the same in both
+    prof, lin = x["profile"]["columns"], x["linear"]["columns"]
+    assert prof["triangles_terrain"] == lin["triangles_terrain"]
     assert x["linear_exponent"] in x["exponents_tried"]
     assert r["profile_vs_linear"]["triangles_profile"] == pytest.approx(goal)
     # the profile run drew with the profile LOD hook, the linear runs without it
@@ -87,10 +90,10 @@ def test_report_names_the_measured_figures_beside_the_targets(battlefield):
 def test_next_exponent_coarsens_when_there_are_too_many_triangles():
     from lodsprite.experiments.battlefield.run import _next_exponent
 
-    assert _next_exponent([(1.0, {"triangles_mean": 2000.0})], 1000.0) > 1.0
-    assert _next_exponent([(1.0, {"triangles_mean": 500.0})], 1000.0) < 1.0
+    assert _next_exponent([(1.0, {"triangles_objects_mean": 2000.0})], 1000.0) > 1.0
+    assert _next_exponent([(1.0, {"triangles_objects_mean": 500.0})], 1000.0) < 1.0
     # a secant on log triangles: exact when triangles fall as exp(-e)
-    tried = [(e, {"triangles_mean": 1e5 * np.exp(-e)}) for e in (1.0, 2.0)]
+    tried = [(e, {"triangles_objects_mean": 1e5 * np.exp(-e)}) for e in (1.0, 2.0)]
     assert _next_exponent(tried, 1e5 * np.exp(-1.5)) == pytest.approx(1.5)
 
 

@@ -20,7 +20,8 @@ and draws every object every frame.  Light fields are view dependent: never in k
 ``benchmarks/scene_layers.py`` measures the two (docs/scenes.md).
 
 Per frame ``Frame.extra`` holds ``ms_terrain``, ``ms_objects``, ``ms_lightfields`` (each
-layer between two ``ctx.finish()``), ``knob_<layer>`` (each layer's setting) and the
+layer between two ``ctx.finish()``), ``knob_<layer>`` (each layer's setting),
+``triangles_<layer>`` and the
 budget's ``predicted_ms_<layer>``; the budget (:class:`~lodsprite.scene.budget.
 LayerBudget`, ``schedule`` ``none`` | ``scheduler`` | ``independent`` under
 ``target_fps``) turns the knobs before each frame.  ``ground_truth=True`` is the
@@ -72,7 +73,7 @@ class LayeredTechnique(Technique):
                  schedule: str = "none", target_fps: float | None = None,
                  keyframes: str = "static", exponent: float = 1.0, nodes: int = 8,
                  ground_truth: bool = False, frame_s: float = FRAME_S,
-                 **terrain_options: Any) -> None:
+                 active: int | None = ACTIVE, **terrain_options: Any) -> None:
         super().__init__(renderer)
         from lodsprite.layered.lightfields import LightFieldLayer
         from lodsprite.layered.objects import ObjectsLayer
@@ -89,10 +90,10 @@ class LayeredTechnique(Technique):
         try:
             self.terrain = TerrainLayer(renderer, terrain_mode, **terrain_options)
             self.layers.append(self.terrain)
-            # the LODManager's active list (§4.2): 300 objects' LODs updated a frame, as the
-            # crowd's default; the reference updates every object at once
+            # the LODManager's active list (§4.2): ``active`` objects' LODs updated a
+            # frame (300, the crowd's default; None: every object, as the reference)
             self.objects = (ObjectsLayer(renderer, world, exponent,
-                                         None if ground_truth else ACTIVE)
+                                         None if ground_truth else active)
                             if world.count else None)
             if self.objects is not None:
                 self.layers.append(self.objects)
@@ -142,6 +143,7 @@ class LayeredTechnique(Technique):
         for name, f in drawn.items():
             extra[f"ms_{name}"] = f.ms
             extra[f"knob_{name}"] = knobs[name]
+            extra[f"triangles_{name}"] = f.triangles
             extra.update(f.extra)
         extra.update(self.budget.after({n: (knobs[n], f.ms, f.work)
                                         for n, f in drawn.items()}, ms))

@@ -23,7 +23,10 @@ weaving among the crowd,
 * ``profile`` and ``linear``: every object type's ``lod`` set to ``profile`` (Scoggins
   et al. 2000 error profiles, which the objects layer hooks on the crowd engine) then
   ``linear`` (distance-linear),
-  on the sampled frames only (each at its own time along the path), the linear run's
+  on the sampled frames only (each at its own time along the path, the terrain at full
+  resolution as the reference's, and every object's LOD updated each frame: the
+  LODManager's active list of 300 would leave most of 3100 objects at the LOD of a frame
+  30 before), the linear run's
   exponent searched (``match_steps`` runs at most, a secant on log triangles) so that its
   triangles match the profile run's: RMSE and FLIP at equal triangles.
 
@@ -99,7 +102,7 @@ def _row(result, target_ms: float | None) -> dict:
     ms = np.array([r["ms"] for r in rows], np.float64)
     q = [r for r in rows if "rmse" in r]
     cols = {k: [r.get(k) for r in rows] for k in rows[0]
-            if k.startswith(("ms_", "knob_")) or k in ("triangles", "extractions")}
+            if k.startswith(("ms_", "knob_", "triangles_")) or k in ("triangles", "extractions")}
     cols.update({k: [r.get(k) for r in rows] for k in ("rmse", "flip") if q})
     s = result.summary
     return {"target_ms": target_ms, **_stats(ms),
@@ -107,6 +110,8 @@ def _row(result, target_ms: float | None) -> dict:
             "flip": float(np.mean([r["flip"] for r in q])) if q and "flip" in q[0] else None,
             "quality_frames": len(q),
             "triangles_mean": float(np.mean([r["triangles"] for r in rows])),
+            "triangles_objects_mean": float(np.mean([r.get("triangles_objects", 0)
+                                                     for r in rows])),
             "extractions": int(sum(r.get("extractions", 0) for r in rows)),
             **{k: v for k, v in s.items() if k.startswith(("share_", "mean_ms_"))},
             "columns": {"ms": ms.tolist(), **cols}}
@@ -133,7 +138,7 @@ class PathRuns:
         """One run of the ``scene`` technique (see the module doc); ``sampled``: the
         sampled frames only, each at its own time; ``first``: the first frames only."""
         from lodsprite.harness import run_path
-        from lodsprite.layered.technique import FRAME_S, LayeredTechnique
+        from lodsprite.layered.technique import ACTIVE, FRAME_S, LayeredTechnique
         from lodsprite.paths import CameraPath
 
         cfg, cam = self.cfg, self.cam
@@ -144,10 +149,18 @@ class PathRuns:
             frame_s, stride = FRAME_S * cfg.sample_every, 1
         elif first is not None:
             cam = CameraPath(cam.name, cam.viewpoints[:first], cam.fov_y_deg)
-        t = LayeredTechnique(self.renderer, self.world, terrain_mode=cfg.terrain_mode,
+        # the sampled frames (profile against linear LOD) draw the terrain at full
+        # resolution, as the reference does: 30 frames apart, the adaptive renderer would
+        # show tiles still streaming in (a low eye under a coarse tile's surface), and
+        # the comparison is of the objects' LODs
+        t = LayeredTechnique(self.renderer, self.world,
+                             terrain_mode="full" if sampled else cfg.terrain_mode,
                              schedule=schedule, target_fps=target_fps,
                              exponent=cfg.exponent if exponent is None else exponent,
-                             frame_s=frame_s, grid=cfg.terrain_grid)
+                             frame_s=frame_s, grid=cfg.terrain_grid,
+                             # the sampled frames are 30 apart: every object's LOD is
+                             # brought to its choice each frame, not 300 of them
+                             active=None if sampled else ACTIVE)
         hooked = False
         try:
             if t.objects is not None:  # the layer wires profile LOD for lod = "profile"
@@ -173,22 +186,22 @@ class PathRuns:
         kept = [t.lod for t in self.world.types]
         try:
             prof = self.with_lod("profile", sampled=True)
-            goal = prof["triangles_mean"]
+            goal = prof["triangles_objects_mean"]  # the objects' (the terrain is the same)
             tried: list[tuple[float, dict]] = []
             e = self.cfg.exponent
             for _ in range(max(1, self.cfg.match_steps)):
                 lin = self.with_lod("linear", sampled=True, exponent=e)
                 tried.append((e, lin))
-                if abs(lin["triangles_mean"] / max(goal, 1.0) - 1.0) < 0.02:
+                if abs(lin["triangles_objects_mean"] / max(goal, 1.0) - 1.0) < 0.02:
                     break
                 e = _next_exponent(tried, goal)
         finally:
             for t, lod in zip(self.world.types, kept, strict=True):
                 t.lod = lod
-        e, lin = min(tried, key=lambda x: abs(x[1]["triangles_mean"] - goal))
+        e, lin = min(tried, key=lambda x: abs(x[1]["triangles_objects_mean"] - goal))
         return {"profile": prof, "linear": lin, "linear_exponent": e,
                 "exponents_tried": [x[0] for x in tried],
-                "triangles_tried": [x[1]["triangles_mean"] for x in tried]}
+                "triangles_tried": [x[1]["triangles_objects_mean"] for x in tried]}
 
 
 def _next_exponent(tried: list[tuple[float, dict]], goal: float) -> float:
@@ -196,11 +209,11 @@ def _next_exponent(tried: list[tuple[float, dict]], goal: float) -> float:
     ``log triangles`` against the exponent from the last two runs, else a doubling or
     halving; kept within 0.05..16."""
     e1, r1 = tried[-1]
-    t1 = np.log(max(r1["triangles_mean"], 1.0))
+    t1 = np.log(max(r1["triangles_objects_mean"], 1.0))
     g = np.log(max(goal, 1.0))
     if len(tried) >= 2:
         e0, r0 = tried[-2]
-        t0 = np.log(max(r0["triangles_mean"], 1.0))
+        t0 = np.log(max(r0["triangles_objects_mean"], 1.0))
         if abs(t1 - t0) > 1e-9:
             return float(np.clip(e1 + (g - t1) * (e1 - e0) / (t1 - t0), 0.05, 16.0))
     return float(np.clip(e1 * (2.0 if t1 > g else 0.5), 0.05, 16.0))
@@ -287,8 +300,8 @@ def results(cfg: BattlefieldConfig, per_path: dict, made: dict, world, scene_fil
         "profile_vs_linear": {
             "rmse_profile": mean("profile", "rmse"), "rmse_linear": mean("linear", "rmse"),
             "flip_profile": mean("profile", "flip"), "flip_linear": mean("linear", "flip"),
-            "triangles_profile": mean("profile", "triangles_mean"),
-            "triangles_linear": mean("linear", "triangles_mean"),
+            "triangles_profile": mean("profile", "triangles_objects_mean"),
+            "triangles_linear": mean("linear", "triangles_objects_mean"),
             "profile_lod_available": all(x["profile"]["profile_lod"] for x in pvl)},
         "extractions_with_manager": int(sum(p["manager"]["extractions"]
                                             for p in per_path.values())),
