@@ -13,7 +13,7 @@ from lodsprite.experiments.base import Experiment, Options, StageProgress, Summa
 
 def configure(o: Options):
     """A :class:`~lodsprite.experiments.battlefield.run.BattlefieldConfig`: the default run
-    (about 12 minutes here) or the short one with ``--quick``; ``--terrain`` replaces the
+    (about 14 minutes here) or the short one with ``--quick``; ``--terrain`` replaces the
     4k² fractal store (a ``fractal:`` spec is tiled into a store first), ``--size`` the
     image side."""
     from lodsprite.experiments.battlefield.run import BattlefieldConfig

@@ -49,7 +49,7 @@ Update = Callable[[str, int, int], None]
 class BattlefieldConfig:
     """The default run: a 4k² store, 3000 walking ogres, 100 trees, two light fields of
     6 slabs of 8² nodes of 64² pixels, 300 frames along each of two paths at 256², a 5 fps
-    target; 738 s here in one run (2 shared cores, load about 4).  :meth:`quick` is the
+    target; 847 s here (the quiet 2-core machine).  :meth:`quick` is the
     tests'."""
 
     terrain: str = "fractal:4096:1"
