@@ -138,12 +138,11 @@ class ObjectsLayer(Layer):
         self.knob = float(exponent)
         self.min_px = 0.0
         self.engine.feedback.exponent = float(exponent)
-        n = len(self.crowd)
-        tri = [(m.triangles(0.0), m.triangles(1.0)) for m in self.crowd.models]
-        self._least = np.array([tri[k][0] for k in self.crowd.types[:n]], np.float64)
-        self._full = np.array([tri[k][1] for k in self.crowd.types[:n]], np.float64)
-        self._heights = np.array([world.types[k].height_m for k in self.crowd.types[:n]],
-                                 np.float64)
+        # each object's type's coarsest and full triangles and height (m)
+        types = self.crowd.types
+        self._least = np.array([m.triangles(0.0) for m in self.crowd.models], np.float64)[types]
+        self._full = np.array([m.triangles(1.0) for m in self.crowd.models], np.float64)[types]
+        self._heights = np.array([t.height_m for t in world.types], np.float64)[types]
         self.engine.desired_hook = profile_lod(world, self.crowd, renderer)
         self.subset: np.ndarray | None = None  # None: every object each frame
         self._log: list[list] = []             # extraction orders of every engine frame
@@ -155,6 +154,7 @@ class ObjectsLayer(Layer):
         # without, no extraction orders nor keyframe draws are kept
         self.recording = False
         self._seen: tuple[Any, np.ndarray] | None = None  # the last draw's view, projection
+        self._seen_visible: np.ndarray | None = None      # ... and what it had in view
 
     @property
     def exponent(self) -> float:
@@ -179,11 +179,13 @@ class ObjectsLayer(Layer):
 
         if self._seen is None:
             return None
-        viewpoint, projection = self._seen
-        e = self.engine
-        visible = spheres_in_frustum(frustum_planes(projection @ viewpoint.view_matrix()),
-                                     e.centres, e.radii)
-        return visible if self.subset is None else visible & self.subset
+        if self._seen_visible is None:  # once a frame: detail() and work() both ask
+            viewpoint, projection = self._seen
+            e = self.engine
+            visible = spheres_in_frustum(frustum_planes(projection @ viewpoint.view_matrix()),
+                                         e.centres, e.radii)
+            self._seen_visible = visible if self.subset is None else visible & self.subset
+        return self._seen_visible
 
     def detail(self) -> tuple | None:
         """The last frame's visible objects for the budget's benefit model: their
@@ -256,11 +258,12 @@ class ObjectsLayer(Layer):
         self._engine_frame(viewpoint, 0.0, projection, np.zeros(len(self.crowd), bool),
                            keep=True)
         self._warm, self._log = self._log[-1], []
-        self._seen = (viewpoint, projection)  # the first plan predicts from this view
+        # the first plan predicts from this view
+        self._seen, self._seen_visible = (viewpoint, projection), None
 
     def draw(self, viewpoint: Viewpoint, t: float, projection: np.ndarray) -> LayerFrame:
         f, self._last = self._engine_frame(viewpoint, t, projection, self.subset, cull=True)
-        self._seen = (viewpoint, projection)
+        self._seen, self._seen_visible = (viewpoint, projection), None
         return LayerFrame(f.ms, f.triangles, work=float(max(f.triangles, 1)),
                           extra={"extractions": f.extractions, "draw_calls": f.draw_calls,
                                  "visible": f.visible})

@@ -83,6 +83,8 @@ class AdaptiveTerrain:
         self.last_morphed: frozenset = frozenset()
         self._keep: set = set()
         self.pinned: set = set()  # nodes whose slots stay (a sprite proxy's frozen nodes)
+        self._ranges_key: tuple[float, ...] | None = None  # triangles_at's ranges, per
+        self._ranges = np.zeros((0, self.tree.levels))       # tolerance, for these
         roots = self.roots = self.tree.roots()
         if len(roots) > self.slots.capacity:
             raise InputError("the GPU cache cannot hold the coarsest level: raise its budget")
@@ -109,7 +111,7 @@ class AdaptiveTerrain:
         (:func:`~lodsprite.terrain.quadtree.selection_counts`): the scene budget's
         prediction of the terrain's work at every setting."""
         key = tuple(float(t) for t in tolerances)
-        if getattr(self, "_ranges_key", None) != key:
+        if self._ranges_key != key:
             diag = self.tree.node_diagonals()
             self._ranges = np.array([ranges(self.tree.errors, t, self.target.size[1],
                                             self.fov, diag) for t in key])

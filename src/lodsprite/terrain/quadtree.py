@@ -89,6 +89,7 @@ class Quadtree:
         self.minmax = [np.asarray(pyramid.minmax(k)) for k in range(self.levels)]
         self.chunk = pyramid.chunk
         self._bounds: dict[Node, tuple[np.ndarray, np.ndarray]] = {}
+        self._kids: dict[Node, list[Node]] = {}
 
     def node_diagonals(self) -> np.ndarray:
         """A node's diagonal (metres) per level."""
@@ -102,10 +103,9 @@ class Quadtree:
 
     def kids(self, n: Node) -> list[Node]:
         """``n``'s children that exist (computed once a node)."""
-        cache = self.__dict__.setdefault("_kids", {})
-        out = cache.get(n)
+        out = self._kids.get(n)
         if out is None:
-            out = cache[n] = [c for c in n.children() if self.exists(c)]
+            out = self._kids[n] = [c for c in n.children() if self.exists(c)]
         return out
 
     def roots(self) -> list[Node]:
@@ -191,7 +191,7 @@ class Quadtree:
                 continue
             d = float(np.linalg.norm(np.clip(eye, lo, hi) - eye))
             if n.k > 0 and d < r[n.k]:
-                kids = [c for c in n.children() if self.exists(c)]
+                kids = self.kids(n)
                 missing = [c for c in kids if not resident(c)]
                 if not missing:
                     stack.extend(kids)
