@@ -36,6 +36,7 @@ from __future__ import annotations
 import numpy as np
 
 from lodsprite.camera import Projection, Viewpoint
+from lodsprite.sprite.raycast import ray_triangle_t
 
 __all__ = ["LATENCY_START_S", "LOST_S", "MAX_AHEAD_S", "MAX_CENTRES", "ErrorMetric",
            "Predictor", "Reprojection"]
@@ -53,7 +54,6 @@ SMOOTHING = 0.3
 T_MIN = 1e-6
 """Hits nearer the keyframe eye than this (in units of the eye-to-C distance) are not
 in front of it."""
-EDGE_TOL = 1e-9
 TRACK_PAIRS = 1 << 16
 """Ray-square pairs of the ground-track search tested at once (bounded memory)."""
 
@@ -99,10 +99,10 @@ class ErrorMetric:
         ni, nj = i[:, None] + di.ravel(), j[:, None] + dj.ravel()  # (K, 9)
         ok = (ni >= 0) & (ni < n) & (nj >= 0) & (nj < n)
         near = self.triangles(np.clip(ni, 0, n - 1), np.clip(nj, 0, n - 1))
-        self._near = _edges(near.reshape(len(i), 18, 3, 3))  # each centre's 3x3 squares
+        self._near = near.reshape(len(i), 18, 3, 3)  # each centre's 3x3 squares' triangles
         self._near_ok = np.repeat(ok, 2, axis=1)  # (K, 18)
-        self._all = _edges(self.triangles(*np.meshgrid(np.arange(n), np.arange(n),
-                                                         indexing="ij")))  # (n, n, 2, ...)
+        self._all = self.triangles(*np.meshgrid(np.arange(n), np.arange(n),
+                                                indexing="ij"))  # (n, n, 2, 3, 3)
         self._z_range = (np.minimum(np.minimum(h[:-1, :-1], h[:-1, 1:]),
                                     np.minimum(h[1:, :-1], h[1:, 1:])),
                          np.maximum(np.maximum(h[:-1, :-1], h[:-1, 1:]),
@@ -126,7 +126,7 @@ class ErrorMetric:
         if self.cached(key_eye):
             return self._last
         d = self.centres - key_eye  # C at t = 1
-        t = _hits(key_eye, d[:, None], self._near)  # (K, 18)
+        t = _hits(key_eye, d, self._near)  # (K, 18)
         best = _nearest_one(np.where(self._near_ok, t, np.nan))
         miss = np.flatnonzero(np.isnan(best))  # rays that missed their neighbourhood
         block = max(1, TRACK_PAIRS // (2 * self.n + 3))  # bounded temporaries
@@ -187,9 +187,7 @@ class ErrorMetric:
         r, m = np.nonzero(near)
         t = np.full(mid.shape + (2,), np.nan)
         if r.size:
-            p0, e1, e2 = self._all
-            i, j = ci[r, m], cj[r, m]
-            t[r, m] = _hits(eye, d[r][:, None], (p0[i, j], e1[i, j], e2[i, j]))  # (P, 2)
+            t[r, m] = _hits(eye, d[r], self._all[ci[r, m], cj[r, m]])  # (P, 2)
         return _nearest_one(t.reshape(len(d), -1))
 
     # ------------------------------------------------------------------- per frame
@@ -216,40 +214,12 @@ class ErrorMetric:
         return float(np.sqrt(total / (hit.sum() + misses)) / beta)
 
 
-def _edges(tris: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Triangles ``(..., 3, 3)`` as ``(p0, p1 - p0, p2 - p0)``, each ``(..., 3)``."""
-    p0 = tris[..., 0, :]
-    return p0, tris[..., 1, :] - p0, tris[..., 2, :] - p0
-
-
-def _hits(o: np.ndarray, d: np.ndarray, tris: tuple) -> np.ndarray:
-    """Möller-Trumbore: ``t`` where rays ``o + t d`` meet triangles ``tris`` (``(p0, e1,
-    e2)`` of :func:`_edges`; ``d`` broadcast to their shape), NaN where they miss or
-    ``t <= T_MIN``."""
-    p0, e1, e2 = tris
-    d = np.broadcast_to(d, e1.shape)
-    pv = _cross(d, e2)
-    det = _dot(e1, pv)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        inv = 1.0 / det
-        s = o - p0
-        u = _dot(s, pv) * inv
-        q = _cross(s, e1)
-        v = _dot(d, q) * inv
-        t = _dot(e2, q) * inv
-    ok = ((np.abs(det) > 1e-300) & (u >= -EDGE_TOL) & (v >= -EDGE_TOL)
-          & (u + v <= 1 + EDGE_TOL) & (t > T_MIN))
-    return np.where(ok, t, np.nan)
-
-
-def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], -1)
-
-
-def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return a[..., 0] * b[..., 0] + a[..., 1] * b[..., 1] + a[..., 2] * b[..., 2]
+def _hits(o: np.ndarray, d: np.ndarray, tris: np.ndarray) -> np.ndarray:
+    """``t (K, T)`` where rays ``o + t d`` (``o (3,)``, ``d (K, 3)``) meet triangles
+    ``tris (K, T, 3, 3)`` (Möller-Trumbore, :func:`~lodsprite.sprite.raycast.
+    ray_triangle_t`), NaN where they miss or ``t <= T_MIN``."""
+    t = ray_triangle_t(o, d, tris)
+    return np.where(t > T_MIN, t, np.nan)
 
 
 def _nearest_one(t: np.ndarray) -> np.ndarray:
