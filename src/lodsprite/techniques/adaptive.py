@@ -126,9 +126,12 @@ def level0_summary(heights) -> dict[str, Any]:
 class AdaptiveTechnique(Technique):
     """Every frame by the adaptive renderer at ``sse`` pixels of screen-space error,
     tiles through caches of ``gpu_mb`` and ``host_mb``, nodes of ``grid`` quads a side.
-    No warm-up beyond the roots (the first frame's time, from the process's start, is
-    ``first_frame_s``; from the technique's making ``first_frame_s_technique``).  Records
-    each frame's selection; its replay reads those tiles and draws the same selection."""
+    Its warm-up streams the first view's tiles until none is left to load and draws it
+    (:meth:`~lodsprite.techniques.adaptive_terrain.AdaptiveTerrain.settle`: shaders
+    compiled, the first view resident), as every technique's warm-up does; when that
+    first frame is done, from the process's start, is ``first_frame_s``; from the
+    technique's making ``first_frame_s_technique``.  Records each frame's selection; its
+    replay reads those tiles and draws the same selection."""
 
     name = "adaptive"
 
@@ -142,13 +145,19 @@ class AdaptiveTechnique(Technique):
         self.first_frame_s = self.first_frame_s_technique = float("nan")
 
     def warm_up(self, viewpoint: Viewpoint) -> None:
-        """Nothing: streaming from the roots is part of the measured run."""
+        """The first view's tiles streamed in and drawn (untimed: the harness's
+        ``first_frame_ms``); the timed run starts with them resident."""
+        self.terrain.settle(viewpoint)
+        self._first_frame()
 
-    def frame(self, viewpoint: Viewpoint) -> Frame:
-        f = self.terrain.frame(viewpoint)
+    def _first_frame(self) -> None:
         if self.first_frame_s_technique != self.first_frame_s_technique:  # NaN: first
             self.first_frame_s_technique = time.perf_counter() - self._t0
             self.first_frame_s = process_age_s()
+
+    def frame(self, viewpoint: Viewpoint) -> Frame:
+        f = self.terrain.frame(viewpoint)
+        self._first_frame()  # a window's first frame (no warm-up there)
         return Frame("adaptive", f.ms, f.triangles, extra={
             "nodes": f.nodes, "uploaded": f.uploaded, "resident": f.resident,
             "loaded": f.loaded, "evicted": f.evicted})
@@ -298,7 +307,15 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
         return source
 
     def warm_up(self, viewpoint: Viewpoint) -> None:
+        """The keyframe's view (its guard band too) streamed in by the adaptive renderer
+        until no tile is left to load, then LOD-sprite's warm-up (a keyframe and a
+        spriteframe drawn, untimed): the timed run starts with the first view resident,
+        as the adaptive technique's does."""
+        s = self.sprite.sprite
+        self.adaptive.fill(viewpoint, s.key_projection(s.terrain.projection(viewpoint)).matrix())
         super().warm_up(viewpoint)
+        if self.first_frame_s != self.first_frame_s:  # NaN: the first frame
+            self.first_frame_s = process_age_s()
         if self.proxy is not None:
             self.proxy.triangles.clear()  # the timed run's keyframes only
         if self.tiled is not None:

@@ -216,18 +216,31 @@ class AdaptiveTerrain:
             pump()
         return self._upload_arrived()
 
-    def settle(self, viewpoint: Viewpoint, max_rounds: int = 100000) -> AdaptiveFrame:
-        """Stream ``viewpoint``'s tiles until none it wants is left to load, then draw it
-        (a converged reference image, untimed use only); returns that frame."""
-        view_proj = self.projection(viewpoint) @ viewpoint.view_matrix()
+    def fill(self, viewpoint: Viewpoint, projection: np.ndarray | None = None,
+             max_rounds: int = 100000) -> int:
+        """Stream the tiles ``viewpoint`` wants through ``projection (4, 4)`` (default
+        :meth:`projection`) until none is left to load, uploading them all (untimed use
+        only: this waits; warm-ups and references); returns the tiles uploaded."""
+        proj = self.projection(viewpoint) if projection is None else projection
+        view_proj = proj @ viewpoint.view_matrix()
         eye = np.asarray(viewpoint.o, dtype=np.float64)
+        total = 0
         for _ in range(max_rounds):
             _, uploaded = self._stream(eye, view_proj)
+            total += uploaded
             if uploaded == 0 and self.loader.idle():
-                if self._stream(eye, view_proj)[1] == 0:  # what arrived meanwhile
+                late = self._stream(eye, view_proj)[1]  # what arrived meanwhile
+                total += late
+                if late == 0:
                     break
             elif uploaded == 0:
                 time.sleep(0.002)
+        return total
+
+    def settle(self, viewpoint: Viewpoint, max_rounds: int = 100000) -> AdaptiveFrame:
+        """Stream ``viewpoint``'s tiles until none it wants is left to load (:meth:`fill`),
+        then draw it (a converged image, untimed use only); returns that frame."""
+        self.fill(viewpoint, None, max_rounds)
         return self.frame(viewpoint)
 
     def redraw(self, viewpoint: Viewpoint, draw: tuple[Node, ...], morphed: frozenset,

@@ -5,7 +5,9 @@ A technique turns a viewpoint into a frame on a renderer (a GL surface: context,
 field of view, framebuffer, and the scene it draws).  The viewer and the batch harness
 (:func:`lodsprite.harness.run_path`) drive every technique through these methods alone:
 
-* :meth:`Technique.warm_up` — untimed work before the first timed frame;
+* :meth:`Technique.warm_up` — untimed work before the first timed frame, the same
+  contract for every technique: afterwards its shaders are compiled and the first view's
+  data resident (the harness times it apart, as ``first_frame_ms``);
 * :meth:`Technique.frame` — render one frame (the harness times it, ``ctx.finish()``
   included) and say what it was (:class:`Frame`);
 * :meth:`Technique.decision` — what the last frame decided (which keyframe it showed, from
@@ -110,8 +112,14 @@ class Technique:
         raise NotImplementedError
 
     def warm_up(self, viewpoint: Viewpoint) -> None:
-        """Untimed work before the first timed frame (shaders compiled, first data
-        resident).  Default: one frame at ``viewpoint``, its record dropped."""
+        """Untimed work before the first timed frame, the one contract of every
+        technique: when it returns, every shader the first frame at ``viewpoint`` uses is
+        compiled and the data that view needs is resident (streamed tiles uploaded,
+        decoded nodes, a first keyframe drawn or received), so that the first timed frame
+        at ``viewpoint`` compiles nothing and streams nothing in.  Never a cold start in
+        one technique's timed run that another's has not.  The harness times it on its
+        own (``first_frame_ms``), outside the run's figures.  Default: one frame at
+        ``viewpoint``, its record dropped (right when a frame needs nothing streamed)."""
         self.frame(viewpoint)
 
     def decision(self) -> dict[str, Any]:
