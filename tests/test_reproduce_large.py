@@ -15,11 +15,12 @@ from hypothesis import strategies as st
 
 from lodsprite.experiments.large.variants import VARIANTS, equal_error, row, unavailable
 
-ROW = ("median_ms", "p99_ms", "rmse", "flip", "epsilon", "keyframes", "tiles_rendered",
-       "total_s", "first_frame_s", "peak_rss_mb", "tiles_loaded", "tiles_bad",
-       "reader_restarts")
+ROW = ("median_ms", "p99_ms", "rmse", "flip", "rmse_chosen", "flip_chosen", "epsilon",
+       "keyframes", "tiles_rendered", "total_s", "first_frame_ms", "first_frame_s",
+       "peak_rss_mb", "tiles_loaded", "tiles_bad", "reader_restarts")
 EPS = (1.0,)
 PATHS = ("flyover",)  # one path: the other runs the same code (the suite's time budget)
+RUN = ("whole", "tiled+cache")
 
 
 def _rows(folder) -> list[dict]:
@@ -33,8 +34,10 @@ def large(tmp_path_factory):
     from lodsprite.experiments.large.run import LargeConfig, reproduce_large
 
     out = tmp_path_factory.mktemp("large")
-    cfg = LargeConfig(sizes=(256,), paths=PATHS, frames=6, image=48, sample_every=3,
-                      jacksboro=False, eps=EPS, validate_sizes=(128,))
+    # two variants, no patrol: the third variant and the patrol run the same code
+    cfg = LargeConfig(sizes=(256,), paths=PATHS, frames=8, image=48, sample_every=2,
+                      jacksboro=False, eps=EPS, validate_sizes=(128,), variants=RUN,
+                      patrol=False)
     r = reproduce_large(cfg, out)
     write_outputs(r, out)
     return out, json.loads((out / "results.json").read_text())
@@ -42,7 +45,8 @@ def large(tmp_path_factory):
 
 def test_results_hold_every_row_of_every_run_with_the_schemas_keys(large):
     out, r = large
-    assert r["sample_frames"] == [0, 3] and list(r["sizes"]) == ["256"]
+    assert r["sample_frames"] == [0, 2, 4, 6] and list(r["sizes"]) == ["256"]
+    assert r["chosen_frames"] == [2, 6] and r["reported_frames"] == [0, 4]
     v = r["sizes"]["256"]
     assert v["side"] == 256 and v["sprite_lod"] == 16
     assert v["scene_load"]["grid"] >= 256 and v["scene_load"]["scene_load_mb"] >= 0
@@ -50,7 +54,7 @@ def test_results_hold_every_row_of_every_run_with_the_schemas_keys(large):
         res, runs = v[p], out / "runs" / "256" / p
         assert set(ROW) <= set(res["adaptive"]) and res["adaptive"]["epsilon"] is None
         assert "median_ms" in res["full"]
-        for name in VARIANTS:  # each variant: one row an ε, or skipped with its reason
+        for name in RUN:  # each variant run: one row an ε, or skipped with its reason
             if name in res["skipped"]:
                 assert "takes no option" in res["skipped"][name] and name not in res
                 continue
@@ -61,13 +65,18 @@ def test_results_hold_every_row_of_every_run_with_the_schemas_keys(large):
         assert "whole" in res  # whole keyframes run on every build
         # the rows are the runs' own: medians from their frames (6 digits in the csv)
         ms = np.array([float(x["ms"]) for x in _rows(runs / "adaptive")])
-        assert len(ms) == 6 and res["adaptive"]["median_ms"] == pytest.approx(
+        assert len(ms) == 8 and res["adaptive"]["median_ms"] == pytest.approx(
             np.median(ms), rel=1e-4)
         ms = np.array([float(x["ms"]) for x in _rows(runs / "whole_eps1")])
         assert res["whole"][0]["median_ms"] == pytest.approx(np.median(ms), rel=1e-4)
         # timed runs write nothing per frame: the replay saved the sampled frames only
         saved = sorted(q.name for q in (runs / "adaptive" / "frames").glob("*.png"))
-        assert saved == ["frame_00000.png", "frame_00003.png"]
+        assert saved == [f"frame_{i:05d}.png" for i in (0, 2, 4, 6)]
+        # every run warmed up untimed, its warm-up reported on its own; adaptive's first
+        # timed frame found the first view's tiles resident
+        assert res["adaptive"]["first_frame_ms"] > 0 and res["whole"][0]["first_frame_ms"] > 0
+        first = _rows(runs / "adaptive")[0]
+        assert first["uploaded"] == "0" and int(first["resident"]) >= 1
         # first frame from the process's start: after the imports and the scene load
         a = res["adaptive"]
         assert a["first_frame_s"] > a["first_frame_s_technique"] > 0
@@ -81,13 +90,13 @@ def test_the_reference_of_each_side_is_named_and_its_stand_in_checked(large):
     _, r = large
     for p in PATHS:
         d = r["reference"]["256"][p]
-        assert d["level0_frames"] == 2 and d["stand_in_frames"] == 0
+        assert d["level0_frames"] == 4 and d["stand_in_frames"] == 0
         assert "0.25 px" in d["stand_in"] and d["level0"]
         # the 0.25 px stand-in at 256² on 48² pixels is level 0 (measured 0.0, 0.0)
         assert 0 <= d["stand_in_rmse"] < 0.5 and 0 <= d["stand_in_flip"] < 0.01
         # a side checked without timed runs (256 is timed: not checked twice)
         check = r["reference"]["128"][p]
-        assert check["timed"] is False and check["level0_frames"] == 2
+        assert check["timed"] is False and check["level0_frames"] == 4
         assert 0 <= check["stand_in_rmse"] < 0.5 and "timed" not in d
     assert list(r["reference"]) == ["256", "128"] and "128" not in r["sizes"]
 
@@ -98,7 +107,7 @@ def test_equal_error_is_the_one_the_rows_give_and_patrol_says_what_it_did(large)
         e = r["equal_error_speedup"]["256"][p]
         assert e == json.loads(json.dumps(equal_error(r["sizes"]["256"][p])))
         assert e["time"] == "total_s" and len(e["rows"]) == sum(
-            len(r["sizes"]["256"][p].get(name, [])) for name in VARIANTS)
+            len(r["sizes"]["256"][p].get(name, [])) for name in RUN)
     pt = r["patrol"]
     assert isinstance(pt.get("skipped"), str) or {"without_cache", "with_cache",
                                                   "keyframe_work_cut"} <= set(pt)
@@ -111,35 +120,43 @@ def test_equal_error_is_the_one_the_rows_give_and_patrol_says_what_it_did(large)
     assert (out / "large_scaling.png").stat().st_size > 2000
 
 
-def _row(rmse: float, flip: float, total: float) -> dict:
-    return {"rmse": rmse, "flip": flip, "total_s": total}
+def _row(rmse: float, flip: float, total: float, rmse_c: float, flip_c: float) -> dict:
+    return {"rmse": rmse, "flip": flip, "total_s": total, "rmse_chosen": rmse_c,
+            "flip_chosen": flip_c}
 
 
 ERR = st.floats(0.0, 10.0, allow_nan=False)
-SPRITE = st.tuples(ERR, st.floats(0.0, 1.0), st.floats(0.01, 100.0))
+FLIP = st.floats(0.0, 1.0)
+SPRITE = st.tuples(ERR, FLIP, st.floats(0.01, 100.0), ERR, FLIP)
 
 
 @settings(max_examples=200, deadline=None)
-@given(ad=st.tuples(ERR, st.floats(0.0, 1.0), st.floats(0.01, 100.0)),
+@given(ad=SPRITE,
        rows=st.dictionaries(st.sampled_from(list(VARIANTS)), st.lists(SPRITE, max_size=4)))
-def test_the_chosen_row_is_within_both_bounds_and_the_fastest_such(ad, rows):
+def test_the_chosen_row_is_within_both_bounds_on_the_chosen_frames_and_the_fastest_such(
+        ad, rows):
     per_path = {"adaptive": _row(*ad)}
     for name, rs in rows.items():
         per_path[name] = [{**_row(*x), "epsilon": 1.0 / (k + 1)} for k, x in enumerate(rs)]
     e = equal_error(per_path)
     assert len(e["rows"]) == sum(len(rs) for rs in rows.values())  # every row reported
-    within = [x for x in e["rows"] if x["rmse"] <= ad[0] and x["flip"] <= ad[1]]
+    within = [x for x in e["rows"] if x["rmse_chosen"] <= ad[3] and x["flip_chosen"] <= ad[4]]
     assert [x["within"] for x in e["rows"]] == [x in within for x in e["rows"]]
+    assert [x["within_reported"] for x in e["rows"]] == [
+        x["rmse"] <= ad[0] and x["flip"] <= ad[1] for x in e["rows"]]
+    assert (e["adaptive_rmse"], e["adaptive_flip"]) == (ad[0], ad[1])  # the reported half
     if not within:
         assert e["best"] is None
         return
     b = e["best"]
-    assert b["rmse"] <= ad[0] and b["flip"] <= ad[1]
+    assert b["rmse_chosen"] <= ad[3] and b["flip_chosen"] <= ad[4]
     assert b["speedup"] == max(x["speedup"] for x in within)
     src = next(x for x in per_path[b["variant"]] if x["epsilon"] == b["epsilon"])
     assert b["speedup"] == pytest.approx(ad[2] / src["total_s"])
+    # the best row's errors are those of the reported frames, not the ones that chose it
+    assert (b["rmse"], b["flip"]) == (src["rmse"], src["flip"])
     assert all(src["total_s"] <= x["total_s"] for rs in rows.values() for x in
-               (_row(*y) for y in rs) if x["rmse"] <= ad[0] and x["flip"] <= ad[1])
+               (_row(*y) for y in rs) if x["rmse_chosen"] <= ad[3] and x["flip_chosen"] <= ad[4])
 
 
 def test_a_variant_whose_option_the_technique_lacks_is_skipped_with_the_reason():
@@ -151,8 +168,9 @@ def test_a_variant_whose_option_the_technique_lacks_is_skipped_with_the_reason()
 
 def test_a_row_counts_whole_keyframes_as_every_tile():
     s = {"keyframes": 3, "median_ms": 1.0, "p99_ms": 2.0, "total_s": 0.5, "other": 1}
-    x = row(s, (1.5, 0.02), 0.5, tiles=4)
+    x = row(s, (1.5, 0.02), 0.5, tiles=4, chosen=(2.5, 0.03))
     assert x["tiles_rendered"] == 48 and x["epsilon"] == 0.5 and "other" not in x
+    assert (x["rmse"], x["rmse_chosen"], x["flip_chosen"]) == (1.5, 2.5, 0.03)
     assert row({**s, "tiles_rendered": 7}, (0.0, 0.0), 1.0, 4)["tiles_rendered"] == 7
 
 
@@ -182,6 +200,13 @@ def test_quick_default_and_full_are_three_configs_and_save_every_is_checked():
                             for q, f in ((True, False), (False, False), (False, True)))
     assert quick.sizes == (256, 512) and {4096, 16384} <= set(default.sizes)
     assert len(full.eps) > len(default.eps) and full.frames > default.frames
+    from lodsprite.experiments.base import MIN_QUALITY_FRAMES
+
+    for cfg in (default, full):  # the real configs: at least 20 sampled frames, split
+        assert len(cfg.sample_frames) >= MIN_QUALITY_FRAMES
+        assert sorted(cfg.chosen_frames + cfg.reported_frames) == cfg.sample_frames
+        assert not set(cfg.chosen_frames) & set(cfg.reported_frames)
+    assert len(quick.chosen_frames) >= 2 and len(quick.reported_frames) >= 2
     with pytest.raises(InputError, match="--quick and --full"):
         e.configure(Options(quick=True, full=True))
     with pytest.raises(InputError, match="save_every"):

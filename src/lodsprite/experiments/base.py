@@ -95,3 +95,16 @@ def single(progress: StageProgress | None, name: str) -> Progress | None:
     if progress is None:
         return None
     return lambda done, total: progress(name, done, total)
+
+
+#: Sampled frames an experiment's quality figures take at least (its real configs).
+MIN_QUALITY_FRAMES = 20
+
+
+def split_sampled(frames: list[int]) -> tuple[list[int], list[int]]:
+    """The sampled frames (indices along a path) in two interleaved halves,
+    ``(chosen, reported)``: an experiment that picks one of several noisy rows picks it on
+    ``chosen`` (every other sampled frame, from the second) and reports its figures on
+    ``reported`` (the others, frame 0 among them), so that the row reported is not the
+    one whose noise won the choice."""
+    return list(frames[1::2]), list(frames[0::2])

@@ -51,10 +51,15 @@ def summary(r: dict) -> Summary:
                          "—" if whole is None else f"{whole['median_ms']:.1f}",
                          f"{ad['rmse']:.2f} / " + ("—" if whole is None
                                                    else f"{whole['rmse']:.2f}"),
-                         f"{ad['peak_rss_mb']:.0f}", f"{ad['first_frame_s']:.2f}", _best(e)))
+                         f"{ad['peak_rss_mb']:.0f}", _ms(ad.get("first_frame_ms")),
+                         f"{ad['first_frame_s']:.2f}", _best(e)))
     return Summary("Large terrain reproduced", (
         "store", "path", "adaptive median ms", "sprite median ms", "RMSE adaptive / sprite",
-        "peak RSS MB", "first frame s", "at equal error"), rows)
+        "peak RSS MB", "adaptive warm-up ms", "first frame s", "at equal error"), rows)
+
+
+def _ms(v: float | None) -> str:
+    return "—" if v is None else f"{v:.0f}"
 
 
 EXPERIMENT = Experiment("large", "Large terrain (adaptive and LOD-sprite over stores)",
