@@ -47,6 +47,7 @@ def test_results_hold_the_issues_keys_and_the_runs_own_figures(battlefield):
             assert len(run["columns"][f"ms_{layer}"]) == 6
     assert PVL_KEYS <= set(r["profile_vs_linear"])
     assert r["sample_frames"] == [0, 3] and r["instances"] == 60
+    assert r["chosen_frames"] == [3] and r["reported_frames"] == [0]
     assert len(r["lightfields"]) == 2 and (out / "battlefield.toml").is_file()
     assert r["terrain"]["tiled"] and (out / "stores").is_dir()
 
@@ -63,14 +64,22 @@ def test_extractions_are_the_crowd_engines_with_and_without_sharing(battlefield)
 def test_the_linear_run_kept_is_the_closest_to_the_profile_runs_triangles(battlefield):
     _, r, _ = battlefield
     x = r["paths"]["weave"]["profile_vs_linear"]
-    goal = x["profile"]["triangles_objects_mean"]  # the objects' (the same terrain)
+    # matched on the chosen frame (3), the objects' triangles (the same terrain)
+    goal = x["profile"]["triangles_objects_chosen"]
+    assert goal == x["profile"]["columns"]["triangles_objects"][1]  # sampled run: 0, 3
     best = min(abs(t - goal) for t in x["triangles_tried"])
-    assert abs(x["linear"]["triangles_objects_mean"] - goal) == pytest.approx(best)
+    assert abs(x["linear"]["triangles_objects_chosen"] - goal) == pytest.approx(best)
+    # and reported on the other frame (0): its quality and triangles, not frame 3's
+    for side in ("profile", "linear"):
+        col = x[side]["columns"]
+        assert x[side]["rmse"] == pytest.approx(col["rmse"][0])
+        assert x[side]["rmse_chosen"] == pytest.approx(col["rmse"][1])
+        assert x[side]["triangles_objects_reported"] == col["triangles_objects"][0]
     # the sampled runs draw the reference's full-resolution terrain: the same in both
     prof, lin = x["profile"]["columns"], x["linear"]["columns"]
     assert prof["triangles_terrain"] == lin["triangles_terrain"]
     assert x["linear_exponent"] in x["exponents_tried"]
-    assert r["profile_vs_linear"]["triangles_profile"] == pytest.approx(goal)
+    assert r["profile_vs_linear"]["triangles_profile_chosen"] == pytest.approx(goal)
     # the profile run drew with the profile LOD hook, the linear runs without it
     assert x["profile"]["profile_lod"] and not x["linear"]["profile_lod"]
     assert r["profile_vs_linear"]["profile_lod_available"]
@@ -88,12 +97,12 @@ def test_report_names_the_measured_figures_beside_the_targets(battlefield):
 
 
 def test_next_exponent_coarsens_when_there_are_too_many_triangles():
-    from lodsprite.experiments.battlefield.run import _next_exponent
+    from lodsprite.experiments.battlefield.run import MATCH_KEY, _next_exponent
 
-    assert _next_exponent([(1.0, {"triangles_objects_mean": 2000.0})], 1000.0) > 1.0
-    assert _next_exponent([(1.0, {"triangles_objects_mean": 500.0})], 1000.0) < 1.0
+    assert _next_exponent([(1.0, {MATCH_KEY: 2000.0})], 1000.0) > 1.0
+    assert _next_exponent([(1.0, {MATCH_KEY: 500.0})], 1000.0) < 1.0
     # a secant on log triangles: exact when triangles fall as exp(-e)
-    tried = [(e, {"triangles_objects_mean": 1e5 * np.exp(-e)}) for e in (1.0, 2.0)]
+    tried = [(e, {MATCH_KEY: 1e5 * np.exp(-e)}) for e in (1.0, 2.0)]
     assert _next_exponent(tried, 1e5 * np.exp(-1.5)) == pytest.approx(1.5)
 
 
@@ -106,3 +115,18 @@ def test_options_choose_the_terrain_and_size_only_when_given():
     cfg = exp.configure(Options(terrain="jacksboro", terrain_given=True, size=96,
                                 size_given=True))
     assert cfg.terrain == "jacksboro" and cfg.image == 96 and cfg.instances == 3000
+
+
+def test_every_run_reports_its_warm_up_apart_and_the_real_config_samples_twenty_frames(
+        battlefield):
+    from lodsprite.experiments.base import MIN_QUALITY_FRAMES
+    from lodsprite.experiments.battlefield.run import BattlefieldConfig
+
+    out, r, report = battlefield
+    p = r["paths"]["weave"]
+    for name in ("scheduler", "independent", "manager", "no_manager"):
+        assert p[name]["first_frame_ms"] > 0, name
+    assert "first frame ms (warm-up)" in report.read_text()
+    cfg = BattlefieldConfig()
+    assert len(cfg.sample_frames) >= MIN_QUALITY_FRAMES
+    assert sorted(cfg.chosen_frames + cfg.reported_frames) == cfg.sample_frames

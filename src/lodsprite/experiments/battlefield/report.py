@@ -90,15 +90,16 @@ def _budget_lines(r: dict) -> list[str]:
 
 def _path_lines(r: dict) -> list[str]:
     out = ["## Per path", "",
-           "| path | run | median ms | p99 ms | σ ms | RMSE | FLIP | triangles | "
-           "extractions | ms terrain / objects / light fields |",
-           "|---|---|---|---|---|---|---|---|---|---|"]
+           "| path | run | first frame ms (warm-up) | median ms | p99 ms | σ ms | RMSE | "
+           "FLIP | triangles | extractions | ms terrain / objects / light fields |",
+           "|---|---|---|---|---|---|---|---|---|---|---|"]
     for p in r["paths"].values():
         for run in ("scheduler", "independent", "manager", "no_manager"):
             x = p[run]
             layers = " / ".join(_num(x.get(f"mean_ms_{k}"), 1)
                                 for k in ("terrain", "objects", "lightfields"))
-            out.append(f"| {p['path']} | {run} | {_num(x['median_ms'], 1)} | "
+            out.append(f"| {p['path']} | {run} | {_num(x.get('first_frame_ms'), 0)} | "
+                       f"{_num(x['median_ms'], 1)} | "
                        f"{_num(x['p99_ms'], 1)} | {_num(x['std_ms'], 1)} | "
                        f"{_num(x['rmse'], 2)} | {_num(x['flip'], 4)} | "
                        f"{x['triangles_mean']:,.0f} | {x['extractions']:,} | {layers} |")
@@ -109,12 +110,15 @@ def _lod_lines(r: dict) -> list[str]:
     v = r["profile_vs_linear"]
     out = ["## Profile LOD against linear LOD at equal triangles", "",
            "Every object type's `lod` set to `profile`, then to `linear` with the LOD "
-           "exponent searched to match the profile run's triangles; on the sampled frames.",
+           "exponent searched to match the profile run's triangles on the chosen frames "
+           f"{r['chosen_frames']}; every figure below is of the reported frames "
+           f"{r['reported_frames']} (triangles on the chosen frames in brackets).",
            "", "| | RMSE | FLIP | triangles |", "|---|---|---|---|",
            f"| profile | {_num(v['rmse_profile'], 2)} | {_num(v['flip_profile'], 4)} | "
-           f"{_num(v['triangles_profile'], 0)} |",
+           f"{_num(v['triangles_profile'], 0)} ({_num(v['triangles_profile_chosen'], 0)}) |",
            f"| linear | {_num(v['rmse_linear'], 2)} | {_num(v['flip_linear'], 4)} | "
-           f"{_num(v['triangles_linear'], 0)} |", ""]
+           f"{_num(v['triangles_linear'], 0)} ({_num(v['triangles_linear_chosen'], 0)}) |",
+           ""]
     for p in r["paths"].values():
         x = p["profile_vs_linear"]
         out.append(f"* {p['path']}: linear exponent {_num(x['linear_exponent'], 2)} (tried "
@@ -135,8 +139,11 @@ def lines(r: dict, plots: list[Path]) -> list[str]:
            f"trees) and {len(r['lightfields'])} light fields on `{r['terrain']['spec']}`; "
            f"paths {', '.join(p['path'] for p in r['paths'].values())}, {c['frames']} frames "
            f"each at {c['image']}², terrain `{c['terrain_mode']}`; quality on frames "
-           f"{r['sample_frames']} of each path against the full-detail scene; GL "
-           f"`{r['gl_renderer']}`. Timings on a shared machine are noisy.", "",
+           f"{r['reported_frames']} of each path against the full-detail scene (frames "
+           f"{r['chosen_frames']} choose the linear run; they are reported nowhere else); "
+           f"GL `{r['gl_renderer']}`. Every run is warmed up untimed at its first "
+           "viewpoint (shaders compiled, the first view's tiles resident): *first frame ms* "
+           "and in no other figure. Timings on a shared machine are noisy.", "",
            *(f"* {line}" for line in r["world"]), ""]
     out += _budget_lines(r) + _lod_lines(r)
     out += ["## LOD extractions with and without the manager", "",
