@@ -68,7 +68,8 @@ def test_reproduce_runs_into_the_default_folder_and_attaches_the_report(tmp_path
 
 
 def test_the_large_table_has_a_row_a_store_and_path_in_size_order():
-    ad = {"median_ms": 2.0, "rmse": 3.0, "peak_rss_mb": 300.0, "first_frame_s": 0.5}
+    ad = {"median_ms": 2.0, "rmse": 3.0, "peak_rss_mb": 300.0, "first_frame_s": 0.5,
+          "first_frame_ms": 412.3}
     v = {"chen1999": {"adaptive": ad, "whole": [{"median_ms": 1.0, "rmse": 4.0}]}}
     best = {"best": {"speedup": 2.5, "variant": "whole", "epsilon": 0.5}}
     ee = {"chen1999": best}
@@ -76,6 +77,6 @@ def test_the_large_table_has_a_row_a_store_and_path_in_size_order():
          "equal_error_speedup": {"2048": ee, "512": ee, "dem.tif": {"chen1999": {"best": None}}}}
     s = experiments.get("large").summary(r)
     assert [row[0] for row in s.rows] == ["512", "2048", "dem.tif"]
-    assert s.rows[0][1:] == ("chen1999", "2.0", "1.0", "3.00 / 4.00", "300", "0.50",
+    assert s.rows[0][1:] == ("chen1999", "2.0", "1.0", "3.00 / 4.00", "300", "412", "0.50",
                              "2.50× (whole ε 0.5)")
     assert s.rows[2][-1] == "none"

@@ -108,3 +108,20 @@ def split_sampled(frames: list[int]) -> tuple[list[int], list[int]]:
     ``reported`` (the others, frame 0 among them), so that the row reported is not the
     one whose noise won the choice."""
     return list(frames[1::2]), list(frames[0::2])
+
+
+class SplitSampled:
+    """A config's sampled frames (its ``sample_frames``) in the two halves of
+    :func:`split_sampled`: :attr:`chosen_frames` and :attr:`reported_frames`."""
+
+    sample_frames: list[int]
+
+    @property
+    def chosen_frames(self) -> list[int]:
+        """The sampled frames a row is chosen on."""
+        return split_sampled(self.sample_frames)[0]
+
+    @property
+    def reported_frames(self) -> list[int]:
+        """The sampled frames every figure is reported on."""
+        return split_sampled(self.sample_frames)[1]

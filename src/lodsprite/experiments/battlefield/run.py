@@ -52,7 +52,7 @@ from pathlib import Path
 
 import numpy as np
 
-from lodsprite.experiments.base import split_sampled
+from lodsprite.experiments.base import SplitSampled
 
 Update = Callable[[str, int, int], None]
 #: What the linear run is matched on: its objects' triangles on the chosen frames.
@@ -60,7 +60,7 @@ MATCH_KEY = "triangles_objects_chosen"
 
 
 @dataclass(frozen=True)
-class BattlefieldConfig:
+class BattlefieldConfig(SplitSampled):
     """The default run: a 4k² store, 3000 walking ogres, 100 trees, two light fields of
     6 slabs of 8² nodes of 64² pixels, 300 frames along each of two paths at 256², a 5 fps
     target; 847 s here (the quiet 2-core machine).  :meth:`quick` is the
@@ -103,16 +103,6 @@ class BattlefieldConfig:
     @property
     def sample_frames(self) -> list[int]:
         return list(range(0, self.frames, self.sample_every))
-
-    @property
-    def chosen_frames(self) -> list[int]:
-        """The sampled frames a run is chosen on (:func:`split_sampled`)."""
-        return split_sampled(self.sample_frames)[0]
-
-    @property
-    def reported_frames(self) -> list[int]:
-        """The sampled frames quality is reported on."""
-        return split_sampled(self.sample_frames)[1]
 
 
 def _stats(ms: np.ndarray) -> dict:

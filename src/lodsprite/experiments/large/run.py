@@ -32,7 +32,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from lodsprite.experiments.base import split_sampled
+from lodsprite.experiments.base import SplitSampled, split_sampled
 from lodsprite.experiments.large.child import render_in_child
 from lodsprite.experiments.large.reference import errors, reference_images, saved_frames
 from lodsprite.experiments.large.variants import (
@@ -48,7 +48,7 @@ Update = Callable[[str, int, int], None]
 
 
 @dataclass(frozen=True)
-class LargeConfig:
+class LargeConfig(SplitSampled):
     """The default run took 18 min 56 s here (2026-12-02, with the one-pass patrol at
     1 px; the three-pass patrol at ε 0.5 took 39 s alone; before the 20 sampled frames
     and adaptive's warm-up, not timed since).  LOD-sprite's setup over a
@@ -91,16 +91,6 @@ class LargeConfig:
     @property
     def sample_frames(self) -> list[int]:
         return list(range(0, self.frames, self.sample_every))
-
-    @property
-    def chosen_frames(self) -> list[int]:
-        """The sampled frames a row is chosen on (:func:`split_sampled`)."""
-        return split_sampled(self.sample_frames)[0]
-
-    @property
-    def reported_frames(self) -> list[int]:
-        """The sampled frames every row's RMSE and FLIP are reported on."""
-        return split_sampled(self.sample_frames)[1]
 
 
 def huge_needs() -> dict:
