@@ -17,12 +17,11 @@ better plan leaves headroom.
 * :class:`FrameScheduler` - every frame :meth:`~FrameScheduler.plan` (the knapsack under
   ``target_ms`` minus the frame's measured overhead, with hysteresis), then
   :meth:`~FrameScheduler.observe` each layer's measured ms to rescale its cost model.
-* :class:`IndependentFeedback` - the baseline, today's behaviour: each layer's own
-  reactive feedback moves its knob towards a fixed share of the target.
-* :class:`NoSchedule` - nothing turns: every knob stays where it is.
+* :class:`IndependentFeedback` - the baseline: each layer's own reactive feedback moves
+  its knob towards a fixed share of the target; :class:`NoSchedule` - nothing turns.
 * :class:`LayerBudget` - what a layered technique runs: a schedule, a model per layer,
-  the frame's measurements fed back, the summary's shares.
-* :func:`steadiness` - oscillation measures: knob changes, std of the knob and of frame ms.
+  the frame's measurements fed back, the plan's predictions, the summary's shares.
+* :func:`steadiness` - oscillation: knob changes, std of the knob and of frame ms.
 """
 
 from __future__ import annotations
@@ -256,7 +255,7 @@ class IndependentFeedback:
                                              len(c.values) - 1))
 
     def observe_frame(self, frame_ms: float, layers_ms: float) -> None:
-        """No use for the whole frame's time: each layer watches its own."""
+        """Unused: each layer watches its own time."""
 
     def shares(self) -> dict[str, float]:
         return {n: self.share(n) for n in self.controls}
@@ -320,6 +319,7 @@ class LayerBudget:
         self.knob_sums: dict[str, np.ndarray] = {}   # (n, Σ value, Σ value²) a layer
         self.frame_ms_sum = 0.0
         self.frames = 0
+        self.predicted: dict[str, float] = {}  # ms each layer's setting was planned at
 
     @property
     def target_ms(self) -> float:
@@ -340,15 +340,20 @@ class LayerBudget:
                 w = c.work()
                 self.models[c.name].work_table = (None if w is None else
                                                   (tuple(c.values), np.asarray(w, np.float64)))
-        return self.schedule.plan(controls, self.models)
+        plan = self.schedule.plan(controls, self.models)
+        planned = getattr(self.schedule, "predicted", {})  # the scheduler's, switch included
+        self.predicted = {n: float(planned[n]) if n in planned else self.models[n].planned(
+            v, self.last_knob.get(n, v)) for n, v in plan.items()}
+        return plan
 
     def after(self, layers: Mapping[str, tuple[float, float, float | None]],
               frame_ms: float) -> dict[str, float]:
         """The frame's measurements: ``layers[name] = (knob value, ms, work counter or
-        None)``, ``frame_ms`` the whole frame; returns ``predicted_ms_<layer>`` (what the
-        cost model predicted for the setting drawn, before this frame's correction)."""
-        out = {f"predicted_ms_{n}": float(self.models[n].predict(v))
-               for n, (v, _, _) in layers.items() if n in self.models}
+        None)``, ``frame_ms`` the whole frame; returns ``predicted_ms_<layer>``: what
+        :meth:`before` predicted for the setting drawn (the scheduler's plan, its switch
+        cost included; without one the same sum, :meth:`~lodsprite.scene.costs.
+        LayerModel.planned`)."""
+        out = {f"predicted_ms_{n}": self.predicted[n] for n in layers if n in self.predicted}
         for name, (value, ms, work) in layers.items():
             self.schedule.observe(name, value, ms, work)
             if name in self.models and work is not None:
