@@ -2,13 +2,11 @@
 
 Funkhouser & Séquin choose every object's level of detail each frame *predictively*: from
 the predicted cost and benefit of each level (:mod:`lodsprite.scene.costs`) they pick the
-levels that maximise total benefit subject to the predicted frame time staying within
-the target, a multiple-choice knapsack they solve greedily, raising whichever object's
-level gives the most benefit per unit cost (§4.2); predicting, rather than correcting
-after a missed frame, is what removes the oscillation of reactive feedback.  A dead band
-round the budget (this module's, against flipping between two neighbouring settings when
-predictions are noisy) keeps the current settings unless they are over budget or a
-better plan leaves headroom.
+levels that maximise total benefit within the target frame time, a multiple-choice
+knapsack solved greedily (the most benefit per unit cost first, §4.2); predicting, not
+correcting after a missed frame, removes reactive feedback's oscillation.  A dead band
+round the budget (this module's, against flipping between neighbouring settings on noisy
+predictions) keeps the settings unless over budget or a better plan leaves headroom.
 
 * :class:`LayerControl` - what the budget may turn on a layer: one knob, its settings in
   ascending quality (and cost).
@@ -49,7 +47,8 @@ class LayerControl:
     gives what its benefit model weighs, ``(lin, cov, coverage[, setting])`` of
     :func:`~lodsprite.scene.costs.object_detail`, called before each plan; ``work``
     (optional, the objects layer's) the layer's predicted counter at every setting
-    ``(n,)``, the cost model's work in place of its power law."""
+    ``(n,)``; ``coverage`` (optional) its measured screen fraction, its benefit's ``Size``
+    (:mod:`lodsprite.layered.coverage`; None before it has one)."""
 
     name: str
     values: tuple[float, ...]
@@ -57,6 +56,7 @@ class LayerControl:
     set: Callable[[float], None]
     detail: Callable[[], tuple | None] | None = None
     work: Callable[[], np.ndarray | None] | None = None
+    coverage: Callable[[], float | None] | None = None
 
     def index(self, value: float | None = None) -> int:
         """The index in :attr:`values` of ``value`` (default: the current one), or of the
@@ -336,6 +336,8 @@ class LayerBudget:
                 seen = c.detail()
                 if seen is not None:
                     benefit.update(*seen)
+            if c.coverage is not None and (size := c.coverage()) is not None:
+                benefit.coverage = float(size)
             if c.work is not None:
                 w = c.work()
                 self.models[c.name].work_table = (None if w is None else
