@@ -17,10 +17,15 @@ holds every chunk RTT/2 in each direction (TCP then sees the proxy's short hop, 
 the RTT: its window grows faster than on a real long link).  Without root (or ``ip
 netns``) the links are skipped with the reason and both run over loopback through the
 proxy.  Per link and mode: frame interval median and p99 (ms between frames shown),
-input-to-frame latency (stream: the viewpoint sent to its image drawn; sprite: the page
-draws the current viewpoint every frame, so one frame interval), bytes/s received, and
-in an untimed replay the image error (RMSE, grey levels) of sampled shown frames against
-the full-resolution render of the viewpoint the viewer is at.
+bytes/s received, in an untimed replay the image error (RMSE, grey levels) of sampled
+shown frames against the full-resolution render of the viewpoint the viewer is at, and
+input-to-frame latency, measured alike for both: after the path, ``--presses`` real key
+presses (selenium's, trusted events), each from its event's timestamp to the display
+frame (``requestAnimationFrame``) after the first frame drawn from a camera that
+includes it: the page moves its flying camera and draws it on its next frame; streaming
+sends the moved viewpoint at once and draws the image rendered from it on arrival.
+``viewpoint_to_image_ms`` is streaming's viewpoint sent to its image drawn during the
+path (the figure published as its input-to-frame latency before).
 
     sudo python benchmarks/web_vs_streaming.py [--links 0:100,50:100,150:100,0:10,...]
 """
@@ -210,6 +215,24 @@ def play(driver, url: str, mode: str, proxy: DelayProxy, samples: int, frames: i
     return {"stats": stats, "bytes_per_s": (proxy.down - b0) / seconds, "shots": shots}
 
 
+def press(driver, presses: int, timeout_s: float = 60.0) -> dict:
+    """``presses`` key presses ('w', held 0.2 s, 0.6 s apart) into the page after its
+    path; its input-to-pixels figures once every press has been drawn (or the deadline:
+    those drawn by then)."""
+    from selenium.webdriver.common.action_chains import ActionChains
+
+    stats = "return (window.lodsprite || window.stream).stats()"
+    for _ in range(presses):
+        ActionChains(driver).key_down("w").pause(0.2).key_up("w").perform()
+        time.sleep(0.4)
+    deadline = time.monotonic() + timeout_s
+    while (s := driver.execute_script(stats))["inputs"] < presses:
+        if time.monotonic() > deadline:
+            break
+        time.sleep(0.1)
+    return s
+
+
 def image_error(shots: list, reference) -> float | None:
     errs = []
     for s in shots:
@@ -259,12 +282,14 @@ def client(args) -> None:
             # The sampled replay first: it also warms up (the renderer loads its scene).
             replay = play(driver, urls[mode], mode, proxies[mode], args.samples, args.frames)
             timed = play(driver, urls[mode], mode, proxies[mode], 0, args.frames)
-            s = timed["stats"]
+            s, i = timed["stats"], press(driver, args.presses)
             out[mode] = {"frame_ms_median": s["median_ms"], "frame_ms_p99": s["p99_ms"],
-                         "input_to_frame_ms": s["median_ms"] if mode == "sprite"
-                         else s["latency_ms"], "bytes_per_s": timed["bytes_per_s"],
+                         "input_to_frame_ms": i["input_ms"],
+                         "input_to_frame_ms_p99": i["input_ms_p99"], "inputs": i["inputs"],
+                         "bytes_per_s": timed["bytes_per_s"],
                          "frames": s["frames"], "keyframes": s.get("keyframes"),
                          "keyframe_latency_ms": s["latency_ms"] if mode == "sprite" else None,
+                         "viewpoint_to_image_ms": s["latency_ms"] if mode == "stream" else None,
                          "image_rmse": image_error(replay["shots"], reference)}
             if mode == "stream":  # the shown image against its own viewpoint: JPEG only
                 own = [{**x, "k": x["shown"]} for x in replay["shots"]]
@@ -281,7 +306,8 @@ def client(args) -> None:
 def python(role: str, args, **extra) -> list[str]:
     cmd = [sys.executable, str(HERE), "--role", role, "--terrain", args.terrain, "--size",
            str(args.size), "--lod", str(args.lod), "--epsilon", str(args.epsilon), "--path",
-           args.path, "--frames", str(args.frames), "--samples", str(args.samples)]
+           args.path, "--frames", str(args.frames), "--samples", str(args.samples),
+           "--presses", str(args.presses)]
     for k, v in extra.items():
         cmd += [f"--{k.replace('_', '-')}", str(v)]
     return cmd
@@ -328,6 +354,8 @@ def main() -> None:
     ap.add_argument("--path", default="chen1999")
     ap.add_argument("--frames", type=int, default=240)
     ap.add_argument("--samples", type=int, default=6)
+    ap.add_argument("--presses", type=int, default=10,
+                    help="key presses timed input to pixels, per mode")
     ap.add_argument("--out", type=Path, default=Path("out/web_vs_streaming"))
     ap.add_argument("--host", default="127.0.0.1")
     ap.add_argument("--port", type=int, default=STREAM_PORT)

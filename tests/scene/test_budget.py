@@ -365,3 +365,27 @@ def test_a_work_table_replaces_the_power_law_and_is_corrected_by_measurement():
     assert m.work_ratio == pytest.approx(2.0, rel=0.01)
     assert m.predict(1.0) == pytest.approx(m.cost.scale * (a + b * 8e5), rel=0.01)
     assert m.predict(2.0) == pytest.approx(m.cost.predict(2.0))   # not in the table
+
+
+@pytest.mark.parametrize("schedule", ["scheduler", "none"])
+def test_predicted_ms_is_what_the_plan_predicted_switch_included(schedule):
+    # issue 30, must-have 4: predicted_ms_<layer> was the steady cost alone, while the
+    # plan charged a setting change its switch cost too (CostModel.switch_ms)
+    c = LayerControl("objects", (2.0, 1.0), 2.0, lambda v: None)
+    budget = LayerBudget(schedule, 40.0 if schedule == "scheduler" else None)
+    m = CostModel(PowerWork(1.0, 1.0, 1.0, fit=False), a=10.0, b=0.0, switch_ms=6.0)
+    budget.models["objects"] = LayerModel(m, default_model("objects", (2.0, 1.0)).benefit)
+    rows = []
+    for k in range(8):
+        before = c.value
+        if schedule == "none" and k == 4:
+            c.value = 1.0                        # the knob turned by hand: a switch too
+        plan = budget.before([c])
+        switched = plan["objects"] != before
+        cols = budget.after({"objects": (plan["objects"], 16.0 if switched else 10.0, 1.0)},
+                            20.0)
+        rows.append((switched, cols["predicted_ms_objects"]))
+        if schedule == "scheduler":
+            assert cols["predicted_ms_objects"] == budget.schedule.predicted["objects"]
+    assert [ms for s, ms in rows if s] == [pytest.approx(16.0)]    # 10 steady + 6 switch
+    assert all(ms == pytest.approx(10.0) for s, ms in rows if not s)

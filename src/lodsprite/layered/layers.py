@@ -117,6 +117,8 @@ class TerrainLayer(Layer):
         self._seen: Viewpoint | None = None       # the last frame's viewpoint
         self._table: np.ndarray | None = None     # the adaptive work table, and its age
         self._plans = 0
+        self._coarse: np.ndarray | None = None    # max-pooled heights, for coverage
+        self._covered: tuple[int, float] | None = None  # (plan, coverage)
 
     def projection(self, viewpoint: Viewpoint) -> np.ndarray:
         """The frame's projection ``(4, 4)``: the terrain technique's own."""
@@ -157,6 +159,25 @@ class TerrainLayer(Layer):
             self._table = self.technique.terrain.triangles_at(self._seen, EPSILONS)
         return self._table
 
+    def coverage(self) -> float | None:
+        """The terrain's non-sky fraction of the window from the last frame's viewpoint
+        (:func:`~lodsprite.layered.coverage.terrain_coverage`), measured every
+        ``WORK_EVERY``-th call; None before a frame."""
+        from lodsprite.layered.coverage import coarse_max, terrain_coverage
+
+        if self._seen is None:
+            return None
+        calls = self._covered[0] + 1 if self._covered else 0
+        if self._covered is None or calls % WORK_EVERY == 0:
+            hf = self.renderer.scene.hf
+            self._coarse = coarse_max(hf) if self._coarse is None else self._coarse
+            size = terrain_coverage(hf, self._seen, self.projection(self._seen),
+                                    coarse=self._coarse)
+        else:
+            size = self._covered[1]
+        self._covered = (calls, size)
+        return size
+
     def draw(self, viewpoint: Viewpoint, t: float, projection: np.ndarray) -> LayerFrame:
         self._seen = viewpoint
         f = self._last = self.technique.frame(viewpoint)
@@ -179,14 +200,14 @@ class TerrainLayer(Layer):
         t = self.technique
         if self.sprite is not None:
             return LayerControl("terrain", EPSILONS, float(self.sprite.epsilon_px),
-                                lambda v: t.set_param("epsilon", v))
+                                lambda v: t.set_param("epsilon", v), coverage=self.coverage)
         if self.mode == "adaptive":
             return LayerControl("terrain", EPSILONS, float(t.terrain.sse), t.terrain.set_sse,
-                                work=self._adaptive_work)
+                                work=self._adaptive_work, coverage=self.coverage)
         if self.mode == "lod":
             levels = tuple(v for v in LEVELS if v <= self.renderer.scene.hf.quads) or (2.0,)
             return LayerControl("terrain", levels, float(t.lod),
-                                lambda v: t.set_param("lod", v))
+                                lambda v: t.set_param("lod", v), coverage=self.coverage)
         return LayerControl("terrain", (1.0,), 1.0, lambda v: None)
 
     def release(self) -> None:

@@ -202,7 +202,19 @@ class LightFieldLayer(Layer):
             item.set_nodes(int(value))
 
     def control(self) -> LayerControl:
-        return LayerControl("lightfields", NODES, self.nodes, self.set_nodes)
+        return LayerControl("lightfields", NODES, self.nodes, self.set_nodes,
+                            coverage=self.coverage)
+
+    def coverage(self) -> float | None:
+        """The union of the last frame's drawn light fields' screen rectangles, a
+        fraction of the window (:func:`~lodsprite.layered.coverage.rects_coverage`); None
+        before a frame."""
+        from lodsprite.layered.coverage import rects_coverage
+
+        if self._frame < 0:
+            return None
+        return rects_coverage([item.rect for item, shown in zip(self.items, self._drawn,
+                                                                 strict=True) if shown])
 
     def warm_up(self, viewpoint: Viewpoint, projection: np.ndarray) -> None:
         for item in self.items:

@@ -198,11 +198,25 @@ class ObjectsLayer(Layer):
         if visible is None:
             return None
         e, eye = self.engine, self._seen[0].o
-        lin, cov, coverage = object_detail(e.centres, e.radii, eye, visible,
-                                           *e.range, e.fov_y_deg, e.target.size)
+        lin, cov, _ = object_detail(e.centres, e.radii, eye, visible, *e.range,
+                                    e.fov_y_deg, e.target.size)
+        coverage = self._coverage(visible, cov)
         size = projected_height(e.centres[visible], self._heights[visible], eye,
                                 e.fov_y_deg, e.target.size[1])
         return lin, cov, coverage, setting, size
+
+    def _coverage(self, visible: np.ndarray, cov: np.ndarray) -> float:
+        """The union of the visible objects' projected discs (areas ``cov (k,)`` px,
+        centres projected through the last frame's view), a fraction of the window
+        (:func:`~lodsprite.layered.coverage.discs_coverage`: overlaps counted once)."""
+        from lodsprite.camera import project_points
+        from lodsprite.layered.coverage import discs_coverage
+
+        viewpoint, projection = self._seen
+        size = self.engine.target.size
+        px, _, _ = project_points(self.engine.centres[visible],
+                                  projection @ viewpoint.view_matrix(), *size)
+        return discs_coverage(px, np.sqrt(cov / np.pi), size)
 
     def work(self) -> np.ndarray | None:
         """Predicted triangles at every setting of :data:`SETTINGS` ``(n,)`` from the

@@ -111,6 +111,7 @@ class LayeredTechnique(Technique):
             self.objects.subset = world.moving()
         self.index = 0
         self._last: dict[str, Any] = {}
+        self._decided = True
 
     def projection(self, viewpoint: Viewpoint) -> np.ndarray:
         """The frame's projection ``(4, 4)`` (the terrain technique's)."""
@@ -147,14 +148,19 @@ class LayeredTechnique(Technique):
             extra.update(f.extra)
         extra.update(self.budget.after({n: (knobs[n], f.ms, f.work)
                                         for n, f in drawn.items()}, ms))
-        self._last = {"t": t, **{n: layer.decision() for n, layer in
-                                 zip(drawn, self.layers, strict=True)}}
+        self._last, self._decided = {"t": t}, False  # decisions: after the clock
         self.index += 1
         terrain = drawn["terrain"]
         return Frame(terrain.extra.get("terrain_kind", "scene"), ms,
                      sum(f.triangles for f in drawn.values()), terrain.error_px, extra)
 
     def decision(self) -> dict[str, Any]:
+        """The last frame's decision, every layer's taken here, once, after the frame's
+        clock stopped (a layer's may read back: the light fields keep their
+        reconstructions for the replay)."""
+        if not self._decided:
+            self._last.update({layer.name: layer.decision() for layer in self.layers})
+            self._decided = True
         return self._last
 
     def replay(self, viewpoint: Viewpoint, decision: dict[str, Any]) -> np.ndarray:

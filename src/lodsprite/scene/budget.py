@@ -2,13 +2,11 @@
 
 Funkhouser & Séquin choose every object's level of detail each frame *predictively*: from
 the predicted cost and benefit of each level (:mod:`lodsprite.scene.costs`) they pick the
-levels that maximise total benefit subject to the predicted frame time staying within
-the target, a multiple-choice knapsack they solve greedily, raising whichever object's
-level gives the most benefit per unit cost (§4.2); predicting, rather than correcting
-after a missed frame, is what removes the oscillation of reactive feedback.  A dead band
-round the budget (this module's, against flipping between two neighbouring settings when
-predictions are noisy) keeps the current settings unless they are over budget or a
-better plan leaves headroom.
+levels that maximise total benefit within the target frame time, a multiple-choice
+knapsack solved greedily (the most benefit per unit cost first, §4.2); predicting, not
+correcting after a missed frame, removes reactive feedback's oscillation.  A dead band
+round the budget (this module's, against flipping between neighbouring settings on noisy
+predictions) keeps the settings unless over budget or a better plan leaves headroom.
 
 * :class:`LayerControl` - what the budget may turn on a layer: one knob, its settings in
   ascending quality (and cost).
@@ -17,12 +15,11 @@ better plan leaves headroom.
 * :class:`FrameScheduler` - every frame :meth:`~FrameScheduler.plan` (the knapsack under
   ``target_ms`` minus the frame's measured overhead, with hysteresis), then
   :meth:`~FrameScheduler.observe` each layer's measured ms to rescale its cost model.
-* :class:`IndependentFeedback` - the baseline, today's behaviour: each layer's own
-  reactive feedback moves its knob towards a fixed share of the target.
-* :class:`NoSchedule` - nothing turns: every knob stays where it is.
+* :class:`IndependentFeedback` - the baseline: each layer's own reactive feedback moves
+  its knob towards a fixed share of the target; :class:`NoSchedule` - nothing turns.
 * :class:`LayerBudget` - what a layered technique runs: a schedule, a model per layer,
-  the frame's measurements fed back, the summary's shares.
-* :func:`steadiness` - oscillation measures: knob changes, std of the knob and of frame ms.
+  the frame's measurements fed back, the plan's predictions, the summary's shares.
+* :func:`steadiness` - oscillation: knob changes, std of the knob and of frame ms.
 """
 
 from __future__ import annotations
@@ -50,7 +47,8 @@ class LayerControl:
     gives what its benefit model weighs, ``(lin, cov, coverage[, setting])`` of
     :func:`~lodsprite.scene.costs.object_detail`, called before each plan; ``work``
     (optional, the objects layer's) the layer's predicted counter at every setting
-    ``(n,)``, the cost model's work in place of its power law."""
+    ``(n,)``; ``coverage`` (optional) its measured screen fraction, its benefit's ``Size``
+    (:mod:`lodsprite.layered.coverage`; None before it has one)."""
 
     name: str
     values: tuple[float, ...]
@@ -58,6 +56,7 @@ class LayerControl:
     set: Callable[[float], None]
     detail: Callable[[], tuple | None] | None = None
     work: Callable[[], np.ndarray | None] | None = None
+    coverage: Callable[[], float | None] | None = None
 
     def index(self, value: float | None = None) -> int:
         """The index in :attr:`values` of ``value`` (default: the current one), or of the
@@ -256,7 +255,7 @@ class IndependentFeedback:
                                              len(c.values) - 1))
 
     def observe_frame(self, frame_ms: float, layers_ms: float) -> None:
-        """No use for the whole frame's time: each layer watches its own."""
+        """Unused: each layer watches its own time."""
 
     def shares(self) -> dict[str, float]:
         return {n: self.share(n) for n in self.controls}
@@ -320,6 +319,7 @@ class LayerBudget:
         self.knob_sums: dict[str, np.ndarray] = {}   # (n, Σ value, Σ value²) a layer
         self.frame_ms_sum = 0.0
         self.frames = 0
+        self.predicted: dict[str, float] = {}  # ms each layer's setting was planned at
 
     @property
     def target_ms(self) -> float:
@@ -336,19 +336,26 @@ class LayerBudget:
                 seen = c.detail()
                 if seen is not None:
                     benefit.update(*seen)
+            if c.coverage is not None and (size := c.coverage()) is not None:
+                benefit.coverage = float(size)
             if c.work is not None:
                 w = c.work()
                 self.models[c.name].work_table = (None if w is None else
                                                   (tuple(c.values), np.asarray(w, np.float64)))
-        return self.schedule.plan(controls, self.models)
+        plan = self.schedule.plan(controls, self.models)
+        planned = getattr(self.schedule, "predicted", {})  # the scheduler's, switch included
+        self.predicted = {n: float(planned[n]) if n in planned else self.models[n].planned(
+            v, self.last_knob.get(n, v)) for n, v in plan.items()}
+        return plan
 
     def after(self, layers: Mapping[str, tuple[float, float, float | None]],
               frame_ms: float) -> dict[str, float]:
         """The frame's measurements: ``layers[name] = (knob value, ms, work counter or
-        None)``, ``frame_ms`` the whole frame; returns ``predicted_ms_<layer>`` (what the
-        cost model predicted for the setting drawn, before this frame's correction)."""
-        out = {f"predicted_ms_{n}": float(self.models[n].predict(v))
-               for n, (v, _, _) in layers.items() if n in self.models}
+        None)``, ``frame_ms`` the whole frame; returns ``predicted_ms_<layer>``: what
+        :meth:`before` predicted for the setting drawn (the scheduler's plan, its switch
+        cost included; without one the same sum, :meth:`~lodsprite.scene.costs.
+        LayerModel.planned`)."""
+        out = {f"predicted_ms_{n}": self.predicted[n] for n in layers if n in self.predicted}
         for name, (value, ms, work) in layers.items():
             self.schedule.observe(name, value, ms, work)
             if name in self.models and work is not None:

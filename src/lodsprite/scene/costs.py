@@ -290,6 +290,12 @@ class LayerModel:
             return self.cost.scale * max(self.cost.raw(w * self.work_ratio), self.cost.a_min)
         return self.cost.predict(value)
 
+    def planned(self, value: float, current: float) -> float:
+        """What a plan predicts the layer costs at knob ``value`` coming from ``current``
+        (ms): the steady cost plus the switch cost (``CostModel.switch_ms``) if the
+        setting changes."""
+        return float(self.predict(value)) + self.cost.switch_ms * (value != current)
+
     def tables(self, values: tuple[float, ...]) -> tuple[np.ndarray, np.ndarray]:
         """Predicted ms and benefit of every knob setting, two ``(n,)`` float64 arrays."""
         return (np.array([self.predict(v) for v in values]),

@@ -42,6 +42,10 @@ const canvas = document.getElementById('view');
 canvas.width = width; canvas.height = height;
 const hud = new Hud(document.getElementById('hud'));
 const stats = { frames: 0, keyframes: 0, intervals: [], latencies: [], error_px: null };
+// Input to pixels: a key press's event time to the display frame after the first frame
+// drawn from a camera that includes it (the flying camera's; a path ignores keys).
+const inputs = { pending: [], drawn: [], ms: [] };
+addEventListener('keydown', (e) => { if (!e.repeat) inputs.pending.push(e.timeStamp); });
 let state = 'connecting';
 let seq = 0;
 const waiting = new Map();  // control seq -> resolve
@@ -140,6 +144,8 @@ function frame(now) {
   const dt = lastFrame === null ? 0 : (now - lastFrame) / 1000;
   if (lastFrame !== null) keep(stats.intervals, now - lastFrame);
   lastFrame = now;
+  for (const t of inputs.drawn) keep(inputs.ms, now - t);  // the drawn frame presented
+  inputs.drawn = [];
   let vp, resting;
   if (path && pathIndex < path.length) {
     vp = path[pathIndex++];
@@ -148,6 +154,7 @@ function frame(now) {
   } else {
     vp = controls.step(dt);
     resting = now - controls.moved > RESTING_MS;
+    [inputs.drawn, inputs.pending] = [inputs.pending, []];  // this frame's camera has them
   }
   predictor.sample(now / 1000, vp);
   if (pendingKey) adopt(now);
@@ -178,6 +185,8 @@ const api = {
       frames: stats.frames, keyframes: stats.keyframes,
       median_ms: percentile(stats.intervals, 0.5), p99_ms: percentile(stats.intervals, 0.99),
       error_px: Number.isFinite(stats.error_px) ? stats.error_px : null, latency_ms: lat,
+      input_ms: percentile(inputs.ms, 0.5), input_ms_p99: percentile(inputs.ms, 0.99),
+      inputs: inputs.ms.length,
     };
   },
   pixels: () => renderer.pixels(),
