@@ -90,8 +90,9 @@ def test_the_reference_of_each_side_is_named_and_its_stand_in_checked(large):
     _, r = large
     for p in PATHS:
         d = r["reference"]["256"][p]
-        assert d["level0_frames"] == 4 and d["stand_in_frames"] == 0
-        assert "0.25 px" in d["stand_in"] and d["level0"]
+        assert d["level0_frames"] == 4 and "stand_in_frames" not in d
+        assert "0.25 px" in d["stand_in"] and "validation only" in d["stand_in"]
+        assert "level 0 whole" in d["level0"]
         # the 0.25 px stand-in at 256² on 48² pixels is level 0 (measured 0.0, 0.0)
         assert 0 <= d["stand_in_rmse"] < 0.5 and 0 <= d["stand_in_flip"] < 0.01
         # a side checked without timed runs (256 is timed: not checked twice)
@@ -213,11 +214,11 @@ def test_quick_default_and_full_are_three_configs_and_save_every_is_checked():
         RenderConfig(save_every=0).validate()
 
 
-def test_the_level_zero_reference_is_used_where_it_draws_and_the_stand_in_elsewhere(
+def test_every_frame_is_judged_against_level_0_and_the_stand_in_is_a_validation_only(
         tmp_path, monkeypatch):
-    """The measure part's LevelZeroReference interface: ``image()`` None beyond its cap
-    takes the 0.25 px stand-in for that frame; the stand-in is checked against the frames
-    it does draw."""
+    """The measure part's LevelZeroReference interface: every sampled frame's reference
+    is its image (never the adaptive renderer's); the 0.25 px adaptive frames are only
+    compared with it."""
     from lodsprite import get_path, load_scene
     from lodsprite.experiments.large import reference
     from lodsprite.terrain.store import build_store
@@ -230,11 +231,13 @@ def test_the_level_zero_reference_is_used_where_it_draws_and_the_stand_in_elsewh
             self.size = size
 
         def image(self, viewpoint, projection=None):
-            return None if viewpoint is path.viewpoints[3] else np.zeros(
-                (self.size[1], self.size[0], 3), np.uint8)
+            return np.zeros((self.size[1], self.size[0], 3), np.uint8)
 
         def describe(self):
             return "fake level 0"
+
+        def release(self):
+            made.append("released")
 
     import lodsprite.gl.reference as glref
 
@@ -244,8 +247,9 @@ def test_the_level_zero_reference_is_used_where_it_draws_and_the_stand_in_elsewh
     scene = load_scene(str(store))
     path = get_path("chen1999", scene.hf, 6)
     ref, how = reference.reference_images(store, scene, path, 32, [0, 3], 0.25, True)
-    assert made == [((32, 32), "auto")] and how["level0"] == "fake level 0"
-    assert how["level0_frames"] == 1 and how["stand_in_frames"] == 1
-    assert not ref[0].any() and ref[3].any()  # frame 3 is the stand-in's terrain and sky
-    # the stand-in against the (black) level-0 frame: its own mean grey level, not 0
+    assert made == [((32, 32), "auto"), "released"] and how["level0"] == "fake level 0"
+    assert how["level0_frames"] == 2 and not ref[0].any() and not ref[3].any()
+    # the adaptive frames against the (black) level-0 frames: their own grey level, not 0
     assert how["stand_in_rmse"] > 10
+    _, plain = reference.reference_images(store, scene, path, 32, [0, 3], 0.25, False)
+    assert "stand_in" not in plain and "stand_in_rmse" not in plain

@@ -16,7 +16,8 @@ quality measured in a separate untimed replay.
 3. with ``ground_truth`` (or an ``on_image`` callback: saved frames, a video), a replay of
    the same decisions (:meth:`~lodsprite.techniques.Technique.replay`), untimed, each image
    compared with a reference from an independent code path (default: the renderer's
-   full-resolution terrain) every ``quality_stride``-th frame: ``rmse, psnr, ssim`` (and
+   full-resolution terrain; over a terrain store, callers pass :func:`scene_reference`,
+   level 0 of the store) every ``quality_stride``-th frame: ``rmse, psnr, ssim`` (and
    ``flip``) per frame, their means in the summary.
 
 :func:`write_run` writes ``frames.csv`` (core columns :data:`CORE_COLUMNS`, then the
@@ -28,7 +29,8 @@ from __future__ import annotations
 
 import platform
 import time
-from collections.abc import Callable, Collection
+from collections.abc import Callable, Collection, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -79,12 +81,51 @@ def timing_summary(ms: np.ndarray) -> dict[str, float]:
 
 
 def full_resolution(renderer) -> Reference:
-    """The default reference: the renderer's full-resolution terrain at a viewpoint."""
+    """The default reference: the renderer's full-resolution terrain at a viewpoint (level
+    0 of an in-memory field; a store's goes through :func:`scene_reference`)."""
     def reference(viewpoint) -> np.ndarray:
         renderer.render(viewpoint, None)
         return renderer.read_color()
 
     return reference
+
+
+def level_zero_reference(gl, scene, size: tuple[int, int], fov_y_deg: float,
+                         shading: str = "auto"):
+    """The one reference of a terrain store's quality figures: a
+    :class:`~lodsprite.gl.reference.LevelZeroReference` over the store ``scene`` names
+    (level 0 through the full-resolution renderer, exaggerated as the scene), frames of
+    ``size = (w, h)`` pixels and ``fov_y_deg`` degrees, coloured by ``shading`` as the run
+    (resolved for the scene); None for an in-memory field, whose full-resolution grid is
+    its level 0 (:func:`full_resolution`).  Release it after use."""
+    from lodsprite.gl.reference import LevelZeroReference
+    from lodsprite.techniques.adaptive import scene_pyramid
+    from lodsprite.techniques.terrain import resolve_shading
+    from lodsprite.terrain.store import is_store
+
+    if not (scene.terrain_spec and is_store(scene.terrain_spec)):
+        return None
+    shading = resolve_shading(scene, shading)
+    return LevelZeroReference(gl, scene_pyramid(scene), size, fov_y_deg, shading,
+                              scene.texture if shading == "texture" else None)
+
+
+@contextmanager
+def scene_reference(renderer, shading: str = "auto") -> Iterator[Reference]:
+    """The reference of a run on ``renderer`` (a :class:`~lodsprite.api.Renderer`) coloured
+    by ``shading``: level 0 of a store (:func:`level_zero_reference`: whole up to 4097
+    samples a side, the part in view beyond, tile by tile), else the renderer's
+    full-resolution terrain (:func:`full_resolution`); never the renderer under test's
+    working grid.  Its GPU objects are released on leaving."""
+    ref = level_zero_reference(renderer.gl, renderer.scene, renderer.size,
+                               renderer.fov_y_deg, shading)
+    if ref is None:
+        yield full_resolution(renderer)
+        return
+    try:
+        yield ref.image
+    finally:
+        ref.release()
 
 
 def quality_summary(rows: list[dict]) -> dict[str, float]:

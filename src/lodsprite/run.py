@@ -14,6 +14,7 @@ same decisions.  The distributed mode is not core: the command line hands it to
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from contextlib import ExitStack
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
@@ -30,7 +31,7 @@ from lodsprite.gl.sprite import (
 )
 from lodsprite.gl.sprite_tiles import MAX_TILES
 from lodsprite.gl.terrain import SHADINGS
-from lodsprite.harness import RunResult, run_path, timing_summary, write_run
+from lodsprite.harness import RunResult, run_path, scene_reference, timing_summary, write_run
 from lodsprite.paths import CameraPath, get_path
 from lodsprite.progress import Progress
 from lodsprite.scene import Scene, load_scene
@@ -201,18 +202,17 @@ def prepare(config: RenderConfig, light: bool = True) -> tuple[Scene, CameraPath
     """Validate the config and load scene and path (all user errors surface here).
 
     Over a store, the modes that draw the store itself (:data:`LIGHT_TECHNIQUES`) get a
-    light scene (:func:`~lodsprite.scene.load_scene` ``light=True``; not with
-    ``ground_truth``, whose reference is the scene's own grid), and no colour texture
-    where frames are shaded from heights.  ``light=False``: the working grid from level 0
-    whatever the mode (the distributed client, whose server loads the scene so)."""
+    light scene (:func:`~lodsprite.scene.load_scene` ``light=True``, with ``ground_truth``
+    too: its reference is level 0, :func:`lodsprite.harness.scene_reference`), and no
+    colour texture where frames are shaded from heights.  ``light=False``: the working
+    grid whatever the mode (the distributed client, whose server loads the scene so)."""
     config = config.resolved()
     config.validate()
     level0 = None
     store = is_store(config.terrain)
     if config.mode == "full" and store:  # level 0's own samples, whole
         level0 = load_level0(config.terrain, config.exaggeration)  # (refused if too large)
-    light = (light and store and config.technique in LIGHT_TECHNIQUES
-             and not config.ground_truth)
+    light = light and store and config.technique in LIGHT_TECHNIQUES
     textured = resolve_shading(Scene(terrain_spec=config.terrain), config.shading) == "texture"
     scene = load_scene(config.terrain, config.texture, config.grid, config.exaggeration,
                        light=light, textured=textured or not light)
@@ -227,48 +227,6 @@ def field_of_view(config: RenderConfig, path: CameraPath) -> float:
     """The vertical field of view (degrees) to render ``path`` with: the config's if set,
     else the path's own (a path file keeps the field of view it was recorded with)."""
     return path.fov_y_deg if config.fov_y_deg is None else config.fov_y_deg
-
-
-def reference_images(pr: PathRenderer, viewpoint, lod: int) -> tuple[np.ndarray, ...]:
-    """What a frame is compared with (untimed): the full-resolution frame, the plain
-    coarse level, and the coarse level with the border ribbons; ``(H, W, 3) uint8`` each."""
-    r = pr.renderer
-    r.render(viewpoint, None)
-    truth = r.target.read_color()
-    r.render(viewpoint, lod)
-    plain = r.target.read_color()
-    r.render_proxy(viewpoint, lod, border=True)
-    return truth, plain, r.target.read_color()
-
-
-def frame_quality(image: np.ndarray, references: tuple[np.ndarray, ...]) -> dict:
-    """RMSE, PSNR and SSIM of ``image`` and of the plain coarse level against the full
-    resolution (:func:`reference_images`), and RMSE of the coarse level with ribbons."""
-    from lodsprite.metrics import psnr, rmse, ssim
-
-    truth, lod, lod_border = references
-    return {"rmse_sprite": rmse(image, truth), "psnr_sprite": psnr(image, truth),
-            "ssim_sprite": ssim(image, truth), "rmse_lod": rmse(lod, truth),
-            "psnr_lod": psnr(lod, truth), "ssim_lod": ssim(lod, truth),
-            "rmse_lod_border": rmse(lod_border, truth)}
-
-
-def quality_summary(rows: list[dict]) -> dict:
-    """Mean RMSE / SSIM over frames; PSNR from the mean squared error over frames (a
-    keyframe equals its ground truth, whose per-frame PSNR would be infinite)."""
-    out = {}
-    for kind in ("sprite", "lod"):
-        r = np.array([row[f"rmse_{kind}"] for row in rows])
-        mse = float(np.mean(r**2))
-        out[f"rmse_{kind}_mean"] = float(r.mean())
-        out[f"psnr_{kind}_mean"] = float("inf") if mse == 0 else 10 * np.log10(255.0**2 / mse)
-        out[f"ssim_{kind}_mean"] = float(np.mean([row[f"ssim_{kind}"] for row in rows]))
-    out["rmse_ratio"] = (out["rmse_sprite_mean"] / out["rmse_lod_mean"]
-                         if out["rmse_lod_mean"] > 0 else float("nan"))
-    # The plain coarse level with the border ribbons LOD-sprite draws (an ablation: how much
-    # of LOD-sprite's gain is the ribbons' alone).
-    out["rmse_lod_border_mean"] = float(np.mean([row["rmse_lod_border"] for row in rows]))
-    return out
 
 
 def keyframe_records(keyframes: list, rows: list[dict]) -> list[dict]:
@@ -290,19 +248,25 @@ def keyframe_records(keyframes: list, rows: list[dict]) -> list[dict]:
 
 def run_technique(renderer, path: CameraPath, config: RenderConfig,
                   progress: Progress | None = None, on_image=None,
-                  keyframes: list | None = None, image_frames=None) -> RunResult:
+                  keyframes: list | None = None, image_frames=None,
+                  reference: Callable | None = None) -> RunResult:
     """The registry's technique for ``config`` on ``renderer`` (a
     :class:`~lodsprite.api.Renderer`) along ``path``, through the harness (``on_image``
-    for the replayed frames ``image_frames``, default all); a LOD-sprite
-    run's rows get ``key_x, key_y, key_z`` (the eye, metres, of the keyframe each frame
-    shows) and ``keyframes``, if given, is extended with the engine's keyframe log."""
+    for the replayed frames ``image_frames``, default all; quality against ``reference``,
+    default :func:`~lodsprite.harness.scene_reference`); a LOD-sprite run's rows get
+    ``key_x, key_y, key_z`` (the eye, metres, of the keyframe each frame shows) and
+    ``keyframes``, if given, is extended with the engine's keyframe log."""
     from lodsprite import techniques
 
+    if reference is None and config.ground_truth:
+        with scene_reference(renderer, config.shading) as own:
+            return run_technique(renderer, path, config, progress, on_image, keyframes,
+                                 image_frames, own)
     technique = techniques.get(config.technique).create(
         renderer, **techniques.get(config.technique).bind(config.technique_options()))
     try:
         result = run_path(technique, path, progress=progress,
-                          ground_truth=config.ground_truth,
+                          ground_truth=config.ground_truth, reference=reference,
                           quality_stride=config.quality_stride, flip=config.flip,
                           on_image=on_image, image_frames=image_frames)
         log = getattr(technique, "keyframe_log", None)  # tiled LOD-sprite: tile updates
@@ -355,6 +319,8 @@ def render_path(config: RenderConfig, out_dir: Path, progress: Progress | None =
     with Renderer(scene, config.size, field_of_view(config, path)) as renderer, \
             ExitStack() as stack:
         writer = stack.enter_context(VideoWriter(video)) if video is not None else None
+        reference = (stack.enter_context(scene_reference(renderer, config.shading))
+                     if config.ground_truth else None)
 
         def on_image(i: int, image: np.ndarray, truth: np.ndarray | None) -> None:
             if config.save_frames:
@@ -362,15 +328,15 @@ def render_path(config: RenderConfig, out_dir: Path, progress: Progress | None =
             if writer is not None:
                 if config.ground_truth:
                     if truth is None:
-                        renderer.render(path.viewpoints[i], None)
-                        truth = renderer.read_color()
+                        truth = reference(path.viewpoints[i])
                     image = side_by_side(truth, image)
                 writer.append(image)
 
         wanted = on_image if config.save_frames or writer is not None else None
         only = (range(0, len(path.viewpoints), config.save_every)
                 if writer is None and config.save_every > 1 else None)
-        result = run_technique(renderer, path, config, progress, wanted, keyframes, only)
+        result = run_technique(renderer, path, config, progress, wanted, keyframes, only,
+                               reference)
         info = renderer.info
         renderer.gl.check_error("render_path")
     summary = {

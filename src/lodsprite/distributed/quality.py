@@ -13,8 +13,11 @@ drawn again as the client drew it and measured:
 * the LOD-sprite error metric (Chen, Swan & Kaufman 1999, Eq. 2: ``sqrt(mean θ²) / β``,
   pixels) of every frame against the keyframe it showed: how far, and how often, the
   keyframes that prediction placed left the viewer past ε;
-* RMSE, PSNR and SSIM against the full-resolution frame on every ``stride``-th frame,
-  beside the plain coarse level's (:func:`lodsprite.run.frame_quality`).
+* RMSE, PSNR and SSIM against the reference frame on every ``stride``-th frame, beside
+  the plain coarse level's (:func:`frame_quality`).  The reference is the one of every
+  quality figure: over a terrain store, level 0 through the full-resolution renderer
+  (:func:`lodsprite.harness.level_zero_reference`), never the working grid the server
+  draws; over an in-memory field, its full-resolution grid (level 0 of the field).
 
 Frames that name no keyframe (index -1, runs recorded before the client logged its own
 keyframes) are left out.  A frame whose error cannot be measured (no coarse square in
@@ -25,6 +28,7 @@ from __future__ import annotations
 
 import csv
 import json
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
@@ -34,19 +38,57 @@ from lodsprite.camera import Viewpoint
 from lodsprite.errors import InputError
 from lodsprite.gl.paths import PathRenderer
 from lodsprite.gl.sprite import SpriteRenderer
-from lodsprite.run import (
-    RenderConfig,
-    field_of_view,
-    frame_quality,
-    prepare,
-    quality_summary,
-    reference_images,
-    sprite_frames,
-)
+from lodsprite.harness import level_zero_reference
+from lodsprite.run import RenderConfig, field_of_view, prepare, sprite_frames
 from lodsprite.sprite.metric import ErrorMetric
 from lodsprite.sprite.policy import keyframe_error_px
 
 DEFAULT_STRIDE = 10
+
+
+def reference_images(pr: PathRenderer, viewpoint, lod: int,
+                     truth: Callable | None = None) -> tuple[np.ndarray, ...]:
+    """What a frame is compared with (untimed): the reference frame (``truth(viewpoint)``,
+    default ``pr``'s full-resolution terrain), the plain coarse level, and the coarse level
+    with the border ribbons; ``(H, W, 3) uint8`` each."""
+    r = pr.renderer
+    if truth is None:
+        r.render(viewpoint, None)
+    truth = r.target.read_color() if truth is None else truth(viewpoint)
+    r.render(viewpoint, lod)
+    plain = r.target.read_color()
+    r.render_proxy(viewpoint, lod, border=True)
+    return truth, plain, r.target.read_color()
+
+
+def frame_quality(image: np.ndarray, references: tuple[np.ndarray, ...]) -> dict:
+    """RMSE, PSNR and SSIM of ``image`` and of the plain coarse level against the full
+    resolution (:func:`reference_images`), and RMSE of the coarse level with ribbons."""
+    from lodsprite.metrics import psnr, rmse, ssim
+
+    truth, lod, lod_border = references
+    return {"rmse_sprite": rmse(image, truth), "psnr_sprite": psnr(image, truth),
+            "ssim_sprite": ssim(image, truth), "rmse_lod": rmse(lod, truth),
+            "psnr_lod": psnr(lod, truth), "ssim_lod": ssim(lod, truth),
+            "rmse_lod_border": rmse(lod_border, truth)}
+
+
+def quality_summary(rows: list[dict]) -> dict:
+    """Mean RMSE / SSIM over frames; PSNR from the mean squared error over frames (a
+    keyframe equals its ground truth, whose per-frame PSNR would be infinite)."""
+    out = {}
+    for kind in ("sprite", "lod"):
+        r = np.array([row[f"rmse_{kind}"] for row in rows])
+        mse = float(np.mean(r**2))
+        out[f"rmse_{kind}_mean"] = float(r.mean())
+        out[f"psnr_{kind}_mean"] = float("inf") if mse == 0 else 10 * np.log10(255.0**2 / mse)
+        out[f"ssim_{kind}_mean"] = float(np.mean([row[f"ssim_{kind}"] for row in rows]))
+    out["rmse_ratio"] = (out["rmse_sprite_mean"] / out["rmse_lod_mean"]
+                         if out["rmse_lod_mean"] > 0 else float("nan"))
+    # The plain coarse level with the border ribbons LOD-sprite draws (an ablation: how much
+    # of LOD-sprite's gain is the ribbons' alone).
+    out["rmse_lod_border_mean"] = float(np.mean([row["rmse_lod_border"] for row in rows]))
+    return out
 
 
 def recorded_keyframes(run_dir: Path) -> tuple[list[Viewpoint], np.ndarray]:
@@ -75,7 +117,11 @@ class Replayer:
         config = config.resolved(store=False)  # options not given: the 1999 algorithm's
         self.config, self.stride = config, stride
         scene, self.path = prepare(config, light=False)  # the grid the server draws
-        self.paths = PathRenderer(scene, config.size, field_of_view(config, self.path))
+        fov = field_of_view(config, self.path)
+        self.paths = PathRenderer(scene, config.size, fov)
+        # a store's frames are judged against its level 0, never the working grid
+        self.level0 = level_zero_reference(self.paths.ctx, scene, config.size, fov,
+                                           config.shading)
         self.sprite = SpriteRenderer(self.paths.renderer, config.lod, config.visibility,
                                      border=config.border, guard_px=0)
         self.metric = ErrorMetric.for_level(scene.hf, config.lod)
@@ -115,10 +161,13 @@ class Replayer:
 
     def _reference(self, i: int, vp: Viewpoint) -> tuple[np.ndarray, ...]:
         if i not in self._references:
-            self._references[i] = reference_images(self.paths, vp, self.config.lod)
+            self._references[i] = reference_images(
+                self.paths, vp, self.config.lod, self.level0 and self.level0.image)
         return self._references[i]
 
     def release(self) -> None:
+        if self.level0 is not None:
+            self.level0.release()
         self.sprite.release()
         self.paths.release()
         self._references.clear()

@@ -1,17 +1,24 @@
-"""The reference image of a terrain: level 0's own samples at full resolution, a code path
-independent of the adaptive renderer (issue 22, "an honest measure at scale").
+"""The one reference image of a terrain: level 0's own samples at full resolution, a code
+path independent of every renderer under test (issues 22 and 30).
 
-Level 0 (of a :class:`~lodsprite.terrain.store.TerrainStore`, or an in-memory
+Every quality figure of a terrain store is taken against it: ``render --ground-truth``
+(:func:`lodsprite.run.make_reference`), the distributed replay
+(:mod:`lodsprite.distributed.quality`), ``reproduce large``
+(:mod:`lodsprite.experiments.large.reference`).  Level 0 (of a
+:class:`~lodsprite.terrain.store.TerrainStore`, or an in-memory
 :class:`~lodsprite.terrain.heightfield.HeightField`) is drawn by the full-resolution
 :class:`~lodsprite.gl.terrain.TerrainRenderer`: whole when its longer side is at most
-``max_side`` samples (4097), beyond that the part of it in view: the frustum's ground
-footprint (:func:`lodsprite.camera.view_footprint`) widened by two samples (so that the
-per-pixel normals of the heights shading see the same neighbours as the whole level's) and
-read with ``TerrainStore.read`` as a window of at most ``max_side²`` samples, drawn at its
-place (world coordinates of the adaptive renderer, :meth:`lodsprite.terrain.quadtree.
-Quadtree.world_xy`: level 0 centred on the origin, x east, y north, metres).  A view whose
-footprint needs more gets no image (:meth:`LevelZeroReference.image` returns None and
-:meth:`~LevelZeroReference.describe` says why).
+``max_side`` samples (4097: a 4096-quad grid), beyond that the part of it in view: the
+frustum's ground footprint (:func:`lodsprite.camera.view_footprint`) widened by two
+samples (so that the per-pixel normals of the heights shading see the same neighbours as
+the whole level's), read with ``TerrainStore.read``, and drawn at its place (world
+coordinates of the adaptive renderer, :meth:`lodsprite.terrain.quadtree.Quadtree.world_xy`:
+level 0 centred on the origin, x east, y north, metres).  A footprint of more than
+``max_side`` samples a side is drawn tile by tile (:func:`tile_ranges`: tiles of at most
+``max_side`` samples a side sharing their edge samples, so no crack opens between them)
+into the same target, one depth buffer for all: every valid view gets an image.  At a
+tile's inner edge the per-pixel normals are one-sided (the tile's height texture ends
+there), a line one sample wide.
 
 Near and far planes are fitted as the adaptive renderer fits them (:meth:`Quadtree.box`,
 :meth:`Quadtree.ground_below`), and the height ramp of the shading spans level 0's range,
@@ -34,6 +41,27 @@ from lodsprite.terrain.quadtree import Quadtree
 
 MAX_SIDE = 4097  # level-0 samples a side drawn at once (a 4096-quad grid)
 MARGIN = 2       # samples around the footprint (central differences of its edge cells)
+Window = tuple[int, int, int, int]  # level-0 samples r0, r1, c0, c1 (r1, c1 exclusive)
+
+
+def tile_ranges(lo: int, hi: int, max_side: int) -> list[tuple[int, int]]:
+    """Sample ranges ``[a, b)`` covering ``[lo, hi)`` with at most ``max_side`` samples
+    each, as even as they can be, neighbours sharing one sample (the quads between them
+    are drawn once, without a gap): ``(0, 9), 5`` gives ``(0, 5), (4, 9)``."""
+    if max_side < 2:
+        raise InputError(f"a reference tile needs at least 2 samples a side, not {max_side}")
+    quads = max(hi - lo - 1, 1)
+    count = -(-quads // (max_side - 1))
+    edges = [lo + round(quads * k / count) for k in range(count + 1)]
+    return [(a, b + 1) for a, b in zip(edges[:-1], edges[1:], strict=True)]
+
+
+def tiles(win: Window, max_side: int) -> list[Window]:
+    """The tiles of the level-0 window ``win``, each at most ``max_side`` samples a side
+    (row-major; one tile when ``win`` fits)."""
+    r0, r1, c0, c1 = win
+    return [(a, b, c, d) for a, b in tile_ranges(r0, r1, max_side)
+            for c, d in tile_ranges(c0, c1, max_side)]
 
 
 class LevelZeroReference:
@@ -42,7 +70,8 @@ class LevelZeroReference:
     ``texture (H, W, 3) uint8`` over level 0's extent, whole level only; ``auto``: heights
     for a store, the texture for an in-memory field given one).  ``store_or_field``: a
     :class:`~lodsprite.terrain.store.TerrainStore` (exaggerated as opened) or a
-    :class:`HeightField` (centred on the origin).  GPU objects live until :meth:`release`."""
+    :class:`HeightField` (centred on the origin).  GPU objects live until :meth:`release`.
+    Raises :class:`InputError` for texture shading of a level 0 beyond ``max_side``."""
 
     def __init__(self, ctx: GLContext, store_or_field, size: tuple[int, int],
                  fov_y_deg: float = 45.0, shading: str = "heights",
@@ -63,10 +92,15 @@ class LevelZeroReference:
         self.tree = Quadtree(self.pyramid)
         self.rows, self.cols = self.tree.rows0, self.tree.cols0
         self.whole = max(self.rows, self.cols) <= self.max_side
+        if shading == "texture" and not self.whole:
+            raise InputError(f"level 0 is {self.cols}x{self.rows} samples, more than "
+                             f"{self.max_side} a side: its reference is shaded from the "
+                             "heights (--shading heights), a texture needs it whole")
         self.height_range = self.tree.height_range()
         self._field = field
-        self._window: tuple[int, int, int, int] | None = None  # r0, r1, c0, c1 (exclusive)
-        self._drawer: tuple[TerrainGeometry, TerrainRenderer] | None = None
+        self._window: Window | None = None  # the window of the geometry kept
+        self._geometry: TerrainGeometry | None = None  # kept while the view needs one tile
+        self._renderer: TerrainRenderer | None = None
         self._note = ""
 
     def projection(self, viewpoint: Viewpoint) -> Projection:
@@ -76,7 +110,7 @@ class LevelZeroReference:
         return fitted_projection(viewpoint, self.fov, w / h, *self.tree.box(),
                                  self.tree.ground_below(np.asarray(viewpoint.o)))
 
-    def window(self, viewpoint: Viewpoint, projection: Projection) -> tuple[int, ...] | None:
+    def window(self, viewpoint: Viewpoint, projection: Projection) -> Window | None:
         """Level 0's sample window ``(r0, r1, c0, c1)`` (``r1``, ``c1`` exclusive) under the
         view's footprint, widened by :data:`MARGIN`; None when nothing is in view."""
         lo, hi = self.tree.box()
@@ -94,35 +128,40 @@ class LevelZeroReference:
         return (max(0, math.floor(r0) - MARGIN), min(self.rows, math.ceil(r1) + MARGIN + 1),
                 max(0, math.floor(c0) - MARGIN), min(self.cols, math.ceil(c1) + MARGIN + 1))
 
-    def image(self, viewpoint: Viewpoint, projection: Projection | None = None
-              ) -> np.ndarray | None:
-        """The reference frame ``(h, w, 3) uint8`` at ``viewpoint`` (through ``projection``,
-        default :meth:`projection`), or None when level 0 in view exceeds ``max_side²``."""
-        projection = projection or self.projection(viewpoint)
+    def _view_window(self, viewpoint: Viewpoint, projection: Projection) -> Window:
+        """What to draw: level 0 whole, or the footprint's window (at least 2x2 samples:
+        a corner of the terrain when nothing of it is in view, the sky)."""
         if self.whole:
-            win = (0, self.rows, 0, self.cols)
-        else:
-            win = self.window(viewpoint, projection)
-            if win is None:
-                win = (0, 2, 0, 2)  # nothing of the terrain in view: the sky
-            if max(win[1] - win[0], win[3] - win[2]) > self.max_side:
-                self._note = (f"the view's footprint needs {win[3] - win[2]}x{win[1] - win[0]} "
-                              f"level-0 samples, more than {self.max_side} a side: no image")
-                return None
-        if self.shading == "texture" and not self.whole:
-            self._note = "texture shading needs level 0 whole: no image"
-            return None
-        _, renderer = self._drawer_for(win)
-        renderer.render(viewpoint, None, projection)
-        self.ctx.finish()
-        return renderer.target.read_color()
+            return (0, self.rows, 0, self.cols)
+        win = self.window(viewpoint, projection)
+        if win is None:
+            return (0, 2, 0, 2)
+        r0, r1, c0, c1 = win
+        r0, c0 = min(r0, self.rows - 2), min(c0, self.cols - 2)
+        return (r0, max(r1, r0 + 2), c0, max(c1, c0 + 2))
 
-    def _drawer_for(self, win: tuple[int, int, int, int]) -> tuple[TerrainGeometry,
-                                                                    TerrainRenderer]:
-        """Geometry and renderer of level 0's window ``win`` (made again when it moves)."""
-        if self._drawer is not None and self._window == win:
-            return self._drawer
-        self._release_drawer()
+    def image(self, viewpoint: Viewpoint, projection: Projection | None = None) -> np.ndarray:
+        """The reference frame ``(h, w, 3) uint8`` (row 0 at the top) at ``viewpoint``
+        through ``projection`` (default :meth:`projection`): level 0 whole, its window
+        under the view, or that window tile by tile into one colour and depth buffer."""
+        projection = projection or self.projection(viewpoint)
+        win = self._view_window(viewpoint, projection)
+        parts = tiles(win, self.max_side)
+        if len(parts) > 1:
+            self._drop_geometry()
+        for k, part in enumerate(parts):
+            geometry = self._geometry_for(part) if len(parts) == 1 else self._make(part)
+            renderer = self._renderer_for(geometry)
+            renderer.render(viewpoint, None, projection, clear=k == 0)
+            if len(parts) > 1:
+                self.ctx.finish()  # drawn: its textures and meshes can go
+                geometry.release()
+        self._note = self._describe_window(win, len(parts))
+        self.ctx.finish()
+        return self._renderer.target.read_color()
+
+    def _make(self, win: Window) -> TerrainGeometry:
+        """The GPU geometry of level 0's window ``win`` at its place."""
         r0, r1, c0, c1 = win
         if self._field is not None:
             heights = self._field.heights[r0:r1, c0:c1]
@@ -131,31 +170,51 @@ class LevelZeroReference:
         hf = HeightField(heights, self.pyramid.dx, self.pyramid.dy, "level 0")
         x, y = self.tree.world_xy(0, np.array([r0]), np.array([c0]))
         corner = None if self.whole else (float(x[0]), float(y[0]))
-        geometry = TerrainGeometry(self.ctx, hf, self.texture, corner=corner,
-                                   height_range=self.height_range)
-        renderer = TerrainRenderer(self.ctx, geometry, *self.size, self.fov)
-        renderer.shading = self.shading
-        self._drawer, self._window = (geometry, renderer), win
-        self._note = (f"level 0 whole, {self.cols}x{self.rows} samples" if self.whole else
-                      f"level-0 window rows {r0}:{r1}, columns {c0}:{c1} of "
-                      f"{self.cols}x{self.rows} samples (the view's footprint)")
-        return self._drawer
+        return TerrainGeometry(self.ctx, hf, self.texture, corner=corner,
+                               height_range=self.height_range)
+
+    def _geometry_for(self, win: Window) -> TerrainGeometry:
+        """The geometry of a one-tile view, kept while the window stays (level 0 whole:
+        always)."""
+        if self._geometry is None or self._window != win:
+            self._drop_geometry()
+            self._geometry, self._window = self._make(win), win
+        return self._geometry
+
+    def _renderer_for(self, geometry: TerrainGeometry) -> TerrainRenderer:
+        """The one full-resolution renderer (and target), drawing ``geometry``."""
+        if self._renderer is None:
+            self._renderer = TerrainRenderer(self.ctx, geometry, *self.size, self.fov)
+            self._renderer.shading = self.shading
+        elif self._renderer.geometry is not geometry:
+            self._renderer.set_geometry(geometry)
+        return self._renderer
+
+    def _describe_window(self, win: Window, count: int) -> str:
+        r0, r1, c0, c1 = win
+        if self.whole:
+            return f"level 0 whole, {self.cols}x{self.rows} samples"
+        how = f"in {count} tiles" if count > 1 else "in one piece"
+        return (f"level-0 window rows {r0}:{r1}, columns {c0}:{c1} of {self.cols}x{self.rows} "
+                f"samples (the view's footprint), drawn {how}")
 
     def describe(self) -> str:
-        """How the reference is made, and for the last view what was drawn (or why not)."""
+        """How the reference is made, and for the last view what was drawn."""
         how = ("level 0 whole" if self.whole else
-               f"level-0 windows cropped to the view's footprint (at most {self.max_side} "
-               "samples a side)")
+               f"level-0 windows cropped to the view's footprint, tiles of at most "
+               f"{self.max_side} samples a side")
         last = f"; last view: {self._note}" if self._note else ""
         return (f"full resolution, {how}, of {self.cols}x{self.rows} samples; "
                 f"{self.shading} shading; near/far fitted as the adaptive renderer's{last}")
 
-    def _release_drawer(self) -> None:
-        if self._drawer is not None:
-            geometry, renderer = self._drawer
-            renderer.release()
-            geometry.release()
-        self._drawer, self._window = None, None
+    def _drop_geometry(self) -> None:
+        if self._geometry is not None:
+            self._geometry.release()
+        self._geometry, self._window = None, None
 
     def release(self) -> None:
-        self._release_drawer()
+        """Free the GPU objects (the renderer's target, the geometry kept)."""
+        self._drop_geometry()
+        if self._renderer is not None:
+            self._renderer.release()
+            self._renderer = None

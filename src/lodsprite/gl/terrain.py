@@ -301,8 +301,12 @@ class TerrainRenderer:
         prog["u_color"].value = 0
         return prog, self._proxy_vaos if proxy else self._vaos
 
-    def _begin(self, target: RenderTarget | None) -> None:
-        (target or self.target).use(SKY_RGB)
+    def _begin(self, target: RenderTarget | None, clear: bool = True) -> None:
+        target = target or self.target
+        if clear:
+            target.use(SKY_RGB)
+        else:  # drawn over what is there, depth test against its depth
+            target.fbo.use()
         self.ctx.mgl.enable(moderngl.DEPTH_TEST)
         self.geometry.color_tex.use(0)
         self.geometry.height_tex.use(1)
@@ -310,13 +314,14 @@ class TerrainRenderer:
     def render(self, viewpoint: Viewpoint, level_quads: int | None = None,
                projection: Projection | None = None,
                target: RenderTarget | None = None,
-               cull: np.ndarray | None = None) -> FrameStats:
+               cull: np.ndarray | None = None, clear: bool = True) -> FrameStats:
         """Render the terrain coloured by :attr:`shading` into ``target`` (default: this
         renderer's own); ``level_quads`` None means full resolution; ``cull``: as
-        :meth:`draw`."""
+        :meth:`draw`; ``clear`` False draws over the target's colour and depth (the tiles
+        of one image, :mod:`lodsprite.gl.reference`)."""
         level = self.geometry.hf.quads if level_quads is None else level_quads
         projection = projection or self.projection(viewpoint)
-        self._begin(target)
+        self._begin(target, clear)
         prog, cache = self.programs(proxy=False)
         prog["u_height"].value = 1
         return self.draw(prog, cache, viewpoint, projection, level, cull)
@@ -333,13 +338,22 @@ class TerrainRenderer:
                                projection.matrix() @ viewpoint.view_matrix(), level_quads, border)
         return FrameStats(tris, 1, projection)
 
+    def set_geometry(self, geometry: TerrainGeometry) -> None:
+        """Draw ``geometry`` from now on (the vertex arrays of the last one released; the
+        geometry is the caller's to release)."""
+        self._release_vaos()
+        self.geometry = geometry
+
+    def _release_vaos(self) -> None:
+        heights = self._heights or (None, None, {}, {})
+        for cache in (self._vaos, self._proxy_vaos, heights[2], heights[3]):
+            for vao in cache.values():
+                vao.release()
+            cache.clear()
+
     def release(self) -> None:
         heights = self._heights or (None, None, {}, {})
-        for vao in [*self._vaos.values(), *self._proxy_vaos.values(), *heights[2].values(),
-                    *heights[3].values()]:
-            vao.release()
-        self._vaos.clear()
-        self._proxy_vaos.clear()
+        self._release_vaos()
         for prog in (self.program, self.proxy_program, *heights[:2]):
             if prog is not None:
                 prog.release()

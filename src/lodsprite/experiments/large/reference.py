@@ -1,16 +1,18 @@
-"""The reference images of ``reproduce large`` and the check of the adaptive renderer's
-0.25 px stand-in against it.
+"""The reference images of ``reproduce large`` and a validation of the adaptive renderer
+at 0.25 px against it.
 
-The reference is full resolution, level 0's own samples: the measure part's
-:class:`lodsprite.gl.reference.LevelZeroReference` (a code path independent of the
-adaptive renderer: whole up to its cap, a level-0 window cropped to the frustum's
-footprint beyond; ``image()`` None where even that is over its cap).  A frame it cannot
-draw takes the stand-in: the adaptive renderer at ``ref_sse`` (0.25 px), streamed until
-complete.  Both are coloured by the one shading of stores (``terrain_shade``, normals per
-pixel from the heights), as every timed run over a store is (``--shading auto``).
+The reference is level 0's own samples at full resolution, the one reference of every
+quality figure (:class:`lodsprite.gl.reference.LevelZeroReference`: a code path
+independent of the adaptive renderer, level 0 whole up to 4097 samples a side, beyond
+that the view's footprint, tile by tile if need be), at every side and every sampled
+frame: never the renderer under test.  It is coloured by the one shading of stores
+(``terrain_shade``, normals per pixel from the heights), as every timed run over a store
+is (``--shading auto``).
 
-:func:`stand_in_check` gives the stand-in's RMSE (grey levels) and FLIP against level 0
-at every side up to ``validate_max`` (1k²–4k²).
+With ``validate`` the adaptive renderer at ``ref_sse`` (0.25 px), streamed until
+complete, is compared with it: ``stand_in_rmse`` (grey levels) and ``stand_in_flip``, a
+validation figure only (how close the adaptive renderer gets at a tiny tolerance), never
+a reference.
 """
 
 from __future__ import annotations
@@ -19,8 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-FULL_MAX = 4096
-FULL_SSE = 1e-6  # px: every node refined to level 0 (the fallback's full resolution)
+FULL_SSE = 1e-6  # px: every node refined to level 0
 Images = dict[int, np.ndarray]
 
 
@@ -68,43 +69,34 @@ def adaptive_images(store: Path, scene, path, image: int, keep: list[int],
 
 
 def level_zero_images(store: Path, scene, path, image: int, keep: list[int]
-                      ) -> tuple[dict[int, np.ndarray | None], str]:
-    """Level 0's own samples at the viewpoints ``keep`` (None for a frame the reference
-    cannot draw) and how they were made."""
+                      ) -> tuple[Images, str]:
+    """Level 0's own samples at the viewpoints ``keep`` and how they were made."""
     from lodsprite.gl.context import GLContext
     from lodsprite.gl.reference import LevelZeroReference
     from lodsprite.terrain.store import TerrainStore
 
-    out: dict[int, np.ndarray | None] = {}
+    out: Images = {}
     with GLContext() as gl:
         ref = LevelZeroReference(gl, TerrainStore(store), (image, image), path.fov_y_deg, "auto")
         try:
             for i in keep:
                 out[i] = ref.image(path.viewpoints[i])
-            how = str(ref.describe())
+            how = ref.describe()
         finally:
-            getattr(ref, "release", lambda: None)()
+            ref.release()
     return out, how
 
 
 def reference_images(store: Path, scene, path, image: int, keep: list[int],
                      ref_sse: float, validate: bool) -> tuple[Images, dict]:
-    """The reference of each sampled frame and how it was made: level 0 where it can be
-    drawn, else the ``ref_sse`` stand-in.  With ``validate`` (sides 1k²–4k²) the
-    stand-in is rendered too and compared with level 0: ``stand_in_rmse``,
-    ``stand_in_flip`` over the frames both exist."""
+    """Level 0's image of each sampled frame ``keep`` and how it was made (``level0``,
+    ``level0_frames``).  With ``validate`` the adaptive renderer at ``ref_sse`` px,
+    settled, is compared with it: ``stand_in`` (what it was), ``stand_in_rmse``,
+    ``stand_in_flip`` (means over ``keep``)."""
     level0, how = level_zero_images(store, scene, path, image, keep)
-    missing = [i for i in keep if level0[i] is None]
-    stand_in: Images = {}
-    if missing or validate:
-        stand_in = adaptive_images(store, scene, path, image,
-                                   keep if validate else missing, ref_sse)
-    ref = {i: level0[i] if level0[i] is not None else stand_in[i] for i in keep}
-    desc: dict = {"level0": how, "level0_frames": len(keep) - len(missing),
-                  "stand_in": f"adaptive at {ref_sse:g} px, settled",
-                  "stand_in_frames": len(missing)}
-    both = {i: stand_in[i] for i in keep if i in stand_in and level0[i] is not None}
-    if validate and both:
-        desc["stand_in_rmse"], desc["stand_in_flip"] = errors(
-            both, {i: level0[i] for i in both})
-    return ref, desc
+    desc: dict = {"level0": how, "level0_frames": len(keep)}
+    if validate:
+        check = adaptive_images(store, scene, path, image, keep, ref_sse)
+        desc["stand_in"] = f"adaptive at {ref_sse:g} px, settled (validation only)"
+        desc["stand_in_rmse"], desc["stand_in_flip"] = errors(check, level0)
+    return level0, desc

@@ -9,11 +9,11 @@ frame, from the process's start, are its own).  Timed runs write nothing per fra
 sampled frames (every ``sample_every``-th) are saved by the untimed replay of the same
 decisions (at least 20 in the real configs; every timed run, adaptive's too, warmed
 up alike and untimed first: ``first_frame_ms``), and their RMSE (grey levels) and FLIP
-are taken against the reference
-(:mod:`lodsprite.experiments.large.reference`: level 0's own samples; the adaptive
-renderer at 0.25 px where those cannot be drawn, and that stand-in checked against level
-0 at 1k²–4k²).  The paths: ``chen1999`` (it scales with the terrain) and ``flyover``
-(1 km above the ground along 10 km, the same in metres at every size).
+are taken against the reference (:mod:`lodsprite.experiments.large.reference`: level 0's
+own samples at every side, the view's footprint tile by tile beyond 4097²; the adaptive
+renderer at 0.25 px checked against it at 1k²–4k² as a validation figure only).  The
+paths: ``chen1999`` (it scales with the terrain) and ``flyover`` (1 km above the ground
+along 10 km, the same in metres at every size).
 
 Per side and path: the adaptive renderer at ``sse`` (1 px), full resolution timed on the
 sampled frames (up to ``full_max`` a side), and each LOD-sprite variant
