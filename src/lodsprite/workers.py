@@ -194,12 +194,16 @@ class ProcessWorker:
     pipe carries headers only, so a frame that collects late never stalls the process on
     a full pipe).  A process that dies is started again, at most ``restarts`` times: the
     request it died on fails, the others are sent to the new process.  After that, or
-    when no process can start, every request fails at once ("no worker process")."""
+    when no process can start, every request fails at once ("no worker process").
+    ``max_request``: bytes a request may carry; ``in_flight`` of them should fit the
+    process's 64 KiB stdin pipe (beyond it :meth:`submit` waits for the process to read)."""
 
     def __init__(self, factory: str, args: dict, in_flight: int = 48, restarts: int = 3,
-                 name: str = "worker", slot_bytes: int = 0) -> None:
+                 name: str = "worker", slot_bytes: int = 0,
+                 max_request: int = MAX_REQUEST) -> None:
         self.factory, self.args, self.name = factory, dict(args), name
         self.in_flight, self.restarts = max(1, int(in_flight)), int(restarts)
+        self.max_request = int(max_request)
         self.slot_bytes = max(0, int(slot_bytes))
         self.deaths = 0
         self._sent: deque[tuple[Hashable, bytes, bytes, int]] = deque()
@@ -240,9 +244,9 @@ class ProcessWorker:
 
     def submit(self, key: Hashable, meta: bytes, data: bytes = b"", _slot: int | None = None
                ) -> bool:
-        """Send a request (``meta + data`` at most :data:`MAX_REQUEST` bytes); False, and
+        """Send a request (``meta + data`` at most ``max_request`` bytes); False, and
         nothing sent, while :attr:`full`."""
-        if len(meta) + len(data) > MAX_REQUEST:
+        if len(meta) + len(data) > self.max_request:
             raise ValueError(f"a worker request of {len(meta) + len(data)} bytes")
         if self.full:
             return False

@@ -50,8 +50,9 @@ def serve(
     renderers: Annotated[int, typer.Option(
         "--renderers", help="renderer processes for web sessions", min=1, max=64)] = 1,
     token: Annotated[str | None, typer.Option(
-        "--token", help="the web page's access token (default: a random one, printed in "
-                        "the page's URL)")] = None,
+        "--token", help="the web page's access token, at least 16 characters beyond "
+                        "loopback (default: a random one, printed in the page's URL)")
+    ] = None,
     cert: Annotated[Path | None, typer.Option(
         "--cert", help="TLS certificate (PEM) for the web page: serve https and wss")] = None,
     key: Annotated[Path | None, typer.Option(
@@ -70,8 +71,10 @@ def serve(
                                "the web sessions' pool (`lodsprite render-worker`; CURVE "
                                "with --keys)")] = None,
     public_host: Annotated[list[str] | None, typer.Option(
-        "--public-host", help="a name the page is served under by a reverse proxy "
-                              "(accepted in Host and Origin); repeat for several")] = None,
+        "--public-host", help="a name users reach the page by (a DNS name, a reverse "
+                              "proxy's), accepted in Host and Origin besides loopback "
+                              "names, the bound host and IP addresses; repeat for "
+                              "several")] = None,
 ) -> None:
     """The LOD server: renders keyframes for LOD clients; driven entirely by messages."""
     import logging
@@ -101,13 +104,19 @@ def _web_config(web, allow_remote, token, data, renderers, codec, cert, key, cap
                 public_host):
     """The web server's configuration from ``serve``'s options (raises InputError)."""
     from lodsprite.distributed.datasets import Datasets
-    from lodsprite.distributed.web.security import make_token, parse_web_address, tls_context
+    from lodsprite.distributed.web.security import (
+        LOOPBACK_NAMES,
+        make_token,
+        parse_web_address,
+        tls_context,
+    )
     from lodsprite.distributed.web.server import WebConfig
     from lodsprite.distributed.web.sessions import Caps
 
     host, port = parse_web_address(web, allow_remote)
+    remote = allow_remote or host not in LOOPBACK_NAMES
     Datasets(data)  # a missing data folder: one line before anything starts
-    return WebConfig(host, port, make_token(token), data, renderers, Caps(*caps), codec,
+    return WebConfig(host, port, make_token(token, remote), data, renderers, Caps(*caps), codec,
                      tls_context(cert, key), tuple(public_host or ()),
                      allow_remote=allow_remote)
 

@@ -12,6 +12,16 @@ and GL errors included): its ``state`` (``idle``, ``loading``, ``ready``, ``fail
 last ``error`` say so, the server stops running, and a later request starts afresh.  At
 start it reads the GL driver's maximum texture size (``max_texture``), so that SERVER-
 CONTROL can refuse oversized scenes before anything is allocated.
+
+The thread shares the server's process, and its GIL, with SERVER-CONTROL, the viewpoint
+receiver and the transmitter.  :class:`~.render.KeyframeRenderer` draws and waits for its
+draws (``glFinish``) with the GIL released, so a 4096² keyframe (33.5 M triangles, seconds
+on llvmpipe) does not keep the control thread from answering within a client's control
+timeout.  Loading a scene still holds the GIL through each texture upload (moderngl):
+up to 1.3 s measured for a 4096² scene's colour texture and mipmaps on a loaded 2-core
+machine; a client's ``ping`` may time out once while such a scene loads.  The render
+pool's workers, whose liveness is a 1 s heartbeat, render in a process of their own
+instead (:mod:`.pool.render_process`).
 """
 
 from __future__ import annotations

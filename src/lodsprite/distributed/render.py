@@ -93,7 +93,15 @@ def check_scene_memory(args: LoadArgs, source: tuple[int, int] | None,
 
 
 class KeyframeRenderer:
-    """Full-resolution renderer of one scene, created and used on one thread."""
+    """Full-resolution renderer of one scene, created and used on one thread.
+
+    It draws and finishes with the GIL released (the project's unlocked draws:
+    ``glDrawElementsInstanced`` and ``glFinish`` through ctypes), so the threads beside
+    it run while a keyframe renders: a pool worker's heartbeats and a LOD server's
+    control, viewpoint and transmitter threads.  A 4096² terrain seen whole is about
+    33 M triangles, shaded for seconds on the calling thread by llvmpipe; drawn through
+    moderngl (which holds the GIL) it silenced the worker past the broker's liveness.
+    Only the readback of the finished, small keyframe holds the GIL."""
 
     def __init__(self, args: LoadArgs | dict, ctx: GLContext | None = None) -> None:
         """``args``: the ``load`` arguments, terrain and texture as loader specs (the
@@ -105,6 +113,7 @@ class KeyframeRenderer:
         scene = load_scene(args.terrain, args.texture, args.grid, args.exaggeration)
         size = tuple(args.size)
         self.paths = PathRenderer(scene, size, args.fov_y_deg, ctx)
+        self.paths.renderer.unlocked_draws = True  # the threads beside it run meanwhile
         try:
             self.lod = args.lod
             self.border = args.border
@@ -120,12 +129,18 @@ class KeyframeRenderer:
         return self.paths.renderer.projection(viewpoint)
 
     def render(self, viewpoint: Viewpoint, seq: int, t0: float) -> Keyframe:
+        """The keyframe of ``viewpoint``: colour ``(h, w, 3) uint8`` and the z-buffer its
+        visibility rule reads ``(h, w) float32``, rows bottom-up."""
         r = self.paths.renderer
         projection = r.projection(viewpoint)
         r.render(viewpoint, None, projection)
-        color = r.target.read_color(copy=False)
         if self.coarse is not None:
             r.render_proxy(viewpoint, self.lod, self.border, projection, self.coarse)
+        # Wait for the draws without the GIL: a readback through moderngl would wait
+        # for them holding it.
+        self.paths.ctx.finish_unlocked()
+        color = r.target.read_color(copy=False)
+        if self.coarse is not None:
             depth, zbuffer = self.coarse.read_depth(copy=False), "coarse"
         else:
             depth, zbuffer = r.target.read_depth(copy=False), "full"

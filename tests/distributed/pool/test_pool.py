@@ -347,25 +347,21 @@ def test_a_reconnecting_worker_forgets_the_jobs_of_its_last_connection() -> None
 def test_a_worker_renders_without_pacing_what_it_is_asked_for() -> None:
     """The submitter decides when a keyframe is due: a worker's renderer never paces
     (no per-keyframe reprojection for a pacer), even when the job's load says
-    ``pace="needed"`` (the default), and the keyframe it returns is the job's."""
-    from lodsprite.distributed.datasets import Datasets
+    ``pace="needed"`` (the default), and the keyframe it returns is the job's.  Checked
+    on the render process's scene cache, in this process."""
     from lodsprite.distributed.pool.jobs import JobMessage, decode_pool, job_key
-    from lodsprite.distributed.pool.worker import _Renderer
+    from lodsprite.distributed.pool.render_process import SceneCache
 
     assert SCENE.pace == "needed"
-    zctx = zmq.Context()
-    pipe = zctx.socket(zmq.PAIR)
-    pipe.setsockopt(zmq.LINGER, 0)
-    pipe.bind("inproc://test-pace")
-    renderer = _Renderer(zctx, "inproc://test-pace", Datasets(None), 1)  # not started
+    scenes = SceneCache(None, 1)
     try:
-        frames = renderer._render(JobMessage(POOL_VERSION, job(7), "raw"))
+        frames = scenes.render(JobMessage(POOL_VERSION, job(7), "raw"))
         msg, parts = decode_pool(frames)
         assert msg.ok, msg.error
         assert decode_keyframe(parts).seq == 7
-        kept = renderer.scenes[job_key(SCENE)]
+        kept = scenes.scenes[job_key(SCENE)]
         assert kept.pacer.pace == "continuous" and kept.pacer.metric is None
     finally:
-        renderer.release()
-        pipe.close(linger=0)
-        zctx.term()
+        for r in scenes.scenes.values():
+            r.release()
+        scenes.gl.release()

@@ -39,6 +39,9 @@ class NoPool:
     (["--web", "8080", "--cert", "x.pem"], "both --cert and --key"),
     (["--web", "8080", "--cert", "x.pem", "--key", "y.pem"], "cannot load the TLS"),
     (["--web", "8080", "--token", "a b"], "--token"),
+    # was: a one-character token accepted for a page served beyond this machine
+    (["--web", "0.0.0.0:0", "--allow-remote", "--token", "x"], "at least 16 characters"),
+    (["--web", "0", "--allow-remote", "--token", "x" * 15], "at least 16 characters"),
     (["--web", "8080", "--data", "/no/such/folder"], "data folder not found"),
 ])
 def test_bad_web_options_are_one_line_and_exit_2(args, fragment):
@@ -53,7 +56,11 @@ def test_host_and_origin_rules():
     assert check_host("[::1]:8080", "127.0.0.1")
     assert not check_host("evil.example:8080", "127.0.0.1") and not check_host(None, "x")
     assert check_host("lod.example", "127.0.0.1", ("lod.example",))
-    assert check_host("anything:1", "0.0.0.0")
+    assert not check_host("anything:1", "0.0.0.0")  # was: any name on a wildcard bind
+    assert check_host("192.168.1.7:8080", "0.0.0.0") and check_host("[fe80::1]:80", "::")
+    assert check_host("LOD.example.:443", "0.0.0.0", ("lod.example",))
+    assert not check_host(":80", "0.0.0.0") and not check_host("lod.example.evil", "0.0.0.0",
+                                                                ("lod.example",))
     assert check_origin(None, "127.0.0.1:8080")  # not a browser page: the token decides
     assert check_origin("https://127.0.0.1:8080", "127.0.0.1:8080")
     assert not check_origin("http://127.0.0.1:8081", "127.0.0.1:8080")
@@ -95,7 +102,21 @@ def test_a_public_host_is_accepted_as_host_behind_a_proxy():
     config = WebConfig(token=TOKEN, public_hosts=("lod.example",))
     got = asyncio.run(statuses(config, [(f"/?token={TOKEN}", {"Host": "lod.example"}),
                                         (f"/?token={TOKEN}", {"Host": "other.example"})]))
-    assert got == [200, 403]
+    assert got == [200, 421]
+
+
+def test_a_foreign_host_gets_421_on_every_route_even_bound_to_all_interfaces():
+    """DNS rebinding: a page of rebind.example re-pointed at this machine sends its own
+    name as Host.  Regression: bound to 0.0.0.0 the server accepted any Host."""
+    config = WebConfig(host="0.0.0.0", token=TOKEN, allow_remote=True)
+    evil, mine = {"Host": "rebind.example:8080"}, {"Host": "127.0.0.1"}
+    ws = {"Connection": "Upgrade", "Upgrade": "websocket", "Sec-WebSocket-Version": "13",
+          "Sec-WebSocket-Key": "dGhlIHNhbXBsZSBub25jZQ=="}
+    got = asyncio.run(statuses(config, [
+        (f"/?token={TOKEN}", evil), ("/static/index.html", evil),
+        (f"/ws?token={TOKEN}", {**evil, **ws}), (f"/?token={TOKEN}", mine),
+        ("/static/index.html", mine), (f"/?token={TOKEN}", {"Host": "10.0.0.5:8080"})]))
+    assert got == [421, 421, 421, 200, 200, 200]
 
 
 def test_the_page_is_served_with_its_security_headers():

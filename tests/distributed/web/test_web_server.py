@@ -110,7 +110,7 @@ def test_token_origin_and_host_are_checked(server):
             await ws.close()
             return statuses
 
-    assert run(go()) == [401, 401, 200, 403, 200, 403, 403, 403, 403, 403]
+    assert run(go()) == [401, 401, 200, 421, 200, 403, 403, 403, 403, 421]
 
 
 def test_load_gives_the_scene_and_a_request_a_keyframe(server):

@@ -3,18 +3,22 @@ ch. 4) rendering keyframes for a :class:`~.broker.Broker`.
 
 A DEALER connects to the broker and says ``ready``.  Two threads: the I/O thread (here,
 :meth:`Worker.run`) owns the socket, sends a heartbeat every :data:`~.jobs.HEARTBEAT_S`,
-takes jobs and forwards results; the render thread owns the GL context and renders one job
-at a time with :class:`~lodsprite.distributed.render.KeyframeRenderer`, so heartbeats go on
-while a scene loads or a keyframe renders.  A broker silent for :data:`~.jobs.LIVENESS_S`
-is dead: the worker closes its socket and connects again after a backoff (0.25 s doubling
-to 4 s, reset by the broker's first message); a result of a job from a lost connection is
-dropped.
+takes jobs and forwards results; the render thread hands one job at a time to the render
+process (:mod:`.render_process`: the GL context and the scenes, rendered with
+:class:`~lodsprite.distributed.render.KeyframeRenderer`) and waits on its pipe, so
+heartbeats go on while a scene loads or a keyframe renders, whatever holds the render
+process's GIL (a 4096² scene's draws and uploads did, past the broker's liveness).
+A broker silent for :data:`~.jobs.LIVENESS_S` is dead: the worker closes its socket and
+connects again after a backoff (0.25 s doubling to 4 s, reset by the broker's first
+message); a result of a job from a lost connection is dropped.
 
 Workers render every job they are given: the submitter (the web page) decides when a
 keyframe is due, so a worker's renderer does not pace (``pace="continuous"``: no
 per-keyframe reprojection for a pacer nobody asks).  Scenes are kept by their ``load``
-arguments, least recently used dropped first (``cache``,
-all sharing the worker's one GL context).  Names follow the ``--data`` rule of
+arguments, least recently used dropped first (``cache``, all sharing the render
+process's one GL context).  A render process that dies (a driver crash, the kernel's
+out-of-memory killer) fails the job it held and is started again, at most three times.
+Names follow the ``--data`` rule of
 :mod:`lodsprite.distributed.datasets` on the worker: built-ins, files relative to the
 worker's own data folder, or absolute paths inside it (what a local web server's
 resolution gives).  A scene the machine cannot hold (its memory estimate against
@@ -23,8 +27,9 @@ resolution gives).  A scene the machine cannot hold (its memory estimate against
 
 Stopping (:meth:`Worker.stop`; SIGTERM or SIGINT with :func:`stop_on_signals`): the I/O
 thread says ``disconnect`` to the broker, which re-queues the job this worker held at
-once, the render thread finishes the render it is in (if any; its result is dropped),
-releases its scenes and GL context, and :meth:`Worker.run` returns.  A local worker
+once, the render thread stops waiting for the render in progress (if any; its result is
+dropped) and ends the render process (which finishes that render within a second or is
+killed; its scenes and GL context go with it), and :meth:`Worker.run` returns.  A local worker
 ignores SIGINT (a terminal's Ctrl-C reaches the whole process group: its web server stops
 it) and stops on SIGTERM.
 """
@@ -37,7 +42,6 @@ import queue
 import signal
 import threading
 import time
-from collections import OrderedDict
 from pathlib import Path
 
 import msgspec
@@ -58,7 +62,6 @@ from lodsprite.distributed.pool.jobs import (
     ResultMessage,
     decode_pool,
     encode_pool,
-    job_key,
 )
 from lodsprite.distributed.protocol import LoadArgs, ProtocolError
 
@@ -94,7 +97,10 @@ def resolve_load(load: LoadArgs, datasets: Datasets) -> LoadArgs:
 
 
 class _Renderer(threading.Thread):
-    """The render thread: jobs in from a queue, result frames out over an inproc PAIR."""
+    """The render thread: jobs in from a queue, handed to the render process
+    (:mod:`.render_process`, the GL's own process, its own GIL), result frames out over
+    an inproc PAIR.  It only waits on the process's pipe, so the I/O thread's heartbeats
+    go on whatever the GL does."""
 
     def __init__(self, zctx: zmq.Context, address: str, datasets: Datasets,
                  cache: int) -> None:
@@ -103,10 +109,10 @@ class _Renderer(threading.Thread):
         self.out = zctx.socket(zmq.PAIR)
         self.out.setsockopt(zmq.LINGER, 0)
         self.out.connect(address)
-        self.datasets = datasets
-        self.cache = cache
-        self.scenes: OrderedDict[bytes, object] = OrderedDict()
-        self.gl = None
+        self.args = {"data_dir": None if datasets.data_dir is None else str(datasets.data_dir),
+                     "cache": cache}
+        self.process = None
+        self.stopping = threading.Event()
 
     def drop_jobs(self) -> int:
         """Forget the jobs not yet started (a reconnect or a stop); how many."""
@@ -118,66 +124,52 @@ class _Renderer(threading.Thread):
                 return n
             n += 1
 
+    def stop(self) -> None:
+        """End after the job in hand (its result dropped) and the jobs queued."""
+        self.stopping.set()
+        self.jobs.put(None)
+
     def run(self) -> None:
         try:
             while (msg := self.jobs.get()) is not None:
-                self.out.send_multipart(self._render(msg))
+                frames = self._render(msg)
+                if frames is not None:
+                    self.out.send_multipart(frames)
         finally:
             self.release()
 
     def release(self) -> None:
-        """Free the scenes, the GL context and the result socket (on the thread that
-        rendered), and log what was released."""
-        released = len(self.scenes)
-        for r in self.scenes.values():
-            r.release()
-        self.scenes.clear()
-        had_gl = self.gl is not None
-        if had_gl:
-            self.gl.release()
-            self.gl = None
+        """End the render process (its scenes and GL context go with it) and close the
+        result socket, on the thread that rendered; log what was released."""
+        had = self.process is not None
+        if had:
+            self.process.close()
+            self.process = None
         self.out.close(linger=0)
-        log.info("render worker: %d scene(s) and %s", released,
-                 "the GL context released" if had_gl else "no GL context made")
+        log.info("render worker: %s", "the render process ended: its scenes and the GL "
+                 "context released" if had else "no render process started")
 
-    def _render(self, msg: JobMessage) -> list:
-        """The result frames of one job; never raises."""
-        from lodsprite.errors import InputError
+    def _render(self, msg: JobMessage) -> list | None:
+        """The result frames of one job (None: stopped while it rendered); never raises."""
+        from lodsprite.distributed.pool.render_process import FACTORY, unpack
+        from lodsprite.workers import Failure, ProcessWorker
 
-        job = msg.job
-        key = job_key(job.load)
+        if self.process is None:
+            self.process = ProcessWorker(FACTORY, self.args, in_flight=1, name="render",
+                                         max_request=MAX_JOB_BYTES)
         try:
-            from lodsprite.distributed.protocol import encode_keyframe, viewpoint_from_wire
-
-            r = self._scene(key, job.load)
-            kf = r.render(viewpoint_from_wire(job.viewpoint), job.job, job.t)
-            frames = encode_keyframe(kf, msg.codec)
-            return encode_pool(ResultMessage(POOL_VERSION, job.job, True), *frames)
-        except Exception as exc:  # noqa: BLE001 - MemoryError, GL errors: reported, not fatal
-            dropped = self.scenes.pop(key, None)
-            if dropped is not None:
-                dropped.release()
-            error = f"{type(exc).__name__}: {exc}"[:4000]
-            return encode_pool(ResultMessage(POOL_VERSION, job.job, False, error,
-                                             refused=isinstance(exc, InputError)))
-
-    def _scene(self, key: bytes, load: LoadArgs):
-        from lodsprite.distributed.render import KeyframeRenderer
-        from lodsprite.gl.context import GLContext
-
-        r = self.scenes.pop(key, None)
-        if r is None:
-            resolved = resolve_load(load, self.datasets)
-            while len(self.scenes) >= self.cache:
-                self.scenes.popitem(last=False)[1].release()
-            if self.gl is None:
-                self.gl = GLContext()
-            # A pool worker renders what it is asked for and never paces: the submitter
-            # decides when a keyframe is due, so the pacer's per-keyframe reprojection
-            # (the exact metric's C', ~20% of a 256² keyframe's time) is not computed.
-            r = KeyframeRenderer(msgspec.structs.replace(resolved, pace="continuous"), self.gl)
-        self.scenes[key] = r  # most recently used last
-        return r
+            self.process.submit(msg.job.job, msgspec.msgpack.encode(msg))
+        except ValueError as exc:  # larger than a job frame can be: not from a broker
+            return encode_pool(ResultMessage(POOL_VERSION, msg.job.job, False, str(exc)))
+        while not (answers := self.process.poll()):
+            if self.stopping.is_set():
+                return None
+            time.sleep(0.002)
+        answer = answers[0][1]
+        if isinstance(answer, Failure):  # the process died on it (started again)
+            return encode_pool(ResultMessage(POOL_VERSION, msg.job.job, False,
+                                             answer.text[:4000]))
+        return unpack(*answer)
 
 
 class Worker:
@@ -222,7 +214,7 @@ class Worker:
                 self._stop.wait(backoff)
         finally:
             renderer.drop_jobs()
-            renderer.jobs.put(None)  # behind nothing: the render thread ends after its job
+            renderer.stop()  # behind nothing: the render thread ends, its job dropped
             renderer.join(timeout=10.0)
             pipe.close(linger=0)
             if not renderer.is_alive():  # a thread stuck in a render still holds a socket

@@ -3,9 +3,10 @@ client a WebGL2 page), an aiohttp application beside the ZeroMQ server.
 
 Routes: ``GET /?token=T&...`` the page (``static/index.html``; 401 without the token),
 ``GET /static/...`` its modules (no token: they hold no data), ``GET /ws?token=T`` the
-WebSocket (403 without the token, for a foreign ``Origin`` or a foreign ``Host``;
-:mod:`.security`).  Each WebSocket is a :class:`~.sessions.Session` of the
-:class:`~.hub.Hub`, which renders its keyframes on the render pool.  Messages: :mod:`.wire`.
+WebSocket (403 without the token or for a foreign ``Origin``).  Every request whose
+``Host`` does not name this server gets 421 first (:mod:`.security`).  Each WebSocket is
+a :class:`~.sessions.Session` of the :class:`~.hub.Hub`, which renders its keyframes on
+the render pool.  Messages: :mod:`.wire`.
 
 :func:`serve_web` runs it until a signal; :class:`WebServer` starts and stops it inside a
 running event loop (tests, benchmarks).  Stopping (SIGTERM, SIGINT, :meth:`WebServer.stop`)
@@ -115,7 +116,7 @@ class WebServer:
         return f"{scheme}://{host}:{self.port}/?token={self.config.token}"
 
     def app(self) -> web.Application:
-        app = web.Application(client_max_size=MAX_PAGE_MESSAGE)
+        app = web.Application(client_max_size=MAX_PAGE_MESSAGE, middlewares=[self._host])
         app.router.add_get("/", self._index)
         app.router.add_get("/ws", self._ws)
         app.router.add_get("/favicon.ico", _no_icon)
@@ -151,9 +152,16 @@ class WebServer:
 
     # ---------------------------------------------------------------------- routes
 
+    @web.middleware
+    async def _host(self, request: web.Request, handler) -> web.StreamResponse:
+        """421 for a request whose ``Host`` is not one of this server's names (DNS
+        rebinding), before any route: page, static files and WebSocket alike."""
+        if not check_host(request.headers.get("Host"), self.config.host,
+                          self.config.public_hosts):
+            return web.Response(status=421, text="unknown host", headers=NO_STORE)
+        return await handler(request)
+
     async def _index(self, request: web.Request) -> web.StreamResponse:
-        if not check_host(request.host, self.config.host, self.config.public_hosts):
-            return web.Response(status=403, text="unknown host", headers=NO_STORE)
         if not token_ok(request.query.get("token"), self.config.token):
             return web.Response(status=401, text="a valid ?token= is required",
                                 headers=NO_STORE)
@@ -163,8 +171,6 @@ class WebServer:
     async def _ws(self, request: web.Request) -> web.StreamResponse:
         if not token_ok(request.query.get("token"), self.config.token):
             return web.Response(status=403, text="a valid ?token= is required")
-        if not check_host(request.host, self.config.host, self.config.public_hosts):
-            return web.Response(status=403, text="unknown host")
         if not check_origin(request.headers.get("Origin"), request.host):
             return web.Response(status=403, text="foreign origin")
         if self._stopping:

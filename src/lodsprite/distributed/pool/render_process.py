@@ -1,0 +1,117 @@
+"""A render worker's GL, in a process of its own (a :class:`~lodsprite.workers.ProcessWorker`).
+
+Why a process: the worker's liveness is its heartbeats, sent by its I/O thread every
+:data:`~.jobs.HEARTBEAT_S`; the broker counts it dead after :data:`~.jobs.LIVENESS_S`
+of silence.  A thread beside the GL cannot promise that: moderngl holds the GIL through
+each call, and a 4096² scene holds it for long stretches (its colour texture's upload and
+mipmaps: up to 1.3 s measured on a loaded 2-core machine, beside draws of 33 M
+triangles that llvmpipe shades for seconds on the calling thread; drawn through moderngl
+the broker declared the worker dead and re-queued its job).  Releasing the GIL around
+the draws (the project's unlocked draws, which :class:`~..render.KeyframeRenderer` uses)
+covers the draws only; a separate process covers every GL call, the scene's loading,
+and a driver crash too (the job fails, the worker lives on).  libzmq's own ZMTP
+heartbeats would be answered without the GIL as well, but the broker could not tell
+which worker a dropped connection was (a ROUTER reports no per-peer disconnect), and
+the pool's liveness is the guide's Paranoid Pirate, by messages.
+
+:func:`handler` is the process's factory: the request's meta is a
+:class:`~.jobs.JobMessage` (msgpack), the answer's meta the lengths of the result's
+frames (msgpack list) and its data those frames joined: the ``result`` header, then on
+success the keyframe message's frames (:func:`~lodsprite.distributed.protocol.
+encode_keyframe`).  Scenes are kept by their ``load`` arguments, least recently used
+dropped first, all sharing the process's one GL context.
+"""
+
+from __future__ import annotations
+
+from collections import OrderedDict
+from collections.abc import Callable
+from pathlib import Path
+
+import msgspec
+
+from lodsprite.distributed.datasets import Datasets
+from lodsprite.distributed.pool.jobs import (
+    POOL_VERSION,
+    JobMessage,
+    ResultMessage,
+    encode_pool,
+    job_key,
+)
+from lodsprite.distributed.protocol import LoadArgs
+
+FACTORY = "lodsprite.distributed.pool.render_process:handler"
+
+
+def pack(frames: list) -> tuple[bytes, bytes]:
+    """A result's frames as a process answer: (msgpack list of lengths, frames joined)."""
+    parts = [bytes(f) for f in frames]
+    return msgspec.msgpack.encode([len(p) for p in parts]), b"".join(parts)
+
+
+def unpack(meta: bytes, data: bytes | memoryview) -> list[bytes]:
+    """The frames :func:`pack` packed."""
+    out, at = [], 0
+    for n in msgspec.msgpack.decode(meta, type=list[int]):
+        out.append(bytes(data[at:at + n]))
+        at += n
+    return out
+
+
+class SceneCache:
+    """The process's scenes (:class:`~..render.KeyframeRenderer`) and GL context."""
+
+    def __init__(self, data_dir: str | None, cache: int) -> None:
+        self.datasets = Datasets(data_dir)
+        self.cache = cache
+        self.scenes: OrderedDict[bytes, object] = OrderedDict()
+        self.gl = None
+
+    def render(self, msg: JobMessage) -> list:
+        """The result frames of one job; never raises."""
+        from lodsprite.distributed.protocol import encode_keyframe, viewpoint_from_wire
+        from lodsprite.errors import InputError
+
+        job = msg.job
+        key = job_key(job.load)
+        try:
+            r = self._scene(key, job.load)
+            kf = r.render(viewpoint_from_wire(job.viewpoint), job.job, job.t)
+            frames = encode_keyframe(kf, msg.codec)
+            return encode_pool(ResultMessage(POOL_VERSION, job.job, True), *frames)
+        except Exception as exc:  # noqa: BLE001 - MemoryError, GL errors: reported, not fatal
+            dropped = self.scenes.pop(key, None)
+            if dropped is not None:
+                dropped.release()
+            error = f"{type(exc).__name__}: {exc}"[:4000]
+            return encode_pool(ResultMessage(POOL_VERSION, job.job, False, error,
+                                             refused=isinstance(exc, InputError)))
+
+    def _scene(self, key: bytes, load: LoadArgs):
+        from lodsprite.distributed.pool.worker import resolve_load
+        from lodsprite.distributed.render import KeyframeRenderer
+        from lodsprite.gl.context import GLContext
+
+        r = self.scenes.pop(key, None)
+        if r is None:
+            resolved = resolve_load(load, self.datasets)
+            while len(self.scenes) >= self.cache:
+                self.scenes.popitem(last=False)[1].release()
+            if self.gl is None:
+                self.gl = GLContext()
+            # A pool worker renders what it is asked for and never paces: the submitter
+            # decides when a keyframe is due, so the pacer's per-keyframe reprojection
+            # (the exact metric's C', ~20% of a 256² keyframe's time) is not computed.
+            r = KeyframeRenderer(msgspec.structs.replace(resolved, pace="continuous"), self.gl)
+        self.scenes[key] = r  # most recently used last
+        return r
+
+
+def handler(data_dir: str | None, cache: int) -> Callable[[bytes, bytes], tuple[bytes, bytes]]:
+    """The render process's request handler (:mod:`lodsprite.workers`' factory)."""
+    scenes = SceneCache(str(Path(data_dir)) if data_dir is not None else None, cache)
+
+    def answer(meta: bytes, data: bytes) -> tuple[bytes, bytes]:
+        return pack(scenes.render(msgspec.msgpack.decode(meta, type=JobMessage)))
+
+    return answer

@@ -1,0 +1,108 @@
+"""Served paths that a long render cannot stall (issue 30, must-have 5).
+
+A 4096² terrain seen whole is about 33 M triangles a keyframe; on llvmpipe the draw call
+shades them on the calling thread for seconds.  Drawn through moderngl, which holds the
+GIL meanwhile, it stopped every other thread of the process: a pool worker's heartbeats
+(the broker declared it dead after :data:`~lodsprite.distributed.pool.LIVENESS_S`,
+re-queued the job and failed it after three tries) and the LOD server's control thread
+(pings unanswered past the client's :data:`~lodsprite.distributed.link.CONTROL_TIMEOUT_MS`).
+Both tests render one real 4096² keyframe, as small an image as the protocol allows work
+on (the cost is the vertices, not the pixels)."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import zmq
+
+from conftest import wait_until
+from lodsprite.camera import look_at
+from lodsprite.distributed.link import CONTROL_TIMEOUT_MS
+from lodsprite.distributed.pool import Broker, Job
+from lodsprite.distributed.protocol import (
+    LoadArgs,
+    WireViewpoint,
+    decode,
+    decode_keyframe,
+    encode,
+)
+from lodsprite.distributed.run import free_ports
+from lodsprite.distributed.server import LodServer, endpoints
+
+SIZE = (32, 32)
+BIG = LoadArgs(terrain="fractal:4096:1", size=SIZE, lod=16, pace="continuous")
+WHOLE = look_at((0.0, -1.0, 200000.0), (0.0, 0.0, 0.0))
+"""High above a fractal:4096 (122880 m a side): every chunk in view, all 33 M triangles."""
+CLIENT = "c" * 16
+GENEROUS_S = 240.0
+"""Deadline against a hang only: a 4096² load and keyframe on a busy 2-core machine."""
+
+
+def test_a_pool_worker_rendering_a_4096_keyframe_is_not_declared_dead() -> None:
+    """Regression: the render thread drew with the GIL held, the heartbeats stopped, the
+    broker declared the worker dead and re-queued the job (failed after three tries)."""
+    with Broker() as broker:
+        broker.spawn_local(1)
+        wait_until(lambda: broker.workers(), 60.0, "the local worker connecting")
+        broker.submit(Job(1, "s", BIG, WireViewpoint(**WHOLE.to_dict()), 1.0))
+        got: list = []
+        wait_until(lambda: got.extend(broker.poll()) or got, GENEROUS_S, "the result")
+        stats = broker.stats()
+        r = got[0]
+        assert r.ok, r.error
+        assert decode_keyframe(r.parts).color.shape == (SIZE[1], SIZE[0], 3)
+        assert (stats["dead"], stats["requeued"], stats["declined"], stats["failed"]) == (
+            0, 0, 0, 0), stats
+
+
+def _ask(req: zmq.Socket, seq: int, op: str, args: dict | None = None) -> dict | None:
+    """One control request; its reply, or None when none came within the client's
+    control timeout (what a client waits before it counts the server gone)."""
+    req.send_multipart(encode({"kind": "control", "seq": seq, "op": op, "args": args or {},
+                               "client": CLIENT}))
+    if not req.poll(CONTROL_TIMEOUT_MS):
+        return None
+    return decode(req.recv_multipart())[0]
+
+
+def test_the_lod_server_answers_pings_while_it_renders_a_4096_keyframe() -> None:
+    """Regression: the producer thread drew with the GIL held; the control thread could
+    not answer a ping until the keyframe was done (seconds)."""
+    address = f"127.0.0.1:{free_ports()}"
+    server = LodServer(bind=address)
+    thread = threading.Thread(target=server.run, daemon=True)
+    thread.start()
+    ctx = zmq.Context()
+    ctl, views, keyframes = endpoints(address, bind=False)
+    req, pub, dealer = ctx.socket(zmq.REQ), ctx.socket(zmq.PUB), ctx.socket(zmq.DEALER)
+    dealer.setsockopt(zmq.IDENTITY, CLIENT.encode())
+    for sock, ep in ((req, ctl), (pub, views), (dealer, keyframes)):
+        sock.connect(ep)
+    try:
+        load = {"terrain": BIG.terrain, "size": list(SIZE), "lod": BIG.lod,
+                "pace": "continuous"}
+        assert _ask(req, 1, "load", load)["ok"]
+        seq, answered, deadline = 1, 0, time.monotonic() + GENEROUS_S
+        started = False
+        while not dealer.poll(0):  # until the keyframe arrives: through load and render
+            assert time.monotonic() < deadline, "no keyframe"
+            seq += 1
+            reply = _ask(req, seq, "ping")
+            assert reply is not None, f"ping {seq} unanswered within {CONTROL_TIMEOUT_MS} ms"
+            answered += 1
+            if not started and reply["data"]["state"] == "ready":
+                seq += 1
+                assert _ask(req, seq, "start")["ok"]
+                started = True
+            time.sleep(0.02)  # a client's pace, not a busy loop contending for the GIL
+            if started:
+                pub.send_multipart(encode({"kind": "viewpoint", "seq": seq, "t": seq * 0.01,
+                                           "viewpoint": WHOLE.to_dict(), "client": CLIENT}))
+        kf = decode_keyframe(dealer.recv_multipart(copy=False))
+        assert kf.color.shape == (SIZE[1], SIZE[0], 3)
+        assert started and answered > 1
+    finally:
+        server.shutdown()
+        thread.join(15)
+        ctx.destroy(linger=0)
