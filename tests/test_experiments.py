@@ -47,6 +47,9 @@ def test_options_become_each_experiments_config():
     assert experiments.get("large").configure(Options()).terrains == ()
     with pytest.raises(InputError, match="epsilon"):
         experiments.get("swan2002").configure(Options(epsilon=0.0))
+    swan = experiments.get("swan2002").configure
+    assert swan(Options(quick=True)).size == 256  # --quick's own size unless --size given
+    assert swan(Options(quick=True, size=64, size_given=True)).size == 64
 
 
 def test_reproduce_runs_into_the_default_folder_and_attaches_the_report(tmp_path,
