@@ -3,6 +3,7 @@ folder, its options, and the table the command line prints."""
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -46,6 +47,9 @@ def test_options_become_each_experiments_config():
     assert experiments.get("large").configure(Options()).terrains == ()
     with pytest.raises(InputError, match="epsilon"):
         experiments.get("swan2002").configure(Options(epsilon=0.0))
+    swan = experiments.get("swan2002").configure
+    assert swan(Options(quick=True)).size == 256  # --quick's own size unless --size given
+    assert swan(Options(quick=True, size=64, size_given=True)).size == 64
 
 
 def test_reproduce_runs_into_the_default_folder_and_attaches_the_report(tmp_path,
@@ -80,3 +84,42 @@ def test_the_large_table_has_a_row_a_store_and_path_in_size_order():
     assert s.rows[0][1:] == ("chen1999", "2.0", "1.0", "3.00 / 4.00", "300", "412", "0.50",
                              "2.50× (whole ε 0.5)")
     assert s.rows[2][-1] == "none"
+
+
+def test_the_demo_is_chen1999_on_the_papers_set_up_without_the_epsilon_sweeps():
+    from lodsprite.experiments.chen1999 import DEMO, EXPERIMENT
+
+    demo, full = DEMO.configure(Options()), EXPERIMENT.configure(Options())
+    paper = ("jacksboro", 512, 460, 16, 1.0)
+    assert (demo.terrain, demo.size, demo.frames, demo.lod, demo.epsilon) == paper
+    assert (full.terrain, full.size, full.frames, full.lod, full.epsilon) == paper
+    assert demo.fig11_epsilon == () and len(full.fig11_epsilon) == 5
+    assert demo.sweeps and demo.fig10_frames[-1] == demo.frames  # Fig. 10 up to the path
+    assert DEMO.run is EXPERIMENT.run and DEMO.summary is EXPERIMENT.summary
+    quick = DEMO.configure(Options(quick=True))
+    assert (quick.size, quick.frames, quick.fig11_epsilon) == (256, 115, ())
+
+
+def test_demo_writes_figs_8_to_10_and_13_14_and_a_report_without_the_sweeps(
+        tmp_path, cli, monkeypatch):
+    from lodsprite.experiments.chen1999.run import ReproduceConfig
+
+    # The command in this process, its demo set-up shrunk for the suite.
+    demo = ReproduceConfig.demo
+    monkeypatch.setattr(ReproduceConfig, "demo", classmethod(lambda cls, **kw: demo(
+        **{**kw, "terrain": "fractal:64:1", "size": 64, "frames": 60,
+           "fig10_frames": (30, 60), "full_sample": 46, "quality_stride": 4})))
+    out = tmp_path / "d"
+    proc = cli("demo", "--out", str(out))
+    assert proc.returncode == 0, proc.stderr
+    r = json.loads((out / "results.json").read_text())
+    assert "fig11" not in r and "fig12" not in r
+    # Fig. 10's point at the path's length is the main run itself.
+    assert r["fig10"]["frames"] == [30, 60] and r["fig10"]["keyframes"][-1] == r["keyframes"]
+    assert r["full_sample_frames"] == 46 and r["quality_frames"] == 15
+    for png in ("fig08_error.png", "fig09_time.png", "fig10_keyframes_vs_frames.png",
+                "fig13.png", "fig14.png"):
+        assert (out / png).stat().st_size > 1000
+    report = (out / "report.md").read_text()
+    assert "Not produced in this run (no data): Fig. 11, Fig. 12." in report
+    assert "speedup" in proc.stdout and "RMSE ratio" in proc.stdout

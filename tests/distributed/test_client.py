@@ -12,7 +12,7 @@ from conftest import wait_until
 from lodsprite.distributed.link import ServerLink
 
 PING = {"kind": "control", "seq": 1, "op": "ping", "args": {}}
-FLOOD = 5_000  # refused keyframes a flood sends
+FLOOD = 5_000  # refused keyframes a flood sends (1000 never filled the client's queue)
 
 
 def test_a_closed_server_link_answers_none_and_opens_no_socket():
@@ -560,15 +560,20 @@ for option, value in ((zmq.RCVHWM, 1), (zmq.ROUTER_MANDATORY, 1), (zmq.LINGER, 0
     router.setsockopt(option, value)
 router.bind(f"tcp://127.0.0.1:{port}")
 
+full = sent = 0  # times the client's queue was full; messages sent
+
 def send(frames, timeout=60.0):
     # A ROUTER drops what a peer's full queue cannot take, silently; mandatory routing
     # makes a full queue say so (zmq.Again), and this waits (a hang guard, not a timing).
+    global full, sent
     deadline = time.perf_counter() + timeout
     while True:
         try:
             router.send_multipart([identity, *frames], flags=zmq.NOBLOCK)
+            sent += 1
             return
         except (zmq.Again, zmq.ZMQError):  # not connected yet, or the client's full
+            full += sent > 0
             if time.perf_counter() > deadline:
                 sys.exit("the client takes no more messages")
             time.sleep(0.001)
@@ -579,7 +584,7 @@ for _ in range(flood):  # keyframes of the wrong size: each refused
 for seq in range(1, 200):  # well-formed ones, each acknowledged (or the ack dropped)
     send(message(seq, vp))
 send(message(10_000, vp))
-print("sent", flush=True)
+print("sent", full, flush=True)
 sys.stdin.read()  # until the test is done: a closed socket drops what it still holds
 """
 
@@ -636,6 +641,9 @@ def test_a_server_that_reads_no_acknowledgements_cannot_wedge_the_receiver(rende
                 f"the last keyframe never came: {client._servers[0].taken} taken, the "
                 f"last {client._servers[0].last_seq}")
         assert client.rejected_keyframes == FLOOD
+        # The flood filled the client's queue: the sender found it full and waited.
+        said, waits = sender.stdout.readline().split()
+        assert said == b"sent" and int(waits) > 0
         assert all(r.poll() is None for r in renderers)  # drawing beside it all along
     finally:
         sender.kill()

@@ -12,11 +12,13 @@ from lodsprite.experiments.swan2002.run import LINK_SETUPS, SETUPS
 def test_reproduce_swan2002_quick_writes_all_setups(tmp_path):
     out = tmp_path / "s"
     proc = subprocess.run([sys.executable, "-c", "from lodsprite.cli import main; main()",
-                           "reproduce", "swan2002", "--quick", "--terrain", "fractal:64:2",
-                           "--no-links", "--out", str(out)], capture_output=True, text=True,
+                           "reproduce", "swan2002", "--quick", "--size", "64", "--terrain",
+                           "fractal:64:2", "--no-links", "--out", str(out)],
+                          capture_output=True, text=True,
                           timeout=300)
     assert proc.returncode == 0, proc.stderr
     results = json.loads((out / "results.json").read_text())
+    assert results["config"]["size"] == 64 and results["config"]["frames"] == 60
     for setup in SETUPS:
         r = results[setup]
         if "skipped" in r:

@@ -1,7 +1,8 @@
 """Chen, Swan & Kaufman (1999), LOD-sprite: ``lodsprite reproduce chen1999``.
 
 The run is :mod:`.run` (timed LOD-sprite and full resolution along the paper's path, an
-untimed quality replay, the Figs 10-12 sweeps), the report :mod:`.report` and
+untimed quality replay, the Figs 10-12 sweeps; :data:`DEMO` is its shorter
+configuration for ``lodsprite demo``), the report :mod:`.report` and
 :mod:`.plots`; the summary table is a selection of the report's own rows.
 """
 
@@ -19,15 +20,30 @@ HEADLINE = ("keyframes", "mean time, keyframe (ms)", "mean time, first spritefra
             "RMSE ratio, LOD-sprite ÷ plain LOD")
 
 
+def _settings(o: Options) -> dict:
+    """The options' terrain and LOD-sprite settings as ``ReproduceConfig`` fields."""
+    return {"terrain": o.terrain, "grid": o.grid, "lod": o.lod, "epsilon": o.epsilon,
+            "visibility": o.visibility, "border": o.border, "guard_px": o.guard}
+
+
 def configure(o: Options):
     """The paper's set-up (or the quick one) with the options' terrain and LOD-sprite
     settings: a :class:`~lodsprite.experiments.chen1999.run.ReproduceConfig`."""
     from lodsprite.experiments.chen1999.run import ReproduceConfig
 
-    kw = {"terrain": o.terrain, "grid": o.grid, "lod": o.lod, "epsilon": o.epsilon,
-          "visibility": o.visibility, "border": o.border, "guard_px": o.guard,
-          "full_sample": o.full_sample, "sweeps": o.sweeps}
+    kw = {**_settings(o), "full_sample": o.full_sample, "sweeps": o.sweeps}
     return ReproduceConfig.quick(**kw) if o.quick else ReproduceConfig(size=o.size, **kw)
+
+
+def configure_demo(o: Options):
+    """``lodsprite demo``'s set-up: :meth:`ReproduceConfig.demo
+    <lodsprite.experiments.chen1999.run.ReproduceConfig.demo>` (the whole path, Fig. 10,
+    no ε sweeps), or with ``o.quick`` the quick run without the ε sweeps."""
+    from lodsprite.experiments.chen1999.run import ReproduceConfig
+
+    if o.quick:
+        return ReproduceConfig.quick(**_settings(o), fig11_epsilon=())
+    return ReproduceConfig.demo(**_settings(o))
 
 
 def run(cfg, out_dir: Path, progress: StageProgress | None = None) -> tuple[dict, Path]:
@@ -51,3 +67,5 @@ def summary(r: dict) -> Summary:
 
 EXPERIMENT = Experiment("chen1999", "Chen, Swan & Kaufman 1999 (LOD-sprite)", configure, run,
                         summary)
+#: ``lodsprite demo``: the same experiment in its demo configuration.
+DEMO = Experiment("chen1999", EXPERIMENT.title, configure_demo, run, summary)

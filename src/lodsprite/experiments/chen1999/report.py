@@ -271,7 +271,9 @@ def _figure_sections(r: dict, out_dir: Path, plots: Sequence[Path]) -> list[str]
                   caption, ""]
         lines += FIGURE_TABLES.get(name, lambda _r: [])(r)
     if skipped:
-        lines += [f"Not produced in this run (no data): {', '.join(skipped)}.", ""]
+        sweeps = (" The ε sweeps (Figs. 11–12) are run by `lodsprite reproduce chen1999`."
+                  if "Fig. 11" in skipped else "")
+        lines += [f"Not produced in this run (no data): {', '.join(skipped)}.{sweeps}", ""]
     return lines
 
 

@@ -39,6 +39,10 @@ FIG10_FRAMES = (115, 230, 460, 920, 1840)
 FIG11_EPSILON = (0.25, 0.5, 1.0, 2.0, 4.0)
 MIN_FULL_SAMPLE = 46
 QUALITY_SWEEP_STRIDE = 10
+# lodsprite demo (ReproduceConfig.demo): what it keeps of the paper's run.
+DEMO_FIG10_FRAMES = (115, 230, 460)
+DEMO_FULL_SAMPLE = 92
+DEMO_QUALITY_STRIDE = 5
 
 
 @dataclass(frozen=True)
@@ -65,6 +69,16 @@ class ReproduceConfig:
         """A short run (about a tenth of the work) for smoke tests and first looks."""
         base = {"size": 256, "frames": 115, "fig10_frames": (58, 115),
                 "fig11_epsilon": (0.5, 1.0, 2.0), "quality_stride": 3}
+        return cls(**{**base, **kw})
+
+    @classmethod
+    def demo(cls, **kw) -> ReproduceConfig:
+        """``lodsprite demo``: the paper's set-up (512², the whole 460-frame path) with
+        Fig. 10 up to the path's own length and no ε sweeps (Figs 11-12), full resolution
+        timed on :data:`DEMO_FULL_SAMPLE` frames and quality on every
+        :data:`DEMO_QUALITY_STRIDE`-th frame, to finish in two minutes on 2 cores."""
+        base = {"fig10_frames": DEMO_FIG10_FRAMES, "fig11_epsilon": (),
+                "full_sample": DEMO_FULL_SAMPLE, "quality_stride": DEMO_QUALITY_STRIDE}
         return cls(**{**base, **kw})
 
     def render_config(self, **kw) -> RenderConfig:
@@ -115,15 +129,20 @@ def _timed_level(pr: PathRenderer, path, level: int | None, indices, work: _Work
 
 
 def _sweep(pr: PathRenderer, scene: Scene, cfg: ReproduceConfig, work: _Work,
-           total_s_full: float) -> dict:
-    """Figures 10-12: keyframe fraction vs frames and vs ε; speedup vs ε."""
+           total_s_full: float, main: list[dict]) -> dict:
+    """Figures 10-12: keyframe fraction vs frames and vs ε; speedup vs ε (Figs 11-12
+    only when ``cfg.fig11_epsilon`` has points).  Fig. 10's point at ``cfg.frames`` is
+    the main run ``main`` (the same path, ε and settings), not run again."""
     fig10 = {"frames": [], "keyframes": [], "keyframe_fraction": []}
     for n in cfg.fig10_frames:
-        rows = sprite_frames(pr, chen1999(scene.hf, n), cfg.render_config(frames=n), work.step)
+        rows = main if n == cfg.frames else sprite_frames(
+            pr, chen1999(scene.hf, n), cfg.render_config(frames=n), work.step)
         k = sum(r["kind"] == KEYFRAME for r in rows)
         fig10["frames"].append(n)
         fig10["keyframes"].append(k)
         fig10["keyframe_fraction"].append(k / n)
+    if not cfg.fig11_epsilon:
+        return {"fig10": fig10}
     fig11 = {"epsilon": [], "keyframes": [], "keyframe_fraction": []}
     fig12 = {"epsilon": [], "total_s_sprite": [], "speedup": []}
     path = chen1999(scene.hf, cfg.frames)
@@ -243,8 +262,8 @@ def reproduce_chen1999(cfg: ReproduceConfig, out_dir: Path,
         raise InputError(f"full-resolution sample must be at least {MIN_FULL_SAMPLE} frames")
     stride = cfg.quality_stride or (max(1, cfg.frames // MIN_FULL_SAMPLE) if large else 1)
     full_idx = _sample_indices(cfg.frames, sample)
-    sweep_frames = (sum(cfg.fig10_frames) + cfg.frames * len(cfg.fig11_epsilon)
-                    if cfg.sweeps else 0)
+    sweep_frames = (sum(n for n in cfg.fig10_frames if n != cfg.frames)
+                    + cfg.frames * len(cfg.fig11_epsilon) if cfg.sweeps else 0)
     work = _Work(len(full_idx) + 3 * cfg.frames + sweep_frames, progress)
     out_dir = Path(out_dir)
     with PathRenderer(scene, (cfg.size, cfg.size)) as pr:
@@ -267,7 +286,7 @@ def reproduce_chen1999(cfg: ReproduceConfig, out_dir: Path,
                                 key_views[key]["frame"], out_dir)
         images["fig13"]["keyframe_ahead"] = images["fig14"]["keyframe_ahead"] = \
             key_views[key]["ahead"]
-        sweeps = _sweep(pr, scene, cfg, work, total_s_full) if cfg.sweeps else {}
+        sweeps = _sweep(pr, scene, cfg, work, total_s_full, main) if cfg.sweeps else {}
         info = pr.ctx.info
         pr.ctx.check_error("reproduce")
     return _results(cfg, scene, main, key_views, ms_full, ms_lod, full_idx, stride,

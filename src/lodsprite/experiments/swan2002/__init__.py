@@ -25,7 +25,9 @@ def configure(o: Options):
     check_client_options(o.pace, o.adopt, max_error)
     kw = {"terrain": o.terrain, "lod": o.lod, "adopt": o.adopt, "pace": o.pace,
           "epsilon": o.epsilon, "max_error": max_error, "links": o.links}
-    return SwanConfig.quick(**kw) if o.quick else SwanConfig(size=o.size, **kw)
+    if o.quick:  # its own 256² unless --size is given
+        return SwanConfig.quick(**kw, **({"size": o.size} if o.size_given else {}))
+    return SwanConfig(size=o.size, **kw)
 
 
 def run(cfg, out_dir: Path, progress: StageProgress | None = None) -> tuple[dict, Path]:
