@@ -1,6 +1,7 @@
 """Rendering tests on the real GL driver (llvmpipe here) against analytic expectations."""
 
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -138,9 +139,16 @@ def test_bad_level_and_oversized_field_raise(renderer_for, gl):
 
 
 def _frames_memory(*args: str) -> dict:
-    """Run ``frames_memory.py`` with ``args`` in a fresh interpreter; its JSON."""
+    """Run ``frames_memory.py`` with ``args`` in a fresh interpreter; its JSON.
+
+    llvmpipe rasterizes on the drawing thread there (``LP_NUM_THREADS=0``): with its
+    rasterizer threads, a loaded machine makes it keep a second scene's bins (about 34 MB)
+    for windows at a time, the resident set then steps between two levels (186 and 153 MB
+    seen with two busy cores beside it, flat at 186 MB on an idle machine) and a slope over
+    a few windows reads that step as growth.  Single-threaded it was flat in both."""
+    env = {**os.environ, "LP_NUM_THREADS": "0"}
     proc = subprocess.run([sys.executable, str(FRAMES_MEMORY), *args], capture_output=True,
-                          text=True, timeout=300)
+                          text=True, timeout=300, env=env)
     assert proc.returncode == 0, proc.stderr
     return json.loads(proc.stdout)
 

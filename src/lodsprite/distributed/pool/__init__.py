@@ -4,7 +4,8 @@ the ZeroMQ guide's Paranoid Pirate heartbeats."""
 
 from lodsprite.distributed.pool.broker import MAX_TRIES, Broker, WorkerInfo
 from lodsprite.distributed.pool.jobs import HEARTBEAT_S, LIVENESS_S, Job, Result
-from lodsprite.distributed.pool.worker import Worker, resolve_load
+from lodsprite.distributed.pool.render_process import resolve_load
+from lodsprite.distributed.pool.worker import Worker
 
 __all__ = ["HEARTBEAT_S", "LIVENESS_S", "MAX_TRIES", "Broker", "Job", "Result", "Worker",
            "WorkerInfo", "resolve_load"]

@@ -24,6 +24,7 @@ dropped first, all sharing the process's one GL context.
 
 from __future__ import annotations
 
+import os
 from collections import OrderedDict
 from collections.abc import Callable
 from pathlib import Path
@@ -41,6 +42,29 @@ from lodsprite.distributed.pool.jobs import (
 from lodsprite.distributed.protocol import LoadArgs
 
 FACTORY = "lodsprite.distributed.pool.render_process:handler"
+
+
+def resolve_load(load: LoadArgs, datasets: Datasets) -> LoadArgs:
+    """``load`` with terrain and texture resolved to loader specs by ``datasets``' rule;
+    raises :class:`~lodsprite.errors.InputError` for a name it refuses or a scene this
+    machine cannot hold.  An absolute path inside the data folder is taken as the name
+    relative to it (and checked again, symlinks included)."""
+    from lodsprite.distributed.render import check_scene_memory
+    from lodsprite.errors import InputError
+
+    def local(name: str) -> str:
+        root = datasets.data_dir
+        if root is not None and os.path.isabs(name) and Path(name).is_relative_to(root):
+            return Path(name).relative_to(root).as_posix()
+        return name
+
+    terrain = datasets.terrain(local(load.terrain))
+    texture = datasets.texture(local(load.texture))
+    resolved = msgspec.structs.replace(load, terrain=terrain.spec, texture=texture.spec)
+    reason = check_scene_memory(resolved, terrain.shape, texture.shape, who="this worker")
+    if reason is not None:
+        raise InputError(reason)
+    return resolved
 
 
 def pack(frames: list) -> tuple[bytes, bytes]:
@@ -88,7 +112,6 @@ class SceneCache:
                                              refused=isinstance(exc, InputError)))
 
     def _scene(self, key: bytes, load: LoadArgs):
-        from lodsprite.distributed.pool.worker import resolve_load
         from lodsprite.distributed.render import KeyframeRenderer
         from lodsprite.gl.context import GLContext
 

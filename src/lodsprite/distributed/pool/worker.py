@@ -63,37 +63,14 @@ from lodsprite.distributed.pool.jobs import (
     decode_pool,
     encode_pool,
 )
-from lodsprite.distributed.protocol import LoadArgs, ProtocolError
+from lodsprite.distributed.protocol import ProtocolError
 
 log = logging.getLogger("lodsprite.pool")
 
-__all__ = ["BACKOFF_MAX_S", "Worker", "end_processes", "resolve_load", "run_local_worker",
+__all__ = ["BACKOFF_MAX_S", "Worker", "end_processes", "run_local_worker",
            "spawn_workers", "stop_on_signals"]
 
 BACKOFF_MAX_S = 4.0
-
-
-def resolve_load(load: LoadArgs, datasets: Datasets) -> LoadArgs:
-    """``load`` with terrain and texture resolved to loader specs by ``datasets``' rule;
-    raises :class:`~lodsprite.errors.InputError` for a name it refuses or a scene this
-    machine cannot hold.  An absolute path inside the data folder is taken as the name
-    relative to it (and checked again, symlinks included)."""
-    from lodsprite.distributed.render import check_scene_memory
-    from lodsprite.errors import InputError
-
-    def local(name: str) -> str:
-        root = datasets.data_dir
-        if root is not None and os.path.isabs(name) and Path(name).is_relative_to(root):
-            return Path(name).relative_to(root).as_posix()
-        return name
-
-    terrain = datasets.terrain(local(load.terrain))
-    texture = datasets.texture(local(load.texture))
-    resolved = msgspec.structs.replace(load, terrain=terrain.spec, texture=texture.spec)
-    reason = check_scene_memory(resolved, terrain.shape, texture.shape, who="this worker")
-    if reason is not None:
-        raise InputError(reason)
-    return resolved
 
 
 class _Renderer(threading.Thread):
