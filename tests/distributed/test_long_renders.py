@@ -6,8 +6,13 @@ GIL meanwhile, it stopped every other thread of the process: a pool worker's hea
 (the broker declared it dead after :data:`~lodsprite.distributed.pool.LIVENESS_S`,
 re-queued the job and failed it after three tries) and the LOD server's control thread
 (pings unanswered past the client's :data:`~lodsprite.distributed.link.CONTROL_TIMEOUT_MS`).
-Both tests render one real 4096² keyframe, as small an image as the protocol allows work
-on (the cost is the vertices, not the pixels)."""
+The pool test renders one real 4096² keyframe; the LOD server's ping test a 2048² one
+(an end-to-end check: its draw through moderngl stalled the control thread about 0.66 s
+on an idle 2-core machine, under the 1 s control timeout, so that test passed before the
+fix there too); the test that fails before the fix, at 2048², times the longest stall of
+a thread beside a keyframe render against the render's own time (0.655 of 0.66 s before
+the fix).  Each renders on as small an image as the protocol allows (the cost is the
+vertices, not the pixels)."""
 
 from __future__ import annotations
 
@@ -32,8 +37,10 @@ from lodsprite.distributed.server import LodServer, endpoints
 
 SIZE = (32, 32)
 BIG = LoadArgs(terrain="fractal:4096:1", size=SIZE, lod=16, pace="continuous")
+SERVED = LoadArgs(terrain="fractal:2048:1", size=SIZE, lod=16, pace="continuous")
 WHOLE = look_at((0.0, -1.0, 200000.0), (0.0, 0.0, 0.0))
-"""High above a fractal:4096 (122880 m a side): every chunk in view, all 33 M triangles."""
+"""High above a fractal:4096 (122880 m a side; a 2048² one is half that): every chunk in
+view, all 33 M triangles (8.4 M)."""
 CLIENT = "c" * 16
 GENEROUS_S = 240.0
 """Deadline against a hang only: a 4096² load and keyframe on a busy 2-core machine."""
@@ -66,7 +73,7 @@ def _ask(req: zmq.Socket, seq: int, op: str, args: dict | None = None) -> dict |
     return decode(req.recv_multipart())[0]
 
 
-def test_the_lod_server_answers_pings_while_it_renders_a_4096_keyframe() -> None:
+def test_the_lod_server_answers_pings_while_it_renders_a_2048_keyframe() -> None:
     """Regression: the producer thread drew with the GIL held; the control thread could
     not answer a ping until the keyframe was done (seconds)."""
     address = f"127.0.0.1:{free_ports()}"
@@ -80,7 +87,7 @@ def test_the_lod_server_answers_pings_while_it_renders_a_4096_keyframe() -> None
     for sock, ep in ((req, ctl), (pub, views), (dealer, keyframes)):
         sock.connect(ep)
     try:
-        load = {"terrain": BIG.terrain, "size": list(SIZE), "lod": BIG.lod,
+        load = {"terrain": SERVED.terrain, "size": list(SIZE), "lod": SERVED.lod,
                 "pace": "continuous"}
         assert _ask(req, 1, "load", load)["ok"]
         seq, answered, deadline = 1, 0, time.monotonic() + GENEROUS_S
@@ -106,3 +113,44 @@ def test_the_lod_server_answers_pings_while_it_renders_a_4096_keyframe() -> None
         server.shutdown()
         thread.join(15)
         ctx.destroy(linger=0)
+
+
+def _longest_stall(render) -> tuple[float, float]:
+    """``render()`` on this thread while another ticks every 5 ms: (the longest gap
+    between its ticks, the render's own time), seconds.  A draw that holds the GIL stops
+    the ticker for all of it."""
+    gaps: list[float] = []
+    stop = threading.Event()
+
+    def tick() -> None:
+        last = time.perf_counter()
+        while not stop.is_set():
+            time.sleep(0.005)
+            now = time.perf_counter()
+            gaps.append(now - last)
+            last = now
+
+    ticker = threading.Thread(target=tick)
+    ticker.start()
+    t0 = time.perf_counter()
+    render()
+    took = time.perf_counter() - t0
+    stop.set()
+    ticker.join()
+    return max(gaps, default=0.0), took
+
+
+def test_a_keyframe_render_lets_the_other_threads_of_its_process_run() -> None:
+    """Regression: the LOD server's producer (and the pool's renders) drew through
+    moderngl holding the GIL, so the control thread stalled for the whole draw; drawn
+    unlocked, a thread beside it keeps ticking.  The bound is relative to the draw's own
+    time (a fast GPU's draw is short and stalls nothing either way)."""
+    from lodsprite.distributed.render import KeyframeRenderer
+
+    r = KeyframeRenderer(SERVED)
+    try:
+        r.render(WHOLE, 0, 0.0)  # loaded, compiled: the next render is the draw alone
+        stall, took = _longest_stall(lambda: r.render(WHOLE, 0, 0.0))
+    finally:
+        r.release()
+    assert stall < max(0.25, took / 2), (stall, took)
