@@ -522,3 +522,31 @@ def test_the_budget_weighs_each_layer_by_its_measured_coverage(gl, tmp_path, lf_
     assert got["terrain"] == pytest.approx((1 + ridge_top) / 2, abs=1.0 / TERRAIN_GRID)
     assert got["lightfields"] == rects_coverage(rects) and got["lightfields"] > 0
     assert 0 < got["objects"] < 0.75 * summed        # the two cubes overlap: counted once
+
+
+def test_the_terrain_coverage_pools_its_heights_in_the_warm_up_not_in_a_frame(
+        gl, tmp_path, monkeypatch):
+    # Regression: the coverage rays' max-pooled heights were made by the first timed
+    # frame's plan (90 ms at 4097²); the warm-up makes them, and no frame does
+    import lodsprite.layered.coverage as coverage
+
+    real, calls = coverage.coarse_max, []
+
+    def counted(hf):
+        calls.append(phase)
+        return real(hf)
+
+    monkeypatch.setattr(coverage, "coarse_max", counted)
+    world = world_with(tmp_path, [([FRONT], 0.0)])
+    vps = [look_at((x, -470.0, 40.0), (x, 0.0, 40.0)) for x in np.linspace(0, 60, 6)]
+    with Renderer(world.scene, SIZE, 45.0, ctx=gl.mgl) as r:
+        t = techniques.create("scene", r, world=world, terrain_mode="adaptive")
+        try:
+            phase = "warm-up"
+            t.warm_up(vps[0])
+            phase = "frames"
+            for vp in vps:
+                t.frame(vp)
+        finally:
+            t.release()
+    assert calls == ["warm-up"]
