@@ -86,7 +86,7 @@ def demo(
     quick: Annotated[bool, typer.Option("--quick", help="a short run")] = False,
 ) -> None:
     """A first look: Chen et al. 1999 on the real Jacksboro DEM at 512², Figs 8-10 and
-    13-14 (about two minutes on 2 cores; the ε sweeps are in ``reproduce chen1999``)."""
+    13-14 (67-71 s measured on 2 cores; the ε sweeps are in ``reproduce chen1999``)."""
     from lodsprite.experiments.chen1999 import DEMO
 
     run_experiment(DEMO, Options(quick=quick), out_dir)

@@ -6,6 +6,7 @@ keyframes drawn by the adaptive renderer).  Registered in :mod:`lodsprite.techni
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
@@ -18,6 +19,8 @@ from lodsprite.sprite.tiled import TILES
 from lodsprite.sprite.tiled_engine import DEFAULT_TILE_BUDGET_MS
 from lodsprite.techniques.base import FALLBACK_TINT, Frame, Param, Technique
 from lodsprite.terrain.lod import DEFAULT_COARSE, level_step
+
+log = logging.getLogger(__name__)
 
 if TYPE_CHECKING:
     from lodsprite.api import LodSprite, Renderer
@@ -193,8 +196,9 @@ class SpriteTechnique(Technique):
             self.frame(viewpoint)
         else:
             self._warm_inline(viewpoint)
-        if self.heights is not None:
-            self.heights.settle()
+        if self.heights is not None and not self.heights.settle():
+            log.warning("warm-up: the store's level-0 chunks of the first view did not all "
+                        "arrive in time; the first timed frames may still read them")
 
     def _warm_inline(self, viewpoint: Viewpoint) -> None:
         s = self.sprite.sprite

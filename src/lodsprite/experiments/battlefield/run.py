@@ -63,8 +63,8 @@ MATCH_KEY = "triangles_objects_chosen"
 class BattlefieldConfig(SplitSampled):
     """The default run: a 4k² store, 3000 walking ogres, 100 trees, two light fields of
     6 slabs of 8² nodes of 64² pixels, 300 frames along each of two paths at 256², a 5 fps
-    target; 847 s here (the quiet 2-core machine).  :meth:`quick` is the
-    tests'."""
+    target; 899 s here (the idle 2-core machine, 2026-12-03; 20 sampled frames a path).
+    :meth:`quick` is the tests'."""
 
     terrain: str = "fractal:4096:1"
     instances: int = 3000

@@ -45,7 +45,9 @@ const stats = { frames: 0, keyframes: 0, intervals: [], latencies: [], error_px:
 // Input to pixels: a key press's event time to the display frame after the first frame
 // drawn from a camera that includes it (the flying camera's; a path ignores keys).
 const inputs = { pending: [], drawn: [], ms: [] };
-addEventListener('keydown', (e) => { if (!e.repeat) inputs.pending.push(e.timeStamp); });
+addEventListener('keydown', (e) => {  // a press while a path plays moves nothing: not counted
+  if (!e.repeat && !(path && pathIndex < path.length)) inputs.pending.push(e.timeStamp);
+});
 let state = 'connecting';
 let seq = 0;
 const waiting = new Map();  // control seq -> resolve
