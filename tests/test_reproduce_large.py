@@ -246,10 +246,10 @@ def test_every_frame_is_judged_against_level_0_and_the_stand_in_is_a_validation_
     build_store("fractal:128:1", store)
     scene = load_scene(str(store))
     path = get_path("chen1999", scene.hf, 6)
-    ref, how = reference.reference_images(store, scene, path, 32, [0, 3], 0.25, True)
+    ref, how = reference.reference_images(store, path, 32, [0, 3], 0.25, True)
     assert made == [((32, 32), "auto"), "released"] and how["level0"] == "fake level 0"
     assert how["level0_frames"] == 2 and not ref[0].any() and not ref[3].any()
     # the adaptive frames against the (black) level-0 frames: their own grey level, not 0
     assert how["stand_in_rmse"] > 10
-    _, plain = reference.reference_images(store, scene, path, 32, [0, 3], 0.25, False)
+    _, plain = reference.reference_images(store, path, 32, [0, 3], 0.25, False)
     assert "stand_in" not in plain and "stand_in_rmse" not in plain

@@ -21,7 +21,6 @@ from pathlib import Path
 
 import numpy as np
 
-FULL_SSE = 1e-6  # px: every node refined to level 0
 Images = dict[int, np.ndarray]
 
 
@@ -41,23 +40,19 @@ def saved_frames(folder: Path, keep: list[int]) -> Images:
     return {i: read_image(Path(folder) / "frames" / f"frame_{i:05d}.png") for i in keep}
 
 
-def adaptive_images(store: Path, scene, path, image: int, keep: list[int],
-                    sse: float) -> Images:
-    """The settled adaptive frames at ``sse`` px (:data:`FULL_SSE`: every node at level
-    0) of the viewpoints ``keep`` of ``path`` over ``store``, ``image`` pixels a side,
-    coloured by the heights shading (``scene`` is unused: kept for the callers)."""
+def adaptive_images(store: Path, path, image: int, keep: list[int], sse: float) -> Images:
+    """The settled adaptive frames at ``sse`` px of the viewpoints ``keep`` of ``path``
+    over ``store``, ``image`` pixels a side, coloured by the heights shading."""
     from lodsprite.gl.context import GLContext
     from lodsprite.gl.target import RenderTarget
     from lodsprite.techniques.adaptive_terrain import AdaptiveTerrain
     from lodsprite.terrain.store import TerrainStore
 
-    full = sse <= FULL_SSE
     out = {}
     with GLContext() as gl:
         t = RenderTarget(gl, image, image)
         a = AdaptiveTerrain(gl, TerrainStore(store), t, path.fov_y_deg, sse,
-                            gpu_mb=1024.0 if full else 256.0, host_mb=1024.0 if full else 512.0,
-                            upload_budget=4096 if full else 16, color=None)
+                            gpu_mb=256.0, host_mb=512.0, upload_budget=16, color=None)
         try:
             for i in keep:
                 a.settle(path.viewpoints[i])
@@ -68,8 +63,7 @@ def adaptive_images(store: Path, scene, path, image: int, keep: list[int],
     return out
 
 
-def level_zero_images(store: Path, scene, path, image: int, keep: list[int]
-                      ) -> tuple[Images, str]:
+def level_zero_images(store: Path, path, image: int, keep: list[int]) -> tuple[Images, str]:
     """Level 0's own samples at the viewpoints ``keep`` and how they were made."""
     from lodsprite.gl.context import GLContext
     from lodsprite.gl.reference import LevelZeroReference
@@ -87,16 +81,16 @@ def level_zero_images(store: Path, scene, path, image: int, keep: list[int]
     return out, how
 
 
-def reference_images(store: Path, scene, path, image: int, keep: list[int],
+def reference_images(store: Path, path, image: int, keep: list[int],
                      ref_sse: float, validate: bool) -> tuple[Images, dict]:
     """Level 0's image of each sampled frame ``keep`` and how it was made (``level0``,
     ``level0_frames``).  With ``validate`` the adaptive renderer at ``ref_sse`` px,
     settled, is compared with it: ``stand_in`` (what it was), ``stand_in_rmse``,
     ``stand_in_flip`` (means over ``keep``)."""
-    level0, how = level_zero_images(store, scene, path, image, keep)
+    level0, how = level_zero_images(store, path, image, keep)
     desc: dict = {"level0": how, "level0_frames": len(keep)}
     if validate:
-        check = adaptive_images(store, scene, path, image, keep, ref_sse)
+        check = adaptive_images(store, path, image, keep, ref_sse)
         desc["stand_in"] = f"adaptive at {ref_sse:g} px, settled (validation only)"
         desc["stand_in_rmse"], desc["stand_in_flip"] = errors(check, level0)
     return level0, desc

@@ -171,9 +171,9 @@ def run_path(store: Path, n: int, cfg: LargeConfig, spec: str, runs: Path
     was made (``reference[side][path]``)."""
     from lodsprite import get_path, load_scene
 
-    scene = load_scene(str(store))  # the references' colours and the path
+    scene = load_scene(str(store))  # the path follows its heights
     path = get_path(spec, scene.hf, cfg.frames)
-    ref, how = reference_images(store, scene, path, cfg.image, cfg.sample_frames,
+    ref, how = reference_images(store, path, cfg.image, cfg.sample_frames,
                                 cfg.ref_sse, validate=n <= cfg.validate_max)
     del scene
     p = PathRuns(store, n, cfg, spec, runs, ref)
@@ -209,7 +209,7 @@ def patrol(store: Path, n: int, cfg: LargeConfig, runs: Path) -> dict:
         path = get_path("patrol", scene.hf, cfg.frames)
     except Exception as exc:  # noqa: BLE001 - any reason the path is not there is recorded
         return {"skipped": f"no patrol path on this build ({exc})"}
-    ref, how = reference_images(store, scene, path, cfg.image, cfg.sample_frames,
+    ref, how = reference_images(store, path, cfg.image, cfg.sample_frames,
                                 cfg.ref_sse, validate=False)
     del scene
     p = PathRuns(store, n, cfg, "patrol", runs, ref)
@@ -252,7 +252,7 @@ def validate_only(cfg: LargeConfig, out_dir: Path) -> dict:
         out[str(n)] = {}
         for p in cfg.paths:
             path = get_path(p, scene.hf, cfg.frames)
-            _, how = reference_images(store, scene, path, cfg.image, cfg.sample_frames,
+            _, how = reference_images(store, path, cfg.image, cfg.sample_frames,
                                       cfg.ref_sse, validate=True)
             out[str(n)][p] = {**how, "timed": False}
     return out
