@@ -140,6 +140,7 @@ class Broker:
         self._inbox: deque[Job] = deque()
         self._done: deque[Result] = deque()
         self._peers: dict[tuple[int, bytes], _Peer] = {}
+        self._unreachable: set[tuple[int, bytes]] = set()  # a send failed: lose next
         self._snapshot: list[WorkerInfo] = []
         self._stats = dict.fromkeys(("jobs", "results", "failed", "requeued", "declined",
                                      "dead", "rejected", "ignored"), 0)
@@ -280,6 +281,7 @@ class Broker:
                 for i, s in enumerate(self._socks):
                     if s in events:
                         self._receive(i, s)
+                self._lose_unreachable()
                 _drain(self._wake_r)
                 while self._inbox:
                     self._queue.append(_Queued(self._inbox.popleft()))
@@ -299,6 +301,8 @@ class Broker:
 
     def _timeout(self, beat: float) -> float:
         """Seconds until the next heartbeat or the next worker's expiry."""
+        if self._unreachable:
+            return 0.0  # read what they said last before losing them
         due = min((p.seen + LIVENESS_S + p.grace for p in self._peers.values()),
                   default=beat)
         return max(0.0, min(beat, due + 1e-3) - time.monotonic())
@@ -425,7 +429,8 @@ class Broker:
     def _dispatch(self, now: float) -> None:
         """Each queued job, in order, to an idle worker that has not declined it."""
         for entry in list(self._queue):
-            idle = [p for p in self._peers.values() if p.entry is None]
+            idle = [p for p in self._peers.values()
+                    if p.entry is None and (p.sock, p.ident) not in self._unreachable]
             if not idle:
                 return
             idle = [p for p in idle if (p.sock, p.ident) not in entry.declined]
@@ -436,14 +441,24 @@ class Broker:
             warm = [p for p in idle if scene in p.scenes]
             peer = min(warm or idle, key=lambda p: p.idle_since)
             peer.entry, peer.since = entry, now
-            # Unreachable: _send loses the peer and puts the job back in front.
+            # Unreachable: lost after the next receive, the job back in front.
             self._send((peer.sock, peer.ident),
                        JobMessage(POOL_VERSION, entry.job, self.codec))
 
     def _send(self, key: tuple[int, bytes], msg) -> None:
+        """Send ``msg`` to one worker; one that cannot take it (gone under
+        ROUTER_MANDATORY, or not keeping up) is lost after the next receive, so that a
+        ``disconnect`` it sent just before it closed counts as one, not as a death."""
         try:
             self._socks[key[0]].send_multipart([key[1], *encode_pool(msg)], zmq.NOBLOCK)
-        except zmq.ZMQError:  # gone (ROUTER_MANDATORY) or not keeping up
+        except zmq.ZMQError:
+            self._unreachable.add(key)
+
+    def _lose_unreachable(self) -> None:
+        """Lose the workers a send failed to (their job back in front of the queue),
+        unless what was just received already let them go."""
+        gone, self._unreachable = self._unreachable, set()
+        for key in gone:
             self._lose(key, "unreachable")
 
     def _broadcast(self, msg) -> None:

@@ -71,6 +71,9 @@ __all__ = ["BACKOFF_MAX_S", "Worker", "end_processes", "run_local_worker",
            "spawn_workers", "stop_on_signals"]
 
 BACKOFF_MAX_S = 4.0
+DISCONNECT_LINGER_MS = 500
+"""How long a stopping worker's ``disconnect`` may wait to reach the broker (a broker
+that is gone costs the stop this much)."""
 
 
 class _Renderer(threading.Thread):
@@ -248,6 +251,7 @@ class Worker:
                     log.info("render worker: broker %s silent, reconnecting", self.connect)
                     return heard
             sock.send_multipart(encode_pool(Disconnect(POOL_VERSION, "worker stopping")))
+            sock.close(linger=DISCONNECT_LINGER_MS)  # sent, not dropped by the close
             return heard
         finally:
             sock.close(linger=0)
