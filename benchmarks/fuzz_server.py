@@ -2,7 +2,7 @@
 
 Starts ``lodsprite serve`` on free loopback ports, sends ``--messages`` random and mutated
 messages spread over its three sockets (control REQ, viewpoint PUB, keyframe DEALERs
-with garbage acknowledgements; ``tests/distributed/hostile.py``), then runs a real
+with garbage acknowledgements; ``tests/hostile.py``), then runs a real
 :class:`~lodsprite.distributed.client.LodClient` on a small fractal and counts the
 keyframes it receives.  Prints what was sent per socket, what the server received,
 rejected and ignored per kind, its state, and the keyframes received afterwards.
@@ -27,7 +27,7 @@ from lodsprite.distributed.render import scene_args
 from lodsprite.distributed.run import local_server
 from lodsprite.run import RenderConfig, prepare
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests" / "distributed"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from hostile import flood  # noqa: E402  (test-only traffic, kept with the tests)
 
 
