@@ -227,3 +227,26 @@ def test_a_call_in_a_fresh_process_returns_its_value_or_its_typed_error(factory)
         call_in_child(mod.refuse, "x")
     with pytest.raises(WorkerDied, match="exit code 3"):   # died without an answer
         call_in_child(mod.vanish)
+
+
+def test_answers_are_read_in_the_wire_format_connections_write():
+    """read_messages parses multiprocessing.connection's own framing: small and large
+    messages, one cut in the middle (kept until its end comes), and the pipe's end."""
+    import multiprocessing as mp
+
+    from lodsprite.workers import read_messages
+
+    r, w = mp.Pipe(duplex=False)
+    os.set_blocking(r.fileno(), False)
+    buf = bytearray()
+    big = bytes(range(256)) * 100                 # over 16 KiB: header and body apart
+    w.send_bytes(b"one")
+    w.send_bytes(big)
+    assert read_messages(r.fileno(), buf) == ([b"one", big], False) and not buf
+    w.send_bytes(b"")
+    os.write(w.fileno(), (5).to_bytes(4, "big") + b"ab")  # a message cut short
+    assert read_messages(r.fileno(), buf) == ([b""], False) and len(buf) == 6
+    os.write(w.fileno(), b"cde")
+    w.close()
+    assert read_messages(r.fileno(), buf) == ([b"abcde"], True) and not buf
+    r.close()

@@ -97,6 +97,46 @@ def _serve(handler: Handler, requests, answers, shm, slot_bytes: int) -> None:
                                          out_data)))
 
 
+_LEN, _LONG_LEN = struct.Struct("!i"), struct.Struct("!Q")
+
+
+def read_messages(fd: int, buf: bytearray) -> tuple[list[bytes], bool]:
+    """The whole messages a :class:`multiprocessing.connection.Connection` wrote to the
+    non-blocking pipe ``fd`` so far (its wire format, kept stable since Python 3.7: a
+    big-endian int32 length, or -1 and a uint64 length, then the bytes), read in large
+    chunks without waiting; a partial message stays in ``buf``.  Also whether the pipe
+    has ended (the writer exited).  ``Connection.poll`` and ``recv_bytes`` cost a
+    ``select`` and two reads a message, and ``recv_bytes`` waits for a message's end."""
+    ended = False
+    while True:
+        try:
+            chunk = os.read(fd, PIPE_BYTES)
+        except BlockingIOError:
+            break
+        except OSError:
+            ended = True
+            break
+        if not chunk:
+            ended = True
+            break
+        buf += chunk
+    out, at = [], 0
+    with memoryview(buf) as view:
+        while len(buf) - at >= _LEN.size:
+            n, head = _LEN.unpack_from(buf, at)[0], _LEN.size
+            if n == -1:
+                if len(buf) - at < _LEN.size + _LONG_LEN.size:
+                    break
+                n = _LONG_LEN.unpack_from(buf, at + _LEN.size)[0]
+                head += _LONG_LEN.size
+            if len(buf) - at < head + n:
+                break
+            out.append(bytes(view[at + head:at + head + n]))
+            at += head + n
+    del buf[:at]
+    return out, ended
+
+
 class ProcessWorker:
     """A worker process driven from the frame's thread: :meth:`submit` a request under a
     key, :meth:`poll` for ``(key, answer)`` pairs in the order submitted (an answer is
@@ -158,6 +198,8 @@ class ProcessWorker:
             import fcntl
 
             fcntl.fcntl(self._ans.fileno(), _F_SETPIPE_SZ, PIPE_BYTES)
+        os.set_blocking(self._ans.fileno(), False)  # read by read_messages alone
+        self._buf = bytearray()
         self.ready, self._ready_by = False, time.monotonic() + self.ready_s
 
     @property
@@ -218,15 +260,12 @@ class ProcessWorker:
     def poll(self) -> list[tuple[Hashable, Answer | WorkerError]]:
         """What has been answered since the last call, in the order submitted."""
         out, self._done = self._done, []
-        while self._child is not None:
-            try:
-                if not self._ans.poll(0):
-                    break
-                msg = self._ans.recv_bytes()
-            except (EOFError, OSError):
+        if self._child is not None:
+            msgs, ended = read_messages(self._ans.fileno(), self._buf)
+            for msg in msgs:
+                self._message(msg)
+            if ended and self._child is not None:
                 self._died(f"it exited (code {self._child.exitcode})")
-                break
-            self._message(msg)
         if self._child is not None and not self.ready and time.monotonic() > self._ready_by:
             self._died(f"not ready in {self.ready_s:.0f} s")
         out += self._done
