@@ -1,237 +1,215 @@
-"""Work beside the draws, driven from the frame's own thread without waiting.
+"""A worker process driven from the frame's thread without waiting: requests and
+answers over :mod:`multiprocessing.connection` pipes, bulk answers through slots of
+:mod:`multiprocessing.shared_memory` (the one process mechanism: :mod:`lodsprite.procs`,
+which says why a process and never a thread).
 
-moderngl holds the GIL through each draw call (the whole llvmpipe rasterisation), so a
-Python thread beside the draws runs only between them: a Zarr read of 1.9 ms took 113 ms
-beside a busy draw loop, and a lumigraph node loader thread decoded 6.5-31.5 nodes a
-second there where it decoded 226-521 alone (its process: 50-101; ``benchmarks/
-beside_draws.py``, two runs on a shared 2-core machine).  So nothing runs
-beside the draws as a thread.  Work that takes time (reading, decoding) runs in a child
-process, with its own GIL, and the frame's thread talks to it through pipes, without
-ever waiting: :class:`ProcessWorker`.  I/O that only waits (sockets) is polled without
-waiting on the frame's thread itself (:func:`ready`, used by the distributed client).
-Both give the same interface: a non-blocking ``poll()`` returning what has arrived.
-
-A worker process is ``python -m lodsprite.workers MODULE:FACTORY ARGS_JSON`` (not
-``multiprocessing``, whose spawn re-imports the caller's main script):
-``FACTORY(**ARGS)`` makes the handler, called once per request as
-``handler(meta: bytes, data: bytes) -> (meta: bytes, data: bytes)``.  Every message on
-the pipes, request or answer, is a header of three little-endian int64 ``status,
-len(meta), len(data)`` and then the two byte strings; an answer's status is 0, or 1 with
-the handler's error as ``meta`` text (the process goes on), or 2: the data are in the
-request's slot of memory shared with the caller (``slot_bytes``; the request's status
-field names the slot), and only the header and meta came through the pipe.  Slots matter
-for large answers: 512² lumigraph nodes (768 KiB) through the 1 MiB pipe came about one
-a frame, 8-10 nodes/s beside a busy draw loop, against 32-99 through slots (129-151
-alone, against 56-100).
+Every message, request or answer, is one ``send_bytes``: a header of three little-endian
+int64 ``status, len(meta), len(data)``, then the two byte strings.  A request's status
+names its slot (-1: none); an answer's is :data:`OK`, :data:`ERROR` (the handler's error
+pickled, the process goes on) or :data:`IN_SLOT` (the data are in the request's slot of
+the shared memory, only the header and meta came through the pipe); a process says
+:data:`READY` once its handler is made, or :data:`START_FAILED` and why.  Slots matter
+for large answers: 512² lumigraph nodes (768 KiB) through a 1 MiB pipe came about one a
+frame, 8-10 nodes/s beside a busy draw loop, against 32-99 through slots.
 """
 
 from __future__ import annotations
 
-import fcntl
-import importlib
-import json
+import contextlib
 import logging
-import mmap
+import multiprocessing as mp
 import os
+import secrets
+import signal
 import struct
-import subprocess
-import sys
+import time
 from collections import deque
 from collections.abc import Callable, Hashable
-from dataclasses import dataclass
+from multiprocessing import shared_memory
+from multiprocessing.util import Finalize
+
+from lodsprite.procs import (
+    STOP_S,
+    Child,
+    HandlerError,
+    WorkerDied,
+    WorkerError,
+    WorkerUnavailable,
+    error_message,
+    handler_error,
+    load_factory,
+)
+
+__all__ = ["HandlerError", "ProcessWorker", "WorkerDied", "WorkerError",
+           "WorkerUnavailable", "peak_rss_mb", "ready", "vm_hwm_mb"]
 
 log = logging.getLogger(__name__)
 
-HEAD = struct.Struct("<3q")
-OK, ERROR, IN_SLOT = 0, 1, 2
+HEAD = struct.Struct("<3q")  # status (a request: its slot), len(meta), len(data)
+OK, ERROR, IN_SLOT, READY, START_FAILED = 0, 1, 2, 3, 4
 PIPE_BYTES = 1 << 20        # answers a process can write ahead of the frame collecting them
 MAX_REQUEST = 1024          # bytes; in flight at most in_flight of them: 64 KiB pipes never fill
-MAX_ANSWER = 1 << 30
+READY_S = 60.0              # a process not ready this long after its start counts as dead
 _F_SETPIPE_SZ = 1031
 
 Handler = Callable[[bytes, bytes], tuple[bytes, bytes]]
+Answer = tuple[bytes, bytes]
 
 
-@dataclass(frozen=True)
-class Failure:
-    """Why a request got no answer: the handler's error, or the process's death."""
-
-    text: str
-
-
-def _read_exact(f, n: int) -> bytes:
-    buf = bytearray()
-    while len(buf) < n:
-        chunk = f.read(n - len(buf))
-        if not chunk:
-            raise EOFError
-        buf += chunk
-    return bytes(buf)
-
-
-def serve(handler: Handler, fin, fout, slots: memoryview | None = None,
-          slot_bytes: int = 0) -> None:
-    """The process's loop: answer requests from ``fin`` on ``fout`` (binary files) until
-    ``fin`` closes; an exception of the handler is answered as an error.  With ``slots``
-    (shared memory of ``slot_bytes`` a slot), an answer's data that fits goes into the
-    slot its request names (the request's status field) and only its header and meta
-    through the pipe (status :data:`IN_SLOT`)."""
-    while True:
+def _serve_main(factory: str, args: dict, requests, answers, shm_name: str | None,
+                slot_bytes: int) -> None:
+    """A :class:`ProcessWorker` process: make the handler, say ready, answer requests
+    until the request pipe closes (its owner stopped or died)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # a terminal's Ctrl-C: the owner decides
+    shm = None
+    try:
         try:
-            slot, n_meta, n_data = HEAD.unpack(_read_exact(fin, HEAD.size))
-            meta, data = _read_exact(fin, n_meta), _read_exact(fin, n_data)
-        except EOFError:
+            handler = load_factory(factory)(**args)
+        except Exception as exc:  # noqa: BLE001 - reported to the owner: requests fail
+            answers.send_bytes(HEAD.pack(START_FAILED, 0, 0) + error_message(exc))
             return
+        shm = shared_memory.SharedMemory(shm_name) if shm_name else None
+        answers.send_bytes(HEAD.pack(READY, 0, 0))
+        _serve(handler, requests, answers, shm, slot_bytes)
+    except (OSError, EOFError):  # the owner closed its ends (stopped, or gone): done
+        pass
+    finally:
+        if shm is not None:
+            shm.close()
+
+
+def _serve(handler: Handler, requests, answers, shm, slot_bytes: int) -> None:
+    while True:
+        msg = requests.recv_bytes()
+        slot, n_meta, _ = HEAD.unpack_from(msg)
+        meta, data = msg[HEAD.size:HEAD.size + n_meta], msg[HEAD.size + n_meta:]
         try:
             out_meta, out_data = handler(meta, data)
-            status = OK
-            if slots is not None and 0 <= slot and len(out_data) <= slot_bytes:
-                slots[slot * slot_bytes:slot * slot_bytes + len(out_data)] = out_data
-                status = IN_SLOT
-            fout.write(HEAD.pack(status, len(out_meta), len(out_data)))
-            fout.write(out_meta)
-            if status == OK:
-                fout.write(out_data)
-        except Exception as exc:  # the handler's own error, returned to the caller
-            text = f"{type(exc).__name__}: {exc}".encode()[:4096]
-            fout.write(HEAD.pack(ERROR, len(text), 0) + text)
-        fout.flush()
+        except Exception as exc:  # noqa: BLE001 - the handler's error, answered
+            answers.send_bytes(HEAD.pack(ERROR, 0, 0) + error_message(exc))
+            continue
+        n = len(out_data)
+        if shm is not None and slot >= 0 and n <= slot_bytes:
+            shm.buf[slot * slot_bytes:slot * slot_bytes + n] = out_data
+            answers.send_bytes(HEAD.pack(IN_SLOT, len(out_meta), n) + out_meta)
+        else:
+            answers.send_bytes(b"".join((HEAD.pack(OK, len(out_meta), n), out_meta,
+                                         out_data)))
 
 
-def main(argv: list[str]) -> None:
-    """The worker process: ``MODULE:FACTORY ARGS_JSON [SLOTS_FD SLOT_BYTES]``."""
-    handler = load_factory(argv[0])(**json.loads(argv[1]))
-    slots, slot_bytes = None, 0
-    if len(argv) > 3:
-        fd, slot_bytes = int(argv[2]), int(argv[3])
-        slots = memoryview(mmap.mmap(fd, os.fstat(fd).st_size))
-    serve(handler, sys.stdin.buffer, sys.stdout.buffer, slots, slot_bytes)
+_LEN, _LONG_LEN = struct.Struct("!i"), struct.Struct("!Q")
 
 
-def load_factory(spec: str) -> Callable[..., Handler]:
-    """``"package.module:name"`` -> the callable it names."""
-    module, _, name = spec.partition(":")
-    return getattr(importlib.import_module(module), name)
-
-
-class _Pipes:
-    """One running process: requests written to its stdin, answers read from its stdout
-    without blocking and parsed as they complete; with ``slots`` (an anonymous shared
-    mapping of ``slot_bytes`` a slot, passed as a file descriptor) answers' data come
-    back through it."""
-
-    def __init__(self, factory: str, args: dict, slots: tuple[int, int] | None) -> None:
-        cmd = [sys.executable, "-m", "lodsprite.workers", factory, json.dumps(args)]
-        if slots is not None:
-            cmd += [str(slots[0]), str(slots[1])]
-        self.proc = subprocess.Popen(
-            cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL,
-            pass_fds=(slots[0],) if slots is not None else ())
-        self._in, self._out = self.proc.stdin.fileno(), self.proc.stdout.fileno()
+def read_messages(fd: int, buf: bytearray) -> tuple[list[bytes], bool]:
+    """The whole messages a :class:`multiprocessing.connection.Connection` wrote to the
+    non-blocking pipe ``fd`` so far (its wire format, kept stable since Python 3.7: a
+    big-endian int32 length, or -1 and a uint64 length, then the bytes), read in large
+    chunks without waiting; a partial message stays in ``buf``.  Also whether the pipe
+    has ended (the writer exited).  ``Connection.poll`` and ``recv_bytes`` cost a
+    ``select`` and two reads a message, and ``recv_bytes`` waits for a message's end."""
+    ended = False
+    while True:
         try:
-            fcntl.fcntl(self._out, _F_SETPIPE_SZ, PIPE_BYTES)
-        except OSError:  # a smaller pipe only means fewer answers written ahead
-            pass
-        os.set_blocking(self._out, False)
-        self._buf = bytearray()
-        self.dead = False  # its stdout closed: the answers before that are still given
-
-    def send(self, slot: int, meta: bytes, data: bytes) -> None:
-        os.write(self._in, HEAD.pack(slot, len(meta), len(data)) + meta + data)
-
-    def answers(self) -> list[tuple[int, bytes, int | bytes]]:
-        """``(status, meta, data)`` complete so far; for :data:`IN_SLOT` ``data`` is the
-        length of what the slot holds."""
-        while True:
-            try:
-                chunk = os.read(self._out, PIPE_BYTES)
-            except BlockingIOError:
+            chunk = os.read(fd, PIPE_BYTES)
+        except BlockingIOError:
+            break
+        except OSError:
+            ended = True
+            break
+        if not chunk:
+            ended = True
+            break
+        buf += chunk
+    out, at = [], 0
+    with memoryview(buf) as view:
+        while len(buf) - at >= _LEN.size:
+            n, head = _LEN.unpack_from(buf, at)[0], _LEN.size
+            if n == -1:
+                if len(buf) - at < _LEN.size + _LONG_LEN.size:
+                    break
+                n = _LONG_LEN.unpack_from(buf, at + _LEN.size)[0]
+                head += _LONG_LEN.size
+            if len(buf) - at < head + n:
                 break
-            if not chunk:
-                self.dead = True
-                break
-            self._buf += chunk
-        out: list[tuple[int, bytes, int | bytes]] = []
-        while len(self._buf) >= HEAD.size:
-            status, n_meta, n_data = HEAD.unpack_from(self._buf)
-            if not (0 <= n_meta <= MAX_ANSWER and 0 <= n_data <= MAX_ANSWER):
-                self.dead = True  # a garbled stream: nothing more of it can be trusted
-                break
-            end = HEAD.size + n_meta + (0 if status == IN_SLOT else n_data)
-            if len(self._buf) < end:
-                break
-            meta = bytes(self._buf[HEAD.size:HEAD.size + n_meta])
-            data = n_data if status == IN_SLOT else bytes(self._buf[HEAD.size + n_meta:end])
-            del self._buf[:end]
-            out.append((status, meta, data))
-        return out
-
-    def peak_mb(self) -> float:
-        peak = vm_hwm_mb(self.proc.pid)
-        return 0.0 if peak is None else peak
-
-    def close(self) -> None:
-        for f in (self.proc.stdin, self.proc.stdout):
-            try:
-                f.close()
-            except OSError:
-                pass
-        try:
-            self.proc.wait(timeout=1.0)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait(timeout=2.0)
+            out.append(bytes(view[at + head:at + head + n]))
+            at += head + n
+    del buf[:at]
+    return out, ended
 
 
 class ProcessWorker:
     """A worker process driven from the frame's thread: :meth:`submit` a request under a
     key, :meth:`poll` for ``(key, answer)`` pairs in the order submitted (an answer is
-    ``(meta, data)`` bytes, or a :class:`Failure`).  Neither ever waits.
+    ``(meta, data)`` bytes, or a :class:`WorkerError`).  Neither ever waits.
 
-    At most ``in_flight`` requests are outstanding (:attr:`full`); the caller keeps the
-    rest.  With ``slot_bytes``, each request in flight holds a slot of that many bytes of
-    memory shared with the process, and answers' data that fit come back through it (the
-    pipe carries headers only, so a frame that collects late never stalls the process on
-    a full pipe).  A process that dies is started again, at most ``restarts`` times: the
-    request it died on fails, the others are sent to the new process.  After that, or
-    when no process can start, every request fails at once ("no worker process").
-    ``max_request``: bytes a request may carry; ``in_flight`` of them should fit the
-    process's 64 KiB stdin pipe (beyond it :meth:`submit` waits for the process to read)."""
+    ``factory``: ``"module:name"``; in the process ``name(**args)`` makes the handler,
+    ``handler(meta: bytes, data: bytes) -> (meta, data)``, called once per request.  At
+    most ``in_flight`` requests are outstanding (:attr:`full`); the caller keeps the rest.
+    With ``slot_bytes``, this object owns a shared-memory segment of ``in_flight`` slots
+    of that size: each request in flight holds one, the process writes an answer's data
+    that fits into it (the pipe carries the header and meta only), :meth:`poll` copies it
+    out (the bytes are the caller's) and frees the slot; :meth:`close` unlinks the
+    segment after the process is joined, and a dead process's slots stay this object's.
+    A process that dies is started again, at most ``restarts`` times: the request it died
+    on fails (:class:`WorkerDied`), the others are sent to the new process.  A process
+    not ready within ``ready_s`` counts as dead.  ``max_request``: bytes a request may
+    carry (``in_flight`` of them should fit the 64 KiB request pipe)."""
 
     def __init__(self, factory: str, args: dict, in_flight: int = 48, restarts: int = 3,
                  name: str = "worker", slot_bytes: int = 0,
-                 max_request: int = MAX_REQUEST) -> None:
+                 max_request: int = MAX_REQUEST, ready_s: float = READY_S) -> None:
         self.factory, self.args, self.name = factory, dict(args), name
         self.in_flight, self.restarts = max(1, int(in_flight)), int(restarts)
-        self.max_request = int(max_request)
+        self.max_request, self.ready_s = int(max_request), float(ready_s)
         self.slot_bytes = max(0, int(slot_bytes))
         self.deaths = 0
+        self.ready = False
         self._sent: deque[tuple[Hashable, bytes, bytes, int]] = deque()
-        self._failed: list[tuple[Hashable, Failure]] = []
-        self._fd, self._map, self._free = -1, None, [-1]
+        self._done: list[tuple[Hashable, Answer | WorkerError]] = []  # not yet polled
+        self._gone: WorkerError | None = None  # why no process runs any more
+        self.shm, self._free = None, [-1]
         if self.slot_bytes:
-            self._fd = os.memfd_create(f"lodsprite-{name}".replace(" ", "-"))
-            os.ftruncate(self._fd, self.in_flight * self.slot_bytes)
-            self._map = mmap.mmap(self._fd, self.in_flight * self.slot_bytes)
+            self.shm = shared_memory.SharedMemory(
+                f"lodsprite-{os.getpid()}-{secrets.token_hex(4)}", create=True,
+                size=self.in_flight * self.slot_bytes)
             self._free = list(range(self.in_flight - 1, -1, -1))
-        self._pipes = self._start()
+        self._child: Child | None = None
+        self._finalizer = Finalize(self, ProcessWorker._release_all,
+                                   (self.__dict__,), exitpriority=20)
+        self._start()
 
-    def _start(self) -> _Pipes | None:
+    def _start(self) -> None:
+        ctx = mp.get_context("spawn")
+        req_r, self._req = ctx.Pipe(duplex=False)
+        self._ans, ans_w = ctx.Pipe(duplex=False)
         try:
-            return _Pipes(self.factory, self.args,
-                          (self._fd, self.slot_bytes) if self._map is not None else None)
+            self._child = Child(_serve_main, (
+                self.factory, self.args, req_r, ans_w,
+                self.shm.name if self.shm is not None else None, self.slot_bytes),
+                f"lodsprite-{self.name}".replace(" ", "-"))
         except OSError as exc:
+            self._child = None
+            self._gone = WorkerUnavailable(f"no {self.name} process ({exc})")
             log.error("%s process cannot start (%s): its requests fail", self.name, exc)
-            return None
+        finally:
+            req_r.close()
+            ans_w.close()
+        with contextlib.suppress(OSError):  # a smaller pipe: fewer answers written ahead
+            import fcntl
+
+            fcntl.fcntl(self._ans.fileno(), _F_SETPIPE_SZ, PIPE_BYTES)
+        os.set_blocking(self._ans.fileno(), False)  # read by read_messages alone
+        self._buf = bytearray()
+        self.ready, self._ready_by = False, time.monotonic() + self.ready_s
 
     @property
     def alive(self) -> bool:
         """Whether a process runs (requests can be answered)."""
-        return self._pipes is not None
+        return self._child is not None
 
     @property
     def pid(self) -> int | None:
-        return self._pipes.proc.pid if self._pipes is not None else None
+        return self._child.pid if self._child is not None else None
 
     @property
     def pending(self) -> list[Hashable]:
@@ -242,6 +220,10 @@ class ProcessWorker:
     def full(self) -> bool:
         return len(self._sent) >= self.in_flight
 
+    def fileno(self) -> int:
+        """The answer pipe's descriptor (readable when :meth:`poll` has something)."""
+        return self._ans.fileno()
+
     def submit(self, key: Hashable, meta: bytes, data: bytes = b"", _slot: int | None = None
                ) -> bool:
         """Send a request (``meta + data`` at most ``max_request`` bytes); False, and
@@ -250,76 +232,126 @@ class ProcessWorker:
             raise ValueError(f"a worker request of {len(meta) + len(data)} bytes")
         if self.full:
             return False
-        if self._pipes is None:
-            if _slot is not None:
-                self._release(_slot)
-            self._failed.append((key, Failure(f"no {self.name} process")))
+        if self._child is None:
+            if _slot is not None and _slot >= 0:
+                self._free.append(_slot)
+            self._done.append((key, self._gone or WorkerUnavailable(f"no {self.name}")))
             return True
-        slot = _slot if _slot is not None else (self._free.pop() if self._map else -1)
+        slot = _slot if _slot is not None else (self._free.pop() if self.shm else -1)
         self._sent.append((key, meta, data, slot))
         try:
-            self._pipes.send(slot, meta, data)
+            self._req.send_bytes(HEAD.pack(slot, len(meta), len(data)) + meta + data)
         except OSError as exc:
-            self._died(exc)
+            self._died(f"its pipe broke ({exc})")
         return True
 
-    def _release(self, slot: int) -> None:
-        if slot >= 0:
-            self._free.append(slot)
+    def wait_ready(self, timeout: float) -> bool:
+        """Wait (setup only) until the process is ready or ``timeout`` s pass."""
+        deadline = time.monotonic() + timeout
+        while not self.ready and self._child is not None:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                return False
+            if self._ans.poll(min(left, 0.1)):
+                got = self.poll()
+                self._done = got + self._done
+        return self.ready
 
-    def _answer(self, status: int, meta: bytes, data, slot: int):
-        if status == ERROR:
-            return Failure(meta.decode(errors="replace"))
-        if status == IN_SLOT:
-            data = self._map[slot * self.slot_bytes:slot * self.slot_bytes + data]
-        return meta, data
-
-    def poll(self) -> list[tuple[Hashable, tuple[bytes, bytes] | Failure]]:
+    def poll(self) -> list[tuple[Hashable, Answer | WorkerError]]:
         """What has been answered since the last call, in the order submitted."""
-        out, self._failed = self._failed, []
-        if self._pipes is None:
-            return out
-        for status, meta, data in self._pipes.answers():
-            key, _, _, slot = self._sent.popleft()
-            out.append((key, self._answer(status, meta, data, slot)))
-            self._release(slot)
-        if self._pipes.dead:
-            self._died(OSError(f"the {self.name} process has stopped"))
-            out += self._failed
-            self._failed = []
+        out, self._done = self._done, []
+        if self._child is not None:
+            msgs, ended = read_messages(self._ans.fileno(), self._buf)
+            for msg in msgs:
+                self._message(msg)
+            if ended and self._child is not None:
+                self._died(f"it exited (code {self._child.exitcode})")
+        if self._child is not None and not self.ready and time.monotonic() > self._ready_by:
+            self._died(f"not ready in {self.ready_s:.0f} s")
+        out += self._done
+        self._done = []
         return out
 
-    def _died(self, exc: Exception) -> None:
-        self._pipes.close()
-        self.deaths += 1
-        if self._sent:  # the request it died on fails; the others are sent again
-            key, _, _, slot = self._sent.popleft()
-            self._release(slot)
-            self._failed.append((key, Failure(f"the {self.name} process died on it ({exc})")))
-        again = self.deaths <= self.restarts
-        log.warning("%s process stopped (%s)%s", self.name, exc,
-                    ": started again" if again else "")
-        self._pipes = self._start() if again else None
+    def _message(self, msg: bytes) -> None:
+        status, n_meta, n_data = HEAD.unpack_from(msg)
+        if status == READY:
+            self.ready = True
+            return
+        if status == START_FAILED:
+            err = handler_error(msg[HEAD.size:])
+            self._stop_child()
+            self._gone = WorkerUnavailable(f"the {self.name} process cannot start: {err}")
+            log.error("%s", self._gone)
+            self._resend()
+            return
+        key, _, _, slot = self._sent.popleft()
+        answer: Answer | WorkerError
+        if status == ERROR:
+            answer = handler_error(msg[HEAD.size:])
+        elif status == IN_SLOT:
+            at = slot * self.slot_bytes
+            answer = (msg[HEAD.size:HEAD.size + n_meta], bytes(self.shm.buf[at:at + n_data]))
+        else:
+            answer = (msg[HEAD.size:HEAD.size + n_meta], msg[HEAD.size + n_meta:])
+        if slot >= 0:
+            self._free.append(slot)
+        self._done.append((key, answer))
+
+    def _resend(self) -> None:
         resend, self._sent = list(self._sent), deque()
         for key, meta, data, slot in resend:
             self.submit(key, meta, data, _slot=slot)
 
+    def _stop_child(self) -> None:
+        self._req.close()
+        self._ans.close()
+        if self._child is not None:
+            self._child.stop(STOP_S)
+            self._child = None
+
+    def _died(self, why: str) -> None:
+        self._stop_child()
+        self.deaths += 1
+        if self._sent:  # the request it died on fails; the others are sent again
+            key, _, _, slot = self._sent.popleft()
+            if slot >= 0:
+                self._free.append(slot)
+            self._done.append((key, WorkerDied(f"the {self.name} process died on it "
+                                                 f"({why})")))
+        again = self.deaths <= self.restarts
+        log.warning("%s process stopped (%s)%s", self.name, why,
+                    ": started again" if again else "")
+        if again:
+            self._start()
+        else:
+            self._gone = WorkerUnavailable(f"no {self.name} process (it died {self.deaths} "
+                                           f"times; last: {why})")
+        self._resend()
+
     def peak_mb(self) -> float:
         """The process's peak resident memory (``VmHWM``) in MB; 0 when unknown."""
-        return self._pipes.peak_mb() if self._pipes is not None else 0.0
+        peak = vm_hwm_mb(self._child.pid) if self._child is not None else None
+        return 0.0 if peak is None else peak
 
     def close(self) -> None:
-        """End the process (it finishes the request in hand); what is in flight is lost."""
-        if self._pipes is not None:
-            self._pipes.close()
-            self._pipes = None
-        for _, _, _, slot in self._sent:
-            self._release(slot)
-        self._sent.clear()
-        if self._map is not None:
-            self._map.close()
-            os.close(self._fd)
-            self._map, self._fd = None, -1
+        """End the process (it finishes the request in hand, else it is terminated) and
+        unlink the shared memory; what is in flight is lost.  Idempotent."""
+        self._finalizer()
+
+    @staticmethod
+    def _release_all(state: dict) -> None:
+        for c in ("_req", "_ans"):
+            if c in state:
+                state[c].close()
+        if state.get("_child") is not None:
+            state["_child"].stop(STOP_S)
+            state["_child"] = None
+        state["_gone"] = state.get("_gone") or WorkerUnavailable("closed")
+        state["_sent"].clear()
+        if state["shm"] is not None:
+            state["shm"].close()
+            state["shm"].unlink()
+            state["shm"] = None
 
 
 def ready(sockets: list, poller=None) -> list:
@@ -358,7 +390,3 @@ def peak_rss_mb() -> float:
     import resource
 
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0  # KB on Linux
-
-
-if __name__ == "__main__":
-    main(sys.argv[1:])

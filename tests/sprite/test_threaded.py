@@ -16,8 +16,8 @@ from lodsprite.gl.terrain import TerrainGeometry, TerrainRenderer
 from lodsprite.metrics import rmse
 from lodsprite.scene import Scene
 from lodsprite.sprite.engine import KEYFRAME, LodSpriteEngine
+from lodsprite.sprite.keyframe_worker import KeyframeWorker, WorkerSettings
 from lodsprite.sprite.threaded import ThreadedLodSpriteEngine
-from lodsprite.sprite.worker import KeyframeWorker, WorkerSettings
 from lodsprite.terrain import make_texture
 
 SIZE = (96, 96)
@@ -138,7 +138,7 @@ def test_the_lead_comes_from_every_delivered_keyframe_not_the_start_up_one(gl, s
 
 
 def test_frames_say_so_when_the_worker_has_died(gl, scene, sprite, monkeypatch):
-    from lodsprite.sprite import worker as worker_module
+    from lodsprite.sprite import keyframe_worker as worker_module
 
     engine = ThreadedLodSpriteEngine(sprite, scene, 45.0, 1.0, request_fraction=0.0)
     try:

@@ -63,12 +63,21 @@ def reads(monkeypatch):
 def _dies_with(heights, rows, cols) -> np.ndarray:
     """Ask for ``heights[rows, cols]`` while the reader process is stopped, then kill it
     and reap it: the request dies in flight.  Returns the values given at once."""
-    proc = heights.reader.worker._pipes.proc
+    proc = heights.reader.worker._child.process
     os.kill(proc.pid, signal.SIGSTOP)
     first = heights[rows, cols]
     os.kill(proc.pid, signal.SIGKILL)
-    proc.wait(timeout=10)
+    proc.join(timeout=10)
     return first
+
+
+def _running(pid: int) -> bool:
+    """Whether process ``pid`` exists (a zombie, not yet reaped, counts)."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    return True
 
 
 def test_a_missing_chunk_is_answered_from_the_coarse_level_then_exactly(ramp, reads):
@@ -97,9 +106,9 @@ def test_a_missing_chunk_is_answered_from_the_coarse_level_then_exactly(ramp, re
         np.testing.assert_allclose(h[r3, c3], map_coordinates(
             level0, [r3 * 299 / 512, c3 * 299 / 512], order=1), atol=1e-3)
     assert [r[:2] for r in reads.log[before:]] == [("read", 0)] and not h.blocking
-    proc = h.reader.worker._pipes.proc
+    pid = h.reader.worker.pid
     h.close()
-    assert proc.poll() is not None and h.reader is None and h.blocking
+    assert not _running(pid) and h.reader is None and h.blocking
     np.testing.assert_allclose(h[rows, cols], exact, atol=1e-3)  # blocking again
 
 
@@ -163,7 +172,7 @@ def test_sprite_adaptive_reads_no_store_inside_its_frames_and_converges(gl, flig
         t = techniques.create("sprite-adaptive", renderer, **techniques.get(
             "sprite-adaptive").bind({"lod": 8, "epsilon": 1.0, "key_sse": 1.0}))
         h = t.heights
-        proc = h.reader.worker._pipes.proc
+        pid = h.reader.worker.pid
         monkeypatch.setattr(metric.ErrorMetric, "fallback_sample", counted)
         try:
             t.warm_up(path.viewpoints[0])
@@ -193,7 +202,7 @@ def test_sprite_adaptive_reads_no_store_inside_its_frames_and_converges(gl, flig
                                                                   order=1), atol=1e-3)
         finally:
             t.release()
-    assert proc.poll() is not None and h.reader is None
+    assert not _running(pid) and h.reader is None
 
 
 def test_a_sprite_made_over_the_same_level_0_keeps_the_reader_until_it_is_released(
@@ -211,11 +220,11 @@ def test_a_sprite_made_over_the_same_level_0_keeps_the_reader_until_it_is_releas
     with Renderer(scene, (64, 64), ctx=gl.mgl) as renderer:
         first = techniques.create("sprite-adaptive", renderer, lod=8, key_sse=1.0)
         h = first.heights
-        proc = h.reader.worker._pipes.proc
+        pid = h.reader.worker.pid
         second = techniques.create("sprite", renderer, lod=8)
         first.release()
         try:
-            assert second.heights is h and not h.blocking and proc.poll() is None
+            assert second.heights is h and not h.blocking and _running(pid)
             for vp in path.viewpoints:
                 reads.state["in_frame"] = True
                 second.frame(vp)
@@ -223,8 +232,7 @@ def test_a_sprite_made_over_the_same_level_0_keeps_the_reader_until_it_is_releas
             assert [r for r in reads.log if r[2]] == []
         finally:
             second.release()
-    proc.wait(timeout=10)
-    assert h.reader is None and h.blocking
+    assert not _running(pid) and h.reader is None and h.blocking
 
 
 def _level0_reads(reads) -> int:

@@ -34,7 +34,7 @@ def render_worker(
     import logging
 
     from lodsprite.distributed.keys import ClientKeys
-    from lodsprite.distributed.pool.worker import Worker, stop_on_signals
+    from lodsprite.distributed.pool.render_worker import Worker, stop_on_signals
 
     if not connect.startswith(("tcp://", "ipc://")):
         raise InputError(f"--connect must be tcp://HOST:PORT, got {connect!r}")

@@ -24,7 +24,7 @@ from collections import OrderedDict
 import numpy as np
 
 from lodsprite.lumigraph.store import Lumigraph
-from lodsprite.workers import Failure, ProcessWorker
+from lodsprite.workers import ProcessWorker, WorkerError
 
 FACTORY = "lodsprite.lumigraph.loader:node_decoder"
 IN_FLIGHT = 16  # nodes sent to the decoder ahead (the critical method requests 16 a frame)
@@ -93,8 +93,8 @@ class NodeLoader:
         while self._wanted and not self._worker.full:
             self._worker.submit(node := self._wanted.pop(0), _REQ.pack(node))
 
-    def _arrived(self, node: int, answer: tuple[bytes, bytes] | Failure) -> None:
-        if isinstance(answer, Failure):
+    def _arrived(self, node: int, answer: tuple[bytes, bytes] | WorkerError) -> None:
+        if isinstance(answer, WorkerError):
             self._bad.add(node)
             i, j = divmod(node, self.n_st)
             self.lf.mark_bad(self.slab, i, j, answer.text)

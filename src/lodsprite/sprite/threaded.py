@@ -27,6 +27,7 @@ from lodsprite.camera import Viewpoint
 from lodsprite.errors import LodspriteError
 from lodsprite.gl.sprite import SpriteRenderer
 from lodsprite.sprite.engine import SpriteFrame
+from lodsprite.sprite.keyframe_worker import KeyframeImage, KeyframeWorker, WorkerSettings
 from lodsprite.sprite.metric import ErrorMetric
 from lodsprite.sprite.policy import (
     DEFAULT_EPSILON_PX,
@@ -37,7 +38,6 @@ from lodsprite.sprite.policy import (
     keyframe_error_px,
     resampling_metric,
 )
-from lodsprite.sprite.worker import KeyframeImage, KeyframeWorker, WorkerSettings
 
 if TYPE_CHECKING:  # the scene is passed in
     from lodsprite.scene import Scene
@@ -47,7 +47,7 @@ LEAD_SMOOTHING = 0.3   # weight of the newest latency in the lead's running mean
 
 
 class ThreadedLodSpriteEngine:
-    """LOD-sprite frame by frame with a :class:`~lodsprite.sprite.worker.KeyframeWorker`.
+    """LOD-sprite frame by frame with a :class:`~lodsprite.sprite.keyframe_worker.KeyframeWorker`.
 
     ``sprite`` draws the spriteframes on the caller's context; ``scene`` is what the worker
     loads on its own context; ``fov_y_deg`` must be the renderer's.

@@ -19,7 +19,7 @@ import struct
 
 import numpy as np
 
-from lodsprite.workers import Failure, ProcessWorker
+from lodsprite.workers import ProcessWorker, WorkerError
 
 MAX_WINDOW = 4097 * 4097  # samples: no request may ask for more
 FACTORY = "lodsprite.terrain.reader:tile_reader"
@@ -55,9 +55,9 @@ def tile_request(k: int, r0: int, r1: int, c0: int, c1: int) -> bytes:
     return _REQ.pack(k, r0, r1, c0, c1)
 
 
-def tile_answer(answer: tuple[bytes, bytes] | Failure) -> np.ndarray | str:
+def tile_answer(answer: tuple[bytes, bytes] | WorkerError) -> np.ndarray | str:
     """An answer as samples ``(a, b) float32``, or the error text."""
-    if isinstance(answer, Failure):
+    if isinstance(answer, WorkerError):
         return answer.text
     meta, data = answer
     a, b = _SHAPE.unpack(meta)

@@ -315,7 +315,7 @@ def test_a_reconnecting_worker_forgets_the_jobs_of_its_last_connection() -> None
 
     from lodsprite.distributed.datasets import Datasets
     from lodsprite.distributed.pool.jobs import Disconnect
-    from lodsprite.distributed.pool.worker import Worker, _Renderer
+    from lodsprite.distributed.pool.render_worker import Worker, _Renderer
 
     zctx = zmq.Context()
     router = zctx.socket(zmq.ROUTER)

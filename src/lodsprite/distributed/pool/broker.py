@@ -58,7 +58,7 @@ from lodsprite.distributed.pool.jobs import (
     encode_pool,
     job_key,
 )
-from lodsprite.distributed.pool.worker import end_processes, spawn_workers
+from lodsprite.distributed.pool.render_worker import end_processes, spawn_workers
 from lodsprite.distributed.protocol import CODECS, ProtocolError, decode_keyframe
 from lodsprite.errors import InputError, LodspriteError
 

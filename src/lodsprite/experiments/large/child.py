@@ -1,34 +1,33 @@
 """One timed run of ``reproduce large`` in a process of its own, through the library.
 
-``python -m lodsprite.experiments.large.child OUT_DIR CONFIG_JSON`` renders
-``RenderConfig(**CONFIG_JSON)`` with :func:`lodsprite.run.render_path` into ``OUT_DIR``
-(``frames.csv``, ``summary.json``, PNG frames with ``save_frames``).  A process per run
-gives each run its own peak resident memory and time to first frame.  A user error
-exits with code 2 and its message as the one line on stderr.
+:func:`render_in_child` renders ``RenderConfig(**config)`` with
+:func:`lodsprite.run.render_path` into ``out`` (``frames.csv``, ``summary.json``, PNG
+frames with ``save_frames``) in a fresh process (:func:`lodsprite.procs.call_in_child`:
+multiprocessing's spawn, a new interpreter), so that each run has its own peak resident
+memory and time to first frame.  A user error comes back as itself (an
+:class:`~lodsprite.errors.InputError`); a process that dies without an answer (the
+out-of-memory killer) as :class:`~lodsprite.procs.WorkerDied`.
 
-``CONFIG_JSON`` ``{"probe": "scene", "terrain": STORE}`` measures instead what loading
-the scene of a store (the in-memory working grid ``render`` makes of it) adds to the
+``config`` ``{"probe": "scene", "terrain": STORE}`` measures instead what loading the
+scene of a store (the in-memory working grid ``render`` makes of it) adds to the
 process's peak resident memory (:func:`scene_probe`).
 """
 
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 
 def render_in_child(config: dict, out: Path) -> dict:
     """Run :func:`lodsprite.run.render_path` on ``RenderConfig(**config)`` in a fresh
     Python process writing to ``out``; return its summary (``summary.json``).  ``config``
-    holds JSON values (``size`` as ``[w, h]``).  Raises RuntimeError with the child's
-    error when it fails."""
-    cmd = [sys.executable, "-m", "lodsprite.experiments.large.child", str(out),
-           json.dumps(config)]
-    r = subprocess.run(cmd, capture_output=True, text=True)
-    if r.returncode != 0:
-        raise RuntimeError(f"render {json.dumps(config)} failed: {r.stderr.strip()}")
+    holds JSON values (``size`` as ``[w, h]``).  Raises the child's error (a
+    :class:`~lodsprite.procs.WorkerError`, which is a RuntimeError, when it died or its
+    error could not travel)."""
+    from lodsprite.procs import call_in_child
+
+    call_in_child(run, Path(out), dict(config), name="lodsprite-large-run")
     return json.loads((Path(out) / "summary.json").read_text())
 
 
@@ -50,28 +49,15 @@ def scene_probe(out: Path, terrain: str) -> dict:
     return s
 
 
-def run(out: Path, config: dict) -> dict:
-    """The child's work: one :func:`~lodsprite.run.render_path` run; returns its summary."""
+def run(out: Path, config: dict) -> None:
+    """The child's work: one :func:`~lodsprite.run.render_path` run (its summary written
+    to ``out``)."""
     from lodsprite.run import RenderConfig, render_path
 
     if config.get("probe") == "scene":
-        return scene_probe(out, config["terrain"])
+        scene_probe(out, config["terrain"])
+        return
     kw = dict(config)
     if "size" in kw:
         kw["size"] = tuple(kw["size"])
-    return render_path(RenderConfig(**kw), Path(out))
-
-
-def main(argv: list[str]) -> int:
-    from lodsprite.errors import LodspriteError
-
-    try:
-        run(Path(argv[0]), json.loads(argv[1]))
-    except LodspriteError as exc:
-        sys.stderr.write(f"{exc}\n")
-        return 2
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main(sys.argv[1:]))
+    render_path(RenderConfig(**kw), Path(out))

@@ -157,8 +157,8 @@ class PathRuns:
                                  "path": str(sampled), "frames": len(self.keep),
                                  "size": [self.cfg.image, self.cfg.image]},
                                 self.runs / "full")
-        except RuntimeError as exc:
-            return {"skipped": str(exc)}
+        except Exception as exc:  # noqa: BLE001 - the child's error or death: said, not fatal
+            return {"skipped": f"{type(exc).__name__}: {exc}"}
         return {"median_ms": s["median_ms"], "p99_ms": s["p99_ms"], "total_s": s["total_s"],
                 "first_frame_ms": s.get("first_frame_ms"),
                 "frames": len(self.keep), "note": "timed on the sampled frames only"}

@@ -131,8 +131,10 @@ class _Renderer(threading.Thread):
 
     def _render(self, msg: JobMessage) -> list | None:
         """The result frames of one job (None: stopped while it rendered); never raises."""
+        from multiprocessing.connection import wait
+
         from lodsprite.distributed.pool.render_process import FACTORY, unpack
-        from lodsprite.workers import Failure, ProcessWorker
+        from lodsprite.workers import ProcessWorker, WorkerError
 
         if self.process is None:
             self.process = ProcessWorker(FACTORY, self.args, in_flight=1, name="render",
@@ -144,9 +146,9 @@ class _Renderer(threading.Thread):
         while not (answers := self.process.poll()):
             if self.stopping.is_set():
                 return None
-            time.sleep(0.002)
+            wait([self.process], timeout=0.05)  # the answer pipe, or a death
         answer = answers[0][1]
-        if isinstance(answer, Failure):  # the process died on it (started again)
+        if isinstance(answer, WorkerError):  # the process died on it (started again)
             return encode_pool(ResultMessage(POOL_VERSION, msg.job.job, False,
                                              answer.text[:4000]))
         return unpack(*answer)
@@ -306,29 +308,17 @@ def run_local_worker(connect: str, data_dir: str | None, cache: int, parent_pid:
 
 
 def spawn_workers(n: int, connect: str, data_dir: str | None, cache: int) -> list:
-    """Start ``n`` local worker processes (multiprocessing spawn: a fresh interpreter,
-    its own GL context) connecting to ``connect``; their ``Process`` objects."""
-    import multiprocessing as mp
+    """Start ``n`` local worker processes connecting to ``connect``
+    (:func:`lodsprite.procs.start_child`: spawn, a fresh interpreter, its own GL
+    context); their :class:`~lodsprite.procs.Child` handles (``pid``, ``is_alive``)."""
+    from lodsprite.procs import start_child
 
-    ctx = mp.get_context("spawn")
-    procs = []
-    for _ in range(n):
-        p = ctx.Process(target=run_local_worker, daemon=True, name="lodsprite-worker",
-                        args=(connect, data_dir, cache, os.getpid()))
-        p.start()
-        procs.append(p)
-    return procs
+    return [start_child(run_local_worker, (connect, data_dir, cache, os.getpid()),
+                        name="lodsprite-worker") for _ in range(n)]
 
 
 def end_processes(procs: list) -> None:
-    """Wait for local workers to exit (they were told), then terminate, then kill."""
-    deadline = time.monotonic() + 2.0
-    for p in procs:
-        p.join(timeout=max(0.0, deadline - time.monotonic()))
-    for p in procs:
-        if p.is_alive():
-            p.terminate()
-            p.join(timeout=1.0)
-        if p.is_alive():
-            p.kill()
-            p.join(timeout=1.0)
+    """Stop local workers (they were told): 2 s to exit, then terminate, then kill."""
+    from lodsprite.procs import stop_children
+
+    stop_children(procs, 2.0)
