@@ -82,6 +82,21 @@ def test_terrain_imports_neither_gl_nor_the_front_ends():
     assert describe(bad) == []
 
 
+def test_the_scene_model_imports_no_rendering():
+    """scene/ (the data model) reaches nothing of gl/ or moderngl, directly or through the
+    modules it imports (runtime edges, lazy ones included)."""
+    graph = importgraph.runtime_graph(EDGES)
+    seen, todo = set(), [m for m in graph if importgraph.unit(m) == "scene"]
+    while todo:
+        m = todo.pop()
+        if m not in seen:
+            seen.add(m)
+            todo.extend(graph.get(m, ()))
+    assert sorted(m for m in seen if importgraph.unit(m) == "gl") == []
+    assert not any(e.target == "moderngl" and e.source in seen and not e.type_only
+                   for e in EDGES)
+
+
 #: The shared helpers every level uses (atomic writers, mesh loading, the cluster extra's
 #: check, worker processes): the bottom of the package, importing nothing of it but errors.
 BASE = ("lodsprite.files", "lodsprite.meshes", "lodsprite.cluster", "lodsprite.workers",

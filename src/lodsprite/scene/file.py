@@ -22,7 +22,8 @@ every path (:func:`resolve_path`: relative to the file's folder, never out of it
 Anything wrong is one :class:`~lodsprite.errors.SceneFileError` line naming the file and
 the field, e.g. ``scene.toml: objects[1].count: must be <= 200000``; a syntax error names
 the line and column.  What needs the terrain (points and positions inside its extent)
-is checked by :func:`lodsprite.scene.world.load_world`, still before anything is written.
+is checked by :func:`lodsprite.scene.world.load_scene_file`, still before anything is
+written.
 """
 
 from __future__ import annotations
