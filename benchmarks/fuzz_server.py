@@ -25,6 +25,7 @@ from lodsprite.distributed.link import ServerLink, control
 from lodsprite.distributed.render import scene_args
 from lodsprite.distributed.run import local_server
 from lodsprite.run import RenderConfig, prepare
+from lodsprite.scene.spec import SceneSpec
 
 
 def server_stats(address: str) -> tuple[dict, dict]:
@@ -59,7 +60,8 @@ def main() -> None:
         sent = flood(address, counts, seed=a.seed)
         flood_s = time.perf_counter() - t0
         ping, stats = server_stats(address)
-        client = LodClient(scene, scene_args(cfg.terrain, cfg.texture, None, 1.0, cfg.size),
+        client = LodClient(scene, scene_args(SceneSpec(cfg.terrain, cfg.texture, None, 1.0),
+                                             cfg.size),
                            [address], cfg.size, cfg.lod, pace="continuous")
         types = []
         try:

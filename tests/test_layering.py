@@ -97,6 +97,24 @@ def test_the_scene_model_imports_no_rendering():
                    for e in EDGES)
 
 
+def test_the_scene_model_names_no_module_by_string():
+    """scene/ finds no module by a dotted string (SCENE_KINDS and the built-in meshes
+    did): other packages' scene kinds and models come through entry points."""
+    import ast
+    import re
+
+    dotted = re.compile(r"^lodsprite(\.\w+)+(:\w+)?$")
+    modules = importgraph.module_files()
+    found = []
+    for path in sorted((ROOT / "src" / "lodsprite" / "scene").glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if (isinstance(node, ast.Constant) and isinstance(node.value, str)
+                    and dotted.match(node.value)
+                    and node.value.partition(":")[0] in modules):  # names a module
+                found.append(f"{path.name}:{node.lineno} {node.value}")
+    assert found == []
+
+
 #: The shared helpers every level uses (atomic writers, mesh loading, the cluster extra's
 #: check, worker processes): the bottom of the package, importing nothing of it but errors.
 BASE = ("lodsprite.files", "lodsprite.meshes", "lodsprite.cluster", "lodsprite.workers",

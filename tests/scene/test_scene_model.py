@@ -115,7 +115,7 @@ def test_the_wire_description_round_trips_and_hostile_ones_are_refused():
     from lodsprite.scene.spec import SceneSpec, describe, open_spec
 
     scene = open_scene("fractal:64", grid=32)
-    spec = describe(scene, grid=32)
+    spec = describe(scene)  # grid: the working field's 32 quads
     raw = msgspec.msgpack.encode(spec)
     assert msgspec.msgpack.decode(raw, type=SceneSpec) == spec
     np.testing.assert_array_equal(open_spec(spec).hf.heights, scene.hf.heights)
@@ -130,3 +130,17 @@ def test_the_wire_description_round_trips_and_hostile_ones_are_refused():
             msgspec.msgpack.decode(msgspec.msgpack.encode(hostile), type=SceneSpec)
     with pytest.raises(InputError):
         describe(open_scene("crowd:3"))
+
+
+def test_the_web_scene_message_is_made_from_the_scene():
+    """A web page's scene message is made from a Scene's terrain layer: its heights are
+    the working field's coarse level (row 0 south); a scene without terrain has none."""
+    from lodsprite.distributed.messages import LoadArgs
+    from lodsprite.distributed.web.scene import decode_scene, scene_parts
+
+    scene = open_scene("fractal:64", grid=32)
+    data = decode_scene(scene_parts(scene, LoadArgs(terrain="fractal:64", grid=32, lod=8)))
+    np.testing.assert_array_equal(data.heights, scene.hf.heights[::4, ::4][::-1])
+    assert data.header.coarse == 8
+    with pytest.raises(InputError):
+        scene_parts(open_scene("crowd:3"), LoadArgs())

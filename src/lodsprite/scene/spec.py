@@ -43,13 +43,15 @@ class SceneSpec(Struct, forbid_unknown_fields=True, omit_defaults=True):
             raise ValueError(f"grid {self.grid} is not a power of two")
 
 
-def describe(scene: Scene, grid: int | None = None, exaggeration: float = 1.0) -> SceneSpec:
-    """The description of ``scene``'s terrain layer (``grid`` and ``exaggeration`` as it
-    was loaded with; the height field keeps no record of them); raises
+def describe(scene: Scene) -> SceneSpec:
+    """The description of ``scene``'s terrain layer: its specs, its working grid (the
+    height field's quads a side) and the exaggeration it was loaded with; raises
     :class:`~lodsprite.errors.InputError` for a scene without terrain."""
-    if scene.hf is None or not scene.terrain_spec:
+    hf = scene.hf
+    if hf is None or not scene.terrain_spec:
         raise InputError(f"scene {scene.name!r} has no terrain to describe on the wire")
-    return SceneSpec(scene.terrain_spec, scene.texture_spec or "terrain", grid, exaggeration)
+    return SceneSpec(scene.terrain_spec, scene.texture_spec or "terrain", hf.quads,
+                     float(hf.meta.get("exaggeration", 1.0)))
 
 
 def open_spec(spec: SceneSpec, light: bool = False) -> Scene:

@@ -29,6 +29,7 @@ from lodsprite.scene.file import (
     MAX_INSTANCES,
     ObjectSection,
     SceneFile,
+    builtin_meshes,
     read_scene_file,
 )
 from lodsprite.scene.model import LightField, Scene, load_scene
@@ -248,7 +249,7 @@ def _anchors(o: ObjectSection, at: str, lo: np.ndarray, hi: np.ndarray
 
 
 def _group(o: ObjectSection, field: str) -> Group:
-    if o.mesh in ("ogre", "tree"):
+    if o.mesh in builtin_meshes():
         t = builtin_type(o.mesh, o.height_m, o.lod, o.lod_floor)
         return Group([t], np.zeros(1, np.intp), np.zeros((1, 2)), np.zeros(1))
     group = load_group(o.mesh, o.height_m, o.lod, o.up, field)
