@@ -26,6 +26,7 @@ from lodsprite.distributed.link import ServerLink, control
 from lodsprite.distributed.render import scene_args
 from lodsprite.distributed.run import local_server
 from lodsprite.run import RenderConfig, prepare
+from lodsprite.scene.spec import SceneSpec
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from hostile import flood  # noqa: E402  (test-only traffic, kept with the tests)
@@ -63,7 +64,8 @@ def main() -> None:
         sent = flood(address, counts, seed=a.seed)
         flood_s = time.perf_counter() - t0
         ping, stats = server_stats(address)
-        client = LodClient(scene, scene_args(cfg.terrain, cfg.texture, None, 1.0, cfg.size),
+        client = LodClient(scene, scene_args(SceneSpec(cfg.terrain, cfg.texture, None, 1.0),
+                                             cfg.size),
                            [address], cfg.size, cfg.lod, pace="continuous")
         types = []
         try:

@@ -19,6 +19,7 @@ import numpy as np
 from lodsprite.distributed.protocol import CODECS, decode_keyframe, encode_keyframe
 from lodsprite.distributed.render import KeyframeRenderer, scene_args
 from lodsprite.paths import swan2002
+from lodsprite.scene.spec import SceneSpec
 from lodsprite.terrain import DEFAULT_EXAGGERATION, load_terrain
 
 LINKS_MBIT = (10, 100)
@@ -30,7 +31,8 @@ def main() -> None:
     ap.add_argument("--size", type=int, default=512)
     ap.add_argument("--keyframes", type=int, default=12)
     a = ap.parse_args()
-    args = {**scene_args(a.terrain, "terrain", None, DEFAULT_EXAGGERATION, (a.size, a.size)),
+    args = {**scene_args(SceneSpec(a.terrain, "terrain", None, DEFAULT_EXAGGERATION),
+                         (a.size, a.size)),
             "lod": 16, "visibility": "coarse", "epsilon": 1.0}
     renderer = KeyframeRenderer(args)
     path = list(swan2002(load_terrain(a.terrain), 600).viewpoints)

@@ -21,8 +21,8 @@ import time
 from lodsprite.gl.context import GLContext
 from lodsprite.manager.profile_compare import profile_vs_linear, type_profiles
 from lodsprite.manager.scene import build_crowd, walkthrough
+from lodsprite.profiles.object_lod import DEFAULT_THRESHOLD, stats
 from lodsprite.scene.objects import builtin_type
-from lodsprite.scene.profile_lod import DEFAULT_THRESHOLD, stats
 
 
 def main() -> None:

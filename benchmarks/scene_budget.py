@@ -93,7 +93,8 @@ def calibrate_terrain(terrain: str, size: int, frames: int) -> dict[str, float]:
 def calibrate_crowd(objects: int, size: int, frames: int) -> dict[str, float]:
     from lodsprite.api import Renderer
     from lodsprite.manager.scene import walkthrough
-    from lodsprite.manager.technique import create, open_scene
+    from lodsprite.manager.technique import create
+    from lodsprite.scene import open_scene
 
     scene = open_scene(f"crowd:{objects}")
     with Renderer(scene, (size, size), fov_y_deg=60.0) as r:
@@ -210,16 +211,16 @@ def compare(scene_file: str, target_fps: float, frames: int, size: int, path: st
     from lodsprite.api import Renderer
     from lodsprite.harness import run_path
     from lodsprite.scene.budget import steadiness
-    from lodsprite.scene.world import load_world
+    from lodsprite.scene.world import load_scene_file
 
     if not scene_file:
         scene_file = str(Path(tempfile.mkdtemp()) / "small.toml")
         Path(scene_file).write_text(SMALL_SCENE)
-    world = load_world(scene_file)
-    cam = world.scene.path(path or world.path, frames)
+    world = load_scene_file(scene_file)
+    cam = world.path(path or world.default_path, frames)
 
     def fly(schedule, fps):
-        with Renderer(world.scene, (size, size)) as r:
+        with Renderer(world, (size, size)) as r:
             t = techniques.create("scene", r, world=world, schedule=schedule,
                                   target_fps=fps)
             try:

@@ -44,11 +44,11 @@ def run(scene_file: Path, holds: str, frames: int, size: int, epsilon: float) ->
     from lodsprite.api import Renderer
     from lodsprite.harness import run_path
     from lodsprite.layered.technique import reference
-    from lodsprite.scene.world import load_world
+    from lodsprite.scene.world import load_scene_file
 
-    world = load_world(scene_file)
-    cam = world.scene.path(world.path, frames)
-    with Renderer(world.scene, (size, size), cam.fov_y_deg) as r:
+    world = load_scene_file(scene_file)
+    cam = world.path(world.default_path, frames)
+    with Renderer(world, (size, size), cam.fov_y_deg) as r:
         t = techniques.create("scene", r, world=world, terrain_mode="sprite",
                               keyframes=holds, epsilon=epsilon)
         image, ref = reference(r, world, cam, t.frame_s)

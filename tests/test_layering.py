@@ -82,6 +82,39 @@ def test_terrain_imports_neither_gl_nor_the_front_ends():
     assert describe(bad) == []
 
 
+def test_the_scene_model_imports_no_rendering():
+    """scene/ (the data model) reaches nothing of gl/ or moderngl, directly or through the
+    modules it imports (runtime edges, lazy ones included)."""
+    graph = importgraph.runtime_graph(EDGES)
+    seen, todo = set(), [m for m in graph if importgraph.unit(m) == "scene"]
+    while todo:
+        m = todo.pop()
+        if m not in seen:
+            seen.add(m)
+            todo.extend(graph.get(m, ()))
+    assert sorted(m for m in seen if importgraph.unit(m) == "gl") == []
+    assert not any(e.target == "moderngl" and e.source in seen and not e.type_only
+                   for e in EDGES)
+
+
+def test_the_scene_model_names_no_module_by_string():
+    """scene/ finds no module by a dotted string (SCENE_KINDS and the built-in meshes
+    did): other packages' scene kinds and models come through entry points."""
+    import ast
+    import re
+
+    dotted = re.compile(r"^lodsprite(\.\w+)+(:\w+)?$")
+    modules = importgraph.module_files()
+    found = []
+    for path in sorted((ROOT / "src" / "lodsprite" / "scene").glob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if (isinstance(node, ast.Constant) and isinstance(node.value, str)
+                    and dotted.match(node.value)
+                    and node.value.partition(":")[0] in modules):  # names a module
+                found.append(f"{path.name}:{node.lineno} {node.value}")
+    assert found == []
+
+
 #: The shared helpers every level uses (atomic writers, mesh loading, the cluster extra's
 #: check, worker processes): the bottom of the package, importing nothing of it but errors
 #: (and the process lifecycle, which workers build on).

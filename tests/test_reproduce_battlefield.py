@@ -75,14 +75,14 @@ def test_the_reference_scores_the_full_detail_scene_as_the_same_image(battlefiel
     from lodsprite.experiments.battlefield.run import BattlefieldConfig, PathRuns
     from lodsprite.harness import run_path
     from lodsprite.layered.technique import LayeredTechnique
-    from lodsprite.scene.world import load_world
+    from lodsprite.scene.world import load_scene_file
 
     out, r, _ = battlefield
     cfg = BattlefieldConfig(**{**r["config"], "paths": tuple(r["config"]["paths"])})
     monkeypatch.setenv("LODSPRITE_CACHE", str(tmp_path))  # built here if needed
-    world = load_world(out / "battlefield.toml")
-    cam = world.scene.path("weave", cfg.frames)
-    with Renderer(world.scene, (cfg.image, cfg.image), cam.fov_y_deg) as renderer:
+    world = load_scene_file(out / "battlefield.toml")
+    cam = world.path("weave", cfg.frames)
+    with Renderer(world, (cfg.image, cfg.image), cam.fov_y_deg) as renderer:
         images = PathRuns(renderer, world, cam, cfg).images
         t = LayeredTechnique(renderer, world, ground_truth=True)
         try:

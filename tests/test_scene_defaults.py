@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-import lodsprite.scene
+import lodsprite.scene.model
 from lodsprite.terrain.store import TerrainStore, build_store
 
 SIDE = 512
@@ -31,7 +31,7 @@ def reads(monkeypatch):
         return read(self, k, r0, r1, c0, c1)
 
     monkeypatch.setattr(TerrainStore, "read", spy)
-    monkeypatch.setattr(lodsprite.scene, "LIGHT_SIDE", 257)
+    monkeypatch.setattr(lodsprite.scene.model, "LIGHT_SIDE", 257)
     return seen
 
 

@@ -146,15 +146,15 @@ def test_after_the_warm_up_a_lumigraphs_first_frame_compiles_nothing(gl, monkeyp
 @pytest.mark.parametrize("terrain_mode", ["full", "adaptive", "sprite-adaptive"])
 def test_after_the_warm_up_a_scenes_first_frame_compiles_and_streams_nothing(
         gl, monkeypatch, tmp_path, terrain_mode):
-    from lodsprite.scene.world import load_world
+    from lodsprite.scene.world import load_scene_file
 
     toml = tmp_path / "scene.toml"
     toml.write_text('[terrain]\nsource = "fractal:128:3"\n\n[[objects]]\nmesh = "ogre"\n'
                     'height_m = 20.0\ncount = 12\nseed = 1\nwalk_mps = 1.5\n'
                     'area = [-300.0, -300.0, 300.0, 300.0]\nlod = "linear"\n')
-    world = load_world(toml, textured=False)
-    path = world.scene.path("flyover", 2)
-    with Renderer(world.scene, (64, 48), path.fov_y_deg, ctx=gl.mgl) as renderer:
+    world = load_scene_file(toml, textured=False)
+    path = world.path("flyover", 2)
+    with Renderer(world, (64, 48), path.fov_y_deg, ctx=gl.mgl) as renderer:
         t = techniques.create("scene", renderer, world=world, terrain_mode=terrain_mode,
                               lod=8)
         try:

@@ -13,6 +13,16 @@ A minimal session::
             frame = sprite.frame(vp)          # keyframe or spriteframe, timed
         ls.write_image("last.png", sprite.read_image())
 
+Any scene: :meth:`Renderer.draw` draws every layer the scene has (terrain, objects, light
+fields) composited by depth at full detail, through the scene technique's layers
+(:class:`~lodsprite.layered.technique.LayeredTechnique`); a scene without terrain (a
+crowd) too::
+
+    scene = ls.open_scene("crowd:200")
+    with ls.Renderer(scene, size=(512, 512), fov_y_deg=60.0) as renderer:
+        renderer.draw(scene.path("walk", 2).viewpoints[0])
+        image = renderer.read_color()
+
 Embedding: ``Renderer(scene, size, ctx=app_ctx)`` draws with an application's moderngl
 context (for example a moderngl-window window's ``ctx``) and :meth:`Renderer.draw_to` /
 :meth:`LodSprite.draw_to` put the last frame into the application's framebuffer.
@@ -22,7 +32,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from PIL import Image
@@ -44,12 +54,16 @@ from lodsprite.terrain.lod import DEFAULT_COARSE
 if TYPE_CHECKING:  # hints only: moderngl is imported under gl/
     import moderngl
 
+    from lodsprite.gl.target import RenderTarget
+    from lodsprite.techniques.base import Frame
+
 MAX_IMAGE_PIXELS = 1 << 28
 
 
 class Renderer:
-    """One scene on one GL context: full-resolution and uniform-level frames of
-    ``size = (w, h)`` pixels with a vertical field of view ``fov_y_deg`` (degrees).
+    """One scene on one GL context: frames of ``size = (w, h)`` pixels with a vertical
+    field of view ``fov_y_deg`` (degrees): every layer composited (:meth:`draw`), or the
+    terrain at full resolution or a uniform level (:meth:`render`).
 
     ``ctx=None`` makes a headless EGL context that the renderer owns; a
     :class:`moderngl.Context` (current on this thread) is used as it is and never
@@ -87,6 +101,8 @@ class Renderer:
         self._presenter: Presenter | None = None
         self._sprites: list[LodSprite] = []  # released with the renderer
         self._own_paths = True
+        self._own_target: RenderTarget | None = None  # a scene without terrain's image
+        self._layers: Any = None  # the layered reference drawing every layer (draw())
 
     @classmethod
     def wrap(cls, paths: PathRenderer) -> Renderer:
@@ -99,6 +115,7 @@ class Renderer:
         self.fov_y_deg = float(r.fov_y_deg)
         self.gl, self._paths = paths.ctx, paths
         self._presenter, self._sprites, self._own_paths = None, [], False
+        self._own_target, self._layers = None, None
         return self
 
     @property
@@ -116,6 +133,34 @@ class Renderer:
             raise InputError("this scene has no terrain layer to draw")
         return self._paths
 
+    @property
+    def target(self) -> RenderTarget:
+        """The image every layer draws into: the terrain's, or (a scene without terrain)
+        one of the renderer's own, with a depth buffer, made on first use."""
+        if self._paths is not None:
+            return self._paths.renderer.target
+        if self._own_target is None:
+            from lodsprite.gl.target import RenderTarget
+
+            self._own_target = RenderTarget(self.gl, *self.size)
+        return self._own_target
+
+    def draw(self, viewpoint: Viewpoint, t: float = 0.0) -> Frame:
+        """Draw every layer of the scene at ``viewpoint`` and time ``t`` seconds (walkers
+        moved), composited by depth at full detail: full-resolution terrain, full meshes,
+        every light field node (the ``scene`` technique's reference, :func:`~lodsprite.
+        layered.technique.reference`, made through the registry); returns once the GL
+        work is done."""
+        from lodsprite import techniques
+
+        if self._layers is None:
+            self._layers = techniques.create("scene", self, ground_truth=True)
+            self._layers.warm_up(viewpoint)
+        self._layers.index = max(0, round(float(t) / self._layers.frame_s))
+        frame = self._layers.frame(viewpoint)
+        self.gl.finish()
+        return frame
+
     def projection(self, viewpoint: Viewpoint) -> Projection:
         """The frame projection at ``viewpoint`` (near/far fitted to the terrain; without
         one, 0.1 m to 100 km)."""
@@ -131,12 +176,12 @@ class Renderer:
         return stats
 
     def read_color(self) -> np.ndarray:
-        """The last image, ``(h, w, 3) uint8``, row 0 at the top."""
-        return self._terrain().renderer.target.read_color()
+        """The last image, ``(h, w, 3) uint8``, row 0 at the top (any scene's)."""
+        return self.target.read_color()
 
     def read_depth(self) -> np.ndarray:
         """The last z-buffer, ``(h, w) float32`` window depth in [0, 1], row 0 at the top."""
-        return self._terrain().renderer.target.read_depth()
+        return self.target.read_depth()
 
     def sprite(self, epsilon_px: float = DEFAULT_EPSILON_PX, lod: int = DEFAULT_COARSE,
                threaded: bool = False, visibility: str = DEFAULT_VISIBILITY,
@@ -166,7 +211,7 @@ class Renderer:
         """Draw the last image over ``framebuffer``'s viewport (default: the context's
         screen, the window of an embedding application).  Rendering binds lodsprite's own
         targets, so an application passes the framebuffer it draws into next."""
-        target = self._terrain().renderer.target
+        target = self.target
         if target.external:  # already drawn there, or copied from there
             dst = framebuffer if framebuffer is not None else self.gl.default_fbo
             if dst is not target.fbo and dst.glo != target.fbo.glo:
@@ -196,6 +241,12 @@ class Renderer:
         for sprite in self._sprites:
             sprite.release()
         self._sprites.clear()
+        if self._layers is not None:
+            self._layers.release()
+            self._layers = None
+        if self._own_target is not None:
+            self._own_target.release()
+            self._own_target = None
         if self._presenter is not None:
             self._presenter.release()
             self._presenter = None

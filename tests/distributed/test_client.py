@@ -10,6 +10,7 @@ import zmq
 
 from conftest import wait_until
 from lodsprite.distributed.link import ServerLink
+from lodsprite.scene.spec import SceneSpec
 
 PING = {"kind": "control", "seq": 1, "op": "ping", "args": {}}
 FLOOD = 5_000  # refused keyframes a flood sends (1000 never filled the client's queue)
@@ -256,7 +257,7 @@ class _FakeLodServer:
         from lodsprite.distributed.render import scene_args
 
         c = self.cfg
-        return LodClient(self.scene, scene_args(c.terrain, c.texture, None, 1.0, c.size),
+        return LodClient(self.scene, scene_args(SceneSpec(c.terrain, c.texture, None, 1.0), c.size),
                          [f"127.0.0.1:{self.port}"], c.size, c.lod, **kw)
 
     def message(self, seq, vp, size=64) -> list:

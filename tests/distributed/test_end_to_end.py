@@ -15,6 +15,7 @@ from lodsprite.distributed.client import DEFAULT_MAX_ERROR, LodClient
 from lodsprite.distributed.render import scene_args
 from lodsprite.distributed.run import free_ports
 from lodsprite.run import RenderConfig, prepare
+from lodsprite.scene.spec import SceneSpec
 
 SMALL = RenderConfig(terrain="fractal:64:2", size=(64, 64), lod=8, frames=40,
                      path="chen1999", mode="sprite")
@@ -36,7 +37,7 @@ def server_and_client(scene, **client_kw):
     """A server process on free loopback ports and a client of it: (address, server, client)."""
     address = f"127.0.0.1:{free_ports()}"
     server = start_server(address)
-    args = scene_args(SMALL.terrain, SMALL.texture, None, SMALL.exaggeration, SMALL.size)
+    args = scene_args(SceneSpec(SMALL.terrain, SMALL.texture, None, SMALL.exaggeration), SMALL.size)
     return address, server, LodClient(scene, args, [address], SMALL.size, SMALL.lod,
                                       **client_kw)
 
@@ -154,7 +155,7 @@ def test_a_bounded_client_renders_its_own_keyframes_once_the_server_is_gone(scen
 def test_client_without_any_server_renders_keyframes_itself(scene):
     sc, path = scene
     address = f"127.0.0.1:{free_ports()}"
-    args = scene_args(SMALL.terrain, SMALL.texture, None, SMALL.exaggeration, SMALL.size)
+    args = scene_args(SceneSpec(SMALL.terrain, SMALL.texture, None, SMALL.exaggeration), SMALL.size)
     client = LodClient(sc, args, [address], SMALL.size, SMALL.lod)
     try:
         frames = [client.frame(vp) for vp in path.viewpoints[:10]]
@@ -269,7 +270,7 @@ def test_curve_keys_admit_the_right_client_and_refuse_a_wrong_one(scene, tmp_pat
     server = subprocess.Popen([sys.executable, "-c", "from lodsprite.cli import main; main()",
                                "serve", "--bind", address, "--keys", str(tmp_path / "good")],
                               stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    args = scene_args(SMALL.terrain, SMALL.texture, None, SMALL.exaggeration, SMALL.size)
+    args = scene_args(SceneSpec(SMALL.terrain, SMALL.texture, None, SMALL.exaggeration), SMALL.size)
     try:
         good = LodClient(sc, args, [address], SMALL.size, SMALL.lod,
                          keys=ClientKeys.load(tmp_path / "good"))

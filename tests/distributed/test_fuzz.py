@@ -21,6 +21,7 @@ from lodsprite.distributed.protocol import (
 )
 from lodsprite.distributed.run import free_ports
 from lodsprite.distributed.server import LodServer
+from lodsprite.scene.spec import SceneSpec
 
 FAST = settings(max_examples=150, deadline=None,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])
@@ -192,7 +193,8 @@ def test_a_flooded_server_still_serves_a_real_client():
         cfg = RenderConfig(terrain="fractal:64:2", size=(64, 64), lod=8, frames=20,
                            path="chen1999", mode="sprite")
         scene, path = prepare(cfg)
-        client = LodClient(scene, scene_args(cfg.terrain, cfg.texture, None, 1.0, cfg.size),
+        client = LodClient(scene, scene_args(SceneSpec(cfg.terrain, cfg.texture, None, 1.0),
+                                             cfg.size),
                            [address], cfg.size, cfg.lod, pace="continuous")
         try:
             deadline = time.perf_counter() + 40

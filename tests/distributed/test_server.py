@@ -19,6 +19,7 @@ from lodsprite.distributed.protocol import decode, decode_keyframe, encode
 from lodsprite.distributed.run import free_ports
 from lodsprite.distributed.server import LodServer, endpoints
 from lodsprite.errors import InputError
+from lodsprite.scene.spec import SceneSpec
 
 A, B = "a" * 16, "b" * 16
 SMALL = {"terrain": "fractal:64:1", "size": [64, 64], "lod": 8}
@@ -468,7 +469,7 @@ def test_a_client_gets_keyframes_again_after_a_passing_render_failure(live, monk
     cfg = RenderConfig(terrain="fractal:64:2", size=(64, 64), lod=8, frames=5,
                        path="chen1999", mode="sprite")
     scene, path = prepare(cfg)
-    client = LodClient(scene, scene_args(cfg.terrain, cfg.texture, None, 1.0, cfg.size),
+    client = LodClient(scene, scene_args(SceneSpec(cfg.terrain, cfg.texture, None, 1.0), cfg.size),
                        [live.address], cfg.size, cfg.lod)
     try:
         deadline = time.perf_counter() + 60.0  # a hang guard

@@ -12,8 +12,8 @@ from lodsprite.manager import profile_compare as pc
 from lodsprite.manager.engine import CrowdEngine
 from lodsprite.manager.models import ProgressiveMesh
 from lodsprite.manager.scene import build_crowd
+from lodsprite.profiles.object_lod import TypeProfile
 from lodsprite.profiles.table import ProfileTable
-from lodsprite.scene.profile_lod import TypeProfile
 
 
 def ball(name: str, radius: float) -> ProgressiveMesh:

@@ -13,7 +13,7 @@ import pytest
 from lodsprite import techniques
 from lodsprite.api import Renderer
 from lodsprite.camera import look_at
-from lodsprite.scene.world import load_world
+from lodsprite.scene.world import load_scene_file
 
 SIZE = (64, 48)
 
@@ -25,14 +25,14 @@ def flat_world(folder: Path):
     (folder / "scene.toml").write_text(
         '[terrain]\nsource = "flat.npy"\ngrid = 32\ntexture = "checker:4"\n'
         '[[objects]]\nmesh = "ogre"\nheight_m = 8.0\npoints = "near.csv"\n')
-    return load_world(folder / "scene.toml")
+    return load_scene_file(folder / "scene.toml")
 
 
 @pytest.mark.parametrize("fps, finest", [(1.0, True), (1e5, False)])
 def test_the_scheduler_turns_every_knob(gl, tmp_path, fps, finest):
     world = flat_world(tmp_path)
     vps = [look_at((0.0, -150.0 + 2 * i, 15.0), (0.0, 0.0, 4.0)) for i in range(6)]
-    with Renderer(world.scene, SIZE, 45.0, ctx=gl.mgl) as r:
+    with Renderer(world, SIZE, 45.0, ctx=gl.mgl) as r:
         t = techniques.create("scene", r, world=world, schedule="scheduler", target_fps=fps)
         try:
             t.warm_up(vps[0])

@@ -17,7 +17,7 @@ import pytest
 from lodsprite import techniques
 from lodsprite.api import Renderer
 from lodsprite.camera import look_at, project_points
-from lodsprite.scene.world import load_world
+from lodsprite.scene.world import load_scene_file
 
 N, SPACING_M = 32, 30.0          # 960 m square, x and y in -480..480
 SIZE = (96, 64)
@@ -52,7 +52,7 @@ def world_with(folder: Path, objects: list[tuple[list, float]], lightfields: str
         (folder / f"p{k}.csv").write_text("\n".join(f"{x},{y}" for x, y in points) + "\n")
         body += (f'[[objects]]\nmesh = "cube.off"\nheight_m = 50.0\npoints = "p{k}.csv"\n'
                  f"walk_mps = {walk}\n")
-    return load_world(scene_file(folder, body + lightfields, ridge_m))
+    return load_scene_file(scene_file(folder, body + lightfields, ridge_m))
 
 
 def pixel(renderer, vp, xyz) -> tuple[int, int]:
@@ -76,7 +76,7 @@ def cubes_over(gl, folder: Path, ridge_m: float):
     front pixel, behind pixel)``."""
     world = world_with(folder, [([FRONT, BEHIND], 0.0)], ridge_m=ridge_m)
     vp = look_at(EYE, AIM)
-    with Renderer(world.scene, SIZE, 45.0, ctx=gl.mgl) as r:
+    with Renderer(world, SIZE, 45.0, ctx=gl.mgl) as r:
         r.render(vp, None)
         bare = r.read_color().astype(int)
         t = techniques.create("scene", r, world=world, terrain_mode="full")
@@ -115,7 +115,7 @@ def test_a_light_field_shows_only_where_its_proxy_is_in_front(gl, tmp_path, lf_f
                   f"height_m = 120.0\n" for x, y in (FRONT, BEHIND))
     world = world_with(tmp_path, [], lfs)
     vp = look_at(EYE, AIM)
-    with Renderer(world.scene, SIZE, 45.0, ctx=gl.mgl) as r:
+    with Renderer(world, SIZE, 45.0, ctx=gl.mgl) as r:
         r.render(vp, None)
         bare = r.read_color().astype(int)
         t = techniques.create("scene", r, world=world, terrain_mode="full")
@@ -144,7 +144,7 @@ def test_a_light_field_shows_only_where_its_proxy_is_in_front(gl, tmp_path, lf_f
 def test_walkers_move_while_keyframes_hold_the_static_objects(gl, tmp_path):
     world = world_with(tmp_path, [([FRONT], 0.0), ([(60.0, -300.0)], 100.0)])
     vps = [look_at(EYE, AIM)] * 3
-    with Renderer(world.scene, SIZE, 45.0, ctx=gl.mgl) as r:
+    with Renderer(world, SIZE, 45.0, ctx=gl.mgl) as r:
         t = techniques.create("scene", r, world=world, terrain_mode="sprite", epsilon=64.0,
                               lod=8, frame_s=1.0)
         try:
@@ -153,8 +153,8 @@ def test_walkers_move_while_keyframes_hold_the_static_objects(gl, tmp_path):
             key = t.terrain.sprite.sprite.keyframe_color().astype(int)
             r.render(vps[0], None)
             bare = r.read_color().astype(int)
-            p0 = world.poses(0.0)[1]
-            p1 = world.poses(1.0)[1]
+            p0 = world.objects.poses(0.0)[1]
+            p1 = world.objects.poses(1.0)[1]
             static = pixel(r, vps[0], (*FRONT, 25.0))
             walker0 = pixel(r, vps[0], (p0[0], p0[1], p0[2] + 25.0))
         finally:
@@ -173,7 +173,7 @@ def test_the_replay_draws_the_timed_frames(gl, tmp_path, lf_folder, mode):
     lfs = f'[[lightfields]]\nsource = "{lf_folder}"\nposition = [0.0, -200.0]\nheight_m = 80.0\n'
     world = world_with(tmp_path, [([FRONT], 0.0), ([(60.0, -300.0)], 40.0)], lfs)
     vps = [look_at((x, -470.0, 40.0), (x, 0.0, 40.0)) for x in np.linspace(0, 60, 4)]
-    with Renderer(world.scene, SIZE, 45.0, ctx=gl.mgl) as r:
+    with Renderer(world, SIZE, 45.0, ctx=gl.mgl) as r:
         t = techniques.create("scene", r, world=world, terrain_mode=mode, epsilon=2.0, lod=8)
         try:
             t.plan_replay({0, 1, 2, 3})
@@ -201,7 +201,7 @@ def test_planned_replays_keep_host_copies_not_a_gpu_target_per_frame(gl, tmp_pat
     lfs = f'[[lightfields]]\nsource = "{lf_folder}"\nposition = [0.0, -200.0]\nheight_m = 80.0\n'
     world = world_with(tmp_path, [], lfs)
     vps = [look_at((x, -470.0, 40.0), (x, 0.0, 40.0)) for x in (0.0, 20.0, 40.0)]
-    with Renderer(world.scene, SIZE, 45.0, ctx=gl.mgl) as r:
+    with Renderer(world, SIZE, 45.0, ctx=gl.mgl) as r:
         t = techniques.create("scene", r, world=world, terrain_mode="full")
         try:
             monkeypatch.setattr(gl_lumigraph, "FloatTarget", Counted)
@@ -221,7 +221,7 @@ def test_frames_without_a_planned_replay_log_nothing(gl, tmp_path):
     # review finding 10: the objects layer appended a list a frame even with no replay
     world = world_with(tmp_path, [([FRONT], 0.0), ([(60.0, -300.0)], 40.0)])
     vps = [look_at(EYE, AIM)] * 4
-    with Renderer(world.scene, SIZE, 45.0, ctx=gl.mgl) as r:
+    with Renderer(world, SIZE, 45.0, ctx=gl.mgl) as r:
         t = techniques.create("scene", r, world=world, terrain_mode="full")
         try:
             run(t, vps)
@@ -302,7 +302,7 @@ def test_the_reference_is_the_scene_at_full_detail(gl, tmp_path):
     world = world_with(tmp_path, [([FRONT, BEHIND], 0.0), ([(60.0, -300.0)], 20.0)])
     path = CameraPath("t", tuple(look_at((x, -470.0, 40.0), (x, 0.0, 40.0))
                                  for x in (0.0, 20.0, 40.0)), 45.0)
-    with Renderer(world.scene, SIZE, 45.0, ctx=gl.mgl) as r:
+    with Renderer(world, SIZE, 45.0, ctx=gl.mgl) as r:
         truth, ref = reference(r, world, path)
         runs = {}
         try:
@@ -332,7 +332,7 @@ def test_the_cropped_reconstruction_matches_a_whole_frame_one(gl, tmp_path, lf_f
     lf = Lumigraph(lf_folder)
     eye, centre = default_path(lf, 2).viewpoints[0].o, lf.slabs[0].frame[:3, 3]
     images = []
-    with Renderer(world.scene, (96, 96), 45.0, ctx=gl.mgl) as r:
+    with Renderer(world, (96, 96), 45.0, ctx=gl.mgl) as r:
         r.render(look_at((0.0, -470.0, 40.0), (0.0, 0.0, 40.0)), None)
         for whole in (False, True):
             if whole:
@@ -415,7 +415,7 @@ def test_a_draw_count_setting_leaves_out_the_objects_under_its_height(gl, tmp_pa
         folder.mkdir()
         world = world_with(folder, [(points, 0.0)], ridge_m=0.0)
         out = {}
-        with Renderer(world.scene, SIZE, 45.0, ctx=gl.mgl) as r:
+        with Renderer(world, SIZE, 45.0, ctx=gl.mgl) as r:
             t = techniques.create("scene", r, world=world, terrain_mode="full")
             try:
                 t.warm_up(vp)
@@ -481,7 +481,7 @@ def test_no_timed_frame_reads_the_gpu_back(gl, tmp_path, lf_folder, monkeypatch)
     lfs = f'[[lightfields]]\nsource = "{lf_folder}"\nposition = [0.0, -200.0]\nheight_m = 80.0\n'
     world = world_with(tmp_path, [([FRONT], 0.0), ([(60.0, -300.0)], 40.0)], lfs)
     vps = [look_at((x, -470.0, 40.0), (x, 0.0, 40.0)) for x in np.linspace(0, 60, 4)]
-    with Renderer(world.scene, SIZE, 45.0, ctx=gl.mgl) as r:
+    with Renderer(world, SIZE, 45.0, ctx=gl.mgl) as r:
         t = techniques.create("scene", r, world=world, terrain_mode="sprite", epsilon=2.0)
         try:
             result = harness.run_path(t, CameraPath("east", tuple(vps), 45.0),
@@ -503,7 +503,7 @@ def test_the_budget_weighs_each_layer_by_its_measured_coverage(gl, tmp_path, lf_
     lfs = f'[[lightfields]]\nsource = "{lf_folder}"\nposition = [0.0, -200.0]\nheight_m = 80.0\n'
     world = world_with(tmp_path, [([FRONT, (-60.0, -300.5)], 0.0)], lfs, ridge_m=80.0)
     vp = look_at(EYE, AIM)
-    with Renderer(world.scene, SIZE, 45.0, ctx=gl.mgl) as r:
+    with Renderer(world, SIZE, 45.0, ctx=gl.mgl) as r:
         t = techniques.create("scene", r, world=world, terrain_mode="adaptive",
                               schedule="scheduler", target_fps=5.0)
         try:
@@ -539,7 +539,7 @@ def test_the_terrain_coverage_pools_its_heights_in_the_warm_up_not_in_a_frame(
     monkeypatch.setattr(coverage, "coarse_max", counted)
     world = world_with(tmp_path, [([FRONT], 0.0)])
     vps = [look_at((x, -470.0, 40.0), (x, 0.0, 40.0)) for x in np.linspace(0, 60, 6)]
-    with Renderer(world.scene, SIZE, 45.0, ctx=gl.mgl) as r:
+    with Renderer(world, SIZE, 45.0, ctx=gl.mgl) as r:
         t = techniques.create("scene", r, world=world, terrain_mode="adaptive")
         try:
             phase = "warm-up"

@@ -12,7 +12,7 @@ import pytest
 from lodsprite.errors import InputError, SceneFileError
 from lodsprite.scene import file as scene_file
 from lodsprite.scene.file import read_scene_file
-from lodsprite.scene.world import load_world
+from lodsprite.scene.world import load_scene_file
 
 TERRAIN = '[terrain]\nsource = "fractal:64"\n'
 
@@ -25,7 +25,7 @@ def write(folder: Path, text: str, name: str = "scene.toml") -> Path:
 
 def refusal(path: Path) -> str:
     with pytest.raises(SceneFileError) as info:
-        load_world(path)
+        load_scene_file(path)
     message = str(info.value)
     assert "\n" not in message
     assert isinstance(info.value, InputError)

@@ -12,7 +12,7 @@ import pytest
 from lodsprite.errors import SceneFileError
 from lodsprite.scene import placement
 from lodsprite.scene.walk import walk
-from lodsprite.scene.world import World, load_world
+from lodsprite.scene.world import World, load_scene_file, summary
 
 SLOPE = (0.05, -0.02)          # the tilted plane's dz/dx, dz/dy
 SPACING_M = 30.0               # a .npy terrain's spacing (lodsprite.terrain.loaders)
@@ -36,7 +36,7 @@ def world_of(folder: Path, body: str) -> World:
     trimesh.creation.box((1.0, 1.0, 1.0)).export(folder / "cube.off")
     scene = folder / "scene.toml"
     scene.write_text(f'[terrain]\nsource = "plane.npy"\ngrid = {N}\n' + body)
-    return load_world(scene, textured=False)
+    return load_scene_file(scene, textured=False).objects
 
 
 def plane_z(xy: np.ndarray) -> np.ndarray:
@@ -291,7 +291,7 @@ def test_poses_are_one_vectorised_pass(tmp_path: Path, monkeypatch: pytest.Monke
 
 def test_the_example_battlefield_loads() -> None:
     example = Path(__file__).resolve().parents[2] / "examples" / "battlefield.toml"
-    w = load_world(example, textured=False)
+    w = load_scene_file(example, textured=False).objects
     assert [t.name for t in w.types] == ["ogre", "tree"]
     assert w.count == 3100 and int(w.moving().sum()) == 3000
     xy = w.poses(60.0)[:3000, :2]
@@ -304,11 +304,13 @@ def test_light_fields_stand_where_the_file_puts_them(tmp_path: Path) -> None:
         (tmp_path / name / "lumigraph.json").write_text("{}")
     body = "".join(f'[[lightfields]]\nsource = "{n}"\nposition = [{x}, -30.0]\nheight_m = 30\n'
                    for n, x in (("statue.lf", 120.0), ("tree.lf", -400.0)))
-    w = world_of(tmp_path, body)
-    assert [(lf.source, lf.position, lf.height_m) for lf in w.lightfields] == [
+    plane_terrain(tmp_path)
+    (tmp_path / "scene.toml").write_text(f'[terrain]\nsource = "plane.npy"\ngrid = {N}\n' + body)
+    scene = load_scene_file(tmp_path / "scene.toml", textured=False)
+    assert [(lf.source, lf.position, lf.height_m) for lf in scene.lightfields] == [
         (tmp_path / "statue.lf", (120.0, -30.0), 30.0), (tmp_path / "tree.lf", (-400.0, -30.0),
                                                          30.0)]
-    assert w.summary()[2] == ("lightfields: 2 (statue.lf at (120, -30), 30 m; tree.lf at "
+    assert summary(scene)[2] == ("lightfields: 2 (statue.lf at (120, -30), 30 m; tree.lf at "
                               "(-400, -30), 30 m)")
 
 
@@ -328,7 +330,7 @@ def test_lod_floor_sets_the_coarsest_lod_of_built_ins_and_meshes(tmp_path):
             '[[objects]]\nmesh = "cube.off"\nheight_m = 3.0\ncount = 2\nlod_floor = 0.05\n'
             '[[objects]]\nmesh = "tree"\ncount = 2\n')
     (tmp_path / "scene.toml").write_text(body)
-    crowd = world_crowd(load_world(tmp_path / "scene.toml"))
+    crowd = world_crowd(load_scene_file(tmp_path / "scene.toml").objects)
     floors = [m.triangles(0.0) / m.triangles(1.0) for m in crowd.models]
     assert floors[0] == pytest.approx(0.02, abs=0.005)
     assert floors[1] == pytest.approx(0.05, abs=0.01)

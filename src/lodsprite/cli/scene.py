@@ -22,8 +22,7 @@ def scene_check(
 ) -> None:
     """Read and validate a scene file, build its world (terrain, meshes, placement) and
     print one line per layer; a bad file is one line naming the field, exit code 2."""
-    from lodsprite.scene.world import load_world
+    from lodsprite.scene.world import load_scene_file, summary
 
-    world = load_world(file, light=light, textured=False)
-    for line in world.summary():
+    for line in summary(load_scene_file(file, light=light, textured=False)):
         out.print(line, markup=False, highlight=False)

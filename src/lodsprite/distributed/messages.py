@@ -11,6 +11,9 @@ from msgspec import Meta, Struct, field
 
 from lodsprite.distributed.pacing import DEFAULT_PACE
 from lodsprite.errors import LodspriteError
+from lodsprite.scene.file import MAX_GRID as SCENE_MAX_GRID
+from lodsprite.scene.spec import MAX_NAME as SCENE_MAX_NAME
+from lodsprite.scene.spec import SceneSpec
 
 PROTOCOL_VERSION = 4
 """4: the web wire's ``request`` and ``scene`` kinds (:mod:`lodsprite.distributed.web`)."""
@@ -25,12 +28,12 @@ PACE_NAMES = ("needed", "continuous")  # lodsprite.distributed.pacing.PACES
 
 MAX_IMAGE_SIDE = 4096
 """Largest keyframe (and server render target) side in pixels."""
-MAX_GRID = 8192
-"""Largest working grid (quads per side) a ``load`` may ask for."""
+MAX_GRID = SCENE_MAX_GRID
+"""Largest working grid (quads per side) a ``load`` may ask for (a scene file's cap)."""
 MAX_SLOTS = 64
 """Most servers one client may use."""
-MAX_NAME = 256
-"""Longest terrain or texture name, characters."""
+MAX_NAME = SCENE_MAX_NAME
+"""Longest terrain or texture name, characters (a scene description's cap)."""
 MAX_COORD = 1e9
 """Largest coordinate (metres) of a viewpoint on the wire."""
 MAX_TIME = 1e12
@@ -85,16 +88,14 @@ class Shown(Struct, forbid_unknown_fields=True):
     slot: Slot
 
 
-class LoadArgs(Struct, forbid_unknown_fields=True, omit_defaults=True):
-    """Arguments of ``load``: the scene (terrain and texture names, working grid in quads,
-    vertical exaggeration, keyframe size ``(width, height)`` px, vertical field of view in
-    degrees) and the client's sprite settings (coarse level in quads, visibility rule,
-    border ribbons, ε in pixels, pace) and its place among its servers (slot of slots)."""
+class LoadArgs(SceneSpec, forbid_unknown_fields=True, omit_defaults=True):
+    """Arguments of ``load``: the scene's description (:class:`~lodsprite.scene.spec.
+    SceneSpec`: terrain and texture names, working grid in quads, vertical exaggeration,
+    with the scene files' caps), keyframe size ``(width, height)`` px, vertical field of
+    view in degrees, the client's sprite settings (coarse level in quads, visibility
+    rule, border ribbons, ε in pixels, pace) and its place among its servers (slot of
+    slots)."""
 
-    terrain: Name = "jacksboro"
-    texture: Name = "terrain"
-    grid: Annotated[int, Meta(ge=16, le=MAX_GRID)] | None = None
-    exaggeration: Annotated[float, Meta(gt=0.0, le=1000.0)] = 1.0
     size: tuple[Side, Side] = (512, 512)
     fov_y_deg: Annotated[float, Meta(ge=1.0, le=179.0)] = 45.0
     lod: Annotated[int, Meta(ge=1, le=MAX_GRID)] = 16
@@ -106,8 +107,7 @@ class LoadArgs(Struct, forbid_unknown_fields=True, omit_defaults=True):
     slots: Annotated[int, Meta(ge=1, le=MAX_SLOTS)] = 1
 
     def __post_init__(self) -> None:
-        if self.grid is not None and self.grid & (self.grid - 1):
-            raise ValueError(f"grid {self.grid} is not a power of two")
+        super().__post_init__()
         if self.lod & (self.lod - 1):
             raise ValueError(f"lod {self.lod} is not a power of two")
         if self.grid is not None and self.lod > self.grid:

@@ -15,7 +15,7 @@ from lodsprite.distributed.protocol import Keyframe, LoadArgs, check_load_args
 from lodsprite.gl.context import GLContext
 from lodsprite.gl.paths import PathRenderer
 from lodsprite.gl.target import RenderTarget
-from lodsprite.scene import load_scene
+from lodsprite.scene.spec import SceneSpec, open_spec
 from lodsprite.terrain.heightfield import DEFAULT_GRID
 
 __all__ = ["MEMORY_FRACTION", "KeyframeRenderer", "check_load_args", "check_scene_memory",
@@ -28,12 +28,13 @@ SCENE_KEYS = ("terrain", "texture", "grid", "exaggeration", "size", "fov_y_deg")
 SPRITE_KEYS = ("lod", "visibility", "border", "epsilon", "pace")
 
 
-def scene_args(terrain: str, texture: str, grid: int | None, exaggeration: float,
-               size: tuple[int, int], fov_y_deg: float = 45.0) -> dict:
-    """The scene part of the ``load`` control message's arguments (the client adds its
+def scene_args(scene: SceneSpec, size: tuple[int, int], fov_y_deg: float = 45.0) -> dict:
+    """The scene part of the ``load`` control message's arguments: the scene's description
+    (:class:`~lodsprite.scene.spec.SceneSpec`, e.g. :func:`~lodsprite.scene.spec.describe`
+    of a scene), the keyframe size and field of view (the client adds its
     ``SPRITE_KEYS``: coarse level, visibility rule, border ribbons, ε in pixels, pace)."""
-    return {"terrain": terrain, "texture": texture, "grid": grid,
-            "exaggeration": exaggeration, "size": list(size), "fov_y_deg": fov_y_deg}
+    return {"terrain": scene.terrain, "texture": scene.texture, "grid": scene.grid,
+            "exaggeration": scene.exaggeration, "size": list(size), "fov_y_deg": fov_y_deg}
 
 
 def working_grid(args: LoadArgs) -> int:
@@ -110,7 +111,7 @@ class KeyframeRenderer:
         share one: each standalone context is not made current again before drawing, so
         with two the older would draw into the newer's (render workers keep a few)."""
         args = check_load_args(args)
-        scene = load_scene(args.terrain, args.texture, args.grid, args.exaggeration)
+        scene = open_spec(args)  # the load's scene description (a SceneSpec)
         size = tuple(args.size)
         self.paths = PathRenderer(scene, size, args.fov_y_deg, ctx)
         self.paths.renderer.unlocked_draws = True  # the threads beside it run meanwhile

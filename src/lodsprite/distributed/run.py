@@ -32,6 +32,7 @@ from lodsprite.errors import InputError, LodspriteError
 from lodsprite.files import write_json
 from lodsprite.progress import Progress
 from lodsprite.run import RenderConfig, field_of_view, prepare
+from lodsprite.scene.spec import SceneSpec
 
 MAX_ERROR_OFF = ("off", "none")
 
@@ -160,8 +161,8 @@ def run_client(config: RenderConfig, servers: list[str], out_dir: Path,
     config = config.resolved(store=False)  # options not given: the 1999 algorithm's
     max_error = check_client_options(pace, adopt, max_error)
     scene, path = prepare(replace(config, mode="sprite"), light=False)  # the server's grid
-    args = scene_args(config.terrain, config.texture, config.grid, config.exaggeration,
-                      config.size, field_of_view(config, path))
+    args = scene_args(SceneSpec(config.terrain, config.texture, config.grid,
+                                config.exaggeration), config.size, field_of_view(config, path))
     client = LodClient(scene, args, servers, config.size, config.lod, config.visibility,
                        config.epsilon, adopt, keys, config.border, pace, max_error)
     technique = DistributedTechnique.on_client(client, servers)

@@ -18,6 +18,7 @@ from lodsprite.camera import Projection, Viewpoint
 from lodsprite.distributed.client import DEFAULT_MAX_ERROR, LodClient
 from lodsprite.distributed.render import scene_args
 from lodsprite.errors import InputError
+from lodsprite.scene.spec import describe
 from lodsprite.sprite.engine import DEFAULT_EPSILON_PX
 from lodsprite.techniques import FALLBACK_TINT, Frame, Param, Technique, TechniqueFactory
 from lodsprite.terrain.lod import DEFAULT_COARSE
@@ -43,9 +44,7 @@ class DistributedTechnique(Technique):
         super().__init__(renderer)
         scene = renderer.scene
         self.server = server
-        args = scene_args(scene.terrain_spec, scene.texture_spec, scene.hf.quads,
-                          float(scene.hf.meta.get("exaggeration", 1.0)), renderer.size,
-                          renderer.fov_y_deg)
+        args = scene_args(describe(scene), renderer.size, renderer.fov_y_deg)
         self.client = LodClient(scene, args, [server], renderer.size, lod, epsilon=epsilon_px,
                                 adopt="better", max_error=max_error, ctx=renderer.gl)
 

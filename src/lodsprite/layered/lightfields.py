@@ -41,7 +41,8 @@ from lodsprite.scene.budget import LayerControl
 
 if TYPE_CHECKING:
     from lodsprite.lumigraph.base import MethodFrame
-    from lodsprite.scene.world import LightFieldPlacement, World
+    from lodsprite.scene import LightField
+    from lodsprite.terrain import HeightField
 
 #: Node budgets, ascending quality.
 NODES = (2.0, 4.0, 8.0, 16.0)
@@ -112,7 +113,7 @@ def local_projection(projection: np.ndarray, s: float) -> np.ndarray:
 class PlacedLightField:
     """One lumigraph in the world: its method, depth-correction proxy and compositor."""
 
-    def __init__(self, gl, size: tuple[int, int], where: LightFieldPlacement,
+    def __init__(self, gl, size: tuple[int, int], where: LightField,
                  ground_z: float, method: str, nodes: int) -> None:
         from lodsprite.gl.composite import ProxyCompositor
         from lodsprite.gl.lumigraph import ColorMeshRenderer
@@ -167,22 +168,25 @@ class PlacedLightField:
 
 
 class LightFieldLayer(Layer):
-    """Every light field of ``world`` on ``renderer``'s terrain target (module doc);
-    ``method``: ``arbitrary`` (knob: nodes) or ``full`` (the reference)."""
+    """The placed ``lightfields`` standing on ``ground`` (the terrain's height field) on
+    ``renderer``'s target (module doc); ``method``: ``arbitrary`` (knob: nodes) or
+    ``full`` (the reference)."""
 
     name = "lightfields"
 
-    def __init__(self, renderer, world: World, method: str = "arbitrary",
-                 nodes: int = 8) -> None:
+    def __init__(self, renderer, lightfields: tuple[LightField, ...], ground: HeightField,
+                 method: str = "arbitrary", nodes: int = 8) -> None:
+        from lodsprite.scene.placement import ground as ground_z
+
         self.renderer = renderer
-        self.fbo = renderer.paths.renderer.target.fbo
+        self.fbo = renderer.target.fbo
         self.nodes = float(nodes)
         self.items: list[PlacedLightField] = []
         self._pool: list = []             # per item: its one replay target (or None)
         self._snaps: dict[int, list] = {}
         try:
-            for where in world.lightfields:
-                z = float(world.ground(np.array([where.position], np.float64))[0])
+            for where in lightfields:
+                z = float(ground_z(ground, np.array([where.position], np.float64))[0])
                 self.items.append(PlacedLightField(renderer.gl, renderer.size, where, z,
                                                    method, int(max(NODES))))
         except BaseException:

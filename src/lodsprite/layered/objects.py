@@ -1,5 +1,6 @@
-"""The objects layer of a scene: a world's mesh instances by the LODManager engine
-(Gumbau et al.: shared LODs, instancing), standing and walking on the terrain.
+"""The objects layer of a scene: its object set by the LODManager engine (Gumbau et al.:
+shared LODs, instancing): a scene file's world standing and walking on the terrain, or a
+crowd (:class:`~lodsprite.manager.scene.Crowd`) standing on its own ground.
 
 The world's object types become the crowd's LOD models (a built-in keeps its own; a mesh
 file becomes a progressive mesh), its instances the crowd's objects; every frame their
@@ -38,6 +39,7 @@ from lodsprite.scene.budget import LayerControl
 if TYPE_CHECKING:
     from lodsprite.camera import Viewpoint
     from lodsprite.manager.scene import Crowd
+    from lodsprite.scene.model import ObjectSet
     from lodsprite.scene.world import World
 
 #: LOD exponents, ascending quality (coarse to fine).
@@ -103,12 +105,12 @@ def world_crowd(world: World) -> Crowd:
 def profile_lod(world: World, crowd: Crowd, renderer):
     """The profile-LOD hook (Scoggins et al. 2000) over the world's ``lod = "profile"``
     types, for :attr:`~lodsprite.manager.engine.CrowdEngine.desired_hook`
-    (:func:`lodsprite.scene.profile_lod.profile_hook`, built now, untimed), or None: no
+    (:func:`lodsprite.profiles.object_lod.profile_hook`, built now, untimed), or None: no
     profile type, or a tree without the profile-LOD part (the distance-linear LOD then)."""
     if not any(t.lod == "profile" for t in world.types):
         return None
     try:
-        from lodsprite.scene.profile_lod import profile_hook
+        from lodsprite.profiles.object_lod import profile_hook
     except ImportError:  # the profile-LOD part not merged yet
         return None
     return profile_hook(world.types, crowd.models, crowd.types, renderer.fov_y_deg,
@@ -116,25 +118,33 @@ def profile_lod(world: World, crowd: Crowd, renderer):
 
 
 class ObjectsLayer(Layer):
-    """A world's instances on ``renderer``'s terrain target (see the module doc).
+    """An object set (a world or a crowd) on ``renderer``'s target (see the module doc).
     ``exponent``: the starting LOD exponent; ``active``: objects whose LOD is updated a
     frame (default: all); ``slots``: LOD slots per type."""
 
     name = "objects"
 
-    def __init__(self, renderer, world: World, exponent: float = 1.0,
+    def __init__(self, renderer, objects: ObjectSet, exponent: float = 1.0,
                  active: int | None = None, slots: int = 16) -> None:
         from lodsprite.manager.engine import CrowdEngine
+        from lodsprite.scene.world import World
 
-        self.world, self.renderer = world, renderer
-        self.crowd = world_crowd(world)
-        self.moving = world.moving()
-        height = max((t.height_m for t in world.types), default=2.0)
-        target = renderer.paths.renderer.target
-        self.engine = CrowdEngine(renderer.gl, self.crowd, target, "manager", slots=slots,
-                                  active=active or max(1, len(self.crowd)),
+        self.renderer = renderer
+        self.world = objects if isinstance(objects, World) else None
+        if self.world is not None:
+            self.crowd = world_crowd(self.world)
+            self.moving = self.world.moving()
+            heights = np.array([t.height_m for t in self.world.types], np.float64)
+        else:  # a crowd: its own models, standing still on its own ground
+            self.crowd = objects
+            self.moving = np.zeros(len(objects), bool)
+            heights = np.array([float(np.ptp(m.vertices[:, 2])) for m in objects.models])
+        height = float(heights.max()) if len(heights) else 2.0
+        own_ground = renderer.scene.hf is None  # no terrain: the crowd's ground clears
+        self.engine = CrowdEngine(renderer.gl, self.crowd, renderer.target, "manager",
+                                  slots=slots, active=active or max(1, len(self.crowd)),
                                   range_near=2.0 * height, range_far=150.0 * height,
-                                  fov_y_deg=renderer.fov_y_deg, ground=False)
+                                  fov_y_deg=renderer.fov_y_deg, ground=own_ground)
         self.knob = float(exponent)
         self.min_px = 0.0
         self.engine.feedback.exponent = float(exponent)
@@ -142,8 +152,9 @@ class ObjectsLayer(Layer):
         types = self.crowd.types
         self._least = np.array([m.triangles(0.0) for m in self.crowd.models], np.float64)[types]
         self._full = np.array([m.triangles(1.0) for m in self.crowd.models], np.float64)[types]
-        self._heights = np.array([t.height_m for t in world.types], np.float64)[types]
-        self.engine.desired_hook = profile_lod(world, self.crowd, renderer)
+        self._heights = heights[types]
+        self.engine.desired_hook = (None if self.world is None
+                                    else profile_lod(self.world, self.crowd, renderer))
         self.subset: np.ndarray | None = None  # None: every object each frame
         self._log: list[list] = []             # extraction orders of every engine frame
         self._applied: int | None = None       # replay: orders applied up to this entry
@@ -258,7 +269,7 @@ class ObjectsLayer(Layer):
         """One engine frame of ``subset`` (``cull``: less the objects under
         :attr:`min_px`); its extraction orders logged only when a replay will come
         (``recording``) or ``keep`` (the warm-up's): never a list a frame otherwise."""
-        self.engine.set_poses(self.world.poses(t))
+        self._pose(t)
         if cull:
             subset = self._drawn(viewpoint, subset)
         f = self.engine.frame(viewpoint, projection=projection, subset=subset, fbo=fbo)
@@ -266,6 +277,16 @@ class ObjectsLayer(Layer):
             self._log.append(list(self.engine.last_orders))
         return f, {"entry": len(self._log) - 1, "using": self.engine.last_using.copy(),
                    "t": t, "drawn": subset}
+
+    def _pose(self, t: float) -> None:
+        """The world's poses at time ``t`` s (a crowd stands still)."""
+        if self.world is not None:
+            self.engine.set_poses(self.world.poses(t))
+
+    def projection(self, viewpoint: Viewpoint) -> np.ndarray:
+        """The engine's own projection ``(4, 4)`` (a scene without terrain draws
+        through it: near/far fitted to the crowd's ground)."""
+        return self.engine.projection
 
     def warm_up(self, viewpoint: Viewpoint, projection: np.ndarray) -> None:
         """Untimed: the first LODs extracted (kept as the replay's starting state)."""
@@ -319,7 +340,7 @@ class ObjectsLayer(Layer):
 
     def replay(self, viewpoint: Viewpoint, t: float, projection: np.ndarray,
                decision: dict[str, Any]) -> None:
-        self.engine.set_poses(self.world.poses(decision["t"]))
+        self._pose(decision["t"])
         self._restore(decision["entry"])
         self.engine.redraw(viewpoint, decision["using"], [], projection,
                            decision.get("drawn", self.subset))

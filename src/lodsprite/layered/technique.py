@@ -8,9 +8,12 @@ renderer's one framebuffer and depth buffer:
 1. the terrain by any terrain technique (:class:`~lodsprite.layered.layers.
    TerrainLayer`: ``full``, ``lod``, ``adaptive``, ``sprite``, ``sprite-adaptive``);
 2. the objects by the LODManager engine (:class:`~lodsprite.layered.objects.
-   ObjectsLayer`), poses from the world at the frame's time;
-3. the light fields (:class:`~lodsprite.layered.lightfields.LightFieldLayer`),
+   ObjectsLayer`), poses from the world at the frame's time (a crowd stands still);
+3. the placed light fields (:class:`~lodsprite.layered.lightfields.LightFieldLayer`),
    each reconstructed in its own target and composited through its proxy's depth.
+
+It draws the layers the scene has (:class:`~lodsprite.scene.Scene`: the renderer's, or
+the one given): a crowd alone is drawn on its own ground through its own projection.
 
 What LOD-sprite's keyframes hold (``keyframes``): ``static`` (the default) renders the
 static objects (``walk_mps = 0``) into every keyframe after its terrain, so spriteframes
@@ -53,7 +56,6 @@ if TYPE_CHECKING:
     from lodsprite.camera import Viewpoint
     from lodsprite.paths import CameraPath
     from lodsprite.scene import Scene
-    from lodsprite.scene.world import World
 
 #: The time between frames (s): frame ``i`` shows the world at ``i * FRAME_S``.
 FRAME_S = 1.0 / 30.0
@@ -65,15 +67,16 @@ ACTIVE = 300
 
 
 class LayeredTechnique(Technique):
-    """A world's layers in one frame (module doc)."""
+    """A scene's layers in one frame (module doc); ``scene`` default: the renderer's."""
 
     name = "scene"
 
-    def __init__(self, renderer: Renderer, world: World, terrain_mode: str = "adaptive",
-                 schedule: str = "none", target_fps: float | None = None,
-                 keyframes: str = "static", exponent: float = 1.0, nodes: int = 8,
-                 ground_truth: bool = False, frame_s: float = FRAME_S,
-                 active: int | None = ACTIVE, **terrain_options: Any) -> None:
+    def __init__(self, renderer: Renderer, scene: Scene | None = None,
+                 terrain_mode: str = "adaptive", schedule: str = "none",
+                 target_fps: float | None = None, keyframes: str = "static",
+                 exponent: float = 1.0, nodes: int = 8, ground_truth: bool = False,
+                 frame_s: float = FRAME_S, active: int | None = ACTIVE,
+                 **terrain_options: Any) -> None:
         super().__init__(renderer)
         from lodsprite.layered.lightfields import LightFieldLayer
         from lodsprite.layered.objects import ObjectsLayer
@@ -84,37 +87,52 @@ class LayeredTechnique(Technique):
                              f"{', '.join(KEYFRAME_HOLDS)}")
         if ground_truth:
             terrain_mode, exponent, schedule = "full", 0.0, "none"
-        self.world, self.frame_s, self.keyframes = world, float(frame_s), keyframes
+        scene = renderer.scene if scene is None else scene
+        placed = tuple(lf for lf in scene.lightfields if lf.placed)
+        if scene.hf is None and scene.objects is None:
+            raise InputError("the scene technique draws terrain and objects: this scene "
+                             "has neither (a light field alone: a lumigraph technique)")
+        self.scene, self.frame_s, self.keyframes = scene, float(frame_s), keyframes
+        self.count = 0 if scene.objects is None else len(scene.objects)
         self.budget = LayerBudget(schedule, None if target_fps is None else 1e3 / target_fps)
         self.layers: list[Layer] = []
+        self.terrain: TerrainLayer | None = None
+        self.objects: ObjectsLayer | None = None
+        self.lightfields: LightFieldLayer | None = None
         try:
-            self.terrain = TerrainLayer(renderer, terrain_mode, **terrain_options)
-            self.layers.append(self.terrain)
+            if scene.hf is not None:
+                self.terrain = TerrainLayer(renderer, terrain_mode, **terrain_options)
+                self.layers.append(self.terrain)
             # the LODManager's active list (§4.2): ``active`` objects' LODs updated a
             # frame (300, the crowd's default; None: every object, as the reference)
-            self.objects = (ObjectsLayer(renderer, world, exponent,
-                                         None if ground_truth else active)
-                            if world.count else None)
-            if self.objects is not None:
+            if self.count:
+                self.objects = ObjectsLayer(renderer, scene.objects, exponent,
+                                            None if ground_truth else active)
                 self.layers.append(self.objects)
-            self.lightfields = (LightFieldLayer(renderer, world,
-                                                "full" if ground_truth else "arbitrary",
-                                                nodes) if world.lightfields else None)
-            if self.lightfields is not None:
+            if placed:
+                self.lightfields = LightFieldLayer(renderer, placed, scene.hf,
+                                                   "full" if ground_truth else "arbitrary",
+                                                   nodes)
                 self.layers.append(self.lightfields)
         except BaseException:
             self.release()
             raise
+        if not self.layers:
+            raise InputError("the scene has nothing to draw (no terrain, no objects)")
         self.static_in_keyframes = (keyframes == "static" and self.objects is not None
+                                    and self.terrain is not None
                                     and self.terrain.keyframe_hook(self.objects.draw_static))
         if self.static_in_keyframes:
-            self.objects.subset = world.moving()
+            self.objects.subset = self.objects.moving
         self.index = 0
         self._last: dict[str, Any] = {}
         self._decided = True
 
     def projection(self, viewpoint: Viewpoint) -> np.ndarray:
-        """The frame's projection ``(4, 4)`` (the terrain technique's)."""
+        """The frame's projection ``(4, 4)``: the terrain technique's (without terrain,
+        the object set's own)."""
+        if self.terrain is None:
+            return self.objects.projection(viewpoint)
         return self.terrain.projection(viewpoint)
 
     def warm_up(self, viewpoint: Viewpoint) -> None:
@@ -124,7 +142,8 @@ class LayeredTechnique(Technique):
         self.renderer.gl.finish()
 
     def plan_replay(self, frames: set[int]) -> None:
-        self.terrain.technique.plan_replay(frames)
+        if self.terrain is not None:
+            self.terrain.technique.plan_replay(frames)
         if self.objects is not None:
             self.objects.recording = bool(frames)
         if self.lightfields is not None:
@@ -150,9 +169,10 @@ class LayeredTechnique(Technique):
                                         for n, f in drawn.items()}, ms))
         self._last, self._decided = {"t": t}, False  # decisions: after the clock
         self.index += 1
-        terrain = drawn["terrain"]
-        return Frame(terrain.extra.get("terrain_kind", "scene"), ms,
-                     sum(f.triangles for f in drawn.values()), terrain.error_px, extra)
+        terrain = drawn.get("terrain")
+        kind = "scene" if terrain is None else terrain.extra.get("terrain_kind", "scene")
+        return Frame(kind, ms, sum(f.triangles for f in drawn.values()),
+                     float("nan") if terrain is None else terrain.error_px, extra)
 
     def decision(self) -> dict[str, Any]:
         """The last frame's decision, every layer's taken here, once, after the frame's
@@ -180,28 +200,37 @@ class LayeredTechnique(Technique):
     def summary(self, frames: list[Frame]) -> dict[str, Any]:
         """The budget's ``share_<layer>`` (fraction of frame ms), ``schedule``,
         ``target_ms``; mean ms per layer; the terrain mode and what keyframes held."""
-        out: dict[str, Any] = {**self.budget.summary(), "terrain_mode": self.terrain.mode,
+        out: dict[str, Any] = {**self.budget.summary(),
+                               "terrain_mode": getattr(self.terrain, "mode", None),
                                "keyframe_holds": ("static" if self.static_in_keyframes
                                                   else "terrain"),
                                "layers": [layer.name for layer in self.layers],
-                               "instances": self.world.count,
-                               "lightfields": len(self.world.lightfields)}
+                               "instances": self.count,
+                               "lightfields": self._placed()}
         for layer in self.layers:
             col = [f.extra[f"ms_{layer.name}"] for f in frames]
             out[f"mean_ms_{layer.name}"] = float(np.mean(col)) if col else float("nan")
         out["keyframes"] = int(sum(f.kind == "keyframe" for f in frames))
         return out
 
+    def _placed(self) -> int:
+        return 0 if self.lightfields is None else len(self.lightfields.items)
+
     def params(self) -> dict[str, Param]:
-        return self.terrain.technique.params()
+        return {} if self.terrain is None else self.terrain.technique.params()
 
     def set_param(self, name: str, value: float) -> None:
+        if self.terrain is None:
+            raise InputError(f"the scene technique has no parameter {name!r} here")
         self.terrain.technique.set_param(name, value)
+
+    def read_image(self) -> np.ndarray:
+        return self.renderer.target.read_color()
 
     def status(self) -> str:
         e = self._last
-        return (f"scene t {e.get('t', 0.0):.1f} s, {self.world.count} objects, "
-                f"{len(self.world.lightfields)} light fields")
+        return (f"scene t {e.get('t', 0.0):.1f} s, {self.count} objects, "
+                f"{self._placed()} light fields")
 
     def release(self) -> None:
         for layer in reversed(self.layers):
@@ -209,12 +238,12 @@ class LayeredTechnique(Technique):
         self.layers = []
 
 
-def reference(renderer: Renderer, world: World, path: CameraPath, frame_s: float = FRAME_S
+def reference(renderer: Renderer, scene: Scene, path: CameraPath, frame_s: float = FRAME_S
               ) -> tuple[Callable[[Viewpoint], np.ndarray], LayeredTechnique]:
     """The full-detail reference of a run along ``path``: ``(viewpoint -> image, the
     reference technique)`` (release it after the run); a viewpoint's time is its index
     along ``path`` (matched by identity) times ``frame_s``."""
-    ref = LayeredTechnique(renderer, world, ground_truth=True, frame_s=frame_s)
+    ref = LayeredTechnique(renderer, scene, ground_truth=True, frame_s=frame_s)
     ref.warm_up(path.viewpoints[0])
     index = {id(vp): i for i, vp in enumerate(path.viewpoints)}
 
@@ -226,35 +255,20 @@ def reference(renderer: Renderer, world: World, path: CameraPath, frame_s: float
     return image, ref
 
 
-def create(renderer: Renderer, world: World | None = None, **options: Any
+def create(renderer: Renderer, world: Scene | None = None, **options: Any
            ) -> LayeredTechnique:
-    """The registry's factory of ``scene``: ``world`` (default: the scene's, a scene
-    opened from a scene file holds its world as its object set)."""
-    if world is None:
-        world = getattr(renderer.scene, "objects", None)
-    if world is None or not hasattr(world, "poses"):
-        raise InputError("the scene technique needs a world (a scene file: "
-                         "lodsprite.scene.world.load_world)")
+    """The registry's factory of ``scene``: the layers of ``world`` (a scene; default: the
+    renderer's)."""
     return LayeredTechnique(renderer, world, **options)
 
 
-def open_scene(spec: str, **_: object) -> Scene:
-    """The scene of a scene file (``lodsprite view SCENE.toml``): its terrain, with the
-    world as its object set; the ``scene`` technique to start with."""
+def with_view_fov(cam: CameraPath, scene: Scene) -> CameraPath:
+    """``cam`` with the vertical field of view of a scene file's ``[view] fov`` (degrees),
+    if the file gives one."""
     from dataclasses import replace
 
-    from lodsprite.scene.world import load_world
-
-    world = load_world(spec)
-    return replace(world.scene, objects=world, mode="scene", label=spec)
-
-
-def with_view_fov(cam: CameraPath, world: World) -> CameraPath:
-    """``cam`` with the vertical field of view of the world's ``[view] fov`` (degrees), if
-    the scene file gives one."""
-    from dataclasses import replace
-
-    return cam if world.view.fov is None else replace(cam, fov_y_deg=float(world.view.fov))
+    fov = None if scene.view is None else scene.view.fov
+    return cam if fov is None else replace(cam, fov_y_deg=float(fov))
 
 
 def render_scene(scene_file: str | os.PathLike, out_dir: str | os.PathLike,
@@ -271,24 +285,24 @@ def render_scene(scene_file: str | os.PathLike, out_dir: str | os.PathLike,
     from lodsprite import techniques
     from lodsprite.api import Renderer
     from lodsprite.harness import run_path, write_run
-    from lodsprite.layered.technique import reference
-    from lodsprite.scene.world import load_world
+    from lodsprite.scene.world import load_scene_file
 
     if target_fps is not None and not target_fps > 0:
         raise InputError(f"--target-fps must be > 0, got {target_fps}")
-    world = load_world(scene_file)
-    size = size or world.view.size_px() or DEFAULT_SIZE
-    target_fps = target_fps if target_fps is not None else world.view.target_fps
-    cam = with_view_fov(world.scene.path(path or world.path, frames), world)
+    scene = load_scene_file(scene_file)
+    view = scene.view
+    size = size or view.size_px() or DEFAULT_SIZE
+    target_fps = target_fps if target_fps is not None else view.target_fps
+    cam = with_view_fov(scene.path(path or view.path, frames), scene)
     schedule = "scheduler" if target_fps is not None else "none"
-    with Renderer(world.scene, size, cam.fov_y_deg) as renderer:
-        t = techniques.create("scene", renderer, world=world, terrain_mode=terrain_mode,
+    with Renderer(scene, size, cam.fov_y_deg) as renderer:
+        t = techniques.create("scene", renderer, terrain_mode=terrain_mode,
                               schedule=schedule, target_fps=target_fps, **options)
         ref = None
         try:
             image = None
             if ground_truth:
-                image, ref = reference(renderer, world, cam, t.frame_s)
+                image, ref = reference(renderer, scene, cam, t.frame_s)
             result = run_path(t, cam, progress=progress, ground_truth=ground_truth,
                               reference=image, flip=flip)
         finally:
@@ -296,7 +310,7 @@ def render_scene(scene_file: str | os.PathLike, out_dir: str | os.PathLike,
             if ref is not None:
                 ref.release()
         summary = {**result.summary, "mode": "scene", "scene": str(scene_file),
-                   "terrain": world.scene.terrain_spec, "path": path or world.path,
+                   "terrain": scene.terrain_spec, "path": path or view.path,
                    "size": list(size), "gl_version": renderer.info.version}
     write_run(Path(out_dir), result, summary)
     return summary

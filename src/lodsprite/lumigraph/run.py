@@ -193,7 +193,7 @@ def _measure(folder, method, path, frames, size, ground_truth, depth_correction,
     from lodsprite.api import Renderer
     from lodsprite.harness import run_path
     from lodsprite.lumigraph.technique import viewer_path
-    from lodsprite.scene import Scene
+    from lodsprite.scene import LightField, Scene
 
     lf = Lumigraph(folder)
     path = path or default_path(lf, frames)
@@ -201,7 +201,8 @@ def _measure(folder, method, path, frames, size, ground_truth, depth_correction,
     if ground_truth and obj_mesh is None:
         raise InputError(f"{folder} holds no {OBJECT_FILE}: no ground truth to compare with")
     w, h = size
-    with Renderer(Scene(lightfield=str(folder)), (w, h), path.fov_y_deg) as renderer:
+    scene = Scene(lightfields=(LightField(Path(folder)),))
+    with Renderer(scene, (w, h), path.fov_y_deg) as renderer:
         if f"lumigraph-{method}" not in techniques.names(["lightfield"]):
             raise InputError(f"unknown lumigraph method {method!r}: use one of "
                              f"{', '.join(s.short for s in techniques.specs(['lightfield']))}")

@@ -11,10 +11,13 @@ orbiting its centre; :func:`open_scene` makes a lumigraph folder a scene.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
 from lodsprite.camera import Viewpoint, look_at, perspective
 from lodsprite.errors import InputError
+from lodsprite.scene import LightField, Scene, SceneKind
 from lodsprite.techniques import Frame, Param, Technique, TechniqueFactory
 
 #: Viewer world (z up, home to the south) to lumigraph world (y up, front towards +z).
@@ -214,14 +217,13 @@ def lumigraph_home(folder):
                       min_distance_m=lf.slabs[0].st_distance * 1.5)
 
 
-def open_scene(folder: str, **_: object):
+def open_lumigraph(folder: str, **_: object) -> Scene:
     """The scene of a lumigraph folder: the light field as its layer, the camera home,
     ``arc`` (the default path: an arc, or an orbit for six slabs; 240 frames by default)
     or a JSON path file in the lumigraph's coordinates, turned into the viewer's."""
     from lodsprite.lumigraph.paths import default_path
     from lodsprite.lumigraph.store import Lumigraph
     from lodsprite.paths import load_path_json
-    from lodsprite.scene import Scene
 
     lf = Lumigraph(folder)  # the header checked now
 
@@ -229,5 +231,11 @@ def open_scene(folder: str, **_: object):
         return viewer_path(default_path(lf, frames or 240) if name == "arc"
                            else load_path_json(name))
 
-    return Scene(lightfield=str(folder), home=lumigraph_home(folder), paths=paths,
-                 mode="critical")
+    return Scene(lightfields=(LightField(Path(folder)),), home=lumigraph_home(folder),
+                 paths=paths, mode="critical", source=Path(folder))
+
+
+#: The lumigraph folder's scene kind (the ``lodsprite.scenes`` entry point ``lumigraph``):
+#: a folder holding ``lumigraph.json``.
+SCENE_KIND = SceneKind("lumigraph", lambda spec: (Path(spec) / "lumigraph.json").is_file(),
+                       open_lumigraph)

@@ -14,7 +14,7 @@ Every frame: frustum culling (bounding spheres), LOD work (timed as ``lod_ms``: 
 decisions, the extractions and their uploads), then the visible objects grouped by the
 index buffer they draw, one instanced draw a group.  Times stop after ``ctx.finish()``.
 A :attr:`CrowdEngine.desired_hook` may replace the distance-linear desired factors of
-some objects (a scene's profile LOD: :class:`lodsprite.scene.profile_lod.ProfileLod`).
+some objects (a scene's profile LOD: :class:`lodsprite.profiles.object_lod.ProfileLod`).
 """
 
 from __future__ import annotations
@@ -109,7 +109,7 @@ class CrowdEngine:
         self.last_orders: list[tuple[int, int, float]] = []  # the last frame's extractions
         self.last_using: np.ndarray | None = None
         # Per-object desired factors from elsewhere (e.g. a scene's profile LOD,
-        # lodsprite.scene.profile_lod.ProfileLod): (viewpoint, transforms (N, 4),
+        # lodsprite.profiles.object_lod.ProfileLod): (viewpoint, transforms (N, 4),
         # desired (N,), exponent) -> (N,) factors; None: the distance-linear ones.
         self.desired_hook: Callable[..., np.ndarray] | None = None
 

@@ -4,7 +4,7 @@ at equal triangle counts).
 
 On one crowd (:class:`~lodsprite.manager.scene.Crowd`, its types' profiles given) and a
 few viewpoints: every visible object's LOD factor comes either from its type's error
-profile at one threshold (:func:`lodsprite.scene.profile_lod.lod_factors`, Eq. 17) or
+profile at one threshold (:func:`lodsprite.profiles.object_lod.lod_factors`, Eq. 17) or
 from the manager's distance-linear rule ``(1 - (d - near) / (far - near)) ** p``
 (:func:`~lodsprite.manager.core.desired_lod`) with the exponent ``p`` tuned by bisection
 (on ``log p``) until the triangles drawn over all viewpoints match the profile's within
@@ -27,7 +27,7 @@ from lodsprite.camera import frustum_planes, perspective
 from lodsprite.errors import InputError
 from lodsprite.manager.core import desired_lod
 from lodsprite.manager.scene import spheres_in_frustum
-from lodsprite.scene.profile_lod import DEFAULT_THRESHOLD, TypeProfile, lod_factors, type_profile
+from lodsprite.profiles.object_lod import DEFAULT_THRESHOLD, TypeProfile, lod_factors, type_profile
 
 if TYPE_CHECKING:
     from lodsprite.camera import Viewpoint

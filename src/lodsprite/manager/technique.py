@@ -10,6 +10,7 @@ import numpy as np
 
 from lodsprite.camera import Viewpoint
 from lodsprite.errors import InputError
+from lodsprite.scene import Scene, SceneKind
 from lodsprite.techniques import Frame, Param, Technique, TechniqueFactory
 
 VIEW_MODES = ("manager", "independent", "discrete")
@@ -161,13 +162,12 @@ def crowd_home(crowd):
                       clearance_m=EYE_HEIGHT_M, fov_y_deg=60.0)
 
 
-def open_scene(spec: str, target_fps: float | None = None, **_: object):
+def open_crowd(spec: str, target_fps: float | None = None, **_: object) -> Scene:
     """The scene of ``crowd[:OBJECTS[:TREES]]``: the crowd as its object set, the camera
     home, ``walk`` (the walkthrough, 600 frames by default) or a JSON path file."""
     from lodsprite.manager.run import CrowdConfig, make_crowd
     from lodsprite.manager.scene import walkthrough
     from lodsprite.paths import load_path_json
-    from lodsprite.scene import Scene
 
     objects, trees = parse_crowd(spec)
     cfg = CrowdConfig(objects=objects, trees=trees, target_fps=target_fps)
@@ -179,3 +179,8 @@ def open_scene(spec: str, target_fps: float | None = None, **_: object):
 
     return Scene(objects=crowd, home=crowd_home(crowd), paths=paths, mode="manager",
                  label=spec)
+
+
+#: The crowd's scene kind (the ``lodsprite.scenes`` entry point ``crowd``).
+SCENE_KIND = SceneKind("crowd", lambda spec: spec == "crowd" or spec.startswith("crowd:"),
+                       open_crowd)

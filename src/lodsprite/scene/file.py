@@ -22,7 +22,8 @@ every path (:func:`resolve_path`: relative to the file's folder, never out of it
 Anything wrong is one :class:`~lodsprite.errors.SceneFileError` line naming the file and
 the field, e.g. ``scene.toml: objects[1].count: must be <= 200000``; a syntax error names
 the line and column.  What needs the terrain (points and positions inside its extent)
-is checked by :func:`lodsprite.scene.world.load_world`, still before anything is written.
+is checked by :func:`lodsprite.scene.world.load_scene_file`, still before anything is
+written.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from __future__ import annotations
 import os
 import re
 import tomllib
+from importlib.metadata import entry_points
 from pathlib import Path
 from typing import Literal, NoReturn
 
@@ -51,9 +53,11 @@ MAX_HEIGHT_M = 10_000.0
 MAX_WALK_MPS = 100.0
 MIN_LOD_FLOOR = 0.005            # [[objects]] lod_floor: the coarsest LOD's fraction
 MAX_GRID = 8192                  # [terrain] grid, quads a side (as the server's cap)
-#: Mesh names that are built in (:mod:`lodsprite.manager.builtins`), not files.
-BUILTIN_MESHES = ("ogre", "tree")
 TERRAIN_BUILTINS = ("jacksboro",)
+#: The entry-point group of built-in models, mesh names that are not files: each entry
+#: point names a callable ``(min_fraction=...) -> LOD model`` (``ogre`` and ``tree``, the
+#: crowd's, registered in pyproject.toml); the scene package imports no technique package.
+MESH_GROUP = "lodsprite.object_models"
 _SIZE = r"\s*(\d+)\s*[xX]\s*(\d+)\s*"     # [view] size: WxH
 
 
@@ -112,6 +116,11 @@ class SceneFile(msgspec.Struct, forbid_unknown_fields=True):
     objects: list[ObjectSection] = []
     lightfields: list[LightFieldSection] = []
     view: ViewSection = msgspec.field(default_factory=ViewSection)
+
+
+def builtin_meshes() -> tuple[str, ...]:
+    """The built-in model names (the :data:`MESH_GROUP` entry points), sorted."""
+    return tuple(sorted({ep.name for ep in entry_points(group=MESH_GROUP)}))
 
 
 def read_scene_file(path: str | os.PathLike) -> SceneFile:
@@ -236,7 +245,7 @@ class _Checker:
             t.texture = self.file(t.texture, "terrain.texture")
 
     def objects(self, o: ObjectSection, at: str) -> None:
-        if o.mesh.strip().lower() in BUILTIN_MESHES:
+        if o.mesh.strip().lower() in builtin_meshes():  # built in (ogre, tree), not files
             o.mesh = o.mesh.strip().lower()
         else:
             o.mesh = self.file(o.mesh, f"{at}.mesh", MAX_MESH_BYTES)

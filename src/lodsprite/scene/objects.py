@@ -16,8 +16,8 @@ scaled to ``height_m``; a built-in keeps its own height unless ``height_m`` is g
 
 from __future__ import annotations
 
-import importlib
 from dataclasses import dataclass
+from importlib.metadata import entry_points
 from pathlib import Path
 from typing import Any
 
@@ -28,8 +28,6 @@ from lodsprite.errors import SceneFileError
 #: Colour of a mesh that has none (grey-green, linear 0..1).
 DEFAULT_COLOUR = (0.55, 0.6, 0.5)
 GLTF = (".glb", ".gltf")
-#: Built-in models, by dotted path (the scene package imports no technique package).
-BUILTINS = {"ogre": "lodsprite.manager.builtins:ogre", "tree": "lodsprite.manager.builtins:tree"}
 _Y_UP = np.array([[1.0, 0, 0], [0, 0, -1.0], [0, 1.0, 0]])  # +y up -> +z up
 
 
@@ -70,10 +68,15 @@ class Group:
 
 def builtin_type(name: str, height_m: float | None, lod: str, lod_floor: float = 0.1
                  ) -> ObjectType:
-    """The built-in ``name`` (``ogre`` or ``tree``), scaled to ``height_m`` if given, its
-    coarsest LOD ``lod_floor`` of its triangles."""
-    module, _, attr = BUILTINS[name].partition(":")
-    model = getattr(importlib.import_module(module), attr)(min_fraction=lod_floor)
+    """The built-in ``name`` (e.g. ``ogre`` or ``tree``), scaled to ``height_m`` if given,
+    its coarsest LOD ``lod_floor`` of its triangles."""
+    from lodsprite.scene.file import MESH_GROUP, builtin_meshes
+
+    found = [ep for ep in entry_points(group=MESH_GROUP) if ep.name == name]
+    if not found:
+        raise SceneFileError(f"no built-in model {name!r} (built-ins: "
+                             f"{', '.join(builtin_meshes()) or 'none installed'})")
+    model = found[0].load()(min_fraction=lod_floor)
     faces = np.asarray(model.extract(1.0), dtype=np.int64).reshape(-1, 3)
     used, inverse = np.unique(faces, return_inverse=True)
     v = np.asarray(model.vertices, dtype=np.float64)

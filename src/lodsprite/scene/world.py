@@ -1,33 +1,38 @@
-"""A world: the terrain scene, object types, their instances and light fields (GL-free).
+"""A scene file's scene, and its object sets over time: the :class:`World` (GL-free).
 
-:func:`load_world` turns a scene file (:mod:`lodsprite.scene.file`) into a
-:class:`World`: it reads and validates the file, loads the terrain
-(:func:`lodsprite.scene.load_scene`), checks that every point and position lies on the
-terrain, loads the meshes (:mod:`lodsprite.scene.objects`) and places the instances
-(:mod:`lodsprite.scene.placement`).  Every user error is one
+:func:`load_scene_file` turns a scene file (:mod:`lodsprite.scene.file`) into a
+:class:`~lodsprite.scene.model.Scene` of every layer it names: it reads and validates the
+file, loads the terrain (:func:`lodsprite.scene.load_scene`), checks that every point
+and position lies on the terrain, loads the meshes (:mod:`lodsprite.scene.objects`),
+places the instances (:mod:`lodsprite.scene.placement`) and places the light fields
+(:class:`~lodsprite.scene.model.LightField`).  Every user error is one
 :class:`~lodsprite.errors.SceneFileError` line naming the field, raised before anything
-is drawn or written.  :meth:`World.poses` gives every instance's ``x, y, z, yaw`` at a
-time: walkers (:mod:`lodsprite.scene.walk`) move, and all stand on the ground.
+is drawn or written.
+
+The scene's object set is a :class:`World`: the types, their instances and the ground
+they stand on, nothing else (no scene: the scene holds the world, never the reverse).
+:meth:`World.poses` gives every instance's ``x, y, z, yaw`` at a time: walkers
+(:mod:`lodsprite.scene.walk`) move, and all stand on the ground.
 """
 
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from lodsprite.errors import InputError, SceneFileError
-from lodsprite.scene import Scene, load_scene
 from lodsprite.scene.file import (
     MAX_INSTANCES,
     ObjectSection,
     SceneFile,
-    ViewSection,
+    builtin_meshes,
     read_scene_file,
 )
+from lodsprite.scene.model import LightField, Scene, load_scene
 from lodsprite.scene.objects import Group, ObjectType, builtin_type, load_group
 from lodsprite.scene.placement import (
     check_inside,
@@ -41,8 +46,11 @@ from lodsprite.scene.placement import (
 )
 from lodsprite.scene.walk import walk
 
-__all__ = ["Instances", "LightFieldPlacement", "ObjectType", "World", "load_world",
-           "read_scene_file"]
+if TYPE_CHECKING:
+    from lodsprite.terrain import HeightField
+
+__all__ = ["Instances", "ObjectType", "World", "load_scene_file", "read_scene_file",
+           "summary"]
 
 
 @dataclass
@@ -64,45 +72,31 @@ class Instances:
 
 
 @dataclass
-class LightFieldPlacement:
-    """A lumigraph folder (as ``lodsprite lumigraph`` writes) standing at ``position``
-    (world metres ``x, y``; on the ground) ``height_m`` tall."""
-
-    source: Path
-    position: tuple[float, float]
-    height_m: float
-
-
-@dataclass
 class World:
-    """Everything a scene file puts in one world.
+    """A scene file's object sets: ``types`` and ``instances`` (each naming its type by
+    index), standing on ``ground`` (the scene's terrain height field, metres).  It holds no
+    scene (the scene holds it, as :attr:`Scene.objects <lodsprite.scene.model.Scene>`)."""
 
-    ``scene``: the terrain layer (as :func:`~lodsprite.scene.load_scene` gives); ``types``
-    and ``instances`` (each naming its type by index); ``lightfields``; ``path`` the
-    ``[view]`` path spec (``view`` the whole section); ``file`` the scene file.
-    """
-
-    scene: Scene
     types: list[ObjectType]
     instances: list[Instances]
-    lightfields: list[LightFieldPlacement]
-    path: str = "flyover"
-    view: ViewSection = field(default_factory=ViewSection)
-    file: Path | None = None
+    ground_field: HeightField
 
     @property
     def extent(self) -> tuple[np.ndarray, np.ndarray]:
         """The terrain's horizontal extent ``lo (2,)``, ``hi (2,)`` in world metres."""
-        return extent(self.scene.hf)
+        return extent(self.ground_field)
 
     @property
     def count(self) -> int:
         """Instances in all."""
         return sum(len(i) for i in self.instances)
 
+    def __len__(self) -> int:
+        return self.count
+
     def ground(self, xy: np.ndarray) -> np.ndarray:
         """Ground heights ``(k,) float64`` metres under ``xy (k, 2)`` world metres."""
-        return ground(self.scene.hf, xy)
+        return ground(self.ground_field, xy)
 
     def type_indices(self) -> np.ndarray:
         """``(count,) intp``: each instance's type (an index into :attr:`types`), in
@@ -143,28 +137,35 @@ class World:
         box = np.concatenate(boxes).astype(np.float64)
         return box[:, :2], box[:, 2:]
 
-    def summary(self) -> list[str]:
-        """One line per layer: terrain, objects (types, instances), light fields."""
-        hf = self.scene.hf
-        lo, hi = self.extent
-        walkers = int(self.moving().sum())
-        return [f"terrain: {self.scene.terrain_spec} ({hf.cols}x{hf.rows} samples, "
-                f"{hi[0] - lo[0]:g} x {hi[1] - lo[1]:g} m, z {hf.heights.min():.0f}.."
-                f"{hf.heights.max():.0f} m)",
-                f"objects: {len(self.types)} types, {self.count} instances ({walkers} "
-                f"walking), {sum(len(t.faces) for t in self.types):,} triangles in the types",
-                _lightfields_line(self.lightfields),
-                f"view: path {self.path}"]
+
+def summary(scene: Scene) -> list[str]:
+    """One line per layer of a scene file's scene: terrain, objects (types, instances),
+    light fields, and the ``[view]`` path."""
+    hf = scene.hf
+    lo, hi = extent(hf)
+    world = scene.objects if isinstance(scene.objects, World) else None
+    types = [] if world is None else world.types
+    count = 0 if world is None else world.count
+    walkers = 0 if world is None else int(world.moving().sum())
+    return [f"terrain: {scene.terrain_spec} ({hf.cols}x{hf.rows} samples, "
+            f"{hi[0] - lo[0]:g} x {hi[1] - lo[1]:g} m, z {hf.heights.min():.0f}.."
+            f"{hf.heights.max():.0f} m)",
+            f"objects: {len(types)} types, {count} instances ({walkers} "
+            f"walking), {sum(len(t.faces) for t in types):,} triangles in the types",
+            _lightfields_line(scene.lightfields),
+            f"view: path {scene.default_path}"]
 
 
-def _lightfields_line(lights: list[LightFieldPlacement]) -> str:
+def _lightfields_line(lights: tuple[LightField, ...]) -> str:
     each = "; ".join(f"{lf.source.name} at ({lf.position[0]:g}, {lf.position[1]:g}), "
-                     f"{lf.height_m:g} m" for lf in lights)
+                     f"{lf.height_m:g} m" for lf in lights if lf.position is not None)
     return f"lightfields: {len(lights)}" + (f" ({each})" if lights else "")
 
 
-def load_world(path: str | os.PathLike, **scene_options: Any) -> World:
-    """Read the scene file at ``path`` and build its :class:`World`.
+def load_scene_file(path: str | os.PathLike, **scene_options: Any) -> Scene:
+    """Read the scene file at ``path`` and build its scene: the terrain, the object set
+    (a :class:`World`, empty without ``[[objects]]``), the light fields, the ``[view]``
+    section; the ``scene`` technique to start with.
 
     ``scene_options`` go to :func:`~lodsprite.scene.load_scene` over the file's
     ``[terrain]`` values (``grid``, ``exaggeration``, ``texture``, ``light``,
@@ -184,10 +185,12 @@ def load_world(path: str | os.PathLike, **scene_options: Any) -> World:
     lights = []
     for i, lf in enumerate(sf.lightfields):
         check_inside(np.array([lf.position]), lo, hi, f"{label}: lightfields[{i}].position")
-        lights.append(LightFieldPlacement(Path(lf.source), lf.position, lf.height_m))
+        lights.append(LightField(Path(lf.source), lf.position, lf.height_m))
     _check_path(scene, sf, label)
     types, instances = _place(sf, label, lo, hi, anchors)
-    return World(scene, types, instances, lights, sf.view.path, sf.view, Path(path))
+    return replace(scene, objects=World(types, instances, scene.hf),
+                   lightfields=tuple(lights), view=sf.view, mode="scene", label=label,
+                   source=Path(path))
 
 
 def _place(sf: SceneFile, label: str, lo: np.ndarray, hi: np.ndarray, anchors: list
@@ -246,7 +249,7 @@ def _anchors(o: ObjectSection, at: str, lo: np.ndarray, hi: np.ndarray
 
 
 def _group(o: ObjectSection, field: str) -> Group:
-    if o.mesh in ("ogre", "tree"):
+    if o.mesh in builtin_meshes():
         t = builtin_type(o.mesh, o.height_m, o.lod, o.lod_floor)
         return Group([t], np.zeros(1, np.intp), np.zeros((1, 2)), np.zeros(1))
     group = load_group(o.mesh, o.height_m, o.lod, o.up, field)

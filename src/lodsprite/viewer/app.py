@@ -113,9 +113,13 @@ class ViewOptions:
 def factories(o: ViewOptions, scene: Scene) -> dict[str, TechniqueFactory]:
     """The viewer's modes: the registry's techniques that draw ``scene``'s layers, with the
     command's options (``distributed`` only with a server)."""
+    from lodsprite.scene.world import World
+
     skip = () if o.server else ("distributed",)
-    if hasattr(scene.objects, "poses"):  # a scene file's world: the crowd modes need a crowd
-        skip = (*skip, "manager", "independent", "discrete")
+    if isinstance(scene.objects, World):  # a scene file's: the crowd modes draw a crowd
+        skip = (*skip, *techniques.names(["objects"]))
+    if any(lf.placed for lf in scene.lightfields):  # placed: drawn by the scene technique
+        skip = (*skip, *techniques.names(["lightfield"]))
     return techniques.factories(scene.layers, skip, **o.technique_options())
 
 
@@ -150,8 +154,8 @@ def with_scene_view(o: ViewOptions, scene: Scene) -> tuple[ViewOptions, float | 
     """``o`` with a scene file's ``[view]`` size and ``target_fps`` where the command gave
     none (the window :data:`WINDOW` when neither does), and its ``fov`` (degrees, None
     when it gives none or ``scene`` is no scene file's), which replaces the path's."""
-    v = getattr(scene.objects, "view", None)
-    if v is None or not hasattr(v, "size_px"):
+    v = scene.view
+    if v is None:
         return replace(o, size=o.size or WINDOW), None
     target = o.target_fps if o.target_fps is not None else v.target_fps
     return replace(o, size=o.size or v.size_px() or WINDOW, target_fps=target), v.fov

@@ -2,10 +2,12 @@
 client holds the coarse model and renders spriteframes from it and the last keyframe),
 and the answer to its ``path`` op.
 
-Computed in the server process, GL-free, from the dataset a ``load`` names: the working
-height field (:func:`lodsprite.scene.load_scene`, as every renderer loads it), its coarse
-level (an exact subsample, ``lod`` quads a side, as the sprite renderer's proxy) and the
-terrain texture, both turned so row 0 is south (the page's ``y`` grows with the row).
+Computed in the server process, GL-free, from the scene a ``load`` describes (its
+:class:`~lodsprite.scene.spec.SceneSpec`, opened by :func:`~lodsprite.scene.spec.
+open_spec` as every renderer opens it): :func:`scene_parts` makes the message from the
+:class:`~lodsprite.scene.Scene`'s terrain layer, its working height field's coarse level
+(an exact subsample, ``lod`` quads a side, as the sprite renderer's proxy) and its
+texture, both turned so row 0 is south (the page's ``y`` grows with the row).
 
 ``path`` (after a ``load``): the viewpoints of a built-in camera path
 (:func:`lodsprite.paths.get_path`: Chen, Swan & Kaufman 1999 Figure 7's orbit, Swan et
@@ -18,7 +20,7 @@ JavaScript).  The reply's ``data``: ``viewpoints`` (12 numbers a frame: the came
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -34,8 +36,11 @@ from lodsprite.distributed.protocol import (
     encode,
 )
 
+if TYPE_CHECKING:
+    from lodsprite.scene import Scene
+
 __all__ = ["SceneData", "build_scene", "build_scene_field", "decode_scene", "path_data",
-           "relief", "scene_key"]
+           "relief", "scene_key", "scene_parts"]
 
 SCENE_FIELDS = ("terrain", "texture", "grid", "exaggeration", "lod", "size", "fov_y_deg",
                 "epsilon", "visibility")
@@ -79,13 +84,25 @@ def build_scene_field(args: LoadArgs, codec: str = "raw") -> tuple[list, Any]:
     """:func:`build_scene`'s parts and the working height field they came from
     (:class:`~lodsprite.terrain.HeightField`, kept for :func:`path_data`)."""
     from lodsprite.errors import InputError
-    from lodsprite.scene import load_scene
+    from lodsprite.scene.spec import open_spec
 
     if args.lod > MAX_SCENE_COARSE:
         raise InputError(f"lod {args.lod}: a web page's coarse level is at most "
                          f"{MAX_SCENE_COARSE} quads a side")
-    scene = load_scene(args.terrain, args.texture, args.grid, args.exaggeration)
+    scene = open_spec(args)  # the load's scene description (a SceneSpec)
+    return scene_parts(scene, args, codec), scene.hf
+
+
+def scene_parts(scene: Scene, args: LoadArgs, codec: str = "raw") -> list:
+    """The parts (header, heights, texture) of the scene message of ``scene``'s terrain
+    layer, as the client's ``args`` (coarse level, size, field of view, ε, visibility)
+    asks; raises :class:`~lodsprite.errors.InputError` for a scene without terrain or
+    texture."""
+    from lodsprite.errors import InputError
+
     hf = scene.hf
+    if hf is None or scene.texture is None:
+        raise InputError(f"scene {scene.name!r}: a web page draws a textured terrain")
     step = hf.quads // args.lod
     heights = np.ascontiguousarray(hf.heights[::step, ::step][::-1], dtype=np.float32)
     texture = scene.texture
@@ -104,7 +121,7 @@ def build_scene_field(args: LoadArgs, codec: str = "raw") -> tuple[list, Any]:
               "visibility": "coarse" if args.visibility == "coarse" else "full",
               "heights": h_spec, "texture": t_spec,
               "relief": relief(hf.heights, step)}
-    return encode(header, h_data, t_data), hf
+    return encode(header, h_data, t_data)
 
 
 class SceneData:
@@ -136,9 +153,9 @@ def path_data(load: LoadArgs, args: PathArgs, hf: Any = None) -> dict:
     from lodsprite.paths import get_path
 
     if hf is None:
-        from lodsprite.scene import load_scene
+        from lodsprite.scene.spec import open_spec
 
-        hf = load_scene(load.terrain, load.texture, load.grid, load.exaggeration).hf
+        hf = open_spec(load).hf
     path = get_path(args.spec, hf, args.frames)
     rows = np.array([np.concatenate([vp.x, vp.y, vp.z, vp.o]) for vp in path.viewpoints],
                     dtype=np.float64)

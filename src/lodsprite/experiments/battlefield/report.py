@@ -125,7 +125,7 @@ def _lod_lines(r: dict) -> list[str]:
                    f"{', '.join(_num(e, 2) for e in x['exponents_tried'])}).")
     if not v["profile_lod_available"]:
         out += ["", "This build has no profile LOD for scene object types "
-                    "(`lodsprite.scene.profile_lod`): `profile` draws as `linear` here, so "
+                    "(`lodsprite.profiles.object_lod`): `profile` draws as `linear` here, so "
                     "the two rows measure the same LOD (the comparison is not yet made)."]
     return out + [""]
 

@@ -210,7 +210,7 @@ class PathRuns:
 
     def with_lod(self, kind: str, **kw) -> dict:
         """A run with every object type's ``lod`` set to ``kind``."""
-        for t in self.world.types:
+        for t in self.world.objects.types:
             t.lod = kind
         return self.run(**kw)
 
@@ -218,7 +218,7 @@ class PathRuns:
         """The profile run, then linear runs whose exponent is searched to match its
         triangles on the chosen frames; the closest linear run there is kept, with every
         exponent tried (its quality reported on the other frames)."""
-        kept = [t.lod for t in self.world.types]
+        kept = [t.lod for t in self.world.objects.types]
         key = MATCH_KEY
         try:
             prof = self.with_lod("profile", sampled=True)
@@ -232,7 +232,7 @@ class PathRuns:
                     break
                 e = _next_exponent(tried, goal)
         finally:
-            for t, lod in zip(self.world.types, kept, strict=True):
+            for t, lod in zip(self.world.objects.types, kept, strict=True):
                 t.lod = lod
         e, lin = min(tried, key=lambda x: abs(x[1][key] - goal))
         return {"profile": prof, "linear": lin, "linear_exponent": e,
@@ -274,7 +274,7 @@ def pooled(per_path: dict, key: str) -> dict:
 def run_path_set(renderer, world, spec: str, cfg: BattlefieldConfig,
                  step: Callable[[str], None]) -> dict:
     """Every run along the path ``spec``."""
-    cam = world.scene.path(spec, cfg.frames)
+    cam = world.path(spec, cfg.frames)
     p = PathRuns(renderer, world, cam, cfg)
     out: dict = {"path": cam.name}
     for name, kw in (("scheduler", {"schedule": "scheduler", "target_fps": cfg.target_fps}),
@@ -295,7 +295,7 @@ def reproduce_battlefield(cfg: BattlefieldConfig, out_dir: Path,
     """The scene, every path's runs, the pooled figures: results.json's dictionary."""
     from lodsprite.api import Renderer
     from lodsprite.experiments.battlefield.scene import write_scene
-    from lodsprite.scene.world import load_world
+    from lodsprite.scene.world import load_scene_file
 
     out_dir = Path(out_dir)
     total = 1 + 5 * len(cfg.paths)
@@ -308,10 +308,10 @@ def reproduce_battlefield(cfg: BattlefieldConfig, out_dir: Path,
 
     step("scene: store, light fields")
     scene_file, made = write_scene(cfg, out_dir)
-    world = load_world(scene_file)
+    world = load_scene_file(scene_file)
     per_path: dict = {}
-    fov = world.scene.path(cfg.paths[0], 2).fov_y_deg
-    with Renderer(world.scene, (cfg.image, cfg.image), fov) as renderer:
+    fov = world.path(cfg.paths[0], 2).fov_y_deg
+    with Renderer(world, (cfg.image, cfg.image), fov) as renderer:
         gl = renderer.info.renderer
         for spec in cfg.paths:
             per_path[spec] = run_path_set(renderer, world, spec, cfg, step)
@@ -322,7 +322,10 @@ def reproduce_battlefield(cfg: BattlefieldConfig, out_dir: Path,
 
 def results(cfg: BattlefieldConfig, per_path: dict, made: dict, world, scene_file: Path,
             gl_renderer: str) -> dict:
-    """results.json: the issue's keys, then the detail."""
+    """results.json: the issue's keys, then the detail (``world``: the scene file's
+    scene)."""
+    from lodsprite.scene.world import summary
+
     pvl = [p["profile_vs_linear"] for p in per_path.values()]
 
     def mean(side: str, key: str) -> float | None:
@@ -346,7 +349,7 @@ def results(cfg: BattlefieldConfig, per_path: dict, made: dict, world, scene_fil
         "extractions_without_manager": int(sum(p["no_manager"]["extractions"]
                                                for p in per_path.values())),
         "paths": per_path, "config": config, "scene_file": str(scene_file), **made,
-        "world": world.summary(), "instances": world.count, "gl_renderer": gl_renderer,
+        "world": summary(world), "instances": world.objects.count, "gl_renderer": gl_renderer,
         "sample_frames": cfg.sample_frames, "chosen_frames": cfg.chosen_frames,
         "reported_frames": cfg.reported_frames}
 

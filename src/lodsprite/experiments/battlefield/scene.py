@@ -12,7 +12,7 @@ objects and the scene file that puts them with a crowd and trees on the terrain.
   written to a PLY file first) into ``OUT/lightfields``, captured once and reused while
   their capture settings are unchanged;
 * ``OUT/battlefield.toml``: the scene file (:mod:`lodsprite.scene.file`) with absolute
-  paths, read back by :func:`~lodsprite.scene.world.load_world`.
+  paths, read back by :func:`~lodsprite.scene.world.load_scene_file`.
 """
 
 from __future__ import annotations

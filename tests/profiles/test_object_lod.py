@@ -12,10 +12,10 @@ import trimesh
 
 from lodsprite.camera import look_at
 from lodsprite.gl.target import RenderTarget
+from lodsprite.profiles import object_lod as pl
 from lodsprite.profiles.generate import ProfileSettings
 from lodsprite.profiles.select import object_views, select_profile
 from lodsprite.profiles.table import ProfileTable
-from lodsprite.scene import profile_lod as pl
 from lodsprite.scene.objects import ObjectType
 
 #: Tiny settings: 32² images, 2 x 2 views (the scene's are 128², 4 x 3).
