@@ -35,7 +35,8 @@ app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_
                   help="Time-critical rendering of large terrains with LOD geometry and "
                        "image reuse (LOD-sprite).")
 for command in (render.info, with_technique_options(render.render, ('terrain', 'objects')),
-                with_technique_options(render.view), terrain.tile, crowd.crowd,
+                with_technique_options(render.view), terrain.tile,
+                with_technique_options(crowd.crowd, ("objects",)),
                 profile.profile, reproduce.reproduce, reproduce.demo, distributed.serve):
     app.command()(command)
 app.command(name="keys")(distributed.keys_command)

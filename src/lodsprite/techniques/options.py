@@ -77,6 +77,16 @@ class Option:
                                 else str(self.default))
         return f"{self.help} [{self.allowed()}; default: {default}]"
 
+    def declaration(self, default: Any = None) -> dict[str, Any]:
+        """The declaration as JSON (the web page parses its query by it): name, type
+        (``int``, ``float``, ``str``, ``bool``), default (``default`` where the option's
+        is None), min, max, above, choices, unit, flag, allowed (in words), help."""
+        return {"name": self.name, "type": self.type.__name__,
+                "default": self.default if self.default is not None else default,
+                "min": self.min, "max": self.max, "above": self.above,
+                "choices": list(self.choices), "unit": self.unit, "flag": self.cli,
+                "allowed": self.allowed(), "help": self.help}
+
     def _fail(self, value: Any) -> InputError:
         return InputError(f"option {self.cli}: got {value!r}, allowed: {self.allowed()}")
 
