@@ -19,7 +19,9 @@ OPTIONS = (
     Option("target_fps", float, 30.0, "lumigraph critical: the frame-rate target", min=0,
            above=True, unit="fps"),
     Option("texture_mb", float, 4.0, "lumigraph critical: texture memory", min=0,
-           above=True, unit="MB"))
+           above=True, unit="MB"),
+    Option("per_component", bool, True, "lumigraph critical: one budget factor per "
+           "component (off: a single factor, the paper's spikes)"))
 
 
 def create(renderer: Any, **options: Any) -> Any:

@@ -68,11 +68,13 @@ SPRITE_SUMMARY = ("keyframes: {keyframes} of {frames}; mean ms keyframe "
 
 
 def with_terrain_defaults(renderer: Any, options: dict[str, Any]) -> dict[str, Any]:
-    """``options`` with those left ``None`` that have a terrain default filled from
-    ``renderer``'s terrain (:func:`lodsprite.techniques.defaults.fill_defaults`)."""
+    """``options`` with those left ``None`` that have a terrain default filled with the
+    1999 algorithm's (:data:`lodsprite.techniques.defaults.MEMORY_DEFAULTS`), as the
+    Python API has always made them; ``render`` and ``view`` fill a store's own before
+    (:meth:`lodsprite.run.RenderConfig.resolved`)."""
     from lodsprite.techniques.defaults import fill_defaults
 
-    return fill_defaults(renderer.scene.terrain_spec, options)
+    return fill_defaults(renderer.scene.terrain_spec, options, store=False)
 
 
 def full(renderer: Any, **options: Any) -> Any:
