@@ -1,5 +1,11 @@
-"""A worked example: a new technique in one class and one registry entry, run through the
-harness like every built-in one.
+"""A worked example: a new technique in one class and its spec (one line per option), run
+through the harness like every built-in one.  In this process :func:`register` adds it; a
+package of its own names ``SPEC`` by an entry point instead, and the technique is then in
+``render --mode``, ``view``, scene files and ``lodsprite info``, its option ``--period`` on
+the command line (docs/api/technique.md, "Writing a technique plug-in"):
+
+    [project.entry-points."lodsprite.techniques"]
+    every-other = "custom_technique:SPEC"
 
 The technique draws every other frame at full resolution and repeats the last image in
 between (a toy frame-skipper).  It records which frame each image came from, so the
@@ -23,6 +29,9 @@ harness's untimed quality replay draws the same images.
     0.0
     >>> sorted(k for k in result.summary if k.endswith("_mean"))[:3]
     ['psnr_mean', 'rmse_mean', 'ssim_mean']
+    >>> techniques.create("every-other", renderer, period=0)
+    Traceback (most recent call last):
+    lodsprite.errors.InputError: option --period: got 0, allowed: >= 1
     >>> techniques.unregister("every-other")
 """
 
@@ -69,8 +78,11 @@ class EveryOther(Technique):
         return self._image
 
 
+SPEC = TechniqueSpec("every-other", EveryOther,
+                    (Option("period", int, 2, "frames per full-resolution draw", min=1),),
+                    ("terrain",), "a toy frame-skipper")
+
+
 def register():
-    """Add the example to the registry (one entry) and return its spec."""
-    return add(TechniqueSpec("every-other", EveryOther,
-                             (Option("period", int, 2, "frames per full-resolution draw"),),
-                             ("terrain",), "a toy frame-skipper"), replace=True)
+    """Add the example to the registry in this process and return its spec."""
+    return add(SPEC, replace=True)

@@ -43,5 +43,5 @@ def test_a_smaller_node_grid_draws_fewer_triangles_at_a_coarse_tolerance(gl):
 def test_a_node_grid_outside_the_offered_ones_is_refused(gl, grid):
     scene = load_scene("fractal:64", "terrain", None, 1.0)
     with Renderer(scene, (32, 32), 60.0, ctx=gl.mgl) as r:
-        with pytest.raises(InputError, match="grid must be one of"):
+        with pytest.raises(InputError, match="option --node-grid: got"):
             techniques.create("adaptive", r, grid=grid)

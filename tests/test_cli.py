@@ -156,8 +156,9 @@ def test_reproduce_quick_writes_results_plots_and_report(tmp_path, cli, monkeypa
 
 
 @pytest.mark.parametrize(("args", "fragment"), [
-    (["--tiles", "9"], "--tiles must be a whole number in 1..4"),
-    (["--tiles", "2", "--tile-budget-ms", "-1"], "--tile-budget-ms >= 0"),
+    (["--tiles", "9"], "option --tiles: got 9, allowed: 1..4"),
+    (["--tiles", "2", "--tile-budget-ms", "-1"],
+     "option --tile-budget-ms: got -1.0, allowed: >= 0 ms"),
     (["--tiles", "2", "--mode", "lod"], "--tiles goes with --mode sprite"),
 ])
 def test_render_refuses_bad_tile_options(args, fragment):

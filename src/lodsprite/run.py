@@ -13,10 +13,9 @@ same decisions.  The distributed mode is not core: the command line hands it to
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from contextlib import ExitStack
-from dataclasses import asdict, dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -24,20 +23,11 @@ import numpy as np
 from lodsprite.errors import InputError
 from lodsprite.files import write_json, write_png
 from lodsprite.gl.paths import PathRenderer
-from lodsprite.gl.sprite import (
-    DEFAULT_GUARD_PX,
-    DEFAULT_VISIBILITY,
-    VISIBILITY_MODES,
-)
-from lodsprite.gl.sprite_tiles import MAX_TILES
-from lodsprite.gl.terrain import SHADINGS
 from lodsprite.harness import RunResult, run_path, scene_reference, timing_summary, write_run
 from lodsprite.paths import CameraPath, get_path
 from lodsprite.progress import Progress
 from lodsprite.scene import Scene, load_scene
-from lodsprite.sprite.cache import POLICIES as CACHE_POLICIES
-from lodsprite.sprite.engine import DEFAULT_EPSILON_PX
-from lodsprite.sprite.policy import METRICS
+from lodsprite.techniques.configs import TechniqueOptions, takes_options
 from lodsprite.techniques.terrain import resolve_shading
 from lodsprite.terrain import DEFAULT_EXAGGERATION
 from lodsprite.terrain.loaders import load_level0
@@ -45,101 +35,85 @@ from lodsprite.terrain.lod import level_step
 from lodsprite.terrain.store import is_store
 from lodsprite.workers import peak_rss_mb
 
-MAX_TILE_GRID = math.isqrt(MAX_TILES)  # --tiles N: N x N keyframe tiles
-#: The techniques that draw a store itself, never the scene's in-memory grid (full: level 0).
-LIGHT_TECHNIQUES = ("adaptive", "sprite-adaptive", "full")
 
-
-def _modes() -> tuple[str, ...]:
-    """``--mode`` choices: the registry's terrain techniques run in this process (the
-    distributed client is handed on by the command line; sprite-adaptive is ``sprite``
-    with ``--key-sse``)."""
+def render_modes() -> tuple[str, ...]:
+    """``--mode`` choices: the registry's terrain techniques that ``render`` runs itself
+    (:attr:`~lodsprite.techniques.TechniqueSpec.batch`; the distributed client is handed
+    on by the command line, sprite-adaptive is ``sprite`` with ``--key-sse``), plug-ins
+    included."""
     from lodsprite import techniques
 
-    return tuple(n for n in techniques.names(("terrain",))
-                 if n not in ("distributed", "sprite-adaptive"))
+    return tuple(s.name for s in techniques.specs(("terrain",)) if s.batch)
 
 
-MODES = _modes()  # the built-in ones (a technique registered later joins _modes())
-MAX_GUARD_PX = 1024
+def __getattr__(name: str):
+    if name == "MODES":  # the registry's now (plug-ins are discovered when first asked)
+        return render_modes()
+    raise AttributeError(name)
 
 
+@takes_options
 @dataclass(frozen=True)
-class RenderConfig:
-    """What to render: terrain, texture and path specs, mode, level, image size, frames."""
+class RenderConfig(TechniqueOptions):
+    """What to render: terrain, texture and path specs, mode, image size, frames, and the
+    technique's options (``options``: name -> value given, each declared once by the
+    technique's :class:`~lodsprite.techniques.Option`; also taken as keywords,
+    ``RenderConfig(mode="sprite", epsilon=2.0)``, and read as attributes, ``c.epsilon``).
+    An option with a terrain-dependent default (``lod``, ``key_sse``, ``tiles``...) left
+    out is filled by :meth:`resolved` (:mod:`lodsprite.techniques.defaults`)."""
 
     terrain: str = "jacksboro"
     texture: str = "terrain"
     path: str = "chen1999"
     mode: str = "full"
-    lod: int | None = None    # None: the terrain's default (lodsprite.techniques.defaults)
     size: tuple[int, int] = (512, 512)
     frames: int | None = None
     grid: int | None = None
     exaggeration: float = DEFAULT_EXAGGERATION
     fov_y_deg: float | None = None  # None: the path's own (45° for the built-in paths)
     save_frames: bool = False
-    epsilon: float = DEFAULT_EPSILON_PX
     ground_truth: bool = False
     quality_stride: int = 1
-    visibility: str = DEFAULT_VISIBILITY
-    border: bool = True
-    guard_px: int = DEFAULT_GUARD_PX
-    sse: float = 1.0          # adaptive: screen-space error tolerance, pixels
-    key_sse: float | None = None  # sprite: keyframes by the adaptive renderer at this SSE
-    #                             (None: the terrain's default, 0.5 px on a store)
-    gpu_mb: float = 256.0     # adaptive: GPU tile cache budget
-    host_mb: float = 512.0    # adaptive: host tile cache budget
-    proxy_sse: float | None = None  # sprite proxy: the adaptive mesh at this SSE (needs key_sse)
     flip: bool = False        # with ground_truth: FLIP per frame too
-    shading: str = "auto"     # colour: auto (heights on a store) | texture | heights
-    tiles: int | None = None  # sprite: an N x N grid of keyframe tiles (1: whole keyframes)
-    tile_budget_ms: float | None = None  # sprite, tiles > 1: tile work per frame, ms
-    cache_mb: float | None = None  # sprite: keyframe cache budget, MB (0: off)
-    cache_policy: str = "lru"  # sprite: keyframe cache replacement, lru | benefit
-    metric: str | None = None  # sprite: "warp" (Eq. 1-2) or "resample" (adds resampling)
-    # lod, key_sse, proxy_sse, tiles, tile_budget_ms, cache_mb, metric: None is the
-    # terrain's default (resolved(); lodsprite.techniques.defaults), a value is kept
     save_every: int = 1       # with save_frames: save every n-th frame of the replay only
+    options: dict = field(default_factory=dict)
 
     def resolved(self, store: bool | None = None) -> RenderConfig:
-        """This config with every option left None filled from the terrain's defaults
+        """This config with every option left out that has a terrain default filled
         (:func:`lodsprite.techniques.defaults.fill_defaults`: LOD-sprite on a store gets
         the store's, any other mode or terrain the 1999 options; ``store=False``: the
         1999 options whatever the terrain, as the distributed client); values given are
         kept."""
         from lodsprite.techniques.defaults import DEFAULTED, fill_defaults
 
-        given = {k: getattr(self, k) for k in DEFAULTED}
+        given = {k: self.options.get(k) for k in DEFAULTED}
         if all(v is not None for k, v in given.items() if k not in ("key_sse", "proxy_sse")) \
-                and (self.key_sse is not None or self.mode != "sprite" or store is False):
+                and ("key_sse" in self.options or self.mode != "sprite" or store is False):
             return self  # nothing to fill
         if self.mode != "sprite":
             store = False
         filled = fill_defaults(self.terrain, given, store)
-        return replace(self, **filled)
+        return replace(self, options={**self.options, **filled})
 
     @property
     def technique(self) -> str:
         """The registry's name of what this config renders."""
         c = self.resolved()
-        return "sprite-adaptive" if c.mode == "sprite" and c.key_sse else c.mode
+        return "sprite-adaptive" if c.mode == "sprite" and c.options.get("key_sse") else c.mode
 
     def technique_options(self) -> dict:
-        """The options of the config the technique declares (the registry picks them)."""
-        self = self.resolved()
-        return {"lod": self.lod, "epsilon": self.epsilon, "visibility": self.visibility,
-                "guard_px": self.guard_px, "border": self.border, "sse": self.sse,
-                "key_sse": self.key_sse, "gpu_mb": self.gpu_mb, "host_mb": self.host_mb,
-                "proxy_sse": self.proxy_sse, "threaded": False, "shading": self.shading,
-                "tiles": self.tiles, "tile_budget_ms": self.tile_budget_ms,
-                "cache_mb": self.cache_mb, "cache_policy": self.cache_policy,
-                "metric": self.metric}
+        """The options given (terrain defaults filled); keyframes are rendered in the
+        frame that needs them (a timed run)."""
+        return {**self.resolved().options, "threaded": False}
 
     def validate(self) -> None:
-        """Raise :class:`InputError` for a bad option (checked with the defaults filled)."""
+        """Raise :class:`InputError` for a bad option (checked with the defaults filled):
+        each option's value by its declaration (:meth:`Option.check`), then what goes
+        with what."""
+        from lodsprite import techniques
+
         self = self.resolved()
-        modes = _modes()  # the registry's now: a technique registered later is one too
+        modes = render_modes()
         if self.mode not in modes:
             raise InputError(f"unknown mode '{self.mode}': use one of {', '.join(modes)}")
         w, h = self.size
@@ -147,41 +121,21 @@ class RenderConfig:
             raise InputError(f"image size must be between 16 and 8192 pixels, got {w}x{h}")
         if self.frames is not None and self.frames < 2:
             raise InputError(f"--frames must be at least 2, got {self.frames}")
-        if not self.epsilon > 0:
-            raise InputError(f"--epsilon must be > 0 pixels, got {self.epsilon}")
-        if self.visibility not in VISIBILITY_MODES:
-            raise InputError(f"unknown visibility '{self.visibility}': use one of "
-                             f"{', '.join(VISIBILITY_MODES)}")
-        if not (isinstance(self.guard_px, int) and 0 <= self.guard_px <= MAX_GUARD_PX):
-            raise InputError(f"--guard must be a whole number of pixels in 0..{MAX_GUARD_PX}, "
-                             f"got {self.guard_px}")
-        if self.shading not in SHADINGS:
-            raise InputError(f"unknown shading '{self.shading}': use one of "
-                             f"{', '.join(SHADINGS)}")
-        if self.metric not in METRICS:
-            raise InputError(f"unknown metric '{self.metric}': use one of "
-                             f"{', '.join(METRICS)}")
         if self.quality_stride < 1:
             raise InputError(f"quality stride must be >= 1, got {self.quality_stride}")
         if self.save_every < 1:
             raise InputError(f"save_every must be >= 1, got {self.save_every}")
-        if self.key_sse is not None and (self.mode != "sprite" or not self.key_sse > 0):
-            raise InputError("--key-sse goes with --mode sprite and must be > 0 pixels")
-        if not (isinstance(self.tiles, int) and 1 <= self.tiles <= MAX_TILE_GRID
-                and self.tile_budget_ms >= 0):
-            raise InputError(f"--tiles must be a whole number in 1..{MAX_TILE_GRID} and "
-                             f"--tile-budget-ms >= 0, got {self.tiles}, {self.tile_budget_ms}")
-        if self.tiles > 1 and self.mode != "sprite":
+        spec, known = techniques.get(self.technique), techniques.all_options()
+        for name, value in self.options.items():
+            mine = [o for o in spec.options if o.name == name]
+            (mine[0] if mine else known[name]).check(value)
+        if "key_sse" in self.options and self.mode != "sprite":
+            raise InputError("--key-sse goes with --mode sprite")
+        if self.options.get("tiles", 1) > 1 and self.mode != "sprite":
             raise InputError("--tiles goes with --mode sprite")
-        if not self.cache_mb >= 0 or self.cache_policy not in CACHE_POLICIES:
-            raise InputError(f"--cache-mb must be >= 0 and --cache-policy lru or benefit, "
-                             f"got {self.cache_mb}, {self.cache_policy!r}")
-        if self.proxy_sse is not None and (self.key_sse is None or not self.proxy_sse > 0):
-            raise InputError("--proxy-sse needs adaptive keyframes (--mode sprite --key-sse PX, "
-                             "whose tile caches the proxy shares) and must be > 0 pixels")
-        if not (self.sse > 0 and self.gpu_mb > 0 and self.host_mb > 0):
-            raise InputError(f"--sse, --gpu-mb and --host-mb must be > 0, got {self.sse}, "
-                             f"{self.gpu_mb}, {self.host_mb}")
+        if "proxy_sse" in self.options and "key_sse" not in self.options:
+            raise InputError("--proxy-sse needs adaptive keyframes (--mode sprite --key-sse "
+                             "PX, whose tile caches the proxy shares)")
 
 
 def parse_size(text: str) -> tuple[int, int]:
@@ -201,18 +155,20 @@ def parse_size(text: str) -> tuple[int, int]:
 def prepare(config: RenderConfig, light: bool = True) -> tuple[Scene, CameraPath]:
     """Validate the config and load scene and path (all user errors surface here).
 
-    Over a store, the modes that draw the store itself (:data:`LIGHT_TECHNIQUES`) get a
+    Over a store, the techniques that draw the store itself (their spec's ``light``) get a
     light scene (:func:`~lodsprite.scene.load_scene` ``light=True``, with ``ground_truth``
     too: its reference is level 0, :func:`lodsprite.harness.scene_reference`), and no
     colour texture where frames are shaded from heights.  ``light=False``: the working
     grid whatever the mode (the distributed client, whose server loads the scene so)."""
+    from lodsprite import techniques
+
     config = config.resolved()
     config.validate()
     level0 = None
     store = is_store(config.terrain)
     if config.mode == "full" and store:  # level 0's own samples, whole
         level0 = load_level0(config.terrain, config.exaggeration)  # (refused if too large)
-    light = light and store and config.technique in LIGHT_TECHNIQUES
+    light = light and store and techniques.get(config.technique).light
     textured = resolve_shading(Scene(terrain_spec=config.terrain), config.shading) == "texture"
     scene = load_scene(config.terrain, config.texture, config.grid, config.exaggeration,
                        light=light, textured=textured or not light)
@@ -344,7 +300,7 @@ def render_path(config: RenderConfig, out_dir: Path, progress: Progress | None =
         "texture": config.texture, "path": config.path,
         "size": list(config.size), "grid": scene.hf.quads,
         "exaggeration": config.exaggeration, "gl_version": info.version,
-        "config": asdict(config),
+        "technique": config.technique, "config": config.flat(),
     }
     if "rmse_mean" in summary and "rmse_lod_mean" in summary:
         summary["rmse_ratio"] = (summary["rmse_mean"] / summary["rmse_lod_mean"]
@@ -356,6 +312,6 @@ def render_path(config: RenderConfig, out_dir: Path, progress: Progress | None =
     return summary
 
 
-__all__ = ["MODES", "RenderConfig", "field_of_view", "keyframe_records", "parse_size",
+__all__ = ["RenderConfig", "render_modes", "field_of_view", "keyframe_records", "parse_size",
            "peak_rss_mb", "prepare", "render_path", "run_technique", "sprite_frames",
            "timing_summary"]

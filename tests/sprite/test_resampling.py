@@ -164,7 +164,9 @@ def test_the_metric_option_reaches_the_sprite_techniques_and_is_checked():
 
     for name in ("sprite", "sprite-adaptive"):
         opts = {o.name: o for o in registry.get(name).options}
-        assert opts["metric"].default == "warp"
+        assert opts["metric"].default is None  # the terrain's: warp in memory
+    assert RenderConfig(terrain="fractal:64", mode="sprite").technique_options()["metric"] \
+        == "warp"
     assert RenderConfig(mode="sprite", metric="resample").technique_options()["metric"] == \
         "resample"
     with pytest.raises(InputError, match="metric"):

@@ -28,12 +28,15 @@ from lodsprite.cli import (
     worker,
 )
 from lodsprite.cli.common import err, one_line, out
+from lodsprite.cli.options import with_technique_options
 from lodsprite.errors import GLUnavailableError, LodspriteError
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
                   help="Time-critical rendering of large terrains with LOD geometry and "
                        "image reuse (LOD-sprite).")
-for command in (render.info, render.render, render.view, terrain.tile, crowd.crowd,
+for command in (render.info, with_technique_options(render.render, ('terrain', 'objects')),
+                with_technique_options(render.view), terrain.tile,
+                with_technique_options(crowd.crowd, ("objects",)),
                 profile.profile, reproduce.reproduce, reproduce.demo, distributed.serve):
     app.command()(command)
 app.command(name="keys")(distributed.keys_command)

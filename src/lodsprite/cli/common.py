@@ -44,16 +44,8 @@ VisOpt = Annotated[str, typer.Option(
 BorderOpt = Annotated[bool, typer.Option(
     "--border/--no-border", help="sprite mode: draw the terrain's full-resolution outline "
                                  "(border ribbons) with the coarse level")]
-MetricOpt = Annotated[str, typer.Option(
-    "--metric", help="sprite mode: the keyframe error metric: warp (Chen et al. Eq. 1-2) | "
-                     "resample (adds the keyframe image's resampling error)")]
 GuardOpt = Annotated[int, typer.Option(
     "--guard", help="sprite mode: keyframe guard band in pixels on every side")]
-CacheMbOpt = Annotated[float, typer.Option(
-    "--cache-mb", help="sprite mode: keep keyframes in a GPU cache of this many MB and show "
-                       "the one with the lowest error (0: off, the 1999 algorithm)")]
-CachePolicyOpt = Annotated[str, typer.Option(
-    "--cache-policy", help="sprite mode: keyframe cache replacement: lru | benefit")]
 PaceOpt = Annotated[str, typer.Option(
     "--pace", help="distributed: needed (the server renders a keyframe when the shown one "
                    "nears ε) | continuous (back to back, the paper)")]

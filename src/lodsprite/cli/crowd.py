@@ -23,27 +23,29 @@ def crowd(
     discrete: Annotated[bool, typer.Option(
         "--discrete", help="baseline b: a discrete LOD chain by screen size with "
                            "hysteresis, instead of continuous LOD")] = False,
-    slots: Annotated[int, typer.Option("--slots", help="N_T: LOD snapshots a type")] = 16,
     snapshots: Annotated[str, typer.Option(
         "--snapshots", help="their distribution: linear | finer-near (narrower slots for "
                             "close objects, §4.3)")] = "linear",
-    active: Annotated[int, typer.Option("--active", help="N_a: active-list size")] = 300,
-    target_fps: Annotated[float | None, typer.Option(
-        "--target-fps", help="bend the LODs to hold this frame rate")] = None,
     path: Annotated[str | None, typer.Option(
         "--path", help="a JSON path file (default: a walkthrough loop)")] = None,
     frames: Annotated[int, typer.Option("--frames", help="frames of the walkthrough")] = 600,
     size: SizeOpt = "640x480",
     out_dir: Annotated[Path, typer.Option("--out", help="output folder")] = Path("out/crowd"),
+    options: dict | None = None,
 ) -> None:
-    """Walk through a crowd of continuous-LOD objects with the LODManager (Gumbau et al.)."""
+    """Walk through a crowd of continuous-LOD objects with the LODManager (Gumbau et al.);
+    its options (--slots, --active, --target-fps, ...): the crowd techniques'
+    declarations, under "Technique options"."""
+    from lodsprite import techniques
     from lodsprite.manager.run import CrowdConfig, run_crowd
     from lodsprite.paths import load_path_json
     from lodsprite.run import parse_size
 
     mode = "discrete" if discrete else ("manager" if manager else "independent")
-    cfg = CrowdConfig(objects, trees, mesh, mode, slots, active, target_fps, frames,
-                      parse_size(size), snapshots=snapshots)
+    o = techniques.get(mode).bind(options or {})
+    cfg = CrowdConfig(objects, trees, mesh, mode, o["slots"], o["active"], o["target_fps"],
+                      frames, parse_size(size), snapshots=snapshots,
+                      range_near=o["range_near"], range_far=o["range_far"])
     cfg.validate()
     cam = load_path_json(path) if path is not None else None
     with progress_bar(f"crowd ({mode})") as update:

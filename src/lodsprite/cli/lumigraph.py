@@ -9,6 +9,7 @@ from typing import Annotated
 import typer
 
 from lodsprite.cli.common import SizeOpt, out, progress_bar
+from lodsprite.cli.options import with_technique_options
 
 lumigraph_app = typer.Typer(no_args_is_help=True,
                              help="Time-critical lumigraph (Sloan et al. 1997): capture, render.")
@@ -58,7 +59,6 @@ def lumigraph_import(
               f"wrote {out_dir}")
 
 
-@lumigraph_app.command("render")
 def lumigraph_render(
     folder: Annotated[Path, typer.Argument(help="a lumigraph folder (lumigraph capture)")],
     frames: Annotated[int, typer.Option("--frames", help="frames along the arc")] = 120,
@@ -71,37 +71,24 @@ def lumigraph_render(
     ground_truth: Annotated[bool, typer.Option(
         "--ground-truth", help="compare every frame with the object drawn directly "
                                "(PSNR, SSIM)")] = False,
-    depth_correction: Annotated[bool, typer.Option(
-        "--depth-correction/--no-depth-correction",
-        help="correct uv coordinates with the approximate geometry")] = True,
     method: Annotated[str, typer.Option(
         "--method", help="full | subsample | fixed | arbitrary | line | projective | "
                          "progressive | critical")] = "full",
-    target_fps: Annotated[float, typer.Option(
-        "--target-fps", help="critical: the frame rate to hold")] = 30.0,
-    texture_mb: Annotated[float, typer.Option(
-        "--texture-mb", help="critical: texture memory for node images (MB)")] = 4.0,
-    nodes: Annotated[int, typer.Option(
-        "--nodes", help="arbitrary, projective, progressive: nodes round the eye")] = 16,
-    level: Annotated[int, typer.Option(
-        "--level", help="subsample: mipmap level (st and uv halved per level)")] = 1,
-    reuse: Annotated[int, typer.Option(
-        "--reuse", help="projective: frames each reconstructed image is reused")] = 6,
-    fade: Annotated[int, typer.Option(
-        "--fade", help="progressive: frames to blend a node in or out")] = 8,
     every: Annotated[int, typer.Option(
         "--every", help="with --ground-truth: compare every K-th frame")] = 1,
     flip: Annotated[bool, typer.Option(
         "--flip", help="with --ground-truth: FLIP too (about 0.4 s a 512² frame)")] = False,
+    options: dict | None = None,
 ) -> None:
-    """Reconstruct a lumigraph along a path with one of the paper's methods."""
+    """Reconstruct a lumigraph along a path with one of the paper's methods (its options:
+    the lumigraph techniques' declarations, under "Technique options")."""
     from lodsprite.lumigraph.run import render_lumigraph
     from lodsprite.paths import load_path_json
     from lodsprite.run import parse_size
 
     cam = load_path_json(path) if path is not None else None
-    opts = dict(nodes=nodes, level=level, reuse=reuse, fade=fade, target_fps=target_fps,
-                texture_mb=texture_mb)
+    opts = dict(options or {})
+    depth_correction = opts.pop("depth_correction", True)
     with progress_bar(f"lumigraph {method}") as update:
         s = render_lumigraph(folder, out_dir, frames, parse_size(size), cam, ground_truth,
                              depth_correction, method, every, update, flip, **opts)
@@ -113,3 +100,6 @@ def lumigraph_render(
     if "flip_mean" in s:
         line += f", FLIP {s['flip_mean']:.4f}"
     out.print(line + f"; wrote {out_dir / 'frames.csv'}, {out_dir / 'summary.json'}")
+
+
+lumigraph_app.command("render")(with_technique_options(lumigraph_render, ("lightfield",)))

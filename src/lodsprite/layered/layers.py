@@ -10,7 +10,8 @@ include the CPU work of LOD selection and extraction, which is most of a layer's
 llvmpipe).
 
 The terrain layer is any terrain technique of the registry (``full``, ``lod``,
-``adaptive``, ``sprite``, ``sprite-adaptive``), made on the same renderer, not copied.
+``adaptive``, ``sprite``, ``sprite-adaptive``, a plug-in's), made on the same renderer,
+not copied; its spec's ``knob`` says what a frame budget may turn.
 LOD-sprite shows a keyframe as it is on the frame that renders it (no spriteframe, no
 proxy depth); in a scene the layer draws the spriteframe of that keyframe on such a frame
 too, so that every frame's depth buffer is the proxy's and later layers test against it.
@@ -32,7 +33,15 @@ if TYPE_CHECKING:
     from lodsprite.camera import Viewpoint
     from lodsprite.techniques.base import Technique
 
-TERRAIN_MODES = ("full", "lod", "adaptive", "sprite", "sprite-adaptive")
+
+def terrain_modes() -> tuple[str, ...]:
+    """The techniques a terrain layer may be drawn by: the registry's that draw the
+    terrain alone (plug-ins included)."""
+    from lodsprite import techniques
+
+    return techniques.names(("terrain",))
+
+
 #: Knob settings, ascending quality: ε (sprite, px), tolerance (adaptive, px), level (lod);
 #: ε in √2 steps to 4 px, then 2^(1/4) steps (the terrain's triangles rise faster than 1/ε
 #: below a few pixels, so the finer steps keep a setting near any budget).
@@ -106,13 +115,14 @@ class TerrainLayer(Layer):
         from lodsprite import techniques
         from lodsprite.errors import InputError
 
-        if mode not in TERRAIN_MODES:
+        if mode not in terrain_modes():
             raise InputError(f"unknown terrain mode {mode!r}: use one of "
-                             f"{', '.join(TERRAIN_MODES)}")
+                             f"{', '.join(terrain_modes())}")
         self.renderer, self.mode = renderer, mode
-        spec = techniques.get(mode)
+        self.spec = spec = techniques.get(mode)
         self.technique: Technique = spec.create(renderer, **spec.bind(options))
-        self.sprite = getattr(self.technique, "sprite", None)  # a LodSprite or None
+        # the spec's knob says what the technique is: epsilon -> LOD-sprite (its LodSprite)
+        self.sprite = self.technique.sprite if spec.knob == "epsilon" else None
         self._last = None
         self._seen: Viewpoint | None = None       # the last frame's viewpoint
         self._table: np.ndarray | None = None     # the adaptive work table, and its age
@@ -122,9 +132,8 @@ class TerrainLayer(Layer):
 
     def projection(self, viewpoint: Viewpoint) -> np.ndarray:
         """The frame's projection ``(4, 4)``: the terrain technique's own."""
-        adaptive = getattr(self.technique, "terrain", None)
-        if self.mode == "adaptive":
-            return adaptive.projection(viewpoint)
+        if self.spec.knob == "sse":  # the adaptive renderer fits its own near/far
+            return self.technique.terrain.projection(viewpoint)
         return self.renderer.projection(viewpoint).matrix()
 
     def keyframe_hook(self, draw: Callable[[Viewpoint, np.ndarray, Any], None]) -> bool:
@@ -206,10 +215,10 @@ class TerrainLayer(Layer):
         if self.sprite is not None:
             return LayerControl("terrain", EPSILONS, float(self.sprite.epsilon_px),
                                 lambda v: t.set_param("epsilon", v), coverage=self.coverage)
-        if self.mode == "adaptive":
+        if self.spec.knob == "sse":
             return LayerControl("terrain", EPSILONS, float(t.terrain.sse), t.terrain.set_sse,
                                 work=self._adaptive_work, coverage=self.coverage)
-        if self.mode == "lod":
+        if self.spec.knob == "lod":
             levels = tuple(v for v in LEVELS if v <= self.renderer.scene.hf.quads) or (2.0,)
             return LayerControl("terrain", levels, float(t.lod),
                                 lambda v: t.set_param("lod", v), coverage=self.coverage)

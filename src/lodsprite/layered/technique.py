@@ -273,12 +273,14 @@ def with_view_fov(cam: CameraPath, scene: Scene) -> CameraPath:
 
 def render_scene(scene_file: str | os.PathLike, out_dir: str | os.PathLike,
                  size: tuple[int, int] | None = None, frames: int | None = None,
-                 terrain_mode: str = "adaptive",
+                 terrain_mode: str | None = None,
                  target_fps: float | None = None, ground_truth: bool = False,
                  flip: bool = False, path: str | None = None, progress=None,
                  **options: Any) -> dict[str, Any]:
     """Run the ``scene`` technique over the world of ``scene_file`` along its ``[view]``
     path (or ``path``) and write the run to ``out_dir``; returns the summary.
+    ``terrain_mode`` left None is the file's ``[terrain] mode`` (else ``adaptive``), and
+    the file's ``[terrain.options]`` go to it under the ``options`` given here.
     ``target_fps`` runs the budget's scheduler (none without).  ``size`` and
     ``target_fps`` left None are the file's ``[view]`` values (else 512x512 and none); its
     ``fov`` replaces the path's."""
@@ -289,15 +291,24 @@ def render_scene(scene_file: str | os.PathLike, out_dir: str | os.PathLike,
 
     if target_fps is not None and not target_fps > 0:
         raise InputError(f"--target-fps must be > 0, got {target_fps}")
+    from lodsprite.scene.file import read_scene_file
+
     scene = load_scene_file(scene_file)
     view = scene.view
+    section = read_scene_file(scene_file).terrain
+    terrain_mode = terrain_mode or section.mode or "adaptive"
+    options = {**section.options, **options}
     size = size or view.size_px() or DEFAULT_SIZE
     target_fps = target_fps if target_fps is not None else view.target_fps
     cam = with_view_fov(scene.path(path or view.path, frames), scene)
     schedule = "scheduler" if target_fps is not None else "none"
     with Renderer(scene, size, cam.fov_y_deg) as renderer:
+        own = {o.name for o in techniques.get("scene").options}
         t = techniques.create("scene", renderer, terrain_mode=terrain_mode,
-                              schedule=schedule, target_fps=target_fps, **options)
+                              schedule=schedule, target_fps=target_fps,
+                              terrain_options={k: v for k, v in options.items()
+                                               if k not in own},
+                              **{k: v for k, v in options.items() if k in own})
         ref = None
         try:
             image = None

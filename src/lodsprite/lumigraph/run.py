@@ -206,10 +206,10 @@ def _measure(folder, method, path, frames, size, ground_truth, depth_correction,
         if f"lumigraph-{method}" not in techniques.names(["lightfield"]):
             raise InputError(f"unknown lumigraph method {method!r}: use one of "
                              f"{', '.join(s.short for s in techniques.specs(['lightfield']))}")
-        spec = techniques.get(f"lumigraph-{method}")  # the registry's factory; every
-        # method option passes (the critical method's own knobs too)
-        t = spec.load()(renderer, folder=str(folder), depth_correction=depth_correction,
-                        **spec.fixed, **options)
+        # the registry's technique; every method option passes (the critical method's
+        # own knobs too), checked by its declaration
+        t = techniques.create(f"lumigraph-{method}", renderer, folder=str(folder),
+                              depth_correction=depth_correction, **options)
         ref = (ObjectReference(renderer.gl, obj_mesh, (w, h), t.projection)
                if obj_mesh is not None else None)
         try:

@@ -53,6 +53,7 @@ MAX_HEIGHT_M = 10_000.0
 MAX_WALK_MPS = 100.0
 MIN_LOD_FLOOR = 0.005            # [[objects]] lod_floor: the coarsest LOD's fraction
 MAX_GRID = 8192                  # [terrain] grid, quads a side (as the server's cap)
+MAX_TERRAIN_OPTIONS = 64         # [terrain.options] entries
 TERRAIN_BUILTINS = ("jacksboro",)
 #: The entry-point group of built-in models, mesh names that are not files: each entry
 #: point names a callable ``(min_fraction=...) -> LOD model`` (``ogre`` and ``tree``, the
@@ -63,12 +64,17 @@ _SIZE = r"\s*(\d+)\s*[xX]\s*(\d+)\s*"     # [view] size: WxH
 
 class TerrainSection(msgspec.Struct, forbid_unknown_fields=True):
     """``[terrain]``: ``source`` as ``--terrain`` takes, ``grid`` (quads a side, a power of
-    two), ``exaggeration`` and ``texture`` as the same options of ``lodsprite render``."""
+    two), ``exaggeration`` and ``texture`` as the same options of ``lodsprite render``;
+    ``mode``: the terrain technique that draws it (any of the registry's, ``lodsprite
+    info``) and ``options``: that technique's options (``[terrain.options]``, name ->
+    value, checked by the technique's declarations)."""
 
     source: str
     grid: int | None = None
     exaggeration: float = 1.0
     texture: str = "terrain"
+    mode: str | None = None
+    options: dict[str, str | int | float | bool] = {}
 
 
 class ObjectSection(msgspec.Struct, forbid_unknown_fields=True):
@@ -243,6 +249,30 @@ class _Checker:
         name = t.texture.strip().lower()
         if not (name == "terrain" or name == "checker" or name.startswith("checker:")):
             t.texture = self.file(t.texture, "terrain.texture")
+        self.technique(t)
+
+    def technique(self, t: TerrainSection) -> None:
+        """``mode`` a terrain technique of the registry, ``options`` its own, each value
+        parsed and checked by its declaration (:class:`~lodsprite.techniques.Option`)."""
+        from lodsprite import techniques
+        from lodsprite.errors import InputError
+
+        modes = techniques.names(("terrain",))
+        if t.mode is not None and t.mode not in modes:
+            self.fail("terrain.mode", f"unknown technique {t.mode!r}: use one of "
+                      f"{', '.join(modes)}")
+        if len(t.options) > MAX_TERRAIN_OPTIONS:
+            self.fail("terrain.options", f"at most {MAX_TERRAIN_OPTIONS} options")
+        declared = ({o.name: o for o in techniques.get(t.mode).options} if t.mode
+                    else techniques.all_options(("terrain",)))
+        for name, value in t.options.items():
+            if name not in declared or not declared[name].on_command_line:
+                self.fail(f"terrain.options.{name}", f"{t.mode or 'no terrain technique'} "
+                          f"takes no such option")
+            try:
+                t.options[name] = declared[name].parse(value)
+            except InputError as exc:
+                self.fail(f"terrain.options.{name}", str(exc))
 
     def objects(self, o: ObjectSection, at: str) -> None:
         if o.mesh.strip().lower() in builtin_meshes():  # built in (ogre, tree), not files

@@ -3,13 +3,15 @@
 * :class:`Technique`, :class:`Frame`, :class:`Param` — the interface (:mod:`.base`);
 * :class:`TechniqueSpec`, :class:`Option`, :func:`register`, :func:`get`, :func:`create`,
   :func:`specs`, :func:`names`, :func:`factories` — the registry (:mod:`.registry`);
-* every built-in technique is registered on import (:mod:`.builtin`), by dotted path:
-  importing this package imports no technique package (and no moderngl).
+* :class:`Option` — an option, declared once (:mod:`.options`);
+* techniques are plug-ins: every spec, the built-in ones (:mod:`.builtin` and the
+  packages' ``spec`` modules) too, is named by an entry point of the group
+  ``lodsprite.techniques`` and loaded the first time the registry is asked; importing
+  this package imports no technique package (and no moderngl).
 
 A run along a camera path: :func:`lodsprite.harness.run_path`.
 """
 
-from lodsprite.techniques import builtin as _builtin  # noqa: F401  (registers)
 from lodsprite.techniques.base import (
     FALLBACK_TINT,
     Frame,
@@ -18,11 +20,14 @@ from lodsprite.techniques.base import (
     Technique,
     TechniqueFactory,
 )
+from lodsprite.techniques.options import Option
 from lodsprite.techniques.registry import (
+    GROUP,
     LAYERS,
-    Option,
     TechniqueSpec,
+    all_options,
     create,
+    discover,
     factories,
     get,
     names,
@@ -31,6 +36,6 @@ from lodsprite.techniques.registry import (
     unregister,
 )
 
-__all__ = ["FALLBACK_TINT", "LAYERS", "Frame", "FrameInfo", "Option", "Param", "Technique",
-           "TechniqueFactory", "TechniqueSpec", "create", "factories", "get", "names",
-           "register", "specs", "unregister"]
+__all__ = ["FALLBACK_TINT", "GROUP", "LAYERS", "Frame", "FrameInfo", "Option", "Param",
+           "Technique", "TechniqueFactory", "TechniqueSpec", "all_options", "create",
+           "discover", "factories", "get", "names", "register", "specs", "unregister"]

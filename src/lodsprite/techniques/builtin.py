@@ -1,108 +1,132 @@
-"""Every technique lodsprite ships, registered by dotted path (nothing imported here).
+"""The terrain techniques lodsprite ships, as specs (each named by an entry point of the
+group ``lodsprite.techniques`` in ``pyproject.toml``), and the options they declare,
+each once.
 
-Adding one: write its class (a :class:`~lodsprite.techniques.Technique`) and add one
-:func:`~lodsprite.techniques.register` entry, here or in your own code
-(``examples/custom_technique.py``).
+A spec's factory imports its class when called, so reading these specs (the command
+line's ``--help``) imports no GL.  Adding a technique: its class, its spec with one
+:class:`~lodsprite.techniques.Option` line per option, and its entry point (or
+:func:`~lodsprite.techniques.register` in your own code, ``examples/custom_technique.py``).
 """
 
 from __future__ import annotations
 
-from lodsprite.techniques.registry import Option, TechniqueSpec, register
+from typing import Any
 
-LOD = Option("lod", int, 16, "coarse level, quads per side (a power of two)")
-EPSILON = Option("epsilon", float, 1.0, "LOD-sprite error threshold ε, pixels")
-VISIBILITY = Option("visibility", str, "coarse", "LOD-sprite visibility rule")
-GUARD = Option("guard_px", int, 32, "keyframe guard band, pixels")
-BORDER = Option("border", bool, True, "draw the coarse level's border ribbons")
-CACHE_MB = Option("cache_mb", float, 0.0, "LOD-sprite keyframe cache budget, MB (0: off)")
-CACHE_POLICY = Option("cache_policy", str, "lru", "keyframe cache replacement: lru | benefit")
-METRIC = Option("metric", str, "warp",
-                "LOD-sprite error metric: warp (Eq. 1-2) | resample (adds resampling)")
-THREADED = Option("threaded", bool, False, "render keyframes on a worker thread")
-TILES = Option("tiles", int, 1, "LOD-sprite: N x N keyframe tiles (1: whole keyframes)")
-TILE_BUDGET = Option("tile_budget_ms", float, 8.0, "LOD-sprite tiles: tile work per frame, ms")
-SSE = Option("sse", float, 1.0, "adaptive: screen-space error tolerance, pixels")
-KEY_SSE = Option("key_sse", float, 1.0, "keyframes by the adaptive renderer at this SSE, px")
-PROXY_SSE = Option("proxy_sse", float, None,
-                   "sprite proxy: the adaptive mesh at this SSE, px (None: the uniform --lod)")
-GPU_MB = Option("gpu_mb", float, 256.0, "adaptive: GPU tile cache budget, MB")
-SHADING = Option("shading", str, "auto", "colour: auto (heights on a store) | texture | heights")
-HOST_MB = Option("host_mb", float, 512.0, "adaptive: host tile cache budget, MB")
-GRID = Option("grid", int, 64, "adaptive: node grid, quads a side (16 | 32 | 64 | 128)")
-SERVER = Option("server", str, "", "the LOD server, HOST:PORT")
-MAX_ERROR = Option("max_error", float, 4.0, "distributed: largest error shown, pixels")
-FOLDER = Option("folder", str, "", "the lumigraph folder (default: the scene's)")
-LF_OPTIONS = (FOLDER, Option("depth_correction", bool, True, "depth-correct with the proxy"),
-              Option("nodes", int, 16, "nodes per frame (arbitrary, projective)"),
-              Option("level", int, 1, "subsample: mip level of the node images"),
-              Option("reuse", int, 6, "projective: frames a reconstruction is reused"),
-              Option("fade", int, 8, "progressive: frames of a fade"),
-              Option("target_fps", float, 30.0, "critical: the frame-rate target"),
-              Option("texture_mb", float, 4.0, "critical: texture memory, MB"))
-TARGET_FPS = Option("target_fps", float, None, "the crowd's frame-rate target (LOD feedback)")
-CROWD = Option("crowd", object, None, "the crowd (default: the scene's object set)")
-SLOTS = Option("slots", int, 16, "crowd: LOD slots per type in the manager's table")
-ACTIVE = Option("active", int, 300, "crowd: objects whose LOD is updated per frame")
-NEAR = Option("range_near", float, 5.0, "crowd: distance of the finest LOD, metres")
-FAR = Option("range_far", float, 150.0, "crowd: distance of the coarsest LOD, metres")
-DIST = Option("dist", object, None, "crowd: the snapshots' distribution (default linear)")
+from lodsprite.techniques.options import Option
+from lodsprite.techniques.registry import TechniqueSpec
 
-TERRAIN = "lodsprite.techniques.terrain"
-ADAPTIVE = "lodsprite.techniques.adaptive"
+_TERRAIN = "the terrain's (lodsprite.techniques.defaults)"
 
-register(TechniqueSpec("full", f"{TERRAIN}:FullTechnique", (SHADING,), ("terrain",),
-                       "the full-resolution terrain (the ground truth)"))
-register(TechniqueSpec("lod", f"{TERRAIN}:LodTechnique", (LOD, SHADING), ("terrain",),
-                       "one uniform coarse level"))
-register(TechniqueSpec("sprite", f"{TERRAIN}:SpriteTechnique",
-                       (LOD, EPSILON, THREADED, VISIBILITY, GUARD, BORDER, SHADING, TILES,
-                        TILE_BUDGET, CACHE_MB, CACHE_POLICY, METRIC),
-                       ("terrain",),
-                       "LOD-sprite (Chen, Swan & Kaufman 1999)"))
-register(TechniqueSpec("adaptive", f"{ADAPTIVE}:AdaptiveTechnique",
-                       (SSE, GPU_MB, HOST_MB, SHADING, GRID), ("terrain",),
-                       "the adaptive (CDLOD-style) renderer, stores of any size"))
-register(TechniqueSpec("sprite-adaptive", f"{ADAPTIVE}:SpriteAdaptiveTechnique",
-                       (LOD, EPSILON, KEY_SSE, GPU_MB, HOST_MB, VISIBILITY, GUARD, BORDER,
-                        SHADING, TILES, TILE_BUDGET, CACHE_MB, CACHE_POLICY, METRIC,
-                        PROXY_SSE),
-                       ("terrain",), "LOD-sprite with keyframes by the adaptive renderer"))
-register(TechniqueSpec("distributed", "lodsprite.distributed.technique:create",
-                       (SERVER, LOD, EPSILON, MAX_ERROR), ("terrain",),
-                       "LOD-sprite client, keyframes from a LOD server (Swan et al. 2002)"))
+LOD = Option("lod", int, None, "coarse level: N x N quads over the terrain (a power of two)",
+             min=2, unit="quads", none=_TERRAIN)
+EPSILON = Option("epsilon", float, 1.0, "LOD-sprite: error threshold ε", min=0, above=True,
+                 unit="px")
+VISIBILITY = Option("visibility", str, "coarse", "LOD-sprite: where the sprite is used",
+                    choices=("coarse", "triangle", "fragment"))
+GUARD = Option("guard_px", int, 32, "LOD-sprite: keyframe guard band on every side",
+               min=0, max=1024, unit="px", flag="guard")
+BORDER = Option("border", bool, True, "LOD-sprite: draw the terrain's full-resolution "
+                "outline (border ribbons) with the coarse level")
+CACHE_MB = Option("cache_mb", float, None, "LOD-sprite: keep keyframes in a GPU cache of "
+                  "this size and show the one with the lowest error (0: off)", min=0,
+                  unit="MB", none=_TERRAIN)
+CACHE_POLICY = Option("cache_policy", str, "lru", "LOD-sprite: keyframe cache replacement",
+                      choices=("lru", "benefit"))
+METRIC = Option("metric", str, None, "LOD-sprite: the keyframe error metric: warp (Chen et "
+                "al. Eq. 1-2) or resample (adds the keyframe image's resampling error)",
+                choices=("warp", "resample"), none=_TERRAIN)
+THREADED = Option("threaded", bool, False, "render keyframes on a worker thread (the "
+                  "window's default; view --inline-keyframes turns it off)",
+                  command_line=False)
+TILES = Option("tiles", int, None, "LOD-sprite: refresh keyframes tile by tile on an N x N "
+               "grid of screen tiles (1: whole keyframes)", min=1, max=4, none=_TERRAIN)
+TILE_BUDGET = Option("tile_budget_ms", float, None, "LOD-sprite with tiles > 1: tile work "
+                     "per frame (a tile over 2 ε is rendered even beyond it)", min=0,
+                     unit="ms", none=_TERRAIN)
+SSE = Option("sse", float, 1.0, "adaptive: screen-space error tolerance", min=0,
+             above=True, unit="px")
+KEY_SSE = Option("key_sse", float, None, "LOD-sprite: keyframes by the adaptive renderer at "
+                 "this tolerance", min=0, above=True, unit="px",
+                 none="the terrain's: 0.5 on a store; in memory none for sprite, 1 for "
+                      "sprite-adaptive")
+PROXY_SSE = Option("proxy_sse", float, None, "LOD-sprite with adaptive keyframes: "
+                   "spriteframes draw the adaptive mesh at this tolerance instead of the "
+                   "uniform --lod level", min=0, above=True, unit="px", none=_TERRAIN)
+GPU_MB = Option("gpu_mb", float, 256.0, "adaptive: GPU tile cache budget", min=0,
+                above=True, unit="MB")
+HOST_MB = Option("host_mb", float, 512.0, "adaptive: host tile cache budget", min=0,
+                 above=True, unit="MB")
+SHADING = Option("shading", str, "auto", "terrain colour: auto (heights on a store, else the "
+                 "texture) | texture | heights", choices=("auto", "texture", "heights"))
+GRID = Option("grid", int, 64, "adaptive: node grid, quads a side",
+              choices=(16, 32, 64, 128), flag="node-grid")
+SPRITE_OPTIONS = (LOD, EPSILON, THREADED, VISIBILITY, GUARD, BORDER, SHADING, TILES,
+                  TILE_BUDGET, CACHE_MB, CACHE_POLICY, METRIC)
+SPRITE_SUMMARY = ("keyframes: {keyframes} of {frames}; mean ms keyframe "
+                  "{mean_ms_keyframe:.1f}, first spriteframe {mean_ms_first_sprite:.1f}, "
+                  "spriteframe {mean_ms_sprite:.1f}",)
 
-CROWD_MODES = {"manager": "the LODManager's crowd (Gumbau et al.)",
-               "independent": "every object extracts its own LOD (baseline a)",
-               "discrete": "discrete LODs by screen size (baseline b)"}
-for _mode, _text in CROWD_MODES.items():
-    register(TechniqueSpec(_mode, "lodsprite.manager.technique:create",
-                           (CROWD, TARGET_FPS, SLOTS, ACTIVE, NEAR, FAR, DIST),
-                           ("objects",), _text, fixed={"mode": _mode}))
 
-LUMIGRAPH_METHODS = {
-    "critical": "time-critical reconstruction (Sloan, Cohen & Gortler 1997)",
-    "full": "every node of the lumigraph", "arbitrary": "nearest nodes, any count",
-    "fixed": "a fixed node set", "line": "nodes on a line",
-    "projective": "projective texture reuse", "progressive": "progressive refinement",
-    "subsample": "a subsampled lumigraph"}
-for _method, _text in LUMIGRAPH_METHODS.items():
-    register(TechniqueSpec(f"lumigraph-{_method}", "lodsprite.lumigraph.technique:create",
-                           LF_OPTIONS, ("lightfield",), _text, mode=_method,
-                           fixed={"method": _method}))
+def with_terrain_defaults(renderer: Any, options: dict[str, Any]) -> dict[str, Any]:
+    """``options`` with those left ``None`` that have a terrain default filled with the
+    1999 algorithm's (:data:`lodsprite.techniques.defaults.MEMORY_DEFAULTS`), as the
+    Python API has always made them; ``render`` and ``view`` fill a store's own before
+    (:meth:`lodsprite.run.RenderConfig.resolved`)."""
+    from lodsprite.techniques.defaults import fill_defaults
 
-SCENE_OPTIONS = (
-    Option("world", object, None, "the world (default: the scene file's)"),
-    Option("terrain_mode", str, "adaptive", "scene: the terrain's technique: full | lod | "
-                                            "adaptive | sprite | sprite-adaptive"),
-    Option("schedule", str, "none", "scene: the frame budget: none | scheduler | independent"),
-    Option("target_fps", float, None, "scene: the frame-rate target of the budget"),
-    Option("keyframes", str, "static", "scene, LOD-sprite: keyframes hold the static layers "
-                                       "(static) or the terrain only (terrain)"),
-    Option("exponent", float, 1.0, "scene: the objects' LOD exponent (0: full meshes)"),
-    Option("nodes", int, 8, "scene: the light fields' node budget"),
-    Option("ground_truth", bool, False, "scene: the full-detail reference"),
-    Option("frame_s", float, 1.0 / 30.0, "scene: seconds of world time a frame"),
-    LOD, EPSILON, SSE, SHADING, GPU_MB, HOST_MB)
-register(TechniqueSpec("scene", "lodsprite.layered.technique:create", SCENE_OPTIONS,
-                       ("terrain", "objects"),
-                       "terrain, objects and light fields composited by depth (issue 23)"))
+    return fill_defaults(renderer.scene.terrain_spec, options, store=False)
+
+
+def full(renderer: Any, **options: Any) -> Any:
+    from lodsprite.techniques.terrain import FullTechnique
+
+    return FullTechnique(renderer, **options)
+
+
+def lod(renderer: Any, **options: Any) -> Any:
+    from lodsprite.techniques.terrain import LodTechnique
+
+    return LodTechnique(renderer, **with_terrain_defaults(renderer, options))
+
+
+def sprite(renderer: Any, **options: Any) -> Any:
+    from lodsprite.techniques.terrain import SpriteTechnique
+
+    return SpriteTechnique(renderer, **with_terrain_defaults(renderer, options))
+
+
+def adaptive(renderer: Any, **options: Any) -> Any:
+    from lodsprite.techniques.adaptive import AdaptiveTechnique
+
+    return AdaptiveTechnique(renderer, **options)
+
+
+def sprite_adaptive(renderer: Any, **options: Any) -> Any:
+    from lodsprite.techniques.adaptive import SpriteAdaptiveTechnique
+
+    given = with_terrain_defaults(renderer, options)  # None left: the class's own default
+    return SpriteAdaptiveTechnique(renderer, **{k: v for k, v in given.items()
+                                                if v is not None})
+
+
+FULL = TechniqueSpec("full", full, (SHADING,), ("terrain",),
+                     "the full-resolution terrain (the ground truth)", order=10, light=True)
+LOD_SPEC = TechniqueSpec("lod", lod, (LOD, SHADING), ("terrain",), "one uniform coarse level",
+                         order=20, knob="lod")
+SPRITE = TechniqueSpec("sprite", sprite, SPRITE_OPTIONS, ("terrain",),
+                       "LOD-sprite (Chen, Swan & Kaufman 1999); adaptive keyframes on a "
+                       "store or with --key-sse", order=30, knob="epsilon",
+                       summary=SPRITE_SUMMARY)
+ADAPTIVE = TechniqueSpec("adaptive", adaptive, (SSE, GPU_MB, HOST_MB, SHADING, GRID),
+                         ("terrain",), "the adaptive (CDLOD-style) renderer, stores of any "
+                         "size", order=40, light=True, knob="sse",
+                         summary=("{sse:g} px: first frame {first_frame_s:.2f} s; tiles "
+                                  "resident {tiles_resident}, loaded {tiles_loaded}, evicted "
+                                  "{tiles_evicted}, unreadable {tiles_bad}",))
+SPRITE_ADAPTIVE = TechniqueSpec(
+    "sprite-adaptive", sprite_adaptive,
+    (LOD, EPSILON, KEY_SSE, GPU_MB, HOST_MB, VISIBILITY, GUARD, BORDER, SHADING, TILES,
+     TILE_BUDGET, CACHE_MB, CACHE_POLICY, METRIC, PROXY_SSE),
+    ("terrain",), "LOD-sprite with keyframes by the adaptive renderer (render: --mode "
+    "sprite --key-sse)", order=50, light=True, batch=False, knob="epsilon",
+    summary=SPRITE_SUMMARY)

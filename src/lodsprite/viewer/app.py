@@ -10,13 +10,14 @@ opens; with no display the error is :class:`~lodsprite.viewer.window.NoDisplayEr
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 from lodsprite import techniques
 from lodsprite.errors import InputError
 from lodsprite.scene import Scene, open_scene
 from lodsprite.techniques import TechniqueFactory
+from lodsprite.techniques.configs import TechniqueOptions, takes_options
 from lodsprite.viewer.core import PlayPlan
 from lodsprite.viewer.window import WindowOptions, check_display, run_viewer
 
@@ -24,18 +25,17 @@ from lodsprite.viewer.window import WindowOptions, check_display, run_viewer
 WINDOW = (1024, 768)
 
 
+@takes_options
 @dataclass(frozen=True)
-class ViewOptions:
-    """What ``lodsprite view`` was asked for (see ``lodsprite view --help``)."""
+class ViewOptions(TechniqueOptions):
+    """What ``lodsprite view`` was asked for (see ``lodsprite view --help``); the
+    techniques' options in ``options`` (name -> value given; also taken as keywords and
+    read as attributes, as :class:`~lodsprite.run.RenderConfig`'s)."""
 
     terrain: str = "jacksboro"
     texture: str = "terrain"
     grid: int | None = None
     mode: str | None = None  # default: the scene's (sprite, critical, manager)
-    # lod, key_sse, proxy_sse, tiles, tile_budget_ms, cache_mb, metric: None is the
-    # terrain's default (lodsprite.techniques.defaults; a store's LOD-sprite variant)
-    lod: int | None = None
-    epsilon: float = 1.0
     size: tuple[int, int] | None = None  # None: a scene file's [view] size, else WINDOW
     fps: float = 60.0
     threaded: bool = True
@@ -46,58 +46,41 @@ class ViewOptions:
     exit: bool = False
     out: Path | None = None
     record: Path | None = None
-    server: str | None = None
     fov_y_deg: float = 45.0
     target_fps: float | None = None  # a crowd's LOD feedback target
-    sse: float | None = None      # adaptive: screen-space error, pixels
-    key_sse: float | None = None  # sprite-adaptive: its keyframes' SSE, pixels
-    shading: str = "auto"         # terrain colour: auto | texture | heights
-    tiles: int | None = None      # sprite: N x N keyframe tiles (> 1: inline keyframes)
-    tile_budget_ms: float | None = None  # sprite, tiles > 1: tile work per frame, ms
-    cache_mb: float | None = None  # sprite (inline keyframes): keyframe cache budget, MB
-    cache_policy: str = "lru"     # keyframe cache replacement, lru | benefit
-    metric: str | None = None     # sprite: warp (Eq. 1-2) | resample (adds resampling)
-    proxy_sse: float | None = None  # sprite-adaptive: the adaptive sprite proxy's SSE, px
+    options: dict = field(default_factory=dict)
 
     def resolved(self) -> ViewOptions:
-        """These options with every one left None filled from the terrain's defaults
+        """These options with every one left out that has a terrain default filled
         (:func:`lodsprite.techniques.defaults.fill_defaults`); values given are kept.
         A store's ``key_sse`` default makes ``sprite`` (and no ``--mode``) mean
         ``sprite-adaptive``: on a store, LOD-sprite's keyframes are adaptive."""
         from lodsprite.techniques.defaults import DEFAULTED, fill_defaults, terrain_defaults
 
-        given = {k: getattr(self, k) for k in DEFAULTED}
-        out = replace(self, **fill_defaults(self.terrain, given))
+        given = {k: self.options.get(k) for k in DEFAULTED}
+        out = replace(self, options={**self.options, **fill_defaults(self.terrain, given)})
         store_keys = terrain_defaults(self.terrain)["key_sse"] is not None
-        if store_keys and self.mode in (None, "sprite") and out.key_sse is not None:
+        if store_keys and self.mode in (None, "sprite") and "key_sse" in out.options:
             out = replace(out, mode="sprite-adaptive")
         return out
 
     def technique_options(self) -> dict:
-        """The options of the command the registry's techniques pick theirs from."""
+        """The options the registry's techniques pick theirs from."""
         self = self.resolved()
-        return {"lod": self.lod, "epsilon": self.epsilon,
-                "threaded": self.threaded and self.tiles == 1,  # tiles are rendered inline
-                "server": self.server, "target_fps": self.target_fps, "sse": self.sse,
-                "key_sse": self.key_sse, "shading": self.shading, "tiles": self.tiles,
-                "tile_budget_ms": self.tile_budget_ms, "cache_mb": self.cache_mb,
-                "cache_policy": self.cache_policy, "metric": self.metric,
-                "proxy_sse": self.proxy_sse,
+        return {**self.options, "threaded": self.threaded and self.tiles == 1,  # tiles inline
+                "target_fps": self.target_fps,
                 "schedule": "none" if self.target_fps is None else "scheduler"}  # scene
 
     def validate(self) -> None:
+        known = techniques.all_options()
+        for name, value in self.options.items():
+            known[name].check(value)
         if self.target_fps is not None and not self.target_fps > 0:
             raise InputError("--target-fps must be > 0")
         if self.mode == "distributed" and not self.server:
             raise InputError("--mode distributed needs --server HOST:PORT")
-        if self.metric not in (None, "warp", "resample"):
-            raise InputError(f"unknown metric '{self.metric}': use warp or resample")
         if self.every < 1:
             raise InputError(f"--every must be at least 1, got {self.every}")
-        if not self.epsilon > 0:
-            raise InputError(f"--epsilon must be > 0 pixels, got {self.epsilon}")
-        if self.shading not in ("auto", "texture", "heights"):
-            raise InputError(f"unknown shading '{self.shading}': use auto, texture or heights")
         if not (self.fps >= 0):
             raise InputError(f"--fps must be >= 0 (0: no cap), got {self.fps}")
         w, h = self.size or WINDOW

@@ -113,6 +113,22 @@ def test_token_origin_and_host_are_checked(server):
     assert run(go()) == [401, 401, 200, 421, 200, 403, 403, 403, 403, 421]
 
 
+def test_the_page_s_query_options_are_the_techniques_declarations(server):
+    from lodsprite.distributed.web.server import PAGE_OPTIONS
+
+    async def go():
+        async with aiohttp.ClientSession() as http:
+            url = f"http://127.0.0.1:{server['port']}/options.json"
+            async with http.get(url) as r:
+                return r.status, await r.json()
+
+    status, declared = run(go())
+    assert status == 200 and [o["name"] for o in declared] == list(PAGE_OPTIONS)
+    by = {o["name"]: o for o in declared}
+    assert by["lod"]["default"] == 16 and by["epsilon"]["above"] and by["epsilon"]["min"] == 0
+    assert set(by["visibility"]["choices"]) == {"coarse", "triangle", "fragment"}
+
+
 def test_load_gives_the_scene_and_a_request_a_keyframe(server):
     async def go():
         async with aiohttp.ClientSession() as http:

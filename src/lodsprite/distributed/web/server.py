@@ -2,7 +2,8 @@
 client a WebGL2 page), an aiohttp application beside the ZeroMQ server.
 
 Routes: ``GET /?token=T&...`` the page (``static/index.html``; 401 without the token),
-``GET /static/...`` its modules (no token: they hold no data), ``GET /ws?token=T`` the
+``GET /static/...`` its modules and ``GET /options.json`` the technique options its query
+takes, as declared (:data:`PAGE_OPTIONS`; no token: they hold no data), ``GET /ws?token=T`` the
 WebSocket (403 without the token or for a foreign ``Origin``).  Every request whose
 ``Host`` does not name this server gets 421 first (:mod:`.security`).  Each WebSocket is
 a :class:`~.sessions.Session` of the :class:`~.hub.Hub`, which renders its keyframes on
@@ -51,6 +52,25 @@ SHUTDOWN_S = 3.0
 """Seconds HTTP requests still running get when the server stops."""
 MAX_SESSIONS = 256
 """WebSockets served at once; one more is answered 503."""
+#: The technique options the page takes from its query string, each parsed and checked by
+#: its declaration (:class:`~lodsprite.techniques.Option`), served as ``/options.json``.
+PAGE_OPTIONS = ("lod", "epsilon", "visibility")
+
+
+def page_options() -> list[dict]:
+    """The declarations of :data:`PAGE_OPTIONS`; a default the terrain decides is the
+    in-memory terrain's (:data:`~lodsprite.techniques.defaults.MEMORY_DEFAULTS`)."""
+    from lodsprite import techniques
+    from lodsprite.techniques.defaults import MEMORY_DEFAULTS
+
+    known = techniques.all_options(("terrain",))
+    return [known[n].declaration(MEMORY_DEFAULTS.get(n)) for n in PAGE_OPTIONS]
+
+
+async def _options(request: web.Request) -> web.StreamResponse:
+    return web.json_response(page_options(), headers=NO_STORE)
+
+
 CSP = ("default-src 'self'; script-src 'self'; style-src 'self' 'unsafe-inline'; "
        "img-src 'self' data: blob:; connect-src 'self' ws: wss:; worker-src 'self' blob:; "
        "frame-ancestors 'none'; base-uri 'none'; form-action 'none'")
@@ -120,6 +140,7 @@ class WebServer:
         app.router.add_get("/", self._index)
         app.router.add_get("/ws", self._ws)
         app.router.add_get("/favicon.ico", _no_icon)
+        app.router.add_get("/options.json", _options)
         app.router.add_static("/static/", STATIC_DIR, follow_symlinks=False,
                               show_index=False)
         return app

@@ -7,9 +7,10 @@
 // Query string: token (required), terrain (a name as a ZeroMQ client gives it; default
 // jacksboro), path (a built-in path: chen1999, swan2002, flyover..., played one viewpoint
 // a frame, then held), frames (the path's viewpoints), size (WxH keyframe and canvas
-// pixels; 512x512), lod (coarse quads a side; 16), grid (working grid), epsilon (pixels;
-// 1), visibility (the load's rule: coarse, the default, or fragment/triangle: the full
-// z-buffer).  For tests and tools: window.lodsprite.ready (a Promise: scene loaded),
+// pixels; 512x512), grid (working grid), and the technique options the server declares
+// at /options.json (lod: coarse quads a side, epsilon: pixels, visibility: the load's
+// rule, coarse or fragment/triangle: the full z-buffer), each parsed and checked by its
+// declaration: a bad one stops the page with the option's one-line error.  For tests and tools: window.lodsprite.ready (a Promise: scene loaded),
 // .finished (a Promise: the path played and the held view's keyframe shown), .stats(),
 // .pixels(), .viewpoint(), .pathIndex() (path viewpoints drawn so far: the one shown is
 // pathIndex() - 1), .serverStats() (a Promise: the `stats` op's reply data),
@@ -30,10 +31,28 @@ const int = (name, fallback) => (q.has(name) ? parseInt(q.get(name), 10) : fallb
 const [width, height] = (q.get('size') || '512x512').split('x').map((s) => parseInt(s, 10));
 const opts = {
   token: q.get('token') || '', terrain: q.get('terrain') || 'jacksboro', path: q.get('path'),
-  frames: int('frames', undefined), lod: int('lod', 16), grid: int('grid', undefined),
-  epsilon: q.has('epsilon') ? parseFloat(q.get('epsilon')) : 1.0,
-  visibility: q.get('visibility') || undefined,
+  frames: int('frames', undefined), grid: int('grid', undefined),
 };
+
+// The query's technique options by their declarations (lodsprite.techniques.Option).
+async function pageOptions() {
+  const declared = await (await fetch('/options.json')).json();
+  const out = {};
+  for (const o of declared) {
+    if (!q.has(o.name)) { out[o.name] = o.default; continue; }
+    const text = q.get(o.name).trim();
+    const number = o.type === 'int' || o.type === 'float';
+    const v = number ? Number(text) : text;
+    const bad = (number && (text === '' || !Number.isFinite(v)))
+      || (o.type === 'int' && !Number.isInteger(v))
+      || (o.choices.length > 0 && !o.choices.includes(v))
+      || (o.min !== null && (o.above ? v <= o.min : v < o.min))
+      || (o.max !== null && v > o.max);
+    if (bad) throw new Error(`option ${o.name}: got '${text}', allowed: ${o.allowed}`);
+    out[o.name] = v;
+  }
+  return out;
+}
 const RESTING_MS = 250;   // no input this long: the viewer rests (one exact keyframe)
 const VIEWPOINT_MS = 33;  // viewpoint samples to the server at most this often
 const KEEP = 2000;        // frame intervals and latencies kept for stats()
@@ -106,10 +125,12 @@ let keyEye = null, finishedResolve, lastFrame = null, lastSample = -Infinity;
 const finished = new Promise((r) => { finishedResolve = r; });
 
 async function start() {
-  await new Promise((resolve, reject) => { ws.onopen = resolve; ws.onerror = () => reject(new Error('no WebSocket')); });
+  const opened = new Promise((resolve, reject) => { ws.onopen = resolve; ws.onerror = () => reject(new Error('no WebSocket')); });
+  const page = await pageOptions();
+  await opened;
   const args = {
-    terrain: opts.terrain, size: [width, height], lod: opts.lod, epsilon: opts.epsilon, grid: opts.grid,
-    visibility: opts.visibility,
+    terrain: opts.terrain, size: [width, height], lod: page.lod, epsilon: page.epsilon, grid: opts.grid,
+    visibility: page.visibility,
   };
   const reply = await call('load', args);
   if (!reply.ok) throw new Error(reply.error);
