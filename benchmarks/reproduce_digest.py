@@ -1,16 +1,29 @@
 """Benchmark: a digest of each reproduction's deterministic figures (issue 31, must-have 8).
 
-Runs every reproduction in a short configuration, one after another, through the command
-line (``lodsprite reproduce NAME ...``), then reads from each run's outputs the figures
-that come from deterministic decisions only and writes them to one JSON digest
-(reproduction -> figure -> value).  Comparing the digest taken before a refactoring with
-the one taken after shows whether the refactoring changed any decision.
+Runs every reproduction in a short configuration (:data:`RUNS`), one after another, each
+in a process of its own, then reads from each run's ``results.json`` the figures that come
+from deterministic decisions only and writes them to one JSON digest (reproduction ->
+figure -> value).  The digest taken before a change of the code compared with the one
+taken after shows whether the change altered any decision.
 
-    python benchmarks/reproduce_digest.py --out DIR [--only NAME ...] [--keep-going]
-    python benchmarks/reproduce_digest.py --from-runs DIR   # re-read DIR's outputs only
+    python benchmarks/reproduce_digest.py [--out DIR] [--only NAME ...] [--keep-going]
+    python benchmarks/reproduce_digest.py --out DIR --from-runs   # re-read DIR's outputs
     python benchmarks/reproduce_digest.py --compare BEFORE.json AFTER.json
 
-``DIR/runs/NAME`` holds each reproduction's outputs, ``DIR/digest.json`` the digest.
+``DIR/runs/NAME`` holds each reproduction's outputs (``DIR/runs/NAME.log`` its output),
+``DIR/digest.json`` the digest.  ``--compare`` exits 1 when a figure differs or is
+missing after.
+
+What is kept: never times, rates, shares of time or memory (:data:`TIMED`), inputs,
+the machine or paths (:data:`NEVER`); of each reproduction what :data:`SELECT` keeps,
+which leaves out the runs whose decisions follow measured time; and not the figures
+that two runs of one commit gave different values (:data:`UNSTABLE`).  Three runs of
+commit 3395c6c on the shared 2-core machine (two for the reduced swan2002 and large)
+gave every kept figure equal to the digit, so :data:`UNSTABLE` is empty; the same runs
+showed each part :data:`SELECT` leaves out to differ between runs (swan2002's other
+set-ups, sloan1997's time-critical runs, gumbau's ``crowd_target``, battlefield's
+scheduler and independent runs, large's tiled variants: keyframes, extractions,
+triangles, tiles and errors alike).
 """
 
 from __future__ import annotations
@@ -26,19 +39,30 @@ import time
 from pathlib import Path
 
 #: name -> the ``reproduce`` arguments of its short run (the fastest each offers), or
-#: Python code run with the output folder as ``sys.argv[1]`` where even that is too long
-#: for this digest: ``large --quick`` took 573 s here, so the digest runs its quick
-#: configuration on the 256² store alone (not the 512² one) through the API.
+#: Python code run with the output folder as ``sys.argv[1]`` where that is still long
+#: for what the digest keeps of it:
+#:
+#: * swan2002: ``--quick --size 128 --no-links`` with the ``inline`` set-up alone (the
+#:   others are processes whose decisions follow time, none in the digest; with all of
+#:   them it took 109 s on a quiet machine and 230 s on a loaded one, inline alone 47 s
+#:   on the loaded one);
+#: * large: its quick configuration on the 256² store alone, not the 512² one, and the
+#:   ``whole`` variant alone (the tiled ones follow time, none in the digest), through
+#:   the API: ``large --quick`` took 573 s here, its 256² store alone with every variant
+#:   555 s under heavier load.
 RUNS: dict[str, list[str] | str] = {
     "chen1999": ["--quick"],
-    "swan2002": ["--quick", "--size", "128", "--no-links"],
+    "swan2002": ("import sys; import lodsprite.experiments.swan2002.run as run; "
+                 "run.SETUPS = {'inline': None}; from lodsprite.cli import main; "
+                 "main(['reproduce', 'swan2002', '--quick', '--size', '128', '--no-links', "
+                 "'--out', sys.argv[1]])"),
     "scoggins2000": ["--quick"],
     "sloan1997": ["--quick"],
     "gumbau": ["--quick"],
     "large": ("import sys; from dataclasses import replace; from pathlib import Path; "
               "from lodsprite.experiments import get; "
               "from lodsprite.experiments.large.run import LargeConfig; "
-              "get('large').run(replace(LargeConfig.quick(), sizes=(256,)), "
+              "get('large').run(replace(LargeConfig.quick(), sizes=(256,), variants=('whole',)), "
               "Path(sys.argv[1]), None)"),
     "battlefield": ["--quick"],
 }
@@ -251,11 +275,15 @@ def main() -> None:
     if args.compare:
         sys.exit(compare(*args.compare))
     args.out.mkdir(parents=True, exist_ok=True)
-    seconds: dict[str, float] = {}
-    if not args.from_runs:
+    if args.from_runs:  # the times of the run that wrote them, where it saved them
+        saved = args.out / "seconds.json"
+        seconds = json.loads(saved.read_text()) if saved.exists() else {}
+    else:
         seconds = run_all(args.out, args.only, args.keep_going)
+        (args.out / "seconds.json").write_text(json.dumps(seconds, indent=1))
     figures = {name: extract(name, args.out / "runs" / name) for name in args.only
                if (args.out / "runs" / name / "results.json").exists()}
+    seconds = {k: v for k, v in seconds.items() if k in args.only}
     digest = {"commit": _commit(), "seconds": seconds, "unstable": UNSTABLE,
               "figures": figures}
     (args.out / "digest.json").write_text(json.dumps(digest, indent=1, allow_nan=True))
