@@ -11,7 +11,8 @@ taken after shows whether the change altered any decision.
     python benchmarks/reproduce_digest.py --compare BEFORE.json AFTER.json
 
 ``DIR/runs/NAME`` holds each reproduction's outputs (``DIR/runs/NAME.log`` its output),
-``DIR/digest.json`` the digest.  ``--compare`` exits 1 when a figure differs or is
+``DIR/cache`` the runs' own profile cache (``$LODSPRITE_CACHE``), ``DIR/digest.json`` the
+digest.  ``--compare`` exits 1 when a figure differs or is
 missing after.
 
 What is kept: never times, rates, shares of time or memory (:data:`TIMED`), inputs,
@@ -32,6 +33,7 @@ import argparse
 import hashlib
 import json
 import math
+import os
 import re
 import subprocess
 import sys
@@ -121,7 +123,10 @@ def run_all(out: Path, only: list[str], keep_going: bool) -> dict[str, float]:
         cmd = ([sys.executable, "-c", how, str(run_dir)] if isinstance(how, str) else
                [sys.executable, "-c", CLI, "reproduce", name, *how, "--out", str(run_dir)])
         t0 = time.perf_counter()
-        proc = subprocess.run(cmd, capture_output=True, text=True)
+        # A cache of this digest's own: a profile cached by another commit's code (its
+        # key covers the inputs, not the code) would hide a change in how it is built.
+        env = {**os.environ, "LODSPRITE_CACHE": str(out / "cache")}
+        proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
         seconds[name] = time.perf_counter() - t0
         (out / "runs").mkdir(parents=True, exist_ok=True)
         (out / "runs" / f"{name}.log").write_text(proc.stdout + proc.stderr)
