@@ -7,8 +7,8 @@ import re
 
 import numpy as np
 import pytest
-from hostile import hostile_frames
 
+from hostile import hostile_frames
 from lodsprite.distributed import server_stats
 from lodsprite.distributed.hold import Hold
 from lodsprite.distributed.protocol import CONTROL_OPS, MAX_REPLY_BYTES, decode, encode
