@@ -2,7 +2,7 @@
 
 Starts ``lodsprite serve`` on free loopback ports, sends ``--messages`` random and mutated
 messages spread over its three sockets (control REQ, viewpoint PUB, keyframe DEALERs
-with garbage acknowledgements; :mod:`lodsprite.distributed.hostile`), then runs a real
+with garbage acknowledgements; ``tests/hostile.py``), then runs a real
 :class:`~lodsprite.distributed.client.LodClient` on a small fractal and counts the
 keyframes it receives.  Prints what was sent per socket, what the server received,
 rejected and ignored per kind, its state, and the keyframes received afterwards.
@@ -15,16 +15,20 @@ from __future__ import annotations
 import argparse
 import itertools
 import json
+import sys
 import time
+from pathlib import Path
 
 import zmq
 
 from lodsprite.distributed.client import LodClient
-from lodsprite.distributed.hostile import flood
 from lodsprite.distributed.link import ServerLink, control
 from lodsprite.distributed.render import scene_args
 from lodsprite.distributed.run import local_server
 from lodsprite.run import RenderConfig, prepare
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+from hostile import flood  # noqa: E402  (test-only traffic, kept with the tests)
 
 
 def server_stats(address: str) -> tuple[dict, dict]:

@@ -6,10 +6,10 @@ import time
 import msgspec
 import numpy as np
 import pytest
+from hostile import flood, hostile_frames, mutate, valid_header
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from lodsprite.distributed.hostile import flood, hostile_frames, mutate, valid_header
 from lodsprite.distributed.protocol import (
     KINDS,
     PROTOCOL_VERSION,

@@ -7,10 +7,10 @@ import re
 
 import numpy as np
 import pytest
+from hostile import hostile_frames
 
 from lodsprite.distributed import server_stats
 from lodsprite.distributed.hold import Hold
-from lodsprite.distributed.hostile import hostile_frames
 from lodsprite.distributed.protocol import CONTROL_OPS, MAX_REPLY_BYTES, decode, encode
 from lodsprite.distributed.run import free_ports
 from lodsprite.distributed.server import LodServer, ServerStats

@@ -228,8 +228,8 @@ def test_a_page_asking_for_an_unknown_terrain_says_why(server, browser):
 
 def test_after_a_live_fuzz_a_page_still_plays(server, browser):
     import aiohttp
+    from hostile import hostile_frames
 
-    from lodsprite.distributed.hostile import hostile_frames
     from lodsprite.distributed.web.wire import MAX_PAGE_MESSAGE, MAX_PARTS, pack
 
     rng = np.random.default_rng(2024)

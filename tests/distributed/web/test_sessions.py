@@ -7,10 +7,10 @@ import struct
 
 import numpy as np
 import pytest
+from hostile import hostile_frames, valid_header
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from lodsprite.distributed.hostile import hostile_frames, valid_header
 from lodsprite.distributed.pool import Result
 from lodsprite.distributed.protocol import LoadArgs, ProtocolError, decode_message, encode
 from lodsprite.distributed.web.hub import Hub

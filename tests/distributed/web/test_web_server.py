@@ -17,8 +17,8 @@ import aiohttp
 import numpy as np
 import pytest
 import zmq
+from hostile import hostile_frames
 
-from lodsprite.distributed.hostile import hostile_frames
 from lodsprite.distributed.protocol import (
     ProtocolError,
     Reply,

@@ -1,10 +1,11 @@
 """Hostile traffic for a LOD server: random and mutated messages on its three sockets.
 
-Used by the fuzz tests (``tests/distributed/test_fuzz.py``) and the fuzz benchmark
-(``benchmarks/fuzz_server.py``).  :func:`hostile_frames` makes one multipart message for
-a socket: random bytes, random msgpack structures, valid messages with one field
-mutated, removed or added, wrong versions, extra frames, deep nesting, or frames over
-the socket's ``zmq.MAXMSGSIZE``.  :func:`flood` sends a number of them to a live server.
+Used by the fuzz tests (``test_fuzz.py`` and the web, bounds and browser tests) and the
+fuzz benchmark (``benchmarks/fuzz_server.py``); test-only, so kept out of the package.
+:func:`hostile_frames` makes one multipart message for a socket: random bytes, random
+msgpack structures, valid messages with one field mutated, removed or added, wrong
+versions, extra frames, deep nesting, or frames over the socket's ``zmq.MAXMSGSIZE``.
+:func:`flood` sends a number of them to a live server.
 
 ``shutdown`` is among the ops: a server started without ``allow_shutdown`` (as the fuzz
 runs do) must refuse it from anyone, holder or not, and go on serving.
