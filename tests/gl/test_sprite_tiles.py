@@ -145,7 +145,7 @@ def test_the_technique_replay_draws_the_timed_mosaic(gl, name):
             for i in order:
                 assert np.array_equal(t.replay(path.viewpoints[i], decisions[i]), shown[i]), i
             # the scissor holds for this technique's tile drawer too
-            eng = t.tiled
+            eng = t.engine.tiled
             before = eng.tiled.target.read_color().astype(int)
             eng.render_tiles([3], eng.updates[0])
             changed = np.abs(eng.tiled.target.read_color().astype(int) - before).max(-1) > 0
@@ -266,7 +266,7 @@ def test_tiled_cache_through_the_registry_replays_and_hits(gl, name):
                 rendered[mb] = s["tiles_rendered"]
                 if mb:
                     assert s["cache_hits"] > 0 and s["cache_keyframes"] >= 4
-                    assert t.tiled.cache.resident_bytes <= mb * 2 ** 20
+                    assert t.engine.tiled.cache.resident_bytes <= mb * 2 ** 20
                 for i in [7, 0, 15, 3, 12]:
                     assert np.array_equal(t.replay(path.viewpoints[i], decisions[i]),
                                           shown[i]), i
@@ -319,7 +319,7 @@ def test_one_tile_on_the_proxy_measures_the_whole_keyframes_proxy_error(gl):
         sp = t.sprite.sprite
         eng = TiledSpriteEngine(sp, 1.0, 1)
         try:
-            eng.metric = metric = t.engine.policy.metric
+            eng.metric = metric = t.sprite.engine.policy.metric
             eng.tiled.use_proxy()
             eng.frame(vps[0])
             tiled = float(eng.errors(vps[1])[0][0])

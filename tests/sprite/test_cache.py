@@ -147,7 +147,7 @@ def test_cache_off_is_the_1999_loop_as_before(gl):
         try:
             frames = [t.frame(vp) for vp in path.viewpoints]
             summary = t.summary(frames)
-            assert t.engine.cache is None and len(t.sprite.sprite.key_targets) == 2
+            assert t.sprite.engine.cache is None and len(t.sprite.sprite.key_targets) == 2
         finally:
             t.release()
     assert "".join(f.kind[0] for f in frames) == BEFORE
@@ -175,9 +175,9 @@ def test_with_the_cache_the_replay_draws_what_the_timed_run_showed(gl, name, pol
                 shown.append(t.read_image())
                 decisions.append(t.decision())
             summary = t.summary(frames)
-            assert t.engine.predicted_keyframes > 0  # the look-ahead works with the cache
+            assert t.sprite.engine.predicted_keyframes > 0  # the look-ahead works with the cache
             if name == "sprite":
-                assert f"/{t.engine.cache.capacity} ({policy}" in t.status()
+                assert f"/{t.sprite.engine.cache.capacity} ({policy}" in t.status()
             sprite = t.sprite.sprite
             assert len(sprite.key_targets) * sprite.keyframe_bytes() <= budget * 2 ** 20
             for i, (vp, d) in enumerate(zip(path.viewpoints, decisions, strict=True)):

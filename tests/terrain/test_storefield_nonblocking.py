@@ -182,8 +182,8 @@ def test_sprite_adaptive_reads_no_store_inside_its_frames_and_converges(gl, flig
             assert summary["peak_rss_mb"] >= (summary["peak_rss_mb_reader"]
                                               + summary["peak_rss_mb_level0_reader"])
             # converged: pumped to idle, the fallback sample's heights are level 0's own
-            m, vp = t.engine.metric, path.viewpoints[-1]
-            view_proj = t.engine.policy.projection(vp).matrix() @ vp.view_matrix()
+            m, vp = t.sprite.engine.metric, path.viewpoints[-1]
+            view_proj = t.sprite.engine.policy.projection(vp).matrix() @ vp.view_matrix()
             rr, cc = m.fallback_grid(view_proj)
             assert len(rr) > 0
             assert h.settle(30.0) and h.exact(rr, cc).all()
@@ -263,7 +263,7 @@ def test_sprite_adaptive_setup_reads_no_level_0_and_its_c_is_the_drawn_surface(
                 return f
 
             t.surface.heights = recorded
-            t.engine.policy.metric = _with_surface(t.engine.policy.metric, recorded)
+            t.sprite.engine.policy.metric = _with_surface(t.sprite.engine.policy.metric, recorded)
             t.warm_up(path.viewpoints[0])
             checked = 0
             for vp in path.viewpoints:
@@ -272,10 +272,10 @@ def test_sprite_adaptive_setup_reads_no_level_0_and_its_c_is_the_drawn_surface(
                 reads.state["in_frame"] = False
                 if f.kind != "keyframe":
                     continue
-                key = t.engine.keyframes[-1].viewpoint.o
+                key = t.sprite.engine.keyframes[-1].viewpoint.o
                 made = [c for c in calls if np.array_equal(c[0], key)]
                 assert made and made[-1][1] == set(t.adaptive.last_draw)
-                cp = t.engine.policy.c_prime
+                cp = t.sprite.engine.policy.c_prime
                 pts = cp.points
                 # stated tolerance: C's heights are the drawn surface's to 1 µm
                 np.testing.assert_allclose(pts[:, 2], made[-1][2](pts[:, 0], pts[:, 1]),

@@ -229,8 +229,10 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
             if field is not None:
                 field.heights.close()
             raise
+        # with tiles, the tiled engine (TiledKeyframes.tiled) and its hooks as well
+        self.tiled = getattr(self.engine, "tiled", None)
         self.sprite.sprite.keyframe_drawer = self._draw_keyframe
-        self.engine.between_keyframes = self._between_keyframes
+        self.sprite.engine.between_keyframes = self._between_keyframes
         self.surface = None  # over a store: the metric's C from the keyframe's drawn nodes
         if field is not None:
             from dataclasses import replace
@@ -238,7 +240,7 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
             from lodsprite.techniques.drawn_surface import DrawnSurface
 
             self.surface = DrawnSurface(self.adaptive)
-            policy = self.engine.policy
+            policy = self.sprite.engine.policy
             policy.metric = replace(policy.metric, surface=self.surface.heights)
             if self.tiled is not None:  # each tile update's C on the surface it shows
                 self.tiled.metric = replace(self.tiled.metric, surface=self.surface.heights)
@@ -296,7 +298,7 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
 
         source = AdaptiveProxySource(self.adaptive, proxy_sse, self.sprite.sprite.target.height)
         self.sprite.sprite.set_proxy(source)
-        policy = self.engine.policy
+        policy = self.sprite.engine.policy
         points = None if self.surface is None else self.surface.points
         policy.metric = ProxyMetric(source.nodes, renderer.paths.geometry.full, policy.metric,
                                     points=points)

@@ -13,11 +13,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from lodsprite.errors import InputError
 from lodsprite.sprite.engine import DEFAULT_EPSILON_PX, FRAME_TYPES, KEYFRAME
-from lodsprite.sprite.tiled import TILES
 from lodsprite.sprite.tiled_engine import DEFAULT_TILE_BUDGET_MS
 from lodsprite.techniques.base import FALLBACK_TINT, Frame, Param, Technique
+from lodsprite.techniques.sprite_engines import SpriteEngine, sprite_engine
 from lodsprite.terrain.lod import DEFAULT_COARSE, level_step
 
 log = logging.getLogger(__name__)
@@ -117,14 +116,13 @@ def level0_reader(geometry, lod: int, border: bool):
 
 
 class SpriteTechnique(Technique):
-    """LOD-sprite: keyframes on a worker thread (``threaded``) or inline (the 1999
-    algorithm, what batch runs time).  Records per frame the keyframe shown; its replay
-    renders that keyframe from its logged viewpoint and projection, then the frame.
-
-    ``tiles > 1``: keyframes refreshed tile by tile within ``tile_budget_ms`` per frame
-    (:class:`~lodsprite.sprite.tiled_engine.TiledSpriteEngine`, inline only); each frame
-    records its mosaic (per tile, the viewpoint it was last rendered from), which the
-    replay brings the tiles to."""
+    """LOD-sprite (Chen, Swan & Kaufman 1999): one technique over three engines
+    (:mod:`lodsprite.techniques.sprite_engines`), chosen once from the options: whole
+    keyframes inline (the 1999 algorithm, what batch runs time), whole keyframes from a
+    worker thread (``threaded``), or keyframes refreshed tile by tile within
+    ``tile_budget_ms`` per frame (``tiles > 1``, inline only).  Records per frame the
+    keyframe (or tile mosaic) shown; its replay renders that from its logged viewpoints
+    and projections, then the frame."""
 
     name = "sprite"
 
@@ -136,46 +134,22 @@ class SpriteTechnique(Technique):
                  cache_policy: str = "lru", metric: str = "warp") -> None:
         super().__init__(renderer)
         from lodsprite.gl.sprite import DEFAULT_GUARD_PX, DEFAULT_VISIBILITY
-        from lodsprite.sprite.tiled_engine import TiledSpriteEngine
-
-        if not (isinstance(tiles, int) and tiles >= 1) or (tiles > 1 and threaded):
-            raise InputError(f"--tiles must be a whole number >= 1 (inline keyframes only "
-                             f"when > 1), got {tiles}")
 
         self.shading = set_shading(renderer, shading)
-
         level_step(renderer.scene.hf.quads, lod)
-        self.threaded = threaded
         self.metric = metric
-        self.sprite: LodSprite = renderer.sprite(
-            epsilon, lod, threaded=threaded, visibility=visibility or DEFAULT_VISIBILITY,
-            guard_px=DEFAULT_GUARD_PX if guard_px is None else guard_px, border=border,
-            cache_mb=0.0 if tiles > 1 else cache_mb, cache_policy=cache_policy,
-            metric=metric)  # with tiles, the tiled engine keeps the cache (of tile renders)
-        self.cache_mb = float(cache_mb)
-        self._tint = False
-        self._replayed: int | None = None
-        self._last = None
-        self.tiled: TiledSpriteEngine | None = None
-        if tiles > 1:
-            try:
-                self.tiled = TiledSpriteEngine(self.sprite.sprite, epsilon, tiles,
-                                               tile_budget_ms, metric, cache_mb, cache_policy)
-            except BaseException:
-                self.sprite.release()
-                raise
-            self._shown = np.full(self.tiled.tiled.count, -1)  # replay: update per tile
+        self.engine: SpriteEngine = sprite_engine(
+            renderer, epsilon, lod, threaded, visibility or DEFAULT_VISIBILITY,
+            DEFAULT_GUARD_PX if guard_px is None else guard_px, border, tiles,
+            tile_budget_ms, cache_mb, cache_policy, metric)
+        self.sprite: LodSprite = self.engine.sprite
         self.heights = level0_reader(renderer.paths.geometry, lod, border)
 
     @property
-    def engine(self):
-        return self.sprite.engine
-
-    @property
-    def keyframe_log(self) -> list | None:
-        """With tiles: every viewpoint tiles were rendered from (the ``keyframe`` column
-        indexes it: the latest update by the frame); None: the engine's keyframes."""
-        return None if self.tiled is None else self.tiled.updates
+    def keyframe_log(self) -> list:
+        """Every view keyframes (or, with tiles, tile updates) were rendered from; the
+        ``keyframe`` column indexes it."""
+        return self.engine.keyframes
 
     def params(self) -> dict[str, Param]:
         return {"epsilon": Param("epsilon", self.sprite.epsilon_px, 0.125, 64.0, 1.25, "px")}
@@ -183,55 +157,23 @@ class SpriteTechnique(Technique):
     def set_param(self, name: str, value: float) -> None:
         if name != "epsilon":
             super().set_param(name, value)
-        self.sprite.epsilon_px = value
-        if self.tiled is not None:
-            self.tiled.epsilon_px = float(value)
+        self.engine.set_epsilon(value)
 
     def warm_up(self, viewpoint: Viewpoint) -> None:
-        """Shaders compiled on a keyframe and a spriteframe drawn outside the engine, so
-        that the timed run starts with no keyframe, as the 1999 algorithm does; over a
-        store, the level-0 chunks those asked of the reader arrived (the first view
-        resident, as every technique's warm-up leaves it)."""
-        if self.threaded:
-            self.frame(viewpoint)
-        else:
-            self._warm_inline(viewpoint)
+        """The engine's warm-up (shaders compiled; the timed run starts with no keyframe,
+        as the 1999 algorithm does, or with the worker's first); over a store, the level-0
+        chunks those asked of the reader arrived (the first view resident, as every
+        technique's warm-up leaves it)."""
+        self.engine.warm_up(viewpoint)
         if self.heights is not None and not self.heights.settle():
             log.warning("warm-up: the store's level-0 chunks of the first view did not all "
                         "arrive in time; the first timed frames may still read them")
 
-    def _warm_inline(self, viewpoint: Viewpoint) -> None:
-        s = self.sprite.sprite
-        s.render_keyframe(viewpoint, 0.0)
-        s.render_spriteframe(viewpoint)
-        if self.tiled is not None:  # tiles drawn, untimed; the timed run starts with none
-            from lodsprite.sprite.policy import KeyChoice
-
-            key = KeyChoice(viewpoint, s.terrain.projection(viewpoint), False)
-            self.tiled.render_tiles(range(self.tiled.tiled.count), key, measure=False)
-            self.tiled.tiled.render_spriteframe(viewpoint)
-        self.renderer.gl.finish()
-
     def frame(self, viewpoint: Viewpoint) -> Frame:
-        if self.tiled is not None:
-            f = self._last = self.tiled.frame(viewpoint)
-            return Frame(f.type, f.ms, f.triangles, f.error_px,
-                         {"keyframe": f.keyframe, "keyframes": len(self.tiled.updates),
-                          "tiles": len(self.tiled.last_tiles),
-                          "cache_tiles": self.tiled.cache_tiles})
-        f = self.sprite.frame(viewpoint)
-        self._last = f
-        return Frame(f.type, f.ms, f.triangles, f.error_px,
-                     {"keyframe": f.keyframe, "keyframes": len(self.sprite.keyframes)})
+        return self.engine.frame(viewpoint)
 
     def decision(self) -> dict[str, Any]:
-        if self.tiled is not None:
-            return {"keyframe": self._last.keyframe, "kind": self._last.type,
-                    "shows_keyframe": self.tiled.shows_keyframe,
-                    "mosaic": tuple(int(u) for u in self.tiled.mosaic),
-                    "tiles": self.tiled.last_tiles}
-        return {"keyframe": self._last.keyframe, "kind": self._last.type,
-                "shows_keyframe": (not self.threaded) and self.engine.shows_keyframe}
+        return self.engine.decision()
 
     def tile_drawer(self, update: int, tile: int) -> Callable | None:
         """The drawer that re-renders ``tile`` as update ``update`` drew it (None: the
@@ -239,20 +181,7 @@ class SpriteTechnique(Technique):
         return None
 
     def replay(self, viewpoint: Viewpoint, decision: dict[str, Any]) -> np.ndarray:
-        if self.tiled is not None:
-            return self.tiled.replay(viewpoint, decision["mosaic"],
-                                     decision["shows_keyframe"], self._shown,
-                                     self.tile_drawer, decision["keyframe"])
-        s = self.sprite.sprite
-        k = decision["keyframe"]
-        if k != self._replayed:
-            key = self.sprite.keyframes[k]
-            s.render_keyframe(key.viewpoint, 0.0, key.projection)
-            self._replayed = k
-        if decision["shows_keyframe"]:
-            return s.keyframe_color()
-        s.render_spriteframe(viewpoint)
-        return s.target.read_color()
+        return self.engine.replay(viewpoint, decision, self.tile_drawer)
 
     def quality_extra(self, viewpoint: Viewpoint, decision: dict[str, Any],
                       truth: np.ndarray) -> dict[str, float]:
@@ -270,65 +199,29 @@ class SpriteTechnique(Technique):
                 "ssim_lod": ssim(plain, truth), "rmse_lod_border": rmse(ribbons, truth)}
 
     def summary(self, frames: list[Frame]) -> dict[str, Any]:
-        """Keyframe count and fraction, mean time per frame kind (ms), mean error (px)."""
+        """Keyframe count and fraction, the engine's work (tiles rendered), mean time per
+        frame kind (ms), mean error (px), the cache's counts."""
         out: dict[str, Any] = {"lod": self.sprite.lod, "epsilon": self.sprite.epsilon_px,
                                "visibility": self.sprite.sprite.visibility,
                                "shading": self.shading,
                                "metric": self.metric,
-                               "keyframes": sum(f.kind == KEYFRAME for f in frames)}
-        if self.tiled is None:
-            out["tiles_rendered"] = out["keyframes"]  # a whole keyframe is 1 x 1 tile
-        else:
-            out["tiles"] = self.tiled.tiles
-            out["tile_budget_ms"] = self.tiled.tile_budget_ms
-            out["tiles_rendered"] = sum(int(f.extra.get("tiles", 0)) for f in frames)
-            ms = [f.ms for f in frames if f.kind == TILES]
-            out[f"mean_ms_{TILES}"] = float(np.mean(ms)) if ms else float("nan")
+                               "keyframes": sum(f.kind == KEYFRAME for f in frames),
+                               **self.engine.work_summary(frames)}
         for t in FRAME_TYPES:
             ms = [f.ms for f in frames if f.kind == t]
             out[f"mean_ms_{t}"] = float(np.mean(ms)) if ms else float("nan")
         out["keyframe_fraction"] = out["keyframes"] / max(1, len(frames))
         out["mean_error_px"] = float(np.mean([f.error_px for f in frames]))
-        return {**out, **self.cache_summary(frames)}
-
-    def cache_summary(self, frames: list[Frame]) -> dict[str, Any]:
-        """``cache_hits`` (frames shown from a keyframe other than the newest rendered),
-        ``cache_keyframes`` (most keyframes resident at once) and ``cache_mb``.  With tiles:
-        ``cache_hits`` sums, over the frames, the tiles shown from a cached render other
-        than their newest; ``cache_keyframes`` is the most tile renders resident at once."""
-        if self.tiled is not None and self.tiled.cache is not None:
-            return {"cache_hits": sum(int(f.extra.get("cache_tiles", 0)) for f in frames),
-                    "cache_keyframes": self.tiled.cache.max_resident,
-                    "cache_mb": self.cache_mb}
-        cache = None if self.threaded or self.tiled is not None else self.engine.cache
-        if cache is None:  # two alternating slots; the newest keyframe is always shown
-            keys = sum(f.kind == KEYFRAME for f in frames)
-            return {"cache_hits": 0, "cache_keyframes": min(2, keys), "cache_mb": 0.0}
-        hits = sum(f.extra["keyframe"] != f.extra["keyframes"] - 1 for f in frames)
-        return {"cache_hits": int(hits), "cache_keyframes": cache.max_resident,
-                "cache_mb": self.cache_mb}
+        return {**out, **self.engine.cache_summary(frames)}
 
     def draw_to(self, framebuffer=None) -> None:
-        if self.tiled is not None and self.tiled.shows_keyframe:
-            s = self.sprite.sprite  # the tiled keyframe's centre, as LodSprite.draw_to
-            tex, (w, h), g = self.tiled.tiled.target.color, self.tiled.tiled.target.size, \
-                s.guard_px
-            self.renderer.present(tex, (g / w, g / h, 1 - g / w, 1 - g / h), framebuffer)
-            return
-        self.sprite.draw_to(framebuffer)
+        self.engine.draw_to(framebuffer)
 
     def read_image(self) -> np.ndarray:
-        if self.tiled is not None:
-            return self.tiled.read_image()
-        return self.sprite.read_image()
+        return self.engine.read_image()
 
     def key_view(self) -> tuple[Viewpoint, Projection] | None:
-        if self.tiled is not None:  # the latest tile update's view
-            if not self.tiled.updates:
-                return None
-            key = self.tiled.updates[-1]
-            return key.viewpoint, self.sprite.sprite.key_projection(key.projection)
-        return self.sprite.key_view()
+        return self.engine.key_view()
 
     def coarse_level(self) -> int | None:
         return self.sprite.lod
@@ -337,27 +230,10 @@ class SpriteTechnique(Technique):
         self.sprite.sprite.fallback_tint = FALLBACK_TINT if on else (*FALLBACK_TINT[:3], 0.0)
 
     def status(self) -> str:
-        if self.tiled is not None:
-            cache = self.tiled.cache
-            return (f"keyframes: {self.tiled.tiles}x{self.tiled.tiles} tiles, budget "
-                    f"{self.tiled.tile_budget_ms:g} ms; last frame {len(self.tiled.last_tiles)}"
-                    + ("" if cache is None else f"; cache {cache.resident} tile renders"))
-        if not self.threaded:
-            cache = self.engine.cache
-            return "keyframes: inline" + ("" if cache is None else (
-                f"; cache {len(cache.entries)}/{cache.capacity} ({cache.policy}, "
-                f"{cache.evicted} evicted)"))
-        engine = self.engine
-        w = engine.worker
-        state = f"failed: {w.error}" if w.error is not None else (
-            "rendering" if w.busy else "idle")
-        return (f"keyframes: worker thread, {state}; {w.rendered} rendered, "
-                f"{engine.discarded} discarded, lead {w.lead_s * 1e3:.0f} ms")
+        return self.engine.status()
 
     def release(self) -> None:
-        if self.tiled is not None:
-            self.tiled.release()
-        self.sprite.release()
+        self.engine.release()
         if self.heights is not None:
             self.heights.close()
             self.heights = None
