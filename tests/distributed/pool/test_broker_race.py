@@ -35,19 +35,19 @@ def test_a_disconnect_read_after_a_failed_send_counts_as_leaving() -> None:
         dealer.send_multipart(encode_pool(Ready(POOL_VERSION, 1, "w", 2)))
         assert router.poll(DEADLINE_S * 1000)
         broker._receive(1, router)
-        assert len(broker._peers) == 1
+        assert len(broker.table.peers) == 1
         dealer.send_multipart(encode_pool(Disconnect(POOL_VERSION, "worker stopping")))
         dealer.close(linger=500)  # delivered, then the connection closes
         deadline = time.monotonic() + DEADLINE_S
-        while not getattr(broker, "_unreachable", None) and broker._peers:  # a send fails
+        while not broker.table.unreachable and broker.table.peers:  # a send fails
             assert time.monotonic() < deadline, "the send to a closed worker never failed"
             broker._broadcast(Heartbeat(POOL_VERSION))
             time.sleep(0.002)
-        assert broker._peers, "lost on the failed send, before its disconnect was read"
+        assert broker.table.peers, "lost on the failed send, before its disconnect was read"
         assert router.poll(0), "the disconnect is still waiting to be read"
         broker._receive(1, router)
-        broker._lose_unreachable()
-        assert not broker._peers
+        broker.table.lose_unreachable()
+        assert not broker.table.peers
         assert broker.stats()["dead"] == 0
     finally:
         dealer.close(linger=0)

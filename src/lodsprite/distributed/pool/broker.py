@@ -9,16 +9,9 @@ public key file lies in the keys folder get in).  One thread owns the sockets:
 
 * a worker says ``ready``; the broker heartbeats each :data:`~.jobs.HEARTBEAT_S`; a
   worker silent for more than :data:`~.jobs.LIVENESS_S` (plus the transfer time of a
-  result it announced) is dead, its job re-queued at the front (a job whose workers died
-  :data:`MAX_TRIES` times fails instead: it may be what kills them);
-* a worker that declines a job (``result`` not ok: it refuses the job, a dataset its
-  ``--data`` lacks or a scene its machine cannot hold, or its render failed) does not fail
-  it while another connected worker has not declined it: the job goes back to the front
-  of the queue for one of those; declined by :data:`MAX_TRIES` workers, or by every worker
-  connected, it fails with :attr:`~.jobs.Result.code` ``refused`` (all refusals) or
-  ``failed``, and the workers' reasons;
-* jobs go one at a time to idle workers that have not declined them, first to one that
-  has the job's scene loaded, else to the one idle longest;
+  result it announced) is dead, its job re-queued (:mod:`.dispatch` holds the workers and
+  jobs and decides who gets what, who is lost and which jobs fail: declined by every
+  worker, or lost under :data:`~.dispatch.MAX_TRIES` workers);
 * every message is received frame by frame with a cap (:mod:`..frames`), each frame under
   ``zmq.MAXMSGSIZE``, and validated (:func:`~.jobs.decode_pool`, a keyframe by
   :func:`~lodsprite.distributed.protocol.decode_keyframe`); a bad one is counted
@@ -39,20 +32,17 @@ import tempfile
 import threading
 import time
 from collections import deque
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import zmq
 
 from lodsprite.distributed.frames import check_frames, recv_frames
 from lodsprite.distributed.keys import ServerKeys
+from lodsprite.distributed.pool.dispatch import MAX_TRIES, JobTable, Key, Peer
 from lodsprite.distributed.pool.jobs import (
     HEARTBEAT_S,
     KEYFRAME_PARTS,
-    LIVENESS_S,
-    MAX_GRACE_S,
     MAX_RESULT_FRAME_BYTES,
-    MIN_LINK_BYTES_S,
     POOL_VERSION,
     Disconnect,
     Heartbeat,
@@ -77,38 +67,6 @@ log = logging.getLogger("lodsprite.pool")
 __all__ = ["JOB_TIMEOUT_S", "MAX_TRIES", "Broker", "WorkerInfo"]
 
 JOB_TIMEOUT_S = 120.0
-JOB_TIMES = 1000
-"""Jobs whose dispatch-to-answer time :meth:`Broker.stats` keeps."""
-MAX_TRIES = 3
-"""Workers a job may see die under it before it fails."""
-
-
-@dataclass(eq=False)  # queued entries are told apart by identity
-class _Queued:
-    """A job in the broker's hands: ``tries`` workers lost under it, the workers that
-    declined it (their key: their reason) and whether each of those refused it."""
-
-    job: Job
-    tries: int = 0
-    declined: dict[tuple[int, bytes], str] = field(default_factory=dict)
-    refused: bool = True
-
-
-@dataclass
-class _Peer:
-    sock: int
-    ident: bytes
-    info: Ready
-    seen: float
-    entry: _Queued | None = None
-    since: float = 0.0
-    grace: float = 0.0
-    idle_since: float = 0.0
-    scenes: deque = field(default_factory=lambda: deque(maxlen=4))
-
-    @property
-    def job(self) -> Job | None:
-        return None if self.entry is None else self.entry.job
 
 
 class Broker:
@@ -136,22 +94,15 @@ class Broker:
         self._auth = None
         self._socks: list[zmq.Socket] = []
         self._procs: list = []
-        self._queue: deque[_Queued] = deque()
         self._inbox: deque[Job] = deque()
-        self._done: deque[Result] = deque()
-        self._peers: dict[tuple[int, bytes], _Peer] = {}
-        self._unreachable: set[tuple[int, bytes]] = set()  # a send failed: lose next
         self._snapshot: list[WorkerInfo] = []
-        self._stats = dict.fromkeys(("jobs", "results", "failed", "requeued", "declined",
-                                     "dead", "rejected", "ignored"), 0)
-        self._busy_s = 0.0  # seconds workers spent on jobs they answered
-        self._job_s: deque[float] = deque(maxlen=JOB_TIMES)  # dispatch -> answer, s
         self._stop = threading.Event()
         self._wake_r, self._wake_w = os.pipe()
         self._ready_r, self._ready_w = os.pipe()
         for fd in (self._wake_r, self._wake_w, self._ready_r, self._ready_w):
             os.set_blocking(fd, False)
         self._closed = False
+        self.table = JobTable(job_timeout_s, lambda: _signal(self._ready_w))
         try:
             self._open(bind)
         except BaseException:
@@ -168,7 +119,8 @@ class Broker:
     def poll(self) -> list[Result]:
         """The results (successes and failures) since the last call; never blocks."""
         _drain(self._ready_r)
-        return [self._done.popleft() for _ in range(len(self._done))]
+        done = self.table.done
+        return [done.popleft() for _ in range(len(done))]
 
     def fileno(self) -> int:
         """A descriptor readable while :meth:`poll` has results (level-triggered)."""
@@ -184,15 +136,9 @@ class Broker:
         the render capacity: ``busy_s`` (seconds workers spent on the jobs they answered,
         dispatch to answer, all workers together: over a wall-clock window and the
         worker count it gives their utilisation) and ``job_ms_p50``/``job_ms_p90`` (a
-        job's dispatch to answer, ms, over the last :data:`JOB_TIMES`; None before
+        job's dispatch to answer, ms, over the last :data:`~.dispatch.JOB_TIMES`; None before
         one)."""
-        times = sorted(self._job_s)
-
-        def pct(q: float) -> float | None:
-            return 1e3 * times[min(len(times) - 1, int(q * len(times)))] if times else None
-
-        return {**self._stats, "busy_s": self._busy_s, "job_ms_p50": pct(0.5),
-                "job_ms_p90": pct(0.9)}
+        return self.table.stats()
 
     def wait_workers(self, n: int, timeout: float) -> bool:
         """Wait until at least ``n`` workers are connected (at most ``timeout`` s)."""
@@ -281,31 +227,24 @@ class Broker:
                 for i, s in enumerate(self._socks):
                     if s in events:
                         self._receive(i, s)
-                self._lose_unreachable()
+                self.table.lose_unreachable()
                 _drain(self._wake_r)
                 while self._inbox:
-                    self._queue.append(_Queued(self._inbox.popleft()))
-                    self._stats["jobs"] += 1
+                    self.table.add(self._inbox.popleft())
                 now = time.monotonic()
                 self._purge(now)
                 if now >= beat:
                     self._broadcast(Heartbeat(POOL_VERSION))
                     beat = now + HEARTBEAT_S
                 self._dispatch(now)
-                self._snapshot = [WorkerInfo(p.ident.hex(), p.info.pid, p.info.name,
-                                             p.sock > 0, p.job and p.job.job)
-                                  for p in self._peers.values()]
+                self._snapshot = self.table.snapshot()
             except Exception as exc:  # noqa: BLE001 - a bug must not stop the pool
                 log.error("render pool broker: internal error %r", exc)
         self._broadcast(Disconnect(POOL_VERSION, "broker closing", stop=True))
 
     def _timeout(self, beat: float) -> float:
         """Seconds until the next heartbeat or the next worker's expiry."""
-        if self._unreachable:
-            return 0.0  # read what they said last before losing them
-        due = min((p.seen + LIVENESS_S + p.grace for p in self._peers.values()),
-                  default=beat)
-        return max(0.0, min(beat, due + 1e-3) - time.monotonic())
+        return max(0.0, self.table.next_due(beat) - time.monotonic())
 
     def _receive(self, index: int, sock: zmq.Socket) -> None:
         for _ in range(1000):  # bounded: heartbeats and dispatch still run under a flood
@@ -323,46 +262,35 @@ class Broker:
             self._handle(key, msg, parts)
 
     def _reject(self, exc: Exception) -> None:
-        self._stats["rejected"] += 1
-        if self._stats["rejected"] == 1:  # said once: a flood must not flood the log
+        self.table.counts["rejected"] += 1
+        if self.table.counts["rejected"] == 1:  # said once: a flood must not flood the log
             log.warning("render pool: a bad message from a worker: %s", exc)
 
-    def _handle(self, key: tuple[int, bytes], msg, parts: list) -> None:
+    def _handle(self, key: Key, msg, parts: list) -> None:
         now = time.monotonic()
-        peer = self._peers.get(key)
+        peer = self.table.peers.get(key)
         if isinstance(msg, Ready):
-            if peer is None and len(self._peers) < 4096:
-                self._peers[key] = _Peer(key[0], key[1], msg, now, idle_since=now)
+            self.table.ready(key, msg, now)
             return
         if peer is None:  # a worker from before a restart, or a stranger: start over
             if not isinstance(msg, Disconnect):
                 self._send(key, Disconnect(POOL_VERSION, "unknown worker: say ready"))
             return
-        peer.seen = now
-        sending = isinstance(msg, Heartbeat) and msg.sending and peer.job is not None
-        peer.grace = min(msg.sending / MIN_LINK_BYTES_S, MAX_GRACE_S) if sending else 0.0
+        self.table.heard(peer, now, msg.sending if isinstance(msg, Heartbeat) else 0)
         if isinstance(msg, Disconnect):
-            self._lose(key, "disconnected")
+            self.table.lose(key, "disconnected")
         elif isinstance(msg, ResultMessage):
-            self._result(key, peer, msg, parts)
+            self._result(key, peer, msg, parts, now)
 
-    def _result(self, key, peer: _Peer, msg: ResultMessage, parts: list) -> None:
+    def _result(self, key: Key, peer: Peer, msg: ResultMessage, parts: list,
+                now: float) -> None:
         job = peer.job
         if job is None or job.job != msg.job:
-            self._stats["ignored"] += 1
+            self.table.counts["ignored"] += 1
             return
-        worker = key[1].hex()
-        took = max(0.0, time.monotonic() - peer.since)
-        self._busy_s += took
-        self._job_s.append(took)
+        self.table.answered(peer, now)
         if not msg.ok:
-            entry = peer.entry
-            peer.entry, peer.idle_since = None, time.monotonic()
-            self._stats["declined"] += 1
-            entry.declined[key] = msg.error
-            entry.refused = entry.refused and msg.refused
-            if not self._fail_if_stuck(entry):
-                self._queue.appendleft(entry)  # another worker may render it
+            self.table.declined(key, self.table.release(peer, now), msg.error, msg.refused)
             return
         data = [bytes(p) for p in parts]
         try:
@@ -372,97 +300,38 @@ class Broker:
         except ProtocolError as exc:  # the worker is broken or hostile: the job goes on
             self._reject(exc)
             self._send(key, Disconnect(POOL_VERSION, "bad keyframe"))
-            self._lose(key, "sent a bad keyframe")
+            self.table.lose(key, "sent a bad keyframe")
             return
-        peer.entry, peer.idle_since = None, time.monotonic()
+        self.table.release(peer, now)
         peer.scenes.append(job_key(job.load))
-        self._finish(Result(job.job, job.session, True, "", data, worker))
-
-    def _finish(self, result: Result) -> None:
-        self._stats["results" if result.ok else "failed"] += 1
-        self._done.append(result)
-        _signal(self._ready_w)
+        self.table.finish(Result(job.job, job.session, True, "", data, key[1].hex()))
 
     def _purge(self, now: float) -> None:
-        for key in [k for k, p in self._peers.items()
-                    if now - p.seen > LIVENESS_S + p.grace]:
-            self._lose(key, "silent")
-        for key in [k for k, p in self._peers.items()
-                    if p.job is not None and now - p.since > self.job_timeout_s]:
-            self._send(key, Disconnect(POOL_VERSION, "job timed out"))
-            self._lose(key, "timed out")
-
-    def _lose(self, key: tuple[int, bytes], why: str) -> None:
-        """Forget a worker; its job goes back to the front of the queue."""
-        peer = self._peers.pop(key, None)
-        if peer is None:
-            return
-        self._stats["dead"] += why != "disconnected"
-        log.info("render pool: worker %s (pid %d) %s", key[1].hex(), peer.info.pid, why)
-        entry = peer.entry
-        if entry is not None:
-            entry.tries += 1
-            if entry.tries >= MAX_TRIES:
-                self._finish(Result(entry.job.job, entry.job.session, False,
-                                    f"{entry.tries} workers were lost rendering this job",
-                                    code="lost"))
-            else:
-                self._stats["requeued"] += 1
-                self._queue.appendleft(entry)
-        for waiting in [q for q in self._queue if q.declined]:  # their last hope gone?
-            if self._fail_if_stuck(waiting):
-                self._queue.remove(waiting)
-
-    def _fail_if_stuck(self, entry: _Queued) -> bool:
-        """Fail ``entry`` (and say True) if :data:`MAX_TRIES` workers declined it or
-        every connected worker did."""
-        if len(entry.declined) < MAX_TRIES and any(
-                k not in entry.declined for k in self._peers):
-            return False
-        reasons = sorted(set(entry.declined.values()))
-        code = "refused" if entry.refused else "failed"
-        self._finish(Result(entry.job.job, entry.job.session, False,
-                            f"{code} by {len(entry.declined)} render worker(s): "
-                            + "; ".join(reasons), code=code))
-        return True
+        silent, late = self.table.expired(now)
+        for key in silent:
+            self.table.lose(key, "silent")
+        for key in late:
+            if key in self.table.peers:
+                self._send(key, Disconnect(POOL_VERSION, "job timed out"))
+                self.table.lose(key, "timed out")
 
     def _dispatch(self, now: float) -> None:
-        """Each queued job, in order, to an idle worker that has not declined it."""
-        for entry in list(self._queue):
-            idle = [p for p in self._peers.values()
-                    if p.entry is None and (p.sock, p.ident) not in self._unreachable]
-            if not idle:
-                return
-            idle = [p for p in idle if (p.sock, p.ident) not in entry.declined]
-            if not idle:
-                continue  # a busy worker may take it later
-            self._queue.remove(entry)
-            scene = job_key(entry.job.load)
-            warm = [p for p in idle if scene in p.scenes]
-            peer = min(warm or idle, key=lambda p: p.idle_since)
-            peer.entry, peer.since = entry, now
-            # Unreachable: lost after the next receive, the job back in front.
-            self._send((peer.sock, peer.ident),
-                       JobMessage(POOL_VERSION, entry.job, self.codec))
+        """Each job the table assigns sent to its worker (one that cannot take it is
+        lost after the next receive, the job back in front)."""
+        for key, entry in self.table.assign(now):
+            self._send(key, JobMessage(POOL_VERSION, entry.job, self.codec))
 
-    def _send(self, key: tuple[int, bytes], msg) -> None:
+    def _send(self, key: Key, msg) -> None:
         """Send ``msg`` to one worker; one that cannot take it (gone under
         ROUTER_MANDATORY, or not keeping up) is lost after the next receive, so that a
         ``disconnect`` it sent just before it closed counts as one, not as a death."""
         try:
             self._socks[key[0]].send_multipart([key[1], *encode_pool(msg)], zmq.NOBLOCK)
         except zmq.ZMQError:
-            self._unreachable.add(key)
-
-    def _lose_unreachable(self) -> None:
-        """Lose the workers a send failed to (their job back in front of the queue),
-        unless what was just received already let them go."""
-        gone, self._unreachable = self._unreachable, set()
-        for key in gone:
-            self._lose(key, "unreachable")
+            self.table.unreachable.add(key)
 
     def _broadcast(self, msg) -> None:
-        for key in list(self._peers):
+        for key in list(self.table.peers):
             self._send(key, msg)
 
 

@@ -1,0 +1,230 @@
+"""The render pool's bookkeeping and dispatch policy, without sockets: the workers
+connected, the jobs queued, who declined what, the results ready, and which idle worker
+gets which job.  The broker (:mod:`.broker`) owns the sockets and the thread and tells
+:class:`JobTable` what it received; everything here runs on the broker's thread.
+
+* a worker lost (silent, timed out, unreachable, or gone) puts its job back at the front
+  of the queue; a job whose workers died :data:`MAX_TRIES` times fails (``lost``);
+* a job declined by :data:`MAX_TRIES` workers, or by every worker connected, fails with
+  :attr:`~.jobs.Result.code` ``refused`` (all refusals) or ``failed``;
+* jobs go one at a time to idle workers that have not declined them, first to one that
+  has the job's scene loaded, else to the one idle longest.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from lodsprite.distributed.pool.jobs import (
+    LIVENESS_S,
+    MAX_GRACE_S,
+    MIN_LINK_BYTES_S,
+    Job,
+    Ready,
+    Result,
+    WorkerInfo,
+    job_key,
+)
+
+log = logging.getLogger("lodsprite.pool")
+
+JOB_TIMES = 1000
+"""Jobs whose dispatch-to-answer time :meth:`JobTable.stats` keeps."""
+MAX_TRIES = 3
+"""Workers a job may see die under it before it fails."""
+MAX_PEERS = 4096
+"""Workers the table holds at most (a ``ready`` beyond them is ignored)."""
+
+Key = tuple[int, bytes]
+"""A worker: the index of the socket it came on and its ROUTER identity."""
+
+
+@dataclass(eq=False)  # queued entries are told apart by identity
+class QueuedJob:
+    """A job in the broker's hands: ``tries`` workers lost under it, the workers that
+    declined it (their key: their reason) and whether each of those refused it."""
+
+    job: Job
+    tries: int = 0
+    declined: dict[Key, str] = field(default_factory=dict)
+    refused: bool = True
+
+
+@dataclass
+class Peer:
+    """A connected worker: what it said in ``ready``, when it was last heard (monotonic
+    s), the job it holds since when, the grace its announced result earns (s), when it
+    went idle, and the scenes it loaded last."""
+
+    sock: int
+    ident: bytes
+    info: Ready
+    seen: float
+    entry: QueuedJob | None = None
+    since: float = 0.0
+    grace: float = 0.0
+    idle_since: float = 0.0
+    scenes: deque = field(default_factory=lambda: deque(maxlen=4))
+
+    @property
+    def key(self) -> Key:
+        return self.sock, self.ident
+
+    @property
+    def job(self) -> Job | None:
+        return None if self.entry is None else self.entry.job
+
+
+class JobTable:
+    """Workers, jobs and results; ``notify`` is called whenever a result is ready."""
+
+    def __init__(self, job_timeout_s: float, notify: Callable[[], None]) -> None:
+        self.job_timeout_s = float(job_timeout_s)
+        self.notify = notify
+        self.peers: dict[Key, Peer] = {}
+        self.queue: deque[QueuedJob] = deque()
+        self.done: deque[Result] = deque()
+        self.unreachable: set[Key] = set()  # a send failed: lose after the next receive
+        self.counts = dict.fromkeys(("jobs", "results", "failed", "requeued", "declined",
+                                     "dead", "rejected", "ignored"), 0)
+        self.busy_s = 0.0  # seconds workers spent on jobs they answered
+        self.job_s: deque[float] = deque(maxlen=JOB_TIMES)  # dispatch -> answer, s
+
+    def add(self, job: Job) -> None:
+        self.queue.append(QueuedJob(job))
+        self.counts["jobs"] += 1
+
+    def ready(self, key: Key, info: Ready, now: float) -> None:
+        """A worker said ``ready`` (a second ``ready`` from it changes nothing)."""
+        if key not in self.peers and len(self.peers) < MAX_PEERS:
+            self.peers[key] = Peer(key[0], key[1], info, now, idle_since=now)
+
+    def heard(self, peer: Peer, now: float, sending: int = 0) -> None:
+        """``peer`` spoke at ``now``; ``sending``: the bytes of a result it announced
+        (they earn it the time to transfer them, capped)."""
+        peer.seen = now
+        sending = sending if peer.job is not None else 0
+        peer.grace = min(sending / MIN_LINK_BYTES_S, MAX_GRACE_S) if sending else 0.0
+
+    def answered(self, peer: Peer, now: float) -> None:
+        """``peer`` answered its job (a keyframe or a decline): its time, dispatch to
+        answer, counted."""
+        took = max(0.0, now - peer.since)
+        self.busy_s += took
+        self.job_s.append(took)
+
+    def release(self, peer: Peer, now: float) -> QueuedJob:
+        """``peer`` idle from ``now``; returns the job's entry it held."""
+        entry = peer.entry
+        peer.entry, peer.idle_since = None, now
+        return entry
+
+    def declined(self, key: Key, entry: QueuedJob, error: str, refused: bool) -> None:
+        """Worker ``key`` declined ``entry``: back in front for another worker, or failed
+        when none is left to try."""
+        self.counts["declined"] += 1
+        entry.declined[key] = error
+        entry.refused = entry.refused and refused
+        if not self.fail_if_stuck(entry):
+            self.queue.appendleft(entry)
+
+    def finish(self, result: Result) -> None:
+        self.counts["results" if result.ok else "failed"] += 1
+        self.done.append(result)
+        self.notify()
+
+    def expired(self, now: float) -> tuple[list[Key], list[Key]]:
+        """The workers silent too long, and those holding a job past the job timeout."""
+        silent = [k for k, p in self.peers.items() if now - p.seen > LIVENESS_S + p.grace]
+        late = [k for k, p in self.peers.items()
+                if p.job is not None and now - p.since > self.job_timeout_s]
+        return silent, late
+
+    def lose(self, key: Key, why: str) -> None:
+        """Forget a worker; its job goes back to the front of the queue."""
+        peer = self.peers.pop(key, None)
+        if peer is None:
+            return
+        self.counts["dead"] += why != "disconnected"
+        log.info("render pool: worker %s (pid %d) %s", key[1].hex(), peer.info.pid, why)
+        entry = peer.entry
+        if entry is not None:
+            entry.tries += 1
+            if entry.tries >= MAX_TRIES:
+                self.finish(Result(entry.job.job, entry.job.session, False,
+                                   f"{entry.tries} workers were lost rendering this job",
+                                   code="lost"))
+            else:
+                self.counts["requeued"] += 1
+                self.queue.appendleft(entry)
+        for waiting in [q for q in self.queue if q.declined]:  # their last hope gone?
+            if self.fail_if_stuck(waiting):
+                self.queue.remove(waiting)
+
+    def lose_unreachable(self) -> None:
+        """Lose the workers a send failed to (their job back in front of the queue),
+        unless what was just received already let them go."""
+        gone, self.unreachable = self.unreachable, set()
+        for key in gone:
+            self.lose(key, "unreachable")
+
+    def fail_if_stuck(self, entry: QueuedJob) -> bool:
+        """Fail ``entry`` (and say True) if :data:`MAX_TRIES` workers declined it or
+        every connected worker did."""
+        if len(entry.declined) < MAX_TRIES and any(
+                k not in entry.declined for k in self.peers):
+            return False
+        reasons = sorted(set(entry.declined.values()))
+        code = "refused" if entry.refused else "failed"
+        self.finish(Result(entry.job.job, entry.job.session, False,
+                           f"{code} by {len(entry.declined)} render worker(s): "
+                           + "; ".join(reasons), code=code))
+        return True
+
+    def assign(self, now: float) -> list[tuple[Key, QueuedJob]]:
+        """Each queued job, in order, to an idle reachable worker that has not declined
+        it (a warm one first, else the one idle longest); the assignments made, each
+        taken off the queue and held by its worker from ``now``."""
+        out = []
+        for entry in list(self.queue):
+            idle = [p for p in self.peers.values()
+                    if p.entry is None and p.key not in self.unreachable]
+            if not idle:
+                break
+            idle = [p for p in idle if p.key not in entry.declined]
+            if not idle:
+                continue  # a busy worker may take it later
+            self.queue.remove(entry)
+            scene = job_key(entry.job.load)
+            warm = [p for p in idle if scene in p.scenes]
+            peer = min(warm or idle, key=lambda p: p.idle_since)
+            peer.entry, peer.since = entry, now
+            out.append((peer.key, entry))
+        return out
+
+    def next_due(self, beat: float) -> float:
+        """The monotonic time the loop must wake by: the next heartbeat ``beat`` or the
+        next worker's expiry (now, while a worker is unreachable: what it said last is
+        read before it is lost)."""
+        if self.unreachable:
+            return 0.0
+        due = min((p.seen + LIVENESS_S + p.grace for p in self.peers.values()), default=beat)
+        return min(beat, due + 1e-3)
+
+    def snapshot(self) -> list[WorkerInfo]:
+        return [WorkerInfo(p.ident.hex(), p.info.pid, p.info.name, p.sock > 0,
+                           p.job and p.job.job) for p in self.peers.values()]
+
+    def stats(self) -> dict[str, float]:
+        """The counts, ``busy_s`` and ``job_ms_p50``/``job_ms_p90`` (None before one):
+        :meth:`lodsprite.distributed.pool.broker.Broker.stats`."""
+        times = sorted(self.job_s)
+
+        def pct(q: float) -> float | None:
+            return 1e3 * times[min(len(times) - 1, int(q * len(times)))] if times else None
+
+        return {**self.counts, "busy_s": self.busy_s, "job_ms_p50": pct(0.5),
+                "job_ms_p90": pct(0.9)}
