@@ -280,8 +280,11 @@ class TiledKeyframes:
                 "cache_keyframes": self.tiled.cache.max_resident, "cache_mb": self.cache_mb}
 
     def draw_to(self, framebuffer=None) -> None:
+        """The tiled keyframe's centre, or the spriteframe (the renderer's image: the
+        whole-keyframe engine beside it never drew a frame, so its own choice would show
+        the warm-up's keyframe)."""
         if not self.tiled.shows_keyframe:
-            self.sprite.draw_to(framebuffer)
+            self.renderer.draw_to(framebuffer)
             return
         target = self.tiled.tiled.target  # the tiled keyframe's centre, as LodSprite.draw_to
         (w, h), g = target.size, self.sprite.sprite.guard_px

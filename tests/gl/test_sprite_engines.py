@@ -1,0 +1,51 @@
+"""The sprite technique's engines (:mod:`lodsprite.techniques.sprite_engines`) as the
+window uses them: what :meth:`draw_to` puts on a framebuffer is the frame
+:meth:`read_image` gives, for whole and tiled keyframes, keyframes and spriteframes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from lodsprite import Renderer, get_path, load_scene, techniques
+from lodsprite.errors import InputError
+from lodsprite.sprite.tiled import TILES
+
+SIZE = 64
+
+
+@pytest.mark.parametrize("options", [{"epsilon": 16.0}, {"epsilon": 0.5, "tiles": 2,
+                                                         "tile_budget_ms": 0.0}],
+                         ids=["whole", "tiled"])
+def test_draw_to_shows_the_frame_read_image_gives(gl, options):
+    # The tiled engine once drew the warm-up's whole keyframe for every frame that was
+    # not a keyframe (the inline engine beside it never drew a frame).
+    scene = load_scene("fractal:64:3", grid=64)
+    path = get_path("chen1999", scene.hf, 12)
+    with Renderer(scene, (SIZE, SIZE), ctx=gl.mgl) as renderer:
+        t = techniques.create("sprite", renderer, **techniques.get("sprite").bind(
+            {"lod": 8, **options}))
+        fbo = gl.mgl.simple_framebuffer((SIZE, SIZE), components=4)
+        try:
+            t.warm_up(path.viewpoints[0])
+            kinds = set()
+            for vp in path.viewpoints:
+                kinds.add(t.frame(vp).kind)
+                fbo.use()
+                fbo.clear()
+                t.draw_to(fbo)
+                drawn = np.frombuffer(fbo.read(components=3), np.uint8)
+                drawn = drawn.reshape(SIZE, SIZE, 3)[::-1]
+                assert np.array_equal(drawn, t.read_image()), t.decision()
+            assert kinds - {"keyframe"}, kinds  # spriteframes (or tile frames) drawn too
+            assert "tiles" not in options or TILES in kinds
+        finally:
+            fbo.release()
+            t.release()
+
+
+def test_tiles_with_threaded_keyframes_is_an_input_error(gl):
+    scene = load_scene("fractal:64:3", grid=64)
+    with Renderer(scene, (SIZE, SIZE), ctx=gl.mgl) as renderer, \
+            pytest.raises(InputError, match="--tiles"):
+        techniques.create("sprite", renderer, lod=8, tiles=2, threaded=True)
