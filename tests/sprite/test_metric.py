@@ -7,8 +7,7 @@ import pytest
 
 from conftest import make_field
 from lodsprite.camera import Projection, look_at
-from lodsprite.sprite import metric as metric_module
-from lodsprite.sprite import raycast
+from lodsprite.sprite import fallback, raycast
 from lodsprite.sprite.metric import (
     MAX_FALLBACK,
     MIN_SAMPLES,
@@ -265,13 +264,13 @@ def test_the_fallback_sample_never_exceeds_its_cap(monkeypatch):
     hf = make_field(128, relief=400.0, spacing=30.0, kind="ridges")
     m = ErrorMetric.for_level(hf, 64)
     tested = []
-    real = metric_module.in_view
+    real = fallback.in_view
 
     def counting(points_h, view_proj):
         tested.append(len(points_h))
         return real(points_h, view_proj)
 
-    monkeypatch.setattr(metric_module, "in_view", counting)
+    monkeypatch.setattr(fallback, "in_view", counting)
     proj = Projection(80.0, 1.0, 0.5, 12000.0)
     spot = hf.points(np.array(37), np.array(41))
     for vp in (look_at(spot + (0.0, -1.0, 400.0), spot),
@@ -281,7 +280,7 @@ def test_the_fallback_sample_never_exceeds_its_cap(monkeypatch):
         tested.clear()
         pts, square = m.fallback_points(vpm)
         assert 0 < len(pts) <= MAX_FALLBACK
-        assert max(tested) <= metric_module.CANDIDATE_CHUNK
+        assert max(tested) <= fallback.CANDIDATE_CHUNK
         assert np.all(in_view(np.c_[pts, np.ones(len(pts))], vpm))
     assert len(pts) < noncoarse_in_view(hf, 2, vpm) or len(pts) == MAX_FALLBACK
 
@@ -295,13 +294,13 @@ def test_the_fallback_reprojection_is_cached_per_keyframe(monkeypatch):
     vpm, beta = proj.matrix() @ vp.view_matrix(), proj.pixel_angle_rad(512)
     cp = metric.reproject(vp.o + np.array([-25.0, 0.0, 10.0]))
     calls = []
-    real = metric_module.reproject_points
+    real = fallback.reproject_points
 
     def counting(squares, key_eye, points, square=None):
         calls.append(len(points))
         return real(squares, key_eye, points, square)
 
-    monkeypatch.setattr(metric_module, "reproject_points", counting)
+    monkeypatch.setattr(fallback, "reproject_points", counting)
     first = metric.error_px(cp, vp.o, vpm, beta)
     assert len(calls) == 1
     again = metric.error_px(cp, vp.o, vpm, beta)

@@ -90,8 +90,21 @@ from functools import cached_property
 import numpy as np
 
 from lodsprite.camera import view_footprint  # noqa: F401  (moved there; re-exported)
+from lodsprite.sprite.fallback import (  # noqa: F401  (the constants re-exported)
+    CANDIDATE_CHUNK,
+    ENUMERATE_FACTOR,
+    MAX_FALLBACK,
+    MIN_SAMPLES,
+    Boxes,
+    containing_square,
+    fallback_grid,
+    fallback_vertices,
+    in_view,
+    reproject_fallback,
+    square_boxes,
+    squares_in_view,
+)
 from lodsprite.sprite.raycast import (
-    FALLBACK_CACHE,
     CoarseSquares,
     Reprojection,
     coarse_normals,
@@ -101,18 +114,10 @@ from lodsprite.sprite.raycast import (
 )
 from lodsprite.sprite.resampling import resampling_px
 from lodsprite.terrain.heightfield import HeightField
-from lodsprite.terrain.lod import level_indices
 
 #: A keyframe's drawn surface: ``(key_eye (3,), key_view_proj (4, 4) | None) ->
 #: height``, ``height(x (K,), y (K,)) -> z (K,) float64`` metres (NaN: unknown there).
 SurfaceSource = Callable[[np.ndarray, "np.ndarray | None"], Callable]
-
-MIN_SAMPLES = 4       # fewer square centres in view than this: measure the fallback sample
-MAX_FALLBACK = 256    # at most this many fallback vertices are measured (evenly chosen)
-ENUMERATE_FACTOR = 4  # the fallback grid is refined while it has at most this times
-                      # MAX_FALLBACK candidate vertices in the coarse squares the view meets
-CANDIDATE_CHUNK = 1 << 14  # candidate vertices tested against the view at once
-
 
 def miss_floor(theta: np.ndarray, missed: np.ndarray) -> np.ndarray:
     """θ ``(K,)`` radians with each missed sample raised to at least the largest θ of the
@@ -131,13 +136,6 @@ def angles_at_eye(eye: np.ndarray, p: np.ndarray, q: np.ndarray) -> np.ndarray:
     cy = a[2] * b[0] - a[0] * b[2]
     cz = a[0] * b[1] - a[1] * b[0]
     return np.arctan2(np.sqrt(cx * cx + cy * cy + cz * cz), (a * b).sum(axis=0))
-
-
-def in_view(points_h: np.ndarray, view_proj: np.ndarray) -> np.ndarray:
-    """``(K,) bool``: homogeneous points ``(K, 4)`` inside the view frustum of ``view_proj``."""
-    clip = points_h @ view_proj.T
-    w = clip[:, 3:4]
-    return (w[:, 0] > 0) & np.all(np.abs(clip[:, :3]) <= w, axis=1)
 
 
 @dataclass(frozen=True)
@@ -210,95 +208,27 @@ class ErrorMetric:
         return th, (np.zeros(th.size, bool) if missed is None else missed[vis]), cp
 
     @cached_property
-    def _square_boxes(self) -> tuple[np.ndarray, np.ndarray]:
-        """``(lo, hi) (n*n, 3)``: bounds of the full-resolution vertices of each coarse
-        square (edges included)."""
-        sq = self.squares
-        hf, step, n = sq.hf, sq.step, sq.level_quads
-        if hasattr(hf.heights, "block_extremes"):  # a store read on demand: chunk bounds
-            zlo, zhi = hf.heights.block_extremes(n, step)
-        else:
-            h = hf.heights.astype(np.float64)
-            m = n * step
-
-            def extreme(red) -> np.ndarray:
-                cols = red(red.reduce(h[:, :m].reshape(len(h), n, step), axis=2),
-                           h[:, step::step])
-                return red(red.reduce(cols[:m].reshape(n, step, n), axis=1), cols[step::step])
-
-            zlo, zhi = extreme(np.minimum), extreme(np.maximum)
-        idx = level_indices(hf, n)
-        x, y = hf.world_xy(idx, idx)  # x by column index, y by row index
-        rr, cc = np.meshgrid(np.arange(n), np.arange(n), indexing="ij")
-        x0, x1 = x[cc].ravel(), x[cc + 1].ravel()
-        y0, y1 = y[rr + 1].ravel(), y[rr].ravel()  # row 0 is north: y falls with the row
-        lo = np.c_[x0, y0, zlo.ravel()]
-        hi = np.c_[x1, y1, zhi.ravel()]
-        return lo, hi
+    def _square_boxes(self) -> Boxes:
+        """``(lo, hi) (n*n, 3)``: each coarse square's vertex bounds
+        (:func:`~lodsprite.sprite.fallback.square_boxes`)."""
+        return square_boxes(self.squares)
 
     def squares_in_view(self, view_proj: np.ndarray) -> np.ndarray:
         """Indices ``(Q,) intp`` of the coarse squares whose bounding box meets the view
         frustum of ``view_proj`` (conservatively: every vertex in view lies in one)."""
-        lo, hi = self._square_boxes
-        m = np.asarray(view_proj, dtype=np.float64)
-        planes = np.array([m[3] + m[0], m[3] - m[0], m[3] + m[1], m[3] - m[1],
-                           m[3] + m[2], m[3] - m[2]])
-        keep = np.ones(len(lo), bool)
-        scale = np.abs(np.r_[lo.min(axis=0), hi.max(axis=0)]).max() + 1.0
-        for pl in planes:
-            top = np.where(pl[:3] > 0, hi, lo) @ pl[:3] + pl[3]
-            keep &= top >= -1e-9 * (np.abs(pl[:3]).sum() * scale + abs(pl[3]))
-        return np.flatnonzero(keep)
-
-    def _visible_grid(self, squares: np.ndarray, s: int, view_proj: np.ndarray) -> np.ndarray:
-        """Sorted linear indices of the vertices on the grid of spacing ``s`` inside the
-        coarse ``squares`` that are in view and are not coarse vertices; the candidates
-        are tested :data:`CANDIDATE_CHUNK` at a time."""
-        sq = self.squares
-        hf, step, n = sq.hf, sq.step, sq.level_quads
-        off = np.arange(0, step + 1, s)
-        per = len(off) ** 2
-        found = []
-        for q0 in range(0, len(squares), max(1, CANDIDATE_CHUNK // per)):
-            r, c = np.divmod(squares[q0:q0 + max(1, CANDIDATE_CHUNK // per)], n)
-            rr = (r[:, None, None] * step + off[None, :, None]) + 0 * off[None, None, :]
-            cc = (c[:, None, None] * step + off[None, None, :]) + 0 * off[None, :, None]
-            rr, cc = rr.ravel(), cc.ravel()
-            keep = (rr % step != 0) | (cc % step != 0)
-            rr, cc = rr[keep], cc[keep]
-            pts = hf.points(rr, cc)
-            vis = in_view(np.c_[pts, np.ones(len(pts))], view_proj)
-            found.append(np.unique(rr[vis] * hf.cols + cc[vis]))
-        return np.unique(np.concatenate(found)) if found else np.zeros(0, np.intp)
+        return squares_in_view(self._square_boxes, view_proj)
 
     def fallback_grid(self, view_proj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(rows (K,), cols (K,)) intp`` of the fallback sample of the current view
-        (module docstring): at most :data:`MAX_FALLBACK` vertices, in row-major order."""
-        sq = self.squares
-        hf, step = sq.hf, sq.step
-        squares = self.squares_in_view(view_proj)
-        s = step // 2  # the centres' spacing: every grid below includes them
-        while True:
-            idx = self._visible_grid(squares, s, view_proj)
-            if s == 1:
-                break
-            finer = len(squares) * (2 * step // s + 1) ** 2  # candidates at spacing s/2
-            if len(idx) >= MIN_SAMPLES and finer > ENUMERATE_FACTOR * MAX_FALLBACK:
-                break
-            s //= 2
-        if len(idx) > MAX_FALLBACK:
-            idx = idx[np.linspace(0, len(idx) - 1, MAX_FALLBACK).round().astype(np.intp)]
-        return np.divmod(idx, hf.cols)
+        (:func:`~lodsprite.sprite.fallback.fallback_grid`)."""
+        return fallback_grid(self.squares, self._square_boxes, view_proj)
 
     def fallback_points(self, view_proj: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The fallback sample of the current view: ``(points (K, 3) float64 metres,
         square (K,) intp)``, full-resolution vertices in view that are not coarse vertices
         (module docstring, :meth:`fallback_grid`), and the coarse square each lies in."""
-        sq = self.squares
         rr, cc = self.fallback_grid(view_proj)
-        n, step = sq.level_quads, sq.step
-        square = np.minimum(rr // step, n - 1) * n + np.minimum(cc // step, n - 1)
-        return sq.hf.points(rr, cc), square
+        return self.squares.hf.points(rr, cc), containing_square(self.squares, rr, cc)
 
     def fallback_theta(self, key_eye: np.ndarray, eye: np.ndarray, view_proj: np.ndarray,
                        cache: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -315,51 +245,13 @@ class ErrorMetric:
         """:meth:`fallback_theta` with the fallback vertices' ``C' (K, 3)`` metres;
         ``surface(x, y) -> z``: the keyframe's drawn surface their ``C`` is taken from
         (a :class:`Reprojection`'s ``surface``; None: the full-resolution field)."""
-        sq = self.squares
         rr, cc = self.fallback_grid(view_proj)
         if len(rr) == 0:
             return np.zeros(0), np.zeros(0, bool), np.zeros((0, 3))
-        n, step = sq.level_quads, sq.step
-        pts = self._fallback_points(rr, cc, surface)
-        lin = rr * sq.hf.cols + cc
-        entry = None if cache is None else cache.get(id(sq))
-        if entry is not None and entry[0] is not sq:
-            entry = None
-        p_prime = np.empty((len(lin), 3))
-        missed = np.zeros(len(lin), bool)
-        new = np.ones(len(lin), bool)
-        if entry is not None:
-            _, known, known_cp, known_missed = entry
-            pos = np.minimum(np.searchsorted(known, lin), len(known) - 1)
-            new = known[pos] != lin
-            p_prime[~new], missed[~new] = known_cp[pos[~new]], known_missed[pos[~new]]
-        if new.any():
-            square = (np.minimum(rr[new] // step, n - 1) * n
-                      + np.minimum(cc[new] // step, n - 1))
-            p_prime[new], missed[new] = reproject_points(sq, key_eye, pts[new], square)
-            # a store's heights not resident yet are approximate: not cached, taken again
-            exact = None if surface is not None else getattr(sq.hf.heights, "exact", None)
-            keep = new if exact is None else new & exact(rr, cc)
-            if cache is not None and keep.any():
-                if entry is None or len(entry[1]) + int(keep.sum()) > FALLBACK_CACHE:
-                    entry = (sq, np.zeros(0, lin.dtype), np.zeros((0, 3)), np.zeros(0, bool))
-                keys = np.r_[entry[1], lin[keep]]
-                order = np.argsort(keys, kind="stable")
-                cache[id(sq)] = (sq, keys[order], np.r_[entry[2], p_prime[keep]][order],
-                                 np.r_[entry[3], missed[keep]][order])
+        pts = fallback_vertices(self.squares, rr, cc, surface)
+        p_prime, missed = reproject_fallback(self.squares, key_eye, rr, cc, pts, cache,
+                                             surface)
         return angles_at_eye(np.asarray(eye, dtype=np.float64), pts, p_prime), missed, p_prime
-
-    def _fallback_points(self, rr: np.ndarray, cc: np.ndarray, surface) -> np.ndarray:
-        """Points ``(K, 3)`` of the fallback vertices: on ``surface`` where it has a
-        height, else the full-resolution field's."""
-        hf = self.squares.hf
-        if surface is None:
-            return hf.points(rr, cc)
-        x, y = hf.world_xy(rr, cc)
-        z = surface(x, y)
-        if np.isnan(z).any():
-            z = np.where(np.isnan(z), hf.points(rr, cc)[:, 2], z)
-        return np.c_[x, y, z]
 
     def covers(self, viewpoint, projection, key_viewpoint, key_projection) -> bool:
         """Whether every square centre in the current view is also in the keyframe's view."""
