@@ -81,7 +81,7 @@ def test_points_outside_the_selection_take_the_finest_resident_node(terrain):
 def test_pointwise_heights_equal_the_whole_frozen_surface(terrain):
     """``drawn_heights`` evaluates the drawn surface at the points' cell corners only;
     it must give the surface built from every sample of every node (to float rounding)."""
-    from lodsprite.sprite.proxy_metric import ProxySurface
+    from lodsprite.sprite.proxy_surface import ProxySurface
     from lodsprite.techniques.sprite_proxy import drawn_heights, frozen_nodes
 
     hf, at, tr = terrain

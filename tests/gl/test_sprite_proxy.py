@@ -9,7 +9,8 @@ from lodsprite.camera import look_at
 from lodsprite.gl.sprite import SpriteRenderer
 from lodsprite.gl.terrain import TerrainGeometry, TerrainRenderer
 from lodsprite.sprite.metric import ErrorMetric
-from lodsprite.sprite.proxy_metric import ProxyMetric, ProxySurface
+from lodsprite.sprite.proxy_metric import ProxyMetric
+from lodsprite.sprite.proxy_surface import ProxySurface
 from lodsprite.techniques.adaptive_terrain import AdaptiveTerrain
 from lodsprite.techniques.sprite_proxy import (
     AdaptiveProxySource,
@@ -168,7 +169,7 @@ def test_the_proxy_metric_adds_the_resampling_term_when_asked(setup):
 
 
 def test_proxy_normals_are_the_planes_normal():
-    from lodsprite.sprite.proxy_metric import ProxyNodes, surface_normals
+    from lodsprite.sprite.proxy_surface import ProxyNodes, surface_normals
 
     g = 4
     rows, cols = np.mgrid[0:g + 1, 0:g + 1].astype(np.float64)

@@ -9,13 +9,8 @@ import pytest
 from conftest import make_field
 from lodsprite.camera import fitted_projection, look_at
 from lodsprite.sprite.metric import ErrorMetric
-from lodsprite.sprite.proxy_metric import (
-    ProxyMetric,
-    ProxyNodes,
-    ProxySurface,
-    node_samples,
-    reproject_onto,
-)
+from lodsprite.sprite.proxy_metric import ProxyMetric, node_samples
+from lodsprite.sprite.proxy_surface import ProxyNodes, ProxySurface, reproject_onto
 
 
 def grid_proxy(hf, per: int, step: int) -> ProxyNodes:

@@ -28,7 +28,7 @@ from collections.abc import Callable
 import numpy as np
 
 from lodsprite.camera import frustum_planes
-from lodsprite.sprite.proxy_metric import ProxySurface
+from lodsprite.sprite.proxy_surface import ProxySurface
 from lodsprite.techniques.sprite_proxy import drawn_heights, frozen_nodes
 from lodsprite.terrain.quadtree import Node
 

@@ -39,7 +39,7 @@ import numpy as np
 
 from lodsprite.camera import frustum_planes
 from lodsprite.errors import InputError
-from lodsprite.sprite.proxy_metric import ProxyNodes, ProxySurface, triangle_height
+from lodsprite.sprite.proxy_surface import ProxyNodes, ProxySurface, triangle_height
 from lodsprite.terrain.quadtree import morph_factor, ranges
 
 WIDEN = 2.0     # the proxy's culling frustum: the keyframe's, tangents times this
