@@ -30,7 +30,8 @@ import numpy as np
 
 from lodsprite.camera import Viewpoint
 from lodsprite.errors import InputError
-from lodsprite.gl.lumigraph import FloatTarget, ProjectiveRenderer
+from lodsprite.gl.lumigraph import FloatTarget
+from lodsprite.gl.projective import ProjectiveRenderer
 from lodsprite.lumigraph.base import FRAME_S, Context, Method, MethodFrame
 from lodsprite.lumigraph.critical import st_point
 from lodsprite.lumigraph.geometry import facing_slab
