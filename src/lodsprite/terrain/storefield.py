@@ -12,7 +12,8 @@ level that commands load whole (4096² at most).
 square working grid of ``(Q+1)²`` samples over level 0's extent, ``Q`` the power of two
 at or above the longer side's quads (so ``Q = rows - 1`` samples level 0 exactly when
 that is a power of two).  Indexing it with integer arrays reads only the level-0 chunks
-those samples lie in, through a least-recently-used chunk cache; its minimum and maximum
+those samples lie in, through a least-recently-used chunk cache
+(:mod:`lodsprite.terrain.chunkcache`); its minimum and maximum
 come from the store's per-chunk bounds.  World coordinates are those of the adaptive
 renderer (:meth:`lodsprite.terrain.quadtree.Quadtree.world_xy`): level 0 centred on the
 origin, x east, y north, metres.
@@ -40,15 +41,14 @@ most three times) is counted in ``bad`` and keeps the coarse level's heights.
 from __future__ import annotations
 
 import logging
-import threading
 import time
-from collections import OrderedDict
 from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
 
 from lodsprite.errors import TerrainError
+from lodsprite.terrain.chunkcache import ChunkCache
 from lodsprite.terrain.heightfield import HeightField
 
 log = logging.getLogger(__name__)
@@ -98,15 +98,10 @@ class LazyHeights:
         self.quads = quads
         self.shape = (quads + 1, quads + 1)
         self.rows0, self.cols0 = store.shape(0)
-        self.chunk = store.chunk
-        self.chunk_cols = -(-self.cols0 // self.chunk)
-        self._here = np.zeros(-(-self.rows0 // self.chunk) * self.chunk_cols, bool)  # cached
+        self.chunks = ChunkCache((self.rows0, self.cols0), store.chunk, cache_chunks)
+        self.chunk, self.chunk_cols = self.chunks.chunk, self.chunks.chunk_cols
         self.scale = ((self.rows0 - 1) / quads, (self.cols0 - 1) / quads)
-        self.capacity = max(4, cache_chunks)
-        self._cache: OrderedDict = OrderedDict()
-        self._lock = threading.Lock()
         self._minmax = np.asarray(store.minmax(0))  # per-chunk bounds, in memory from now
-        self.chunks_read = 0     # level-0 chunks decoded, here or by the reader process
         self.blocking = True     # False after start_reader: nothing read on this thread
         self.reader = None       # a ChunkReader (the reader process) while non-blocking
         self.coarse: np.ndarray | None = None  # the resident coarser level, whole
@@ -116,6 +111,11 @@ class LazyHeights:
         self._users = 0          # start_reader calls not yet closed
         self._setup = False      # inside from_coarse(): every sample from the coarse level
         self.setup_samples = 0   # samples served from the coarse level inside from_coarse()
+
+    @property
+    def chunks_read(self) -> int:
+        """Level-0 chunks decoded, here or by the reader process."""
+        return self.chunks.chunks_read
 
     def __getitem__(self, key) -> np.ndarray:
         rows, cols = self._indices(key)
@@ -165,14 +165,11 @@ class LazyHeights:
             self.approximate += int((~ok).sum())
         return out.astype(np.float32)
 
-    def _chunk_ids(self, r: np.ndarray, c: np.ndarray) -> np.ndarray:
-        return (r // self.chunk) * self.chunk_cols + c // self.chunk
-
     def _resident(self, corners: list) -> tuple[np.ndarray, np.ndarray]:
         """``(ok, missing)``: which samples have every corner of weight > 0 in resident
         chunks, and the ids of the chunks that are not."""
-        ids = np.stack([self._chunk_ids(rr, cc) for rr, cc, _ in corners])
-        have = self._here[ids] | (np.stack([w for _, _, w in corners]) <= 0)
+        ids = np.stack([self.chunks.ids(rr, cc) for rr, cc, _ in corners])
+        have = self.chunks.here[ids] | (np.stack([w for _, _, w in corners]) <= 0)
         return have.all(axis=0), np.unique(ids[~have])
 
     def exact(self, rows, cols) -> np.ndarray:
@@ -195,7 +192,7 @@ class LazyHeights:
     def gather(self, r: np.ndarray, c: np.ndarray) -> np.ndarray:
         """Level-0 samples at integer ``(r, c)`` (metres, float64), chunk by chunk."""
         out = np.empty(r.shape, np.float64)
-        cid = self._chunk_ids(r, c)
+        cid = self.chunks.ids(r, c)
         flat_r, flat_c, flat_id = r.ravel(), c.ravel(), cid.ravel()
         order = np.argsort(flat_id, kind="stable")
         ids, starts = np.unique(flat_id[order], return_index=True)
@@ -208,35 +205,19 @@ class LazyHeights:
             flat[sel] = block[flat_r[sel] - cr * self.chunk, flat_c[sel] - cc * self.chunk]
         return out
 
-    def _window(self, cid: int) -> tuple[int, int, int, int]:
-        cr, cc = divmod(cid, self.chunk_cols)
-        c = self.chunk
-        return cr * c, min((cr + 1) * c, self.rows0), cc * c, min((cc + 1) * c, self.cols0)
-
     def _chunk(self, cr: int, cc: int) -> np.ndarray:
         key = cr * self.chunk_cols + cc
-        with self._lock:
-            block = self._cache.get(key)
-            if block is not None:
-                self._cache.move_to_end(key)
-                return block
+        block = self.chunks.get(key)
+        if block is not None:
+            return block
         if not self.blocking:  # sample() gathers resident chunks only
             raise RuntimeError(f"level-0 chunk ({cr}, {cc}) is not resident")
-        block = np.asarray(self.store.read(0, *self._window(key)))
+        block = np.asarray(self.store.read(0, *self.chunks.window(key)))
         if not np.all(np.isfinite(block)):
             raise TerrainError(f"{self.store.path}: level-0 chunk ({cr}, {cc}) holds unwritten "
                                "or invalid heights")
-        self._keep(key, block)
+        self.chunks.keep(key, block)
         return block
-
-    def _keep(self, key: int, block: np.ndarray) -> None:
-        with self._lock:
-            self._cache[key] = block
-            self._cache.move_to_end(key)
-            self._here[key] = True
-            self.chunks_read += 1
-            while len(self._cache) > self.capacity:
-                self._here[self._cache.popitem(last=False)[0]] = False
 
     def min(self) -> float:
         return float(self._minmax[..., 0].min())
@@ -281,7 +262,8 @@ class LazyHeights:
         if self.reader is not None:
             return
         k = self.hold_coarse(coarse_side)
-        self.reader = ChunkReader(self.store, self._window, in_flight, self.capacity, k)
+        self.reader = ChunkReader(self.store, self.chunks.window, in_flight,
+                                  self.chunks.capacity, k)
         self.blocking = False
 
     def hold_coarse(self, coarse_side: int = COARSE_SIDE) -> int:
@@ -318,9 +300,7 @@ class LazyHeights:
             self._send()
 
     def _send(self) -> None:
-        with self._lock:
-            here = set(self._cache)
-        self.reader.send(here)
+        self.reader.send(self.chunks.held())
 
     def pump(self) -> int:
         """Collect the chunks the reader has answered and send what is wanted next; never
@@ -338,7 +318,7 @@ class LazyHeights:
                                 self.coarse_level)
                 self.bad.add(cid)
                 continue
-            self._keep(cid, block)
+            self.chunks.keep(cid, block)
             got += 1
         self._send()
         return got
