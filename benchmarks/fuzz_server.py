@@ -31,9 +31,6 @@ from lodsprite.scene.spec import SceneSpec
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from hostile import flood  # noqa: E402  (test-only traffic, kept with the tests)
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from hostile import flood  # noqa: E402  (test-only traffic, kept with the tests)
-
 
 def server_stats(address: str) -> tuple[dict, dict]:
     """(ping data, stats) of the server, asked by a client that does not hold it."""
