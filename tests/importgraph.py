@@ -9,6 +9,14 @@ module parses every file under ``src/lodsprite`` and records each ``import`` and
 ``from lodsprite import Name`` goes through the package's PEP 562 facade: it is resolved
 to the module that the facade's ``_LAZY`` table names for ``Name``.
 
+A string that names a module of the package (``"lodsprite.manager.technique"``, or
+``"lodsprite.manager.technique:create"`` as factories and entry points are written) is an
+import that runs later through :mod:`importlib`: it is an edge too (``string``, counted
+as lazy), so a dependency hidden in a string cannot close a cycle unseen.  A module
+naming itself (a worker's factory handed to another process) is no edge, nor is a
+string that is an entry-point group of ``pyproject.toml`` (``"lodsprite.techniques"``
+names the group plug-ins register in, not a module to import) or a logger's name.
+
 Used by ``tests/test_layering.py`` (the rules) and ``benchmarks/code_shape.py`` (the
 figures: cycles, long modules, long functions).
 """
@@ -16,6 +24,7 @@ figures: cycles, long modules, long functions).
 from __future__ import annotations
 
 import ast
+import tomllib
 from collections import defaultdict
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -24,6 +33,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 SRC = ROOT / "src"
 PACKAGE = "lodsprite"
+#: The entry-point groups the project declares: names of groups, not of modules.
+GROUPS = frozenset(tomllib.loads((ROOT / "pyproject.toml").read_text())
+                   .get("project", {}).get("entry-points", {}))
 
 
 @dataclass(frozen=True)
@@ -36,6 +48,7 @@ class Import:
     line: int
     lazy: bool
     type_only: bool
+    string: bool = False
 
 
 def module_files(src: Path = SRC) -> dict[str, Path]:
@@ -93,9 +106,34 @@ class _Collector(ast.NodeVisitor):
             self.generic_visit(node)
 
     # --- imports ------------------------------------------------------------------------
-    def _add(self, target: str, line: int) -> None:
-        self.found.append(Import(self.module, target, line, self._depth > 0,
-                                 self._type_only > 0))
+    def _add(self, target: str, line: int, string: bool = False) -> None:
+        self.found.append(Import(self.module, target, line, self._depth > 0 or string,
+                                 self._type_only > 0, string))
+
+    def visit_Call(self, node: ast.Call) -> None:
+        func = node.func
+        if isinstance(func, ast.Attribute) and func.attr == "getLogger":
+            return  # a logger's name is no import
+        self.generic_visit(node)
+
+    def visit_Constant(self, node: ast.Constant) -> None:
+        """A string naming a module of the package (``module`` or ``module:attr``)."""
+        if (isinstance(node.value, str) and node.value.startswith(PACKAGE + ".")
+                and node.value not in GROUPS):
+            module = node.value.partition(":")[0]
+            if module in self.known:
+                self._add(module, node.lineno, string=True)
+
+    def visit_JoinedStr(self, node: ast.JoinedStr) -> None:
+        """An f-string's leading literal naming a module (``f"lodsprite.x:{name}"``)."""
+        head = node.values[0] if node.values else None
+        if (isinstance(head, ast.Constant) and isinstance(head.value, str)
+                and head.value.startswith(PACKAGE + ".")):
+            module = head.value.partition(":")[0]
+            if module in self.known and (len(node.values) == 1 or ":" in head.value):
+                self._add(module, node.lineno, string=True)
+        for value in node.values[1:]:
+            self.visit(value)
 
     def _resolve(self, dotted: str) -> str:
         """The longest known module that ``dotted`` names (an outside name: its top)."""

@@ -1,4 +1,5 @@
-"""Layering and the lean install (issue 12, items 9 and 10; issue 21, must-have 6).
+"""Layering and the lean install (issue 12, items 9 and 10; issue 21, must-have 6; issue 31,
+must-have 5: string imports count).
 
 * The layers, read from the source (AST, :mod:`importgraph`), lazy imports counted: no
   module or package cycle; moderngl only under gl/ (elsewhere hints under
@@ -95,24 +96,6 @@ def test_the_scene_model_imports_no_rendering():
     assert sorted(m for m in seen if importgraph.unit(m) == "gl") == []
     assert not any(e.target == "moderngl" and e.source in seen and not e.type_only
                    for e in EDGES)
-
-
-def test_the_scene_model_names_no_module_by_string():
-    """scene/ finds no module by a dotted string (SCENE_KINDS and the built-in meshes
-    did): other packages' scene kinds and models come through entry points."""
-    import ast
-    import re
-
-    dotted = re.compile(r"^lodsprite(\.\w+)+(:\w+)?$")
-    modules = importgraph.module_files()
-    found = []
-    for path in sorted((ROOT / "src" / "lodsprite" / "scene").glob("*.py")):
-        for node in ast.walk(ast.parse(path.read_text())):
-            if (isinstance(node, ast.Constant) and isinstance(node.value, str)
-                    and dotted.match(node.value)
-                    and node.value.partition(":")[0] in modules):  # names a module
-                found.append(f"{path.name}:{node.lineno} {node.value}")
-    assert found == []
 
 
 #: The shared helpers every level uses (atomic writers, mesh loading, the cluster extra's
@@ -352,3 +335,18 @@ def test_test_module_names_are_unique():
     pytest refuse to collect the second (as tests/lumigraph/test_cli.py once did)."""
     names = [p.name for p in (ROOT / "tests").rglob("test_*.py")]
     assert sorted(n for n in set(names) if names.count(n) > 1) == []
+
+
+def test_the_import_graph_sees_string_imports(tmp_path):
+    """A module found by its dotted name in a string (a factory, an opener) is an edge:
+    planted, such a string closes a cycle that no import statement shows."""
+    pkg = tmp_path / "src" / "lodsprite"
+    pkg.mkdir(parents=True)
+    (pkg / "__init__.py").write_text("")
+    (pkg / "a.py").write_text("import lodsprite.b\n")
+    (pkg / "b.py").write_text("OPENERS = ['lodsprite.a:open']\nNAME = f'lodsprite.b:{1}'\n")
+    edges = importgraph.imports(tmp_path / "src")
+    assert importgraph.strongly_connected(importgraph.runtime_graph(edges)) == [
+        ["lodsprite.a", "lodsprite.b"]]
+    (hidden,) = [e for e in edges if e.string]
+    assert (hidden.source, hidden.target, hidden.lazy) == ("lodsprite.b", "lodsprite.a", True)
