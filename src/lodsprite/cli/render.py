@@ -15,10 +15,12 @@ from lodsprite.cli.common import (
     ExagOpt,
     FramesOpt,
     GridOpt,
+    GroundTruthOpt,
     GuardOpt,
     MaxErrorOpt,
     PaceOpt,
     PathOpt,
+    QualityStrideOpt,
     TerrainOpt,
     TextureOpt,
     VisOpt,
@@ -54,8 +56,6 @@ def _check_mode(mode: str, ground_truth: bool, video: Path | None,
     if mode not in (*MODES, "distributed"):
         raise InputError(f"unknown mode '{mode}': use one of {', '.join(MODES)}, distributed")
     distributed = mode == "distributed"  # not a core mode: the distributed layer runs it
-    if distributed and ground_truth:
-        raise InputError("--ground-truth replays a run's decisions: not for --mode distributed")
     if distributed and video is not None:
         raise InputError(f"--video is for --mode {', '.join(MODES)}")
     if distributed and metric not in (None, "warp"):
@@ -131,9 +131,8 @@ def render(
     grid: GridOpt = None,
     exaggeration: ExagOpt = DEFAULT_EXAGGERATION,
     epsilon: EpsOpt = 1.0,
-    ground_truth: Annotated[bool, typer.Option(
-        "--ground-truth", help="replay the run's decisions untimed against full "
-                               "resolution: RMSE/PSNR/SSIM per frame and their means")] = False,
+    ground_truth: GroundTruthOpt = False,
+    quality_stride: QualityStrideOpt = 1,
     flip: Annotated[bool, typer.Option(
         "--flip", help="with --ground-truth: FLIP per frame too")] = False,
     visibility: VisOpt = "coarse",
@@ -182,7 +181,8 @@ def render(
                           mode="sprite" if distributed else mode, lod=lod,
                           size=parse_size(size or "512x512"), frames=frames, grid=grid,
                           exaggeration=exaggeration, save_frames=save_frames, epsilon=epsilon,
-                          ground_truth=ground_truth, visibility=visibility, border=border,
+                          ground_truth=ground_truth, quality_stride=quality_stride,
+                          visibility=visibility, border=border,
                           guard_px=guard, sse=sse, gpu_mb=gpu_mb, host_mb=host_mb,
                           key_sse=key_sse, proxy_sse=proxy_sse, flip=flip, shading=shading,
                           tiles=tiles, tile_budget_ms=tile_budget_ms, cache_mb=cache_mb,
