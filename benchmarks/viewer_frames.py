@@ -114,11 +114,13 @@ def main() -> None:
             paced = offscreen_paced_sprite_ms(terrain, a.frames, a.size, a.fps)
             for inline in (False, True):
                 s = window_run(terrain, a.frames, a.size, a.fps, inline, Path(tmp))
+                # the window's whole frame (start to after the swap) against the
+                # technique's own (ms: frame() and ctx.finish(), as offscreen)
+                w, p99 = s["window_median_ms"], s["window_p99_ms"]
                 print(f"| {terrain} | {'inline' if inline else 'worker thread'} | "
-                      f"{s['median_ms']:.2f} | {s['p99_ms']:.2f} | "
-                      f"{s['p99_ms'] / s['median_ms']:.2f} | {s['render_median_ms']:.2f} | "
-                      f"{ref:.2f} | {s['median_ms'] / ref:.2f} | {paced:.2f} | "
-                      f"{s['median_ms'] / paced:.2f} | {s['keyframes']} | "
+                      f"{w:.2f} | {p99:.2f} | {p99 / w:.2f} | {s['median_ms']:.2f} | "
+                      f"{ref:.2f} | {w / ref:.2f} | {paced:.2f} | "
+                      f"{w / paced:.2f} | {s['keyframes']} | "
                       f"{s['error_mean']:.2f} / {s['error_max']:.2f} | "
                       f"{100 * s['over_eps']:.0f} % |", flush=True)
 

@@ -304,7 +304,6 @@ def lodsprite_cli(*args: str) -> subprocess.CompletedProcess:
 
 @pytest.mark.parametrize(("args", "fragment"), [
     (["--mode", "warp"], "distributed"),
-    (["--mode", "distributed", "--ground-truth"], "not for --mode distributed"),
     (["--mode", "distributed", "--pace", "sometimes"], "--pace"),
     (["--mode", "distributed", "--max-error", "wide"], "--max-error"),
     (["--mode", "distributed", "--epsilon", "0"], "epsilon"),

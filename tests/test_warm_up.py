@@ -89,7 +89,7 @@ def test_adaptive_starts_its_timed_run_with_the_first_view_settled(gl, tmp_path)
     with Renderer(scene, (96, 96), path.fov_y_deg, ctx=gl.mgl) as renderer:
         t = techniques.create("adaptive", renderer)
         try:
-            settled = t.terrain.settle(path.viewpoints[0]).resident
+            settled = t.terrain.settle(path.viewpoints[0]).extra["resident"]
         finally:
             t.release()
         t = techniques.create("adaptive", renderer)

@@ -44,10 +44,10 @@ from lodsprite.gl.context import GLContext, GLInfo
 from lodsprite.gl.overlay import Presenter
 from lodsprite.gl.paths import PathRenderer
 from lodsprite.gl.sprite import DEFAULT_GUARD_PX, DEFAULT_VISIBILITY, SpriteRenderer
-from lodsprite.gl.terrain import FrameStats
+from lodsprite.record import Frame
 from lodsprite.scene import Scene
 from lodsprite.sprite.cache import DEFAULT_POLICY
-from lodsprite.sprite.engine import DEFAULT_EPSILON_PX, LodSpriteEngine, SpriteFrame
+from lodsprite.sprite.engine import DEFAULT_EPSILON_PX, LodSpriteEngine
 from lodsprite.sprite.threaded import ThreadedLodSpriteEngine
 from lodsprite.terrain.lod import DEFAULT_COARSE
 
@@ -168,7 +168,7 @@ class Renderer:
             return Projection(self.fov_y_deg, self.size[0] / self.size[1], 0.1, 1e5)
         return self._paths.renderer.projection(viewpoint)
 
-    def render(self, viewpoint: Viewpoint, lod: int | None = None) -> FrameStats:
+    def render(self, viewpoint: Viewpoint, lod: int | None = None) -> Frame:
         """Draw the terrain at full resolution (``lod=None``) or at uniform level ``lod``
         (quads per side) into the renderer's image; returns once the GL work is done."""
         stats = self._terrain().renderer.render(viewpoint, lod)
@@ -289,7 +289,7 @@ class LodSprite:
         except BaseException:
             self.sprite.release()
             raise
-        self.last: SpriteFrame | None = None
+        self.last: Frame | None = None
 
     @property
     def epsilon_px(self) -> float:
@@ -312,7 +312,7 @@ class LodSprite:
     def lod(self) -> int:
         return self.sprite.coarse_quads
 
-    def frame(self, viewpoint: Viewpoint) -> SpriteFrame:
+    def frame(self, viewpoint: Viewpoint) -> Frame:
         """Render the frame for ``viewpoint`` (returns after ``ctx.finish()``)."""
         self.last = self.engine.frame(viewpoint)
         return self.last

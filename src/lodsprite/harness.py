@@ -27,7 +27,6 @@ the technique's own), atomically.
 
 from __future__ import annotations
 
-import platform
 import time
 from collections.abc import Callable, Collection, Iterator
 from contextlib import contextmanager
@@ -38,15 +37,20 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from lodsprite.errors import InputError
-from lodsprite.techniques.base import Frame, Technique
+from lodsprite.record import (  # the record's rows and summary, here too
+    CORE_COLUMNS,
+    CORE_KEYS,
+    Frame,
+    frame_rows,
+    frames_summary,
+    timing_summary,
+)
+from lodsprite.techniques.base import Technique
 
 if TYPE_CHECKING:
     from lodsprite.paths import CameraPath
     from lodsprite.progress import Progress
 
-CORE_COLUMNS = ("frame", "kind", "ms", "triangles", "error_px")
-CORE_KEYS = ("frames", "median_ms", "mean_ms", "std_ms", "p95_ms", "p99_ms", "max_ms",
-             "total_s", "first_frame_ms", "gl_renderer")
 QUALITY_COLUMNS = ("rmse", "psnr", "ssim", "flip")
 
 #: ``on_image(frame, image, reference)``: a replayed frame's image ``(h, w, 3) uint8`` and
@@ -66,18 +70,6 @@ class RunResult:
     columns: list[str]
     summary: dict[str, Any] = field(default_factory=dict)
     interrupted: bool = False  # stopped by Ctrl-C: the frames finished so far
-
-
-def timing_summary(ms: np.ndarray) -> dict[str, float]:
-    """The core timing keys of per-frame times ``ms`` (milliseconds): median, mean,
-    standard deviation, p95, p99, max (ms) and total (s)."""
-    ms = np.asarray(ms, dtype=np.float64)
-    if ms.size == 0:
-        raise InputError("a run needs at least one frame")
-    return {"frames": int(ms.size), "median_ms": float(np.median(ms)),
-            "mean_ms": float(ms.mean()), "std_ms": float(ms.std()),
-            "p95_ms": float(np.percentile(ms, 95)), "p99_ms": float(np.percentile(ms, 99)),
-            "max_ms": float(ms.max()), "total_s": float(ms.sum() / 1e3)}
 
 
 def full_resolution(renderer) -> Reference:
@@ -132,7 +124,8 @@ def quality_summary(rows: list[dict]) -> dict[str, float]:
     """Means of the quality columns over the rows that have them: ``rmse_mean``,
     ``ssim_mean`` (and ``flip_mean``), and ``psnr_mean`` from the mean squared error (a
     keyframe equals its reference, whose own PSNR is infinite); a technique's extra
-    columns (``rmse_lod`` ...) the same way (``rmse_lod_mean`` ...)."""
+    columns (``rmse_lod`` ...) the same way (``rmse_lod_mean`` ...); with a plain coarse
+    level beside it, ``rmse_ratio = rmse_mean / rmse_lod_mean``."""
     rows = [r for r in rows if "rmse" in r]
     if not rows:
         return {}
@@ -146,6 +139,9 @@ def quality_summary(rows: list[dict]) -> dict[str, float]:
             mse = float(np.mean(v ** 2))
             out[f"psnr{key[4:]}_mean"] = (float("inf") if mse == 0
                                           else float(10 * np.log10(255.0 ** 2 / mse)))
+    if "rmse_lod_mean" in out:  # the technique against its plain coarse level
+        out["rmse_ratio"] = (out["rmse_mean"] / out["rmse_lod_mean"]
+                             if out["rmse_lod_mean"] > 0 else float("nan"))
     return out
 
 
@@ -242,26 +238,11 @@ def run_path(technique: Technique, path: CameraPath, *, finish: Callable[[], Non
         _replay(technique, path, decisions, rows, reference if ground_truth else None,
                 quality_stride, flip, on_image, image_frames)
         columns += [c for c in _quality_columns(rows) if c not in columns]
-    summary = {**timing_summary(np.array([f.ms for f in frames])), "first_frame_ms": first_ms,
-               "gl_renderer": gl_renderer or (renderer.info.renderer if renderer else ""),
-               "technique": technique.name,
-               "triangles_mean": float(np.mean([f.triangles for f in frames])),
-               "machine": platform.machine(), "python": platform.python_version(),
-               **own, **quality_summary(rows)}
+    summary = {**frames_summary(frames, technique.name, gl_renderer or (
+        renderer.info.renderer if renderer else ""), first_ms), **own, **quality_summary(rows)}
     if interrupted:
         summary["interrupted"] = True
     return RunResult(frames, decisions, rows, columns, summary, interrupted)
-
-
-def frame_rows(frames: list[Frame]) -> tuple[list[dict], list[str]]:
-    """The rows of ``frames.csv`` and their columns: the core ones, then the technique's
-    own (in the order first seen)."""
-    rows, extra = [], {}
-    for i, f in enumerate(frames):
-        rows.append({"frame": i, "kind": f.kind, "ms": f.ms, "triangles": f.triangles,
-                     "error_px": f.error_px, **f.extra})
-        extra.update(dict.fromkeys(f.extra))
-    return rows, [*CORE_COLUMNS, *(k for k in extra if k not in CORE_COLUMNS)]
 
 
 def _quality_columns(rows: list[dict]) -> list[str]:
@@ -280,3 +261,8 @@ def write_run(out_dir: Path, result: RunResult, summary: dict[str, Any] | None =
     out_dir = Path(out_dir)
     write_csv(out_dir / "frames.csv", result.rows, result.columns)
     write_json(out_dir / "summary.json", result.summary if summary is None else summary)
+
+
+__all__ = ["CORE_COLUMNS", "CORE_KEYS", "QUALITY_COLUMNS", "Frame", "RunResult", "frame_rows",
+           "frames_summary", "full_resolution", "level_zero_reference", "quality_summary",
+           "run_path", "scene_reference", "timing_summary", "warm_up", "write_run"]

@@ -300,7 +300,7 @@ def test_the_client_runs_no_thread_beside_its_draws(fake):
             client.frame(vp)
             assert time.perf_counter() < deadline, "the client never loaded the scene"
         fake.send(1, vp)
-        assert _until(client, vp, "keyframe").keyframe_seq == 1
+        assert _until(client, vp, "keyframe").extra["keyframe_seq"] == 1
         assert set(threading.enumerate()) == before
     finally:
         client.close()
@@ -415,11 +415,11 @@ def test_the_receiver_survives_hostile_keyframes_counts_them_and_shows_the_next_
             fake.keys.send_multipart(m)
         fake.keys.send_multipart(good)
         f = _until(client, vp, "keyframe")
-        assert client.shown[f.keyframe_index]["seq"] == 1  # seq 7 did not count as taken
+        assert client.shown[f.extra["keyframe"]]["seq"] == 1  # seq 7 did not count as taken
         assert client.rejected_keyframes == len(hostile)
         fake.send(2, fake.path.viewpoints[3])  # and it goes on receiving
         f = _until(client, vp, "keyframe")
-        assert client.shown[f.keyframe_index]["seq"] == 2
+        assert client.shown[f.extra["keyframe"]]["seq"] == 2
     finally:
         client.close()
 
@@ -430,7 +430,7 @@ def test_the_bounded_client_renders_its_own_keyframe_when_the_shown_one_is_too_f
     """With ``max_error`` the client renders its own keyframe where the server's shown
     keyframe's error reaches it; the paper's client (None) keeps showing the far one."""
     from lodsprite.camera import Viewpoint
-    from lodsprite.distributed.quality import Replayer
+    from lodsprite.distributed.technique import DistributedTechnique
     from lodsprite.sprite.policy import keyframe_error_px
 
     client = fake.client(max_error=max_error)
@@ -446,19 +446,19 @@ def test_the_bounded_client_renders_its_own_keyframe_when_the_shown_one_is_too_f
         drawn = client.image()
         again = client.frame(far)
         shown = list(client.shown)
+        # The harness's replay draws this frame from the logged viewpoint as drawn here.
+        replayed = DistributedTechnique.on_client(client, []).replay(
+            far, {"keyframe": f.extra["keyframe"]})
     finally:
         client.close()
     if max_error is None:
-        assert (f.type, again.type) == ("sprite", "sprite") and f.keyframe_seq == 1
+        assert (f.type, again.type) == ("sprite", "sprite") and f.extra["keyframe_seq"] == 1
         return
     assert (f.type, again.type) == ("local_keyframe", "local_sprite")
-    assert f.keyframe_seq == 0 and again.keyframe_index == f.keyframe_index
-    own = shown[f.keyframe_index]
+    assert f.extra["keyframe_seq"] == 0 and again.extra["keyframe"] == f.extra["keyframe"]
+    own = shown[f.extra["keyframe"]]
     assert own["local"] and own["seq"] == 0
     assert Viewpoint.from_dict(own["viewpoint"]).to_dict() == far.to_dict()
-    # The replay draws this frame from the logged viewpoint as the client drew it.
-    with Replayer(fake.cfg) as replayer:
-        replayed = replayer.draw(Viewpoint.from_dict(own["viewpoint"]), far)
     diff = np.abs(replayed.astype(int) - drawn.astype(int))
     assert diff.mean() < 0.05 and diff.max() <= 2
 
@@ -478,7 +478,7 @@ def test_the_bounded_client_keeps_a_far_server_keyframe_back_until_it_serves(fak
             assert time.perf_counter() < deadline, "the second keyframe never arrived"
         assert [client.frame(near).type for _ in range(3)] == ["sprite"] * 3
         f = client.frame(far)
-        assert f.type == "keyframe" and f.keyframe_seq == 2
+        assert f.type == "keyframe" and f.extra["keyframe_seq"] == 2
     finally:
         client.close()
 
@@ -674,10 +674,10 @@ def test_a_keyframe_number_far_ahead_does_not_freeze_the_link(fake, monkeypatch)
             time.sleep(0.01)
         fake.send(2**62, near)
         f = _until(client, near, "keyframe")
-        assert f.keyframe_seq == 2**62
+        assert f.extra["keyframe_seq"] == 2**62
         monkeypatch.setattr(client_module, "SEQ_RESET_S", 0.0)  # as if it were long ago
         fake.send(7, far)
         f = _until(client, far, "keyframe")
-        assert f.keyframe_seq == 7 and client._servers[0].last_seq == 7
+        assert f.extra["keyframe_seq"] == 7 and client._servers[0].last_seq == 7
     finally:
         client.close()

@@ -10,7 +10,6 @@ import numpy as np
 import pytest
 
 from conftest import wait_until
-from lodsprite.camera import Viewpoint
 from lodsprite.distributed.client import DEFAULT_MAX_ERROR, LodClient
 from lodsprite.distributed.render import scene_args
 from lodsprite.distributed.run import free_ports
@@ -55,7 +54,8 @@ def test_render_mode_distributed_writes_frames_and_server_statistics(tmp_path):
     out = tmp_path / "d"
     proc = subprocess.run([sys.executable, "-c", "from lodsprite.cli import main; main()",
                            "render", "--mode", "distributed", "--terrain", "fractal:64:2",
-                           "--size", "64x64", "--lod", "8", "--frames", "30", "--out", str(out)],
+                           "--size", "64x64", "--lod", "8", "--frames", "30", "--out", str(out),
+                           "--ground-truth", "--quality-stride", "10"],
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
     rows = list(csv.DictReader((out / "frames.csv").open()))
@@ -70,6 +70,16 @@ def test_render_mode_distributed_writes_frames_and_server_statistics(tmp_path):
     assert max(shown) == len(keys) - 1 and min(shown) >= 0
     assert any(not k["local"] for k in keys)  # the server's keyframes reached the client
     assert summary["local_keyframes"] == sum(r["kind"] == "local_keyframe" for r in rows)
+    # quality from the harness's untimed replay, as every technique's: the harness's
+    # columns on every 10th frame, beside the plain coarse level's
+    measured = [i for i, r in enumerate(rows) if r["rmse"] != ""]
+    assert measured == [0, 10, 20]
+    assert all(float(rows[i]["rmse_lod"]) > 0 for i in measured)
+    assert summary["quality_frames"] == 3 and summary["rmse_lod_mean"] > 0
+    assert summary["rmse_ratio"] == pytest.approx(summary["rmse_mean"] / summary["rmse_lod_mean"])
+    # and each frame's error metric against the keyframe it showed, measured untimed
+    assert summary["replayed_frames"] == 30
+    assert all(float(r["error_px"]) >= 0 for r in rows)
 
 
 @pytest.fixture
@@ -130,7 +140,7 @@ def test_a_bounded_client_renders_its_own_keyframes_once_the_server_is_gone(scen
     """With ``max_error`` the client does not show the last server keyframe forever: when
     the viewer moves on after the server died, it renders its own keyframes, and every
     frame it draws stays under the bound as the replay measures it."""
-    from lodsprite.distributed.quality import Replayer
+    from lodsprite.distributed.technique import DistributedTechnique
 
     sc, path = scene
     _, server, client = server_and_client(sc, max_error=1.0)
@@ -139,17 +149,16 @@ def test_a_bounded_client_renders_its_own_keyframes_once_the_server_is_gone(scen
         stop(server)
         frames = [client.frame(vp) for vp in path.viewpoints]
         shown = list(client.shown)
+        errors = DistributedTechnique.on_client(client, []).replayed_errors(
+            path.viewpoints, [{"keyframe": f.extra["keyframe"]} for f in frames])
     finally:
         client.close()
         stop(server)
     types = [f.type for f in frames]
     assert "local_keyframe" in types and set(types) <= {"keyframe", "sprite", "local_keyframe",
                                                         "local_sprite"}
-    keys = [Viewpoint.from_dict(k["viewpoint"]) for k in shown]
-    with Replayer(SMALL, stride=len(frames)) as replayer:
-        res = replayer.replay(keys, np.array([f.keyframe_index for f in frames]))
-    assert res["replayed_frames"] == len(frames)
-    assert res["error_px_max"] < 1.0 and res["over_epsilon"] == 0.0
+    assert len(shown) > 1
+    assert np.all(errors < 1.0)  # every frame showed a keyframe, measurably under the bound
 
 
 def test_client_without_any_server_renders_keyframes_itself(scene):
@@ -296,7 +305,7 @@ def test_a_replayed_frame_is_the_frame_the_client_drew(scene):
     """The image error of distributed runs is measured by replaying their frames from the
     recorded keyframe viewpoints; that is sound only if a replay draws what the client drew
     from the keyframe the server sent."""
-    from lodsprite.distributed.quality import Replayer
+    from lodsprite.distributed.technique import DistributedTechnique
 
     sc, path = scene
     _, server, client = server_and_client(sc)
@@ -304,12 +313,11 @@ def test_a_replayed_frame_is_the_frame_the_client_drew(scene):
         assert wait_for(client, path.viewpoints[0])
         frames = [client.frame(vp) for vp in path.viewpoints[:12]]
         drawn = client.image()
-        key = client.shown[frames[-1].keyframe_index]
+        again = DistributedTechnique.on_client(client, []).replay(
+            path.viewpoints[11], {"keyframe": frames[-1].extra["keyframe"]})
     finally:
         client.close()
         stop(server)
-    with Replayer(SMALL) as replayer:
-        again = replayer.draw(Viewpoint.from_dict(key["viewpoint"]), path.viewpoints[11])
     diff = np.abs(again.astype(int) - drawn.astype(int))
     assert diff.mean() < 0.05 and diff.max() <= 2  # stated tolerance, in grey levels
 

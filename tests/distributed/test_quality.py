@@ -1,42 +1,107 @@
-"""Replaying a client's frames to measure their image error (real GL on llvmpipe)."""
+"""The quality of a distributed client's runs: the harness's untimed replay of the frames
+it showed, and each frame's error metric against its keyframe (real GL on llvmpipe).
 
-import json
+The client here has no server that answers: it draws from its own keyframes (the 1999
+algorithm), so its decisions are deterministic and the replay can be checked frame by
+frame against what it drew."""
+
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from lodsprite.distributed.quality import Replayer, inline_quality, recorded_keyframes
+from lodsprite.camera import Viewpoint
+from lodsprite.distributed.client import LodClient
+from lodsprite.distributed.quality import error_summary
+from lodsprite.distributed.render import scene_args
+from lodsprite.distributed.technique import DistributedTechnique
 from lodsprite.errors import InputError
-from lodsprite.run import RenderConfig
+from lodsprite.harness import run_path
+from lodsprite.run import RenderConfig, prepare
 
 CFG = RenderConfig(terrain="fractal:64:2", size=(64, 64), lod=16, frames=12, path="chen1999",
                    mode="sprite")
 
 
-@pytest.fixture(scope="module")
-def replayer():
-    with Replayer(CFG, stride=3) as r:
-        yield r
+def _technique(cfg: RenderConfig) -> tuple[DistributedTechnique, object, object]:
+    """A client of a server that never answers (it draws from its own keyframes), as the
+    batch runs make it; (technique, scene, path)."""
+    scene, path = prepare(cfg, light=False)
+    args = scene_args(cfg.terrain, cfg.texture, None, cfg.exaggeration, cfg.size)
+    client = LodClient(scene, args, ["127.0.0.1:9"], cfg.size, cfg.lod, epsilon=cfg.epsilon,
+                       max_error=None)
+    technique = DistributedTechnique.on_client(client, ["127.0.0.1:9"])
+    technique.warmup_s = 0.1  # no server keyframe is coming
+    return technique, scene, path
 
 
-def test_frames_shown_from_their_own_viewpoint_carry_no_error(replayer):
-    views = list(replayer.path.viewpoints)
-    fresh = replayer.replay(views, np.arange(len(views)))
-    assert fresh["replayed_frames"] == 12 and fresh["quality_frames"] == 4
-    assert fresh["error_px_max"] < 1e-6 and fresh["over_epsilon"] == 0.0
-    # Along the silhouettes the coarse level covers other pixels than full resolution,
-    # so even these frames differ from it, but less than the plain coarse level does.
-    assert fresh["rmse_sprite_mean"] < fresh["rmse_lod_mean"]
+def _reference(technique: DistributedTechnique):
+    terrain = technique.client.paths.renderer
+
+    def full(viewpoint):
+        terrain.render(viewpoint, None)
+        return terrain.target.read_color()
+
+    return full
 
 
-def test_a_stale_keyframe_shows_as_error_and_frames_without_one_are_left_out(replayer):
-    views = list(replayer.path.viewpoints)
-    stale = replayer.replay(views[:1], np.array([-1] + [0] * 11))
-    assert stale["replayed_frames"] == 11 and stale["per_frame_error_px"][0] is None
-    errors = np.array(stale["per_frame_error_px"][1:])
-    assert errors[-1] > errors[0] and stale["over_epsilon"] > 0
-    fresh = replayer.replay(views, np.arange(len(views)))
-    assert stale["rmse_sprite_mean"] > fresh["rmse_sprite_mean"]
+def test_error_summary_leaves_out_frames_without_a_keyframe_and_counts_inf_as_over():
+    s = error_summary(np.array([np.nan, 0.0, 0.5, np.inf, 2.0]), epsilon=1.0)
+    assert s["replayed_frames"] == 4 and s["unmeasurable_frames"] == 1
+    assert s["per_frame_error_px"][0] is None and s["per_frame_error_px"][2] == 0.5
+    assert s["over_epsilon"] == 0.5  # inf and 2.0 of the four measured
+    assert s["error_px_max"] == 2.0 and s["error_px_mean"] == pytest.approx(2.5 / 3)
+    assert "error_px_mean" not in error_summary(np.array([np.nan]), 1.0)
+
+
+def test_the_harness_replays_the_clients_frames_as_it_drew_them():
+    """The same replay path as every technique's: each recorded decision drawn again
+    equals the frame the client drew, and the harness's quality columns are those of
+    the drawn frames against the one reference."""
+    from lodsprite.metrics import rmse
+
+    technique, _, path = _technique(CFG)
+    client = technique.client
+    try:
+        def draw(vp):  # the frame as drawn, read back (outside any timed run)
+            technique.frame(vp)
+            return client.image(), technique.decision()
+
+        drawn, decisions = zip(*[draw(vp) for vp in path.viewpoints], strict=True)
+        kinds = {client.shown[d["keyframe"]]["local"] for d in decisions}
+        assert kinds == {True}  # no server answered: the client's own keyframes
+        reference = _reference(technique)
+        want = [rmse(img, reference(vp)) for img, vp in zip(drawn, path.viewpoints,
+                                                            strict=True)]
+        for i in (11, 0, 5):  # out of order: the keyframe is rendered again when needed
+            again = technique.replay(path.viewpoints[i], decisions[i])
+            assert np.abs(again.astype(int) - drawn[i].astype(int)).max() <= 2
+        result = run_path(technique, path, finish=client.paths.ctx.finish,
+                          ground_truth=True, reference=reference, quality_stride=3)
+    finally:
+        client.close()
+    assert [d["keyframe"] >= 0 for d in result.decisions] == [True] * 12
+    rows = result.rows
+    assert [i for i, r in enumerate(rows) if "rmse" in r] == [0, 3, 6, 9]
+    for i in (0, 3, 6, 9):  # the run's own decisions; the same as the loop's above
+        if result.decisions[i]["keyframe"] - result.decisions[0]["keyframe"] == \
+                decisions[i]["keyframe"] - decisions[0]["keyframe"]:
+            assert rows[i]["rmse"] == pytest.approx(want[i], abs=0.05)
+        assert rows[i]["rmse"] < rows[i]["rmse_lod"] or rows[i]["rmse_lod"] == 0
+    assert result.summary["quality_frames"] == 4
+    assert result.summary["rmse_ratio"] == pytest.approx(
+        result.summary["rmse_mean"] / result.summary["rmse_lod_mean"])
+
+
+def test_a_frame_that_showed_no_keyframe_is_refused_by_the_replay():
+    technique, _, path = _technique(CFG)
+    try:
+        with pytest.raises(InputError):
+            technique.replay(path.viewpoints[0], {"keyframe": -1})
+        errors = technique.replayed_errors(path.viewpoints[:2], [{"keyframe": -1}] * 2)
+        assert np.all(np.isnan(errors))
+    finally:
+        technique.client.close()
 
 
 def _coarse_height(hf, lod, x, y):
@@ -90,44 +155,25 @@ def _brute_force_error_px(hf, lod, key, vp, projection, height_px):
 
 
 def test_the_replayed_error_is_eq2_as_computed_independently_and_flags_a_far_keyframe():
-    """The replay's error metric against a brute-force Eq. 2 (ray marching, no triangle
+    """The replayed error metric against a brute-force Eq. 2 (ray marching, no triangle
     tests) on a flattened terrain, where every ray in view meets the coarse surface: a
     keyframe far behind the viewer is at or above ε, a near one is not."""
-    from dataclasses import replace
-
-    from lodsprite.run import prepare
-
     flat = replace(CFG, exaggeration=0.3)
-    hf = prepare(flat)[0].hf
-    with Replayer(flat, stride=CFG.frames) as replayer:
-        views = list(replayer.path.viewpoints)
-        renderer = replayer.paths.renderer
-        stale = replayer.replay(views[:1], np.zeros(len(views), dtype=int))
-        errors = stale["per_frame_error_px"]
+    technique, scene, path = _technique(flat)
+    client = technique.client
+    try:
+        views = list(path.viewpoints)
+        client.shown.append({"slot": 0, "seq": 0, "t0": 0.0, "local": True,
+                             "viewpoint": views[0].to_dict()})
+        errors = technique.replayed_errors(views, [{"keyframe": 0}] * len(views))
+        renderer = client.paths.renderer
         for frame in (1, 3, 11):
             vp = views[frame]
-            want = _brute_force_error_px(hf, flat.lod, views[0], vp, renderer.projection(vp),
-                                         renderer.target.height)
+            want = _brute_force_error_px(scene.hf, flat.lod, Viewpoint.from_dict(
+                views[0].to_dict()), vp, renderer.projection(vp), renderer.target.height)
             assert want is not None, "a ray in view misses: choose a flatter terrain"
             assert errors[frame] == pytest.approx(want, rel=1e-3)
+    finally:
+        client.close()
     assert errors[0] < 1e-6 and errors[1] < flat.epsilon
-    assert errors[11] >= flat.epsilon and stale["over_epsilon"] > 0
-
-
-def test_inline_quality_measures_the_1999_algorithms_frames():
-    q = inline_quality(CFG, stride=4)
-    assert q["replayed_frames"] == 12 and q["quality_frames"] == 3
-    errors = np.array(q["per_frame_error_px"], dtype=float)
-    assert errors[0] == 0.0 and np.all(np.isfinite(errors))  # the first frame is a keyframe
-    assert 0.0 < q["rmse_sprite_mean"] < q["rmse_lod_mean"]
-
-
-def test_replays_need_a_recorded_run(tmp_path, replayer):
-    with pytest.raises(InputError):
-        recorded_keyframes(tmp_path)
-    (tmp_path / "keyframes.json").write_text(json.dumps({"keyframes": []}))
-    (tmp_path / "frames.csv").write_text("frame,keyframe\n0,0\n")
-    with pytest.raises(InputError):  # names a keyframe that was never recorded
-        recorded_keyframes(tmp_path)
-    with pytest.raises(InputError):
-        replayer.replay([], np.array([-1, -1]))  # not the path's frame count
+    assert errors[11] >= flat.epsilon and error_summary(errors, flat.epsilon)["over_epsilon"] > 0

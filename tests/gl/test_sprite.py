@@ -371,12 +371,12 @@ def test_a_far_viewpoint_or_a_view_without_terrain_calls_for_a_keyframe(build):
     assert [engine.frame(vp).type for vp in near] == [KEYFRAME, FIRST_SPRITE, SPRITE]
     far = look_at((1800.0, 0.0, 900.0), (0.0, 0.0, 0.0))  # 90 degrees around the terrain
     f = engine.frame(far)
-    assert f.type == KEYFRAME and f.decision_error_px >= 1.0
+    assert f.type == KEYFRAME and f.extra["decision_error_px"] >= 1.0
     # Turned to the sky: nothing of the terrain can be measured, so the keyframe is stale
     # (the metric once said 0 here and the terrain's image stayed on screen).
     sky = look_at((1800.0, 0.0, 900.0), (5000.0, 0.0, 3000.0))
     f = engine.frame(sky)
-    assert f.type == KEYFRAME and f.decision_error_px == math.inf
+    assert f.type == KEYFRAME and f.extra["decision_error_px"] == math.inf
 
 
 _IMPLICIT_DERIVATIVES = re.compile(r"\b(dFdx|dFdy|fwidth|texture|textureProj|textureOffset)\s*\(")

@@ -56,7 +56,8 @@ def test_flat_terrain_lands_where_the_projection_says(renderer_for):
     stats = r.render(vp)
     assert stats.triangles == 2 * 32 * 32
     mask = terrain_mask(r.target.read_color())
-    proj = Projection(45.0, 160 / 120, stats.projection.near, stats.projection.far)
+    used = stats.extra["projection"]
+    proj = Projection(45.0, 160 / 120, used.near, used.far)
     lo, hi = hf.bounds()
     corners = np.array([[x, y, 0.0] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])])
     px, _, _ = project_points(corners, proj.matrix() @ vp.view_matrix(), 160, 120)

@@ -49,7 +49,7 @@ def assert_status_is_the_last_frames(tech, name: str) -> None:
     assert m, (name, tech.status())
     images, uploads, resident, capacity, mb, decoded = m.groups()
     f, rec = tech._last, tech.method.rec
-    assert (int(images), int(uploads)) == (f.images, f.uploads), name
+    assert (int(images), int(uploads)) == (f.extra["images"], f.extra["uploads"]), name
     assert (int(resident), int(capacity)) == (len(rec.slot_of), rec.capacity), name
     assert float(mb) == pytest.approx(rec.capacity * rec.node_bytes / 2 ** 20, abs=0.05)
     assert int(decoded) <= tech.method.loader.decoded, name   # the loader decodes on

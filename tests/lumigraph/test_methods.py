@@ -83,7 +83,7 @@ def test_every_method_sums_its_alphas_to_one(gl, lf_folder, method):
             seen = st_plane_seen(vp, proj, slab)
             inside = binary_erosion(seen, iterations=2)
             outside = ~binary_dilation(seen, iterations=2)
-            assert inside.any() and f.images >= 1
+            assert inside.any() and f.extra["images"] >= 1
             assert outside.any() == (distance > 5)
             assert np.abs(a[inside] - 1.0).max() < TOL, (method, distance)
             assert np.abs(a[outside]).max(initial=0.0) < TOL
@@ -130,7 +130,7 @@ def test_progressive_fading_never_overflows_texture_memory(gl, lf_folder):
     far = [look_at((x, y, 4.2), (0.0, 0.0, 0.0), up=(0.0, 1.0, 0.0))
            for x, y in [(-1.2, -1.2)] * 8 + [(1.2, -1.2)] * 4 + [(0.0, 1.2)] * 4]
     for _vp, _proj, _a, f, m in run(gl, lf_folder, "progressive", far, nodes=6, fade=8):
-        assert len(m.rec.slot_of) <= m.rec.capacity and f.images <= m.rec.capacity
+        assert len(m.rec.slot_of) <= m.rec.capacity and f.extra["images"] <= m.rec.capacity
 
 
 def test_projective_predicts_from_the_real_eye(gl, lf_folder):

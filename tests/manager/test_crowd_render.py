@@ -50,7 +50,8 @@ def test_the_manager_shares_what_independent_objects_extract_themselves(gl, memb
         e = CrowdEngine(gl, crowd, t, mode, slots=8, active=100, range_far=60.0)
         try:
             frames = [e.frame(vp) for vp in path.viewpoints]
-            out[mode] = (sum(f.extractions for f in frames), frames[-1].draw_calls,
+            out[mode] = (sum(f.extra["extractions"] for f in frames),
+                         frames[-1].extra["draw_calls"],
                          t.read_color())
         finally:
             e.release()

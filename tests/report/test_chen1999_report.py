@@ -54,12 +54,12 @@ def _results(out_dir: Path) -> dict:
         "mean_ms_keyframe": 12.345, "mean_ms_first_sprite": 1.1, "mean_ms_sprite": 0.4,
         "total_s_full": 0.46, "total_s_sprite": 0.0745, "total_s_lod": 0.012,
         "speedup": 6.1745, "full_sampled": True, "full_sample_frames": 8,
-        "rmse_sprite_mean": 4.5, "rmse_lod_mean": 12.25, "rmse_ratio": 0.3673,
-        "psnr_sprite_mean": 35.12, "psnr_lod_mean": 26.4,
-        "ssim_sprite_mean": 0.9512, "ssim_lod_mean": 0.8123,
+        "rmse_mean": 4.5, "rmse_lod_mean": 12.25, "rmse_ratio": 0.3673,
+        "psnr_mean": 35.12, "psnr_lod_mean": 26.4,
+        "ssim_mean": 0.9512, "ssim_lod_mean": 0.8123,
         "per_frame": {
             "type": types, "error_px": err, "ms_sprite": ms, "ms_full": ms_full,
-            "ms_lod": [0.3] * N, "rmse_sprite": [4.5] * N, "rmse_lod": [12.25] * N,
+            "ms_lod": [0.3] * N, "rmse": [4.5] * N, "rmse_lod": [12.25] * N,
         },
         "fig10": {"frames": [115, 230, 460, 920], "keyframes": [20, 28, 30, 33],
                   "keyframe_fraction": [20 / 115, 28 / 230, 30 / 460, 33 / 920]},
@@ -136,7 +136,7 @@ def test_missing_optional_sections_are_skipped(results: dict, tmp_path: Path) ->
 
 
 def test_nan_none_and_inf_render_as_dash(results: dict, tmp_path: Path) -> None:
-    results.update(rmse_ratio=float("nan"), psnr_sprite_mean="inf", speedup=None,
+    results.update(rmse_ratio=float("nan"), psnr_mean="inf", speedup=None,
                    mean_ms_sprite=math.inf)
     results["per_frame"]["error_px"][3] = float("nan")
     results["fig12"]["speedup"][0] = "inf"

@@ -76,4 +76,4 @@ def test_the_figure_sprite_is_the_image_the_run_showed(run: tuple[dict, Path]) -
     spec = r["images"]["fig14"]
     assert r["quality_stride"] == 1
     got = rmse(_png(out / spec["sprite"]), _png(out / spec["full"]))
-    assert got == pytest.approx(r["per_frame"]["rmse_sprite"][spec["frame"]], rel=1e-9)
+    assert got == pytest.approx(r["per_frame"]["rmse"][spec["frame"]], rel=1e-9)

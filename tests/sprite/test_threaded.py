@@ -179,5 +179,5 @@ def test_the_inline_engine_decides_with_the_resample_metric(gl, scene, sprite):
     fw = [warp.frame(vp) for vp in path]
     fr = [res.frame(vp) for vp in path]
     # the same first keyframe; the resampling term only adds to the error of what follows
-    assert fw[1].decision_error_px < fr[1].decision_error_px
+    assert fw[1].extra["decision_error_px"] < fr[1].extra["decision_error_px"]
     assert sum(f.type == KEYFRAME for f in fr) >= sum(f.type == KEYFRAME for f in fw)

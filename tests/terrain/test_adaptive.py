@@ -199,7 +199,7 @@ def test_a_missing_tile_is_drawn_from_its_parent(gl):
             try:
                 f = a.settle(vp)                 # streams until nothing wanted is left
                 images[name] = t.read_color().astype(int)
-                assert f.bad == len(tiles) and (parent in a.slots)
+                assert f.extra["bad"] == len(tiles) and (parent in a.slots)
                 assert (Node(0, 3, 3) in a.slots) == (name == "whole")
                 if name == "whole":
                     mask = footprint(a, parent, vp, 96)
@@ -280,7 +280,7 @@ def test_an_evicted_root_comes_back_and_the_loader_drops_stale_requests(gl):
         assert a.slots.capacity == 10 and len(a.roots) == 4
         for x in np.linspace(-6000, 6000, 40):     # sweep low over the field, each
             vp = look_at((x, -1500.0, 400.0), (x, 0.0, 0.0))   # view given some tiles
-            wait_until(lambda: a.frame(vp).uploaded or a.loader.idle(), 20,  # noqa: B023
+            wait_until(lambda: a.frame(vp).extra["uploaded"] or a.loader.idle(), 20,  # noqa: B023
                        "a tile of the sweep uploaded")
         assert a.slots.evicted > 0
         afar = look_at((0.0, -30000.0, 20000.0), (0.0, 0.0, 0.0))  # then see it all

@@ -14,7 +14,7 @@ from lodsprite.errors import LodspriteError
 from lodsprite.gl.target import RenderTarget
 from lodsprite.technique import FALLBACK_TINT, FullTechnique
 from lodsprite.viewer.controls import CameraController, FlightRecorder
-from lodsprite.viewer.core import FRAME_COLUMNS, PlayPlan, ViewerCore
+from lodsprite.viewer.core import WINDOW_COLUMNS, PlayPlan, ViewerCore
 
 SIZE = (96, 96)
 MAGENTA = np.array(FALLBACK_TINT[:3]) * 255.0
@@ -296,7 +296,7 @@ def test_hud_state_after_frames(make_core, gl):
     assert core.hud.fps == pytest.approx(1e3 / np.mean(intervals))
     lines = core.hud.lines()
     median = float(lines[0].split("frame ")[1].split(" ms median")[0])
-    assert median == pytest.approx(np.median([r["ms"] for r in core.rows]), abs=0.006)
+    assert median == pytest.approx(np.median([r["window_ms"] for r in core.rows]), abs=0.006)
     assert lines[1] == "mode sprite  epsilon 1px"
     assert lines[4] == f"GL {gl.info.renderer}"
     core.key("x")
@@ -323,7 +323,7 @@ def test_played_path_writes_frames_summary_and_screenshots(make_core, gl, scene,
         head = fh.readline().strip().split(",")
         assert head[:5] == ["frame", "kind", "ms", "triangles", "error_px"]
     rows = list(csv.DictReader((tmp_path / "out" / "frames.csv").open()))
-    assert len(rows) == 5 and list(rows[0]) == FRAME_COLUMNS
+    assert len(rows) == 5 and list(rows[0])[-len(WINDOW_COLUMNS):] == list(WINDOW_COLUMNS)
     assert [int(r["frame"]) for r in rows] == list(range(5))
     assert all(float(r["ms"]) > 0 for r in rows)
 
@@ -367,6 +367,43 @@ def test_played_path_writes_frames_summary_and_screenshots(make_core, gl, scene,
         shot = read_image(tmp_path / "shots" / f"frame_{i:05d}.png")
         assert shot.shape == (96, 96, 3)
         assert np.abs(shot.astype(int) - images[i]).max() <= 1, i
+
+
+def test_a_played_paths_ms_is_the_harness_ms_and_window_times_are_extra_columns(
+        make_core, gl, scene, tmp_path):
+    """The window writes its rows through the harness's record: the same core columns as
+    a harness run of the same technique along the same path, ``ms`` the technique's
+    frame and ``ctx.finish()`` (within the window's whole frame, ``window_ms``, every
+    row), the window's own times in extra columns, the summary's timing keys of ``ms``."""
+    from lodsprite.harness import CORE_COLUMNS, CORE_KEYS, run_path, write_run
+
+    path = get_path("chen1999", scene.hf, 6)
+    core, t = make_core(mode="sprite", play=PlayPlan(path, tmp_path / "view")), \
+        make_core.target()
+    assert play(core, t.fbo) == 6
+    with Renderer(scene, SIZE, 45.0, ctx=gl.mgl) as r:
+        tech = terrain_techniques(16, 1.0, threaded=False)["sprite"](r)
+        try:
+            write_run(tmp_path / "batch", run_path(tech, path))
+        finally:
+            tech.release()
+    view = list(csv.DictReader((tmp_path / "view" / "frames.csv").open()))
+    batch = list(csv.DictReader((tmp_path / "batch" / "frames.csv").open()))
+    assert list(view[0])[:len(CORE_COLUMNS)] == list(batch[0])[:len(CORE_COLUMNS)] \
+        == list(CORE_COLUMNS)
+    assert set(WINDOW_COLUMNS) <= set(view[0]) and not set(WINDOW_COLUMNS) & set(batch[0])
+    assert len(view) == len(batch) == 6
+    for r in view:
+        ms, window = float(r["ms"]), float(r["window_ms"])
+        parts = sum(float(r[k]) for k in ("present_ms", "hud_ms", "swap_ms"))
+        assert 0 < ms <= window and parts <= window
+    summary = json.loads((tmp_path / "view" / "summary.json").read_text())
+    assert set(CORE_KEYS) <= set(summary)
+    ms = np.array([float(r["ms"]) for r in view])
+    assert summary["median_ms"] == pytest.approx(np.median(ms), rel=1e-5)
+    assert summary["window_median_ms"] == pytest.approx(
+        np.median([float(r["window_ms"]) for r in view]), rel=1e-5)
+    assert summary["first_frame_ms"] > 0
 
 
 def test_played_path_without_exit_hands_over_to_the_controller(make_core, scene, tmp_path):

@@ -49,6 +49,11 @@ GuardOpt = Annotated[int, typer.Option(
 PaceOpt = Annotated[str, typer.Option(
     "--pace", help="distributed: needed (the server renders a keyframe when the shown one "
                    "nears ε) | continuous (back to back, the paper)")]
+QualityStrideOpt = Annotated[int, typer.Option(
+    "--quality-stride", help="with --ground-truth: measure every K-th frame")]
+GroundTruthOpt = Annotated[bool, typer.Option(
+    "--ground-truth", help="replay the run's decisions untimed against full "
+                           "resolution: RMSE/PSNR/SSIM per frame and their means")]
 MaxErrorOpt = Annotated[str | None, typer.Option(
     "--max-error", help="distributed: PX: the client renders its own keyframe when the shown "
                         "one's error reaches PX pixels and no better one has arrived | off: "

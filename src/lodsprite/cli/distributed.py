@@ -13,10 +13,12 @@ from lodsprite.cli.common import (
     ExagOpt,
     FramesOpt,
     GridOpt,
+    GroundTruthOpt,
     LodOpt,
     MaxErrorOpt,
     PaceOpt,
     PathOpt,
+    QualityStrideOpt,
     SizeOpt,
     TerrainOpt,
     TextureOpt,
@@ -185,6 +187,8 @@ def client(
                         "error metric here is lower than the shown one's; needed: when the "
                         "shown one's reaches ε/2")] = "newest",
     max_error: MaxErrorOpt = None,
+    ground_truth: GroundTruthOpt = False,
+    quality_stride: QualityStrideOpt = 1,
     keys: Annotated[Path | None, typer.Option(
         "--keys", help="folder holding client.key_secret and server.key (CURVE)")] = None,
 ) -> None:
@@ -200,7 +204,8 @@ def client(
     config = RenderConfig(terrain=terrain, texture=texture, path=path, mode="sprite",
                           lod=lod, size=parse_size(size), frames=frames, grid=grid,
                           exaggeration=exaggeration, visibility=visibility, epsilon=epsilon,
-                          border=border)
+                          border=border, ground_truth=ground_truth,
+                          quality_stride=quality_stride)
     with progress_bar("client") as update:
         s = run_client(config, list(server or ["127.0.0.1:5555"]), out_dir, update,
                        adopt=adopt, keys=ClientKeys.load(keys) if keys is not None else None,

@@ -16,9 +16,11 @@ from lodsprite.cli.common import (
     ExagOpt,
     FramesOpt,
     GridOpt,
+    GroundTruthOpt,
     MaxErrorOpt,
     PaceOpt,
     PathOpt,
+    QualityStrideOpt,
     TerrainOpt,
     TextureOpt,
     out,
@@ -59,8 +61,6 @@ def _check_mode(mode: str, ground_truth: bool, video: Path | None,
     if mode not in (*modes, "distributed"):
         raise InputError(f"unknown mode '{mode}': use one of {', '.join(modes)}, distributed")
     distributed = mode == "distributed"  # not a core mode: the distributed layer runs it
-    if distributed and ground_truth:
-        raise InputError("--ground-truth replays a run's decisions: not for --mode distributed")
     if distributed and video is not None:
         raise InputError(f"--video is for --mode {', '.join(modes)}")
     if distributed and metric not in (None, "warp"):
@@ -114,9 +114,8 @@ def render(
                         "LOD-sprite | difference side by side)")] = None,
     grid: GridOpt = None,
     exaggeration: ExagOpt = DEFAULT_EXAGGERATION,
-    ground_truth: Annotated[bool, typer.Option(
-        "--ground-truth", help="replay the run's decisions untimed against full "
-                               "resolution: RMSE/PSNR/SSIM per frame and their means")] = False,
+    ground_truth: GroundTruthOpt = False,
+    quality_stride: QualityStrideOpt = 1,
     flip: Annotated[bool, typer.Option(
         "--flip", help="with --ground-truth: FLIP per frame too")] = False,
     pace: PaceOpt = "needed",
@@ -145,7 +144,8 @@ def render(
                           mode="sprite" if distributed else mode,
                           size=parse_size(size or "512x512"), frames=frames, grid=grid,
                           exaggeration=exaggeration, save_frames=save_frames,
-                          ground_truth=ground_truth, flip=flip, options=options)
+                          ground_truth=ground_truth, quality_stride=quality_stride,
+                          flip=flip, options=options)
     with progress_bar(f"render {mode}") as update:
         if distributed:
             from lodsprite.distributed.run import parse_max_error, render_distributed

@@ -69,7 +69,6 @@ from __future__ import annotations
 import itertools
 import logging
 import time
-from dataclasses import dataclass
 
 import numpy as np
 import zmq
@@ -89,6 +88,7 @@ from lodsprite.errors import InputError
 from lodsprite.gl.context import GLContext
 from lodsprite.gl.paths import PathRenderer
 from lodsprite.gl.sprite import SpriteRenderer
+from lodsprite.record import Frame
 from lodsprite.scene import Scene
 from lodsprite.sprite.metric import ErrorMetric
 from lodsprite.sprite.policy import keyframe_due, keyframe_error_px
@@ -126,21 +126,6 @@ def check_max_error(max_error: float | None) -> float | None:
     if not value > 0:  # NaN too
         raise InputError(f"--max-error must be > 0 pixels (or off), got {max_error}")
     return value
-
-
-@dataclass(frozen=True)
-class ClientFrame:
-    """One client frame: ``type`` is ``keyframe`` (a server keyframe was taken this frame),
-    ``sprite`` (drawn from a server keyframe), ``local_keyframe`` (the client rendered its
-    own keyframe this frame) or ``local_sprite`` (drawn from the client's own keyframe);
-    wall time in ms; triangles drawn; the shown server keyframe's sequence number (0 when
-    the client shows its own) and the shown keyframe's index in :attr:`LodClient.shown`."""
-
-    type: str
-    ms: float
-    triangles: int
-    keyframe_seq: int
-    keyframe_index: int = -1
 
 
 class LodClient:
@@ -274,8 +259,14 @@ class LodClient:
 
     # ------------------------------------------------------------ SPRITEFRAME-RENDERER
 
-    def frame(self, viewpoint) -> ClientFrame:
-        """Draw one frame for ``viewpoint``; returns once its GL work has finished."""
+    def frame(self, viewpoint) -> Frame:
+        """Draw one frame for ``viewpoint``; returns once its GL work has finished.  Its
+        ``kind``: ``keyframe`` (a server keyframe was taken this frame), ``sprite`` (drawn
+        from a server keyframe), ``local_keyframe`` (the client rendered its own this
+        frame) or ``local_sprite``; ``ms`` wall time; ``extra``: ``keyframe_seq`` (the shown
+        server keyframe's sequence number, 0 for the client's own) and ``keyframe`` (the
+        shown keyframe's index in :attr:`shown`).  ``error_px`` is NaN (measured apart,
+        :meth:`shown_error_px`)."""
         t0 = time.perf_counter()
         header = {"kind": "viewpoint", "seq": next(self._counter), "t": t0,
                   "viewpoint": viewpoint_to_wire(viewpoint)}
@@ -313,8 +304,8 @@ class LodClient:
         self.paths.ctx.finish()
         self._say_link_state()
         seq = self._current.seq if self._current is not None and not self._own else 0
-        return ClientFrame(kind, (time.perf_counter() - t0) * 1e3, triangles, seq,
-                           len(self.shown) - 1)
+        return Frame(kind, (time.perf_counter() - t0) * 1e3, triangles,
+                     extra={"keyframe_seq": seq, "keyframe": len(self.shown) - 1})
 
     def _error(self, c_prime: np.ndarray, viewpoint, projection) -> float:
         """Error (pixels, Eq. 2) of the keyframe with ``C' = c_prime`` here; may be inf."""

@@ -27,6 +27,7 @@ from lodsprite.distributed.client import (
 )
 from lodsprite.distributed.keys import ClientKeys
 from lodsprite.distributed.pacing import DEFAULT_PACE, PACES
+from lodsprite.distributed.quality import error_summary
 from lodsprite.distributed.render import scene_args
 from lodsprite.errors import InputError, LodspriteError
 from lodsprite.files import write_json
@@ -156,7 +157,7 @@ def run_client(config: RenderConfig, servers: list[str], out_dir: Path,
     counted as frames drawn without one.
     """
     from lodsprite.distributed.technique import DistributedTechnique
-    from lodsprite.harness import run_path, write_run
+    from lodsprite.harness import write_run
 
     config = config.resolved(store=False)  # options not given: the 1999 algorithm's
     max_error = check_client_options(pace, adopt, max_error)
@@ -168,8 +169,7 @@ def run_client(config: RenderConfig, servers: list[str], out_dir: Path,
     technique = DistributedTechnique.on_client(client, servers)
     technique.warmup_s = warmup_s
     try:
-        result = run_path(technique, path, finish=client.paths.ctx.finish,
-                          gl_renderer=client.paths.ctx.info.renderer, progress=progress)
+        result = _client_run(technique, client, scene, path, config, progress)
         stats = client.server_stats()
         shown = client.shown
     finally:
@@ -185,6 +185,39 @@ def run_client(config: RenderConfig, servers: list[str], out_dir: Path,
     if result.interrupted:
         raise KeyboardInterrupt
     return summary
+
+
+def _client_run(technique, client: LodClient, scene, path, config: RenderConfig,
+                progress: Progress | None):
+    """The harness's run of the client (quality, with ``config.ground_truth``, from its
+    untimed replay against the one reference); then each frame's error metric against
+    the keyframe it showed, measured untimed (``error_px``, :func:`error_summary`)."""
+    from lodsprite.harness import level_zero_reference, run_path
+
+    ctx, terrain = client.paths.ctx, client.paths.renderer
+    level0 = (level_zero_reference(ctx, scene, config.size, terrain.fov_y_deg,
+                                   config.shading) if config.ground_truth else None)
+
+    def full_resolution(viewpoint) -> np.ndarray:
+        terrain.render(viewpoint, None)
+        return terrain.target.read_color()
+
+    try:
+        result = run_path(technique, path, finish=ctx.finish, gl_renderer=ctx.info.renderer,
+                          progress=progress, ground_truth=config.ground_truth,
+                          reference=level0.image if level0 else full_resolution,
+                          quality_stride=config.quality_stride, flip=config.flip)
+    finally:
+        if level0 is not None:
+            level0.release()
+    errors = technique.replayed_errors(path.viewpoints[:len(result.decisions)],
+                                       result.decisions)
+    for row, e in zip(result.rows, errors, strict=True):
+        row["error_px"] = float(e)
+    figures = error_summary(errors, config.epsilon)
+    del figures["per_frame_error_px"]  # frames.csv's error_px column
+    result.summary.update(figures)
+    return result
 
 
 def _mean(values) -> float:

@@ -9,6 +9,7 @@ with the server's address; the viewer core never imports this layer.
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -20,6 +21,7 @@ from lodsprite.distributed.render import scene_args
 from lodsprite.errors import InputError
 from lodsprite.scene.spec import describe
 from lodsprite.sprite.engine import DEFAULT_EPSILON_PX
+from lodsprite.sprite.policy import keyframe_error_px
 from lodsprite.techniques import FALLBACK_TINT, Frame, Param, Technique, TechniqueFactory
 from lodsprite.terrain.lod import DEFAULT_COARSE
 
@@ -58,13 +60,17 @@ class DistributedTechnique(Technique):
         self.measure_error = False
         return self
 
-    replays = False  # keyframes come from servers: quality by lodsprite.distributed.quality
+    #: Recorded frames replay: every keyframe shown (a server's or the client's own) is a
+    #: function of its logged viewpoint, and every frame a spriteframe drawn from it.
+    replays = True
+    _shown = -1  # the keyframe the last frame showed (index in client.shown)
+    _replayed: int | None = None  # the keyframe the replay drew last
 
     def warm_up(self, viewpoint: Viewpoint) -> None:
         """Wait (up to :attr:`warmup_s`) for a first keyframe at ``viewpoint``."""
         deadline = time.perf_counter() + self.warmup_s
         while time.perf_counter() < deadline:
-            if self.client.frame(viewpoint).type == "keyframe":
+            if self.client.frame(viewpoint).kind == "keyframe":
                 return
             time.sleep(0.02)
 
@@ -89,10 +95,55 @@ class DistributedTechnique(Technique):
 
     def frame(self, viewpoint: Viewpoint) -> Frame:
         f = self.client.frame(viewpoint)
+        self._shown = f.extra["keyframe"]
         error = self.client.shown_error_px(viewpoint) if self.measure_error else float("nan")
-        return Frame(f.type, f.ms, f.triangles, error,
-                     {"keyframe_seq": f.keyframe_seq, "keyframe": f.keyframe_index,
-                      "keyframes": len(self.client.shown)})
+        return replace(f, error_px=error,
+                       extra={**f.extra, "keyframes": len(self.client.shown)})
+
+    def decision(self) -> dict:
+        return {"keyframe": self._shown}
+
+    def _key(self, k: int) -> Viewpoint:
+        return Viewpoint.from_dict(self.client.shown[k]["viewpoint"])
+
+    def replay(self, viewpoint: Viewpoint, decision: dict) -> np.ndarray:
+        """The frame as the client drew it: a spriteframe at ``viewpoint`` from the
+        keyframe it showed, rendered here again from that keyframe's logged viewpoint
+        through the same projection the server renders with (no guard band)."""
+        k, sprite = decision["keyframe"], self.client.sprite
+        if k < 0:
+            raise InputError("a frame that showed no keyframe cannot be replayed")
+        if k != self._replayed:
+            sprite.render_keyframe(self._key(k), 0.0)
+            self._replayed = k
+        sprite.render_spriteframe(viewpoint)
+        return sprite.target.read_color()
+
+    def quality_extra(self, viewpoint: Viewpoint, decision: dict,
+                      truth: np.ndarray) -> dict[str, float]:
+        """The plain coarse level beside it (:func:`lodsprite.techniques.terrain.
+        coarse_baseline`)."""
+        from lodsprite.techniques.terrain import coarse_baseline
+
+        return coarse_baseline(self.client.paths.renderer, viewpoint,
+                               self.client.sprite.coarse_quads, truth)
+
+    def replayed_errors(self, viewpoints: list[Viewpoint], decisions: list[dict]) -> np.ndarray:
+        """The error metric (Chen, Swan & Kaufman 1999, Eq. 2, pixels) of each recorded
+        frame against the keyframe it showed, measured untimed after the run: ``(frames,)
+        float64``, NaN where a frame showed none, ``inf`` where nothing was measurable."""
+        metric, r = self.client.metric, self.client.paths.renderer
+        c_primes: dict[int, np.ndarray] = {}
+        out = np.full(len(decisions), np.nan)
+        for i, (vp, d) in enumerate(zip(viewpoints, decisions, strict=True)):
+            k = d["keyframe"]
+            if k < 0:
+                continue
+            if k not in c_primes:
+                c_primes[k] = metric.reproject(self._key(k).o)
+            out[i] = keyframe_error_px(metric, c_primes[k], vp, r.projection(vp),
+                                       r.target.height)
+        return out
 
     def draw_to(self, framebuffer: moderngl.Framebuffer | None = None) -> None:
         target = self.client.paths.renderer.target

@@ -28,7 +28,8 @@ from lodsprite.gl.shaders import (
     SPRITE_VS_FRAGMENT,
 )
 from lodsprite.gl.target import RenderTarget
-from lodsprite.gl.terrain import SKY_RGB, FrameStats, TerrainRenderer, mat_bytes
+from lodsprite.gl.terrain import SKY_RGB, TerrainRenderer, draw_stats, mat_bytes
+from lodsprite.record import Frame
 
 DEFAULT_VERTEX_TOL = 0.01
 DEFAULT_FRAGMENT_TOL = 0.03
@@ -271,7 +272,7 @@ class SpriteRenderer:
 
     def render_keyframe(self, viewpoint: Viewpoint, t0: float,
                         projection: Projection | None = None,
-                        slot: int | None = None) -> FrameStats:
+                        slot: int | None = None) -> Frame:
         """Render the full-resolution terrain into keyframe slot ``slot`` (None: the one of
         the two alternating slots not shown; never the slot shown) and show it.
 
@@ -292,7 +293,7 @@ class SpriteRenderer:
         return stats
 
     #: Draws keyframes instead of the full-resolution terrain when set:
-    #: ``(viewpoint, projection, target) -> FrameStats`` (the adaptive renderer's
+    #: ``(viewpoint, projection, target) -> draw statistics`` (the adaptive renderer's
     #: :meth:`~lodsprite.techniques.adaptive_terrain.AdaptiveTerrain.render_into`).
     keyframe_drawer = None
     #: Draws over each keyframe after its terrain when set (a scene's static layers):
@@ -346,7 +347,7 @@ class SpriteRenderer:
         return (img[g:h - g, g:w - g] if g else img).copy()
 
     def render_spriteframe(self, viewpoint: Viewpoint,
-                           projection: Projection | None = None) -> FrameStats:
+                           projection: Projection | None = None) -> Frame:
         """Render the coarse level (and its border ribbon) textured from the current
         keyframe into :attr:`target`."""
         key = self.keyframe
@@ -371,7 +372,7 @@ class SpriteRenderer:
                 prog[name].value = value
         tris = (key.proxy or self.proxy).draw(prog, projection.matrix()
                                               @ viewpoint.view_matrix())
-        return FrameStats(tris, 1, projection)
+        return draw_stats(tris, 1, projection)
 
     def release(self) -> None:
         self._default_proxy.release()

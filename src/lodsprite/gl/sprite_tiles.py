@@ -37,7 +37,8 @@ from lodsprite.gl.shaders import (
 )
 from lodsprite.gl.sprite import SpriteRenderer
 from lodsprite.gl.target import RenderTarget
-from lodsprite.gl.terrain import SKY_RGB, FrameStats
+from lodsprite.gl.terrain import SKY_RGB, draw_stats
+from lodsprite.record import Frame
 
 MAX_TILES = 16  # N x N tiles, N <= 4: one vec4 varying per tile
 
@@ -128,8 +129,9 @@ def tiled_sprite_shaders(count: int) -> tuple[str, str]:
 
 
 #: Draws a tile's full-resolution terrain: ``(viewpoint, projection, target, cull) ->
-#: FrameStats``, ``cull`` the ``(4, 4)`` sub-frustum matrix the chunks are culled with.
-TileDrawer = Callable[[Viewpoint, Projection, RenderTarget, np.ndarray], FrameStats]
+#: Frame`` (:func:`~lodsprite.gl.terrain.draw_stats`), ``cull`` the ``(4, 4)``
+#: sub-frustum matrix the chunks are culled with.
+TileDrawer = Callable[[Viewpoint, Projection, RenderTarget, np.ndarray], Frame]
 
 
 def scissor_rect(rect: np.ndarray) -> tuple[int, int, int, int]:
@@ -197,12 +199,12 @@ class TiledSpriteRenderer:
         return len(self.rects)
 
     def default_drawer(self, viewpoint: Viewpoint, projection: Projection,
-                       target: RenderTarget, cull: np.ndarray) -> FrameStats:
+                       target: RenderTarget, cull: np.ndarray) -> Frame:
         """The full-resolution terrain with its chunks culled by ``cull``."""
         return self.sprite.terrain.render(viewpoint, None, projection, target, cull=cull)
 
     def render_tile(self, tile: int, viewpoint: Viewpoint, projection: Projection,
-                    cull: np.ndarray, drawer: TileDrawer | None = None) -> FrameStats:
+                    cull: np.ndarray, drawer: TileDrawer | None = None) -> Frame:
         """Re-render tile ``tile`` from ``viewpoint`` through the key ``projection`` (the
         widened one), scissored to its rectangle, the terrain culled by ``cull (4, 4)``
         (the tile's sub-frustum, :func:`lodsprite.sprite.tiled.sub_view_proj`); its coarse
@@ -237,7 +239,7 @@ class TiledSpriteRenderer:
         return (img[g:h - g, g:w - g] if g else img).copy()
 
     def render_spriteframe(self, viewpoint: Viewpoint,
-                           projection: Projection | None = None) -> FrameStats:
+                           projection: Projection | None = None) -> Frame:
         """The coarse level textured from the tiles into the sprite renderer's target."""
         if any(v is None for v in self.viewpoints):
             raise RuntimeError("render_spriteframe needs every tile rendered first")
@@ -261,7 +263,7 @@ class TiledSpriteRenderer:
                 prog[name].value = value
         tris = (self.proxy_gl or s.proxy).draw(prog, projection.matrix()
                                                @ viewpoint.view_matrix())
-        return FrameStats(tris, 1, projection)
+        return draw_stats(tris, 1, projection)
 
     def release(self) -> None:
         self.program.release()

@@ -7,8 +7,6 @@ a frame only uploads the origins of the chunks that survive frustum culling.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import moderngl
 import numpy as np
 
@@ -23,6 +21,7 @@ from lodsprite.errors import InputError
 from lodsprite.gl.context import GLContext, gl_draw_elements_instanced
 from lodsprite.gl.shaders import TERRAIN_FS, TERRAIN_HEIGHTS_FS, TERRAIN_VS, proxy_twin
 from lodsprite.gl.target import RenderTarget
+from lodsprite.record import Frame
 from lodsprite.terrain.heightfield import HeightField
 from lodsprite.terrain.lod import (
     DEFAULT_CHUNK,
@@ -39,13 +38,11 @@ SHADINGS = ("auto", "texture", "heights")  # auto: heights on a store, else the 
 GL_UNSIGNED_INT = 0x1405
 
 
-@dataclass(frozen=True)
-class FrameStats:
-    """What one draw did: triangles submitted, chunks drawn, and the projection used."""
-
-    triangles: int
-    chunks: int
-    projection: Projection
+def draw_stats(triangles: int, chunks: int, projection: Projection) -> Frame:
+    """What one draw did, as the one frame record: ``kind`` ``draw``, ``ms`` 0 (a draw is
+    not timed; the frame it is part of is), ``triangles`` submitted, and in ``extra`` the
+    ``chunks`` drawn and the ``projection`` used."""
+    return Frame("draw", 0.0, triangles, extra={"chunks": chunks, "projection": projection})
 
 
 class TerrainGeometry:
@@ -264,7 +261,7 @@ class TerrainRenderer:
 
     def draw(self, program: moderngl.Program, cache: dict[int, moderngl.VertexArray],
              viewpoint: Viewpoint, projection: Projection, level_quads: int,
-             cull: np.ndarray | None = None) -> FrameStats:
+             cull: np.ndarray | None = None) -> Frame:
         """Draw one level with ``program`` (uniforms other than geometry's already set);
         chunks are culled by the frustum of ``cull (4, 4)`` when given (a tile's
         sub-frustum), else by the view's."""
@@ -282,7 +279,7 @@ class TerrainRenderer:
                 vao.render(moderngl.TRIANGLES, vertices=0, instances=chunks)
                 draw(moderngl.TRIANGLES, self.geometry.mesh(layout.chunk_quads)[2],
                      GL_UNSIGNED_INT, None, chunks)
-        return FrameStats(chunks * layout.triangles_per_chunk, chunks, projection)
+        return draw_stats(chunks * layout.triangles_per_chunk, chunks, projection)
 
     def programs(self, proxy: bool) -> tuple[moderngl.Program, dict]:
         """The program (grid or proxy mesh) of :attr:`shading` and its vertex arrays,
@@ -314,7 +311,7 @@ class TerrainRenderer:
     def render(self, viewpoint: Viewpoint, level_quads: int | None = None,
                projection: Projection | None = None,
                target: RenderTarget | None = None,
-               cull: np.ndarray | None = None, clear: bool = True) -> FrameStats:
+               cull: np.ndarray | None = None, clear: bool = True) -> Frame:
         """Render the terrain coloured by :attr:`shading` into ``target`` (default: this
         renderer's own); ``level_quads`` None means full resolution; ``cull``: as
         :meth:`draw`; ``clear`` False draws over the target's colour and depth (the tiles
@@ -328,7 +325,7 @@ class TerrainRenderer:
 
     def render_proxy(self, viewpoint: Viewpoint, level_quads: int, border: bool = True,
                      projection: Projection | None = None,
-                     target: RenderTarget | None = None) -> FrameStats:
+                     target: RenderTarget | None = None) -> Frame:
         """Render the proxy mesh of a coarse level (with its border ribbon if ``border``)
         coloured by :attr:`shading`, like :meth:`render`."""
         projection = projection or self.projection(viewpoint)
@@ -336,7 +333,7 @@ class TerrainRenderer:
         prog, cache = self.programs(proxy=True)
         tris = self.draw_proxy(prog, cache,
                                projection.matrix() @ viewpoint.view_matrix(), level_quads, border)
-        return FrameStats(tris, 1, projection)
+        return draw_stats(tris, 1, projection)
 
     def set_geometry(self, geometry: TerrainGeometry) -> None:
         """Draw ``geometry`` from now on (the vertex arrays of the last one released; the

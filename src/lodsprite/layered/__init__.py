@@ -1,7 +1,7 @@
 """A scene's layers in one frame (issue 23): terrain, objects and light fields composited
 by depth, under one frame budget.
 
-* :mod:`.layers` - :class:`~.layers.Layer`, :class:`~.layers.LayerFrame`, the terrain layer;
+* :mod:`.layers` - :class:`~.layers.Layer`, :func:`~.layers.layer_frame`, the terrain layer;
 * :mod:`.objects` - the objects layer (the LODManager engine over a world's instances);
 * :mod:`.lightfields` - the light-field layer (reconstruction composited by proxy depth);
 * :mod:`.technique` - :class:`~.technique.LayeredTechnique`, registered as ``scene``;

@@ -1,5 +1,5 @@
 """The layers of a scene frame (issue 23; Chen, Swan & Kaufman 1999 §1 on decomposing a
-scene into layers): :class:`Layer`, what each layer's frame was (:class:`LayerFrame`),
+scene into layers): :class:`Layer`, what each layer's frame was (:func:`layer_frame`),
 and the terrain layer (:class:`TerrainLayer`).
 
 Every layer draws into the renderer's one framebuffer and depth buffer, in the order
@@ -19,13 +19,15 @@ too, so that every frame's depth buffer is the proxy's and later layers test aga
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from lodsprite.record import Frame
 from lodsprite.scene.budget import LayerControl
 
 if TYPE_CHECKING:
@@ -51,19 +53,22 @@ LEVELS = (8.0, 16.0, 32.0, 64.0)
 #: The adaptive terrain's work table (triangles at every ε) is recomputed every this many
 #: plans; the budget's measured/predicted ratio corrects it between.
 WORK_EVERY = 4
+WORK = "work"  # the key of a layer frame's work counter in its extra
 
 
-@dataclass(frozen=True)
-class LayerFrame:
-    """One layer's part of a frame: ``ms`` (GL finished), ``triangles`` drawn,
-    ``error_px`` (NaN where the layer measures none), ``work`` (the layer's own counter
-    for its cost model: triangles, nodes; None: none) and its own ``extra`` columns."""
+def layer_frame(layer: str, ms: float, triangles: int = 0, error_px: float = math.nan,
+                work: float | None = None, extra: dict[str, Any] | None = None) -> Frame:
+    """One layer's part of a frame, as the one frame record: ``kind`` the layer's name,
+    ``ms`` (GL finished), ``triangles`` drawn, ``error_px`` (NaN where the layer measures
+    none), and in ``extra`` the layer's own columns and ``work`` (its own counter for its
+    cost model: triangles, nodes; None: none), which the scene's frame takes out
+    (:func:`layer_work`)."""
+    return Frame(layer, ms, triangles, error_px, {**(extra or {}), WORK: work})
 
-    ms: float
-    triangles: int = 0
-    error_px: float = float("nan")
-    work: float | None = None
-    extra: dict[str, Any] = field(default_factory=dict)
+
+def layer_work(f: Frame) -> tuple[float | None, dict[str, Any]]:
+    """A layer frame's ``work`` and its own columns (the rest of its ``extra``)."""
+    return f.extra.get(WORK), {k: v for k, v in f.extra.items() if k != WORK}
 
 
 class Layer:
@@ -72,7 +77,7 @@ class Layer:
 
     name = "layer"
 
-    def draw(self, viewpoint: Viewpoint, t: float, projection: np.ndarray) -> LayerFrame:
+    def draw(self, viewpoint: Viewpoint, t: float, projection: np.ndarray) -> Frame:
         """Draw the layer at time ``t`` (seconds) through ``projection (4, 4)``."""
         raise NotImplementedError
 
@@ -96,7 +101,7 @@ class Layer:
         """Release what the layer made."""
 
 
-def timed(finish: Callable[[], None], draw: Callable[[], LayerFrame]) -> LayerFrame:
+def timed(finish: Callable[[], None], draw: Callable[[], Frame]) -> Frame:
     """``draw()`` between two ``finish()`` calls; its frame with ``ms`` measured here."""
     finish()
     t0 = time.perf_counter()
@@ -192,14 +197,15 @@ class TerrainLayer(Layer):
         self._covered = (calls, size)
         return size
 
-    def draw(self, viewpoint: Viewpoint, t: float, projection: np.ndarray) -> LayerFrame:
+    def draw(self, viewpoint: Viewpoint, t: float, projection: np.ndarray) -> Frame:
         self._seen = viewpoint
         f = self._last = self.technique.frame(viewpoint)
         self._spriteframe(viewpoint)
         extra = {"terrain_kind": f.kind}
         if "keyframes" in f.extra:
             extra["keyframes"] = f.extra["keyframes"]
-        return LayerFrame(f.ms, f.triangles, f.error_px, float(max(f.triangles, 1)), extra)
+        return layer_frame(self.name, f.ms, f.triangles, f.error_px, float(max(f.triangles, 1)),
+                           extra)
 
     def decision(self) -> dict[str, Any]:
         return self.technique.decision()

@@ -36,11 +36,11 @@ import numpy as np
 
 from lodsprite.camera import Viewpoint
 from lodsprite.errors import InputError
-from lodsprite.layered.layers import Layer, LayerFrame
+from lodsprite.layered.layers import Layer, layer_frame
 from lodsprite.scene.budget import LayerControl
 
 if TYPE_CHECKING:
-    from lodsprite.lumigraph.base import MethodFrame
+    from lodsprite.record import Frame
     from lodsprite.scene import LightField
     from lodsprite.terrain import HeightField
 
@@ -147,7 +147,7 @@ class PlacedLightField:
         if target is not None and hasattr(target, "count"):
             target.count = int(np.clip(n, 1, self.max_nodes))
 
-    def reconstruct(self, viewpoint: Viewpoint, projection: np.ndarray) -> MethodFrame:
+    def reconstruct(self, viewpoint: Viewpoint, projection: np.ndarray) -> Frame:
         """Reconstruct through ``projection`` cropped to the proxy's screen rectangle
         (:attr:`rect`) into the method's small target."""
         self.rect = screen_rect(projection @ viewpoint.view_matrix(), *self.box())
@@ -233,7 +233,7 @@ class LightFieldLayer(Layer):
         planes = frustum_planes(projection @ viewpoint.view_matrix())
         return boxes_in_frustum(planes, self._lo, self._hi)
 
-    def draw(self, viewpoint: Viewpoint, t: float, projection: np.ndarray) -> LayerFrame:
+    def draw(self, viewpoint: Viewpoint, t: float, projection: np.ndarray) -> Frame:
         """Reconstruct and composite every light field in view (the others cost nothing)."""
         images = tris = 0
         self._drawn = self.in_view(viewpoint, projection)
@@ -242,10 +242,10 @@ class LightFieldLayer(Layer):
                 continue
             self.set_nodes(self.nodes)  # a slab switch makes a new method
             f = item.reconstruct(viewpoint, projection)
-            images += f.images
+            images += f.extra["images"]
             tris += item.composite(projection, viewpoint, item.method.output.color, self.fbo)
         self._frame += 1
-        return LayerFrame(0.0, tris, work=float(max(images, 1)),
+        return layer_frame(self.name, 0.0, tris, work=float(max(images, 1)),
                           extra={"lf_images": images, "lf_drawn": int(self._drawn.sum())})
 
     def plan_replay(self, frames: set[int]) -> None:

@@ -33,12 +33,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from lodsprite.layered.layers import Layer, LayerFrame
+from lodsprite.layered.layers import Layer, layer_frame
 from lodsprite.scene.budget import LayerControl
 
 if TYPE_CHECKING:
     from lodsprite.camera import Viewpoint
     from lodsprite.manager.scene import Crowd
+    from lodsprite.record import Frame
     from lodsprite.scene.model import ObjectSet
     from lodsprite.scene.world import World
 
@@ -296,12 +297,12 @@ class ObjectsLayer(Layer):
         # the first plan predicts from this view
         self._seen, self._seen_visible = (viewpoint, projection), None
 
-    def draw(self, viewpoint: Viewpoint, t: float, projection: np.ndarray) -> LayerFrame:
+    def draw(self, viewpoint: Viewpoint, t: float, projection: np.ndarray) -> Frame:
         f, self._last = self._engine_frame(viewpoint, t, projection, self.subset, cull=True)
         self._seen, self._seen_visible = (viewpoint, projection), None
-        return LayerFrame(f.ms, f.triangles, work=float(max(f.triangles, 1)),
-                          extra={"extractions": f.extractions, "draw_calls": f.draw_calls,
-                                 "visible": f.visible})
+        return layer_frame(self.name, f.ms, f.triangles, work=float(max(f.triangles, 1)),
+                          extra={k: f.extra[k] for k in ("extractions", "draw_calls",
+                                                         "visible")})
 
     def draw_static(self, viewpoint: Viewpoint, projection: np.ndarray, fbo) -> None:
         """The static objects into a keyframe's framebuffer (LOD-sprite's static layer)."""

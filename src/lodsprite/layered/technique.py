@@ -48,7 +48,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from lodsprite.errors import InputError
-from lodsprite.layered.layers import Layer, TerrainLayer, timed
+from lodsprite.layered.layers import Layer, TerrainLayer, layer_work, timed
 from lodsprite.techniques.base import Frame, Param, Technique
 
 if TYPE_CHECKING:
@@ -160,12 +160,14 @@ class LayeredTechnique(Technique):
         ms = (time.perf_counter() - t0) * 1e3
         knobs = {layer.name: layer.control().value for layer in self.layers}
         extra: dict[str, Any] = {"t": t}
+        work = {}
         for name, f in drawn.items():
             extra[f"ms_{name}"] = f.ms
             extra[f"knob_{name}"] = knobs[name]
             extra[f"triangles_{name}"] = f.triangles
-            extra.update(f.extra)
-        extra.update(self.budget.after({n: (knobs[n], f.ms, f.work)
+            work[name], own = layer_work(f)
+            extra.update(own)
+        extra.update(self.budget.after({n: (knobs[n], f.ms, work[n])
                                         for n, f in drawn.items()}, ms))
         self._last, self._decided = {"t": t}, False  # decisions: after the clock
         self.index += 1

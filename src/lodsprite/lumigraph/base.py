@@ -21,24 +21,24 @@ from lodsprite.lumigraph.geometry import Slab
 from lodsprite.lumigraph.loader import NodeLoader
 from lodsprite.lumigraph.store import Lumigraph
 from lodsprite.lumigraph.subsets import cover_draws, grid_cover, subset_cover
+from lodsprite.record import Frame
 from lodsprite.sprite.predictors import DecayLinearPredictor
 
 FRAME_S = 1.0 / 30.0  # the nominal time between frames, for the motion predictor
 
 
-@dataclass(frozen=True)
-class MethodFrame:
-    """One frame: ``ms`` in all, of which ``upload_ms`` making nodes resident (decoding
-    included where the method decodes in the frame) and ``raster_ms`` drawing; node
-    ``images`` drawn, ``uploads`` and ``evictions`` made, and the frame's ``kind``."""
+#: A method frame's own columns (in :attr:`~lodsprite.record.Frame.extra`): of its ``ms``,
+#: ``upload_ms`` making nodes resident (decoding included where the method decodes in the
+#: frame) and ``raster_ms`` drawing; node ``images`` drawn, ``uploads`` and ``evictions``.
+METHOD_COLUMNS = ("upload_ms", "raster_ms", "images", "uploads", "evictions")
 
-    ms: float
-    upload_ms: float
-    raster_ms: float
-    images: int
-    uploads: int
-    evictions: int
-    kind: str = "frame"
+
+def method_frame(ms: float, upload_ms: float, raster_ms: float, images: int, uploads: int,
+                 evictions: int, kind: str = "frame") -> Frame:
+    """A lumigraph method's frame record: ``ms`` in all, the rest its own columns
+    (:data:`METHOD_COLUMNS`)."""
+    return Frame(kind, ms, extra=dict(zip(METHOD_COLUMNS, (upload_ms, raster_ms, images,
+                                                           uploads, evictions), strict=True)))
 
 
 @dataclass
@@ -106,7 +106,7 @@ class Method:
         return cover_draws(subset_cover(self.slab, nodes, valid))
 
     def frame(self, index: int, viewpoint: Viewpoint, projection: np.ndarray,
-              count_samples: bool = False, observe: bool = True) -> MethodFrame:
+              count_samples: bool = False, observe: bool = True) -> Frame:
         gl = self.ctx.gl
         t0 = time.perf_counter()
         if observe:  # (the projective method observes the real eye, not its prediction)
@@ -120,7 +120,7 @@ class Method:
         gl.finish()
         t1 = time.perf_counter()
         raster_ms = self.draw(viewpoint, projection, count_samples)
-        return MethodFrame((t1 - t0) * 1e3 + raster_ms, (t1 - t0) * 1e3, raster_ms,
+        return method_frame((t1 - t0) * 1e3 + raster_ms, (t1 - t0) * 1e3, raster_ms,
                            self.rec.images, ups, evs)
 
     def draw(self, viewpoint: Viewpoint, projection: np.ndarray, count_samples: bool

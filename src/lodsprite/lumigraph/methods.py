@@ -32,7 +32,7 @@ from lodsprite.camera import Viewpoint
 from lodsprite.errors import InputError
 from lodsprite.gl.lumigraph import FloatTarget
 from lodsprite.gl.projective import ProjectiveRenderer
-from lodsprite.lumigraph.base import FRAME_S, Context, Method, MethodFrame
+from lodsprite.lumigraph.base import FRAME_S, Context, Method, method_frame
 from lodsprite.lumigraph.critical import st_point
 from lodsprite.lumigraph.geometry import facing_slab
 from lodsprite.lumigraph.subsets import (
@@ -44,8 +44,9 @@ from lodsprite.lumigraph.subsets import (
     subsample_nodes,
     subset_cover,
 )
+from lodsprite.record import Frame
 
-__all__ = ["FRAME_S", "METHODS", "Context", "Method", "MethodFrame", "MultiSlabMethod",
+__all__ = ["FRAME_S", "METHODS", "Context", "Method", "MultiSlabMethod",
            "make_method"]
 
 METHODS = ("full", "subsample", "fixed", "arbitrary", "line", "projective", "progressive",
@@ -198,15 +199,16 @@ class ProjectiveMethod(ArbitraryMethod):
             self.ctx.gl.finish()
             extra = (time.perf_counter() - t0) * 1e3 - f.ms
         else:
-            f, extra = MethodFrame(0.0, 0.0, 0.0, 0, 0, 0, "reuse"), 0.0
+            f, extra = method_frame(0.0, 0.0, 0.0, 0, 0, 0, "reuse"), 0.0
         t1 = time.perf_counter()
         self.proj.render(viewpoint.view_matrix(), projection, count_samples)
         self.ctx.gl.finish()
         warp = (time.perf_counter() - t1) * 1e3
         self.samples = self.proj.samples
         kind = "reuse" if f.kind == "reuse" else "keyframe"
-        return MethodFrame(f.ms + extra + warp, f.upload_ms, f.raster_ms + extra + warp,
-                           f.images, f.uploads, f.evictions, kind)
+        x = f.extra
+        return method_frame(f.ms + extra + warp, x["upload_ms"], x["raster_ms"] + extra + warp,
+                            x["images"], x["uploads"], x["evictions"], kind)
 
     def release(self) -> None:
         self.proj.release()
@@ -243,7 +245,7 @@ class MultiSlabMethod:
         self._for(viewpoint, projection)
 
     def frame(self, index: int, viewpoint: Viewpoint, projection: np.ndarray,
-              count_samples: bool = False) -> MethodFrame:
+              count_samples: bool = False) -> Frame:
         """A frame on the facing slab; a switch (the new slab's method made, and warmed
         up for ``critical``) is timed as part of the frame."""
         from dataclasses import replace as _replace

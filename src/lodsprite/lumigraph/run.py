@@ -227,7 +227,9 @@ def _measure(folder, method, path, frames, size, ground_truth, depth_correction,
 
 
 class MethodRun:
-    """A method, the approximate geometry and the ground truth on one GL context."""
+    """A method, the approximate geometry and the ground truth on one GL context, for
+    measurements that read the method's state frame by frame (``reproduce sloan1997``'s
+    Table 1); timed runs go through :func:`measure` (the harness)."""
 
     def __init__(self, gl, lf: Lumigraph, size, depth_correction: bool,
                  obj_mesh: ColorMesh | None, method: str, options: dict) -> None:
@@ -235,7 +237,7 @@ class MethodRun:
         from lodsprite.gl.target import RenderTarget
         from lodsprite.lumigraph.methods import Context, MultiSlabMethod, make_method
 
-        self.gl, self.made, self.flip = gl, [], False
+        self.gl, self.made = gl, []
         proxy_mesh = lf.proxy() if depth_correction else None
         self.proxy = (ColorMeshRenderer(gl, proxy_mesh.vertices, proxy_mesh.faces,
                                         proxy_mesh.colors, proxy_mesh.normals)
@@ -250,45 +252,6 @@ class MethodRun:
         self.method = (make_method(method, ctx, **options) if len(lf.slabs) == 1
                        else MultiSlabMethod(ctx, method, options))
         self.made.append(self.method)
-
-    def frames(self, path: CameraPath, proj, quality_every: int,
-               progress: Progress | None) -> list[dict]:
-        m, vp0 = self.method, path.viewpoints[0]
-        if hasattr(m, "warm_up"):
-            m.warm_up(vp0, proj)
-        else:
-            m.frame(0, vp0, proj)  # untimed: the first set of nodes decoded and resident
-        self.gl.finish()
-        rows = []
-        for i, vp in enumerate(path.viewpoints):
-            f = m.frame(i, vp, proj)
-            row = {"frame": i, "kind": f.kind, "ms": f.ms, "upload_ms": f.upload_ms,
-                   "raster_ms": f.raster_ms, "images": f.images, "uploads": f.uploads,
-                   "evictions": f.evictions}
-            if self.truth is not None and i % max(1, quality_every) == 0:
-                row.update(self.quality(vp, proj))
-            rows.append(row)
-            if progress:
-                progress(i + 1, len(path))
-        return rows
-
-    def quality(self, vp: Viewpoint, proj) -> dict:
-        """PSNR, SSIM and FLIP of the method's image against the object drawn directly
-        (untimed)."""
-        from lodsprite.metrics import flip, psnr, ssim
-
-        got = self.method.output.read_rgb8()
-        self.truth.render(proj @ vp.view_matrix(), self.target.fbo)
-        want = self.target.read_color()
-        out = {"psnr": psnr(got, want), "ssim": ssim(got, want)}
-        if self.flip:
-            out["flip"] = flip(got, want)
-        return out
-
-    def info(self) -> dict:
-        from lodsprite.lumigraph.technique import method_facts
-
-        return method_facts(self.method)
 
     def release(self) -> None:
         for obj in reversed(self.made):

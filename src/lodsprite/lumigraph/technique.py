@@ -11,6 +11,7 @@ orbiting its centre; :func:`open_scene` makes a lumigraph folder a scene.
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -117,9 +118,7 @@ class LumigraphTechnique(Technique):
         f = self.method.frame(self.index, to_lumigraph(viewpoint), self.projection)
         self.index += 1
         self._last = f
-        return Frame(f.kind, f.ms, self.method.rec.vertex_count // 3, extra={
-            "upload_ms": f.upload_ms, "raster_ms": f.raster_ms, "images": f.images,
-            "uploads": f.uploads, "evictions": f.evictions})
+        return replace(f, triangles=self.method.rec.vertex_count // 3)
 
     def plan_replay(self, frames: set[int]) -> None:
         """The GPU copies of the frames to be replayed, made now (before the warm-up), so
@@ -170,7 +169,8 @@ class LumigraphTechnique(Technique):
             return ""
         rec = self.method.rec
         mb = rec.capacity * rec.node_bytes / 2 ** 20
-        return (f"{f.images} node images, {f.uploads} uploaded; texture {len(rec.slot_of)}/"
+        return (f"{f.extra['images']} node images, {f.extra['uploads']} uploaded; texture "
+                f"{len(rec.slot_of)}/"
                 f"{rec.capacity} ({mb:.1f} MB); decoded {self.method.loader.decoded}")
 
     def release(self) -> None:

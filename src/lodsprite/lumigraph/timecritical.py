@@ -22,9 +22,10 @@ import numpy as np
 
 from lodsprite.camera import Viewpoint
 from lodsprite.errors import InputError
-from lodsprite.lumigraph.base import FRAME_S, Context, Method, MethodFrame
+from lodsprite.lumigraph.base import FRAME_S, Context, Method, method_frame
 from lodsprite.lumigraph.critical import DISK, RAM, RESIDENT, CostModel, benefit, plan, st_point
 from lodsprite.lumigraph.subsets import cover_draws, nearest_nodes, subset_cover
+from lodsprite.record import Frame
 
 PATH_AHEAD_S = (0.1, 0.2, 0.3, 0.5)  # predicted eye positions that make the Path term
 
@@ -96,7 +97,7 @@ class CriticalMethod(Method):
         return w
 
     def frame(self, index: int, viewpoint: Viewpoint, projection: np.ndarray,
-              count_samples: bool = False) -> MethodFrame:
+              count_samples: bool = False) -> Frame:
         gl = self.ctx.gl
         t0 = time.perf_counter()
         now = index * FRAME_S
@@ -140,4 +141,4 @@ class CriticalMethod(Method):
         total = (time.perf_counter() - t0) * 1e3
         self.costs.observe(uploaded, len(nodes), {"upload": upload_ms, "raster": raster_ms,
                                                   "base": total - upload_ms - raster_ms})
-        return MethodFrame(total, upload_ms, raster_ms, len(nodes), uploaded, len(p.evict))
+        return method_frame(total, upload_ms, raster_ms, len(nodes), uploaded, len(p.evict))

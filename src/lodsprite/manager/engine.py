@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -29,6 +28,7 @@ from lodsprite.camera import Viewpoint, frustum_planes, perspective
 from lodsprite.errors import InputError
 from lodsprite.manager.core import Feedback, LodManager, active_list, desired_lod, linear
 from lodsprite.manager.scene import Crowd, spheres_in_frustum
+from lodsprite.record import Frame
 
 MODES = ("manager", "independent", "discrete")
 DISCRETE_LEVELS = (1.0, 0.5, 0.25, 0.0)
@@ -37,20 +37,11 @@ DISCRETE_THRESHOLDS = (0.25, 0.1, 0.04)
 HYSTERESIS = 0.15
 
 
-@dataclass(frozen=True)
-class CrowdFrame:
-    """One frame: ``ms`` in all (GL finished), ``lod_ms`` of LOD work, ``extractions``,
-    ``draw_calls``, ``triangles`` drawn, ``visible`` objects, the feedback ``exponent``
-    and (discrete) LOD ``switches``."""
-
-    ms: float
-    lod_ms: float
-    extractions: int
-    draw_calls: int
-    triangles: int
-    visible: int
-    exponent: float
-    switches: int = 0
+#: The columns a crowd frame (:meth:`CrowdEngine.frame`, the one frame record
+#: :class:`~lodsprite.record.Frame`) has in ``extra``: ``lod_ms`` of LOD work,
+#: ``extractions``, ``draw_calls``, ``visible`` objects, the feedback ``exponent`` and
+#: (discrete) LOD ``switches``.
+CROWD_COLUMNS = ("lod_ms", "extractions", "draw_calls", "visible", "exponent", "switches")
 
 
 def discrete_levels(height_frac: np.ndarray, current: np.ndarray,
@@ -131,10 +122,12 @@ class CrowdEngine:
 
     def frame(self, viewpoint: Viewpoint, extra_ms: float = 0.0,
               projection: np.ndarray | None = None, subset: np.ndarray | None = None,
-              fbo=None) -> CrowdFrame:
+              fbo=None) -> Frame:
         """Select, extract and draw one frame from ``viewpoint``: through ``projection``
         (``(4, 4)``; default the engine's own), of the objects in ``subset`` (``(N,)
-        bool``; default all) into ``fbo`` (default the target's)."""
+        bool``; default all) into ``fbo`` (default the target's).  Its ``kind`` is the
+        engine's mode, ``ms`` in all (GL finished), the rest in ``extra``
+        (:data:`CROWD_COLUMNS`)."""
         t0 = time.perf_counter()
         view_proj = (self.projection if projection is None else projection
                      ) @ viewpoint.view_matrix()
@@ -174,8 +167,9 @@ class CrowdEngine:
         ms = (time.perf_counter() - t0) * 1e3
         exponent = self.feedback.exponent
         self.feedback.observe(ms + extra_ms)
-        return CrowdFrame(ms, lod_ms, extractions, self.renderer.draw_calls,
-                          self.renderer.triangles, len(idx), exponent, switches)
+        return Frame(self.mode, ms, self.renderer.triangles, extra=dict(zip(
+            CROWD_COLUMNS, (lod_ms, extractions, self.renderer.draw_calls, len(idx), exponent,
+                            switches), strict=True)))
 
     def _draw(self, view_proj: np.ndarray, using: np.ndarray, idx: np.ndarray,
               fbo=None) -> None:

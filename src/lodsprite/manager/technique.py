@@ -30,13 +30,6 @@ def parse_crowd(spec: str) -> tuple[int, int]:
     return objects, trees
 
 
-def crowd_columns(f) -> dict:
-    """A crowd frame's own ``frames.csv`` columns."""
-    return {"lod_ms": f.lod_ms,
-            "extractions": f.extractions, "draw_calls": f.draw_calls, "visible": f.visible,
-            "exponent": f.exponent, "switches": f.switches}
-
-
 class CrowdTechnique(Technique):
     """One crowd mode on the viewer's renderer (its GL context and size)."""
 
@@ -108,7 +101,7 @@ class CrowdTechnique(Technique):
         f = self.engine.frame(viewpoint)
         self._last = f
         self._orders.append(list(self.engine.last_orders))
-        return Frame(self.name, f.ms, f.triangles, extra=crowd_columns(f))
+        return f
 
     def draw_to(self, framebuffer=None) -> None:
         self.renderer.present(self.target.color, (0.0, 0.0, 1.0, 1.0), framebuffer)
@@ -120,8 +113,9 @@ class CrowdTechnique(Technique):
         f = self._last
         if f is None:
             return ""
-        return (f"{f.visible} visible, {f.draw_calls} draws, {f.extractions} extractions, "
-                f"LOD {f.lod_ms:.1f} ms, p {f.exponent:.2f}")
+        x = f.extra
+        return (f"{x['visible']} visible, {x['draw_calls']} draws, {x['extractions']} "
+                f"extractions, LOD {x['lod_ms']:.1f} ms, p {x['exponent']:.2f}")
 
     def release(self) -> None:
         self.engine.release()

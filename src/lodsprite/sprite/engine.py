@@ -27,12 +27,13 @@ metric, the GL work, ``C'`` for a new keyframe, and ``ctx.finish()``.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import numpy as np
 
 from lodsprite.camera import Viewpoint
 from lodsprite.gl.sprite import SpriteRenderer
+from lodsprite.record import Frame
 from lodsprite.sprite.cache import DEFAULT_POLICY, KeyframeCache
 from lodsprite.sprite.metric import ErrorMetric
 from lodsprite.sprite.policy import (
@@ -47,21 +48,21 @@ from lodsprite.sprite.policy import (
 )
 
 __all__ = ["DEFAULT_EPSILON_PX", "FIRST_SPRITE", "FRAME_TYPES", "KEYFRAME", "SPRITE",
-           "LodSpriteEngine", "SpriteFrame"]
+           "LodSpriteEngine", "SpriteFrame", "sprite_frame"]
 
 
-@dataclass(frozen=True)
-class SpriteFrame:
-    """One frame: its type, the error of the image shown (pixels; 0 for a keyframe), the
-    error that decided it (pixels, measured against the previous keyframe), triangles
-    drawn, wall time (ms) and the index of the keyframe the image comes from."""
+#: A LOD-sprite frame: the one frame record (:class:`~lodsprite.record.Frame`), ``kind``
+#: its type, ``error_px`` the error of the image shown (pixels; 0 for a keyframe), ``extra``
+#: ``keyframe`` (the index in :attr:`LodSpriteEngine.keyframes` of the keyframe shown) and
+#: ``decision_error_px`` (the error that decided it, against the previous keyframe).
+SpriteFrame = Frame
 
-    type: str
-    error_px: float
-    decision_error_px: float
-    triangles: int
-    ms: float
-    keyframe: int = -1  # index in LodSpriteEngine.keyframes of the keyframe shown
+
+def sprite_frame(kind: str, ms: float, triangles: int, error_px: float, keyframe: int,
+                 decision_error_px: float) -> Frame:
+    """A LOD-sprite engine's frame record (:data:`SpriteFrame`)."""
+    return Frame(kind, ms, triangles, error_px,
+                 {"keyframe": keyframe, "decision_error_px": decision_error_px})
 
 
 class LodSpriteEngine:
@@ -120,7 +121,7 @@ class LodSpriteEngine:
             return self.sprite.keyframe_color()
         return self.sprite.target.read_color()
 
-    def frame(self, viewpoint: Viewpoint) -> SpriteFrame:
+    def frame(self, viewpoint: Viewpoint) -> Frame:
         """Render the frame for ``viewpoint``; returns once the GL work has finished."""
         t0 = time.perf_counter()
         d = self.policy.decide(viewpoint)
@@ -143,4 +144,4 @@ class LodSpriteEngine:
         if d.key is not None:
             self.policy.keyframe_cost(ms)
         shown = len(self.keyframes) - 1 if d.keyframe is None else d.keyframe
-        return SpriteFrame(d.type, d.error_px, d.decision_error_px, stats.triangles, ms, shown)
+        return sprite_frame(d.type, ms, stats.triangles, d.error_px, shown, d.decision_error_px)

@@ -26,7 +26,8 @@ import numpy as np
 from lodsprite.camera import Viewpoint
 from lodsprite.errors import LodspriteError
 from lodsprite.gl.sprite import SpriteRenderer
-from lodsprite.sprite.engine import SpriteFrame
+from lodsprite.record import Frame
+from lodsprite.sprite.engine import sprite_frame
 from lodsprite.sprite.keyframe_worker import KeyframeImage, KeyframeWorker, WorkerSettings
 from lodsprite.sprite.metric import ErrorMetric
 from lodsprite.sprite.policy import (
@@ -93,7 +94,7 @@ class ThreadedLodSpriteEngine:
         self._leads += 1
         self.worker.lead_s = (1 - w) * self.worker.lead_s + w * latency
 
-    def frame(self, viewpoint: Viewpoint) -> SpriteFrame:
+    def frame(self, viewpoint: Viewpoint) -> Frame:
         """Draw the frame for ``viewpoint``; returns once the GL work has finished."""
         t0 = time.perf_counter()
         if self.worker.error is not None:  # no keyframe will ever come: say so
@@ -120,8 +121,8 @@ class ThreadedLodSpriteEngine:
             self.worker.request()
         stats = self.sprite.render_spriteframe(viewpoint, projection)
         self.sprite.terrain.ctx.finish()
-        return SpriteFrame(kind, error, error, stats.triangles,
-                           (time.perf_counter() - t0) * 1e3, len(self.keyframes) - 1)
+        return sprite_frame(kind, (time.perf_counter() - t0) * 1e3, stats.triangles, error,
+                            len(self.keyframes) - 1, error)
 
     def read_image(self) -> np.ndarray:
         """The last frame, ``(H, W, 3) uint8``, row 0 at the top (always a spriteframe)."""

@@ -11,7 +11,7 @@ centre); one that re-rendered some is of kind ``tiles``; the others are spritefr
 Each tile's cost is its last measured time (ms, GL finished after it; the first frame
 renders every tile and measures each).  The frame's time covers the errors, the
 selection, the tiles, ``C'`` of the new viewpoint and the spriteframe, up to
-``ctx.finish()``; it returns a :class:`~lodsprite.sprite.engine.SpriteFrame` as
+``ctx.finish()``; it returns a :class:`~lodsprite.record.Frame` as
 :class:`~lodsprite.sprite.engine.LodSpriteEngine` does.
 """
 
@@ -26,8 +26,9 @@ from lodsprite.camera import Viewpoint
 from lodsprite.errors import InputError
 from lodsprite.gl.sprite import SpriteRenderer
 from lodsprite.gl.sprite_tiles import TileDrawer, TiledSpriteRenderer, TileSlots
+from lodsprite.record import Frame
 from lodsprite.sprite.cache import SWITCH_FRACTION, TileCache
-from lodsprite.sprite.engine import SpriteFrame
+from lodsprite.sprite.engine import sprite_frame
 from lodsprite.sprite.metric import ErrorMetric
 from lodsprite.sprite.policy import KEYFRAME, SPRITE, KeyChoice, resampling_metric
 from lodsprite.sprite.tiled import (
@@ -142,7 +143,7 @@ class TiledSpriteEngine:
                 self.costs_ms[i] = (time.perf_counter() - t) * 1e3
         return tris
 
-    def frame(self, viewpoint: Viewpoint) -> SpriteFrame:
+    def frame(self, viewpoint: Viewpoint) -> Frame:
         """Render the frame for ``viewpoint``; returns once the GL work has finished."""
         t0 = time.perf_counter()
         s = self.sprite
@@ -184,8 +185,8 @@ class TiledSpriteEngine:
         kind = KEYFRAME if whole else (TILES if len(chosen) else SPRITE)
         shown = 0.0 if whole else combined_error(errors, served)
         s.terrain.ctx.finish()
-        return SpriteFrame(kind, shown, decision, tris, (time.perf_counter() - t0) * 1e3,
-                           len(self.updates) - 1)
+        return sprite_frame(kind, (time.perf_counter() - t0) * 1e3, tris, shown,
+                            len(self.updates) - 1, decision)
 
     def _within(self, chosen: Sequence[int], key_vp: np.ndarray) -> np.ndarray | None:
         """The sub-frustum of the tiles ``chosen`` (their NDC bounding rectangle), whose

@@ -9,12 +9,14 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from contextlib import nullcontext
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from lodsprite.errors import InputError
+from lodsprite.techniques.adaptive_terrain import ADAPTIVE_COLUMNS
 from lodsprite.techniques.base import Frame, Technique
 from lodsprite.techniques.terrain import SpriteTechnique, resolve_shading, set_shading
 from lodsprite.workers import peak_rss_mb
@@ -158,9 +160,7 @@ class AdaptiveTechnique(Technique):
     def frame(self, viewpoint: Viewpoint) -> Frame:
         f = self.terrain.frame(viewpoint)
         self._first_frame()  # a window's first frame (no warm-up there)
-        return Frame("adaptive", f.ms, f.triangles, extra={
-            "nodes": f.nodes, "uploaded": f.uploaded, "resident": f.resident,
-            "loaded": f.loaded, "evicted": f.evicted})
+        return replace(f, extra={k: f.extra[k] for k in ADAPTIVE_COLUMNS if k != "bad"})
 
     def decision(self) -> dict[str, Any]:
         return {"draw": tuple(self.terrain.last_draw), "morphed": self.terrain.last_morphed}
@@ -235,7 +235,6 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
         self.sprite.engine.between_keyframes = self._between_keyframes
         self.surface = None  # over a store: the metric's C from the keyframe's drawn nodes
         if field is not None:
-            from dataclasses import replace
 
             from lodsprite.techniques.drawn_surface import DrawnSurface
 
@@ -268,10 +267,10 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
         draw, morphed = self._tile_selections[(update, tile)]
 
         def again(vp, projection, target, cull):
-            from lodsprite.gl.terrain import FrameStats
+            from lodsprite.gl.terrain import draw_stats
 
             self.adaptive.redraw(vp, draw, morphed, projection, target)
-            return FrameStats(0, len(draw), projection)
+            return draw_stats(0, len(draw), projection)
 
         return again
 
@@ -352,10 +351,10 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
         s = self.sprite.sprite
 
         def again(vp, projection, target):
-            from lodsprite.gl.terrain import FrameStats
+            from lodsprite.gl.terrain import draw_stats
 
             self.adaptive.redraw(vp, draw, morphed, projection, target)
-            return FrameStats(0, len(draw), projection)
+            return draw_stats(0, len(draw), projection)
 
         s.keyframe_drawer = again
         if self.proxy is not None:

@@ -15,12 +15,12 @@ know no GL) and gl/ (the draw, which knows no technique).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
 
 import numpy as np
 
 from lodsprite.camera import Viewpoint, fitted_projection, frustum_planes
 from lodsprite.errors import InputError
+from lodsprite.record import Frame
 from lodsprite.terrain.quadtree import (
     DEFAULT_GRID,
     MORPH_SPAN,
@@ -31,20 +31,10 @@ from lodsprite.terrain.quadtree import (
 )
 from lodsprite.terrain.streaming import SlotCache, tile_loader
 
-
-@dataclass(frozen=True)
-class AdaptiveFrame:
-    """One frame: ``ms`` (GL finished), nodes and triangles drawn, tiles uploaded this
-    frame, resident on the GPU, loaded and evicted so far, bad tiles."""
-
-    ms: float
-    nodes: int
-    triangles: int
-    uploaded: int
-    resident: int
-    loaded: int
-    evicted: int
-    bad: int
+#: An adaptive frame's own columns (in :attr:`~lodsprite.record.Frame.extra`): quadtree
+#: ``nodes`` drawn, tiles ``uploaded`` this frame, ``resident`` on the GPU, ``loaded`` and
+#: ``evicted`` so far, ``bad`` tiles.
+ADAPTIVE_COLUMNS = ("nodes", "uploaded", "resident", "loaded", "evicted", "bad")
 
 
 class AdaptiveTerrain:
@@ -139,18 +129,19 @@ class AdaptiveTerrain:
 
     def render_into(self, viewpoint: Viewpoint, projection, target, cull=None):
         """Draw into ``target`` through ``projection`` (a :class:`~lodsprite.camera.
-        Projection`; the LOD-sprite keyframe hook); returns the terrain renderer's
-        ``FrameStats``.  Selection uses the target's height for screen error.  ``cull``:
+        Projection`; the LOD-sprite keyframe hook); returns what it drew
+        (:func:`~lodsprite.gl.terrain.draw_stats`).  Selection uses the target's height
+        for screen error.  ``cull``:
         a ``(4, 4)`` matrix whose frustum the quadtree is culled by instead of the view's
         (a keyframe tile's sub-frustum; draw it with ``target.fbo.scissor`` set to the
         tile)."""
-        from lodsprite.gl.terrain import FrameStats
+        from lodsprite.gl.terrain import draw_stats
 
         f = self.frame(viewpoint, projection.matrix(), target, finish=False, cull=cull)
-        return FrameStats(f.triangles, f.nodes, projection)
+        return draw_stats(f.triangles, f.extra["nodes"], projection)
 
     def frame(self, viewpoint: Viewpoint, projection: np.ndarray | None = None,
-              target=None, finish: bool = True, cull=None) -> AdaptiveFrame:
+              target=None, finish: bool = True, cull=None) -> Frame:
         """Select, stream and draw one frame (into ``target``, default the renderer's own,
         through ``projection``, default fitted to the terrain; the selection culled by
         the frustum of ``cull (4, 4)`` when given)."""
@@ -165,9 +156,10 @@ class AdaptiveTerrain:
                            self.height_range, self.extent, self.color)
         if finish:
             self.gl.finish()
-        return AdaptiveFrame((time.perf_counter() - t0) * 1e3, len(draw),
-                             self.renderer.triangles, uploaded, len(self.slots.slots),
-                             self.loader.loaded, self.slots.evicted, len(self.loader.bad))
+        return Frame("adaptive", (time.perf_counter() - t0) * 1e3, self.renderer.triangles,
+                     extra=dict(zip(ADAPTIVE_COLUMNS, (
+                         len(draw), uploaded, len(self.slots.slots), self.loader.loaded,
+                         self.slots.evicted, len(self.loader.bad)), strict=True)))
 
     def _stream(self, eye: np.ndarray, view_proj: np.ndarray) -> tuple[list[Node], int]:
         """Select the nodes to draw, ask the loader for what is missing and upload what
@@ -237,7 +229,7 @@ class AdaptiveTerrain:
                 time.sleep(0.002)
         return total
 
-    def settle(self, viewpoint: Viewpoint, max_rounds: int = 100000) -> AdaptiveFrame:
+    def settle(self, viewpoint: Viewpoint, max_rounds: int = 100000) -> Frame:
         """Stream ``viewpoint``'s tiles until none it wants is left to load (:meth:`fill`),
         then draw it (a converged image, untimed use only); returns that frame."""
         self.fill(viewpoint, None, max_rounds)

@@ -23,14 +23,14 @@ field of view, framebuffer, and the scene it draws).  The viewer and the batch h
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from lodsprite.errors import InputError
+from lodsprite.record import Frame
 
 if TYPE_CHECKING:  # moderngl only under gl/ at run time
     import moderngl
@@ -59,35 +59,6 @@ class Param:
         v = self.value * self.step if up else self.value / self.step
         v = min(max(v, self.lo), self.hi)
         return replace(self, value=float(round(v)) if self.integer else v)
-
-
-@dataclass(frozen=True)
-class Frame:
-    """One frame, for every technique.
-
-    ``kind``: what the frame was (``full``, ``lod``, ``adaptive``, ``keyframe``,
-    ``first_sprite``, ``sprite``, a lumigraph method's frame kind, a crowd mode, ...);
-    ``ms``: its time (milliseconds, GL work finished; the harness replaces it with its own
-    clock); ``triangles`` drawn; ``error_px``: the error of the image shown (pixels, NaN
-    where the technique does not measure one); ``extra``: the technique's own columns of
-    ``frames.csv`` (scalars; e.g. ``keyframe``, ``resident``, ``uploads``).
-    """
-
-    kind: str
-    ms: float
-    triangles: int = 0
-    error_px: float = math.nan
-    extra: dict[str, Any] = field(default_factory=dict)
-
-    @property
-    def type(self) -> str:
-        """The frame's kind (the name it had before one frame record served all)."""
-        return self.kind
-
-    @property
-    def keyframes(self) -> int:
-        """Keyframes taken so far (0 for a technique without keyframes)."""
-        return int(self.extra.get("keyframes", 0))
 
 
 #: The name the viewer's frame record had; the same type now.

@@ -115,6 +115,22 @@ def level0_reader(geometry, lod: int, border: bool):
     return heights
 
 
+def coarse_baseline(terrain, viewpoint, lod: int, truth: np.ndarray) -> dict[str, float]:
+    """A LOD-sprite run's baseline columns: the plain coarse level ``lod`` (quads a side)
+    and the coarse level with LOD-sprite's border ribbons, drawn untimed by ``terrain`` (a
+    :class:`~lodsprite.gl.terrain.TerrainRenderer`) at ``viewpoint`` and compared with
+    the same reference ``truth (h, w, 3) uint8``: ``rmse_lod, psnr_lod, ssim_lod,
+    rmse_lod_border``."""
+    from lodsprite.metrics import psnr, rmse, ssim
+
+    terrain.render(viewpoint, lod)
+    plain = terrain.target.read_color()
+    terrain.render_proxy(viewpoint, lod, border=True)
+    ribbons = terrain.target.read_color()
+    return {"rmse_lod": rmse(plain, truth), "psnr_lod": psnr(plain, truth),
+            "ssim_lod": ssim(plain, truth), "rmse_lod_border": rmse(ribbons, truth)}
+
+
 class SpriteTechnique(Technique):
     """LOD-sprite (Chen, Swan & Kaufman 1999): one technique over three engines
     (:mod:`lodsprite.techniques.sprite_engines`), chosen once from the options: whole
@@ -186,17 +202,8 @@ class SpriteTechnique(Technique):
     def quality_extra(self, viewpoint: Viewpoint, decision: dict[str, Any],
                       truth: np.ndarray) -> dict[str, float]:
         """The plain coarse level and the coarse level with LOD-sprite's border ribbons
-        against the same reference: ``rmse_lod, psnr_lod, ssim_lod, rmse_lod_border``."""
-        from lodsprite.metrics import psnr, rmse, ssim
-
-        r = self.renderer.paths.renderer
-        lod = self.sprite.lod
-        r.render(viewpoint, lod)
-        plain = r.target.read_color()
-        r.render_proxy(viewpoint, lod, border=True)
-        ribbons = r.target.read_color()
-        return {"rmse_lod": rmse(plain, truth), "psnr_lod": psnr(plain, truth),
-                "ssim_lod": ssim(plain, truth), "rmse_lod_border": rmse(ribbons, truth)}
+        against the same reference (:func:`coarse_baseline`)."""
+        return coarse_baseline(self.renderer.paths.renderer, viewpoint, self.sprite.lod, truth)
 
     def summary(self, frames: list[Frame]) -> dict[str, Any]:
         """Keyframe count and fraction, the engine's work (tiles rendered), mean time per

@@ -18,9 +18,8 @@ from __future__ import annotations
 
 import logging
 import math
-import platform
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -28,11 +27,10 @@ import numpy as np
 
 from lodsprite import Renderer, write_image
 from lodsprite.errors import LodspriteError
-from lodsprite.files import write_csv, write_json
 from lodsprite.gl.overlay import HudLayer, LineOverlay, frustum_segments
 from lodsprite.paths import CameraPath
 from lodsprite.scene import Scene
-from lodsprite.techniques import Technique, TechniqueFactory
+from lodsprite.techniques import Frame, Technique, TechniqueFactory
 from lodsprite.viewer.controls import CameraController, FlightRecorder
 from lodsprite.viewer.hud import PANEL_HZ, HudState, glyph_atlas, layout_text
 
@@ -41,8 +39,13 @@ if TYPE_CHECKING:  # hints only: moderngl is imported under gl/
 
 log = logging.getLogger(__name__)
 
-FRAME_COLUMNS = ["frame", "kind", "ms", "triangles", "error_px", "render_ms", "interval_ms",
-                 "keyframes"]
+#: The window's own columns of ``frames.csv``, after the harness's core columns and the
+#: technique's own (milliseconds): ``present_ms`` (the frame drawn into the window, with
+#: its overlays), ``hud_ms`` (the HUD), ``swap_ms`` (from there to after the buffer swap),
+#: ``window_ms`` (the whole window frame: from its start to after the swap, a screenshot's
+#: read excluded; ``ms`` is its technique share, as in the harness) and ``interval_ms``
+#: (since the previous frame's start).
+WINDOW_COLUMNS = ("present_ms", "hud_ms", "swap_ms", "window_ms", "interval_ms")
 TOGGLE_KEYS = {"x": "wireframe", "t": "tint", "k": "frustum", "h": "hud"}
 WIREFRAME_RGBA = (0.1, 0.1, 0.1, 0.55)
 FRUSTUM_RGBA = (1.0, 0.9, 0.1, 0.9)
@@ -91,7 +94,8 @@ class ViewerCore:
         self._lines = LineOverlay(self.renderer.gl)
         self.mode = mode
         self.technique: Technique = self.factories[mode](self.renderer)
-        self.rows: list[dict] = []
+        self.frames: list[Frame] = []  # the frames logged, window times in their extra
+        self.first_frame_ms = float("nan")  # the warm-up's time (ms), as the harness's
         self.index = 0
         self.quit = False
         self.pending_size: tuple[int, int] | None = None  # set by the window's resize event
@@ -102,8 +106,9 @@ class ViewerCore:
         self._shot: np.ndarray | None = None
         self._shot_ms = 0.0
         self._start = time.perf_counter()
+        self._marks = (0.0, 0.0, 0.0)  # technique done, presented, HUD done (perf_counter)
         self._last_start: float | None = None
-        self._last = None
+        self._last: Frame | None = None
 
     # ------------------------------------------------------------------ input
 
@@ -192,22 +197,30 @@ class ViewerCore:
         return self.controller.update(dt_s)
 
     def frame(self, dt_s: float, framebuffer: moderngl.Framebuffer) -> None:
-        """Render and draw one frame into ``framebuffer`` (its whole viewport)."""
+        """Render and draw one frame into ``framebuffer`` (its whole viewport).  The
+        technique's :meth:`~lodsprite.techniques.Technique.frame` and ``ctx.finish()`` are
+        the frame's ``ms``, as in the harness; presenting, overlays and HUD are timed
+        apart (:data:`WINDOW_COLUMNS`)."""
         self._start = time.perf_counter()
         vp = self.viewpoint(dt_s)
-        self._last = self.technique.frame(vp)
+        f = self.technique.frame(vp)
+        self.ctx.finish()
+        done = time.perf_counter()
+        self._last = replace(f, ms=(done - self._start) * 1e3)
         self._shot, self._shot_ms = None, 0.0
         if self._shot_due():  # read before overlays and HUD; its time is not the frame's
-            t = time.perf_counter()
             self._shot = self.technique.read_image()
-            self._shot_ms = (time.perf_counter() - t) * 1e3
+            self._shot_ms = (time.perf_counter() - done) * 1e3
+        shown = time.perf_counter()
         framebuffer.use()
         self.technique.draw_to(framebuffer)
         self._overlays(vp)
         if self.record is not None:
             self.record.append(vp)
+        presented = time.perf_counter()
         if self.toggles["hud"]:
             self._draw_hud(framebuffer)
+        self._marks = (shown, presented, time.perf_counter())
 
     def _shot_due(self) -> bool:
         plan = self.play
@@ -219,6 +232,7 @@ class ViewerCore:
         before its timed frames: shaders compiled (llvmpipe compiles a shader variant at
         its first draw), the first keyframe taken, overlays and HUD drawn once."""
         record, self.record = self.record, None
+        t0 = time.perf_counter()
         try:
             for _ in range(frames):
                 for _ in range(2):  # so that the frame-time graph is drawn too
@@ -231,24 +245,28 @@ class ViewerCore:
             self.hud.interval_ms.clear()
         self._last = None
         self.ctx.finish()
+        self.first_frame_ms = (time.perf_counter() - t0) * 1e3
 
     def log_frame(self) -> None:
-        """Log the frame just shown (call after the buffer swap): its time from the start
-        of :meth:`frame` to now, the technique's own time and the interval since the
-        previous frame's start; take the played path's screenshot; finish a played path."""
+        """Log the frame just shown (call after the buffer swap): the technique's frame
+        (``ms`` its :meth:`~lodsprite.techniques.Technique.frame` and ``ctx.finish()``) with
+        the window's times (:data:`WINDOW_COLUMNS`); take the played path's screenshot;
+        finish a played path."""
         if self._last is None:  # no frame drawn yet
             return
         now = time.perf_counter()
-        ms = (now - self._start) * 1e3 - self._shot_ms
+        window = (now - self._start) * 1e3 - self._shot_ms
         interval = (self._start - self._last_start) * 1e3 if self._last_start else 0.0
         self._last_start = self._start
-        f = self._last
-        self.hud.record(ms, interval)
+        shown, presented, hud = self._marks
+        f = replace(self._last, extra={
+            **self._last.extra, "keyframes": self._last.keyframes,
+            "present_ms": (presented - shown) * 1e3, "hud_ms": (hud - presented) * 1e3,
+            "swap_ms": (now - hud) * 1e3, "window_ms": window, "interval_ms": interval})
+        self.hud.record(window, interval)
         self.hud.frame_type, self.hud.error_px = f.kind, f.error_px
         self.hud.keyframes, self.hud.triangles = f.keyframes, f.triangles
-        self.rows.append({"frame": self.index, "kind": f.kind, "ms": ms,
-                          "triangles": f.triangles, "error_px": f.error_px, "render_ms": f.ms,
-                          "interval_ms": interval, "keyframes": f.keyframes})
+        self.frames.append(f)
         if self._shot is not None:
             self.screenshot(self._shot)
             self._shot, self._want_shot = None, False
@@ -298,7 +316,7 @@ class ViewerCore:
         """Write ``image`` (default: the frame shown, read now) as ``frame_NNNNN.png`` in
         the screenshot folder, NNNNN the number of that frame (the last one logged).  The
         viewer reads a frame before drawing its overlays and HUD, so none are in it."""
-        shown = self.rows[-1]["frame"] if self.rows else 0
+        shown = len(self.frames) - 1 if self.frames else 0
         path = self.screenshot_dir / f"frame_{shown:05d}.png"
         try:
             write_image(path, self.technique.read_image() if image is None else image)
@@ -309,30 +327,41 @@ class ViewerCore:
         self.screenshots.append(path)
         return path
 
+    @property
+    def rows(self) -> list[dict]:
+        """The rows of ``frames.csv`` so far (:func:`lodsprite.record.frame_rows`)."""
+        from lodsprite.harness import frame_rows
+
+        return frame_rows(self.frames)[0]
+
     def summary(self) -> dict:
-        """The core timing keys of the frame times shown (:func:`lodsprite.harness.
-        timing_summary`), the technique's own time, and the run's facts."""
-        from lodsprite.harness import timing_summary
+        """The harness's summary of the frames shown (:func:`lodsprite.record.
+        frames_summary`: ``ms`` the technique's frame and ``ctx.finish()``), the window's
+        frame time beside it, and the run's facts."""
+        from lodsprite.harness import frames_summary
         from lodsprite.workers import peak_rss_mb
 
-        ms = np.array([r["ms"] for r in self.rows], dtype=np.float64)
-        render = np.array([r["render_ms"] for r in self.rows], dtype=np.float64)
-        return {**timing_summary(ms), "mode": self.mode, "terrain": self.scene.name,
+        window = np.array([f.extra["window_ms"] for f in self.frames], dtype=np.float64)
+        return {**frames_summary(self.frames, self.technique.name,
+                                 self.renderer.info.renderer, self.first_frame_ms),
+                "mode": self.mode, "terrain": self.scene.name,
                 "path": self.play.path.name if self.play else "flight",
                 "size": list(self.renderer.size),
-                "render_median_ms": float(np.median(render)),
-                "render_p99_ms": float(np.percentile(render, 99)),
-                "keyframes": int(self.rows[-1]["keyframes"]) if self.rows else 0,
-                "status": self.technique.status(), "gl_renderer": self.renderer.info.renderer,
-                "peak_rss_mb": peak_rss_mb() + self.technique.outside_mb(),
-                "machine": platform.machine(), "python": platform.python_version()}
+                "window_median_ms": float(np.median(window)),
+                "window_p99_ms": float(np.percentile(window, 99)),
+                "keyframes": self.frames[-1].keyframes if self.frames else 0,
+                "status": self.technique.status(),
+                "peak_rss_mb": peak_rss_mb() + self.technique.outside_mb()}
 
     def write_outputs(self, out_dir: Path) -> dict:
-        """``frames.csv`` and ``summary.json`` of the frames shown so far."""
+        """``frames.csv`` and ``summary.json`` of the frames shown so far, through the
+        harness's record (:func:`lodsprite.harness.write_run`)."""
+        from lodsprite.harness import RunResult, frame_rows, write_run
+
         summary = self.summary()
+        rows, columns = frame_rows(self.frames)
         try:
-            write_csv(Path(out_dir) / "frames.csv", self.rows, FRAME_COLUMNS)
-            write_json(Path(out_dir) / "summary.json", summary)
+            write_run(Path(out_dir), RunResult(self.frames, [], rows, columns, summary))
         except OSError as exc:
             raise LodspriteError(f"cannot write the run's results to {out_dir}: "
                                  f"{exc.strerror or exc}") from exc

@@ -26,6 +26,7 @@ from lodsprite.errors import InputError
 from lodsprite.files import write_json, write_png
 from lodsprite.gl.paths import PathRenderer
 from lodsprite.gl.sprite import DEFAULT_GUARD_PX, DEFAULT_VISIBILITY, SpriteRenderer
+from lodsprite.harness import quality_summary
 from lodsprite.metrics import difference_image
 from lodsprite.paths import chen1999
 from lodsprite.progress import Progress
@@ -159,26 +160,11 @@ def _sweep(pr: PathRenderer, scene: Scene, cfg: ReproduceConfig, work: _Work,
         fig12["epsilon"].append(eps)
         fig12["total_s_sprite"].append(total)
         fig12["speedup"].append(total_s_full / total)
-        q = quality_summary([r for r in rows if "rmse" in r])
-        for key in ("rmse_sprite", "rmse_lod"):
+        q = quality_summary(rows)
+        for key in ("rmse", "rmse_lod"):
             fig11.setdefault(key, []).append(q[f"{key}_mean"])
         fig11.setdefault("rmse_ratio", []).append(q["rmse_ratio"])
     return {"fig10": fig10, "fig11": fig11, "fig12": fig12}
-
-
-def quality_summary(rows: list[dict]) -> dict:
-    """The experiment's quality keys (LOD-sprite beside the plain coarse level) from the
-    harness's per-frame columns: ``rmse_sprite_mean``, ``psnr_sprite_mean``,
-    ``ssim_sprite_mean``, the same ``_lod_``, ``rmse_ratio``, ``rmse_lod_border_mean``."""
-    from lodsprite.harness import quality_summary as means
-
-    q = means(rows)
-    out = {f"{m}_sprite_mean": q[f"{m}_mean"] for m in ("rmse", "psnr", "ssim")}
-    out.update({f"{m}_lod_mean": q[f"{m}_lod_mean"] for m in ("rmse", "psnr", "ssim")})
-    out["rmse_ratio"] = (out["rmse_sprite_mean"] / out["rmse_lod_mean"]
-                         if out["rmse_lod_mean"] > 0 else float("nan"))
-    out["rmse_lod_border_mean"] = q["rmse_lod_border_mean"]
-    return out
 
 
 def sprite_summary(rows: list[dict]) -> dict:
@@ -314,7 +300,7 @@ def _results(cfg, scene, main, key_views, ms_full, ms_lod, full_idx, stride, tot
         "speedup": total_s_full / total_s_sprite,
         "full_sampled": len(full_idx) < cfg.frames, "full_sample_frames": len(full_idx),
         "quality_stride": stride, "quality_frames": len(quality_rows),
-        **quality_summary(quality_rows),
+        **quality_summary(quality_rows),  # the harness's keys: rmse_mean, rmse_lod_mean ...
         "per_frame": {
             "type": [r["kind"] for r in main],
             "error_px": [r["error_px"] for r in main],
@@ -323,7 +309,7 @@ def _results(cfg, scene, main, key_views, ms_full, ms_lod, full_idx, stride, tot
             "ms_sprite": [r["ms"] for r in main],
             "ms_full": [None if np.isnan(v) else float(v) for v in ms_full],
             "ms_lod": [float(v) for v in ms_lod],
-            "rmse_sprite": [r.get("rmse") for r in main],
+            "rmse": [r.get("rmse") for r in main],
             "rmse_lod": [r.get("rmse_lod") for r in main],
         },
         "keyframe_views": key_views,

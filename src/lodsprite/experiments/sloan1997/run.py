@@ -163,7 +163,7 @@ def table1(lf_dir: Path, path: CameraPath, size: tuple[int, int],
                     covered = m.output.read_rgba()[..., 3] > 0.5 / 255
                     per_cov.append(m.samples / max(1, covered.sum()))
                     per_px.append(m.samples / (w * h))
-                    ups.append(f.uploads)
+                    ups.append(f.extra["uploads"])
                     if name == "progressive":
                         part.append(m.partial)
                     got = m.output.read_rgb8()

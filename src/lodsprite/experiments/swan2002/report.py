@@ -182,17 +182,18 @@ def stability_lines(results: dict) -> list[str]:
 
 
 IMAGE_COLUMNS = [("error px mean", "error_px_mean"), ("p95", "error_px_p95"),
-                 ("max", "error_px_max"), ("RMSE", "rmse_sprite_mean"),
-                 ("SSIM", "ssim_sprite_mean")]
+                 ("max", "error_px_max"), ("RMSE", "rmse_mean"),
+                 ("SSIM", "ssim_mean")]
 
 
 def image_error_lines(results: dict, setups: list[str]) -> list[str]:
-    """The replayed image error of each set-up (:mod:`lodsprite.distributed.quality`)."""
+    """The replayed image error of each set-up (each run's untimed replay,
+    :mod:`lodsprite.distributed.quality`)."""
     rows = [s for s in setups if (results[s].get("image") or {}).get("replayed_frames")]
     if not rows:
         return []
     first = results[rows[0]]["image"]
-    lines = ["", "## Image error, replayed after the timed runs", "",
+    lines = ["", "## Image error, replayed after the timed frames", "",
              "Every frame drawn again, untimed, from the keyframe it showed: the 1999 error "
              "metric (Eq. 2, pixels) against that keyframe, and RMSE / SSIM against full "
              f"resolution on {first['quality_frames']} evenly spaced frames. The plain "

@@ -29,12 +29,14 @@ same run (:data:`SETUPS`):
 Each set-up's folder holds the client's ``frames.csv``, ``summary.json``,
 ``keyframes.json`` and the server's per-keyframe statistics; ``results.json`` gathers
 them with the prediction error of each predictor on the same path, ahead by the measured
-δt.  After the timed runs every set-up's frames are replayed untimed
-(:mod:`lodsprite.distributed.quality`): the error metric of each frame against the
-keyframe it showed and, every ``quality_stride`` frames, RMSE against full resolution
-(``image`` in each set-up's results).  ``policies`` sets each bounded set-up beside its
-paper counterpart (:data:`POLICY_PAIRS`): frame-time σ and p99, the shown error's mean,
-p99 and maximum, and the share of frames at or above ε.
+δt.  After its timed frames each run replays its frames untimed, in its own process,
+through the harness (``--ground-truth --quality-stride``, :mod:`lodsprite.distributed.
+quality`): the error metric of each frame against the keyframe it showed and, every
+``quality_stride`` frames, RMSE against full resolution (``image`` in each set-up's
+results, gathered from the run's ``frames.csv`` and ``summary.json``).  ``policies``
+sets each bounded set-up beside its paper counterpart (:data:`POLICY_PAIRS`): frame-time
+σ and p99, the shown error's mean, p99 and maximum, and the share of frames at or
+above ε.
 """
 
 from __future__ import annotations
@@ -51,13 +53,12 @@ import numpy as np
 
 from lodsprite.distributed.client import DEFAULT_MAX_ERROR
 from lodsprite.distributed.netns import RATES, SERVER_IP, available, two_hosts
-from lodsprite.distributed.quality import Replayer, inline_quality, recorded_keyframes
+from lodsprite.distributed.quality import QUALITY_KEYS, error_summary
 from lodsprite.distributed.run import local_server, lodsprite_command, pinned, server_process
 from lodsprite.errors import LodspriteError
 from lodsprite.files import write_json
 from lodsprite.paths import swan2002
 from lodsprite.progress import Progress
-from lodsprite.run import RenderConfig
 from lodsprite.sprite.predictors import PREDICTORS, prediction_error
 from lodsprite.terrain import load_terrain
 
@@ -121,17 +122,14 @@ class SwanConfig:
     def quick(cls, **kw) -> SwanConfig:
         return cls(**{"frames": 60, "size": 256, **kw})
 
-    def render_config(self) -> RenderConfig:
-        """The client's frames, as :mod:`lodsprite.distributed.quality` replays them."""
-        return RenderConfig(terrain=self.terrain, path="swan2002", frames=self.frames,
-                            size=(self.size, self.size), lod=self.lod, mode="sprite",
-                            epsilon=self.epsilon)
-
     def args(self) -> list[str]:
-        """Options shared by ``render --mode sprite`` (inline) and ``client``."""
+        """Options shared by ``render --mode sprite`` (inline) and ``client``: with a
+        quality stride, each run replays its frames untimed against full resolution."""
+        quality = (["--ground-truth", "--quality-stride", str(self.quality_stride)]
+                   if self.quality_stride else [])
         return ["--terrain", self.terrain, "--path", "swan2002", "--frames", str(self.frames),
                 "--size", f"{self.size}x{self.size}", "--lod", str(self.lod),
-                "--epsilon", str(self.epsilon)]
+                "--epsilon", str(self.epsilon), *quality]
 
     def client_args(self, bounded: bool) -> list[str]:
         """``lodsprite client`` options: shared ones, pace, adoption rule and the bound."""
@@ -208,12 +206,17 @@ def _collect(setup: str, out: Path) -> dict:
            "keyframe_rate_hz": received / (ms.sum() / 1e3),
            "sprites_per_keyframe": (len(rows) - received) / received if received else None,
            "per_frame_ms": ms.tolist(), "per_frame_type": [r["kind"] for r in rows]}
+    summary = json.loads((out / "summary.json").read_text())
+    # each frame's error metric (the inline engine's own; the client's measured untimed
+    # after its run) and, with --ground-truth, the image quality of the run's replay
+    errors = np.array([float(r["error_px"]) for r in rows])
+    res["image"] = {**error_summary(errors, summary["epsilon"]),
+                    **{k: summary[k] for k in QUALITY_KEYS if k in summary}}
     stats_file = out / "server_stats.json"
     if setup != "inline" and stats_file.exists():
         every = json.loads(stats_file.read_text())["stats"] or [{}]
         stats = {k: [v for s in every for v in s.get(k, [])] for k in every[0]
                  if isinstance(every[0][k], list)}
-        summary = json.loads((out / "summary.json").read_text())
         res["max_error"] = summary.get("max_error")
         res["rejected_keyframes"] = summary.get("rejected_keyframes")
         res["server"] = every[0]
@@ -239,18 +242,6 @@ def _prediction(cfg: SwanConfig, results: dict) -> dict:
     return {"lead_frames": lead, **{name: prediction_error(cls(), times, list(path.viewpoints),
                                                            lead)
                                     for name, cls in PREDICTORS.items()}}
-
-
-def _image_error(cfg: SwanConfig, results: dict, out_dir: Path) -> None:
-    """Replay every set-up's frames untimed and add their image error (``image``)."""
-    render_cfg = cfg.render_config()
-    ran = [s for s in SETUPS if "per_frame_ms" in results.get(s, {})]
-    if "inline" in ran:  # its own GL context, released before the replayer's is made
-        results["inline"]["image"] = inline_quality(render_cfg, cfg.quality_stride)
-    with Replayer(render_cfg, cfg.quality_stride) as replayer:
-        for name in ran:
-            if name != "inline":
-                results[name]["image"] = replayer.replay(*recorded_keyframes(out_dir / name))
 
 
 #: What :func:`policies` sets side by side: (results key, where it lies).
@@ -296,8 +287,6 @@ def reproduce_swan2002(cfg: SwanConfig, out_dir: Path,
         if progress:
             progress(i + 1, len(setups) + 1)
     results["prediction"] = _prediction(cfg, results)
-    if cfg.quality_stride:
-        _image_error(cfg, results, out_dir)
     results["policies"] = policies(results)
     if progress:
         progress(len(setups) + 1, len(setups) + 1)
