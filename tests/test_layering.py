@@ -349,3 +349,11 @@ def test_the_import_graph_sees_string_imports(tmp_path):
         ["lodsprite.a", "lodsprite.b"]]
     (hidden,) = [e for e in edges if e.string]
     assert (hidden.source, hidden.target, hidden.lazy) == ("lodsprite.b", "lodsprite.a", True)
+
+
+def test_the_distributed_layer_imports_no_batch_module():
+    """The distributed layer starts from what a run renders (:mod:`lodsprite.runconfig`),
+    never from the batch driver (:mod:`lodsprite.run`), which the command line and the
+    experiments drive."""
+    bad = [e for e in runtime_edges("distributed") if e.target == "lodsprite.run"]
+    assert describe(bad) == []

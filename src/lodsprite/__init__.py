@@ -36,7 +36,7 @@ _LAZY = {
     "write_image": "lodsprite.api", "Projection": "lodsprite.camera",
     "Viewpoint": "lodsprite.camera", "look_at": "lodsprite.camera",
     "CameraPath": "lodsprite.paths", "get_path": "lodsprite.paths",
-    "load_path_json": "lodsprite.paths", "RenderConfig": "lodsprite.run",
+    "load_path_json": "lodsprite.paths", "RenderConfig": "lodsprite.runconfig",
     "render_path": "lodsprite.run", "Scene": "lodsprite.scene",
     "load_scene": "lodsprite.scene", "SpriteFrame": "lodsprite.sprite.engine",
     "FrameInfo": "lodsprite.techniques", "Param": "lodsprite.techniques",
@@ -52,7 +52,8 @@ if TYPE_CHECKING:
     from lodsprite.camera import Projection, Viewpoint, look_at
     from lodsprite.harness import run_path
     from lodsprite.paths import CameraPath, get_path, load_path_json
-    from lodsprite.run import RenderConfig, render_path
+    from lodsprite.run import render_path
+    from lodsprite.runconfig import RenderConfig
     from lodsprite.scene import Scene, load_scene, open_scene
     from lodsprite.sprite.engine import SpriteFrame
     from lodsprite.technique import terrain_techniques

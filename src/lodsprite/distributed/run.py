@@ -32,7 +32,7 @@ from lodsprite.distributed.render import scene_args
 from lodsprite.errors import InputError, LodspriteError
 from lodsprite.files import write_json
 from lodsprite.progress import Progress
-from lodsprite.run import RenderConfig, field_of_view, prepare
+from lodsprite.runconfig import RenderConfig, field_of_view, prepare
 from lodsprite.scene.spec import SceneSpec
 
 MAX_ERROR_OFF = ("off", "none")
