@@ -18,6 +18,7 @@ from lodsprite.distributed.technique import DistributedTechnique
 from lodsprite.errors import InputError
 from lodsprite.harness import run_path
 from lodsprite.run import RenderConfig, prepare
+from lodsprite.scene.spec import SceneSpec
 
 CFG = RenderConfig(terrain="fractal:64:2", size=(64, 64), lod=16, frames=12, path="chen1999",
                    mode="sprite")
@@ -27,7 +28,7 @@ def _technique(cfg: RenderConfig) -> tuple[DistributedTechnique, object, object]
     """A client of a server that never answers (it draws from its own keyframes), as the
     batch runs make it; (technique, scene, path)."""
     scene, path = prepare(cfg, light=False)
-    args = scene_args(cfg.terrain, cfg.texture, None, cfg.exaggeration, cfg.size)
+    args = scene_args(SceneSpec(cfg.terrain, cfg.texture, None, cfg.exaggeration), cfg.size)
     client = LodClient(scene, args, ["127.0.0.1:9"], cfg.size, cfg.lod, epsilon=cfg.epsilon,
                        max_error=None)
     technique = DistributedTechnique.on_client(client, ["127.0.0.1:9"])
@@ -36,7 +37,7 @@ def _technique(cfg: RenderConfig) -> tuple[DistributedTechnique, object, object]
 
 
 def _reference(technique: DistributedTechnique):
-    terrain = technique.client.paths.renderer
+    terrain = technique.client.terrain_gl.renderer
 
     def full(viewpoint):
         terrain.render(viewpoint, None)
@@ -76,7 +77,7 @@ def test_the_harness_replays_the_clients_frames_as_it_drew_them():
         for i in (11, 0, 5):  # out of order: the keyframe is rendered again when needed
             again = technique.replay(path.viewpoints[i], decisions[i])
             assert np.abs(again.astype(int) - drawn[i].astype(int)).max() <= 2
-        result = run_path(technique, path, finish=client.paths.ctx.finish,
+        result = run_path(technique, path, finish=client.terrain_gl.ctx.finish,
                           ground_truth=True, reference=reference, quality_stride=3)
     finally:
         client.close()
@@ -166,7 +167,7 @@ def test_the_replayed_error_is_eq2_as_computed_independently_and_flags_a_far_key
         client.shown.append({"slot": 0, "seq": 0, "t0": 0.0, "local": True,
                              "viewpoint": views[0].to_dict()})
         errors = technique.replayed_errors(views, [{"keyframe": 0}] * len(views))
-        renderer = client.paths.renderer
+        renderer = client.terrain_gl.renderer
         for frame in (1, 3, 11):
             vp = views[frame]
             want = _brute_force_error_px(scene.hf, flat.lod, Viewpoint.from_dict(
