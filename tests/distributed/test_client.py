@@ -315,16 +315,18 @@ def test_viewpoint_messages_name_the_shown_keyframe_for_the_servers_pacing(fake)
     views = fake.views
 
     def next_header(vp) -> dict:
-        """The newest viewpoint message after drawing ``vp`` (PUB drops messages until
-        the subscription has joined, so draw until one comes)."""
-        while views.poll(0):
-            views.recv_multipart()
-        for _ in range(100):
+        """The viewpoint message of a frame drawing ``vp`` (PUB drops messages until the
+        subscription has joined, so draw until one comes); older messages still on
+        their way are skipped by their time stamp (the client's clock, this process's),
+        not taken for this frame's."""
+        deadline = time.perf_counter() + 10.0
+        while time.perf_counter() < deadline:
+            start = time.perf_counter()
             client.frame(vp)
-            if views.poll(100):
-                while views.poll(0):
-                    header, _ = decode(views.recv_multipart())
-                return header
+            while views.poll(100):
+                header, _ = decode(views.recv_multipart())
+                if header["t"] >= start:
+                    return header
         raise AssertionError("no viewpoint message reached the server")
 
     try:
@@ -438,7 +440,7 @@ def test_the_bounded_client_renders_its_own_keyframe_when_the_shown_one_is_too_f
     try:
         fake.send(1, near)
         _until(client, near, "keyframe")
-        r = client.paths.renderer
+        r = client.terrain_gl.renderer
         # the server keyframe is out of bounds at `far`, as the metric measures it
         assert keyframe_error_px(client.metric, client.metric.reproject(near.o), far,
                                  r.projection(far), r.target.height) >= 1.0
@@ -597,7 +599,7 @@ vps = get_path("chen1999", r.scene.hf, 200).viewpoints
 i = 0
 while True:
     r.render(vps[i % len(vps)])
-    r.paths.ctx.finish()
+    r.terrain_gl.ctx.finish()
     print(i, flush=True)
     i += 1
 """
