@@ -206,7 +206,8 @@ def same(a: Value, b: Value) -> bool:
         return a == b
     if math.isnan(a) or math.isnan(b):
         return math.isnan(a) and math.isnan(b)
-    return math.isclose(a, b, rel_tol=1e-6, abs_tol=1e-9)
+    # a figure written rounded to six digits (a CSV column) equals its full value
+    return f"{a:.6g}" == f"{b:.6g}" or math.isclose(a, b, rel_tol=1e-6, abs_tol=1e-9)
 
 
 def show(v: Value) -> str:
@@ -235,9 +236,14 @@ def differences(before: dict, after: dict) -> tuple[list, list, list]:
     return equal, differing, new
 
 
-def compare(before_file: Path, after_file: Path) -> int:
-    """Print which figures are equal to the digit and which differ; 1 on a difference."""
+def compare(before_file: Path, after_file: Path, renames: list[str] = ()) -> int:
+    """Print which figures are equal to the digit and which differ; 1 on a difference.
+    ``renames``: ``OLD:NEW`` parts of figure names the code renamed between the two
+    (e.g. ``rmse_sprite:rmse``), applied to BEFORE's names."""
     before = json.loads(before_file.read_text())["figures"]
+    for old, _, new in (r.partition(":") for r in renames):
+        before = {run: {fig.replace(old, new): v for fig, v in figs.items()}
+                  for run, figs in before.items()}
     after = json.loads(after_file.read_text())["figures"]
     equal, differing, new = differences(before, after)
     for name in sorted(set(before) | set(after)):
@@ -276,9 +282,11 @@ def main() -> None:
                     help="read the outputs already in OUT/runs; run nothing")
     ap.add_argument("--compare", nargs=2, type=Path, metavar=("BEFORE", "AFTER"))
     ap.add_argument("--quiet", action="store_true", help="no table")
+    ap.add_argument("--rename", action="append", default=[], metavar="OLD:NEW",
+                    help="with --compare: a part of BEFORE's figure names the code renamed")
     args = ap.parse_args()
     if args.compare:
-        sys.exit(compare(*args.compare))
+        sys.exit(compare(*args.compare, args.rename))
     args.out.mkdir(parents=True, exist_ok=True)
     if args.from_runs:  # the times of the run that wrote them, where it saved them
         saved = args.out / "seconds.json"
