@@ -61,7 +61,7 @@ def node_loads(lf_dir: Path, seconds: float, draws: bool) -> dict:
             pump()
             if draws:
                 renderer.render(path.viewpoints[frames % len(path.viewpoints)])
-                renderer.paths.ctx.finish()
+                renderer.terrain_gl.ctx.finish()
             else:
                 time.sleep(0.005)
             frames += 1
@@ -105,7 +105,7 @@ def tile_loads(store_dir: Path, seconds: float, draws: bool) -> dict:
             pump()
             if draws:
                 renderer.render(path.viewpoints[frames % len(path.viewpoints)])
-                renderer.paths.ctx.finish()
+                renderer.terrain_gl.ctx.finish()
             else:
                 time.sleep(0.005)
             frames += 1

@@ -24,8 +24,8 @@ import time
 import numpy as np
 
 from lodsprite.camera import look_at
-from lodsprite.gl.paths import PathRenderer
 from lodsprite.gl.sprite import SpriteRenderer
+from lodsprite.gl.terrain_gl import TerrainGL
 from lodsprite.metrics import rmse
 from lodsprite.run import RenderConfig, prepare
 from lodsprite.sprite.engine import LodSpriteEngine
@@ -38,7 +38,7 @@ BINS = ((1.0, 1.5), (1.5, 2.0), (2.0, 3.01))
 ELEVATIONS = (10.0, 35.0, 70.0)
 
 
-def fly_away(pr: PathRenderer, sprite: SpriteRenderer, elevation_deg: float) -> np.ndarray:
+def fly_away(pr: TerrainGL, sprite: SpriteRenderer, elevation_deg: float) -> np.ndarray:
     """RMSE ``(len(SCALES),)`` of spriteframes from eyes SCALES times as far as the
     keyframe's from the terrain's centre."""
     hf = pr.geometry.hf
@@ -56,7 +56,7 @@ def fly_away(pr: PathRenderer, sprite: SpriteRenderer, elevation_deg: float) -> 
     return np.array(errors)
 
 
-def chen1999_run(pr: PathRenderer, path, sprite: SpriteRenderer) -> dict:
+def chen1999_run(pr: TerrainGL, path, sprite: SpriteRenderer) -> dict:
     vp0 = path.viewpoints[0]
     sprite.render_keyframe(vp0, 0.0)  # warm-up (shader compilation), untimed
     sprite.render_spriteframe(vp0)
@@ -79,7 +79,7 @@ def chen1999_run(pr: PathRenderer, path, sprite: SpriteRenderer) -> dict:
             "rmse": float(np.mean(errors))}
 
 
-def mipmap_ms(pr: PathRenderer, sprite: SpriteRenderer, vp, reps: int = 50) -> float:
+def mipmap_ms(pr: TerrainGL, sprite: SpriteRenderer, vp, reps: int = 50) -> float:
     sprite.render_keyframe(vp, 0.0)
     tex = sprite.keyframe.color
     times = []
@@ -103,7 +103,7 @@ def main() -> None:
                                        frames=args.frames, mode="sprite",
                                        size=(args.size, args.size)))
     rows = {}
-    with PathRenderer(scene, (args.size, args.size)) as pr:
+    with TerrainGL(scene, (args.size, args.size)) as pr:
         info = pr.ctx.info
         for name, mipmaps in CASES:
             sprite = SpriteRenderer(pr.renderer, LOD, mipmaps=mipmaps)

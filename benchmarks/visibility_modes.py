@@ -13,8 +13,8 @@ import argparse
 
 import numpy as np
 
-from lodsprite.gl.paths import PathRenderer
 from lodsprite.gl.sprite import SpriteRenderer
+from lodsprite.gl.terrain_gl import TerrainGL
 from lodsprite.metrics import rmse
 from lodsprite.run import RenderConfig, prepare
 from lodsprite.sprite.engine import LodSpriteEngine
@@ -27,7 +27,7 @@ CASES = [  # visibility, keyframes ahead, border ribbons, guard band (px)
 ]
 
 
-def run(pr: PathRenderer, path, visibility: str, predict: bool, border: bool,
+def run(pr: TerrainGL, path, visibility: str, predict: bool, border: bool,
         guard: int) -> dict:
     sprite = SpriteRenderer(pr.renderer, 16, visibility, border=border, guard_px=guard)
     try:
@@ -66,7 +66,7 @@ def main() -> None:
     print(f"{'visibility':10s} {'ahead':>5s} {'border':>6s} {'guard':>5s} {'keyframes':>9s} "
           f"{'sprite ms':>9s} {'total s':>8s} {'RMSE sprite':>11s} {'RMSE 16²':>9s} "
           f"{'ratio':>6s}")
-    with PathRenderer(scene, (512, 512)) as pr:
+    with TerrainGL(scene, (512, 512)) as pr:
         for visibility, predict, border, guard in CASES:
             r = run(pr, path, visibility, predict, border, guard)
             print(f"{visibility:10s} {predict!s:>5s} {border!s:>6s} {guard:5d} "

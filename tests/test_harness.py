@@ -250,7 +250,7 @@ def test_the_viewer_switches_from_sprite_to_sprite_adaptive_over_a_store(gl, tmp
                 core.log_frame()
             img = core.technique.read_image()
             assert (img != img[0, 0]).any(axis=2).mean() > 0.2, mode
-        assert isinstance(core.renderer.paths.geometry.full, StoreField)
+        assert isinstance(core.renderer.terrain_gl.geometry.full, StoreField)
     finally:
         core.release()
         target.release()

@@ -195,7 +195,7 @@ def test_no_core_module_pulls_dask_in_when_imported():
     (zarr, numcodecs, ...) import in turn."""
     modules = core_modules()
     for name in ("lodsprite.run", "lodsprite.sprite.engine", "lodsprite.sprite.policy",
-                 "lodsprite.gl.paths", "lodsprite.experiments.chen1999.report",
+                 "lodsprite.gl.terrain_gl", "lodsprite.experiments.chen1999.report",
                  "lodsprite.experiments.swan2002.report", "lodsprite.profiles.generate",
                  "lodsprite.cli", "lodsprite.progress"):
         assert name in modules

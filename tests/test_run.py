@@ -77,7 +77,7 @@ def test_a_renderer_releases_the_context_it_made_and_its_sprites():
 def test_a_renderer_that_fails_to_build_releases_the_context_it_made(monkeypatch):
     from lodsprite import Renderer, load_scene
     from lodsprite.errors import InputError
-    from lodsprite.gl import paths as gl_paths
+    from lodsprite.gl import terrain_gl as gl_state
     from lodsprite.gl.context import GLContext
 
     released = []
@@ -88,7 +88,7 @@ def test_a_renderer_that_fails_to_build_releases_the_context_it_made(monkeypatch
     def no_renderer(*args, **kwargs):
         raise InputError("no renderer today")
 
-    monkeypatch.setattr(gl_paths, "TerrainRenderer", no_renderer)
+    monkeypatch.setattr(gl_state, "TerrainRenderer", no_renderer)
     with pytest.raises(InputError, match="no renderer today"):
         Renderer(load_scene("fractal:64", grid=64), (32, 32))
     assert released and released[-1].mgl is None

@@ -42,8 +42,8 @@ from lodsprite.errors import InputError
 from lodsprite.files import write_png
 from lodsprite.gl.context import GLContext, GLInfo
 from lodsprite.gl.overlay import Presenter
-from lodsprite.gl.paths import PathRenderer
 from lodsprite.gl.sprite import DEFAULT_GUARD_PX, DEFAULT_VISIBILITY, SpriteRenderer
+from lodsprite.gl.terrain_gl import TerrainGL
 from lodsprite.record import Frame
 from lodsprite.scene import Scene
 from lodsprite.sprite.cache import DEFAULT_POLICY
@@ -90,31 +90,31 @@ class Renderer:
         self.size = (w, h)
         self.fov_y_deg = float(fov_y_deg)
         self.gl = GLContext() if ctx is None else GLContext.wrap(ctx)
-        self._paths = None  # the terrain layer's GL state (none without one)
+        self._terrain_gl = None  # the terrain layer's GL state (none without one)
         if scene.hf is not None:
             try:
-                self._paths = PathRenderer(scene, self.size, self.fov_y_deg, self.gl,
+                self._terrain_gl = TerrainGL(scene, self.size, self.fov_y_deg, self.gl,
                                            framebuffer)
             except BaseException:
                 self.gl.release()  # a context of our own only; a wrapped one is forgotten
                 raise
         self._presenter: Presenter | None = None
         self._sprites: list[LodSprite] = []  # released with the renderer
-        self._own_paths = True
+        self._own_terrain_gl = True
         self._own_target: RenderTarget | None = None  # a scene without terrain's image
         self._layers: Any = None  # the layered reference drawing every layer (draw())
 
     @classmethod
-    def wrap(cls, paths: PathRenderer) -> Renderer:
-        """A renderer over existing GL state ``paths`` (its scene, size and field of
+    def wrap(cls, terrain_gl: TerrainGL) -> Renderer:
+        """A renderer over existing GL state ``terrain_gl`` (its scene, size and field of
         view), which it never releases: what a caller holding a
-        :class:`~lodsprite.gl.paths.PathRenderer` passes to a technique."""
+        :class:`~lodsprite.gl.terrain_gl.TerrainGL` passes to a technique."""
         self = cls.__new__(cls)
-        r = paths.renderer
-        self.scene, self.size = paths.scene, (r.target.width, r.target.height)
+        r = terrain_gl.renderer
+        self.scene, self.size = terrain_gl.scene, (r.target.width, r.target.height)
         self.fov_y_deg = float(r.fov_y_deg)
-        self.gl, self._paths = paths.ctx, paths
-        self._presenter, self._sprites, self._own_paths = None, [], False
+        self.gl, self._terrain_gl = terrain_gl.ctx, terrain_gl
+        self._presenter, self._sprites, self._own_terrain_gl = None, [], False
         self._own_target, self._layers = None, None
         return self
 
@@ -124,21 +124,21 @@ class Renderer:
         return self.gl.info
 
     @property
-    def paths(self) -> PathRenderer:
+    def terrain_gl(self) -> TerrainGL:
         """The terrain layer's GL state (context, geometry, terrain renderer)."""
         return self._terrain()
 
-    def _terrain(self) -> PathRenderer:
-        if self._paths is None:
+    def _terrain(self) -> TerrainGL:
+        if self._terrain_gl is None:
             raise InputError("this scene has no terrain layer to draw")
-        return self._paths
+        return self._terrain_gl
 
     @property
     def target(self) -> RenderTarget:
         """The image every layer draws into: the terrain's, or (a scene without terrain)
         one of the renderer's own, with a depth buffer, made on first use."""
-        if self._paths is not None:
-            return self._paths.renderer.target
+        if self._terrain_gl is not None:
+            return self._terrain_gl.renderer.target
         if self._own_target is None:
             from lodsprite.gl.target import RenderTarget
 
@@ -164,9 +164,9 @@ class Renderer:
     def projection(self, viewpoint: Viewpoint) -> Projection:
         """The frame projection at ``viewpoint`` (near/far fitted to the terrain; without
         one, 0.1 m to 100 km)."""
-        if self._paths is None:
+        if self._terrain_gl is None:
             return Projection(self.fov_y_deg, self.size[0] / self.size[1], 0.1, 1e5)
-        return self._paths.renderer.projection(viewpoint)
+        return self._terrain_gl.renderer.projection(viewpoint)
 
     def render(self, viewpoint: Viewpoint, lod: int | None = None) -> Frame:
         """Draw the terrain at full resolution (``lod=None``) or at uniform level ``lod``
@@ -250,11 +250,11 @@ class Renderer:
         if self._presenter is not None:
             self._presenter.release()
             self._presenter = None
-        if self._paths is not None:
-            if self._own_paths:
-                self._paths.release()
-            self._paths = None
-        if self.gl is not None and self.gl.owned and self._own_paths:
+        if self._terrain_gl is not None:
+            if self._own_terrain_gl:
+                self._terrain_gl.release()
+            self._terrain_gl = None
+        if self.gl is not None and self.gl.owned and self._own_terrain_gl:
             self.gl.release()
         self.gl = None
 
@@ -278,7 +278,7 @@ class LodSprite:
                  cache_policy: str = DEFAULT_POLICY, metric: str = "warp") -> None:
         self.renderer = renderer
         self.threaded = threaded
-        self.sprite = SpriteRenderer(renderer.paths.renderer, lod, visibility, border=border,
+        self.sprite = SpriteRenderer(renderer.terrain_gl.renderer, lod, visibility, border=border,
                                      guard_px=guard_px)
         try:
             self.engine: LodSpriteEngine | ThreadedLodSpriteEngine = (

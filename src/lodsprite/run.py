@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from lodsprite.files import write_json, write_png
-from lodsprite.gl.paths import PathRenderer
+from lodsprite.gl.terrain_gl import TerrainGL
 from lodsprite.harness import RunResult, run_path, scene_reference, timing_summary, write_run
 from lodsprite.paths import CameraPath
 from lodsprite.progress import Progress
@@ -97,7 +97,7 @@ def run_technique(renderer, path: CameraPath, config: RenderConfig,
         technique.release()
 
 
-def sprite_frames(pr: PathRenderer, path: CameraPath, config: RenderConfig,
+def sprite_frames(pr: TerrainGL, path: CameraPath, config: RenderConfig,
                   progress: Progress | None = None, on_image=None,
                   keyframes: list | None = None) -> list[dict]:
     """The rows of a LOD-sprite run (``config.mode == "sprite"``) on ``pr``'s GL state

@@ -60,7 +60,7 @@ def test_full_on_a_store_draws_level_0_as_the_same_field_in_memory(store, tmp_pa
     hf = level0(store)
     path = get_path("chen1999", hf, 2)
     with Renderer(Scene(hf, np.zeros((2, 2, 3), np.uint8)), (64, 48)) as r:
-        r.paths.renderer.shading = "heights"
+        r.terrain_gl.renderer.shading = "heights"
         for i, vp in enumerate(path.viewpoints):
             r.render(vp)
             saved = read_image(tmp_path / "frames" / f"frame_{i:05d}.png")

@@ -10,7 +10,7 @@ from PIL import Image
 
 from lodsprite.camera import Projection, Viewpoint
 from lodsprite.experiments.chen1999.run import ReproduceConfig, reproduce_chen1999
-from lodsprite.gl.paths import PathRenderer
+from lodsprite.gl.terrain_gl import TerrainGL
 from lodsprite.metrics import rmse
 from lodsprite.paths import chen1999
 from lodsprite.scene import load_scene
@@ -57,7 +57,7 @@ def test_figures_show_the_keyframe_rendered_where_it_was_logged(run: tuple[dict,
     key_vp = Viewpoint.from_dict(view["viewpoint"])
     key_proj = Projection(**view["projection"])
     scene = load_scene(CFG.terrain, "terrain", CFG.grid)
-    with PathRenderer(scene, (CFG.size, CFG.size)) as pr:
+    with TerrainGL(scene, (CFG.size, CFG.size)) as pr:
         pr.renderer.render(key_vp, None, key_proj)
         at_key = pr.renderer.target.read_color()
         pr.renderer.render(chen1999(scene.hf, CFG.frames).viewpoints[view["frame"]])

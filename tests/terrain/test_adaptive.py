@@ -238,8 +238,8 @@ def test_adaptive_at_a_quarter_pixel_matches_full_resolution(gl):
         rmse = {}
         for sse in (0.25, 4.0):
             a = AdaptiveTerrain(r.gl, MemoryPyramid.from_heightfield(hf),
-                                r.paths.renderer.target, 45.0, sse,
-                                color=r.paths.geometry.color_tex)
+                                r.terrain_gl.renderer.target, 45.0, sse,
+                                color=r.terrain_gl.geometry.color_tex)
             try:
                 a.settle(vp)                     # every wanted tile streamed in
                 got = a.target.read_color().astype(float)

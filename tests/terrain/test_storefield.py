@@ -84,7 +84,7 @@ def test_an_exaggerated_store_scales_heights_bounds_and_errors(exact):
 
 
 def test_sprite_mode_with_adaptive_keys_takes_proxy_and_metric_from_level_0(tmp_path):
-    from lodsprite.run import PathRenderer, RenderConfig, field_of_view, prepare, sprite_frames
+    from lodsprite.run import RenderConfig, TerrainGL, field_of_view, prepare, sprite_frames
     from lodsprite.terrain.storefield import StoreField
 
     build_store("fractal:513:6", tmp_path / "s.zarr", tile=256, chunk=64)
@@ -92,7 +92,7 @@ def test_sprite_mode_with_adaptive_keys_takes_proxy_and_metric_from_level_0(tmp_
     cfg = RenderConfig(terrain=str(tmp_path / "s.zarr"), mode="sprite", key_sse=0.5, frames=6,
                        size=(64, 64), lod=16, grid=64)
     scene, path = prepare(cfg)
-    with PathRenderer(scene, cfg.size, field_of_view(cfg, path)) as pr:
+    with TerrainGL(scene, cfg.size, field_of_view(cfg, path)) as pr:
         rows = sprite_frames(pr, path, cfg)
         full = pr.geometry.full
         used = pr.geometry.proxy(16, True)[2]

@@ -86,8 +86,8 @@ from lodsprite.distributed.protocol import (
 )
 from lodsprite.errors import InputError
 from lodsprite.gl.context import GLContext
-from lodsprite.gl.paths import PathRenderer
 from lodsprite.gl.sprite import SpriteRenderer
+from lodsprite.gl.terrain_gl import TerrainGL
 from lodsprite.record import Frame
 from lodsprite.scene import Scene
 from lodsprite.sprite.metric import ErrorMetric
@@ -160,8 +160,8 @@ class LodClient:
         self._own = False  # whether the shown keyframe is the client's own
         self.scene_args = {**scene_args, "lod": lod, "visibility": visibility,
                            "border": border, "epsilon": float(epsilon), "pace": pace}
-        self.paths = PathRenderer(scene, size, float(scene_args.get("fov_y_deg", 45.0)), ctx)
-        self.sprite = SpriteRenderer(self.paths.renderer, lod, visibility, border=border,
+        self.terrain_gl = TerrainGL(scene, size, float(scene_args.get("fov_y_deg", 45.0)), ctx)
+        self.sprite = SpriteRenderer(self.terrain_gl.renderer, lod, visibility, border=border,
                                      guard_px=0)
         self.metric = ErrorMetric.for_level(scene.hf, lod)
         # the newest keyframe received and not yet considered: (slot, keyframe, None)
@@ -275,7 +275,7 @@ class LodClient:
             header["shown"] = {"eye": last["viewpoint"]["o"], "slot": last["slot"]}
         for s in self._servers:
             s.send_viewpoint(header)  # adds the link's client id
-        projection = self.paths.renderer.projection(viewpoint)
+        projection = self.terrain_gl.renderer.projection(viewpoint)
         self.pump()
         kind = "local_sprite" if self._own else "sprite"
         triangles = 0
@@ -301,7 +301,7 @@ class LodClient:
             self.shown.append({"slot": self.shown[-1]["slot"] if self.shown else 0, "seq": 0,
                                "t0": t0, "viewpoint": viewpoint.to_dict(), "local": True})
         triangles += self.sprite.render_spriteframe(viewpoint, projection).triangles
-        self.paths.ctx.finish()
+        self.terrain_gl.ctx.finish()
         self._say_link_state()
         seq = self._current.seq if self._current is not None and not self._own else 0
         return Frame(kind, (time.perf_counter() - t0) * 1e3, triangles,
@@ -317,7 +317,7 @@ class LodClient:
         shown or its ``C'`` is unknown."""
         if self._c_prime is None:
             return float("nan")
-        return self._error(self._c_prime, viewpoint, self.paths.renderer.projection(viewpoint))
+        return self._error(self._c_prime, viewpoint, self.terrain_gl.renderer.projection(viewpoint))
 
     @property
     def links_alive(self) -> list[bool | None]:
@@ -388,4 +388,4 @@ class LodClient:
             s.close()
         self._zmq.destroy(linger=0)  # closes any socket still open, then ends the context
         self.sprite.release()
-        self.paths.release()
+        self.terrain_gl.release()

@@ -13,8 +13,8 @@ from lodsprite.camera import Viewpoint
 from lodsprite.distributed.pacing import KeyframePacer
 from lodsprite.distributed.protocol import Keyframe, LoadArgs, check_load_args
 from lodsprite.gl.context import GLContext
-from lodsprite.gl.paths import PathRenderer
 from lodsprite.gl.target import RenderTarget
+from lodsprite.gl.terrain_gl import TerrainGL
 from lodsprite.scene.spec import SceneSpec, open_spec
 from lodsprite.terrain.heightfield import DEFAULT_GRID
 
@@ -113,33 +113,33 @@ class KeyframeRenderer:
         args = check_load_args(args)
         scene = open_spec(args)  # the load's scene description (a SceneSpec)
         size = tuple(args.size)
-        self.paths = PathRenderer(scene, size, args.fov_y_deg, ctx)
-        self.paths.renderer.unlocked_draws = True  # the threads beside it run meanwhile
+        self.terrain_gl = TerrainGL(scene, size, args.fov_y_deg, ctx)
+        self.terrain_gl.renderer.unlocked_draws = True  # the threads beside it run meanwhile
         try:
             self.lod = args.lod
             self.border = args.border
             self.coarse_z = args.visibility == "coarse"
-            self.coarse = (RenderTarget(self.paths.ctx, *size, color=False) if self.coarse_z
+            self.coarse = (RenderTarget(self.terrain_gl.ctx, *size, color=False) if self.coarse_z
                            else None)
             self.pacer = KeyframePacer(scene.hf, self.lod, args.epsilon, size[1], args.pace)
         except BaseException:
-            self.paths.release()
+            self.terrain_gl.release()
             raise
 
     def projection(self, viewpoint: Viewpoint):
-        return self.paths.renderer.projection(viewpoint)
+        return self.terrain_gl.renderer.projection(viewpoint)
 
     def render(self, viewpoint: Viewpoint, seq: int, t0: float) -> Keyframe:
         """The keyframe of ``viewpoint``: colour ``(h, w, 3) uint8`` and the z-buffer its
         visibility rule reads ``(h, w) float32``, rows bottom-up."""
-        r = self.paths.renderer
+        r = self.terrain_gl.renderer
         projection = r.projection(viewpoint)
         r.render(viewpoint, None, projection)
         if self.coarse is not None:
             r.render_proxy(viewpoint, self.lod, self.border, projection, self.coarse)
         # Wait for the draws without the GIL: a readback through moderngl would wait
         # for them holding it.
-        self.paths.ctx.finish_unlocked()
+        self.terrain_gl.ctx.finish_unlocked()
         color = r.target.read_color(copy=False)
         if self.coarse is not None:
             depth, zbuffer = self.coarse.read_depth(copy=False), "coarse"
@@ -151,4 +151,4 @@ class KeyframeRenderer:
     def release(self) -> None:
         if self.coarse is not None:
             self.coarse.release()
-        self.paths.release()
+        self.terrain_gl.release()

@@ -1,4 +1,5 @@
-"""GL state for rendering one scene along camera paths: context, geometry, renderer."""
+"""One scene's terrain GL state (:class:`TerrainGL`): context, geometry and terrain
+renderer, made once and released once; what the terrain techniques draw with."""
 
 from __future__ import annotations
 
@@ -15,7 +16,7 @@ if TYPE_CHECKING:  # a scene is passed in: gl/ imports no scene code
     from lodsprite.scene import Scene
 
 
-class PathRenderer:
+class TerrainGL:
     """GL state for one scene: context, geometry and renderer, created once, released once."""
 
     def __init__(self, scene: Scene, size: tuple[int, int], fov_y_deg: float = 45.0,
@@ -51,7 +52,7 @@ class PathRenderer:
         if self.own_ctx:
             self.ctx.release()
 
-    def __enter__(self) -> PathRenderer:
+    def __enter__(self) -> TerrainGL:
         return self
 
     def __exit__(self, *exc: object) -> None:

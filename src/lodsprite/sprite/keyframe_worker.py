@@ -212,16 +212,16 @@ class _WorkerGL:
     """The worker's GL state: its own context, terrain and keyframe renderer."""
 
     def __init__(self, scene: Scene, s: WorkerSettings) -> None:
-        from lodsprite.gl.paths import PathRenderer
         from lodsprite.gl.sprite import SpriteRenderer
+        from lodsprite.gl.terrain_gl import TerrainGL
 
-        self.paths = PathRenderer(scene, s.size, s.fov_y_deg)
-        self.paths.renderer.unlocked_draws = True  # the drawing thread runs meanwhile
+        self.terrain_gl = TerrainGL(scene, s.size, s.fov_y_deg)
+        self.terrain_gl.renderer.unlocked_draws = True  # the drawing thread runs meanwhile
         try:
-            self.sprite = SpriteRenderer(self.paths.renderer, s.lod, s.visibility,
+            self.sprite = SpriteRenderer(self.terrain_gl.renderer, s.lod, s.visibility,
                                          border=s.border, guard_px=s.guard_px)
         except BaseException:
-            self.paths.release()
+            self.terrain_gl.release()
             raise
         self.metric = ErrorMetric.for_level(scene.hf, s.lod, s.resampling)
         self.zbuffer = "coarse" if s.visibility == "coarse" else "full"
@@ -229,9 +229,9 @@ class _WorkerGL:
     def render(self, target: tuple[Viewpoint, bool], asked: float) -> KeyframeImage:
         vp, predicted = target
         t0 = time.perf_counter()
-        frame_projection = self.paths.renderer.projection(vp)
+        frame_projection = self.terrain_gl.renderer.projection(vp)
         self.sprite.render_keyframe(vp, t0, frame_projection)
-        self.paths.ctx.finish_unlocked()  # the drawing thread runs meanwhile
+        self.terrain_gl.ctx.finish_unlocked()  # the drawing thread runs meanwhile
         key = self.sprite.keyframe
         color = key.target.read_color()
         depth = (key.coarse if self.zbuffer == "coarse" else key.target).read_depth()
@@ -242,7 +242,7 @@ class _WorkerGL:
 
     def release(self) -> None:
         self.sprite.release()
-        self.paths.release()
+        self.terrain_gl.release()
 
 
 def _lower_priority(nice: int) -> None:

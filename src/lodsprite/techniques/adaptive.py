@@ -54,7 +54,7 @@ def make_adaptive(renderer: Renderer, sse: float, gpu_mb: float, host_mb: float,
 
     if int(grid) != grid or int(grid) not in GRIDS:
         raise InputError(f"grid must be one of {', '.join(map(str, GRIDS))} quads, got {grid}")
-    pr = renderer.paths
+    pr = renderer.terrain_gl
     heights = resolve_shading(renderer.scene, shading) == "heights"
     return AdaptiveTerrain(pr.ctx, scene_pyramid(renderer.scene), pr.renderer.target,
                            renderer.fov_y_deg, sse, grid=int(grid), gpu_mb=gpu_mb,
@@ -217,7 +217,7 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
         try:
             if isinstance(self.adaptive.tree.p, TerrainStore):
                 field = store_field(self.adaptive.tree.p)
-                renderer.paths.geometry.set_full(field)
+                renderer.terrain_gl.geometry.set_full(field)
             # the proxy, ribbons and the metric's coarse triangles from the store's coarse
             # level held whole (no level-0 chunk at setup), then level 0 without blocking
             with nullcontext() if field is None else field.heights.from_coarse():
@@ -299,11 +299,11 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
         self.sprite.sprite.set_proxy(source)
         policy = self.sprite.engine.policy
         points = None if self.surface is None else self.surface.points
-        policy.metric = ProxyMetric(source.nodes, renderer.paths.geometry.full, policy.metric,
+        policy.metric = ProxyMetric(source.nodes, renderer.terrain_gl.geometry.full, policy.metric,
                                     points=points)
         if self.tiled is not None:  # tiles: the proxy frozen per update, its metric per tile
             self.tiled.tiled.use_proxy()
-            self.tiled.metric = ProxyMetric(source.nodes, renderer.paths.geometry.full,
+            self.tiled.metric = ProxyMetric(source.nodes, renderer.terrain_gl.geometry.full,
                                             self.tiled.metric, points=points)
         return source
 

@@ -45,7 +45,7 @@ def set_shading(renderer: Renderer, shading: str) -> str:
     """Colour ``renderer``'s terrain frames (full, levels, keyframes, LOD-sprite's
     fallback) by ``shading`` resolved for its scene; returns the resolved one."""
     resolved = resolve_shading(renderer.scene, shading)
-    renderer.paths.renderer.shading = resolved
+    renderer.terrain_gl.renderer.shading = resolved
     return resolved
 
 
@@ -159,7 +159,7 @@ class SpriteTechnique(Technique):
             DEFAULT_GUARD_PX if guard_px is None else guard_px, border, tiles,
             tile_budget_ms, cache_mb, cache_policy, metric)
         self.sprite: LodSprite = self.engine.sprite
-        self.heights = level0_reader(renderer.paths.geometry, lod, border)
+        self.heights = level0_reader(renderer.terrain_gl.geometry, lod, border)
 
     @property
     def keyframe_log(self) -> list:
@@ -203,7 +203,7 @@ class SpriteTechnique(Technique):
                       truth: np.ndarray) -> dict[str, float]:
         """The plain coarse level and the coarse level with LOD-sprite's border ribbons
         against the same reference (:func:`coarse_baseline`)."""
-        return coarse_baseline(self.renderer.paths.renderer, viewpoint, self.sprite.lod, truth)
+        return coarse_baseline(self.renderer.terrain_gl.renderer, viewpoint, self.sprite.lod, truth)
 
     def summary(self, frames: list[Frame]) -> dict[str, Any]:
         """Keyframe count and fraction, the engine's work (tiles rendered), mean time per

@@ -282,7 +282,7 @@ class ViewerCore:
         view_proj = self.renderer.projection(vp).matrix() @ vp.view_matrix()
         level = self.technique.coarse_level()
         if self.toggles["wireframe"] and level is not None:
-            self._lines.wireframe(self.renderer.paths.geometry, level, view_proj,
+            self._lines.wireframe(self.renderer.terrain_gl.geometry, level, view_proj,
                                   WIREFRAME_RGBA)
         key = self.technique.key_view()
         if self.toggles["frustum"] and key is not None:

@@ -24,8 +24,8 @@ import numpy as np
 
 from lodsprite.errors import InputError
 from lodsprite.files import write_json, write_png
-from lodsprite.gl.paths import PathRenderer
 from lodsprite.gl.sprite import DEFAULT_GUARD_PX, DEFAULT_VISIBILITY, SpriteRenderer
+from lodsprite.gl.terrain_gl import TerrainGL
 from lodsprite.harness import quality_summary
 from lodsprite.metrics import difference_image
 from lodsprite.paths import chen1999
@@ -109,7 +109,7 @@ def _sample_indices(frames: int, sample: int) -> np.ndarray:
     return np.unique(np.linspace(0, frames - 1, min(sample, frames)).round().astype(int))
 
 
-def _timed_level(pr: PathRenderer, path, level: int | None, indices, work: _Work) -> np.ndarray:
+def _timed_level(pr: TerrainGL, path, level: int | None, indices, work: _Work) -> np.ndarray:
     """Per-frame ms at ``level`` (None = full) for ``indices``, through the harness (the
     ``full`` or ``lod`` technique along those viewpoints); NaN elsewhere."""
     from lodsprite.api import Renderer
@@ -130,7 +130,7 @@ def _timed_level(pr: PathRenderer, path, level: int | None, indices, work: _Work
     return ms
 
 
-def _sweep(pr: PathRenderer, scene: Scene, cfg: ReproduceConfig, work: _Work,
+def _sweep(pr: TerrainGL, scene: Scene, cfg: ReproduceConfig, work: _Work,
            total_s_full: float, main: list[dict]) -> dict:
     """Figures 10-12: keyframe fraction vs frames and vs ε; speedup vs ε (Figs 11-12
     only when ``cfg.fig11_epsilon`` has points).  Fig. 10's point at ``cfg.frames`` is
@@ -192,7 +192,7 @@ def _pick_frame(rows: list[dict]) -> int:
 
 
 
-def _figure_images(pr: PathRenderer, scene: Scene, cfg: ReproduceConfig, path, frame: int,
+def _figure_images(pr: TerrainGL, scene: Scene, cfg: ReproduceConfig, path, frame: int,
                    key: int, key_view: KeyChoice, key_frame: int, out_dir: Path) -> dict:
     """Figures 13 (checker texture) and 14 (terrain texture): full, coarse, LOD-sprite, and
     the keyframe LOD-sprite drew from (keyframe ``key``, rendered at frame ``key_frame``
@@ -253,7 +253,7 @@ def reproduce_chen1999(cfg: ReproduceConfig, out_dir: Path,
                     + cfg.frames * len(cfg.fig11_epsilon) if cfg.sweeps else 0)
     work = _Work(len(full_idx) + 3 * cfg.frames + sweep_frames, progress)
     out_dir = Path(out_dir)
-    with PathRenderer(scene, (cfg.size, cfg.size)) as pr:
+    with TerrainGL(scene, (cfg.size, cfg.size)) as pr:
         ms_full = _timed_level(pr, path, None, full_idx, work)
         ms_lod = _timed_level(pr, path, cfg.lod, np.arange(cfg.frames), work)
         total_s_full = float(np.nanmean(ms_full)) * cfg.frames / 1e3
