@@ -2,8 +2,8 @@
 
 One module per command group: :mod:`.render` (info, render, view), :mod:`.lumigraph`,
 :mod:`.terrain` (tile), :mod:`.crowd`, :mod:`.scene` (scene check), :mod:`.profile`,
-:mod:`.reproduce` (reproduce, demo), :mod:`.distributed` (serve, keys, client), :mod:`.worker`
-(render-worker); :mod:`.common` holds what they share.
+:mod:`.reproduce` (reproduce, demo), :mod:`.distributed` (serve, keys, client),
+:mod:`.render_worker` (render-worker); :mod:`.common` holds what they share.
 
 User errors (bad files, bad options) print one line on stderr and exit with
 code 2; an interrupted run exits with 130.  No traceback reaches the user for
@@ -22,10 +22,10 @@ from lodsprite.cli import (
     lumigraph,
     profile,
     render,
+    render_worker,
     reproduce,
     scene,
     terrain,
-    worker,
 )
 from lodsprite.cli.common import err, one_line, out
 from lodsprite.cli.options import with_technique_options
@@ -41,7 +41,7 @@ for command in (render.info, with_technique_options(render.render, ('terrain', '
     app.command()(command)
 app.command(name="keys")(distributed.keys_command)
 app.command()(distributed.client)
-app.command(name="render-worker")(worker.render_worker)
+app.command(name="render-worker")(render_worker.render_worker)
 app.add_typer(lumigraph.lumigraph_app, name="lumigraph")
 app.add_typer(scene.scene_app, name="scene")
 
