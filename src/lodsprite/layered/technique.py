@@ -293,13 +293,10 @@ def render_scene(scene_file: str | os.PathLike, out_dir: str | os.PathLike,
 
     if target_fps is not None and not target_fps > 0:
         raise InputError(f"--target-fps must be > 0, got {target_fps}")
-    from lodsprite.scene.file import read_scene_file
-
-    scene = load_scene_file(scene_file)
+    scene = load_scene_file(scene_file)  # the file read and checked once
     view = scene.view
-    section = read_scene_file(scene_file).terrain
-    terrain_mode = terrain_mode or section.mode or "adaptive"
-    options = {**section.options, **options}
+    terrain_mode = terrain_mode or scene.terrain_mode or "adaptive"
+    options = {**scene.terrain_options, **options}
     size = size or view.size_px() or DEFAULT_SIZE
     target_fps = target_fps if target_fps is not None else view.target_fps
     cam = with_view_fov(scene.path(path or view.path, frames), scene)

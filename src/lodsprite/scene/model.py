@@ -87,8 +87,10 @@ class Scene:
     (None: the terrain's default); ``paths``: ``(name, frames) -> CameraPath`` for the
     scene's own path names (None: the terrain's :func:`~lodsprite.paths.get_path`);
     ``view``: a scene file's ``[view]`` section (its default path, size, fov and frame-rate
-    target; None: not a scene file's); ``mode``: the technique to start with; ``source``:
-    the scene file or folder it was opened from.
+    target; None: not a scene file's); ``terrain_mode``/``terrain_options``: a scene
+    file's ``[terrain] mode`` and ``[terrain.options]``, checked against the technique's
+    declarations (None and empty: not given); ``mode``: the technique to start with;
+    ``source``: the scene file or folder it was opened from.
     """
 
     hf: HeightField | None = None
@@ -100,6 +102,8 @@ class Scene:
     home: CameraHome | None = None
     paths: Callable[[str, int | None], CameraPath] | None = field(default=None, repr=False)
     view: ViewSection | None = None
+    terrain_mode: str | None = None
+    terrain_options: dict[str, Any] = field(default_factory=dict)
     mode: str = "sprite"
     label: str = ""
     source: Path | None = None

@@ -189,7 +189,8 @@ def load_scene_file(path: str | os.PathLike, **scene_options: Any) -> Scene:
     _check_path(scene, sf, label)
     types, instances = _place(sf, label, lo, hi, anchors)
     return replace(scene, objects=World(types, instances, scene.hf),
-                   lightfields=tuple(lights), view=sf.view, mode="scene", label=label,
+                   lightfields=tuple(lights), view=sf.view, terrain_mode=t.mode,
+                   terrain_options=dict(t.options), mode="scene", label=label,
                    source=Path(path))
 
 
