@@ -202,11 +202,12 @@ class ViewerCore:
         the frame's ``ms``, as in the harness; presenting, overlays and HUD are timed
         apart (:data:`WINDOW_COLUMNS`)."""
         self._start = time.perf_counter()
-        vp = self.viewpoint(dt_s)
+        vp = self.viewpoint(dt_s)  # the camera's move: the window's time, not the frame's
+        t0 = time.perf_counter()
         f = self.technique.frame(vp)
         self.ctx.finish()
         done = time.perf_counter()
-        self._last = replace(f, ms=(done - self._start) * 1e3)
+        self._last = replace(f, ms=(done - t0) * 1e3)
         self._shot, self._shot_ms = None, 0.0
         if self._shot_due():  # read before overlays and HUD; its time is not the frame's
             self._shot = self.technique.read_image()
