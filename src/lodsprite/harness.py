@@ -70,6 +70,8 @@ class RunResult:
     columns: list[str]
     summary: dict[str, Any] = field(default_factory=dict)
     interrupted: bool = False  # stopped by Ctrl-C: the frames finished so far
+    #: Replayed images a caller asked to keep, by frame (:class:`lodsprite.run.Measure`).
+    images: dict[int, np.ndarray] = field(default_factory=dict)
 
 
 def full_resolution(renderer) -> Reference:

@@ -1,28 +1,30 @@
-"""Rendering a camera path with timings: the engine behind ``lodsprite render``.
+"""The one batch driver: any technique of the registry on any scene along a camera path,
+timed, measured and written the same way (its core, :func:`lodsprite.driver.drive`).
 
-:func:`render_path` makes the registry's technique for the config
-(:mod:`lodsprite.techniques`: ``full``, ``lod``, ``sprite``, ``adaptive``, and
-``sprite-adaptive`` for ``--mode sprite --key-sse``) and runs it through the one harness
-(:func:`lodsprite.harness.run_path`): one untimed warm-up, per-frame time with
-``ctx.finish()`` inside the clock, nothing read back in the timed loop; saved frames,
-video and quality (``--ground-truth``, every technique) come from an untimed replay of the
-same decisions.  What a run renders (:class:`RenderConfig`, :func:`prepare`) is in
-:mod:`lodsprite.runconfig`.  The distributed mode is not core: the command line hands it to
-:func:`lodsprite.distributed.run.render_distributed` (this module never imports
-:mod:`lodsprite.distributed`).
+* :func:`run_scene` makes the registry's technique on a :class:`~lodsprite.api.Renderer`
+  over a :class:`~lodsprite.scene.Scene` (any layers) and drives it.
+* :func:`render_path` is ``lodsprite render``: a :class:`RenderConfig` (a terrain, or any
+  scene spec in ``scene``) opened by :func:`~lodsprite.runconfig.prepare`, then
+  :func:`run_scene`.
+
+The other batch commands are shortcuts onto it: ``render --scene FILE`` (the ``scene``
+technique, :func:`lodsprite.layered.technique.render_scene`), ``crowd``
+(:func:`lodsprite.manager.run.run_crowd`), ``lumigraph render``
+(:func:`lodsprite.lumigraph.run.render_lumigraph`) and ``client``
+(:func:`lodsprite.distributed.run.run_client`, a technique on the client's own GL
+context, through :func:`drive`).  This module never imports those packages.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from contextlib import ExitStack
+from collections.abc import Callable, Mapping
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
-import numpy as np
-
-from lodsprite.files import write_json, write_png
+from lodsprite.driver import Measure, drive
+from lodsprite.errors import InputError
 from lodsprite.gl.terrain_gl import TerrainGL
-from lodsprite.harness import RunResult, run_path, scene_reference, timing_summary, write_run
+from lodsprite.harness import RunResult, timing_summary
 from lodsprite.paths import CameraPath
 from lodsprite.progress import Progress
 from lodsprite.runconfig import (  # noqa: F401  (their public home was here)
@@ -32,7 +34,11 @@ from lodsprite.runconfig import (  # noqa: F401  (their public home was here)
     prepare,
     render_modes,
 )
+from lodsprite.techniques.terrain import keyframe_records
 from lodsprite.workers import peak_rss_mb
+
+if TYPE_CHECKING:
+    from lodsprite.scene import Scene
 
 
 def __getattr__(name: str):
@@ -41,21 +47,74 @@ def __getattr__(name: str):
     raise AttributeError(name)
 
 
-def keyframe_records(keyframes: list, rows: list[dict]) -> list[dict]:
-    """JSON records of the keyframes a LOD-sprite run rendered: ``keyframes`` is the
-    engine's log (:class:`~lodsprite.sprite.policy.KeyChoice` in order); ``rows`` the
-    run's frames with their ``keyframe`` index.  Each record holds the viewpoint, the frame
-    projection, the frame that rendered it and ``ahead`` (placed ahead of the viewer by
-    look-ahead)."""
-    first: dict[int, int] = {}
-    for i, row in enumerate(rows):
-        first.setdefault(row["keyframe"], i)
-    return [{"frame": first.get(k, -1), "viewpoint": key.viewpoint.to_dict(),
-             "projection": {"fov_y_deg": key.projection.fov_y_deg,
-                            "aspect": key.projection.aspect, "near": key.projection.near,
-                            "far": key.projection.far},
-             "ahead": bool(key.predicted)}
-            for k, key in enumerate(keyframes)]
+def run_scene(scene: Scene, mode: str, options: Mapping[str, Any], path: CameraPath,
+              size: tuple[int, int], out_dir: Path | None = None,
+              measure: Measure | None = None, *, fov_y_deg: float | None = None,
+              progress: Progress | None = None,
+              summary: Mapping[str, Any] | None = None) -> RunResult:
+    """The registry's technique ``mode`` with ``options`` (checked by its declarations) on
+    a renderer of ``size = (w, h)`` pixels over ``scene``, along ``path`` (field of view:
+    ``fov_y_deg``, default the path's), through :func:`drive`.  A technique that draws a
+    layer ``scene`` lacks is an :class:`~lodsprite.errors.InputError`."""
+    from lodsprite import techniques
+    from lodsprite.api import Renderer
+
+    spec = techniques.get(mode)
+    missing = set(spec.layers) - set(scene.layers)
+    if missing:
+        usable = ", ".join(s.short for s in techniques.specs(scene.layers)) or "none"
+        raise InputError(f"{spec.short} draws {', '.join(sorted(missing))}, which "
+                         f"{scene.name} lacks; its techniques: {usable}")
+    fov = path.fov_y_deg if fov_y_deg is None else fov_y_deg
+    with Renderer(scene, size, fov) as renderer:
+        technique = spec.create(renderer, **options)
+        try:
+            result = drive(technique, path, out_dir, measure or Measure(), progress=progress,
+                           summary={**(summary or {}), "gl_version": renderer.info.version})
+        finally:
+            technique.release()
+        renderer.gl.check_error(f"run {mode}")
+    return result
+
+
+def technique_for(scene: Scene, mode: str | None):
+    """The registry's spec that ``mode`` names (its name or short name; default: the
+    scene's own ``mode``) among those that draw ``scene``'s layers; else an
+    :class:`~lodsprite.errors.InputError` naming the choices."""
+    from lodsprite import techniques
+
+    mode = mode or scene.mode
+    usable = techniques.specs(scene.layers)
+    for spec in usable:
+        if mode in (spec.name, spec.short):
+            return spec
+    raise InputError(f"unknown mode '{mode}' for {scene.name} ({', '.join(scene.layers)}): "
+                     f"use one of {', '.join(s.short for s in usable if s.batch) or 'none'}")
+
+
+def render_spec(spec: str, out_dir: Path, mode: str | None = None,
+                options: Mapping[str, Any] | None = None, path: str | None = None,
+                frames: int | None = None, size: tuple[int, int] = (512, 512),
+                measure: Measure | None = None, progress: Progress | None = None) -> dict:
+    """``lodsprite render --scene SPEC`` for any scene kind (:func:`lodsprite.scene.
+    open_scene`: ``crowd[:OBJECTS[:TREES]]``, a lumigraph folder, a plug-in's): the
+    technique ``mode`` (default: the scene's) with ``options`` (those it declares) along
+    ``path`` (default: the scene's own, e.g. a crowd's ``walk``, a lumigraph's ``arc``) of
+    ``frames``, through :func:`run_scene`; writes the run to ``out_dir``, returns the
+    summary."""
+    from lodsprite.scene import open_scene
+
+    scene = open_scene(spec, light=True, **(options or {}))
+    technique = technique_for(scene, mode)
+    mine = {o.name for o in technique.options}
+    name = path or scene.default_path or "chen1999"
+    cam = scene.path(name, frames)
+    result = run_scene(scene, technique.name,
+                       {k: v for k, v in (options or {}).items() if k in mine}, cam,
+                       size, Path(out_dir), measure, progress=progress,
+                       summary={"mode": technique.short, "technique": technique.name,
+                                "scene": spec, "path": name, "size": list(size)})
+    return result.summary
 
 
 def run_technique(renderer, path: CameraPath, config: RenderConfig,
@@ -63,35 +122,19 @@ def run_technique(renderer, path: CameraPath, config: RenderConfig,
                   keyframes: list | None = None, image_frames=None,
                   reference: Callable | None = None) -> RunResult:
     """The registry's technique for ``config`` on ``renderer`` (a
-    :class:`~lodsprite.api.Renderer`) along ``path``, through the harness (``on_image``
-    for the replayed frames ``image_frames``, default all; quality against ``reference``,
-    default :func:`~lodsprite.harness.scene_reference`); a LOD-sprite run's rows get
-    ``key_x, key_y, key_z`` (the eye, metres, of the keyframe each frame shows) and
-    ``keyframes``, if given, is extended with the engine's keyframe log."""
+    :class:`~lodsprite.api.Renderer`) along ``path``, through :func:`drive` without
+    writing (``on_image`` for the replayed frames ``image_frames``, default all; quality
+    against ``reference``, default the technique's); ``keyframes``, if given, is extended
+    with a LOD-sprite run's keyframe log (whose rows get ``key_x, key_y, key_z``)."""
     from lodsprite import techniques
 
-    if reference is None and config.ground_truth:
-        with scene_reference(renderer, config.shading) as own:
-            return run_technique(renderer, path, config, progress, on_image, keyframes,
-                                 image_frames, own)
-    technique = techniques.get(config.technique).create(
-        renderer, **techniques.get(config.technique).bind(config.technique_options()))
+    spec = techniques.get(config.technique)
+    technique = spec.create(renderer, **spec.bind(config.technique_options()))
     try:
-        result = run_path(technique, path, progress=progress,
-                          ground_truth=config.ground_truth, reference=reference,
-                          quality_stride=config.quality_stride, flip=config.flip,
-                          on_image=on_image, image_frames=image_frames)
-        log = getattr(technique, "keyframe_log", None)  # tiled LOD-sprite: tile updates
-        if log is None:
-            log = getattr(getattr(technique, "sprite", None), "keyframes", None)
-        if log is not None:
-            for row in result.rows:
-                eye = log[row["keyframe"]].viewpoint.o
-                row.update(key_x=float(eye[0]), key_y=float(eye[1]), key_z=float(eye[2]))
-            result.columns[result.columns.index("keyframe") + 2:
-                           result.columns.index("keyframe") + 2] = ["key_x", "key_y", "key_z"]
-            if keyframes is not None:
-                keyframes.extend(log)
+        result = drive(technique, path, None, Measure.of(config), reference=reference,
+                       progress=progress, on_image=on_image, image_frames=image_frames)
+        if keyframes is not None and hasattr(technique, "keyframe_log"):
+            keyframes.extend(technique.keyframe_log)
         return result
     finally:
         technique.release()
@@ -111,63 +154,39 @@ def sprite_frames(pr: TerrainGL, path: CameraPath, config: RenderConfig,
 
 def render_path(config: RenderConfig, out_dir: Path, progress: Progress | None = None,
                 video: Path | None = None) -> dict:
-    """Render ``config``'s path; write ``frames.csv``, ``summary.json`` (and in sprite mode
-    ``keyframes.json``, every keyframe rendered, indexed by the ``keyframe`` column) and
-    optionally PNG frames to ``out_dir``; return the summary.
-
-    ``video``: an MP4 file of the frames shown (:mod:`lodsprite.report.video`); with
-    ``config.ground_truth`` each video frame is full resolution | technique | difference.
-    Saved frames and video come from the untimed replay.
-    """
-    from lodsprite.api import Renderer
-    from lodsprite.report.video import VideoWriter, check_video_path, side_by_side
+    """``lodsprite render``: ``config``'s scene and path (:func:`~lodsprite.runconfig.
+    prepare`) drawn by its technique through :func:`run_scene`; writes ``frames.csv``,
+    ``summary.json`` (and the technique's files: a LOD-sprite run's ``keyframes.json``,
+    every keyframe rendered, indexed by the ``keyframe`` column) and optionally PNG frames
+    and an MP4 ``video`` (with ``config.ground_truth`` each video frame is full
+    resolution | technique | difference) to ``out_dir``; returns the summary."""
+    from lodsprite.report.video import check_video_path
 
     if video is not None:
         check_video_path(video)
     config = config.resolved()
     scene, path = prepare(config)
-    out_dir = Path(out_dir)
-    keyframes: list = []
-    with Renderer(scene, config.size, field_of_view(config, path)) as renderer, \
-            ExitStack() as stack:
-        writer = stack.enter_context(VideoWriter(video)) if video is not None else None
-        reference = (stack.enter_context(scene_reference(renderer, config.shading))
-                     if config.ground_truth else None)
-
-        def on_image(i: int, image: np.ndarray, truth: np.ndarray | None) -> None:
-            if config.save_frames:
-                write_png(out_dir / "frames" / f"frame_{i:05d}.png", image)
-            if writer is not None:
-                if config.ground_truth:
-                    if truth is None:
-                        truth = reference(path.viewpoints[i])
-                    image = side_by_side(truth, image)
-                writer.append(image)
-
-        wanted = on_image if config.save_frames or writer is not None else None
-        only = (range(0, len(path.viewpoints), config.save_every)
-                if writer is None and config.save_every > 1 else None)
-        result = run_technique(renderer, path, config, progress, wanted, keyframes, only,
-                               reference)
-        info = renderer.info
-        renderer.gl.check_error("render_path")
-    summary = {
-        **result.summary, "mode": config.mode, "terrain": config.terrain,
-        "texture": config.texture, "path": config.path,
-        "size": list(config.size), "grid": scene.hf.quads,
-        "exaggeration": config.exaggeration, "gl_version": info.version,
-        "technique": config.technique, "config": config.flat(),
-    }
-    if "rmse_mean" in summary and "rmse_lod_mean" in summary:
-        summary["rmse_ratio"] = (summary["rmse_mean"] / summary["rmse_lod_mean"]
-                                 if summary["rmse_lod_mean"] > 0 else float("nan"))
-    write_run(out_dir, result, summary)
-    if config.mode == "sprite":
-        write_json(out_dir / "keyframes.json",
-                   {"keyframes": keyframe_records(keyframes, result.rows)})
-    return summary
+    summary = {"mode": config.mode, "terrain": config.terrain, "texture": config.texture,
+               "path": config.path, "size": list(config.size),
+               "exaggeration": config.exaggeration, "technique": config.technique,
+               "config": config.flat()}
+    if scene.hf is not None:
+        summary["grid"] = scene.hf.quads
+    options = {k: v for k, v in config.technique_options().items()
+               if k in {o.name for o in _spec(config).options}}
+    result = run_scene(scene, config.technique, options, path, config.size, Path(out_dir),
+                       Measure.of(config, video), fov_y_deg=field_of_view(config, path),
+                       progress=progress, summary=summary)
+    return result.summary
 
 
-__all__ = ["RenderConfig", "render_modes", "field_of_view", "keyframe_records", "parse_size",
-           "peak_rss_mb", "prepare", "render_path", "run_technique", "sprite_frames",
+def _spec(config: RenderConfig):
+    from lodsprite import techniques
+
+    return techniques.get(config.technique)
+
+
+__all__ = ["Measure", "RenderConfig", "render_modes", "drive", "field_of_view",
+           "keyframe_records", "parse_size", "peak_rss_mb", "prepare", "render_path",
+           "render_spec", "run_scene", "run_technique", "sprite_frames", "technique_for",
            "timing_summary"]

@@ -364,18 +364,19 @@ def test_render_scene_takes_size_fov_and_target_fps_from_view(tmp_path, monkeypa
 
     scene = scene_file(tmp_path, VIEW)
     opened, created = [], []
-    renderer, create = lodsprite.api.Renderer, techniques.create
+    renderer, create = lodsprite.api.Renderer, techniques.TechniqueSpec.create
 
     def spy_renderer(scene_, size, fov, *args, **kwargs):
         opened.append((tuple(size), fov))
         return renderer(scene_, size, fov, *args, **kwargs)
 
-    def spy_create(name, r, **options):
-        created.append(options)
-        return create(name, r, **options)
+    def spy_create(spec, r, **options):
+        if spec.name == "scene":  # not the terrain layer's own technique
+            created.append(options)
+        return create(spec, r, **options)
 
     monkeypatch.setattr(lodsprite.api, "Renderer", spy_renderer)
-    monkeypatch.setattr(techniques, "create", spy_create)
+    monkeypatch.setattr(techniques.TechniqueSpec, "create", spy_create)
     s = render_scene(scene, tmp_path / "a", frames=2, terrain_mode="lod")
     assert s["size"] == [48, 32] and opened[-1] == ((48, 32), 30.0)
     assert created[-1]["target_fps"] == 50.0 and created[-1]["schedule"] == "scheduler"

@@ -34,7 +34,7 @@ from lodsprite.errors import GLUnavailableError, LodspriteError
 app = typer.Typer(add_completion=False, no_args_is_help=True, pretty_exceptions_enable=False,
                   help="Time-critical rendering of large terrains with LOD geometry and "
                        "image reuse (LOD-sprite).")
-for command in (render.info, with_technique_options(render.render, ('terrain', 'objects')),
+for command in (render.info, with_technique_options(render.render),
                 with_technique_options(render.view), terrain.tile,
                 with_technique_options(crowd.crowd, ("objects",)),
                 profile.profile, reproduce.reproduce, reproduce.demo, distributed.serve):

@@ -19,7 +19,6 @@ from lodsprite.cli.common import (
     GroundTruthOpt,
     MaxErrorOpt,
     PaceOpt,
-    PathOpt,
     QualityStrideOpt,
     TerrainOpt,
     TextureOpt,
@@ -96,13 +95,19 @@ def _print_render(s: dict, out_dir: Path) -> None:
 def render(
     terrain: TerrainOpt = "jacksboro",
     texture: TextureOpt = "terrain",
-    path: PathOpt = "chen1999",
+    path: Annotated[str | None, typer.Option(
+        "--path", help="chen1999 (the default) | swan2002 | flyover[:HEIGHT_M[:TRACK_M]] | "
+                       "patrol[:HEIGHT_M[:TRACK_M[:PASSES]]] | bank[:HEIGHT_M[:TRACK_M]] | "
+                       "weave[:HEIGHT_M[:HALF_M[:TURNS]]] | FILE.json; a --scene's own "
+                       "by default (walk, arc, the file's [view] path)")] = None,
     mode: Annotated[str | None, typer.Option(
-        "--mode", help="a terrain technique of the registry (lodsprite info): full | lod | "
-                       "sprite (adaptive keyframes on a store or with --key-sse) | adaptive "
-                       "(view-dependent, --sse) | distributed (starts a local LOD server) | "
-                       "a plug-in's (default full; with --scene the file's [terrain] mode, "
-                       "else adaptive)")] = None,
+        "--mode", help="a technique of the registry (lodsprite info) that draws the "
+                       "scene: full | lod | sprite (adaptive keyframes on a store or with "
+                       "--key-sse) | adaptive (view-dependent, --sse) | distributed (starts "
+                       "a local LOD server) | a plug-in's (default full); with --scene "
+                       "FILE.toml the terrain's (default the file's [terrain] mode, else "
+                       "adaptive); with a crowd or lumigraph --scene its techniques "
+                       "(default manager, critical)")] = None,
     size: Annotated[str | None, typer.Option(
         "--size", help="image size WxH in pixels (default 512x512; with --scene the "
                        "file's [view] size if it gives one)")] = None,
@@ -120,9 +125,11 @@ def render(
         "--flip", help="with --ground-truth: FLIP per frame too")] = False,
     pace: PaceOpt = "needed",
     max_error: MaxErrorOpt = None,
-    scene: Annotated[Path | None, typer.Option(
-        "--scene", help="a scene file (TOML): its terrain (drawn by --mode), objects and "
-                        "light fields composited by depth along its [view] path")] = None,
+    scene: Annotated[str | None, typer.Option(
+        "--scene", help="a scene instead of --terrain: a scene file (TOML: its terrain "
+                        "drawn by --mode, objects and light fields composited by depth "
+                        "along its [view] path), crowd[:OBJECTS[:TREES]] (along walk), a "
+                        "lumigraph folder (along arc), a plug-in's kind")] = None,
     target_fps: Annotated[float | None, typer.Option(
         "--target-fps", help="with --scene: one frame budget over the layers "
                              "(the scheduler) at this frame rate")] = None,
@@ -130,15 +137,23 @@ def render(
 ) -> None:
     """Render a camera path; write DIR/frames.csv and DIR/summary.json (and PNG frames)."""
     from lodsprite import RenderConfig, render_path
+    from lodsprite.driver import Measure
     from lodsprite.run import parse_size
+    from lodsprite.scene.kinds import scene_kind
 
     options = options or {}
+    if scene is not None and scene_kind(scene) is None:  # a terrain, as --terrain
+        terrain, scene = scene, None
+    if scene is not None and scene_kind(scene) != "scene-file":
+        _render_spec(scene, out_dir, mode, path, frames, size, target_fps, options,
+                     Measure(ground_truth, quality_stride, flip, save_frames, video=video))
+        return
     if scene is not None or target_fps is not None:
         _render_scene(scene, out_dir, None if size is None else parse_size(size), frames,
-                      mode, target_fps, ground_truth, flip, **options)
+                      mode, target_fps, ground_truth, flip, path, **options)
         return
 
-    mode = mode or "full"
+    mode, path = mode or "full", path or "chen1999"
     distributed = _check_mode(mode, ground_truth, video, options.get("metric"))
     config = RenderConfig(terrain=terrain, texture=texture, path=path,
                           mode="sprite" if distributed else mode,
@@ -157,9 +172,29 @@ def render(
     _print_render(s, out_dir)
 
 
-def _render_scene(scene: Path | None, out_dir: Path, size: tuple[int, int] | None,
+def _render_spec(scene: str, out_dir: Path, mode: str | None, path: str | None,
+                 frames: int | None, size: str | None, target_fps: float | None,
+                 options: dict, measure) -> None:
+    """``render --scene SPEC`` for a scene kind (a crowd, a lumigraph folder, a plug-in's):
+    the batch driver's :func:`~lodsprite.run.render_spec`."""
+    from lodsprite.run import parse_size, render_spec
+
+    if target_fps is not None:  # a crowd technique's LOD feedback
+        options = {**options, "target_fps": target_fps}
+    with progress_bar(f"render {scene}") as update:
+        s = render_spec(scene, out_dir, mode, options, path, frames,
+                        parse_size(size or "512x512"), measure, update)
+    quality = (f"; RMSE {s['rmse_mean']:.2f}, PSNR {s['psnr_mean']:.1f} dB, SSIM "
+               f"{s['ssim_mean']:.3f}" if "rmse_mean" in s else "")
+    out.print(f"{s['frames']} frames of {scene} ({s['mode']}): median {s['median_ms']:.2f} "
+              f"ms, p99 {s['p99_ms']:.2f} ms{quality}; wrote {out_dir / 'frames.csv'}, "
+              f"{out_dir / 'summary.json'}")
+
+
+def _render_scene(scene: str | None, out_dir: Path, size: tuple[int, int] | None,
                   frames: int | None, mode: str | None, target_fps: float | None,
-                  ground_truth: bool, flip: bool, **options) -> None:
+                  ground_truth: bool, flip: bool, path: str | None = None,
+                  **options) -> None:
     """``render --scene``: the layered technique over a scene file's world (``options``:
     the scene technique's and its terrain technique's)."""
     from lodsprite import techniques
@@ -173,7 +208,7 @@ def _render_scene(scene: Path | None, out_dir: Path, size: tuple[int, int] | Non
         o if isinstance(o, str) else o.name for o in terrain}
     with progress_bar("render scene") as update:
         s = render_scene(scene, out_dir, size, frames, mode, target_fps, ground_truth,
-                         flip, progress=update,
+                         flip, path, progress=update,
                          **{k: v for k, v in options.items() if k in takes})
     shares = ", ".join(f"{k[6:]} {v:.0%}" for k, v in s.items() if k.startswith("share_"))
     out.print(f"{s['frames']} frames of {scene}: median {s['median_ms']:.1f} ms, p99 "

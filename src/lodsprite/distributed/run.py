@@ -17,8 +17,6 @@ from contextlib import contextmanager
 from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
-
 from lodsprite.distributed.client import (
     ADOPT_MODES,
     DEFAULT_MAX_ERROR,
@@ -27,10 +25,8 @@ from lodsprite.distributed.client import (
 )
 from lodsprite.distributed.keys import ClientKeys
 from lodsprite.distributed.pacing import DEFAULT_PACE, PACES
-from lodsprite.distributed.quality import error_summary
 from lodsprite.distributed.render import scene_args
 from lodsprite.errors import InputError, LodspriteError
-from lodsprite.files import write_json
 from lodsprite.progress import Progress
 from lodsprite.runconfig import RenderConfig, field_of_view, prepare
 from lodsprite.scene.spec import SceneSpec
@@ -157,7 +153,7 @@ def run_client(config: RenderConfig, servers: list[str], out_dir: Path,
     counted as frames drawn without one.
     """
     from lodsprite.distributed.technique import DistributedTechnique
-    from lodsprite.harness import write_run
+    from lodsprite.driver import Measure, drive
 
     config = config.resolved(store=False)  # options not given: the 1999 algorithm's
     max_error = check_client_options(pace, adopt, max_error)
@@ -168,66 +164,18 @@ def run_client(config: RenderConfig, servers: list[str], out_dir: Path,
                        config.epsilon, adopt, keys, config.border, pace, max_error)
     technique = DistributedTechnique.on_client(client, servers)
     technique.warmup_s = warmup_s
+    technique.shading = config.shading  # the reference's colouring, as the server's
+    ctx = client.terrain_gl.ctx
     try:
-        result = _client_run(technique, client, scene, path, config, progress)
-        stats = client.server_stats()
-        shown = client.shown
+        result = drive(technique, path, out_dir, Measure.of(config), progress=progress,
+                       finish=ctx.finish, gl_renderer=ctx.info.renderer,
+                       summary={"mode": "distributed", "terrain": config.terrain,
+                                "path": config.path, "size": list(config.size),
+                                "servers": servers, "grid": scene.hf.quads,
+                                "lod": config.lod, "adopt": adopt, "pace": pace,
+                                "max_error": max_error, "epsilon": config.epsilon})
     finally:
         client.close()
-    summary = {**result.summary, "mode": "distributed", "terrain": config.terrain,
-               "path": config.path, "size": list(config.size), "servers": servers,
-               **_server_means(stats), "grid": scene.hf.quads, "lod": config.lod,
-               "interrupted": result.interrupted, "adopt": adopt, "pace": pace,
-               "max_error": max_error, "epsilon": config.epsilon}
-    write_run(out_dir, result, summary)
-    write_json(out_dir / "server_stats.json", {"servers": servers, "stats": stats})
-    write_json(out_dir / "keyframes.json", {"servers": servers, "keyframes": shown})
     if result.interrupted:
         raise KeyboardInterrupt
-    return summary
-
-
-def _client_run(technique, client: LodClient, scene, path, config: RenderConfig,
-                progress: Progress | None):
-    """The harness's run of the client (quality, with ``config.ground_truth``, from its
-    untimed replay against the one reference); then each frame's error metric against
-    the keyframe it showed, measured untimed (``error_px``, :func:`error_summary`)."""
-    from lodsprite.harness import level_zero_reference, run_path
-
-    ctx, terrain = client.terrain_gl.ctx, client.terrain_gl.renderer
-    level0 = (level_zero_reference(ctx, scene, config.size, terrain.fov_y_deg,
-                                   config.shading) if config.ground_truth else None)
-
-    def full_resolution(viewpoint) -> np.ndarray:
-        terrain.render(viewpoint, None)
-        return terrain.target.read_color()
-
-    try:
-        result = run_path(technique, path, finish=ctx.finish, gl_renderer=ctx.info.renderer,
-                          progress=progress, ground_truth=config.ground_truth,
-                          reference=level0.image if level0 else full_resolution,
-                          quality_stride=config.quality_stride, flip=config.flip)
-    finally:
-        if level0 is not None:
-            level0.release()
-    errors = technique.replayed_errors(path.viewpoints[:len(result.decisions)],
-                                       result.decisions)
-    for row, e in zip(result.rows, errors, strict=True):
-        row["error_px"] = float(e)
-    figures = error_summary(errors, config.epsilon)
-    del figures["per_frame_error_px"]  # frames.csv's error_px column
-    result.summary.update(figures)
-    return result
-
-
-def _mean(values) -> float:
-    return float(np.mean(values)) if len(values) else float("nan")
-
-
-def _server_means(stats: list[dict]) -> dict:
-    """The servers' mean times per stage (ms) from their statistics."""
-    server = {k: _mean([v for s in stats for v in s.get(k, [])])
-              for k in ("production_ms", "viewpoint_wait_ms", "paced_ms", "render_ms",
-                        "queue_insert_ms", "delta_t_ms", "queue_retrieve_ms",
-                        "transmission_ms")}
-    return {f"{k.removesuffix('_ms')}_ms_mean": v for k, v in server.items()}
+    return result.summary

@@ -53,10 +53,11 @@ class DistributedTechnique(Technique):
     @classmethod
     def on_client(cls, client: LodClient, servers: list[str]) -> DistributedTechnique:
         """The technique over a client made elsewhere (``lodsprite client``): batch runs
-        only (no renderer to present with), the error left out of the frame's time."""
+        only, on the client's own GL state (its renderer wraps it), the error left out of
+        the frame's time (measured after the run, :meth:`outputs`)."""
         self = cls.__new__(cls)
-        Technique.__init__(self, None)
-        self.client, self.server = client, ",".join(servers)
+        Technique.__init__(self, Renderer.wrap(client.terrain_gl))
+        self.client, self.server, self.servers = client, ",".join(servers), list(servers)
         self.measure_error = False
         return self
 
@@ -145,6 +146,26 @@ class DistributedTechnique(Technique):
                                        r.target.height)
         return out
 
+    def outputs(self, result, path) -> dict:
+        """After a batch run: each frame's error metric against the keyframe it showed
+        (``error_px``, :meth:`replayed_errors`) and its figures in the summary
+        (:func:`~lodsprite.distributed.quality.error_summary`); the files:
+        ``server_stats.json`` (the servers' own timings) and ``keyframes.json`` (every
+        keyframe shown)."""
+        from lodsprite.distributed.quality import error_summary
+
+        errors = self.replayed_errors(path.viewpoints[:len(result.decisions)],
+                                      result.decisions)
+        for row, e in zip(result.rows, errors, strict=True):
+            row["error_px"] = float(e)
+        figures = error_summary(errors, self.client.epsilon_px)
+        del figures["per_frame_error_px"]  # frames.csv's error_px column
+        stats = self.client.server_stats()
+        result.summary.update(figures, **server_means(stats), interrupted=result.interrupted)
+        servers = getattr(self, "servers", [self.server])
+        return {"server_stats.json": {"servers": servers, "stats": stats},
+                "keyframes.json": {"servers": servers, "keyframes": self.client.shown}}
+
     def draw_to(self, framebuffer: moderngl.Framebuffer | None = None) -> None:
         target = self.client.terrain_gl.renderer.target
         self.renderer.present(target.color, (0.0, 0.0, 1.0, 1.0), framebuffer, target.fbo)
@@ -186,3 +207,16 @@ def create(renderer: Renderer, server: str, lod: int = DEFAULT_COARSE,
     if not server:
         raise InputError("the distributed technique needs a server (HOST:PORT)")
     return DistributedTechnique(renderer, server, lod, epsilon, max_error)
+
+
+def _mean(values) -> float:
+    return float(np.mean(values)) if len(values) else float("nan")
+
+
+def server_means(stats: list[dict]) -> dict:
+    """The servers' mean times per stage (ms) from their statistics."""
+    server = {k: _mean([v for s in stats for v in s.get(k, [])])
+              for k in ("production_ms", "viewpoint_wait_ms", "paced_ms", "render_ms",
+                        "queue_insert_ms", "delta_t_ms", "queue_retrieve_ms",
+                        "transmission_ms")}
+    return {f"{k.removesuffix('_ms')}_ms_mean": v for k, v in server.items()}

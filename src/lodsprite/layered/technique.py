@@ -41,7 +41,8 @@ from __future__ import annotations
 
 import os
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import AbstractContextManager, contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -215,6 +216,11 @@ class LayeredTechnique(Technique):
         out["keyframes"] = int(sum(f.kind == "keyframe" for f in frames))
         return out
 
+    def reference(self, path: CameraPath) -> AbstractContextManager[Callable]:
+        """The full-detail scene along ``path`` (:func:`reference`): full-resolution
+        terrain, full meshes, every lumigraph node, the world at each frame's time."""
+        return _full_detail(self.renderer, self.scene, path, self.frame_s)
+
     def _placed(self) -> int:
         return 0 if self.lightfields is None else len(self.lightfields.items)
 
@@ -257,6 +263,16 @@ def reference(renderer: Renderer, scene: Scene, path: CameraPath, frame_s: float
     return image, ref
 
 
+@contextmanager
+def _full_detail(renderer: Renderer, scene: Scene, path: CameraPath, frame_s: float
+                 ) -> Iterator[Callable[[Viewpoint], np.ndarray]]:
+    image, ref = reference(renderer, scene, path, frame_s)
+    try:
+        yield image
+    finally:
+        ref.release()
+
+
 def create(renderer: Renderer, world: Scene | None = None, **options: Any
            ) -> LayeredTechnique:
     """The registry's factory of ``scene``: the layers of ``world`` (a scene; default: the
@@ -287,8 +303,8 @@ def render_scene(scene_file: str | os.PathLike, out_dir: str | os.PathLike,
     ``target_fps`` left None are the file's ``[view]`` values (else 512x512 and none); its
     ``fov`` replaces the path's."""
     from lodsprite import techniques
-    from lodsprite.api import Renderer
-    from lodsprite.harness import run_path, write_run
+    from lodsprite.driver import Measure
+    from lodsprite.run import run_scene
     from lodsprite.scene.world import load_scene_file
 
     if target_fps is not None and not target_fps > 0:
@@ -300,27 +316,15 @@ def render_scene(scene_file: str | os.PathLike, out_dir: str | os.PathLike,
     size = size or view.size_px() or DEFAULT_SIZE
     target_fps = target_fps if target_fps is not None else view.target_fps
     cam = with_view_fov(scene.path(path or view.path, frames), scene)
-    schedule = "scheduler" if target_fps is not None else "none"
-    with Renderer(scene, size, cam.fov_y_deg) as renderer:
-        own = {o.name for o in techniques.get("scene").options}
-        t = techniques.create("scene", renderer, terrain_mode=terrain_mode,
-                              schedule=schedule, target_fps=target_fps,
-                              terrain_options={k: v for k, v in options.items()
-                                               if k not in own},
-                              **{k: v for k, v in options.items() if k in own})
-        ref = None
-        try:
-            image = None
-            if ground_truth:
-                image, ref = reference(renderer, scene, cam, t.frame_s)
-            result = run_path(t, cam, progress=progress, ground_truth=ground_truth,
-                              reference=image, flip=flip)
-        finally:
-            t.release()
-            if ref is not None:
-                ref.release()
-        summary = {**result.summary, "mode": "scene", "scene": str(scene_file),
-                   "terrain": scene.terrain_spec, "path": path or view.path,
-                   "size": list(size), "gl_version": renderer.info.version}
-    write_run(Path(out_dir), result, summary)
-    return summary
+    own = {o.name for o in techniques.get("scene").options}
+    result = run_scene(
+        scene, "scene",
+        {"terrain_mode": terrain_mode,
+         "schedule": "scheduler" if target_fps is not None else "none",
+         "target_fps": target_fps,
+         "terrain_options": {k: v for k, v in options.items() if k not in own},
+         **{k: v for k, v in options.items() if k in own}},
+        cam, size, Path(out_dir), Measure(ground_truth, flip=flip), progress=progress,
+        summary={"mode": "scene", "scene": str(scene_file), "terrain": scene.terrain_spec,
+                 "path": path or view.path, "size": list(size)})
+    return result.summary

@@ -21,16 +21,15 @@ from pathlib import Path
 
 import numpy as np
 
-from lodsprite.camera import Viewpoint
 from lodsprite.errors import InputError
 from lodsprite.files import atomic_write_bytes
 from lodsprite.lumigraph.capture import ColorMesh, capture, still_life
 from lodsprite.lumigraph.geometry import SIX_DIRECTIONS, SIX_SLABS, slab_facing
 from lodsprite.lumigraph.paths import default_path
+from lodsprite.lumigraph.reference import OBJECT_FILE
 from lodsprite.lumigraph.store import Lumigraph, save
 from lodsprite.paths import CameraPath
 
-OBJECT_FILE = "object.npz"
 BUILTIN_OBJECTS = ("still-life",)
 DEFAULT_PROXY_FACES = 2000
 Progress = Callable[[int, int], None]
@@ -119,34 +118,22 @@ def capture_lumigraph(model: str, out_dir: Path, n_st: int = 32, n_uv: int = 256
             "codec": codec, "capture_s": capture_s, "faces": int(len(mesh.faces))}
 
 
-def _read_object(folder: Path) -> ColorMesh | None:
-    path = folder / OBJECT_FILE
-    if not path.is_file():
-        return None
-    with np.load(path, allow_pickle=False) as z:
-        return ColorMesh(z["vertices"].astype(np.float64), z["faces"].astype(np.int32),
-                         z["colors"].astype(np.float64), z["normals"].astype(np.float64))
-
-
 def render_lumigraph(folder: Path, out_dir: Path, frames: int = 120,
                      size: tuple[int, int] = (512, 512), path: CameraPath | None = None,
                      ground_truth: bool = False, depth_correction: bool = True,
                      method: str = "full", quality_every: int = 1,
                      progress: Progress | None = None, flip: bool = False,
                      **options) -> dict:
-    """Reconstruct every frame of ``path`` (default:
+    """``lodsprite lumigraph render``, a shortcut onto the batch driver
+    (:func:`lodsprite.run.run_scene`): reconstruct every frame of ``path`` (default:
     :func:`~lodsprite.lumigraph.paths.default_path`) with ``method``
     (:data:`~lodsprite.lumigraph.methods.METHODS`; ``options`` go to
     :func:`~lodsprite.lumigraph.methods.make_method`); write ``frames.csv`` and
     ``summary.json`` to ``out_dir`` and return the summary.  With ``ground_truth``, every
     ``quality_every``-th frame is compared (in the harness's untimed replay) with the
     object drawn directly."""
-    from lodsprite.harness import write_run
-
-    result, summary = _measure(folder, method, path, frames, size, ground_truth,
-                               depth_correction, quality_every, progress, flip, **options)
-    write_run(Path(out_dir), result, summary)
-    return summary
+    return _measure(folder, method, path, frames, size, ground_truth, depth_correction,
+                    quality_every, progress, flip, Path(out_dir), **options).summary
 
 
 def measure(folder: Path, method: str = "full", path: CameraPath | None = None,
@@ -154,76 +141,39 @@ def measure(folder: Path, method: str = "full", path: CameraPath | None = None,
             depth_correction: bool = True, quality_every: int = 1,
             progress: Progress | None = None, flip: bool = False, **options
             ) -> tuple[list[dict], dict]:
-    """Run ``method`` along ``path`` through the harness: the per-frame rows and their
-    summary (see :func:`render_lumigraph`); with ``flip``, compared frames get FLIP too
-    (0.4 s a 512² frame here)."""
-    result, summary = _measure(folder, method, path, frames, size, ground_truth,
-                               depth_correction, quality_every, progress, flip, **options)
-    return result.rows, summary
-
-
-class ObjectReference:
-    """The ground truth of a lumigraph frame: the object drawn directly from the same eye
-    (a viewer-world viewpoint, as the technique takes it), ``(h, w, 3) uint8``."""
-
-    def __init__(self, gl, mesh: ColorMesh, size: tuple[int, int], projection) -> None:
-        from lodsprite.gl.lumigraph import ColorMeshRenderer
-        from lodsprite.gl.target import RenderTarget
-
-        self.truth = ColorMeshRenderer(gl, mesh.vertices, mesh.faces, mesh.colors,
-                                       mesh.normals)
-        self.target = RenderTarget(gl, *size)
-        self.projection = projection
-
-    def __call__(self, viewpoint: Viewpoint) -> np.ndarray:
-        from lodsprite.lumigraph.technique import to_lumigraph
-
-        self.truth.render(self.projection @ to_lumigraph(viewpoint).view_matrix(),
-                          self.target.fbo)
-        return self.target.read_color()
-
-    def release(self) -> None:
-        self.target.release()
-        self.truth.release()
+    """Run ``method`` along ``path`` through the batch driver, nothing written: the
+    per-frame rows and their summary (see :func:`render_lumigraph`); with ``flip``,
+    compared frames get FLIP too (0.4 s a 512² frame here)."""
+    result = _measure(folder, method, path, frames, size, ground_truth, depth_correction,
+                      quality_every, progress, flip, None, **options)
+    return result.rows, result.summary
 
 
 def _measure(folder, method, path, frames, size, ground_truth, depth_correction,
-             quality_every, progress, flip, **options):
+             quality_every, progress, flip, out_dir, **options):
     from lodsprite import techniques
-    from lodsprite.api import Renderer
-    from lodsprite.harness import run_path
+    from lodsprite.driver import Measure
     from lodsprite.lumigraph.technique import viewer_path
+    from lodsprite.run import run_scene
     from lodsprite.scene import LightField, Scene
 
     lf = Lumigraph(folder)
     path = path or default_path(lf, frames)
-    obj_mesh = _read_object(Path(folder)) if ground_truth else None
-    if ground_truth and obj_mesh is None:
+    if ground_truth and not (Path(folder) / OBJECT_FILE).is_file():
         raise InputError(f"{folder} holds no {OBJECT_FILE}: no ground truth to compare with")
-    w, h = size
+    if f"lumigraph-{method}" not in techniques.names(["lightfield"]):
+        raise InputError(f"unknown lumigraph method {method!r}: use one of "
+                         f"{', '.join(s.short for s in techniques.specs(['lightfield']))}")
     scene = Scene(lightfields=(LightField(Path(folder)),))
-    with Renderer(scene, (w, h), path.fov_y_deg) as renderer:
-        if f"lumigraph-{method}" not in techniques.names(["lightfield"]):
-            raise InputError(f"unknown lumigraph method {method!r}: use one of "
-                             f"{', '.join(s.short for s in techniques.specs(['lightfield']))}")
-        # the registry's technique; every method option passes (the critical method's
-        # own knobs too), checked by its declaration
-        t = techniques.create(f"lumigraph-{method}", renderer, folder=str(folder),
-                              depth_correction=depth_correction, **options)
-        ref = (ObjectReference(renderer.gl, obj_mesh, (w, h), t.projection)
-               if obj_mesh is not None else None)
-        try:
-            result = run_path(t, viewer_path(path), progress=progress,
-                              ground_truth=ground_truth, reference=ref,
-                              quality_stride=max(1, quality_every), flip=flip)
-        finally:
-            if ref is not None:
-                ref.release()
-            t.release()
-    summary = {**result.summary, "method": method, "lumigraph": str(folder),
-               "object": lf.header.object, "bad_nodes": len(lf.bad_nodes), "size": [w, h],
-               "depth_correction": depth_correction}
-    return result, summary
+    # the registry's technique; every method option passes (the critical method's own
+    # knobs too), checked by its declaration
+    return run_scene(scene, f"lumigraph-{method}",
+                     {"folder": str(folder), "depth_correction": depth_correction, **options},
+                     viewer_path(path), tuple(size), out_dir,
+                     Measure(ground_truth, max(1, quality_every), flip), progress=progress,
+                     summary={"method": method, "lumigraph": str(folder),
+                              "object": lf.header.object, "bad_nodes": len(lf.bad_nodes),
+                              "size": list(size), "depth_correction": depth_correction})
 
 
 class MethodRun:

@@ -10,7 +10,8 @@ from lodsprite.techniques.options import Option
 from lodsprite.techniques.registry import TechniqueSpec
 
 OPTIONS = (
-    Option("folder", str, "", "lumigraph: the folder (default: the scene's)"),
+    Option("folder", str, "", "lumigraph: the folder (default: the scene's)",
+           command_line=False),  # the command names the scene (--scene, an argument)
     Option("depth_correction", bool, True, "lumigraph: depth-correct with the proxy"),
     Option("nodes", int, 16, "lumigraph: nodes per frame (arbitrary, projective)", min=1),
     Option("level", int, 1, "lumigraph subsample: mip level of the node images", min=0),

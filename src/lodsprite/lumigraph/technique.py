@@ -11,6 +11,8 @@ orbiting its centre; :func:`open_scene` makes a lumigraph folder a scene.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator
+from contextlib import AbstractContextManager, contextmanager
 from dataclasses import replace
 from pathlib import Path
 
@@ -157,6 +159,21 @@ class LumigraphTechnique(Technique):
                 "uploads_per_frame_mean": float(np.mean([f.extra["uploads"] for f in frames])),
                 **method_facts(self.method)}
 
+    def reference(self, path) -> AbstractContextManager[Callable]:
+        """The ground truth: the object the lumigraph was captured from (its folder's
+        ``object.npz``) drawn directly from the same eye, at the same projection
+        (:class:`~lodsprite.lumigraph.reference.ObjectReference`); a folder without it is
+        an :class:`~lodsprite.errors.InputError`."""
+        return self._object_reference()
+
+    @contextmanager
+    def _object_reference(self) -> Iterator[Callable]:
+        from lodsprite.lumigraph.reference import object_reference
+
+        with object_reference(self.renderer.gl, self.lf.folder, self.renderer.size,
+                              self.projection) as ref:
+            yield lambda viewpoint: ref(to_lumigraph(viewpoint))
+
     def draw_to(self, framebuffer=None) -> None:
         self.renderer.present(self.method.output.color, (0.0, 0.0, 1.0, 1.0), framebuffer)
 
@@ -232,7 +249,7 @@ def open_lumigraph(folder: str, **_: object) -> Scene:
                            else load_path_json(name))
 
     return Scene(lightfields=(LightField(Path(folder)),), home=lumigraph_home(folder),
-                 paths=paths, mode="critical", source=Path(folder))
+                 paths=paths, mode="critical", source=Path(folder), path_name="arc")
 
 
 #: The lumigraph folder's scene kind (the ``lodsprite.scenes`` entry point ``lumigraph``):

@@ -83,38 +83,27 @@ def make_crowd(cfg: CrowdConfig) -> Crowd:
 def run_crowd(cfg: CrowdConfig, out_dir: Path | None = None, path: CameraPath | None = None,
               progress: Progress | None = None, keep_frames: tuple[int, ...] = ()
               ) -> tuple[list[dict], dict, dict[int, np.ndarray]]:
-    """Walk ``path`` (default: the walkthrough) through the crowd of ``cfg`` with the
-    registry's technique ``cfg.mode``, through the harness
-    (:func:`lodsprite.harness.run_path`); returns the rows, the summary and the images of
-    ``keep_frames`` (from the untimed replay); writes ``frames.csv`` and ``summary.json``
-    to ``out_dir`` if given."""
-    from lodsprite.api import Renderer
-    from lodsprite.harness import run_path, write_run
+    """``lodsprite crowd``, a shortcut onto the batch driver
+    (:func:`lodsprite.run.run_scene`): walk ``path`` (default: the walkthrough) through
+    the crowd of ``cfg`` with the registry's technique ``cfg.mode``; returns the rows, the
+    summary and the images of ``keep_frames`` (from the untimed replay); writes
+    ``frames.csv`` and ``summary.json`` to ``out_dir`` if given."""
+    from lodsprite.driver import Measure
+    from lodsprite.run import run_scene
     from lodsprite.scene import Scene
-    from lodsprite.techniques import create
 
     cfg.validate()
     crowd = make_crowd(cfg)
     path = path or walkthrough(crowd, cfg.frames)
-    images: dict[int, np.ndarray] = {}
-    keep = set(keep_frames)
-    with Renderer(Scene(objects=crowd, label="crowd"), cfg.size, path.fov_y_deg) as renderer:
-        technique = create(cfg.mode, renderer, crowd=crowd, target_fps=cfg.target_fps,
-                           slots=cfg.slots, active=cfg.active, range_near=cfg.range_near,
-                           range_far=cfg.range_far, dist=SNAPSHOTS[cfg.snapshots])
-        try:
-            result = run_path(technique, path, progress=progress, image_frames=keep,
-                              on_image=(lambda i, image, _: images.__setitem__(i, image))
-                              if keep else None)
-        finally:
-            technique.release()
-    for row in result.rows:
-        row["fps"] = 1e3 / row["ms"]
-    result.columns.insert(result.columns.index("ms") + 1, "fps")
-    summary = {**result.summary, "mode": cfg.mode, "objects": len(crowd),
-               "trees": cfg.trees, "mesh": cfg.mesh or "ogre", "slots": cfg.slots,
-               "active": cfg.active, "snapshots": cfg.snapshots, "target_fps": cfg.target_fps,
-               "path": path.name, "size": list(cfg.size)}
-    if out_dir is not None:
-        write_run(Path(out_dir), result, summary)
-    return result.rows, summary, images
+    result = run_scene(
+        Scene(objects=crowd, label="crowd"), cfg.mode,
+        {"crowd": crowd, "target_fps": cfg.target_fps, "slots": cfg.slots,
+         "active": cfg.active, "range_near": cfg.range_near, "range_far": cfg.range_far,
+         "dist": SNAPSHOTS[cfg.snapshots]},
+        path, cfg.size, None if out_dir is None else Path(out_dir),
+        Measure(keep=tuple(keep_frames)), progress=progress,
+        summary={"mode": cfg.mode, "objects": len(crowd), "trees": cfg.trees,
+                 "mesh": cfg.mesh or "ogre", "slots": cfg.slots, "active": cfg.active,
+                 "snapshots": cfg.snapshots, "target_fps": cfg.target_fps,
+                 "path": path.name, "size": list(cfg.size)})
+    return result.rows, result.summary, result.images

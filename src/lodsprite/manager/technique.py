@@ -86,6 +86,13 @@ class CrowdTechnique(Technique):
                 "exponent_final": float(col["exponent"][-1]),
                 "warmup_extractions": len(self._warm)}
 
+    def outputs(self, result, path) -> dict:
+        """Each row's frame rate (``fps = 1000 / ms``, after ``ms``); no files."""
+        for row in result.rows:
+            row["fps"] = 1e3 / row["ms"]
+        result.columns.insert(result.columns.index("ms") + 1, "fps")
+        return {}
+
     def params(self) -> dict[str, Param]:
         fb = self.engine.feedback
         if self.name == "discrete" or fb.target_fps is None:
@@ -172,7 +179,7 @@ def open_crowd(spec: str, target_fps: float | None = None, **_: object) -> Scene
         return walkthrough(crowd, frames or 600) if name == "walk" else load_path_json(name)
 
     return Scene(objects=crowd, home=crowd_home(crowd), paths=paths, mode="manager",
-                 label=spec)
+                 label=spec, path_name="walk")
 
 
 #: The crowd's scene kind (the ``lodsprite.scenes`` entry point ``crowd``).

@@ -64,6 +64,15 @@ def scene_kinds() -> tuple[SceneKind, ...]:
     return tuple(found)
 
 
+def scene_kind(spec: str) -> str | None:
+    """The name of the kind that claims ``spec`` (``scene-file``, ``crowd``,
+    ``lumigraph``, a plug-in's), or None for a terrain."""
+    for kind in scene_kinds():
+        if kind.claims(spec):
+            return kind.name
+    return None
+
+
 def open_scene(spec: str, texture: str = "terrain", grid: int | None = None,
                exaggeration: float = DEFAULT_EXAGGERATION, light: bool = False,
                **options: Any) -> Scene:

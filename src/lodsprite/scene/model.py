@@ -90,7 +90,9 @@ class Scene:
     target; None: not a scene file's); ``terrain_mode``/``terrain_options``: a scene
     file's ``[terrain] mode`` and ``[terrain.options]``, checked against the technique's
     declarations (None and empty: not given); ``mode``: the technique to start with;
-    ``source``: the scene file or folder it was opened from.
+    ``source``: the scene file or folder it was opened from; ``path_name``: the path a
+    run plays when none is named (None: a scene file's ``[view]`` path, else the
+    terrain's ``chen1999``).
     """
 
     hf: HeightField | None = None
@@ -107,6 +109,7 @@ class Scene:
     mode: str = "sprite"
     label: str = ""
     source: Path | None = None
+    path_name: str | None = None
 
     @property
     def layers(self) -> tuple[str, ...]:
@@ -123,8 +126,9 @@ class Scene:
 
     @property
     def default_path(self) -> str | None:
-        """The path a scene file's ``[view]`` names (None: not a scene file's)."""
-        return None if self.view is None else self.view.path
+        """The path a run plays when none is named: a scene file's ``[view]`` path, or
+        the scene's own :attr:`path_name` (None: neither)."""
+        return self.path_name if self.view is None else self.view.path
 
     @property
     def name(self) -> str:

@@ -16,6 +16,9 @@ field of view, framebuffer, and the scene it draws).  The viewer and the batch h
   (quality against a reference is measured in that replay, never in the timed run;
   :meth:`Technique.plan_replay` says beforehand which frames will be replayed);
 * :meth:`Technique.summary` — the technique's own keys for ``summary.json``;
+* :meth:`Technique.reference` and :meth:`Technique.outputs` — the batch driver's
+  (:func:`lodsprite.run.drive`): the ground truth a run is judged against, and the
+  technique's own columns and files after a run;
 * :meth:`Technique.draw_to`, :meth:`Technique.read_image`, :meth:`Technique.params`,
   :meth:`Technique.key_view`, :meth:`Technique.coarse_level`, :meth:`Technique.status`,
   :meth:`Technique.release` — the window's side.
@@ -33,10 +36,14 @@ from lodsprite.errors import InputError
 from lodsprite.record import Frame
 
 if TYPE_CHECKING:  # moderngl only under gl/ at run time
+    from contextlib import AbstractContextManager
+
     import moderngl
 
     from lodsprite.api import Renderer
     from lodsprite.camera import Projection, Viewpoint
+    from lodsprite.harness import Reference, RunResult
+    from lodsprite.paths import CameraPath
 
 FALLBACK_TINT = (1.0, 0.0, 1.0, 0.45)
 
@@ -71,6 +78,9 @@ class Technique:
     depends on its viewpoint alone."""
 
     name = "technique"
+    #: How a terrain is coloured (terrain techniques set the resolved choice,
+    #: ``texture`` or ``heights``); the default reference colours its terrain the same.
+    shading = "auto"
     #: Whether :meth:`replay` can draw recorded frames again (False: the harness refuses
     #: quality, saved frames and video for this technique).
     replays = True
@@ -118,6 +128,21 @@ class Technique:
                       truth: np.ndarray) -> dict[str, float]:
         """Extra per-frame quality columns of the replay (e.g. a baseline's RMSE against
         the same reference ``truth``); none by default."""
+        return {}
+
+    def reference(self, path: CameraPath) -> AbstractContextManager[Reference] | None:
+        """The ground truth of a run along ``path``: a context manager giving
+        ``viewpoint -> (h, w, 3) uint8`` from a code path independent of this technique
+        (its GPU objects released on leaving).  None, the default: the scene's terrain at
+        full resolution (level 0 of a store), coloured by :attr:`shading`
+        (:func:`lodsprite.harness.scene_reference`).  A technique whose scene holds more
+        than terrain gives its own (the object drawn directly, the full-detail scene)."""
+        return None
+
+    def outputs(self, result: RunResult, path: CameraPath) -> dict[str, Any]:
+        """After a run (untimed): add the technique's own columns to ``result.rows`` (and
+        their names to ``result.columns``) and return the files to write beside
+        ``frames.csv``, name -> JSON data (e.g. ``keyframes.json``).  Default: none."""
         return {}
 
     # ------------------------------------------------------------ window

@@ -24,6 +24,8 @@ log = logging.getLogger(__name__)
 if TYPE_CHECKING:
     from lodsprite.api import LodSprite, Renderer
     from lodsprite.camera import Projection, Viewpoint
+    from lodsprite.harness import RunResult
+    from lodsprite.paths import CameraPath
 
 
 def resolve_shading(scene, shading: str = "auto") -> str:
@@ -131,6 +133,23 @@ def coarse_baseline(terrain, viewpoint, lod: int, truth: np.ndarray) -> dict[str
             "ssim_lod": ssim(plain, truth), "rmse_lod_border": rmse(ribbons, truth)}
 
 
+def keyframe_records(keyframes: list, rows: list[dict]) -> list[dict]:
+    """JSON records of the keyframes a LOD-sprite run rendered: ``keyframes`` is the
+    engine's log (:class:`~lodsprite.sprite.policy.KeyChoice` in order); ``rows`` the
+    run's frames with their ``keyframe`` index.  Each record holds the viewpoint, the frame
+    projection, the frame that rendered it and ``ahead`` (placed ahead of the viewer by
+    look-ahead)."""
+    first: dict[int, int] = {}
+    for i, row in enumerate(rows):
+        first.setdefault(row["keyframe"], i)
+    return [{"frame": first.get(k, -1), "viewpoint": key.viewpoint.to_dict(),
+             "projection": {"fov_y_deg": key.projection.fov_y_deg,
+                            "aspect": key.projection.aspect, "near": key.projection.near,
+                            "far": key.projection.far},
+             "ahead": bool(key.predicted)}
+            for k, key in enumerate(keyframes)]
+
+
 class SpriteTechnique(Technique):
     """LOD-sprite (Chen, Swan & Kaufman 1999): one technique over three engines
     (:mod:`lodsprite.techniques.sprite_engines`), chosen once from the options: whole
@@ -166,6 +185,18 @@ class SpriteTechnique(Technique):
         """Every view keyframes (or, with tiles, tile updates) were rendered from; the
         ``keyframe`` column indexes it."""
         return self.engine.keyframes
+
+    def outputs(self, result: RunResult, path: CameraPath) -> dict[str, Any]:
+        """Each row gets ``key_x, key_y, key_z`` (the eye, metres, of the keyframe or tile
+        update it shows), after its ``keyframe`` and ``keyframes`` columns; the files:
+        ``keyframes.json`` (:func:`keyframe_records`)."""
+        log = self.keyframe_log
+        for row in result.rows:
+            eye = log[row["keyframe"]].viewpoint.o
+            row.update(key_x=float(eye[0]), key_y=float(eye[1]), key_z=float(eye[2]))
+        at = result.columns.index("keyframe") + 2
+        result.columns[at:at] = ["key_x", "key_y", "key_z"]
+        return {"keyframes.json": {"keyframes": keyframe_records(log, result.rows)}}
 
     def params(self) -> dict[str, Param]:
         return {"epsilon": Param("epsilon", self.sprite.epsilon_px, 0.125, 64.0, 1.25, "px")}

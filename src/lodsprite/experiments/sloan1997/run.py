@@ -24,7 +24,8 @@ import numpy as np
 
 from lodsprite.camera import perspective
 from lodsprite.lumigraph.paths import object_path
-from lodsprite.lumigraph.run import MethodRun, _read_object, capture_lumigraph, measure
+from lodsprite.lumigraph.reference import read_object
+from lodsprite.lumigraph.run import MethodRun, capture_lumigraph, measure
 from lodsprite.lumigraph.store import Lumigraph
 from lodsprite.paths import CameraPath
 
@@ -145,7 +146,7 @@ def table1(lf_dir: Path, path: CameraPath, size: tuple[int, int],
     from lodsprite.metrics import psnr
 
     lf = Lumigraph(lf_dir)
-    obj = _read_object(Path(lf_dir))
+    obj = read_object(Path(lf_dir))
     w, h = size
     proj = perspective(path.fov_y_deg, w / h, lf.header.near, 4 * lf.header.far)
     centre = np.zeros((h, w), bool)
