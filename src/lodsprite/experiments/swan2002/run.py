@@ -59,8 +59,8 @@ from lodsprite.errors import LodspriteError
 from lodsprite.files import write_json
 from lodsprite.paths import swan2002
 from lodsprite.progress import Progress
+from lodsprite.scene import load_scene
 from lodsprite.sprite.predictors import PREDICTORS, prediction_error
-from lodsprite.terrain import load_terrain
 
 NS_PORT = 5555
 ONE_THREAD = {"LP_NUM_THREADS": "1"}
@@ -234,7 +234,7 @@ def _prediction(cfg: SwanConfig, results: dict) -> dict:
     ref = results.get("separate") or results.get("same_cores")
     if not ref or not ref.get("delta_t_ms_mean"):
         return {}
-    hf = load_terrain(cfg.terrain)
+    hf = load_scene(cfg.terrain, textured=False).hf  # the path follows the heights
     path = swan2002(hf, cfg.frames)
     times = np.cumsum(ref["per_frame_ms"]) / 1e3
     lead = max(1, round(ref["delta_t_ms_mean"] / ref["client_ms_mean"]))
