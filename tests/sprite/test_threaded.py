@@ -1,8 +1,11 @@
-"""LOD-sprite with keyframes from a worker thread (its own GL context)."""
+"""LOD-sprite with keyframes from a worker process (its own GL context)."""
 
 from __future__ import annotations
 
 import itertools
+import multiprocessing
+import os
+import signal
 import threading
 
 import numpy as np
@@ -14,6 +17,7 @@ from lodsprite.errors import LodspriteError
 from lodsprite.gl.sprite import SpriteRenderer
 from lodsprite.gl.terrain import TerrainGeometry, TerrainRenderer
 from lodsprite.metrics import rmse
+from lodsprite.procs import WorkerDied, WorkerUnavailable
 from lodsprite.scene import Scene
 from lodsprite.sprite.engine import KEYFRAME, LodSpriteEngine
 from lodsprite.sprite.keyframe_worker import KeyframeWorker, WorkerSettings
@@ -47,8 +51,8 @@ def orbit(n: int, start_deg: float = 0.0, span_deg: float = 40.0):
     return out
 
 
-def worker_threads() -> list[threading.Thread]:
-    return [t for t in threading.enumerate() if t.name == "lodsprite-keyframes"]
+def worker_processes() -> list:
+    return [p for p in multiprocessing.active_children() if p.name == "lodsprite-keyframes"]
 
 
 def test_a_worker_keyframe_draws_the_same_spriteframe_as_an_inline_one(gl, scene, sprite):
@@ -80,7 +84,7 @@ def test_frames_go_on_while_the_worker_renders_and_it_stops_on_close(gl, scene, 
         engine.worker.wait(30.0) if engine.worker.busy else None
     finally:
         engine.close()
-    assert not worker_threads()
+    assert not worker_processes()
     assert frames[0].type == KEYFRAME
     assert all(f.type != KEYFRAME for f in frames[1:])  # the drawing thread never renders one
     assert engine.worker.rendered >= 2  # keyframes were asked for along the orbit
@@ -111,9 +115,9 @@ def test_an_adopted_keyframe_is_never_worse_than_the_one_shown(gl, scene, sprite
 
 
 def test_a_worker_that_cannot_start_says_why(gl, scene):
-    with pytest.raises(LodspriteError, match="could not start"):
+    with pytest.raises(WorkerUnavailable, match="could not start"):
         KeyframeWorker(scene, WorkerSettings((1 << 20, 16), 45.0, 8, "coarse", True, 0))
-    assert not worker_threads()
+    assert not worker_processes()
 
 
 def test_an_unknown_predictor_is_refused(scene):
@@ -137,23 +141,66 @@ def test_the_lead_comes_from_every_delivered_keyframe_not_the_start_up_one(gl, s
         engine.close()
 
 
-def test_frames_say_so_when_the_worker_has_died(gl, scene, sprite, monkeypatch):
-    from lodsprite.sprite import keyframe_worker as worker_module
-
+def test_a_worker_process_killed_mid_run_is_a_typed_error_not_a_hang(gl, scene, sprite):
     engine = ThreadedLodSpriteEngine(sprite, scene, 45.0, 1.0, request_fraction=0.0)
+    views = itertools.cycle(orbit(400))  # keyframes are asked for every frame
     try:
-        engine.frame(orbit(1)[0])
-
-        def broken(self, target, asked):
-            raise RuntimeError("the GL context was lost")
-
-        monkeypatch.setattr(worker_module._WorkerGL, "render", broken)
-        views = itertools.cycle(orbit(400))  # keyframes are asked for every frame
-        with pytest.raises(LodspriteError, match="worker stopped: the GL context was lost"):
-            wait_until(lambda: engine.frame(next(views)) and False, 60,
+        engine.frame(next(views))
+        engine.frame(next(views))  # a keyframe requested: the process has it in hand
+        assert engine.worker.busy
+        os.kill(engine.worker.pid, signal.SIGKILL)
+        with pytest.raises(LodspriteError, match="worker stopped: .*died"):
+            wait_until(lambda: engine.frame(next(views)) and False, 30,
                        "a frame that says the worker died", interval_s=0.002)
+        assert isinstance(engine.worker.error, WorkerDied)
+        with pytest.raises(LodspriteError, match="keyframe worker failed"):
+            engine.worker.wait(5.0)
     finally:
         engine.close()
+    assert not worker_processes()
+
+
+def test_the_drawing_side_never_waits_for_a_slow_worker(gl, scene, sprite):
+    """A stopped process is a worker as slow as can be: polls and frames still return
+    (each under a deadline: a hang fails the test), and its keyframe arrives once it
+    goes on."""
+    engine = ThreadedLodSpriteEngine(sprite, scene, 45.0, 1.0, request_fraction=0.0)
+    views = itertools.cycle(orbit(50))
+    pid = None
+    try:
+        engine.frame(next(views))  # the first keyframe, and the next one asked for
+        engine.worker.wait(30.0)  # taken here: nothing in flight
+        pid = engine.worker.pid
+        os.kill(pid, signal.SIGSTOP)
+        got: list = []
+
+        def draw() -> None:
+            got.extend(engine.frame(next(views)) for _ in range(10))  # the 1st asks
+            got.append(engine.worker.poll())
+
+        drawer = threading.Thread(target=draw, daemon=True)
+        drawer.start()
+        drawer.join(30.0)
+        assert not drawer.is_alive(), "the drawing side waited for the stopped worker"
+        assert [f.type for f in got[:10]] == ["sprite"] * 10
+        assert got[10] is None and engine.worker.busy
+        os.kill(pid, signal.SIGCONT)
+        pid = None
+        key = engine.worker.wait(30.0)
+        assert key.color.shape == (SIZE[1] + 8, SIZE[0] + 8, 3) and key.color.std() > 5
+    finally:
+        if pid is not None:
+            os.kill(pid, signal.SIGCONT)
+        engine.close()
+
+
+def test_the_worker_process_runs_at_a_lower_priority(gl, scene, sprite):
+    engine = ThreadedLodSpriteEngine(sprite, scene, 45.0, 1.0)
+    try:
+        theirs = os.getpriority(os.PRIO_PROCESS, engine.worker.pid)
+    finally:
+        engine.close()
+    assert theirs >= min(os.getpriority(os.PRIO_PROCESS, 0) + 10, 19)
 
 
 def test_the_worker_gives_the_resample_metric_its_keyframe_matrix_and_size(gl, scene, sprite):
