@@ -7,7 +7,7 @@ For each terrain, in one run:
   frame period, as the window paces them (the like-for-like reference on a CPU
   rasteriser, where an idle gap slows the next frame);
 * in a window (``lodsprite view --play chen1999 --mode sprite --exit``), keyframes on the
-  worker thread (default) and inline (``--inline-keyframes``): median and p99 frame time
+  worker process (default) and inline (``--inline-keyframes``): median and p99 frame time
   (from the start of a frame to its buffer swap), the technique's own time, keyframes and
   the error of the frames shown.
 
@@ -117,7 +117,7 @@ def main() -> None:
                 # the window's whole frame (start to after the swap) against the
                 # technique's own (ms: frame() and ctx.finish(), as offscreen)
                 w, p99 = s["window_median_ms"], s["window_p99_ms"]
-                print(f"| {terrain} | {'inline' if inline else 'worker thread'} | "
+                print(f"| {terrain} | {'inline' if inline else 'worker process'} | "
                       f"{w:.2f} | {p99:.2f} | {p99 / w:.2f} | {s['median_ms']:.2f} | "
                       f"{ref:.2f} | {w / ref:.2f} | {paced:.2f} | "
                       f"{w / paced:.2f} | {s['keyframes']} | "

@@ -188,8 +188,8 @@ class Renderer:
                guard_px: int = DEFAULT_GUARD_PX, border: bool = True, cache_mb: float = 0.0,
                cache_policy: str = DEFAULT_POLICY, metric: str = "warp") -> LodSprite:
         """A LOD-sprite engine on this renderer: error threshold ``epsilon_px`` pixels,
-        coarse level ``lod`` quads per side.  ``threaded=True`` renders keyframes on a
-        worker thread with its own context (:mod:`lodsprite.sprite.threaded`); otherwise a
+        coarse level ``lod`` quads per side.  ``threaded=True`` renders keyframes in a
+        worker process with its own context (:mod:`lodsprite.sprite.threaded`); otherwise a
         keyframe is rendered inline in the frame that needs it (the 1999 algorithm).
         ``cache_mb > 0`` keeps keyframes in a GPU cache of that many MB replaced by
         ``cache_policy`` (``lru`` | ``benefit``; :mod:`lodsprite.sprite.cache`; inline
