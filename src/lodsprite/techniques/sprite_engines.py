@@ -6,7 +6,7 @@
   from a keyframe cache; what batch runs time;
 * :class:`WorkerKeyframes` — whole keyframes rendered ahead by a worker process (the
   ``threaded`` option), the drawing loop only draws spriteframes
-  (:class:`~lodsprite.sprite.threaded.ThreadedLodSpriteEngine`);
+  (:class:`~lodsprite.sprite.worker_engine.WorkerLodSpriteEngine`);
 * :class:`TiledKeyframes` — the keyframe refreshed tile by tile within a per-frame budget
   (:class:`~lodsprite.sprite.tiled_engine.TiledSpriteEngine`), inline.
 
@@ -179,7 +179,7 @@ class WholeKeyframes(_Whole):
 class WorkerKeyframes(_Whole):
     """Whole keyframes from a worker process with its own context; every frame is a
     spriteframe and never waits for a keyframe after the first
-    (:class:`~lodsprite.sprite.threaded.ThreadedLodSpriteEngine`)."""
+    (:class:`~lodsprite.sprite.worker_engine.WorkerLodSpriteEngine`)."""
 
     def warm_up(self, viewpoint: Viewpoint) -> None:
         """One frame drawn: the first keyframe is waited for there (the worker's

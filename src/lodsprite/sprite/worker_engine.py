@@ -49,7 +49,7 @@ DEFAULT_REQUEST_FRACTION = 0.5
 LEAD_SMOOTHING = 0.3   # weight of the newest latency in the lead's running mean
 
 
-class ThreadedLodSpriteEngine:
+class WorkerLodSpriteEngine:
     """LOD-sprite frame by frame with a :class:`~lodsprite.sprite.keyframe_worker.KeyframeWorker`.
 
     ``sprite`` draws the spriteframes on the caller's context; ``scene`` is what the worker

@@ -21,7 +21,7 @@ from lodsprite.procs import WorkerDied, WorkerUnavailable
 from lodsprite.scene import Scene
 from lodsprite.sprite.engine import KEYFRAME, LodSpriteEngine
 from lodsprite.sprite.keyframe_worker import KeyframeWorker, WorkerSettings
-from lodsprite.sprite.threaded import ThreadedLodSpriteEngine
+from lodsprite.sprite.worker_engine import WorkerLodSpriteEngine
 from lodsprite.terrain import make_texture
 
 SIZE = (96, 96)
@@ -57,7 +57,7 @@ def worker_processes() -> list:
 
 def test_a_worker_keyframe_draws_the_same_spriteframe_as_an_inline_one(gl, scene, sprite):
     vp = orbit(1)[0]
-    engine = ThreadedLodSpriteEngine(sprite, scene, 45.0, 1.0)
+    engine = WorkerLodSpriteEngine(sprite, scene, 45.0, 1.0)
     try:
         first = engine.frame(vp)  # waits for the worker's first keyframe, at vp
         threaded = engine.read_image()
@@ -77,7 +77,7 @@ def test_a_worker_keyframe_draws_the_same_spriteframe_as_an_inline_one(gl, scene
 
 def test_frames_go_on_while_the_worker_renders_and_it_stops_on_close(gl, scene, sprite):
     path = orbit(40)
-    engine = ThreadedLodSpriteEngine(sprite, scene, 45.0, 0.5)
+    engine = WorkerLodSpriteEngine(sprite, scene, 45.0, 0.5)
     try:
         frames = [engine.frame(vp) for vp in path]
         # let the worker finish what it was asked for, then take it
@@ -95,7 +95,7 @@ def test_frames_go_on_while_the_worker_renders_and_it_stops_on_close(gl, scene, 
 
 
 def test_an_adopted_keyframe_is_never_worse_than_the_one_shown(gl, scene, sprite):
-    engine = ThreadedLodSpriteEngine(sprite, scene, 45.0, 0.5)
+    engine = WorkerLodSpriteEngine(sprite, scene, 45.0, 0.5)
     views = itertools.cycle(orbit(600, span_deg=60))  # slowly: keyframes arrive on the way
     adopted = []
 
@@ -127,7 +127,7 @@ def test_an_unknown_predictor_is_refused(scene):
 
 def test_the_lead_comes_from_every_delivered_keyframe_not_the_start_up_one(gl, scene, sprite):
     vp = orbit(1)[0]
-    engine = ThreadedLodSpriteEngine(sprite, scene, 45.0, 1.0, request_fraction=0.0)
+    engine = WorkerLodSpriteEngine(sprite, scene, 45.0, 1.0, request_fraction=0.0)
     try:
         engine.frame(vp)  # start-up: waited for, not a measure of the latency
         assert engine.worker.lead_s == 0.0
@@ -142,7 +142,7 @@ def test_the_lead_comes_from_every_delivered_keyframe_not_the_start_up_one(gl, s
 
 
 def test_a_worker_process_killed_mid_run_is_a_typed_error_not_a_hang(gl, scene, sprite):
-    engine = ThreadedLodSpriteEngine(sprite, scene, 45.0, 1.0, request_fraction=0.0)
+    engine = WorkerLodSpriteEngine(sprite, scene, 45.0, 1.0, request_fraction=0.0)
     views = itertools.cycle(orbit(400))  # keyframes are asked for every frame
     try:
         engine.frame(next(views))
@@ -164,7 +164,7 @@ def test_the_drawing_side_never_waits_for_a_slow_worker(gl, scene, sprite):
     """A stopped process is a worker as slow as can be: polls and frames still return
     (each under a deadline: a hang fails the test), and its keyframe arrives once it
     goes on."""
-    engine = ThreadedLodSpriteEngine(sprite, scene, 45.0, 1.0, request_fraction=0.0)
+    engine = WorkerLodSpriteEngine(sprite, scene, 45.0, 1.0, request_fraction=0.0)
     views = itertools.cycle(orbit(50))
     pid = None
     try:
@@ -195,7 +195,7 @@ def test_the_drawing_side_never_waits_for_a_slow_worker(gl, scene, sprite):
 
 
 def test_the_worker_process_runs_at_a_lower_priority(gl, scene, sprite):
-    engine = ThreadedLodSpriteEngine(sprite, scene, 45.0, 1.0)
+    engine = WorkerLodSpriteEngine(sprite, scene, 45.0, 1.0)
     try:
         theirs = os.getpriority(os.PRIO_PROCESS, engine.worker.pid)
     finally:
@@ -205,7 +205,7 @@ def test_the_worker_process_runs_at_a_lower_priority(gl, scene, sprite):
 
 def test_the_worker_gives_the_resample_metric_its_keyframe_matrix_and_size(gl, scene, sprite):
     path = orbit(6, span_deg=10)
-    engine = ThreadedLodSpriteEngine(sprite, scene, 45.0, 1.0, metric="resample")
+    engine = WorkerLodSpriteEngine(sprite, scene, 45.0, 1.0, metric="resample")
     try:
         frames = [engine.frame(vp) for vp in path]
         cp = engine._c_prime
