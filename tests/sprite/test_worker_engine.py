@@ -75,6 +75,35 @@ def test_a_worker_keyframe_draws_the_same_spriteframe_as_an_inline_one(gl, scene
     assert threaded.std() > 5  # a picture, not a cleared target
 
 
+def test_the_worker_process_renders_the_keyframe_this_context_would(gl, scene):
+    """Same heights (exaggeration included), texture and settings in the process: its
+    keyframe is the one rendered here, to the bit."""
+    tall = Scene(scene.hf.scaled(2.5), scene.texture)
+    vp = orbit(1, start_deg=30)[0]
+    worker = KeyframeWorker(tall, WorkerSettings(SIZE, 45.0, 8, "coarse", True, 4))
+    try:
+        worker.observe(0.0, vp)
+        worker.request()
+        key = worker.wait(30.0)
+    finally:
+        worker.close()
+    geo = TerrainGeometry(gl, tall.hf, tall.texture)
+    tr = TerrainRenderer(gl, geo, *SIZE)
+    sp = SpriteRenderer(tr, 8, guard_px=4)
+    try:
+        sp.render_keyframe(vp, 0.0, tr.projection(vp))
+        here = sp.keyframe
+        np.testing.assert_array_equal(key.color, here.target.read_color())
+        np.testing.assert_array_equal(key.depth, here.coarse.read_depth())
+        assert key.zbuffer == "coarse" and not key.predicted
+        assert key.projection == here.projection
+    finally:
+        sp.release()
+        tr.release()
+        geo.release()
+    assert key.color.std() > 5
+
+
 def test_frames_go_on_while_the_worker_renders_and_it_stops_on_close(gl, scene, sprite):
     path = orbit(40)
     engine = WorkerLodSpriteEngine(sprite, scene, 45.0, 0.5)
