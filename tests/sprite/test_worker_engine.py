@@ -117,6 +117,8 @@ def test_frames_go_on_while_the_worker_renders_and_it_stops_on_close(gl, scene, 
     assert frames[0].type == KEYFRAME
     assert all(f.type != KEYFRAME for f in frames[1:])  # the drawing thread never renders one
     assert engine.worker.rendered >= 2  # keyframes were asked for along the orbit
+    assert len(engine.worker.render_ms) == engine.worker.rendered  # one time per keyframe
+    assert all(ms > 0 for ms in engine.worker.render_ms)
     assert engine.worker.error is None
     # errors are measured per frame; the first is the keyframe's own view
     assert frames[0].error_px == pytest.approx(0.0, abs=1e-6)

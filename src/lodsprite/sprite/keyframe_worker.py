@@ -116,10 +116,11 @@ class KeyframeWorker:
     The drawing loop calls :meth:`observe` every frame (cheap), :meth:`request` when a
     keyframe is wanted (the viewpoint is predicted there) and :meth:`poll` for a finished
     one; none of them waits, only :meth:`wait` does (start-up, with a deadline).
-    :attr:`lead_s` is how far ahead keyframes are placed.  A process that fails to start
-    raises :class:`~lodsprite.procs.WorkerUnavailable` here; one that dies or fails to
-    render sets :attr:`error` (a :class:`~lodsprite.procs.WorkerError`): it is not
-    started again (no keyframe will come).
+    :attr:`lead_s` is how far ahead keyframes are placed; :attr:`render_ms` lists the
+    process's time for each keyframe delivered (ms, the first one included).  A process
+    that fails to start raises :class:`~lodsprite.procs.WorkerUnavailable` here; one that
+    dies or fails to render sets :attr:`error` (a :class:`~lodsprite.procs.WorkerError`):
+    it is not started again (no keyframe will come).
     """
 
     def __init__(self, scene: Scene, settings: WorkerSettings, ready_s: float = READY_S
@@ -132,6 +133,7 @@ class KeyframeWorker:
         self.settings = settings
         self.lead_s = 0.0
         self.rendered = 0
+        self.render_ms: list[float] = []
         self.error: WorkerError | None = None
         self._samples: deque[tuple[float, Viewpoint]] = deque(maxlen=SAMPLES_KEPT)
         self._predictor = PREDICTORS[settings.predictor]()
@@ -179,6 +181,7 @@ class KeyframeWorker:
             else:
                 got = _image(*answer)
                 self.rendered += 1
+                self.render_ms.append(got.render_ms)
         if self.error is None and not self._proc.alive:
             self._fail(self._proc.gone or WorkerDied("the keyframe process stopped"))
         return got
@@ -246,7 +249,7 @@ def _start(scene: Scene, settings: WorkerSettings, ready_s: float) -> ProcessWor
             proc.poll()  # a start that failed, or a deadline passed: the reason
             why = proc.gone or WorkerUnavailable(f"not ready in {ready_s:g} s")
             proc.close()
-            raise WorkerUnavailable(f"keyframe worker could not start: {why}")
+            raise WorkerUnavailable(f"keyframe worker could not start: {why}") from why
         return proc
     finally:
         shm.close()
