@@ -16,7 +16,7 @@ or on a machine without a display, under a virtual X server::
     xvfb-run -a -s "-screen 0 1280x1024x24" python examples/embed_moderngl_window.py --frames 30
 
 ``--frames N`` quits after N frames and prints a summary line; ``--inline`` renders
-keyframes in the frame that needs them (the 1999 algorithm) instead of on a worker thread;
+keyframes in the frame that needs them (the 1999 algorithm) instead of in a worker process;
 ``--epsilon PX`` sets the error threshold.  moderngl-window's own options (``--size``,
 ``--vsync``, ...) work too.
 """
@@ -50,7 +50,7 @@ class TerrainWindow(moderngl_window.WindowConfig):
         parser.add_argument("--epsilon", type=float, default=1.0,
                             help="LOD-sprite error threshold in pixels")
         parser.add_argument("--inline", action="store_true",
-                            help="render keyframes inline instead of on a worker thread")
+                            help="render keyframes inline instead of in a worker process")
 
     def __init__(self, **kwargs) -> None:
         super().__init__(**kwargs)
@@ -101,7 +101,7 @@ class TerrainWindow(moderngl_window.WindowConfig):
               f"GL {self.renderer.info.renderer}")
 
     def on_close(self) -> None:
-        self.sprite.release()     # stops the keyframe worker thread
+        self.sprite.release()     # ends the keyframe worker process
         self.renderer.release()   # lodsprite's GPU objects (not the window's context)
 
 

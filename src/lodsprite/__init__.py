@@ -6,7 +6,7 @@ The public API (see the README's "Python API" section):
   scene: a terrain, a lumigraph folder, a crowd) -> :class:`Scene`, which holds layers;
 * rendering: :class:`Renderer` (standalone headless context, or an application's
   moderngl context for embedding), :meth:`Renderer.sprite` -> :class:`LodSprite`, the
-  LOD-sprite engine frame by frame (keyframes inline, or on a worker thread);
+  LOD-sprite engine frame by frame (keyframes inline, or from a worker process);
 * cameras and paths: :class:`Viewpoint`, :func:`look_at`, :class:`CameraPath`,
   :func:`get_path` (built-in paths and JSON files), :func:`load_path_json`;
 * images: :func:`read_image`, :func:`write_image`;

@@ -48,7 +48,7 @@ from lodsprite.record import Frame
 from lodsprite.scene import Scene
 from lodsprite.sprite.cache import DEFAULT_POLICY
 from lodsprite.sprite.engine import DEFAULT_EPSILON_PX, LodSpriteEngine
-from lodsprite.sprite.threaded import ThreadedLodSpriteEngine
+from lodsprite.sprite.worker_engine import WorkerLodSpriteEngine
 from lodsprite.terrain.lod import DEFAULT_COARSE
 
 if TYPE_CHECKING:  # hints only: moderngl is imported under gl/
@@ -188,8 +188,8 @@ class Renderer:
                guard_px: int = DEFAULT_GUARD_PX, border: bool = True, cache_mb: float = 0.0,
                cache_policy: str = DEFAULT_POLICY, metric: str = "warp") -> LodSprite:
         """A LOD-sprite engine on this renderer: error threshold ``epsilon_px`` pixels,
-        coarse level ``lod`` quads per side.  ``threaded=True`` renders keyframes on a
-        worker thread with its own context (:mod:`lodsprite.sprite.threaded`); otherwise a
+        coarse level ``lod`` quads per side.  ``threaded=True`` renders keyframes in a
+        worker process with its own context (:mod:`lodsprite.sprite.worker_engine`); otherwise a
         keyframe is rendered inline in the frame that needs it (the 1999 algorithm).
         ``cache_mb > 0`` keeps keyframes in a GPU cache of that many MB replaced by
         ``cache_policy`` (``lru`` | ``benefit``; :mod:`lodsprite.sprite.cache`; inline
@@ -281,8 +281,8 @@ class LodSprite:
         self.sprite = SpriteRenderer(renderer.terrain_gl.renderer, lod, visibility, border=border,
                                      guard_px=guard_px)
         try:
-            self.engine: LodSpriteEngine | ThreadedLodSpriteEngine = (
-                ThreadedLodSpriteEngine(self.sprite, renderer.scene, renderer.fov_y_deg,
+            self.engine: LodSpriteEngine | WorkerLodSpriteEngine = (
+                WorkerLodSpriteEngine(self.sprite, renderer.scene, renderer.fov_y_deg,
                                         epsilon_px, metric=metric) if threaded
                 else LodSpriteEngine(self.sprite, epsilon_px, cache_mb=cache_mb,
                                      cache_policy=cache_policy, metric=metric))
@@ -343,7 +343,7 @@ class LodSprite:
         :meth:`Renderer.release` calls it for every sprite not released yet)."""
         if self.sprite is None:
             return
-        if isinstance(self.engine, ThreadedLodSpriteEngine):
+        if isinstance(self.engine, WorkerLodSpriteEngine):
             self.engine.close()
         self.sprite.release()
         self.sprite = None

@@ -17,9 +17,9 @@ closing its input or telling it, then ``terminate``, then ``kill``, each with a
 deadline, and joined: no zombie; stopped at interpreter exit if its owner forgot):
 
 * :class:`~lodsprite.workers.ProcessWorker`: requests and answers (the tile reader, the
-  node decoder, a render worker's GL process), submitted and polled from the frame's
-  thread without waiting; bulk answers come back through a bounded number of
-  shared-memory slots.
+  node decoder, a render worker's GL process, the LOD-sprite keyframe worker),
+  submitted and polled from the frame's thread without waiting; bulk answers come back
+  through a bounded number of shared-memory slots.
 * :func:`call_in_child`: one call in a fresh process (a run whose peak memory is its own).
 * :func:`start_child`: a long-running process that talks for itself (a pool worker).
 

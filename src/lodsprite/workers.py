@@ -208,6 +208,12 @@ class ProcessWorker:
         return self._child is not None
 
     @property
+    def gone(self) -> WorkerError | None:
+        """Why no process runs any more (its factory failed, it was not ready in time,
+        it died more often than it may be restarted, it was closed); None while one may."""
+        return self._gone
+
+    @property
     def pid(self) -> int | None:
         return self._child.pid if self._child is not None else None
 

@@ -4,7 +4,7 @@
 import csv
 import json
 import math
-import threading
+import multiprocessing
 
 import numpy as np
 import pytest
@@ -465,10 +465,10 @@ def test_resize_makes_frames_of_the_new_size(make_core, tmp_path):
     assert core.technique.read_image().shape == (80, 128, 3)
 
 
-# ------------------------------------------------------------------------ worker thread
+# ----------------------------------------------------------------------- worker process
 
 def workers():
-    return [th for th in threading.enumerate() if th.name == "lodsprite-keyframes"]
+    return [p for p in multiprocessing.active_children() if p.name == "lodsprite-keyframes"]
 
 
 def test_threaded_sprite_mode_renders_and_release_stops_the_worker(make_core, scene):
@@ -480,7 +480,7 @@ def test_threaded_sprite_mode_renders_and_release_stops_the_worker(make_core, sc
     assert len(workers()) == before + 1
     assert play(core, t.fbo) == 8
     status = core.technique.status()
-    assert core.hud.keyframes >= 1 and status.startswith("keyframes: worker thread")
+    assert core.hud.keyframes >= 1 and status.startswith("keyframes: worker process")
     assert "lead -" not in status  # the lead is a latency, never negative
     assert {r["kind"] for r in core.rows} <= {"keyframe", "first_sprite", "sprite"}
     assert core.technique.read_image().std() > 0

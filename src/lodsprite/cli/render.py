@@ -234,8 +234,8 @@ def view(
         "--fps", help="frame rate cap (0: none); the keyframe worker uses the time left")] = 60,
     inline: Annotated[bool, typer.Option(
         "--inline-keyframes", help="sprite mode: render keyframes in the frame that needs "
-                                   "them (the 1999 algorithm) instead of on a worker "
-                                   "thread")] = False,
+                                   "them (the 1999 algorithm) instead of in a worker "
+                                   "process")] = False,
     play: Annotated[str | None, typer.Option(
         "--play", help="play a path (chen1999 | swan2002 | FILE.json; lumigraph: arc | "
                        "FILE.json; crowd: walk | FILE.json) instead of flying")] = None,

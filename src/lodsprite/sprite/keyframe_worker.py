@@ -1,18 +1,24 @@
-"""Keyframes rendered off the drawing thread: Swan et al. (2002)'s server/client split
-inside one process.
+"""Keyframes rendered beside the drawing loop: Swan et al. (2002)'s server/client split,
+the server as a process of its own.
 
 The 2002 paper renders keyframes on a second graphics pipe (the LOD server) so that the
-client draws spriteframes at a steady rate.  :class:`KeyframeWorker` is that server as a
-thread with its own OpenGL context: it renders the full-resolution terrain for a viewpoint
-predicted ``δt`` ahead (:mod:`lodsprite.sprite.predictors`, the paper's
-VIEWPOINT-PREDICTOR; δt is the measured request-to-adoption latency), reads the keyframe's
-colour and z-buffer back and hands them over, with the keyframe's ``C'`` (the error
-metric's reprojected centres, Eq. 2), to the drawing thread, which uploads them
-(:meth:`~lodsprite.gl.sprite.SpriteRenderer.upload_keyframe`) and never waits.
+client draws spriteframes at a steady rate.  :class:`KeyframeWorker` is the client's
+end of that server, which runs as a :class:`~lodsprite.workers.ProcessWorker` (the one
+process mechanism, :mod:`lodsprite.procs`: moderngl holds the GIL through each draw, so
+a thread beside the draws runs only between them).  The process makes its own headless
+OpenGL context and the scene's terrain from the drawing side's arrays (the same heights,
+exaggeration included, and texture, handed over once through shared memory), renders
+the full-resolution terrain for the viewpoint it is sent, reads the keyframe's colour
+and z-buffer back and answers them through a shared-memory slot, with the keyframe's
+``C'`` (the error metric's reprojected centres, Eq. 2).  The drawing side places each
+request ``δt`` ahead (:mod:`lodsprite.sprite.predictors`, the paper's
+VIEWPOINT-PREDICTOR, fed with the observed viewpoints; δt is the measured
+request-to-adoption latency), polls for the answer without waiting and uploads it
+(:meth:`~lodsprite.gl.sprite.SpriteRenderer.upload_keyframe`).
 
-The worker thread lowers its own scheduling priority (``nice``, Linux) before it makes its
+The process lowers its own scheduling priority (``nice``, Linux) before it makes its
 context, so that the software rasteriser's threads it starts inherit it: on a machine
-without a GPU, the drawing thread's spriteframes come first and keyframes take the
+without a GPU, the drawing loop's spriteframes come first and keyframes take the
 remaining CPU time.
 """
 
@@ -20,26 +26,35 @@ from __future__ import annotations
 
 import logging
 import os
+import pickle
 import threading
 import time
 from collections import deque
 from dataclasses import dataclass
+from multiprocessing import shared_memory
+from multiprocessing.connection import wait as wait_readable
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from lodsprite.camera import Projection, Viewpoint
 from lodsprite.errors import LodspriteError
+from lodsprite.procs import WorkerDied, WorkerError, WorkerUnavailable
 from lodsprite.sprite.metric import ErrorMetric
 from lodsprite.sprite.predictors import PREDICTORS
+from lodsprite.workers import ProcessWorker
 
 if TYPE_CHECKING:  # the scene is passed in
     from lodsprite.scene import Scene
+    from lodsprite.terrain import HeightField
 
 log = logging.getLogger(__name__)
 
 DEFAULT_WORKER_NICE = 10
 SAMPLES_KEPT = 64
+READY_S = 60.0          # the process's start (context, scene, shaders) has this long
+MAX_REQUEST = 4096      # bytes: a pickled viewpoint and two numbers
+FACTORY = "lodsprite.sprite.keyframe_worker:keyframe_handler"
 
 
 @dataclass(frozen=True)
@@ -49,9 +64,10 @@ class KeyframeImage:
     ``color (H, W, 3) uint8`` and ``depth (H, W) float32`` (window depth; whose z-buffer:
     ``zbuffer``, "coarse" or "full"), row 0 at the top, at the keyframe size (image plus
     guard band); ``projection``: the keyframe's own (widened); ``frame_projection``: the
-    frame projection at its viewpoint; ``c_prime (n*n, 3)`` metres; ``requested_at``
-    (``time.perf_counter`` seconds); ``render_ms``: the worker's time for it;
-    ``predicted``: placed ahead of the latest viewpoint sample."""
+    frame projection at its viewpoint; ``c_prime (n*n, 3)`` metres (a
+    :class:`~lodsprite.sprite.raycast.Reprojection`); ``requested_at``
+    (``time.perf_counter`` seconds of the drawing process); ``render_ms``: the worker's
+    time for it; ``predicted``: placed ahead of the latest viewpoint sample."""
 
     viewpoint: Viewpoint
     projection: Projection
@@ -69,7 +85,7 @@ class KeyframeImage:
 class WorkerSettings:
     """How the worker renders: image size ``(w, h)`` pixels, vertical field of view
     (degrees), coarse level (quads per side), visibility rule, border ribbons, guard band
-    (pixels), predictor name, the nice increment of the worker thread and whether the
+    (pixels), predictor name, the nice increment of the worker process and whether the
     keyframes' ``C'`` are for the resampling metric (their matrix and size attached)."""
 
     size: tuple[int, int]
@@ -82,39 +98,54 @@ class WorkerSettings:
     nice: int = DEFAULT_WORKER_NICE
     resampling: bool = False
 
+    @property
+    def key_size(self) -> tuple[int, int]:
+        """A keyframe's ``(w, h)`` pixels: the image plus the guard band on every side."""
+        return self.size[0] + 2 * self.guard_px, self.size[1] + 2 * self.guard_px
+
+    @property
+    def answer_bytes(self) -> int:
+        """A keyframe's depth (float32) and colour (3 bytes a pixel) together."""
+        w, h = self.key_size
+        return w * h * (3 + 4)
+
 
 class KeyframeWorker:
-    """A thread with its own GL context that renders keyframes on request.
+    """A process with its own GL context that renders keyframes on request.
 
-    The drawing thread calls :meth:`observe` every frame (cheap), :meth:`request` when a
-    keyframe is wanted and :meth:`poll` for the newest finished one; it never blocks but
-    in :meth:`wait` (start-up).  :attr:`lead_s` is how far ahead keyframes are placed.
+    The drawing loop calls :meth:`observe` every frame (cheap), :meth:`request` when a
+    keyframe is wanted (the viewpoint is predicted there) and :meth:`poll` for a finished
+    one; none of them waits, only :meth:`wait` does (start-up, with a deadline).
+    :attr:`lead_s` is how far ahead keyframes are placed; :attr:`render_ms` lists the
+    process's time for each keyframe delivered (ms, the first one included).  A process
+    that fails to start raises :class:`~lodsprite.procs.WorkerUnavailable` here; one that
+    dies or fails to render sets :attr:`error` (a :class:`~lodsprite.procs.WorkerError`):
+    it is not started again (no keyframe will come).
     """
 
-    def __init__(self, scene: Scene, settings: WorkerSettings) -> None:
+    def __init__(self, scene: Scene, settings: WorkerSettings, ready_s: float = READY_S
+                 ) -> None:
         if settings.predictor not in PREDICTORS:
             raise LodspriteError(f"unknown predictor {settings.predictor!r}")
+        if scene.hf is None:
+            raise LodspriteError("the keyframe worker needs a scene with terrain")
         self.scene = scene
         self.settings = settings
         self.lead_s = 0.0
         self.rendered = 0
-        self.error: BaseException | None = None
+        self.render_ms: list[float] = []
+        self.error: WorkerError | None = None
         self._samples: deque[tuple[float, Viewpoint]] = deque(maxlen=SAMPLES_KEPT)
-        self._lock = threading.Lock()
-        self._wake = threading.Condition(self._lock)
-        self._done = threading.Condition(self._lock)
-        self._wanted: float | None = None   # request time of the keyframe asked for
-        self._ready: KeyframeImage | None = None
-        self._stop = False
-        self._started = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="lodsprite-keyframes",
-                                        daemon=True)
-        self._thread.start()
-        self._started.wait()
-        if self.error is not None:
-            raise LodspriteError(f"keyframe worker could not start: {self.error}") from self.error
+        self._predictor = PREDICTORS[settings.predictor]()
+        self._fed = -np.inf
+        self._wanted: float | None = None  # request time of the keyframe asked for
+        self._closed = False
+        self._proc = _start(scene, settings, ready_s)
 
-    # ---------------------------------------------------------------- drawing thread side
+    @property
+    def pid(self) -> int | None:
+        """The worker process's id (None once it is gone)."""
+        return self._proc.pid
 
     def observe(self, t: float, viewpoint: Viewpoint) -> None:
         """A viewpoint sample at ``t`` seconds (``time.perf_counter``)."""
@@ -126,123 +157,204 @@ class KeyframeWorker:
         return self._wanted is not None
 
     def request(self) -> None:
-        """Ask for a keyframe at the predicted viewpoint; no-op while one is on its way."""
-        with self._lock:
-            if self._wanted is None and not self._stop:
-                self._wanted = time.perf_counter()
-                self._wake.notify()
+        """Ask for a keyframe at the predicted viewpoint; no-op while one is on its way,
+        after a failure or :meth:`close`."""
+        if self._wanted is not None or self._closed or self.error is not None:
+            return
+        if not self._samples:
+            raise LodspriteError("a keyframe request needs an observed viewpoint")
+        now = time.perf_counter()
+        vp, predicted = self._target(now)
+        self._wanted = now
+        self._proc.submit(now, pickle.dumps((vp, predicted, now)))
 
     def poll(self) -> KeyframeImage | None:
-        """The keyframe finished since the last call, or None (never blocks)."""
-        if self._ready is None:
+        """The keyframe finished since the last call, or None (never blocks).  A failed
+        render or a dead process sets :attr:`error`."""
+        if self._closed:
             return None
-        with self._lock:
-            ready, self._ready = self._ready, None
-            return ready
+        got = None
+        for _, answer in self._proc.poll():
+            self._wanted = None
+            if isinstance(answer, WorkerError):
+                self._fail(answer)
+            else:
+                got = _image(*answer)
+                self.rendered += 1
+                self.render_ms.append(got.render_ms)
+        if self.error is None and not self._proc.alive:
+            self._fail(self._proc.gone or WorkerDied("the keyframe process stopped"))
+        return got
 
     def wait(self, timeout_s: float = 60.0) -> KeyframeImage:
-        """Block until the requested keyframe is ready (start-up only)."""
-        with self._lock:
-            if not self._done.wait_for(lambda: self._ready is not None or self.error
-                                       is not None or not self._thread.is_alive(), timeout_s):
+        """Block until the requested keyframe is ready (start-up only); raises
+        :class:`~lodsprite.errors.LodspriteError` when it fails or ``timeout_s`` passes."""
+        deadline = time.monotonic() + timeout_s
+        while True:
+            got = self.poll()
+            if got is not None:
+                return got
+            if self.error is not None:
+                raise LodspriteError(f"keyframe worker failed: {self.error}") from self.error
+            if self._wanted is None:
+                raise LodspriteError("no keyframe was requested")
+            left = deadline - time.monotonic()
+            if left <= 0:
                 raise LodspriteError(f"no keyframe within {timeout_s:g} s")
-            if self._ready is None:
-                raise LodspriteError(f"keyframe worker failed: {self.error}")
-            ready, self._ready = self._ready, None
-            return ready
+            wait_readable([self._proc], timeout=min(left, 0.5))  # an answer or a death
 
     def close(self) -> None:
-        """Stop the thread and release its GL objects (in the thread, where they live)."""
-        with self._lock:
-            self._stop = True
-            self._wake.notify()
-        self._thread.join(timeout=30.0)
+        """End the process (its GL context and objects go with it).  Idempotent."""
+        self._closed = True
+        self._wanted = None
+        self._proc.close()
 
-    # ---------------------------------------------------------------- worker thread side
+    def _fail(self, error: WorkerError) -> None:
+        log.error("keyframe worker stopped: %s", error)
+        self.error = error
 
-    def _run(self) -> None:
-        _lower_priority(self.settings.nice)
-        try:
-            gl = _WorkerGL(self.scene, self.settings)  # releases what it made if it fails
-        except BaseException as exc:  # reported to the constructor
-            self.error = exc
-            self._started.set()
-            return
-        self._started.set()
-        predictor = PREDICTORS[self.settings.predictor]()
-        fed = -np.inf
-        try:
-            while True:
-                with self._lock:
-                    self._wake.wait_for(lambda: self._stop or self._wanted is not None)
-                    if self._stop:
-                        return
-                    asked = self._wanted
-                    # tuple() copies the deque in one step: observe() may append meanwhile
-                    samples = [s for s in tuple(self._samples) if s[0] > fed]
-                for t, vp in samples:
-                    predictor.observe(t, vp)
-                    fed = t
-                image = gl.render(self._target(predictor, samples), asked)
-                with self._lock:
-                    self._ready, self._wanted = image, None
-                    self.rendered += 1
-                    self._done.notify_all()
-        except BaseException as exc:  # noqa: BLE001 - reported to the drawing thread
-            log.error("keyframe worker stopped: %s", exc)
-            self.error = exc
-            with self._lock:
-                self._done.notify_all()
-        finally:
-            gl.release()
-
-    def _target(self, predictor, samples: list) -> tuple[Viewpoint, bool]:
-        """The viewpoint to render: the latest sample moved ``lead_s`` ahead, unless the
+    def _target(self, now: float) -> tuple[Viewpoint, bool]:
+        """The viewpoint to render: the latest sample moved ``lead_s`` ahead (the
+        predictor fed with the samples observed since the last request), unless the
         prediction goes under the ground."""
-        latest_t, latest = self._samples[-1] if self._samples else samples[-1]
-        ahead = time.perf_counter() - latest_t + self.lead_s
+        for t, vp in tuple(self._samples):
+            if t > self._fed:
+                self._predictor.observe(t, vp)
+                self._fed = t
+        latest_t, latest = self._samples[-1]
+        ahead = now - latest_t + self.lead_s
         if ahead <= 0 or len(self._samples) < 2:
             return latest, False
-        vp = predictor.predict(ahead)
+        vp = self._predictor.predict(ahead)
         ground = float(self.scene.hf.height_at(vp.o[0], vp.o[1]))
         return (vp, True) if vp.o[2] > ground else (latest, False)
 
 
+def _start(scene: Scene, settings: WorkerSettings, ready_s: float) -> ProcessWorker:
+    """The worker process, ready (its context and scene made), or
+    :class:`~lodsprite.procs.WorkerUnavailable` saying why not.  The scene's arrays go
+    through a shared-memory segment that is unlinked once the process has copied them."""
+    hf = scene.hf
+    arrays = {"heights": hf.heights}
+    if scene.texture is not None:
+        arrays["texture"] = np.ascontiguousarray(scene.texture)
+    shm, layout = share_arrays(arrays)
+    try:
+        proc = ProcessWorker(FACTORY, {
+            "shm_name": shm.name, "layout": layout,
+            "field": (hf.dx, hf.dy, hf.name, dict(hf.meta)), "settings": settings},
+            in_flight=1, restarts=0, name="keyframes", slot_bytes=settings.answer_bytes,
+            max_request=MAX_REQUEST, ready_s=ready_s)
+        if not proc.wait_ready(ready_s):
+            proc.poll()  # a start that failed, or a deadline passed: the reason
+            why = proc.gone or WorkerUnavailable(f"not ready in {ready_s:g} s")
+            proc.close()
+            raise WorkerUnavailable(f"keyframe worker could not start: {why}") from why
+        return proc
+    finally:
+        shm.close()
+        shm.unlink()
+
+
+def share_arrays(arrays: dict[str, np.ndarray]
+                 ) -> tuple[shared_memory.SharedMemory, dict[str, tuple]]:
+    """``arrays`` copied into one new shared-memory segment; the segment (its creator
+    closes and unlinks it) and the layout :func:`copy_shared` reads them back by:
+    per name, ``(offset bytes, shape, dtype str)``."""
+    layout, at = {}, 0
+    for name, a in arrays.items():
+        layout[name] = (at, tuple(a.shape), a.dtype.str)
+        at += -(-a.nbytes // 64) * 64
+    shm = shared_memory.SharedMemory(create=True, size=max(at, 1))
+    for name, a in arrays.items():
+        off, shape, dtype = layout[name]
+        np.ndarray(shape, dtype, buffer=shm.buf, offset=off)[...] = a
+    return shm, layout
+
+
+def copy_shared(shm_name: str, layout: dict[str, tuple]) -> dict[str, np.ndarray]:
+    """The arrays :func:`share_arrays` put in the segment ``shm_name``, copied out."""
+    shm = shared_memory.SharedMemory(shm_name)
+    try:
+        return {name: np.ndarray(shape, dtype, buffer=shm.buf, offset=off).copy()
+                for name, (off, shape, dtype) in layout.items()}
+    finally:
+        shm.close()
+
+
+def _image(meta: bytes, data: bytes) -> KeyframeImage:
+    """A process answer (:func:`keyframe_handler`) as the keyframe it carries."""
+    fields = pickle.loads(meta)
+    w, h = fields.pop("key_size")
+    depth = np.frombuffer(data, np.float32, w * h).reshape(h, w)
+    color = np.frombuffer(data, np.uint8, w * h * 3, offset=w * h * 4).reshape(h, w, 3)
+    return KeyframeImage(color=color, depth=depth, **fields)
+
+
+# ----------------------------------------------------------------- the worker process
+
+
+def keyframe_handler(shm_name: str, layout: dict, field: tuple, settings: WorkerSettings):
+    """The worker process's request handler (:mod:`lodsprite.workers`' factory): its
+    priority lowered, its context and scene made from the shared arrays.  A request's
+    meta is ``(viewpoint, predicted, requested_at)`` pickled; the answer's meta the
+    keyframe's fields pickled, its data the depth then the colour bytes."""
+    from lodsprite.terrain import HeightField
+
+    _lower_priority(settings.nice)
+    arrays = copy_shared(shm_name, layout)
+    dx, dy, name, meta = field
+    gl = _WorkerGL(HeightField(arrays["heights"], dx, dy, name, meta), arrays.get("texture"),
+                   settings)
+
+    def answer(meta: bytes, data: bytes) -> tuple[bytes, bytes]:
+        vp, predicted, asked = pickle.loads(meta)
+        return gl.render(vp, predicted, asked)
+
+    return answer
+
+
 class _WorkerGL:
-    """The worker's GL state: its own context, terrain and keyframe renderer."""
+    """The worker's GL state: its own context, the terrain (height field ``hf``, colour
+    ``texture (H, W, 3) uint8`` or None) and the keyframe renderer."""
 
-    def __init__(self, scene: Scene, s: WorkerSettings) -> None:
+    def __init__(self, hf: HeightField, texture: np.ndarray | None, s: WorkerSettings
+                 ) -> None:
+        from lodsprite.gl.context import GLContext
         from lodsprite.gl.sprite import SpriteRenderer
-        from lodsprite.gl.terrain_gl import TerrainGL
+        from lodsprite.gl.terrain import TerrainGeometry, TerrainRenderer
 
-        self.terrain_gl = TerrainGL(scene, s.size, s.fov_y_deg)
-        self.terrain_gl.renderer.unlocked_draws = True  # the drawing thread runs meanwhile
+        self.ctx = GLContext()
+        made = [self.ctx]
         try:
-            self.sprite = SpriteRenderer(self.terrain_gl.renderer, s.lod, s.visibility,
-                                         border=s.border, guard_px=s.guard_px)
-        except BaseException:
-            self.terrain_gl.release()
+            made.append(TerrainGeometry(self.ctx, hf, texture))
+            made.append(TerrainRenderer(self.ctx, made[-1], s.size[0], s.size[1], s.fov_y_deg))
+            self.terrain = made[-1]
+            self.sprite = SpriteRenderer(self.terrain, s.lod, s.visibility, border=s.border,
+                                         guard_px=s.guard_px)
+        except BaseException:  # released in the order made, backwards
+            for obj in reversed(made):
+                obj.release()
             raise
-        self.metric = ErrorMetric.for_level(scene.hf, s.lod, s.resampling)
+        self.metric = ErrorMetric.for_level(hf, s.lod, s.resampling)
         self.zbuffer = "coarse" if s.visibility == "coarse" else "full"
 
-    def render(self, target: tuple[Viewpoint, bool], asked: float) -> KeyframeImage:
-        vp, predicted = target
+    def render(self, vp: Viewpoint, predicted: bool, asked: float) -> tuple[bytes, bytes]:
         t0 = time.perf_counter()
-        frame_projection = self.terrain_gl.renderer.projection(vp)
+        frame_projection = self.terrain.projection(vp)
         self.sprite.render_keyframe(vp, t0, frame_projection)
-        self.terrain_gl.ctx.finish_unlocked()  # the drawing thread runs meanwhile
+        self.ctx.finish()
         key = self.sprite.keyframe
         color = key.target.read_color()
         depth = (key.coarse if self.zbuffer == "coarse" else key.target).read_depth()
         c_prime = self.metric.reproject(vp.o, key.projection.matrix() @ vp.view_matrix(),
                                         key.target.size)
-        return KeyframeImage(vp, key.projection, frame_projection, color, depth, self.zbuffer,
-                             c_prime, asked, (time.perf_counter() - t0) * 1e3, predicted)
-
-    def release(self) -> None:
-        self.sprite.release()
-        self.terrain_gl.release()
+        fields = {"viewpoint": vp, "projection": key.projection,
+                  "frame_projection": frame_projection, "zbuffer": self.zbuffer,
+                  "c_prime": c_prime, "requested_at": asked, "predicted": predicted,
+                  "render_ms": (time.perf_counter() - t0) * 1e3, "key_size": key.target.size}
+        return pickle.dumps(fields), b"".join((np.ascontiguousarray(depth, np.float32).data,
+                                               np.ascontiguousarray(color, np.uint8).data))
 
 
 def _lower_priority(nice: int) -> None:

@@ -1,6 +1,6 @@
 """Viewpoint predictors (Swan et al. 2002, §3.3, VIEWPOINT-PREDICTOR).
 
-A keyframe producer (the distributed LOD server, or the viewer's keyframe worker thread)
+A keyframe producer (the distributed LOD server, or the viewer's keyframe worker process)
 predicts where the viewer will be when a keyframe it starts now reaches the
 client, ``δt`` seconds ahead (δt measured by the KEYFRAME-TRANSMITTER).
 

@@ -35,7 +35,7 @@ CACHE_POLICY = Option("cache_policy", str, "lru", "LOD-sprite: keyframe cache re
 METRIC = Option("metric", str, None, "LOD-sprite: the keyframe error metric: warp (Chen et "
                 "al. Eq. 1-2) or resample (adds the keyframe image's resampling error)",
                 choices=("warp", "resample"), none=_TERRAIN)
-THREADED = Option("threaded", bool, False, "render keyframes on a worker thread (the "
+THREADED = Option("threaded", bool, False, "render keyframes in a worker process (the "
                   "window's default; view --inline-keyframes turns it off)",
                   command_line=False)
 TILES = Option("tiles", int, None, "LOD-sprite: refresh keyframes tile by tile on an N x N "

@@ -4,9 +4,9 @@
 * :class:`WholeKeyframes` — the 1999 algorithm inline: whole keyframes rendered in the
   frame that needs them (:class:`~lodsprite.sprite.engine.LodSpriteEngine`), optionally
   from a keyframe cache; what batch runs time;
-* :class:`ThreadedKeyframes` — whole keyframes rendered ahead on a worker thread, the
-  drawing thread only draws spriteframes
-  (:class:`~lodsprite.sprite.threaded.ThreadedLodSpriteEngine`);
+* :class:`WorkerKeyframes` — whole keyframes rendered ahead by a worker process (the
+  ``threaded`` option), the drawing loop only draws spriteframes
+  (:class:`~lodsprite.sprite.worker_engine.WorkerLodSpriteEngine`);
 * :class:`TiledKeyframes` — the keyframe refreshed tile by tile within a per-frame budget
   (:class:`~lodsprite.sprite.tiled_engine.TiledSpriteEngine`), inline.
 
@@ -84,7 +84,7 @@ def slot_summary(frames: list[Frame]) -> dict[str, Any]:
 
 
 class _Whole:
-    """Whole keyframes on ``sprite`` (inline or threaded): the frame, its decision and
+    """Whole keyframes on ``sprite`` (inline or from the worker): the frame, its decision and
     its untimed replay (the logged keyframe rendered again, then the spriteframe)."""
 
     def __init__(self, sprite: LodSprite) -> None:
@@ -176,10 +176,10 @@ class WholeKeyframes(_Whole):
             f"{cache.evicted} evicted)"))
 
 
-class ThreadedKeyframes(_Whole):
-    """Whole keyframes from a worker thread with its own context; every frame is a
+class WorkerKeyframes(_Whole):
+    """Whole keyframes from a worker process with its own context; every frame is a
     spriteframe and never waits for a keyframe after the first
-    (:class:`~lodsprite.sprite.threaded.ThreadedLodSpriteEngine`)."""
+    (:class:`~lodsprite.sprite.worker_engine.WorkerLodSpriteEngine`)."""
 
     def warm_up(self, viewpoint: Viewpoint) -> None:
         """One frame drawn: the first keyframe is waited for there (the worker's
@@ -198,7 +198,7 @@ class ThreadedKeyframes(_Whole):
         w = engine.worker
         state = f"failed: {w.error}" if w.error is not None else (
             "rendering" if w.busy else "idle")
-        return (f"keyframes: worker thread, {state}; {w.rendered} rendered, "
+        return (f"keyframes: worker process, {state}; {w.rendered} rendered, "
                 f"{engine.discarded} discarded, lead {w.lead_s * 1e3:.0f} ms")
 
 
@@ -317,7 +317,7 @@ def sprite_engine(renderer: Renderer, epsilon: float, lod: int, threaded: bool,
                   tile_budget_ms: float, cache_mb: float, cache_policy: str,
                   metric: str) -> SpriteEngine:
     """The engine the options ask for, chosen once: :class:`TiledKeyframes` for
-    ``tiles > 1`` (inline only), else :class:`ThreadedKeyframes` or
+    ``tiles > 1`` (inline only), else :class:`WorkerKeyframes` or
     :class:`WholeKeyframes`.  Raises :class:`~lodsprite.errors.InputError` for a bad
     ``tiles``."""
     if not (isinstance(tiles, int) and tiles >= 1) or (tiles > 1 and threaded):
@@ -328,7 +328,7 @@ def sprite_engine(renderer: Renderer, epsilon: float, lod: int, threaded: bool,
         border=border, cache_mb=0.0 if tiles > 1 else cache_mb, cache_policy=cache_policy,
         metric=metric)  # with tiles, the tiled engine keeps the cache (of tile renders)
     if tiles == 1:
-        return (ThreadedKeyframes(sprite) if threaded
+        return (WorkerKeyframes(sprite) if threaded
                 else WholeKeyframes(sprite, renderer, cache_mb))
     try:
         return TiledKeyframes(sprite, renderer, epsilon, tiles, tile_budget_ms, metric,

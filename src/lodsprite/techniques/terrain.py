@@ -154,7 +154,7 @@ class SpriteTechnique(Technique):
     """LOD-sprite (Chen, Swan & Kaufman 1999): one technique over three engines
     (:mod:`lodsprite.techniques.sprite_engines`), chosen once from the options: whole
     keyframes inline (the 1999 algorithm, what batch runs time), whole keyframes from a
-    worker thread (``threaded``), or keyframes refreshed tile by tile within
+    worker process (``threaded``), or keyframes refreshed tile by tile within
     ``tile_budget_ms`` per frame (``tiles > 1``, inline only).  Records per frame the
     keyframe (or tile mosaic) shown; its replay renders that from its logged viewpoints
     and projections, then the frame."""

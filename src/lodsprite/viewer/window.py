@@ -4,7 +4,7 @@ moderngl-window makes the window and its OpenGL 3.3 core context and turns the
 toolkit's events into callbacks; lodsprite draws with that context through its public
 API (:class:`lodsprite.Renderer` with ``ctx=``).  The frame loop is ours: draw, swap,
 log, then sleep to the frame period (``fps``; 0 = as fast as possible, no vsync), so that
-keyframe work on the worker thread gets the time between frames, as at a display's rate.
+the keyframe worker process gets the CPU time between frames, as at a display's rate.
 Sizes are the framebuffer's, not the window's, so HiDPI screens get full resolution.
 """
 
@@ -24,7 +24,6 @@ from lodsprite.viewer.controls import CameraController, FlightRecorder
 from lodsprite.viewer.core import PlayPlan, ViewerCore
 
 DEFAULT_FPS = 60.0
-SWITCH_INTERVAL_S = 0.0005
 WARM_UP_FRAMES = 5
 
 
@@ -124,15 +123,9 @@ def run_viewer(scene: Scene, factories: dict[str, TechniqueFactory], mode: str,
 
 def _loop(window, core: ViewerCore, fps: float) -> None:
     period = 1.0 / fps if fps > 0 else 0.0
-    # The keyframe worker thread holds the GIL in numpy and readbacks; a drawing thread
-    # that wants it back waits up to the switch interval (5 ms by default): 0.5 ms keeps
-    # that wait under a tenth of a frame.
-    interval = sys.getswitchinterval()
-    sys.setswitchinterval(min(interval, SWITCH_INTERVAL_S))
     try:
         _frames(window, core, period)
     finally:
-        sys.setswitchinterval(interval)
         gc.unfreeze()
 
 

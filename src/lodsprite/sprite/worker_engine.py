@@ -1,8 +1,10 @@
-"""LOD-sprite with keyframes from a worker thread: the drawing thread only draws
+"""LOD-sprite with keyframes from a worker process: the drawing loop only draws
 spriteframes (Chen et al. 1999 §3.1 step 3, as the 2002 client does) and never waits for
-a keyframe after the first.
+a keyframe after the first; the keyframes come from a
+:class:`~lodsprite.sprite.keyframe_worker.KeyframeWorker` (the 2002 LOD server, as a
+process with its own GL context).
 
-Per frame, on the drawing thread:
+Per frame, in the drawing loop:
 
 1. take the worker's newest keyframe, if one arrived, and adopt it when its error at the
    current viewpoint (Eq. 2, pixels) is below the shown keyframe's (the ``--adopt better``
@@ -47,11 +49,14 @@ DEFAULT_REQUEST_FRACTION = 0.5
 LEAD_SMOOTHING = 0.3   # weight of the newest latency in the lead's running mean
 
 
-class ThreadedLodSpriteEngine:
+class WorkerLodSpriteEngine:
     """LOD-sprite frame by frame with a :class:`~lodsprite.sprite.keyframe_worker.KeyframeWorker`.
 
     ``sprite`` draws the spriteframes on the caller's context; ``scene`` is what the worker
-    loads on its own context; ``fov_y_deg`` must be the renderer's.
+    process loads on its own context (its height field and texture); ``fov_y_deg`` must be
+    the renderer's.  A worker that cannot start raises
+    :class:`~lodsprite.procs.WorkerUnavailable` here; one that dies makes the next
+    :meth:`frame` raise :class:`~lodsprite.errors.LodspriteError`.
     """
 
     def __init__(self, sprite: SpriteRenderer, scene: Scene, fov_y_deg: float,
@@ -129,5 +134,5 @@ class ThreadedLodSpriteEngine:
         return self.sprite.target.read_color()
 
     def close(self) -> None:
-        """Stop the worker thread (its GL objects are released there)."""
+        """End the worker process (its context and GL objects go with it)."""
         self.worker.close()

@@ -1,8 +1,11 @@
-"""LOD-sprite with keyframes from a worker thread (its own GL context)."""
+"""LOD-sprite with keyframes from a worker process (its own GL context)."""
 
 from __future__ import annotations
 
 import itertools
+import multiprocessing
+import os
+import signal
 import threading
 
 import numpy as np
@@ -14,10 +17,11 @@ from lodsprite.errors import LodspriteError
 from lodsprite.gl.sprite import SpriteRenderer
 from lodsprite.gl.terrain import TerrainGeometry, TerrainRenderer
 from lodsprite.metrics import rmse
+from lodsprite.procs import WorkerDied, WorkerUnavailable
 from lodsprite.scene import Scene
 from lodsprite.sprite.engine import KEYFRAME, LodSpriteEngine
 from lodsprite.sprite.keyframe_worker import KeyframeWorker, WorkerSettings
-from lodsprite.sprite.threaded import ThreadedLodSpriteEngine
+from lodsprite.sprite.worker_engine import WorkerLodSpriteEngine
 from lodsprite.terrain import make_texture
 
 SIZE = (96, 96)
@@ -47,13 +51,13 @@ def orbit(n: int, start_deg: float = 0.0, span_deg: float = 40.0):
     return out
 
 
-def worker_threads() -> list[threading.Thread]:
-    return [t for t in threading.enumerate() if t.name == "lodsprite-keyframes"]
+def worker_processes() -> list:
+    return [p for p in multiprocessing.active_children() if p.name == "lodsprite-keyframes"]
 
 
 def test_a_worker_keyframe_draws_the_same_spriteframe_as_an_inline_one(gl, scene, sprite):
     vp = orbit(1)[0]
-    engine = ThreadedLodSpriteEngine(sprite, scene, 45.0, 1.0)
+    engine = WorkerLodSpriteEngine(sprite, scene, 45.0, 1.0)
     try:
         first = engine.frame(vp)  # waits for the worker's first keyframe, at vp
         threaded = engine.read_image()
@@ -71,19 +75,53 @@ def test_a_worker_keyframe_draws_the_same_spriteframe_as_an_inline_one(gl, scene
     assert threaded.std() > 5  # a picture, not a cleared target
 
 
+def test_the_worker_process_renders_the_keyframe_this_context_would(gl, scene):
+    """Same heights (exaggeration included), texture and settings in the process: its
+    keyframe is the one rendered here, to the bit."""
+    tall = Scene(scene.hf.scaled(2.5), scene.texture)
+    vp = orbit(1, start_deg=30)[0]
+    worker = KeyframeWorker(tall, WorkerSettings(SIZE, 45.0, 8, "coarse", True, 4))
+    try:
+        worker.observe(0.0, vp)
+        worker.request()
+        key = worker.wait(30.0)
+    finally:
+        worker.close()
+    geo = TerrainGeometry(gl, tall.hf, tall.texture)
+    tr = TerrainRenderer(gl, geo, *SIZE)
+    sp = SpriteRenderer(tr, 8, guard_px=4)
+    try:
+        sp.render_keyframe(vp, 0.0, tr.projection(vp))
+        here = sp.keyframe
+        np.testing.assert_array_equal(key.color, here.target.read_color())
+        np.testing.assert_array_equal(key.depth, here.coarse.read_depth())
+        assert key.zbuffer == "coarse" and not key.predicted
+        assert key.projection == here.projection
+    finally:
+        sp.release()
+        tr.release()
+        geo.release()
+    assert key.color.std() > 5
+
+
 def test_frames_go_on_while_the_worker_renders_and_it_stops_on_close(gl, scene, sprite):
     path = orbit(40)
-    engine = ThreadedLodSpriteEngine(sprite, scene, 45.0, 0.5)
+    engine = WorkerLodSpriteEngine(sprite, scene, 45.0, 0.5)
     try:
+        # the process lowered its priority before it made its context
+        theirs = os.getpriority(os.PRIO_PROCESS, engine.worker.pid)
+        assert theirs >= min(os.getpriority(os.PRIO_PROCESS, 0) + 10, 19)
         frames = [engine.frame(vp) for vp in path]
         # let the worker finish what it was asked for, then take it
         engine.worker.wait(30.0) if engine.worker.busy else None
     finally:
         engine.close()
-    assert not worker_threads()
+    assert not worker_processes()
     assert frames[0].type == KEYFRAME
     assert all(f.type != KEYFRAME for f in frames[1:])  # the drawing thread never renders one
     assert engine.worker.rendered >= 2  # keyframes were asked for along the orbit
+    assert len(engine.worker.render_ms) == engine.worker.rendered  # one time per keyframe
+    assert all(ms > 0 for ms in engine.worker.render_ms)
     assert engine.worker.error is None
     # errors are measured per frame; the first is the keyframe's own view
     assert frames[0].error_px == pytest.approx(0.0, abs=1e-6)
@@ -91,7 +129,7 @@ def test_frames_go_on_while_the_worker_renders_and_it_stops_on_close(gl, scene, 
 
 
 def test_an_adopted_keyframe_is_never_worse_than_the_one_shown(gl, scene, sprite):
-    engine = ThreadedLodSpriteEngine(sprite, scene, 45.0, 0.5)
+    engine = WorkerLodSpriteEngine(sprite, scene, 45.0, 0.5)
     views = itertools.cycle(orbit(600, span_deg=60))  # slowly: keyframes arrive on the way
     adopted = []
 
@@ -111,9 +149,9 @@ def test_an_adopted_keyframe_is_never_worse_than_the_one_shown(gl, scene, sprite
 
 
 def test_a_worker_that_cannot_start_says_why(gl, scene):
-    with pytest.raises(LodspriteError, match="could not start"):
+    with pytest.raises(WorkerUnavailable, match="could not start"):
         KeyframeWorker(scene, WorkerSettings((1 << 20, 16), 45.0, 8, "coarse", True, 0))
-    assert not worker_threads()
+    assert not worker_processes()
 
 
 def test_an_unknown_predictor_is_refused(scene):
@@ -123,7 +161,7 @@ def test_an_unknown_predictor_is_refused(scene):
 
 def test_the_lead_comes_from_every_delivered_keyframe_not_the_start_up_one(gl, scene, sprite):
     vp = orbit(1)[0]
-    engine = ThreadedLodSpriteEngine(sprite, scene, 45.0, 1.0, request_fraction=0.0)
+    engine = WorkerLodSpriteEngine(sprite, scene, 45.0, 1.0, request_fraction=0.0)
     try:
         engine.frame(vp)  # start-up: waited for, not a measure of the latency
         assert engine.worker.lead_s == 0.0
@@ -137,28 +175,62 @@ def test_the_lead_comes_from_every_delivered_keyframe_not_the_start_up_one(gl, s
         engine.close()
 
 
-def test_frames_say_so_when_the_worker_has_died(gl, scene, sprite, monkeypatch):
-    from lodsprite.sprite import keyframe_worker as worker_module
-
-    engine = ThreadedLodSpriteEngine(sprite, scene, 45.0, 1.0, request_fraction=0.0)
+def test_a_worker_process_killed_mid_run_is_a_typed_error_not_a_hang(gl, scene, sprite):
+    engine = WorkerLodSpriteEngine(sprite, scene, 45.0, 1.0, request_fraction=0.0)
+    views = itertools.cycle(orbit(400))  # keyframes are asked for every frame
     try:
-        engine.frame(orbit(1)[0])
-
-        def broken(self, target, asked):
-            raise RuntimeError("the GL context was lost")
-
-        monkeypatch.setattr(worker_module._WorkerGL, "render", broken)
-        views = itertools.cycle(orbit(400))  # keyframes are asked for every frame
-        with pytest.raises(LodspriteError, match="worker stopped: the GL context was lost"):
-            wait_until(lambda: engine.frame(next(views)) and False, 60,
+        engine.frame(next(views))
+        engine.frame(next(views))  # a keyframe requested: the process has it in hand
+        assert engine.worker.busy
+        os.kill(engine.worker.pid, signal.SIGKILL)
+        with pytest.raises(LodspriteError, match="worker stopped: .*died"):
+            wait_until(lambda: engine.frame(next(views)) and False, 30,
                        "a frame that says the worker died", interval_s=0.002)
+        assert isinstance(engine.worker.error, WorkerDied)
+        with pytest.raises(LodspriteError, match="keyframe worker failed"):
+            engine.worker.wait(5.0)
     finally:
+        engine.close()
+    assert not worker_processes()
+
+
+def test_the_drawing_side_never_waits_for_a_slow_worker(gl, scene, sprite):
+    """A stopped process is a worker as slow as can be: polls and frames still return
+    (each under a deadline: a hang fails the test), and its keyframe arrives once it
+    goes on."""
+    engine = WorkerLodSpriteEngine(sprite, scene, 45.0, 1.0, request_fraction=0.0)
+    views = itertools.cycle(orbit(50))
+    pid = None
+    try:
+        engine.frame(next(views))  # the first keyframe, and the next one asked for
+        engine.worker.wait(30.0)  # taken here: nothing in flight
+        pid = engine.worker.pid
+        os.kill(pid, signal.SIGSTOP)
+        got: list = []
+
+        def draw() -> None:
+            got.extend(engine.frame(next(views)) for _ in range(10))  # the 1st asks
+            got.append(engine.worker.poll())
+
+        drawer = threading.Thread(target=draw, daemon=True)
+        drawer.start()
+        drawer.join(30.0)
+        assert not drawer.is_alive(), "the drawing side waited for the stopped worker"
+        assert [f.type for f in got[:10]] == ["sprite"] * 10
+        assert got[10] is None and engine.worker.busy
+        os.kill(pid, signal.SIGCONT)
+        pid = None
+        key = engine.worker.wait(30.0)
+        assert key.color.shape == (SIZE[1] + 8, SIZE[0] + 8, 3) and key.color.std() > 5
+    finally:
+        if pid is not None:
+            os.kill(pid, signal.SIGCONT)
         engine.close()
 
 
 def test_the_worker_gives_the_resample_metric_its_keyframe_matrix_and_size(gl, scene, sprite):
     path = orbit(6, span_deg=10)
-    engine = ThreadedLodSpriteEngine(sprite, scene, 45.0, 1.0, metric="resample")
+    engine = WorkerLodSpriteEngine(sprite, scene, 45.0, 1.0, metric="resample")
     try:
         frames = [engine.frame(vp) for vp in path]
         cp = engine._c_prime
