@@ -291,13 +291,13 @@ def test_tiles_draw_the_view_dependent_proxy_and_replay(gl, cache_mb):
                                      "tile_budget_ms": 0.0, "proxy_sse": 8.0,
                                      "cache_mb": cache_mb}))
         try:
-            assert isinstance(t.tiled.metric, ProxyMetric)
+            assert isinstance(t.engine.tiled.metric, ProxyMetric)
             frames, shown, decisions = _fly(t, path.viewpoints)
             assert TILES in {f.kind for f in frames}
             assert all(np.isfinite(f.error_px) for f in frames)
             s = t.summary(frames)
             assert s["proxy_sse"] == 8.0 and s["mean_proxy_triangles"] > 0
-            assert len(t.proxy.triangles) == len(t.tiled.updates)
+            assert len(t.proxy.triangles) == len(t.engine.tiled.updates)
             for i in [6, 0, 13, 2, 9]:
                 assert np.array_equal(t.replay(path.viewpoints[i], decisions[i]), shown[i]), i
         finally:
