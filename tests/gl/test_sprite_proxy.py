@@ -6,8 +6,8 @@ import pytest
 
 from conftest import make_field
 from lodsprite.camera import look_at
-from lodsprite.gl.sprite import SpriteRenderer
-from lodsprite.gl.terrain import TerrainGeometry, TerrainRenderer
+from lodsprite.gl.sprite import SpriteDrawer
+from lodsprite.gl.terrain import TerrainDrawer, TerrainGeometry
 from lodsprite.sprite.metric import ErrorMetric
 from lodsprite.sprite.proxy_metric import ProxyMetric
 from lodsprite.sprite.proxy_surface import ProxySurface
@@ -31,8 +31,8 @@ def setup(gl):
     def make(kind="ridges", relief=150.0, proxy_sse=8.0, n=256):
         hf = make_field(n, kind=kind, relief=relief)
         geo = TerrainGeometry(gl, hf, make_texture("terrain", hf))
-        tr = TerrainRenderer(gl, geo, SIZE, SIZE)
-        sp = SpriteRenderer(tr, 8, "coarse", guard_px=0)
+        tr = TerrainDrawer(gl, geo, SIZE, SIZE)
+        sp = SpriteDrawer(tr, 8, "coarse", guard_px=0)
         at = AdaptiveTerrain(gl, MemoryPyramid.from_heightfield(hf), tr.target, 45.0, 1.0,
                              gpu_mb=16, host_mb=16, color=geo.color_tex)
         sp.keyframe_drawer = at.render_into

@@ -5,8 +5,8 @@ import pytest
 
 from conftest import make_field
 from lodsprite.camera import look_at
-from lodsprite.gl.sprite import SpriteRenderer
-from lodsprite.gl.terrain import TerrainGeometry, TerrainRenderer
+from lodsprite.gl.sprite import SpriteDrawer
+from lodsprite.gl.terrain import TerrainDrawer, TerrainGeometry
 from lodsprite.sprite.engine import KEYFRAME
 from lodsprite.sprite.tiled import TILES
 from lodsprite.sprite.tiled_engine import TiledSpriteEngine
@@ -20,8 +20,8 @@ def build(gl):
     def make(coarse=8, visibility="coarse", size=(128, 128), guard=16):
         hf = make_field(64, kind="ridges", relief=150.0)
         geo = TerrainGeometry(gl, hf, make_texture("terrain", hf))
-        tr = TerrainRenderer(gl, geo, *size)
-        sp = SpriteRenderer(tr, coarse, visibility, guard_px=guard)
+        tr = TerrainDrawer(gl, geo, *size)
+        sp = SpriteDrawer(tr, coarse, visibility, guard_px=guard)
         made.append((sp, tr, geo))
         return sp
 

@@ -11,8 +11,8 @@ import pytest
 from conftest import make_field, wait_until
 from lodsprite.camera import look_at
 from lodsprite.errors import LodspriteError
-from lodsprite.gl.sprite import SpriteRenderer
-from lodsprite.gl.terrain import TerrainGeometry, TerrainRenderer
+from lodsprite.gl.sprite import SpriteDrawer
+from lodsprite.gl.terrain import TerrainDrawer, TerrainGeometry
 from lodsprite.metrics import rmse
 from lodsprite.scene import Scene
 from lodsprite.sprite.engine import KEYFRAME, LodSpriteEngine
@@ -32,8 +32,8 @@ def scene() -> Scene:
 @pytest.fixture
 def sprite(gl, scene):
     geo = TerrainGeometry(gl, scene.hf, scene.texture)
-    tr = TerrainRenderer(gl, geo, *SIZE)
-    sp = SpriteRenderer(tr, 8, guard_px=4)
+    tr = TerrainDrawer(gl, geo, *SIZE)
+    sp = SpriteDrawer(tr, 8, guard_px=4)
     yield sp
     sp.release()
     tr.release()

@@ -14,7 +14,7 @@ start it reads the GL driver's maximum texture size (``max_texture``), so that S
 CONTROL can refuse oversized scenes before anything is allocated.
 
 The thread shares the server's process, and its GIL, with SERVER-CONTROL, the viewpoint
-receiver and the transmitter.  :class:`~.render.KeyframeRenderer` draws and waits for its
+receiver and the transmitter.  :class:`~.render.KeyframeService` draws and waits for its
 draws (``glFinish``) with the GIL released, so a 4096² keyframe (33.5 M triangles, seconds
 on llvmpipe) does not keep the control thread from answering within a client's control
 timeout.  Loading a scene still holds the GIL through each texture upload (moderngl):
@@ -34,7 +34,7 @@ from collections.abc import Callable
 from lodsprite.distributed.hold import Hold
 from lodsprite.distributed.protocol import Keyframe, LoadArgs
 from lodsprite.distributed.queue import Closed, KeyframeQueue
-from lodsprite.distributed.render import KeyframeRenderer
+from lodsprite.distributed.render import KeyframeService
 from lodsprite.distributed.server_stats import ServerStats
 from lodsprite.distributed.viewpoints import ViewpointReceiver
 
@@ -102,7 +102,7 @@ class KeyframeProducer:
 
     def run(self) -> None:
         """Load and render until the server stops or the queue closes."""
-        renderer: KeyframeRenderer | None = None
+        renderer: KeyframeService | None = None
 
         def release() -> None:
             nonlocal renderer
@@ -137,10 +137,10 @@ class KeyframeProducer:
         finally:
             release()
 
-    def _open(self, scene: LoadArgs) -> KeyframeRenderer | None:
+    def _open(self, scene: LoadArgs) -> KeyframeService | None:
         """A renderer for ``scene``; None (state ``failed``) when it cannot be made."""
         try:
-            renderer = KeyframeRenderer(scene)
+            renderer = KeyframeService(scene)
         except Exception as exc:  # MemoryError, GL errors, bad files, anything
             self._fail("cannot load the scene", exc)
             return None
@@ -158,7 +158,7 @@ class KeyframeProducer:
         moments."""
         return self.viewpoints.predict(self.delta_t() * (1.0 + self.slot / self.slots))
 
-    def due(self, renderer: KeyframeRenderer, vp, shown) -> bool:
+    def due(self, renderer: KeyframeService, vp, shown) -> bool:
         """Whether to render for ``vp``.  With several servers they take turns: it is this
         server's turn when the client shows the previous slot's keyframe."""
         eye, turn = None, True
@@ -167,7 +167,7 @@ class KeyframeProducer:
             turn = (slot + 1) % self.slots == self.slot
         return renderer.pacer.due(vp, renderer.projection(vp), eye, turn)
 
-    def _produce(self, renderer: KeyframeRenderer) -> None:
+    def _produce(self, renderer: KeyframeService) -> None:
         t0 = time.perf_counter()
         if not self.viewpoints.have.wait(0.1):
             return

@@ -194,7 +194,7 @@ def _client_run(technique, client: LodClient, scene, path, config: RenderConfig,
     the keyframe it showed, measured untimed (``error_px``, :func:`error_summary`)."""
     from lodsprite.harness import level_zero_reference, run_path
 
-    ctx, terrain = client.terrain_gl.ctx, client.terrain_gl.renderer
+    ctx, terrain = client.terrain_gl.ctx, client.terrain_gl.drawer
     level0 = (level_zero_reference(ctx, scene, config.size, terrain.fov_y_deg,
                                    config.shading) if config.ground_truth else None)
 

@@ -68,7 +68,7 @@ class CrowdEngine:
                  active: int = 300, target_fps: float | None = None, range_near: float = 5.0,
                  range_far: float = 150.0, dist=linear, fov_y_deg: float = 60.0,
                  penalty: float = 0.25, ground: bool = True) -> None:
-        from lodsprite.gl.crowd import CrowdRenderer
+        from lodsprite.gl.crowd import CrowdDrawer
 
         if mode not in MODES:
             raise InputError(f"unknown crowd mode {mode!r}: use one of {', '.join(MODES)}")
@@ -84,7 +84,7 @@ class CrowdEngine:
         w, h = target.size
         self.fov_y_deg = fov_y_deg
         self.projection = perspective(fov_y_deg, w / h, 0.3, 4.0 * crowd.extent + 100.0)
-        self.renderer = CrowdRenderer(gl, crowd.models, crowd.extent)
+        self.renderer = CrowdDrawer(gl, crowd.models, crowd.extent)
         n_types = len(crowd.models)
         self.manager = LodManager(crowd.types, n_types, slots, base_lod=0.0,
                                   share=(mode == "manager"), dist=dist)

@@ -11,7 +11,7 @@ from the manager's distance-linear rule ``(1 - (d - near) / (far - near)) ** p``
 ``tolerance``; where no exponent reaches them the LOD ranges are scaled instead (the
 "scale").  Linear factors are rounded to :data:`FACTOR_STEP` (the LODs actually
 extracted; profile factors are the profile's levels).  Each selection is drawn by the
-crowd renderer (:class:`~lodsprite.gl.crowd.CrowdRenderer`) and compared with every
+crowd renderer (:class:`~lodsprite.gl.crowd.CrowdDrawer`) and compared with every
 object at its full mesh: RMSE (grey levels) and FLIP, means over the viewpoints.
 """
 
@@ -188,7 +188,7 @@ def profile_vs_linear(gl, crowd: Crowd, profiles: dict[int, TypeProfile],
     (:class:`~lodsprite.gl.context.GLContext`).  ``profiles`` by type index (every type);
     ``range_near``/``range_far`` metres the linear rule's ranges before scaling."""
     from lodsprite import metrics
-    from lodsprite.gl.crowd import CrowdRenderer
+    from lodsprite.gl.crowd import CrowdDrawer
     from lodsprite.gl.target import RenderTarget
 
     if not viewpoints:
@@ -200,7 +200,7 @@ def profile_vs_linear(gl, crowd: Crowd, profiles: dict[int, TypeProfile],
     lin = linear_factors(views, range_near, range_far, p, s)
     full = [np.ones(len(crowd)) for _ in viewpoints]
     target = RenderTarget(gl, *size)
-    renderer = CrowdRenderer(gl, crowd.models, crowd.extent)
+    renderer = CrowdDrawer(gl, crowd.models, crowd.extent)
     try:
         extracted: dict = {}
         scores: dict[str, list[float]] = {k: [] for k in ("rp", "rl", "fp", "fl")}

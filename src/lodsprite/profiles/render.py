@@ -1,6 +1,6 @@
 """Render shots of LOD-chain objects (each object at its own LOD) to images.
 
-A thin layer over :class:`lodsprite.gl.mesh.MeshRenderer` that keeps one chain's levels on
+A thin layer over :class:`lodsprite.gl.mesh.MeshDrawer` that keeps one chain's levels on
 the GPU and turns a :class:`~lodsprite.profiles.scenes.Shot` plus per-object LOD indices
 into an ``(H, W, 3) uint8`` image, optionally colour-coded by LOD as in the paper's
 Figures 7c and 8 (red: high LOD number, green: low, white: the full model).
@@ -13,7 +13,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from lodsprite.gl.context import GLContext
-from lodsprite.gl.mesh import MeshRenderer, MeshSet
+from lodsprite.gl.mesh import MeshDrawer, MeshSet
 from lodsprite.profiles.generate import DEFAULT_LIGHT
 from lodsprite.profiles.scenes import Shot
 
@@ -31,7 +31,7 @@ def lod_colours(levels: np.ndarray, n_levels: int) -> np.ndarray:
     return rgb
 
 
-class ChainRenderer:
+class ChainDrawer:
     """Draws shots of one LOD chain's objects into ``size x size`` images."""
 
     def __init__(self, ctx: GLContext, levels: Sequence[tuple[np.ndarray, np.ndarray]],
@@ -41,7 +41,7 @@ class ChainRenderer:
         self.levels = len(levels)
         self.light = tuple(float(v) for v in light)
         self.meshes = MeshSet(ctx, levels)
-        self.renderer = MeshRenderer(ctx, size, size, samples=samples)
+        self.renderer = MeshDrawer(ctx, size, size, samples=samples)
 
     @property
     def size(self) -> int:

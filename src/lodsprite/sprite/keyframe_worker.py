@@ -8,7 +8,7 @@ predicted ``δt`` ahead (:mod:`lodsprite.sprite.predictors`, the paper's
 VIEWPOINT-PREDICTOR; δt is the measured request-to-adoption latency), reads the keyframe's
 colour and z-buffer back and hands them over, with the keyframe's ``C'`` (the error
 metric's reprojected centres, Eq. 2), to the drawing thread, which uploads them
-(:meth:`~lodsprite.gl.sprite.SpriteRenderer.upload_keyframe`) and never waits.
+(:meth:`~lodsprite.gl.sprite.SpriteDrawer.upload_keyframe`) and never waits.
 
 The worker thread lowers its own scheduling priority (``nice``, Linux) before it makes its
 context, so that the software rasteriser's threads it starts inherit it: on a machine
@@ -212,13 +212,13 @@ class _WorkerGL:
     """The worker's GL state: its own context, terrain and keyframe renderer."""
 
     def __init__(self, scene: Scene, s: WorkerSettings) -> None:
-        from lodsprite.gl.sprite import SpriteRenderer
+        from lodsprite.gl.sprite import SpriteDrawer
         from lodsprite.gl.terrain_gl import TerrainGL
 
         self.terrain_gl = TerrainGL(scene, s.size, s.fov_y_deg)
-        self.terrain_gl.renderer.unlocked_draws = True  # the drawing thread runs meanwhile
+        self.terrain_gl.drawer.unlocked_draws = True  # the drawing thread runs meanwhile
         try:
-            self.sprite = SpriteRenderer(self.terrain_gl.renderer, s.lod, s.visibility,
+            self.sprite = SpriteDrawer(self.terrain_gl.drawer, s.lod, s.visibility,
                                          border=s.border, guard_px=s.guard_px)
         except BaseException:
             self.terrain_gl.release()
@@ -229,7 +229,7 @@ class _WorkerGL:
     def render(self, target: tuple[Viewpoint, bool], asked: float) -> KeyframeImage:
         vp, predicted = target
         t0 = time.perf_counter()
-        frame_projection = self.terrain_gl.renderer.projection(vp)
+        frame_projection = self.terrain_gl.drawer.projection(vp)
         self.sprite.render_keyframe(vp, t0, frame_projection)
         self.terrain_gl.ctx.finish_unlocked()  # the drawing thread runs meanwhile
         key = self.sprite.keyframe

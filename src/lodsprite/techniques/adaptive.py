@@ -57,7 +57,7 @@ def make_adaptive(renderer: Renderer, sse: float, gpu_mb: float, host_mb: float,
         raise InputError(f"grid must be one of {', '.join(map(str, GRIDS))} quads, got {grid}")
     pr = renderer.terrain_gl
     heights = resolve_shading(renderer.scene, shading) == "heights"
-    return AdaptiveTerrain(pr.ctx, scene_pyramid(renderer.scene), pr.renderer.target,
+    return AdaptiveTerrain(pr.ctx, scene_pyramid(renderer.scene), pr.drawer.target,
                            renderer.fov_y_deg, sse, grid=int(grid), gpu_mb=gpu_mb,
                            host_mb=host_mb, color=None if heights else pr.geometry.color_tex)
 

@@ -44,7 +44,7 @@ class AdaptiveTerrain:
     def __init__(self, gl, pyramid, target, fov_y_deg: float, sse_px: float = 1.0,
                  grid: int = DEFAULT_GRID, gpu_mb: float = 256.0, host_mb: float = 512.0,
                  upload_budget: int = 16, color=None) -> None:
-        from lodsprite.gl.adaptive import AdaptiveRenderer
+        from lodsprite.gl.adaptive import AdaptiveDrawer
 
         if not sse_px > 0:
             raise InputError(f"--sse must be > 0 pixels, got {sse_px}")
@@ -57,7 +57,7 @@ class AdaptiveTerrain:
                         self.tree.node_diagonals())
         self.loader = tile_loader(self.tree, host_mb)
         tile_bytes = (grid + 1) ** 2 * 4
-        self.renderer = AdaptiveRenderer(gl, grid, max(1, int(gpu_mb * 2 ** 20 // tile_bytes)))
+        self.renderer = AdaptiveDrawer(gl, grid, max(1, int(gpu_mb * 2 ** 20 // tile_bytes)))
         self.slots = SlotCache(self.renderer.capacity)
         self.upload_budget = int(upload_budget)
         self.bounds = self.tree.box()

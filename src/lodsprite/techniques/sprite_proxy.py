@@ -201,7 +201,7 @@ class AdaptiveProxySource:
     """The view-dependent proxy of ``terrain`` (an
     :class:`~lodsprite.techniques.adaptive_terrain.AdaptiveTerrain`, whose atlas, slots and
     loader it shares) at ``proxy_sse`` pixels: a proxy geometry factory for
-    :meth:`lodsprite.gl.sprite.SpriteRenderer.set_proxy` and the source of
+    :meth:`lodsprite.gl.sprite.SpriteDrawer.set_proxy` and the source of
     :class:`~lodsprite.sprite.proxy_metric.ProxyMetric`."""
 
     def __init__(self, terrain, proxy_sse: float, height_px: int,

@@ -5,7 +5,7 @@ A DEALER connects to the broker and says ``ready``.  Two threads: the I/O thread
 :meth:`Worker.run`) owns the socket, sends a heartbeat every :data:`~.jobs.HEARTBEAT_S`,
 takes jobs and forwards results; the render thread hands one job at a time to the render
 process (:mod:`.render_process`: the GL context and the scenes, rendered with
-:class:`~lodsprite.distributed.render.KeyframeRenderer`) and waits on its pipe, so
+:class:`~lodsprite.distributed.render.KeyframeService`) and waits on its pipe, so
 heartbeats go on while a scene loads or a keyframe renders, whatever holds the render
 process's GIL (a 4096² scene's draws and uploads did, past the broker's liveness).
 A broker silent for :data:`~.jobs.LIVENESS_S` is dead: the worker closes its socket and

@@ -26,7 +26,7 @@ from lodsprite.experiments.paper_numbers import PAPER_2000
 from lodsprite.gl.context import GLContext
 from lodsprite.profiles.generate import ProfileSettings, generate_profile, release_cached
 from lodsprite.profiles.models import mountain, sphere_family, sphereflake
-from lodsprite.profiles.render import ChainRenderer
+from lodsprite.profiles.render import ChainDrawer
 from lodsprite.profiles.scenes import (
     MOUNTAIN_FOV_DEG,
     SPIRAL_FOV_DEG,
@@ -105,7 +105,7 @@ def match_screen_space(table: ProfileTable, shots: list[Shot], size: int,
     return best
 
 
-def _compare(renderer: ChainRenderer, table: ProfileTable, shots: list[Shot],
+def _compare(renderer: ChainDrawer, table: ProfileTable, shots: list[Shot],
              fulls: list[np.ndarray], threshold: float, size: int) -> dict:
     """Profile (CSF) selection vs screen-space selection at equal triangles, against full."""
     prof = [select_profile(table, s.models, s.viewpoint.o, s.projection.fov_y_deg, size,
@@ -194,7 +194,7 @@ def _spiral(ctx: GLContext, cfg: ScogginsConfig, chain, table: ProfileTable,
     per_flake = {k: np.bincount(shot.group, faces[v], cfg.flakes).astype(int).tolist()
                  for k, v in lod.items()}
     full_flake = int(len(radii) * faces[-1])
-    renderer = ChainRenderer(ctx, [(m.vertices, m.faces) for m in chain.levels], cfg.size)
+    renderer = ChainDrawer(ctx, [(m.vertices, m.faces) for m in chain.levels], cfg.size)
     try:
         if progress:
             progress("spiral images", 0, 3)
@@ -236,7 +236,7 @@ def _sweep(ctx: GLContext, cfg: ScogginsConfig, chain, table: ProfileTable, imag
         faces[k] = [int(table.faces[select_profile(table, s.models, s.viewpoint.o,
                                                    MOUNTAIN_FOV_DEG, cfg.size, thr[k],
                                                    csf=(k == "csf"))[0]]) for s in shots]
-    renderer = ChainRenderer(ctx, [(m.vertices, m.faces) for m in chain.levels], cfg.size)
+    renderer = ChainDrawer(ctx, [(m.vertices, m.faces) for m in chain.levels], cfg.size)
     try:
         picks = np.unique(np.linspace(0, len(shots) - 1, cfg.compare_frames).round().astype(int))
         cmp_shots = [shots[i] for i in picks]
