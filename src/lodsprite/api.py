@@ -125,7 +125,7 @@ class Renderer:
 
     @property
     def terrain_gl(self) -> TerrainGL:
-        """The terrain layer's GL state (context, geometry, terrain renderer)."""
+        """The terrain layer's GL state (context, geometry, terrain drawer)."""
         return self._terrain()
 
     def _terrain(self) -> TerrainGL:

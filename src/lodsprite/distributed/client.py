@@ -42,7 +42,7 @@ messages or :data:`RECEIVE_MS` a frame; acknowledges them, drops any not newer t
 last one from the same server (unless none came from it for :data:`SEQ_RESET_S`), and
 keeps the newest (``C'`` is never computed for a keyframe a newer one replaced before a
 frame considered it).  It refuses malformed messages, keyframes whose images are not this
-client's keyframe size (the image size: the client's sprite renderer has no guard band)
+client's keyframe size (the image size: the client's sprite drawer has no guard band)
 and anything else a message may cause, counts them (:attr:`LodClient.rejected_keyframes`)
 and goes on: no message stops it.  Refused keyframes are not acknowledged, and an
 acknowledgement is never waited for: one the server does not take is dropped and counted

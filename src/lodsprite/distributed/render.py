@@ -1,4 +1,4 @@
-"""GL work of the distributed programs: the server's keyframe renderer.
+"""GL work of the distributed programs: the server's keyframe service.
 
 The server renders the full-resolution terrain from the predicted viewpoint and reads
 the colour back, so the keyframe can cross the network as plain arrays.  For the
@@ -94,7 +94,7 @@ def check_scene_memory(args: LoadArgs, source: tuple[int, int] | None,
 
 
 class KeyframeService:
-    """Full-resolution renderer of one scene, created and used on one thread.
+    """Full-resolution keyframes of one scene, drawn on one thread that creates and uses it.
 
     It draws and finishes with the GIL released (the project's unlocked draws:
     ``glDrawElementsInstanced`` and ``glFinish`` through ctypes), so the threads beside

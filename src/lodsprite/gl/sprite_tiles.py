@@ -166,7 +166,7 @@ class TiledSpriteDrawer:
         self.program = self._program()
 
     def _program(self):
-        """The tiled spriteframe's program, reading the sprite renderer's proxy geometry."""
+        """The tiled spriteframe's program, reading the sprite drawer's proxy geometry."""
         sprite = self.sprite
         vs, fs = tiled_sprite_shaders(self.count)
         prog = self.ctx.mgl.program(vertex_shader=sprite.proxy.twin(vs), fragment_shader=fs)
@@ -180,7 +180,7 @@ class TiledSpriteDrawer:
         return prog
 
     def use_proxy(self) -> None:
-        """Read the sprite renderer's proxy geometry again (after its ``set_proxy``)."""
+        """Read the sprite drawer's proxy geometry again (after its ``set_proxy``)."""
         self.program.release()
         self.program = self._program()
         self.proxy_gl = None
@@ -240,7 +240,7 @@ class TiledSpriteDrawer:
 
     def render_spriteframe(self, viewpoint: Viewpoint,
                            projection: Projection | None = None) -> Frame:
-        """The coarse level textured from the tiles into the sprite renderer's target."""
+        """The coarse level textured from the tiles into the sprite drawer's target."""
         if any(v is None for v in self.viewpoints):
             raise RuntimeError("render_spriteframe needs every tile rendered first")
         s = self.sprite

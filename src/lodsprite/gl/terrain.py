@@ -1,4 +1,4 @@
-"""Terrain renderer: full-resolution and uniform coarse levels, offscreen, with chunk culling.
+"""Terrain drawer: full-resolution and uniform coarse levels, offscreen, with chunk culling.
 
 GPU objects (height texture, colour texture, one grid mesh per chunk size, the
 instance buffer and the programs) are created once and reused for every frame;

@@ -1,5 +1,5 @@
 """One scene's terrain GL state (:class:`TerrainGL`): context, geometry and terrain
-renderer, made once and released once; what the terrain techniques draw with."""
+drawer, made once and released once; what the terrain techniques draw with."""
 
 from __future__ import annotations
 
@@ -17,7 +17,8 @@ if TYPE_CHECKING:  # a scene is passed in: gl/ imports no scene code
 
 
 class TerrainGL:
-    """GL state for one scene: context, geometry and renderer, created once, released once."""
+    """GL state for one scene: context, geometry and drawer (:attr:`drawer`, a
+    :class:`~lodsprite.gl.terrain.TerrainDrawer`), created once, released once."""
 
     def __init__(self, scene: Scene, size: tuple[int, int], fov_y_deg: float = 45.0,
                  ctx: GLContext | None = None,

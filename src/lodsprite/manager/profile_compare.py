@@ -11,7 +11,7 @@ from the manager's distance-linear rule ``(1 - (d - near) / (far - near)) ** p``
 ``tolerance``; where no exponent reaches them the LOD ranges are scaled instead (the
 "scale").  Linear factors are rounded to :data:`FACTOR_STEP` (the LODs actually
 extracted; profile factors are the profile's levels).  Each selection is drawn by the
-crowd renderer (:class:`~lodsprite.gl.crowd.CrowdDrawer`) and compared with every
+crowd drawer (:class:`~lodsprite.gl.crowd.CrowdDrawer`) and compared with every
 object at its full mesh: RMSE (grey levels) and FLIP, means over the viewpoints.
 """
 
