@@ -75,7 +75,7 @@ def test_the_frozen_proxy_has_fewer_triangles_than_the_keyframe_and_stays_put(se
     vp = key_view()
     at.settle(vp)
     sp.render_keyframe(vp, 0.0)
-    key_tris = at.renderer.triangles  # the keyframe's own selection at 1 px
+    key_tris = at.drawer.triangles  # the keyframe's own selection at 1 px
     proxy_tris = src.triangles[-1]
     assert 0 < proxy_tris < key_tris
     # frozen: spriteframes from elsewhere draw the frozen nodes in their view (no

@@ -41,18 +41,18 @@ class ChainDrawer:
         self.levels = len(levels)
         self.light = tuple(float(v) for v in light)
         self.meshes = MeshSet(ctx, levels)
-        self.renderer = MeshDrawer(ctx, size, size, samples=samples)
+        self.drawer = MeshDrawer(ctx, size, size, samples=samples)
 
     @property
     def size(self) -> int:
-        return self.renderer.width
+        return self.drawer.width
 
     def image(self, shot: Shot, lods: np.ndarray, coded: bool = False) -> np.ndarray:
         """The shot with object ``k`` drawn at LOD ``lods[k]``; ``(H, W, 3) uint8``."""
         albedo = lod_colours(lods, self.levels) if coded else None
-        self.renderer.render(self.meshes, lods, shot.models, shot.view_proj, self.light,
+        self.drawer.render(self.meshes, lods, shot.models, shot.view_proj, self.light,
                              albedo=albedo)
-        img = self.renderer.read_rgb8()
+        img = self.drawer.read_rgb8()
         self.ctx.check_error("shot")
         return img
 
@@ -61,6 +61,6 @@ class ChainDrawer:
         return self.image(shot, np.full(len(shot.models), self.levels - 1))
 
     def release(self) -> None:
-        self.renderer.forget(self.meshes)
+        self.drawer.forget(self.meshes)
         self.meshes.release()
-        self.renderer.release()
+        self.drawer.release()

@@ -217,7 +217,7 @@ class AdaptiveProxySource:
                         terrain.fov, tree.node_diagonals())
         self._made: list[tuple[bytes, tuple, frozenset]] = []  # (key, nodes, morphed)
         self._frozen: dict[int, tuple[tuple, frozenset, object]] = {}  # target -> GL proxy
-        self._gl = lambda: AdaptiveProxy(terrain.renderer, terrain.extent, self.stride)
+        self._gl = lambda: AdaptiveProxy(terrain.drawer, terrain.extent, self.stride)
         self.twin = AdaptiveProxy.twin
         self.forced: tuple[tuple, frozenset] | None = None  # a replay's recorded selection
         self.last: tuple[tuple, frozenset] = ((), frozenset())  # the last frozen selection
