@@ -17,7 +17,7 @@ import time
 import numpy as np
 
 from lodsprite.distributed.protocol import CODECS, decode_keyframe, encode_keyframe
-from lodsprite.distributed.render import KeyframeRenderer, scene_args
+from lodsprite.distributed.render import KeyframeService, scene_args
 from lodsprite.paths import swan2002
 from lodsprite.scene.spec import SceneSpec
 from lodsprite.terrain import DEFAULT_EXAGGERATION, load_terrain
@@ -34,7 +34,7 @@ def main() -> None:
     args = {**scene_args(SceneSpec(a.terrain, "terrain", None, DEFAULT_EXAGGERATION),
                          (a.size, a.size)),
             "lod": 16, "visibility": "coarse", "epsilon": 1.0}
-    renderer = KeyframeRenderer(args)
+    renderer = KeyframeService(args)
     path = list(swan2002(load_terrain(a.terrain), 600).viewpoints)
     picks = np.linspace(60, len(path) - 1, a.keyframes).astype(int)
     keyframes = [renderer.render(path[i], int(i), 0.0) for i in picks]

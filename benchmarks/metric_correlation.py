@@ -47,7 +47,7 @@ MEASURES = ("rmse", "flip")
 def predicted(renderer: Renderer, config: RenderConfig, path, log, rows) -> list[dict]:
     """Both metrics' errors (px) of each measured spriteframe of ``rows`` against the
     keyframe it showed (``log``: the engine's keyframes), with its RMSE and FLIP."""
-    tr = renderer.terrain_gl.renderer
+    tr = renderer.terrain_gl.drawer
     hf = tr.geometry.full  # what the engine's metric was built on
     w, h = config.size
     g = config.guard_px

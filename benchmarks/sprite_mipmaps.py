@@ -24,7 +24,7 @@ import time
 import numpy as np
 
 from lodsprite.camera import look_at
-from lodsprite.gl.sprite import SpriteRenderer
+from lodsprite.gl.sprite import SpriteDrawer
 from lodsprite.gl.terrain_gl import TerrainGL
 from lodsprite.metrics import rmse
 from lodsprite.run import RenderConfig, prepare
@@ -38,7 +38,7 @@ BINS = ((1.0, 1.5), (1.5, 2.0), (2.0, 3.01))
 ELEVATIONS = (10.0, 35.0, 70.0)
 
 
-def fly_away(pr: TerrainGL, sprite: SpriteRenderer, elevation_deg: float) -> np.ndarray:
+def fly_away(pr: TerrainGL, sprite: SpriteDrawer, elevation_deg: float) -> np.ndarray:
     """RMSE ``(len(SCALES),)`` of spriteframes from eyes SCALES times as far as the
     keyframe's from the terrain's centre."""
     hf = pr.geometry.hf
@@ -51,12 +51,12 @@ def fly_away(pr: TerrainGL, sprite: SpriteRenderer, elevation_deg: float) -> np.
         vp = look_at(target + s * base, target)
         sprite.render_spriteframe(vp)
         frame = sprite.target.read_color()
-        pr.renderer.render(vp)
-        errors.append(rmse(frame, pr.renderer.target.read_color()))
+        pr.drawer.render(vp)
+        errors.append(rmse(frame, pr.drawer.target.read_color()))
     return np.array(errors)
 
 
-def chen1999_run(pr: TerrainGL, path, sprite: SpriteRenderer) -> dict:
+def chen1999_run(pr: TerrainGL, path, sprite: SpriteDrawer) -> dict:
     vp0 = path.viewpoints[0]
     sprite.render_keyframe(vp0, 0.0)  # warm-up (shader compilation), untimed
     sprite.render_spriteframe(vp0)
@@ -70,8 +70,8 @@ def chen1999_run(pr: TerrainGL, path, sprite: SpriteRenderer) -> dict:
         if i % 5:
             continue
         image = engine.read_image()
-        pr.renderer.render(vp)
-        errors.append(rmse(image, pr.renderer.target.read_color()))
+        pr.drawer.render(vp)
+        errors.append(rmse(image, pr.drawer.target.read_color()))
     keys = [f.ms for f in frames if f.type == KEYFRAME]
     sprites = [f.ms for f in frames if f.type != KEYFRAME]
     return {"keyframes": len(keys), "key_ms": float(np.mean(keys)),
@@ -79,7 +79,7 @@ def chen1999_run(pr: TerrainGL, path, sprite: SpriteRenderer) -> dict:
             "rmse": float(np.mean(errors))}
 
 
-def mipmap_ms(pr: TerrainGL, sprite: SpriteRenderer, vp, reps: int = 50) -> float:
+def mipmap_ms(pr: TerrainGL, sprite: SpriteDrawer, vp, reps: int = 50) -> float:
     sprite.render_keyframe(vp, 0.0)
     tex = sprite.keyframe.color
     times = []
@@ -106,7 +106,7 @@ def main() -> None:
     with TerrainGL(scene, (args.size, args.size)) as pr:
         info = pr.ctx.info
         for name, mipmaps in CASES:
-            sprite = SpriteRenderer(pr.renderer, LOD, mipmaps=mipmaps)
+            sprite = SpriteDrawer(pr.drawer, LOD, mipmaps=mipmaps)
             try:
                 r = {f"fly{el}": fly_away(pr, sprite, el) for el in ELEVATIONS}
                 r.update(chen1999_run(pr, path, sprite))

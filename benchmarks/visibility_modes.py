@@ -13,7 +13,7 @@ import argparse
 
 import numpy as np
 
-from lodsprite.gl.sprite import SpriteRenderer
+from lodsprite.gl.sprite import SpriteDrawer
 from lodsprite.gl.terrain_gl import TerrainGL
 from lodsprite.metrics import rmse
 from lodsprite.run import RenderConfig, prepare
@@ -29,7 +29,7 @@ CASES = [  # visibility, keyframes ahead, border ribbons, guard band (px)
 
 def run(pr: TerrainGL, path, visibility: str, predict: bool, border: bool,
         guard: int) -> dict:
-    sprite = SpriteRenderer(pr.renderer, 16, visibility, border=border, guard_px=guard)
+    sprite = SpriteDrawer(pr.drawer, 16, visibility, border=border, guard_px=guard)
     try:
         vp0 = path.viewpoints[0]
         sprite.render_keyframe(vp0, 0.0)
@@ -44,11 +44,11 @@ def run(pr: TerrainGL, path, visibility: str, predict: bool, border: bool,
             if i % 5:
                 continue
             image = engine.read_image()
-            pr.renderer.render(vp)
-            truth = pr.renderer.target.read_color()
-            pr.renderer.render(vp, 16)
+            pr.drawer.render(vp)
+            truth = pr.drawer.target.read_color()
+            pr.drawer.render(vp, 16)
             err_sprite.append(rmse(image, truth))
-            err_lod.append(rmse(pr.renderer.target.read_color(), truth))
+            err_lod.append(rmse(pr.drawer.target.read_color(), truth))
     finally:
         sprite.release()
     sprites = [f.ms for f in frames if f.type != KEYFRAME]

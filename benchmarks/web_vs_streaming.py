@@ -7,7 +7,7 @@ driven by selenium through the system chromedriver):
   itself from the coarse level and the last keyframe, and asks for keyframes ahead;
 * ``stream``: the remote view of trame / Pixel Streaming: the page sends each frame's
   viewpoint, the server renders the newest one at full resolution with lodsprite's real
-  renderer (:class:`~lodsprite.distributed.render.KeyframeRenderer`) and sends a JPEG,
+  renderer (:class:`~lodsprite.distributed.render.KeyframeService`) and sends a JPEG,
   which the page draws (``--role stream``: a small aiohttp server in this file).
 
 Links: two network namespaces joined by a veth pair, rate-limited with tbf
@@ -107,14 +107,14 @@ def stream_server(args) -> None:
     from PIL import Image
 
     from lodsprite.distributed.protocol import LoadArgs, viewpoint_from_wire
-    from lodsprite.distributed.render import KeyframeRenderer
+    from lodsprite.distributed.render import KeyframeService
     from lodsprite.paths import get_path
     from lodsprite.scene import load_scene
 
     hf = load_scene(args.terrain, "terrain", None, 1.0).hf
     path = [vp.to_dict() for vp in get_path(args.path, hf, args.frames).viewpoints]
     gl = ThreadPoolExecutor(1)  # the GL context lives on one thread
-    r = gl.submit(KeyframeRenderer, LoadArgs(terrain=args.terrain, size=(args.size,) * 2,
+    r = gl.submit(KeyframeService, LoadArgs(terrain=args.terrain, size=(args.size,) * 2,
                                             lod=args.lod)).result()
 
     def render(vp: dict) -> bytes:
@@ -249,7 +249,7 @@ def image_error(shots: list, reference) -> float | None:
 
 def client(args) -> None:
     from lodsprite.distributed.protocol import LoadArgs
-    from lodsprite.distributed.render import KeyframeRenderer
+    from lodsprite.distributed.render import KeyframeService
     from lodsprite.paths import get_path
     from lodsprite.scene import load_scene
 
@@ -267,7 +267,7 @@ def client(args) -> None:
     urls = {"sprite": f"http://127.0.0.1:18080/?{q}", "stream": "http://127.0.0.1:18081/"}
     hf = load_scene(args.terrain, "terrain", None, 1.0).hf
     path = get_path(args.path, hf, args.frames).viewpoints
-    r = KeyframeRenderer(LoadArgs(terrain=args.terrain, size=(args.size,) * 2, lod=args.lod))
+    r = KeyframeService(LoadArgs(terrain=args.terrain, size=(args.size,) * 2, lod=args.lod))
     cache: dict[int, np.ndarray] = {}
 
     def reference(k: int) -> np.ndarray:  # top-down rows, as a canvas's getImageData

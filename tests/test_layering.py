@@ -218,16 +218,16 @@ def test_the_engine_renders_what_the_policy_decides(gl):
     """The GL driver and a policy built from pure camera math alone agree frame by frame:
     the same frame types, keyframes at the same viewpoints (ahead of the viewer too)."""
     from lodsprite.camera import look_at
-    from lodsprite.gl.sprite import SpriteRenderer
-    from lodsprite.gl.terrain import TerrainGeometry, TerrainRenderer
+    from lodsprite.gl.sprite import SpriteDrawer
+    from lodsprite.gl.terrain import TerrainDrawer, TerrainGeometry
     from lodsprite.sprite.engine import LodSpriteEngine
     from lodsprite.sprite.policy import KeyframePolicy
     from lodsprite.terrain import make_texture
 
     hf = make_field(64, kind="ridges", relief=150.0)
     geometry = TerrainGeometry(gl, hf, make_texture("terrain", hf))
-    renderer = TerrainRenderer(gl, geometry, 64, 64)
-    sprite = SpriteRenderer(renderer, 8, guard_px=4)
+    renderer = TerrainDrawer(gl, geometry, 64, 64)
+    sprite = SpriteDrawer(renderer, 8, guard_px=4)
     try:
         path = [look_at((2600 * np.sin(a), -2600 * np.cos(a), 1300.0), (0.0, 0.0, 0.0))
                 for a in np.linspace(0.0, np.pi / 2, 40)]

@@ -88,7 +88,7 @@ def test_a_renderer_that_fails_to_build_releases_the_context_it_made(monkeypatch
     def no_renderer(*args, **kwargs):
         raise InputError("no renderer today")
 
-    monkeypatch.setattr(gl_state, "TerrainRenderer", no_renderer)
+    monkeypatch.setattr(gl_state, "TerrainDrawer", no_renderer)
     with pytest.raises(InputError, match="no renderer today"):
         Renderer(load_scene("fractal:64", grid=64), (32, 32))
     assert released and released[-1].mgl is None

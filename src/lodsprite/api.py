@@ -42,7 +42,7 @@ from lodsprite.errors import InputError
 from lodsprite.files import write_png
 from lodsprite.gl.context import GLContext, GLInfo
 from lodsprite.gl.overlay import Presenter
-from lodsprite.gl.sprite import DEFAULT_GUARD_PX, DEFAULT_VISIBILITY, SpriteRenderer
+from lodsprite.gl.sprite import DEFAULT_GUARD_PX, DEFAULT_VISIBILITY, SpriteDrawer
 from lodsprite.gl.terrain_gl import TerrainGL
 from lodsprite.record import Frame
 from lodsprite.scene import Scene
@@ -110,7 +110,7 @@ class Renderer:
         view), which it never releases: what a caller holding a
         :class:`~lodsprite.gl.terrain_gl.TerrainGL` passes to a technique."""
         self = cls.__new__(cls)
-        r = terrain_gl.renderer
+        r = terrain_gl.drawer
         self.scene, self.size = terrain_gl.scene, (r.target.width, r.target.height)
         self.fov_y_deg = float(r.fov_y_deg)
         self.gl, self._terrain_gl = terrain_gl.ctx, terrain_gl
@@ -125,7 +125,7 @@ class Renderer:
 
     @property
     def terrain_gl(self) -> TerrainGL:
-        """The terrain layer's GL state (context, geometry, terrain renderer)."""
+        """The terrain layer's GL state (context, geometry, terrain drawer)."""
         return self._terrain()
 
     def _terrain(self) -> TerrainGL:
@@ -138,7 +138,7 @@ class Renderer:
         """The image every layer draws into: the terrain's, or (a scene without terrain)
         one of the renderer's own, with a depth buffer, made on first use."""
         if self._terrain_gl is not None:
-            return self._terrain_gl.renderer.target
+            return self._terrain_gl.drawer.target
         if self._own_target is None:
             from lodsprite.gl.target import RenderTarget
 
@@ -166,12 +166,12 @@ class Renderer:
         one, 0.1 m to 100 km)."""
         if self._terrain_gl is None:
             return Projection(self.fov_y_deg, self.size[0] / self.size[1], 0.1, 1e5)
-        return self._terrain_gl.renderer.projection(viewpoint)
+        return self._terrain_gl.drawer.projection(viewpoint)
 
     def render(self, viewpoint: Viewpoint, lod: int | None = None) -> Frame:
         """Draw the terrain at full resolution (``lod=None``) or at uniform level ``lod``
         (quads per side) into the renderer's image; returns once the GL work is done."""
-        stats = self._terrain().renderer.render(viewpoint, lod)
+        stats = self._terrain().drawer.render(viewpoint, lod)
         self.gl.finish()
         return stats
 
@@ -278,7 +278,7 @@ class LodSprite:
                  cache_policy: str = DEFAULT_POLICY, metric: str = "warp") -> None:
         self.renderer = renderer
         self.threaded = threaded
-        self.sprite = SpriteRenderer(renderer.terrain_gl.renderer, lod, visibility, border=border,
+        self.sprite = SpriteDrawer(renderer.terrain_gl.drawer, lod, visibility, border=border,
                                      guard_px=guard_px)
         try:
             self.engine: LodSpriteEngine | WorkerLodSpriteEngine = (

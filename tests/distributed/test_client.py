@@ -440,7 +440,7 @@ def test_the_bounded_client_renders_its_own_keyframe_when_the_shown_one_is_too_f
     try:
         fake.send(1, near)
         _until(client, near, "keyframe")
-        r = client.terrain_gl.renderer
+        r = client.terrain_gl.drawer
         # the server keyframe is out of bounds at `far`, as the metric measures it
         assert keyframe_error_px(client.metric, client.metric.reproject(near.o), far,
                                  r.projection(far), r.target.height) >= 1.0

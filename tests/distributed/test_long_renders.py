@@ -145,9 +145,9 @@ def test_a_keyframe_render_lets_the_other_threads_of_its_process_run() -> None:
     moderngl holding the GIL, so the control thread stalled for the whole draw; drawn
     unlocked, a thread beside it keeps ticking.  The bound is relative to the draw's own
     time (a fast GPU's draw is short and stalls nothing either way)."""
-    from lodsprite.distributed.render import KeyframeRenderer
+    from lodsprite.distributed.render import KeyframeService
 
-    r = KeyframeRenderer(SERVED)
+    r = KeyframeService(SERVED)
     try:
         r.render(WHOLE, 0, 0.0)  # loaded, compiled: the next render is the draw alone
         stall, took = _longest_stall(lambda: r.render(WHOLE, 0, 0.0))

@@ -89,7 +89,7 @@ def test_a_server_out_of_turn_renders_only_at_the_full_threshold(hf):
     assert any(PACE_FRACTION <= e < 1.0 for e in errors)  # where the two rules differ
 
 
-class _Renderer:
+class _FakeService:
     def __init__(self, pacer):
         self.pacer = pacer
 
@@ -116,9 +116,9 @@ def test_two_servers_take_turns_after_the_shown_keyframes_server(hf, slot, shown
                 return True
 
         eye = np.asarray(eye_at(0.0).o)
-        assert server._producer.due(_Renderer(Pacer()), eye_at(10.0), (eye, shown_slot))
+        assert server._producer.due(_FakeService(Pacer()), eye_at(10.0), (eye, shown_slot))
         assert calls[-1][1] is turn and calls[-1][0] is eye
-        server._producer.due(_Renderer(Pacer()), eye_at(10.0), None)  # nothing shown yet
+        server._producer.due(_FakeService(Pacer()), eye_at(10.0), None)  # nothing shown yet
         assert calls[-1] == (None, True)
     finally:
         server._ctx.term()

@@ -37,7 +37,7 @@ def _technique(cfg: RenderConfig) -> tuple[DistributedTechnique, object, object]
 
 
 def _reference(technique: DistributedTechnique):
-    terrain = technique.client.terrain_gl.renderer
+    terrain = technique.client.terrain_gl.drawer
 
     def full(viewpoint):
         terrain.render(viewpoint, None)
@@ -167,7 +167,7 @@ def test_the_replayed_error_is_eq2_as_computed_independently_and_flags_a_far_key
         client.shown.append({"slot": 0, "seq": 0, "t0": 0.0, "local": True,
                              "viewpoint": views[0].to_dict()})
         errors = technique.replayed_errors(views, [{"keyframe": 0}] * len(views))
-        renderer = client.terrain_gl.renderer
+        renderer = client.terrain_gl.drawer
         for frame in (1, 3, 11):
             vp = views[frame]
             want = _brute_force_error_px(scene.hf, flat.lod, Viewpoint.from_dict(

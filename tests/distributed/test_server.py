@@ -372,7 +372,7 @@ def test_keyframes_go_to_the_holder_only(live):
 
 
 def _fail_for(terrain, exc):
-    real = producer_module.KeyframeRenderer
+    real = producer_module.KeyframeService
 
     def make(args):
         if args.terrain == terrain:
@@ -388,7 +388,7 @@ def test_the_renderer_survives_a_scene_that_fails_and_a_later_load_works(live, m
     """Regression: only LodspriteError and ValueError were caught: anything else (a
     MemoryError, a GL error) killed the renderer thread, and the server answered ping
     but never sent a keyframe again."""
-    monkeypatch.setattr(producer_module, "KeyframeRenderer", _fail_for("fractal:32:9", exc))
+    monkeypatch.setattr(producer_module, "KeyframeService", _fail_for("fractal:32:9", exc))
     assert live.control("load", {**SMALL, "terrain": "fractal:32:9"})["ok"]
     live.control("start")  # refused when the load has failed already, accepted before
     data = live.wait_state({"failed"})
@@ -406,7 +406,7 @@ def _first_render_fails(monkeypatch, message: str) -> list:
     """Make the server's first keyframe render raise ``RuntimeError(message)``; the list
     of render calls so far."""
     calls: list = []
-    real = producer_module.KeyframeRenderer
+    real = producer_module.KeyframeService
 
     class Flaky(real):
         def render(self, *a, **kw):
@@ -415,7 +415,7 @@ def _first_render_fails(monkeypatch, message: str) -> list:
                 raise RuntimeError(message)
             return super().render(*a, **kw)
 
-    monkeypatch.setattr(producer_module, "KeyframeRenderer", Flaky)
+    monkeypatch.setattr(producer_module, "KeyframeService", Flaky)
     return calls
 
 
@@ -442,7 +442,7 @@ def test_the_renderer_survives_a_keyframe_that_fails_to_render(live, monkeypatch
 def test_a_failed_scene_holds_no_memory_in_the_servers_accounting(live, monkeypatch):
     """Regression: the estimate of a scene that failed stayed credited as held, so the
     next load's memory check counted memory nobody held."""
-    monkeypatch.setattr(producer_module, "KeyframeRenderer",
+    monkeypatch.setattr(producer_module, "KeyframeService",
                         _fail_for("fractal:32:9", MemoryError()))
     assert live.control("load", {**SMALL, "terrain": "fractal:32:9"})["ok"]
     assert live.server._producer.scene_bytes > 0  # asked for, not yet loaded

@@ -34,7 +34,7 @@ import numpy as np  # noqa: E402
 from conftest import make_field  # noqa: E402
 from lodsprite.camera import look_at  # noqa: E402
 from lodsprite.gl.context import GLContext  # noqa: E402
-from lodsprite.gl.terrain import TerrainGeometry, TerrainRenderer  # noqa: E402
+from lodsprite.gl.terrain import TerrainDrawer, TerrainGeometry  # noqa: E402
 
 SAMPLE = 50  # frames between resident-set samples
 _LIBC = ctypes.CDLL(None) if hasattr(ctypes.CDLL(None), "malloc_trim") else None
@@ -58,7 +58,7 @@ def measure(warmup: int, window: int, windows: int, trace: bool) -> dict:
     gl.mgl.gc_mode = "context_gc"  # a GL object dropped without release() lands in objects
     hf = make_field(64)
     geo = TerrainGeometry(gl, hf, np.full((8, 8, 3), (200, 40, 40), np.uint8))
-    r = TerrainRenderer(gl, geo, 32, 32)
+    r = TerrainDrawer(gl, geo, 32, 32)
     vps = [look_at((2000 * np.cos(a), 2000 * np.sin(a), 900.0), (0, 0, 0))
            for a in np.linspace(0, 2 * np.pi, 50)]
     out: dict = {"frames": [], "rss": [], "py": []}

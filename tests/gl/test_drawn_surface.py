@@ -7,7 +7,7 @@ import pytest
 
 from conftest import make_field
 from lodsprite.camera import look_at
-from lodsprite.gl.terrain import TerrainGeometry, TerrainRenderer
+from lodsprite.gl.terrain import TerrainDrawer, TerrainGeometry
 from lodsprite.techniques.adaptive_terrain import AdaptiveTerrain
 from lodsprite.techniques.drawn_surface import DrawnSurface
 from lodsprite.terrain import make_texture
@@ -20,7 +20,7 @@ SIZE = 128
 def terrain(gl):
     hf = make_field(512, kind="ridges", relief=300.0)
     geo = TerrainGeometry(gl, hf, make_texture("terrain", hf))
-    tr = TerrainRenderer(gl, geo, SIZE, SIZE)
+    tr = TerrainDrawer(gl, geo, SIZE, SIZE)
     at = AdaptiveTerrain(gl, MemoryPyramid.from_heightfield(hf), tr.target, 45.0, 1.0,
                          grid=16, gpu_mb=16, host_mb=16, color=geo.color_tex)
     yield hf, at, tr

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from lodsprite.camera import look_at, perspective
-from lodsprite.gl.mesh import MeshRenderer, MeshSet
+from lodsprite.gl.mesh import MeshDrawer, MeshSet
 from lodsprite.profiles.scenes import placement
 
 # A unit square in the xy-plane facing +z (counter-clockwise seen from +z).
@@ -18,7 +18,7 @@ QUAD = (np.array([[-0.5, -0.5, 0], [0.5, -0.5, 0], [0.5, 0.5, 0], [-0.5, 0.5, 0]
 
 @pytest.fixture
 def scene(gl):
-    renderer = MeshRenderer(gl, 64, 64, samples=4)
+    renderer = MeshDrawer(gl, 64, 64, samples=4)
     meshes = MeshSet(gl, [QUAD, QUAD])
     yield gl, renderer, meshes
     renderer.forget(meshes)

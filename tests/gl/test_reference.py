@@ -60,7 +60,7 @@ def test_full_on_a_store_draws_level_0_as_the_same_field_in_memory(store, tmp_pa
     hf = level0(store)
     path = get_path("chen1999", hf, 2)
     with Renderer(Scene(hf, np.zeros((2, 2, 3), np.uint8)), (64, 48)) as r:
-        r.terrain_gl.renderer.shading = "heights"
+        r.terrain_gl.drawer.shading = "heights"
         for i, vp in enumerate(path.viewpoints):
             r.render(vp)
             saved = read_image(tmp_path / "frames" / f"frame_{i:05d}.png")
@@ -249,7 +249,7 @@ def test_shading_reaches_every_terrain_technique_auto_is_heights_on_a_store(stor
 def test_a_texture_reference_of_a_field_draws_the_texture(gl):
     """``auto`` with an in-memory field and its texture draws the texture (jacksboro and
     chen1999 keep theirs): the same image as the full-resolution renderer's."""
-    from lodsprite.gl.terrain import TerrainGeometry, TerrainRenderer
+    from lodsprite.gl.terrain import TerrainDrawer, TerrainGeometry
     from lodsprite.terrain import make_texture
 
     hf = HeightField(np.asarray(np.random.default_rng(3).normal(0, 40, (65, 65)), np.float32),
@@ -258,7 +258,7 @@ def test_a_texture_reference_of_a_field_draws_the_texture(gl):
     vp = look_at((0.0, -2000.0, 1500.0), (0.0, 0.0, 0.0))
     ref = LevelZeroReference(gl, hf, SIZE, shading="auto", texture=tex)
     geo = TerrainGeometry(gl, hf, tex)
-    r = TerrainRenderer(gl, geo, *SIZE)
+    r = TerrainDrawer(gl, geo, *SIZE)
     try:
         img = ref.image(vp)
         r.render(vp, None, ref.projection(vp))

@@ -10,8 +10,8 @@ from conftest import make_field
 from lodsprite.camera import look_at
 from lodsprite.errors import InputError
 from lodsprite.gl.shaders import SPRITE_FS
-from lodsprite.gl.sprite import VISIBILITY_MODES, SpriteRenderer
-from lodsprite.gl.terrain import TerrainGeometry, TerrainRenderer
+from lodsprite.gl.sprite import VISIBILITY_MODES, SpriteDrawer
+from lodsprite.gl.terrain import TerrainDrawer, TerrainGeometry
 from lodsprite.metrics import rmse
 from lodsprite.sprite.engine import FIRST_SPRITE, KEYFRAME, SPRITE, LodSpriteEngine
 from lodsprite.sprite.metric import ErrorMetric
@@ -25,8 +25,8 @@ def build(gl):
 
     def make(hf, texture, coarse=8, visibility="coarse", size=(128, 128), **kw):
         geo = TerrainGeometry(gl, hf, texture)
-        tr = TerrainRenderer(gl, geo, *size)
-        sp = SpriteRenderer(tr, coarse, visibility, **kw)
+        tr = TerrainDrawer(gl, geo, *size)
+        sp = SpriteDrawer(tr, coarse, visibility, **kw)
         made.append((sp, tr, geo))
         return sp
 

@@ -6,8 +6,8 @@ import pytest
 
 from conftest import make_field
 from lodsprite.camera import look_at
-from lodsprite.gl.sprite import SpriteRenderer
-from lodsprite.gl.terrain import TerrainGeometry, TerrainRenderer
+from lodsprite.gl.sprite import SpriteDrawer
+from lodsprite.gl.terrain import TerrainDrawer, TerrainGeometry
 from lodsprite.sprite.metric import ErrorMetric
 from lodsprite.sprite.proxy_metric import ProxyMetric
 from lodsprite.sprite.proxy_surface import ProxySurface
@@ -31,8 +31,8 @@ def setup(gl):
     def make(kind="ridges", relief=150.0, proxy_sse=8.0, n=256):
         hf = make_field(n, kind=kind, relief=relief)
         geo = TerrainGeometry(gl, hf, make_texture("terrain", hf))
-        tr = TerrainRenderer(gl, geo, SIZE, SIZE)
-        sp = SpriteRenderer(tr, 8, "coarse", guard_px=0)
+        tr = TerrainDrawer(gl, geo, SIZE, SIZE)
+        sp = SpriteDrawer(tr, 8, "coarse", guard_px=0)
         at = AdaptiveTerrain(gl, MemoryPyramid.from_heightfield(hf), tr.target, 45.0, 1.0,
                              gpu_mb=16, host_mb=16, color=geo.color_tex)
         sp.keyframe_drawer = at.render_into
@@ -75,7 +75,7 @@ def test_the_frozen_proxy_has_fewer_triangles_than_the_keyframe_and_stays_put(se
     vp = key_view()
     at.settle(vp)
     sp.render_keyframe(vp, 0.0)
-    key_tris = at.renderer.triangles  # the keyframe's own selection at 1 px
+    key_tris = at.drawer.triangles  # the keyframe's own selection at 1 px
     proxy_tris = src.triangles[-1]
     assert 0 < proxy_tris < key_tris
     # frozen: spriteframes from elsewhere draw the frozen nodes in their view (no

@@ -5,8 +5,8 @@ import pytest
 
 from conftest import make_field
 from lodsprite.camera import look_at
-from lodsprite.gl.sprite import SpriteRenderer
-from lodsprite.gl.terrain import TerrainGeometry, TerrainRenderer
+from lodsprite.gl.sprite import SpriteDrawer
+from lodsprite.gl.terrain import TerrainDrawer, TerrainGeometry
 from lodsprite.sprite.engine import KEYFRAME
 from lodsprite.sprite.tiled import TILES
 from lodsprite.sprite.tiled_engine import TiledSpriteEngine
@@ -20,8 +20,8 @@ def build(gl):
     def make(coarse=8, visibility="coarse", size=(128, 128), guard=16):
         hf = make_field(64, kind="ridges", relief=150.0)
         geo = TerrainGeometry(gl, hf, make_texture("terrain", hf))
-        tr = TerrainRenderer(gl, geo, *size)
-        sp = SpriteRenderer(tr, coarse, visibility, guard_px=guard)
+        tr = TerrainDrawer(gl, geo, *size)
+        sp = SpriteDrawer(tr, coarse, visibility, guard_px=guard)
         made.append((sp, tr, geo))
         return sp
 
@@ -291,13 +291,13 @@ def test_tiles_draw_the_view_dependent_proxy_and_replay(gl, cache_mb):
                                      "tile_budget_ms": 0.0, "proxy_sse": 8.0,
                                      "cache_mb": cache_mb}))
         try:
-            assert isinstance(t.tiled.metric, ProxyMetric)
+            assert isinstance(t.engine.tiled.metric, ProxyMetric)
             frames, shown, decisions = _fly(t, path.viewpoints)
             assert TILES in {f.kind for f in frames}
             assert all(np.isfinite(f.error_px) for f in frames)
             s = t.summary(frames)
             assert s["proxy_sse"] == 8.0 and s["mean_proxy_triangles"] > 0
-            assert len(t.proxy.triangles) == len(t.tiled.updates)
+            assert len(t.proxy.triangles) == len(t.engine.tiled.updates)
             for i in [6, 0, 13, 2, 9]:
                 assert np.array_equal(t.replay(path.viewpoints[i], decisions[i]), shown[i]), i
         finally:

@@ -12,7 +12,7 @@ import pytest
 from conftest import make_field
 from lodsprite.camera import Projection, look_at, project_points
 from lodsprite.errors import InputError
-from lodsprite.gl.terrain import SKY_RGB, TerrainGeometry, TerrainRenderer
+from lodsprite.gl.terrain import SKY_RGB, TerrainDrawer, TerrainGeometry
 
 SKY = np.round(np.array(SKY_RGB) * 255).astype(np.uint8)
 FRAMES_MEMORY = Path(__file__).with_name("frames_memory.py")
@@ -35,7 +35,7 @@ def renderer_for(gl):
 
     def build(hf, texture, size=(128, 128)):
         geo = TerrainGeometry(gl, hf, texture)
-        r = TerrainRenderer(gl, geo, *size)
+        r = TerrainDrawer(gl, geo, *size)
         made.append((r, geo))
         return r
 

@@ -9,7 +9,7 @@ import pytest
 from scipy.ndimage import binary_dilation, binary_erosion
 
 from lodsprite.camera import look_at, perspective
-from lodsprite.gl.lumigraph import ColorMeshRenderer
+from lodsprite.gl.lumigraph import ColorMeshDrawer
 from lodsprite.gl.target import RenderTarget
 from lodsprite.lumigraph.capture import capture, textured_plane
 from lodsprite.lumigraph.geometry import Slab
@@ -26,7 +26,7 @@ TOL = 4e-3
 def lf_folder(gl, tmp_path):
     slab = Slab(np.eye(4), st_size=3.0, uv_size=2.0, st_distance=2.5, n_st=8, n_uv=32)
     plane = textured_plane(2.0, 8)
-    obj = ColorMeshRenderer(gl, plane.vertices, plane.faces, plane.colors, plane.normals)
+    obj = ColorMeshDrawer(gl, plane.vertices, plane.faces, plane.colors, plane.normals)
     target = RenderTarget(gl, 32, 32)
     try:
         images = capture(obj, slab, target, near=0.1, far=10.0)
@@ -59,7 +59,7 @@ def st_plane_seen(vp, proj, slab: Slab) -> np.ndarray:
 def run(gl, folder, method, views, **opts):
     lf = Lumigraph(folder)
     proxy_mesh = lf.proxy()
-    proxy = ColorMeshRenderer(gl, proxy_mesh.vertices, proxy_mesh.faces, proxy_mesh.colors,
+    proxy = ColorMeshDrawer(gl, proxy_mesh.vertices, proxy_mesh.faces, proxy_mesh.colors,
                               proxy_mesh.normals)
     m = make_method(method, Context(gl, lf, 0, (SIZE, SIZE), proxy, white=True), **opts)
     proj = perspective(32.0, 1.0, 0.5, 30.0)

@@ -7,7 +7,7 @@ import pytest
 from scipy.ndimage import binary_erosion
 
 from lodsprite.camera import look_at, perspective
-from lodsprite.gl.lumigraph import ColorMeshRenderer
+from lodsprite.gl.lumigraph import ColorMeshDrawer
 from lodsprite.gl.target import RenderTarget
 from lodsprite.lumigraph.base import full_reconstruction
 from lodsprite.lumigraph.capture import capture, textured_plane
@@ -31,7 +31,7 @@ def lumigraph(gl):
     made = []
 
     def build(mesh, sl, proxy_mesh=None):
-        obj = ColorMeshRenderer(gl, mesh.vertices, mesh.faces, mesh.colors, mesh.normals)
+        obj = ColorMeshDrawer(gl, mesh.vertices, mesh.faces, mesh.colors, mesh.normals)
         target = RenderTarget(gl, sl.n_uv, sl.n_uv)
         images = capture(obj, sl, target, near=0.1, far=10.0)
         target.release()

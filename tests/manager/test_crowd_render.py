@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from lodsprite.camera import look_at, perspective
-from lodsprite.gl.crowd import CrowdRenderer
+from lodsprite.gl.crowd import CrowdDrawer
 from lodsprite.gl.target import RenderTarget
 from lodsprite.manager.builtins import ogre
 from lodsprite.manager.engine import CrowdEngine, discrete_levels
@@ -22,7 +22,7 @@ def member():
 
 def test_instanced_drawing_of_a_shared_lod_equals_drawing_one_by_one(gl, member):
     crowd = build_crowd([member], objects=25, spacing=3.0)
-    r = CrowdRenderer(gl, crowd.models, crowd.extent)
+    r = CrowdDrawer(gl, crowd.models, crowd.extent)
     t = RenderTarget(gl, *SIZE)
     try:
         r.set_indices(0, 0, member.extract(0.5))

@@ -126,7 +126,7 @@ def test_a_light_field_shows_only_where_its_proxy_is_in_front(gl, tmp_path, lf_f
             assert not t.lightfields.in_view(back, t.projection(back)).any()
             items = t.lightfields.items
             proxy_px = []
-            target = r.terrain_gl.renderer.target
+            target = r.terrain_gl.drawer.target
             for item in items:  # each proxy's own silhouette, alone on magenta
                 target.use((1.0, 0.0, 1.0))
                 item.compositor.draw(t.projection(vp) @ vp.view_matrix() @ item.m,

@@ -58,10 +58,10 @@ def test_figures_show_the_keyframe_rendered_where_it_was_logged(run: tuple[dict,
     key_proj = Projection(**view["projection"])
     scene = load_scene(CFG.terrain, "terrain", CFG.grid)
     with TerrainGL(scene, (CFG.size, CFG.size)) as pr:
-        pr.renderer.render(key_vp, None, key_proj)
-        at_key = pr.renderer.target.read_color()
-        pr.renderer.render(chen1999(scene.hf, CFG.frames).viewpoints[view["frame"]])
-        at_path = pr.renderer.target.read_color()
+        pr.drawer.render(key_vp, None, key_proj)
+        at_key = pr.drawer.target.read_color()
+        pr.drawer.render(chen1999(scene.hf, CFG.frames).viewpoints[view["frame"]])
+        at_path = pr.drawer.target.read_color()
     shown = _png(out / spec["keyframe_image"])
     diff = np.abs(shown.astype(int) - at_key.astype(int))
     assert diff.mean() < 0.1 and diff.max() <= 2  # the guard band's rounding only

@@ -14,8 +14,8 @@ import pytest
 from conftest import make_field, wait_until
 from lodsprite.camera import look_at
 from lodsprite.errors import LodspriteError
-from lodsprite.gl.sprite import SpriteRenderer
-from lodsprite.gl.terrain import TerrainGeometry, TerrainRenderer
+from lodsprite.gl.sprite import SpriteDrawer
+from lodsprite.gl.terrain import TerrainDrawer, TerrainGeometry
 from lodsprite.metrics import rmse
 from lodsprite.procs import WorkerDied, WorkerUnavailable
 from lodsprite.scene import Scene
@@ -36,8 +36,8 @@ def scene() -> Scene:
 @pytest.fixture
 def sprite(gl, scene):
     geo = TerrainGeometry(gl, scene.hf, scene.texture)
-    tr = TerrainRenderer(gl, geo, *SIZE)
-    sp = SpriteRenderer(tr, 8, guard_px=4)
+    tr = TerrainDrawer(gl, geo, *SIZE)
+    sp = SpriteDrawer(tr, 8, guard_px=4)
     yield sp
     sp.release()
     tr.release()
@@ -88,8 +88,8 @@ def test_the_worker_process_renders_the_keyframe_this_context_would(gl, scene):
     finally:
         worker.close()
     geo = TerrainGeometry(gl, tall.hf, tall.texture)
-    tr = TerrainRenderer(gl, geo, *SIZE)
-    sp = SpriteRenderer(tr, 8, guard_px=4)
+    tr = TerrainDrawer(gl, geo, *SIZE)
+    sp = SpriteDrawer(tr, 8, guard_px=4)
     try:
         sp.render_keyframe(vp, 0.0, tr.projection(vp))
         here = sp.keyframe

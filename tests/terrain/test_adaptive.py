@@ -238,7 +238,7 @@ def test_adaptive_at_a_quarter_pixel_matches_full_resolution(gl):
         rmse = {}
         for sse in (0.25, 4.0):
             a = AdaptiveTerrain(r.gl, MemoryPyramid.from_heightfield(hf),
-                                r.terrain_gl.renderer.target, 45.0, sse,
+                                r.terrain_gl.drawer.target, 45.0, sse,
                                 color=r.terrain_gl.geometry.color_tex)
             try:
                 a.settle(vp)                     # every wanted tile streamed in
@@ -298,9 +298,9 @@ def test_an_evicted_root_comes_back_and_the_loader_drops_stale_requests(gl):
 
 
 def test_a_huge_gpu_budget_is_clamped_to_the_largest_atlas(gl):
-    from lodsprite.gl.adaptive import AdaptiveRenderer
+    from lodsprite.gl.adaptive import AdaptiveDrawer
 
-    r = AdaptiveRenderer(gl, 64, 10 ** 7)
+    r = AdaptiveDrawer(gl, 64, 10 ** 7)
     try:
         side = gl.mgl.info["GL_MAX_TEXTURE_SIZE"] // 65
         assert r.capacity <= side * side and r.atlas.height <= side * 65

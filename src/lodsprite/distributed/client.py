@@ -42,7 +42,7 @@ messages or :data:`RECEIVE_MS` a frame; acknowledges them, drops any not newer t
 last one from the same server (unless none came from it for :data:`SEQ_RESET_S`), and
 keeps the newest (``C'`` is never computed for a keyframe a newer one replaced before a
 frame considered it).  It refuses malformed messages, keyframes whose images are not this
-client's keyframe size (the image size: the client's sprite renderer has no guard band)
+client's keyframe size (the image size: the client's sprite drawer has no guard band)
 and anything else a message may cause, counts them (:attr:`LodClient.rejected_keyframes`)
 and goes on: no message stops it.  Refused keyframes are not acknowledged, and an
 acknowledgement is never waited for: one the server does not take is dropped and counted
@@ -86,7 +86,7 @@ from lodsprite.distributed.protocol import (
 )
 from lodsprite.errors import InputError
 from lodsprite.gl.context import GLContext
-from lodsprite.gl.sprite import SpriteRenderer
+from lodsprite.gl.sprite import SpriteDrawer
 from lodsprite.gl.terrain_gl import TerrainGL
 from lodsprite.record import Frame
 from lodsprite.scene import Scene
@@ -161,7 +161,7 @@ class LodClient:
         self.scene_args = {**scene_args, "lod": lod, "visibility": visibility,
                            "border": border, "epsilon": float(epsilon), "pace": pace}
         self.terrain_gl = TerrainGL(scene, size, float(scene_args.get("fov_y_deg", 45.0)), ctx)
-        self.sprite = SpriteRenderer(self.terrain_gl.renderer, lod, visibility, border=border,
+        self.sprite = SpriteDrawer(self.terrain_gl.drawer, lod, visibility, border=border,
                                      guard_px=0)
         self.metric = ErrorMetric.for_level(scene.hf, lod)
         # the newest keyframe received and not yet considered: (slot, keyframe, None)
@@ -275,7 +275,7 @@ class LodClient:
             header["shown"] = {"eye": last["viewpoint"]["o"], "slot": last["slot"]}
         for s in self._servers:
             s.send_viewpoint(header)  # adds the link's client id
-        projection = self.terrain_gl.renderer.projection(viewpoint)
+        projection = self.terrain_gl.drawer.projection(viewpoint)
         self.pump()
         kind = "local_sprite" if self._own else "sprite"
         triangles = 0
@@ -317,7 +317,7 @@ class LodClient:
         shown or its ``C'`` is unknown."""
         if self._c_prime is None:
             return float("nan")
-        return self._error(self._c_prime, viewpoint, self.terrain_gl.renderer.projection(viewpoint))
+        return self._error(self._c_prime, viewpoint, self.terrain_gl.drawer.projection(viewpoint))
 
     @property
     def links_alive(self) -> list[bool | None]:

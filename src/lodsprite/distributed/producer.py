@@ -14,7 +14,7 @@ start it reads the GL driver's maximum texture size (``max_texture``), so that S
 CONTROL can refuse oversized scenes before anything is allocated.
 
 The thread shares the server's process, and its GIL, with SERVER-CONTROL, the viewpoint
-receiver and the transmitter.  :class:`~.render.KeyframeRenderer` draws and waits for its
+receiver and the transmitter.  :class:`~.render.KeyframeService` draws and waits for its
 draws (``glFinish``) with the GIL released, so a 4096² keyframe (33.5 M triangles, seconds
 on llvmpipe) does not keep the control thread from answering within a client's control
 timeout.  Loading a scene still holds the GIL through each texture upload (moderngl):
@@ -34,7 +34,7 @@ from collections.abc import Callable
 from lodsprite.distributed.hold import Hold
 from lodsprite.distributed.protocol import Keyframe, LoadArgs
 from lodsprite.distributed.queue import Closed, KeyframeQueue
-from lodsprite.distributed.render import KeyframeRenderer
+from lodsprite.distributed.render import KeyframeService
 from lodsprite.distributed.server_stats import ServerStats
 from lodsprite.distributed.viewpoints import ViewpointReceiver
 
@@ -102,16 +102,16 @@ class KeyframeProducer:
 
     def run(self) -> None:
         """Load and render until the server stops or the queue closes."""
-        renderer: KeyframeRenderer | None = None
+        service: KeyframeService | None = None
 
         def release() -> None:
-            nonlocal renderer
-            if renderer is not None:
+            nonlocal service
+            if service is not None:
                 try:
-                    renderer.release()
+                    service.release()
                 except Exception as exc:  # a broken context: drop it all the same
                     log.warning("releasing the scene: %r", exc)
-                renderer = None
+                service = None
 
         self._probe_gl()
         try:
@@ -121,12 +121,12 @@ class KeyframeProducer:
                     request, self.pending = self.pending, None
                 if request is not None:
                     release()
-                    renderer = self._open(request)
-                if renderer is None or not self._running.is_set():
+                    service = self._open(request)
+                if service is None or not self._running.is_set():
                     time.sleep(0.01)
                     continue
                 try:
-                    self._produce(renderer)
+                    self._produce(service)
                 except Closed:
                     raise
                 except Exception as exc:
@@ -137,17 +137,17 @@ class KeyframeProducer:
         finally:
             release()
 
-    def _open(self, scene: LoadArgs) -> KeyframeRenderer | None:
-        """A renderer for ``scene``; None (state ``failed``) when it cannot be made."""
+    def _open(self, scene: LoadArgs) -> KeyframeService | None:
+        """A keyframe service for ``scene``; None (state ``failed``) when it cannot be made."""
         try:
-            renderer = KeyframeRenderer(scene)
+            service = KeyframeService(scene)
         except Exception as exc:  # MemoryError, GL errors, bad files, anything
             self._fail("cannot load the scene", exc)
             return None
         with self._lock:
             if self.pending is None:
                 self._set_state("ready", "")
-        return renderer
+        return service
 
     def predicted_viewpoint(self):
         """The viewpoint a keyframe started now should show, and what the client shows.
@@ -158,22 +158,22 @@ class KeyframeProducer:
         moments."""
         return self.viewpoints.predict(self.delta_t() * (1.0 + self.slot / self.slots))
 
-    def due(self, renderer: KeyframeRenderer, vp, shown) -> bool:
+    def due(self, service: KeyframeService, vp, shown) -> bool:
         """Whether to render for ``vp``.  With several servers they take turns: it is this
         server's turn when the client shows the previous slot's keyframe."""
         eye, turn = None, True
         if shown is not None:
             eye, slot = shown
             turn = (slot + 1) % self.slots == self.slot
-        return renderer.pacer.due(vp, renderer.projection(vp), eye, turn)
+        return service.pacer.due(vp, service.projection(vp), eye, turn)
 
-    def _produce(self, renderer: KeyframeRenderer) -> None:
+    def _produce(self, service: KeyframeService) -> None:
         t0 = time.perf_counter()
         if not self.viewpoints.have.wait(0.1):
             return
         t_vp = time.perf_counter()
         vp, shown = self.predicted_viewpoint()
-        while vp is None or not self.due(renderer, vp, shown):
+        while vp is None or not self.due(service, vp, shown):
             if self._stop.is_set() or not self._running.is_set() or self.pending is not None:
                 return
             self.viewpoints.fresh.wait(0.05)  # check again with the next viewpoint
@@ -181,7 +181,7 @@ class KeyframeProducer:
             vp, shown = self.predicted_viewpoint()
         t1 = time.perf_counter()  # δt runs from here: the prediction was made for t1 + δt
         self._seq += 1
-        kf = renderer.render(vp, self._seq, t1)
+        kf = service.render(vp, self._seq, t1)
         t2 = time.perf_counter()
         while not self.queue.put(kf, timeout=0.1):
             if self._stop.is_set() or not self._running.is_set():

@@ -1,4 +1,4 @@
-"""GL work of the distributed programs: the server's keyframe renderer.
+"""GL work of the distributed programs: the server's keyframe service.
 
 The server renders the full-resolution terrain from the predicted viewpoint and reads
 the colour back, so the keyframe can cross the network as plain arrays.  For the
@@ -18,7 +18,7 @@ from lodsprite.gl.terrain_gl import TerrainGL
 from lodsprite.scene.spec import SceneSpec, open_spec
 from lodsprite.terrain.heightfield import DEFAULT_GRID
 
-__all__ = ["MEMORY_FRACTION", "KeyframeRenderer", "check_load_args", "check_scene_memory",
+__all__ = ["MEMORY_FRACTION", "KeyframeService", "check_load_args", "check_scene_memory",
            "estimate_scene_bytes", "memory_available", "scene_args"]
 
 MEMORY_FRACTION = 0.8
@@ -93,8 +93,8 @@ def check_scene_memory(args: LoadArgs, source: tuple[int, int] | None,
     return None
 
 
-class KeyframeRenderer:
-    """Full-resolution renderer of one scene, created and used on one thread.
+class KeyframeService:
+    """Full-resolution keyframes of one scene, drawn on one thread that creates and uses it.
 
     It draws and finishes with the GIL released (the project's unlocked draws:
     ``glDrawElementsInstanced`` and ``glFinish`` through ctypes), so the threads beside
@@ -114,7 +114,7 @@ class KeyframeRenderer:
         scene = open_spec(args)  # the load's scene description (a SceneSpec)
         size = tuple(args.size)
         self.terrain_gl = TerrainGL(scene, size, args.fov_y_deg, ctx)
-        self.terrain_gl.renderer.unlocked_draws = True  # the threads beside it run meanwhile
+        self.terrain_gl.drawer.unlocked_draws = True  # the threads beside it run meanwhile
         try:
             self.lod = args.lod
             self.border = args.border
@@ -127,12 +127,12 @@ class KeyframeRenderer:
             raise
 
     def projection(self, viewpoint: Viewpoint):
-        return self.terrain_gl.renderer.projection(viewpoint)
+        return self.terrain_gl.drawer.projection(viewpoint)
 
     def render(self, viewpoint: Viewpoint, seq: int, t0: float) -> Keyframe:
         """The keyframe of ``viewpoint``: colour ``(h, w, 3) uint8`` and the z-buffer its
         visibility rule reads ``(h, w) float32``, rows bottom-up."""
-        r = self.terrain_gl.renderer
+        r = self.terrain_gl.drawer
         projection = r.projection(viewpoint)
         r.render(viewpoint, None, projection)
         if self.coarse is not None:

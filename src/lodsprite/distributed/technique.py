@@ -126,14 +126,14 @@ class DistributedTechnique(Technique):
         coarse_baseline`)."""
         from lodsprite.techniques.terrain import coarse_baseline
 
-        return coarse_baseline(self.client.terrain_gl.renderer, viewpoint,
+        return coarse_baseline(self.client.terrain_gl.drawer, viewpoint,
                                self.client.sprite.coarse_quads, truth)
 
     def replayed_errors(self, viewpoints: list[Viewpoint], decisions: list[dict]) -> np.ndarray:
         """The error metric (Chen, Swan & Kaufman 1999, Eq. 2, pixels) of each recorded
         frame against the keyframe it showed, measured untimed after the run: ``(frames,)
         float64``, NaN where a frame showed none, ``inf`` where nothing was measurable."""
-        metric, r = self.client.metric, self.client.terrain_gl.renderer
+        metric, r = self.client.metric, self.client.terrain_gl.drawer
         c_primes: dict[int, np.ndarray] = {}
         out = np.full(len(decisions), np.nan)
         for i, (vp, d) in enumerate(zip(viewpoints, decisions, strict=True)):
@@ -167,7 +167,7 @@ class DistributedTechnique(Technique):
                 "keyframes.json": {"servers": servers, "keyframes": self.client.shown}}
 
     def draw_to(self, framebuffer: moderngl.Framebuffer | None = None) -> None:
-        target = self.client.terrain_gl.renderer.target
+        target = self.client.terrain_gl.drawer.target
         self.renderer.present(target.color, (0.0, 0.0, 1.0, 1.0), framebuffer, target.fbo)
 
     def read_image(self) -> np.ndarray:

@@ -130,7 +130,7 @@ void main() {
 LIGHT = np.array([-0.45, 0.45, 0.77]) / np.linalg.norm([-0.45, 0.45, 0.77])
 
 
-class AdaptiveRenderer:
+class AdaptiveDrawer:
     """The GPU cache (a height atlas of ``capacity`` tiles) and the instanced node draw."""
 
     def __init__(self, ctx: GLContext, grid: int, capacity: int) -> None:
@@ -228,20 +228,20 @@ ATLAS_UNIT = 5  # the texture unit a proxy binds the atlas to (sprite programs u
 
 class AdaptiveProxy:
     """A frozen selection of the adaptive mesh as LOD-sprite's proxy geometry (the object
-    :class:`~lodsprite.gl.sprite.SpriteRenderer` draws spriteframes and the coarse z-buffer
+    :class:`~lodsprite.gl.sprite.SpriteDrawer` draws spriteframes and the coarse z-buffer
     with): the node instances and the eye their morph factors are evaluated at (the
-    keyframe's), drawn from ``renderer``'s atlas and grid mesh with any program whose vertex
+    keyframe's), drawn from ``drawer``'s atlas and grid mesh with any program whose vertex
     shader reads ``terrain_position`` (:meth:`twin`)."""
 
-    def __init__(self, renderer: AdaptiveRenderer, extent: tuple[float, float, float, float],
+    def __init__(self, drawer: AdaptiveDrawer, extent: tuple[float, float, float, float],
                  stride: int = 1) -> None:
-        if stride < 1 or renderer.g % (2 * stride):
+        if stride < 1 or drawer.g % (2 * stride):
             raise ValueError(f"a proxy stride must divide half the node grid, got {stride}")
-        self.renderer = renderer
+        self.drawer = drawer
         self.extent = tuple(float(v) for v in extent)
         self.stride = int(stride)
-        uv, tris = grid_mesh(renderer.g // self.stride)  # every stride-th node sample
-        mgl = renderer.ctx.mgl
+        uv, tris = grid_mesh(drawer.g // self.stride)  # every stride-th node sample
+        mgl = drawer.ctx.mgl
         self.vbo = mgl.buffer(uv.astype(np.float32).tobytes())
         self.ibo = mgl.buffer(tris.astype(np.uint32).tobytes())
         self.index_count = tris.size
@@ -262,7 +262,7 @@ class AdaptiveProxy:
 
     def set(self, instances: np.ndarray, eye: np.ndarray,
             boxes: tuple[np.ndarray, np.ndarray] | None = None) -> None:
-        """Freeze ``instances (N, 16) float32`` (the layout of :meth:`AdaptiveRenderer.draw`)
+        """Freeze ``instances (N, 16) float32`` (the layout of :meth:`AdaptiveDrawer.draw`)
         morphed by the distance from ``eye (3,)`` metres; ``boxes``: the nodes' bounds
         ``(lo (N, 3), hi (N, 3))`` metres, to draw only those in each view."""
         self._all = np.ascontiguousarray(instances, dtype=np.float32)
@@ -286,7 +286,7 @@ class AdaptiveProxy:
     def draw(self, program: moderngl.Program, view_proj: np.ndarray) -> int:
         """Draw the frozen nodes with ``program`` (other uniforms set) through
         ``view_proj (4, 4)``; returns the triangles drawn."""
-        r = self.renderer
+        r = self.drawer
         if program.glo not in self._vaos:
             self._vaos[program.glo] = r.ctx.mgl.vertex_array(program, [
                 (self.vbo, "2f", "in_grid"),

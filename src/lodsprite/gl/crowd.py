@@ -68,7 +68,7 @@ SKY = (0.62, 0.74, 0.88)
 ROW = 1024
 
 
-class CrowdRenderer:
+class CrowdDrawer:
     """The crowd's GPU state: ``models`` (per type ``vertices``, ``normals``, ``colors``)
     and a ground square of half width ``extent`` metres."""
 

@@ -1,9 +1,9 @@
 """GL side of the time-critical lumigraph (Sloan, Cohen & Gortler 1997, §2.3).
 
-* :class:`ColorMeshRenderer` draws a mesh with per-vertex colours under a fixed
+* :class:`ColorMeshDrawer` draws a mesh with per-vertex colours under a fixed
   directional light through any view and projection: the node images of a capture, the
   ground truth, and the z-buffer of the approximate geometry (depth correction).
-* :class:`LumigraphRenderer` reconstructs an image from node images resident in one
+* :class:`LumigraphDrawer` reconstructs an image from node images resident in one
   texture array (the texture memory of §4): the draws of a covering of the st plane
   (:mod:`lodsprite.lumigraph.subsets`: each triangle once per node with data round it,
   textured from that node's uv image, alphas summing to one), blended additively.  The uv
@@ -11,7 +11,7 @@
   or, with depth correction (Gortler et al. 1996), where the ray from the node through
   the approximate geometry's surface point seen at that pixel meets it; both per
   fragment, in the shader.
-* :class:`~lodsprite.gl.projective.ProjectiveRenderer` (:mod:`lodsprite.gl.projective`)
+* :class:`~lodsprite.gl.projective.ProjectiveDrawer` (:mod:`lodsprite.gl.projective`)
   reuses the last reconstructed image as a projective texture on the approximate geometry
   (§3.2).
 
@@ -116,7 +116,7 @@ void main() {
 """
 
 
-class ColorMeshRenderer:
+class ColorMeshDrawer:
     """A mesh with per-vertex colours, lit by a fixed directional light."""
 
     def __init__(self, ctx: GLContext, vertices: np.ndarray, faces: np.ndarray,
@@ -193,7 +193,7 @@ class FloatTarget:
             obj.release()
 
 
-class LumigraphRenderer(FloatTarget):
+class LumigraphDrawer(FloatTarget):
     """Reconstruction (§2.3) from node images resident in a texture array of ``capacity``
     layers of ``n_uv >> level`` pixels square (the texture memory of §4: nodes are
     uploaded into free layers and evicted by the caller) into a float target.
@@ -278,7 +278,7 @@ class LumigraphRenderer(FloatTarget):
         self.vertex_count, self.draws = len(verts), draws
 
     def render(self, view: np.ndarray, projection: np.ndarray,
-               proxy: ColorMeshRenderer | None = None, white: bool = False,
+               proxy: ColorMeshDrawer | None = None, white: bool = False,
                count_samples: bool = False) -> None:
         """Reconstruct the view ``projection @ view`` (world to clip); with ``proxy``, the
         approximate geometry's z-buffer corrects the uv coordinates for depth.  With

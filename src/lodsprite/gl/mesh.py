@@ -50,7 +50,7 @@ class MeshSet:
         self.buffers.clear()
 
 
-class MeshRenderer:
+class MeshDrawer:
     """Renders :class:`MeshSet` objects into a ``width x height`` multisampled framebuffer.
 
     ``samples`` is the MSAA sample count (1 = none; reduced to what the driver allows).

@@ -1,5 +1,5 @@
 """GL side of the time-critical lumigraph's image reuse (Sloan, Cohen & Gortler 1997,
-§3.2): :class:`ProjectiveRenderer` keeps the last reconstructed image (a
+§3.2): :class:`ProjectiveDrawer` keeps the last reconstructed image (a
 :class:`~lodsprite.gl.lumigraph.FloatTarget`) and warps it to later views as a projective
 texture on the approximate geometry, one draw call per frame."""
 
@@ -37,7 +37,7 @@ TEXTURE_MATRIX = np.array([[0.5, 0, 0, 0.5], [0, 0.5, 0, 0.5], [0, 0, 0.5, 0.5],
                            [0, 0, 0, 1.0]])
 
 
-class ProjectiveRenderer(FloatTarget):
+class ProjectiveDrawer(FloatTarget):
     """§3.2: the last reconstructed image reused as a projective texture on the
     approximate geometry (``proxy``, vertices in world space) for the frames after it."""
 

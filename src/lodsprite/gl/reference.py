@@ -7,7 +7,7 @@ Every quality figure of a terrain store is taken against it: ``render --ground-t
 (:mod:`lodsprite.experiments.large.reference`).  Level 0 (of a
 :class:`~lodsprite.terrain.store.TerrainStore`, or an in-memory
 :class:`~lodsprite.terrain.heightfield.HeightField`) is drawn by the full-resolution
-:class:`~lodsprite.gl.terrain.TerrainRenderer`: whole when its longer side is at most
+:class:`~lodsprite.gl.terrain.TerrainDrawer`: whole when its longer side is at most
 ``max_side`` samples (4097: a 4096-quad grid), beyond that the part of it in view: the
 frustum's ground footprint (:func:`lodsprite.camera.view_footprint`) widened by two
 samples (so that the per-pixel normals of the heights shading see the same neighbours as
@@ -34,7 +34,7 @@ import numpy as np
 from lodsprite.camera import Projection, Viewpoint, fitted_projection, view_footprint
 from lodsprite.errors import InputError
 from lodsprite.gl.context import GLContext
-from lodsprite.gl.terrain import TerrainGeometry, TerrainRenderer
+from lodsprite.gl.terrain import TerrainDrawer, TerrainGeometry
 from lodsprite.terrain.heightfield import HeightField
 from lodsprite.terrain.pyramid import MemoryPyramid
 from lodsprite.terrain.quadtree import Quadtree
@@ -100,7 +100,7 @@ class LevelZeroReference:
         self._field = field
         self._window: Window | None = None  # the window of the geometry kept
         self._geometry: TerrainGeometry | None = None  # kept while the view needs one tile
-        self._renderer: TerrainRenderer | None = None
+        self._drawer: TerrainDrawer | None = None
         self._note = ""
 
     def projection(self, viewpoint: Viewpoint) -> Projection:
@@ -151,14 +151,14 @@ class LevelZeroReference:
             self._drop_geometry()
         for k, part in enumerate(parts):
             geometry = self._geometry_for(part) if len(parts) == 1 else self._make(part)
-            renderer = self._renderer_for(geometry)
-            renderer.render(viewpoint, None, projection, clear=k == 0)
+            drawer = self._drawer_for(geometry)
+            drawer.render(viewpoint, None, projection, clear=k == 0)
             if len(parts) > 1:
                 self.ctx.finish()  # drawn: its textures and meshes can go
                 geometry.release()
         self._note = self._describe_window(win, len(parts))
         self.ctx.finish()
-        return self._renderer.target.read_color()
+        return self._drawer.target.read_color()
 
     def _make(self, win: Window) -> TerrainGeometry:
         """The GPU geometry of level 0's window ``win`` at its place."""
@@ -181,14 +181,14 @@ class LevelZeroReference:
             self._geometry, self._window = self._make(win), win
         return self._geometry
 
-    def _renderer_for(self, geometry: TerrainGeometry) -> TerrainRenderer:
+    def _drawer_for(self, geometry: TerrainGeometry) -> TerrainDrawer:
         """The one full-resolution renderer (and target), drawing ``geometry``."""
-        if self._renderer is None:
-            self._renderer = TerrainRenderer(self.ctx, geometry, *self.size, self.fov)
-            self._renderer.shading = self.shading
-        elif self._renderer.geometry is not geometry:
-            self._renderer.set_geometry(geometry)
-        return self._renderer
+        if self._drawer is None:
+            self._drawer = TerrainDrawer(self.ctx, geometry, *self.size, self.fov)
+            self._drawer.shading = self.shading
+        elif self._drawer.geometry is not geometry:
+            self._drawer.set_geometry(geometry)
+        return self._drawer
 
     def _describe_window(self, win: Window, count: int) -> str:
         r0, r1, c0, c1 = win
@@ -215,6 +215,6 @@ class LevelZeroReference:
     def release(self) -> None:
         """Free the GPU objects (the renderer's target, the geometry kept)."""
         self._drop_geometry()
-        if self._renderer is not None:
-            self._renderer.release()
-            self._renderer = None
+        if self._drawer is not None:
+            self._drawer.release()
+            self._drawer = None

@@ -7,7 +7,7 @@ glCopyTexImage2D for the same purpose).  Keyframes live in a pool of slots
 (colour + depth target and coarse z-buffer each, made as first needed): without a
 keyframe cache two slots alternate so a new keyframe never overwrites the one being
 shown; with one (:mod:`lodsprite.sprite.cache`) the cache names the slot of each new
-keyframe and which kept one to show (:meth:`SpriteRenderer.show`).
+keyframe and which kept one to show (:meth:`SpriteDrawer.show`).
 """
 
 from __future__ import annotations
@@ -28,7 +28,7 @@ from lodsprite.gl.shaders import (
     SPRITE_VS_FRAGMENT,
 )
 from lodsprite.gl.target import RenderTarget
-from lodsprite.gl.terrain import SKY_RGB, TerrainRenderer, draw_stats, mat_bytes
+from lodsprite.gl.terrain import SKY_RGB, TerrainDrawer, draw_stats, mat_bytes
 from lodsprite.record import Frame
 
 DEFAULT_VERTEX_TOL = 0.01
@@ -37,7 +37,7 @@ DEFAULT_COARSE_TOL = 0.002
 VISIBILITY_MODES = {"triangle": 0, "fragment": 1, "coarse": 2}
 DEFAULT_VISIBILITY = "coarse"
 DEFAULT_GUARD_PX = 32
-DEFAULT_SPRITE_MIPMAPS = False  # benchmarks/sprite_mipmaps.py: see SpriteRenderer
+DEFAULT_SPRITE_MIPMAPS = False  # benchmarks/sprite_mipmaps.py: see SpriteDrawer
 
 # The coarse z-buffer: a proxy's depth alone, from the keyframe's view.
 PROXY_DEPTH_VS = "#version 330\n" + PROXY_VERTEX_COMMON + """
@@ -56,7 +56,7 @@ void main() { f_color = vec4(v_uv, 0.0, 1.0); }
 
 class UniformProxy:
     """The default sprite proxy geometry: the uniform coarse level of ``level_quads`` quads
-    (with its border ribbons if ``border``), :meth:`TerrainRenderer.draw_proxy`'s mesh.
+    (with its border ribbons if ``border``), :meth:`TerrainDrawer.draw_proxy`'s mesh.
 
     A proxy geometry object has ``twin(vertex_shader) -> str`` (the shader reading its
     vertices through ``terrain_position``, in place of ``PROXY_VERTEX_COMMON``) and
@@ -64,9 +64,9 @@ class UniformProxy:
     projection) -> geometry``, the geometry frozen for the keyframe rendered into ``slot``
     (a view-dependent proxy, :class:`lodsprite.gl.adaptive.AdaptiveProxy`)."""
 
-    def __init__(self, terrain: TerrainRenderer, level_quads: int, border: bool) -> None:
+    def __init__(self, terrain: TerrainDrawer, level_quads: int, border: bool) -> None:
         self.terrain, self.level_quads, self.border = terrain, level_quads, border
-        self._vaos: dict[int, dict] = {}  # program -> TerrainRenderer.draw_proxy's cache
+        self._vaos: dict[int, dict] = {}  # program -> TerrainDrawer.draw_proxy's cache
 
     @staticmethod
     def twin(vertex_shader: str) -> str:
@@ -100,7 +100,7 @@ class GLKeyframe:
     proxy: object = None  # the proxy geometry its spriteframes draw (frozen with it)
 
 
-class SpriteRenderer:
+class SpriteDrawer:
     """Renders keyframes (full resolution) and spriteframes (coarse level + keyframe sprite).
 
     ``visibility`` chooses where a spriteframe takes the sprite rather than the terrain
@@ -130,7 +130,7 @@ class SpriteRenderer:
     with its border ribbons); :meth:`set_proxy` changes it.
     """
 
-    def __init__(self, terrain: TerrainRenderer, coarse_quads: int = 16,
+    def __init__(self, terrain: TerrainDrawer, coarse_quads: int = 16,
                  visibility: str = DEFAULT_VISIBILITY, vertex_tol: float = DEFAULT_VERTEX_TOL,
                  fragment_tol: float = DEFAULT_FRAGMENT_TOL,
                  coarse_tol: float = DEFAULT_COARSE_TOL, border: bool = True,

@@ -12,10 +12,10 @@ depths there as the whole-keyframe spriteframe does (rules ``fragment`` and ``co
 saw are coloured as there (the terrain texture, or ``terrain_shade`` with the heights
 shading).  No mipmaps.
 
-It composes :class:`~lodsprite.gl.sprite.SpriteRenderer` (its key and coarse targets
+It composes :class:`~lodsprite.gl.sprite.SpriteDrawer` (its key and coarse targets
 index 0 hold the tiles, its terrain draws the tiles; the spriteframe and the coarse
 z-buffers draw through its proxy geometry object, ``twin`` / ``draw``; a view-dependent
-one is frozen at each tile update, :meth:`TiledSpriteRenderer.freeze`: that update's
+one is frozen at each tile update, :meth:`TiledSpriteDrawer.freeze`: that update's
 coarse z-buffers and the spriteframes from then on draw it, so tiles of older updates
 are textured onto the newest proxy).
 """
@@ -35,7 +35,7 @@ from lodsprite.gl.shaders import (
     SPRITE_FRAGMENT_COMMON,
     TERRAIN_SHADE,
 )
-from lodsprite.gl.sprite import SpriteRenderer
+from lodsprite.gl.sprite import SpriteDrawer
 from lodsprite.gl.target import RenderTarget
 from lodsprite.gl.terrain import SKY_RGB, draw_stats
 from lodsprite.record import Frame
@@ -140,8 +140,8 @@ def scissor_rect(rect: np.ndarray) -> tuple[int, int, int, int]:
     return x0, y0, x1 - x0, y1 - y0
 
 
-class TiledSpriteRenderer:
-    """Tiled keyframes and tiled spriteframes over a :class:`SpriteRenderer`.
+class TiledSpriteDrawer:
+    """Tiled keyframes and tiled spriteframes over a :class:`SpriteDrawer`.
 
     ``rects (T, 4) int``: the tiles' pixel rectangles ``(x0, y0, x1, y1)`` in the keyframe
     target (GL window coordinates), ``ndc (T, 4)``: the same in NDC (``T <=``
@@ -149,7 +149,7 @@ class TiledSpriteRenderer:
     (viewpoint, key projection, key view-projection) is set by :meth:`render_tile`.
     """
 
-    def __init__(self, sprite: SpriteRenderer, rects: np.ndarray, ndc: np.ndarray) -> None:
+    def __init__(self, sprite: SpriteDrawer, rects: np.ndarray, ndc: np.ndarray) -> None:
         count = len(rects)
         if not 1 <= count <= MAX_TILES or len(ndc) != count:
             raise InputError(f"1 to {MAX_TILES} tiles, got {count}")
@@ -166,7 +166,7 @@ class TiledSpriteRenderer:
         self.program = self._program()
 
     def _program(self):
-        """The tiled spriteframe's program, reading the sprite renderer's proxy geometry."""
+        """The tiled spriteframe's program, reading the sprite drawer's proxy geometry."""
         sprite = self.sprite
         vs, fs = tiled_sprite_shaders(self.count)
         prog = self.ctx.mgl.program(vertex_shader=sprite.proxy.twin(vs), fragment_shader=fs)
@@ -180,7 +180,7 @@ class TiledSpriteRenderer:
         return prog
 
     def use_proxy(self) -> None:
-        """Read the sprite renderer's proxy geometry again (after its ``set_proxy``)."""
+        """Read the sprite drawer's proxy geometry again (after its ``set_proxy``)."""
         self.program.release()
         self.program = self._program()
         self.proxy_gl = None
@@ -240,7 +240,7 @@ class TiledSpriteRenderer:
 
     def render_spriteframe(self, viewpoint: Viewpoint,
                            projection: Projection | None = None) -> Frame:
-        """The coarse level textured from the tiles into the sprite renderer's target."""
+        """The coarse level textured from the tiles into the sprite drawer's target."""
         if any(v is None for v in self.viewpoints):
             raise RuntimeError("render_spriteframe needs every tile rendered first")
         s = self.sprite

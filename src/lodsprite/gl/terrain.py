@@ -1,4 +1,4 @@
-"""Terrain renderer: full-resolution and uniform coarse levels, offscreen, with chunk culling.
+"""Terrain drawer: full-resolution and uniform coarse levels, offscreen, with chunk culling.
 
 GPU objects (height texture, colour texture, one grid mesh per chunk size, the
 instance buffer and the programs) are created once and reused for every frame;
@@ -196,7 +196,7 @@ def mat_bytes(m: np.ndarray) -> bytes:
     return np.asarray(m, dtype=np.float32).T.tobytes()
 
 
-class TerrainRenderer:
+class TerrainDrawer:
     """Renders a terrain at full resolution or at any uniform level into a render target.
 
     ``render`` issues the GL work and returns at once; call ``ctx.finish()``

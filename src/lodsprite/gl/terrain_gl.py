@@ -1,5 +1,5 @@
 """One scene's terrain GL state (:class:`TerrainGL`): context, geometry and terrain
-renderer, made once and released once; what the terrain techniques draw with."""
+drawer, made once and released once; what the terrain techniques draw with."""
 
 from __future__ import annotations
 
@@ -10,14 +10,15 @@ import moderngl
 
 from lodsprite.gl.context import GLContext
 from lodsprite.gl.target import RenderTarget
-from lodsprite.gl.terrain import TerrainGeometry, TerrainRenderer
+from lodsprite.gl.terrain import TerrainDrawer, TerrainGeometry
 
 if TYPE_CHECKING:  # a scene is passed in: gl/ imports no scene code
     from lodsprite.scene import Scene
 
 
 class TerrainGL:
-    """GL state for one scene: context, geometry and renderer, created once, released once."""
+    """GL state for one scene: context, geometry and drawer (:attr:`drawer`, a
+    :class:`~lodsprite.gl.terrain.TerrainDrawer`), created once, released once."""
 
     def __init__(self, scene: Scene, size: tuple[int, int], fov_y_deg: float = 45.0,
                  ctx: GLContext | None = None,
@@ -30,7 +31,7 @@ class TerrainGL:
             self.geometry = TerrainGeometry(self.ctx, scene.hf, scene.texture)
             target = (RenderTarget.wrap(self.ctx, framebuffer) if framebuffer is not None
                       else None)
-            self.renderer = TerrainRenderer(self.ctx, self.geometry, size[0], size[1],
+            self.drawer = TerrainDrawer(self.ctx, self.geometry, size[0], size[1],
                                             fov_y_deg, target)
         except BaseException:  # release what was made: a leaked context outlives us
             if self.geometry is not None:
@@ -42,12 +43,12 @@ class TerrainGL:
     def timed(self, viewpoint, level: int | None) -> tuple[float, int]:
         """Render one frame; (milliseconds including ``ctx.finish()``, triangles)."""
         t0 = time.perf_counter()
-        stats = self.renderer.render(viewpoint, level)
+        stats = self.drawer.render(viewpoint, level)
         self.ctx.finish()
         return (time.perf_counter() - t0) * 1e3, stats.triangles
 
     def release(self) -> None:
-        self.renderer.release()
+        self.drawer.release()
         self.geometry.release()
         if self.own_ctx:
             self.ctx.release()

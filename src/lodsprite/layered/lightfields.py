@@ -116,7 +116,7 @@ class PlacedLightField:
     def __init__(self, gl, size: tuple[int, int], where: LightField,
                  ground_z: float, method: str, nodes: int) -> None:
         from lodsprite.gl.composite import ProxyCompositor
-        from lodsprite.gl.lumigraph import ColorMeshRenderer
+        from lodsprite.gl.lumigraph import ColorMeshDrawer
         from lodsprite.lumigraph.methods import Context, MultiSlabMethod, make_method
         from lodsprite.lumigraph.store import Lumigraph
 
@@ -125,7 +125,7 @@ class PlacedLightField:
         self.m, self.s = placement(mesh.vertices, where.position, ground_z, where.height_m)
         self.proxy_vertices = np.asarray(mesh.vertices, np.float64)
         self.max_nodes = int(min(nodes, self.lf.slabs[0].n_st ** 2))
-        self.proxy = ColorMeshRenderer(gl, mesh.vertices, mesh.faces, mesh.colors,
+        self.proxy = ColorMeshDrawer(gl, mesh.vertices, mesh.faces, mesh.colors,
                                        mesh.normals)
         self.compositor = ProxyCompositor(gl, mesh.vertices, mesh.faces, mesh.colors,
                                           mesh.normals)

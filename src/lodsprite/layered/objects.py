@@ -335,7 +335,7 @@ class ObjectsLayer(Layer):
         else:
             pending = [o for e in self._log[self._applied + 1:entry + 1] for o in e]
         for buffer, type_index, lod in pending:
-            self.engine.renderer.set_indices(buffer, type_index,
+            self.engine.drawer.set_indices(buffer, type_index,
                                              self.crowd.models[type_index].extract(lod))
         self._applied = entry
 

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from lodsprite.camera import Viewpoint
-from lodsprite.gl.lumigraph import ColorMeshRenderer, FloatTarget, LumigraphRenderer
+from lodsprite.gl.lumigraph import ColorMeshDrawer, FloatTarget, LumigraphDrawer
 from lodsprite.lumigraph.critical import st_point
 from lodsprite.lumigraph.geometry import Slab
 from lodsprite.lumigraph.loader import NodeLoader
@@ -50,7 +50,7 @@ class Context:
     lf: Lumigraph
     slab_index: int
     size: tuple[int, int]
-    proxy: ColorMeshRenderer | None
+    proxy: ColorMeshDrawer | None
     white: bool = False  # every texel white: the image is the alpha sum (tests)
 
 
@@ -64,7 +64,7 @@ class Method:
         self.slab = ctx.lf.slabs[ctx.slab_index]
         self.n_nodes = self.slab.n_st ** 2
         w, h = ctx.size
-        self.rec = LumigraphRenderer(ctx.gl, self.slab, w, h, capacity, level)
+        self.rec = LumigraphDrawer(ctx.gl, self.slab, w, h, capacity, level)
         self.loader = NodeLoader(ctx.lf, ctx.slab_index, level)
         self.predictor = DecayLinearPredictor()
         self.samples = 0
@@ -141,10 +141,10 @@ class Method:
 
 
 def full_reconstruction(gl: object, slab: Slab, images: dict[tuple[int, int], np.ndarray],
-                        width: int, height: int) -> LumigraphRenderer:
+                        width: int, height: int) -> LumigraphDrawer:
     """A renderer with every node of ``images`` (``(i, j)`` -> uv image) resident, drawn
     over the full grid (nodes missing from ``images`` are fictitious)."""
-    rec = LumigraphRenderer(gl, slab, width, height, max(len(images), 1))
+    rec = LumigraphDrawer(gl, slab, width, height, max(len(images), 1))
     n = slab.n_st
     valid = np.zeros((n, n))
     for (i, j), img in images.items():

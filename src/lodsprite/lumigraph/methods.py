@@ -31,7 +31,7 @@ import numpy as np
 from lodsprite.camera import Viewpoint
 from lodsprite.errors import InputError
 from lodsprite.gl.lumigraph import FloatTarget
-from lodsprite.gl.projective import ProjectiveRenderer
+from lodsprite.gl.projective import ProjectiveDrawer
 from lodsprite.lumigraph.base import FRAME_S, Context, Method, method_frame
 from lodsprite.lumigraph.critical import st_point
 from lodsprite.lumigraph.geometry import facing_slab
@@ -180,7 +180,7 @@ class ProjectiveMethod(ArbitraryMethod):
             raise InputError("the projective method needs the approximate geometry "
                              "(depth correction on)")
         mesh = ctx.lf.proxy()
-        self.proj = ProjectiveRenderer(ctx.gl, mesh.vertices, mesh.faces, *ctx.size)
+        self.proj = ProjectiveDrawer(ctx.gl, mesh.vertices, mesh.faces, *ctx.size)
         self.reuse = max(1, int(reuse))
 
     @property

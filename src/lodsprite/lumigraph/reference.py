@@ -33,10 +33,10 @@ class ObjectReference:
     (a viewpoint in the lumigraph's world), ``(h, w, 3) uint8``."""
 
     def __init__(self, gl, mesh: ColorMesh, size: tuple[int, int], projection) -> None:
-        from lodsprite.gl.lumigraph import ColorMeshRenderer
+        from lodsprite.gl.lumigraph import ColorMeshDrawer
         from lodsprite.gl.target import RenderTarget
 
-        self.truth = ColorMeshRenderer(gl, mesh.vertices, mesh.faces, mesh.colors,
+        self.truth = ColorMeshDrawer(gl, mesh.vertices, mesh.faces, mesh.colors,
                                        mesh.normals)
         self.target = RenderTarget(gl, *size)
         self.projection = projection

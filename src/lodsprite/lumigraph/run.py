@@ -79,7 +79,7 @@ def capture_lumigraph(model: str, out_dir: Path, n_st: int = 32, n_uv: int = 256
     """Capture ``model`` into the lumigraph folder ``out_dir`` with 1 slab (in front,
     +z) or 6 (round it); returns a summary."""
     from lodsprite.gl.context import GLContext
-    from lodsprite.gl.lumigraph import ColorMeshRenderer
+    from lodsprite.gl.lumigraph import ColorMeshDrawer
     from lodsprite.gl.target import RenderTarget
 
     if slabs not in (1, 6):
@@ -95,7 +95,7 @@ def capture_lumigraph(model: str, out_dir: Path, n_st: int = 32, n_uv: int = 256
     per = n_st * n_st
     t0 = time.perf_counter()
     with GLContext() as gl:
-        obj = ColorMeshRenderer(gl, mesh.vertices, mesh.faces, mesh.colors, mesh.normals)
+        obj = ColorMeshDrawer(gl, mesh.vertices, mesh.faces, mesh.colors, mesh.normals)
         target = RenderTarget(gl, n_uv, n_uv)
         try:
             images = [capture(obj, slab, target, near, far,
@@ -183,17 +183,17 @@ class MethodRun:
 
     def __init__(self, gl, lf: Lumigraph, size, depth_correction: bool,
                  obj_mesh: ColorMesh | None, method: str, options: dict) -> None:
-        from lodsprite.gl.lumigraph import ColorMeshRenderer
+        from lodsprite.gl.lumigraph import ColorMeshDrawer
         from lodsprite.gl.target import RenderTarget
         from lodsprite.lumigraph.methods import Context, MultiSlabMethod, make_method
 
         self.gl, self.made = gl, []
         proxy_mesh = lf.proxy() if depth_correction else None
-        self.proxy = (ColorMeshRenderer(gl, proxy_mesh.vertices, proxy_mesh.faces,
+        self.proxy = (ColorMeshDrawer(gl, proxy_mesh.vertices, proxy_mesh.faces,
                                         proxy_mesh.colors, proxy_mesh.normals)
                       if proxy_mesh is not None else None)
         self.made.append(self.proxy)
-        self.truth = (ColorMeshRenderer(gl, obj_mesh.vertices, obj_mesh.faces,
+        self.truth = (ColorMeshDrawer(gl, obj_mesh.vertices, obj_mesh.faces,
                                         obj_mesh.colors, obj_mesh.normals)
                       if obj_mesh is not None else None)
         self.target = RenderTarget(gl, *size) if self.truth is not None else None

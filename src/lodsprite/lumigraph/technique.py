@@ -64,7 +64,7 @@ class LumigraphTechnique(Technique):
     def __init__(self, renderer, folder, method: str, options: dict,
                  depth_correction: bool = True) -> None:
         super().__init__(renderer)
-        from lodsprite.gl.lumigraph import ColorMeshRenderer
+        from lodsprite.gl.lumigraph import ColorMeshDrawer
         from lodsprite.lumigraph.methods import Context, MultiSlabMethod, make_method
         from lodsprite.lumigraph.store import Lumigraph
 
@@ -74,7 +74,7 @@ class LumigraphTechnique(Technique):
         self.proxy = None
         if depth_correction:
             mesh = self.lf.proxy()
-            self.proxy = ColorMeshRenderer(gl, mesh.vertices, mesh.faces, mesh.colors,
+            self.proxy = ColorMeshDrawer(gl, mesh.vertices, mesh.faces, mesh.colors,
                                            mesh.normals)
         ctx = Context(gl, self.lf, 0, renderer.size, self.proxy)
         try:

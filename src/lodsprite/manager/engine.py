@@ -68,7 +68,7 @@ class CrowdEngine:
                  active: int = 300, target_fps: float | None = None, range_near: float = 5.0,
                  range_far: float = 150.0, dist=linear, fov_y_deg: float = 60.0,
                  penalty: float = 0.25, ground: bool = True) -> None:
-        from lodsprite.gl.crowd import CrowdRenderer
+        from lodsprite.gl.crowd import CrowdDrawer
 
         if mode not in MODES:
             raise InputError(f"unknown crowd mode {mode!r}: use one of {', '.join(MODES)}")
@@ -84,7 +84,7 @@ class CrowdEngine:
         w, h = target.size
         self.fov_y_deg = fov_y_deg
         self.projection = perspective(fov_y_deg, w / h, 0.3, 4.0 * crowd.extent + 100.0)
-        self.renderer = CrowdRenderer(gl, crowd.models, crowd.extent)
+        self.drawer = CrowdDrawer(gl, crowd.models, crowd.extent)
         n_types = len(crowd.models)
         self.manager = LodManager(crowd.types, n_types, slots, base_lod=0.0,
                                   share=(mode == "manager"), dist=dist)
@@ -94,7 +94,7 @@ class CrowdEngine:
         if mode == "discrete":
             for t, m in enumerate(crowd.models):
                 for k, f in enumerate(DISCRETE_LEVELS):
-                    self.renderer.set_indices(self._discrete_id(t, k), t, m.extract(f))
+                    self.drawer.set_indices(self._discrete_id(t, k), t, m.extract(f))
         self.transforms = np.concatenate([crowd.positions, crowd.yaw[:, None]],
                                          axis=1).astype(np.float32)
         self.last_orders: list[tuple[int, int, float]] = []  # the last frame's extractions
@@ -107,7 +107,7 @@ class CrowdEngine:
     def reset_indices(self) -> None:
         """Every type's index buffer on its base LOD (the state before the first frame)."""
         for t, m in enumerate(self.crowd.models):
-            self.renderer.set_indices(t, t, m.extract(0.0))
+            self.drawer.set_indices(t, t, m.extract(0.0))
 
     def _discrete_id(self, t: int, k: int) -> int:
         return len(self.crowd.models) + t * len(DISCRETE_LEVELS) + k
@@ -154,7 +154,7 @@ class CrowdEngine:
                                  self.manager.n_slots, self.penalty, self.dist)
             orders = self.manager.update(active, desired)
             for o in orders:
-                self.renderer.set_indices(o.buffer, o.type_index,
+                self.drawer.set_indices(o.buffer, o.type_index,
                                           self.crowd.models[o.type_index].extract(o.lod))
             extractions = len(orders)
             using = self.manager.using
@@ -167,16 +167,16 @@ class CrowdEngine:
         ms = (time.perf_counter() - t0) * 1e3
         exponent = self.feedback.exponent
         self.feedback.observe(ms + extra_ms)
-        return Frame(self.mode, ms, self.renderer.triangles, extra=dict(zip(
-            CROWD_COLUMNS, (lod_ms, extractions, self.renderer.draw_calls, len(idx), exponent,
+        return Frame(self.mode, ms, self.drawer.triangles, extra=dict(zip(
+            CROWD_COLUMNS, (lod_ms, extractions, self.drawer.draw_calls, len(idx), exponent,
                             switches), strict=True)))
 
     def _draw(self, view_proj: np.ndarray, using: np.ndarray, idx: np.ndarray,
               fbo=None) -> None:
         order = idx[np.argsort(using[idx], kind="stable")]
         buffers, first, counts = np.unique(using[order], return_index=True, return_counts=True)
-        self.renderer.upload_instances(self.transforms[order])
-        self.renderer.draw(view_proj, self.target.fbo if fbo is None else fbo,
+        self.drawer.upload_instances(self.transforms[order])
+        self.drawer.draw(view_proj, self.target.fbo if fbo is None else fbo,
                            list(zip(buffers.tolist(), first.tolist(), counts.tolist(),
                                     strict=True)), ground=self.ground)
 
@@ -188,7 +188,7 @@ class CrowdEngine:
         visible object (of ``subset``) from the index buffer ``using`` names
         (``projection``, ``fbo`` as in :meth:`frame`)."""
         for buffer, type_index, lod in orders:
-            self.renderer.set_indices(buffer, type_index,
+            self.drawer.set_indices(buffer, type_index,
                                       self.crowd.models[type_index].extract(lod))
         view_proj = (self.projection if projection is None else projection
                      ) @ viewpoint.view_matrix()
@@ -199,4 +199,4 @@ class CrowdEngine:
         self.gl.finish()
 
     def release(self) -> None:
-        self.renderer.release()
+        self.drawer.release()

@@ -11,7 +11,7 @@ from the manager's distance-linear rule ``(1 - (d - near) / (far - near)) ** p``
 ``tolerance``; where no exponent reaches them the LOD ranges are scaled instead (the
 "scale").  Linear factors are rounded to :data:`FACTOR_STEP` (the LODs actually
 extracted; profile factors are the profile's levels).  Each selection is drawn by the
-crowd renderer (:class:`~lodsprite.gl.crowd.CrowdRenderer`) and compared with every
+crowd drawer (:class:`~lodsprite.gl.crowd.CrowdDrawer`) and compared with every
 object at its full mesh: RMSE (grey levels) and FLIP, means over the viewpoints.
 """
 
@@ -157,7 +157,7 @@ def match_linear(crowd: Crowd, views: _Views, target: int, near: float, far: flo
     return p, _bisect_log(by_scale, 1 / 256, 256.0, target, falling=False)
 
 
-def _render(gl, renderer, target, crowd: Crowd, views: _Views, v: int,
+def _render(gl, drawer, target, crowd: Crowd, views: _Views, v: int,
             factors: np.ndarray, extracted: dict) -> np.ndarray:
     """One viewpoint with ``factors (N,)``: each distinct (type, factor) one index buffer
     (``extracted``: buffer ids so far), one instanced draw each; ``(H, W, 3) uint8``."""
@@ -166,13 +166,13 @@ def _render(gl, renderer, target, crowd: Crowd, views: _Views, v: int,
     for key in dict.fromkeys(keys):
         if key not in extracted:
             extracted[key] = len(extracted)
-            renderer.set_indices(extracted[key], key[0], crowd.models[key[0]].extract(key[1]))
+            drawer.set_indices(extracted[key], key[0], crowd.models[key[0]].extract(key[1]))
     buffers = np.array([extracted[k] for k in keys], np.int64)
     order = np.argsort(buffers, kind="stable")
     ids, first, counts = np.unique(buffers[order], return_index=True, return_counts=True)
     poses = np.concatenate([crowd.positions, crowd.yaw[:, None]], axis=1)[idx[order]]
-    renderer.upload_instances(poses.astype(np.float32))
-    renderer.draw(views.view_proj[v], target.fbo,
+    drawer.upload_instances(poses.astype(np.float32))
+    drawer.draw(views.view_proj[v], target.fbo,
                   list(zip(ids.tolist(), first.tolist(), counts.tolist(), strict=True)))
     gl.finish()
     return target.read_color()
@@ -188,7 +188,7 @@ def profile_vs_linear(gl, crowd: Crowd, profiles: dict[int, TypeProfile],
     (:class:`~lodsprite.gl.context.GLContext`).  ``profiles`` by type index (every type);
     ``range_near``/``range_far`` metres the linear rule's ranges before scaling."""
     from lodsprite import metrics
-    from lodsprite.gl.crowd import CrowdRenderer
+    from lodsprite.gl.crowd import CrowdDrawer
     from lodsprite.gl.target import RenderTarget
 
     if not viewpoints:
@@ -200,18 +200,18 @@ def profile_vs_linear(gl, crowd: Crowd, profiles: dict[int, TypeProfile],
     lin = linear_factors(views, range_near, range_far, p, s)
     full = [np.ones(len(crowd)) for _ in viewpoints]
     target = RenderTarget(gl, *size)
-    renderer = CrowdRenderer(gl, crowd.models, crowd.extent)
+    drawer = CrowdDrawer(gl, crowd.models, crowd.extent)
     try:
         extracted: dict = {}
         scores: dict[str, list[float]] = {k: [] for k in ("rp", "rl", "fp", "fl")}
         for v in range(len(viewpoints)):
-            ref = _render(gl, renderer, target, crowd, views, v, full[v], extracted)
+            ref = _render(gl, drawer, target, crowd, views, v, full[v], extracted)
             for name, f in (("p", prof[v]), ("l", lin[v])):
-                img = _render(gl, renderer, target, crowd, views, v, f, extracted)
+                img = _render(gl, drawer, target, crowd, views, v, f, extracted)
                 scores["r" + name].append(metrics.rmse(img, ref))
                 scores["f" + name].append(metrics.flip(img, ref))
     finally:
-        renderer.release()
+        drawer.release()
         target.release()
     return ProfileVsLinear(
         float(np.mean(scores["rp"])), float(np.mean(scores["rl"])),

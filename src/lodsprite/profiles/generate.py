@@ -119,9 +119,9 @@ _CACHE_LOCK = threading.Lock()
 
 def _renderer(key: str, levels: Sequence[tuple[np.ndarray, np.ndarray]], image_size: int,
               samples: int) -> tuple:
-    """This thread's (GLContext, MeshRenderer, MeshSet) for a chain, created once."""
+    """This thread's (GLContext, MeshDrawer, MeshSet) for a chain, created once."""
     from lodsprite.gl.context import GLContext
-    from lodsprite.gl.mesh import MeshRenderer, MeshSet
+    from lodsprite.gl.mesh import MeshDrawer, MeshSet
 
     ckey = (key, image_size, samples, threading.get_ident())
     with _CACHE_LOCK:
@@ -130,7 +130,7 @@ def _renderer(key: str, levels: Sequence[tuple[np.ndarray, np.ndarray]], image_s
                 _release(_CACHE.pop(old))
             ctx = GLContext()
             with ctx.mgl:
-                _CACHE[ckey] = (ctx, MeshRenderer(ctx, image_size, image_size, samples, 1),
+                _CACHE[ckey] = (ctx, MeshDrawer(ctx, image_size, image_size, samples, 1),
                                 MeshSet(ctx, levels))
         return _CACHE[ckey]
 

@@ -1,6 +1,6 @@
 """Render shots of LOD-chain objects (each object at its own LOD) to images.
 
-A thin layer over :class:`lodsprite.gl.mesh.MeshRenderer` that keeps one chain's levels on
+A thin layer over :class:`lodsprite.gl.mesh.MeshDrawer` that keeps one chain's levels on
 the GPU and turns a :class:`~lodsprite.profiles.scenes.Shot` plus per-object LOD indices
 into an ``(H, W, 3) uint8`` image, optionally colour-coded by LOD as in the paper's
 Figures 7c and 8 (red: high LOD number, green: low, white: the full model).
@@ -13,7 +13,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from lodsprite.gl.context import GLContext
-from lodsprite.gl.mesh import MeshRenderer, MeshSet
+from lodsprite.gl.mesh import MeshDrawer, MeshSet
 from lodsprite.profiles.generate import DEFAULT_LIGHT
 from lodsprite.profiles.scenes import Shot
 
@@ -31,7 +31,7 @@ def lod_colours(levels: np.ndarray, n_levels: int) -> np.ndarray:
     return rgb
 
 
-class ChainRenderer:
+class ChainDrawer:
     """Draws shots of one LOD chain's objects into ``size x size`` images."""
 
     def __init__(self, ctx: GLContext, levels: Sequence[tuple[np.ndarray, np.ndarray]],
@@ -41,18 +41,18 @@ class ChainRenderer:
         self.levels = len(levels)
         self.light = tuple(float(v) for v in light)
         self.meshes = MeshSet(ctx, levels)
-        self.renderer = MeshRenderer(ctx, size, size, samples=samples)
+        self.drawer = MeshDrawer(ctx, size, size, samples=samples)
 
     @property
     def size(self) -> int:
-        return self.renderer.width
+        return self.drawer.width
 
     def image(self, shot: Shot, lods: np.ndarray, coded: bool = False) -> np.ndarray:
         """The shot with object ``k`` drawn at LOD ``lods[k]``; ``(H, W, 3) uint8``."""
         albedo = lod_colours(lods, self.levels) if coded else None
-        self.renderer.render(self.meshes, lods, shot.models, shot.view_proj, self.light,
+        self.drawer.render(self.meshes, lods, shot.models, shot.view_proj, self.light,
                              albedo=albedo)
-        img = self.renderer.read_rgb8()
+        img = self.drawer.read_rgb8()
         self.ctx.check_error("shot")
         return img
 
@@ -61,6 +61,6 @@ class ChainRenderer:
         return self.image(shot, np.full(len(shot.models), self.levels - 1))
 
     def release(self) -> None:
-        self.renderer.forget(self.meshes)
+        self.drawer.forget(self.meshes)
         self.meshes.release()
-        self.renderer.release()
+        self.drawer.release()

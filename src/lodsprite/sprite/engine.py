@@ -9,9 +9,9 @@ step 4  go to step 2.
 What to draw (steps 2 and 4, and where a keyframe goes: at the viewer, or ahead of it
 with ``predict=True``, the paper's §5 proposal) is decided by the GL-free
 :class:`~lodsprite.sprite.policy.KeyframePolicy`; this module renders what it decides
-(steps 1 and 3) with a :class:`~lodsprite.gl.sprite.SpriteRenderer`.
+(steps 1 and 3) with a :class:`~lodsprite.gl.sprite.SpriteDrawer`.
 
-Keyframes are rendered with a guard band (:class:`~lodsprite.gl.sprite.SpriteRenderer`
+Keyframes are rendered with a guard band (:class:`~lodsprite.gl.sprite.SpriteDrawer`
 ``guard_px``); a frame that is a keyframe shows the keyframe's centre.  A keyframe placed
 ahead of the viewer is followed, in the same frame, by a spriteframe from it.
 
@@ -32,7 +32,7 @@ from dataclasses import replace
 import numpy as np
 
 from lodsprite.camera import Viewpoint
-from lodsprite.gl.sprite import SpriteRenderer
+from lodsprite.gl.sprite import SpriteDrawer
 from lodsprite.record import Frame
 from lodsprite.sprite.cache import DEFAULT_POLICY, KeyframeCache
 from lodsprite.sprite.metric import ErrorMetric
@@ -69,7 +69,7 @@ class LodSpriteEngine:
     """Renders keyframes and spriteframes for a stream of viewpoints, as its
     :class:`~lodsprite.sprite.policy.KeyframePolicy` (:attr:`policy`) decides."""
 
-    def __init__(self, sprite: SpriteRenderer, epsilon_px: float = DEFAULT_EPSILON_PX,
+    def __init__(self, sprite: SpriteDrawer, epsilon_px: float = DEFAULT_EPSILON_PX,
                  predict: bool = True, cache_mb: float = 0.0,
                  cache_policy: str = DEFAULT_POLICY, metric: str = "warp") -> None:
         self.sprite = sprite

@@ -14,7 +14,7 @@ and z-buffer back and answers them through a shared-memory slot, with the keyfra
 request ``δt`` ahead (:mod:`lodsprite.sprite.predictors`, the paper's
 VIEWPOINT-PREDICTOR, fed with the observed viewpoints; δt is the measured
 request-to-adoption latency), polls for the answer without waiting and uploads it
-(:meth:`~lodsprite.gl.sprite.SpriteRenderer.upload_keyframe`).
+(:meth:`~lodsprite.gl.sprite.SpriteDrawer.upload_keyframe`).
 
 The process lowers its own scheduling priority (``nice``, Linux) before it makes its
 context, so that the software rasteriser's threads it starts inherit it: on a machine
@@ -321,16 +321,16 @@ class _WorkerGL:
     def __init__(self, hf: HeightField, texture: np.ndarray | None, s: WorkerSettings
                  ) -> None:
         from lodsprite.gl.context import GLContext
-        from lodsprite.gl.sprite import SpriteRenderer
-        from lodsprite.gl.terrain import TerrainGeometry, TerrainRenderer
+        from lodsprite.gl.sprite import SpriteDrawer
+        from lodsprite.gl.terrain import TerrainDrawer, TerrainGeometry
 
         self.ctx = GLContext()
         made = [self.ctx]
         try:
             made.append(TerrainGeometry(self.ctx, hf, texture))
-            made.append(TerrainRenderer(self.ctx, made[-1], s.size[0], s.size[1], s.fov_y_deg))
+            made.append(TerrainDrawer(self.ctx, made[-1], s.size[0], s.size[1], s.fov_y_deg))
             self.terrain = made[-1]
-            self.sprite = SpriteRenderer(self.terrain, s.lod, s.visibility, border=s.border,
+            self.sprite = SpriteDrawer(self.terrain, s.lod, s.visibility, border=s.border,
                                          guard_px=s.guard_px)
         except BaseException:  # released in the order made, backwards
             for obj in reversed(made):

@@ -24,8 +24,8 @@ import numpy as np
 
 from lodsprite.camera import Viewpoint
 from lodsprite.errors import InputError
-from lodsprite.gl.sprite import SpriteRenderer
-from lodsprite.gl.sprite_tiles import TileDrawer, TiledSpriteRenderer, TileSlots
+from lodsprite.gl.sprite import SpriteDrawer
+from lodsprite.gl.sprite_tiles import TileDrawer, TiledSpriteDrawer, TileSlots
 from lodsprite.record import Frame
 from lodsprite.sprite.cache import SWITCH_FRACTION, TileCache
 from lodsprite.sprite.engine import sprite_frame
@@ -63,7 +63,7 @@ class TiledSpriteEngine:
     re-rendered; :attr:`cache_tiles` counts, per frame, the tiles shown from a render other
     than their newest."""
 
-    def __init__(self, sprite: SpriteRenderer, epsilon_px: float, tiles: int,
+    def __init__(self, sprite: SpriteDrawer, epsilon_px: float, tiles: int,
                  tile_budget_ms: float = DEFAULT_TILE_BUDGET_MS, metric: str = "warp",
                  cache_mb: float = 0.0, cache_policy: str = "lru") -> None:
         if not epsilon_px > 0:
@@ -72,7 +72,7 @@ class TiledSpriteEngine:
             raise InputError(f"--tile-budget-ms must be >= 0, got {tile_budget_ms}")
         self.sprite = sprite
         rects = tile_rects(tiles, sprite.key_size)
-        self.tiled = TiledSpriteRenderer(sprite, rects, ndc_rects(rects,
+        self.tiled = TiledSpriteDrawer(sprite, rects, ndc_rects(rects,
                                                                   sprite.key_size))
         self.tiles = tiles
         self.epsilon_px = float(epsilon_px)

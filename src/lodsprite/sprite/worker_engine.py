@@ -27,7 +27,7 @@ import numpy as np
 
 from lodsprite.camera import Viewpoint
 from lodsprite.errors import LodspriteError
-from lodsprite.gl.sprite import SpriteRenderer
+from lodsprite.gl.sprite import SpriteDrawer
 from lodsprite.record import Frame
 from lodsprite.sprite.engine import sprite_frame
 from lodsprite.sprite.keyframe_worker import KeyframeImage, KeyframeWorker, WorkerSettings
@@ -59,7 +59,7 @@ class WorkerLodSpriteEngine:
     :meth:`frame` raise :class:`~lodsprite.errors.LodspriteError`.
     """
 
-    def __init__(self, sprite: SpriteRenderer, scene: Scene, fov_y_deg: float,
+    def __init__(self, sprite: SpriteDrawer, scene: Scene, fov_y_deg: float,
                  epsilon_px: float = DEFAULT_EPSILON_PX,
                  request_fraction: float = DEFAULT_REQUEST_FRACTION,
                  predictor: str = "linear", metric: str = "warp") -> None:

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from lodsprite.errors import InputError
+from lodsprite.techniques.adaptive_keys import AdaptiveKeys, adaptive_keys
 from lodsprite.techniques.adaptive_terrain import ADAPTIVE_COLUMNS
 from lodsprite.techniques.base import Frame, Technique
 from lodsprite.techniques.terrain import SpriteTechnique, resolve_shading, set_shading
@@ -56,7 +57,7 @@ def make_adaptive(renderer: Renderer, sse: float, gpu_mb: float, host_mb: float,
         raise InputError(f"grid must be one of {', '.join(map(str, GRIDS))} quads, got {grid}")
     pr = renderer.terrain_gl
     heights = resolve_shading(renderer.scene, shading) == "heights"
-    return AdaptiveTerrain(pr.ctx, scene_pyramid(renderer.scene), pr.renderer.target,
+    return AdaptiveTerrain(pr.ctx, scene_pyramid(renderer.scene), pr.drawer.target,
                            renderer.fov_y_deg, sse, grid=int(grid), gpu_mb=gpu_mb,
                            host_mb=host_mb, color=None if heights else pr.geometry.color_tex)
 
@@ -198,7 +199,9 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
     of :mod:`lodsprite.sprite.proxy_metric`; the replay freezes the recorded selection.
     With ``tiles > 1`` the proxy is selected and frozen at each tile update (its coarse
     z-buffers and the spriteframes from then on draw it) and every tile's error is the proxy
-    metric over the samples it serves (:mod:`lodsprite.sprite.tiled_engine`)."""
+    metric over the samples it serves (:mod:`lodsprite.sprite.tiled_engine`).  The hooks
+    on LOD-sprite's engine, whole keyframes or tiles, are :attr:`keys`
+    (:mod:`lodsprite.techniques.adaptive_keys`), chosen once with the engine."""
 
     name = "sprite-adaptive"
 
@@ -229,82 +232,33 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
             if field is not None:
                 field.heights.close()
             raise
-        # with tiles, the tiled engine (TiledKeyframes.tiled) and its hooks as well
-        self.tiled = getattr(self.engine, "tiled", None)
-        self.sprite.sprite.keyframe_drawer = self._draw_keyframe
-        self.sprite.engine.between_keyframes = self._between_keyframes
+        # the adaptive renderer's hooks on the engine, whole keyframes or tiles
+        self.keys: AdaptiveKeys = adaptive_keys(self.engine, self.adaptive, self._pump)
         self.surface = None  # over a store: the metric's C from the keyframe's drawn nodes
         if field is not None:
-
             from lodsprite.techniques.drawn_surface import DrawnSurface
 
             self.surface = DrawnSurface(self.adaptive)
-            policy = self.sprite.engine.policy
-            policy.metric = replace(policy.metric, surface=self.surface.heights)
-            if self.tiled is not None:  # each tile update's C on the surface it shows
-                self.tiled.metric = replace(self.tiled.metric, surface=self.surface.heights)
-        self._selections: dict[int, tuple] = {}  # keyframe -> (nodes drawn, morphed)
+            self.keys.use_surface(self.surface.heights)
         self.proxy = None if proxy_sse is None else self._adaptive_proxy(renderer, proxy_sse)
-        self._proxies: dict[int, tuple] = {}  # keyframe -> its frozen proxy selection
         self.first_frame_s = float("nan")  # from the process's start
-        if self.tiled is not None:
-            self._drawn: list[tuple] = []  # this frame's tile selections, in draw order
-            self._tile_selections: dict[tuple[int, int], tuple] = {}  # (update, tile) ->
-            self.tiled.drawer = self._draw_tile
-            self.tiled.between_keyframes = self._between_keyframes
-            self.tiled.after_tiles = self.adaptive.request
 
-    def _draw_tile(self, viewpoint, projection, target, cull):
-        """A tile by the adaptive renderer, culled by its sub-frustum; its selection is
-        kept (references only: recorded in :meth:`decision`)."""
-        self._pump()
-        stats = self.adaptive.render_into(viewpoint, projection, target, cull)
-        self._drawn.append((self.adaptive.last_draw, self.adaptive.last_morphed))
-        return stats
-
-    def tile_drawer(self, update: int, tile: int) -> Callable:
+    def tile_drawer(self, update: int, tile: int) -> Callable | None:
         """Re-renders ``tile`` with the selection update ``update`` drew it with."""
-        draw, morphed = self._tile_selections[(update, tile)]
-
-        def again(vp, projection, target, cull):
-            from lodsprite.gl.terrain import draw_stats
-
-            self.adaptive.redraw(vp, draw, morphed, projection, target)
-            return draw_stats(0, len(draw), projection)
-
-        return again
+        return self.keys.tile_drawer(update, tile)
 
     def _pump(self) -> None:
         if self.heights is not None:
             self.heights.pump()
 
-    def _draw_keyframe(self, viewpoint: Viewpoint, projection, target):
-        """The keyframe hook: collect the level-0 chunks arrived, then draw adaptively."""
-        self._pump()
-        return self.adaptive.render_into(viewpoint, projection, target)
-
-    def _between_keyframes(self) -> int:
-        """Each spriteframe: stream the adaptive renderer's tiles and collect the
-        chunks arrived for the metric (neither waits)."""
-        self._pump()
-        return self.adaptive.prefetch()
-
     def _adaptive_proxy(self, renderer: Renderer, proxy_sse: float):
         """Spriteframes, coarse z-buffers and the error metric on the adaptive mesh at
         ``proxy_sse`` px (:mod:`lodsprite.techniques.sprite_proxy`)."""
-        from lodsprite.sprite.proxy_metric import ProxyMetric
         from lodsprite.techniques.sprite_proxy import AdaptiveProxySource
 
         source = AdaptiveProxySource(self.adaptive, proxy_sse, self.sprite.sprite.target.height)
-        self.sprite.sprite.set_proxy(source)
-        policy = self.sprite.engine.policy
-        points = None if self.surface is None else self.surface.points
-        policy.metric = ProxyMetric(source.nodes, renderer.terrain_gl.geometry.full, policy.metric,
-                                    points=points)
-        if self.tiled is not None:  # tiles: the proxy frozen per update, its metric per tile
-            self.tiled.tiled.use_proxy()
-            self.tiled.metric = ProxyMetric(source.nodes, renderer.terrain_gl.geometry.full,
-                                            self.tiled.metric, points=points)
+        self.keys.use_proxy(source, renderer.terrain_gl.geometry.full,
+                            None if self.surface is None else self.surface.points)
         return source
 
     def warm_up(self, viewpoint: Viewpoint) -> None:
@@ -317,10 +271,7 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
         super().warm_up(viewpoint)
         if self.first_frame_s != self.first_frame_s:  # NaN: the first frame
             self.first_frame_s = process_age_s()
-        if self.proxy is not None:
-            self.proxy.triangles.clear()  # the timed run's keyframes only
-        if self.tiled is not None:
-            self._drawn.clear()  # the warm-up's tiles are no update's
+        self.keys.warmed_up()
 
     def frame(self, viewpoint: Viewpoint) -> Frame:
         f = super().frame(viewpoint)
@@ -332,39 +283,11 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
         """The keyframe shown; for a new one, the selection it was drawn with (recorded
         here, after the frame's clock stopped: nothing draws between the two)."""
         d = super().decision()
-        if self.tiled is not None:
-            for t, (draw, morphed) in zip(d["tiles"], self._drawn, strict=True):
-                self._tile_selections[(d["keyframe"], t)] = (tuple(draw), morphed)
-            self._drawn.clear()
-            return d
-        if d["keyframe"] not in self._selections:
-            self._selections[d["keyframe"]] = (tuple(self.adaptive.last_draw),
-                                               self.adaptive.last_morphed)
-            if self.proxy is not None:
-                self._proxies[d["keyframe"]] = self.proxy.last
+        self.keys.record(d)
         return d
 
     def replay(self, viewpoint: Viewpoint, decision: dict[str, Any]) -> np.ndarray:
-        if self.tiled is not None:
-            return super().replay(viewpoint, decision)
-        draw, morphed = self._selections[decision["keyframe"]]
-        s = self.sprite.sprite
-
-        def again(vp, projection, target):
-            from lodsprite.gl.terrain import draw_stats
-
-            self.adaptive.redraw(vp, draw, morphed, projection, target)
-            return draw_stats(0, len(draw), projection)
-
-        s.keyframe_drawer = again
-        if self.proxy is not None:
-            self.proxy.force(self._proxies[decision["keyframe"]])
-        try:
-            return super().replay(viewpoint, decision)
-        finally:
-            s.keyframe_drawer = self._draw_keyframe
-            if self.proxy is not None:
-                self.proxy.force(None)
+        return self.keys.replay(viewpoint, decision)
 
     def summary(self, frames: list[Frame]) -> dict[str, Any]:
         out = {**super().summary(frames), "key_sse": self.adaptive.sse,

@@ -44,7 +44,7 @@ class AdaptiveTerrain:
     def __init__(self, gl, pyramid, target, fov_y_deg: float, sse_px: float = 1.0,
                  grid: int = DEFAULT_GRID, gpu_mb: float = 256.0, host_mb: float = 512.0,
                  upload_budget: int = 16, color=None) -> None:
-        from lodsprite.gl.adaptive import AdaptiveRenderer
+        from lodsprite.gl.adaptive import AdaptiveDrawer
 
         if not sse_px > 0:
             raise InputError(f"--sse must be > 0 pixels, got {sse_px}")
@@ -57,8 +57,8 @@ class AdaptiveTerrain:
                         self.tree.node_diagonals())
         self.loader = tile_loader(self.tree, host_mb)
         tile_bytes = (grid + 1) ** 2 * 4
-        self.renderer = AdaptiveRenderer(gl, grid, max(1, int(gpu_mb * 2 ** 20 // tile_bytes)))
-        self.slots = SlotCache(self.renderer.capacity)
+        self.drawer = AdaptiveDrawer(gl, grid, max(1, int(gpu_mb * 2 ** 20 // tile_bytes)))
+        self.slots = SlotCache(self.drawer.capacity)
         self.upload_budget = int(upload_budget)
         self.bounds = self.tree.box()
         # the height ramp of terrain_shade: level 0's range, as full resolution's
@@ -124,7 +124,7 @@ class AdaptiveTerrain:
         slot = self.slots.assign(node, keep)
         if slot is None:
             return False
-        self.renderer.upload(slot, data)
+        self.drawer.upload(slot, data)
         return True
 
     def render_into(self, viewpoint: Viewpoint, projection, target, cull=None):
@@ -152,11 +152,11 @@ class AdaptiveTerrain:
         eye = np.asarray(viewpoint.o, dtype=np.float64)
         draw, uploaded = self._stream(eye, view_proj if cull is None else cull)
         self.last_draw = draw
-        self.renderer.draw(target.fbo, view_proj, eye, self._instances(draw),
+        self.drawer.draw(target.fbo, view_proj, eye, self._instances(draw),
                            self.height_range, self.extent, self.color)
         if finish:
             self.gl.finish()
-        return Frame("adaptive", (time.perf_counter() - t0) * 1e3, self.renderer.triangles,
+        return Frame("adaptive", (time.perf_counter() - t0) * 1e3, self.drawer.triangles,
                      extra=dict(zip(ADAPTIVE_COLUMNS, (
                          len(draw), uploaded, len(self.slots.slots), self.loader.loaded,
                          self.slots.evicted, len(self.loader.bad)), strict=True)))
@@ -247,7 +247,7 @@ class AdaptiveTerrain:
         view_proj = proj @ viewpoint.view_matrix()
         eye = np.asarray(viewpoint.o, dtype=np.float64)
         target = self.target if target is None else target
-        self.renderer.draw(target.fbo, view_proj, eye, self._instances(list(draw), morphed),
+        self.drawer.draw(target.fbo, view_proj, eye, self._instances(list(draw), morphed),
                            self.height_range, self.extent, self.color)
         self.gl.finish()
 
@@ -303,9 +303,9 @@ class AdaptiveTerrain:
         data = self.loader.cache.get(n)
         if data is None:
             r0, r1, c0, c1 = self.tree.samples(n)
-            data = self.renderer.read_tile(self.slots.slot(n), r1 - r0, c1 - c0)
+            data = self.drawer.read_tile(self.slots.slot(n), r1 - r0, c1 - c0)
         return data
 
     def release(self) -> None:
         self.loader.close()
-        self.renderer.release()
+        self.drawer.release()

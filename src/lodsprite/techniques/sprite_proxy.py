@@ -201,7 +201,7 @@ class AdaptiveProxySource:
     """The view-dependent proxy of ``terrain`` (an
     :class:`~lodsprite.techniques.adaptive_terrain.AdaptiveTerrain`, whose atlas, slots and
     loader it shares) at ``proxy_sse`` pixels: a proxy geometry factory for
-    :meth:`lodsprite.gl.sprite.SpriteRenderer.set_proxy` and the source of
+    :meth:`lodsprite.gl.sprite.SpriteDrawer.set_proxy` and the source of
     :class:`~lodsprite.sprite.proxy_metric.ProxyMetric`."""
 
     def __init__(self, terrain, proxy_sse: float, height_px: int,
@@ -217,7 +217,7 @@ class AdaptiveProxySource:
                         terrain.fov, tree.node_diagonals())
         self._made: list[tuple[bytes, tuple, frozenset]] = []  # (key, nodes, morphed)
         self._frozen: dict[int, tuple[tuple, frozenset, object]] = {}  # target -> GL proxy
-        self._gl = lambda: AdaptiveProxy(terrain.renderer, terrain.extent, self.stride)
+        self._gl = lambda: AdaptiveProxy(terrain.drawer, terrain.extent, self.stride)
         self.twin = AdaptiveProxy.twin
         self.forced: tuple[tuple, frozenset] | None = None  # a replay's recorded selection
         self.last: tuple[tuple, frozenset] = ((), frozenset())  # the last frozen selection

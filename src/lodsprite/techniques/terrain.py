@@ -47,7 +47,7 @@ def set_shading(renderer: Renderer, shading: str) -> str:
     """Colour ``renderer``'s terrain frames (full, levels, keyframes, LOD-sprite's
     fallback) by ``shading`` resolved for its scene; returns the resolved one."""
     resolved = resolve_shading(renderer.scene, shading)
-    renderer.terrain_gl.renderer.shading = resolved
+    renderer.terrain_gl.drawer.shading = resolved
     return resolved
 
 
@@ -120,7 +120,7 @@ def level0_reader(geometry, lod: int, border: bool):
 def coarse_baseline(terrain, viewpoint, lod: int, truth: np.ndarray) -> dict[str, float]:
     """A LOD-sprite run's baseline columns: the plain coarse level ``lod`` (quads a side)
     and the coarse level with LOD-sprite's border ribbons, drawn untimed by ``terrain`` (a
-    :class:`~lodsprite.gl.terrain.TerrainRenderer`) at ``viewpoint`` and compared with
+    :class:`~lodsprite.gl.terrain.TerrainDrawer`) at ``viewpoint`` and compared with
     the same reference ``truth (h, w, 3) uint8``: ``rmse_lod, psnr_lod, ssim_lod,
     rmse_lod_border``."""
     from lodsprite.metrics import psnr, rmse, ssim
@@ -234,7 +234,7 @@ class SpriteTechnique(Technique):
                       truth: np.ndarray) -> dict[str, float]:
         """The plain coarse level and the coarse level with LOD-sprite's border ribbons
         against the same reference (:func:`coarse_baseline`)."""
-        return coarse_baseline(self.renderer.terrain_gl.renderer, viewpoint, self.sprite.lod, truth)
+        return coarse_baseline(self.renderer.terrain_gl.drawer, viewpoint, self.sprite.lod, truth)
 
     def summary(self, frames: list[Frame]) -> dict[str, Any]:
         """Keyframe count and fraction, the engine's work (tiles rendered), mean time per

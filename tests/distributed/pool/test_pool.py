@@ -315,7 +315,7 @@ def test_a_reconnecting_worker_forgets_the_jobs_of_its_last_connection() -> None
 
     from lodsprite.distributed.datasets import Datasets
     from lodsprite.distributed.pool.jobs import Disconnect
-    from lodsprite.distributed.pool.render_worker import Worker, _Renderer
+    from lodsprite.distributed.pool.render_worker import Worker, _RenderThread
 
     zctx = zmq.Context()
     router = zctx.socket(zmq.ROUTER)
@@ -324,7 +324,7 @@ def test_a_reconnecting_worker_forgets_the_jobs_of_its_last_connection() -> None
     pipe = zctx.socket(zmq.PAIR)
     pipe.setsockopt(zmq.LINGER, 0)
     pipe.bind("inproc://test-render")
-    renderer = _Renderer(zctx, "inproc://test-render", Datasets(None), 1)  # not started
+    renderer = _RenderThread(zctx, "inproc://test-render", Datasets(None), 1)  # not started
     renderer.jobs.put("left over from the last connection")
     worker = Worker("inproc://test-broker")
     session = threading.Thread(target=worker._session, args=(zctx, pipe, renderer))

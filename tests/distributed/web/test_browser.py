@@ -6,7 +6,7 @@ subprocess) and one browser for the module.
 The page must load only with the token, connect, receive keyframes (decoded by its Web
 Worker) and draw, play the chen1999 path the server computes and hold its last frame;
 that frame must match lodsprite's own offscreen render of the same viewpoint (the
-server's KeyframeRenderer); and after a live fuzz of hostile frames another page must
+server's KeyframeService); and after a live fuzz of hostile frames another page must
 still play."""
 
 import asyncio
@@ -143,9 +143,9 @@ def offscreen(viewpoints) -> list[np.ndarray]:
     """lodsprite's own renders at ``viewpoints`` ((H, W, 3) uint8, rows bottom-up as the
     page's readPixels gives them), as the server renders a keyframe."""
     from lodsprite.distributed.protocol import LoadArgs
-    from lodsprite.distributed.render import KeyframeRenderer
+    from lodsprite.distributed.render import KeyframeService
 
-    r = KeyframeRenderer(LoadArgs(**TERRAIN, size=(SIZE, SIZE)))
+    r = KeyframeService(LoadArgs(**TERRAIN, size=(SIZE, SIZE)))
     try:  # Keyframe.color is read_color's top-down view
         return [np.array(r.render(vp, 0, 0.0).color)[::-1] for vp in viewpoints]
     finally:

@@ -7,7 +7,7 @@ each call, and a 4096² scene holds it for long stretches (its colour texture's 
 mipmaps: up to 1.3 s measured on a loaded 2-core machine, beside draws of 33 M
 triangles that llvmpipe shades for seconds on the calling thread; drawn through moderngl
 the broker declared the worker dead and re-queued its job).  Releasing the GIL around
-the draws (the project's unlocked draws, which :class:`~..render.KeyframeRenderer` uses)
+the draws (the project's unlocked draws, which :class:`~..render.KeyframeService` uses)
 covers the draws only; a separate process covers every GL call, the scene's loading,
 and a driver crash too (the job fails, the worker lives on).  libzmq's own ZMTP
 heartbeats would be answered without the GIL as well, but the broker could not tell
@@ -83,7 +83,7 @@ def unpack(meta: bytes, data: bytes | memoryview) -> list[bytes]:
 
 
 class SceneCache:
-    """The process's scenes (:class:`~..render.KeyframeRenderer`) and GL context."""
+    """The process's scenes (:class:`~..render.KeyframeService`) and GL context."""
 
     def __init__(self, data_dir: str | None, cache: int) -> None:
         self.datasets = Datasets(data_dir)
@@ -112,7 +112,7 @@ class SceneCache:
                                              refused=isinstance(exc, InputError)))
 
     def _scene(self, key: bytes, load: LoadArgs):
-        from lodsprite.distributed.render import KeyframeRenderer
+        from lodsprite.distributed.render import KeyframeService
         from lodsprite.gl.context import GLContext
 
         r = self.scenes.pop(key, None)
@@ -125,7 +125,7 @@ class SceneCache:
             # A pool worker renders what it is asked for and never paces: the submitter
             # decides when a keyframe is due, so the pacer's per-keyframe reprojection
             # (the exact metric's C', ~20% of a 256² keyframe's time) is not computed.
-            r = KeyframeRenderer(msgspec.structs.replace(resolved, pace="continuous"), self.gl)
+            r = KeyframeService(msgspec.structs.replace(resolved, pace="continuous"), self.gl)
         self.scenes[key] = r  # most recently used last
         return r
 

@@ -5,7 +5,7 @@ A DEALER connects to the broker and says ``ready``.  Two threads: the I/O thread
 :meth:`Worker.run`) owns the socket, sends a heartbeat every :data:`~.jobs.HEARTBEAT_S`,
 takes jobs and forwards results; the render thread hands one job at a time to the render
 process (:mod:`.render_process`: the GL context and the scenes, rendered with
-:class:`~lodsprite.distributed.render.KeyframeRenderer`) and waits on its pipe, so
+:class:`~lodsprite.distributed.render.KeyframeService`) and waits on its pipe, so
 heartbeats go on while a scene loads or a keyframe renders, whatever holds the render
 process's GIL (a 4096² scene's draws and uploads did, past the broker's liveness).
 A broker silent for :data:`~.jobs.LIVENESS_S` is dead: the worker closes its socket and
@@ -76,7 +76,7 @@ DISCONNECT_LINGER_MS = 500
 that is gone costs the stop this much)."""
 
 
-class _Renderer(threading.Thread):
+class _RenderThread(threading.Thread):
     """The render thread: jobs in from a queue, handed to the render process
     (:mod:`.render_process`, the GL's own process, its own GIL), result frames out over
     an inproc PAIR.  It only waits on the process's pipe, so the I/O thread's heartbeats
@@ -186,7 +186,7 @@ class Worker:
         address = f"inproc://pool-render-{id(self)}"
         pipe = zctx.socket(zmq.PAIR)
         pipe.bind(address)
-        renderer = _Renderer(zctx, address, self.datasets, self.cache)
+        renderer = _RenderThread(zctx, address, self.datasets, self.cache)
         renderer.start()
         backoff = HEARTBEAT_S
         try:
@@ -207,7 +207,7 @@ class Worker:
             return True
         return self._stop.is_set()
 
-    def _session(self, zctx: zmq.Context, pipe: zmq.Socket, renderer: _Renderer) -> bool:
+    def _session(self, zctx: zmq.Context, pipe: zmq.Socket, renderer: _RenderThread) -> bool:
         """One connection to the broker, until it is silent too long or says disconnect;
         whether it heard the broker at all."""
         sock = zctx.socket(zmq.DEALER)
@@ -258,7 +258,7 @@ class Worker:
         finally:
             sock.close(linger=0)
 
-    def _from_broker(self, sock: zmq.Socket, renderer: _Renderer,
+    def _from_broker(self, sock: zmq.Socket, renderer: _RenderThread,
                      mine: set[int]) -> bool | None:
         """Handle the waiting messages: True if the broker spoke, False if it said
         disconnect, None if only bad messages came."""

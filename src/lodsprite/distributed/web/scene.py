@@ -6,7 +6,7 @@ Computed in the server process, GL-free, from the scene a ``load`` describes (it
 :class:`~lodsprite.scene.spec.SceneSpec`, opened by :func:`~lodsprite.scene.spec.
 open_spec` as every renderer opens it): :func:`scene_parts` makes the message from the
 :class:`~lodsprite.scene.Scene`'s terrain layer, its working height field's coarse level
-(an exact subsample, ``lod`` quads a side, as the sprite renderer's proxy) and its
+(an exact subsample, ``lod`` quads a side, as the sprite drawer's proxy) and its
 texture, both turned so row 0 is south (the page's ``y`` grows with the row).
 
 ``path`` (after a ``load``): the viewpoints of a built-in camera path

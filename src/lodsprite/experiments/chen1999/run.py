@@ -24,7 +24,7 @@ import numpy as np
 
 from lodsprite.errors import InputError
 from lodsprite.files import write_json, write_png
-from lodsprite.gl.sprite import DEFAULT_GUARD_PX, DEFAULT_VISIBILITY, SpriteRenderer
+from lodsprite.gl.sprite import DEFAULT_GUARD_PX, DEFAULT_VISIBILITY, SpriteDrawer
 from lodsprite.gl.terrain_gl import TerrainGL
 from lodsprite.harness import quality_summary
 from lodsprite.metrics import difference_image
@@ -203,12 +203,12 @@ def _figure_images(pr: TerrainGL, scene: Scene, cfg: ReproduceConfig, path, fram
     for fig, texture in (("fig13", make_texture("checker", scene.hf)), ("fig14", None)):
         if texture is not None:
             pr.geometry.set_texture(texture)
-        r = pr.renderer
+        r = pr.drawer
         r.render(vp)
         full = r.target.read_color()
         r.render(vp, cfg.lod)
         lod = r.target.read_color()
-        sprite = SpriteRenderer(r, cfg.lod, cfg.visibility, border=cfg.border,
+        sprite = SpriteDrawer(r, cfg.lod, cfg.visibility, border=cfg.border,
                                 guard_px=cfg.guard_px)
         try:
             sprite.render_keyframe(key_vp, 0.0, key_proj)

@@ -26,7 +26,7 @@ from lodsprite.experiments.paper_numbers import PAPER_2000
 from lodsprite.gl.context import GLContext
 from lodsprite.profiles.generate import ProfileSettings, generate_profile, release_cached
 from lodsprite.profiles.models import mountain, sphere_family, sphereflake
-from lodsprite.profiles.render import ChainRenderer
+from lodsprite.profiles.render import ChainDrawer
 from lodsprite.profiles.scenes import (
     MOUNTAIN_FOV_DEG,
     SPIRAL_FOV_DEG,
@@ -105,7 +105,7 @@ def match_screen_space(table: ProfileTable, shots: list[Shot], size: int,
     return best
 
 
-def _compare(renderer: ChainRenderer, table: ProfileTable, shots: list[Shot],
+def _compare(drawer: ChainDrawer, table: ProfileTable, shots: list[Shot],
              fulls: list[np.ndarray], threshold: float, size: int) -> dict:
     """Profile (CSF) selection vs screen-space selection at equal triangles, against full."""
     prof = [select_profile(table, s.models, s.viewpoint.o, s.projection.fov_y_deg, size,
@@ -117,7 +117,7 @@ def _compare(renderer: ChainRenderer, table: ProfileTable, shots: list[Shot],
                  "triangles_full": sum(len(s.models) * int(table.faces[-1]) for s in shots),
                  "sse_tolerance_px": tol, "images": len(shots)}
     for name, lods in (("profile", prof), ("sse", sse)):
-        imgs = [renderer.image(s, lod) for s, lod in zip(shots, lods, strict=True)]
+        imgs = [drawer.image(s, lod) for s, lod in zip(shots, lods, strict=True)]
         pairs = list(zip(imgs, fulls, strict=True))
         for key, fn in (("rmse", metrics.rmse), ("ssim", metrics.ssim), ("flip", metrics.flip)):
             out[f"{key}_{name}"] = float(np.mean([fn(i, f) for i, f in pairs]))
@@ -194,20 +194,20 @@ def _spiral(ctx: GLContext, cfg: ScogginsConfig, chain, table: ProfileTable,
     per_flake = {k: np.bincount(shot.group, faces[v], cfg.flakes).astype(int).tolist()
                  for k, v in lod.items()}
     full_flake = int(len(radii) * faces[-1])
-    renderer = ChainRenderer(ctx, [(m.vertices, m.faces) for m in chain.levels], cfg.size)
+    drawer = ChainDrawer(ctx, [(m.vertices, m.faces) for m in chain.levels], cfg.size)
     try:
         if progress:
             progress("spiral images", 0, 3)
-        full = renderer.full(shot)
+        full = drawer.full(shot)
         images["fig7a_full"] = full
-        images["fig7b_lod_csf"] = renderer.image(shot, lod["csf"])
-        images["fig7c_lod_coded"] = renderer.image(shot, lod["csf"], coded=True)
+        images["fig7b_lod_csf"] = drawer.image(shot, lod["csf"])
+        images["fig7c_lod_coded"] = drawer.image(shot, lod["csf"], coded=True)
         images["fig7d_error"] = metrics.difference_image(images["fig7b_lod_csf"], full)
         if progress:
             progress("spiral images", 3, 3)
-        cmp = _compare(renderer, table, [shot], [full], thr["csf"], cfg.size)
+        cmp = _compare(drawer, table, [shot], [full], thr["csf"], cfg.size)
     finally:
-        renderer.release()
+        drawer.release()
     return {
         "spiral": {"distances": dist.tolist(), "spheres_per_flake": len(radii),
                    "triangles_csf": per_flake["csf"], "triangles_nocsf": per_flake["nocsf"],
@@ -236,13 +236,13 @@ def _sweep(ctx: GLContext, cfg: ScogginsConfig, chain, table: ProfileTable, imag
         faces[k] = [int(table.faces[select_profile(table, s.models, s.viewpoint.o,
                                                    MOUNTAIN_FOV_DEG, cfg.size, thr[k],
                                                    csf=(k == "csf"))[0]]) for s in shots]
-    renderer = ChainRenderer(ctx, [(m.vertices, m.faces) for m in chain.levels], cfg.size)
+    drawer = ChainDrawer(ctx, [(m.vertices, m.faces) for m in chain.levels], cfg.size)
     try:
         picks = np.unique(np.linspace(0, len(shots) - 1, cfg.compare_frames).round().astype(int))
         cmp_shots = [shots[i] for i in picks]
         fulls = []
         for n, s in enumerate(cmp_shots):
-            fulls.append(renderer.full(s))
+            fulls.append(drawer.full(s))
             if progress:
                 progress("mountain images", n + 1, len(cmp_shots))
         fig8 = np.unique(np.linspace(0, len(picks) - 1, min(4, len(picks))).round().astype(int))
@@ -252,10 +252,10 @@ def _sweep(ctx: GLContext, cfg: ScogginsConfig, chain, table: ProfileTable, imag
             for k in ("nocsf", "csf"):
                 lod = select_profile(table, s.models, s.viewpoint.o, MOUNTAIN_FOV_DEG, cfg.size,
                                      thr[k], csf=(k == "csf"))
-                images[f"fig8_{n}_{k}"] = renderer.image(s, lod, coded=True)
-        cmp = _compare(renderer, table, cmp_shots, fulls, thr["csf"], cfg.size)
+                images[f"fig8_{n}_{k}"] = drawer.image(s, lod, coded=True)
+        cmp = _compare(drawer, table, cmp_shots, fulls, thr["csf"], cfg.size)
     finally:
-        renderer.release()
+        drawer.release()
     mean_err = {}
     for label, phi_v in (("phi0", 0.0), ("phi90", 90.0)):
         i = int(np.abs(table.phi_deg - phi_v).argmin())

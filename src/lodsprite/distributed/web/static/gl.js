@@ -103,7 +103,7 @@ export function coarseMesh(scene, heights) {
   return { pos, uv, index };
 }
 
-export class SpriteRenderer {
+export class SpriteDrawer {
   constructor(canvas) {
     const gl = canvas.getContext('webgl2', { antialias: false, preserveDrawingBuffer: true });
     if (!gl) throw new Error('this browser has no WebGL2');

@@ -21,7 +21,7 @@
 // uploaded, so it never waits for a decode or an upload.
 
 import { pack, unpack, image } from './wire.js';
-import { SpriteRenderer } from './gl.js';
+import { SpriteDrawer } from './gl.js';
 import { FlyControls, lookAt, norm, sub } from './camera.js';
 import { ErrorMetric, Predictor } from './predictor.js';
 import { Hud } from './hud.js';
@@ -136,7 +136,7 @@ async function start() {
   if (!reply.ok) throw new Error(reply.error);
   const scene = await sceneArrived;
   const h = scene.header;
-  renderer = new SpriteRenderer(canvas);
+  renderer = new SpriteDrawer(canvas);
   renderer.setScene(h, scene.heights, scene.texture);
   metric = new ErrorMetric(h, scene.heights);
   predictor = new Predictor(h.epsilon, h.fov, width / height, h.near, h.far, height);
