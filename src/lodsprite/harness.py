@@ -28,7 +28,7 @@ the technique's own), atomically.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Collection, Iterator
+from collections.abc import Callable, Collection, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -48,6 +48,7 @@ from lodsprite.record import (  # the record's rows and summary, here too
 from lodsprite.techniques.base import Technique
 
 if TYPE_CHECKING:
+    from lodsprite.camera import Viewpoint
     from lodsprite.paths import CameraPath
     from lodsprite.progress import Progress
 
@@ -187,10 +188,16 @@ def _timed(technique: Technique, path: CameraPath, finish: Callable[[], None],
     return frames, decisions, False
 
 
-def _replay(technique: Technique, path: CameraPath, decisions: list[dict], rows: list[dict],
-            reference: Reference | None, stride: int, flip: bool,
-            on_image: ImageCallback | None, image_frames) -> None:
-    for i, (vp, d) in enumerate(zip(path.viewpoints, decisions, strict=True)):
+def replay_frames(technique: Technique, drawn: Sequence[Viewpoint],
+                  judged: Sequence[Viewpoint], decisions: list[dict], rows: list[dict],
+                  reference: Reference | None, stride: int, flip: bool,
+                  on_image: ImageCallback | None, image_frames) -> None:
+    """The untimed replay: frame ``i``'s recorded decision drawn again at ``drawn[i]``
+    (the viewpoint it was drawn for) and, every ``stride``-th frame, compared with the
+    reference at ``judged[i]`` (the viewpoint it is judged at: the same, or, in a run
+    played in time, the viewpoint of its display time); its quality columns go into
+    ``rows[i]``."""
+    for i, (vp, at, d) in enumerate(zip(drawn, judged, decisions, strict=True)):
         measured = reference is not None and i % stride == 0
         shown = on_image is not None and (image_frames is None or i in image_frames)
         if not (measured or shown):
@@ -198,9 +205,9 @@ def _replay(technique: Technique, path: CameraPath, decisions: list[dict], rows:
         image = technique.replay(vp, d)
         truth = None
         if measured:
-            truth = reference(vp)
+            truth = reference(at)
             rows[i].update(_quality(image, truth, flip))
-            rows[i].update(technique.quality_extra(vp, d, truth))
+            rows[i].update(technique.quality_extra(at, d, truth))
         if shown:
             on_image(i, image, truth)
 
@@ -237,9 +244,10 @@ def run_path(technique: Technique, path: CameraPath, *, finish: Callable[[], Non
     if ground_truth and reference is None:
         reference = full_resolution(renderer)
     if (ground_truth or on_image) and not interrupted:
-        _replay(technique, path, decisions, rows, reference if ground_truth else None,
-                quality_stride, flip, on_image, image_frames)
-        columns += [c for c in _quality_columns(rows) if c not in columns]
+        replay_frames(technique, path.viewpoints, path.viewpoints, decisions, rows,
+                      reference if ground_truth else None, quality_stride, flip, on_image,
+                      image_frames)
+        columns += [c for c in quality_columns(rows) if c not in columns]
     summary = {**frames_summary(frames, technique.name, gl_renderer or (
         renderer.info.renderer if renderer else ""), first_ms), **own, **quality_summary(rows)}
     if interrupted:
@@ -247,7 +255,8 @@ def run_path(technique: Technique, path: CameraPath, *, finish: Callable[[], Non
     return RunResult(frames, decisions, rows, columns, summary, interrupted)
 
 
-def _quality_columns(rows: list[dict]) -> list[str]:
+def quality_columns(rows: list[dict]) -> list[str]:
+    """The quality columns the rows have, in the order they first appear."""
     seen: dict[str, None] = {}
     for r in rows:
         if "rmse" in r:
@@ -267,4 +276,5 @@ def write_run(out_dir: Path, result: RunResult, summary: dict[str, Any] | None =
 
 __all__ = ["CORE_COLUMNS", "CORE_KEYS", "QUALITY_COLUMNS", "Frame", "RunResult", "frame_rows",
            "frames_summary", "full_resolution", "level_zero_reference", "quality_summary",
+           "quality_columns", "replay_frames",
            "run_path", "scene_reference", "timing_summary", "warm_up", "write_run"]

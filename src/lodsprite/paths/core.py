@@ -60,6 +60,9 @@ CHEN1999_FRAMES = 460
 SWAN2002_FRAMES = 600
 BUILTIN_PATHS = ("chen1999", "swan2002")
 
+#: The frame rate a path's frames are spaced at when it is played in time (frame ``i`` at
+#: ``i / NOMINAL_FPS`` seconds): the 30 frames a second the papers' paths were made for.
+NOMINAL_FPS = 30.0
 _AXES_TOL = 1e-6  # the tolerance of Viewpoint's own orthonormality check
 
 
@@ -115,28 +118,44 @@ class CameraPath:
         exactly.
         """
         n = _check_frames(n)
+        u = np.linspace(0.0, len(self) - 1.0, n)
+        return CameraPath(self.name, tuple(self.between(u)), self.fov_y_deg)
+
+    def between(self, u: np.ndarray) -> list[Viewpoint]:
+        """Viewpoints at fractional frame indices ``u`` (``(k,) float64`` in ``[0, N-1]``):
+        the eye interpolated linearly between frames ``floor(u)`` and ``ceil(u)``, the
+        orientation by quaternion slerp; an index on a frame gives that frame itself."""
         count = len(self)
-        u = np.linspace(0.0, count - 1.0, n)
-        i0 = np.minimum(np.floor(u).astype(np.intp), max(count - 2, 0))
-        w = u - i0
+        u = np.clip(np.asarray(u, dtype=np.float64).reshape(-1), 0.0, count - 1.0)
         if count == 1:
-            return CameraPath(self.name, (self.viewpoints[0],) * n, self.fov_y_deg)
+            return [self.viewpoints[0]] * len(u)
+        i0 = np.minimum(np.floor(u).astype(np.intp), count - 2)
+        w = u - i0
         eyes = self.eyes()
         rots = view_rotation(self.axes())
         from scipy.spatial.transform import Slerp  # on first use: a slow import
 
-        slerp = Slerp(np.arange(count, dtype=np.float64), rots)
-        rotations = slerp(u)
+        rotations = Slerp(np.arange(count, dtype=np.float64), rots)(u)
         pos = eyes[i0] * (1.0 - w)[:, None] + eyes[i0 + 1] * w[:, None]
         out = []
-        for j in range(n):
+        for j in range(len(u)):
             if w[j] == 0.0:
                 out.append(self.viewpoints[i0[j]])
             elif w[j] == 1.0:
                 out.append(self.viewpoints[i0[j] + 1])
             else:
                 out.append(rotated_viewpoint(rotations[j], pos[j]))
-        return CameraPath(self.name, tuple(out), self.fov_y_deg)
+        return out
+
+    def duration_s(self, fps: float = NOMINAL_FPS) -> float:
+        """Seconds the path lasts played at ``fps`` frames a second (its nominal speed):
+        frame ``i`` is at ``i / fps``."""
+        return (len(self) - 1) / float(fps)
+
+    def at_time(self, t_s: float, fps: float = NOMINAL_FPS) -> Viewpoint:
+        """The viewpoint ``t_s`` seconds into the path played at ``fps`` frames a second
+        (clamped to its ends; :meth:`between`)."""
+        return self.between(np.array([t_s * float(fps)]))[0]
 
     def to_dict(self) -> dict:
         """The JSON document (see the module docstring) as plain Python objects."""
