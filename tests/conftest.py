@@ -28,23 +28,40 @@ from lodsprite.terrain.heightfield import HeightField  # noqa: E402
 HEAVY_FIRST = (
     "tests/distributed/test_end_to_end.py",
     "tests/distributed/test_reproduce_swan2002.py",
-    "tests/terrain/test_storefield_nonblocking.py",
-    "tests/test_reproduce_large.py",
     "tests/distributed/test_long_renders.py",
-    "tests/distributed/test_client.py",
-    "tests/test_cli.py",
+    "tests/terrain/test_storefield_nonblocking.py",
     "tests/viewer/test_window.py",
+    "tests/distributed/test_client.py",
+    "tests/test_reproduce_large.py",
+    "tests/test_honest_reference.py",
     "tests/test_readme.py",
     "tests/distributed/pool/test_pool.py",
-    "tests/distributed/pool/test_worker_stop.py",
-    "tests/terrain/test_pyramid_store.py",
-    "tests/distributed/web/test_web_shutdown.py",
-    "tests/terrain/test_adaptive.py",
+    "tests/test_cli.py",
+    "tests/sprite/test_worker_engine.py",
     "tests/distributed/test_fuzz.py",
-    "tests/test_harness.py",
+    "tests/terrain/test_pyramid_store.py",
+    "tests/distributed/pool/test_worker_stop.py",
+    "tests/terrain/test_adaptive.py",
+    "tests/test_reproduce_battlefield.py",
+    "tests/distributed/web/test_browser.py",
+    "tests/gl/test_terrain_render.py",
+    "tests/distributed/test_server.py",
     "tests/test_warm_up.py",
+    "tests/distributed/web/test_web_shutdown.py",
+    "tests/test_harness.py",
+    "tests/distributed/web/test_web_server.py",
 )
 _ROOT = Path(__file__).resolve().parents[1]
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Keep :data:`HEAVY_FIRST`'s order under ``--dist loadfile``: pytest-xdist otherwise
+    hands out the files by their number of tests, most first (``--loadscope-reorder``, on
+    by default), which sent the one-test files last, the swan2002 reproduction (the
+    longest file) and test_honest_reference among them, so that one worker ran them alone
+    at the end while the other had finished."""
+    if getattr(config.option, "loadscopereorder", False):
+        config.option.loadscopereorder = False
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:

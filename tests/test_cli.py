@@ -108,7 +108,7 @@ def test_bad_input_exits_2_with_one_line_and_writes_nothing(tmp_path, cli, args,
 
 def test_a_real_process_exits_2_with_one_line(tmp_path):
     out = tmp_path / "never"
-    assert_user_error(run_cli("render", *SMALL, "--mode", "warp", "--out", str(out)), "mode")
+    assert_user_error(lodsprite("render", *SMALL, "--mode", "warp", "--out", str(out)), "mode")
     assert not out.exists()
 
 
@@ -161,6 +161,6 @@ def test_reproduce_quick_writes_results_plots_and_report(tmp_path, cli, monkeypa
      "option --tile-budget-ms: got -1.0, allowed: >= 0 ms"),
     (["--tiles", "2", "--mode", "lod"], "--tiles goes with --mode sprite"),
 ])
-def test_render_refuses_bad_tile_options(args, fragment):
-    assert_user_error(lodsprite("render", *SMALL, "--mode", "sprite", "--frames", "2", *args),
+def test_render_refuses_bad_tile_options(cli, args, fragment):
+    assert_user_error(cli("render", *SMALL, "--mode", "sprite", "--frames", "2", *args),
                       fragment)

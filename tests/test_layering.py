@@ -15,6 +15,7 @@ must-have 5: string imports count).
 
 from __future__ import annotations
 
+import functools
 import json
 import pkgutil
 import subprocess
@@ -42,7 +43,12 @@ DASK = ("dask", "distributed")  # the cluster extra's top-level names
 # Every import statement anywhere in a module (inside functions too) is an edge; only those
 # under ``if TYPE_CHECKING:`` never run and count for no cycle.
 
-EDGES = importgraph.imports()
+@functools.cache
+def package_edges() -> list[importgraph.Import]:
+    """The package's import edges, read once, when the first test asks (not while the
+    suite collects, which every xdist worker does for every file)."""
+    return importgraph.imports()
+
 #: Packages of techniques, experiments and front ends: gl/ draws for them and knows none.
 ABOVE_GL = {"sprite", "lumigraph", "manager", "profiles", "distributed", "adaptive", "viewer",
             "cli", "experiments", "api", "run", "harness", "techniques", "technique", "scene",
@@ -50,7 +56,7 @@ ABOVE_GL = {"sprite", "lumigraph", "manager", "profiles", "distributed", "adapti
 
 
 def runtime_edges(source_unit: str | None = None):
-    return [e for e in EDGES if not e.type_only and e.target.startswith("lodsprite")
+    return [e for e in package_edges() if not e.type_only and e.target.startswith("lodsprite")
             and (source_unit is None or importgraph.unit(e.source) == source_unit)]
 
 
@@ -60,15 +66,16 @@ def describe(edges) -> list[str]:
 
 
 def test_no_module_imports_itself_round_a_cycle():
-    assert importgraph.strongly_connected(importgraph.runtime_graph(EDGES)) == []
+    assert importgraph.strongly_connected(importgraph.runtime_graph(package_edges())) == []
 
 
 def test_no_package_imports_itself_round_a_cycle():
-    assert importgraph.strongly_connected(importgraph.runtime_graph(EDGES, packages=True)) == []
+    graph = importgraph.runtime_graph(package_edges(), packages=True)
+    assert importgraph.strongly_connected(graph) == []
 
 
 def test_moderngl_is_imported_only_under_gl():
-    bad = [e for e in EDGES if e.target == "moderngl" and not e.type_only
+    bad = [e for e in package_edges() if e.target == "moderngl" and not e.type_only
            and importgraph.unit(e.source) != "gl"]
     assert describe(bad) == []
 
@@ -86,7 +93,7 @@ def test_terrain_imports_neither_gl_nor_the_front_ends():
 def test_the_scene_model_imports_no_rendering():
     """scene/ (the data model) reaches nothing of gl/ or moderngl, directly or through the
     modules it imports (runtime edges, lazy ones included)."""
-    graph = importgraph.runtime_graph(EDGES)
+    graph = importgraph.runtime_graph(package_edges())
     seen, todo = set(), [m for m in graph if importgraph.unit(m) == "scene"]
     while todo:
         m = todo.pop()
@@ -95,7 +102,7 @@ def test_the_scene_model_imports_no_rendering():
             todo.extend(graph.get(m, ()))
     assert sorted(m for m in seen if importgraph.unit(m) == "gl") == []
     assert not any(e.target == "moderngl" and e.source in seen and not e.type_only
-                   for e in EDGES)
+                   for e in package_edges())
 
 
 #: The shared helpers every level uses (atomic writers, mesh loading, the cluster extra's
@@ -109,7 +116,7 @@ def test_the_shared_helpers_sit_at_the_bottom():
     bad = [e for e in runtime_edges() if e.source in BASE
            and e.target not in ("lodsprite.errors", "lodsprite.procs")]
     assert describe(bad) == []
-    assert {e.source for e in EDGES if e.target in BASE} >= {
+    assert {e.source for e in package_edges() if e.target in BASE} >= {
         "lodsprite.terrain.store", "lodsprite.profiles.generate", "lodsprite.harness",
         "lodsprite.manager.builtins", "lodsprite.lumigraph.store"}
 
@@ -129,11 +136,11 @@ def test_the_core_loads_neither_the_distributed_layer_nor_dask_when_imported():
     """Outside the distributed layer, the distributed layer and Dask are imported only
     inside functions (the command that needs them): importing any other module, and so
     every module its top level imports, loads neither."""
-    bad = [e for e in EDGES if not e.lazy and not e.type_only
+    bad = [e for e in package_edges() if not e.lazy and not e.type_only
            and not in_distributed_layer(e.source)
            and (in_distributed_layer(e.target) or e.target in DASK)]
     assert describe(bad) == []
-    assert any(e.target == "dask" and e.lazy for e in EDGES)  # the rule sees them
+    assert any(e.target == "dask" and e.lazy for e in package_edges())  # the rule sees them
 
 
 def test_the_import_graph_sees_lazy_imports(tmp_path):

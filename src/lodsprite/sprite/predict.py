@@ -8,8 +8,6 @@ both sides of it, so the error metric stays under the threshold for longer.
 
 from __future__ import annotations
 
-from scipy.spatial.transform import Rotation
-
 from lodsprite.camera import Viewpoint, rotated_viewpoint, view_rotation
 
 
@@ -19,6 +17,8 @@ def extrapolate(prev: Viewpoint, cur: Viewpoint, steps: float) -> Viewpoint:
     The eye moves on linearly; the orientation keeps turning at the same angular velocity
     (the rotation ``prev -> cur`` raised to the power ``steps``).
     """
+    from scipy.spatial.transform import Rotation  # on first use: a slow import
+
     r_prev, r_cur = view_rotation(prev), view_rotation(cur)
     turn = r_cur * r_prev.inv()
     r_new = Rotation.from_rotvec(turn.as_rotvec() * steps) * r_cur

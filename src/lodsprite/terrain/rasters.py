@@ -16,7 +16,6 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy import ndimage
 
 from lodsprite.errors import TerrainError
 from lodsprite.terrain.heightfield import HeightField
@@ -88,6 +87,8 @@ def _fill_holes(h: np.ndarray, valid: np.ndarray, name: str) -> float:
     if fraction > MAX_NODATA_FRACTION:
         raise TerrainError(f"{name}: {fraction:.0%} of samples are nodata (at most "
                            f"{MAX_NODATA_FRACTION:.0%} can be filled)")
+    from scipy import ndimage  # on first use: a slow import, which the CLI skips
+
     nearest = ndimage.distance_transform_edt(bad, return_distances=False, return_indices=True)
     h[bad] = h[tuple(idx[bad] for idx in nearest)]
     for _ in range(_HOLE_SMOOTHING_ITERATIONS):   # averages of valid range: no spikes
