@@ -15,7 +15,7 @@ border's vertical plane; consecutive samples make a quad.  Textured from a
 keyframe, a ribbon carries the keyframe's picture of the real outline: terrain
 where the full profile stands out beyond the coarse line, the keyframe's sky where
 the coarse surface stands out beyond the full one.  The profile is first simplified
-(Douglas-Peucker, :mod:`.simplify`) within each coarse segment, so every coarse vertex
+(Douglas-Peucker, scikit-image) within each coarse segment, so every coarse vertex
 stays and the ribbon meets the coarse surface exactly.
 
 All arrays are world metres (x east, y north, z up) and terrain texture
@@ -31,7 +31,6 @@ import numpy as np
 from lodsprite.errors import InputError
 from lodsprite.terrain.heightfield import HeightField
 from lodsprite.terrain.lod import level_indices, level_step
-from lodsprite.terrain.simplify import approximate_polygon
 
 DEFAULT_TOLERANCE = 0.25  # Douglas-Peucker tolerance, in grid spacings
 
@@ -86,7 +85,7 @@ def _kept_samples(full: np.ndarray, step: int, spacing: float, tol: float) -> np
     keep = [np.arange(0, len(full), step)]
     for a in range(0, len(full) - 1, step):
         pts = np.stack([np.arange(step + 1) * spacing, full[a:a + step + 1]], axis=1)
-        keep.append(a + np.rint(approximate_polygon(pts, tol)[:, 0] / spacing).astype(np.intp))
+        keep.append(a + np.rint(_approximate_polygon(pts, tol)[:, 0] / spacing).astype(np.intp))
     return np.unique(np.concatenate(keep))
 
 
@@ -141,3 +140,11 @@ def proxy_mesh(hf: HeightField, level_quads: int, border: bool = True,
                      np.concatenate([level.tris, rib.tris + len(level.positions)]).astype(
                          np.uint32), level.level_triangles)
 
+
+def _approximate_polygon(points: np.ndarray, tolerance: float) -> np.ndarray:
+    """scikit-image's Douglas-Peucker ``approximate_polygon``, imported on first use:
+    ``skimage.measure`` pulls in ``scipy.signal`` and ``scipy.stats`` (0.7 s at every
+    process start that imports the GL terrain code, the CLI's included)."""
+    from skimage.measure import approximate_polygon
+
+    return approximate_polygon(points, tolerance)
