@@ -202,7 +202,8 @@ def _render_scene(scene: str | None, out_dir: Path, size: tuple[int, int] | None
     from lodsprite.layered.technique import render_scene
 
     if scene is None:
-        raise InputError("--target-fps is for --scene SCENE.toml")
+        raise InputError("--target-fps is for --scene: a scene file (its frame budget) or "
+                         "a crowd (its LOD feedback)")
     terrain = techniques.get(mode).options if mode else techniques.all_options(("terrain",))
     takes = {o.name for o in techniques.get("scene").options} | {
         o if isinstance(o, str) else o.name for o in terrain}
