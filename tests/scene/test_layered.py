@@ -551,3 +551,22 @@ def test_the_terrain_coverage_pools_its_heights_in_the_warm_up_not_in_a_frame(
         finally:
             t.release()
     assert calls == ["warm-up"]
+
+
+def test_render_scene_saves_frames_and_strides_quality_as_render_does(tmp_path):
+    """``render --scene FILE`` takes the batch driver's measurement options too: saved
+    PNG frames and a quality stride (before, only --ground-truth and --flip reached it)."""
+    import csv
+
+    from conftest import run_cli
+
+    scene = scene_file(tmp_path, VIEW)
+    out = tmp_path / "run"
+    r = run_cli("render", "--scene", str(scene), "--mode", "lod", "--frames", "4",
+                "--ground-truth", "--quality-stride", "2", "--save-frames", "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    assert sorted(p.name for p in (out / "frames").iterdir()) == [
+        f"frame_{i:05d}.png" for i in range(4)]
+    with open(out / "frames.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert [bool(row["rmse"]) for row in rows] == [True, False, True, False]

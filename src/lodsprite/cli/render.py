@@ -150,7 +150,9 @@ def render(
         return
     if scene is not None or target_fps is not None:
         _render_scene(scene, out_dir, None if size is None else parse_size(size), frames,
-                      mode, target_fps, ground_truth, flip, path, **options)
+                      mode, target_fps, ground_truth, flip, path,
+                      Measure(ground_truth, quality_stride, flip, save_frames, video=video),
+                      **options)
         return
 
     mode, path = mode or "full", path or "chen1999"
@@ -194,7 +196,7 @@ def _render_spec(scene: str, out_dir: Path, mode: str | None, path: str | None,
 def _render_scene(scene: str | None, out_dir: Path, size: tuple[int, int] | None,
                   frames: int | None, mode: str | None, target_fps: float | None,
                   ground_truth: bool, flip: bool, path: str | None = None,
-                  **options) -> None:
+                  measure=None, **options) -> None:
     """``render --scene``: the layered technique over a scene file's world (``options``:
     the scene technique's and its terrain technique's)."""
     from lodsprite import techniques
@@ -209,7 +211,7 @@ def _render_scene(scene: str | None, out_dir: Path, size: tuple[int, int] | None
         o if isinstance(o, str) else o.name for o in terrain}
     with progress_bar("render scene") as update:
         s = render_scene(scene, out_dir, size, frames, mode, target_fps, ground_truth,
-                         flip, path, progress=update,
+                         flip, path, progress=update, measure=measure,
                          **{k: v for k, v in options.items() if k in takes})
     shares = ", ".join(f"{k[6:]} {v:.0%}" for k, v in s.items() if k.startswith("share_"))
     out.print(f"{s['frames']} frames of {scene}: median {s['median_ms']:.1f} ms, p99 "

@@ -294,14 +294,16 @@ def render_scene(scene_file: str | os.PathLike, out_dir: str | os.PathLike,
                  terrain_mode: str | None = None,
                  target_fps: float | None = None, ground_truth: bool = False,
                  flip: bool = False, path: str | None = None, progress=None,
-                 **options: Any) -> dict[str, Any]:
+                 measure=None, **options: Any) -> dict[str, Any]:
     """Run the ``scene`` technique over the world of ``scene_file`` along its ``[view]``
     path (or ``path``) and write the run to ``out_dir``; returns the summary.
     ``terrain_mode`` left None is the file's ``[terrain] mode`` (else ``adaptive``), and
     the file's ``[terrain.options]`` go to it under the ``options`` given here.
     ``target_fps`` runs the budget's scheduler (none without).  ``size`` and
     ``target_fps`` left None are the file's ``[view]`` values (else 512x512 and none); its
-    ``fov`` replaces the path's."""
+    ``fov`` replaces the path's.  ``measure`` (a :class:`~lodsprite.driver.Measure`):
+    what else the run measures and keeps (saved frames, a video, a quality stride), in
+    place of ``ground_truth`` and ``flip``."""
     from lodsprite import techniques
     from lodsprite.driver import Measure
     from lodsprite.run import run_scene
@@ -324,7 +326,8 @@ def render_scene(scene_file: str | os.PathLike, out_dir: str | os.PathLike,
          "target_fps": target_fps,
          "terrain_options": {k: v for k, v in options.items() if k not in own},
          **{k: v for k, v in options.items() if k in own}},
-        cam, size, Path(out_dir), Measure(ground_truth, flip=flip), progress=progress,
+        cam, size, Path(out_dir), measure or Measure(ground_truth, flip=flip),
+        progress=progress,
         summary={"mode": "scene", "scene": str(scene_file), "terrain": scene.terrain_spec,
                  "path": path or view.path, "size": list(size)})
     return result.summary
