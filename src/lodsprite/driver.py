@@ -17,7 +17,7 @@ context), which is why it lives apart from :mod:`lodsprite.run`.
 from __future__ import annotations
 
 from collections.abc import Callable, Collection, Mapping
-from contextlib import ExitStack
+from contextlib import AbstractContextManager, ExitStack
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -97,6 +97,22 @@ def _image_sink(measure: Measure, n: int, out_dir: Path | None, stack: ExitStack
     return on_image, sorted(set(saved) | keep)
 
 
+def technique_reference(technique: Technique, path: CameraPath
+                        ) -> AbstractContextManager[Callable]:
+    """The ground truth of ``technique``'s run along ``path``: its own
+    :meth:`~lodsprite.techniques.Technique.reference`, else the scene's terrain at full
+    resolution coloured by its :attr:`~lodsprite.techniques.Technique.shading`
+    (:func:`~lodsprite.harness.scene_reference`); a technique with neither (its scene has
+    no terrain) is an :class:`~lodsprite.errors.InputError`, before anything runs."""
+    own = technique.reference(path)
+    if own is not None:
+        return own
+    if technique.renderer.scene.hf is None:
+        raise InputError(f"{technique.name} gives no ground truth to compare with "
+                         f"(its scene has no terrain, and it names no reference)")
+    return scene_reference(technique.renderer, technique.shading)
+
+
 def drive(technique: Technique, path: CameraPath, out_dir: Path | None = None,
           measure: Measure = Measure(), *, reference: Callable | None = None,
           progress: Progress | None = None, summary: Mapping[str, Any] | None = None,
@@ -119,13 +135,7 @@ def drive(technique: Technique, path: CameraPath, out_dir: Path | None = None,
     images: dict[int, np.ndarray] = {}
     with ExitStack() as stack:
         if measure.ground_truth and reference is None:
-            own = technique.reference(path)
-            if own is None and technique.renderer.scene.hf is None:
-                raise InputError(f"{technique.name} gives no ground truth to compare with "
-                                 f"(its scene has no terrain, and it names no reference)")
-            reference = stack.enter_context(
-                own if own is not None else scene_reference(technique.renderer,
-                                                            technique.shading))
+            reference = stack.enter_context(technique_reference(technique, path))
         if on_image is None:
             on_image, image_frames = _image_sink(
                 measure, len(path.viewpoints), None if out_dir is None else Path(out_dir),
@@ -144,4 +154,4 @@ def drive(technique: Technique, path: CameraPath, out_dir: Path | None = None,
     return result
 
 
-__all__ = ["Measure", "drive"]
+__all__ = ["Measure", "drive", "technique_reference"]

@@ -196,7 +196,8 @@ def replay_frames(technique: Technique, drawn: Sequence[Viewpoint],
     (the viewpoint it was drawn for) and, every ``stride``-th frame, compared with the
     reference at ``judged[i]`` (the viewpoint it is judged at: the same, or, in a run
     played in time, the viewpoint of its display time); its quality columns go into
-    ``rows[i]``."""
+    ``rows[i]``.  A technique's baselines (:meth:`~lodsprite.techniques.Technique.
+    quality_extra`) are drawn at ``drawn[i]`` too, so that they carry the same latency."""
     for i, (vp, at, d) in enumerate(zip(drawn, judged, decisions, strict=True)):
         measured = reference is not None and i % stride == 0
         shown = on_image is not None and (image_frames is None or i in image_frames)
@@ -207,7 +208,7 @@ def replay_frames(technique: Technique, drawn: Sequence[Viewpoint],
         if measured:
             truth = reference(at)
             rows[i].update(_quality(image, truth, flip))
-            rows[i].update(technique.quality_extra(at, d, truth))
+            rows[i].update(technique.quality_extra(vp, d, truth))
         if shown:
             on_image(i, image, truth)
 

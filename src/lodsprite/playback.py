@@ -15,25 +15,27 @@ at the viewpoint of ``shown_s[k]``.
 
 Every technique runs the same: the same untimed warm-up at the path's first viewpoint,
 the same clock (``ctx.finish()`` before it stops), nothing read back inside the played
-loop.  The rows get ``start_s``, ``shown_s`` and ``latency_ms`` (``shown_s - start_s``);
-the summary ``played_s``, ``path_fps``, ``display_rate``, ``display_fps`` (frames shown a
-second) and ``latency_ms_mean``.
+loop.  A frame's ``ms`` is the technique's alone; the rows get ``start_s`` (the path's time
+it drew), ``shown_s`` and ``latency_ms`` (``shown_s - start_s``); the summary
+``played_s``, ``path_fps``, ``display_rate``, ``display_fps`` (frames shown a second),
+``latency_ms_mean`` and ``truncated`` (stopped by the frame cap before the path's end).
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from contextlib import ExitStack
 from dataclasses import replace
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from lodsprite.driver import technique_reference
 from lodsprite.errors import InputError
 from lodsprite.harness import (
     Reference,
     RunResult,
-    full_resolution,
     quality_columns,
     quality_summary,
     replay_frames,
@@ -41,6 +43,10 @@ from lodsprite.harness import (
 )
 from lodsprite.paths.core import NOMINAL_FPS
 from lodsprite.record import Frame, frame_rows, frames_summary
+
+#: The default cap on a played run's frames, per frame of the path (a display 16 times
+#: faster than the path's frame rate: 480 frames a second at 30).
+FRAMES_PER_PATH_FRAME = 16
 
 if TYPE_CHECKING:
     from lodsprite.camera import Viewpoint
@@ -52,9 +58,12 @@ if TYPE_CHECKING:
 def _played(technique: Technique, path: CameraPath, finish: Callable[[], None], fps: float,
             rate: float | None, progress: Progress | None, max_frames: int
             ) -> tuple[list[Frame], list[dict], list[Viewpoint], np.ndarray, np.ndarray]:
-    """The played loop: frames, decisions, the viewpoints drawn, their start and display
-    times (seconds from the first frame's start); at most ``max_frames`` frames."""
+    """The played loop: frames, decisions, the viewpoints drawn, their times (the path's
+    time each frame drew) and display times (seconds from the first frame's start); at
+    most ``max_frames`` frames.  A frame's ``ms`` is the technique's alone (its
+    ``frame()`` and ``ctx.finish()``), not the viewpoint's interpolation."""
     duration = path.duration_s(fps)
+    at = path.sampler()
     frames, decisions, drawn, starts, shown = [], [], [], [], []
     period = None if rate is None else 1.0 / rate
     t0 = time.perf_counter()
@@ -62,17 +71,18 @@ def _played(technique: Technique, path: CameraPath, finish: Callable[[], None], 
         start = time.perf_counter() - t0
         if start > duration or len(frames) == max_frames:
             break
-        vp = path.at_time(start, fps)
+        vp = at(start * fps)[0]
+        begin = time.perf_counter()
         f = technique.frame(vp)
         finish()
-        end = time.perf_counter() - t0
-        frames.append(replace(f, ms=(end - start) * 1e3))
+        done = time.perf_counter()
+        frames.append(replace(f, ms=(done - begin) * 1e3))
         decisions.append(technique.decision())
         drawn.append(vp)
         starts.append(start)
-        shown.append(end)
+        shown.append(done - t0)
         if progress:
-            progress(min(round(end / duration * len(path)), len(path)), len(path))
+            progress(min(round((done - t0) / duration * len(path)), len(path)), len(path))
         if period is not None:  # a display rate: the next frame starts on its slot
             wait = (len(frames) * period) - (time.perf_counter() - t0)
             if wait > 0:
@@ -89,11 +99,15 @@ def run_played(technique: Technique, path: CameraPath, *, fps: float = NOMINAL_F
     """Play ``path`` in time with ``technique`` (module doc): its frames at ``fps`` frames
     a second of path, drawn as often as the technique can, or at most ``rate`` frames a
     second; with ``ground_truth`` each ``quality_stride``-th displayed frame compared, in
-    the untimed replay, with ``reference`` (default: the renderer's full resolution) at
-    its display time's viewpoint.  ``max_frames`` (default four a path frame) caps the
-    frames drawn: the replay's plan (:meth:`~lodsprite.techniques.Technique.plan_replay`)
-    is made before the run for every frame that may come.  Returns the frames, rows and
-    summary (not written)."""
+    the untimed replay, with ``reference`` (default: the technique's
+    :meth:`~lodsprite.techniques.Technique.reference`, else the scene's terrain at full
+    resolution) at its display time's viewpoint.  ``max_frames`` (default
+    :data:`FRAMES_PER_PATH_FRAME` a path frame) caps the frames drawn, because the
+    replay's plan (:meth:`~lodsprite.techniques.Technique.plan_replay`) is made before the
+    run for every frame that may come; a run stopped by it before the path's end says
+    ``truncated`` in its summary.  A technique whose frames follow the frame count rather
+    than the time (:attr:`~lodsprite.techniques.Technique.plays_in_time` False) is
+    refused.  Returns the frames, rows and summary (not written)."""
     if not fps > 0:
         raise InputError(f"a path's frame rate must be > 0, got {fps}")
     if rate is not None and not rate > 0:
@@ -102,12 +116,25 @@ def run_played(technique: Technique, path: CameraPath, *, fps: float = NOMINAL_F
         raise InputError(f"quality stride must be >= 1, got {quality_stride}")
     if len(path.viewpoints) < 2:
         raise InputError("a played run needs a path of at least two viewpoints")
+    if not technique.plays_in_time:
+        raise InputError(f"{technique.name} cannot be played in time: its frames follow "
+                         "the frame count, not the clock")
     if ground_truth and not technique.replays:
         raise InputError(f"{technique.name} cannot replay its frames: no ground truth")
+    with ExitStack() as stack:
+        if ground_truth and reference is None:
+            reference = stack.enter_context(technique_reference(technique, path))
+        return _run(technique, path, fps, rate, finish, gl_renderer, progress,
+                    reference if ground_truth else None, quality_stride, flip,
+                    FRAMES_PER_PATH_FRAME * len(path) if max_frames is None
+                    else int(max_frames))
+
+
+def _run(technique, path, fps, rate, finish, gl_renderer, progress, reference,
+         quality_stride, flip, cap) -> RunResult:
     renderer = technique.renderer
     finish = finish or renderer.gl.finish
-    cap = 4 * len(path) if max_frames is None else int(max_frames)
-    technique.plan_replay(set(range(0, cap, quality_stride)) if ground_truth else set())
+    technique.plan_replay(set(range(0, cap, quality_stride)) if reference else set())
     first_ms = warm_up(technique, path.viewpoints[0], finish)
     frames, decisions, drawn, starts, shown = _played(technique, path, finish, fps, rate,
                                                       progress, cap)
@@ -115,20 +142,20 @@ def run_played(technique: Technique, path: CameraPath, *, fps: float = NOMINAL_F
     rows, columns = frame_rows(frames)
     for row, a, b in zip(rows, starts, shown, strict=True):
         row.update(start_s=float(a), shown_s=float(b), latency_ms=float(b - a) * 1e3)
-    columns[columns.index("ms") + 1:columns.index("ms") + 1] = ["start_s", "shown_s",
-                                                                 "latency_ms"]
-    if ground_truth:
+    at = columns.index("ms") + 1
+    columns[at:at] = ["start_s", "shown_s", "latency_ms"]
+    if reference is not None:
         judged = path.between(shown * fps)
-        replay_frames(technique, drawn, judged, decisions, rows,
-                      reference or full_resolution(renderer), quality_stride, flip, None,
-                      None)
+        replay_frames(technique, drawn, judged, decisions, rows, reference, quality_stride,
+                      flip, None, None)
         columns += [c for c in quality_columns(rows) if c not in columns]
     summary = {**frames_summary(frames, technique.name, gl_renderer or (
         renderer.info.renderer if renderer else ""), first_ms), **own,
         **quality_summary(rows), "played_s": float(shown[-1]), "path_fps": float(fps),
         "display_rate": rate, "display_fps": len(frames) / float(shown[-1]),
-        "latency_ms_mean": float(np.mean(shown - starts) * 1e3)}
+        "latency_ms_mean": float(np.mean(shown - starts) * 1e3),
+        "truncated": bool(len(frames) == cap and shown[-1] < path.duration_s(fps))}
     return RunResult(frames, decisions, rows, columns, summary)
 
 
-__all__ = ["run_played"]
+__all__ = ["FRAMES_PER_PATH_FRAME", "run_played"]

@@ -59,6 +59,8 @@ def run_scene(scene: Scene, mode: str, options: Mapping[str, Any], path: CameraP
     from lodsprite import techniques
     from lodsprite.api import Renderer
 
+    measure = measure or Measure()
+    measure.check()  # before anything is made
     spec = techniques.get(mode)
     missing = set(spec.layers) - set(scene.layers)
     if missing:
@@ -69,7 +71,7 @@ def run_scene(scene: Scene, mode: str, options: Mapping[str, Any], path: CameraP
     with Renderer(scene, size, fov) as renderer:
         technique = spec.create(renderer, **options)
         try:
-            result = drive(technique, path, out_dir, measure or Measure(), progress=progress,
+            result = drive(technique, path, out_dir, measure, progress=progress,
                            summary={**(summary or {}), "gl_version": renderer.info.version})
         finally:
             technique.release()
@@ -104,6 +106,8 @@ def render_spec(spec: str, out_dir: Path, mode: str | None = None,
     summary."""
     from lodsprite.scene import open_scene
 
+    if measure is not None:
+        measure.check()  # before the scene is opened
     scene = open_scene(spec, light=True, **(options or {}))
     technique = technique_for(scene, mode)
     mine = {o.name for o in technique.options}

@@ -70,6 +70,8 @@ ACTIVE = 300
 class LayeredTechnique(Technique):
     """A scene's layers in one frame (module doc); ``scene`` default: the renderer's."""
 
+    plays_in_time = False  # the world advances one frame_s a frame, whatever the clock
+
     name = "scene"
 
     def __init__(self, renderer: Renderer, scene: Scene | None = None,

@@ -46,6 +46,7 @@ from __future__ import annotations
 import json
 import math
 import os
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -125,27 +126,36 @@ class CameraPath:
         """Viewpoints at fractional frame indices ``u`` (``(k,) float64`` in ``[0, N-1]``):
         the eye interpolated linearly between frames ``floor(u)`` and ``ceil(u)``, the
         orientation by quaternion slerp; an index on a frame gives that frame itself."""
+        return self.sampler()(u)
+
+    def sampler(self) -> Callable[[np.ndarray], list[Viewpoint]]:
+        """:meth:`between` with the path's eyes, rotations and slerp made once: a callable
+        ``u -> viewpoints`` for many calls (a played run asks one per frame)."""
         count = len(self)
-        u = np.clip(np.asarray(u, dtype=np.float64).reshape(-1), 0.0, count - 1.0)
         if count == 1:
-            return [self.viewpoints[0]] * len(u)
-        i0 = np.minimum(np.floor(u).astype(np.intp), count - 2)
-        w = u - i0
+            return lambda u: [self.viewpoints[0]] * np.asarray(u).reshape(-1).size
         eyes = self.eyes()
-        rots = view_rotation(self.axes())
         from scipy.spatial.transform import Slerp  # on first use: a slow import
 
-        rotations = Slerp(np.arange(count, dtype=np.float64), rots)(u)
-        pos = eyes[i0] * (1.0 - w)[:, None] + eyes[i0 + 1] * w[:, None]
-        out = []
-        for j in range(len(u)):
-            if w[j] == 0.0:
-                out.append(self.viewpoints[i0[j]])
-            elif w[j] == 1.0:
-                out.append(self.viewpoints[i0[j] + 1])
-            else:
-                out.append(rotated_viewpoint(rotations[j], pos[j]))
-        return out
+        slerp = Slerp(np.arange(count, dtype=np.float64), view_rotation(self.axes()))
+
+        def at(u) -> list[Viewpoint]:
+            u = np.clip(np.asarray(u, dtype=np.float64).reshape(-1), 0.0, count - 1.0)
+            i0 = np.minimum(np.floor(u).astype(np.intp), count - 2)
+            w = u - i0
+            rotations = slerp(u)
+            pos = eyes[i0] * (1.0 - w)[:, None] + eyes[i0 + 1] * w[:, None]
+            out = []
+            for j in range(len(u)):
+                if w[j] == 0.0:
+                    out.append(self.viewpoints[i0[j]])
+                elif w[j] == 1.0:
+                    out.append(self.viewpoints[i0[j] + 1])
+                else:
+                    out.append(rotated_viewpoint(rotations[j], pos[j]))
+            return out
+
+        return at
 
     def duration_s(self, fps: float = NOMINAL_FPS) -> float:
         """Seconds the path lasts played at ``fps`` frames a second (its nominal speed):

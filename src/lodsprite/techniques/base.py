@@ -84,6 +84,10 @@ class Technique:
     #: Whether :meth:`replay` can draw recorded frames again (False: the harness refuses
     #: quality, saved frames and video for this technique).
     replays = True
+    #: Whether a run played in time (:func:`lodsprite.playback.run_played`) can judge it:
+    #: False where a frame depends on the frame count, not on the viewpoint and clock
+    #: (the ``scene`` technique's world advances one step a frame).
+    plays_in_time = True
 
     def __init__(self, renderer: Renderer) -> None:
         self.renderer = renderer
