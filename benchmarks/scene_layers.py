@@ -50,7 +50,7 @@ def run(scene_file: Path, holds: str, frames: int, size: int, epsilon: float) ->
     cam = world.path(world.default_path, frames)
     with Renderer(world, (size, size), cam.fov_y_deg) as r:
         t = techniques.create("scene", r, world=world, terrain_mode="sprite",
-                              keyframes=holds, epsilon=epsilon)
+                              keyframe_holds=holds, epsilon=epsilon)
         image, ref = reference(r, world, cam, t.frame_s)
         try:
             res = run_path(t, cam, ground_truth=True, reference=image)

@@ -103,3 +103,35 @@ def test_what_a_scene_cannot_do_is_one_line_and_exit_code_2(tmp_path, args, frag
     assert r.returncode == 2, r.stderr
     assert fragment in r.stderr and len(r.stderr.strip().splitlines()) == 1
     assert not out.exists()  # nothing half-written
+
+
+def test_render_with_worker_keyframes_plays_the_path_in_time(tmp_path):
+    """``--keyframes worker``: keyframes from the worker process while the path plays in
+    time, at the display rate asked; every frame judged at its display time, with the
+    played run's columns."""
+    out = tmp_path / "w"
+    r = run_cli("render", "--terrain", "fractal:64:3", "--grid", "64", "--mode", "sprite",
+                "--keyframes", "worker", "--display-fps", "40", "--frames", "12",
+                "--size", SIZE, "--ground-truth", "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    s = json.loads((out / "summary.json").read_text())
+    got = rows(out)
+    shown = np.array([float(x["shown_s"]) for x in got])
+    start = np.array([float(x["start_s"]) for x in got])
+    assert (start >= np.arange(len(got)) / 40.0 - 1e-3).all()   # never before its slot
+    assert (shown >= start).all() and s["display_rate"] == 40.0
+    assert all(x["rmse"] for x in got) and s["truncated"] is False
+    shown_keys = {int(x["keyframe"]) for x in got}
+    assert len(json.loads((out / "keyframes.json").read_text())["keyframes"]) > max(shown_keys)
+
+
+@pytest.mark.parametrize("args, fragment", [
+    (["--keyframes", "worker", "--tiles", "2"], "whole keyframes"),
+    (["--keyframes", "worker", "--save-frames"], "keeps no images"),
+    (["--display-fps", "30"], "--display-fps goes with --keyframes worker"),
+])
+def test_worker_keyframes_refuse_what_a_played_run_cannot_do(tmp_path, args, fragment):
+    r = run_cli("render", "--mode", "sprite", *args, "--frames", "3", "--size", SIZE,
+                "--out", str(tmp_path / "bad"))
+    assert r.returncode == 2 and fragment in r.stderr, r.stderr
+    assert not (tmp_path / "bad").exists()

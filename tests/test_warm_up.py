@@ -10,7 +10,7 @@ import pytest
 from lodsprite import Renderer, get_path, load_scene, techniques
 
 TERRAIN = [("full", {}), ("lod", {"lod": 8}), ("sprite", {"lod": 8}),
-           ("sprite", {"lod": 8, "tiles": 2}), ("sprite", {"lod": 8, "threaded": True}),
+           ("sprite", {"lod": 8, "tiles": 2}), ("sprite", {"lod": 8, "keyframes": "worker"}),
            ("adaptive", {}), ("sprite-adaptive", {"lod": 8}),
            ("sprite-adaptive", {"lod": 8, "proxy_sse": 8.0}),
            ("sprite-adaptive", {"lod": 8, "tiles": 2})]

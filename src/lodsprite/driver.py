@@ -17,7 +17,7 @@ context), which is why it lives apart from :mod:`lodsprite.run`.
 from __future__ import annotations
 
 from collections.abc import Callable, Collection, Mapping
-from contextlib import AbstractContextManager, ExitStack
+from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -26,7 +26,13 @@ import numpy as np
 
 from lodsprite.errors import InputError
 from lodsprite.files import write_json, write_png
-from lodsprite.harness import ImageCallback, RunResult, run_path, scene_reference, write_run
+from lodsprite.harness import (
+    ImageCallback,
+    RunResult,
+    run_path,
+    technique_reference,
+    write_run,
+)
 
 if TYPE_CHECKING:
     from lodsprite.paths import CameraPath
@@ -43,7 +49,10 @@ class Measure:
     ``quality_stride``-th frame of the untimed replay; ``save_frames``: PNG frames
     (``frames/frame_NNNNN.png``, every ``save_every``-th); ``video``: an MP4 of the frames
     shown (with ``ground_truth``: reference | technique | difference); ``keep``: frames
-    whose images come back in :attr:`RunResult.images`."""
+    whose images come back in :attr:`RunResult.images`; ``played``: the path played in
+    time (:func:`lodsprite.playback.run_played`: frames as often as the technique draws
+    them, or at ``display_rate`` a second, each judged at its display time's viewpoint)
+    instead of frame after frame."""
 
     ground_truth: bool = False
     quality_stride: int = 1
@@ -52,18 +61,24 @@ class Measure:
     save_every: int = 1
     video: Path | None = None
     keep: tuple[int, ...] = ()
+    played: bool = False
+    display_rate: float | None = None
 
     @classmethod
     def of(cls, config: RenderConfig, video: Path | None = None) -> Measure:
         """The measurement a :class:`RenderConfig` asks for."""
         return cls(config.ground_truth, config.quality_stride, config.flip,
-                   config.save_frames, config.save_every, video)
+                   config.save_frames, config.save_every, video, played=config.played,
+                   display_rate=config.display_fps)
 
     def check(self) -> None:
         if self.quality_stride < 1:
             raise InputError(f"quality stride must be >= 1, got {self.quality_stride}")
         if self.save_every < 1:
             raise InputError(f"save_every must be >= 1, got {self.save_every}")
+        if self.played and (self.save_frames or self.video is not None or self.keep):
+            raise InputError("a run played in time keeps no images yet: no saved frames, "
+                             "video or kept frames")
 
 
 def _image_sink(measure: Measure, n: int, out_dir: Path | None, stack: ExitStack,
@@ -97,22 +112,6 @@ def _image_sink(measure: Measure, n: int, out_dir: Path | None, stack: ExitStack
     return on_image, sorted(set(saved) | keep)
 
 
-def technique_reference(technique: Technique, path: CameraPath
-                        ) -> AbstractContextManager[Callable]:
-    """The ground truth of ``technique``'s run along ``path``: its own
-    :meth:`~lodsprite.techniques.Technique.reference`, else the scene's terrain at full
-    resolution coloured by its :attr:`~lodsprite.techniques.Technique.shading`
-    (:func:`~lodsprite.harness.scene_reference`); a technique with neither (its scene has
-    no terrain) is an :class:`~lodsprite.errors.InputError`, before anything runs."""
-    own = technique.reference(path)
-    if own is not None:
-        return own
-    if technique.renderer.scene.hf is None:
-        raise InputError(f"{technique.name} gives no ground truth to compare with "
-                         f"(its scene has no terrain, and it names no reference)")
-    return scene_reference(technique.renderer, technique.shading)
-
-
 def drive(technique: Technique, path: CameraPath, out_dir: Path | None = None,
           measure: Measure = Measure(), *, reference: Callable | None = None,
           progress: Progress | None = None, summary: Mapping[str, Any] | None = None,
@@ -136,14 +135,24 @@ def drive(technique: Technique, path: CameraPath, out_dir: Path | None = None,
     with ExitStack() as stack:
         if measure.ground_truth and reference is None:
             reference = stack.enter_context(technique_reference(technique, path))
-        if on_image is None:
-            on_image, image_frames = _image_sink(
-                measure, len(path.viewpoints), None if out_dir is None else Path(out_dir),
-                stack, reference, images, path)
-        result = run_path(technique, path, finish=finish, gl_renderer=gl_renderer,
-                          progress=progress, ground_truth=measure.ground_truth,
-                          reference=reference, quality_stride=measure.quality_stride,
-                          flip=measure.flip, on_image=on_image, image_frames=image_frames)
+        if measure.played:
+            from lodsprite.playback import run_played
+
+            result = run_played(technique, path, rate=measure.display_rate, finish=finish,
+                                gl_renderer=gl_renderer, progress=progress,
+                                ground_truth=measure.ground_truth, reference=reference,
+                                quality_stride=measure.quality_stride, flip=measure.flip)
+        else:
+            if on_image is None:
+                on_image, image_frames = _image_sink(
+                    measure, len(path.viewpoints),
+                    None if out_dir is None else Path(out_dir), stack, reference, images,
+                    path)
+            result = run_path(technique, path, finish=finish, gl_renderer=gl_renderer,
+                              progress=progress, ground_truth=measure.ground_truth,
+                              reference=reference, quality_stride=measure.quality_stride,
+                              flip=measure.flip, on_image=on_image,
+                              image_frames=image_frames)
     files = technique.outputs(result, path)
     result.summary.update(summary or {})
     result.images = images
@@ -154,4 +163,4 @@ def drive(technique: Technique, path: CameraPath, out_dir: Path | None = None,
     return result
 
 
-__all__ = ["Measure", "drive", "technique_reference"]
+__all__ = ["Measure", "drive"]

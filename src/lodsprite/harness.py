@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Collection, Iterator, Sequence
-from contextlib import contextmanager
+from contextlib import AbstractContextManager, contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -121,6 +121,22 @@ def scene_reference(renderer, shading: str = "auto") -> Iterator[Reference]:
         yield ref.image
     finally:
         ref.release()
+
+
+def technique_reference(technique: Technique, path: CameraPath
+                        ) -> AbstractContextManager[Callable]:
+    """The ground truth of ``technique``'s run along ``path``: its own
+    :meth:`~lodsprite.techniques.Technique.reference`, else the scene's terrain at full
+    resolution coloured by its :attr:`~lodsprite.techniques.Technique.shading`
+    (:func:`scene_reference`); a technique with neither (its scene has
+    no terrain) is an :class:`~lodsprite.errors.InputError`, before anything runs."""
+    own = technique.reference(path)
+    if own is not None:
+        return own
+    if technique.renderer.scene.hf is None:
+        raise InputError(f"{technique.name} gives no ground truth to compare with "
+                         f"(its scene has no terrain, and it names no reference)")
+    return scene_reference(technique.renderer, technique.shading)
 
 
 def quality_summary(rows: list[dict]) -> dict[str, float]:
@@ -277,5 +293,5 @@ def write_run(out_dir: Path, result: RunResult, summary: dict[str, Any] | None =
 
 __all__ = ["CORE_COLUMNS", "CORE_KEYS", "QUALITY_COLUMNS", "Frame", "RunResult", "frame_rows",
            "frames_summary", "full_resolution", "level_zero_reference", "quality_summary",
-           "quality_columns", "replay_frames",
+           "quality_columns", "replay_frames", "technique_reference",
            "run_path", "scene_reference", "timing_summary", "warm_up", "write_run"]

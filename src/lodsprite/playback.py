@@ -31,7 +31,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from lodsprite.driver import technique_reference
 from lodsprite.errors import InputError
 from lodsprite.harness import (
     Reference,
@@ -39,6 +38,7 @@ from lodsprite.harness import (
     quality_columns,
     quality_summary,
     replay_frames,
+    technique_reference,
     warm_up,
 )
 from lodsprite.paths.core import NOMINAL_FPS

@@ -63,6 +63,7 @@ class RenderConfig(TechniqueOptions):
     quality_stride: int = 1
     flip: bool = False        # with ground_truth: FLIP per frame too
     save_every: int = 1       # with save_frames: save every n-th frame of the replay only
+    display_fps: float | None = None  # a run played in time: at most this many frames a s
     options: dict = field(default_factory=dict)
 
     def resolved(self, store: bool | None = None) -> RenderConfig:
@@ -89,9 +90,14 @@ class RenderConfig(TechniqueOptions):
         return "sprite-adaptive" if c.mode == "sprite" and c.options.get("key_sse") else c.mode
 
     def technique_options(self) -> dict:
-        """The options given (terrain defaults filled); keyframes are rendered in the
-        frame that needs them (a timed run)."""
-        return {**self.resolved().options, "threaded": False}
+        """The options given (terrain defaults filled)."""
+        return dict(self.resolved().options)
+
+    @property
+    def played(self) -> bool:
+        """Whether the run plays its path in time (:mod:`lodsprite.playback`): keyframes
+        from a worker process (``keyframes="worker"``) arrive while the camera moves on."""
+        return self.options.get("keyframes") == "worker"
 
     def validate(self) -> None:
         """Raise :class:`InputError` for a bad option (checked with the defaults filled):
@@ -112,10 +118,17 @@ class RenderConfig(TechniqueOptions):
             raise InputError(f"quality stride must be >= 1, got {self.quality_stride}")
         if self.save_every < 1:
             raise InputError(f"save_every must be >= 1, got {self.save_every}")
+        if self.display_fps is not None and not (self.played and self.display_fps > 0):
+            raise InputError("--display-fps goes with --keyframes worker and is > 0, got "
+                             f"{self.display_fps}")
         spec, known = techniques.get(self.technique), techniques.all_options()
         for name, value in self.options.items():
             mine = [o for o in spec.options if o.name == name]
             (mine[0] if mine else known[name]).check(value)
+        if self.played and (self.mode != "sprite" or self.options.get("tiles", 1) > 1
+                            or "key_sse" in self.options):
+            raise InputError("--keyframes worker goes with --mode sprite and whole keyframes "
+                             "(no --tiles, no --key-sse)")
         if "key_sse" in self.options and self.mode != "sprite":
             raise InputError("--key-sse goes with --mode sprite")
         if self.options.get("tiles", 1) > 1 and self.mode != "sprite":

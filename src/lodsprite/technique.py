@@ -22,6 +22,7 @@ def terrain_techniques(lod: int = 16, epsilon_px: float = 1.0,
                        threaded: bool = True) -> dict[str, TechniqueFactory]:
     """Factories of the basic terrain techniques by mode name: ``full``, ``lod``,
     ``sprite`` (the registry's, :func:`lodsprite.techniques.factories`)."""
-    found = factories(("terrain",), lod=lod, epsilon=epsilon_px, threaded=threaded)
+    found = factories(("terrain",), lod=lod, epsilon=epsilon_px,
+                      keyframes="worker" if threaded else "inline")
     return {k: found[k] for k in ("full", "lod", "sprite")}
 

@@ -48,4 +48,4 @@ def test_tiles_with_threaded_keyframes_is_an_input_error(gl):
     scene = load_scene("fractal:64:3", grid=64)
     with Renderer(scene, (SIZE, SIZE), ctx=gl.mgl) as renderer, \
             pytest.raises(InputError, match="--tiles"):
-        techniques.create("sprite", renderer, lod=8, tiles=2, threaded=True)
+        techniques.create("sprite", renderer, lod=8, tiles=2, keyframes="worker")

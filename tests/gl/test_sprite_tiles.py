@@ -167,7 +167,7 @@ def test_the_viewer_flies_tiled_lod_sprite(gl):
     from lodsprite.viewer.core import ViewerCore
 
     scene = open_scene("fractal:128:3", grid=128)
-    modes = techniques.factories(scene.layers, ("distributed",), lod=16, threaded=False,
+    modes = techniques.factories(scene.layers, ("distributed",), lod=16, keyframes="inline",
                                  tiles=3, tile_budget_ms=4.0)
     core = ViewerCore(gl.mgl, scene, (64, 64), modes, "sprite",
                       CameraController.from_home(scene.camera_home()))

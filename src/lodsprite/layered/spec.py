@@ -19,8 +19,8 @@ OPTIONS = (
            choices=("none", "scheduler", "independent")),
     Option("target_fps", float, None, "scene: the frame-rate target of the budget", min=0,
            above=True, unit="fps", none="none (no budget)"),
-    Option("keyframes", str, "static", "scene, LOD-sprite: keyframes hold the static layers "
-           "(static) or the terrain only (terrain)", choices=("static", "terrain")),
+    Option("keyframe_holds", str, "static", "scene, LOD-sprite: keyframes hold the static "
+           "layers (static) or the terrain only (terrain)", choices=("static", "terrain")),
     Option("exponent", float, 1.0, "scene: the objects' LOD exponent (0: full meshes)",
            min=0),
     Option("nodes", int, 8, "scene: the light fields' node budget", min=1),

@@ -15,7 +15,7 @@ renderer's one framebuffer and depth buffer:
 It draws the layers the scene has (:class:`~lodsprite.scene.Scene`: the renderer's, or
 the one given): a crowd alone is drawn on its own ground through its own projection.
 
-What LOD-sprite's keyframes hold (``keyframes``): ``static`` (the default) renders the
+What LOD-sprite's keyframes hold (``keyframe_holds``): ``static`` (the default) renders the
 static objects (``walk_mps = 0``) into every keyframe after its terrain, so spriteframes
 warp them with the terrain and a frame draws only the moving objects, depth tested
 against the spriteframe's (the proxy's) depth; ``terrain`` keeps keyframes terrain only
@@ -76,7 +76,7 @@ class LayeredTechnique(Technique):
 
     def __init__(self, renderer: Renderer, scene: Scene | None = None,
                  terrain_mode: str = "adaptive", schedule: str = "none",
-                 target_fps: float | None = None, keyframes: str = "static",
+                 target_fps: float | None = None, keyframe_holds: str = "static",
                  exponent: float = 1.0, nodes: int = 8, ground_truth: bool = False,
                  frame_s: float = FRAME_S, active: int | None = ACTIVE,
                  **terrain_options: Any) -> None:
@@ -85,8 +85,8 @@ class LayeredTechnique(Technique):
         from lodsprite.layered.objects import ObjectsLayer
         from lodsprite.scene.budget import LayerBudget
 
-        if keyframes not in KEYFRAME_HOLDS:
-            raise InputError(f"unknown keyframes {keyframes!r}: use one of "
+        if keyframe_holds not in KEYFRAME_HOLDS:
+            raise InputError(f"unknown keyframe_holds {keyframe_holds!r}: use one of "
                              f"{', '.join(KEYFRAME_HOLDS)}")
         if ground_truth:
             terrain_mode, exponent, schedule = "full", 0.0, "none"
@@ -95,7 +95,7 @@ class LayeredTechnique(Technique):
         if scene.hf is None and scene.objects is None:
             raise InputError("the scene technique draws terrain and objects: this scene "
                              "has neither (a light field alone: a lumigraph technique)")
-        self.scene, self.frame_s, self.keyframes = scene, float(frame_s), keyframes
+        self.scene, self.frame_s, self.keyframe_holds = scene, float(frame_s), keyframe_holds
         self.count = 0 if scene.objects is None else len(scene.objects)
         self.budget = LayerBudget(schedule, None if target_fps is None else 1e3 / target_fps)
         self.layers: list[Layer] = []
@@ -122,7 +122,7 @@ class LayeredTechnique(Technique):
             raise
         if not self.layers:
             raise InputError("the scene has nothing to draw (no terrain, no objects)")
-        self.static_in_keyframes = (keyframes == "static" and self.objects is not None
+        self.static_in_keyframes = (keyframe_holds == "static" and self.objects is not None
                                     and self.terrain is not None
                                     and self.terrain.keyframe_hook(self.objects.draw_static))
         if self.static_in_keyframes:

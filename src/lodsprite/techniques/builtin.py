@@ -35,9 +35,11 @@ CACHE_POLICY = Option("cache_policy", str, "lru", "LOD-sprite: keyframe cache re
 METRIC = Option("metric", str, None, "LOD-sprite: the keyframe error metric: warp (Chen et "
                 "al. Eq. 1-2) or resample (adds the keyframe image's resampling error)",
                 choices=("warp", "resample"), none=_TERRAIN)
-THREADED = Option("threaded", bool, False, "render keyframes in a worker process (the "
-                  "window's default; view --inline-keyframes turns it off)",
-                  command_line=False)
+KEYFRAMES = Option("keyframes", str, "inline", "LOD-sprite: where keyframes are rendered: "
+                   "in the frame that needs them (inline, the 1999 algorithm) or by a worker "
+                   "process beside the display (worker: render plays the path in time; the "
+                   "window's default)",
+                   choices=("inline", "worker"))
 TILES = Option("tiles", int, None, "LOD-sprite: refresh keyframes tile by tile on an N x N "
                "grid of screen tiles (1: whole keyframes)", min=1, max=4, none=_TERRAIN)
 TILE_BUDGET = Option("tile_budget_ms", float, None, "LOD-sprite with tiles > 1: tile work "
@@ -60,7 +62,7 @@ SHADING = Option("shading", str, "auto", "terrain colour: auto (heights on a sto
                  "texture) | texture | heights", choices=("auto", "texture", "heights"))
 GRID = Option("grid", int, 64, "adaptive: node grid, quads a side",
               choices=(16, 32, 64, 128), flag="node-grid")
-SPRITE_OPTIONS = (LOD, EPSILON, THREADED, VISIBILITY, GUARD, BORDER, SHADING, TILES,
+SPRITE_OPTIONS = (LOD, EPSILON, KEYFRAMES, VISIBILITY, GUARD, BORDER, SHADING, TILES,
                   TILE_BUDGET, CACHE_MB, CACHE_POLICY, METRIC)
 SPRITE_SUMMARY = ("keyframes: {keyframes} of {frames}; mean ms keyframe "
                   "{mean_ms_keyframe:.1f}, first spriteframe {mean_ms_first_sprite:.1f}, "

@@ -5,7 +5,7 @@
   frame that needs them (:class:`~lodsprite.sprite.engine.LodSpriteEngine`), optionally
   from a keyframe cache; what batch runs time;
 * :class:`WorkerKeyframes` — whole keyframes rendered ahead by a worker process (the
-  ``threaded`` option), the drawing loop only draws spriteframes
+  ``keyframes="worker"`` option), the drawing loop only draws spriteframes
   (:class:`~lodsprite.sprite.worker_engine.WorkerLodSpriteEngine`);
 * :class:`TiledKeyframes` — the keyframe refreshed tile by tile within a per-frame budget
   (:class:`~lodsprite.sprite.tiled_engine.TiledSpriteEngine`), inline.

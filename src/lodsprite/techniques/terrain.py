@@ -154,7 +154,7 @@ class SpriteTechnique(Technique):
     """LOD-sprite (Chen, Swan & Kaufman 1999): one technique over three engines
     (:mod:`lodsprite.techniques.sprite_engines`), chosen once from the options: whole
     keyframes inline (the 1999 algorithm, what batch runs time), whole keyframes from a
-    worker process (``threaded``), or keyframes refreshed tile by tile within
+    worker process (``keyframes="worker"``), or keyframes refreshed tile by tile within
     ``tile_budget_ms`` per frame (``tiles > 1``, inline only).  Records per frame the
     keyframe (or tile mosaic) shown; its replay renders that from its logged viewpoints
     and projections, then the frame."""
@@ -162,7 +162,7 @@ class SpriteTechnique(Technique):
     name = "sprite"
 
     def __init__(self, renderer: Renderer, lod: int = DEFAULT_COARSE,
-                 epsilon: float = DEFAULT_EPSILON_PX, threaded: bool = False,
+                 epsilon: float = DEFAULT_EPSILON_PX, keyframes: str = "inline",
                  visibility: str | None = None, guard_px: int | None = None,
                  border: bool = True, shading: str = "auto", tiles: int = 1,
                  tile_budget_ms: float = DEFAULT_TILE_BUDGET_MS, cache_mb: float = 0.0,
@@ -174,7 +174,7 @@ class SpriteTechnique(Technique):
         level_step(renderer.scene.hf.quads, lod)
         self.metric = metric
         self.engine: SpriteEngine = sprite_engine(
-            renderer, epsilon, lod, threaded, visibility or DEFAULT_VISIBILITY,
+            renderer, epsilon, lod, keyframes == "worker", visibility or DEFAULT_VISIBILITY,
             DEFAULT_GUARD_PX if guard_px is None else guard_px, border, tiles,
             tile_budget_ms, cache_mb, cache_policy, metric)
         self.sprite: LodSprite = self.engine.sprite

@@ -67,7 +67,9 @@ class ViewOptions(TechniqueOptions):
     def technique_options(self) -> dict:
         """The options the registry's techniques pick theirs from."""
         self = self.resolved()
-        return {**self.options, "threaded": self.threaded and self.tiles == 1,  # tiles inline
+        chosen = self.options.get("keyframes", "worker" if self.threaded else "inline")
+        worker = chosen == "worker" and self.tiles == 1  # tiles inline
+        return {**self.options, "keyframes": "worker" if worker else "inline",
                 "target_fps": self.target_fps,
                 "schedule": "none" if self.target_fps is None else "scheduler"}  # scene
 
