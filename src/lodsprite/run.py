@@ -81,17 +81,17 @@ def run_scene(scene: Scene, mode: str, options: Mapping[str, Any], path: CameraP
 
 def technique_for(scene: Scene, mode: str | None):
     """The registry's spec that ``mode`` names (its name or short name; default: the
-    scene's own ``mode``) among those that draw ``scene``'s layers; else an
+    scene's own ``mode``) among the batch techniques that draw ``scene``'s layers; else an
     :class:`~lodsprite.errors.InputError` naming the choices."""
     from lodsprite import techniques
 
     mode = mode or scene.mode
-    usable = techniques.specs(scene.layers)
+    usable = [s for s in techniques.specs(scene.layers) if s.batch]
     for spec in usable:
         if mode in (spec.name, spec.short):
             return spec
     raise InputError(f"unknown mode '{mode}' for {scene.name} ({', '.join(scene.layers)}): "
-                     f"use one of {', '.join(s.short for s in usable if s.batch) or 'none'}")
+                     f"use one of {', '.join(s.short for s in usable) or 'none'}")
 
 
 def render_spec(spec: str, out_dir: Path, mode: str | None = None,
@@ -170,24 +170,17 @@ def render_path(config: RenderConfig, out_dir: Path, progress: Progress | None =
         check_video_path(video)
     config = config.resolved()
     scene, path = prepare(config)
+    from lodsprite import techniques
+
     summary = {"mode": config.mode, "terrain": config.terrain, "texture": config.texture,
-               "path": config.path, "size": list(config.size),
+               "path": config.path, "size": list(config.size), "grid": scene.hf.quads,
                "exaggeration": config.exaggeration, "technique": config.technique,
                "config": config.flat()}
-    if scene.hf is not None:
-        summary["grid"] = scene.hf.quads
-    options = {k: v for k, v in config.technique_options().items()
-               if k in {o.name for o in _spec(config).options}}
+    options = techniques.get(config.technique).bind(config.technique_options())
     result = run_scene(scene, config.technique, options, path, config.size, Path(out_dir),
                        Measure.of(config, video), fov_y_deg=field_of_view(config, path),
                        progress=progress, summary=summary)
     return result.summary
-
-
-def _spec(config: RenderConfig):
-    from lodsprite import techniques
-
-    return techniques.get(config.technique)
 
 
 __all__ = ["Measure", "RenderConfig", "render_modes", "drive", "field_of_view",

@@ -45,7 +45,7 @@ class DistributedTechnique(Technique):
                  max_error: float | None = DEFAULT_MAX_ERROR) -> None:
         super().__init__(renderer)
         scene = renderer.scene
-        self.server = server
+        self.server, self.servers = server, [server]
         args = scene_args(describe(scene), renderer.size, renderer.fov_y_deg)
         self.client = LodClient(scene, args, [server], renderer.size, lod, epsilon=epsilon_px,
                                 adopt="better", max_error=max_error, ctx=renderer.gl)
@@ -162,9 +162,8 @@ class DistributedTechnique(Technique):
         del figures["per_frame_error_px"]  # frames.csv's error_px column
         stats = self.client.server_stats()
         result.summary.update(figures, **server_means(stats), interrupted=result.interrupted)
-        servers = getattr(self, "servers", [self.server])
-        return {"server_stats.json": {"servers": servers, "stats": stats},
-                "keyframes.json": {"servers": servers, "keyframes": self.client.shown}}
+        return {"server_stats.json": {"servers": self.servers, "stats": stats},
+                "keyframes.json": {"servers": self.servers, "keyframes": self.client.shown}}
 
     def draw_to(self, framebuffer: moderngl.Framebuffer | None = None) -> None:
         target = self.client.terrain_gl.drawer.target

@@ -168,7 +168,7 @@ def _measure(folder, method, path, frames, size, ground_truth, depth_correction,
     # the registry's technique; every method option passes (the critical method's own
     # knobs too), checked by its declaration
     return run_scene(scene, f"lumigraph-{method}",
-                     {"folder": str(folder), "depth_correction": depth_correction, **options},
+                     {"depth_correction": depth_correction, **options},
                      viewer_path(path), tuple(size), out_dir,
                      Measure(ground_truth, max(1, quality_every), flip), progress=progress,
                      summary={"method": method, "lumigraph": str(folder),

@@ -97,7 +97,7 @@ def run_crowd(cfg: CrowdConfig, out_dir: Path | None = None, path: CameraPath | 
     path = path or walkthrough(crowd, cfg.frames)
     result = run_scene(
         Scene(objects=crowd, label="crowd"), cfg.mode,
-        {"crowd": crowd, "target_fps": cfg.target_fps, "slots": cfg.slots,
+        {"target_fps": cfg.target_fps, "slots": cfg.slots,
          "active": cfg.active, "range_near": cfg.range_near, "range_far": cfg.range_far,
          "dist": SNAPSHOTS[cfg.snapshots]},
         path, cfg.size, None if out_dir is None else Path(out_dir),
