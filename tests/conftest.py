@@ -202,3 +202,14 @@ def make_field(n: int = 64, relief: float = 200.0, spacing: float = 30.0,
 @pytest.fixture
 def bump_field() -> HeightField:
     return make_field()
+
+
+@pytest.fixture(scope="session")
+def store512(tmp_path_factory) -> str:
+    """A small terrain store (a 512² fractal, built once): its level 0 is more than the
+    roots, so a view's tiles stream in after its first frame."""
+    from lodsprite.terrain.store import build_store
+
+    out = tmp_path_factory.mktemp("store") / "f512.zarr"
+    build_store("fractal:512:1", out)
+    return str(out)

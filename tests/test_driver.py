@@ -127,6 +127,7 @@ def test_render_with_worker_keyframes_plays_the_path_in_time(tmp_path):
 
 @pytest.mark.parametrize("args, fragment", [
     (["--keyframes", "worker", "--tiles", "2"], "whole keyframes"),
+    (["--keyframes", "worker", "--key-sse", "1", "--proxy-sse", "4"], "no --proxy-sse"),
     (["--keyframes", "worker", "--save-frames"], "keeps no images"),
     (["--display-fps", "30"], "--display-fps goes with --keyframes worker"),
 ])

@@ -186,7 +186,8 @@ class Renderer:
     def sprite(self, epsilon_px: float = DEFAULT_EPSILON_PX, lod: int = DEFAULT_COARSE,
                threaded: bool = False, visibility: str = DEFAULT_VISIBILITY,
                guard_px: int = DEFAULT_GUARD_PX, border: bool = True, cache_mb: float = 0.0,
-               cache_policy: str = DEFAULT_POLICY, metric: str = "warp") -> LodSprite:
+               cache_policy: str = DEFAULT_POLICY, metric: str = "warp",
+               store=None) -> LodSprite:
         """A LOD-sprite engine on this renderer: error threshold ``epsilon_px`` pixels,
         coarse level ``lod`` quads per side.  ``threaded=True`` renders keyframes in a
         worker process with its own context (:mod:`lodsprite.sprite.worker_engine`); otherwise a
@@ -194,7 +195,9 @@ class Renderer:
         ``cache_mb > 0`` keeps keyframes in a GPU cache of that many MB replaced by
         ``cache_policy`` (``lru`` | ``benefit``; :mod:`lodsprite.sprite.cache`; inline
         keyframes only).  ``metric``: ``"warp"`` (Eq. 1-2) or ``"resample"`` (adds the
-        keyframe image's resampling error, :mod:`lodsprite.sprite.resampling`)."""
+        keyframe image's resampling error, :mod:`lodsprite.sprite.resampling`).  ``store``:
+        the worker's keyframes over a terrain store, drawn adaptively
+        (:class:`~lodsprite.sprite.keyframe_worker.StoreKeys`; threaded only)."""
         if not epsilon_px > 0:
             raise InputError(f"epsilon must be > 0 pixels, got {epsilon_px}")
         if not cache_mb >= 0:
@@ -203,7 +206,7 @@ class Renderer:
             raise InputError("the keyframe cache needs inline keyframes "
                              "(--inline-keyframes)")
         sprite = LodSprite(self, epsilon_px, lod, threaded, visibility, guard_px, border,
-                           cache_mb, cache_policy, metric)
+                           cache_mb, cache_policy, metric, store)
         self._sprites.append(sprite)
         return sprite
 
@@ -275,7 +278,8 @@ class LodSprite:
 
     def __init__(self, renderer: Renderer, epsilon_px: float, lod: int, threaded: bool,
                  visibility: str, guard_px: int, border: bool, cache_mb: float = 0.0,
-                 cache_policy: str = DEFAULT_POLICY, metric: str = "warp") -> None:
+                 cache_policy: str = DEFAULT_POLICY, metric: str = "warp",
+                 store=None) -> None:
         self.renderer = renderer
         self.threaded = threaded
         self.sprite = SpriteDrawer(renderer.terrain_gl.drawer, lod, visibility, border=border,
@@ -283,7 +287,7 @@ class LodSprite:
         try:
             self.engine: LodSpriteEngine | WorkerLodSpriteEngine = (
                 WorkerLodSpriteEngine(self.sprite, renderer.scene, renderer.fov_y_deg,
-                                        epsilon_px, metric=metric) if threaded
+                                        epsilon_px, metric=metric, store=store) if threaded
                 else LodSpriteEngine(self.sprite, epsilon_px, cache_mb=cache_mb,
                                      cache_policy=cache_policy, metric=metric))
         except BaseException:

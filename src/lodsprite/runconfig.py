@@ -80,7 +80,8 @@ class RenderConfig(TechniqueOptions):
             return self  # nothing to fill
         if self.mode != "sprite":
             store = False
-        filled = fill_defaults(self.terrain, given, store)
+        filled = fill_defaults(self.terrain, given, store,
+                               worker=self.options.get("keyframes") == "worker")
         return replace(self, options={**self.options, **filled})
 
     @property
@@ -126,9 +127,9 @@ class RenderConfig(TechniqueOptions):
             mine = [o for o in spec.options if o.name == name]
             (mine[0] if mine else known[name]).check(value)
         if self.played and (self.mode != "sprite" or self.options.get("tiles", 1) > 1
-                            or "key_sse" in self.options):
+                            or self.options.get("proxy_sse") is not None):
             raise InputError("--keyframes worker goes with --mode sprite and whole keyframes "
-                             "(no --tiles, no --key-sse)")
+                             "(no --tiles, no --proxy-sse)")
         if "key_sse" in self.options and self.mode != "sprite":
             raise InputError("--key-sse goes with --mode sprite")
         if self.options.get("tiles", 1) > 1 and self.mode != "sprite":

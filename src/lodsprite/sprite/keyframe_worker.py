@@ -16,6 +16,13 @@ VIEWPOINT-PREDICTOR, fed with the observed viewpoints; δt is the measured
 request-to-adoption latency), polls for the answer without waiting and uploads it
 (:meth:`~lodsprite.gl.sprite.SpriteDrawer.upload_keyframe`).
 
+Over a terrain store (``sprite-adaptive``, keyframes drawn by the adaptive renderer at
+``--key-sse``: :attr:`WorkerSettings.store`) the process opens the store itself and
+renders each keyframe with its own adaptive renderer, streaming its own tiles
+(:mod:`lodsprite.techniques.adaptive_worker`); its answer adds what the keyframe lacks
+(``deficit_px``: tiles its tolerance needs that had not arrived) and the selection it
+was drawn with (for the untimed replay).
+
 The process lowers its own scheduling priority (``nice``, Linux) before it makes its
 context, so that the software rasteriser's threads it starts inherit it: on a machine
 without a GPU, the drawing loop's spriteframes come first and keyframes take the
@@ -25,9 +32,7 @@ remaining CPU time.
 from __future__ import annotations
 
 import logging
-import os
 import pickle
-import threading
 import time
 from collections import deque
 from dataclasses import dataclass
@@ -40,13 +45,11 @@ import numpy as np
 from lodsprite.camera import Projection, Viewpoint
 from lodsprite.errors import LodspriteError
 from lodsprite.procs import WorkerDied, WorkerError, WorkerUnavailable
-from lodsprite.sprite.metric import ErrorMetric
 from lodsprite.sprite.predictors import PREDICTORS
 from lodsprite.workers import ProcessWorker
 
 if TYPE_CHECKING:  # the scene is passed in
     from lodsprite.scene import Scene
-    from lodsprite.terrain import HeightField
 
 log = logging.getLogger(__name__)
 
@@ -54,7 +57,7 @@ DEFAULT_WORKER_NICE = 10
 SAMPLES_KEPT = 64
 READY_S = 60.0          # the process's start (context, scene, shaders) has this long
 MAX_REQUEST = 4096      # bytes: a pickled viewpoint and two numbers
-FACTORY = "lodsprite.sprite.keyframe_worker:keyframe_handler"
+FACTORY = "lodsprite.sprite.keyframe_process:keyframe_handler"
 
 
 @dataclass(frozen=True)
@@ -79,6 +82,25 @@ class KeyframeImage:
     requested_at: float
     render_ms: float
     predicted: bool
+    deficit_px: float = 0.0
+    selection: tuple | None = None
+
+
+@dataclass(frozen=True)
+class StoreKeys:
+    """Keyframes drawn by the adaptive renderer: the process's request handler
+    ``factory`` (``"module:function"``, :mod:`lodsprite.workers`), the terrain ``path``
+    (a store the worker process opens, as the drawing side opened it; any other terrain
+    is drawn from the arrays handed over), the tolerance ``key_sse`` (pixels), the caches
+    ``gpu_mb`` and ``host_mb`` and whether the terrain is shaded from its ``heights``
+    (else coloured with the texture)."""
+
+    factory: str
+    path: str
+    key_sse: float
+    gpu_mb: float
+    host_mb: float
+    heights: bool
 
 
 @dataclass(frozen=True)
@@ -86,7 +108,9 @@ class WorkerSettings:
     """How the worker renders: image size ``(w, h)`` pixels, vertical field of view
     (degrees), coarse level (quads per side), visibility rule, border ribbons, guard band
     (pixels), predictor name, the nice increment of the worker process and whether the
-    keyframes' ``C'`` are for the resampling metric (their matrix and size attached)."""
+    keyframes' ``C'`` are for the resampling metric (their matrix and size attached);
+    ``store``: keyframes over a store by the adaptive renderer (None: in-memory terrain,
+    full resolution)."""
 
     size: tuple[int, int]
     fov_y_deg: float
@@ -97,6 +121,7 @@ class WorkerSettings:
     predictor: str = "linear"
     nice: int = DEFAULT_WORKER_NICE
     resampling: bool = False
+    store: StoreKeys | None = None
 
     @property
     def key_size(self) -> tuple[int, int]:
@@ -240,7 +265,7 @@ def _start(scene: Scene, settings: WorkerSettings, ready_s: float) -> ProcessWor
         arrays["texture"] = np.ascontiguousarray(scene.texture)
     shm, layout = share_arrays(arrays)
     try:
-        proc = ProcessWorker(FACTORY, {
+        proc = ProcessWorker(FACTORY if settings.store is None else settings.store.factory, {
             "shm_name": shm.name, "layout": layout,
             "field": (hf.dx, hf.dy, hf.name, dict(hf.meta)), "settings": settings},
             in_flight=1, restarts=0, name="keyframes", slot_bytes=settings.answer_bytes,
@@ -259,8 +284,9 @@ def _start(scene: Scene, settings: WorkerSettings, ready_s: float) -> ProcessWor
 def share_arrays(arrays: dict[str, np.ndarray]
                  ) -> tuple[shared_memory.SharedMemory, dict[str, tuple]]:
     """``arrays`` copied into one new shared-memory segment; the segment (its creator
-    closes and unlinks it) and the layout :func:`copy_shared` reads them back by:
-    per name, ``(offset bytes, shape, dtype str)``."""
+    closes and unlinks it) and the layout
+    :func:`~lodsprite.sprite.keyframe_process.copy_shared` reads them back by: per name,
+    ``(offset bytes, shape, dtype str)``."""
     layout, at = {}, 0
     for name, a in arrays.items():
         layout[name] = (at, tuple(a.shape), a.dtype.str)
@@ -272,98 +298,14 @@ def share_arrays(arrays: dict[str, np.ndarray]
     return shm, layout
 
 
-def copy_shared(shm_name: str, layout: dict[str, tuple]) -> dict[str, np.ndarray]:
-    """The arrays :func:`share_arrays` put in the segment ``shm_name``, copied out."""
-    shm = shared_memory.SharedMemory(shm_name)
-    try:
-        return {name: np.ndarray(shape, dtype, buffer=shm.buf, offset=off).copy()
-                for name, (off, shape, dtype) in layout.items()}
-    finally:
-        shm.close()
-
-
 def _image(meta: bytes, data: bytes) -> KeyframeImage:
     """A process answer (:func:`keyframe_handler`) as the keyframe it carries."""
     fields = pickle.loads(meta)
     w, h = fields.pop("key_size")
+    points = fields.pop("points", None)  # a drawn surface's C (pickling drops it)
+    if points is not None:
+        fields["c_prime"].set_points(points)
+    fields["c_prime"].deficit_px = fields.get("deficit_px", 0.0)  # in its error
     depth = np.frombuffer(data, np.float32, w * h).reshape(h, w)
     color = np.frombuffer(data, np.uint8, w * h * 3, offset=w * h * 4).reshape(h, w, 3)
     return KeyframeImage(color=color, depth=depth, **fields)
-
-
-# ----------------------------------------------------------------- the worker process
-
-
-def keyframe_handler(shm_name: str, layout: dict, field: tuple, settings: WorkerSettings):
-    """The worker process's request handler (:mod:`lodsprite.workers`' factory): its
-    priority lowered, its context and scene made from the shared arrays.  A request's
-    meta is ``(viewpoint, predicted, requested_at)`` pickled; the answer's meta the
-    keyframe's fields pickled, its data the depth then the colour bytes."""
-    from lodsprite.terrain import HeightField
-
-    _lower_priority(settings.nice)
-    arrays = copy_shared(shm_name, layout)
-    dx, dy, name, meta = field
-    gl = _WorkerGL(HeightField(arrays["heights"], dx, dy, name, meta), arrays.get("texture"),
-                   settings)
-
-    def answer(meta: bytes, data: bytes) -> tuple[bytes, bytes]:
-        vp, predicted, asked = pickle.loads(meta)
-        return gl.render(vp, predicted, asked)
-
-    return answer
-
-
-class _WorkerGL:
-    """The worker's GL state: its own context, the terrain (height field ``hf``, colour
-    ``texture (H, W, 3) uint8`` or None) and the keyframe renderer."""
-
-    def __init__(self, hf: HeightField, texture: np.ndarray | None, s: WorkerSettings
-                 ) -> None:
-        from lodsprite.gl.context import GLContext
-        from lodsprite.gl.sprite import SpriteDrawer
-        from lodsprite.gl.terrain import TerrainDrawer, TerrainGeometry
-
-        self.ctx = GLContext()
-        made = [self.ctx]
-        try:
-            made.append(TerrainGeometry(self.ctx, hf, texture))
-            made.append(TerrainDrawer(self.ctx, made[-1], s.size[0], s.size[1], s.fov_y_deg))
-            self.terrain = made[-1]
-            self.sprite = SpriteDrawer(self.terrain, s.lod, s.visibility, border=s.border,
-                                         guard_px=s.guard_px)
-        except BaseException:  # released in the order made, backwards
-            for obj in reversed(made):
-                obj.release()
-            raise
-        self.metric = ErrorMetric.for_level(hf, s.lod, s.resampling)
-        self.zbuffer = "coarse" if s.visibility == "coarse" else "full"
-
-    def render(self, vp: Viewpoint, predicted: bool, asked: float) -> tuple[bytes, bytes]:
-        t0 = time.perf_counter()
-        frame_projection = self.terrain.projection(vp)
-        self.sprite.render_keyframe(vp, t0, frame_projection)
-        self.ctx.finish()
-        key = self.sprite.keyframe
-        color = key.target.read_color()
-        depth = (key.coarse if self.zbuffer == "coarse" else key.target).read_depth()
-        c_prime = self.metric.reproject(vp.o, key.projection.matrix() @ vp.view_matrix(),
-                                        key.target.size)
-        fields = {"viewpoint": vp, "projection": key.projection,
-                  "frame_projection": frame_projection, "zbuffer": self.zbuffer,
-                  "c_prime": c_prime, "requested_at": asked, "predicted": predicted,
-                  "render_ms": (time.perf_counter() - t0) * 1e3, "key_size": key.target.size}
-        return pickle.dumps(fields), b"".join((np.ascontiguousarray(depth, np.float32).data,
-                                               np.ascontiguousarray(color, np.uint8).data))
-
-
-def _lower_priority(nice: int) -> None:
-    """Raise this thread's nice value by ``nice`` (Linux threads have their own); threads
-    it starts later inherit it.  Ignored where the platform has no per-thread priority."""
-    if nice <= 0 or not hasattr(os, "setpriority"):
-        return
-    try:
-        tid = threading.get_native_id()
-        os.setpriority(os.PRIO_PROCESS, tid, os.getpriority(os.PRIO_PROCESS, tid) + nice)
-    except OSError as exc:
-        log.debug("could not lower the keyframe worker's priority: %s", exc)

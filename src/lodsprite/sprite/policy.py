@@ -70,13 +70,16 @@ def keyframe_error_px(metric: ErrorMetric, c_prime: np.ndarray, viewpoint: Viewp
                       projection: Projection, height_px: int) -> float:
     """Error (pixels, Eq. 2) of showing the keyframe whose reprojected centres are
     ``c_prime (n*n, 3)`` metres at ``viewpoint`` seen through ``projection`` on an
-    image ``height_px`` pixels high.  May be ``inf`` (nothing measurable)."""
+    image ``height_px`` pixels high.  May be ``inf`` (nothing measurable).  A keyframe
+    whose ``C'`` carries ``deficit_px`` (what it lacks: drawn while the tiles its
+    tolerance needs were streaming, :mod:`lodsprite.techniques.adaptive_keys`) adds it."""
     view_proj = projection.matrix() @ viewpoint.view_matrix()
     beta = projection.pixel_angle_rad(height_px)
+    lacks = float(getattr(c_prime, "deficit_px", 0.0))
     if not getattr(metric, "resampling", False):  # the 1999 metric (or a stand-in)
-        return metric.error_px(c_prime, viewpoint.o, view_proj, beta)
+        return lacks + metric.error_px(c_prime, viewpoint.o, view_proj, beta)
     size = (max(1, round(projection.aspect * height_px)), int(height_px))
-    return metric.error_px(c_prime, viewpoint.o, view_proj, beta, size=size)
+    return lacks + metric.error_px(c_prime, viewpoint.o, view_proj, beta, size=size)
 
 
 def resampling_metric(metric: str) -> bool:

@@ -13,6 +13,14 @@ Per frame, in the drawing loop:
    worker for the next keyframe, placed ahead by the measured request-to-adoption latency;
 3. draw the spriteframe and ``finish()``.
 
+Over a terrain store (``store``, keyframes drawn by the worker's own adaptive renderer,
+:mod:`lodsprite.techniques.adaptive_worker`) a keyframe's error adds what it lacks
+(:attr:`~lodsprite.sprite.keyframe_worker.KeyframeImage.deficit_px`, pixels: the tiles its
+tolerance needs that had not arrived when it was drawn), at every frame it is shown, so
+the next one is asked for while tiles stream and a held view sharpens as they arrive;
+each adopted keyframe's adaptive selection is kept (:attr:`WorkerLodSpriteEngine.
+selections`) for the untimed replay.
+
 The bound ε is kept only as well as the worker keeps up: while a keyframe is on its way,
 the error of the frames shown can exceed ε (reported per frame), but the frame rate does
 not drop.  :class:`~lodsprite.sprite.engine.LodSpriteEngine` is the inline alternative.
@@ -30,7 +38,12 @@ from lodsprite.errors import LodspriteError
 from lodsprite.gl.sprite import SpriteDrawer
 from lodsprite.record import Frame
 from lodsprite.sprite.engine import sprite_frame
-from lodsprite.sprite.keyframe_worker import KeyframeImage, KeyframeWorker, WorkerSettings
+from lodsprite.sprite.keyframe_worker import (
+    KeyframeImage,
+    KeyframeWorker,
+    StoreKeys,
+    WorkerSettings,
+)
 from lodsprite.sprite.metric import ErrorMetric
 from lodsprite.sprite.policy import (
     DEFAULT_EPSILON_PX,
@@ -54,7 +67,8 @@ class WorkerLodSpriteEngine:
 
     ``sprite`` draws the spriteframes on the caller's context; ``scene`` is what the worker
     process loads on its own context (its height field and texture); ``fov_y_deg`` must be
-    the renderer's.  A worker that cannot start raises
+    the renderer's; ``store``: keyframes over a terrain store, drawn adaptively by the
+    worker (None: in-memory terrain at full resolution).  A worker that cannot start raises
     :class:`~lodsprite.procs.WorkerUnavailable` here; one that dies makes the next
     :meth:`frame` raise :class:`~lodsprite.errors.LodspriteError`.
     """
@@ -62,22 +76,28 @@ class WorkerLodSpriteEngine:
     def __init__(self, sprite: SpriteDrawer, scene: Scene, fov_y_deg: float,
                  epsilon_px: float = DEFAULT_EPSILON_PX,
                  request_fraction: float = DEFAULT_REQUEST_FRACTION,
-                 predictor: str = "linear", metric: str = "warp") -> None:
+                 predictor: str = "linear", metric: str = "warp",
+                 store: StoreKeys | None = None) -> None:
         self.sprite = sprite
         self.epsilon_px = float(epsilon_px)
         self.request_fraction = float(request_fraction)
         resampling = resampling_metric(metric)
-        self.metric = ErrorMetric.for_level(scene.hf, sprite.coarse_quads, resampling)
+        hf = sprite.terrain.geometry.full  # the terrain, or a store's level 0
+        self.metric = ErrorMetric.for_level(hf, sprite.coarse_quads, resampling)
         self.worker = KeyframeWorker(scene, WorkerSettings(
             sprite.target.size, fov_y_deg, sprite.coarse_quads, sprite.visibility,
-            sprite.border, sprite.guard_px, predictor, resampling=resampling))
+            sprite.border, sprite.guard_px, predictor, resampling=resampling, store=store))
         self.keyframes: list[KeyChoice] = []
+        # per adopted keyframe, over a store: the adaptive selection it was drawn with
+        self.selections: list[tuple | None] = []
+        self.deficit_px = 0.0  # what the shown keyframe lacks (pixels)
         self.discarded = 0
         self._leads = 0
         self._c_prime: np.ndarray | None = None
 
     def error_px(self, viewpoint: Viewpoint, projection) -> float:
-        """Error (pixels) of the shown keyframe at ``viewpoint`` (inf before the first)."""
+        """Error (pixels) of the shown keyframe at ``viewpoint`` (inf before the first):
+        the metric's, plus what the keyframe lacks (its ``C'``'s ``deficit_px``)."""
         if self._c_prime is None:
             return float("inf")
         return keyframe_error_px(self.metric, self._c_prime, viewpoint, projection,
@@ -86,8 +106,9 @@ class WorkerLodSpriteEngine:
     def _adopt(self, key: KeyframeImage, now: float) -> None:
         self.sprite.upload_keyframe(key.viewpoint, key.projection, key.color, key.depth, now,
                                     key.zbuffer)
-        self._c_prime = key.c_prime
+        self._c_prime, self.deficit_px = key.c_prime, key.deficit_px
         self.keyframes.append(KeyChoice(key.viewpoint, key.frame_projection, key.predicted))
+        self.selections.append(key.selection)
 
     def _measure_lead(self, key: KeyframeImage, now: float) -> None:
         """Keyframes are placed ahead by the running mean of the request-to-delivery

@@ -16,7 +16,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from lodsprite.errors import InputError
-from lodsprite.techniques.adaptive_keys import AdaptiveKeys, adaptive_keys
+from lodsprite.sprite.policy import KEYFRAME
+from lodsprite.techniques.adaptive_keys import (
+    AdaptiveKeys,
+    WorkerAdaptiveKeys,
+    adaptive_keys,
+)
 from lodsprite.techniques.adaptive_terrain import ADAPTIVE_COLUMNS
 from lodsprite.techniques.base import Frame, Technique
 from lodsprite.techniques.terrain import SpriteTechnique, resolve_shading, set_shading
@@ -39,6 +44,10 @@ def scene_pyramid(scene):
                             float(scene.hf.meta.get("exaggeration", 1.0)))
     return MemoryPyramid.from_heightfield(scene.hf)
 
+
+#: The keyframe worker process's handler over a store (its module builds what this one's
+#: ``sprite-adaptive`` builds for keyframes, and imports neither this module nor the api).
+WORKER_FACTORY = "lodsprite.techniques.adaptive_worker:store_keyframe_handler"
 
 #: Node grids the adaptive renderer takes (quads a node side); 64 is the default.
 GRIDS = (16, 32, 64, 128)
@@ -201,7 +210,17 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
     z-buffers and the spriteframes from then on draw it) and every tile's error is the proxy
     metric over the samples it serves (:mod:`lodsprite.sprite.tiled_engine`).  The hooks
     on LOD-sprite's engine, whole keyframes or tiles, are :attr:`keys`
-    (:mod:`lodsprite.techniques.adaptive_keys`), chosen once with the engine."""
+    (:mod:`lodsprite.techniques.adaptive_keys`), chosen once with the engine.
+
+    A whole keyframe carries what it lacks in its error: the screen-space error of the
+    coarser nodes it drew because the tiles its tolerance needs had not arrived
+    (:meth:`~lodsprite.techniques.adaptive_terrain.AdaptiveTerrain.deficit_px`, added to
+    the metric's error at every frame), so a held view is keyed again as tiles arrive.
+
+    ``keyframes="worker"``: whole keyframes drawn by a worker process with its own
+    adaptive renderer and tile streaming (:mod:`lodsprite.techniques.adaptive_worker`);
+    the drawing side's adaptive renderer only draws each keyframe's recorded selection
+    again in the untimed replay.  Not with tiles or ``proxy_sse``."""
 
     name = "sprite-adaptive"
 
@@ -211,9 +230,18 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
                  border: bool = True, shading: str = "auto", tiles: int = 1,
                  tile_budget_ms: float = 8.0, cache_mb: float = 0.0,
                  cache_policy: str = "lru", metric: str = "warp",
-                 proxy_sse: float | None = None) -> None:
+                 proxy_sse: float | None = None, keyframes: str = "inline") -> None:
+        from lodsprite.sprite.keyframe_worker import StoreKeys
         from lodsprite.terrain.store import TerrainStore
         from lodsprite.terrain.storefield import store_field
+
+        worker = keyframes == "worker"
+        if worker and (tiles > 1 or proxy_sse is not None):
+            raise InputError("adaptive keyframes from the worker are whole keyframes under "
+                             "the uniform coarse level: no tiles > 1, no proxy_sse")
+        heights = resolve_shading(renderer.scene, shading) == "heights"
+        store = StoreKeys(WORKER_FACTORY, renderer.scene.terrain_spec, key_sse, gpu_mb,
+                          host_mb, heights) if worker else None
 
         self.adaptive = make_adaptive(renderer, key_sse, gpu_mb, host_mb, shading)
         field = None
@@ -224,9 +252,10 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
             # the proxy, ribbons and the metric's coarse triangles from the store's coarse
             # level held whole (no level-0 chunk at setup), then level 0 without blocking
             with nullcontext() if field is None else field.heights.from_coarse():
-                super().__init__(renderer, lod, epsilon, False, visibility, guard_px, border,
-                                 shading=shading, tiles=tiles, tile_budget_ms=tile_budget_ms,
-                                 cache_mb=cache_mb, cache_policy=cache_policy, metric=metric)
+                super().__init__(renderer, lod, epsilon, keyframes, visibility, guard_px,
+                                 border, shading=shading, tiles=tiles,
+                                 tile_budget_ms=tile_budget_ms, cache_mb=cache_mb,
+                                 cache_policy=cache_policy, metric=metric, store=store)
         except BaseException:
             self.adaptive.release()
             if field is not None:
@@ -234,14 +263,17 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
             raise
         # the adaptive renderer's hooks on the engine, whole keyframes or tiles
         self.keys: AdaptiveKeys = adaptive_keys(self.engine, self.adaptive, self._pump)
-        self.surface = None  # over a store: the metric's C from the keyframe's drawn nodes
+        self.surface = self.proxy = None  # the metric's C from the keyframe's drawn nodes
+        if worker:  # both on the worker's side
+            return
         if field is not None:
             from lodsprite.techniques.drawn_surface import DrawnSurface
 
             self.surface = DrawnSurface(self.adaptive)
             self.keys.use_surface(self.surface.heights)
         self.proxy = None if proxy_sse is None else self._adaptive_proxy(renderer, proxy_sse)
-        self.first_frame_s = float("nan")  # from the process's start
+
+    first_frame_s = float("nan")  # from the process's start
 
     def tile_drawer(self, update: int, tile: int) -> Callable | None:
         """Re-renders ``tile`` with the selection update ``update`` drew it with."""
@@ -267,7 +299,9 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
         spriteframe drawn, untimed): the timed run starts with the first view resident,
         as the adaptive technique's does."""
         s = self.sprite.sprite
-        self.adaptive.fill(viewpoint, s.key_projection(s.terrain.projection(viewpoint)).matrix())
+        if not isinstance(self.keys, WorkerAdaptiveKeys):  # the worker fills its own
+            self.adaptive.fill(viewpoint,
+                               s.key_projection(s.terrain.projection(viewpoint)).matrix())
         super().warm_up(viewpoint)
         if self.first_frame_s != self.first_frame_s:  # NaN: the first frame
             self.first_frame_s = process_age_s()
@@ -275,6 +309,8 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
 
     def frame(self, viewpoint: Viewpoint) -> Frame:
         f = super().frame(viewpoint)
+        if f.kind == KEYFRAME:  # a keyframe shown as it is: its error is what it lacks
+            f = replace(f, error_px=f.error_px + getattr(self.keys, "deficit_px", 0.0))
         if self.first_frame_s != self.first_frame_s:  # NaN: the first frame
             self.first_frame_s = process_age_s()
         return f
@@ -301,6 +337,8 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
         return out
 
     def status(self) -> str:
+        if isinstance(self.keys, WorkerAdaptiveKeys):
+            return f"adaptive keyframes, sse {self.adaptive.sse:g} px; {super().status()}"
         return f"keyframes: adaptive, sse {self.adaptive.sse:g} px; {tile_status(self.adaptive)}"
 
     def outside_mb(self) -> float:

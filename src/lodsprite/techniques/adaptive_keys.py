@@ -10,9 +10,13 @@ once when the technique is made (:func:`adaptive_keys`):
   (:class:`~lodsprite.techniques.sprite_engines.TiledKeyframes`): each tile drawn by the
   adaptive renderer culled by the tile's sub-frustum, its selection recorded per (update,
   tile) and drawn again in the replay; the adaptive renderer's tile requests go out after
-  each update's tiles.
+  each update's tiles;
+* :class:`WorkerAdaptiveKeys` — whole keyframes from the worker process
+  (:class:`~lodsprite.techniques.sprite_engines.WorkerKeyframes`), drawn by its own
+  adaptive renderer (:mod:`lodsprite.techniques.adaptive_worker`); each keyframe comes
+  with its selection, which the replay draws again here.
 
-Both stream the adaptive renderer's tiles between keyframes and, before each draw,
+The first two stream the adaptive renderer's tiles between keyframes and, before each draw,
 collect the store's level-0 chunks arrived for the error metric (``pump``), neither
 waiting.  The classes only wire the GL drivers' hooks; what is drawn is decided in the
 sprite engines and the adaptive renderer.
@@ -26,7 +30,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from lodsprite.techniques.sprite_engines import SpriteEngine, TiledKeyframes
+from lodsprite.techniques.sprite_engines import SpriteEngine, TiledKeyframes, WorkerKeyframes
 
 if TYPE_CHECKING:
     from lodsprite.camera import Viewpoint
@@ -101,13 +105,28 @@ class _AdaptiveKeys:
 
 class WholeAdaptiveKeys(_AdaptiveKeys):
     """Whole keyframes drawn adaptively; each keyframe's selection (and frozen proxy) is
-    recorded when it is first shown and drawn again to replay it."""
+    recorded when it is first shown and drawn again to replay it.  Each keyframe carries
+    what it lacks (:meth:`~lodsprite.techniques.adaptive_terrain.AdaptiveTerrain.
+    deficit_px`, set on its ``C'`` as ``deficit_px``) in its error at every frame
+    (:func:`~lodsprite.sprite.policy.keyframe_error_px`), so a keyframe drawn while the
+    tiles its tolerance needs were streaming is due again until what it lacks is under
+    ε."""
 
     def __init__(self, engine: SpriteEngine, adaptive: AdaptiveTerrain,
                  pump: Callable[[], None]) -> None:
         super().__init__(engine, adaptive, pump)
         self._selections: dict[int, tuple] = {}  # keyframe -> (nodes drawn, morphed)
         self._proxies: dict[int, tuple] = {}  # keyframe -> its frozen proxy selection
+        self.deficit_px = 0.0  # what the newest keyframe lacks (pixels)
+
+    def draw_keyframe(self, viewpoint: Viewpoint, projection, target):
+        """The keyframe drawn adaptively; what it lacks set on its ``C'``."""
+        stats = super().draw_keyframe(viewpoint, projection, target)
+        self.deficit_px = self.adaptive.deficit_px()
+        c_prime = self.engine.sprite.engine.policy.c_prime
+        if c_prime is not None:
+            c_prime.deficit_px = self.deficit_px
+        return stats
 
     def record(self, decision: dict[str, Any]) -> None:
         """For a new keyframe, the selection it was drawn with (after the frame's clock
@@ -189,13 +208,53 @@ class TiledAdaptiveKeys(_AdaptiveKeys):
         return self.engine.replay(viewpoint, decision, self.tile_drawer)
 
 
-AdaptiveKeys = WholeAdaptiveKeys | TiledAdaptiveKeys
+class WorkerAdaptiveKeys:
+    """Whole keyframes drawn by the worker process's adaptive renderer; the drawing
+    side's ``adaptive`` draws none in the timed run.  Its untimed replay draws each
+    keyframe from the selection the worker drew it with
+    (:attr:`~lodsprite.sprite.worker_engine.WorkerLodSpriteEngine.selections`), its
+    tiles read then: the image the worker drew, not what the replay's resident set would
+    give."""
+
+    def __init__(self, engine: WorkerKeyframes, adaptive: AdaptiveTerrain) -> None:
+        self.engine = engine
+        self.adaptive = adaptive
+
+    @property
+    def deficit_px(self) -> float:
+        """What the shown keyframe lacks (pixels), as the worker measured it."""
+        return self.engine.sprite.engine.deficit_px
+
+    def record(self, decision: dict[str, Any]) -> None:
+        """Nothing: each keyframe's selection came with it."""
+
+    def warmed_up(self) -> None:
+        """Nothing: the warm-up drew no keyframe here."""
+
+    def tile_drawer(self, update: int, tile: int) -> Callable | None:
+        return None
+
+    def replay(self, viewpoint: Viewpoint, decision: dict[str, Any]) -> np.ndarray:
+        """The frame again, its keyframe drawn from the worker's selection."""
+        s = self.engine.sprite.sprite
+        s.keyframe_drawer = redraw(self.adaptive,
+                                   *self.engine.sprite.engine.selections[decision["keyframe"]])
+        try:
+            return self.engine.replay(viewpoint, decision, self.tile_drawer)
+        finally:
+            s.keyframe_drawer = None
+
+
+AdaptiveKeys = WholeAdaptiveKeys | TiledAdaptiveKeys | WorkerAdaptiveKeys
 
 
 def adaptive_keys(engine: SpriteEngine, adaptive: AdaptiveTerrain,
                   pump: Callable[[], None]) -> AdaptiveKeys:
     """The adaptive keyframes for LOD-sprite's ``engine``, chosen once:
-    :class:`TiledAdaptiveKeys` for tile updates, else :class:`WholeAdaptiveKeys`."""
+    :class:`TiledAdaptiveKeys` for tile updates, :class:`WorkerAdaptiveKeys` for the
+    worker's keyframes, else :class:`WholeAdaptiveKeys`."""
+    if isinstance(engine, WorkerKeyframes):
+        return WorkerAdaptiveKeys(engine, adaptive)
     if isinstance(engine, TiledKeyframes):
         return TiledAdaptiveKeys(engine, adaptive, pump)
     return WholeAdaptiveKeys(engine, adaptive, pump)

@@ -71,6 +71,7 @@ class AdaptiveTerrain:
         self._wanted: list[Node] = []
         self.last_draw: list[Node] = []        # the last frame's selection (for replays)
         self.last_morphed: frozenset = frozenset()
+        self._last_eye: np.ndarray | None = None  # the eye the last selection was made at
         self._keep: set = set()
         self.pinned: set = set()  # nodes whose slots stay (a sprite proxy's frozen nodes)
         self._ranges_key: tuple[float, ...] | None = None  # triangles_at's ranges, per
@@ -151,7 +152,7 @@ class AdaptiveTerrain:
         view_proj = proj @ viewpoint.view_matrix()
         eye = np.asarray(viewpoint.o, dtype=np.float64)
         draw, uploaded = self._stream(eye, view_proj if cull is None else cull)
-        self.last_draw = draw
+        self.last_draw, self._last_eye = draw, eye
         self.drawer.draw(target.fbo, view_proj, eye, self._instances(draw),
                            self.height_range, self.extent, self.color)
         if finish:
@@ -160,6 +161,30 @@ class AdaptiveTerrain:
                      extra=dict(zip(ADAPTIVE_COLUMNS, (
                          len(draw), uploaded, len(self.slots.slots), self.loader.loaded,
                          self.slots.evicted, len(self.loader.bad)), strict=True)))
+
+    def deficit_px(self) -> float:
+        """What the last frame drawn lacks (pixels): the largest screen-space error, at
+        the eye it was selected at, of the nodes it drew coarser than its tolerance asks
+        because their finer nodes were not resident (the selection wanted to split them:
+        ``d < R_k``) and whose error exceeds the tolerance; 0 when none does.  Nodes with
+        a child that cannot be read (the loader's ``bad``) are left out: no refresh can
+        draw them finer.  A frame drawn after every tile it wants has arrived lacks 0."""
+        eye = self._last_eye
+        nodes = [n for n in self.last_draw if n.k > 0]
+        if eye is None or not nodes:
+            return 0.0
+        box = [self.tree.bounds(n) for n in nodes]
+        lo, hi = np.array([b[0] for b in box]), np.array([b[1] for b in box])
+        d = np.linalg.norm(np.clip(eye, lo, hi) - eye, axis=1)
+        k = np.array([n.k for n in nodes])
+        bad = self.loader.bad
+        split = (d < self.r[k]) & np.array([not any(c in bad for c in self.tree.kids(n))
+                                            for n in nodes])
+        h = self.target.size[1]
+        err = self.tree.errors[k] * h / (2.0 * np.maximum(d, 1e-9)
+                                         * np.tan(np.radians(self.fov) / 2))
+        over = err[split & (err > self.sse)]
+        return float(over.max()) if over.size else 0.0
 
     def _stream(self, eye: np.ndarray, view_proj: np.ndarray) -> tuple[list[Node], int]:
         """Select the nodes to draw, ask the loader for what is missing and upload what

@@ -127,8 +127,8 @@ ADAPTIVE = TechniqueSpec("adaptive", adaptive, (SSE, GPU_MB, HOST_MB, SHADING, G
                                   "{tiles_evicted}, unreadable {tiles_bad}",))
 SPRITE_ADAPTIVE = TechniqueSpec(
     "sprite-adaptive", sprite_adaptive,
-    (LOD, EPSILON, KEY_SSE, GPU_MB, HOST_MB, VISIBILITY, GUARD, BORDER, SHADING, TILES,
-     TILE_BUDGET, CACHE_MB, CACHE_POLICY, METRIC, PROXY_SSE),
+    (LOD, EPSILON, KEY_SSE, KEYFRAMES, GPU_MB, HOST_MB, VISIBILITY, GUARD, BORDER, SHADING,
+     TILES, TILE_BUDGET, CACHE_MB, CACHE_POLICY, METRIC, PROXY_SSE),
     ("terrain",), "LOD-sprite with keyframes by the adaptive renderer (render: --mode "
     "sprite --key-sse)", order=50, light=True, batch=False, knob="epsilon",
     summary=SPRITE_SUMMARY)

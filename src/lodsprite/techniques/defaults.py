@@ -62,10 +62,14 @@ def terrain_defaults(terrain: str, store: bool | None = None) -> dict[str, Any]:
 
 
 def fill_defaults(terrain: str, options: dict[str, Any],
-                  store: bool | None = None) -> dict[str, Any]:
+                  store: bool | None = None, worker: bool = False) -> dict[str, Any]:
     """``options`` (name -> value, ``None``: not given) with every :data:`DEFAULTED`
-    option not given set to ``terrain``'s default; options given are kept."""
+    option not given set to ``terrain``'s default; options given are kept.  ``worker``
+    (keyframes from the worker process): no ``proxy_sse`` default (the adaptive proxy is
+    frozen at keyframes drawn inline)."""
     defaults = terrain_defaults(terrain, store)
+    if worker:
+        defaults["proxy_sse"] = None
     return {**options, **{k: defaults[k] for k in DEFAULTED
                           if k in options and options[k] is None}}
 

@@ -315,18 +315,19 @@ class TiledKeyframes:
 def sprite_engine(renderer: Renderer, epsilon: float, lod: int, threaded: bool,
                   visibility: str, guard_px: int, border: bool, tiles: int,
                   tile_budget_ms: float, cache_mb: float, cache_policy: str,
-                  metric: str) -> SpriteEngine:
+                  metric: str, store=None) -> SpriteEngine:
     """The engine the options ask for, chosen once: :class:`TiledKeyframes` for
     ``tiles > 1`` (inline only), else :class:`WorkerKeyframes` or
-    :class:`WholeKeyframes`.  Raises :class:`~lodsprite.errors.InputError` for a bad
-    ``tiles``."""
+    :class:`WholeKeyframes` (``store``: the worker's keyframes over a terrain store,
+    :class:`~lodsprite.sprite.keyframe_worker.StoreKeys`).  Raises
+    :class:`~lodsprite.errors.InputError` for a bad ``tiles``."""
     if not (isinstance(tiles, int) and tiles >= 1) or (tiles > 1 and threaded):
         raise InputError(f"--tiles must be a whole number >= 1 (inline keyframes only "
                          f"when > 1), got {tiles}")
     sprite = renderer.sprite(
         epsilon, lod, threaded=threaded, visibility=visibility, guard_px=guard_px,
         border=border, cache_mb=0.0 if tiles > 1 else cache_mb, cache_policy=cache_policy,
-        metric=metric)  # with tiles, the tiled engine keeps the cache (of tile renders)
+        metric=metric, store=store)  # with tiles, the tiled engine keeps the cache (of tiles)
     if tiles == 1:
         return (WorkerKeyframes(sprite) if threaded
                 else WholeKeyframes(sprite, renderer, cache_mb))

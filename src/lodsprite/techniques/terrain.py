@@ -166,7 +166,7 @@ class SpriteTechnique(Technique):
                  visibility: str | None = None, guard_px: int | None = None,
                  border: bool = True, shading: str = "auto", tiles: int = 1,
                  tile_budget_ms: float = DEFAULT_TILE_BUDGET_MS, cache_mb: float = 0.0,
-                 cache_policy: str = "lru", metric: str = "warp") -> None:
+                 cache_policy: str = "lru", metric: str = "warp", store=None) -> None:
         super().__init__(renderer)
         from lodsprite.gl.sprite import DEFAULT_GUARD_PX, DEFAULT_VISIBILITY
 
@@ -176,7 +176,7 @@ class SpriteTechnique(Technique):
         self.engine: SpriteEngine = sprite_engine(
             renderer, epsilon, lod, keyframes == "worker", visibility or DEFAULT_VISIBILITY,
             DEFAULT_GUARD_PX if guard_px is None else guard_px, border, tiles,
-            tile_budget_ms, cache_mb, cache_policy, metric)
+            tile_budget_ms, cache_mb, cache_policy, metric, store)
         self.sprite: LodSprite = self.engine.sprite
         self.heights = level0_reader(renderer.terrain_gl.geometry, lod, border)
 

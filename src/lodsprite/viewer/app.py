@@ -58,7 +58,9 @@ class ViewOptions(TechniqueOptions):
         from lodsprite.techniques.defaults import DEFAULTED, fill_defaults, terrain_defaults
 
         given = {k: self.options.get(k) for k in DEFAULTED}
-        out = replace(self, options={**self.options, **fill_defaults(self.terrain, given)})
+        worker = self.options.get("keyframes") == "worker"
+        out = replace(self, options={**self.options,
+                                     **fill_defaults(self.terrain, given, worker=worker)})
         store_keys = terrain_defaults(self.terrain)["key_sse"] is not None
         if store_keys and self.mode in (None, "sprite") and "key_sse" in out.options:
             out = replace(out, mode="sprite-adaptive")
@@ -66,8 +68,13 @@ class ViewOptions(TechniqueOptions):
 
     def technique_options(self) -> dict:
         """The options the registry's techniques pick theirs from."""
+        from lodsprite.techniques.defaults import terrain_defaults
+
         self = self.resolved()
-        chosen = self.options.get("keyframes", "worker" if self.threaded else "inline")
+        store = terrain_defaults(self.terrain)["key_sse"] is not None
+        # the worker by default in memory; over a store when asked (--keyframes worker)
+        default = "worker" if self.threaded and not store else "inline"
+        chosen = self.options.get("keyframes", default)
         worker = chosen == "worker" and self.tiles == 1  # tiles inline
         return {**self.options, "keyframes": "worker" if worker else "inline",
                 "target_fps": self.target_fps,

@@ -1,0 +1,149 @@
+"""The keyframe worker process over a terrain store (Swan et al. 2002's LOD server, with
+the adaptive renderer drawing keyframes: ``sprite-adaptive --keyframes worker``).
+
+The process (:func:`store_keyframe_handler`, :mod:`lodsprite.workers`' factory, named by
+:data:`lodsprite.techniques.adaptive.WORKER_FACTORY`) makes its own headless context and
+the drawing side's terrain from the arrays handed over through shared memory (a store's
+light grid), opens the store at the path the user gave (validated there as on the
+drawing side: :class:`~lodsprite.terrain.store.TerrainStore`; an in-memory terrain is
+drawn from its arrays as a pyramid) and builds what ``sprite-adaptive`` builds for its
+keyframes: its own adaptive renderer (tile reader and caches), the coarse level with its
+ribbons from the store's coarse level, the level-0 reader, and the error metric whose
+``C`` is the surface each keyframe draws (:class:`~lodsprite.techniques.drawn_surface.
+DrawnSurface`).  Per request it streams (collects the tiles arrived: never waits, except
+for the first keyframe, whose view it fills as the inline technique's warm-up does),
+takes the keyframe's ``C'``, draws the keyframe adaptively at ``key_sse`` and answers it
+with:
+
+* ``deficit_px`` — what it lacks (:meth:`~lodsprite.techniques.adaptive_terrain.
+  AdaptiveTerrain.deficit_px`): its ``C'`` carries it into the keyframe's error on the
+  drawing side every frame, so a keyframe drawn while tiles stream is asked for again
+  until they have arrived;
+* ``selection`` — the nodes drawn and those morphed, which the drawing side's untimed
+  replay draws again (:class:`~lodsprite.techniques.adaptive_keys.WorkerAdaptiveKeys`);
+* ``points`` — the keyframe's own ``C`` (pickling a ``C'`` drops them).
+
+It imports no technique and no :mod:`lodsprite.api` (the process is named by the
+technique, so importing it back would be a cycle): it builds the GL objects itself.
+"""
+
+from __future__ import annotations
+
+import pickle
+import time
+from contextlib import nullcontext
+from dataclasses import replace
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+from lodsprite.sprite.keyframe_process import copy_shared, keyframe_answer, lower_priority
+from lodsprite.sprite.metric import ErrorMetric
+
+if TYPE_CHECKING:
+    import numpy as np
+
+    from lodsprite.camera import Viewpoint
+    from lodsprite.sprite.keyframe_worker import WorkerSettings
+    from lodsprite.terrain import HeightField
+
+
+def store_keyframe_handler(shm_name: str, layout: dict, field: tuple,
+                           settings: WorkerSettings):
+    """The worker process's request handler over a store (the requests and answers of
+    :func:`~lodsprite.sprite.keyframe_process.keyframe_handler`, module docstring)."""
+    from lodsprite.terrain import HeightField
+
+    lower_priority(settings.nice)
+    arrays = copy_shared(shm_name, layout)
+    dx, dy, name, meta = field
+    keys = StoreKeyframes(HeightField(arrays["heights"], dx, dy, name, meta),
+                          arrays.get("texture"), settings)
+
+    def answer(meta: bytes, data: bytes) -> tuple[bytes, bytes]:
+        vp, predicted, asked = pickle.loads(meta)
+        return keys.render(vp, predicted, asked)
+
+    return answer
+
+
+class StoreKeyframes:
+    """The worker's GL state: its own context, the terrain ``hf`` (the drawing side's
+    working grid; ``texture (H, W, 3) uint8`` or None), the adaptive renderer over the
+    store ``settings.store.path`` at ``key_sse`` and the sprite renderer whose keyframes
+    it draws."""
+
+    def __init__(self, hf: HeightField, texture: np.ndarray | None,
+                 s: WorkerSettings) -> None:
+        from lodsprite.gl.context import GLContext
+        from lodsprite.gl.sprite import SpriteDrawer
+        from lodsprite.gl.terrain import TerrainDrawer, TerrainGeometry
+        from lodsprite.techniques.adaptive_terrain import AdaptiveTerrain
+        from lodsprite.techniques.drawn_surface import DrawnSurface
+        from lodsprite.terrain.pyramid import MemoryPyramid
+        from lodsprite.terrain.store import TerrainStore, is_store
+        from lodsprite.terrain.storefield import store_field
+
+        keys = s.store
+        self.ctx = GLContext()
+        made: list = [self.ctx]
+        self.heights = None
+        try:
+            geometry = TerrainGeometry(self.ctx, hf, texture)
+            made.append(geometry)
+            self.terrain = TerrainDrawer(self.ctx, geometry, s.size[0], s.size[1],
+                                         s.fov_y_deg)
+            made.append(self.terrain)
+            pyramid = (TerrainStore(Path(keys.path).expanduser(),
+                                    float(hf.meta.get("exaggeration", 1.0)))
+                       if is_store(keys.path) else MemoryPyramid.from_heightfield(hf))
+            self.adaptive = AdaptiveTerrain(
+                self.ctx, pyramid, self.terrain.target, s.fov_y_deg, keys.key_sse,
+                gpu_mb=keys.gpu_mb, host_mb=keys.host_mb,
+                color=None if keys.heights else geometry.color_tex)
+            made.append(self.adaptive)
+            field = store_field(pyramid) if isinstance(pyramid, TerrainStore) else None
+            if field is not None:
+                geometry.set_full(field)
+            # the coarse level, its ribbons and the metric's squares from the store's
+            # coarse level held whole (no level-0 chunk read), as sprite-adaptive's setup
+            with nullcontext() if field is None else field.heights.from_coarse():
+                self.sprite = SpriteDrawer(self.terrain, s.lod, s.visibility,
+                                           border=s.border, guard_px=s.guard_px)
+                made.append(self.sprite)
+                self.metric = ErrorMetric.for_level(geometry.full, s.lod, s.resampling)
+                if field is not None:
+                    geometry.proxy(s.lod, s.border)
+                    field.heights.start_reader()
+                    self.heights = field.heights
+        except BaseException:  # released in the order made, backwards
+            for obj in reversed(made):
+                obj.release()
+            raise
+        if self.heights is not None:  # C: the surface each keyframe draws
+            self.metric = replace(self.metric, surface=DrawnSurface(self.adaptive).heights)
+        self.sprite.keyframe_drawer = self.adaptive.render_into
+        self.zbuffer = "coarse" if s.visibility == "coarse" else "full"
+        self.key_size = s.key_size
+        self.filled = False
+
+    def render(self, vp: Viewpoint, predicted: bool, asked: float) -> tuple[bytes, bytes]:
+        """The keyframe at ``vp`` drawn adaptively, as an answer (module docstring)."""
+        t0 = time.perf_counter()
+        s, adaptive = self.sprite, self.adaptive
+        frame_projection = self.terrain.projection(vp)
+        key_projection = s.key_projection(frame_projection)
+        if not self.filled:  # the first keyframe, waited for: its view resident
+            adaptive.fill(vp, key_projection.matrix())
+            self.filled = True
+        if self.heights is not None:
+            self.heights.pump()
+        adaptive.prefetch()
+        c_prime = self.metric.reproject(vp.o, key_projection.matrix() @ vp.view_matrix(),
+                                        self.key_size)
+        s.render_keyframe(vp, t0, frame_projection)
+        self.ctx.finish()
+        return keyframe_answer(s, self.zbuffer, {
+            "viewpoint": vp, "frame_projection": frame_projection, "c_prime": c_prime,
+            "requested_at": asked, "predicted": predicted,
+            "points": getattr(c_prime, "points", None), "deficit_px": adaptive.deficit_px(),
+            "selection": (tuple(adaptive.last_draw), adaptive.last_morphed)}, t0)
