@@ -105,6 +105,26 @@ def test_store_defaults_fill_what_was_not_given_and_keep_what_was(store):
     assert ViewOptions(terrain="fractal:64").resolved().mode is None
 
 
+def test_worker_keyframes_over_a_store_when_asked_and_without_the_proxy_default(store):
+    """The window draws a store's adaptive keyframes inline unless --keyframes worker is
+    given (in memory the worker is its default); with the worker the store's proxy_sse
+    default is not filled (the proxy is frozen at inline keyframes), one given is
+    refused."""
+    from lodsprite.errors import InputError
+    from lodsprite.run import RenderConfig
+    from lodsprite.viewer.app import ViewOptions
+
+    assert ViewOptions(terrain=store).technique_options()["keyframes"] == "inline"
+    assert ViewOptions(terrain="fractal:64").technique_options()["keyframes"] == "worker"
+    asked = ViewOptions(terrain=store, options={"keyframes": "worker"}).technique_options()
+    assert asked["keyframes"] == "worker" and asked.get("proxy_sse") is None
+    c = RenderConfig(terrain=store, mode="sprite", keyframes="worker").resolved()
+    assert c.technique == "sprite-adaptive" and c.proxy_sse is None and c.key_sse == 0.5
+    c.validate()  # the worker over a store is no longer refused
+    with pytest.raises(InputError, match="no --proxy-sse"):
+        RenderConfig(terrain=store, mode="sprite", keyframes="worker", proxy_sse=4.0).validate()
+
+
 def test_a_sprite_run_on_a_store_draws_adaptive_keyframes_and_reports_its_counts(
         store, tmp_path):
     from lodsprite.run import RenderConfig, render_path
