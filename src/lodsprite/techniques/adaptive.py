@@ -220,7 +220,8 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
     ``keyframes="worker"``: whole keyframes drawn by a worker process with its own
     adaptive renderer and tile streaming (:mod:`lodsprite.techniques.adaptive_worker`);
     the drawing side's adaptive renderer only draws each keyframe's recorded selection
-    again in the untimed replay.  Not with tiles or ``proxy_sse``."""
+    again in the untimed replay (the summary's tile counts are then that renderer's, the
+    replay's reads).  Not with tiles or ``proxy_sse``."""
 
     name = "sprite-adaptive"
 
@@ -264,6 +265,7 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
         # the adaptive renderer's hooks on the engine, whole keyframes or tiles
         self.keys: AdaptiveKeys = adaptive_keys(self.engine, self.adaptive, self._pump)
         self.surface = self.proxy = None  # the metric's C from the keyframe's drawn nodes
+        self.first_frame_s = float("nan")  # from the process's start
         if worker:  # both on the worker's side
             return
         if field is not None:
@@ -272,8 +274,6 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
             self.surface = DrawnSurface(self.adaptive)
             self.keys.use_surface(self.surface.heights)
         self.proxy = None if proxy_sse is None else self._adaptive_proxy(renderer, proxy_sse)
-
-    first_frame_s = float("nan")  # from the process's start
 
     def tile_drawer(self, update: int, tile: int) -> Callable | None:
         """Re-renders ``tile`` with the selection update ``update`` drew it with."""
