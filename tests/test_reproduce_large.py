@@ -300,3 +300,15 @@ def test_every_frame_is_judged_against_level_0_and_the_stand_in_is_a_validation_
     assert how["stand_in_rmse"] > 10
     _, plain = reference.reference_images(store, path, 32, [0, 3], 0.25, False)
     assert "stand_in" not in plain and "stand_in_rmse" not in plain
+
+
+def test_the_patrol_says_how_much_work_the_cache_cut_and_at_what_error():
+    from lodsprite.experiments.large.variants import patrol_block
+
+    off = {"keyframes": 12, "tiles_rendered": 12, "rmse": 5.0, "flip": 0.05, "total_s": 6.0}
+    on = {"keyframes": 3, "tiles_rendered": 3, "rmse": 5.5, "flip": 0.04, "total_s": 3.0}
+    p = patrol_block(off, on, 64.0)
+    assert p["keyframe_work_cut"] == 4.0 and p["speedup"] == 2.0
+    assert p["rmse_ratio"] == pytest.approx(1.1) and p["flip_ratio"] == pytest.approx(0.8)
+    assert p["equal_error"] is False  # fewer keyframes bought with a worse image
+    assert patrol_block(off, {**on, "rmse": 4.9}, 64.0)["equal_error"] is True

@@ -187,7 +187,8 @@ def _patrol(r: dict) -> list[str]:
             f"(cut {cut}); cache hits {b.get('cache_hits', '—')}; total "
             f"{f(a['total_s'], 2)} s against {f(b['total_s'], 2)} s "
             f"({f(pt['speedup'], 2)}×); RMSE / FLIP {f(a['rmse'], 2)} / {f(a['flip'], 3)} "
-            f"without, {f(b['rmse'], 2)} / {f(b['flip'], 3)} with."]
+            f"without, {f(b['rmse'], 2)} / {f(b['flip'], 3)} with (at equal error: "
+            f"{_yes(pt.get('equal_error', False))})."]
 
 
 def _jacksboro(r: dict) -> list[str]:

@@ -116,9 +116,15 @@ def equal_error(per_path: dict) -> dict:
 def patrol_block(without: dict, cached: dict, cache_mb: float) -> dict:
     """The patrol comparison from its two rows (``cache_mb`` 0 and ``cache_mb``):
     keyframe work (keyframes and tiles rendered) and speed with and without the cache,
-    and how many times less keyframe work the cache does."""
+    how many times less keyframe work the cache does, the cached run's RMSE and FLIP over
+    the uncached one's (``rmse_ratio``, ``flip_ratio``) and ``equal_error`` (both at most
+    the uncached run's, on the reported frames)."""
     work = "tiles_rendered" if without.get("tiles_rendered") else "keyframes"
     cut = (without[work] / cached[work]) if cached.get(work) else None
+    ratio = {f"{k}_ratio": (cached[k] / without[k] if without[k] else None)
+             for k in ("rmse", "flip")}
     return {"cache_mb": cache_mb, "without_cache": without, "with_cache": cached,
             "work": work, "keyframe_work_cut": cut,
-            "speedup": without[TIME_KEY] / cached[TIME_KEY]}
+            "speedup": without[TIME_KEY] / cached[TIME_KEY], **ratio,
+            "equal_error": cached["rmse"] <= without["rmse"]
+            and cached["flip"] <= without["flip"]}
