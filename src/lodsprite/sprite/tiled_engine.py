@@ -96,6 +96,10 @@ class TiledSpriteEngine:
         self.newest = np.full(count, -1, np.intp)  # per tile, the update last rendered
         self.cache_tiles = 0  # the last frame's tiles shown from a render not their newest
         self.proxy_selections: list = []  # per update, a view-dependent proxy's selection
+        # A view-dependent proxy kept between tile updates until stale (a ProxyHold of
+        # lodsprite.sprite.proxy_hold; None: frozen again at every update)
+        self.hold = None
+        self.frozen_for: list[int] = []  # per update, the update whose key froze its proxy
         self._now = 0
         if not cache_mb >= 0:
             raise InputError(f"cache_mb must be >= 0 MB, got {cache_mb}")
@@ -124,14 +128,17 @@ class TiledSpriteEngine:
                            projection.pixel_angle_rad(s.target.height), s.target.size)
 
     def render_tiles(self, chosen: Iterable[int], key: KeyChoice,
-                     drawer: TileDrawer | None = None, measure: bool = True) -> int:
+                     drawer: TileDrawer | None = None, measure: bool = True,
+                     freeze: KeyChoice | None = None) -> int:
         """Render tiles ``chosen`` from ``key`` (finishing after each, to measure its cost
-        when ``measure``); returns the triangles drawn."""
+        when ``measure``); returns the triangles drawn.  ``freeze``: the key a
+        view-dependent proxy is frozen for first (None: the one frozen is kept)."""
         key_proj = self.sprite.key_projection(key.projection)
         view_proj = key_proj.matrix() @ key.viewpoint.view_matrix()
         tris = 0
         ctx = self.sprite.terrain.ctx
-        self.tiled.freeze(key.viewpoint, key_proj)  # a view-dependent proxy, for the update
+        if freeze is not None:  # a view-dependent proxy, frozen for this update's key
+            self.tiled.freeze(freeze.viewpoint, self.sprite.key_projection(freeze.projection))
         for i in chosen:
             t = time.perf_counter()
             stats = self.tiled.render_tile(int(i), key.viewpoint, key_proj,
@@ -163,9 +170,12 @@ class TiledSpriteEngine:
             key_proj = s.key_projection(projection)
             # C' first: a view-dependent proxy is selected for it, then frozen by the tiles
             key_vp = key_proj.matrix() @ viewpoint.view_matrix()
+            why = self._refreeze(viewpoint, key_proj)
             c_prime = reproject_in_key_view(self.metric, viewpoint.o, key_vp, s.key_size,
                                             self._within(chosen, key_vp))
-            tris += self.render_tiles(chosen, key)
+            tris += self.render_tiles(chosen, key, freeze=key if why else None)
+            if why and self.hold is not None:
+                self.hold.frozen(viewpoint.o, why)
             self.proxy_selections.append(getattr(s.proxy, "last", None))
             if self.after_tiles is not None:
                 self.after_tiles(viewpoint, key_proj)
@@ -187,6 +197,19 @@ class TiledSpriteEngine:
         s.terrain.ctx.finish()
         return sprite_frame(kind, (time.perf_counter() - t0) * 1e3, tris, shown,
                             len(self.updates) - 1, decision)
+
+    def _refreeze(self, viewpoint: Viewpoint, key_proj) -> str | None:
+        """Why this update freezes the proxy again (None: the held one is kept, its
+        nodes the metric's): every update without a :attr:`hold`, else when the held
+        proxy is stale (:mod:`lodsprite.sprite.proxy_hold`); logs :attr:`frozen_for`."""
+        why = "update" if self.hold is None else self.hold.stale(viewpoint, key_proj)
+        if why or not self.frozen_for:
+            self.frozen_for.append(len(self.updates) - 1)
+        else:
+            self.frozen_for.append(self.frozen_for[-1])
+        if self.hold is not None:
+            self.hold.held = why is None
+        return why
 
     def _within(self, chosen: Sequence[int], key_vp: np.ndarray) -> np.ndarray | None:
         """The sub-frustum of the tiles ``chosen`` (their NDC bounding rectangle), whose
@@ -257,14 +280,15 @@ class TiledSpriteEngine:
                     drawer = None if drawer_for is None else drawer_for(int(u), t)
                     if force is not None:
                         force(self.proxy_selections[u])
-                    self.render_tiles([t], self.updates[u], drawer, measure=False)
+                    self.render_tiles([t], self.updates[u], drawer, measure=False,
+                                      freeze=self.updates[self.frozen_for[u]])
                     shown[t] = u
             if shows_keyframe:
                 return self.tiled.keyframe_color()
             if force is not None:
                 u = int(max(mosaic)) if latest is None else int(latest)
                 force(self.proxy_selections[u])
-                key = self.updates[u]
+                key = self.updates[self.frozen_for[u]]
                 self.tiled.freeze(key.viewpoint, self.sprite.key_projection(key.projection))
             self.tiled.render_spriteframe(viewpoint)
             return self.sprite.target.read_color()
