@@ -17,6 +17,7 @@ selection, the tiles, ``C'`` of the new viewpoint and the spriteframe, up to
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Iterable, Sequence
 
@@ -27,7 +28,7 @@ from lodsprite.errors import InputError
 from lodsprite.gl.sprite import SpriteDrawer
 from lodsprite.gl.sprite_tiles import TileDrawer, TiledSpriteDrawer, TileSlots
 from lodsprite.record import Frame
-from lodsprite.sprite.cache import SWITCH_FRACTION, TileCache
+from lodsprite.sprite.cache import SWITCH_FRACTION, TileCache, far_error_px
 from lodsprite.sprite.engine import sprite_frame
 from lodsprite.sprite.metric import ErrorMetric
 from lodsprite.sprite.policy import KEYFRAME, SPRITE, KeyChoice, resampling_metric
@@ -59,7 +60,8 @@ class TiledSpriteEngine:
 
     ``cache_mb > 0``: a cache of tile renders within that many MB of GPU memory, replaced
     by ``cache_policy`` (:class:`lodsprite.sprite.cache.TileCache`): each frame a tile at or over
-    half ε shows its cached render with the lowest error, and only tiles still over ε are
+    half ε shows its cached render with the lowest error (the far term of
+    :func:`~lodsprite.sprite.cache.far_error_px` included), and only tiles still over ε are
     re-rendered; :attr:`cache_tiles` counts, per frame, the tiles shown from a render other
     than their newest."""
 
@@ -222,7 +224,9 @@ class TiledSpriteEngine:
 
     def _use_cache(self, viewpoint: Viewpoint, errors: np.ndarray) -> bool:
         """Each tile at or over ``SWITCH_FRACTION`` ε shows its cached render with the
-        lowest error (copied into the mosaic when not the one shown); True if any changed."""
+        lowest error, the tile's and the far term over the render's samples
+        (:func:`~lodsprite.sprite.cache.far_error_px`) in quadrature (copied into the
+        mosaic when not the one shown); True if any changed."""
         s = self.sprite
         projection = s.terrain.projection(viewpoint)
         view_proj = projection.matrix() @ viewpoint.view_matrix()
@@ -233,10 +237,11 @@ class TiledSpriteEngine:
                 self.cache.keep(i, self._now)
                 continue
             shown = self.cache.caches[i].shown
-            entry, _ = self.cache.best(i, viewpoint.o, lambda e, i=i: render_error(
+            entry, _ = self.cache.best(i, viewpoint.o, lambda e, i=i: math.hypot(render_error(
                 self.metric, e.c_prime, e.projection.matrix() @ e.viewpoint.view_matrix(),
-                self.tiled.ndc[i],
-                viewpoint.o, view_proj, beta, s.target.size), self._now)
+                self.tiled.ndc[i], viewpoint.o, view_proj, beta, s.target.size),
+                far_error_px(self.metric, e.c_prime, e.viewpoint.o, viewpoint.o, view_proj,
+                             beta)), self._now)
             if entry is None or entry is shown:
                 continue
             self.slots.load((i, entry.slot))
