@@ -7,6 +7,10 @@ tile_errors`), the tiles to re-render chosen by benefit/cost within ``tile_budge
 through the key projection there (scissored, culled by its sub-frustum), then the tiled
 spriteframe.  A frame that re-rendered every tile is a keyframe (shown as it is, its
 centre); one that re-rendered some is of kind ``tiles``; the others are spriteframes.
+With a view-dependent proxy (:attr:`TiledSpriteEngine.hold`) a tile update keeps the
+proxy frozen at an earlier one until it is stale (:mod:`lodsprite.sprite.proxy_hold`:
+the rule), and records the update it was frozen for (:attr:`~TiledSpriteEngine.
+frozen_for`), which the replay freezes again.
 
 Each tile's cost is its last measured time (ms, GL finished after it; the first frame
 renders every tile and measures each).  The frame's time covers the errors, the
@@ -170,7 +174,8 @@ class TiledSpriteEngine:
             key = KeyChoice(viewpoint, projection, False)
             self.updates.append(key)
             key_proj = s.key_projection(projection)
-            # C' first: a view-dependent proxy is selected for it, then frozen by the tiles
+            # C' first: a stale view-dependent proxy is selected for it, then frozen by the
+            # tiles; a fresh one is kept (lodsprite.sprite.proxy_hold)
             key_vp = key_proj.matrix() @ viewpoint.view_matrix()
             why = self._refreeze(viewpoint, key_proj)
             c_prime = reproject_in_key_view(self.metric, viewpoint.o, key_vp, s.key_size,
