@@ -73,6 +73,8 @@ class AdaptiveTerrain:
         self.last_morphed: frozenset = frozenset()
         self._keep: set = set()
         self.pinned: set = set()  # nodes whose slots stay (a sprite proxy's frozen nodes)
+        # a tile update's requests and nodes kept so far (None: each selection its own)
+        self.gathering: tuple[list, set] | None = None
         self._ranges_key: tuple[float, ...] | None = None  # triangles_at's ranges, per
         self._ranges = np.zeros((0, self.tree.levels))       # tolerance, for these
         roots = self.roots = self.tree.roots()
@@ -168,12 +170,16 @@ class AdaptiveTerrain:
                                       self.slots.__contains__)
         # a root evicted (off-screen, LRU) comes back first: its region would be a hole
         want += [(float("inf"), n) for n in self.roots if n not in self.slots]
-        self.loader.want(want)
         keep = set(self.roots) | self.pinned
         for n in draw:
             while n.k <= self.tree.top and n not in keep:
                 keep.add(n)
                 n = n.parent()
+        if self.gathering is not None:  # a tile update: every tile's wants, not the last's
+            self.gathering[0].extend(want)
+            self.gathering[1].update(keep)
+            want, keep = self.gathering
+        self.loader.want(want)
         self._wanted, self._keep = [n for _, n in sorted(want, key=lambda u: -u[0])], keep
         return draw, self._upload_arrived()
 
