@@ -312,3 +312,15 @@ def test_the_patrol_says_how_much_work_the_cache_cut_and_at_what_error():
     assert p["rmse_ratio"] == pytest.approx(1.1) and p["flip_ratio"] == pytest.approx(0.8)
     assert p["equal_error"] is False  # fewer keyframes bought with a worse image
     assert patrol_block(off, {**on, "rmse": 4.9}, 64.0)["equal_error"] is True
+
+
+def test_no_two_runs_of_a_path_share_a_folder():
+    """The patrol's runs without and with the cache used to share ``whole_eps0.5``: the
+    second overwrote the first's frames and summary."""
+    from lodsprite.experiments.large.runs import run_folder
+
+    names = [run_folder("whole", 0.5, extra={"cache_mb": 0.0}),
+             run_folder("whole", 0.5, extra={"cache_mb": 64.0}),
+             run_folder("whole", 0.5, 2.0), run_folder("whole", 1.0),
+             run_folder("tiled+cache", 0.5), run_folder("worker", 0.5)]
+    assert len(set(names)) == len(names) and names[0] == "whole_eps0.5"

@@ -197,14 +197,6 @@ class AdaptiveTerrain:
             self._wanted = [n for n in self._wanted if n not in self.slots]
         return uploaded
 
-    def request(self, viewpoint: Viewpoint, projection) -> int:
-        """Select for ``viewpoint`` through ``projection`` (a :class:`~lodsprite.camera.
-        Projection`) without drawing: ask the loader for what that view lacks and upload
-        what has arrived; returns the tiles uploaded.  After keyframe tiles culled by
-        their sub-frusta, this streams for the whole view, not only the last tile."""
-        view_proj = projection.matrix() @ viewpoint.view_matrix()
-        return self._stream(np.asarray(viewpoint.o, dtype=np.float64), view_proj)[1]
-
     def prefetch(self) -> int:
         """Between frames drawn by this renderer (LOD-sprite's spriteframes): go on
         streaming the last selection's tiles and upload what has arrived, so the next

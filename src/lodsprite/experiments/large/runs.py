@@ -32,8 +32,20 @@ def sprite_lod(side: int) -> int:
     return q
 
 
-def _folder(variant: str, eps: float) -> str:
-    return f"{variant.replace('+', '-')}_eps{eps:g}"
+def run_folder(variant: str, eps: float, key_sse: float | None = None,
+               extra: dict | None = None) -> str:
+    """The folder of a LOD-sprite run: ``VARIANT_epsE``, then ``_keyK`` for a keyframe
+    tolerance other than the config's (``key_sse`` given) and ``_NAMEV`` for each option
+    in ``extra`` that differs from the variant's own (the patrol's two cache settings), so
+    that no two runs of one path share a folder."""
+    name = f"{variant.replace('+', '-')}_eps{eps:g}"
+    if key_sse is not None:
+        name += f"_key{key_sse:g}"
+    own = VARIANTS.get(variant, {})
+    for k, v in sorted((extra or {}).items()):
+        if own.get(k) != v:
+            name += f"_{k.replace('_', '')}{v:g}"
+    return name
 
 
 class PathRuns:
@@ -72,8 +84,7 @@ class PathRuns:
         config's ``key_sse``)."""
         opts = {**VARIANTS[variant], **extra}
         key = self.cfg.key_sse if key_sse is None else key_sse
-        folder = _folder(variant, eps) if key == self.cfg.key_sse else (
-            f"{_folder(variant, eps)}_key{key:g}")
+        folder = run_folder(variant, eps, None if key == self.cfg.key_sse else key, extra)
         s, q, c = self.timed(folder, mode="sprite", key_sse=key, lod=sprite_lod(self.n),
                              epsilon=eps, **opts)
         return row(s, q, eps, int(opts.get("tiles", 1)), chosen=c, key_sse=key)
@@ -92,8 +103,8 @@ class PathRuns:
                              "epsilon": eps, "ground_truth": True, "flip": True,
                              "quality_stride": self.cfg.sample_every,
                              "display_fps": NOMINAL_FPS, **opts},
-                            self.runs / _folder(variant, eps))
-        judged = played_quality(self.runs / _folder(variant, eps))
+                            self.runs / run_folder(variant, eps))
+        judged = played_quality(self.runs / run_folder(variant, eps))
         return {**row(s, judged[0], eps, chosen=judged[1], key_sse=self.cfg.key_sse),
                 "played": True, **{k: s.get(k) for k in ("display_fps", "latency_ms_mean",
                                                            "truncated")}}
