@@ -89,7 +89,7 @@ class BattlefieldConfig(SplitSampled):
     frames: int = 300
     image: int = 256
     target_fps: float = 5.0     # binds: a 100-frame run's fixed-exponent frames took 221-319 ms
-    extraction_frames: int = 100  # the manager / no_manager runs: the first frames of a path
+    extraction_frames: int = 50   # the manager / no_manager runs: the first frames of a path
     sample_every: int = 15      # 20 sampled frames a path: 10 to choose on, 10 to report
     terrain_mode: str = "adaptive"
     terrain_grid: int = 32      # the adaptive renderer's nodes: 32² quads (docs/scenes.md)
