@@ -283,9 +283,11 @@ def _keyframed(renderer: Renderer, scene: Scene, mode: str, exponent: float,
     own = {o.name for o in techniques.get("adaptive").options}
     adaptive = mode == "sprite-adaptive"
     keys = SceneKeys(str(scene.source), "adaptive" if adaptive else "full",
-                     {k: v for k, v in options.items() if adaptive and k in own})
-    return KeyframedTerrain(renderer, keys, float(options.get("epsilon", DEFAULT_EPSILON_PX)),
-                            int(options.get("lod", DEFAULT_COARSE)), exponent)
+                     {k: v for k, v in options.items()
+                      if adaptive and k in own and v is not None})
+    epsilon, lod = options.get("epsilon"), options.get("lod")  # None: the defaults
+    return KeyframedTerrain(renderer, keys, float(epsilon or DEFAULT_EPSILON_PX),
+                            int(lod or DEFAULT_COARSE), exponent)
 
 
 def reference(renderer: Renderer, scene: Scene, path: CameraPath, frame_s: float = FRAME_S
