@@ -29,12 +29,12 @@ def test_a_slow_worker_raises_the_predicted_error_of_fine_settings():
         m.rate.observe(1.0, 100.0)
         m.rate.observe(0.5, 200.0)
     for _ in range(50):
-        m.observe_view(10.0, 1.0, 0.1)   # 10 px a second of error growth
-    assert m.growth_pxs == pytest.approx(10.0, rel=1e-3)
-    # ε 1 (τ 0.5): 10 keyframes a second needed, 5 delivered: the error doubles past ε
-    assert m.error_px(1.0) == pytest.approx(0.5 + 1.0 * 2.0, rel=1e-3)
-    # ε 4 (τ 2): 2.5 needed, 20 delivered: the bound holds
-    assert m.error_px(4.0) == pytest.approx(tolerance_for(4.0) + 4.0, rel=1e-3)
+        m.observe_view(40.0, 1.0, 0.1)   # 40 px a second of error growth
+    assert m.growth_pxs == pytest.approx(40.0, rel=1e-3)
+    # ε 1 (τ 0.5): asked for at 0.5 px, 200 ms to come at 40 px/s: 8.5 px, past ε
+    assert m.error_px(1.0) == pytest.approx(0.5 + 0.5 + 40.0 / 5.0, rel=1e-3)
+    # ε 8 (τ 4): 25 ms to come, asked at 4 px: the bound holds
+    assert m.error_px(8.0) == pytest.approx(tolerance_for(8.0) + 8.0, rel=1e-3)
     # the finest setting is not the best one: its error, and so its benefit, is worse
     errors = [m.error_px(e) for e in EPS]
     assert int(np.argmin(errors)) < len(EPS) - 1
@@ -47,7 +47,7 @@ def test_the_scheduler_plans_the_reused_terrain_by_its_predicted_error():
     for _ in range(20):
         m.rate.observe(1.0, 100.0)
         m.rate.observe(0.5, 200.0)
-    m.growth_pxs = 10.0
+    m.growth_pxs = 40.0
     value = [EPS[0]]
 
     def set_value(v: float) -> None:

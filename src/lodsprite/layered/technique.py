@@ -231,7 +231,7 @@ class LayeredTechnique(Technique):
             col = [f.extra[f"ms_{layer.name}"] for f in frames]
             out[f"mean_ms_{layer.name}"] = float(np.mean(col)) if col else float("nan")
         out["keyframes"] = int(sum(f.kind == "keyframe" for f in frames))
-        return {**out, **self.terrain.summary()} if hasattr(self.terrain, "engine") else out
+        return {**out, **self.terrain.summary()} if hasattr(self.terrain, "summary") else out
 
     def reference(self, path: CameraPath) -> AbstractContextManager[Callable]:
         """The full-detail scene along ``path`` (:func:`reference`): full-resolution

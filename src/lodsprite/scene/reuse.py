@@ -14,9 +14,10 @@ work and the error shown:
   and so the keyframes it can deliver a second, ``rate(τ) = 1000 / ms(τ)``;
 * the view's error growth ``g`` (pixels a second: the shown keyframe's error over its
   age, a moving average) makes ``need(ε) = g / ε`` keyframes a second to hold ε;
-* the predicted error of a setting: ``τ + ε · max(1, need(ε) / rate(τ))`` pixels (a
-  worker slower than the view needs lets the error grow past ε by that ratio; the
-  keyframe itself is τ from level 0);
+* the predicted error of a setting: ``τ + max(ε, f · ε + g / rate(τ))`` pixels: a
+  keyframe is asked for at ``f · ε`` (the worker engine's request fraction) and comes
+  ``1 / rate`` seconds later, the error growing by ``g / rate`` meanwhile, so a worker
+  slower than the view lets the error pass ε; the keyframe itself is τ from level 0;
 * its benefit ``coverage · min(1, e_min / error)`` (``e_min`` the finest setting's
   ``τ + ε``: the same unit as :class:`~lodsprite.scene.costs.TerrainBenefit`);
 * its cost, the display's ms: ``scale · (a + b · work)`` (:class:`~lodsprite.scene.costs.
@@ -38,6 +39,7 @@ from lodsprite.scene.costs import CostModel, LayerModel, PowerWork
 REUSE_SETTINGS = ((16.0, 8.0), (11.3, 5.7), (8.0, 4.0), (5.7, 2.8), (4.0, 2.0),
                   (2.8, 1.4), (2.0, 1.0), (1.4, 0.71), (1.0, 0.5), (0.71, 0.5), (0.5, 0.5))
 GROWTH_GAIN = 0.2   # weight of the newest error-growth sample in its moving average
+REQUEST_FRACTION = 0.5  # f: the worker engine's (DEFAULT_REQUEST_FRACTION)
 
 
 def tolerance_for(epsilon: float) -> float:
@@ -116,7 +118,8 @@ class ReuseModel(LayerModel):
     def error_px(self, value: float) -> float:
         """Predicted error (px) of the setting whose ε is ``value``."""
         tau = tolerance_for(value)
-        return tau + value * max(1.0, self.need(value) / self.rate.rate(tau))
+        late = REQUEST_FRACTION * value + self.growth_pxs / self.rate.rate(tau)
+        return tau + max(value, late)
 
     def worker_ms(self, value: float) -> float:
         """The worker's ms a display frame at the setting ``value``."""
