@@ -141,6 +141,10 @@ class TerrainLayer(Layer):
             return self.technique.terrain.projection(viewpoint)
         return self.renderer.projection(viewpoint).matrix()
 
+    def plan_replay(self, frames: set[int]) -> None:
+        """The frames a replay will come for (the technique's own plan)."""
+        self.technique.plan_replay(frames)
+
     def keyframe_hook(self, draw: Callable[[Viewpoint, np.ndarray, Any], None]) -> bool:
         """With LOD-sprite: ``draw(viewpoint, projection (4, 4), fbo)`` runs after the
         terrain of every keyframe, into the keyframe (static layers); False without."""

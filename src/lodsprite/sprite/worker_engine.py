@@ -62,13 +62,14 @@ class WorkerLodSpriteEngine:
     def __init__(self, sprite: SpriteDrawer, scene: Scene, fov_y_deg: float,
                  epsilon_px: float = DEFAULT_EPSILON_PX,
                  request_fraction: float = DEFAULT_REQUEST_FRACTION,
-                 predictor: str = "linear", metric: str = "warp") -> None:
+                 predictor: str = "linear", metric: str = "warp", make_worker=None) -> None:
         self.sprite = sprite
         self.epsilon_px = float(epsilon_px)
         self.request_fraction = float(request_fraction)
         resampling = resampling_metric(metric)
         self.metric = ErrorMetric.for_level(scene.hf, sprite.coarse_quads, resampling)
-        self.worker = KeyframeWorker(scene, WorkerSettings(
+        # make_worker(scene, settings): another client end (a scene's); default the terrain's
+        self.worker = (make_worker or KeyframeWorker)(scene, WorkerSettings(
             sprite.target.size, fov_y_deg, sprite.coarse_quads, sprite.visibility,
             sprite.border, sprite.guard_px, predictor, resampling=resampling))
         self.keyframes: list[KeyChoice] = []
