@@ -58,14 +58,14 @@ def pixel(renderer, vp, xyz) -> tuple[int, int]:
     return int(px[1]), int(px[0])
 
 
-def shown_with_worker(gl, folder: Path, static: bool):
-    """The second frame of the scene technique with worker keyframes, and the walker's
-    pixel (row, column)."""
+def shown_with_worker(gl, folder: Path, static: bool, keyframes: str = "worker"):
+    """The second frame of the scene technique with ``keyframes`` from the worker (or
+    inline), and the walker's pixel (row, column)."""
     world = load_scene_file(scene(folder, static))
     vp = look_at(EYE, AIM)
     with Renderer(world, SIZE, 45.0, ctx=gl.mgl) as r:
         t = techniques.create("scene", r, world=world, terrain_mode="sprite",
-                              keyframes="worker", epsilon=4.0, lod=8)
+                              keyframes=keyframes, epsilon=4.0, lod=8)
         try:
             assert t.static_in_keyframes and t.objects.subset is t.objects.moving
             t.warm_up(vp)
@@ -78,13 +78,16 @@ def shown_with_worker(gl, folder: Path, static: bool):
     return img, walker
 
 
-def test_a_walker_behind_a_static_cube_in_the_keyframe_is_hidden(gl, tmp_path):
+@pytest.mark.parametrize("keyframes", ["worker", "inline"])
+def test_a_walker_behind_a_static_cube_in_the_keyframe_is_hidden(gl, tmp_path, keyframes):
+    """Inline keyframes too: they left the proxy's depth alone, and the walker showed
+    through the static cube's sprite."""
     (tmp_path / "a").mkdir(), (tmp_path / "b").mkdir()
-    img, walker = shown_with_worker(gl, tmp_path / "a", static=True)
+    img, walker = shown_with_worker(gl, tmp_path / "a", static=True, keyframes=keyframes)
     red = img[walker]
     assert not (red[0] > red[1] + 60 and red[0] > red[2] + 60), red  # the cube's grey
     # the control: the static cube removed, the same walker shows red at that pixel
-    ctrl, same = shown_with_worker(gl, tmp_path / "b", static=False)
+    ctrl, same = shown_with_worker(gl, tmp_path / "b", static=False, keyframes=keyframes)
     assert same == walker
     c = ctrl[walker]
     assert c[0] > c[1] + 60 and c[0] > c[2] + 60, c
