@@ -18,7 +18,8 @@ the one given): a crowd alone is drawn on its own ground through its own project
 What LOD-sprite's keyframes hold (``keyframe_holds``): ``static`` (the default) renders the
 static objects (``walk_mps = 0``) into every keyframe after its terrain, so spriteframes
 warp them with the terrain and a frame draws only the moving objects, depth tested
-against the spriteframe's (the proxy's) depth; ``terrain`` keeps keyframes terrain only
+against the keyframe's depth warped under the spriteframe (whole keyframes,
+:class:`~lodsprite.gl.key_depth.KeyDepthPass`); ``terrain`` keeps keyframes terrain only
 and draws every object every frame.  Light fields are view dependent: never in keyframes.
 ``benchmarks/scene_layers.py`` measures the two (docs/scenes.md).
 
