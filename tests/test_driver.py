@@ -125,11 +125,27 @@ def test_render_with_worker_keyframes_plays_the_path_in_time(tmp_path):
     assert len(json.loads((out / "keyframes.json").read_text())["keyframes"]) > max(shown_keys)
 
 
+def test_render_play_plays_inline_keyframes_in_time_too(tmp_path):
+    """``--play`` with inline keyframes: the same played loop as the worker's (so the two
+    are compared alike), keyframes drawn in the frames that need them."""
+    out = tmp_path / "p"
+    r = run_cli("render", "--terrain", "fractal:64:3", "--grid", "64", "--mode", "sprite",
+                "--play", "--display-fps", "40", "--frames", "8", "--size", SIZE,
+                "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    s = json.loads((out / "summary.json").read_text())
+    got = rows(out)
+    start = np.array([float(x["start_s"]) for x in got])
+    assert s["display_rate"] == 40.0 and s["played_s"] >= 7 / 30.0 - 1e-3
+    assert (np.diff(start) > 0).all() and (start >= np.arange(len(got)) / 40.0 - 1e-3).all()
+    assert s["keyframes"] >= 1 and "latency_ms_mean" in s
+
+
 @pytest.mark.parametrize("args, fragment", [
     (["--keyframes", "worker", "--tiles", "2"], "whole keyframes"),
     (["--keyframes", "worker", "--key-sse", "1", "--proxy-sse", "4"], "no --proxy-sse"),
     (["--keyframes", "worker", "--save-frames"], "keeps no images"),
-    (["--display-fps", "30"], "--display-fps goes with --keyframes worker"),
+    (["--display-fps", "30"], "--display-fps goes with --play or --keyframes worker"),
 ])
 def test_worker_keyframes_refuse_what_a_played_run_cannot_do(tmp_path, args, fragment):
     r = run_cli("render", "--mode", "sprite", *args, "--frames", "3", "--size", SIZE,

@@ -33,7 +33,7 @@ def battlefield(tmp_path_factory):
 
 def test_results_hold_the_issues_keys_and_the_runs_own_figures(battlefield):
     out, r, _ = battlefield
-    for name in ("scheduler", "independent"):
+    for name in ("scheduler", "reuse", "independent"):
         assert RUN_KEYS <= set(r[name]), name
         run = r["paths"]["weave"][name]
         ms = np.array(run["columns"]["ms"])
@@ -44,7 +44,8 @@ def test_results_hold_the_issues_keys_and_the_runs_own_figures(battlefield):
         assert (ms >= layers - 1e-6).all(), (ms, layers)
         assert r[name]["median_ms"] >= np.median(layers) - 1e-6
         assert r[name]["p99_ms"] >= np.percentile(layers, 99) - 1e-6
-        assert r[name]["target_ms"] == pytest.approx(1e3 / r["config"]["target_fps"])
+        fps = r["config"]["reuse_fps" if name == "reuse" else "target_fps"]
+        assert r[name]["target_ms"] == pytest.approx(1e3 / fps)
         assert run["quality_frames"] == 2  # frames 0 and 3 against the full-detail scene
         # the reduced-detail run scores worse than the full-detail scene does against the
         # same reference (which scores it as the same image: see the test below)
@@ -137,6 +138,10 @@ def test_report_names_the_measured_figures_beside_the_targets(battlefield):
     assert f"{r['extractions_without_manager']:,}" in text
     assert (out / "frame_times.png").stat().st_size > 0
     assert (out / "profile_vs_linear.png").stat().st_size > 0
+    # issue 32: reuse beside the scheduler, with the frontier plot of the three runs
+    assert "## Reused static layers" in text and f"{r['reuse']['median_ms']:.1f}" in text
+    assert (out / "frontier_0.png").stat().st_size > 0 and "frontier_0.png" in text
+    assert r["paths"]["weave"]["reuse"]["keyframes_rendered"] >= 1
 
 
 def test_next_exponent_coarsens_when_there_are_too_many_triangles():

@@ -37,7 +37,7 @@ def large(tmp_path_factory):
     # two variants, no patrol: the third variant and the patrol run the same code
     cfg = LargeConfig(sizes=(256,), paths=PATHS, frames=8, image=48, sample_every=2,
                       jacksboro=False, eps=EPS, validate_sizes=(128,), variants=RUN,
-                      patrol=False)
+                      patrol=False, adaptive_sse=(1.0, 4.0), key_sweep=())
     r = reproduce_large(cfg, out)
     write_outputs(r, out)
     return out, json.loads((out / "results.json").read_text())
@@ -119,6 +119,53 @@ def test_equal_error_is_the_one_the_rows_give_and_patrol_says_what_it_did(large)
     assert report.count("| 256² | whole |") == len(PATHS) * len(EPS)  # every ε row, path
     assert report.count("| 128² (check only, no timed runs) |") == len(PATHS)
     assert (out / "large_scaling.png").stat().st_size > 2000
+
+
+def test_the_frontiers_are_the_runs_own_and_a_level_not_run_has_no_speedup(large):
+    from lodsprite.experiments.large.frontiers import frontier_block
+
+    out, r = large
+    for p in PATHS:
+        per_path = r["sizes"]["256"][p]
+        block = r["frontier"]["256"][p]
+        assert [x["sse"] for x in per_path["adaptive_sweep"]] == [1.0, 4.0]
+        assert [x["sse"] for x in block["adaptive"]] == [1.0, 4.0]
+        # every LOD-sprite run of every variant is a point, at its own figures
+        runs = [x for name in RUN for x in per_path.get(name, [])]
+        assert [x["median_ms"] for x in block["lod-sprite"]] == [x["median_ms"] for x in runs]
+        assert any(x["on_frontier"] for x in block["adaptive"])
+        again, speed = frontier_block(per_path, list(RUN))
+        assert json.loads(json.dumps(again)) == block
+        assert speed["median_ms"] == r["frontier_speedup"]["256"][p]
+        assert set(r["frontier_speedup"]["256"][p]) == {"1px", "2px", "4px"}
+        assert block["levels"]["2px"] is None and r["frontier_speedup"]["256"][p]["2px"] is None
+        assert block["levels"]["1px"] == per_path["adaptive"]["rmse"]
+        assert (out / f"frontier_256_{p}.png").stat().st_size > 2000
+    assert "## Error–time frontiers" in (out / "report.md").read_text()
+
+
+def _pt(ms: float, rmse: float, chosen: float) -> dict:
+    return {"median_ms": ms, "p99_ms": 2 * ms, "rmse": rmse, "rmse_chosen": chosen}
+
+
+def test_frontier_runs_are_chosen_on_one_half_and_compared_on_the_other():
+    from lodsprite.experiments.large.frontiers import curve, frontier_block
+
+    # b is on the frontier only by the reported half: it is left out; c is dominated on
+    # the chosen half by a (faster, lower error): left out too
+    pts = [_pt(10.0, 3.0, 2.0), _pt(20.0, 1.0, 2.5), _pt(30.0, 2.5, 2.1), _pt(40.0, 0.5, 1.0)]
+    front, members = curve(pts, "median_ms")
+    assert members == [0, 3] and front == [(10.0, 3.0), (40.0, 0.5)]
+    per_path = {"adaptive_sweep": [{**_pt(50.0, 2.0, 2.0), "sse": 1.0},
+                                   {**_pt(25.0, 4.0, 4.0), "sse": 4.0}],
+                "whole": [{**x, "epsilon": 1.0} for x in pts]}
+    block, speed = frontier_block(per_path, ["whole"])
+    assert block["levels"] == {"1px": 2.0, "2px": None, "4px": 4.0}
+    # at RMSE 2 LOD-sprite's curve is between 10 ms (3.0) and 40 ms (0.5): log-interpolated
+    t = 10.0 * (40.0 / 10.0) ** ((3.0 - 2.0) / (3.0 - 0.5))
+    assert speed["median_ms"]["1px"] == pytest.approx(50.0 / t)
+    assert speed["median_ms"]["4px"] is None  # above LOD-sprite's worst error: none
+    assert [x["on_frontier"] for x in block["lod-sprite"]] == [True, False, False, True]
 
 
 def _row(rmse: float, flip: float, total: float, rmse_c: float, flip_c: float) -> dict:
@@ -253,3 +300,27 @@ def test_every_frame_is_judged_against_level_0_and_the_stand_in_is_a_validation_
     assert how["stand_in_rmse"] > 10
     _, plain = reference.reference_images(store, path, 32, [0, 3], 0.25, False)
     assert "stand_in" not in plain and "stand_in_rmse" not in plain
+
+
+def test_the_patrol_says_how_much_work_the_cache_cut_and_at_what_error():
+    from lodsprite.experiments.large.variants import patrol_block
+
+    off = {"keyframes": 12, "tiles_rendered": 12, "rmse": 5.0, "flip": 0.05, "total_s": 6.0}
+    on = {"keyframes": 3, "tiles_rendered": 3, "rmse": 5.5, "flip": 0.04, "total_s": 3.0}
+    p = patrol_block(off, on, 64.0)
+    assert p["keyframe_work_cut"] == 4.0 and p["speedup"] == 2.0
+    assert p["rmse_ratio"] == pytest.approx(1.1) and p["flip_ratio"] == pytest.approx(0.8)
+    assert p["equal_error"] is False  # fewer keyframes bought with a worse image
+    assert patrol_block(off, {**on, "rmse": 4.9}, 64.0)["equal_error"] is True
+
+
+def test_no_two_runs_of_a_path_share_a_folder():
+    """The patrol's runs without and with the cache used to share ``whole_eps0.5``: the
+    second overwrote the first's frames and summary."""
+    from lodsprite.experiments.large.runs import run_folder
+
+    names = [run_folder("whole", 0.5, extra={"cache_mb": 0.0}),
+             run_folder("whole", 0.5, extra={"cache_mb": 64.0}),
+             run_folder("whole", 0.5, 2.0), run_folder("whole", 1.0),
+             run_folder("tiled+cache", 0.5), run_folder("worker", 0.5)]
+    assert len(set(names)) == len(names) and names[0] == "whole_eps0.5"

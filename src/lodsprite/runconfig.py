@@ -64,6 +64,7 @@ class RenderConfig(TechniqueOptions):
     flip: bool = False        # with ground_truth: FLIP per frame too
     save_every: int = 1       # with save_frames: save every n-th frame of the replay only
     display_fps: float | None = None  # a run played in time: at most this many frames a s
+    play: bool = False        # play the path in time (always so with worker keyframes)
     options: dict = field(default_factory=dict)
 
     def resolved(self, store: bool | None = None) -> RenderConfig:
@@ -96,9 +97,10 @@ class RenderConfig(TechniqueOptions):
 
     @property
     def played(self) -> bool:
-        """Whether the run plays its path in time (:mod:`lodsprite.playback`): keyframes
-        from a worker process (``keyframes="worker"``) arrive while the camera moves on."""
-        return self.options.get("keyframes") == "worker"
+        """Whether the run plays its path in time (:mod:`lodsprite.playback`): asked for
+        (``play``), or keyframes from a worker process (``keyframes="worker"``), which
+        arrive while the camera moves on."""
+        return self.play or self.options.get("keyframes") == "worker"
 
     def validate(self) -> None:
         """Raise :class:`InputError` for a bad option (checked with the defaults filled):
@@ -120,14 +122,16 @@ class RenderConfig(TechniqueOptions):
         if self.save_every < 1:
             raise InputError(f"save_every must be >= 1, got {self.save_every}")
         if self.display_fps is not None and not (self.played and self.display_fps > 0):
-            raise InputError("--display-fps goes with --keyframes worker and is > 0, got "
+            raise InputError("--display-fps goes with --play or --keyframes worker and is "
+                             "> 0, got "
                              f"{self.display_fps}")
         spec, known = techniques.get(self.technique), techniques.all_options()
         for name, value in self.options.items():
             mine = [o for o in spec.options if o.name == name]
             (mine[0] if mine else known[name]).check(value)
-        if self.played and (self.mode != "sprite" or self.options.get("tiles", 1) > 1
-                            or self.options.get("proxy_sse") is not None):
+        worker = self.options.get("keyframes") == "worker"
+        if worker and (self.mode != "sprite" or self.options.get("tiles", 1) > 1
+                       or self.options.get("proxy_sse") is not None):
             raise InputError("--keyframes worker goes with --mode sprite and whole keyframes "
                              "(no --tiles, no --proxy-sse)")
         if "key_sse" in self.options and self.mode != "sprite":

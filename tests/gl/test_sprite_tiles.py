@@ -278,8 +278,9 @@ def test_tiled_cache_through_the_registry_replays_and_hits(gl, name):
 @pytest.mark.parametrize("cache_mb", [0.0, 4.0])
 def test_tiles_draw_the_view_dependent_proxy_and_replay(gl, cache_mb):
     # sprite-adaptive with --proxy-sse and tiles (and the cache): the proxy is frozen at
-    # each tile update (mean_proxy_triangles counts them), tile errors use the proxy
-    # metric (finite, its own samples), and every frame equals its replay out of order.
+    # a tile update and kept until stale (mean_proxy_triangles counts the freezes), tile
+    # errors use the proxy metric (finite, its own samples), and every frame equals its
+    # replay out of order (each update's tiles on the proxy frozen for it).
     from lodsprite import Renderer, get_path, load_scene, techniques
     from lodsprite.sprite.proxy_metric import ProxyMetric
 
@@ -297,7 +298,8 @@ def test_tiles_draw_the_view_dependent_proxy_and_replay(gl, cache_mb):
             assert all(np.isfinite(f.error_px) for f in frames)
             s = t.summary(frames)
             assert s["proxy_sse"] == 8.0 and s["mean_proxy_triangles"] > 0
-            assert len(t.proxy.triangles) == len(t.engine.tiled.updates)
+            eng = t.engine.tiled
+            assert len(t.proxy.triangles) == len(set(eng.frozen_for)) == len(eng.hold.reasons)
             for i in [6, 0, 13, 2, 9]:
                 assert np.array_equal(t.replay(path.viewpoints[i], decisions[i]), shown[i]), i
         finally:
@@ -332,3 +334,52 @@ def test_one_tile_on_the_proxy_measures_the_whole_keyframes_proxy_error(gl):
             t.release()
     assert len(c_prime.points) > 16 and 0 < whole < 1e3
     assert tiled == pytest.approx(whole, rel=0.05), (tiled, whole)
+
+
+def test_tile_updates_keep_a_fresh_proxy_and_freeze_a_stale_one_again(gl):
+    # Along a short path the updates keep the proxy frozen at the first (no new selection,
+    # no new GL freeze); a view turned around, off the proxy's footprint, is stale
+    # ("region") and freezes it again.  No update makes a selection for the whole view:
+    # the adaptive renderer selects once per tile drawn, and never through request().
+    from lodsprite import Renderer, get_path, load_scene, techniques
+    from lodsprite.sprite.proxy_hold import ERROR, REGION
+
+    scene = load_scene("fractal:256:3", grid=256)
+    vps = get_path("chen1999", scene.hf, 64).viewpoints[:6]
+    with Renderer(scene, (64, 64), ctx=gl.mgl) as renderer:
+        t = techniques.create("sprite-adaptive", renderer, lod=8, epsilon=0.25, key_sse=1.0,
+                              tiles=2, tile_budget_ms=0.0, proxy_sse=8.0)
+        eng, adaptive = t.engine.tiled, t.adaptive
+        calls = {"freeze": 0, "nodes": 0, "stream": 0, "request": 0}
+
+        def counted(name, fn):
+            def wrapper(*a, **k):
+                calls[name] += 1
+                return fn(*a, **k)
+            return wrapper
+
+        t.proxy.for_keyframe = counted("freeze", t.proxy.for_keyframe)
+        t.proxy.nodes = counted("nodes", t.proxy.nodes)  # a selection made for the metric
+        adaptive._stream = counted("stream", adaptive._stream)
+        adaptive.request = counted("request", adaptive.request)
+        try:
+            t.warm_up(vps[0])
+            for k in calls:
+                calls[k] = 0
+            n0, frozen0, drawn = len(eng.updates), len(set(eng.frozen_for)), 0
+            for vp in vps:
+                t.frame(vp)
+                drawn += len(eng.last_tiles)
+            kept = [u for u, f in enumerate(eng.frozen_for) if f != u and u >= n0]
+            assert len(eng.updates) > n0 + 2 and kept, eng.frozen_for
+            frozen = len(set(eng.frozen_for)) - frozen0
+            assert calls["freeze"] == calls["nodes"] == frozen < len(eng.updates) - n0
+            assert calls["request"] == 0 and calls["stream"] == drawn
+            x, y, _ = vps[5].o  # down near the ground, looking level: the proxy's error
+            low = np.array([x, y, scene.hf.height_at(x, y) + 5.0])  # bound passes 2x
+            n = len(eng.updates)
+            t.frame(look_at(low, low + np.r_[-vps[5].z[:2], 0.0]))
+            assert len(eng.updates) == n + 1 and eng.frozen_for[-1] == n, eng.hold.reasons
+            assert eng.hold.reasons[-1] in (REGION, ERROR) and calls["freeze"] == frozen + 1
+        finally:
+            t.release()

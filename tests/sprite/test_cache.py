@@ -44,7 +44,7 @@ def test_the_policy_shows_the_cached_keyframe_with_the_lowest_error():
         assert policy.decide(_north(y)).type == KEYFRAME
     here = _north(120.0)  # nearest the middle keyframe, which is not the one shown
     assert cache.shown.index == 2
-    errors = [policy.error_px(e.c_prime, here, policy.projection(here)) for e in cache.entries]
+    errors = [policy.cached_error_px(e, here, policy.projection(here)) for e in cache.entries]
     assert int(np.argmin(errors)) == 1 and errors[1] < 0.5 * min(errors[0], errors[2])
     policy.epsilon_px = 2.5 * errors[2]  # under SWITCH_FRACTION ε the shown one stays
     assert policy.best_cached(here, policy.projection(here))[0].index == 2
@@ -186,3 +186,66 @@ def test_with_the_cache_the_replay_draws_what_the_timed_run_showed(gl, name, pol
             t.release()
     assert summary["cache_hits"] > 0 and 2 < summary["cache_keyframes"] <= 6
     assert summary["keyframes"] + summary["cache_hits"] < len(path.viewpoints)
+
+
+
+def _wall_policy(top_m: float = 150.0) -> tuple[KeyframePolicy, KeyframeCache]:
+    """A plain 1.28 km square, 10 m a sample, with a wall ``top_m`` high east-west across
+    it 160-240 m north of its centre, under a policy at ε 1 with a cache, its metric on a
+    4 x 4-node proxy of every 4th sample (the proxy metric: C' where the key ray first
+    meets the proxy, so ground behind the wall is hidden from a low eye south of it)."""
+    from lodsprite.sprite.proxy_metric import ProxyMetric
+    from lodsprite.sprite.proxy_surface import ProxyNodes
+    from lodsprite.terrain.heightfield import HeightField
+
+    h = np.zeros((129, 129), np.float32)
+    h[40:49, :] = top_m
+    hf = HeightField(h, 10.0, 10.0, "wall")
+    xs, ys = hf.world_xy(np.arange(129), np.arange(129))
+    cells = [(r, c) for r in range(0, 128, 32) for c in range(0, 128, 32)]
+    nodes = ProxyNodes(np.array([(xs[c], ys[r]) for r, c in cells]),
+                       np.tile([40.0, 40.0], (16, 1)), np.full((16, 2), 8.0),
+                       np.array([h[r:r + 33:4, c:c + 33:4] for r, c in cells], float),
+                       np.array([(r, r + 32, c, c + 32) for r, c in cells]))
+    cache = KeyframeCache(64 * 2 ** 20, 2 ** 20)
+    policy = KeyframePolicy.for_terrain(hf, 16, 1.0, (128, 128), guard_px=16,
+                                        predict=False, cache=cache)
+    policy.metric = ProxyMetric(lambda eye, view_proj: nodes, hf, policy.metric)
+    return policy, cache
+
+
+def _low(x: float):
+    """100 m south of the centre, 200 m up, looking north and down: ``x`` metres east."""
+    from lodsprite.camera import look_at
+
+    return look_at(np.array([x, -100.0, 200.0]), np.array([x, 600.0, 0.0]))
+
+
+def test_a_cached_keyframe_far_from_the_view_is_refused_and_a_near_one_shown():
+    # A keyframe from a low eye south of the wall; Eq. 2 alone would show it from 10 m
+    # east, where ground it did not see behind the wall comes into view; with the far
+    # term the cache refuses it there (a new keyframe), and shows it from 2 m east.
+    policy, cache = _wall_policy()
+    assert policy.decide(_low(0.0)).type == KEYFRAME
+    key = cache.entries[0]
+    near, far = _low(2.0), _low(10.0)
+    assert policy.cached_error_px(key, near, policy.projection(near)) < 0.5
+    d = policy.decide(near)
+    assert d.type != KEYFRAME and d.keyframe == 0
+    eq2 = policy.error_px(key.c_prime, far, policy.projection(far))
+    assert eq2 < 1.0 <= policy.cached_error_px(key, far, policy.projection(far))
+    d = policy.decide(far)
+    assert d.type == KEYFRAME and d.keyframe == 1
+
+
+def test_the_far_term_vanishes_where_the_keyframe_saw_every_sample():
+    from lodsprite.sprite.cache import far_error_px
+
+    for top, hidden in ((0.0, False), (150.0, True)):  # a plain, then the wall
+        policy, cache = _wall_policy(top)
+        policy.decide(_low(0.0))
+        key, v = cache.shown, _low(40.0)
+        p = policy.projection(v)
+        far = far_error_px(policy.metric, key.c_prime, key.viewpoint.o, v.o,
+                           p.matrix() @ v.view_matrix(), p.pixel_angle_rad(128))
+        assert (far > 1.0) if hidden else far == 0.0, (top, far)

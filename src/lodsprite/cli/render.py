@@ -125,10 +125,14 @@ def render(
         "--flip", help="with --ground-truth: FLIP per frame too")] = False,
     pace: PaceOpt = "needed",
     max_error: MaxErrorOpt = None,
+    play: Annotated[bool, typer.Option(
+        "--play", help="play the path in time: the camera moves at the path's speed, "
+                       "frames drawn as often as the technique can (or --display-fps), each "
+                       "judged at its display time's viewpoint (always so with --keyframes "
+                       "worker)")] = False,
     display_fps: Annotated[float | None, typer.Option(
-        "--display-fps", help="with --keyframes worker (the path played in time): draw at "
-                              "most this many frames a second (default: as often as it "
-                              "can)")] = None,
+        "--display-fps", help="with --play or --keyframes worker: draw at most this many "
+                              "frames a second (default: as often as it can)")] = None,
     scene: Annotated[str | None, typer.Option(
         "--scene", help="a scene instead of --terrain: a scene file (TOML: its terrain "
                         "drawn by --mode, objects and light fields composited by depth "
@@ -166,7 +170,7 @@ def render(
                           size=parse_size(size or "512x512"), frames=frames, grid=grid,
                           exaggeration=exaggeration, save_frames=save_frames,
                           ground_truth=ground_truth, quality_stride=quality_stride,
-                          flip=flip, display_fps=display_fps, options=options)
+                          flip=flip, display_fps=display_fps, play=play, options=options)
     with progress_bar(f"render {mode}") as update:
         if distributed:
             from lodsprite.distributed.run import parse_max_error, render_distributed

@@ -15,9 +15,9 @@ shading).  No mipmaps.
 It composes :class:`~lodsprite.gl.sprite.SpriteDrawer` (its key and coarse targets
 index 0 hold the tiles, its terrain draws the tiles; the spriteframe and the coarse
 z-buffers draw through its proxy geometry object, ``twin`` / ``draw``; a view-dependent
-one is frozen at each tile update, :meth:`TiledSpriteDrawer.freeze`: that update's
-coarse z-buffers and the spriteframes from then on draw it, so tiles of older updates
-are textured onto the newest proxy).
+one is frozen at a tile update, :meth:`TiledSpriteDrawer.freeze`, and kept by the next
+updates until stale (:mod:`lodsprite.sprite.proxy_hold`): the coarse z-buffers and the
+spriteframes from then on draw it, so tiles of older updates are textured onto it).
 """
 
 from __future__ import annotations

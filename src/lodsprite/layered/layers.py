@@ -134,12 +134,17 @@ class TerrainLayer(Layer):
         self._plans = 0
         self._coarse: np.ndarray | None = None    # max-pooled heights, for coverage
         self._covered: tuple[int, float] | None = None  # (plan, coverage)
+        self._depth = None  # the keyframe's depth under spriteframes (static layers kept)
 
     def projection(self, viewpoint: Viewpoint) -> np.ndarray:
         """The frame's projection ``(4, 4)``: the terrain technique's own."""
         if self.spec.knob == "sse":  # the adaptive renderer fits its own near/far
             return self.technique.terrain.projection(viewpoint)
         return self.renderer.projection(viewpoint).matrix()
+
+    def plan_replay(self, frames: set[int]) -> None:
+        """The frames a replay will come for (the technique's own plan)."""
+        self.technique.plan_replay(frames)
 
     def keyframe_hook(self, draw: Callable[[Viewpoint, np.ndarray, Any], None]) -> bool:
         """With LOD-sprite: ``draw(viewpoint, projection (4, 4), fbo)`` runs after the
@@ -151,12 +156,21 @@ class TerrainLayer(Layer):
             draw(viewpoint, projection.matrix(), target.fbo)
 
         self.sprite.sprite.after_keyframe = after
+        if getattr(self.technique.engine, "tiled", None) is None:  # whole keyframes
+            from lodsprite.gl.key_depth import KeyDepthPass
+
+            self._depth = KeyDepthPass(self.sprite.sprite)
         return True
 
     def _spriteframe(self, viewpoint: Viewpoint) -> None:
-        """A keyframe shown as it is: its spriteframe drawn too (the proxy's depth)."""
+        """A keyframe shown as it is: its spriteframe drawn too (the proxy's depth); with
+        static layers in the keyframes, the depth buffer then the keyframe's own, warped
+        (:class:`~lodsprite.gl.key_depth.KeyDepthPass`), so that what the sprite shows
+        in front of a moving object hides it."""
         if self.sprite is not None and self.sprite.engine.shows_keyframe:
             self.sprite.sprite.render_spriteframe(viewpoint)
+        if self._depth is not None:
+            self._depth.draw(viewpoint, self.renderer.projection(viewpoint))
 
     def warm_up(self, viewpoint: Viewpoint, projection: np.ndarray) -> None:
         from lodsprite.layered.coverage import coarse_max
@@ -215,6 +229,8 @@ class TerrainLayer(Layer):
         if self.sprite is not None and "shows_keyframe" in decision:
             decision = {**decision, "shows_keyframe": False}  # the spriteframe, as drawn
         self.technique.replay(viewpoint, decision)
+        if self._depth is not None:
+            self._depth.draw(viewpoint, self.renderer.projection(viewpoint))
 
     def control(self) -> LayerControl:
         t = self.technique
@@ -231,4 +247,6 @@ class TerrainLayer(Layer):
         return LayerControl("terrain", (1.0,), 1.0, lambda v: None)
 
     def release(self) -> None:
+        if self._depth is not None:
+            self._depth.release()
         self.technique.release()

@@ -7,7 +7,15 @@ from __future__ import annotations
 
 from typing import Any
 
-from lodsprite.techniques.builtin import EPSILON, GPU_MB, HOST_MB, LOD, SHADING, SSE
+from lodsprite.techniques.builtin import (
+    EPSILON,
+    GPU_MB,
+    HOST_MB,
+    KEYFRAMES,
+    LOD,
+    SHADING,
+    SSE,
+)
 from lodsprite.techniques.options import Option
 from lodsprite.techniques.registry import TechniqueSpec
 
@@ -30,7 +38,7 @@ OPTIONS = (
     Option("terrain_options", object, None, "scene: the terrain technique's own options "
            "(name -> value; lod, epsilon, sse, shading, gpu_mb, host_mb are also options "
            "of the scene)"),
-    LOD, EPSILON, SSE, SHADING, GPU_MB, HOST_MB)
+    KEYFRAMES, LOD, EPSILON, SSE, SHADING, GPU_MB, HOST_MB)
 
 
 def create(renderer: Any, terrain_options: dict[str, Any] | None = None,

@@ -18,7 +18,8 @@ the one given): a crowd alone is drawn on its own ground through its own project
 What LOD-sprite's keyframes hold (``keyframe_holds``): ``static`` (the default) renders the
 static objects (``walk_mps = 0``) into every keyframe after its terrain, so spriteframes
 warp them with the terrain and a frame draws only the moving objects, depth tested
-against the spriteframe's (the proxy's) depth; ``terrain`` keeps keyframes terrain only
+against the keyframe's depth warped under the spriteframe (whole keyframes,
+:class:`~lodsprite.gl.key_depth.KeyDepthPass`); ``terrain`` keeps keyframes terrain only
 and draws every object every frame.  Light fields are view dependent: never in keyframes.
 ``benchmarks/scene_layers.py`` measures the two (docs/scenes.md).
 
@@ -61,6 +62,10 @@ if TYPE_CHECKING:
 #: The time between frames (s): frame ``i`` shows the world at ``i * FRAME_S``.
 FRAME_S = 1.0 / 30.0
 KEYFRAME_HOLDS = ("static", "terrain")
+KEYFRAMES = ("inline", "worker")
+#: The terrain modes whose keyframes ``keyframes="worker"`` renders in the worker (with the
+#: static objects); the others draw as they do inline.
+REUSED = ("sprite", "sprite-adaptive")
 #: ``render --scene``'s image size when neither the command nor ``[view]`` gives one.
 DEFAULT_SIZE = (512, 512)
 #: Objects whose LOD the manager updates a frame (its active list).
@@ -79,7 +84,7 @@ class LayeredTechnique(Technique):
                  target_fps: float | None = None, keyframe_holds: str = "static",
                  exponent: float = 1.0, nodes: int = 8, ground_truth: bool = False,
                  frame_s: float = FRAME_S, active: int | None = ACTIVE,
-                 **terrain_options: Any) -> None:
+                 keyframes: str = "inline", **terrain_options: Any) -> None:
         super().__init__(renderer)
         from lodsprite.layered.lightfields import LightFieldLayer
         from lodsprite.layered.objects import ObjectsLayer
@@ -88,14 +93,20 @@ class LayeredTechnique(Technique):
         if keyframe_holds not in KEYFRAME_HOLDS:
             raise InputError(f"unknown keyframe_holds {keyframe_holds!r}: use one of "
                              f"{', '.join(KEYFRAME_HOLDS)}")
+        if keyframes not in KEYFRAMES:
+            raise InputError(f"unknown keyframes {keyframes!r}: use one of "
+                             f"{', '.join(KEYFRAMES)}")
         if ground_truth:
             terrain_mode, exponent, schedule = "full", 0.0, "none"
+        if terrain_mode not in REUSED:  # keyframes are LOD-sprite's (the window's default)
+            keyframes = "inline"
         scene = renderer.scene if scene is None else scene
         placed = tuple(lf for lf in scene.lightfields if lf.placed)
         if scene.hf is None and scene.objects is None:
             raise InputError("the scene technique draws terrain and objects: this scene "
                              "has neither (a light field alone: a lumigraph technique)")
         self.scene, self.frame_s, self.keyframe_holds = scene, float(frame_s), keyframe_holds
+        self.keyframes = keyframes
         self.count = 0 if scene.objects is None else len(scene.objects)
         self.budget = LayerBudget(schedule, None if target_fps is None else 1e3 / target_fps)
         self.layers: list[Layer] = []
@@ -104,7 +115,10 @@ class LayeredTechnique(Technique):
         self.lightfields: LightFieldLayer | None = None
         try:
             if scene.hf is not None:
-                self.terrain = TerrainLayer(renderer, terrain_mode, **terrain_options)
+                self.terrain = (TerrainLayer(renderer, terrain_mode, **terrain_options)
+                                if keyframes == "inline" else
+                                _keyframed(renderer, scene, terrain_mode, exponent,
+                                           terrain_options))
                 self.layers.append(self.terrain)
             # the LODManager's active list (§4.2): ``active`` objects' LODs updated a
             # frame (300, the crowd's default; None: every object, as the reference)
@@ -122,9 +136,10 @@ class LayeredTechnique(Technique):
             raise
         if not self.layers:
             raise InputError("the scene has nothing to draw (no terrain, no objects)")
-        self.static_in_keyframes = (keyframe_holds == "static" and self.objects is not None
-                                    and self.terrain is not None
-                                    and self.terrain.keyframe_hook(self.objects.draw_static))
+        self.static_in_keyframes = (self.objects is not None and self.terrain is not None
+                                    and (keyframes == "worker" or keyframe_holds == "static"
+                                         and self.terrain.keyframe_hook(
+                                             self.objects.draw_static)))
         if self.static_in_keyframes:
             self.objects.subset = self.objects.moving
         self.index = 0
@@ -146,7 +161,7 @@ class LayeredTechnique(Technique):
 
     def plan_replay(self, frames: set[int]) -> None:
         if self.terrain is not None:
-            self.terrain.technique.plan_replay(frames)
+            self.terrain.plan_replay(frames)
         if self.objects is not None:
             self.objects.recording = bool(frames)
         if self.lightfields is not None:
@@ -209,6 +224,7 @@ class LayeredTechnique(Technique):
                                "terrain_mode": getattr(self.terrain, "mode", None),
                                "keyframe_holds": ("static" if self.static_in_keyframes
                                                   else "terrain"),
+                               "keyframes_at": self.keyframes,
                                "layers": [layer.name for layer in self.layers],
                                "instances": self.count,
                                "lightfields": self._placed()}
@@ -216,7 +232,7 @@ class LayeredTechnique(Technique):
             col = [f.extra[f"ms_{layer.name}"] for f in frames]
             out[f"mean_ms_{layer.name}"] = float(np.mean(col)) if col else float("nan")
         out["keyframes"] = int(sum(f.kind == "keyframe" for f in frames))
-        return out
+        return {**out, **self.terrain.summary()} if hasattr(self.terrain, "summary") else out
 
     def reference(self, path: CameraPath) -> AbstractContextManager[Callable]:
         """The full-detail scene along ``path`` (:func:`reference`): full-resolution
@@ -227,12 +243,14 @@ class LayeredTechnique(Technique):
         return 0 if self.lightfields is None else len(self.lightfields.items)
 
     def params(self) -> dict[str, Param]:
-        return {} if self.terrain is None else self.terrain.technique.params()
+        technique = getattr(self.terrain, "technique", None)
+        return {} if technique is None else technique.params()
 
     def set_param(self, name: str, value: float) -> None:
-        if self.terrain is None:
+        technique = getattr(self.terrain, "technique", None)
+        if technique is None:
             raise InputError(f"the scene technique has no parameter {name!r} here")
-        self.terrain.technique.set_param(name, value)
+        technique.set_param(name, value)
 
     def read_image(self) -> np.ndarray:
         return self.renderer.target.read_color()
@@ -246,6 +264,31 @@ class LayeredTechnique(Technique):
         for layer in reversed(self.layers):
             layer.release()
         self.layers = []
+
+
+def _keyframed(renderer: Renderer, scene: Scene, mode: str, exponent: float,
+               options: dict[str, Any]) -> Layer:
+    """The terrain and static objects from the scene's keyframe worker
+    (:class:`~lodsprite.layered.reuse.KeyframedTerrain`): LOD-sprite's ``mode`` over a
+    scene read from its file; ``sprite-adaptive``'s keyframes by the adaptive renderer
+    (its options among ``options``), ``sprite``'s at full resolution."""
+    from lodsprite import techniques
+    from lodsprite.layered.reuse import KeyframedTerrain
+    from lodsprite.layered.scene_keys import SceneKeys
+    from lodsprite.sprite.policy import DEFAULT_EPSILON_PX
+    from lodsprite.terrain.lod import DEFAULT_COARSE
+
+    if scene.source is None or not Path(scene.source).is_file():
+        raise InputError("--keyframes worker in a scene needs a scene file (the worker "
+                         "process reads it)")
+    own = {o.name for o in techniques.get("adaptive").options}
+    adaptive = mode == "sprite-adaptive"
+    keys = SceneKeys(str(scene.source), "adaptive" if adaptive else "full",
+                     {k: v for k, v in options.items()
+                      if adaptive and k in own and v is not None})
+    epsilon, lod = options.get("epsilon"), options.get("lod")  # None: the defaults
+    return KeyframedTerrain(renderer, keys, float(epsilon or DEFAULT_EPSILON_PX),
+                            int(lod or DEFAULT_COARSE), exponent)
 
 
 def reference(renderer: Renderer, scene: Scene, path: CameraPath, frame_s: float = FRAME_S

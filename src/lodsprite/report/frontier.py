@@ -85,10 +85,12 @@ def frontier_speedup(slower: Sequence[Point], faster: Sequence[Point],
 def plot_frontiers(curves: Mapping[str, Iterable[Sequence[float]]], path: Path,
                    title: str = "", error_label: str = "RMSE (grey levels)",
                    time_label: str = "median frame time (ms)",
-                   levels: Sequence[float] = ()) -> Path:
+                   levels: Sequence[float] = (),
+                   fronts: Mapping[str, Sequence[Point]] | None = None) -> Path:
     """Error against time (log), one curve per technique: its measured points (light) and
-    its frontier (a line through the envelope); ``levels``: error levels marked as
-    horizontal lines.  Written to ``path`` (PNG); returns it."""
+    its frontier (a line through the envelope; ``fronts[name]`` where given, e.g. a
+    frontier chosen on other frames, else :func:`frontier` of the points); ``levels``:
+    error levels marked as horizontal lines.  Written to ``path`` (PNG); returns it."""
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(6.4, 4.4), dpi=120)
@@ -97,7 +99,8 @@ def plot_frontiers(curves: Mapping[str, Iterable[Sequence[float]]], path: Path,
         a = _finite(points)
         colour = f"C{i}"
         ax.scatter(a[:, 0], a[:, 1], s=14, color=colour, alpha=0.35)
-        front = np.array(frontier(a)).reshape(-1, 2)
+        given = None if fronts is None else fronts.get(name)
+        front = np.array(frontier(a) if given is None else given).reshape(-1, 2)
         ax.plot(front[:, 0], front[:, 1], "o-", color=colour, label=name, lw=1.6, ms=4)
     for level in levels:
         ax.axhline(level, color="0.6", lw=0.8, ls=":")

@@ -19,7 +19,6 @@ predictions) keeps the settings unless over budget or a better plan leaves headr
   its knob towards a fixed share of the target; :class:`NoSchedule` - nothing turns.
 * :class:`LayerBudget` - what a layered technique runs: a schedule, a model per layer,
   the frame's measurements fed back, the plan's predictions, the summary's shares.
-* :func:`steadiness` - oscillation: knob changes, std of the knob and of frame ms.
 """
 
 from __future__ import annotations
@@ -48,7 +47,8 @@ class LayerControl:
     :func:`~lodsprite.scene.costs.object_detail`, called before each plan; ``work``
     (optional, the objects layer's) the layer's predicted counter at every setting
     ``(n,)``; ``coverage`` (optional) its measured screen fraction, its benefit's ``Size``
-    (:mod:`lodsprite.layered.coverage`; None before it has one)."""
+    (:mod:`lodsprite.layered.coverage`; None before it has one); ``model`` (optional)
+    makes the layer's own :class:`~lodsprite.scene.costs.LayerModel` (default: priors)."""
 
     name: str
     values: tuple[float, ...]
@@ -57,6 +57,7 @@ class LayerControl:
     detail: Callable[[], tuple | None] | None = None
     work: Callable[[], np.ndarray | None] | None = None
     coverage: Callable[[], float | None] | None = None
+    model: Callable[[], LayerModel] | None = None
 
     def index(self, value: float | None = None) -> int:
         """The index in :attr:`values` of ``value`` (default: the current one), or of the
@@ -317,8 +318,7 @@ class LayerBudget:
         self.last_knob: dict[str, float] = {}
         self.changes: dict[str, int] = {}
         self.knob_sums: dict[str, np.ndarray] = {}   # (n, Σ value, Σ value²) a layer
-        self.frame_ms_sum = 0.0
-        self.frames = 0
+        self.frame_ms_sum, self.frames = 0.0, 0
         self.predicted: dict[str, float] = {}  # ms each layer's setting was planned at
 
     @property
@@ -330,7 +330,8 @@ class LayerBudget:
         controls = list(controls)
         for c in controls:
             if c.name not in self.models:
-                self.models[c.name] = default_model(c.name, tuple(c.values))
+                self.models[c.name] = (c.model() if c.model is not None
+                                       else default_model(c.name, tuple(c.values)))
             benefit = self.models[c.name].benefit
             if c.detail is not None and hasattr(benefit, "update"):
                 seen = c.detail()
@@ -377,8 +378,7 @@ class LayerBudget:
         scheduler's mean planned share, the independent feedback's fixed share);
         ``knob_changes_<layer>``: frames whose knob differed from the frame before, and
         ``knob_std_<layer>`` the standard deviation of its setting (oscillation)."""
-        out: dict[str, float | int | str] = {"schedule": self.kind,
-                                       "target_ms": float(self.target_ms)}
+        out: dict[str, float | int | str] = {"schedule": self.kind, "target_ms": self.target_ms}
         total = max(self.frame_ms_sum, 1e-9)
         for name, ms in self.ms_sums.items():
             out[f"share_{name}"] = ms / total

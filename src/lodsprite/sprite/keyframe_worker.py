@@ -148,8 +148,8 @@ class KeyframeWorker:
     it is not started again (no keyframe will come).
     """
 
-    def __init__(self, scene: Scene, settings: WorkerSettings, ready_s: float = READY_S
-                 ) -> None:
+    def __init__(self, scene: Scene, settings: WorkerSettings, ready_s: float = READY_S,
+                 start=None) -> None:
         if settings.predictor not in PREDICTORS:
             raise LodspriteError(f"unknown predictor {settings.predictor!r}")
         if scene.hf is None:
@@ -165,7 +165,9 @@ class KeyframeWorker:
         self._fed = -np.inf
         self._wanted: float | None = None  # request time of the keyframe asked for
         self._closed = False
-        self._proc = _start(scene, settings, ready_s)
+        self.request_extra: tuple = ()  # appended to each request (another handler's)
+        # ``start(scene, settings, ready_s)``: another handler's process (a scene's)
+        self._proc = (start or _start)(scene, settings, ready_s)
 
     @property
     def pid(self) -> int | None:
@@ -191,7 +193,7 @@ class KeyframeWorker:
         now = time.perf_counter()
         vp, predicted = self._target(now)
         self._wanted = now
-        self._proc.submit(now, pickle.dumps((vp, predicted, now)))
+        self._proc.submit(now, pickle.dumps((vp, predicted, now, *self.request_extra)))
 
     def poll(self) -> KeyframeImage | None:
         """The keyframe finished since the last call, or None (never blocks).  A failed

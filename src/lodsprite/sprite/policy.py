@@ -28,9 +28,10 @@ paper.
 
 Keyframe cache (``cache``, :mod:`lodsprite.sprite.cache`, the 1999 §5 proposal): every
 keyframe rendered is kept within a GPU byte budget; each frame shows the cached keyframe
-with the lowest error here (among the nearest-eyed candidates that cover the view) and a
-new keyframe is due only when that lowest error reaches ε.  Without a cache (None) the
-policy keeps one keyframe, as the paper does.
+with the lowest error here (Eq. 2 with the term of a keyframe shown far from where it was
+taken, :meth:`KeyframePolicy.cached_error_px`), among the nearest-eyed candidates that
+cover the view, and a new keyframe is due only when that lowest error reaches ε.  Without
+a cache (None) the policy keeps one keyframe, as the paper does.
 
 Errors are plain floats compared with thresholds: an infinite error (nothing measurable,
 :meth:`~lodsprite.sprite.metric.ErrorMetric.error_px`) makes a keyframe due, and so
@@ -47,7 +48,12 @@ import numpy as np
 
 from lodsprite.camera import Projection, Viewpoint, fitted_projection, widened
 from lodsprite.errors import InputError
-from lodsprite.sprite.cache import SWITCH_FRACTION, CachedKeyframe, KeyframeCache
+from lodsprite.sprite.cache import (
+    SWITCH_FRACTION,
+    CachedKeyframe,
+    KeyframeCache,
+    far_error_px,
+)
 from lodsprite.sprite.metric import ErrorMetric
 from lodsprite.sprite.predict import extrapolate
 from lodsprite.terrain.heightfield import HeightField
@@ -284,7 +290,7 @@ class KeyframePolicy:
         shown = self.cache.shown
         if shown is None:
             return None, math.inf
-        best, best_err = shown, self.error_px(shown.c_prime, viewpoint, projection)
+        best, best_err = shown, self.cached_error_px(shown, viewpoint, projection)
         if best_err < SWITCH_FRACTION * self.epsilon_px:
             return best, best_err
         here = None
@@ -296,10 +302,21 @@ class KeyframePolicy:
                 here = self.metric.in_view_mask(viewpoint, projection)
             if not np.all(e.in_view[here]):
                 continue
-            err = self.error_px(e.c_prime, viewpoint, projection)
+            err = self.cached_error_px(e, viewpoint, projection)
             if err < best_err:
                 best, best_err = e, err
         return best, best_err
+
+    def cached_error_px(self, entry: CachedKeyframe, viewpoint: Viewpoint,
+                        projection: Projection) -> float:
+        """A cached keyframe's error at ``viewpoint``: Eq. 2 and the term of one shown far
+        from where it was taken (:func:`~lodsprite.sprite.cache.far_error_px`) in
+        quadrature."""
+        err = self.error_px(entry.c_prime, viewpoint, projection)
+        far = far_error_px(self.metric, entry.c_prime, entry.viewpoint.o, viewpoint.o,
+                           projection.matrix() @ viewpoint.view_matrix(),
+                           projection.pixel_angle_rad(self.height_px))
+        return math.hypot(err, far)
 
     def keyframe_cost(self, ms: float) -> None:
         """What the keyframe just rendered cost (ms): the ``benefit`` policy weighs it."""

@@ -7,6 +7,10 @@ tile_errors`), the tiles to re-render chosen by benefit/cost within ``tile_budge
 through the key projection there (scissored, culled by its sub-frustum), then the tiled
 spriteframe.  A frame that re-rendered every tile is a keyframe (shown as it is, its
 centre); one that re-rendered some is of kind ``tiles``; the others are spriteframes.
+With a view-dependent proxy (:attr:`TiledSpriteEngine.hold`) a tile update keeps the
+proxy frozen at an earlier one until it is stale (:mod:`lodsprite.sprite.proxy_hold`:
+the rule), and records the update it was frozen for (:attr:`~TiledSpriteEngine.
+frozen_for`), which the replay freezes again.
 
 Each tile's cost is its last measured time (ms, GL finished after it; the first frame
 renders every tile and measures each).  The frame's time covers the errors, the
@@ -17,6 +21,7 @@ selection, the tiles, ``C'`` of the new viewpoint and the spriteframe, up to
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Iterable, Sequence
 
@@ -27,7 +32,7 @@ from lodsprite.errors import InputError
 from lodsprite.gl.sprite import SpriteDrawer
 from lodsprite.gl.sprite_tiles import TileDrawer, TiledSpriteDrawer, TileSlots
 from lodsprite.record import Frame
-from lodsprite.sprite.cache import SWITCH_FRACTION, TileCache
+from lodsprite.sprite.cache import SWITCH_FRACTION, TileCache, far_error_px
 from lodsprite.sprite.engine import sprite_frame
 from lodsprite.sprite.metric import ErrorMetric
 from lodsprite.sprite.policy import KEYFRAME, SPRITE, KeyChoice, resampling_metric
@@ -59,7 +64,8 @@ class TiledSpriteEngine:
 
     ``cache_mb > 0``: a cache of tile renders within that many MB of GPU memory, replaced
     by ``cache_policy`` (:class:`lodsprite.sprite.cache.TileCache`): each frame a tile at or over
-    half ε shows its cached render with the lowest error, and only tiles still over ε are
+    half ε shows its cached render with the lowest error (the far term of
+    :func:`~lodsprite.sprite.cache.far_error_px` included), and only tiles still over ε are
     re-rendered; :attr:`cache_tiles` counts, per frame, the tiles shown from a render other
     than their newest."""
 
@@ -96,6 +102,10 @@ class TiledSpriteEngine:
         self.newest = np.full(count, -1, np.intp)  # per tile, the update last rendered
         self.cache_tiles = 0  # the last frame's tiles shown from a render not their newest
         self.proxy_selections: list = []  # per update, a view-dependent proxy's selection
+        # A view-dependent proxy kept between tile updates until stale (a ProxyHold of
+        # lodsprite.sprite.proxy_hold; None: frozen again at every update)
+        self.hold = None
+        self.frozen_for: list[int] = []  # per update, the update whose key froze its proxy
         self._now = 0
         if not cache_mb >= 0:
             raise InputError(f"cache_mb must be >= 0 MB, got {cache_mb}")
@@ -124,14 +134,17 @@ class TiledSpriteEngine:
                            projection.pixel_angle_rad(s.target.height), s.target.size)
 
     def render_tiles(self, chosen: Iterable[int], key: KeyChoice,
-                     drawer: TileDrawer | None = None, measure: bool = True) -> int:
+                     drawer: TileDrawer | None = None, measure: bool = True,
+                     freeze: KeyChoice | None = None) -> int:
         """Render tiles ``chosen`` from ``key`` (finishing after each, to measure its cost
-        when ``measure``); returns the triangles drawn."""
+        when ``measure``); returns the triangles drawn.  ``freeze``: the key a
+        view-dependent proxy is frozen for first (None: the one frozen is kept)."""
         key_proj = self.sprite.key_projection(key.projection)
         view_proj = key_proj.matrix() @ key.viewpoint.view_matrix()
         tris = 0
         ctx = self.sprite.terrain.ctx
-        self.tiled.freeze(key.viewpoint, key_proj)  # a view-dependent proxy, for the update
+        if freeze is not None:  # a view-dependent proxy, frozen for this update's key
+            self.tiled.freeze(freeze.viewpoint, self.sprite.key_projection(freeze.projection))
         for i in chosen:
             t = time.perf_counter()
             stats = self.tiled.render_tile(int(i), key.viewpoint, key_proj,
@@ -161,11 +174,15 @@ class TiledSpriteEngine:
             key = KeyChoice(viewpoint, projection, False)
             self.updates.append(key)
             key_proj = s.key_projection(projection)
-            # C' first: a view-dependent proxy is selected for it, then frozen by the tiles
+            # C' first: a stale view-dependent proxy is selected for it, then frozen by the
+            # tiles; a fresh one is kept (lodsprite.sprite.proxy_hold)
             key_vp = key_proj.matrix() @ viewpoint.view_matrix()
+            why = self._refreeze(viewpoint, key_proj)
             c_prime = reproject_in_key_view(self.metric, viewpoint.o, key_vp, s.key_size,
                                             self._within(chosen, key_vp))
-            tris += self.render_tiles(chosen, key)
+            tris += self.render_tiles(chosen, key, freeze=key if why else None)
+            if why and self.hold is not None:
+                self.hold.frozen(viewpoint.o, why)
             self.proxy_selections.append(getattr(s.proxy, "last", None))
             if self.after_tiles is not None:
                 self.after_tiles(viewpoint, key_proj)
@@ -188,6 +205,19 @@ class TiledSpriteEngine:
         return sprite_frame(kind, (time.perf_counter() - t0) * 1e3, tris, shown,
                             len(self.updates) - 1, decision)
 
+    def _refreeze(self, viewpoint: Viewpoint, key_proj) -> str | None:
+        """Why this update freezes the proxy again (None: the held one is kept, its
+        nodes the metric's): every update without a :attr:`hold`, else when the held
+        proxy is stale (:mod:`lodsprite.sprite.proxy_hold`); logs :attr:`frozen_for`."""
+        why = "update" if self.hold is None else self.hold.stale(viewpoint, key_proj)
+        if why or not self.frozen_for:
+            self.frozen_for.append(len(self.updates) - 1)
+        else:
+            self.frozen_for.append(self.frozen_for[-1])
+        if self.hold is not None:
+            self.hold.held = why is None
+        return why
+
     def _within(self, chosen: Sequence[int], key_vp: np.ndarray) -> np.ndarray | None:
         """The sub-frustum of the tiles ``chosen`` (their NDC bounding rectangle), whose
         samples alone the update's ``C'`` needs; None when every tile is chosen."""
@@ -199,7 +229,9 @@ class TiledSpriteEngine:
 
     def _use_cache(self, viewpoint: Viewpoint, errors: np.ndarray) -> bool:
         """Each tile at or over ``SWITCH_FRACTION`` ε shows its cached render with the
-        lowest error (copied into the mosaic when not the one shown); True if any changed."""
+        lowest error, the tile's and the far term over the render's samples
+        (:func:`~lodsprite.sprite.cache.far_error_px`) in quadrature (copied into the
+        mosaic when not the one shown); True if any changed."""
         s = self.sprite
         projection = s.terrain.projection(viewpoint)
         view_proj = projection.matrix() @ viewpoint.view_matrix()
@@ -210,10 +242,11 @@ class TiledSpriteEngine:
                 self.cache.keep(i, self._now)
                 continue
             shown = self.cache.caches[i].shown
-            entry, _ = self.cache.best(i, viewpoint.o, lambda e, i=i: render_error(
+            entry, _ = self.cache.best(i, viewpoint.o, lambda e, i=i: math.hypot(render_error(
                 self.metric, e.c_prime, e.projection.matrix() @ e.viewpoint.view_matrix(),
-                self.tiled.ndc[i],
-                viewpoint.o, view_proj, beta, s.target.size), self._now)
+                self.tiled.ndc[i], viewpoint.o, view_proj, beta, s.target.size),
+                far_error_px(self.metric, e.c_prime, e.viewpoint.o, viewpoint.o, view_proj,
+                             beta)), self._now)
             if entry is None or entry is shown:
                 continue
             self.slots.load((i, entry.slot))
@@ -257,14 +290,15 @@ class TiledSpriteEngine:
                     drawer = None if drawer_for is None else drawer_for(int(u), t)
                     if force is not None:
                         force(self.proxy_selections[u])
-                    self.render_tiles([t], self.updates[u], drawer, measure=False)
+                    self.render_tiles([t], self.updates[u], drawer, measure=False,
+                                      freeze=self.updates[self.frozen_for[u]])
                     shown[t] = u
             if shows_keyframe:
                 return self.tiled.keyframe_color()
             if force is not None:
                 u = int(max(mosaic)) if latest is None else int(latest)
                 force(self.proxy_selections[u])
-                key = self.updates[u]
+                key = self.updates[self.frozen_for[u]]
                 self.tiled.freeze(key.viewpoint, self.sprite.key_projection(key.projection))
             self.tiled.render_spriteframe(viewpoint)
             return self.sprite.target.read_color()

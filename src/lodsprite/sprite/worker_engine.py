@@ -77,14 +77,15 @@ class WorkerLodSpriteEngine:
                  epsilon_px: float = DEFAULT_EPSILON_PX,
                  request_fraction: float = DEFAULT_REQUEST_FRACTION,
                  predictor: str = "linear", metric: str = "warp",
-                 store: StoreKeys | None = None) -> None:
+                 store: StoreKeys | None = None, make_worker=None) -> None:
         self.sprite = sprite
         self.epsilon_px = float(epsilon_px)
         self.request_fraction = float(request_fraction)
         resampling = resampling_metric(metric)
         hf = sprite.terrain.geometry.full  # the terrain, or a store's level 0
         self.metric = ErrorMetric.for_level(hf, sprite.coarse_quads, resampling)
-        self.worker = KeyframeWorker(scene, WorkerSettings(
+        # make_worker(scene, settings): another client end (a scene's); default the terrain's
+        self.worker = (make_worker or KeyframeWorker)(scene, WorkerSettings(
             sprite.target.size, fov_y_deg, sprite.coarse_quads, sprite.visibility,
             sprite.border, sprite.guard_px, predictor, resampling=resampling, store=store))
         self.keyframes: list[KeyChoice] = []

@@ -206,8 +206,9 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
     ``proxy_sse``: spriteframes draw the adaptive mesh at that tolerance, selected at each
     keyframe and frozen (:mod:`lodsprite.techniques.sprite_proxy`), with the error metric
     of :mod:`lodsprite.sprite.proxy_metric`; the replay freezes the recorded selection.
-    With ``tiles > 1`` the proxy is selected and frozen at each tile update (its coarse
-    z-buffers and the spriteframes from then on draw it) and every tile's error is the proxy
+    With ``tiles > 1`` the proxy is frozen at a tile update and kept by the next ones until
+    stale (:mod:`lodsprite.sprite.proxy_hold`; its coarse z-buffers and the spriteframes
+    draw it) and every tile's error is the proxy
     metric over the samples it serves (:mod:`lodsprite.sprite.tiled_engine`).  The hooks
     on LOD-sprite's engine, whole keyframes or tiles, are :attr:`keys`
     (:mod:`lodsprite.techniques.adaptive_keys`), chosen once with the engine.

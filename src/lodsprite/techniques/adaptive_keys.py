@@ -9,15 +9,17 @@ once when the technique is made (:func:`adaptive_keys`):
 * :class:`TiledAdaptiveKeys` — tile updates
   (:class:`~lodsprite.techniques.sprite_engines.TiledKeyframes`): each tile drawn by the
   adaptive renderer culled by the tile's sub-frustum, its selection recorded per (update,
-  tile) and drawn again in the replay; the adaptive renderer's tile requests go out after
-  each update's tiles;
+  tile) and drawn again in the replay.  An update's stream request is its tiles' own
+  selections gathered (``AdaptiveTerrain.gathering``), no whole-view selection; the
+  view-dependent proxy is kept from update to update until stale
+  (:mod:`lodsprite.sprite.proxy_hold`);
 * :class:`WorkerAdaptiveKeys` — whole keyframes from the worker process
   (:class:`~lodsprite.techniques.sprite_engines.WorkerKeyframes`), drawn by its own
   adaptive renderer (:mod:`lodsprite.techniques.adaptive_worker`); each keyframe comes
   with its selection, which the replay draws again here.
 
-The first two stream the adaptive renderer's tiles between keyframes and, before each draw,
-collect the store's level-0 chunks arrived for the error metric (``pump``), neither
+The first two stream the adaptive renderer's tiles between keyframes and, before each
+draw, collect the store's level-0 chunks arrived for the error metric (``pump``), neither
 waiting.  The classes only wire the GL drivers' hooks; what is drawn is decided in the
 sprite engines and the adaptive renderer.
 """
@@ -164,15 +166,22 @@ class TiledAdaptiveKeys(_AdaptiveKeys):
         self._selections: dict[tuple[int, int], tuple] = {}  # (update, tile) -> selection
         self.tiled.drawer = self.draw_tile
         self.tiled.between_keyframes = self.between_keyframes
-        self.tiled.after_tiles = adaptive.request
+        self.tiled.after_tiles = self.tiles_done
 
     def draw_tile(self, viewpoint: Viewpoint, projection, target, cull):
         """A tile by the adaptive renderer, culled by its sub-frustum; its selection is
         kept (references only: recorded in :meth:`record`)."""
         self.pump()
+        if self.adaptive.gathering is None:  # the update's first tile
+            self.adaptive.gathering = ([], set())
         stats = self.adaptive.render_into(viewpoint, projection, target, cull)
         self._drawn.append((self.adaptive.last_draw, self.adaptive.last_morphed))
         return stats
+
+    def tiles_done(self, viewpoint: Viewpoint, projection) -> None:
+        """After an update's tiles: their selections' requests stay the wish list
+        (gathered tile by tile; no selection for the whole view is made)."""
+        self.adaptive.gathering = None
 
     def use_surface(self, heights) -> None:
         """Each tile update's ``C`` on the surface it shows as well."""
@@ -180,13 +189,17 @@ class TiledAdaptiveKeys(_AdaptiveKeys):
         self.tiled.metric = replace(self.tiled.metric, surface=heights)
 
     def use_proxy(self, source, full, points) -> None:
-        """The proxy frozen at each tile update, and every tile's error the proxy metric
-        over the samples it serves."""
+        """The proxy frozen at a tile update and kept by the next ones until stale
+        (:class:`~lodsprite.sprite.proxy_hold.ProxyHold`), and every tile's error the proxy
+        metric over the samples it serves."""
+        from lodsprite.sprite.proxy_hold import ProxyHold
         from lodsprite.sprite.proxy_metric import ProxyMetric
 
         super().use_proxy(source, full, points)
         self.tiled.tiled.use_proxy()
-        self.tiled.metric = ProxyMetric(source.nodes, full, self.tiled.metric, points=points)
+        self.tiled.hold = ProxyHold(source, self.tiled.metric)
+        self.tiled.metric = ProxyMetric(self.tiled.hold.nodes, full, self.tiled.metric,
+                                        points=points)
 
     def warmed_up(self) -> None:
         """Forget the warm-up's tiles too: they are no update's."""

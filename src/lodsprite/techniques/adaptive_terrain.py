@@ -74,6 +74,8 @@ class AdaptiveTerrain:
         self._last_eye: np.ndarray | None = None  # the eye the last selection was made at
         self._keep: set = set()
         self.pinned: set = set()  # nodes whose slots stay (a sprite proxy's frozen nodes)
+        # a tile update's requests and nodes kept so far (None: each selection its own)
+        self.gathering: tuple[list, set] | None = None
         self._ranges_key: tuple[float, ...] | None = None  # triangles_at's ranges, per
         self._ranges = np.zeros((0, self.tree.levels))       # tolerance, for these
         roots = self.roots = self.tree.roots()
@@ -193,12 +195,16 @@ class AdaptiveTerrain:
                                       self.slots.__contains__)
         # a root evicted (off-screen, LRU) comes back first: its region would be a hole
         want += [(float("inf"), n) for n in self.roots if n not in self.slots]
-        self.loader.want(want)
         keep = set(self.roots) | self.pinned
         for n in draw:
             while n.k <= self.tree.top and n not in keep:
                 keep.add(n)
                 n = n.parent()
+        if self.gathering is not None:  # a tile update: every tile's wants, not the last's
+            self.gathering[0].extend(want)
+            self.gathering[1].update(keep)
+            want, keep = self.gathering
+        self.loader.want(want)
         self._wanted, self._keep = [n for _, n in sorted(want, key=lambda u: -u[0])], keep
         return draw, self._upload_arrived()
 
@@ -215,14 +221,6 @@ class AdaptiveTerrain:
         if uploaded:  # what is resident is not looked for again (prefetch, every frame)
             self._wanted = [n for n in self._wanted if n not in self.slots]
         return uploaded
-
-    def request(self, viewpoint: Viewpoint, projection) -> int:
-        """Select for ``viewpoint`` through ``projection`` (a :class:`~lodsprite.camera.
-        Projection`) without drawing: ask the loader for what that view lacks and upload
-        what has arrived; returns the tiles uploaded.  After keyframe tiles culled by
-        their sub-frusta, this streams for the whole view, not only the last tile."""
-        view_proj = projection.matrix() @ viewpoint.view_matrix()
-        return self._stream(np.asarray(viewpoint.o, dtype=np.float64), view_proj)[1]
 
     def prefetch(self) -> int:
         """Between frames drawn by this renderer (LOD-sprite's spriteframes): go on

@@ -42,7 +42,7 @@ def _f(v, digits: int) -> str:
 def summary(r: dict) -> Summary:
     """Scheduler against independent feedback; profile against linear; extractions."""
     rows = []
-    for name in ("scheduler", "independent"):
+    for name in ("scheduler", "reuse", "independent"):
         x = r[name]
         rows.append((name, f"{x['target_ms']:.1f}", f"{x['median_ms']:.1f}",
                      f"{x['p99_ms']:.1f}", f"{x['std_ms']:.1f}", _f(x["rmse"], 2),

@@ -15,6 +15,11 @@ weaving among the crowd,
   ``sample_every``-th frame replayed untimed against the full-detail scene (every layer
   at full detail: :func:`~lodsprite.layered.technique.reference`, rendered once per
   path) for RMSE (grey levels) and FLIP;
+* ``reuse`` (issue 32): the scheduler at ``reuse_fps`` with the static layers reused
+  (``keyframes="worker"``: the terrain, by the adaptive renderer at the keyframe
+  tolerance, and the trees in LOD-sprite keyframes from the scene's keyframe worker
+  process, which shares the machine's cores with the display;
+  :mod:`lodsprite.layered.reuse`), quality as the two above;
 * ``manager`` and ``no_manager``, on the first ``extraction_frames`` frames (every object
   extracting its own LODs is slow: about 0.8 s a frame here): the LOD exponent fixed at
   ``exponent``, the crowd
@@ -63,8 +68,9 @@ MATCH_KEY = "triangles_objects_chosen"
 class BattlefieldConfig(SplitSampled):
     """The default run: a 4k² store, 3000 walking ogres, 100 trees, two light fields of
     6 slabs of 8² nodes of 64² pixels, 300 frames along each of two paths at 256², a 5 fps
-    target; 899 s here (the idle 2-core machine, 2026-12-03; 20 sampled frames a path).
-    :meth:`quick` is the tests'."""
+    target (reuse: 15 fps); 899 s here before the reuse runs (the idle 2-core machine,
+    2026-12-03; 20 sampled frames a path), 1262 s with them on the machine shared with
+    other runs (docs/commands/reproduce.md).  :meth:`quick` is the tests'."""
 
     terrain: str = "fractal:4096:1"
     instances: int = 3000
@@ -84,13 +90,15 @@ class BattlefieldConfig(SplitSampled):
     frames: int = 300
     image: int = 256
     target_fps: float = 5.0     # binds: a 100-frame run's fixed-exponent frames took 221-319 ms
-    extraction_frames: int = 100  # the manager / no_manager runs: the first frames of a path
+    extraction_frames: int = 50   # the manager / no_manager runs: the first frames of a path
     sample_every: int = 15      # 20 sampled frames a path: 10 to choose on, 10 to report
     terrain_mode: str = "adaptive"
     terrain_grid: int = 32      # the adaptive renderer's nodes: 32² quads (docs/scenes.md)
     lod_floor: float = 0.02     # the coarsest LOD of ogres and trees: 2 % of their triangles
     exponent: float = 1.0       # the fixed-exponent runs' LOD exponent
     match_steps: int = 4        # linear runs at most, matching the profile run's triangles
+    reuse_mode: str = "sprite-adaptive"  # reuse: keyframes by the adaptive renderer, worker
+    reuse_fps: float = 15.0     # reuse: its own target, 3x the scheduler's (issue 32)
 
     @classmethod
     def quick(cls, **kw) -> BattlefieldConfig:
@@ -98,6 +106,7 @@ class BattlefieldConfig(SplitSampled):
                              paths=("flyover:300:3000", "weave:8:120:3"), lf_st=4,
                              extraction_frames=12,
                              lf_uv=32, lf_slabs=6, frames=12, image=64, target_fps=30.0,
+                             reuse_fps=90.0,
                              sample_every=3, match_steps=2), **kw})
 
     @property
@@ -145,7 +154,7 @@ def _row(result, target_ms: float | None, chosen: set[int]) -> dict:
             "triangles_objects_mean": float(np.mean([r.get("triangles_objects", 0)
                                                      for r in rows])),
             "extractions": int(sum(r.get("extractions", 0) for r in rows)),
-            **{k: v for k, v in s.items() if k.startswith(("share_", "mean_ms_"))},
+            **{k: v for k, v in s.items() if k.startswith(("share_", "mean_ms_", "keyframe"))},
             "columns": {"ms": ms.tolist(), **cols}}
 
 
@@ -166,7 +175,8 @@ class PathRuns:
 
     def run(self, *, schedule: str = "none", target_fps: float | None = None,
             exponent: float | None = None, share: bool = True, quality: bool = True,
-            sampled: bool = False, first: int | None = None) -> dict:
+            sampled: bool = False, first: int | None = None, keyframes: str = "inline",
+            terrain_mode: str | None = None) -> dict:
         """One run of the ``scene`` technique (see the module doc); ``sampled``: the
         sampled frames only, each at its own time; ``first``: the first frames only."""
         from lodsprite.harness import run_path
@@ -188,7 +198,9 @@ class PathRuns:
         # show tiles still streaming in (a low eye under a coarse tile's surface), and
         # the comparison is of the objects' LODs
         t = LayeredTechnique(self.renderer, self.world,
-                             terrain_mode="full" if sampled else cfg.terrain_mode,
+                             terrain_mode="full" if sampled else (terrain_mode
+                                                                  or cfg.terrain_mode),
+                             keyframes=keyframes,
                              schedule=schedule, target_fps=target_fps,
                              exponent=cfg.exponent if exponent is None else exponent,
                              frame_s=frame_s, grid=cfg.terrain_grid,
@@ -278,6 +290,8 @@ def run_path_set(renderer, world, spec: str, cfg: BattlefieldConfig,
     p = PathRuns(renderer, world, cam, cfg)
     out: dict = {"path": cam.name}
     for name, kw in (("scheduler", {"schedule": "scheduler", "target_fps": cfg.target_fps}),
+                     ("reuse", {"schedule": "scheduler", "target_fps": cfg.reuse_fps,
+                                "keyframes": "worker", "terrain_mode": cfg.reuse_mode}),
                      ("independent", {"schedule": "independent",
                                       "target_fps": cfg.target_fps}),
                      ("manager", {"quality": False, "first": cfg.extraction_frames}),
@@ -298,7 +312,7 @@ def reproduce_battlefield(cfg: BattlefieldConfig, out_dir: Path,
     from lodsprite.scene.world import load_scene_file
 
     out_dir = Path(out_dir)
-    total = 1 + 5 * len(cfg.paths)
+    total = 1 + 6 * len(cfg.paths)
     done = [0]
 
     def step(name: str) -> None:
@@ -336,6 +350,7 @@ def results(cfg: BattlefieldConfig, per_path: dict, made: dict, world, scene_fil
     return {
         "scheduler": pooled(per_path, "scheduler"),
         "independent": pooled(per_path, "independent"),
+        "reuse": pooled(per_path, "reuse"),
         "profile_vs_linear": {
             "rmse_profile": mean("profile", "rmse"), "rmse_linear": mean("linear", "rmse"),
             "flip_profile": mean("profile", "flip"), "flip_linear": mean("linear", "flip"),

@@ -52,10 +52,17 @@ def summary(r: dict) -> Summary:
                          f"{ad['rmse']:.2f} / " + ("—" if whole is None
                                                    else f"{whole['rmse']:.2f}"),
                          f"{ad['peak_rss_mb']:.0f}", _ms(ad.get("first_frame_ms")),
-                         f"{ad['first_frame_s']:.2f}", _best(e)))
+                         f"{ad['first_frame_s']:.2f}", _best(e),
+                         _speed(r.get("frontier_speedup", {}).get(side, {}).get(p, {}))))
     return Summary("Large terrain reproduced", (
         "store", "path", "adaptive median ms", "sprite median ms", "RMSE adaptive / sprite",
-        "peak RSS MB", "adaptive warm-up ms", "first frame s", "at equal error"), rows)
+        "peak RSS MB", "adaptive warm-up ms", "first frame s", "at equal error",
+        "frontier speedup 1 / 2 / 4 px"), rows)
+
+
+def _speed(levels: dict) -> str:
+    return " / ".join("—" if levels.get(k) is None else f"{levels[k]:.2f}×"
+                      for k in ("1px", "2px", "4px"))
 
 
 def _ms(v: float | None) -> str:

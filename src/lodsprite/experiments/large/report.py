@@ -9,8 +9,11 @@ from pathlib import Path
 
 from matplotlib.figure import Figure
 
+from lodsprite.experiments.large.frontiers import LEVELS, SPRITE, curve
+from lodsprite.experiments.large.frontiers import plot as plot_frontier
 from lodsprite.experiments.large.variants import VARIANTS, equal_error
 from lodsprite.files import atomic_write_bytes, save_figure, write_json
+from lodsprite.report.frontier import time_at_error
 from lodsprite.report.values import fmt_fixed
 
 f = fmt_fixed
@@ -98,15 +101,20 @@ def path_rows(r: dict, path: str) -> list[str]:
     lines = list(ROWS_HEAD)
     for key, res in _stores(r):
         v = res[path]
-        ee = {(e["variant"], e["epsilon"]): e for e in equal_error(v)["rows"]}
+        ee = {(e["variant"], e.get("key_sse"), e["epsilon"]): e
+              for e in equal_error(v)["rows"]}
         label = _label(key, res)
-        lines.append(_line(label, "adaptive 1 px", v["adaptive"], None))
+        for x in v.get("adaptive_sweep", [v["adaptive"]]):
+            lines.append(_line(label, f"adaptive {x.get('sse', 1.0):g} px", x, None))
         full = v.get("full")
         if full and "median_ms" in full:
             lines.append(_line(label, "full resolution (sampled frames)", full, None))
         for name in VARIANTS:
             for x in v.get(name, []):
-                lines.append(_line(label, name, x, ee[(name, x["epsilon"])]))
+                own = x.get("key_sse") in (None, r["config"]["key_sse"])
+                run = name if own else f"{name}, keyframes {x['key_sse']:g} px"
+                lines.append(_line(label, run, x,
+                                   ee[(name, x.get("key_sse"), x["epsilon"])]))
     return lines
 
 
@@ -179,7 +187,8 @@ def _patrol(r: dict) -> list[str]:
             f"(cut {cut}); cache hits {b.get('cache_hits', '—')}; total "
             f"{f(a['total_s'], 2)} s against {f(b['total_s'], 2)} s "
             f"({f(pt['speedup'], 2)}×); RMSE / FLIP {f(a['rmse'], 2)} / {f(a['flip'], 3)} "
-            f"without, {f(b['rmse'], 2)} / {f(b['flip'], 3)} with."]
+            f"without, {f(b['rmse'], 2)} / {f(b['flip'], 3)} with (at equal error: "
+            f"{_yes(pt.get('equal_error', False))})."]
 
 
 def _jacksboro(r: dict) -> list[str]:
@@ -220,7 +229,8 @@ def write_outputs(r: dict, out_dir: Path) -> Path:
              "frames; every row measured is in the tables."]
     for p in c["paths"]:
         lines += ["", f"## Path {p}", "", *path_rows(r, p)]
-    lines += ["", "## At equal error", "", *equal_table(r), "", *_skipped(r),
+    lines += ["", "## Error–time frontiers", "", *frontier_lines(r, out_dir),
+              "", "## At equal error", "", *equal_table(r), "", *_skipped(r),
               "", "## Reference", "", *reference_table(r),
               "", "## Memory", "", *memory_lines(r),
               "", "## Patrol: the keyframe cache", "", *_patrol(r), *_jacksboro(r)]
@@ -244,3 +254,41 @@ def _variants_line() -> str:
         return (f"`{name}`: {tiles}{cache}, proxy at {o.get('proxy_sse')} px, metric "
                 f"{o.get('metric', 'warp')}")
     return "; ".join(one(k, v) for k, v in VARIANTS.items())
+
+
+def _speed(v: float | None) -> str:
+    return "— (not reached)" if v is None else f"{f(v, 2)}×"
+
+
+def frontier_lines(r: dict, out_dir: Path) -> list[str]:
+    """Per store and path: each level's error and both frontiers' times there (median),
+    the speedups by the median and the p99, and the plot of both frontiers."""
+    lines = ["Each technique along its own knobs (adaptive: its tolerance; LOD-sprite: ε, "
+             "keyframe tolerance, whole or tiled keyframes); a technique's frontier is the "
+             "lower envelope of its runs, chosen on the chosen frames and drawn with the "
+             "reported frames' RMSE.  A level is adaptive's own RMSE at that tolerance; "
+             "the speedup is adaptive's frontier time over LOD-sprite's at that error, "
+             "interpolated in log time between measured runs, never extrapolated "
+             "(not reached: LOD-sprite's frontier has no run at or beyond that error).", "",
+             "| side | path | level | RMSE | adaptive frontier ms | LOD-sprite frontier ms | "
+             "speedup (median) | speedup (p99) |", "|---|---|---|---|---|---|---|---|"]
+    plots = []
+    for key, res in _stores(r):
+        for p, block in r.get("frontier", {}).get(key, {}).items():
+            speed, p99 = r["frontier_speedup"][key][p], r["frontier_speedup_p99"][key][p]
+            for name in LEVELS:
+                e = block["levels"][name]
+                lines.append(f"| {_label(key, res)} | {p} | {name} | {_cell(e, 2)} | "
+                             f"{_ms_at(block, 'adaptive', e)} | {_ms_at(block, SPRITE, e)} | "
+                             f"{_speed(speed[name])} | {_speed(p99[name])} |")
+            png = plot_frontier(block, out_dir / f"frontier_{key}_{p}.png",
+                                f"{_label(key, res)}, {p}")
+            plots.append(f"![frontier {key} {p}]({png.name})")
+    return [*lines, "", *plots]
+
+
+def _ms_at(block: dict, tech: str, error: float | None) -> str:
+    if error is None:
+        return "—"
+    t = time_at_error(curve(block[tech], "median_ms")[0], error)
+    return "—" if t is None else f(t, 2)

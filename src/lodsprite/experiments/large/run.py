@@ -15,9 +15,13 @@ renderer at 0.25 px checked against it at 1k²–4k² as a validation figure onl
 paths: ``chen1999`` (it scales with the terrain) and ``flyover`` (1 km above the ground
 along 10 km, the same in metres at every size).
 
-Per side and path: the adaptive renderer at ``sse`` (1 px), full resolution timed on the
-sampled frames (up to ``full_max`` a side), and each LOD-sprite variant
-(:data:`~lodsprite.experiments.large.variants.VARIANTS`) at every ε of ``eps``; the
+Per side and path: the adaptive renderer at every tolerance of ``adaptive_sse`` (``sse``,
+1 px, among them), full resolution timed on the sampled frames (up to ``full_max`` a
+side), each LOD-sprite variant of ``variants``
+(:data:`~lodsprite.experiments.large.variants.VARIANTS`) at every ε of ``eps`` and whole
+keyframes at each (keyframe tolerance, ε) of ``key_sweep``.  Each technique's runs are
+its error–time frontier (:mod:`~lodsprite.experiments.large.frontiers`), compared at
+adaptive's 1, 2 and 4 px errors (``frontier_speedup``); the
 comparison at equal error (:func:`~lodsprite.experiments.large.variants.equal_error`)
 lists every row; it picks the best row on one half of the sampled frames and reports it
 on the other (:func:`~lodsprite.experiments.base.split_sampled`). ``patrol`` compares
@@ -32,14 +36,17 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from lodsprite.experiments.base import SplitSampled, split_sampled
+from lodsprite.errors import InputError
+from lodsprite.experiments.base import SplitSampled
 from lodsprite.experiments.large.child import render_in_child
-from lodsprite.experiments.large.reference import errors, reference_images, saved_frames
+from lodsprite.experiments.large.frontiers import frontier_block
+from lodsprite.experiments.large.reference import reference_images
+from lodsprite.experiments.large.runs import PathRuns, sprite_lod
 from lodsprite.experiments.large.variants import (
+    PLAYED,
     VARIANTS,
     equal_error,
     patrol_block,
-    row,
     unavailable,
 )
 from lodsprite.terrain.store import build_store, estimate_bytes
@@ -64,8 +71,11 @@ class LargeConfig(SplitSampled):
     key_sse: float = 0.5
     ref_sse: float = 0.25
     sample_every: int = 6     # 20 sampled frames: 10 to choose a row on, 10 to report
-    eps: tuple[float, ...] = (1.0, 0.5, 0.25)  # every LOD-sprite variant at each ε
-    variants: tuple[str, ...] = tuple(VARIANTS)
+    eps: tuple[float, ...] = (1.0, 0.5)  # every LOD-sprite variant at each ε
+    variants: tuple[str, ...] = ("whole", "tiled", "worker")  # tiled+cache: --full
+    adaptive_sse: tuple[float, ...] = (0.5, 1.0, 2.0, 4.0)  # adaptive's frontier
+    #: more whole-keyframe runs for LOD-sprite's frontier: (keyframe tolerance px, ε)
+    key_sweep: tuple[tuple[float, float], ...] = ((2.0, 2.0), (4.0, 4.0))
     full_max: int = 4096      # full resolution timed up to this side
     validate_max: int = 4096  # the 0.25 px stand-in checked against level 0 up to this side
     validate_sizes: tuple[int, ...] = (1024, 2048)  # stores for that check alone, untimed
@@ -81,12 +91,15 @@ class LargeConfig(SplitSampled):
     @classmethod
     def quick(cls) -> LargeConfig:
         return cls(sizes=(256, 512), frames=24, image=128, sample_every=6, quick_512=True,
-                   eps=(1.0, 0.5), validate_sizes=(), patrol_passes=1)
+                   eps=(1.0, 0.5), validate_sizes=(), patrol_passes=1,
+                   adaptive_sse=(1.0, 4.0), key_sweep=((4.0, 4.0),))
 
     @classmethod
     def full(cls) -> LargeConfig:
         return cls(sizes=(1024, 2048, 4096, 16384), frames=230, image=512, sample_every=11,
-                   eps=(1.0, 0.7, 0.5, 0.35, 0.25), validate_sizes=())
+                   eps=(1.0, 0.7, 0.5, 0.35, 0.25), validate_sizes=(),
+                   variants=tuple(VARIANTS), adaptive_sse=(0.5, 1.0, 2.0, 4.0, 8.0, 16.0),
+                   key_sweep=((1.0, 1.0), (2.0, 2.0), (4.0, 4.0)))
 
     @property
     def sample_frames(self) -> list[int]:
@@ -98,70 +111,6 @@ def huge_needs() -> dict:
     need = estimate_bytes(65536, 65536, "float32")
     free = shutil.disk_usage(Path.cwd()).free
     return {"need_gb": need / 2 ** 30, "free_gb": free / 2 ** 30}
-
-
-def sprite_lod(side: int) -> int:
-    """LOD-sprite's coarse level for a store ``side`` samples a side: squares of about
-    128 samples (3.8 km at 30 m), 16 to 128 squares a side (16, the paper's, up to 2k²).
-    A fixed 16² over 16k² has squares 30 km wide: a low flight sees one or two square
-    centres, and the proxy stands far off the ground in view."""
-    q = 16
-    while q < 128 and q * 128 < side:
-        q *= 2
-    return q
-
-
-def _folder(variant: str, eps: float) -> str:
-    return f"{variant.replace('+', '-')}_eps{eps:g}"
-
-
-class PathRuns:
-    """The timed runs of one store along one path, each measured on the sampled frames
-    against ``ref`` (frame index -> reference image)."""
-
-    def __init__(self, store: Path, n: int, cfg: LargeConfig, spec: str, runs: Path,
-                 ref: dict) -> None:
-        self.store, self.n, self.cfg, self.runs, self.ref = store, n, cfg, runs, ref
-        self.keep = sorted(ref)
-        self.common = {"terrain": str(store), "path": spec, "frames": cfg.frames,
-                       "size": [cfg.image, cfg.image], "save_frames": True,
-                       "save_every": cfg.sample_every}
-
-    def timed(self, folder: str, **config) -> tuple[dict, tuple[float, float],
-                                                    tuple[float, float]]:
-        """One timed run (its summary) and its (RMSE, FLIP) on the reported and on the
-        chosen halves of the sampled frames (:func:`split_sampled`)."""
-        s = render_in_child({**self.common, **config}, self.runs / folder)
-        images = saved_frames(self.runs / folder, self.keep)
-        chosen, reported = split_sampled(self.keep)
-        return (s, errors({i: images[i] for i in reported}, self.ref),
-                errors({i: images[i] for i in chosen}, self.ref))
-
-    def adaptive(self) -> dict:
-        s, q, c = self.timed("adaptive", mode="adaptive", sse=self.cfg.sse)
-        return {**row(s, q, chosen=c), "sse": self.cfg.sse, "tiles_evicted": s["tiles_evicted"],
-                "gpu_cache_mb": s["gpu_cache_mb"],
-                "first_frame_s_technique": s.get("first_frame_s_technique")}
-
-    def sprite(self, variant: str, eps: float, **extra) -> dict:
-        opts = {**VARIANTS[variant], **extra}
-        s, q, c = self.timed(_folder(variant, eps), mode="sprite", key_sse=self.cfg.key_sse,
-                             lod=sprite_lod(self.n), epsilon=eps, **opts)
-        return row(s, q, eps, int(opts.get("tiles", 1)), chosen=c)
-
-    def full(self, path) -> dict:
-        """Full resolution timed on the sampled frames (a path file of them), or why not."""
-        sampled = sampled_path(path, self.keep, self.runs / "sampled.json")
-        try:
-            s = render_in_child({"terrain": str(self.store), "mode": "full", "grid": self.n,
-                                 "path": str(sampled), "frames": len(self.keep),
-                                 "size": [self.cfg.image, self.cfg.image]},
-                                self.runs / "full")
-        except Exception as exc:  # noqa: BLE001 - the child's error or death: said, not fatal
-            return {"skipped": f"{type(exc).__name__}: {exc}"}
-        return {"median_ms": s["median_ms"], "p99_ms": s["p99_ms"], "total_s": s["total_s"],
-                "first_frame_ms": s.get("first_frame_ms"),
-                "frames": len(self.keep), "note": "timed on the sampled frames only"}
 
 
 def run_path(store: Path, n: int, cfg: LargeConfig, spec: str, runs: Path
@@ -177,7 +126,9 @@ def run_path(store: Path, n: int, cfg: LargeConfig, spec: str, runs: Path
                                 cfg.ref_sse, validate=n <= cfg.validate_max)
     del scene
     p = PathRuns(store, n, cfg, spec, runs, ref)
-    out: dict = {"adaptive": p.adaptive(), "skipped": {}}
+    sweep = {sse: p.adaptive(sse) for sse in sorted({*cfg.adaptive_sse, cfg.sse})}
+    out: dict = {"adaptive": sweep[cfg.sse], "adaptive_sweep": list(sweep.values()),
+                 "skipped": {}}
     if n <= cfg.full_max:
         out["full"] = p.full(path)
     for name in cfg.variants:
@@ -185,7 +136,13 @@ def run_path(store: Path, n: int, cfg: LargeConfig, spec: str, runs: Path
         if why:
             out["skipped"][name] = why
             continue
-        out[name] = [p.sprite(name, eps) for eps in cfg.eps]
+        try:
+            out[name] = [(p.played if name in PLAYED else p.sprite)(name, eps)
+                         for eps in cfg.eps]
+        except InputError as exc:  # refused on this build (e.g. worker over a store)
+            out["skipped"][name] = str(exc)
+    if "whole" in out:
+        out["whole"] += [p.sprite("whole", eps, key) for key, eps in cfg.key_sweep]
     return out, how
 
 
@@ -273,7 +230,8 @@ def reproduce_large(cfg: LargeConfig, out_dir: Path, update: Update | None = Non
                           for k, v in cfg.__dict__.items()}, "sizes": {}, "terrains": {},
                "reference": {}, "equal_error_speedup": {}, "huge": huge_needs(),
                "sample_frames": cfg.sample_frames, "chosen_frames": cfg.chosen_frames,
-               "reported_frames": cfg.reported_frames, "patrol": {"skipped": "not run"}}
+               "reported_frames": cfg.reported_frames, "patrol": {"skipped": "not run"},
+               "frontier": {}, "frontier_speedup": {}, "frontier_speedup_p99": {}}
     for step, (key, spec) in enumerate(jobs):
         if update:
             update("stores", step, len(jobs))
@@ -287,11 +245,16 @@ def reproduce_large(cfg: LargeConfig, out_dir: Path, update: Update | None = Non
                      "tile_mb_per_s": built.get("mb_per_s"), "sprite_lod": sprite_lod(n),
                      "scene_load": render_in_child({"probe": "scene", "terrain": str(store)},
                                                    out_dir / "runs" / safe / "scene")}
-        r["reference"][key], r["equal_error_speedup"][key] = {}, {}
+        for block in ("reference", "equal_error_speedup", "frontier", "frontier_speedup",
+                      "frontier_speedup_p99"):
+            r[block][key] = {}
         for p in cfg.paths:
             res[p], r["reference"][key][p] = run_path(store, n, cfg, p,
                                                       out_dir / "runs" / safe / p)
             r["equal_error_speedup"][key][p] = equal_error(res[p])
+            r["frontier"][key][p], speed = frontier_block(res[p], list(cfg.variants))
+            r["frontier_speedup"][key][p] = speed["median_ms"]
+            r["frontier_speedup_p99"][key][p] = speed["p99_ms"]
         (r["sizes"] if spec.startswith("fractal:") else r["terrains"])[key] = res
         if cfg.patrol and spec.startswith("fractal:") and n == patrol_side(cfg):
             r["patrol"] = patrol(store, n, cfg, out_dir / "runs" / safe / "patrol")
@@ -331,13 +294,3 @@ def _jacksboro(cfg: LargeConfig, out_dir: Path) -> dict:
                       "mean_ms_keyframe": key["mean_ms_keyframe"],
                       "mean_ms_sprite": key["mean_ms_sprite"]}
     return r
-
-
-def sampled_path(path, keep: list[int], file: Path) -> Path:
-    """The viewpoints ``keep`` of ``path`` as a path file."""
-    from lodsprite.paths import CameraPath
-
-    file.parent.mkdir(parents=True, exist_ok=True)
-    CameraPath("sampled", tuple(path.viewpoints[i] for i in keep), path.fov_y_deg
-               ).to_json(file)
-    return file

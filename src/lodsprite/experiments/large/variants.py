@@ -33,7 +33,12 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "whole": {"tiles": 1, "cache_mb": 0.0, "proxy_sse": PROXY_SSE, "metric": METRIC},
     "tiled": {"tiles": 4, "cache_mb": 0.0, "proxy_sse": PROXY_SSE, "metric": METRIC},
     "tiled+cache": {"tiles": 4, "cache_mb": 64.0, "proxy_sse": PROXY_SSE, "metric": METRIC},
+    "worker": {"tiles": 1, "cache_mb": 0.0, "proxy_sse": PROXY_SSE, "metric": METRIC,
+               "keyframes": "worker"},
 }
+#: Variants whose keyframes come from the worker process: run with the path played in
+#: time (:mod:`lodsprite.playback`) at the path's own rate, judged at display time.
+PLAYED = frozenset(k for k, v in VARIANTS.items() if v.get("keyframes") == "worker")
 TIME_KEY = "total_s"  # what the speedups compare: the whole path's time
 #: What a row keeps of a run's summary.json, where the run has it.
 ROW_KEYS = ("median_ms", "p99_ms", "total_s", "first_frame_ms", "first_frame_s",
@@ -55,19 +60,21 @@ def unavailable(options: dict[str, Any]) -> str | None:
 
 
 def row(summary: dict, quality: tuple[float, float], epsilon: float | None = None,
-        tiles: int = 1, chosen: tuple[float, float] | None = None) -> dict:
+        tiles: int = 1, chosen: tuple[float, float] | None = None,
+        key_sse: float | None = None) -> dict:
     """One row of results.json from a run's ``summary``, its ``(rmse, flip)`` on the
     reported frames and ``chosen`` (the same on the frames rows are chosen on; default:
     ``quality``): ``median_ms, p99_ms, rmse, flip, rmse_chosen, flip_chosen, epsilon,
-    keyframes, tiles_rendered`` and the :data:`ROW_KEYS` the run has (``first_frame_ms``:
+    key_sse, keyframes, tiles_rendered`` and the :data:`ROW_KEYS` the run has
+    (``first_frame_ms``:
     its untimed warm-up).  ``tiles_rendered`` where the run does not count it: its
     keyframes times ``tiles`` squared (a whole keyframe is every tile)."""
     keyframes = summary.get("keyframes")
     rendered = summary.get("tiles_rendered")
     if rendered is None and keyframes is not None:
         rendered = int(keyframes) * tiles * tiles
-    out = {"epsilon": epsilon, "keyframes": keyframes, "tiles_rendered": rendered,
-           "rmse": quality[0], "flip": quality[1]}
+    out = {"epsilon": epsilon, "key_sse": key_sse, "keyframes": keyframes,
+           "tiles_rendered": rendered, "rmse": quality[0], "flip": quality[1]}
     chosen = quality if chosen is None else chosen
     out["rmse_chosen"], out["flip_chosen"] = chosen
     out.update({k: summary[k] for k in ROW_KEYS if k in summary})
@@ -93,7 +100,8 @@ def equal_error(per_path: dict) -> dict:
     frames); ``best``: the fastest row within on the chosen frames, or None when no row
     is (module docstring)."""
     ad = per_path["adaptive"]
-    rows = [{"variant": name, "epsilon": r["epsilon"], "rmse": r["rmse"], "flip": r["flip"],
+    rows = [{"variant": name, "epsilon": r["epsilon"], "key_sse": r.get("key_sse"),
+             "rmse": r["rmse"], "flip": r["flip"],
              "rmse_chosen": r["rmse_chosen"], "flip_chosen": r["flip_chosen"],
              "speedup": ad[TIME_KEY] / r[TIME_KEY], "within": _within(r, ad, "_chosen"),
              "within_reported": _within(r, ad, "")}
@@ -108,9 +116,15 @@ def equal_error(per_path: dict) -> dict:
 def patrol_block(without: dict, cached: dict, cache_mb: float) -> dict:
     """The patrol comparison from its two rows (``cache_mb`` 0 and ``cache_mb``):
     keyframe work (keyframes and tiles rendered) and speed with and without the cache,
-    and how many times less keyframe work the cache does."""
+    how many times less keyframe work the cache does, the cached run's RMSE and FLIP over
+    the uncached one's (``rmse_ratio``, ``flip_ratio``) and ``equal_error`` (both at most
+    the uncached run's, on the reported frames)."""
     work = "tiles_rendered" if without.get("tiles_rendered") else "keyframes"
     cut = (without[work] / cached[work]) if cached.get(work) else None
+    ratio = {f"{k}_ratio": (cached[k] / without[k] if without[k] else None)
+             for k in ("rmse", "flip")}
     return {"cache_mb": cache_mb, "without_cache": without, "with_cache": cached,
             "work": work, "keyframe_work_cut": cut,
-            "speedup": without[TIME_KEY] / cached[TIME_KEY]}
+            "speedup": without[TIME_KEY] / cached[TIME_KEY], **ratio,
+            "equal_error": cached["rmse"] <= without["rmse"]
+            and cached["flip"] <= without["flip"]}

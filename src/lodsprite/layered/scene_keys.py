@@ -1,0 +1,181 @@
+"""A scene's static layers in keyframes from a worker process (issue 32, must-have 5; Swan
+et al. 2002's LOD server): the terrain and the static objects rendered into LOD-sprite
+keyframes by a process with its own GL context, from predicted viewpoints.
+
+The process is a :class:`~lodsprite.sprite.keyframe_worker.KeyframeWorker` (the same
+client end, protocol, predictor and shared-memory answers as the terrain's worker) whose
+handler is :func:`scene_key_handler`: it reads the scene file itself (a scene's world is
+made from its file, seeded: the same instances as the display's), makes a
+:class:`~lodsprite.api.Renderer` of the display's size and field of view and, for each
+request ``(viewpoint, predicted, requested_at, tolerance, exponent)``, renders into a
+keyframe slot (the guard-band widened projection, as inline keyframes): the terrain,
+by the adaptive renderer at the keyframe tolerance ``tolerance`` (px) over a store, or
+at full resolution in memory (``terrain="full"``), then the static objects (``walk_mps
+= 0``) by the LODManager engine at the LOD exponent ``exponent``.  It answers the
+keyframe's colour and its *full* z-buffer (terrain and static objects: what the display's
+moving layers are depth-tested against, :mod:`lodsprite.gl.key_depth`) and the error
+metric's ``C'`` of the display's coarse level (Chen et al. 1999 Eq. 2).
+"""
+
+from __future__ import annotations
+
+import pickle
+import time
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from lodsprite.errors import InputError
+from lodsprite.sprite.keyframe_process import lower_priority
+from lodsprite.sprite.keyframe_worker import MAX_REQUEST, KeyframeWorker, WorkerSettings
+from lodsprite.workers import ProcessWorker, WorkerUnavailable
+
+if TYPE_CHECKING:
+    from lodsprite.camera import Projection, Viewpoint
+    from lodsprite.scene import Scene
+
+FACTORY = "lodsprite.layered.scene_keys:scene_key_handler"
+KEY_TERRAIN = ("full", "adaptive")
+
+
+@dataclass(frozen=True)
+class SceneKeys:
+    """What the scene's worker draws: ``scene_file`` (read there), ``terrain`` (``full``:
+    the in-memory terrain at full resolution; ``adaptive``: the adaptive renderer, over a
+    store), ``terrain_options`` (the adaptive technique's own) and the objects' ``active``
+    count (None: every static object's LOD updated each keyframe)."""
+
+    scene_file: str
+    terrain: str = "full"
+    terrain_options: dict[str, Any] = field(default_factory=dict)
+    active: int | None = None
+
+
+def scene_starter(keys: SceneKeys):
+    """A ``start(scene, settings, ready_s)`` for :class:`KeyframeWorker`: the process of
+    :func:`scene_key_handler`, ready, or :class:`~lodsprite.workers.WorkerUnavailable`."""
+    if keys.terrain not in KEY_TERRAIN:
+        raise InputError(f"the scene's keyframes draw terrain {' or '.join(KEY_TERRAIN)}, "
+                         f"not {keys.terrain!r}")
+
+    def start(scene: Scene, settings: WorkerSettings, ready_s: float) -> ProcessWorker:
+        proc = ProcessWorker(FACTORY, {"keys": keys, "settings": settings}, in_flight=1,
+                             restarts=0, name="scene-keyframes", max_request=MAX_REQUEST,
+                             slot_bytes=settings.answer_bytes, ready_s=ready_s)
+        if proc.wait_ready(ready_s):
+            return proc
+        proc.poll()  # why it did not start (or the deadline)
+        why = proc.gone or WorkerUnavailable(f"not ready in {ready_s:g} s")
+        proc.close()
+        raise WorkerUnavailable(f"the scene's keyframe worker could not start: {why}") from why
+
+    return start
+
+
+class SceneKeyframeWorker(KeyframeWorker):
+    """The client end (:class:`KeyframeWorker`) of :func:`scene_key_handler`'s process;
+    :attr:`tolerance` and :attr:`exponent` go with each request, and :attr:`timings`
+    lists ``(tolerance, render ms)`` of every keyframe delivered."""
+
+    def __init__(self, scene: Scene, settings: WorkerSettings, keys: SceneKeys,
+                 ready_s: float = 120.0) -> None:
+        super().__init__(scene, settings, ready_s, start=scene_starter(keys))
+        self.tolerance, self.exponent = 1.0, 1.0
+        self.timings: list[tuple[float, float]] = []
+        self._asked: float | None = None
+
+    def request(self) -> None:
+        if self.busy:
+            return
+        self.request_extra = (self.tolerance, self.exponent)
+        self._asked = self.tolerance
+        super().request()
+
+    def poll(self):
+        got = super().poll()
+        if got is not None:
+            self.timings.append((float(self._asked or self.tolerance), got.render_ms))
+        return got
+
+
+# ----------------------------------------------------------------- the worker process
+
+
+def scene_key_handler(keys: SceneKeys, settings: WorkerSettings):
+    """The process's request handler (:mod:`lodsprite.workers`' factory): its priority
+    lowered, the scene read from its file, the renderer and layers made."""
+    lower_priority(settings.nice)
+    gl = _SceneKeysGL(keys, settings)
+
+    def answer(meta: bytes, data: bytes) -> tuple[bytes, bytes]:
+        vp, predicted, asked, tolerance, exponent = pickle.loads(meta)
+        return gl.render(vp, predicted, asked, float(tolerance), float(exponent))
+
+    return answer
+
+
+class _SceneKeysGL:
+    """The process's renderer, keyframe slots, terrain and static objects."""
+
+    def __init__(self, keys: SceneKeys, s: WorkerSettings) -> None:
+        from lodsprite.api import Renderer
+        from lodsprite.gl.sprite import SpriteDrawer
+        from lodsprite.layered.layers import TerrainLayer
+        from lodsprite.layered.objects import ObjectsLayer
+        from lodsprite.scene.world import load_scene_file
+        from lodsprite.sprite.metric import ErrorMetric
+
+        scene = load_scene_file(keys.scene_file)
+        self.renderer = Renderer(scene, s.size, s.fov_y_deg)
+        self.terrain = self.objects = None
+        try:
+            self.sprite = SpriteDrawer(self.renderer.terrain_gl.drawer, s.lod, s.visibility,
+                                       border=s.border, guard_px=s.guard_px)
+            if keys.terrain == "adaptive":
+                self.terrain = TerrainLayer(self.renderer, "adaptive", **keys.terrain_options)
+                self.sprite.keyframe_drawer = self.terrain.technique.terrain.render_into
+            if scene.objects is not None and not scene.objects.moving().all():
+                self.objects = ObjectsLayer(self.renderer, scene.objects, 1.0, keys.active)
+                self.sprite.after_keyframe = self._static
+        except BaseException:
+            self.release()
+            raise
+        self.metric = ErrorMetric.for_level(scene.hf, s.lod, s.resampling)
+        self._warm = False
+
+    def _static(self, viewpoint: Viewpoint, projection: Projection, target) -> None:
+        self.objects.draw_static(viewpoint, projection.matrix(), target.fbo)
+
+    def render(self, vp: Viewpoint, predicted: bool, asked: float, tolerance: float,
+               exponent: float) -> tuple[bytes, bytes]:
+        t0 = time.perf_counter()
+        if self.terrain is not None:
+            if not self._warm:  # the first view's tiles resident (as a run's warm-up)
+                self.terrain.technique.warm_up(vp)
+            self.terrain.technique.terrain.set_sse(tolerance)
+            self.terrain.technique.terrain.prefetch()
+        if self.objects is not None:
+            self.objects.set_exponent(exponent)
+        self._warm = True
+        frame_projection = self.renderer.projection(vp)
+        self.sprite.render_keyframe(vp, t0, frame_projection)
+        self.renderer.gl.finish()
+        key = self.sprite.keyframe
+        color, depth = key.target.read_color(), key.target.read_depth()
+        c_prime = self.metric.reproject(vp.o, key.projection.matrix() @ vp.view_matrix(),
+                                        key.target.size)
+        fields = {"viewpoint": vp, "projection": key.projection,
+                  "frame_projection": frame_projection, "zbuffer": "full",
+                  "c_prime": c_prime, "requested_at": asked, "predicted": predicted,
+                  "render_ms": (time.perf_counter() - t0) * 1e3, "key_size": key.target.size}
+        return pickle.dumps(fields), b"".join((np.ascontiguousarray(depth, np.float32).data,
+                                               np.ascontiguousarray(color, np.uint8).data))
+
+    def release(self) -> None:
+        for part in (self.objects, self.terrain):
+            if part is not None:
+                part.release()
+        if getattr(self, "sprite", None) is not None:
+            self.sprite.release()
+        self.renderer.release()
