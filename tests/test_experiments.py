@@ -78,12 +78,13 @@ def test_the_large_table_has_a_row_a_store_and_path_in_size_order():
     best = {"best": {"speedup": 2.5, "variant": "whole", "epsilon": 0.5}}
     ee = {"chen1999": best}
     r = {"sizes": {"2048": v, "512": v}, "terrains": {"dem.tif": v},
-         "equal_error_speedup": {"2048": ee, "512": ee, "dem.tif": {"chen1999": {"best": None}}}}
+         "equal_error_speedup": {"2048": ee, "512": ee, "dem.tif": {"chen1999": {"best": None}}},
+         "frontier_speedup": {"512": {"chen1999": {"1px": 3.2, "2px": None, "4px": 1.1}}}}
     s = experiments.get("large").summary(r)
     assert [row[0] for row in s.rows] == ["512", "2048", "dem.tif"]
     assert s.rows[0][1:] == ("chen1999", "2.0", "1.0", "3.00 / 4.00", "300", "412", "0.50",
-                             "2.50× (whole ε 0.5)")
-    assert s.rows[2][-1] == "none"
+                             "2.50× (whole ε 0.5)", "3.20× / — / 1.10×")
+    assert s.rows[2][-2:] == ("none", "— / — / —")  # no frontier run: no speedup
 
 
 def test_the_demo_is_chen1999_on_the_papers_set_up_without_the_epsilon_sweeps():

@@ -340,7 +340,7 @@ def test_tile_updates_keep_a_fresh_proxy_and_freeze_a_stale_one_again(gl):
     # Along a short path the updates keep the proxy frozen at the first (no new selection,
     # no new GL freeze); a view turned around, off the proxy's footprint, is stale
     # ("region") and freezes it again.  No update makes a selection for the whole view:
-    # the adaptive renderer selects once per tile drawn, and never through request().
+    # the adaptive renderer selects once per tile drawn, never for the whole view.
     from lodsprite import Renderer, get_path, load_scene, techniques
     from lodsprite.sprite.proxy_hold import ERROR, REGION
 
@@ -350,7 +350,7 @@ def test_tile_updates_keep_a_fresh_proxy_and_freeze_a_stale_one_again(gl):
         t = techniques.create("sprite-adaptive", renderer, lod=8, epsilon=0.25, key_sse=1.0,
                               tiles=2, tile_budget_ms=0.0, proxy_sse=8.0)
         eng, adaptive = t.engine.tiled, t.adaptive
-        calls = {"freeze": 0, "nodes": 0, "stream": 0, "request": 0}
+        calls = {"freeze": 0, "nodes": 0, "stream": 0}
 
         def counted(name, fn):
             def wrapper(*a, **k):
@@ -361,7 +361,6 @@ def test_tile_updates_keep_a_fresh_proxy_and_freeze_a_stale_one_again(gl):
         t.proxy.for_keyframe = counted("freeze", t.proxy.for_keyframe)
         t.proxy.nodes = counted("nodes", t.proxy.nodes)  # a selection made for the metric
         adaptive._stream = counted("stream", adaptive._stream)
-        adaptive.request = counted("request", adaptive.request)
         try:
             t.warm_up(vps[0])
             for k in calls:
@@ -374,7 +373,7 @@ def test_tile_updates_keep_a_fresh_proxy_and_freeze_a_stale_one_again(gl):
             assert len(eng.updates) > n0 + 2 and kept, eng.frozen_for
             frozen = len(set(eng.frozen_for)) - frozen0
             assert calls["freeze"] == calls["nodes"] == frozen < len(eng.updates) - n0
-            assert calls["request"] == 0 and calls["stream"] == drawn
+            assert calls["stream"] == drawn  # one selection a tile drawn, no whole view
             x, y, _ = vps[5].o  # down near the ground, looking level: the proxy's error
             low = np.array([x, y, scene.hf.height_at(x, y) + 5.0])  # bound passes 2x
             n = len(eng.updates)

@@ -176,6 +176,8 @@ class TerrainLayer(Layer):
         from lodsprite.layered.coverage import coarse_max
 
         self.technique.warm_up(viewpoint)
+        if self._depth is not None:  # its program compiled here, not in the first frame
+            self._depth.draw(viewpoint, self.renderer.projection(viewpoint))
         self._seen = viewpoint  # the first plan predicts from this view
         # the coverage rays' max-pooled heights (28 ms at 1025², 90 ms at 4097²): made here,
         # untimed, not in the first timed frame's plan
