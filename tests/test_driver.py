@@ -123,6 +123,9 @@ def test_render_with_worker_keyframes_plays_the_path_in_time(tmp_path):
     assert all(x["rmse"] for x in got) and s["truncated"] is False
     shown_keys = {int(x["keyframe"]) for x in got}
     assert len(json.loads((out / "keyframes.json").read_text())["keyframes"]) > max(shown_keys)
+    # the keyframes the display showed, though none of its frames is one (was 0)
+    assert s["keyframes"] == len(shown_keys) >= 1
+    assert s["keyframes_rendered"] >= s["keyframes"]
 
 
 def test_render_play_plays_inline_keyframes_in_time_too(tmp_path):

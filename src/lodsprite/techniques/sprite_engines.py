@@ -191,7 +191,14 @@ class WorkerKeyframes(_Whole):
                 "shows_keyframe": False}
 
     def cache_summary(self, frames: list[Frame]) -> dict[str, Any]:
-        return slot_summary(frames)
+        """No frame here is a keyframe: ``keyframes`` counts the worker's keyframes the
+        frames showed, ``keyframes_rendered`` all it rendered (``keyframes_discarded``:
+        those never adopted)."""
+        shown = len({f.keyframe for f in frames})
+        engine = self.sprite.engine
+        return {**slot_summary(frames), "cache_keyframes": min(2, shown),
+                "keyframes": shown, "keyframes_rendered": engine.worker.rendered,
+                "keyframes_discarded": engine.discarded}
 
     def status(self) -> str:
         engine = self.sprite.engine
