@@ -14,7 +14,9 @@ mean RMSE of the judged frames).  The frontier of each source is the lower envel
 points, chosen on one half of the judged frames and compared with the other half's RMSE
 (:func:`~lodsprite.experiments.base.split_sampled`); printed: every point, then inline's
 frontier time over the worker's at each of inline's frontier errors (> 1: the worker is
-faster at that error; none where the worker's frontier does not reach it).  Each run is
+faster at that error; none where the worker's frontier does not reach it), and the
+inline runs some worker run beats in both time and error (a worker frontier wholly below
+inline's reaches none of inline's errors).  Each run is
 a process of its own, warmed up alike, in turns (inline, worker, inline, ...) so that
 drift on a shared machine falls on both.
 
@@ -76,6 +78,22 @@ def compare(points: list[dict], time: str) -> dict:
             for _, e in curves["inline"]}
 
 
+def dominated(points: list[dict], time: str) -> list[dict]:
+    """The inline points some worker point beats or equals in both ``time`` and RMSE
+    (reported half), with the worker point that does: where the worker's frontier lies
+    wholly below inline's, the speedup at inline's errors is never reached and this says
+    why."""
+    out = []
+    for p in (q for q in points if q["source"] == "inline"):
+        better = [w for w in points if w["source"] == "worker" and w[time] <= p[time]
+                  and w["rmse"] <= p["rmse"]]
+        if better:
+            w = min(better, key=lambda q: q[time])
+            out.append({"inline_epsilon": p["epsilon"], "worker_epsilon": w["epsilon"],
+                        "time_ratio": p[time] / w[time], "rmse": (p["rmse"], w["rmse"])})
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--terrain", default="jacksboro")
@@ -91,7 +109,9 @@ def main() -> None:
     out = args.out or Path(tempfile.mkdtemp(prefix="keyframes_played_"))
     points = [point(args, src, eps, out) for eps in args.eps for src in SOURCES]
     result = {"points": points, "worker_speedup_median": compare(points, "median_ms"),
-              "worker_speedup_p99": compare(points, "p99_ms")}
+              "worker_speedup_p99": compare(points, "p99_ms"),
+              "inline_dominated_median": dominated(points, "median_ms"),
+              "inline_dominated_p99": dominated(points, "p99_ms")}
     if args.json:
         print(json.dumps(result, indent=1))
         return
@@ -102,6 +122,11 @@ def main() -> None:
     for key in ("worker_speedup_median", "worker_speedup_p99"):
         cells = ", ".join(f"RMSE {e}: " + ("none" if v is None else f"{v:.2f}x")
                           for e, v in result[key].items())
+        print(f"{key}: {cells}")
+    for key in ("inline_dominated_median", "inline_dominated_p99"):
+        cells = ", ".join(f"inline ε {d['inline_epsilon']:g} by worker ε "
+                          f"{d['worker_epsilon']:g} ({d['time_ratio']:.2f}x the time)"
+                          for d in result[key]) or "none"
         print(f"{key}: {cells}")
 
 

@@ -92,6 +92,7 @@ def plot_frontiers(curves: Mapping[str, Iterable[Sequence[float]]], path: Path,
     frontier chosen on other frames, else :func:`frontier` of the points); ``levels``:
     error levels marked as horizontal lines.  Written to ``path`` (PNG); returns it."""
     from matplotlib.figure import Figure
+    from matplotlib.ticker import FuncFormatter
 
     fig = Figure(figsize=(6.4, 4.4), dpi=120)
     ax = fig.subplots()
@@ -105,6 +106,10 @@ def plot_frontiers(curves: Mapping[str, Iterable[Sequence[float]]], path: Path,
     for level in levels:
         ax.axhline(level, color="0.6", lw=0.8, ls=":")
     ax.set_xscale("log")
+    plain = FuncFormatter(lambda v, _: f"{v:g}")  # 3, 20, 300: not 3×10^0
+    ax.xaxis.set_major_formatter(plain)
+    ax.xaxis.set_minor_formatter(FuncFormatter(
+        lambda v, _: f"{v:g}" if f"{v:g}"[0] in "25" else ""))
     ax.set_xlabel(time_label)
     ax.set_ylabel(error_label)
     if title:

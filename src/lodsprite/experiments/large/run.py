@@ -56,9 +56,9 @@ Update = Callable[[str, int, int], None]
 
 @dataclass(frozen=True)
 class LargeConfig(SplitSampled):
-    """The default run took 18 min 56 s here (2026-12-02, with the one-pass patrol at
-    1 px; the three-pass patrol at ε 0.5 took 39 s alone; before the 20 sampled frames
-    and adaptive's warm-up, not timed since).  LOD-sprite's setup over a
+    """The default at 4096² alone took 13 min 57 s here (2026-12-03, every frontier run);
+    16k² adds far more than the rest of 20 minutes (its level-0 reference is drawn window
+    by window, about a minute a chen1999 frame).  LOD-sprite's setup over a
     16k² store reads no level-0 chunk (first frame 7-11 s, was 188-468 s).  Timed runs at
     1k² do not fit beside 4k² and 16k² (1k² and 2k² get the stand-in check alone): they are in
     :meth:`full`, the long sweep; :meth:`quick` is the tests'."""
