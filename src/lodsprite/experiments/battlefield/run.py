@@ -68,9 +68,9 @@ MATCH_KEY = "triangles_objects_chosen"
 class BattlefieldConfig(SplitSampled):
     """The default run: a 4k² store, 3000 walking ogres, 100 trees, two light fields of
     6 slabs of 8² nodes of 64² pixels, 300 frames along each of two paths at 256², a 5 fps
-    target (reuse: 15 fps); 899 s here before the reuse runs (the idle 2-core machine,
-    2026-12-03; 20 sampled frames a path), 1262 s with them on the machine shared with
-    other runs (docs/commands/reproduce.md).  :meth:`quick` is the tests'."""
+    target (reuse: 15 fps); 680 s here with the reuse runs (the idle 2-core machine,
+    2026-12-03; 20 sampled frames a path; docs/commands/reproduce.md).  :meth:`quick` is
+    the tests'."""
 
     terrain: str = "fractal:4096:1"
     instances: int = 3000
