@@ -322,5 +322,6 @@ def test_no_two_runs_of_a_path_share_a_folder():
     names = [run_folder("whole", 0.5, extra={"cache_mb": 0.0}),
              run_folder("whole", 0.5, extra={"cache_mb": 64.0}),
              run_folder("whole", 0.5, 2.0), run_folder("whole", 1.0),
-             run_folder("tiled+cache", 0.5), run_folder("worker", 0.5)]
+             run_folder("tiled+cache", 0.5), run_folder("worker", 0.5),
+             run_folder("whole", 0.5, extra={"keyframes": "worker"})]
     assert len(set(names)) == len(names) and names[0] == "whole_eps0.5"

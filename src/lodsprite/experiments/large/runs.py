@@ -44,7 +44,8 @@ def run_folder(variant: str, eps: float, key_sse: float | None = None,
     own = VARIANTS.get(variant, {})
     for k, v in sorted((extra or {}).items()):
         if own.get(k) != v:
-            name += f"_{k.replace('_', '')}{v:g}"
+            name += f"_{k.replace('_', '')}" + (f"{v:g}" if isinstance(v, int | float)
+                                                else str(v))
     return name
 
 
