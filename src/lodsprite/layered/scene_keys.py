@@ -24,10 +24,8 @@ import time
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-import numpy as np
-
 from lodsprite.errors import InputError
-from lodsprite.sprite.keyframe_process import lower_priority
+from lodsprite.sprite.keyframe_process import keyframe_answer, lower_priority
 from lodsprite.sprite.keyframe_worker import MAX_REQUEST, KeyframeWorker, WorkerSettings
 from lodsprite.workers import ProcessWorker, WorkerUnavailable
 
@@ -162,15 +160,11 @@ class _SceneKeysGL:
         self.sprite.render_keyframe(vp, t0, frame_projection)
         self.renderer.gl.finish()
         key = self.sprite.keyframe
-        color, depth = key.target.read_color(), key.target.read_depth()
         c_prime = self.metric.reproject(vp.o, key.projection.matrix() @ vp.view_matrix(),
                                         key.target.size)
-        fields = {"viewpoint": vp, "projection": key.projection,
-                  "frame_projection": frame_projection, "zbuffer": "full",
-                  "c_prime": c_prime, "requested_at": asked, "predicted": predicted,
-                  "render_ms": (time.perf_counter() - t0) * 1e3, "key_size": key.target.size}
-        return pickle.dumps(fields), b"".join((np.ascontiguousarray(depth, np.float32).data,
-                                               np.ascontiguousarray(color, np.uint8).data))
+        return keyframe_answer(self.sprite, "full", {
+            "viewpoint": vp, "frame_projection": frame_projection, "c_prime": c_prime,
+            "requested_at": asked, "predicted": predicted}, t0)
 
     def release(self) -> None:
         for part in (self.objects, self.terrain):
