@@ -105,14 +105,15 @@ def test_what_a_scene_cannot_do_is_one_line_and_exit_code_2(tmp_path, args, frag
     assert not out.exists()  # nothing half-written
 
 
-def test_render_with_worker_keyframes_plays_the_path_in_time(tmp_path):
-    """``--keyframes worker``: keyframes from the worker process while the path plays in
-    time, at the display rate asked; every frame judged at its display time, with the
-    played run's columns."""
+@pytest.mark.parametrize("tiles", [1, 2])
+def test_render_with_worker_keyframes_plays_the_path_in_time(tmp_path, tiles):
+    """``--keyframes worker``: keyframes (or tiles) from the worker process while the
+    path plays in time, at the display rate asked; every frame judged at its display
+    time, with the played run's columns."""
     out = tmp_path / "w"
     r = run_cli("render", "--terrain", "fractal:64:3", "--grid", "64", "--mode", "sprite",
-                "--keyframes", "worker", "--display-fps", "40", "--frames", "12",
-                "--size", SIZE, "--ground-truth", "--out", str(out))
+                "--keyframes", "worker", "--tiles", str(tiles), "--display-fps", "40",
+                "--frames", "12", "--size", SIZE, "--ground-truth", "--out", str(out))
     assert r.returncode == 0, r.stderr
     s = json.loads((out / "summary.json").read_text())
     got = rows(out)
@@ -126,6 +127,9 @@ def test_render_with_worker_keyframes_plays_the_path_in_time(tmp_path):
     # the keyframes the display showed, though none of its frames is one (was 0)
     assert s["keyframes"] == len(shown_keys) >= 1
     assert s["keyframes_rendered"] >= s["keyframes"]
+    if tiles > 1:  # the tiles adopted, a tile update's frames, what was left
+        assert s["tiles"] == tiles and s["tiles_rendered"] == sum(
+            int(x["tiles"]) for x in got) and "tiles_discarded" in s
 
 
 def test_render_play_plays_inline_keyframes_in_time_too(tmp_path):
@@ -145,7 +149,7 @@ def test_render_play_plays_inline_keyframes_in_time_too(tmp_path):
 
 
 @pytest.mark.parametrize("args, fragment", [
-    (["--keyframes", "worker", "--tiles", "2"], "whole keyframes"),
+    (["--keyframes", "worker", "--key-sse", "1", "--tiles", "2"], "no --tiles with --key-sse"),
     (["--keyframes", "worker", "--key-sse", "1", "--proxy-sse", "4"], "no --proxy-sse"),
     (["--keyframes", "worker", "--save-frames"], "keeps no images"),
     (["--display-fps", "30"], "--display-fps goes with --play or --keyframes worker"),

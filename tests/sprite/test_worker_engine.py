@@ -10,8 +10,9 @@ import threading
 
 import numpy as np
 import pytest
+import worker_fixtures
 
-from conftest import make_field, wait_until
+from conftest import wait_until
 from lodsprite.camera import look_at
 from lodsprite.errors import LodspriteError
 from lodsprite.gl.sprite import SpriteDrawer
@@ -22,26 +23,9 @@ from lodsprite.scene import Scene
 from lodsprite.sprite.engine import KEYFRAME, LodSpriteEngine
 from lodsprite.sprite.keyframe_worker import KeyframeWorker, WorkerSettings
 from lodsprite.sprite.worker_engine import WorkerLodSpriteEngine
-from lodsprite.terrain import make_texture
 
-SIZE = (96, 96)
-
-
-@pytest.fixture
-def scene() -> Scene:
-    hf = make_field(64, kind="ridges")
-    return Scene(hf, make_texture("terrain", hf), "ridges", "terrain")
-
-
-@pytest.fixture
-def sprite(gl, scene):
-    geo = TerrainGeometry(gl, scene.hf, scene.texture)
-    tr = TerrainDrawer(gl, geo, *SIZE)
-    sp = SpriteDrawer(tr, 8, guard_px=4)
-    yield sp
-    sp.release()
-    tr.release()
-    geo.release()
+SIZE = worker_fixtures.SIZE
+scene, sprite = worker_fixtures.scene, worker_fixtures.sprite  # the fixtures
 
 
 def orbit(n: int, start_deg: float = 0.0, span_deg: float = 40.0):

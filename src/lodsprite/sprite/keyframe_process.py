@@ -53,10 +53,25 @@ def keyframe_handler(shm_name: str, layout: dict, field: tuple, settings: Worker
                    settings)
 
     def answer(meta: bytes, data: bytes) -> tuple[bytes, bytes]:
-        vp, predicted, asked = pickle.loads(meta)
+        vp, predicted, asked, *tiles = pickle.loads(meta)
+        if settings.tiles > 1:
+            return gl.render_tiles(vp, predicted, asked, checked_tiles(tiles, gl.tiled.count))
         return gl.render(vp, predicted, asked)
 
     return answer
+
+
+def checked_tiles(rest: list, count: int) -> tuple[int, ...]:
+    """The tiles a request names (its one extra field): distinct whole numbers below
+    ``count``, at least one; raises ValueError otherwise (the request is answered with
+    the error, the process goes on)."""
+    if len(rest) != 1 or not isinstance(rest[0], tuple) or not rest[0]:
+        raise ValueError("a tile request names its tiles")
+    tiles = rest[0]
+    if len(set(tiles)) != len(tiles) or not all(
+            isinstance(t, int) and 0 <= t < count for t in tiles):
+        raise ValueError(f"tiles must be distinct whole numbers below {count}")
+    return tiles
 
 
 class _WorkerGL:
@@ -77,6 +92,8 @@ class _WorkerGL:
             self.terrain = made[-1]
             self.sprite = SpriteDrawer(self.terrain, s.lod, s.visibility, border=s.border,
                                          guard_px=s.guard_px)
+            made.append(self.sprite)
+            self.tiled = None if s.tiles <= 1 else tiled_drawer(self.sprite, s.tiles)
         except BaseException:  # released in the order made, backwards
             for obj in reversed(made):
                 obj.release()
@@ -95,6 +112,59 @@ class _WorkerGL:
         return keyframe_answer(self.sprite, self.zbuffer, {
             "viewpoint": vp, "frame_projection": frame_projection, "c_prime": c_prime,
             "requested_at": asked, "predicted": predicted}, t0)
+
+
+    def render_tiles(self, vp: Viewpoint, predicted: bool, asked: float,
+                     tiles: tuple[int, ...]) -> tuple[bytes, bytes]:
+        """The keyframe's ``tiles`` at ``vp``, rendered and answered
+        (:func:`tiles_answer`)."""
+        t0 = time.perf_counter()
+        frame_projection = self.terrain.projection(vp)
+        key = self.sprite.key_projection(frame_projection)
+        render_tiles_at(self.tiled, tiles, vp, key)
+        self.ctx.finish()
+        return tiles_answer(self.tiled, tiles, self.metric, vp, key, t0, {
+            "viewpoint": vp, "frame_projection": frame_projection, "requested_at": asked,
+            "predicted": predicted})
+
+
+def tiled_drawer(sprite, tiles: int):
+    """A :class:`~lodsprite.gl.sprite_tiles.TiledSpriteDrawer` of ``tiles x tiles`` tiles
+    over ``sprite``'s keyframe, as the drawing side's."""
+    from lodsprite.gl.sprite_tiles import TiledSpriteDrawer
+    from lodsprite.sprite.tiled import ndc_rects, tile_rects
+
+    rects = tile_rects(tiles, sprite.key_size)
+    return TiledSpriteDrawer(sprite, rects, ndc_rects(rects, sprite.key_size))
+
+
+def render_tiles_at(tiled, tiles: tuple[int, ...], vp: Viewpoint, key, drawer=None) -> None:
+    """Issue the draws of ``tiles`` of ``tiled`` from ``vp`` through the key projection
+    ``key``, each culled by its sub-frustum (``drawer``: the tiles' terrain drawer)."""
+    from lodsprite.sprite.tiled import sub_view_proj
+
+    view_proj = key.matrix() @ vp.view_matrix()
+    for i in tiles:
+        tiled.render_tile(i, vp, key, sub_view_proj(view_proj, tiled.ndc[i]), drawer)
+
+
+def tiles_answer(tiled, tiles: tuple[int, ...], metric, vp: Viewpoint, key, t0: float,
+                 fields: dict) -> tuple[bytes, bytes]:
+    """The answer for ``tiles`` just rendered into ``tiled``: meta ``fields`` with the
+    key ``projection``, the tiles, their byte sizes and ``C'`` (reprojected for their
+    sub-frustum, :func:`~lodsprite.sprite.tiled.reproject_in_key_view`); data per tile
+    its depth then colour bytes (:meth:`~lodsprite.gl.sprite_tiles.TiledSpriteDrawer.
+    read_tile`)."""
+    from lodsprite.sprite.tiled import reproject_in_key_view, tiles_frustum
+
+    key_vp = key.matrix() @ vp.view_matrix()
+    parts = [tiled.read_tile(i) for i in tiles]
+    c_prime = reproject_in_key_view(metric, vp.o, key_vp, tiled.target.size,
+                                    tiles_frustum(key_vp, tiled.ndc, tiles))
+    fields = {**fields, "projection": key, "tiles": tuple(tiles), "c_prime": c_prime,
+              "tile_bytes": [len(d) for d, _ in parts],
+              "render_ms": (time.perf_counter() - t0) * 1e3}
+    return pickle.dumps(fields), b"".join(b for pair in parts for b in pair)
 
 
 def keyframe_answer(sprite, zbuffer: str, fields: dict, t0: float) -> tuple[bytes, bytes]:

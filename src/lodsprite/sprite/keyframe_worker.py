@@ -110,7 +110,8 @@ class WorkerSettings:
     (pixels), predictor name, the nice increment of the worker process and whether the
     keyframes' ``C'`` are for the resampling metric (their matrix and size attached);
     ``store``: keyframes over a store by the adaptive renderer (None: in-memory terrain,
-    full resolution)."""
+    full resolution); ``tiles``: the keyframe split into ``tiles x tiles`` tiles, each
+    request naming those to render (1: whole keyframes)."""
 
     size: tuple[int, int]
     fov_y_deg: float
@@ -122,6 +123,7 @@ class WorkerSettings:
     nice: int = DEFAULT_WORKER_NICE
     resampling: bool = False
     store: StoreKeys | None = None
+    tiles: int = 1
 
     @property
     def key_size(self) -> tuple[int, int]:
@@ -130,9 +132,10 @@ class WorkerSettings:
 
     @property
     def answer_bytes(self) -> int:
-        """A keyframe's depth (float32) and colour (3 bytes a pixel) together."""
+        """A keyframe's depth (float32) and colour (3 bytes a pixel; RGBA8 tiles: 4)
+        together."""
         w, h = self.key_size
-        return w * h * (3 + 4)
+        return w * h * ((4 if self.tiles > 1 else 3) + 4)
 
 
 class KeyframeWorker:
@@ -183,17 +186,20 @@ class KeyframeWorker:
         """Whether a keyframe has been requested and not yet taken."""
         return self._wanted is not None
 
-    def request(self) -> None:
-        """Ask for a keyframe at the predicted viewpoint; no-op while one is on its way,
-        after a failure or :meth:`close`."""
+    def request(self, tiles: tuple[int, ...] | None = None) -> bool:
+        """Ask for a keyframe at the predicted viewpoint (``tiles``: only those tiles of
+        it, :attr:`WorkerSettings.tiles`); no-op while one is on its way, after a failure
+        or :meth:`close`.  Returns whether a request was sent."""
         if self._wanted is not None or self._closed or self.error is not None:
-            return
+            return False
         if not self._samples:
             raise LodspriteError("a keyframe request needs an observed viewpoint")
         now = time.perf_counter()
         vp, predicted = self._target(now)
         self._wanted = now
-        self._proc.submit(now, pickle.dumps((vp, predicted, now, *self.request_extra)))
+        extra = self.request_extra if tiles is None else (tuple(int(t) for t in tiles),)
+        self._proc.submit(now, pickle.dumps((vp, predicted, now, *extra)))
+        return True
 
     def poll(self) -> KeyframeImage | None:
         """The keyframe finished since the last call, or None (never blocks).  A failed
@@ -300,9 +306,37 @@ def share_arrays(arrays: dict[str, np.ndarray]
     return shm, layout
 
 
-def _image(meta: bytes, data: bytes) -> KeyframeImage:
-    """A process answer (:func:`keyframe_handler`) as the keyframe it carries."""
+@dataclass(frozen=True)
+class TileUpdate:
+    """Tiles of a keyframe rendered by the worker (:attr:`WorkerSettings.tiles`), ready to
+    upload (:meth:`~lodsprite.gl.sprite_tiles.TiledSpriteDrawer.upload_tile`): ``tiles``
+    their indices, and per tile its ``depth`` (float32) and ``color`` (RGBA8) bytes, GL
+    row order; the other fields as :class:`KeyframeImage`'s (``c_prime`` reprojected for
+    these tiles' sub-frustum only)."""
+
+    viewpoint: Viewpoint
+    projection: Projection
+    frame_projection: Projection
+    tiles: tuple[int, ...]
+    depth: tuple[bytes, ...]
+    color: tuple[bytes, ...]
+    c_prime: np.ndarray
+    requested_at: float
+    render_ms: float
+    predicted: bool
+
+
+def _image(meta: bytes, data: bytes) -> KeyframeImage | TileUpdate:
+    """A process answer (:func:`keyframe_handler`) as the keyframe (or tiles) it
+    carries."""
     fields = pickle.loads(meta)
+    if "tile_bytes" in fields:  # tiles: per tile its depth then colour bytes
+        sizes, parts, at = fields.pop("tile_bytes"), [], 0
+        for n in sizes:
+            parts.append((data[at:at + n], data[at + n:at + 2 * n]))
+            at += 2 * n
+        return TileUpdate(depth=tuple(p[0] for p in parts),
+                          color=tuple(p[1] for p in parts), **fields)
     w, h = fields.pop("key_size")
     points = fields.pop("points", None)  # a drawn surface's C (pickling drops it)
     if points is not None:

@@ -206,6 +206,17 @@ def render_error(metric: ErrorMetric, c_prime, key_view_proj: np.ndarray, rect: 
     return math.inf if err is None else err
 
 
+def tiles_frustum(key_view_proj: np.ndarray, ndc: np.ndarray, chosen) -> np.ndarray | None:
+    """``(4, 4)``: the sub-frustum of the tiles ``chosen`` (indices into ``ndc (T, 4)``,
+    their NDC bounding rectangle) in ``key_view_proj``, whose samples alone an update of
+    those tiles needs in its ``C'``; None when every tile is chosen."""
+    if len(chosen) == len(ndc):
+        return None
+    r = np.asarray(ndc)[np.asarray(chosen, np.intp)]
+    box = np.array([r[:, 0].min(), r[:, 1].min(), r[:, 2].max(), r[:, 3].max()])
+    return sub_view_proj(key_view_proj, box)
+
+
 def reproject_in_key_view(metric: ErrorMetric, key_eye: np.ndarray,
                           key_view_proj: np.ndarray,
                           key_size: tuple[int, int] | None = None,

@@ -46,6 +46,7 @@ from lodsprite.sprite.tiled import (
     sub_view_proj,
     tile_errors,
     tile_rects,
+    tiles_frustum,
 )
 
 DEFAULT_TILE_BUDGET_MS = 8.0
@@ -219,13 +220,9 @@ class TiledSpriteEngine:
         return why
 
     def _within(self, chosen: Sequence[int], key_vp: np.ndarray) -> np.ndarray | None:
-        """The sub-frustum of the tiles ``chosen`` (their NDC bounding rectangle), whose
-        samples alone the update's ``C'`` needs; None when every tile is chosen."""
-        if len(chosen) == self.tiled.count:
-            return None
-        r = self.tiled.ndc[np.asarray(chosen, np.intp)]
-        box = np.array([r[:, 0].min(), r[:, 1].min(), r[:, 2].max(), r[:, 3].max()])
-        return sub_view_proj(key_vp, box)
+        """The sub-frustum of the tiles ``chosen`` (:func:`~lodsprite.sprite.tiled.
+        tiles_frustum`)."""
+        return tiles_frustum(key_vp, self.tiled.ndc, chosen)
 
     def _use_cache(self, viewpoint: Viewpoint, errors: np.ndarray) -> bool:
         """Each tile at or over ``SWITCH_FRACTION`` ε shows its cached render with the

@@ -319,26 +319,70 @@ class TiledKeyframes:
         self.sprite.release()
 
 
+class WorkerTiledKeyframes(TiledKeyframes):
+    """Tiles rendered by a worker process with its own context
+    (:class:`~lodsprite.sprite.worker_tiles.WorkerTiledEngine`, :attr:`tiled`); every
+    frame is a tiled spriteframe and never waits for a tile after the first update."""
+
+    def __init__(self, sprite: LodSprite, renderer: Renderer, epsilon: float, tiles: int,
+                 metric: str) -> None:
+        from lodsprite.sprite.worker_tiles import WorkerTiledEngine
+
+        self.sprite = sprite
+        self.renderer = renderer
+        self.cache_mb = 0.0
+        self.tiled = WorkerTiledEngine(sprite.sprite, renderer.scene, renderer.fov_y_deg,
+                                       epsilon, tiles, metric=metric)
+        self._shown = np.full(self.tiled.tiled.count, -1)
+        self._last = None
+
+    def warm_up(self, viewpoint: Viewpoint) -> None:
+        """One frame drawn: the first update (every tile) is waited for there."""
+        self.frame(viewpoint)
+
+    def cache_summary(self, frames: list[Frame]) -> dict[str, Any]:
+        """``keyframes`` counts the updates the frames showed, ``keyframes_rendered`` all
+        the worker delivered; ``tiles_discarded`` the tiles delivered and not adopted."""
+        shown = len({f.keyframe for f in frames})
+        w = self.tiled.worker
+        return {**slot_summary(frames), "keyframes": shown, "keyframes_rendered": w.rendered,
+                "tiles_discarded": self.tiled.discarded}
+
+    def status(self) -> str:
+        w = self.tiled.worker
+        state = f"failed: {w.error}" if w.error is not None else (
+            "rendering" if w.busy else "idle")
+        return (f"keyframes: {self.tiled.tiles}x{self.tiled.tiles} tiles from a worker "
+                f"process, {state}; {w.rendered} updates, {self.tiled.discarded} tiles "
+                f"discarded, lead {w.lead_s * 1e3:.0f} ms")
+
+
 def sprite_engine(renderer: Renderer, epsilon: float, lod: int, threaded: bool,
                   visibility: str, guard_px: int, border: bool, tiles: int,
                   tile_budget_ms: float, cache_mb: float, cache_policy: str,
                   metric: str, store=None) -> SpriteEngine:
-    """The engine the options ask for, chosen once: :class:`TiledKeyframes` for
-    ``tiles > 1`` (inline only), else :class:`WorkerKeyframes` or
-    :class:`WholeKeyframes` (``store``: the worker's keyframes over a terrain store,
+    """The engine the options ask for, chosen once: for ``tiles > 1``
+    :class:`TiledKeyframes` (inline) or :class:`WorkerTiledKeyframes` (``threaded``,
+    in-memory terrain), else :class:`WorkerKeyframes` or :class:`WholeKeyframes`
+    (``store``: the worker's keyframes over a terrain store,
     :class:`~lodsprite.sprite.keyframe_worker.StoreKeys`).  Raises
     :class:`~lodsprite.errors.InputError` for a bad ``tiles``."""
-    if not (isinstance(tiles, int) and tiles >= 1) or (tiles > 1 and threaded):
-        raise InputError(f"--tiles must be a whole number >= 1 (inline keyframes only "
-                         f"when > 1), got {tiles}")
+    if not (isinstance(tiles, int) and tiles >= 1):
+        raise InputError(f"--tiles must be a whole number >= 1, got {tiles}")
+    if tiles > 1 and threaded and (store is not None or cache_mb > 0):
+        raise InputError("tiles from the keyframe worker: in-memory terrain, without "
+                         "--cache-mb")
     sprite = renderer.sprite(
-        epsilon, lod, threaded=threaded, visibility=visibility, guard_px=guard_px,
+        epsilon, lod, threaded=threaded and tiles == 1, visibility=visibility,
+        guard_px=guard_px,
         border=border, cache_mb=0.0 if tiles > 1 else cache_mb, cache_policy=cache_policy,
         metric=metric, store=store)  # with tiles, the tiled engine keeps the cache (of tiles)
     if tiles == 1:
         return (WorkerKeyframes(sprite) if threaded
                 else WholeKeyframes(sprite, renderer, cache_mb))
     try:
+        if threaded:
+            return WorkerTiledKeyframes(sprite, renderer, epsilon, tiles, metric)
         return TiledKeyframes(sprite, renderer, epsilon, tiles, tile_budget_ms, metric,
                               cache_mb, cache_policy)
     except BaseException:

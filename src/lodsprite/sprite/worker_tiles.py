@@ -1,0 +1,163 @@
+"""Tiled keyframes from a worker process: Qu, Wan, Qin & Kaufman (2000)'s part of the
+image re-rendered, with Swan et al. (2002)'s split, the parts rendered beside the
+drawing loop (:class:`~lodsprite.sprite.keyframe_worker.KeyframeWorker` with
+:attr:`~lodsprite.sprite.keyframe_worker.WorkerSettings.tiles`).
+
+Per frame, in the drawing loop (never waiting after the first update):
+
+1. the error of every tile at the current viewpoint (Chen et al. 1999 Eq. 1-2 per tile,
+   :func:`~lodsprite.sprite.tiled.tile_errors`);
+2. the tiles the worker finished, if any, each adopted when its error at the current
+   viewpoint (the update's tiles all put in, :func:`adopted`) is below the error of the
+   render it replaces; the others are discarded;
+3. a request, when none is on its way, for every tile at or over ``request_fraction``
+   ε, placed ahead by the measured request-to-delivery latency as whole keyframes are
+   (:mod:`lodsprite.sprite.worker_engine`): the fewer tiles stale, the smaller and
+   sooner the update;
+4. the tiled spriteframe, and ``finish()``.
+
+The worker renders a tile update as the inline tiled engine renders one (each tile
+scissored, culled by its sub-frustum, the update's ``C'`` reprojected for those tiles'
+sub-frustum) and answers each tile's depth and colour; the drawing side writes them into
+its mosaic and draws the tile's coarse z-buffer (:meth:`~lodsprite.gl.sprite_tiles.
+TiledSpriteDrawer.upload_tile`).  Every adopted update is logged as the inline engine
+logs its own (:attr:`~lodsprite.sprite.tiled_engine.TiledSpriteEngine.updates`,
+``mosaic``), so the untimed replay renders each tile again from the viewpoint it was
+rendered from.  The first update (every tile) is waited for.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from lodsprite.camera import Viewpoint
+from lodsprite.errors import LodspriteError
+from lodsprite.gl.sprite import SpriteDrawer
+from lodsprite.record import Frame
+from lodsprite.sprite.engine import sprite_frame
+from lodsprite.sprite.keyframe_worker import KeyframeWorker, TileUpdate, WorkerSettings
+from lodsprite.sprite.policy import KEYFRAME, SPRITE, KeyChoice, resampling_metric
+from lodsprite.sprite.tiled import TILES, combined_error, tile_errors
+from lodsprite.sprite.tiled_engine import TiledSpriteEngine
+from lodsprite.sprite.worker_engine import DEFAULT_REQUEST_FRACTION, LEAD_SMOOTHING
+
+
+def adopted(current: np.ndarray, candidate: np.ndarray, tiles) -> np.ndarray:
+    """The tiles of an update to adopt: those of ``tiles`` whose ``candidate (T,)`` error
+    (px, the update put in) is below their ``current (T,)`` one (a tile never rendered,
+    ``inf``, always); ``(k,) intp``."""
+    tiles = np.asarray(tiles, np.intp)
+    return tiles[(candidate[tiles] < current[tiles]) | ~np.isfinite(current[tiles])]
+
+
+class WorkerTiledEngine(TiledSpriteEngine):
+    """LOD-sprite with ``tiles x tiles`` tiles rendered by a keyframe worker (module
+    docstring).  ``scene``, ``fov_y_deg``, ``predictor`` and ``make_worker`` as
+    :class:`~lodsprite.sprite.worker_engine.WorkerLodSpriteEngine`'s; :attr:`last_tiles`
+    lists the tiles adopted in the last frame, :attr:`discarded` counts tiles delivered
+    and not adopted."""
+
+    def __init__(self, sprite: SpriteDrawer, scene, fov_y_deg: float, epsilon_px: float,
+                 tiles: int, request_fraction: float = DEFAULT_REQUEST_FRACTION,
+                 predictor: str = "linear", metric: str = "warp", make_worker=None) -> None:
+        super().__init__(sprite, epsilon_px, tiles, 0.0, metric)
+        self.request_fraction = float(request_fraction)
+        self.discarded = 0
+        self._leads = 0
+        try:
+            self.worker = (make_worker or KeyframeWorker)(scene, WorkerSettings(
+                sprite.target.size, fov_y_deg, sprite.coarse_quads, sprite.visibility,
+                sprite.border, sprite.guard_px, predictor,
+                resampling=resampling_metric(metric), tiles=tiles))
+        except BaseException:
+            self.tiled.release()
+            raise
+
+    def _candidate_errors(self, update: TileUpdate, viewpoint: Viewpoint) -> np.ndarray:
+        """The tiles' errors at ``viewpoint`` with ``update``'s tiles put in."""
+        s = self.sprite
+        projection = s.terrain.projection(viewpoint)
+        view_proj = projection.matrix() @ viewpoint.view_matrix()
+        c_primes, key_vps = list(self.c_primes), self.tiled.view_projs.copy()
+        key_vp = update.projection.matrix() @ update.viewpoint.view_matrix()
+        for i in update.tiles:
+            c_primes[i], key_vps[i] = update.c_prime, key_vp
+        key = s.key_projection(projection)
+        errors, _ = tile_errors(self.metric, c_primes, key_vps, self.tiled.ndc, viewpoint.o,
+                                view_proj, key.matrix() @ viewpoint.view_matrix(),
+                                projection.pixel_angle_rad(s.target.height), s.target.size)
+        return errors
+
+    def _adopt(self, update: TileUpdate, take: np.ndarray) -> None:
+        """Write the tiles ``take`` of ``update`` into the mosaic and log the update."""
+        self.updates.append(KeyChoice(update.viewpoint, update.frame_projection,
+                                      update.predicted))
+        self.frozen_for.append(len(self.updates) - 1)
+        self.proxy_selections.append(None)
+        at = {t: k for k, t in enumerate(update.tiles)}
+        for i in take:
+            k = at[int(i)]
+            self.tiled.upload_tile(int(i), update.viewpoint, update.projection,
+                                   update.depth[k], update.color[k])
+            self.c_primes[i] = update.c_prime
+        self.mosaic[take] = self.newest[take] = len(self.updates) - 1
+
+    def _measure_lead(self, update: TileUpdate, now: float) -> None:
+        """The lead: the running mean of request-to-delivery latencies (as
+        :meth:`~lodsprite.sprite.worker_engine.WorkerLodSpriteEngine._measure_lead`)."""
+        latency = max(now - update.requested_at, 0.0)
+        w = LEAD_SMOOTHING if self._leads else 1.0
+        self._leads += 1
+        self.worker.lead_s = (1 - w) * self.worker.lead_s + w * latency
+
+    def _take(self, viewpoint: Viewpoint, errors: np.ndarray, t0: float) -> np.ndarray:
+        """The tiles adopted from a finished update (none if none arrived)."""
+        update = self.worker.poll()
+        if update is None:
+            return np.empty(0, np.intp)
+        if not isinstance(update, TileUpdate):
+            raise LodspriteError("the keyframe worker answered a whole keyframe to a tile "
+                                 "request")
+        self._measure_lead(update, t0)
+        take = adopted(errors, self._candidate_errors(update, viewpoint), update.tiles)
+        self.discarded += len(update.tiles) - len(take)
+        if len(take):
+            self._adopt(update, take)
+        return take
+
+    def frame(self, viewpoint: Viewpoint) -> Frame:
+        """Draw the frame for ``viewpoint``; returns once the GL work has finished."""
+        t0 = time.perf_counter()
+        if self.worker.error is not None:
+            raise LodspriteError(f"the keyframe worker stopped: {self.worker.error}")
+        self.worker.observe(t0, viewpoint)
+        kind = SPRITE
+        if not self.updates:  # start-up: every tile, waited for
+            self.worker.request(tuple(range(self.tiled.count)))
+            update = self.worker.wait()
+            self._adopt(update, np.asarray(update.tiles, np.intp))
+            take, kind = np.asarray(update.tiles, np.intp), KEYFRAME
+            errors, served = self.errors(viewpoint)
+        else:
+            errors, served = self.errors(viewpoint)
+            take = self._take(viewpoint, errors, t0)
+            if len(take):
+                kind = TILES
+                errors, served = self.errors(viewpoint)
+        stale = np.flatnonzero(~(errors < self.request_fraction * self.epsilon_px))
+        if len(stale):
+            self.worker.request(tuple(int(i) for i in stale))
+        self.last_tiles = tuple(int(i) for i in take)
+        self._shows_keyframe = False
+        tris = self.tiled.render_spriteframe(viewpoint).triangles
+        self.sprite.terrain.ctx.finish()
+        shown = combined_error(errors, served)
+        return sprite_frame(kind, (time.perf_counter() - t0) * 1e3, tris, shown,
+                            len(self.updates) - 1, shown)
+
+    def release(self) -> None:
+        """End the worker process, then release the tiled drawer."""
+        self.worker.close()
+        super().release()
