@@ -149,7 +149,6 @@ def test_render_play_plays_inline_keyframes_in_time_too(tmp_path):
 
 
 @pytest.mark.parametrize("args, fragment", [
-    (["--keyframes", "worker", "--key-sse", "1", "--tiles", "2"], "no --tiles with --key-sse"),
     (["--keyframes", "worker", "--key-sse", "1", "--proxy-sse", "4"], "no --proxy-sse"),
     (["--keyframes", "worker", "--save-frames"], "keeps no images"),
     (["--display-fps", "30"], "--display-fps goes with --play or --keyframes worker"),

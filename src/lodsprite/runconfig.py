@@ -130,11 +130,9 @@ class RenderConfig(TechniqueOptions):
             mine = [o for o in spec.options if o.name == name]
             (mine[0] if mine else known[name]).check(value)
         worker = self.options.get("keyframes") == "worker"
-        tiles = self.options.get("tiles", 1) > 1
-        if worker and (self.mode != "sprite" or self.options.get("proxy_sse") is not None
-                       or (tiles and self.options.get("key_sse") is not None)):
-            raise InputError("--keyframes worker goes with --mode sprite, whole keyframes "
-                             "over a store (no --tiles with --key-sse) and no --proxy-sse")
+        if worker and (self.mode != "sprite" or self.options.get("proxy_sse") is not None):
+            raise InputError("--keyframes worker goes with --mode sprite and no "
+                             "--proxy-sse")
         if "key_sse" in self.options and self.mode != "sprite":
             raise InputError("--key-sse goes with --mode sprite")
         if self.options.get("tiles", 1) > 1 and self.mode != "sprite":

@@ -123,9 +123,11 @@ class _WorkerGL:
         key = self.sprite.key_projection(frame_projection)
         render_tiles_at(self.tiled, tiles, vp, key)
         self.ctx.finish()
-        return tiles_answer(self.tiled, tiles, self.metric, vp, key, t0, {
+        key_vp = key.matrix() @ vp.view_matrix()
+        return tiles_answer(self.tiled, tiles, t0, {
             "viewpoint": vp, "frame_projection": frame_projection, "requested_at": asked,
-            "predicted": predicted})
+            "predicted": predicted, "projection": key,
+            "c_prime": tile_c_prime(self.metric, self.tiled, tiles, vp, key_vp)})
 
 
 def tiled_drawer(sprite, tiles: int):
@@ -148,21 +150,24 @@ def render_tiles_at(tiled, tiles: tuple[int, ...], vp: Viewpoint, key, drawer=No
         tiled.render_tile(i, vp, key, sub_view_proj(view_proj, tiled.ndc[i]), drawer)
 
 
-def tiles_answer(tiled, tiles: tuple[int, ...], metric, vp: Viewpoint, key, t0: float,
-                 fields: dict) -> tuple[bytes, bytes]:
-    """The answer for ``tiles`` just rendered into ``tiled``: meta ``fields`` with the
-    key ``projection``, the tiles, their byte sizes and ``C'`` (reprojected for their
-    sub-frustum, :func:`~lodsprite.sprite.tiled.reproject_in_key_view`); data per tile
-    its depth then colour bytes (:meth:`~lodsprite.gl.sprite_tiles.TiledSpriteDrawer.
-    read_tile`)."""
+def tile_c_prime(metric, tiled, tiles: tuple[int, ...], vp: Viewpoint, key_vp: np.ndarray):
+    """``C'`` of an update of ``tiles`` of ``tiled`` from ``vp`` (key view-projection
+    ``key_vp``), reprojected for their sub-frustum
+    (:func:`~lodsprite.sprite.tiled.reproject_in_key_view`)."""
     from lodsprite.sprite.tiled import reproject_in_key_view, tiles_frustum
 
-    key_vp = key.matrix() @ vp.view_matrix()
+    return reproject_in_key_view(metric, vp.o, key_vp, tiled.target.size,
+                                 tiles_frustum(key_vp, tiled.ndc, tiles))
+
+
+def tiles_answer(tiled, tiles: tuple[int, ...], t0: float, fields: dict
+                 ) -> tuple[bytes, bytes]:
+    """The answer for ``tiles`` just rendered into ``tiled``: meta ``fields`` (the key
+    ``projection`` and ``c_prime`` among them) with the tiles, their byte sizes and
+    ``render_ms`` (since ``t0``); data per tile its depth then colour bytes
+    (:meth:`~lodsprite.gl.sprite_tiles.TiledSpriteDrawer.read_tile`)."""
     parts = [tiled.read_tile(i) for i in tiles]
-    c_prime = reproject_in_key_view(metric, vp.o, key_vp, tiled.target.size,
-                                    tiles_frustum(key_vp, tiled.ndc, tiles))
-    fields = {**fields, "projection": key, "tiles": tuple(tiles), "c_prime": c_prime,
-              "tile_bytes": [len(d) for d, _ in parts],
+    fields = {**fields, "tiles": tuple(tiles), "tile_bytes": [len(d) for d, _ in parts],
               "render_ms": (time.perf_counter() - t0) * 1e3}
     return pickle.dumps(fields), b"".join(b for pair in parts for b in pair)
 

@@ -312,7 +312,9 @@ class TileUpdate:
     upload (:meth:`~lodsprite.gl.sprite_tiles.TiledSpriteDrawer.upload_tile`): ``tiles``
     their indices, and per tile its ``depth`` (float32) and ``color`` (RGBA8) bytes, GL
     row order; the other fields as :class:`KeyframeImage`'s (``c_prime`` reprojected for
-    these tiles' sub-frustum only)."""
+    these tiles' sub-frustum only).  Over a store, per tile what it lacks
+    (``deficits``, pixels) and the adaptive selection it was drawn with
+    (``selections``)."""
 
     viewpoint: Viewpoint
     projection: Projection
@@ -324,12 +326,17 @@ class TileUpdate:
     requested_at: float
     render_ms: float
     predicted: bool
+    deficits: tuple[float, ...] | None = None
+    selections: tuple[tuple, ...] | None = None
 
 
 def _image(meta: bytes, data: bytes) -> KeyframeImage | TileUpdate:
     """A process answer (:func:`keyframe_handler`) as the keyframe (or tiles) it
     carries."""
     fields = pickle.loads(meta)
+    points = fields.pop("points", None)  # a drawn surface's C (pickling drops it)
+    if points is not None:
+        fields["c_prime"].set_points(points)
     if "tile_bytes" in fields:  # tiles: per tile its depth then colour bytes
         sizes, parts, at = fields.pop("tile_bytes"), [], 0
         for n in sizes:
@@ -338,9 +345,6 @@ def _image(meta: bytes, data: bytes) -> KeyframeImage | TileUpdate:
         return TileUpdate(depth=tuple(p[0] for p in parts),
                           color=tuple(p[1] for p in parts), **fields)
     w, h = fields.pop("key_size")
-    points = fields.pop("points", None)  # a drawn surface's C (pickling drops it)
-    if points is not None:
-        fields["c_prime"].set_points(points)
     fields["c_prime"].deficit_px = fields.get("deficit_px", 0.0)  # in its error
     depth = np.frombuffer(data, np.float32, w * h).reshape(h, w)
     color = np.frombuffer(data, np.uint8, w * h * 3, offset=w * h * 4).reshape(h, w, 3)

@@ -24,6 +24,12 @@ TiledSpriteDrawer.upload_tile`).  Every adopted update is logged as the inline e
 logs its own (:attr:`~lodsprite.sprite.tiled_engine.TiledSpriteEngine.updates`,
 ``mosaic``), so the untimed replay renders each tile again from the viewpoint it was
 rendered from.  The first update (every tile) is waited for.
+
+Over a terrain store (``store``: the worker's own adaptive renderer draws each tile,
+:mod:`lodsprite.techniques.adaptive_worker`) each tile comes with what it lacks (the
+tiles its tolerance needs that had not arrived, pixels), added to its error at every
+frame so that it is asked for again while they stream, and with the selection it was
+drawn with (:attr:`WorkerTiledEngine.selections`), which the replay draws again.
 """
 
 from __future__ import annotations
@@ -37,7 +43,12 @@ from lodsprite.errors import LodspriteError
 from lodsprite.gl.sprite import SpriteDrawer
 from lodsprite.record import Frame
 from lodsprite.sprite.engine import sprite_frame
-from lodsprite.sprite.keyframe_worker import KeyframeWorker, TileUpdate, WorkerSettings
+from lodsprite.sprite.keyframe_worker import (
+    KeyframeWorker,
+    StoreKeys,
+    TileUpdate,
+    WorkerSettings,
+)
 from lodsprite.sprite.policy import KEYFRAME, SPRITE, KeyChoice, resampling_metric
 from lodsprite.sprite.tiled import TILES, combined_error, tile_errors
 from lodsprite.sprite.tiled_engine import TiledSpriteEngine
@@ -61,34 +72,51 @@ class WorkerTiledEngine(TiledSpriteEngine):
 
     def __init__(self, sprite: SpriteDrawer, scene, fov_y_deg: float, epsilon_px: float,
                  tiles: int, request_fraction: float = DEFAULT_REQUEST_FRACTION,
-                 predictor: str = "linear", metric: str = "warp", make_worker=None) -> None:
+                 predictor: str = "linear", metric: str = "warp", store: StoreKeys | None = None,
+                 make_worker=None) -> None:
         super().__init__(sprite, epsilon_px, tiles, 0.0, metric)
         self.request_fraction = float(request_fraction)
         self.discarded = 0
         self._leads = 0
+        # what each tile's render lacks (pixels, over a store), added to its error
+        self.deficits = np.zeros(self.tiled.count)
+        self.selections: dict[tuple[int, int], tuple] = {}  # (update, tile) -> selection
         try:
             self.worker = (make_worker or KeyframeWorker)(scene, WorkerSettings(
                 sprite.target.size, fov_y_deg, sprite.coarse_quads, sprite.visibility,
                 sprite.border, sprite.guard_px, predictor,
-                resampling=resampling_metric(metric), tiles=tiles))
+                resampling=resampling_metric(metric), store=store, tiles=tiles))
         except BaseException:
             self.tiled.release()
             raise
 
-    def _candidate_errors(self, update: TileUpdate, viewpoint: Viewpoint) -> np.ndarray:
-        """The tiles' errors at ``viewpoint`` with ``update``'s tiles put in."""
+    def _errors(self, viewpoint: Viewpoint, c_primes: list, key_vps: np.ndarray,
+                deficits: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(errors (T,) px, served (T,))`` at ``viewpoint`` of tiles showing renders
+        with these ``C'``, key view-projections and deficits (px, added)."""
         s = self.sprite
         projection = s.terrain.projection(viewpoint)
-        view_proj = projection.matrix() @ viewpoint.view_matrix()
-        c_primes, key_vps = list(self.c_primes), self.tiled.view_projs.copy()
-        key_vp = update.projection.matrix() @ update.viewpoint.view_matrix()
-        for i in update.tiles:
-            c_primes[i], key_vps[i] = update.c_prime, key_vp
         key = s.key_projection(projection)
-        errors, _ = tile_errors(self.metric, c_primes, key_vps, self.tiled.ndc, viewpoint.o,
-                                view_proj, key.matrix() @ viewpoint.view_matrix(),
-                                projection.pixel_angle_rad(s.target.height), s.target.size)
-        return errors
+        errors, served = tile_errors(
+            self.metric, c_primes, key_vps, self.tiled.ndc, viewpoint.o,
+            projection.matrix() @ viewpoint.view_matrix(),
+            key.matrix() @ viewpoint.view_matrix(),
+            projection.pixel_angle_rad(s.target.height), s.target.size)
+        return errors + deficits, served
+
+    def errors(self, viewpoint: Viewpoint) -> tuple[np.ndarray, np.ndarray]:
+        """The tiles' errors at ``viewpoint``, what each render lacks included."""
+        return self._errors(viewpoint, self.c_primes, self.tiled.view_projs, self.deficits)
+
+    def _candidate_errors(self, update: TileUpdate, viewpoint: Viewpoint) -> np.ndarray:
+        """The tiles' errors at ``viewpoint`` with ``update``'s tiles put in."""
+        c_primes, key_vps = list(self.c_primes), self.tiled.view_projs.copy()
+        deficits = self.deficits.copy()
+        key_vp = update.projection.matrix() @ update.viewpoint.view_matrix()
+        for k, i in enumerate(update.tiles):
+            c_primes[i], key_vps[i] = update.c_prime, key_vp
+            deficits[i] = update.deficits[k] if update.deficits else 0.0
+        return self._errors(viewpoint, c_primes, key_vps, deficits)[0]
 
     def _adopt(self, update: TileUpdate, take: np.ndarray) -> None:
         """Write the tiles ``take`` of ``update`` into the mosaic and log the update."""
@@ -96,13 +124,17 @@ class WorkerTiledEngine(TiledSpriteEngine):
                                       update.predicted))
         self.frozen_for.append(len(self.updates) - 1)
         self.proxy_selections.append(None)
+        u = len(self.updates) - 1
         at = {t: k for k, t in enumerate(update.tiles)}
         for i in take:
             k = at[int(i)]
             self.tiled.upload_tile(int(i), update.viewpoint, update.projection,
                                    update.depth[k], update.color[k])
             self.c_primes[i] = update.c_prime
-        self.mosaic[take] = self.newest[take] = len(self.updates) - 1
+            self.deficits[i] = update.deficits[k] if update.deficits else 0.0
+            if update.selections:
+                self.selections[(u, int(i))] = update.selections[k]
+        self.mosaic[take] = self.newest[take] = u
 
     def _measure_lead(self, update: TileUpdate, now: float) -> None:
         """The lead: the running mean of request-to-delivery latencies (as

@@ -222,7 +222,9 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
     adaptive renderer and tile streaming (:mod:`lodsprite.techniques.adaptive_worker`);
     the drawing side's adaptive renderer only draws each keyframe's recorded selection
     again in the untimed replay (the summary's tile counts are then that renderer's, the
-    replay's reads).  Not with tiles or ``proxy_sse``."""
+    replay's reads).  With ``tiles > 1`` the worker draws the tiles asked for, each with
+    its selection and what it lacks (:mod:`lodsprite.sprite.worker_tiles`).  Not with
+    ``proxy_sse``."""
 
     name = "sprite-adaptive"
 
@@ -238,9 +240,9 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
         from lodsprite.terrain.storefield import store_field
 
         worker = keyframes == "worker"
-        if worker and (tiles > 1 or proxy_sse is not None):
-            raise InputError("adaptive keyframes from the worker are whole keyframes under "
-                             "the uniform coarse level: no tiles > 1, no proxy_sse")
+        if worker and proxy_sse is not None:
+            raise InputError("adaptive keyframes from the worker are drawn under the "
+                             "uniform coarse level: no proxy_sse")
         heights = resolve_shading(renderer.scene, shading) == "heights"
         store = StoreKeys(WORKER_FACTORY, renderer.scene.terrain_spec, key_sse, gpu_mb,
                           host_mb, heights) if worker else None
@@ -300,7 +302,7 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
         spriteframe drawn, untimed): the timed run starts with the first view resident,
         as the adaptive technique's does."""
         s = self.sprite.sprite
-        if not isinstance(self.keys, WorkerAdaptiveKeys):  # the worker fills its own
+        if not isinstance(self.keys, WorkerAdaptiveKeys):  # a worker fills its own
             self.adaptive.fill(viewpoint,
                                s.key_projection(s.terrain.projection(viewpoint)).matrix())
         super().warm_up(viewpoint)

@@ -16,7 +16,10 @@ once when the technique is made (:func:`adaptive_keys`):
 * :class:`WorkerAdaptiveKeys` — whole keyframes from the worker process
   (:class:`~lodsprite.techniques.sprite_engines.WorkerKeyframes`), drawn by its own
   adaptive renderer (:mod:`lodsprite.techniques.adaptive_worker`); each keyframe comes
-  with its selection, which the replay draws again here.
+  with its selection, which the replay draws again here;
+* :class:`WorkerTiledAdaptiveKeys` — tiles from the worker process
+  (:class:`~lodsprite.techniques.sprite_engines.WorkerTiledKeyframes`), each with its
+  selection, drawn again in the replay.
 
 The first two stream the adaptive renderer's tiles between keyframes and, before each
 draw, collect the store's level-0 chunks arrived for the error metric (``pump``), neither
@@ -32,7 +35,12 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from lodsprite.techniques.sprite_engines import SpriteEngine, TiledKeyframes, WorkerKeyframes
+from lodsprite.techniques.sprite_engines import (
+    SpriteEngine,
+    TiledKeyframes,
+    WorkerKeyframes,
+    WorkerTiledKeyframes,
+)
 
 if TYPE_CHECKING:
     from lodsprite.camera import Viewpoint
@@ -258,16 +266,38 @@ class WorkerAdaptiveKeys:
             s.keyframe_drawer = None
 
 
-AdaptiveKeys = WholeAdaptiveKeys | TiledAdaptiveKeys | WorkerAdaptiveKeys
+class WorkerTiledAdaptiveKeys(WorkerAdaptiveKeys):
+    """Tiles drawn by the worker process's adaptive renderer; the untimed replay draws
+    each tile from the selection the worker drew it with
+    (:attr:`~lodsprite.sprite.worker_tiles.WorkerTiledEngine.selections`)."""
+
+    @property
+    def deficit_px(self) -> float:
+        """What the tiles shown lack at most (pixels), as the worker measured it."""
+        return float(self.engine.tiled.deficits.max())
+
+    def tile_drawer(self, update: int, tile: int) -> Callable:
+        return redraw(self.adaptive, *self.engine.tiled.selections[(update, tile)])
+
+    def replay(self, viewpoint: Viewpoint, decision: dict[str, Any]) -> np.ndarray:
+        """The frame's mosaic brought back, each tile drawn from the worker's selection."""
+        return self.engine.replay(viewpoint, decision, self.tile_drawer)
+
+
+AdaptiveKeys = (WholeAdaptiveKeys | TiledAdaptiveKeys | WorkerAdaptiveKeys
+                | WorkerTiledAdaptiveKeys)
 
 
 def adaptive_keys(engine: SpriteEngine, adaptive: AdaptiveTerrain,
                   pump: Callable[[], None]) -> AdaptiveKeys:
     """The adaptive keyframes for LOD-sprite's ``engine``, chosen once:
-    :class:`TiledAdaptiveKeys` for tile updates, :class:`WorkerAdaptiveKeys` for the
-    worker's keyframes, else :class:`WholeAdaptiveKeys`."""
+    :class:`TiledAdaptiveKeys` for tile updates, :class:`WorkerAdaptiveKeys` and
+    :class:`WorkerTiledAdaptiveKeys` for the worker's keyframes and tiles, else
+    :class:`WholeAdaptiveKeys`."""
     if isinstance(engine, WorkerKeyframes):
         return WorkerAdaptiveKeys(engine, adaptive)
+    if isinstance(engine, WorkerTiledKeyframes):
+        return WorkerTiledAdaptiveKeys(engine, adaptive)
     if isinstance(engine, TiledKeyframes):
         return TiledAdaptiveKeys(engine, adaptive, pump)
     return WholeAdaptiveKeys(engine, adaptive, pump)

@@ -23,6 +23,12 @@ with:
   replay draws again (:class:`~lodsprite.techniques.adaptive_keys.WorkerAdaptiveKeys`);
 * ``points`` — the keyframe's own ``C`` (pickling a ``C'`` drops them).
 
+With tiles (:attr:`~lodsprite.sprite.keyframe_worker.WorkerSettings.tiles`) a request
+names the tiles to draw: each is drawn adaptively, culled by its sub-frustum (the
+update's stream request is its tiles' selections gathered, as the inline
+``TiledAdaptiveKeys`` does), and answered with its own selection and what it lacks
+(:mod:`lodsprite.sprite.worker_tiles`).
+
 It imports no technique and no :mod:`lodsprite.api` (the process is named by the
 technique, so importing it back would be a cycle): it builds the GL objects itself.
 """
@@ -36,7 +42,16 @@ from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from lodsprite.sprite.keyframe_process import copy_shared, keyframe_answer, lower_priority
+from lodsprite.sprite.keyframe_process import (
+    checked_tiles,
+    copy_shared,
+    keyframe_answer,
+    lower_priority,
+    render_tiles_at,
+    tile_c_prime,
+    tiled_drawer,
+    tiles_answer,
+)
 from lodsprite.sprite.metric import ErrorMetric
 
 if TYPE_CHECKING:
@@ -60,7 +75,10 @@ def store_keyframe_handler(shm_name: str, layout: dict, field: tuple,
                           arrays.get("texture"), settings)
 
     def answer(meta: bytes, data: bytes) -> tuple[bytes, bytes]:
-        vp, predicted, asked = pickle.loads(meta)
+        vp, predicted, asked, *tiles = pickle.loads(meta)
+        if keys.tiled is not None:
+            return keys.render_tiles(vp, predicted, asked,
+                                     checked_tiles(tiles, keys.tiled.count))
         return keys.render(vp, predicted, asked)
 
     return answer
@@ -125,6 +143,53 @@ class StoreKeyframes:
         self.zbuffer = "coarse" if s.visibility == "coarse" else "full"
         self.key_size = s.key_size
         self.filled = False
+        self.tiled = None if s.tiles <= 1 else tiled_drawer(self.sprite, s.tiles)
+        self._drawn: list[tuple] = []  # the update's tiles: (selection, deficit) each
+
+    def _ready(self, vp: Viewpoint, key_projection) -> None:
+        """Before a keyframe or tile update: the first one's view resident (waited for,
+        as the inline technique's warm-up), the level-0 chunks and tiles arrived taken
+        (neither waits)."""
+        if not self.filled:
+            self.adaptive.fill(vp, key_projection.matrix())
+            self.filled = True
+        if self.heights is not None:
+            self.heights.pump()
+        self.adaptive.prefetch()
+
+    def _draw_tile(self, vp: Viewpoint, projection, target, cull):
+        """A tile by the adaptive renderer, culled by its sub-frustum (an update's
+        stream request is its tiles' selections gathered); its selection and what it
+        lacks kept."""
+        stats = self.adaptive.render_into(vp, projection, target, cull)
+        self._drawn.append(((tuple(self.adaptive.last_draw), self.adaptive.last_morphed),
+                            self.adaptive.deficit_px()))
+        return stats
+
+    def render_tiles(self, vp: Viewpoint, predicted: bool, asked: float,
+                     tiles: tuple[int, ...]) -> tuple[bytes, bytes]:
+        """The keyframe's ``tiles`` at ``vp`` drawn adaptively, as an answer
+        (:func:`~lodsprite.sprite.keyframe_process.tiles_answer`, with per tile its
+        selection and what it lacks)."""
+        t0 = time.perf_counter()
+        frame_projection = self.terrain.projection(vp)
+        key = self.sprite.key_projection(frame_projection)
+        self._ready(vp, key)
+        key_vp = key.matrix() @ vp.view_matrix()
+        c_prime = tile_c_prime(self.metric, self.tiled, tiles, vp, key_vp)  # C' first
+        self._drawn.clear()
+        self.adaptive.gathering = ([], set())
+        try:
+            render_tiles_at(self.tiled, tiles, vp, key, self._draw_tile)
+        finally:
+            self.adaptive.gathering = None
+        self.ctx.finish()
+        return tiles_answer(self.tiled, tiles, t0, {
+            "viewpoint": vp, "frame_projection": frame_projection, "requested_at": asked,
+            "predicted": predicted, "projection": key, "c_prime": c_prime,
+            "points": getattr(c_prime, "points", None),
+            "selections": tuple(d[0] for d in self._drawn),
+            "deficits": tuple(d[1] for d in self._drawn)})
 
     def render(self, vp: Viewpoint, predicted: bool, asked: float) -> tuple[bytes, bytes]:
         """The keyframe at ``vp`` drawn adaptively, as an answer (module docstring)."""
@@ -132,12 +197,7 @@ class StoreKeyframes:
         s, adaptive = self.sprite, self.adaptive
         frame_projection = self.terrain.projection(vp)
         key_projection = s.key_projection(frame_projection)
-        if not self.filled:  # the first keyframe, waited for: its view resident
-            adaptive.fill(vp, key_projection.matrix())
-            self.filled = True
-        if self.heights is not None:
-            self.heights.pump()
-        adaptive.prefetch()
+        self._ready(vp, key_projection)
         c_prime = self.metric.reproject(vp.o, key_projection.matrix() @ vp.view_matrix(),
                                         self.key_size)
         s.render_keyframe(vp, t0, frame_projection)

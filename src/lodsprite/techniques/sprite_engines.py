@@ -325,14 +325,14 @@ class WorkerTiledKeyframes(TiledKeyframes):
     frame is a tiled spriteframe and never waits for a tile after the first update."""
 
     def __init__(self, sprite: LodSprite, renderer: Renderer, epsilon: float, tiles: int,
-                 metric: str) -> None:
+                 metric: str, store=None) -> None:
         from lodsprite.sprite.worker_tiles import WorkerTiledEngine
 
         self.sprite = sprite
         self.renderer = renderer
         self.cache_mb = 0.0
         self.tiled = WorkerTiledEngine(sprite.sprite, renderer.scene, renderer.fov_y_deg,
-                                       epsilon, tiles, metric=metric)
+                                       epsilon, tiles, metric=metric, store=store)
         self._shown = np.full(self.tiled.tiled.count, -1)
         self._last = None
 
@@ -362,27 +362,26 @@ def sprite_engine(renderer: Renderer, epsilon: float, lod: int, threaded: bool,
                   tile_budget_ms: float, cache_mb: float, cache_policy: str,
                   metric: str, store=None) -> SpriteEngine:
     """The engine the options ask for, chosen once: for ``tiles > 1``
-    :class:`TiledKeyframes` (inline) or :class:`WorkerTiledKeyframes` (``threaded``,
-    in-memory terrain), else :class:`WorkerKeyframes` or :class:`WholeKeyframes`
+    :class:`TiledKeyframes` (inline) or :class:`WorkerTiledKeyframes` (``threaded``),
+    else :class:`WorkerKeyframes` or :class:`WholeKeyframes`
     (``store``: the worker's keyframes over a terrain store,
     :class:`~lodsprite.sprite.keyframe_worker.StoreKeys`).  Raises
     :class:`~lodsprite.errors.InputError` for a bad ``tiles``."""
     if not (isinstance(tiles, int) and tiles >= 1):
         raise InputError(f"--tiles must be a whole number >= 1, got {tiles}")
-    if tiles > 1 and threaded and (store is not None or cache_mb > 0):
-        raise InputError("tiles from the keyframe worker: in-memory terrain, without "
-                         "--cache-mb")
+    if tiles > 1 and threaded and cache_mb > 0:
+        raise InputError("tiles from the keyframe worker keep no cache (--cache-mb)")
     sprite = renderer.sprite(
         epsilon, lod, threaded=threaded and tiles == 1, visibility=visibility,
         guard_px=guard_px,
         border=border, cache_mb=0.0 if tiles > 1 else cache_mb, cache_policy=cache_policy,
-        metric=metric, store=store)  # with tiles, the tiled engine keeps the cache (of tiles)
+        metric=metric, store=store if tiles == 1 else None)  # tiles: the tiled engine's
     if tiles == 1:
         return (WorkerKeyframes(sprite) if threaded
                 else WholeKeyframes(sprite, renderer, cache_mb))
     try:
         if threaded:
-            return WorkerTiledKeyframes(sprite, renderer, epsilon, tiles, metric)
+            return WorkerTiledKeyframes(sprite, renderer, epsilon, tiles, metric, store)
         return TiledKeyframes(sprite, renderer, epsilon, tiles, tile_budget_ms, metric,
                               cache_mb, cache_policy)
     except BaseException:

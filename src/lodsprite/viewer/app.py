@@ -75,8 +75,7 @@ class ViewOptions(TechniqueOptions):
         # the worker by default in memory; over a store when asked (--keyframes worker)
         default = "worker" if self.threaded and not store else "inline"
         chosen = self.options.get("keyframes", default)
-        worker = chosen == "worker" and (self.tiles == 1 or not store)  # stores: whole
-        return {**self.options, "keyframes": "worker" if worker else "inline",
+        return {**self.options, "keyframes": chosen,
                 "target_fps": self.target_fps,
                 "schedule": "none" if self.target_fps is None else "scheduler"}  # scene
 
