@@ -72,7 +72,8 @@ class LargeConfig(SplitSampled):
     ref_sse: float = 0.25
     sample_every: int = 6     # 20 sampled frames: 10 to choose a row on, 10 to report
     eps: tuple[float, ...] = (1.0, 0.5)  # every LOD-sprite variant at each ε
-    variants: tuple[str, ...] = ("whole", "tiled", "worker")  # tiled+cache: --full
+    # tiled+cache and worker+tiled: --full
+    variants: tuple[str, ...] = ("whole", "tiled", "worker")
     adaptive_sse: tuple[float, ...] = (0.5, 1.0, 2.0, 4.0)  # adaptive's frontier
     #: more whole-keyframe runs for LOD-sprite's frontier: (keyframe tolerance px, ε)
     key_sweep: tuple[tuple[float, float], ...] = ((2.0, 2.0), (4.0, 4.0))

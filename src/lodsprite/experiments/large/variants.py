@@ -35,6 +35,7 @@ VARIANTS: dict[str, dict[str, Any]] = {
     "tiled+cache": {"tiles": 4, "cache_mb": 64.0, "proxy_sse": PROXY_SSE, "metric": METRIC},
     # the worker's spriteframes on the coarse level (the view-dependent proxy is inline's)
     "worker": {"tiles": 1, "cache_mb": 0.0, "metric": METRIC, "keyframes": "worker"},
+    "worker+tiled": {"tiles": 4, "cache_mb": 0.0, "metric": METRIC, "keyframes": "worker"},
 }
 #: Variants whose keyframes come from the worker process: run with the path played in
 #: time (:mod:`lodsprite.playback`) at the path's own rate, judged at display time.
