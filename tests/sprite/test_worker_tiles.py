@@ -12,6 +12,7 @@ import worker_fixtures
 
 from conftest import wait_until
 from lodsprite.camera import look_at
+from lodsprite.errors import InputError
 from lodsprite.metrics import rmse
 from lodsprite.sprite.keyframe_process import checked_tiles
 from lodsprite.sprite.keyframe_worker import WorkerSettings
@@ -41,9 +42,38 @@ def test_a_tile_request_is_checked_in_the_process():
     for bad in ([], [()], [(1, 1)], [(16,)], [(-1,)], [(1.0,)], [[1]], [(1,), (2,)]):
         with pytest.raises(ValueError):
             checked_tiles(bad, 16)
-    # the answer slot holds every tile's depth and RGBA colour
+    # the answer slot holds every tile's depth, RGBA colour and coarse depth
     s = WorkerSettings(SIZE, 45.0, 8, "coarse", True, 4, tiles=4)
-    assert s.answer_bytes == (SIZE[0] + 8) * (SIZE[1] + 8) * 8
+    assert s.answer_bytes == (SIZE[0] + 8) * (SIZE[1] + 8) * 12  # depth, RGBA, coarse
+
+
+def test_a_tile_read_and_uploaded_is_the_tile_rendered(gl, sprite):
+    """What the worker answers (:meth:`read_tile`) written back over other renders gives
+    the mosaic, its depth and its coarse z-buffer of the first render, bit for bit, and
+    the coarse z-buffer drawn here when the answer has none."""
+    a, b = orbit(2, span_deg=50)
+    engine = TiledSpriteEngine(sprite, 0.5, 4)
+    t = engine.tiled
+    try:
+        key = KeyChoice(a, sprite.terrain.projection(a), False)
+        engine.render_tiles(range(16), key, measure=False)
+        parts = [t.read_tile(i) for i in range(16)]
+        want = (t.target.read_color(), t.target.read_depth(), t.coarse.read_depth())
+        kp = sprite.key_projection(key.projection)
+        for coarse in (True, False):
+            engine.render_tiles(range(16), KeyChoice(b, sprite.terrain.projection(b), False),
+                                measure=False)
+            assert t.target.read_depth().tobytes() != want[1].tobytes()  # overwritten
+            for i, (depth, color, zc) in enumerate(parts):
+                t.upload_tile(i, a, kp, depth, color, zc if coarse else b"")
+            got = (t.target.read_color(), t.target.read_depth(), t.coarse.read_depth())
+            for g, w in zip(got, want, strict=True):
+                np.testing.assert_array_equal(g, w)
+            np.testing.assert_allclose(t.view_projs[5], kp.matrix() @ a.view_matrix())
+        with pytest.raises(InputError, match="tile 0 is"):
+            t.upload_tile(0, a, kp, parts[0][0][:-4], parts[0][1])
+    finally:
+        engine.release()
 
 
 def test_worker_tiles_draw_what_inline_tiles_draw_and_only_stale_tiles_are_asked(

@@ -230,29 +230,36 @@ class TiledSpriteDrawer:
         self.viewpoints[tile], self.projections[tile] = viewpoint, projection
         self.view_projs[tile] = projection.matrix() @ viewpoint.view_matrix()
 
-    def read_tile(self, tile: int) -> tuple[bytes, bytes]:
-        """Tile ``tile``'s rectangle of the mosaic as ``(depth, colour)`` bytes: float32
-        window depth then RGBA8, GL row order (bottom row first), what
-        :meth:`upload_tile` writes back (a keyframe worker's answer)."""
+    def read_tile(self, tile: int) -> tuple[bytes, bytes, bytes]:
+        """Tile ``tile``'s rectangle of the mosaic as ``(depth, colour, coarse)`` bytes:
+        float32 window depth, RGBA8, and the coarse z-buffer's float32 depth (``coarse``
+        rule; else empty), GL row order (bottom row first), what :meth:`upload_tile`
+        writes back (a keyframe worker's answer)."""
         box = scissor_rect(self.rects[tile])
         fbo = self.target.fbo
+        coarse = (self.coarse.fbo.read(viewport=box, components=1, attachment=-1, dtype="f4")
+                  if self.sprite.visibility == "coarse" else b"")
         return (fbo.read(viewport=box, components=1, attachment=-1, dtype="f4"),
-                fbo.read(viewport=box, components=4))
+                fbo.read(viewport=box, components=4), coarse)
 
     def upload_tile(self, tile: int, viewpoint: Viewpoint, projection: Projection,
-                    depth: bytes, color: bytes) -> None:
+                    depth: bytes, color: bytes, coarse: bytes = b"") -> None:
         """Make a tile rendered elsewhere (a keyframe worker, :meth:`read_tile` there)
         tile ``tile``'s render: its full-resolution ``depth`` (float32) and ``color``
         (RGBA8) bytes of the tile's rectangle, GL row order, from ``viewpoint`` through
-        the key ``projection``; its coarse z-buffer (``coarse`` rule) is drawn here.
-        Raises :class:`~lodsprite.errors.InputError` for bytes of the wrong size."""
+        the key ``projection``; its coarse z-buffer (``coarse`` rule) from ``coarse``
+        (float32), drawn here when empty.  Raises :class:`~lodsprite.errors.InputError`
+        for bytes of the wrong size."""
         box = scissor_rect(self.rects[tile])
-        if len(depth) != 4 * box[2] * box[3] or len(color) != 4 * box[2] * box[3]:
-            raise InputError(f"tile {tile} is {box[2]}x{box[3]}: got {len(depth)} depth "
-                             f"and {len(color)} colour bytes")
+        n = 4 * box[2] * box[3]
+        if len(depth) != n or len(color) != n or len(coarse) not in (0, n):
+            raise InputError(f"tile {tile} is {box[2]}x{box[3]}: got {len(depth)} depth, "
+                             f"{len(color)} colour and {len(coarse)} coarse bytes")
         self.target.color.write(color, viewport=box, alignment=1)
         self.target.depth.write(depth, viewport=box, alignment=1)
-        if self.sprite.visibility == "coarse":
+        if self.sprite.visibility == "coarse" and coarse:
+            self.coarse.depth.write(coarse, viewport=box, alignment=1)
+        elif self.sprite.visibility == "coarse":
             try:
                 self.coarse.fbo.scissor = box
                 self.sprite.render_coarse_depth(viewpoint, projection, self.coarse,

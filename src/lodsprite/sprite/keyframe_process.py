@@ -163,13 +163,15 @@ def tile_c_prime(metric, tiled, tiles: tuple[int, ...], vp: Viewpoint, key_vp: n
 def tiles_answer(tiled, tiles: tuple[int, ...], t0: float, fields: dict
                  ) -> tuple[bytes, bytes]:
     """The answer for ``tiles`` just rendered into ``tiled``: meta ``fields`` (the key
-    ``projection`` and ``c_prime`` among them) with the tiles, their byte sizes and
-    ``render_ms`` (since ``t0``); data per tile its depth then colour bytes
+    ``projection`` and ``c_prime`` among them) with the tiles, their byte sizes
+    (``(depth and colour, coarse)`` each) and ``render_ms`` (since ``t0``); data per tile
+    its depth, colour and coarse depth bytes
     (:meth:`~lodsprite.gl.sprite_tiles.TiledSpriteDrawer.read_tile`)."""
     parts = [tiled.read_tile(i) for i in tiles]
-    fields = {**fields, "tiles": tuple(tiles), "tile_bytes": [len(d) for d, _ in parts],
+    fields = {**fields, "tiles": tuple(tiles),
+              "tile_bytes": [(len(d), len(c)) for d, _, c in parts],
               "render_ms": (time.perf_counter() - t0) * 1e3}
-    return pickle.dumps(fields), b"".join(b for pair in parts for b in pair)
+    return pickle.dumps(fields), b"".join(b for part in parts for b in part)
 
 
 def keyframe_answer(sprite, zbuffer: str, fields: dict, t0: float) -> tuple[bytes, bytes]:

@@ -132,10 +132,10 @@ class WorkerSettings:
 
     @property
     def answer_bytes(self) -> int:
-        """A keyframe's depth (float32) and colour (3 bytes a pixel; RGBA8 tiles: 4)
-        together."""
+        """A keyframe's depth (float32) and colour (3 bytes a pixel) together; tiles: their
+        depth, RGBA8 colour and coarse depth (float32)."""
         w, h = self.key_size
-        return w * h * ((4 if self.tiles > 1 else 3) + 4)
+        return w * h * (12 if self.tiles > 1 else 7)
 
 
 class KeyframeWorker:
@@ -310,9 +310,10 @@ def share_arrays(arrays: dict[str, np.ndarray]
 class TileUpdate:
     """Tiles of a keyframe rendered by the worker (:attr:`WorkerSettings.tiles`), ready to
     upload (:meth:`~lodsprite.gl.sprite_tiles.TiledSpriteDrawer.upload_tile`): ``tiles``
-    their indices, and per tile its ``depth`` (float32) and ``color`` (RGBA8) bytes, GL
-    row order; the other fields as :class:`KeyframeImage`'s (``c_prime`` reprojected for
-    these tiles' sub-frustum only).  Over a store, per tile what it lacks
+    their indices, and per tile its ``depth`` (float32), ``color`` (RGBA8) and ``coarse``
+    z-buffer (float32; empty unless the ``coarse`` rule) bytes, GL row order; the other
+    fields as :class:`KeyframeImage`'s (``c_prime`` reprojected for these tiles'
+    sub-frustum only).  Over a store, per tile what it lacks
     (``deficits``, pixels) and the adaptive selection it was drawn with
     (``selections``)."""
 
@@ -322,6 +323,7 @@ class TileUpdate:
     tiles: tuple[int, ...]
     depth: tuple[bytes, ...]
     color: tuple[bytes, ...]
+    coarse: tuple[bytes, ...]
     c_prime: np.ndarray
     requested_at: float
     render_ms: float
@@ -337,13 +339,14 @@ def _image(meta: bytes, data: bytes) -> KeyframeImage | TileUpdate:
     points = fields.pop("points", None)  # a drawn surface's C (pickling drops it)
     if points is not None:
         fields["c_prime"].set_points(points)
-    if "tile_bytes" in fields:  # tiles: per tile its depth then colour bytes
+    if "tile_bytes" in fields:  # tiles: per tile its depth, colour and coarse bytes
         sizes, parts, at = fields.pop("tile_bytes"), [], 0
-        for n in sizes:
-            parts.append((data[at:at + n], data[at + n:at + 2 * n]))
-            at += 2 * n
-        return TileUpdate(depth=tuple(p[0] for p in parts),
-                          color=tuple(p[1] for p in parts), **fields)
+        for n, c in sizes:
+            parts.append((data[at:at + n], data[at + n:at + 2 * n],
+                          data[at + 2 * n:at + 2 * n + c]))
+            at += 2 * n + c
+        return TileUpdate(depth=tuple(p[0] for p in parts), color=tuple(p[1] for p in parts),
+                          coarse=tuple(p[2] for p in parts), **fields)
     w, h = fields.pop("key_size")
     fields["c_prime"].deficit_px = fields.get("deficit_px", 0.0)  # in its error
     depth = np.frombuffer(data, np.float32, w * h).reshape(h, w)

@@ -108,15 +108,17 @@ class WorkerTiledEngine(TiledSpriteEngine):
         """The tiles' errors at ``viewpoint``, what each render lacks included."""
         return self._errors(viewpoint, self.c_primes, self.tiled.view_projs, self.deficits)
 
-    def _candidate_errors(self, update: TileUpdate, viewpoint: Viewpoint) -> np.ndarray:
-        """The tiles' errors at ``viewpoint`` with ``update``'s tiles put in."""
+    def _candidate_errors(self, update: TileUpdate, viewpoint: Viewpoint
+                          ) -> tuple[np.ndarray, np.ndarray]:
+        """The tiles' ``(errors, served)`` at ``viewpoint`` with ``update``'s tiles put
+        in."""
         c_primes, key_vps = list(self.c_primes), self.tiled.view_projs.copy()
         deficits = self.deficits.copy()
         key_vp = update.projection.matrix() @ update.viewpoint.view_matrix()
         for k, i in enumerate(update.tiles):
             c_primes[i], key_vps[i] = update.c_prime, key_vp
             deficits[i] = update.deficits[k] if update.deficits else 0.0
-        return self._errors(viewpoint, c_primes, key_vps, deficits)[0]
+        return self._errors(viewpoint, c_primes, key_vps, deficits)
 
     def _adopt(self, update: TileUpdate, take: np.ndarray) -> None:
         """Write the tiles ``take`` of ``update`` into the mosaic and log the update."""
@@ -129,7 +131,7 @@ class WorkerTiledEngine(TiledSpriteEngine):
         for i in take:
             k = at[int(i)]
             self.tiled.upload_tile(int(i), update.viewpoint, update.projection,
-                                   update.depth[k], update.color[k])
+                                   update.depth[k], update.color[k], update.coarse[k])
             self.c_primes[i] = update.c_prime
             self.deficits[i] = update.deficits[k] if update.deficits else 0.0
             if update.selections:
@@ -144,8 +146,9 @@ class WorkerTiledEngine(TiledSpriteEngine):
         self._leads += 1
         self.worker.lead_s = (1 - w) * self.worker.lead_s + w * latency
 
-    def _take(self, viewpoint: Viewpoint, errors: np.ndarray, t0: float) -> np.ndarray:
-        """The tiles adopted from a finished update (none if none arrived)."""
+    def _take(self, viewpoint: Viewpoint, both: list, t0: float) -> np.ndarray:
+        """The tiles adopted from a finished update (none if none arrived); ``both``,
+        the tiles' ``[errors, served]`` at ``viewpoint``, updated in place."""
         update = self.worker.poll()
         if update is None:
             return np.empty(0, np.intp)
@@ -153,10 +156,12 @@ class WorkerTiledEngine(TiledSpriteEngine):
             raise LodspriteError("the keyframe worker answered a whole keyframe to a tile "
                                  "request")
         self._measure_lead(update, t0)
-        take = adopted(errors, self._candidate_errors(update, viewpoint), update.tiles)
+        candidate = self._candidate_errors(update, viewpoint)
+        take = adopted(both[0], candidate[0], update.tiles)
         self.discarded += len(update.tiles) - len(take)
         if len(take):
             self._adopt(update, take)
+            both[:] = candidate if len(take) == len(update.tiles) else self.errors(viewpoint)
         return take
 
     def frame(self, viewpoint: Viewpoint) -> Frame:
@@ -173,11 +178,10 @@ class WorkerTiledEngine(TiledSpriteEngine):
             take, kind = np.asarray(update.tiles, np.intp), KEYFRAME
             errors, served = self.errors(viewpoint)
         else:
-            errors, served = self.errors(viewpoint)
-            take = self._take(viewpoint, errors, t0)
-            if len(take):
-                kind = TILES
-                errors, served = self.errors(viewpoint)
+            both = list(self.errors(viewpoint))
+            take = self._take(viewpoint, both, t0)
+            errors, served = both
+            kind = TILES if len(take) else SPRITE
         stale = np.flatnonzero(~(errors < self.request_fraction * self.epsilon_px))
         if len(stale):
             self.worker.request(tuple(int(i) for i in stale))
