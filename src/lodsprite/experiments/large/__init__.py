@@ -11,10 +11,10 @@ from lodsprite.experiments.base import Experiment, Options, StageProgress, Summa
 
 
 def configure(o: Options):
-    """A :class:`~lodsprite.experiments.large.run.LargeConfig`: the default run (14
-    minutes here at 4096², much longer with 16k²'s references), the long sweep with
-    ``--full``, the short one with ``--quick``; plus ``--terrain`` when it is not the
-    default, plus 65536² with ``--huge``."""
+    """A :class:`~lodsprite.experiments.large.run.LargeConfig`: the default run (4096²,
+    14 minutes here), the long sweep with ``--full`` (16k² too), the short one with
+    ``--quick``; plus ``--terrain`` when it is not the default, plus 65536² with
+    ``--huge``."""
     from lodsprite.errors import InputError
     from lodsprite.experiments.large.run import LargeConfig
 
