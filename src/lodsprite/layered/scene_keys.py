@@ -38,6 +38,8 @@ from lodsprite.sprite.keyframe_worker import (
 from lodsprite.workers import ProcessWorker, WorkerUnavailable
 
 if TYPE_CHECKING:
+    from multiprocessing.shared_memory import SharedMemory
+
     from lodsprite.camera import Projection, Viewpoint
     from lodsprite.scene import Scene
 
@@ -89,7 +91,7 @@ def scene_starter(keys: SceneKeys):
     return start
 
 
-def share_scene(scene: Scene):
+def share_scene(scene: Scene) -> tuple[SharedMemory, dict[str, tuple], tuple]:
     """The display's ``scene`` for the worker process: its terrain's heights
     (``(rows, cols) float32`` metres) and texture (``(H, W, 3) uint8``) copied into a new
     shared-memory segment (:func:`~lodsprite.sprite.keyframe_worker.share_arrays`; the
