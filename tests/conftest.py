@@ -22,37 +22,53 @@ import pytest  # noqa: E402
 
 from lodsprite.terrain.heightfield import HeightField  # noqa: E402
 
-#: The files that take longest (``--durations``, 2026-12-03), collected first so that the
-#: two xdist workers (``--dist loadfile``) start on them and end together, the short files
-#: filling in last; only the order changes, and within a file none.
+#: The files that take longest (their tests' setup, call and teardown summed from
+#: ``--durations=0`` of the whole suite under ``-n 2 --dist loadfile``, 2026-12-03: every
+#: file of 4 s or more, longest first), collected first so that the two xdist workers
+#: (``--dist loadfile``) start on them and end together, the short files filling in
+#: last; only the order changes, and within a file none.
 HEAVY_FIRST = (
-    "tests/distributed/test_end_to_end.py",
     "tests/distributed/test_reproduce_swan2002.py",
+    "tests/distributed/test_end_to_end.py",
     "tests/distributed/test_long_renders.py",
     "tests/terrain/test_storefield_nonblocking.py",
+    "tests/sprite/test_worker_engine.py",
+    "tests/test_reproduce_large.py",
     "tests/viewer/test_window.py",
     "tests/distributed/test_client.py",
-    "tests/test_reproduce_large.py",
-    "tests/test_reproduce_battlefield.py",
+    "tests/techniques/test_worker_store.py",
+    "tests/distributed/pool/test_pool.py",
+    "tests/test_readme.py",
+    "tests/test_cli.py",
     "tests/test_honest_reference.py",
     "tests/scene/test_scene_reuse.py",
-    "tests/techniques/test_worker_store.py",
-    "tests/test_readme.py",
-    "tests/distributed/pool/test_pool.py",
-    "tests/test_cli.py",
-    "tests/sprite/test_worker_engine.py",
     "tests/distributed/test_fuzz.py",
-    "tests/terrain/test_pyramid_store.py",
-    "tests/distributed/pool/test_worker_stop.py",
+    "tests/test_reproduce_battlefield.py",
     "tests/terrain/test_adaptive.py",
-    "tests/techniques/test_keyframe_deficit.py",
-    "tests/distributed/web/test_browser.py",
-    "tests/gl/test_terrain_render.py",
-    "tests/distributed/test_server.py",
-    "tests/test_warm_up.py",
+    "tests/terrain/test_pyramid_store.py",
     "tests/distributed/web/test_web_shutdown.py",
     "tests/test_harness.py",
+    "tests/profiles/test_generate.py",
+    "tests/gl/test_terrain_render.py",
+    "tests/distributed/web/test_browser.py",
+    "tests/distributed/pool/test_worker_stop.py",
+    "tests/manager/test_crowd_cli.py",
+    "tests/test_warm_up.py",
     "tests/distributed/web/test_web_server.py",
+    "tests/lumigraph/test_sloan1997.py",
+    "tests/gl/test_sprite_tiles.py",
+    "tests/gl/test_reference.py",
+    "tests/distributed/test_server.py",
+    "tests/sprite/test_metric.py",
+    "tests/test_driver.py",
+    "tests/techniques/test_keyframe_deficit.py",
+    "tests/profiles/test_reproduce_scoggins.py",
+    "tests/distributed/test_quality.py",
+    "tests/manager/test_crowd_render.py",
+    "tests/lumigraph/test_lumigraph_cli.py",
+    "tests/gl/test_sprite_engines.py",
+    "tests/test_layering.py",
+    "tests/scene/test_layered.py",
 )
 _ROOT = Path(__file__).resolve().parents[1]
 

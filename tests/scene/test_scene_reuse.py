@@ -141,3 +141,30 @@ def test_worker_keyframes_are_lod_sprites_and_need_a_scene_file(gl, tmp_path):
         with pytest.raises(InputError, match="scene file"):
             techniques.create("scene", r, world=replace(world, source=None),
                               terrain_mode="sprite", keyframes="worker")
+
+
+def test_the_worker_is_handed_the_displays_scene_through_shared_memory(tmp_path):
+    """The worker process is not made to read the scene file again: what it receives
+    (:func:`share_scene`, then :func:`received_scene` as the process does) is the
+    display's scene: the same heights, texture and objects, standing on the same ground,
+    with no link left to the display's arrays."""
+    from lodsprite.layered.scene_keys import received_scene, share_scene
+
+    world = load_scene_file(scene(tmp_path, static=True, hills_m=20.0))
+    shm, layout, rest = share_scene(world)
+    try:
+        got = received_scene(shm.name, layout, rest)
+    finally:
+        shm.close()
+        shm.unlink()
+    assert np.array_equal(got.hf.heights, world.hf.heights)
+    assert got.hf.heights.dtype == world.hf.heights.dtype
+    assert (got.hf.dx, got.hf.dy, got.hf.name) == (world.hf.dx, world.hf.dy, world.hf.name)
+    assert np.array_equal(got.texture, world.texture) and got.texture.dtype == np.uint8
+    assert not np.shares_memory(got.hf.heights, world.hf.heights)
+    assert got.objects.ground_field is got.hf
+    assert world.objects.ground_field is world.hf  # the display's scene is left whole
+    assert np.array_equal(got.objects.moving(), world.objects.moving())
+    for t in (0.0, 7.5):  # the walker where the display has it, the cube on the ground
+        assert np.array_equal(got.objects.poses(t), world.objects.poses(t))
+    assert got.source == world.source and got.lightfields == world.lightfields

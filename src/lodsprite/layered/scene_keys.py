@@ -4,8 +4,9 @@ keyframes by a process with its own GL context, from predicted viewpoints.
 
 The process is a :class:`~lodsprite.sprite.keyframe_worker.KeyframeWorker` (the same
 client end, protocol, predictor and shared-memory answers as the terrain's worker) whose
-handler is :func:`scene_key_handler`: it reads the scene file itself (a scene's world is
-made from its file, seeded: the same instances as the display's), makes a
+handler is :func:`scene_key_handler`: it is handed the display's scene (its terrain's
+heights and texture through a shared-memory segment, as the terrain's worker is, the rest
+pickled: the same instances as the display's, not read from the file again), makes a
 :class:`~lodsprite.api.Renderer` of the display's size and field of view and, for each
 request ``(viewpoint, predicted, requested_at, tolerance, exponent)``, renders into a
 keyframe slot (the guard-band widened projection, as inline keyframes): the terrain,
@@ -21,15 +22,24 @@ from __future__ import annotations
 
 import pickle
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
+import numpy as np
+
 from lodsprite.errors import InputError
-from lodsprite.sprite.keyframe_process import keyframe_answer, lower_priority
-from lodsprite.sprite.keyframe_worker import MAX_REQUEST, KeyframeWorker, WorkerSettings
+from lodsprite.sprite.keyframe_process import copy_shared, keyframe_answer, lower_priority
+from lodsprite.sprite.keyframe_worker import (
+    MAX_REQUEST,
+    KeyframeWorker,
+    WorkerSettings,
+    share_arrays,
+)
 from lodsprite.workers import ProcessWorker, WorkerUnavailable
 
 if TYPE_CHECKING:
+    from multiprocessing.shared_memory import SharedMemory
+
     from lodsprite.camera import Projection, Viewpoint
     from lodsprite.scene import Scene
 
@@ -39,7 +49,8 @@ KEY_TERRAIN = ("full", "adaptive")
 
 @dataclass(frozen=True)
 class SceneKeys:
-    """What the scene's worker draws: ``scene_file`` (read there), ``terrain`` (``full``:
+    """What the scene's worker draws: ``scene_file`` (the display's scene's file),
+    ``terrain`` (``full``:
     the in-memory terrain at full resolution; ``adaptive``: the adaptive renderer, over a
     store), ``terrain_options`` (the adaptive technique's own) and the objects' ``active``
     count (None: every static object's LOD updated each keyframe)."""
@@ -58,17 +69,62 @@ def scene_starter(keys: SceneKeys):
                          f"not {keys.terrain!r}")
 
     def start(scene: Scene, settings: WorkerSettings, ready_s: float) -> ProcessWorker:
-        proc = ProcessWorker(FACTORY, {"keys": keys, "settings": settings}, in_flight=1,
-                             restarts=0, name="scene-keyframes", max_request=MAX_REQUEST,
-                             slot_bytes=settings.answer_bytes, ready_s=ready_s)
-        if proc.wait_ready(ready_s):
-            return proc
-        proc.poll()  # why it did not start (or the deadline)
-        why = proc.gone or WorkerUnavailable(f"not ready in {ready_s:g} s")
-        proc.close()
-        raise WorkerUnavailable(f"the scene's keyframe worker could not start: {why}") from why
+        shm, layout, rest = share_scene(scene)
+        try:
+            proc = ProcessWorker(FACTORY, {"keys": keys, "settings": settings,
+                                           "shm_name": shm.name, "layout": layout,
+                                           "rest": rest},
+                                 in_flight=1, restarts=0, name="scene-keyframes",
+                                 max_request=MAX_REQUEST, slot_bytes=settings.answer_bytes,
+                                 ready_s=ready_s)
+            if proc.wait_ready(ready_s):
+                return proc
+            proc.poll()  # why it did not start (or the deadline)
+            why = proc.gone or WorkerUnavailable(f"not ready in {ready_s:g} s")
+            proc.close()
+            raise WorkerUnavailable(f"the scene's keyframe worker could not start: {why}"
+                                    ) from why
+        finally:  # the process has copied the arrays out once it is ready (or gone)
+            shm.close()
+            shm.unlink()
 
     return start
+
+
+def share_scene(scene: Scene) -> tuple[SharedMemory, dict[str, tuple], tuple]:
+    """The display's ``scene`` for the worker process: its terrain's heights
+    (``(rows, cols) float32`` metres) and texture (``(H, W, 3) uint8``) copied into a new
+    shared-memory segment (:func:`~lodsprite.sprite.keyframe_worker.share_arrays`; the
+    caller closes and unlinks it), and the rest of the scene without them (its world's
+    ground field and its path maker left out too), for :func:`received_scene`.  Returns
+    ``(segment, layout, rest)``."""
+    from lodsprite.scene.world import World
+
+    hf = scene.hf
+    arrays = {"heights": hf.heights}
+    if scene.texture is not None:
+        arrays["texture"] = scene.texture
+    shm, layout = share_arrays({k: np.ascontiguousarray(a) for k, a in arrays.items()})
+    objects = scene.objects
+    if isinstance(objects, World):
+        objects = replace(objects, ground_field=None)
+    rest = replace(scene, hf=None, texture=None, objects=objects, paths=None)
+    return shm, layout, (rest, (hf.dx, hf.dy, hf.name, dict(hf.meta)))
+
+
+def received_scene(shm_name: str, layout: dict, rest: tuple) -> Scene:
+    """The scene :func:`share_scene` handed over, made again in the worker process: the
+    same heights, texture and objects, standing on the same ground."""
+    from lodsprite.scene.world import World
+    from lodsprite.terrain import HeightField
+
+    arrays = copy_shared(shm_name, layout)
+    scene, (dx, dy, name, meta) = rest
+    hf = HeightField(arrays["heights"], dx, dy, name, meta)
+    objects = scene.objects
+    if isinstance(objects, World):
+        objects = replace(objects, ground_field=hf)
+    return replace(scene, hf=hf, texture=arrays.get("texture"), objects=objects)
 
 
 class SceneKeyframeWorker(KeyframeWorker):
@@ -100,11 +156,13 @@ class SceneKeyframeWorker(KeyframeWorker):
 # ----------------------------------------------------------------- the worker process
 
 
-def scene_key_handler(keys: SceneKeys, settings: WorkerSettings):
+def scene_key_handler(keys: SceneKeys, settings: WorkerSettings, shm_name: str,
+                      layout: dict, rest: tuple):
     """The process's request handler (:mod:`lodsprite.workers`' factory): its priority
-    lowered, the scene read from its file, the renderer and layers made."""
+    lowered, the display's scene received (:func:`received_scene`), the renderer and
+    layers made."""
     lower_priority(settings.nice)
-    gl = _SceneKeysGL(keys, settings)
+    gl = _SceneKeysGL(received_scene(shm_name, layout, rest), keys, settings)
 
     def answer(meta: bytes, data: bytes) -> tuple[bytes, bytes]:
         vp, predicted, asked, tolerance, exponent = pickle.loads(meta)
@@ -116,15 +174,13 @@ def scene_key_handler(keys: SceneKeys, settings: WorkerSettings):
 class _SceneKeysGL:
     """The process's renderer, keyframe slots, terrain and static objects."""
 
-    def __init__(self, keys: SceneKeys, s: WorkerSettings) -> None:
+    def __init__(self, scene: Scene, keys: SceneKeys, s: WorkerSettings) -> None:
         from lodsprite.api import Renderer
         from lodsprite.gl.sprite import SpriteDrawer
         from lodsprite.layered.layers import TerrainLayer
         from lodsprite.layered.objects import ObjectsLayer
-        from lodsprite.scene.world import load_scene_file
         from lodsprite.sprite.metric import ErrorMetric
 
-        scene = load_scene_file(keys.scene_file)
         self.renderer = Renderer(scene, s.size, s.fov_y_deg)
         self.terrain = self.objects = None
         try:

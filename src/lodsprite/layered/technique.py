@@ -270,8 +270,8 @@ def _keyframed(renderer: Renderer, scene: Scene, mode: str, exponent: float,
                options: dict[str, Any]) -> Layer:
     """The terrain and static objects from the scene's keyframe worker
     (:class:`~lodsprite.layered.reuse.KeyframedTerrain`): LOD-sprite's ``mode`` over a
-    scene read from its file; ``sprite-adaptive``'s keyframes by the adaptive renderer
-    (its options among ``options``), ``sprite``'s at full resolution."""
+    scene file's world (handed to the worker); ``sprite-adaptive``'s keyframes by the
+    adaptive renderer (its options among ``options``), ``sprite``'s at full resolution."""
     from lodsprite import techniques
     from lodsprite.layered.reuse import KeyframedTerrain
     from lodsprite.layered.scene_keys import SceneKeys
@@ -279,8 +279,7 @@ def _keyframed(renderer: Renderer, scene: Scene, mode: str, exponent: float,
     from lodsprite.terrain.lod import DEFAULT_COARSE
 
     if scene.source is None or not Path(scene.source).is_file():
-        raise InputError("--keyframes worker in a scene needs a scene file (the worker "
-                         "process reads it)")
+        raise InputError("--keyframes worker in a scene needs a scene file")
     own = {o.name for o in techniques.get("adaptive").options}
     adaptive = mode == "sprite-adaptive"
     keys = SceneKeys(str(scene.source), "adaptive" if adaptive else "full",

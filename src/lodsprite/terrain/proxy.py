@@ -15,8 +15,8 @@ border's vertical plane; consecutive samples make a quad.  Textured from a
 keyframe, a ribbon carries the keyframe's picture of the real outline: terrain
 where the full profile stands out beyond the coarse line, the keyframe's sky where
 the coarse surface stands out beyond the full one.  The profile is first simplified
-(Douglas-Peucker, scikit-image) within each coarse segment, so every coarse vertex
-stays and the ribbon meets the coarse surface exactly.
+(Douglas-Peucker, as scikit-image's ``approximate_polygon``) within each coarse segment,
+so every coarse vertex stays and the ribbon meets the coarse surface exactly.
 
 All arrays are world metres (x east, y north, z up) and terrain texture
 coordinates ``(col, row) / (N)``, matching the GPU terrain shaders.
@@ -85,7 +85,7 @@ def _kept_samples(full: np.ndarray, step: int, spacing: float, tol: float) -> np
     keep = [np.arange(0, len(full), step)]
     for a in range(0, len(full) - 1, step):
         pts = np.stack([np.arange(step + 1) * spacing, full[a:a + step + 1]], axis=1)
-        keep.append(a + np.rint(_approximate_polygon(pts, tol)[:, 0] / spacing).astype(np.intp))
+        keep.append(a + douglas_peucker(pts, tol))
     return np.unique(np.concatenate(keep))
 
 
@@ -141,10 +141,37 @@ def proxy_mesh(hf: HeightField, level_quads: int, border: bool = True,
                          np.uint32), level.level_triangles)
 
 
-def _approximate_polygon(points: np.ndarray, tolerance: float) -> np.ndarray:
-    """scikit-image's Douglas-Peucker ``approximate_polygon``, imported on first use:
-    ``skimage.measure`` pulls in ``scipy.signal`` and ``scipy.stats`` (0.7 s at every
-    process start that imports the GL terrain code, the CLI's included)."""
-    from skimage.measure import approximate_polygon
-
-    return approximate_polygon(points, tolerance)
+def douglas_peucker(points: np.ndarray, tolerance: float) -> np.ndarray:
+    """Indices ``(k,) intp`` (ascending, the first and last included) of the points
+    ``(m, 2) float64`` a Douglas-Peucker simplification within ``tolerance`` (the points'
+    unit) keeps: scikit-image's ``skimage.measure.approximate_polygon``, the same
+    arithmetic and the same points kept, without importing ``skimage.measure`` (it pulls
+    in ``scipy.signal`` and ``scipy.stats``: about 1 s at the start of every process that
+    draws a proxy: the CLI's renders, a distributed client and server, keyframe workers).
+    A point's distance is to the segment's line where it projects inside the segment,
+    else to the nearer end."""
+    pts = np.asarray(points, np.float64)
+    m = len(pts)
+    if tolerance <= 0 or m < 3:
+        return np.arange(m)
+    chain = np.zeros(m, bool)
+    chain[0] = chain[-1] = True
+    stack = [(0, m - 1)]
+    while stack:
+        start, end = stack.pop()
+        (r0, c0), (r1, c1) = pts[start], pts[end]
+        dr, dc = r1 - r0, c1 - c0
+        angle = -np.arctan2(dr, dc)
+        line = c0 * np.sin(angle) + r0 * np.cos(angle)
+        seg = pts[start + 1:end]
+        dr0, dc0 = seg[:, 0] - r0, seg[:, 1] - c0
+        dr1, dc1 = seg[:, 0] - r1, seg[:, 1] - c1
+        perp = (dr0 * dr + dc0 * dc > 0) & (-dr1 * dr - dc1 * dc > 0)
+        dist = np.where(perp, np.abs(seg[:, 0] * np.cos(angle) + seg[:, 1] * np.sin(angle)
+                                     - line),
+                        np.minimum(np.sqrt(dc0 ** 2 + dr0 ** 2), np.sqrt(dc1 ** 2 + dr1 ** 2)))
+        if np.any(dist > tolerance):
+            split = start + int(np.argmax(dist)) + 1
+            stack += [(split, end), (start, split)]
+            chain[split] = True
+    return np.flatnonzero(chain)
