@@ -44,8 +44,13 @@ def test_draw_to_shows_the_frame_read_image_gives(gl, options):
             t.release()
 
 
-def test_tiles_with_threaded_keyframes_is_an_input_error(gl):
+def test_what_worker_tiles_cannot_do_is_an_input_error(gl):
+    """Tiles from the worker keep no cache; a grid of no tiles is no grid (both refused
+    before any worker process starts)."""
     scene = load_scene("fractal:64:3", grid=64)
-    with Renderer(scene, (SIZE, SIZE), ctx=gl.mgl) as renderer, \
-            pytest.raises(InputError, match="--tiles"):
-        techniques.create("sprite", renderer, lod=8, tiles=2, keyframes="worker")
+    with Renderer(scene, (SIZE, SIZE), ctx=gl.mgl) as renderer:
+        with pytest.raises(InputError, match="keep no cache"):
+            techniques.create("sprite", renderer, lod=8, tiles=2, keyframes="worker",
+                              cache_mb=8.0)
+        with pytest.raises(InputError, match="--tiles"):
+            techniques.create("sprite", renderer, lod=8, tiles=0, keyframes="worker")

@@ -20,7 +20,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from lodsprite.camera import Viewpoint, rotated_viewpoint, view_rotation
 
@@ -92,6 +91,8 @@ class KalmanPredictor:
     def predict(self, dt: float) -> Viewpoint:
         if self._last is None:
             raise RuntimeError("predict() before any observe()")
+        from scipy.spatial.transform import Rotation  # on first use: a slow import
+
         eye = self._x[:, 0] + self._x[:, 1] * dt
         rotation = Rotation.from_rotvec(self._omega * dt) * view_rotation(self._last)
         return rotated_viewpoint(rotation, eye)
