@@ -126,6 +126,19 @@ def gl(gl_session):
 T = TypeVar("T")
 
 
+def imported_by(code: str, modules: tuple[str, ...]) -> list[str]:
+    """Which of ``modules`` a fresh Python process has imported after running ``code``
+    (sorted); fails the test if the process fails."""
+    import subprocess
+    import sys
+
+    probe = f"{code}\nimport sys\nprint(','.join(m for m in {modules!r} if m in sys.modules))"
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True,
+                         timeout=120)
+    assert out.returncode == 0, out.stderr
+    return sorted(m for m in out.stdout.strip().split(",") if m)
+
+
 def wait_until(pred: Callable[[], T], timeout_s: float, what: str,
                interval_s: float = 0.01) -> T:
     """Call ``pred`` until it returns something truthy, and return that; fail the test

@@ -47,16 +47,11 @@ def test_errors_on_a_curve_are_reported_and_bounded():
     assert kalman["view_deg_mean"] < linear["view_deg_mean"]
 
 
+
 def test_the_keyframe_worker_starts_without_scipy_spatial():
     """``scipy.spatial`` (0.55 s of every process start) comes in only when a rotation is
     predicted, not with the predictors' module (it did before)."""
-    import subprocess
-    import sys
+    from conftest import imported_by
 
-    code = ("import sys\n"
-            "import lodsprite.sprite.keyframe_worker, lodsprite.sprite.predictors\n"
-            "print('scipy.spatial' in sys.modules)")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         timeout=120)
-    assert out.returncode == 0, out.stderr
-    assert out.stdout.strip() == "False"
+    code = "import lodsprite.sprite.keyframe_worker, lodsprite.sprite.predictors"
+    assert imported_by(code, ("scipy.spatial",)) == []
