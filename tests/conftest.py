@@ -37,6 +37,8 @@ HEAVY_FIRST = (
     "tests/viewer/test_window.py",
     "tests/distributed/test_client.py",
     "tests/techniques/test_worker_store.py",
+    "tests/sprite/test_worker_tiles.py",
+    "tests/techniques/test_worker_store_tiles.py",
     "tests/distributed/pool/test_pool.py",
     "tests/test_readme.py",
     "tests/test_cli.py",
