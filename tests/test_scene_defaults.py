@@ -116,6 +116,11 @@ def test_worker_keyframes_over_a_store_when_asked_and_without_the_proxy_default(
 
     assert ViewOptions(terrain=store).technique_options()["keyframes"] == "inline"
     assert ViewOptions(terrain="fractal:64").technique_options()["keyframes"] == "worker"
+    # tiles over a store: the worker's, without the proxy default (was inline)
+    tiled = ViewOptions(terrain=store, options={"tiles": 2}).technique_options()
+    assert tiled["keyframes"] == "worker" and tiled.get("proxy_sse") is None
+    assert ViewOptions(terrain=store, threaded=False,
+                       options={"tiles": 2}).technique_options()["keyframes"] == "inline"
     asked = ViewOptions(terrain=store, options={"keyframes": "worker"}).technique_options()
     assert asked["keyframes"] == "worker" and asked.get("proxy_sse") is None
     c = RenderConfig(terrain=store, mode="sprite", keyframes="worker").resolved()

@@ -58,7 +58,7 @@ class ViewOptions(TechniqueOptions):
         from lodsprite.techniques.defaults import DEFAULTED, fill_defaults, terrain_defaults
 
         given = {k: self.options.get(k) for k in DEFAULTED}
-        worker = self.options.get("keyframes") == "worker"
+        worker = self.options.get("keyframes", self._default_keyframes()) == "worker"
         out = replace(self, options={**self.options,
                                      **fill_defaults(self.terrain, given, worker=worker)})
         store_keys = terrain_defaults(self.terrain)["key_sse"] is not None
@@ -66,15 +66,25 @@ class ViewOptions(TechniqueOptions):
             out = replace(out, mode="sprite-adaptive")
         return out
 
+    def _default_keyframes(self) -> str:
+        """Where keyframes are rendered unless ``--keyframes`` says: by the worker in
+        memory, and over a store with tiles (``--tiles`` > 1), where tiles from the worker
+        beat inline tiles in both frame time and error (docs/figures.md,
+        keyframes_played.py); inline for a store's whole keyframes, whose lowest error is
+        inline's (the worker's spriteframes draw the coarse level, not the store's
+        ``--proxy-sse`` proxy).  ``--inline-keyframes``: inline."""
+        from lodsprite.techniques.defaults import terrain_defaults
+
+        store = terrain_defaults(self.terrain)["key_sse"] is not None
+        tiles = (self.options.get("tiles") or 1) > 1
+        return "worker" if self.threaded and (not store or tiles) else "inline"
+
     def technique_options(self) -> dict:
         """The options the registry's techniques pick theirs from."""
         from lodsprite.techniques.defaults import terrain_defaults
 
         self = self.resolved()
-        store = terrain_defaults(self.terrain)["key_sse"] is not None
-        # the worker by default in memory; over a store when asked (--keyframes worker)
-        default = "worker" if self.threaded and not store else "inline"
-        chosen = self.options.get("keyframes", default)
+        chosen = self.options.get("keyframes", self._default_keyframes())
         return {**self.options, "keyframes": chosen,
                 "target_fps": self.target_fps,
                 "schedule": "none" if self.target_fps is None else "scheduler"}  # scene
