@@ -81,7 +81,6 @@ class ViewOptions(TechniqueOptions):
 
     def technique_options(self) -> dict:
         """The options the registry's techniques pick theirs from."""
-        from lodsprite.techniques.defaults import terrain_defaults
 
         self = self.resolved()
         chosen = self.options.get("keyframes", self._default_keyframes())
