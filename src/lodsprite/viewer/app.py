@@ -81,7 +81,6 @@ class ViewOptions(TechniqueOptions):
 
     def technique_options(self) -> dict:
         """The options the registry's techniques pick theirs from."""
-
         self = self.resolved()
         chosen = self.options.get("keyframes", self._default_keyframes())
         return {**self.options, "keyframes": chosen,
