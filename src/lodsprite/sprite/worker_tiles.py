@@ -170,7 +170,6 @@ class WorkerTiledEngine(TiledSpriteEngine):
         if self.worker.error is not None:
             raise LodspriteError(f"the keyframe worker stopped: {self.worker.error}")
         self.worker.observe(t0, viewpoint)
-        kind = SPRITE
         if not self.updates:  # start-up: every tile, waited for
             self.worker.request(tuple(range(self.tiled.count)))
             update = self.worker.wait()

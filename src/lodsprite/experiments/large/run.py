@@ -58,9 +58,10 @@ Update = Callable[[str, int, int], None]
 class LargeConfig(SplitSampled):
     """The default, 4096² alone, took 13 min 57 s here (2026-12-03, every frontier run),
     within its 20 minutes.  16k² is in :meth:`full`, the long sweep: its level-0 reference
-    draws level 0 window by window, 537 million triangles a chen1999 frame, 51 s of
-    draws a frame on llvmpipe (decoding the chunks: 5 s), so that 20 sampled frames
-    alone pass 20 minutes on a machine without a GPU.  LOD-sprite's setup over a 16k²
+    draws level 0 window by window, 537 million triangles a chen1999 frame: 63-75 s a
+    frame on llvmpipe, 51 s of it the draws and 5 s the chunks' decoding (one frame
+    profiled, the machine shared), so that 20 sampled frames alone pass 20 minutes on a
+    machine without a GPU.  LOD-sprite's setup over a 16k²
     store reads no level-0 chunk (first frame 7-11 s, was 188-468 s).  Timed runs at 1k²
     and 2k² are in :meth:`full` too (the default gives them the stand-in check alone);
     :meth:`quick` is the tests'."""
