@@ -127,9 +127,9 @@ def test_render_with_worker_keyframes_plays_the_path_in_time(tmp_path, tiles):
     # the keyframes the display showed, though none of its frames is one (was 0)
     assert s["keyframes"] == len(shown_keys) >= 1
     assert s["keyframes_rendered"] >= s["keyframes"]
-    if tiles > 1:  # the tiles adopted, a tile update's frames, what was left
-        assert s["tiles"] == tiles and s["tiles_rendered"] == sum(
-            int(x["tiles"]) for x in got) and "tiles_discarded" in s
+    if tiles > 1:  # no tile budget (the display renders no tile; it read 0.0)
+        assert s["tiles"] == tiles and s["tile_budget_ms"] is None
+        assert "tiles_discarded" in s
 
 
 def test_render_play_plays_inline_keyframes_in_time_too(tmp_path):

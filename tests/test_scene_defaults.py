@@ -121,6 +121,9 @@ def test_worker_keyframes_over_a_store_when_asked_and_without_the_proxy_default(
     assert tiled["keyframes"] == "worker" and tiled.get("proxy_sse") is None
     assert ViewOptions(terrain=store, threaded=False,
                        options={"tiles": 2}).technique_options()["keyframes"] == "inline"
+    # tiles stay inline with a cache (worker tiles keep none; it was refused)
+    cached = ViewOptions(terrain="fractal:64", options={"tiles": 2, "cache_mb": 16.0})
+    assert cached.technique_options()["keyframes"] == "inline"
     asked = ViewOptions(terrain=store, options={"keyframes": "worker"}).technique_options()
     assert asked["keyframes"] == "worker" and asked.get("proxy_sse") is None
     c = RenderConfig(terrain=store, mode="sprite", keyframes="worker").resolved()

@@ -80,13 +80,15 @@ def test_worker_tiles_draw_what_inline_tiles_draw_and_only_stale_tiles_are_asked
         gl, scene, sprite):
     path = orbit(400, span_deg=60)
     engine = WorkerTiledEngine(sprite, scene, 45.0, 0.5, 4)
-    asked: list[tuple[int, ...]] = []
+    asked: list[tuple[tuple[int, ...], tuple[int, ...]]] = []  # (asked, due) a request
     request = engine.worker.request
 
     def spy(tiles=None):
         sent = request(tiles)
-        if sent:
-            asked.append((tuple(tiles), tuple(engine.c_primes)))
+        if sent:  # the tiles at or over half ε at the view the request was made at
+            errors, _ = engine.errors(engine.worker._samples[-1][1])
+            due = tuple(int(i) for i in np.flatnonzero(~(errors < 0.5 * 0.5)))
+            asked.append((tuple(tiles), due))
         return sent
 
     engine.worker.request = spy
@@ -109,7 +111,8 @@ def test_worker_tiles_draw_what_inline_tiles_draw_and_only_stale_tiles_are_asked
         engine.release()
     assert first.type == KEYFRAME and all(f.type != KEYFRAME for f in frames[1:])
     assert len(asked[0][0]) == 16 and len(asked) >= 2
-    # a later request names the tiles at or over half ε, not all of them
+    # every later request names exactly the tiles at or over half ε, not all of them
+    assert all(tiles == due for tiles, due in asked[1:])
     assert any(len(tiles) < 16 for tiles, _ in asked[1:])
     # the replay renders each tile again here from the viewpoint it was rendered from
     assert rmse(replayed, live) < 0.5 and live.std() > 5

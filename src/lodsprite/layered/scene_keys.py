@@ -104,11 +104,11 @@ def share_scene(scene: Scene) -> tuple[SharedMemory, dict[str, tuple], tuple]:
     arrays = {"heights": hf.heights}
     if scene.texture is not None:
         arrays["texture"] = scene.texture
-    shm, layout = share_arrays({k: np.ascontiguousarray(a) for k, a in arrays.items()})
     objects = scene.objects
     if isinstance(objects, World):
         objects = replace(objects, ground_field=None)
     rest = replace(scene, hf=None, texture=None, objects=objects, paths=None)
+    shm, layout = share_arrays({k: np.ascontiguousarray(a) for k, a in arrays.items()})
     return shm, layout, (rest, (hf.dx, hf.dy, hf.name, dict(hf.meta)))
 
 

@@ -18,9 +18,9 @@ Per frame, in the drawing loop (never waiting after the first update):
 
 The worker renders a tile update as the inline tiled engine renders one (each tile
 scissored, culled by its sub-frustum, the update's ``C'`` reprojected for those tiles'
-sub-frustum) and answers each tile's depth and colour; the drawing side writes them into
-its mosaic and draws the tile's coarse z-buffer (:meth:`~lodsprite.gl.sprite_tiles.
-TiledSpriteDrawer.upload_tile`).  Every adopted update is logged as the inline engine
+sub-frustum) and answers each tile's depth, colour and coarse z-buffer; the drawing side
+writes them into its mosaic (:meth:`~lodsprite.gl.sprite_tiles.TiledSpriteDrawer.
+upload_tile`).  Every adopted update is logged as the inline engine
 logs its own (:attr:`~lodsprite.sprite.tiled_engine.TiledSpriteEngine.updates`,
 ``mosaic``), so the untimed replay renders each tile again from the viewpoint it was
 rendered from.  The first update (every tile) is waited for.
@@ -35,6 +35,8 @@ drawn with (:attr:`WorkerTiledEngine.selections`), which the replay draws again.
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -54,8 +56,11 @@ from lodsprite.sprite.tiled import TILES, combined_error, tile_errors
 from lodsprite.sprite.tiled_engine import TiledSpriteEngine
 from lodsprite.sprite.worker_engine import DEFAULT_REQUEST_FRACTION, LEAD_SMOOTHING
 
+if TYPE_CHECKING:  # the scene is passed in
+    from lodsprite.scene import Scene
 
-def adopted(current: np.ndarray, candidate: np.ndarray, tiles) -> np.ndarray:
+
+def adopted(current: np.ndarray, candidate: np.ndarray, tiles: Sequence[int]) -> np.ndarray:
     """The tiles of an update to adopt: those of ``tiles`` whose ``candidate (T,)`` error
     (px, the update put in) is below their ``current (T,)`` one (a tile never rendered,
     ``inf``, always); ``(k,) intp``."""
@@ -70,7 +75,7 @@ class WorkerTiledEngine(TiledSpriteEngine):
     lists the tiles adopted in the last frame, :attr:`discarded` counts tiles delivered
     and not adopted."""
 
-    def __init__(self, sprite: SpriteDrawer, scene, fov_y_deg: float, epsilon_px: float,
+    def __init__(self, sprite: SpriteDrawer, scene: Scene, fov_y_deg: float, epsilon_px: float,
                  tiles: int, request_fraction: float = DEFAULT_REQUEST_FRACTION,
                  predictor: str = "linear", metric: str = "warp", store: StoreKeys | None = None,
                  make_worker=None) -> None:
@@ -121,17 +126,20 @@ class WorkerTiledEngine(TiledSpriteEngine):
         return self._errors(viewpoint, c_primes, key_vps, deficits)
 
     def _adopt(self, update: TileUpdate, take: np.ndarray) -> None:
-        """Write the tiles ``take`` of ``update`` into the mosaic and log the update."""
-        self.updates.append(KeyChoice(update.viewpoint, update.frame_projection,
-                                      update.predicted))
-        self.frozen_for.append(len(self.updates) - 1)
-        self.proxy_selections.append(None)
-        u = len(self.updates) - 1
+        """Write the tiles ``take`` of ``update`` into the mosaic, then log the update
+        (an upload that raises logs nothing)."""
+        u = len(self.updates)
         at = {t: k for k, t in enumerate(update.tiles)}
         for i in take:
             k = at[int(i)]
             self.tiled.upload_tile(int(i), update.viewpoint, update.projection,
                                    update.depth[k], update.color[k], update.coarse[k])
+        self.updates.append(KeyChoice(update.viewpoint, update.frame_projection,
+                                      update.predicted))
+        self.frozen_for.append(u)
+        self.proxy_selections.append(None)
+        for i in take:
+            k = at[int(i)]
             self.c_primes[i] = update.c_prime
             self.deficits[i] = update.deficits[k] if update.deficits else 0.0
             if update.selections:
@@ -146,16 +154,22 @@ class WorkerTiledEngine(TiledSpriteEngine):
         self._leads += 1
         self.worker.lead_s = (1 - w) * self.worker.lead_s + w * latency
 
+    @staticmethod
+    def _checked(update) -> TileUpdate:
+        """``update`` if it carries tiles; a whole keyframe answered to a tile request
+        raises :class:`~lodsprite.errors.LodspriteError`."""
+        if not isinstance(update, TileUpdate):
+            raise LodspriteError("the keyframe worker answered a whole keyframe to a tile "
+                                 "request")
+        return update
+
     def _take(self, viewpoint: Viewpoint, both: list, t0: float) -> np.ndarray:
         """The tiles adopted from a finished update (none if none arrived); ``both``,
         the tiles' ``[errors, served]`` at ``viewpoint``, updated in place."""
         update = self.worker.poll()
         if update is None:
             return np.empty(0, np.intp)
-        if not isinstance(update, TileUpdate):
-            raise LodspriteError("the keyframe worker answered a whole keyframe to a tile "
-                                 "request")
-        self._measure_lead(update, t0)
+        self._measure_lead(self._checked(update), t0)
         candidate = self._candidate_errors(update, viewpoint)
         take = adopted(both[0], candidate[0], update.tiles)
         self.discarded += len(update.tiles) - len(take)
@@ -172,7 +186,7 @@ class WorkerTiledEngine(TiledSpriteEngine):
         self.worker.observe(t0, viewpoint)
         if not self.updates:  # start-up: every tile, waited for
             self.worker.request(tuple(range(self.tiled.count)))
-            update = self.worker.wait()
+            update = self._checked(self.worker.wait())
             self._adopt(update, np.asarray(update.tiles, np.intp))
             take, kind = np.asarray(update.tiles, np.intp), KEYFRAME
             errors, served = self.errors(viewpoint)

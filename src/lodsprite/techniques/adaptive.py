@@ -312,7 +312,9 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
 
     def frame(self, viewpoint: Viewpoint) -> Frame:
         f = super().frame(viewpoint)
-        if f.kind == KEYFRAME:  # a keyframe shown as it is: its error is what it lacks
+        # a keyframe shown as it is: its error is what it lacks (a worker's start-up frame
+        # is a spriteframe, whose error has it already)
+        if f.kind == KEYFRAME and not isinstance(self.keys, WorkerAdaptiveKeys):
             f = replace(f, error_px=f.error_px + getattr(self.keys, "deficit_px", 0.0))
         if self.first_frame_s != self.first_frame_s:  # NaN: the first frame
             self.first_frame_s = process_age_s()

@@ -133,6 +133,7 @@ class StoreKeyframes:
                     geometry.proxy(s.lod, s.border)
                     field.heights.start_reader()
                     self.heights = field.heights
+            self.tiled = None if s.tiles <= 1 else tiled_drawer(self.sprite, s.tiles)
         except BaseException:  # released in the order made, backwards
             for obj in reversed(made):
                 obj.release()
@@ -143,7 +144,6 @@ class StoreKeyframes:
         self.zbuffer = "coarse" if s.visibility == "coarse" else "full"
         self.key_size = s.key_size
         self.filled = False
-        self.tiled = None if s.tiles <= 1 else tiled_drawer(self.sprite, s.tiles)
         self._drawn: list[tuple] = []  # the update's tiles: (selection, deficit) each
 
     def _ready(self, vp: Viewpoint, key_projection) -> None:

@@ -33,6 +33,7 @@ from lodsprite.techniques.base import Frame
 if TYPE_CHECKING:
     from lodsprite.api import LodSprite, Renderer
     from lodsprite.camera import Projection, Viewpoint
+    from lodsprite.sprite.keyframe_worker import StoreKeys
     from lodsprite.sprite.tiled_engine import TiledSpriteEngine
 
 TileDrawerFor = Callable[[int, int], Callable | None]
@@ -325,7 +326,7 @@ class WorkerTiledKeyframes(TiledKeyframes):
     frame is a tiled spriteframe and never waits for a tile after the first update."""
 
     def __init__(self, sprite: LodSprite, renderer: Renderer, epsilon: float, tiles: int,
-                 metric: str, store=None) -> None:
+                 metric: str, store: StoreKeys | None = None) -> None:
         from lodsprite.sprite.worker_tiles import WorkerTiledEngine
 
         self.sprite = sprite
@@ -339,6 +340,11 @@ class WorkerTiledKeyframes(TiledKeyframes):
     def warm_up(self, viewpoint: Viewpoint) -> None:
         """One frame drawn: the first update (every tile) is waited for there."""
         self.frame(viewpoint)
+
+    def work_summary(self, frames: list[Frame]) -> dict[str, Any]:
+        """As inline tiles', with no ``tile_budget_ms`` (None): the worker's tiles cost
+        the display no tile work, so ``--tile-budget-ms`` does not apply."""
+        return {**super().work_summary(frames), "tile_budget_ms": None}
 
     def cache_summary(self, frames: list[Frame]) -> dict[str, Any]:
         """``keyframes`` counts the updates the frames showed, ``keyframes_rendered`` all

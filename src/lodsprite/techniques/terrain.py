@@ -155,8 +155,8 @@ class SpriteTechnique(Technique):
     (:mod:`lodsprite.techniques.sprite_engines`), chosen once from the options: whole
     keyframes inline (the 1999 algorithm, what batch runs time), whole keyframes from a
     worker process (``keyframes="worker"``), or keyframes refreshed tile by tile within
-    ``tile_budget_ms`` per frame (``tiles > 1``, inline only).  ``store``: the worker's
-    keyframes drawn by the adaptive renderer (a
+    ``tile_budget_ms`` per frame (``tiles > 1``; from the worker too, without a budget).
+    ``store``: the worker's keyframes drawn by the adaptive renderer (a
     :class:`~lodsprite.sprite.keyframe_worker.StoreKeys`, given by ``sprite-adaptive``).
     Records per frame the keyframe (or tile mosaic) shown; its replay renders that from
     its logged viewpoints and projections, then the frame."""

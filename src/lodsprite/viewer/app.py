@@ -72,11 +72,15 @@ class ViewOptions(TechniqueOptions):
         beat inline tiles in both frame time and error (docs/figures.md,
         keyframes_played.py); inline for a store's whole keyframes, whose lowest error is
         inline's (the worker's spriteframes draw the coarse level, not the store's
-        ``--proxy-sse`` proxy).  ``--inline-keyframes``: inline."""
+        ``--proxy-sse`` proxy).  Tiles stay inline with ``--cache-mb`` (worker tiles
+        keep no cache).
+        ``--inline-keyframes``: inline."""
         from lodsprite.techniques.defaults import terrain_defaults
 
         store = terrain_defaults(self.terrain)["key_sse"] is not None
         tiles = (self.options.get("tiles") or 1) > 1
+        if tiles and (self.options.get("cache_mb") or 0) > 0:  # worker tiles keep no cache
+            return "inline"
         return "worker" if self.threaded and (not store or tiles) else "inline"
 
     def technique_options(self) -> dict:
