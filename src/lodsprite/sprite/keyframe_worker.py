@@ -57,6 +57,7 @@ DEFAULT_WORKER_NICE = 10
 SAMPLES_KEPT = 64
 READY_S = 60.0          # the process's start (context, scene, shaders) has this long
 MAX_REQUEST = 4096      # bytes: a pickled viewpoint and two numbers
+LEAD_SMOOTHING = 0.3    # weight of the newest latency in the lead's running mean
 FACTORY = "lodsprite.sprite.keyframe_process:keyframe_handler"
 
 
@@ -160,6 +161,7 @@ class KeyframeWorker:
         self.scene = scene
         self.settings = settings
         self.lead_s = 0.0
+        self._leads = 0  # latencies measured into lead_s
         self.rendered = 0
         self.render_ms: list[float] = []
         self.error: WorkerError | None = None
@@ -185,6 +187,17 @@ class KeyframeWorker:
     def busy(self) -> bool:
         """Whether a keyframe has been requested and not yet taken."""
         return self._wanted is not None
+
+    def measure_lead(self, requested_at: float, now: float) -> None:
+        """A delivery at ``now`` of what was asked for at ``requested_at``
+        (``time.perf_counter`` seconds) in :attr:`lead_s`, the running mean of
+        request-to-delivery latencies.  Callers measure every delivery, taken or not
+        (from adopted ones only, a lead that overshot would discard every later one and
+        never be corrected), and not the first, waited for at start-up."""
+        latency = max(now - requested_at, 0.0)
+        w = LEAD_SMOOTHING if self._leads else 1.0
+        self._leads += 1
+        self.lead_s = (1 - w) * self.lead_s + w * latency
 
     def request(self, tiles: tuple[int, ...] | None = None) -> bool:
         """Ask for a keyframe at the predicted viewpoint (``tiles``: only those tiles of

@@ -59,7 +59,6 @@ if TYPE_CHECKING:  # the scene is passed in
     from lodsprite.scene import Scene
 
 DEFAULT_REQUEST_FRACTION = 0.5
-LEAD_SMOOTHING = 0.3   # weight of the newest latency in the lead's running mean
 
 
 class WorkerLodSpriteEngine:
@@ -93,7 +92,6 @@ class WorkerLodSpriteEngine:
         self.selections: list[tuple | None] = []
         self.deficit_px = 0.0  # what the shown keyframe lacks (pixels)
         self.discarded = 0
-        self._leads = 0
         self._c_prime: np.ndarray | None = None
 
     def error_px(self, viewpoint: Viewpoint, projection) -> float:
@@ -111,16 +109,6 @@ class WorkerLodSpriteEngine:
         self.keyframes.append(KeyChoice(key.viewpoint, key.frame_projection, key.predicted))
         self.selections.append(key.selection)
 
-    def _measure_lead(self, key: KeyframeImage, now: float) -> None:
-        """Keyframes are placed ahead by the running mean of the request-to-delivery
-        latency, taken from every keyframe delivered, adopted or not (from adopted ones
-        only, a lead that overshot would discard every later keyframe and never be
-        corrected).  The first keyframe, waited for at start-up, is not counted."""
-        latency = max(now - key.requested_at, 0.0)
-        w = LEAD_SMOOTHING if self._leads else 1.0
-        self._leads += 1
-        self.worker.lead_s = (1 - w) * self.worker.lead_s + w * latency
-
     def frame(self, viewpoint: Viewpoint) -> Frame:
         """Draw the frame for ``viewpoint``; returns once the GL work has finished."""
         t0 = time.perf_counter()
@@ -136,7 +124,7 @@ class WorkerLodSpriteEngine:
         error = self.error_px(viewpoint, projection)
         new = None if kind == KEYFRAME else self.worker.poll()
         if new is not None:
-            self._measure_lead(new, t0)
+            self.worker.measure_lead(new.requested_at, t0)
             new_error = keyframe_error_px(self.metric, new.c_prime, viewpoint, projection,
                                           self.sprite.target.height)
             if new_error < error:

@@ -54,7 +54,7 @@ from lodsprite.sprite.keyframe_worker import (
 from lodsprite.sprite.policy import KEYFRAME, SPRITE, KeyChoice, resampling_metric
 from lodsprite.sprite.tiled import TILES, combined_error, tile_errors
 from lodsprite.sprite.tiled_engine import TiledSpriteEngine
-from lodsprite.sprite.worker_engine import DEFAULT_REQUEST_FRACTION, LEAD_SMOOTHING
+from lodsprite.sprite.worker_engine import DEFAULT_REQUEST_FRACTION
 
 if TYPE_CHECKING:  # the scene is passed in
     from lodsprite.scene import Scene
@@ -82,7 +82,6 @@ class WorkerTiledEngine(TiledSpriteEngine):
         super().__init__(sprite, epsilon_px, tiles, 0.0, metric)
         self.request_fraction = float(request_fraction)
         self.discarded = 0
-        self._leads = 0
         # what each tile's render lacks (pixels, over a store), added to its error
         self.deficits = np.zeros(self.tiled.count)
         self.selections: dict[tuple[int, int], tuple] = {}  # (update, tile) -> selection
@@ -146,14 +145,6 @@ class WorkerTiledEngine(TiledSpriteEngine):
                 self.selections[(u, int(i))] = update.selections[k]
         self.mosaic[take] = self.newest[take] = u
 
-    def _measure_lead(self, update: TileUpdate, now: float) -> None:
-        """The lead: the running mean of request-to-delivery latencies (as
-        :meth:`~lodsprite.sprite.worker_engine.WorkerLodSpriteEngine._measure_lead`)."""
-        latency = max(now - update.requested_at, 0.0)
-        w = LEAD_SMOOTHING if self._leads else 1.0
-        self._leads += 1
-        self.worker.lead_s = (1 - w) * self.worker.lead_s + w * latency
-
     @staticmethod
     def _checked(update) -> TileUpdate:
         """``update`` if it carries tiles; a whole keyframe answered to a tile request
@@ -169,7 +160,7 @@ class WorkerTiledEngine(TiledSpriteEngine):
         update = self.worker.poll()
         if update is None:
             return np.empty(0, np.intp)
-        self._measure_lead(self._checked(update), t0)
+        self.worker.measure_lead(self._checked(update).requested_at, t0)
         candidate = self._candidate_errors(update, viewpoint)
         take = adopted(both[0], candidate[0], update.tiles)
         self.discarded += len(update.tiles) - len(take)
