@@ -43,14 +43,24 @@ def keyframe_handler(shm_name: str, layout: dict, field: tuple, settings: Worker
     """The worker process's request handler (:mod:`lodsprite.workers`' factory): its
     priority lowered, its context and scene made from the shared arrays.  A request's
     meta is ``(viewpoint, predicted, requested_at)`` pickled; the answer's meta the
-    keyframe's fields pickled, its data the depth then the colour bytes."""
+    keyframe's fields pickled, its data the depth then the colour bytes; with tiles the
+    request adds the tiles to render (:func:`checked_tiles`)."""
+    return serve(_WorkerGL, shm_name, layout, field, settings)
+
+
+def serve(make, shm_name: str, layout: dict, field: tuple, settings: WorkerSettings):
+    """A request handler: this thread's priority lowered, the terrain made from the
+    shared arrays (``field``: its ``dx, dy, name, meta``) and handed with its texture to
+    ``make(hf, texture, settings)``, whose ``render`` (whole keyframes) or
+    ``render_tiles`` (``settings.tiles > 1``, over its ``tiled`` drawer) answers each
+    request."""
     from lodsprite.terrain import HeightField
 
     lower_priority(settings.nice)
     arrays = copy_shared(shm_name, layout)
     dx, dy, name, meta = field
-    gl = _WorkerGL(HeightField(arrays["heights"], dx, dy, name, meta), arrays.get("texture"),
-                   settings)
+    gl = make(HeightField(arrays["heights"], dx, dy, name, meta), arrays.get("texture"),
+              settings)
 
     def answer(meta: bytes, data: bytes) -> tuple[bytes, bytes]:
         vp, predicted, asked, *tiles = pickle.loads(meta)

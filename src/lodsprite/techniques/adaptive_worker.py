@@ -35,7 +35,6 @@ technique, so importing it back would be a cycle): it builds the GL objects itse
 
 from __future__ import annotations
 
-import pickle
 import time
 from contextlib import nullcontext
 from dataclasses import replace
@@ -43,11 +42,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from lodsprite.sprite.keyframe_process import (
-    checked_tiles,
-    copy_shared,
     keyframe_answer,
-    lower_priority,
     render_tiles_at,
+    serve,
     tile_c_prime,
     tiled_drawer,
     tiles_answer,
@@ -66,22 +63,7 @@ def store_keyframe_handler(shm_name: str, layout: dict, field: tuple,
                            settings: WorkerSettings):
     """The worker process's request handler over a store (the requests and answers of
     :func:`~lodsprite.sprite.keyframe_process.keyframe_handler`, module docstring)."""
-    from lodsprite.terrain import HeightField
-
-    lower_priority(settings.nice)
-    arrays = copy_shared(shm_name, layout)
-    dx, dy, name, meta = field
-    keys = StoreKeyframes(HeightField(arrays["heights"], dx, dy, name, meta),
-                          arrays.get("texture"), settings)
-
-    def answer(meta: bytes, data: bytes) -> tuple[bytes, bytes]:
-        vp, predicted, asked, *tiles = pickle.loads(meta)
-        if keys.tiled is not None:
-            return keys.render_tiles(vp, predicted, asked,
-                                     checked_tiles(tiles, keys.tiled.count))
-        return keys.render(vp, predicted, asked)
-
-    return answer
+    return serve(StoreKeyframes, shm_name, layout, field, settings)
 
 
 class StoreKeyframes:
