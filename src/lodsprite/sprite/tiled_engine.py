@@ -180,7 +180,7 @@ class TiledSpriteEngine:
             key_vp = key_proj.matrix() @ viewpoint.view_matrix()
             why = self._refreeze(viewpoint, key_proj)
             c_prime = reproject_in_key_view(self.metric, viewpoint.o, key_vp, s.key_size,
-                                            self._within(chosen, key_vp))
+                                            tiles_frustum(key_vp, self.tiled.ndc, chosen))
             tris += self.render_tiles(chosen, key, freeze=key if why else None)
             if why and self.hold is not None:
                 self.hold.frozen(viewpoint.o, why)
@@ -218,11 +218,6 @@ class TiledSpriteEngine:
         if self.hold is not None:
             self.hold.held = why is None
         return why
-
-    def _within(self, chosen: Sequence[int], key_vp: np.ndarray) -> np.ndarray | None:
-        """The sub-frustum of the tiles ``chosen`` (:func:`~lodsprite.sprite.tiled.
-        tiles_frustum`)."""
-        return tiles_frustum(key_vp, self.tiled.ndc, chosen)
 
     def _use_cache(self, viewpoint: Viewpoint, errors: np.ndarray) -> bool:
         """Each tile at or over ``SWITCH_FRACTION`` ε shows its cached render with the
