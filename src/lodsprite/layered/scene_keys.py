@@ -30,12 +30,12 @@ import numpy as np
 from lodsprite.errors import InputError
 from lodsprite.sprite.keyframe_process import copy_shared, keyframe_answer, lower_priority
 from lodsprite.sprite.keyframe_worker import (
-    MAX_REQUEST,
     KeyframeWorker,
     WorkerSettings,
     share_arrays,
+    start_ready,
 )
-from lodsprite.workers import ProcessWorker, WorkerUnavailable
+from lodsprite.workers import ProcessWorker
 
 if TYPE_CHECKING:
     from multiprocessing.shared_memory import SharedMemory
@@ -70,23 +70,8 @@ def scene_starter(keys: SceneKeys):
 
     def start(scene: Scene, settings: WorkerSettings, ready_s: float) -> ProcessWorker:
         shm, layout, rest = share_scene(scene)
-        try:
-            proc = ProcessWorker(FACTORY, {"keys": keys, "settings": settings,
-                                           "shm_name": shm.name, "layout": layout,
-                                           "rest": rest},
-                                 in_flight=1, restarts=0, name="scene-keyframes",
-                                 max_request=MAX_REQUEST, slot_bytes=settings.answer_bytes,
-                                 ready_s=ready_s)
-            if proc.wait_ready(ready_s):
-                return proc
-            proc.poll()  # why it did not start (or the deadline)
-            why = proc.gone or WorkerUnavailable(f"not ready in {ready_s:g} s")
-            proc.close()
-            raise WorkerUnavailable(f"the scene's keyframe worker could not start: {why}"
-                                    ) from why
-        finally:  # the process has copied the arrays out once it is ready (or gone)
-            shm.close()
-            shm.unlink()
+        return start_ready(FACTORY, {"keys": keys, "layout": layout, "rest": rest}, shm,
+                           settings, ready_s, "scene-keyframes")
 
     return start
 

@@ -285,17 +285,26 @@ def _start(scene: Scene, settings: WorkerSettings, ready_s: float) -> ProcessWor
     if scene.texture is not None:
         arrays["texture"] = np.ascontiguousarray(scene.texture)
     shm, layout = share_arrays(arrays)
+    return start_ready(FACTORY if settings.store is None else settings.store.factory,
+                       {"layout": layout, "field": (hf.dx, hf.dy, hf.name, dict(hf.meta))},
+                       shm, settings, ready_s, "keyframes")
+
+
+def start_ready(factory: str, args: dict, shm: shared_memory.SharedMemory,
+                settings: WorkerSettings, ready_s: float, name: str) -> ProcessWorker:
+    """The keyframe process ``name`` of the request handler ``factory`` (called with
+    ``args``, ``settings`` and ``shm_name``), ready, or
+    :class:`~lodsprite.procs.WorkerUnavailable` saying why not; the segment ``shm`` is
+    closed and unlinked once the process has copied it out (or is gone)."""
     try:
-        proc = ProcessWorker(FACTORY if settings.store is None else settings.store.factory, {
-            "shm_name": shm.name, "layout": layout,
-            "field": (hf.dx, hf.dy, hf.name, dict(hf.meta)), "settings": settings},
-            in_flight=1, restarts=0, name="keyframes", slot_bytes=settings.answer_bytes,
-            max_request=MAX_REQUEST, ready_s=ready_s)
+        proc = ProcessWorker(factory, {**args, "shm_name": shm.name, "settings": settings},
+                             in_flight=1, restarts=0, name=name, max_request=MAX_REQUEST,
+                             slot_bytes=settings.answer_bytes, ready_s=ready_s)
         if not proc.wait_ready(ready_s):
             proc.poll()  # a start that failed, or a deadline passed: the reason
             why = proc.gone or WorkerUnavailable(f"not ready in {ready_s:g} s")
             proc.close()
-            raise WorkerUnavailable(f"keyframe worker could not start: {why}") from why
+            raise WorkerUnavailable(f"the {name} worker could not start: {why}") from why
         return proc
     finally:
         shm.close()
