@@ -68,8 +68,8 @@ def reproduce(
         "--huge", help="large: also a 65536² store (see report.md for the disk it needs)")
     ] = False,
     full: Annotated[bool, typer.Option(
-        "--full", help="large: the long sweep (1k² to 16k², more frames and ε; hours "
-                       "without a GPU)")] = False,
+        "--full", help="large: the long sweep (1k² to 16k², more frames and ε; far "
+                       "longer than the default, not timed here)")] = False,
 ) -> None:
     """Run a paper's experiment; write DIR/results.json, PNG plots and DIR/report.md."""
     options = Options(terrain=terrain or "jacksboro", size=size or 512,
