@@ -54,13 +54,15 @@ class ViewOptions(TechniqueOptions):
         """These options with every one left out that has a terrain default filled
         (:func:`lodsprite.techniques.defaults.fill_defaults`); values given are kept.
         A store's ``key_sse`` default makes ``sprite`` (and no ``--mode``) mean
-        ``sprite-adaptive``: on a store, LOD-sprite's keyframes are adaptive."""
+        ``sprite-adaptive``: on a store, LOD-sprite's keyframes are adaptive.  Where
+        keyframes are rendered is chosen here too, once (:meth:`_default_keyframes`)."""
         from lodsprite.techniques.defaults import DEFAULTED, fill_defaults, terrain_defaults
 
         given = {k: self.options.get(k) for k in DEFAULTED}
-        worker = self.options.get("keyframes", self._default_keyframes()) == "worker"
-        out = replace(self, options={**self.options,
-                                     **fill_defaults(self.terrain, given, worker=worker)})
+        keyframes = self.options.get("keyframes", self._default_keyframes())
+        out = replace(self, options={
+            **self.options, "keyframes": keyframes,
+            **fill_defaults(self.terrain, given, worker=keyframes == "worker")})
         store_keys = terrain_defaults(self.terrain)["key_sse"] is not None
         if store_keys and self.mode in (None, "sprite") and "key_sse" in out.options:
             out = replace(out, mode="sprite-adaptive")
@@ -86,8 +88,7 @@ class ViewOptions(TechniqueOptions):
     def technique_options(self) -> dict:
         """The options the registry's techniques pick theirs from."""
         self = self.resolved()
-        chosen = self.options.get("keyframes", self._default_keyframes())
-        return {**self.options, "keyframes": chosen,
+        return {**self.options,
                 "target_fps": self.target_fps,
                 "schedule": "none" if self.target_fps is None else "scheduler"}  # scene
 
