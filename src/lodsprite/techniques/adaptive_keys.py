@@ -241,11 +241,6 @@ class WorkerAdaptiveKeys:
         self.engine = engine
         self.adaptive = adaptive
 
-    @property
-    def deficit_px(self) -> float:
-        """What the shown keyframe lacks (pixels), as the worker measured it."""
-        return self.engine.sprite.engine.deficit_px
-
     def record(self, decision: dict[str, Any]) -> None:
         """Nothing: each keyframe's selection came with it."""
 
@@ -270,11 +265,6 @@ class WorkerTiledAdaptiveKeys(WorkerAdaptiveKeys):
     """Tiles drawn by the worker process's adaptive renderer; the untimed replay draws
     each tile from the selection the worker drew it with
     (:attr:`~lodsprite.sprite.worker_tiles.WorkerTiledEngine.selections`)."""
-
-    @property
-    def deficit_px(self) -> float:
-        """What the tiles shown lack at most (pixels), as the worker measured it."""
-        return float(self.engine.tiled.deficits.max())
 
     def tile_drawer(self, update: int, tile: int) -> Callable:
         return redraw(self.adaptive, *self.engine.tiled.selections[(update, tile)])
