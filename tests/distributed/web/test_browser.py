@@ -165,7 +165,7 @@ def test_the_page_needs_the_token(server):
     assert refused.value.code == 401
     with urllib.request.urlopen(page_url(server), timeout=DEADLINE_S) as r:
         assert r.status == 200 and b"/static/main.js" in r.read()
-    for module in ("main", "wire", "gl", "camera", "predictor", "hud", "decode"):  # no token
+    for module in ("main", "app", "wire", "gl", "camera", "predictor", "hud", "decode"):  # no token
         url = f"http://127.0.0.1:{server['port']}/static/{module}.js"
         with urllib.request.urlopen(url, timeout=DEADLINE_S) as r:
             assert r.status == 200 and b"export" in r.read() or module == "main"

@@ -312,10 +312,11 @@ def test_the_web_benchmark_calls_only_what_the_page_exposes():
         "web_vs_streaming", root / "benchmarks" / "web_vs_streaming.py")
     bench = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(bench)
-    main = (root / "src/lodsprite/distributed/web/static/main.js").read_text()
-    api = main[main.index("const api = {"):main.index("window.lodsprite = api")]
+    app = (root / "src/lodsprite/distributed/web/static/app.js").read_text()
+    api = app[app.index("  const api = {"):app.index("  return api;")]
     exposed = set(re.findall(r"^\s+(\w+)(?:\(|:|,$)", api, re.M))  # name(), name: or name,
-    exposed |= set(re.findall(r"^api\.(\w+) =", api, re.M))
+    exposed |= set(re.findall(r"^\s+api\.(\w+) =", api, re.M))
+    exposed |= set(re.findall(r"^\s+get (\w+)\(\)", api, re.M))
     used = set(re.findall(r"\bl\.(\w+)", bench.SAMPLE_JS["sprite"]))
     used |= set(re.findall(r"get\(\)\.(\w+)", bench.WAIT_JS)) - {"%s"}
     used |= {"ready", "finished", "stats"}  # WAIT_JS's % arguments and play()'s stats()

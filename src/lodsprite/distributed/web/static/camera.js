@@ -50,34 +50,40 @@ export function lookAlong(eye, forward, up = [0, 0, 1]) {
 export function lookAt(eye, target) { return lookAlong(eye, sub(target, eye)); }
 
 // Fly controls over a viewpoint; `speed` in metres per second, the user's input marks the
-// time of the last change (`moved`).
+// time of the last change (`moved`).  Keys are read on `keyTarget` (the window on the
+// page; the canvas in a notebook, so that typing in a cell flies nothing); detach()
+// removes every listener.
 export class FlyControls {
-  constructor(canvas, viewpoint, speed) {
+  constructor(canvas, viewpoint, speed, keyTarget = window) {
+    this.listening = new AbortController();
+    const on = { signal: this.listening.signal };
     this.vp = viewpoint; this.speed = speed; this.keys = new Set(); this.moved = -Infinity;
     this.yawRate = 1.2;  // radians per second with the arrow keys
     const dirs = this._angles();
     this.yaw = dirs.yaw; this.pitch = dirs.pitch;
-    addEventListener('keydown', (e) => { this.keys.add(e.key.toLowerCase()); });
-    addEventListener('keyup', (e) => { this.keys.delete(e.key.toLowerCase()); });
+    keyTarget.addEventListener('keydown', (e) => { this.keys.add(e.key.toLowerCase()); }, on);
+    keyTarget.addEventListener('keyup', (e) => { this.keys.delete(e.key.toLowerCase()); }, on);
+    keyTarget.addEventListener('blur', () => { this.keys.clear(); }, on);
     let drag = null;
-    canvas.addEventListener('pointerdown', (e) => { if (e.pointerType === 'mouse') drag = [e.clientX, e.clientY]; });
-    addEventListener('pointerup', () => { drag = null; });
+    canvas.addEventListener('pointerdown', (e) => { if (e.pointerType === 'mouse') drag = [e.clientX, e.clientY]; }, on);
+    addEventListener('pointerup', () => { drag = null; }, on);
     addEventListener('pointermove', (e) => {
       if (!drag) return;
       this.turn((e.clientX - drag[0]) * -0.005, (e.clientY - drag[1]) * -0.005);
       drag = [e.clientX, e.clientY];
-    });
-    canvas.addEventListener('wheel', (e) => { e.preventDefault(); this.forward(-e.deltaY * this.speed * 0.002); }, { passive: false });
-    this._touches(canvas);
+    }, on);
+    canvas.addEventListener('wheel', (e) => { e.preventDefault(); this.forward(-e.deltaY * this.speed * 0.002); }, { passive: false, ...on });
+    this._touches(canvas, on);
   }
+  detach() { this.listening.abort(); this.keys.clear(); }
   _angles() {
     const f = scale(this.vp.z, -1);
     return { yaw: Math.atan2(f[1], f[0]), pitch: Math.asin(Math.max(-1, Math.min(1, f[2]))) };
   }
-  _touches(canvas) {
+  _touches(canvas, on) {
     let last = null;
     const read = (e) => [...e.touches].map((t) => [t.clientX, t.clientY]);
-    canvas.addEventListener('touchstart', (e) => { e.preventDefault(); last = read(e); }, { passive: false });
+    canvas.addEventListener('touchstart', (e) => { e.preventDefault(); last = read(e); }, { passive: false, ...on });
     canvas.addEventListener('touchmove', (e) => {
       e.preventDefault();
       const now = read(e);
@@ -88,8 +94,8 @@ export class FlyControls {
         this.forward((d(now) - d(last)) * this.speed * 0.004);
       }
       last = now;
-    }, { passive: false });
-    canvas.addEventListener('touchend', (e) => { last = read(e); });
+    }, { passive: false, ...on });
+    canvas.addEventListener('touchend', (e) => { last = read(e); }, on);
   }
   turn(dYaw, dPitch) {
     this.yaw += dYaw;

@@ -1,0 +1,240 @@
+// The lodsprite client (Swan et al. 2002's LOD client in a browser), whatever carries its
+// messages: it loads the coarse level and the terrain texture from the server, draws a
+// spriteframe every display frame from the last keyframe (gl.js), asks for keyframes
+// ahead of the viewer (predictor.js), flies with the keyboard, mouse and touch
+// (camera.js) or plays a camera path the server computes, and shows a HUD (hud.js).
+// The web page (main.js) carries its messages over a WebSocket, the notebook widget
+// (lodsprite.widget) over the widget's own messages; both are this module.
+//
+// startApp({canvas, hud, transport, options, decoderUrl, keyTarget}) -> the client's API:
+//   transport: {opened: Promise, send(Uint8Array), onmessage(handler(ArrayBuffer)),
+//               onclose(handler())}: one web message (wire.js) each way a call;
+//   options: {terrain, size: [w, h], lod, epsilon, visibility, grid, path, frames}, and
+//   moreOptions (a Promise of more, merged before the load; a rejection fails `ready`);
+//   decoderUrl: decode.js's URL (a module Web Worker); keyTarget: the element whose key
+//   presses fly the camera (default: the window).
+// The API (for tests, tools and the widget): ready (a Promise: scene loaded), finished()
+// (a Promise: the path played and the held view's keyframe shown), stats(), pixels(),
+// viewpoint(), pathIndex() (path viewpoints drawn so far: the one shown is pathIndex() - 1),
+// serverStats() (a Promise: the `stats` op's reply data), decoded() (keyframes decoded by
+// the decode worker), play(spec, frames) (a Promise: the path's viewpoints arrived and
+// play), stop() (hold the view shown), setViewpoint(vp), screenshot() (a Promise: a PNG
+// Blob of the canvas), close().
+//
+// Keyframes are decoded by a Web Worker (decode.js: inflate, checks, an ImageBitmap of the
+// colour) and uploaded when their decode resolves; a frame only adopts the newest one
+// uploaded, so it never waits for a decode or an upload.
+
+import { pack, unpack, image } from './wire.js';
+import { SpriteDrawer } from './gl.js';
+import { FlyControls, lookAt, norm, sub } from './camera.js';
+import { ErrorMetric, Predictor } from './predictor.js';
+import { Hud } from './hud.js';
+
+const RESTING_MS = 250;   // no input this long: the viewer rests (one exact keyframe)
+const VIEWPOINT_MS = 33;  // viewpoint samples to the server at most this often
+const KEEP = 2000;        // frame intervals and latencies kept for stats()
+
+export function percentile(values, p) {
+  if (!values.length) return null;
+  const s = [...values].sort((a, b) => a - b);
+  return s[Math.min(s.length - 1, Math.floor(p * (s.length - 1) + 0.5))];
+}
+function keep(list, x) { list.push(x); if (list.length > KEEP) list.shift(); }
+
+// Viewpoint rows of a `path` reply (12 numbers: axes x, y, z, then the eye o).
+export function viewpoints(rows) {
+  return rows.map((r) => ({ x: r.slice(0, 3), y: r.slice(3, 6), z: r.slice(6, 9), o: r.slice(9, 12) }));
+}
+
+export function startApp({ canvas, hud: hudEl = null, transport, options, moreOptions = null, decoderUrl, keyTarget = window }) {
+  const [width, height] = options.size;
+  canvas.width = width; canvas.height = height;
+  const hud = hudEl ? new Hud(hudEl) : null;
+  const stats = { frames: 0, keyframes: 0, intervals: [], latencies: [], error_px: null, errorSum: 0, errorFrames: 0 };
+  // Input to pixels: a key press's event time to the display frame after the first frame
+  // drawn from a camera that includes it (the flying camera's; a path ignores keys).
+  const inputs = { pending: [], drawn: [], ms: [] };
+  const playing = () => path && pathIndex < path.length;
+  const onKey = (e) => { if (!e.repeat && !playing()) inputs.pending.push(e.timeStamp); };
+  keyTarget.addEventListener('keydown', onKey);
+  let state = 'connecting', seq = 0, closed = false;
+  const waiting = new Map();  // control seq -> resolve
+  let sceneResolve;
+  const sceneArrived = new Promise((r) => { sceneResolve = r; });
+  let pendingKey = null;  // the newest keyframe uploaded, not yet drawn: {header, key}
+  let keyframesIn = 0, newestDecoded = 0, decoded = 0;
+  const keyframeHeaders = new Map();  // decode id -> header
+  const decoder = new Worker(decoderUrl, { type: 'module' });
+  decoder.onmessage = ({ data }) => {
+    const header = keyframeHeaders.get(data.id);
+    keyframeHeaders.delete(data.id);
+    if (data.error) { state = `bad keyframe: ${data.error}`; return; }
+    decoded += 1;
+    if (closed || !renderer || !header || data.id < newestDecoded) { data.bitmap.close(); return; }  // older than one uploaded
+    newestDecoded = data.id;
+    const key = renderer.prepareKeyframe(header, data.bitmap, data.depth);
+    if (pendingKey) renderer.dropKeyframe(pendingKey.key);  // superseded before a frame drew it
+    pendingKey = { header, key };
+  };
+  decoder.onerror = (e) => { state = `keyframe decoder: ${e.message}`; };
+
+  const send = (header) => { seq += 1; transport.send(pack({ seq, ...header })); return seq; };
+  const call = (op, args = {}) => new Promise((resolve) => { waiting.set(send({ kind: 'control', op, args }), resolve); });
+
+  transport.onmessage(async (data) => {
+    let msg;
+    try { msg = unpack(data); } catch (e) { state = `bad message: ${e.message}`; return; }
+    const { header, buffers } = msg;
+    if (header.kind === 'reply') {
+      const resolve = waiting.get(header.seq);
+      if (resolve) { waiting.delete(header.seq); resolve(header); return; }
+      if (!header.ok) { state = header.error; predictor?.failed(header.seq); }
+    } else if (header.kind === 'scene') {
+      try {
+        const [heights, texture] = await Promise.all([image(header.heights, buffers[0]), image(header.texture, buffers[1])]);
+        sceneResolve({ header, heights, texture });
+      } catch (e) { state = `bad scene: ${e.message}`; }
+    } else if (header.kind === 'keyframe') {
+      keyframesIn += 1;
+      keyframeHeaders.set(keyframesIn, header);
+      decoder.postMessage({ id: keyframesIn, header, color: buffers[0], depth: buffers[1] }, [data]);
+    }
+  });
+  transport.onclose(() => { state = 'disconnected'; });
+
+  let renderer, metric, predictor, controls, path = null, pathIndex = 0, pathName = null;
+  let shownVp = null, keyEye = null, finishedResolve = () => {}, finished = null, lastFrame = null, lastSample = -Infinity;
+  const newFinished = () => { finished = new Promise((r) => { finishedResolve = r; }); };
+  newFinished();
+
+  async function load() {
+    if (moreOptions) Object.assign(options, await moreOptions);
+    await transport.opened;
+    const args = {
+      terrain: options.terrain, size: [width, height], lod: options.lod, epsilon: options.epsilon,
+      grid: options.grid, visibility: options.visibility,
+    };
+    const reply = await call('load', args);
+    if (!reply.ok) throw new Error(reply.error);
+    const scene = await sceneArrived;
+    const h = scene.header;
+    renderer = new SpriteDrawer(canvas);
+    renderer.setScene(h, scene.heights, scene.texture);
+    metric = new ErrorMetric(h, scene.heights);
+    predictor = new Predictor(h.epsilon, h.fov, width / height, h.near, h.far, height);
+    predictor.failed = (s) => { if (predictor.inflight && predictor.inflight.seq === s) predictor.inflight = null; };
+    const extent = h.coarse * h.spacing;
+    const centre = [h.origin[0] + extent / 2, h.origin[1] + extent / 2, 0];
+    controls = new FlyControls(canvas, lookAt([centre[0], centre[1] - 1.2 * extent, 0.6 * extent], centre), 0.25 * extent, keyTarget);
+    if (options.path) await play(options.path, options.frames);
+    else state = 'flying';
+    requestAnimationFrame(frame);
+  }
+
+  async function play(spec, frames) {
+    const p = await call('path', { spec, frames });
+    if (!p.ok) throw new Error(p.error);
+    path = viewpoints(p.data.viewpoints);
+    pathIndex = 0; pathName = spec;
+    newFinished();
+    state = `playing ${spec}`;
+  }
+
+  function hold(vp) {  // fly from vp on: a path stops where it is
+    path = null;
+    controls.set(vp);
+    controls.moved = performance.now();
+    state = 'flying';
+  }
+
+  function adopt(now) {
+    const { header, key } = pendingKey;
+    pendingKey = null;
+    renderer.useKeyframe(key);
+    keyEye = header.viewpoint.o;
+    stats.keyframes += 1;
+    keep(stats.latencies, now - 1000 * header.t0);
+    predictor.arrived(header.t0, now / 1000);
+  }
+
+  function frame(now) {
+    if (closed) return;
+    const dt = lastFrame === null ? 0 : (now - lastFrame) / 1000;
+    if (lastFrame !== null) keep(stats.intervals, now - lastFrame);
+    lastFrame = now;
+    for (const t of inputs.drawn) keep(inputs.ms, now - t);  // the drawn frame presented
+    inputs.drawn = [];
+    let vp, resting;
+    if (playing()) {
+      vp = path[pathIndex++];
+      resting = pathIndex === path.length;
+      if (resting) { controls.set(vp); state = `${pathName} played: holding`; }
+    } else {
+      vp = controls.step(dt);
+      resting = now - controls.moved > RESTING_MS;
+      [inputs.drawn, inputs.pending] = [inputs.pending, []];  // this frame's camera has them
+    }
+    shownVp = vp;
+    predictor.sample(now / 1000, vp);
+    if (pendingKey) adopt(now);
+    const want = predictor.want(metric, keyEye, now / 1000, resting);
+    if (want) {
+      const t = now / 1000;
+      const s = send({ kind: 'request', t, viewpoint: want });
+      predictor.sent(t, want); predictor.inflight.seq = s;
+    } else if (now - lastSample > VIEWPOINT_MS) {
+      lastSample = now;
+      const shown = keyEye ? { eye: keyEye, slot: 0 } : undefined;  // as the ZeroMQ client
+      send({ kind: 'viewpoint', t: now / 1000, viewpoint: vp, shown });
+    }
+    renderer.draw(predictor.viewProj(vp));
+    stats.error_px = predictor.errorPx(metric, keyEye, vp);
+    if (Number.isFinite(stats.error_px)) { stats.errorSum += stats.error_px; stats.errorFrames += 1; }
+    stats.frames += 1;
+    if (path && pathIndex === path.length && keyEye && norm(sub(keyEye, vp.o)) <= 1e-6 * (1 + norm(vp.o))) {
+      finishedResolve(stats.frames);
+    }
+    if (hud) hud.update(now, api.stats, state);
+    requestAnimationFrame(frame);
+  }
+
+  const api = {
+    stats() {
+      return {
+        frames: stats.frames, keyframes: stats.keyframes,
+        median_ms: percentile(stats.intervals, 0.5), p99_ms: percentile(stats.intervals, 0.99),
+        error_px: Number.isFinite(stats.error_px) ? stats.error_px : null,
+        error_px_mean: stats.errorFrames ? stats.errorSum / stats.errorFrames : null,
+        latency_ms: percentile(stats.latencies, 0.5),
+        input_ms: percentile(inputs.ms, 0.5), input_ms_p99: percentile(inputs.ms, 0.99),
+        inputs: inputs.ms.length,
+      };
+    },
+    resetStats() {
+      Object.assign(stats, { frames: 0, keyframes: 0, intervals: [], latencies: [], errorSum: 0, errorFrames: 0 });
+      inputs.ms = []; lastFrame = null;
+    },
+    pixels: () => renderer.pixels(),
+    viewpoint: () => controls && controls.vp,
+    pathIndex: () => pathIndex,
+    state: () => state,
+    serverStats: () => call('stats').then((r) => r.data),
+    decoded: () => decoded,
+    get finished() { return finished; },
+    play,
+    stop() { if (controls) hold(shownVp || controls.vp); },
+    setViewpoint(vp) { if (controls) hold(vp); },
+    screenshot: () => new Promise((resolve) => canvas.toBlob(resolve, 'image/png')),
+    close() {
+      closed = true;
+      keyTarget.removeEventListener('keydown', onKey);
+      if (controls) controls.detach();
+      decoder.terminate();
+      const gl = canvas.getContext('webgl2');  // the context the drawer made: lost, freed
+      gl?.getExtension('WEBGL_lose_context')?.loseContext();
+    },
+  };
+  api.ready = load().then(() => true, (e) => { state = `failed: ${e.message}`; if (hud) hud.update(Infinity, api.stats, state); throw e; });
+  return api;
+}
