@@ -16,6 +16,7 @@ The public API (see the README's "Python API" section):
   :class:`Frame`), the registry (:class:`TechniqueSpec`, :class:`Option`, :func:`register`,
   module :mod:`lodsprite.techniques`), :func:`run_path`, the one harness, and
   :func:`view_scene`, the viewer window with your own techniques;
+* notebooks: :func:`widget`, a Jupyter widget flying a terrain (the ``notebook`` extra);
 * errors: :class:`LodspriteError` and its subclasses.
 """
 
@@ -44,13 +45,14 @@ _LAZY = {
     "Frame": "lodsprite.techniques", "TechniqueSpec": "lodsprite.techniques",
     "Option": "lodsprite.techniques", "register": "lodsprite.techniques",
     "run_path": "lodsprite.harness", "open_scene": "lodsprite.scene",
-    "view_scene": "lodsprite.viewer.app",
+    "view_scene": "lodsprite.viewer.app", "widget": "lodsprite.notebook",
 }
 
 if TYPE_CHECKING:
     from lodsprite.api import LodSprite, Renderer, read_image, write_image
     from lodsprite.camera import Projection, Viewpoint, look_at
     from lodsprite.harness import run_path
+    from lodsprite.notebook import widget
     from lodsprite.paths import CameraPath, get_path, load_path_json
     from lodsprite.run import render_path
     from lodsprite.runconfig import RenderConfig
@@ -117,5 +119,6 @@ __all__ = [
     "run_path",
     "terrain_techniques",
     "view_scene",
+    "widget",
     "write_image",
 ]

@@ -92,6 +92,7 @@ class Hub:
         self._generation: dict[str, int] = {}
         self._tasks: set[asyncio.Task] = set()
         self._ticker: asyncio.Task | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
         timeout = getattr(pool, "job_timeout_s", JOB_TIMEOUT_S)  # the broker's: one timeout
         self.job_timeout_s = timeout * POOL_TRIES + JOB_GRACE_S
 
@@ -100,10 +101,17 @@ class Hub:
     def start(self) -> None:
         loop = asyncio.get_running_loop()
         loop.add_reader(self.pool.fileno(), self.drain)
+        self._loop = loop
         self._ticker = loop.create_task(self._tick())
 
     async def stop(self) -> None:
-        asyncio.get_running_loop().remove_reader(self.pool.fileno())
+        self.close()
+
+    def close(self) -> None:
+        """End the hub's tasks and sessions (from the loop's thread; idempotent)."""
+        loop = self._loop
+        if loop is not None and not loop.is_closed():
+            loop.remove_reader(self.pool.fileno())
         for task in [self._ticker, *self._tasks]:
             if task is not None:
                 task.cancel()

@@ -1,0 +1,86 @@
+"""What a notebook widget shows: a terrain named as the web server names one, resolved
+in the kernel before anything starts.
+
+The user's own Python names the terrain (a file or a store folder, or a built-in); the
+widget serves that one name from the file's folder, by the web server's rules
+(:class:`~lodsprite.distributed.datasets.Datasets`: no path outside the folder, stores
+without symlinks, size caps), and a ``load`` from the browser that names anything else is
+refused.  Every argument is checked here, as the server will check it
+(:class:`~lodsprite.distributed.protocol.LoadArgs`), so a bad one is one
+:class:`~lodsprite.errors.InputError` in the cell, not a failure in the browser later.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import msgspec
+
+from lodsprite.distributed.datasets import Datasets
+from lodsprite.distributed.protocol import LoadArgs, PathArgs
+from lodsprite.errors import InputError
+
+__all__ = ["WidgetSource", "check_path", "resolve_source"]
+
+
+@dataclass(frozen=True)
+class WidgetSource:
+    """A resolved widget terrain: the ``load`` a view sends (names as the server takes
+    them) and the folder they are served from (None: built-ins only)."""
+
+    load: LoadArgs
+    data_dir: Path | None
+
+
+def _name_in(value: str | Path, kind: str, folder: Path | None) -> tuple[str, Path | None]:
+    """``value`` as a name the server resolves, and the folder it is in (None: a
+    built-in); a file outside ``folder`` (when given) is refused."""
+    text = str(value)
+    probe = Datasets(None)
+    try:  # a built-in name (jacksboro, fractal:N[:S], terrain, checker[:K])
+        getattr(probe, kind)(text)
+        return text, None
+    except InputError as exc:
+        builtin_error = exc
+    path = Path(text).expanduser()
+    if not path.exists():
+        if "/" in text or Path(text).suffix:
+            raise InputError(f"{kind} not found: {text}")
+        raise builtin_error
+    path = path.resolve()
+    if folder is not None and path.parent != folder:
+        raise InputError(f"{kind} {text}: a widget serves files from one folder, "
+                         f"{folder}")
+    return path.name, path.parent
+
+
+def resolve_source(terrain: str | Path, texture: str | Path = "terrain",
+                   **load: object) -> WidgetSource:
+    """The :class:`WidgetSource` for ``terrain`` and ``texture`` (each a built-in name
+    or a file; files in one folder) and the other ``load`` fields (``size``, ``lod``,
+    ``epsilon``, ``visibility``, ``grid``, ``fov_y_deg``, ``exaggeration``); raises
+    :class:`InputError` with one line naming the bad value."""
+    t_name, folder = _name_in(terrain, "terrain", None)
+    x_name, x_folder = _name_in(texture, "texture", folder)
+    folder = folder or x_folder
+    fields = {k: v for k, v in load.items() if v is not None}
+    if "size" in fields:
+        fields["size"] = list(fields["size"])  # type: ignore[call-overload]
+    try:
+        args = msgspec.convert({"terrain": t_name, "texture": x_name, **fields}, LoadArgs)
+    except (msgspec.ValidationError, ValueError) as exc:
+        raise InputError(f"widget: {str(exc).splitlines()[0]}") from None
+    datasets = Datasets(folder)
+    datasets.terrain(args.terrain)  # the server's checks, here first
+    datasets.texture(args.texture)
+    return WidgetSource(args, folder)
+
+
+def check_path(spec: str, frames: int | None) -> PathArgs:
+    """``spec`` and ``frames`` as the ``path`` op takes them (a built-in path: chen1999,
+    swan2002, flyover[:...], patrol[:...], bank[:...]); raises :class:`InputError`."""
+    try:
+        return msgspec.convert({"spec": spec, "frames": frames}, PathArgs)
+    except msgspec.ValidationError as exc:
+        raise InputError(f"path {spec!r}, frames {frames}: {exc}") from None
