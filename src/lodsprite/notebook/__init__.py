@@ -12,23 +12,39 @@ from typing import Any
 __all__ = ["widget"]
 
 
-def widget(source: str | Path = "jacksboro", **kwargs: Any):
-    """A widget for ``source`` (a DEM file, a terrain store folder, a built-in terrain;
-    see :class:`~lodsprite.notebook.sprite.SpriteWidget` for the keyword arguments),
-    displayed as a cell's value.  Raises :class:`~lodsprite.errors.InputError` (one
-    line) for a bad argument, and :class:`~lodsprite.errors.LodspriteError` naming the
-    ``notebook`` extra when anywidget is not installed."""
+def widget(source: str | Path = "jacksboro", *, stream: bool = False, **kwargs: Any):
+    """A widget for ``source``, displayed as a cell's value.
+
+    A terrain (a DEM file, a terrain store folder, a built-in such as ``jacksboro`` or
+    ``fractal:N``) gives a :class:`~lodsprite.notebook.sprite.SpriteWidget`: spriteframes
+    drawn in the browser, keyframes from the kernel's renderer processes (see it for the
+    keyword arguments).  A scene the browser does not draw (a scene file, a light field,
+    a crowd), or any scene with ``stream=True``, gives a
+    :class:`~lodsprite.notebook.stream.StreamWidget`: every frame rendered in the kernel.
+    Raises :class:`~lodsprite.errors.InputError` (one line) for a bad argument, and
+    :class:`~lodsprite.errors.LodspriteError` naming the ``notebook`` extra when its
+    packages are not installed."""
     from lodsprite.errors import LodspriteError
 
     try:
         from lodsprite.notebook.sprite import SpriteWidget
+        from lodsprite.notebook.stream import StreamWidget
     except ModuleNotFoundError as exc:
-        if exc.name not in ("anywidget", "traitlets", "ipywidgets"):
+        if exc.name not in ("anywidget", "traitlets", "ipywidgets", "jupyter_rfb"):
             raise
         raise LodspriteError("lodsprite.widget needs the notebook extra: "
                              "pip install 'lodsprite[notebook]'") from None
     one_line_errors()
+    if stream or _scene_kind(str(source)):
+        return StreamWidget(source, **kwargs)
     return SpriteWidget(source, **kwargs)
+
+
+def _scene_kind(spec: str) -> bool:
+    """Whether a scene kind (a scene file, a crowd, a light field) claims ``spec``."""
+    from lodsprite.scene.kinds import scene_kinds
+
+    return any(kind.claims(spec) for kind in scene_kinds())
 
 
 def one_line_errors() -> None:
@@ -44,6 +60,8 @@ def one_line_errors() -> None:
     from lodsprite.errors import LodspriteError
 
     def handler(self, etype, value, tb, tb_offset=None):  # IPython's CustomTB signature
-        return [f"{etype.__name__}: {value}"]
+        stb = [f"{etype.__name__}: {value}"]
+        self._showtraceback(etype, value, stb)  # the kernel's error message, one line
+        return stb
 
     shell.set_custom_exc((LodspriteError,), handler)

@@ -12,16 +12,20 @@ refused.  Every argument is checked here, as the server will check it
 
 from __future__ import annotations
 
+import asyncio
 from dataclasses import dataclass
 from pathlib import Path
 
 import msgspec
 
 from lodsprite.distributed.datasets import Datasets
-from lodsprite.distributed.protocol import LoadArgs, PathArgs
-from lodsprite.errors import InputError
+from lodsprite.distributed.protocol import MAX_IMAGE_SIDE, LoadArgs, PathArgs
+from lodsprite.errors import InputError, LodspriteError
 
-__all__ = ["WidgetSource", "check_path", "resolve_source"]
+__all__ = ["MIN_SIDE", "WidgetSource", "check_path", "path_played", "resolve_source"]
+
+MIN_SIDE = 16
+"""Smallest canvas side (pixels) a widget draws, as the renderer's."""
 
 
 @dataclass(frozen=True)
@@ -66,7 +70,11 @@ def resolve_source(terrain: str | Path, texture: str | Path = "terrain",
     folder = folder or x_folder
     fields = {k: v for k, v in load.items() if v is not None}
     if "size" in fields:
-        fields["size"] = list(fields["size"])  # type: ignore[call-overload]
+        size = fields["size"] = list(fields["size"])  # type: ignore[call-overload]
+        if len(size) != 2 or not all(isinstance(v, int) and MIN_SIDE <= v <= MAX_IMAGE_SIDE
+                                     for v in size):
+            raise InputError(f"widget: size {tuple(size)}: (width, height), each "
+                             f"{MIN_SIDE}..{MAX_IMAGE_SIDE} pixels")
     try:
         args = msgspec.convert({"terrain": t_name, "texture": x_name, **fields}, LoadArgs)
     except (msgspec.ValidationError, ValueError) as exc:
@@ -84,3 +92,14 @@ def check_path(spec: str, frames: int | None) -> PathArgs:
         return msgspec.convert({"spec": spec, "frames": frames}, PathArgs)
     except msgspec.ValidationError as exc:
         raise InputError(f"path {spec!r}, frames {frames}: {exc}") from None
+
+
+async def path_played(future: asyncio.Future | None, timeout: float) -> int:
+    """The result of a widget's ``played`` ``future`` (frames drawn); raises
+    :class:`LodspriteError` without one (no path started) or after ``timeout`` s."""
+    if future is None:
+        raise LodspriteError("no path is playing: call play() first")
+    try:
+        return await asyncio.wait_for(asyncio.shield(future), timeout)
+    except TimeoutError:
+        raise LodspriteError(f"the path did not finish within {timeout:g} s") from None

@@ -25,11 +25,11 @@ import numpy as np
 import traitlets
 
 from lodsprite.camera import Viewpoint
-from lodsprite.errors import InputError, LodspriteError
+from lodsprite.errors import InputError
 from lodsprite.notebook.bundle import widget_css, widget_esm
 from lodsprite.notebook.kernel import WidgetCore
 from lodsprite.notebook.messages import STATS_KEYS, viewpoint_row
-from lodsprite.notebook.source import check_path, resolve_source
+from lodsprite.notebook.source import check_path, path_played, resolve_source
 
 __all__ = ["SpriteWidget"]
 
@@ -116,15 +116,7 @@ class SpriteWidget(anywidget.AnyWidget):
         """Wait (``await w.played()``) until the path :meth:`play` started has played
         and its held view's keyframe shows; the frames drawn.  Raises
         :class:`LodspriteError` when the view fails or ``timeout`` s pass."""
-        import asyncio
-
-        core = self._core
-        if core.played is None:
-            raise LodspriteError("no path is playing: call play() first")
-        try:
-            return await asyncio.wait_for(asyncio.shield(core.played), timeout)
-        except TimeoutError:
-            raise LodspriteError(f"the path did not finish within {timeout:g} s") from None
+        return await path_played(self._core.played, timeout)
 
     def stop(self) -> None:
         """Stop a playing path where it is; the view is then flown by hand."""
@@ -174,5 +166,7 @@ class SpriteWidget(anywidget.AnyWidget):
     def close(self) -> None:
         """Close the views, the sessions, the renderer processes (their GL contexts)
         and the widget; idempotent."""
-        self._finalizer()
+        finalizer = getattr(self, "_finalizer", None)  # None: __init__ failed before it
+        if finalizer is not None:
+            finalizer()
         super().close()

@@ -1,0 +1,227 @@
+"""A streaming widget: every frame rendered in the kernel and sent to the browser
+(jupyter_rfb on anywidget, the convention of PyVista, pygfx and vispy in Jupyter: JPEG
+at quality 80 while moving, a lossless PNG when still, at most two frames in flight).
+
+It shows any scene the library opens (a terrain, a scene file with objects, a light
+field, a crowd), drawn at full detail by :meth:`lodsprite.Renderer.draw`; it is what
+:func:`lodsprite.widget` returns for the scenes the browser's spriteframes do not draw,
+and the baseline the sprite widget is measured against (``benchmarks/
+notebook_vs_rfb.py``).  Every frame waits for the kernel and the network: a frame shows
+the camera as the kernel last heard of it.  Same Python API as
+:class:`~lodsprite.notebook.sprite.SpriteWidget`.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import io
+import time
+from collections import deque
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from jupyter_rfb import RemoteFrameBuffer
+
+from lodsprite.camera import Viewpoint
+from lodsprite.errors import InputError, LodspriteError
+from lodsprite.notebook.flight import FlyCamera, look_along
+from lodsprite.notebook.source import check_path, path_played
+
+__all__ = ["StreamWidget"]
+
+KEEP = 2000
+MAX_INPUTS = 2000
+
+
+def _percentile(values: Any, p: float) -> float | None:
+    a = np.asarray(values, dtype=np.float64)
+    return float(np.percentile(a, p)) if a.size else None
+
+
+def start_view(scene: Any) -> Viewpoint:
+    """A first viewpoint: the scene file's default path's first, else over the terrain
+    looking at its centre (as the page's), else 30 m back from the origin."""
+    try:
+        return scene.path(None if scene.view is None else scene.view.path, 2).viewpoints[0]
+    except Exception:  # noqa: BLE001 - no default path: a view of its own
+        pass
+    if scene.hf is not None:
+        lo, hi = scene.hf.bounds()
+        centre = 0.5 * (lo + hi)
+        extent = float(hi[0] - lo[0])
+        eye = np.array([centre[0], centre[1] - 1.2 * extent, centre[2] + 0.6 * extent])
+        return look_along(eye, centre - eye)
+    return look_along(np.array([0.0, -30.0, 5.0]), np.array([0.0, 1.0, -0.15]))
+
+
+class StreamWidget(RemoteFrameBuffer):
+    """Frames of ``source`` rendered in the kernel, ``size`` (w, h) pixels; see the
+    module."""
+
+    def __init__(self, source: str | Path = "jacksboro", *, path: str | None = None,
+                 frames: int | None = None, size: tuple[int, int] = (640, 480),
+                 fov_y_deg: float | None = None, quality: int = 80, **scene_options: Any
+                 ) -> None:
+        from lodsprite import Renderer, open_scene
+
+        w, h = (int(v) for v in size)
+        scene = open_scene(str(source), **scene_options)
+        if path is not None:
+            check_path(path, frames)
+        fov = fov_y_deg or (scene.view.fov_y_deg if scene.view is not None
+                            and getattr(scene.view, "fov_y_deg", None) else 45.0)
+        super().__init__(css_width=f"{w}px", css_height=f"{h}px", resizable=False,
+                         quality=quality)
+        self.scene = scene
+        self.renderer = Renderer(scene, size=(w, h), fov_y_deg=fov)
+        first = start_view(scene)
+        span = (float(np.ptp(scene.hf.bounds(), axis=0)[0]) if scene.hf is not None
+                else 60.0)
+        self.flight = FlyCamera(first, 0.25 * span)
+        self._path: list[Viewpoint] = []
+        self._path_index = 0
+        self._played: asyncio.Future | None = None
+        self._last = None  # the frame time (perf_counter) of the last frame
+        self._started = time.perf_counter()
+        self._intervals: deque[float] = deque(maxlen=KEEP)
+        self._render_ms: deque[float] = deque(maxlen=KEEP)
+        self._drag: tuple[float, float] | None = None
+        self.inputs: deque[tuple[float, int]] = deque(maxlen=MAX_INPUTS)
+        """(browser event timestamp, index of the first frame rendered after it) for each
+        key press, for input-to-frame measurements (the frame index is jupyter_rfb's)."""
+        self._pending_inputs: list[float] = []
+        self.frames = 0
+        if path is not None:
+            self.play(path, frames)
+        else:
+            self.request_draw()
+
+    # ------------------------------------------------------------------ rendering
+
+    def get_frame(self) -> np.ndarray:
+        """Render the next frame (the path's next viewpoint, or the flown camera)."""
+        now = time.perf_counter()
+        dt = 0.0 if self._last is None else now - self._last
+        if self._last is not None:
+            self._intervals.append(dt * 1e3)
+        self._last = now
+        more = False
+        if self._path_index < len(self._path):
+            vp = self._path[self._path_index]
+            self._path_index += 1
+            more = self._path_index < len(self._path)
+            self.flight.viewpoint = vp
+            if not more and self._played is not None and not self._played.done():
+                self._played.set_result(self.frames + 1)
+        else:
+            more = self.flight.step(dt)
+            vp = self.flight.viewpoint
+        t0 = time.perf_counter()
+        self.renderer.draw(vp, t=now - self._started)
+        image = self.renderer.read_color()
+        self._render_ms.append((time.perf_counter() - t0) * 1e3)
+        self.frames += 1
+        index = self._rfb_frame_index + 1  # the index jupyter_rfb gives this frame
+        self.inputs.extend((t, index) for t in self._pending_inputs)
+        self._pending_inputs = []
+        if more:
+            self.request_draw()
+        return image
+
+    def handle_event(self, event: dict) -> None:
+        kind = event.get("type") or event.get("event_type")
+        if kind == "key_down":
+            key = str(event.get("key", "")).lower()[:16]
+            self.flight.keys.add(key)
+            self._pending_inputs.append(float(event.get("timestamp", 0.0) or 0.0))
+        elif kind == "key_up":
+            self.flight.keys.discard(str(event.get("key", "")).lower()[:16])
+        elif kind == "pointer_down":
+            self._drag = (float(event.get("x", 0)), float(event.get("y", 0)))
+        elif kind == "pointer_up":
+            self._drag = None
+        elif kind == "pointer_move" and self._drag is not None:
+            x, y = float(event.get("x", 0)), float(event.get("y", 0))
+            self.flight.drag(x - self._drag[0], y - self._drag[1])
+            self._drag = (x, y)
+        elif kind == "wheel":
+            self.flight.wheel(float(event.get("dy", 0.0)))
+        else:
+            return
+        self._path = []  # input takes the camera from a path
+        self._last = None if not self.flight.keys else self._last
+        self.request_draw()
+
+    # ----------------------------------------------------------------------- API
+
+    def play(self, path: str = "chen1999", frames: int | None = None) -> None:
+        """Play the built-in camera ``path`` over ``frames`` viewpoints, one a frame;
+        raises :class:`InputError` for an unknown path."""
+        from lodsprite.errors import PathError
+
+        args = check_path(path, frames)
+        try:
+            self._path = list(self.scene.path(args.spec, args.frames).viewpoints)
+        except PathError as exc:
+            raise InputError(str(exc)) from None
+        self._path_index = 0
+        try:
+            self._played = asyncio.get_running_loop().create_future()
+        except RuntimeError:
+            self._played = None
+        self.request_draw()
+
+    async def played(self, timeout: float = 120.0) -> int:
+        """Wait until the path has been rendered to its end; the frames rendered."""
+        return await path_played(self._played, timeout)
+
+    def stop(self) -> None:
+        """Stop a playing path where it is."""
+        self._path = []
+
+    @property
+    def camera(self) -> Viewpoint:
+        """The viewpoint of the last frame; set it to move the view there."""
+        return self.flight.viewpoint
+
+    @camera.setter
+    def camera(self, value: Viewpoint | Any) -> None:
+        from lodsprite.notebook.sprite import _row
+
+        r = _row(value)
+        self._path = []
+        self.flight.viewpoint = Viewpoint(np.array(r[0:3]), np.array(r[3:6]),
+                                          np.array(r[6:9]), np.array(r[9:12]))
+        self.request_draw()
+
+    @property
+    def stats(self) -> dict[str, Any]:
+        """Frames rendered (each is a keyframe), their intervals' median and p99 (ms),
+        the kernel's render time (median, ms) and jupyter_rfb's own figures (``rfb``:
+        frames sent and confirmed, round trip and delivery times)."""
+        return {"frames": self.frames, "keyframes": self.frames,
+                "median_ms": _percentile(self._intervals, 50),
+                "p99_ms": _percentile(self._intervals, 99),
+                "render_ms": _percentile(self._render_ms, 50),
+                "error_px": 0.0 if self.frames else None,
+                "error_px_mean": 0.0 if self.frames else None,
+                "rfb": dict(self.get_stats())}
+
+    async def screenshot(self, timeout: float = 10.0) -> bytes:
+        """A PNG of the last frame sent to the browser (what it shows once delivered)."""
+        from PIL import Image
+
+        frame = self._rfb_last_frame
+        if frame is None:
+            raise LodspriteError("no frame was rendered yet: display the widget first")
+        out = io.BytesIO()
+        Image.fromarray(np.asarray(frame)[..., :3]).save(out, format="PNG")
+        return out.getvalue()
+
+    def close(self) -> None:
+        """Release the renderer (its GL context) and close the widget; idempotent."""
+        renderer, self.renderer = getattr(self, "renderer", None), None
+        if renderer is not None:
+            renderer.release()
+        super().close()

@@ -1,0 +1,80 @@
+"""The streaming widget (jupyter_rfb): every frame rendered in the kernel, flown by the
+browser's input events or a path, with the sprite widget's Python API."""
+
+import asyncio
+from io import BytesIO
+
+import numpy as np
+import pytest
+
+pytest.importorskip("jupyter_rfb", reason="the notebook extra")
+
+from lodsprite.errors import InputError, LodspriteError  # noqa: E402
+
+
+def stream(**kw):
+    import lodsprite
+
+    w = lodsprite.widget("fractal:64:4", stream=True, size=(64, 48), grid=64, **kw)
+    w._has_visible_views = True  # as a displayed view reports
+    return w
+
+
+def test_a_path_plays_one_viewpoint_a_frame_and_resolves_played():
+    async def main():
+        w = stream(path="chen1999", frames=4)
+        try:
+            path = w.scene.path("chen1999", 4).viewpoints
+            shown = []
+            for _ in range(4):
+                image = w.get_frame()
+                shown.append(w.camera.o.copy())
+            assert image.shape == (48, 64, 3) and image.dtype == np.uint8
+            assert np.allclose(shown, [vp.o for vp in path])
+            assert await w.played(timeout=1) == 4
+            png = await w.screenshot()
+            from PIL import Image
+
+            assert np.array_equal(np.asarray(Image.open(BytesIO(png))), image)
+            assert w.stats["frames"] >= 4 and w.stats["median_ms"] is not None  # + held redraws
+        finally:
+            w.close()
+
+    asyncio.run(main())
+
+
+def test_keys_fly_the_camera_and_are_logged_for_input_to_frame():
+    async def main():
+        w = stream()
+        try:
+            w.get_frame()
+            before = w.camera
+            w.handle_event({"type": "key_down", "key": "W", "timestamp": 1234.5})
+            w._last -= 0.5  # half a second held
+            w.get_frame()
+            moved = w.camera.o - before.o
+            assert np.dot(moved, -before.z) > 0 and np.allclose(np.cross(moved, before.z), 0,
+                                                                 atol=1e-6 * np.linalg.norm(moved))
+            assert list(w.inputs) == [(1234.5, w._rfb_frame_index + 1)]
+            w.handle_event({"type": "key_up", "key": "w"})
+            assert not w.flight.keys
+            with pytest.raises(InputError):
+                w.camera = [0.0] * 12
+            with pytest.raises(InputError):
+                w.play("nowhere")
+        finally:
+            w.close()
+
+    asyncio.run(main())
+
+
+def test_screenshot_before_a_frame_says_why():
+    async def main():
+        w = stream()
+        try:
+            with pytest.raises(LodspriteError, match="no frame"):
+                await w.screenshot()
+        finally:
+            w.close()
+
+    asyncio.run(main())
