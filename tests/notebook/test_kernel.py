@@ -174,6 +174,10 @@ def test_a_request_gets_a_keyframe_and_close_ends_the_renderers():
                             "camera": [*vp["x"], *vp["y"], *vp["z"], *vp["o"]],
                             "state": "flying"}, [])
             assert w.stats["frames"] == 3 and w.stats["state"] == "flying"
+            w.reset_stats()
+            assert sent[-1][0] == {"kind": "reset"} and w.stats["frames"] == 0
+            w._on_front(w, {"kind": "status", "view": VIEW, "stats": {"frames": 0.0},
+                            "camera": [*vp["x"], *vp["y"], *vp["z"], *vp["o"]]}, [])
             assert np.allclose(w.camera.o, vp["o"])
             w._on_front(w, {"kind": "closed", "view": VIEW}, [])
             assert not w._core.views

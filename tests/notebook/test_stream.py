@@ -37,6 +37,8 @@ def test_a_path_plays_one_viewpoint_a_frame_and_resolves_played():
 
             assert np.array_equal(np.asarray(Image.open(BytesIO(png))), image)
             assert w.stats["frames"] >= 4 and w.stats["median_ms"] is not None  # + held redraws
+            w.reset_stats()
+            assert w.stats["frames"] == 0 and w.stats["median_ms"] is None
         finally:
             w.close()
 

@@ -9,7 +9,8 @@
 //   stats, camera, state}, {kind: 'played', view, frames}, {kind: 'failed', view, error},
 //   {kind: 'shot', view, id} + a PNG, {kind: 'closed', view};
 //   from the kernel: {kind: 'wire', view} + one web message, {kind: 'play', spec, frames},
-//   {kind: 'stop'}, {kind: 'camera', viewpoint: 12 numbers}, {kind: 'shot', id}.
+//   {kind: 'stop'}, {kind: 'reset'} (the figures start again), {kind: 'camera', viewpoint:
+//   12 numbers}, {kind: 'shot', id}.
 
 const MODULES = /*__MODULES__*/null;
 const STATUS_MS = 250;  // stats and camera to the kernel at most this often
@@ -77,6 +78,8 @@ async function render({ model, el }) {
       if (msg.view === view && handler && buffers && buffers.length === 1) handler(owned(buffers[0]));
     } else if (msg.kind === 'play') {
       app.ready.then(() => app.play(msg.spec, msg.frames ?? undefined)).then(played, failed);
+    } else if (msg.kind === 'reset') {
+      app.resetStats();
     } else if (msg.kind === 'stop') {
       app.ready.then(() => app.stop(), () => {});
     } else if (msg.kind === 'camera' && Array.isArray(msg.viewpoint) && msg.viewpoint.length === 12) {

@@ -153,6 +153,12 @@ class SpriteWidget(anywidget.AnyWidget):
         out["state"] = status.state if status is not None else "not shown"
         return out
 
+    def reset_stats(self) -> None:
+        """Start the browser's figures again (frames, keyframes, times, errors), e.g.
+        once the first keyframe shows, to measure a path without the start-up."""
+        self._core.status = None
+        self._core.command({"kind": "reset"})
+
     @property
     def error(self) -> str:
         """The last failure a view reported (one line; empty: none)."""

@@ -208,6 +208,14 @@ class StreamWidget(RemoteFrameBuffer):
                 "error_px_mean": 0.0 if self.frames else None,
                 "rfb": dict(self.get_stats())}
 
+    def reset_stats(self) -> None:
+        """Start the figures again (jupyter_rfb's too; its constructor calls this)."""
+        super().reset_stats()
+        if hasattr(self, "_intervals"):
+            self.frames = 0
+            self._intervals.clear()
+            self._render_ms.clear()
+
     async def screenshot(self, timeout: float = 10.0) -> bytes:
         """A PNG of the last frame sent to the browser (what it shows once delivered)."""
         from PIL import Image
