@@ -257,8 +257,8 @@ def test_after_a_live_fuzz_a_page_still_plays(server, browser):
 def test_the_pages_error_estimate_is_the_python_sides(server, browser):
     """``static/predictor.js`` and ``lodsprite.distributed.web.estimate`` (what the load
     benchmark's pages run) are one algorithm: the same errors, in the browser and here,
-    for keyframes a few frames old along two paths (misses and views without a centre
-    included)."""
+    for keyframes a few frames old along three paths (misses, squares the keyframe did
+    not see, its frustum given or not, and views without a centre included)."""
     from lodsprite.distributed.protocol import LoadArgs
     from lodsprite.distributed.web.estimate import ErrorMetric, Predictor
     from lodsprite.distributed.web.scene import build_scene_field, decode_scene
@@ -268,16 +268,19 @@ def test_the_pages_error_estimate_is_the_python_sides(server, browser):
     scene = decode_scene(parts)
     metric, pred = ErrorMetric(scene), Predictor(scene)
     cases, want = [], []
-    for spec in ("chen1999", "swan2002"):
+    for spec in ("chen1999", "swan2002", "flyover"):
         path = get_path(spec, hf, 40).viewpoints
         for k in range(0, 36, 3):
             vp = path[k + 3]
+            key_vp = pred.proj @ path[k].view_matrix() if k % 2 else None  # frustum: some
             cases.append({"key": path[k].o.tolist(),
-                          "vp": {a: getattr(vp, a).tolist() for a in "xyzo"}})
-            want.append(pred.error_px(metric, path[k].o, vp))
+                          "vp": {a: getattr(vp, a).tolist() for a in "xyzo"},
+                          "keyVp": None if key_vp is None else key_vp.ravel().tolist()})
+            want.append(pred.error_px(metric, path[k].o, vp, key_vp))
     h = scene.header
     doc = {"scene": {"coarse": h.coarse, "origin": list(h.origin), "spacing": h.spacing,
-                     "spacing_y": h.spacing_y, "relief": h.relief},
+                     "spacing_y": h.spacing_y, "relief": h.relief,
+                     "visibility": h.visibility},
            "heights": scene.heights.astype(float).ravel().tolist(), "cases": cases,
            "camera": [h.epsilon, h.fov, h.size[0] / h.size[1], h.near, h.far, h.size[1]]}
     browser.get(page_url(server, query=QUERY.split("&path=")[0]))
@@ -287,7 +290,7 @@ def test_the_pages_error_estimate_is_the_python_sides(server, browser):
           const metric = new m.ErrorMetric(doc.scene, doc.heights);
           const pred = new m.Predictor(...doc.camera);
           done(doc.cases.map((c) => {
-            const e = pred.errorPx(metric, c.key, c.vp);
+            const e = pred.errorPx(metric, c.key, c.vp, c.keyVp);
             return Number.isFinite(e) ? e : null;
           }));
         }, (e) => done(String(e)));""", doc)
