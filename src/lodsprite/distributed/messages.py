@@ -49,9 +49,14 @@ MAX_KEYFRAME_FRAME_BYTES = (MAX_IMAGE_SIDE**2 * 4 * 102) // 100 + 65536
 pixel), plus zlib's worst-case expansion of incompressible data and the header."""
 MAX_SCENE_COARSE = 2048
 """Largest coarse level (quads a side) a ``scene`` message carries."""
-MAX_SCENE_BYTES = (MAX_IMAGE_SIDE**2 * 3 + (MAX_SCENE_COARSE + 1) ** 2 * 4) * 102 // 100 + 65536
+MAX_RIBBON_VERTICES = 8 * (MAX_GRID + 1)
+"""Most border ribbon vertices a ``scene`` message carries (two a border sample)."""
+MAX_RIBBON_TRIANGLES = 8 * MAX_GRID
+"""Most border ribbon triangles a ``scene`` message carries (two a border quad)."""
+MAX_SCENE_BYTES = ((MAX_IMAGE_SIDE**2 * 3 + (MAX_SCENE_COARSE + 1) ** 2 * 4) * 102 // 100
+                   + 12 * (MAX_RIBBON_VERTICES + MAX_RIBBON_TRIANGLES) + 65536)
 """Largest ``scene`` message: the texture at the largest side (RGB) and the coarse heights,
-with zlib's worst-case expansion and the header."""
+with zlib's worst-case expansion, the border ribbon and the header."""
 
 
 class ProtocolError(LodspriteError, ValueError):
@@ -207,7 +212,11 @@ class SceneMessage(Message, tag="scene"):
     south), keyframe ``size`` (w, h) px, ``fov`` (vertical, degrees), a ``near``/``far``
     covering the terrain, ``epsilon`` px, ``visibility`` (the z-buffer keyframes
     carry) and ``relief`` (metres: the RMS height of the full-resolution square centres
-    above or below the coarse surface, what the page's error estimate needs of them)."""
+    above or below the coarse surface, what the page's error estimate needs of them).
+    ``ribbon`` and ``ribbon_tris``: the border ribbons of the coarse level
+    (:func:`lodsprite.terrain.proxy.border_ribbon`; empty when the load asked for none),
+    vertices ``(V, 3) float32`` world metres and triangles ``(T, 3) uint32`` indices into
+    them, little-endian bytes: what the keyframe's coarse z-buffer was drawn with."""
 
     coarse: Annotated[int, Meta(ge=1, le=MAX_SCENE_COARSE)]
     origin: tuple[Coord, Coord]
@@ -222,6 +231,8 @@ class SceneMessage(Message, tag="scene"):
     heights: ImageSpec
     texture: ImageSpec
     relief: Annotated[float, Meta(ge=0.0, le=MAX_COORD)] = 0.0
+    ribbon: Annotated[bytes, Meta(max_length=12 * MAX_RIBBON_VERTICES)] = b""
+    ribbon_tris: Annotated[bytes, Meta(max_length=12 * MAX_RIBBON_TRIANGLES)] = b""
 
 
 ANY_MESSAGE = (Control | Reply | ViewpointMessage | KeyframeMessage | Ack | Request

@@ -139,3 +139,62 @@ def test_the_predictor_asks_one_latency_ahead_and_never_with_a_request_in_flight
     assert pred.inflight is None and pred.latency == pytest.approx(0.1 + 0.3 * (0.5 - 0.1))
     pred.sent(1.0)
     assert pred.want(metric, key.o, 6.5) is not None  # given up after 5 s unanswered
+
+
+def ridge_scene():
+    """A flat coarse level at 500 m with a 400 m ridge along row 6 (y = 600 m)."""
+    scene = plane_scene(n=16, slope=(0.0, 0.0))
+    scene.header.visibility = "coarse"
+    scene.heights[6] += 400.0
+    return scene
+
+
+def test_squares_the_keyframe_did_not_see_count_once_the_view_shows_them():
+    """Behind the ridge, seen from a low keyframe eye, the coarse level hides the squares'
+    fragments: at that eye they count nothing (the view does not show them either); from
+    higher up the view shows them drawn from the fallback, and each counts at least the
+    worst hit, as a miss does (the first estimate counted their parallax as hits)."""
+    scene = ridge_scene()
+    metric, pred = ErrorMetric(scene), Predictor(scene)
+    key = look_at((800.0, -300.0, 700.0), (800.0, 1200.0, 500.0))
+    rep = metric.reproject(key.o)
+    rows = metric.square[:, 0]
+    assert not rep.hidden[rows <= 4].any()  # before the ridge: seen
+    assert rep.hidden[rows >= 8].sum() >= 0.5 * (rows >= 8).sum()  # behind it: mostly not
+    assert pred.error_px(metric, key.o, key) == pytest.approx(0.0, abs=1e-9)
+    up = look_at((800.0, -300.0, 1600.0), (800.0, 1200.0, 500.0))
+    vpm = pred.proj @ up.view_matrix()
+    err = pred.error_px(metric, key.o, up)
+    shown = rep.hidden & ~metric._hidden(up.o) & _inside(metric.fragments, vpm)
+    assert shown.sum() >= 10  # the rise shows squares the keyframe did not see
+    hit = _inside(metric.centres, vpm) & ~rep.hidden & ~rep.missed
+    worst = max(_theta(up.o, metric.centres[hit], rep.c_prime[hit]))
+    assert err * pred.beta >= worst * np.sqrt(shown.sum() / (hit.sum() + shown.sum())) - 1e-12
+
+
+def test_turning_in_place_counts_the_squares_outside_the_keyframe():
+    """A view turned from its keyframe at the same eye has no parallax, but its edge
+    shows squares outside the keyframe's frustum (the fallback): given the keyframe's
+    view-projection the estimate counts them, and the predictor asks for a keyframe."""
+    scene = ridge_scene()
+    metric, pred = ErrorMetric(scene), Predictor(scene)
+    key = look_at((800.0, -300.0, 1500.0), (300.0, 1200.0, 500.0))
+    key_vp = pred.proj @ key.view_matrix()
+    assert pred.error_px(metric, key.o, key, key_vp) == pytest.approx(0.0, abs=1e-9)
+    turned = look_at((800.0, -300.0, 1500.0), (1300.0, 1200.0, 500.0))
+    assert pred.error_px(metric, key.o, turned) == pytest.approx(0.0, abs=1e-9)
+    assert pred.error_px(metric, key.o, turned, key_vp) > 0.5 * pred.epsilon
+    pred.sample(0.0, turned)
+    assert pred.want(metric, key.o, 0.0) is None
+    assert pred.want(metric, key.o, 0.0, key_vp) is not None
+
+
+def _inside(p, m):
+    k = np.c_[p, np.ones(len(p))] @ m.T
+    return (k[:, 3] > 0) & (np.abs(k[:, :3]) <= k[:, 3:]).all(1)
+
+
+def _theta(eye, p, q):
+    a, b = p - eye, q - eye
+    cos = (a * b).sum(1) / np.linalg.norm(a, axis=1) / np.linalg.norm(b, axis=1)
+    return np.arccos(np.clip(cos, -1.0, 1.0))

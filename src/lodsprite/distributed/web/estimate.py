@@ -14,7 +14,22 @@ keyframe eye, the one nearest to ``C`` along the ray (as
 only, so it is cast once per keyframe (:meth:`ErrorMetric.reproject`, cached for the last
 eye); a frame measures ``θ`` at its eye between ``C`` and ``C'`` for the centres in view.
 A ray that meets no triangle is a miss, counted as the worst hit.  The error is
-``sqrt(mean θ²) / β`` pixels; ``inf`` when no centre is in view or every one missed.
+``sqrt(mean θ²) / β`` pixels; ``inf`` when no centre is in view or none in view is a hit.
+
+It also counts what the spriteframe cannot show from the keyframe.  A square whose
+fragment ``F`` (the coarse surface under ``C``, on the square's diagonal: where the page
+draws its colour) the keyframe did not see is drawn from the terrain texture (``gl.js``'s
+fallback), which puts ``C``'s texel at ``F``.  Not seen: hidden behind the keyframe's
+coarse level (the keyframe eye's ray to ``F`` meets it nearer than ``F`` by more than the
+page's tolerance, :data:`TOLERANCE`: its coarse z-buffer rule; cast once a keyframe) or,
+when the keyframe's view-projection is given, outside its frustum.  When the current view
+shows that ``F`` (inside its frustum, and the same cast from the current eye, for those
+squares only), the square counts as a
+miss does, no better than the worst hit (:func:`lodsprite.sprite.metric.miss_floor`),
+and with the angle between ``C`` and ``F`` when that is larger.  At the keyframe's own
+eye nothing the keyframe did not see is in view, and the error is 0 still.  (The
+first estimate counted parallax only: flying the flyover over Jacksboro it read a third
+of a pixel while the page showed rows of fallback texels; ``docs/web.md``.)
 
 (The page's first estimate met the ray with the horizontal plane of the square's centre
 instead of the mesh: for an eye a few hundred metres above rough terrain a grazing ray
@@ -38,8 +53,8 @@ import numpy as np
 from lodsprite.camera import Projection, Viewpoint
 from lodsprite.sprite.raycast import ray_triangle_t
 
-__all__ = ["LATENCY_START_S", "LOST_S", "MAX_AHEAD_S", "MAX_CENTRES", "ErrorMetric",
-           "Predictor", "Reprojection"]
+__all__ = ["LATENCY_START_S", "LOST_S", "MAX_AHEAD_S", "MAX_CENTRES", "TOLERANCE",
+           "ErrorMetric", "Predictor", "Reprojection"]
 
 MAX_CENTRES = 4096
 """Square centres measured (a finer coarse level: evenly, row-major)."""
@@ -54,18 +69,24 @@ SMOOTHING = 0.3
 T_MIN = 1e-6
 """Hits nearer the keyframe eye than this (in units of the eye-to-C distance) are not
 in front of it."""
+TOLERANCE = {"coarse": 0.002, "full": 0.03}
+"""The page's visibility tolerance by the scene's ``visibility`` (``gl.js``: lodsprite.gl.
+sprite's ``DEFAULT_COARSE_TOL`` and ``DEFAULT_FRAGMENT_TOL``), relative to depth."""
 TRACK_PAIRS = 1 << 16
 """Ray-square pairs of the ground-track search tested at once (bounded memory)."""
 
 
 class Reprojection:
     """``C' (K, 3)`` metres and ``missed (K,) bool`` of the metric's centres for the
-    keyframe eye ``key_eye (3,)``."""
+    keyframe eye ``key_eye (3,)``, and ``hidden (K,) bool``: the squares whose ``F`` the
+    keyframe's coarse level hides from it."""
 
-    def __init__(self, key_eye: np.ndarray, c_prime: np.ndarray, missed: np.ndarray) -> None:
+    def __init__(self, key_eye: np.ndarray, c_prime: np.ndarray, missed: np.ndarray,
+                 hidden: np.ndarray | None = None) -> None:
         self.key_eye = key_eye
         self.c_prime = c_prime
         self.missed = missed
+        self.hidden = np.zeros(len(c_prime), bool) if hidden is None else hidden
 
 
 class ErrorMetric:
@@ -81,6 +102,7 @@ class ErrorMetric:
         self.origin = np.array(hdr.origin, np.float64)
         self.step = np.array([hdr.spacing, hdr.spacing_y], np.float64)
         self.relief = float(hdr.relief)
+        self.tol = TOLERANCE.get(getattr(hdr, "visibility", None), TOLERANCE["full"])
         jj, ii = np.meshgrid(np.arange(n + 1), np.arange(n + 1))
         self.vertices = np.stack([self.origin[0] + jj * self.step[0],
                                   self.origin[1] + ii * self.step[1], h], -1)  # (n+1, n+1, 3)
@@ -95,6 +117,8 @@ class ErrorMetric:
         self.centres = np.stack([self.origin[0] + (j + 0.5) * self.step[0],
                                  self.origin[1] + (i + 0.5) * self.step[1],
                                  mid[i, j] + self.relief], -1)  # C (K, 3)
+        self.fragments = np.c_[self.centres[:, :2],
+                               0.5 * (h[i + 1, j] + h[i, j + 1])]  # F (K, 3): nw-se diagonal
         di, dj = np.meshgrid([-1, 0, 1], [-1, 0, 1], indexing="ij")
         ni, nj = i[:, None] + di.ravel(), j[:, None] + dj.ravel()  # (K, 9)
         ok = (ni >= 0) & (ni < n) & (nj >= 0) & (nj < n)
@@ -134,8 +158,19 @@ class ErrorMetric:
             best[miss[k0:k0 + block]] = self._along_track(key_eye, d[miss[k0:k0 + block]])
         missed = np.isnan(best)
         c_prime = key_eye + d * np.where(missed, 1.0, best)[:, None]
-        self._last = Reprojection(key_eye, c_prime, missed)
+        self._last = Reprojection(key_eye, c_prime, missed, self._hidden(key_eye))
         return self._last
+
+    def _hidden(self, eye: np.ndarray, k: np.ndarray | None = None) -> np.ndarray:
+        """``(K,) bool``: whether the coarse level hides ``F`` of the squares ``k`` (None:
+        all) from ``eye (3,)``: the ray meets it first nearer than ``F`` by more than
+        :attr:`tol`, relative."""
+        d = self.fragments[slice(None) if k is None else k] - eye  # F at t = 1
+        first = np.empty(len(d))
+        block = max(1, TRACK_PAIRS // (2 * self.n + 3))
+        for k0 in range(0, len(d), block):
+            first[k0:k0 + block] = self._along_track(eye, d[k0:k0 + block], first=True)
+        return ~np.isnan(first) & (first * (1.0 + self.tol) < 1.0)
 
     def cached(self, key_eye: np.ndarray) -> bool:
         """Whether ``C'`` of ``key_eye`` is cast already (:meth:`reproject` is then
@@ -148,9 +183,9 @@ class ErrorMetric:
         process), as the cached one."""
         self._last = rep
 
-    def _along_track(self, eye: np.ndarray, d: np.ndarray) -> np.ndarray:
-        """``t (R,)`` of the hit nearest ``t = 1`` among the squares the rays' ground
-        tracks cross inside the terrain (NaN: none)."""
+    def _along_track(self, eye: np.ndarray, d: np.ndarray, first: bool = False) -> np.ndarray:
+        """``t (R,)`` of the hit nearest ``t = 1`` (``first``: the smallest ``t``) among the
+        squares the rays' ground tracks cross inside the terrain (NaN: none)."""
         n, lo, step = self.n, self.origin, self.step
         hi = lo + n * step
         dxy = d[:, :2]
@@ -188,30 +223,53 @@ class ErrorMetric:
         t = np.full(mid.shape + (2,), np.nan)
         if r.size:
             t[r, m] = _hits(eye, d[r], self._all[ci[r, m], cj[r, m]])  # (P, 2)
-        return _nearest_one(t.reshape(len(d), -1))
+        t = t.reshape(len(d), -1)
+        if first:
+            return np.where(np.isnan(t).all(1), np.nan,
+                            np.nanmin(np.where(np.isnan(t), np.inf, t), 1))
+        return _nearest_one(t)
 
     # ------------------------------------------------------------------- per frame
 
-    def error_px(self, key_eye, vp: Viewpoint, view_proj: np.ndarray, beta: float) -> float:
+    def error_px(self, key_eye, vp: Viewpoint, view_proj: np.ndarray, beta: float,
+                 key_view_proj: np.ndarray | None = None) -> float:
         """Error (px) of the keyframe seen from ``key_eye (3,)`` (None: none shown:
         ``inf``) shown at ``vp`` through ``view_proj (4, 4)``, ``beta`` radians a pixel;
-        ``inf`` when no centre is in view or all of them missed."""
+        ``key_view_proj (4, 4)``: the keyframe's (its squares outside it count as not
+        seen; None: not tested); ``inf`` when no centre is in view or none in view is a
+        hit."""
         if key_eye is None:
             return float("inf")
         rep = self.reproject(key_eye)
-        c = self.centres
-        k = np.c_[c, np.ones(len(c))] @ np.asarray(view_proj, np.float64).T
-        w = k[:, 3]
-        inside = (w > 0) & (np.abs(k[:, :3]) <= w[:, None]).all(1)
-        hit = inside & ~rep.missed
-        misses = int((inside & rep.missed).sum())
+        c, f = self.centres, self.fragments
+        inside = _in_view(c, view_proj)
+        unseen = inside & rep.hidden
+        if key_view_proj is not None:
+            unseen |= inside & ~_in_view(f, key_view_proj)
+        k = np.flatnonzero(unseen & _in_view(f, view_proj))  # F drawn in this view
+        shown = k[~self._hidden(np.asarray(vp.o, np.float64), k)]  # F seen from here
+        hit = inside & ~unseen & ~rep.missed
+        misses = int((inside & ~unseen & rep.missed).sum())
         if not hit.any():
             return float("inf")
-        a = _unit(c[hit] - vp.o)
-        b = _unit(rep.c_prime[hit] - vp.o)
-        theta = np.arctan2(np.linalg.norm(np.cross(a, b), axis=1), (a * b).sum(1))
-        total = (theta**2).sum() + misses * theta.max() ** 2
-        return float(np.sqrt(total / (hit.sum() + misses)) / beta)
+        theta = _angles(vp.o, c[hit], rep.c_prime[hit])
+        worst = theta.max()
+        fallback = np.maximum(_angles(vp.o, c[shown], f[shown]), worst)
+        total = (theta**2).sum() + misses * worst**2 + (fallback**2).sum()
+        return float(np.sqrt(total / (hit.sum() + misses + len(shown))) / beta)
+
+
+def _in_view(p: np.ndarray, view_proj: np.ndarray) -> np.ndarray:
+    """``(K,) bool``: points ``p (K, 3)`` inside the clip volume of ``view_proj``."""
+    k = np.c_[p, np.ones(len(p))] @ np.asarray(view_proj, np.float64).T
+    w = k[:, 3]
+    return (w > 0) & (np.abs(k[:, :3]) <= w[:, None]).all(1)
+
+
+def _angles(eye: np.ndarray, p: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Angles (radians) at ``eye`` between points ``p (K, 3)`` and ``q (K, 3)``."""
+    a, b = _unit(p - eye), _unit(q - eye)
+    return np.arctan2(np.linalg.norm(np.cross(a, b), axis=1), (a * b).sum(1))
 
 
 def _hits(o: np.ndarray, d: np.ndarray, tris: np.ndarray) -> np.ndarray:
@@ -268,18 +326,23 @@ class Predictor:
         :data:`MAX_AHEAD_S`."""
         return min(self.latency, MAX_AHEAD_S)
 
-    def error_px(self, metric: ErrorMetric, key_eye, vp: Viewpoint) -> float:
-        return metric.error_px(key_eye, vp, self.proj @ vp.view_matrix(), self.beta)
+    def error_px(self, metric: ErrorMetric, key_eye, vp: Viewpoint,
+                 key_view_proj: np.ndarray | None = None) -> float:
+        return metric.error_px(key_eye, vp, self.proj @ vp.view_matrix(), self.beta,
+                               key_view_proj)
 
-    def want(self, metric: ErrorMetric, key_eye, t: float) -> Viewpoint | None:
+    def want(self, metric: ErrorMetric, key_eye, t: float,
+             key_view_proj: np.ndarray | None = None) -> Viewpoint | None:
         """What to request at time ``t`` (a viewpoint) or None (the page's moving case;
-        a resting viewer's last request is the page's own)."""
+        a resting viewer's last request is the page's own); ``key_view_proj``: the shown
+        keyframe's (:meth:`ErrorMetric.error_px`)."""
         if self.inflight is not None and t - self.inflight > LOST_S:
             self.inflight = None
         if self.inflight is not None:
             return None
         ahead = self.predict(t + self.lead())
-        return ahead if self.error_px(metric, key_eye, ahead) >= 0.5 * self.epsilon else None
+        return (ahead if self.error_px(metric, key_eye, ahead, key_view_proj)
+                >= 0.5 * self.epsilon else None)
 
     def sent(self, t: float) -> None:
         self.inflight = t

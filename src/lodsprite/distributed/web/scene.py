@@ -7,7 +7,12 @@ Computed in the server process, GL-free, from the scene a ``load`` describes (it
 open_spec` as every renderer opens it): :func:`scene_parts` makes the message from the
 :class:`~lodsprite.scene.Scene`'s terrain layer, its working height field's coarse level
 (an exact subsample, ``lod`` quads a side, as the sprite drawer's proxy) and its
-texture, both turned so row 0 is south (the page's ``y`` grows with the row).
+texture, both turned so row 0 is south (the page's ``y`` grows with the row), and (unless
+the load says ``border: false``) the coarse level's border ribbons
+(:func:`lodsprite.terrain.proxy.border_ribbon`), which the page draws with the coarse
+level: the server's coarse z-buffer is drawn with them (:mod:`lodsprite.distributed.
+render`), and lodsprite's own spriteframes draw them (:class:`lodsprite.gl.sprite.
+SpriteDrawer`).
 
 ``path`` (after a ``load``): the viewpoints of a built-in camera path
 (:func:`lodsprite.paths.get_path`: Chen, Swan & Kaufman 1999 Figure 7's orbit, Swan et
@@ -39,11 +44,12 @@ from lodsprite.distributed.protocol import (
 if TYPE_CHECKING:
     from lodsprite.scene import Scene
 
-__all__ = ["SceneData", "build_scene", "build_scene_field", "decode_scene", "path_data",
+__all__ = ["SceneData", "build_scene", "build_scene_field", "decode_ribbon", "decode_scene",
+           "path_data",
            "relief", "scene_key", "scene_parts"]
 
 SCENE_FIELDS = ("terrain", "texture", "grid", "exaggeration", "lod", "size", "fov_y_deg",
-                "epsilon", "visibility")
+                "epsilon", "visibility", "border")
 
 
 def scene_key(args: LoadArgs) -> tuple:
@@ -99,6 +105,7 @@ def scene_parts(scene: Scene, args: LoadArgs, codec: str = "raw") -> list:
     asks; raises :class:`~lodsprite.errors.InputError` for a scene without terrain or
     texture."""
     from lodsprite.errors import InputError
+    from lodsprite.terrain.proxy import border_ribbon
 
     hf = scene.hf
     if hf is None or scene.texture is None:
@@ -121,17 +128,43 @@ def scene_parts(scene: Scene, args: LoadArgs, codec: str = "raw") -> list:
               "visibility": "coarse" if args.visibility == "coarse" else "full",
               "heights": h_spec, "texture": t_spec,
               "relief": relief(hf.heights, step)}
+    if args.border:
+        rib = border_ribbon(hf, args.lod)
+        header["ribbon"] = rib.positions.astype("<f4").tobytes()
+        header["ribbon_tris"] = rib.tris.astype("<u4").tobytes()
     return encode(header, h_data, t_data)
 
 
 class SceneData:
     """A decoded scene message: ``header`` (:class:`SceneMessage`), ``heights``
-    ``(n+1, n+1) float32`` (row 0 south) and ``texture (H, W, 3) uint8`` (row 0 south)."""
+    ``(n+1, n+1) float32`` (row 0 south), ``texture (H, W, 3) uint8`` (row 0 south) and
+    the border ribbon, ``ribbon (V, 3) float32`` metres and ``ribbon_tris (T, 3) uint32``
+    (empty without one)."""
 
-    def __init__(self, header: SceneMessage, heights: np.ndarray, texture: np.ndarray) -> None:
+    def __init__(self, header: SceneMessage, heights: np.ndarray, texture: np.ndarray,
+                 ribbon: np.ndarray | None = None,
+                 ribbon_tris: np.ndarray | None = None) -> None:
         self.header = header
         self.heights = heights
         self.texture = texture
+        self.ribbon = np.zeros((0, 3), np.float32) if ribbon is None else ribbon
+        self.ribbon_tris = np.zeros((0, 3), np.uint32) if ribbon_tris is None else ribbon_tris
+
+
+def decode_ribbon(msg: SceneMessage) -> tuple[np.ndarray, np.ndarray]:
+    """``(vertices (V, 3) float32, triangles (T, 3) uint32)`` of a scene message's border
+    ribbon; raises :class:`ProtocolError` when the bytes are not whole vertices and
+    triangles or a triangle names a vertex the message lacks (caps: the schema's)."""
+    if len(msg.ribbon) % 12 or len(msg.ribbon_tris) % 12:
+        raise ProtocolError("ribbon: not whole (x, y, z) vertices and (i, j, k) triangles")
+    vertices = np.frombuffer(msg.ribbon, "<f4").reshape(-1, 3).astype(np.float32)
+    tris = np.frombuffer(msg.ribbon_tris, "<u4").reshape(-1, 3).astype(np.uint32)
+    if tris.size and int(tris.max()) >= len(vertices):
+        raise ProtocolError(f"ribbon: a triangle names vertex {int(tris.max())} of "
+                            f"{len(vertices)}")
+    if not np.isfinite(vertices).all():
+        raise ProtocolError("ribbon: a vertex is not finite")
+    return vertices, tris
 
 
 def decode_scene(parts: list) -> SceneData:
@@ -142,7 +175,7 @@ def decode_scene(parts: list) -> SceneData:
     if heights.shape != (n, n):
         raise ProtocolError(f"heights: shape {heights.shape}, expected {(n, n)}")
     texture = decode_image(msg.texture, buffers[1], "uint8", 3, "texture", False)
-    return SceneData(msg, heights, texture)
+    return SceneData(msg, heights, texture, *decode_ribbon(msg))
 
 
 def path_data(load: LoadArgs, args: PathArgs, hf: Any = None) -> dict:

@@ -8,6 +8,17 @@
 // for "full", 0.03: lodsprite.gl.sprite's DEFAULT_COARSE_TOL and DEFAULT_FRAGMENT_TOL).
 // The paper's per-triangle rule needs a geometry shader, which WebGL2 lacks: a "full"
 // scene is drawn with the per-fragment rule.
+//
+// As lodsprite's own spriteframes (lodsprite.gl.sprite.SpriteDrawer), the keyframe's
+// z-buffer is sampled bilinearly (window depth is affine across a triangle in screen
+// space, so a bilinear sample is exact inside one), and the coarse level is drawn with
+// its border ribbons (the scene message's `ribbon`: lodsprite.terrain.proxy), which the
+// server's coarse z-buffer is drawn with too.  (The page's first version sampled the
+// z-buffer nearest: where the keyframe saw a slope at a grazing angle a nearest sample
+// is off by up to half a texel's depth slope, far beyond the 0.002 tolerance, so rows of
+// fragments the keyframe saw fell back to the terrain texture: the streaks across slopes
+// that a frame a few viewpoints from its keyframe showed.  Without the ribbons the
+// terrain's far edge showed sky where the keyframe shows terrain.)
 
 import { mul } from './camera.js';
 
@@ -36,12 +47,26 @@ uniform sampler2D u_key_depth;  // keyframe z-buffer (window depth in [0, 1])
 uniform int u_has_key;
 uniform float u_tol;
 uniform vec2 u_key_near_far;
+uniform vec4 u_fallback_tint;   // mixed into fallback fragments by its alpha (0: none)
 in vec2 v_uv;
 in vec4 v_key;
 out vec4 f_color;
 float linear_depth(float z) {
   float n = u_key_near_far.x, f = u_key_near_far.y;
   return 2.0 * n * f / (f + n - (2.0 * z - 1.0) * (f - n));
+}
+// The keyframe z-buffer sampled bilinearly (as lodsprite.gl.sprite's LINEAR depth
+// filter), from four texels: R32F textures filter only with OES_texture_float_linear.
+float bilinear_depth(vec2 uv) {
+  ivec2 size = textureSize(u_key_depth, 0), last = size - 1;
+  vec2 p = uv * vec2(size) - 0.5;
+  ivec2 i = ivec2(floor(p));
+  vec2 f = p - floor(p);
+  float z00 = texelFetch(u_key_depth, clamp(i, ivec2(0), last), 0).r;
+  float z10 = texelFetch(u_key_depth, clamp(i + ivec2(1, 0), ivec2(0), last), 0).r;
+  float z01 = texelFetch(u_key_depth, clamp(i + ivec2(0, 1), ivec2(0), last), 0).r;
+  float z11 = texelFetch(u_key_depth, clamp(i + ivec2(1, 1), ivec2(0), last), 0).r;
+  return mix(mix(z00, z10, f.x), mix(z01, z11, f.x), f.y);
 }
 void main() {
   vec2 key_uv = v_key.xy / v_key.w * 0.5 + 0.5;  // derivatives in uniform control flow
@@ -51,11 +76,12 @@ void main() {
   if (u_has_key == 1 && v_key.w > 0.0) {
     vec3 ndc = v_key.xyz / v_key.w;
     if (all(lessThanEqual(abs(ndc), vec3(1.0)))) {
-      float zb = textureLod(u_key_depth, ndc.xy * 0.5 + 0.5, 0.0).r;
+      float zb = bilinear_depth(ndc.xy * 0.5 + 0.5);
       seen = linear_depth(ndc.z * 0.5 + 0.5) <= linear_depth(zb) * (1.0 + u_tol);
     }
   }
-  vec3 rgb = seen ? textureGrad(u_sprite, key_uv, key_dx, key_dy).rgb : fallback;
+  vec3 rgb = seen ? textureGrad(u_sprite, key_uv, key_dx, key_dy).rgb
+                  : mix(fallback, u_fallback_tint.rgb, u_fallback_tint.a);
   f_color = vec4(rgb, 1.0);
 }`;
 
@@ -80,13 +106,33 @@ function texture(gl, unit, internal, format, type, w, h, data, filter, mipmaps =
   return t;
 }
 
+// The scene's border ribbon: {pos (V, 3) Float32Array metres, index (T, 3) Uint32Array},
+// from its `ribbon` and `ribbon_tris` bytes (little-endian float32, uint32); empty when it
+// has none.  Throws on bytes that are not whole vertices and triangles, a vertex that is
+// not finite or a triangle naming a vertex it lacks (as distributed.web.scene.decode_ribbon).
+export function ribbonMesh(scene) {
+  const bytes = (b) => (b ? new Uint8Array(b) : new Uint8Array(0));  // a copy: aligned
+  const v = bytes(scene.ribbon), t = bytes(scene.ribbon_tris);
+  if (v.byteLength % 12 || t.byteLength % 12) throw new Error('scene: ribbon of partial vertices or triangles');
+  const pos = new Float32Array(v.buffer), index = new Uint32Array(t.buffer);
+  const little = new Uint8Array(new Uint16Array([1]).buffer)[0] === 1;
+  if (!little) throw new Error('scene: a big-endian browser reads no ribbon');
+  if (!pos.every(Number.isFinite)) throw new Error('scene: ribbon vertex not finite');
+  const count = pos.length / 3;
+  if (index.some((k) => k >= count)) throw new Error('scene: ribbon triangle names a missing vertex');
+  return { pos, index };
+}
+
 // The coarse mesh ((n+1)^2 vertices: row i at y = origin_y + i * spacing_y, column j at
 // x = origin_x + j * spacing, z from `heights`) and its texture coordinates (row 0 south);
 // each square split along its north-west to south-east diagonal, as the server's coarse
-// level (lodsprite.terrain.proxy.level_mesh), so the coarse z-buffer test agrees with it.
+// level (lodsprite.terrain.proxy.level_mesh), so the coarse z-buffer test agrees with it;
+// then the border ribbon's vertices and triangles (ribbonMesh), texture coordinates from
+// their x, y.
 export function coarseMesh(scene, heights) {
   const n = scene.coarse, m = n + 1;
-  const pos = new Float32Array(3 * m * m), uv = new Float32Array(2 * m * m);
+  const ribbon = ribbonMesh(scene), rv = ribbon.pos.length / 3;
+  const pos = new Float32Array(3 * (m * m + rv)), uv = new Float32Array(2 * (m * m + rv));
   for (let i = 0; i < m; i++) for (let j = 0; j < m; j++) {
     const k = i * m + j;
     pos[3 * k] = scene.origin[0] + j * scene.spacing;
@@ -94,12 +140,20 @@ export function coarseMesh(scene, heights) {
     pos[3 * k + 2] = heights[k];
     uv[2 * k] = j / n; uv[2 * k + 1] = i / n;
   }
-  const index = new Uint32Array(6 * n * n);
+  const extent = [n * scene.spacing, n * scene.spacing_y];
+  pos.set(ribbon.pos, 3 * m * m);
+  for (let k = 0; k < rv; k++) {
+    const x = ribbon.pos[3 * k], y = ribbon.pos[3 * k + 1];
+    uv[2 * (m * m + k)] = (x - scene.origin[0]) / extent[0];
+    uv[2 * (m * m + k) + 1] = (y - scene.origin[1]) / extent[1];
+  }
+  const index = new Uint32Array(6 * n * n + ribbon.index.length);
   let at = 0;
   for (let i = 0; i < n; i++) for (let j = 0; j < n; j++) {
     const a = i * m + j, b = a + 1, c = a + m, d = c + 1;
     index.set([c, a, b, c, b, d], at); at += 6;  // split nw-se, as lodsprite.terrain.proxy
   }
+  for (let k = 0; k < ribbon.index.length; k++) index[at + k] = m * m + ribbon.index[k];
   return { pos, uv, index };
 }
 
@@ -115,10 +169,13 @@ export class SpriteDrawer {
     if (!gl.getProgramParameter(p, gl.LINK_STATUS)) throw new Error(gl.getProgramInfoLog(p));
     this.program = p;
     this.u = {};
-    for (const name of ['u_mvp', 'u_key_mvp', 'u_color', 'u_sprite', 'u_key_depth', 'u_has_key', 'u_tol', 'u_key_near_far']) {
+    for (const name of ['u_mvp', 'u_key_mvp', 'u_color', 'u_sprite', 'u_key_depth', 'u_has_key', 'u_tol', 'u_key_near_far', 'u_fallback_tint']) {
       this.u[name] = gl.getUniformLocation(p, name);
     }
     this.key = null;
+    // Mixed by its alpha into fragments that fell back to the terrain texture (as
+    // lodsprite.gl.sprite.SpriteDrawer.fallback_tint); alpha 0 draws them as they are.
+    this.fallbackTint = [1, 0, 1, 0];
   }
 
   // The scene message (header, heights Float32Array, texture Uint8Array).
@@ -138,7 +195,7 @@ export class SpriteDrawer {
     const [th, tw] = scene.texture.shape;
     this.colorTex = texture(gl, 0, gl.RGB8, gl.RGB, gl.UNSIGNED_BYTE, tw, th, tex, gl.LINEAR, true);
     this.tol = TOLERANCE[scene.visibility] ?? TOLERANCE.full;
-    this.triangles = 2 * scene.coarse * scene.coarse;
+    this.triangles = this.count / 3;
   }
 
   // A keyframe's textures, uploaded now (when its decode resolves, not in a frame): header
@@ -184,6 +241,7 @@ export class SpriteDrawer {
     gl.uniformMatrix4fv(u.u_key_mvp, true, key ? key.mvp : viewProj);
     gl.uniform2fv(u.u_key_near_far, key ? key.nearFar : [1, 2]);
     gl.uniform1f(u.u_tol, this.tol);
+    gl.uniform4fv(u.u_fallback_tint, this.fallbackTint);
     gl.activeTexture(gl.TEXTURE0); gl.bindTexture(gl.TEXTURE_2D, this.colorTex);
     gl.activeTexture(gl.TEXTURE1); gl.bindTexture(gl.TEXTURE_2D, key ? key.sprite : this.colorTex);
     gl.activeTexture(gl.TEXTURE2); gl.bindTexture(gl.TEXTURE_2D, key ? key.depth : null);

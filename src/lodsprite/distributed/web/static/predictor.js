@@ -16,6 +16,18 @@
 // lodsprite.sprite.metric does).  At the keyframe's own eye the error is 0, as in the
 // paper; it grows with the parallax the coarse level cannot show.
 //
+// It also counts what the spriteframe cannot show from the keyframe: a square whose
+// fragment F (the coarse surface under C, on its diagonal: gl.js draws its colour there)
+// the keyframe did not see is drawn from the terrain texture (gl.js's fallback), which
+// puts C's texel at F.  Not seen: hidden behind the keyframe's coarse level (the keyframe
+// eye's ray to F meets it nearer than F by more than gl.js's tolerance: its coarse
+// z-buffer rule; cast once a keyframe) or, when the keyframe's view-projection is given,
+// outside its frustum.  When the current view shows that F (inside its frustum, and the
+// same cast from the current eye, for those squares only), the square counts as a miss does, no better than the worst hit,
+// and with the angle between C and F when that is larger.  At the keyframe's own eye
+// nothing it did not see is in view: the error is 0 still.  (The first estimate counted
+// parallax only.)
+//
 // The linear predictor: the eye and the axes extrapolated linearly from the last two
 // samples (the axes re-orthonormalised).  A request goes out for the viewpoint the viewer
 // will be at one measured keyframe latency ahead (at most 1 s), when the shown keyframe's
@@ -30,6 +42,9 @@ import { add, clip, cross, dot, mul, norm, scale, sub, unit, viewMatrix, perspec
 const MAX_CENTRES = 4096;  // square centres measured a frame (a finer coarse level: evenly)
 const T_MIN = 1e-6;  // hits nearer the keyframe eye (in units of eye to C) are not in front
 const EDGE_TOL = 1e-9;
+// The page's visibility tolerance (gl.js TOLERANCE: lodsprite.gl.sprite's
+// DEFAULT_COARSE_TOL and DEFAULT_FRAGMENT_TOL), relative to depth.
+const TOLERANCE = { coarse: 0.002, full: 0.03 };
 
 // Moller-Trumbore: t where the ray o + t d meets the triangle (p0, e1, e2), or NaN.
 function hit(o, d, p0, e1, e2) {
@@ -47,36 +62,42 @@ export class ErrorMetric {
     this.origin = scene.origin;
     this.step = [scene.spacing, scene.spacing_y];
     this.relief = scene.relief || 0;
+    this.tol = TOLERANCE[scene.visibility] ?? TOLERANCE.full;
     const vertex = (i, j) => [scene.origin[0] + j * scene.spacing, scene.origin[1] + i * scene.spacing_y, heights[i * m + j]];
     this.tris = [];  // square (i, j) at 2 (i n + j) and +1: [p0, e1, e2], split nw-se as gl.js
+    this.zRange = [];  // square (i, j) at i n + j: [lowest, highest corner]
     for (let i = 0; i < n; i++) for (let j = 0; j < n; j++) {
       const a = vertex(i, j), b = vertex(i, j + 1), c = vertex(i + 1, j), d = vertex(i + 1, j + 1);
       this.tris.push([c, sub(a, c), sub(b, c)], [c, sub(b, c), sub(d, c)]);
+      this.zRange.push([Math.min(a[2], b[2], c[2], d[2]), Math.max(a[2], b[2], c[2], d[2])]);
     }
-    this.centres = [];  // [C, i, j]
+    this.centres = [];  // [C, i, j, F]: F on the diagonal from (i+1, j) to (i, j+1)
     const stride = Math.ceil(n * n / MAX_CENTRES);  // evenly, row-major
     for (let k = 0; k < n * n; k += stride) {
       const i = Math.floor(k / n), j = k % n;
       const h = 0.25 * (heights[i * m + j] + heights[i * m + j + 1] + heights[(i + 1) * m + j] + heights[(i + 1) * m + j + 1]);
-      this.centres.push([[scene.origin[0] + (j + 0.5) * scene.spacing, scene.origin[1] + (i + 0.5) * scene.spacing_y, h + this.relief], i, j]);
+      const x = scene.origin[0] + (j + 0.5) * scene.spacing, y = scene.origin[1] + (i + 0.5) * scene.spacing_y;
+      const f = 0.5 * (heights[(i + 1) * m + j] + heights[i * m + j + 1]);
+      this.centres.push([[x, y, h + this.relief], i, j, [x, y, f]]);
     }
-    this.last = null;  // {eye, cPrime (C' or null: a miss)}
+    this.last = null;  // {eye, cPrime (C' or null: a miss), hidden (F hidden from eye)}
   }
 
-  // t nearest 1 of the ray eye + t d against the triangles of square (i, j), given the
-  // best so far; squares outside the grid have none.
-  nearest(eye, d, i, j, best) {
+  // t nearest 1 (`first`: the smallest t) of the ray eye + t d against the triangles of
+  // square (i, j), given the best so far; squares outside the grid have none.
+  nearest(eye, d, i, j, best, first = false) {
     if (i < 0 || j < 0 || i >= this.n || j >= this.n) return best;
     for (let s = 0; s < 2; s++) {
       const [p0, e1, e2] = this.tris[2 * (i * this.n + j) + s];
       const t = hit(eye, d, p0, e1, e2);
-      if (!Number.isNaN(t) && (Number.isNaN(best) || Math.abs(t - 1) < Math.abs(best - 1))) best = t;
+      if (!Number.isNaN(t) && (Number.isNaN(best) || (first ? t < best : Math.abs(t - 1) < Math.abs(best - 1)))) best = t;
     }
     return best;
   }
 
-  // The squares the ray's ground track crosses inside the terrain (t > 0): t nearest 1.
-  alongTrack(eye, d) {
+  // The squares the ray's ground track crosses inside the terrain (t > 0): t nearest 1
+  // (`first`: the smallest t).
+  alongTrack(eye, d, first = false) {
     const n = this.n, lo = this.origin, hi = [lo[0] + n * this.step[0], lo[1] + n * this.step[1]];
     let a = 0, b = Infinity;
     const big = Math.max(Math.abs(d[0]), Math.abs(d[1]), Math.abs(d[2]));
@@ -103,15 +124,28 @@ export class ErrorMetric {
       const t = 0.5 * (ts[k] + ts[k + 1]);
       const j = Math.min(n - 1, Math.max(0, Math.floor((eye[0] + t * d[0] - lo[0]) / this.step[0])));
       const i = Math.min(n - 1, Math.max(0, Math.floor((eye[1] + t * d[1] - lo[1]) / this.step[1])));
-      best = this.nearest(eye, d, i, j, best);
+      // only a square whose height range the ray's stretch over it meets can be hit
+      const [zlo, zhi] = this.zRange[i * n + j], tol = 1e-9 * (1 + Math.abs(zhi));
+      const z0 = eye[2] + d[2] * ts[k], z1 = eye[2] + d[2] * ts[k + 1];
+      if (Math.max(z0, z1) < zlo - tol || Math.min(z0, z1) > zhi + tol) continue;
+      best = this.nearest(eye, d, i, j, best, first);
     }
     return best;
   }
 
-  // C' of every centre for the keyframe eye `keyEye` (the last eye's is kept).
+  // Whether the coarse level hides centre k's F from `eye`: the ray meets it first nearer
+  // than F by more than the tolerance, relative.
+  hides(eye, k) {
+    const t = this.alongTrack(eye, sub(this.centres[k][3], eye), true);
+    return !Number.isNaN(t) && t * (1 + this.tol) < 1;
+  }
+
+  // C' of every centre for the keyframe eye `keyEye`, and whether its F is hidden from it
+  // (the last eye's are kept): {eye, cPrime, hidden}.
   reproject(keyEye) {
     const last = this.last;
-    if (last && last.eye[0] === keyEye[0] && last.eye[1] === keyEye[1] && last.eye[2] === keyEye[2]) return last.cPrime;
+    if (last && last.eye[0] === keyEye[0] && last.eye[1] === keyEye[1] && last.eye[2] === keyEye[2]) return last;
+    const hidden = this.centres.map((_, k) => this.hides(keyEye, k));
     const cPrime = this.centres.map(([c, i, j]) => {
       const d = sub(c, keyEye);
       let best = NaN;
@@ -119,27 +153,42 @@ export class ErrorMetric {
       if (Number.isNaN(best)) best = this.alongTrack(keyEye, d);
       return Number.isNaN(best) ? null : add(keyEye, scale(d, best));
     });
-    this.last = { eye: [...keyEye], cPrime };
-    return cPrime;
+    this.last = { eye: [...keyEye], cPrime, hidden };
+    return this.last;
   }
 
   // Error in pixels of the keyframe seen from `keyEye` shown at viewpoint `vp` through
-  // view-projection `viewProj`, `beta` radians a pixel; Infinity when no centre is in view
-  // or every one in view missed.
-  errorPx(keyEye, vp, viewProj, beta) {
-    const cPrime = this.reproject(keyEye);
+  // view-projection `viewProj`, `beta` radians a pixel; `keyViewProj` (optional, row-major):
+  // the keyframe's view-projection (its squares outside it count as not seen); Infinity
+  // when no centre is in view or no centre in view is a hit.
+  errorPx(keyEye, vp, viewProj, beta, keyViewProj = null) {
+    const { cPrime, hidden } = this.reproject(keyEye);
+    const angle = (p, q) => {
+      const a = unit(sub(p, vp.o)), b = unit(sub(q, vp.o));
+      return Math.atan2(norm(cross(a, b)), dot(a, b));
+    };
+    const outside = (m, p) => {
+      const q = clip(m, p);
+      return q[3] <= 0 || Math.abs(q[0]) > q[3] || Math.abs(q[1]) > q[3] || Math.abs(q[2]) > q[3];
+    };
     let sum = 0, hits = 0, misses = 0, worst = 0;
+    const shown = [];  // angles C to F of the squares drawn from the fallback, seen here
     for (let k = 0; k < this.centres.length; k++) {
-      const c = this.centres[k][0];
-      const q = clip(viewProj, c);
-      if (q[3] <= 0 || Math.abs(q[0]) > q[3] || Math.abs(q[1]) > q[3] || Math.abs(q[2]) > q[3]) continue;
+      const [c, , , f] = this.centres[k];
+      if (outside(viewProj, c)) continue;
+      if (hidden[k] || (keyViewProj && outside(keyViewProj, f))) {  // the keyframe did not see F
+        if (!outside(viewProj, f) && !this.hides(vp.o, k)) shown.push(angle(c, f));  // F drawn
+        continue;
+      }
       if (cPrime[k] === null) { misses++; continue; }  // the keyframe maps C nowhere
-      const a = unit(sub(c, vp.o)), b = unit(sub(cPrime[k], vp.o));
-      const theta = Math.atan2(norm(cross(a, b)), dot(a, b));
+      const theta = angle(c, cPrime[k]);
       sum += theta * theta; hits++; worst = Math.max(worst, theta);
     }
-    // a miss counts as the worst hit (lodsprite.sprite.metric.miss_floor); none: due
-    return hits ? Math.sqrt((sum + misses * worst * worst) / (hits + misses)) / beta : Infinity;
+    if (!hits) return Infinity;
+    // a miss counts as the worst hit (lodsprite.sprite.metric.miss_floor), a square drawn
+    // from the fallback as the worst hit or its own angle
+    for (const u of shown) sum += Math.max(u, worst) ** 2;
+    return Math.sqrt((sum + misses * worst * worst) / (hits + misses + shown.length)) / beta;
   }
 }
 
@@ -175,9 +224,14 @@ export class Predictor {
   // Seconds ahead a request looks: the measured latency, at most MAX_AHEAD_S.
   lead() { return Math.min(this.latency, MAX_AHEAD_S); }
   viewProj(vp) { return mul(this.proj, viewMatrix(vp)); }
-  errorPx(metric, keyEye, vp) { return keyEye ? metric.errorPx(keyEye, vp, this.viewProj(vp), this.beta) : Infinity; }
-  // What to request now (a viewpoint) or null; `keyEye`: the shown keyframe's eye.
-  want(metric, keyEye, t, resting) {
+  // `keyViewProj` (optional): the shown keyframe's view-projection, mul(header.proj,
+  // header.view) of its keyframe message (ErrorMetric.errorPx).
+  errorPx(metric, keyEye, vp, keyViewProj = null) {
+    return keyEye ? metric.errorPx(keyEye, vp, this.viewProj(vp), this.beta, keyViewProj) : Infinity;
+  }
+  // What to request now (a viewpoint) or null; `keyEye`: the shown keyframe's eye
+  // (`keyViewProj`: as errorPx).
+  want(metric, keyEye, t, resting, keyViewProj = null) {
     if (this.inflight && t - this.inflight.t > LOST_S) this.inflight = null;  // lost
     if (this.inflight) return null;
     const now = this.samples[this.samples.length - 1][1];
@@ -188,7 +242,7 @@ export class Predictor {
     }
     this.settled = false;
     const ahead = this.predict(t + this.lead());
-    return this.errorPx(metric, keyEye, ahead) >= 0.5 * this.epsilon ? ahead : null;
+    return this.errorPx(metric, keyEye, ahead, keyViewProj) >= 0.5 * this.epsilon ? ahead : null;
   }
   sent(t, vp) { this.inflight = { t, vp }; }
   arrived(t0, now) {
