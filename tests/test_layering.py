@@ -36,6 +36,9 @@ DISTRIBUTED = "lodsprite.distributed"
 #: The swan2002 reproduction drives the distributed layer: a front end of it, like cli/.
 SWAN2002 = "lodsprite.experiments.swan2002"
 SWAN_RUN = f"{SWAN2002}.run"
+#: The notebook widgets are the web page's client in a cell: a front end of the distributed
+#: layer (its hub, sessions and renderer pool), loaded only by ``lodsprite.widget``.
+NOTEBOOK = "lodsprite.notebook"
 DASK = ("dask", "distributed")  # the cluster extra's top-level names
 
 
@@ -51,6 +54,7 @@ def package_edges() -> list[importgraph.Import]:
 
 #: Packages of techniques, experiments and front ends: gl/ draws for them and knows none.
 ABOVE_GL = {"sprite", "lumigraph", "manager", "profiles", "distributed", "adaptive", "viewer",
+            "notebook",
             "cli", "experiments", "api", "run", "harness", "techniques", "technique", "scene",
             "report", "layered"}
 
@@ -122,12 +126,12 @@ def test_the_shared_helpers_sit_at_the_bottom():
 
 
 def in_distributed_layer(module: str) -> bool:
-    return module.startswith((DISTRIBUTED, SWAN_RUN))
+    return module.startswith((DISTRIBUTED, SWAN_RUN, NOTEBOOK))
 
 
 def test_only_the_command_line_reaches_into_the_distributed_layer():
     bad = [e for e in runtime_edges() if importgraph.unit(e.target) == "distributed"
-           and importgraph.unit(e.source) not in ("distributed", "cli")
+           and importgraph.unit(e.source) not in ("distributed", "cli", "notebook")
            and not e.source.startswith(SWAN2002)]
     assert describe(bad) == []
 
@@ -364,3 +368,12 @@ def test_the_distributed_layer_imports_no_batch_module():
     experiments drive."""
     bad = [e for e in runtime_edges("distributed") if e.target == "lodsprite.run"]
     assert describe(bad) == []
+
+
+def test_only_the_lazy_widget_entry_reaches_the_notebook_front_end():
+    """``import lodsprite`` must not pull in the notebook widgets (and through them the
+    distributed layer, anywidget and jupyter_rfb): every edge into them from outside is lazy."""
+    inward = [e for e in runtime_edges() if e.target.startswith(NOTEBOOK)
+              and not e.source.startswith(NOTEBOOK)]
+    assert describe([e for e in inward if not e.lazy]) == []
+    assert any(e.source == "lodsprite" for e in inward)  # the rule sees lodsprite.widget

@@ -27,7 +27,7 @@
 
 import { pack, unpack, image } from './wire.js';
 import { SpriteDrawer } from './gl.js';
-import { FlyControls, lookAt, norm, sub } from './camera.js';
+import { FlyControls, lookAt, mul, norm, sub } from './camera.js';
 import { ErrorMetric, Predictor } from './predictor.js';
 import { Hud } from './hud.js';
 
@@ -104,7 +104,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
   transport.onclose(() => { state = 'disconnected'; });
 
   let renderer, metric, predictor, controls, path = null, pathIndex = 0, pathName = null;
-  let shownVp = null, keyEye = null, finishedResolve = () => {}, finished = null, lastFrame = null, lastSample = -Infinity;
+  let shownVp = null, keyEye = null, keyViewProj = null, finishedResolve = () => {}, finished = null, lastFrame = null, lastSample = -Infinity;
   const newFinished = () => { finished = new Promise((r) => { finishedResolve = r; }); };
   newFinished();
 
@@ -153,6 +153,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
     pendingKey = null;
     renderer.useKeyframe(key);
     keyEye = header.viewpoint.o;
+    keyViewProj = mul(header.proj, header.view);  // the estimate's keyframe frustum
     stats.keyframes += 1;
     keep(stats.latencies, now - 1000 * header.t0);
     predictor.arrived(header.t0, now / 1000);
@@ -178,7 +179,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
     shownVp = vp;
     predictor.sample(now / 1000, vp);
     if (pendingKey) adopt(now);
-    const want = predictor.want(metric, keyEye, now / 1000, resting);
+    const want = predictor.want(metric, keyEye, now / 1000, resting, keyViewProj);
     if (want) {
       const t = now / 1000;
       const s = send({ kind: 'request', t, viewpoint: want });
@@ -189,7 +190,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
       send({ kind: 'viewpoint', t: now / 1000, viewpoint: vp, shown });
     }
     renderer.draw(predictor.viewProj(vp));
-    stats.error_px = predictor.errorPx(metric, keyEye, vp);
+    stats.error_px = predictor.errorPx(metric, keyEye, vp, keyViewProj);
     if (Number.isFinite(stats.error_px)) { stats.errorSum += stats.error_px; stats.errorFrames += 1; }
     stats.frames += 1;
     if (path && pathIndex === path.length && keyEye && norm(sub(keyEye, vp.o)) <= 1e-6 * (1 + norm(vp.o))) {
