@@ -3,6 +3,7 @@ validated), what Python may pass (one typed error), and what the views get back,
 real renderer processes and the web server's sessions."""
 
 import asyncio
+import threading
 import time
 
 import numpy as np
@@ -206,6 +207,29 @@ def test_camera_and_screenshot_refuse_what_cannot_be_done():
             assert sent[-1][0] == {"kind": "camera",
                                    "viewpoint": [1.0, 0, 0, 0, 0, 1.0, 0, -1.0, 0, 5.0, 6.0,
                                                  7.0]}
+        finally:
+            w.close()
+
+    asyncio.run(main())
+
+
+def test_messages_from_a_subshell_thread_are_handled_on_the_widgets_own_loop():
+    """JupyterLab sends widget messages to a kernel subshell (ipykernel 7): its thread
+    hands each to the widget's loop, where the cell awaiting ``played()`` runs."""
+    async def main():
+        w, sent = widget_with_outbox()
+        try:
+            w.play("chen1999", frames=4)
+            handled = []
+            core_handle = w._core.handle
+            w._core.handle = lambda c, b: (handled.append(threading.get_ident()),
+                                           core_handle(c, b))
+            subshell = threading.Thread(target=w._on_front, args=(
+                w, {"kind": "played", "view": VIEW, "frames": 4}, []))
+            subshell.start()
+            subshell.join()
+            assert await w.played(timeout=DEADLINE_S) == 4
+            assert handled == [threading.get_ident()]
         finally:
             w.close()
 

@@ -2,6 +2,8 @@
 browser's input events or a path, with the sprite widget's Python API."""
 
 import asyncio
+import threading
+import time
 from io import BytesIO
 
 import numpy as np
@@ -76,6 +78,57 @@ def test_screenshot_before_a_frame_says_why():
         try:
             with pytest.raises(LodspriteError, match="no frame"):
                 await w.screenshot()
+        finally:
+            w.close()
+
+    asyncio.run(main())
+
+
+def test_the_pages_frame_feedback_is_logged_and_hostile_feedback_ignored():
+    async def main():
+        w = stream()
+        try:
+            w._frame_feedback = {"index": 3, "timestamp": 1.0, "localtime": 1700000000.25}
+            w._frame_feedback = {"index": "x", "localtime": None}  # from a hostile page
+            w._frame_feedback = {"localtime": 2.0}
+            assert list(w.shown) == [(3, 1700000000.25)]
+            w.handle_event({"type": "key_down", "key": "w", "timestamp": 1.0})
+            w.get_frame()
+            w.reset_stats()
+            assert not w.shown and not w.inputs
+        finally:
+            w.close()
+
+    asyncio.run(main())
+
+
+def test_events_from_a_subshell_thread_draw_on_the_widgets_own_loop():
+    """An event handled on a kernel subshell's thread (JupyterLab, ipykernel 7) draws on
+    the widget's loop, where its GL context was made, not on that thread."""
+    async def main():
+        w = stream()
+        drew = []
+        get_frame = w.get_frame
+        w.get_frame = lambda: (drew.append(threading.get_ident()), get_frame())[1]
+
+        async def drawn():
+            end = time.monotonic() + 10.0
+            while not drew:
+                assert time.monotonic() < end, "no frame drawn"
+                await asyncio.sleep(0.02)
+
+        try:
+            await drawn()  # the first frame, asked for when the widget was made
+            w._frame_feedback = {"index": w._rfb_frame_index, "timestamp": 1.0,
+                                 "localtime": 1.0}  # the page has shown it
+            await asyncio.sleep(0.05)
+            drew.clear()
+            subshell = threading.Thread(target=w._rfb_handle_msg, args=(
+                w, {"type": "key_down", "key": "w", "timestamp": 2.0}, []))
+            subshell.start()
+            subshell.join()
+            await drawn()
+            assert set(drew) == {threading.get_ident()} and "w" in w.flight.keys
         finally:
             w.close()
 

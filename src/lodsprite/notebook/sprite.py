@@ -27,6 +27,7 @@ import traitlets
 from lodsprite.camera import Viewpoint
 from lodsprite.errors import InputError
 from lodsprite.notebook.bundle import widget_css, widget_esm
+from lodsprite.notebook.home import at_home
 from lodsprite.notebook.kernel import WidgetCore
 from lodsprite.notebook.messages import STATS_KEYS, viewpoint_row
 from lodsprite.notebook.source import check_path, path_played, resolve_source
@@ -97,7 +98,7 @@ class SpriteWidget(anywidget.AnyWidget):
             self.send(content, buffers=buffers or None)
 
     def _on_front(self, _widget: Any, content: Any, buffers: list) -> None:
-        self._core.handle(content, buffers)
+        at_home(self._core.loop, self._core.handle, content, buffers)  # maybe a subshell's
 
     # ---------------------------------------------------------------------- API
 

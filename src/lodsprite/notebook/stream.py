@@ -26,6 +26,7 @@ from jupyter_rfb import RemoteFrameBuffer
 from lodsprite.camera import Viewpoint
 from lodsprite.errors import InputError, LodspriteError
 from lodsprite.notebook.flight import FlyCamera, look_along
+from lodsprite.notebook.home import at_home, home_loop
 from lodsprite.notebook.source import check_path, path_played
 
 __all__ = ["StreamWidget"]
@@ -73,6 +74,7 @@ class StreamWidget(RemoteFrameBuffer):
                             and getattr(scene.view, "fov_y_deg", None) else 45.0)
         super().__init__(css_width=f"{w}px", css_height=f"{h}px", resizable=False,
                          quality=quality)
+        self._home = home_loop()  # every draw and event runs here (lodsprite.notebook.home)
         self.scene = scene
         self.renderer = Renderer(scene, size=(w, h), fov_y_deg=fov)
         first = start_view(scene)
@@ -91,6 +93,11 @@ class StreamWidget(RemoteFrameBuffer):
         """(browser event timestamp, index of the first frame rendered after it) for each
         key press, for input-to-frame measurements (the frame index is jupyter_rfb's)."""
         self._pending_inputs: list[float] = []
+        self.shown: deque[tuple[int, float]] = deque(maxlen=KEEP)
+        """(jupyter_rfb frame index, browser wall-clock time in s) of each frame the page
+        put on screen, from jupyter_rfb's frame feedback: frame times as the page shows
+        them, and the end of an input-to-frame measurement."""
+        self.observe(self._on_feedback, names=["_frame_feedback"])
         self.frames = 0
         if path is not None:
             self.play(path, frames)
@@ -128,6 +135,30 @@ class StreamWidget(RemoteFrameBuffer):
         if more:
             self.request_draw()
         return image
+
+    # jupyter_rfb's front-end messages and draws, on the widget's home loop: messages may
+    # arrive on a kernel subshell's thread (lodsprite.notebook.home)
+
+    def _rfb_handle_msg(self, widget: Any, content: Any, buffers: list) -> None:
+        at_home(getattr(self, "_home", None), super()._rfb_handle_msg, widget, content,
+                buffers)
+
+    def _rfb_schedule_maybe_draw(self, *args: Any) -> None:
+        home = getattr(self, "_home", None)
+        if home is None:
+            super()._rfb_schedule_maybe_draw(*args)
+            return
+        try:
+            home.call_soon_threadsafe(self._rfb_maybe_draw)
+        except RuntimeError:  # the kernel's loop has closed
+            pass
+
+    def _on_feedback(self, change: dict) -> None:
+        fb = change.get("new") or {}
+        try:
+            self.shown.append((int(fb["index"]), float(fb["localtime"])))
+        except (KeyError, TypeError, ValueError):  # the page's message: ignore what is not
+            pass
 
     def handle_event(self, event: dict) -> None:
         kind = event.get("type") or event.get("event_type")
@@ -215,6 +246,8 @@ class StreamWidget(RemoteFrameBuffer):
             self.frames = 0
             self._intervals.clear()
             self._render_ms.clear()
+            self.inputs.clear()
+            self.shown.clear()
 
     async def screenshot(self, timeout: float = 10.0) -> bytes:
         """A PNG of the last frame sent to the browser (what it shows once delivered)."""
