@@ -80,3 +80,34 @@ def test_screenshot_before_a_frame_says_why():
             w.close()
 
     asyncio.run(main())
+
+
+def test_a_light_field_streams_from_its_own_view_and_plays_its_own_path(tmp_path):
+    import lodsprite
+    from lodsprite.lumigraph.run import capture_lumigraph
+
+    folder = tmp_path / "still.lf"
+    capture_lumigraph("still-life", folder, n_st=4, n_uv=32, codec="png")
+
+    async def main():
+        w = lodsprite.widget(folder, size=(64, 48))
+        try:
+            w._has_visible_views = True
+            image = w.get_frame()
+            assert image.shape == (48, 64, 3)
+            lit = image.max(axis=-1) > 0  # the still life on the lumigraph's black
+            assert 0.02 < lit.mean() < 0.98, "the light field is not in view"
+            w.play(frames=3)  # the scene's own default path: the arc
+            arc = w.scene.path("arc", 3).viewpoints
+            for vp in arc:
+                w.get_frame()
+                assert np.allclose(w.camera.o, vp.o)
+            assert await w.played(timeout=1) == 4
+            with pytest.raises(InputError, match="not found"):
+                w.play("nowhere.json")
+            with pytest.raises(InputError):
+                w.play("arc", frames=1)
+        finally:
+            w.close()
+
+    asyncio.run(main())
