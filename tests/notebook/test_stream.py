@@ -111,3 +111,34 @@ def test_a_light_field_streams_from_its_own_view_and_plays_its_own_path(tmp_path
             w.close()
 
     asyncio.run(main())
+
+
+
+def test_two_streams_in_one_kernel_each_draw_on_their_own_context(tmp_path):
+    """Each stream has its own GL context; making a second one (as a second widget in a
+    notebook does) leaves it current, and the first must still draw on its own."""
+    import lodsprite
+    from lodsprite.lumigraph.run import capture_lumigraph
+
+    folder = tmp_path / "still.lf"
+    capture_lumigraph("still-life", folder, n_st=4, n_uv=32, codec="png")
+
+    async def main():
+        first = stream()
+        second = None
+        try:
+            alone = first.get_frame().copy()
+            second = lodsprite.widget(folder, size=(64, 48))
+            second._has_visible_views = True
+            assert np.array_equal(first.get_frame(), alone)  # the held view, once more
+            light = second.get_frame().copy()
+            assert (light.max(axis=-1) > 0).mean() > 0.02
+            assert np.array_equal(first.get_frame(), alone)
+            assert np.array_equal(second.get_frame(), light)
+        finally:
+            first.close()
+            if second is not None:
+                second.close()
+        assert first.renderer is None and second.renderer is None
+
+    asyncio.run(main())

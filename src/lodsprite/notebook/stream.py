@@ -25,6 +25,7 @@ from jupyter_rfb import RemoteFrameBuffer
 
 from lodsprite.camera import Viewpoint
 from lodsprite.errors import InputError, LodspriteError
+from lodsprite.gl.context import keep_current
 from lodsprite.notebook.flight import FlyCamera, look_along
 from lodsprite.notebook.source import check_path, path_played
 
@@ -135,8 +136,9 @@ class StreamWidget(RemoteFrameBuffer):
             more = self.flight.step(dt)
             vp = self.flight.viewpoint
         t0 = time.perf_counter()
-        self.renderer.draw(vp, t=now - self._started)
-        image = self.renderer.read_color()
+        with self.renderer.gl.mgl:  # its own context current (another widget's may be)
+            self.renderer.draw(vp, t=now - self._started)
+            image = self.renderer.read_color()
         self._render_ms.append((time.perf_counter() - t0) * 1e3)
         self.frames += 1
         index = self._rfb_frame_index + 1  # the index jupyter_rfb gives this frame
@@ -252,5 +254,7 @@ class StreamWidget(RemoteFrameBuffer):
         """Release the renderer (its GL context) and close the widget; idempotent."""
         renderer, self.renderer = getattr(self, "renderer", None), None
         if renderer is not None:
-            renderer.release()
+            with keep_current():  # its objects released on its own context
+                renderer.gl.mgl.__enter__()
+                renderer.release()
         super().close()
