@@ -36,6 +36,7 @@ HEAVY_FIRST = (
     "tests/test_reproduce_large.py",
     "tests/viewer/test_window.py",
     "tests/distributed/test_client.py",
+    "tests/notebook/test_example_notebook.py",
     "tests/techniques/test_worker_store.py",
     "tests/sprite/test_worker_tiles.py",
     "tests/techniques/test_worker_store_tiles.py",

@@ -150,14 +150,20 @@ class Renderer:
         moved), composited by depth at full detail: full-resolution terrain, full meshes,
         every light field node (the ``scene`` technique's reference, :func:`~lodsprite.
         layered.technique.reference`, made through the registry); returns once the GL
-        work is done."""
+        work is done.  A light field alone (a lumigraph folder) is drawn from every node
+        of it (the ``lumigraph-full`` technique) into :attr:`target`."""
         from lodsprite import techniques
 
+        alone = self.scene.hf is None and self.scene.objects is None
         if self._layers is None:
-            self._layers = techniques.create("scene", self, ground_truth=True)
+            self._layers = (techniques.create("lumigraph-full", self) if alone else
+                            techniques.create("scene", self, ground_truth=True))
             self._layers.warm_up(viewpoint)
-        self._layers.index = max(0, round(float(t) / self._layers.frame_s))
+        if not alone:
+            self._layers.index = max(0, round(float(t) / self._layers.frame_s))
         frame = self._layers.frame(viewpoint)
+        if alone:
+            self._layers.draw_to(self.target.fbo)
         self.gl.finish()
         return frame
 

@@ -102,6 +102,37 @@ def test_the_pages_frame_feedback_is_logged_and_hostile_feedback_ignored():
     asyncio.run(main())
 
 
+def test_a_light_field_streams_from_its_own_view_and_plays_its_own_path(tmp_path):
+    import lodsprite
+    from lodsprite.lumigraph.run import capture_lumigraph
+
+    folder = tmp_path / "still.lf"
+    capture_lumigraph("still-life", folder, n_st=4, n_uv=32, codec="png")
+
+    async def main():
+        w = lodsprite.widget(folder, size=(64, 48))
+        try:
+            w._has_visible_views = True
+            image = w.get_frame()
+            assert image.shape == (48, 64, 3)
+            lit = image.max(axis=-1) > 0  # the still life on the lumigraph's black
+            assert 0.02 < lit.mean() < 0.98, "the light field is not in view"
+            w.play(frames=3)  # the scene's own default path: the arc
+            arc = w.scene.path("arc", 3).viewpoints
+            for vp in arc:
+                w.get_frame()
+                assert np.allclose(w.camera.o, vp.o)
+            assert await w.played(timeout=1) == 4
+            with pytest.raises(InputError, match="not found"):
+                w.play("nowhere.json")
+            with pytest.raises(InputError):
+                w.play("arc", frames=1)
+        finally:
+            w.close()
+
+    asyncio.run(main())
+
+
 def test_events_from_a_subshell_thread_draw_on_the_widgets_own_loop():
     """An event handled on a kernel subshell's thread (JupyterLab, ipykernel 7) draws on
     the widget's loop, where its GL context was made, not on that thread."""
@@ -131,5 +162,35 @@ def test_events_from_a_subshell_thread_draw_on_the_widgets_own_loop():
             assert set(drew) == {threading.get_ident()} and "w" in w.flight.keys
         finally:
             w.close()
+
+    asyncio.run(main())
+
+
+def test_two_streams_in_one_kernel_each_draw_on_their_own_context(tmp_path):
+    """Each stream has its own GL context; making a second one (as a second widget in a
+    notebook does) leaves it current, and the first must still draw on its own."""
+    import lodsprite
+    from lodsprite.lumigraph.run import capture_lumigraph
+
+    folder = tmp_path / "still.lf"
+    capture_lumigraph("still-life", folder, n_st=4, n_uv=32, codec="png")
+
+    async def main():
+        first = stream()
+        second = None
+        try:
+            alone = first.get_frame().copy()
+            second = lodsprite.widget(folder, size=(64, 48))
+            second._has_visible_views = True
+            assert np.array_equal(first.get_frame(), alone)  # the held view, once more
+            light = second.get_frame().copy()
+            assert (light.max(axis=-1) > 0).mean() > 0.02
+            assert np.array_equal(first.get_frame(), alone)
+            assert np.array_equal(second.get_frame(), light)
+        finally:
+            first.close()
+            if second is not None:
+                second.close()
+        assert first.renderer is None and second.renderer is None
 
     asyncio.run(main())

@@ -25,6 +25,7 @@ from jupyter_rfb import RemoteFrameBuffer
 
 from lodsprite.camera import Viewpoint
 from lodsprite.errors import InputError, LodspriteError
+from lodsprite.gl.context import keep_current
 from lodsprite.notebook.flight import FlyCamera, look_along
 from lodsprite.notebook.home import at_home, home_loop
 from lodsprite.notebook.source import check_path, path_played
@@ -33,6 +34,7 @@ __all__ = ["StreamWidget"]
 
 KEEP = 2000
 MAX_INPUTS = 2000
+MAX_SPEC = 1024
 
 
 def _percentile(values: Any, p: float) -> float | None:
@@ -41,12 +43,14 @@ def _percentile(values: Any, p: float) -> float | None:
 
 
 def start_view(scene: Any) -> Viewpoint:
-    """A first viewpoint: the scene file's default path's first, else over the terrain
-    looking at its centre (as the page's), else 30 m back from the origin."""
-    try:
-        return scene.path(None if scene.view is None else scene.view.path, 2).viewpoints[0]
-    except Exception:  # noqa: BLE001 - no default path: a view of its own
-        pass
+    """A first viewpoint: the scene's default path's first (a scene file's ``[view]``
+    path, a light field's ``arc``, a crowd's ``walk``), else over the terrain looking at
+    its centre (as the page's), else 30 m back from the origin."""
+    if scene.default_path is not None:
+        try:
+            return scene.path(scene.default_path, 2).viewpoints[0]
+        except Exception:  # noqa: BLE001 - no default path: a view of its own
+            pass
     if scene.hf is not None:
         lo, hi = scene.hf.bounds()
         centre = 0.5 * (lo + hi)
@@ -54,6 +58,20 @@ def start_view(scene: Any) -> Viewpoint:
         eye = np.array([centre[0], centre[1] - 1.2 * extent, centre[2] + 0.6 * extent])
         return look_along(eye, centre - eye)
     return look_along(np.array([0.0, -30.0, 5.0]), np.array([0.0, 1.0, -0.15]))
+
+
+def _check_scene_path(scene: Any, spec: Any, frames: int | None) -> None:
+    """``spec`` and ``frames`` checked before a path is made: a terrain's paths are the
+    built-ins (:func:`check_path`); a scene with paths of its own (a light field, a crowd)
+    names them or a JSON file, which :meth:`Scene.path` checks.  Raises
+    :class:`InputError`."""
+    if scene.paths is None:
+        check_path(spec, frames)
+        return
+    if not isinstance(spec, str) or not 0 < len(spec) <= MAX_SPEC:
+        raise InputError(f"path: a path name or a JSON file (1..{MAX_SPEC} characters), "
+                         f"got {spec!r:.40}")
+    check_path("chen1999", frames)  # the frame count's bounds
 
 
 class StreamWidget(RemoteFrameBuffer):
@@ -69,7 +87,7 @@ class StreamWidget(RemoteFrameBuffer):
         w, h = (int(v) for v in size)
         scene = open_scene(str(source), **scene_options)
         if path is not None:
-            check_path(path, frames)
+            _check_scene_path(scene, path, frames)
         fov = fov_y_deg or (scene.view.fov_y_deg if scene.view is not None
                             and getattr(scene.view, "fov_y_deg", None) else 45.0)
         super().__init__(css_width=f"{w}px", css_height=f"{h}px", resizable=False,
@@ -78,9 +96,9 @@ class StreamWidget(RemoteFrameBuffer):
         self.scene = scene
         self.renderer = Renderer(scene, size=(w, h), fov_y_deg=fov)
         first = start_view(scene)
-        span = (float(np.ptp(scene.hf.bounds(), axis=0)[0]) if scene.hf is not None
-                else 60.0)
-        self.flight = FlyCamera(first, 0.25 * span)
+        speed = (0.25 * float(np.ptp(scene.hf.bounds(), axis=0)[0]) if scene.hf is not None
+                 else scene.home.speed_mps if scene.home is not None else 15.0)
+        self.flight = FlyCamera(first, speed)
         self._path: list[Viewpoint] = []
         self._path_index = 0
         self._played: asyncio.Future | None = None
@@ -125,8 +143,9 @@ class StreamWidget(RemoteFrameBuffer):
             more = self.flight.step(dt)
             vp = self.flight.viewpoint
         t0 = time.perf_counter()
-        self.renderer.draw(vp, t=now - self._started)
-        image = self.renderer.read_color()
+        with self.renderer.gl.mgl:  # its own context current (another widget's may be)
+            self.renderer.draw(vp, t=now - self._started)
+            image = self.renderer.read_color()
         self._render_ms.append((time.perf_counter() - t0) * 1e3)
         self.frames += 1
         index = self._rfb_frame_index + 1  # the index jupyter_rfb gives this frame
@@ -186,14 +205,18 @@ class StreamWidget(RemoteFrameBuffer):
 
     # ----------------------------------------------------------------------- API
 
-    def play(self, path: str = "chen1999", frames: int | None = None) -> None:
-        """Play the built-in camera ``path`` over ``frames`` viewpoints, one a frame;
-        raises :class:`InputError` for an unknown path."""
+    def play(self, path: str | None = None, frames: int | None = None) -> None:
+        """Play the camera ``path`` over ``frames`` viewpoints (None: the path's own
+        count), one a frame: a built-in terrain path (chen1999, swan2002, flyover[:...],
+        patrol[:...], bank[:...]) or the scene's own (a light field's ``arc``, a crowd's
+        ``walk``, a JSON path file); None: the scene's default path, else chen1999.
+        Raises :class:`InputError` for an unknown path."""
         from lodsprite.errors import PathError
 
-        args = check_path(path, frames)
+        spec = path if path is not None else self.scene.default_path or "chen1999"
+        _check_scene_path(self.scene, spec, frames)
         try:
-            self._path = list(self.scene.path(args.spec, args.frames).viewpoints)
+            self._path = list(self.scene.path(spec, frames).viewpoints)
         except PathError as exc:
             raise InputError(str(exc)) from None
         self._path_index = 0
@@ -204,8 +227,24 @@ class StreamWidget(RemoteFrameBuffer):
         self.request_draw()
 
     async def played(self, timeout: float = 120.0) -> int:
-        """Wait until the path has been rendered to its end; the frames rendered."""
-        return await path_played(self._played, timeout)
+        """Wait until the path has been rendered to its end; the frames rendered.
+
+        A stream's frames flow while the kernel is idle: jupyter_rfb sends a frame once
+        the page has confirmed the one before last, and JupyterLab and Notebook 7 hold
+        those confirmations (widget state updates) while a cell runs.  So await it in a
+        cell of its own after the path has played, or in a task
+        (``asyncio.ensure_future(w.played())``); a cell awaiting it while the path plays
+        raises :class:`LodspriteError` after ``timeout`` s, saying so."""
+        try:
+            return await path_played(self._played, timeout)
+        except LodspriteError as exc:
+            confirmed = self._frame_feedback.get("index", 0)
+            if self._rfb_frame_index - confirmed >= self.max_buffered_frames:
+                raise LodspriteError(
+                    f"{exc}: the page confirmed no frame since frame {confirmed} (the "
+                    "notebook holds a stream's confirmations while a cell runs: let the "
+                    "cell end, or await played() in a task)") from None
+            raise
 
     def stop(self) -> None:
         """Stop a playing path where it is."""
@@ -264,5 +303,7 @@ class StreamWidget(RemoteFrameBuffer):
         """Release the renderer (its GL context) and close the widget; idempotent."""
         renderer, self.renderer = getattr(self, "renderer", None), None
         if renderer is not None:
-            renderer.release()
+            with keep_current():  # its objects released on its own context
+                renderer.gl.mgl.__enter__()
+                renderer.release()
         super().close()
