@@ -38,7 +38,7 @@ import zmq
 
 from lodsprite.distributed.frames import check_frames, recv_frames
 from lodsprite.distributed.keys import ServerKeys
-from lodsprite.distributed.pool.dispatch import MAX_TRIES, JobTable, Key, Peer
+from lodsprite.distributed.pool.dispatch import MAX_TRIES, Key
 from lodsprite.distributed.pool.jobs import (
     HEARTBEAT_S,
     KEYFRAME_PARTS,
@@ -49,17 +49,16 @@ from lodsprite.distributed.pool.jobs import (
     Job,
     JobMessage,
     Ready,
-    Result,
     ResultMessage,
     WorkerInfo,
     check_bind,
     check_job,
     decode_pool,
     encode_pool,
-    job_key,
 )
 from lodsprite.distributed.pool.render_worker import end_processes, spawn_workers
-from lodsprite.distributed.protocol import CODECS, ProtocolError, decode_keyframe
+from lodsprite.distributed.pool.results import PoolResults, drain, signal
+from lodsprite.distributed.protocol import CODECS, ProtocolError
 from lodsprite.errors import InputError, LodspriteError
 
 log = logging.getLogger("lodsprite.pool")
@@ -69,7 +68,7 @@ __all__ = ["JOB_TIMEOUT_S", "MAX_TRIES", "Broker", "WorkerInfo"]
 JOB_TIMEOUT_S = 120.0
 
 
-class Broker:
+class Broker(PoolResults):
     """The pool's broker.  ``bind``: ``tcp://HOST:PORT`` for remote workers (None: local
     workers only); a host beyond loopback needs ``curve`` or ``allow_remote``.
     ``curve``: the server's CURVE keys (:class:`~lodsprite.distributed.keys.ServerKeys`).
@@ -83,8 +82,8 @@ class Broker:
             raise InputError(f"unknown codec '{codec}': use {', '.join(CODECS)}")
         if bind is not None:
             check_bind(bind, curve is not None or allow_remote)
+        super().__init__(job_timeout_s)
         self.codec = codec
-        self.job_timeout_s = float(job_timeout_s)
         self.data_dir = None if data_dir is None else str(Path(data_dir).resolve())
         self.curve = curve
         self._dir = tempfile.mkdtemp(prefix="lodsprite-pool-")
@@ -95,14 +94,11 @@ class Broker:
         self._socks: list[zmq.Socket] = []
         self._procs: list = []
         self._inbox: deque[Job] = deque()
-        self._snapshot: list[WorkerInfo] = []
         self._stop = threading.Event()
         self._wake_r, self._wake_w = os.pipe()
-        self._ready_r, self._ready_w = os.pipe()
-        for fd in (self._wake_r, self._wake_w, self._ready_r, self._ready_w):
+        for fd in (self._wake_r, self._wake_w):
             os.set_blocking(fd, False)
         self._closed = False
-        self.table = JobTable(job_timeout_s, lambda: _signal(self._ready_w))
         try:
             self._open(bind)
         except BaseException:
@@ -114,38 +110,7 @@ class Broker:
     def submit(self, job: Job) -> None:
         """Queue ``job`` (never blocks; thread-safe)."""
         self._inbox.append(check_job(job))
-        _signal(self._wake_w)
-
-    def poll(self) -> list[Result]:
-        """The results (successes and failures) since the last call; never blocks."""
-        _drain(self._ready_r)
-        done = self.table.done
-        return [done.popleft() for _ in range(len(done))]
-
-    def fileno(self) -> int:
-        """A descriptor readable while :meth:`poll` has results (level-triggered)."""
-        return self._ready_r
-
-    def workers(self) -> list[WorkerInfo]:
-        """The workers connected now."""
-        return list(self._snapshot)
-
-    def stats(self) -> dict[str, float]:
-        """Counts: jobs, results, failed, requeued (after a lost worker), declined
-        (results not ok, each retried elsewhere or failed), dead, rejected, ignored; and
-        the render capacity: ``busy_s`` (seconds workers spent on the jobs they answered,
-        dispatch to answer, all workers together: over a wall-clock window and the
-        worker count it gives their utilisation) and ``job_ms_p50``/``job_ms_p90`` (a
-        job's dispatch to answer, ms, over the last :data:`~.dispatch.JOB_TIMES`; None before
-        one)."""
-        return self.table.stats()
-
-    def wait_workers(self, n: int, timeout: float) -> bool:
-        """Wait until at least ``n`` workers are connected (at most ``timeout`` s)."""
-        deadline = time.monotonic() + timeout
-        while len(self._snapshot) < n and time.monotonic() < deadline:
-            time.sleep(0.02)
-        return len(self._snapshot) >= n
+        signal(self._wake_w)
 
     def spawn_local(self, n: int, cache: int = 2) -> list[int]:
         """Start ``n`` worker processes (multiprocessing spawn, each with its own GL
@@ -167,7 +132,7 @@ class Broker:
         self._stop.set()
         thread = getattr(self, "_thread", None)
         if thread is not None:
-            _signal(self._wake_w)
+            signal(self._wake_w)
             thread.join(timeout=5.0)
         for s in self._socks:
             s.close(linger=0)
@@ -175,8 +140,9 @@ class Broker:
             self._auth.stop()
         self._ctx.term()
         end_processes(self._procs)
-        for fd in (self._wake_r, self._wake_w, self._ready_r, self._ready_w):
+        for fd in (self._wake_r, self._wake_w):
             os.close(fd)
+        self._close_results()
         shutil.rmtree(self._dir, ignore_errors=True)
 
     def __enter__(self) -> Broker:
@@ -228,7 +194,7 @@ class Broker:
                     if s in events:
                         self._receive(i, s)
                 self.table.lose_unreachable()
-                _drain(self._wake_r)
+                drain(self._wake_r)
                 while self._inbox:
                     self.table.add(self._inbox.popleft())
                 now = time.monotonic()
@@ -237,7 +203,7 @@ class Broker:
                     self._broadcast(Heartbeat(POOL_VERSION))
                     beat = now + HEARTBEAT_S
                 self._dispatch(now)
-                self._snapshot = self.table.snapshot()
+                self._changed()
             except Exception as exc:  # noqa: BLE001 - a bug must not stop the pool
                 log.error("render pool broker: internal error %r", exc)
         self._broadcast(Disconnect(POOL_VERSION, "broker closing", stop=True))
@@ -280,31 +246,15 @@ class Broker:
         if isinstance(msg, Disconnect):
             self.table.lose(key, "disconnected")
         elif isinstance(msg, ResultMessage):
-            self._result(key, peer, msg, parts, now)
+            self._result(key, msg, parts, now)
 
-    def _result(self, key: Key, peer: Peer, msg: ResultMessage, parts: list,
-                now: float) -> None:
-        job = peer.job
-        if job is None or job.job != msg.job:
-            self.table.counts["ignored"] += 1
-            return
-        self.table.answered(peer, now)
-        if not msg.ok:
-            self.table.declined(key, self.table.release(peer, now), msg.error, msg.refused)
-            return
-        data = [bytes(p) for p in parts]
+    def _result(self, key: Key, msg: ResultMessage, parts: list, now: float) -> None:
         try:
-            kf = decode_keyframe(data)
-            if kf.seq != job.job:
-                raise ProtocolError(f"keyframe seq {kf.seq} for job {job.job}")
+            self.table.settle(key, msg, parts, now)
         except ProtocolError as exc:  # the worker is broken or hostile: the job goes on
             self._reject(exc)
             self._send(key, Disconnect(POOL_VERSION, "bad keyframe"))
             self.table.lose(key, "sent a bad keyframe")
-            return
-        self.table.release(peer, now)
-        peer.scenes.append(job_key(job.load))
-        self.table.finish(Result(job.job, job.session, True, "", data, key[1].hex()))
 
     def _purge(self, now: float) -> None:
         silent, late = self.table.expired(now)
@@ -334,17 +284,3 @@ class Broker:
         for key in list(self.table.peers):
             self._send(key, msg)
 
-
-def _signal(fd: int) -> None:
-    try:
-        os.write(fd, b"\x01")
-    except (BlockingIOError, OSError):
-        pass  # the pipe is full (a wake-up is pending anyway) or closed
-
-
-def _drain(fd: int) -> None:
-    try:
-        while os.read(fd, 4096):
-            pass
-    except (BlockingIOError, OSError):
-        pass

@@ -25,9 +25,11 @@ from lodsprite.distributed.pool.jobs import (
     Job,
     Ready,
     Result,
+    ResultMessage,
     WorkerInfo,
     job_key,
 )
+from lodsprite.distributed.protocol import ProtocolError, decode_keyframe
 
 log = logging.getLogger("lodsprite.pool")
 
@@ -92,6 +94,7 @@ class JobTable:
                                      "dead", "rejected", "ignored"), 0)
         self.busy_s = 0.0  # seconds workers spent on jobs they answered
         self.job_s: deque[float] = deque(maxlen=JOB_TIMES)  # dispatch -> answer, s
+        self.overhead_s: deque[float] = deque(maxlen=JOB_TIMES)  # that less the worker's own
 
     def add(self, job: Job) -> None:
         self.queue.append(QueuedJob(job))
@@ -109,12 +112,38 @@ class JobTable:
         sending = sending if peer.job is not None else 0
         peer.grace = min(sending / MIN_LINK_BYTES_S, MAX_GRACE_S) if sending else 0.0
 
-    def answered(self, peer: Peer, now: float) -> None:
+    def answered(self, peer: Peer, now: float, render_ms: float = 0.0) -> None:
         """``peer`` answered its job (a keyframe or a decline): its time, dispatch to
-        answer, counted."""
+        answer, counted, and the dispatch overhead (that time less the worker's own
+        ``render_ms``)."""
         took = max(0.0, now - peer.since)
         self.busy_s += took
         self.job_s.append(took)
+        self.overhead_s.append(max(0.0, took - 1e-3 * render_ms))
+
+    def settle(self, key: Key, msg: ResultMessage, parts: list, now: float) -> bool:
+        """Worker ``key``'s answer ``msg`` (with the keyframe's frames ``parts``): a
+        keyframe finishes its job, a decline puts it back for another worker (or fails
+        it); an answer to a job it does not hold is counted ``ignored``.  Raises
+        :class:`ProtocolError` for a keyframe that does not decode as its job's (the
+        caller then loses the worker, the job back in the queue); False when ignored."""
+        peer = self.peers.get(key)
+        job = None if peer is None else peer.job
+        if job is None or job.job != msg.job:
+            self.counts["ignored"] += 1
+            return False
+        self.answered(peer, now, msg.render_ms)
+        if not msg.ok:
+            self.declined(key, self.release(peer, now), msg.error, msg.refused)
+            return True
+        data = [bytes(p) for p in parts]
+        kf = decode_keyframe(data)
+        if kf.seq != job.job:
+            raise ProtocolError(f"keyframe seq {kf.seq} for job {job.job}")
+        self.release(peer, now)
+        peer.scenes.append(job_key(job.load))
+        self.finish(Result(job.job, job.session, True, "", data, key[1].hex()))
+        return True
 
     def release(self, peer: Peer, now: float) -> QueuedJob:
         """``peer`` idle from ``now``; returns the job's entry it held."""
@@ -219,12 +248,16 @@ class JobTable:
                            p.job and p.job.job) for p in self.peers.values()]
 
     def stats(self) -> dict[str, float]:
-        """The counts, ``busy_s`` and ``job_ms_p50``/``job_ms_p90`` (None before one):
+        """The counts, ``busy_s``, ``job_ms_p50``/``job_ms_p90`` and the dispatch
+        overhead ``overhead_ms_p50``/``overhead_ms_p90`` (None before one):
         :meth:`lodsprite.distributed.pool.broker.Broker.stats`."""
-        times = sorted(self.job_s)
+        return {**self.counts, "busy_s": self.busy_s,
+                "job_ms_p50": _pct(self.job_s, 0.5), "job_ms_p90": _pct(self.job_s, 0.9),
+                "overhead_ms_p50": _pct(self.overhead_s, 0.5),
+                "overhead_ms_p90": _pct(self.overhead_s, 0.9)}
 
-        def pct(q: float) -> float | None:
-            return 1e3 * times[min(len(times) - 1, int(q * len(times)))] if times else None
 
-        return {**self.counts, "busy_s": self.busy_s, "job_ms_p50": pct(0.5),
-                "job_ms_p90": pct(0.9)}
+def _pct(seconds: deque, q: float) -> float | None:
+    """The ``q`` quantile of ``seconds``, in ms (None when empty)."""
+    times = sorted(seconds)
+    return 1e3 * times[min(len(times) - 1, int(q * len(times)))] if times else None

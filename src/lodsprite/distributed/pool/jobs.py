@@ -49,8 +49,9 @@ __all__ = ["HEARTBEAT_S", "LIVENESS_S", "MAX_GRACE_S", "MAX_JOB_BYTES", "MAX_RES
            "Ready", "Result", "ResultMessage", "WorkerInfo", "check_bind", "check_job",
            "decode_pool", "encode_pool", "job_key"]
 
-POOL_VERSION = 2
-"""2: ``result`` says whether the worker ``refused`` the job."""
+POOL_VERSION = 3
+"""2: ``result`` says whether the worker ``refused`` the job; 3: and how long the worker
+took (``render_ms``)."""
 HEARTBEAT_S = 0.25
 """Seconds between heartbeats, each way."""
 LIVENESS_S = 1.0
@@ -127,12 +128,15 @@ class JobMessage(PoolMessage, tag="job"):
 
 class ResultMessage(PoolMessage, tag="result"):
     """``refused``: not ok because this worker cannot take the job (its data rule or its
-    memory), not because a render failed."""
+    memory), not because a render failed.  ``render_ms``: the worker's own time on the
+    job (decode, scene load, render with the read-back, encode), ms; the rest of a job's
+    dispatch-to-answer time is the pool's dispatch overhead."""
 
     job: Seq
     ok: bool
     error: Text = ""
     refused: bool = False
+    render_ms: Annotated[float, Meta(ge=0.0, le=1e9)] = 0.0
 
 
 class Disconnect(PoolMessage, tag="disconnect"):
