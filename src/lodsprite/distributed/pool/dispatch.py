@@ -142,7 +142,8 @@ class JobTable:
             raise ProtocolError(f"keyframe seq {kf.seq} for job {job.job}")
         self.release(peer, now)
         peer.scenes.append(job_key(job.load))
-        self.finish(Result(job.job, job.session, True, "", data, key[1].hex()))
+        self.finish(Result(job.job, job.session, True, "", data, key[1].hex(),
+                           render_ms=msg.render_ms))
         return True
 
     def release(self, peer: Peer, now: float) -> QueuedJob:

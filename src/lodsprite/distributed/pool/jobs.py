@@ -92,7 +92,8 @@ class Result(Struct):
     failure: ``refused`` (every worker that tried refused it: a dataset its ``--data``
     lacks, a scene its machine cannot hold), ``failed`` (a worker's render failed) or
     ``lost`` (its workers died); ``worker``: the hex id of the worker that answered (""
-    when none did)."""
+    when none did); ``render_ms``: that worker's own time on the job (ms; the rest of
+    the round trip is the pool's dispatch overhead)."""
 
     job: int
     session: str
@@ -101,6 +102,7 @@ class Result(Struct):
     parts: list[bytes] = field(default_factory=list)
     worker: str = ""
     code: Literal["", "refused", "failed", "lost"] = ""
+    render_ms: float = 0.0
 
 
 class PoolMessage(Struct, forbid_unknown_fields=True, omit_defaults=True, tag_field="kind"):

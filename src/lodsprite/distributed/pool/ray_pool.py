@@ -15,10 +15,13 @@ they would wait for that actor's restart, where another renderer may be free now
 restarted actor joins again once it answers :meth:`~.ray_actor.Renderer.ready`, and a
 job past ``job_timeout_s`` has its actor killed (Ray restarts it).
 
-One thread runs an asyncio loop that owns the table and awaits the actors' replies;
-:meth:`RayPool.submit` and :meth:`RayPool.poll` never block (a pipe wakes the caller's
-loop, as the Broker's).  Ray is imported here only when a pool is made:
-:func:`require_ray` names the ``ray`` extra in one line where it is not installed.
+An asyncio loop owns the table and awaits the actors' replies: the web hub's own loop
+(:meth:`RayPool.start`, called by the hub: a job goes from the hub to Ray and its
+keyframe back with no hop between threads of the server process, each of which waits
+for the GIL under load), else a thread of the pool's own.  :meth:`RayPool.submit` and
+:meth:`RayPool.poll` never block (a pipe wakes the caller's loop, as the Broker's).
+Ray is imported here only when a pool is made: :func:`require_ray` names the ``ray``
+extra in one line where it is not installed.
 """
 
 from __future__ import annotations
@@ -147,10 +150,26 @@ class RayPool(PoolResults):
         self._closed = False
         self._of: dict[Key, int] = {}  # a joined renderer: its actor's index
         self._actors = self._start_actors(renderers, data_dir, cache, gpus_per_renderer)
-        self._loop = asyncio.new_event_loop()
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._thread: threading.Thread | None = None
+        self._owner = 0  # the id of the thread running the pool's loop
         self._tasks: set[asyncio.Task] = set()
-        self._thread = threading.Thread(target=self._run, daemon=True, name="ray-pool")
-        self._thread.start()
+
+    def start(self, loop: asyncio.AbstractEventLoop | None = None) -> None:
+        """Run the pool on ``loop``, the running loop of the calling thread (the web
+        hub's: its submit and poll then reach the pool without a hop between threads,
+        each a wait for the GIL under load) or, with None, on a thread of its own.  A
+        pool already started stays where it runs; :meth:`submit` and
+        :meth:`wait_workers` start one that was not, on a thread of its own."""
+        if self._loop is not None or self._closed:
+            return
+        if loop is None:
+            self._loop = asyncio.new_event_loop()
+            self._thread = threading.Thread(target=self._run, daemon=True, name="ray-pool")
+            self._thread.start()
+        else:
+            self._loop, self._owner = loop, threading.get_ident()
+            self._begin()
 
     def _start_actors(self, n: int, data_dir: Path | str | None, cache: int,
                       gpus: float) -> list:
@@ -169,7 +188,19 @@ class RayPool(PoolResults):
         job = check_job(job)
         if self._closed:
             raise LodspriteError("the render pool is closed")
-        self._loop.call_soon_threadsafe(self._add, job)
+        if self._loop is None:
+            self.start()
+        if threading.get_ident() == self._owner:
+            self._add(job)
+        else:
+            self._loop.call_soon_threadsafe(self._add, job)
+
+    def wait_workers(self, n: int, timeout: float) -> bool:
+        """Wait until at least ``n`` renderers have joined (at most ``timeout`` s; not
+        from the thread of the pool's loop)."""
+        if self._loop is None:
+            self.start()
+        return super().wait_workers(n, timeout)
 
     def actor_pids(self) -> dict[int, int]:
         """Each joined renderer's actor index: its process id."""
@@ -181,9 +212,14 @@ class RayPool(PoolResults):
         if self._closed:
             return
         self._closed = True
-        if self._thread.is_alive():
+        if self._thread is not None:
             self._loop.call_soon_threadsafe(self._loop.stop)
             self._thread.join(timeout=5.0)
+        elif self._loop is not None:
+            try:
+                self._loop.call_soon_threadsafe(self._cancel)
+            except RuntimeError:
+                pass  # the caller's loop is closed: its tasks went with it
         for actor in self._actors:
             try:
                 self._ray.kill(actor, no_restart=True)
@@ -203,16 +239,23 @@ class RayPool(PoolResults):
 
     def _run(self) -> None:
         asyncio.set_event_loop(self._loop)
-        for i in range(len(self._actors)):
-            self._spawn(self._join(i))
-        self._spawn(self._tick())
+        self._owner = threading.get_ident()
+        self._begin()
         try:
             self._loop.run_forever()
         finally:
-            for task in list(self._tasks):
-                task.cancel()
+            self._cancel()
             self._loop.run_until_complete(asyncio.sleep(0))
             self._loop.close()
+
+    def _begin(self) -> None:
+        for i in range(len(self._actors)):
+            self._spawn(self._join(i))
+        self._spawn(self._tick())
+
+    def _cancel(self) -> None:
+        for task in list(self._tasks):
+            task.cancel()
 
     def _spawn(self, coro) -> None:
         task = self._loop.create_task(coro)
@@ -224,6 +267,8 @@ class RayPool(PoolResults):
         self._dispatch()
 
     def _dispatch(self) -> None:
+        if self._closed:
+            return
         for key, entry in self.table.assign(time.monotonic()):
             self._spawn(self._render(key, entry.job))
         self._changed()
@@ -270,7 +315,7 @@ class RayPool(PoolResults):
         """Forget renderer ``key`` (its job back in the queue) and wait for it to join
         again; ``restart``: kill its process first (Ray starts another)."""
         i = self._of.pop(key, None)
-        if i is None:
+        if i is None or self._closed:
             return
         self.table.lose(key, why)
         if restart:
