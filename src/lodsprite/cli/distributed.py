@@ -69,10 +69,6 @@ def serve(
     rate: Annotated[float, typer.Option(
         "--rate", help="messages a second a web session may send; excess dropped",
         min=1.0, max=100000.0)] = 240.0,
-    workers_bind: Annotated[str | None, typer.Option(
-        "--workers-bind", help="tcp://HOST:PORT where render workers of other hosts join "
-                               "the web sessions' pool (`lodsprite render-worker`; CURVE "
-                               "with --keys)")] = None,
     ray: Annotated[str | None, typer.Option(
         "--ray", help="run the web page's --renderers as Ray actors on a Ray cluster: "
                       "auto (the one running on this machine), ray://HOST:PORT (Ray "
@@ -98,9 +94,7 @@ def serve(
     if web is not None:  # every web option checked before anything starts
         config = _web_config(web, allow_remote, token, data, renderers, codec, cert, key,
                              (session_jobs, session_queue, rate), public_host)
-        config.workers_bind, config.worker_keys = workers_bind, server_keys
-        config.ray, config.gpus_per_renderer = _ray_options(ray, gpus_per_renderer,
-                                                            workers_bind)
+        config.ray, config.gpus_per_renderer = _ray_options(ray, gpus_per_renderer)
     elif ray is not None:
         raise InputError("--ray runs the web page's renderers: give --web too")
     server = LodServer(bind, predictor, codec, server_keys, data_dir=data,
@@ -132,20 +126,16 @@ def _web_config(web, allow_remote, token, data, renderers, codec, cert, key, cap
     remote = allow_remote or host not in LOOPBACK_NAMES
     Datasets(data)  # a missing data folder: one line before anything starts
     return WebConfig(host, port, make_token(token, remote), data, renderers, Caps(*caps), codec,
-                     tls_context(cert, key), tuple(public_host or ()),
-                     allow_remote=allow_remote)
+                     tls_context(cert, key), tuple(public_host or ()))
 
 
-def _ray_options(ray: str | None, gpus: float, workers_bind: str | None) -> tuple:
-    """``--ray`` and ``--gpus-per-renderer`` checked (Ray installed, no --workers-bind
-    beside it); raises InputError."""
+def _ray_options(ray: str | None, gpus: float) -> tuple:
+    """``--ray`` and ``--gpus-per-renderer`` checked (Ray installed, an address of a
+    known form); raises InputError."""
     if ray is None:
         if gpus > 0:
             raise InputError("--gpus-per-renderer places Ray actors: give --ray too")
         return None, 0.0
-    if workers_bind is not None:
-        raise InputError("--ray and --workers-bind: the renderers are Ray actors or local "
-                         "processes joined by render workers, not both")
     from lodsprite.distributed.pool.ray_pool import check_address, require_ray
 
     require_ray()

@@ -1,17 +1,25 @@
-"""The render pool's broker: the Paranoid Pirate queue of the ZeroMQ guide (Hintjens,
-*ZeroMQ*, ch. 4, "Robust Reliable Queuing") between a keyframe submitter (the web server)
-and render workers (:mod:`.worker`).
+"""The local render pool's broker: the embedded default of ``serve --web`` and of the
+notebook widgets, the renderers local processes of this machine.  The Paranoid Pirate
+queue of the ZeroMQ guide (Hintjens, *ZeroMQ*, ch. 4, "Robust Reliable Queuing") between
+a keyframe submitter (the web server) and render workers (:mod:`.render_worker`).
+
+Renderers on other machines are Ray actors (:mod:`.ray_pool`, ``--ray``): the broker
+no longer takes workers of other hosts (no TCP endpoint, no CURVE, no slow-link
+allowance).  What is kept, and why Ray does not do it: this pool runs where Ray is not
+installed (Ray is an extra; a lean install serves the page with local renderers), and
+starting a Ray instance (about 7 s and several processes here) for one machine's
+renderers is not what a notebook or a small server should pay.  Its heartbeats and
+re-queues are the local pool's liveness: a local worker can hang or die in its GL (a
+driver, the out-of-memory killer) without its process exiting on its own.
 
 A ROUTER socket, bound to a private ``ipc://`` endpoint for the workers this process
-starts (:meth:`Broker.spawn_local`) and, with ``bind``, to ``tcp://HOST:PORT`` for workers
-on other hosts (``lodsprite render-worker``; CURVE with ``curve`` keys: only workers whose
-public key file lies in the keys folder get in).  One thread owns the sockets:
+starts (:meth:`Broker.spawn_local`).  One thread owns the socket:
 
 * a worker says ``ready``; the broker heartbeats each :data:`~.jobs.HEARTBEAT_S`; a
-  worker silent for more than :data:`~.jobs.LIVENESS_S` (plus the transfer time of a
-  result it announced) is dead, its job re-queued (:mod:`.dispatch` holds the workers and
-  jobs and decides who gets what, who is lost and which jobs fail: declined by every
-  worker, or lost under :data:`~.dispatch.MAX_TRIES` workers);
+  worker silent for more than :data:`~.jobs.LIVENESS_S` is dead, its job re-queued
+  (:mod:`.dispatch` holds the workers and jobs and decides who gets what, who is lost
+  and which jobs fail: declined by every worker, or lost under
+  :data:`~.dispatch.MAX_TRIES` workers);
 * every message is received frame by frame with a cap (:mod:`..frames`), each frame under
   ``zmq.MAXMSGSIZE``, and validated (:func:`~.jobs.decode_pool`, a keyframe by
   :func:`~lodsprite.distributed.protocol.decode_keyframe`); a bad one is counted
@@ -37,7 +45,6 @@ from pathlib import Path
 import zmq
 
 from lodsprite.distributed.frames import check_frames, recv_frames
-from lodsprite.distributed.keys import ServerKeys
 from lodsprite.distributed.pool.dispatch import MAX_TRIES, Key
 from lodsprite.distributed.pool.jobs import (
     HEARTBEAT_S,
@@ -51,7 +58,6 @@ from lodsprite.distributed.pool.jobs import (
     Ready,
     ResultMessage,
     WorkerInfo,
-    check_bind,
     check_job,
     decode_pool,
     encode_pool,
@@ -69,28 +75,20 @@ JOB_TIMEOUT_S = 120.0
 
 
 class Broker(PoolResults):
-    """The pool's broker.  ``bind``: ``tcp://HOST:PORT`` for remote workers (None: local
-    workers only); a host beyond loopback needs ``curve`` or ``allow_remote``.
-    ``curve``: the server's CURVE keys (:class:`~lodsprite.distributed.keys.ServerKeys`).
-    ``codec``: keyframe images ``raw`` or ``zlib``.  ``data_dir``: the data folder local
-    workers serve (the web server's ``--data``)."""
+    """The local pool's broker.  ``codec``: keyframe images ``raw`` or ``zlib``.
+    ``data_dir``: the data folder local workers serve (the web server's ``--data``)."""
 
-    def __init__(self, bind: str | None = None, curve: ServerKeys | None = None,
-                 codec: str = "raw", data_dir: Path | str | None = None,
-                 allow_remote: bool = False, job_timeout_s: float = JOB_TIMEOUT_S) -> None:
+    def __init__(self, codec: str = "raw", data_dir: Path | str | None = None,
+                 job_timeout_s: float = JOB_TIMEOUT_S) -> None:
         if codec not in CODECS:
             raise InputError(f"unknown codec '{codec}': use {', '.join(CODECS)}")
-        if bind is not None:
-            check_bind(bind, curve is not None or allow_remote)
         super().__init__(job_timeout_s)
         self.codec = codec
         self.data_dir = None if data_dir is None else str(Path(data_dir).resolve())
-        self.curve = curve
         self._dir = tempfile.mkdtemp(prefix="lodsprite-pool-")
         self.local_endpoint = f"ipc://{self._dir}/workers"
         self.endpoints = [self.local_endpoint]
         self._ctx = zmq.Context()
-        self._auth = None
         self._socks: list[zmq.Socket] = []
         self._procs: list = []
         self._inbox: deque[Job] = deque()
@@ -100,7 +98,7 @@ class Broker(PoolResults):
             os.set_blocking(fd, False)
         self._closed = False
         try:
-            self._open(bind)
+            self._socks.append(self._router(self.local_endpoint))
         except BaseException:
             self.close()
             raise
@@ -136,8 +134,6 @@ class Broker(PoolResults):
             thread.join(timeout=5.0)
         for s in self._socks:
             s.close(linger=0)
-        if self._auth is not None:
-            self._auth.stop()
         self._ctx.term()
         end_processes(self._procs)
         for fd in (self._wake_r, self._wake_w):
@@ -153,25 +149,11 @@ class Broker(PoolResults):
 
     # ---------------------------------------------------------------------- sockets
 
-    def _open(self, bind: str | None) -> None:
-        self._socks.append(self._router(self.local_endpoint, None))
-        if bind is not None:
-            if self.curve is not None:
-                from zmq.auth.thread import ThreadAuthenticator
-
-                self._auth = ThreadAuthenticator(self._ctx)
-                self._auth.start()  # admits the public keys in the keys folder only
-                self._auth.configure_curve(domain="*", location=str(self.curve.clients_dir))
-            self._socks.append(self._router(bind, self.curve))
-            self.endpoints.append(self._socks[-1].getsockopt_string(zmq.LAST_ENDPOINT))
-
-    def _router(self, address: str, curve: ServerKeys | None) -> zmq.Socket:
+    def _router(self, address: str) -> zmq.Socket:
         sock = self._ctx.socket(zmq.ROUTER)
         sock.setsockopt(zmq.LINGER, 0)
         sock.setsockopt(zmq.MAXMSGSIZE, MAX_RESULT_FRAME_BYTES)
         sock.setsockopt(zmq.ROUTER_MANDATORY, 1)  # a departed worker: an error, not a drop
-        if curve is not None:
-            curve.apply(sock)
         try:
             sock.bind(address)
         except zmq.ZMQError as exc:
@@ -242,7 +224,7 @@ class Broker(PoolResults):
             if not isinstance(msg, Disconnect):
                 self._send(key, Disconnect(POOL_VERSION, "unknown worker: say ready"))
             return
-        self.table.heard(peer, now, msg.sending if isinstance(msg, Heartbeat) else 0)
+        self.table.heard(peer, now)
         if isinstance(msg, Disconnect):
             self.table.lose(key, "disconnected")
         elif isinstance(msg, ResultMessage):

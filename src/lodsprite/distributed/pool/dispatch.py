@@ -20,8 +20,6 @@ from dataclasses import dataclass, field
 
 from lodsprite.distributed.pool.jobs import (
     LIVENESS_S,
-    MAX_GRACE_S,
-    MIN_LINK_BYTES_S,
     Job,
     Ready,
     Result,
@@ -58,7 +56,7 @@ class QueuedJob:
 @dataclass
 class Peer:
     """A connected worker: what it said in ``ready``, when it was last heard (monotonic
-    s), the job it holds since when, the grace its announced result earns (s), when it
+    s), the job it holds since when, when it
     went idle, and the scenes it loaded last."""
 
     sock: int
@@ -67,7 +65,6 @@ class Peer:
     seen: float
     entry: QueuedJob | None = None
     since: float = 0.0
-    grace: float = 0.0
     idle_since: float = 0.0
     scenes: deque = field(default_factory=lambda: deque(maxlen=4))
 
@@ -105,12 +102,9 @@ class JobTable:
         if key not in self.peers and len(self.peers) < MAX_PEERS:
             self.peers[key] = Peer(key[0], key[1], info, now, idle_since=now)
 
-    def heard(self, peer: Peer, now: float, sending: int = 0) -> None:
-        """``peer`` spoke at ``now``; ``sending``: the bytes of a result it announced
-        (they earn it the time to transfer them, capped)."""
+    def heard(self, peer: Peer, now: float) -> None:
+        """``peer`` spoke at ``now``."""
         peer.seen = now
-        sending = sending if peer.job is not None else 0
-        peer.grace = min(sending / MIN_LINK_BYTES_S, MAX_GRACE_S) if sending else 0.0
 
     def answered(self, peer: Peer, now: float, render_ms: float = 0.0) -> None:
         """``peer`` answered its job (a keyframe or a decline): its time, dispatch to
@@ -168,7 +162,7 @@ class JobTable:
 
     def expired(self, now: float) -> tuple[list[Key], list[Key]]:
         """The workers silent too long, and those holding a job past the job timeout."""
-        silent = [k for k, p in self.peers.items() if now - p.seen > LIVENESS_S + p.grace]
+        silent = [k for k, p in self.peers.items() if now - p.seen > LIVENESS_S]
         late = [k for k, p in self.peers.items()
                 if p.job is not None and now - p.since > self.job_timeout_s]
         return silent, late
@@ -241,12 +235,12 @@ class JobTable:
         read before it is lost)."""
         if self.unreachable:
             return 0.0
-        due = min((p.seen + LIVENESS_S + p.grace for p in self.peers.values()), default=beat)
+        due = min((p.seen + LIVENESS_S for p in self.peers.values()), default=beat)
         return min(beat, due + 1e-3)
 
     def snapshot(self) -> list[WorkerInfo]:
-        return [WorkerInfo(p.ident.hex(), p.info.pid, p.info.name, p.sock > 0,
-                           p.job and p.job.job) for p in self.peers.values()]
+        return [WorkerInfo(p.ident.hex(), p.info.pid, p.info.name, p.job and p.job.job)
+                for p in self.peers.values()]
 
     def stats(self) -> dict[str, float]:
         """The counts, ``busy_s``, ``job_ms_p50``/``job_ms_p90`` and the dispatch

@@ -85,10 +85,10 @@ class WebConfig:
     """What ``serve --web`` was given: ``host``/``port`` (0: any free port), the
     ``token``, ``data_dir``, ``renderers`` local renderer processes, per-session ``caps``,
     keyframe ``codec``, an optional TLS context, the ``public_hosts`` names a reverse
-    proxy serves the page under (accepted as ``Host``), and where render workers of other
-    hosts join the pool: ``workers_bind`` (``tcp://HOST:PORT``, None: local renderers
-    only) with CURVE ``worker_keys`` (:class:`~lodsprite.distributed.keys.ServerKeys`)
-    or ``allow_remote``."""
+    proxy serves the page under (accepted as ``Host``), and ``ray``, the address of a
+    Ray cluster whose actors are the ``renderers``
+    (:class:`~lodsprite.distributed.pool.ray_pool.RayPool`), each with
+    ``gpus_per_renderer`` GPUs (None: local renderer processes)."""
 
     host: str = "127.0.0.1"
     port: int = 0
@@ -99,9 +99,6 @@ class WebConfig:
     codec: str = "raw"
     tls: ssl.SSLContext | None = None
     public_hosts: tuple[str, ...] = ()
-    workers_bind: str | None = None
-    worker_keys: Any = None
-    allow_remote: bool = False
     ray: str | None = None
     gpus_per_renderer: float = 0.0
 
@@ -233,8 +230,7 @@ def make_pool(config: WebConfig) -> Any:
                        config.gpus_per_renderer)
     from lodsprite.distributed.pool import Broker
 
-    pool = Broker(config.workers_bind, config.worker_keys, config.codec, config.data_dir,
-                  config.allow_remote)
+    pool = Broker(config.codec, config.data_dir)
     pool.spawn_local(config.renderers)
     return pool
 
