@@ -9,6 +9,9 @@ the renderer's own time on it (``render_ms``: decode, render with the read-back,
 encode), so what is left is the pool's: queueing, transport of the job and of the
 keyframe (a 256² keyframe is about 0.26 MB raw), the hops to the submitter's loop.
 Both pools are measured in the same run, alternately in rounds, after the same warm-up.
+Then, in a second Ray instance with Ray's default ``max_direct_call_object_size``
+(100 KB), the Ray pool again (``ray_object_store``): a keyframe larger than that goes
+through the object store rather than inline in the actor's reply.
 
     python benchmarks/pool_overhead.py --jobs 200 --size 256
 """
@@ -96,17 +99,22 @@ def main() -> None:
 
     from lodsprite.distributed.pool.ray_pool import INLINE_BYTES, RayPool
 
-    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False,
-             _system_config={"max_direct_call_object_size": INLINE_BYTES})
     load = LoadArgs(terrain=args.terrain, size=(args.size, args.size), lod=32)
-    pools = {"local": Broker(), "ray": RayPool("auto", 1)}
-    pools["local"].spawn_local(1)
-    try:
-        got = asyncio.run(rounds(pools, load, args.jobs, args.warm, args.rounds))
-    finally:
-        for pool in pools.values():
-            pool.close()
-        ray.shutdown()
+    got = {}
+    for inline in (True, False):
+        ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False,
+                 _system_config={"max_direct_call_object_size": INLINE_BYTES} if inline
+                 else {})
+        pools = {"ray" if inline else "ray_object_store": RayPool("auto", 1)}
+        if inline:
+            pools = {"local": Broker(), **pools}
+            pools["local"].spawn_local(1)
+        try:
+            got.update(asyncio.run(rounds(pools, load, args.jobs, args.warm, args.rounds)))
+        finally:
+            for pool in pools.values():
+                pool.close()
+            ray.shutdown()
     results = {name: summary(g) for name, g in got.items()}
     print(json.dumps({"terrain": args.terrain, "size": args.size, **results}, indent=1))
 

@@ -29,6 +29,9 @@ pool's figure) and the set-up.
 With ``--ray`` the same load runs twice in one invocation, on the local pool and then on
 Ray actors (the server started with ``--ray local``: a Ray instance of this machine's
 cores, started by the server), and ``results.json`` holds both (``local``, ``ray``).
+``--kill-renderer-at S`` kills a renderer actor (SIGKILL, one rendering if any) S seconds
+into the Ray run's play: ``killed_renderer`` and the pool's ``pool_dead``,
+``pool_requeued`` and ``pool_failed`` over the play say what became of its job.
 
     python benchmarks/web_load.py --clients 16 --renderers 2 --out out/web_load
     python benchmarks/web_load.py --clients 16 --renderers 2 --ray --out out/web_load_ray
@@ -176,6 +179,34 @@ async def pool_stats(url: str, token: str) -> dict:
             await page.close()
 
 
+async def kill_renderer(server_pid: int, at_s: float) -> dict | None:
+    """SIGKILL one Ray renderer actor of the server's process tree ``at_s`` seconds into
+    the play, one holding a job if there is one (its process title ``ray::Renderer.render``
+    while it renders); its pid and whether it was rendering (None: none found)."""
+    import psutil
+
+    await asyncio.sleep(at_s)
+    deadline = time.monotonic() + 2.0
+    while True:
+        found = [(p, cmd) for p in psutil.Process(server_pid).children(recursive=True)
+                 for cmd in [_cmdline(p)] if cmd.startswith("ray::Renderer")]
+        busy = [p for p, cmd in found if ".render" in cmd]
+        if busy or (found and time.monotonic() > deadline):
+            victim = (busy or [p for p, _ in found])[0]
+            victim.kill()
+            return {"pid": victim.pid, "rendering": bool(busy), "at_s": at_s}
+        if not found and time.monotonic() > deadline:
+            return None
+        await asyncio.sleep(0.002)
+
+
+def _cmdline(p) -> str:
+    try:
+        return " ".join(p.cmdline())
+    except Exception:  # noqa: BLE001 - psutil: gone, or not ours to read
+        return ""
+
+
 def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
@@ -271,7 +302,10 @@ async def run(args, pool: str = "local") -> dict:
         own0 = pages_cpu_s(proc.pid)
         t0 = time.monotonic()
         start.set()
+        killer = (asyncio.create_task(kill_renderer(proc.pid, args.kill_renderer_at))
+                  if pool == "ray" and args.kill_renderer_at is not None else None)
         got = await asyncio.gather(*tasks)
+        killed = await killer if killer is not None else None
         wall = time.monotonic() - t0
         own = pages_cpu_s(proc.pid) - own0
         cpu, pool1 = tree_cpu_s(proc.pid) - cpu0, await pool_stats(url, token)
@@ -316,7 +350,11 @@ async def run(args, pool: str = "local") -> dict:
             "overhead_ms_p50": pool1.get("overhead_ms_p50"),
             "overhead_ms_p90": pool1.get("overhead_ms_p90"),
             "renderer_busy": (pool1["busy_s"] - pool0["busy_s"]) / (args.renderers * wall)
-            if "busy_s" in pool1 else None}
+            if "busy_s" in pool1 else None,
+            # --kill-renderer-at: the renderer killed, and what the pool did about it
+            "killed_renderer": killed,
+            **{f"pool_{k}": pool1[k] - pool0[k] for k in ("dead", "requeued", "failed")
+               if k in pool1}}
 
 
 def _finite_mean(a: np.ndarray) -> float | None:
@@ -342,6 +380,9 @@ def main() -> None:
     ap.add_argument("--ray", action="store_true",
                     help="also run the load on Ray actors (the server's --ray local), after "
                          "the local pool")
+    ap.add_argument("--kill-renderer-at", type=float, default=None, metavar="S",
+                    help="with --ray: SIGKILL a renderer actor S seconds into the play "
+                         "(Ray restarts it; its job goes to another)")
     ap.add_argument("--out", type=Path, default=Path("out/web_load"))
     args = ap.parse_args()
     runs = {pool: asyncio.run(run(args, pool)) for pool in (

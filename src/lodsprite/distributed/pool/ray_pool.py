@@ -59,8 +59,8 @@ RAY_EXTRA = "lodsprite[ray]"
 INLINE_BYTES = 16 * 2**20
 """Replies up to this size travel inline with the call's answer (Ray's
 ``max_direct_call_object_size``, set where this process starts Ray: ``--ray local``)
-rather than through the object store: a 256² keyframe's round trip drops from about
-3.6 ms to 1.5 ms on a 2-core machine."""
+rather than through the object store: a 256² keyframe's dispatch overhead drops from
+3.6 ms to 2.4 ms on a 2-core machine (``benchmarks/pool_overhead.py``)."""
 TICK_S = 0.25
 """How often the pool looks for jobs past their timeout (s)."""
 CONNECT_S = 5.0
