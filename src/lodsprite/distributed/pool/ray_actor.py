@@ -8,9 +8,11 @@ first).  Its methods run one at a time on the actor's one thread (Ray's default 
 synchronous actor), the thread that made the GL context: no Python thread beside the
 draws (moderngl holds the GIL through them).
 
-Where Ray assigns GPUs it sets ``CUDA_VISIBLE_DEVICES`` for the actor; NVIDIA's EGL
-enumerates the visible devices only, so the headless context (EGL device 0) is the
-assigned GPU.  :meth:`Renderer.ready` reports the GPU ids and the GL renderer string.
+Where Ray assigns GPUs it sets ``CUDA_VISIBLE_DEVICES`` for the actor; the headless
+context is made on EGL's first device (glcontext's default, ``GLCONTEXT_DEVICE_INDEX``
+picks another), which is the assigned GPU where the driver's EGL device list follows
+``CUDA_VISIBLE_DEVICES`` (not verified here: no GPU).  :meth:`Renderer.ready` reports
+the GPU ids and the GL renderer string, so that a deployment can check.
 
 The job arrives as the pool's ``job`` message (msgpack bytes, :class:`~.jobs.JobMessage`),
 the answer is the pool's ``result`` frames (:func:`~.jobs.encode_pool`: the header, then
