@@ -340,6 +340,31 @@ def test_the_distributed_layer_and_the_local_web_pool_load_no_ray():
     assert proc.stdout.strip().splitlines()[-1] == "[]"
 
 
+def test_serve_web_runs_without_ray_and_stops_cleanly():
+    """Ray made unimportable (as where the extra is not installed): ``serve --web`` starts
+    its local renderers, prints the page's URL and exits 0 on SIGTERM."""
+    import queue
+    import signal
+    import threading
+
+    from lodsprite.distributed.run import free_ports
+
+    code = "import sys; sys.modules['ray'] = None; from lodsprite.cli import main; main()"
+    proc = subprocess.Popen([sys.executable, "-c", code, "serve", "--bind",
+                             f"127.0.0.1:{free_ports()}", "--web", "127.0.0.1:0"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    lines: queue.Queue = queue.Queue()
+    threading.Thread(target=lambda: lines.put(proc.stdout.readline()), daemon=True).start()
+    try:
+        line = lines.get(timeout=60)  # printed once serving ("" if it exited first)
+        assert line.startswith("web page: http://127.0.0.1:"), line
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 0, err
+    assert "Traceback" not in err, err
+
+
 def test_serve_ray_without_ray_is_one_line_and_exit_2():
     code = "import sys; sys.modules['ray'] = None; from lodsprite.cli import main; main()"
     proc = subprocess.run([sys.executable, "-c", code, "serve", "--web", "0", "--ray", "auto"],

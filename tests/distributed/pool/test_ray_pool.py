@@ -37,6 +37,7 @@ VP = {"x": [1.0, 0.0, 0.0], "y": [0.0, 0.6, 0.8], "z": [0.0, -0.8, 0.6],
 def cluster():
     """The module's Ray instance: two CPUs, one per renderer actor."""
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False,
+             object_store_memory=100 * 2**20,  # lean: keyframes travel inline anyway
              _system_config={"max_direct_call_object_size": INLINE_BYTES})
     yield
     ray.shutdown()
