@@ -22,9 +22,19 @@ Writes ``DIR/results.json``: ``keyframes_per_client`` (list), ``most_over_least`
 ``error_px_mean_by_path`` (both, per path), ``server_cpu_s``, the render capacity
 (``keyframes_per_s`` served, the pool's ``job_ms_p50``/``job_ms_p90`` dispatch to
 answer, ``renderer_busy``: the fraction of the play time the renderers rendered),
-``play_s``, ``frames_shown`` and the set-up.
+``play_s``, ``frames_shown``, the dispatch overhead per keyframe (``overhead_ms_p50``/
+``overhead_ms_p90``: a job's dispatch to answer less the renderer's own time on it, the
+pool's figure) and the set-up.
+
+With ``--ray`` the same load runs twice in one invocation, on the local pool and then on
+Ray actors (the server started with ``--ray local``: a Ray instance of this machine's
+cores, started by the server), and ``results.json`` holds both (``local``, ``ray``).
+``--kill-renderer-at S`` kills a renderer actor (SIGKILL, one rendering if any) S seconds
+into the Ray run's play: ``killed_renderer`` and the pool's ``pool_dead``,
+``pool_requeued`` and ``pool_failed`` over the play say what became of its job.
 
     python benchmarks/web_load.py --clients 16 --renderers 2 --out out/web_load
+    python benchmarks/web_load.py --clients 16 --renderers 2 --ray --out out/web_load_ray
 """
 
 from __future__ import annotations
@@ -169,6 +179,34 @@ async def pool_stats(url: str, token: str) -> dict:
             await page.close()
 
 
+async def kill_renderer(server_pid: int, at_s: float) -> dict | None:
+    """SIGKILL one Ray renderer actor of the server's process tree ``at_s`` seconds into
+    the play, one holding a job if there is one (its process title ``ray::Renderer.render``
+    while it renders); its pid and whether it was rendering (None: none found)."""
+    import psutil
+
+    await asyncio.sleep(at_s)
+    deadline = time.monotonic() + 2.0
+    while True:
+        found = [(p, cmd) for p in psutil.Process(server_pid).children(recursive=True)
+                 for cmd in [_cmdline(p)] if cmd.startswith("ray::Renderer")]
+        busy = [p for p, cmd in found if ".render" in cmd]
+        if busy or (found and time.monotonic() > deadline):
+            victim = (busy or [p for p, _ in found])[0]
+            victim.kill()
+            return {"pid": victim.pid, "rendering": bool(busy), "at_s": at_s}
+        if not found and time.monotonic() > deadline:
+            return None
+        await asyncio.sleep(0.002)
+
+
+def _cmdline(p) -> str:
+    try:
+        return " ".join(p.cmdline())
+    except Exception:  # noqa: BLE001 - psutil: gone, or not ours to read
+        return ""
+
+
 def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
@@ -245,9 +283,9 @@ def pages_cpu_s(server_pid: int) -> float | None:
     return total
 
 
-async def run(args) -> dict:
+async def run(args, pool: str = "local") -> dict:
     token = secrets.token_urlsafe(16)
-    proc, url = start_server(args.renderers, token)
+    proc, url = start_server(args.renderers, token, ["--ray", "local"] if pool == "ray" else [])
     hf = load_scene(args.terrain, "terrain", None, 1.0).hf
     paths = {spec: list(get_path(spec, hf, args.frames).viewpoints)
              for spec in PATHS[:args.clients]}
@@ -264,7 +302,10 @@ async def run(args) -> dict:
         own0 = pages_cpu_s(proc.pid)
         t0 = time.monotonic()
         start.set()
+        killer = (asyncio.create_task(kill_renderer(proc.pid, args.kill_renderer_at))
+                  if pool == "ray" and args.kill_renderer_at is not None else None)
         got = await asyncio.gather(*tasks)
+        killed = await killer if killer is not None else None
         wall = time.monotonic() - t0
         own = pages_cpu_s(proc.pid) - own0
         cpu, pool1 = tree_cpu_s(proc.pid) - cpu0, await pool_stats(url, token)
@@ -286,7 +327,8 @@ async def run(args) -> dict:
         e = np.asarray(g["errors_px"], np.float64)
         by_path.setdefault(PATHS[i % len(PATHS)], []).append((e[np.isfinite(e)],
                                                               ex[i][np.isfinite(ex[i])]))
-    return {"clients": args.clients, "renderers": args.renderers, "terrain": args.terrain,
+    return {"pool": pool, "clients": args.clients, "renderers": args.renderers,
+            "terrain": args.terrain,
             "size": args.size, "lod": args.lod, "epsilon": args.epsilon,
             "frames": args.frames, "fps": args.fps, "keyframes_per_client": per,
             "most_over_least": max(per) / max(1, min(per)),
@@ -305,8 +347,14 @@ async def run(args) -> dict:
             "play_s": wall, "keyframes_per_s": sum(per) / wall,
             "frames_shown": sum(len(g["shown_eyes"]) for g in got),
             "job_ms_p50": pool1.get("job_ms_p50"), "job_ms_p90": pool1.get("job_ms_p90"),
+            "overhead_ms_p50": pool1.get("overhead_ms_p50"),
+            "overhead_ms_p90": pool1.get("overhead_ms_p90"),
             "renderer_busy": (pool1["busy_s"] - pool0["busy_s"]) / (args.renderers * wall)
-            if "busy_s" in pool1 else None}
+            if "busy_s" in pool1 else None,
+            # --kill-renderer-at: the renderer killed, and what the pool did about it
+            "killed_renderer": killed,
+            **{f"pool_{k}": pool1[k] - pool0[k] for k in ("dead", "requeued", "failed")
+               if k in pool1}}
 
 
 def _finite_mean(a: np.ndarray) -> float | None:
@@ -329,13 +377,22 @@ def main() -> None:
     ap.add_argument("--clients", type=int, default=16)
     ap.add_argument("--renderers", type=int, default=2)
     scene_options(ap)
+    ap.add_argument("--ray", action="store_true",
+                    help="also run the load on Ray actors (the server's --ray local), after "
+                         "the local pool")
+    ap.add_argument("--kill-renderer-at", type=float, default=None, metavar="S",
+                    help="with --ray: SIGKILL a renderer actor S seconds into the play "
+                         "(Ray restarts it; its job goes to another)")
     ap.add_argument("--out", type=Path, default=Path("out/web_load"))
     args = ap.parse_args()
-    results = asyncio.run(run(args))
+    runs = {pool: asyncio.run(run(args, pool)) for pool in (
+        ("local", "ray") if args.ray else ("local",))}
     args.out.mkdir(parents=True, exist_ok=True)
+    results = runs if args.ray else runs["local"]
     (args.out / "results.json").write_text(json.dumps(results, indent=2) + "\n")
-    print(json.dumps({k: v for k, v in results.items() if k != "keyframes_per_client"}))
-    print("keyframes per client:", results["keyframes_per_client"])
+    for r in runs.values():
+        print(json.dumps({k: v for k, v in r.items() if k != "keyframes_per_client"}))
+        print(f"{r['pool']}: keyframes per client:", r["keyframes_per_client"])
 
 
 if __name__ == "__main__":

@@ -98,6 +98,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--latency", type=float, nargs="+", default=[0.09, 0.25, 0.5],
                     help="keyframe latencies, s")
+    ap.add_argument("--policies", nargs="+", choices=POLICIES, default=list(POLICIES),
+                    help="request policies to play (web_capacity.py reads page)")
     scene_options(ap)
     ap.add_argument("--out", type=Path, default=Path("out/web_predictor"))
     args = ap.parse_args()
@@ -111,7 +113,7 @@ def main() -> None:
     paths = {spec: list(get_path(spec, hf, args.frames).viewpoints) for spec in PATHS}
     rows = []
     for latency in args.latency:
-        for policy in POLICIES:
+        for policy in args.policies:
             per = {spec: play(scene, exact, p, latency, args.fps, policy)
                    for spec, p in paths.items()}
             means = {k: _mean([v[k] for v in per.values() if v[k] is not None])

@@ -20,6 +20,7 @@ import json
 import pkgutil
 import subprocess
 import sys
+import textwrap
 import tomllib
 from pathlib import Path
 
@@ -304,6 +305,81 @@ def test_dask_is_an_extra_that_the_test_install_pulls_in():
     extras = project["optional-dependencies"]
     assert any(d.startswith("dask[distributed]") for d in extras["cluster"])
     assert "lodsprite[cluster]" in extras["test"]
+
+
+# --- the ray extra ---------------------------------------------------------------------------
+
+RAY_MODULES = ("lodsprite.distributed.pool.ray_pool", "lodsprite.distributed.pool.ray_actor")
+
+
+def test_ray_is_imported_lazily_and_only_by_the_ray_pool():
+    """``import ray`` sits inside functions of the Ray pool and its actor, nowhere else."""
+    edges = [e for e in package_edges() if e.target.split(".")[0] == "ray"]
+    assert edges, "the rule sees the Ray pool's imports"
+    assert describe([e for e in edges if not e.lazy or e.source not in RAY_MODULES]) == []
+
+
+def test_the_distributed_layer_and_the_local_web_pool_load_no_ray():
+    """Importing every module of the distributed layer (the Ray pool's too) and making the
+    web server's embedded pool loads nothing of Ray: only ``--ray`` does."""
+    names = sorted(m.name for m in pkgutil.walk_packages(
+        [str(ROOT / "src" / "lodsprite" / "distributed")], f"{DISTRIBUTED}.")
+        if not m.name.endswith("__main__"))
+    assert set(RAY_MODULES) <= set(names)
+    code = textwrap.dedent("""
+        import importlib, sys
+        for name in sys.argv[1].split(","):
+            importlib.import_module(name)
+        from lodsprite.distributed.web.server import WebConfig, make_pool
+        make_pool(WebConfig(renderers=1)).close()
+        print(sorted(m for m in sys.modules if m.split(".")[0] == "ray"))
+    """)
+    proc = subprocess.run([sys.executable, "-c", code, ",".join(names)], capture_output=True,
+                          text=True, timeout=120, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip().splitlines()[-1] == "[]"
+
+
+def test_serve_web_runs_without_ray_and_stops_cleanly():
+    """Ray made unimportable (as where the extra is not installed): ``serve --web`` starts
+    its local renderers, prints the page's URL and exits 0 on SIGTERM."""
+    import queue
+    import signal
+    import threading
+
+    from lodsprite.distributed.run import free_ports
+
+    code = "import sys; sys.modules['ray'] = None; from lodsprite.cli import main; main()"
+    proc = subprocess.Popen([sys.executable, "-c", code, "serve", "--bind",
+                             f"127.0.0.1:{free_ports()}", "--web", "127.0.0.1:0"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    lines: queue.Queue = queue.Queue()
+    threading.Thread(target=lambda: lines.put(proc.stdout.readline()), daemon=True).start()
+    try:
+        line = lines.get(timeout=60)  # printed once serving ("" if it exited first)
+        assert line.startswith("web page: http://127.0.0.1:"), line
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 0, err
+    assert "Traceback" not in err, err
+
+
+def test_serve_ray_without_ray_is_one_line_and_exit_2():
+    code = "import sys; sys.modules['ray'] = None; from lodsprite.cli import main; main()"
+    proc = subprocess.run([sys.executable, "-c", code, "serve", "--web", "0", "--ray", "auto"],
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2, proc.stderr
+    lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "lodsprite[ray]" in lines[0], proc.stderr
+
+
+def test_ray_is_an_extra_that_the_test_install_pulls_in():
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    assert not any(d.startswith("ray") for d in project["dependencies"])
+    extras = project["optional-dependencies"]
+    assert any(d.startswith("ray") for d in extras["ray"])
+    assert "lodsprite[ray]" in extras["test"]
 
 
 # --- the command line picks the distributed mode ---------------------------------------------

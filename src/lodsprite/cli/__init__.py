@@ -2,8 +2,8 @@
 
 One module per command group: :mod:`.render` (info, render, view), :mod:`.lumigraph`,
 :mod:`.terrain` (tile), :mod:`.crowd`, :mod:`.scene` (scene check), :mod:`.profile`,
-:mod:`.reproduce` (reproduce, demo), :mod:`.distributed` (serve, keys, client),
-:mod:`.render_worker` (render-worker); :mod:`.common` holds what they share.
+:mod:`.reproduce` (reproduce, demo), :mod:`.distributed` (serve, keys, client);
+:mod:`.common` holds what they share.
 
 User errors (bad files, bad options) print one line on stderr and exit with
 code 2; an interrupted run exits with 130.  No traceback reaches the user for
@@ -22,7 +22,6 @@ from lodsprite.cli import (
     lumigraph,
     profile,
     render,
-    render_worker,
     reproduce,
     scene,
     terrain,
@@ -41,7 +40,6 @@ for command in (render.info, with_technique_options(render.render),
     app.command()(command)
 app.command(name="keys")(distributed.keys_command)
 app.command()(distributed.client)
-app.command(name="render-worker")(render_worker.render_worker)
 app.add_typer(lumigraph.lumigraph_app, name="lumigraph")
 app.add_typer(scene.scene_app, name="scene")
 

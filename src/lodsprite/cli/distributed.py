@@ -26,6 +26,7 @@ from lodsprite.cli.common import (
     out,
     progress_bar,
 )
+from lodsprite.errors import InputError
 from lodsprite.terrain import DEFAULT_EXAGGERATION
 
 
@@ -68,10 +69,14 @@ def serve(
     rate: Annotated[float, typer.Option(
         "--rate", help="messages a second a web session may send; excess dropped",
         min=1.0, max=100000.0)] = 240.0,
-    workers_bind: Annotated[str | None, typer.Option(
-        "--workers-bind", help="tcp://HOST:PORT where render workers of other hosts join "
-                               "the web sessions' pool (`lodsprite render-worker`; CURVE "
-                               "with --keys)")] = None,
+    ray: Annotated[str | None, typer.Option(
+        "--ray", help="run the web page's --renderers as Ray actors on a Ray cluster: "
+                      "auto (the one running on this machine), ray://HOST:PORT (Ray "
+                      "Client), HOST:PORT (a head node) or local (one started here); needs "
+                      "the ray extra")] = None,
+    gpus_per_renderer: Annotated[float, typer.Option(
+        "--gpus-per-renderer", help="GPUs Ray reserves for each renderer actor (--ray; "
+                                    "0: none)", min=0.0, max=64.0)] = 0.0,
     public_host: Annotated[list[str] | None, typer.Option(
         "--public-host", help="a name users reach the page by (a DNS name, a reverse "
                               "proxy's), accepted in Host and Origin besides loopback "
@@ -89,7 +94,9 @@ def serve(
     if web is not None:  # every web option checked before anything starts
         config = _web_config(web, allow_remote, token, data, renderers, codec, cert, key,
                              (session_jobs, session_queue, rate), public_host)
-        config.workers_bind, config.worker_keys = workers_bind, server_keys
+        config.ray, config.gpus_per_renderer = _ray_options(ray, gpus_per_renderer)
+    elif ray is not None:
+        raise InputError("--ray runs the web page's renderers: give --web too")
     server = LodServer(bind, predictor, codec, server_keys, data_dir=data,
                        allow_remote=allow_remote, allow_shutdown=allow_shutdown)
     logging.basicConfig(level=logging.INFO, format="lodsprite serve: %(message)s")
@@ -119,8 +126,21 @@ def _web_config(web, allow_remote, token, data, renderers, codec, cert, key, cap
     remote = allow_remote or host not in LOOPBACK_NAMES
     Datasets(data)  # a missing data folder: one line before anything starts
     return WebConfig(host, port, make_token(token, remote), data, renderers, Caps(*caps), codec,
-                     tls_context(cert, key), tuple(public_host or ()),
-                     allow_remote=allow_remote)
+                     tls_context(cert, key), tuple(public_host or ()))
+
+
+def _ray_options(ray: str | None, gpus: float) -> tuple:
+    """``--ray`` and ``--gpus-per-renderer`` checked (Ray installed, an address of a
+    known form); raises InputError."""
+    if ray is None:
+        if gpus > 0:
+            raise InputError("--gpus-per-renderer places Ray actors: give --ray too")
+        return None, 0.0
+    from lodsprite.distributed.pool.ray_pool import check_address, require_ray
+
+    require_ray()
+    check_address(ray)
+    return ray, gpus
 
 
 def _say_url(url: str) -> None:

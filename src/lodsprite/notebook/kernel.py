@@ -77,7 +77,7 @@ class WidgetCore:
             raise LodspriteError("a lodsprite widget runs in a Jupyter kernel (or inside a "
                                  "running asyncio event loop)") from None
         self.send = send
-        self.pool = Broker(None, None, codec, data_dir)
+        self.pool = Broker(codec, data_dir)
         try:
             self.pool.spawn_local(renderers)
             self.hub = WidgetHub(self.pool, Datasets(data_dir), named,

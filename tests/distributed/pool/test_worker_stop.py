@@ -1,4 +1,4 @@
-"""`lodsprite render-worker` processes (real GL, EGL llvmpipe) joined over tcp://:
+"""Render worker processes (real GL, EGL llvmpipe) joined over the broker's endpoint:
 stopped by SIGINT while idle and SIGTERM while it holds a job, a worker leaves the pool
 with a ``disconnect`` (not by going silent), releases its scenes and GL context and exits
 0 without a traceback, and the job it held is done by another worker.  A job a worker
@@ -45,9 +45,20 @@ def job(i: int, load: LoadArgs = SCENE) -> Job:
     return Job(i, "s", load, VIEW, float(i))
 
 
+WORKER = """
+import logging, sys
+from lodsprite.distributed.pool.render_worker import Worker, stop_on_signals
+logging.basicConfig(level=logging.INFO, format="render worker: %(message)s")
+worker = Worker(sys.argv[1], sys.argv[2] or None, name="test")
+stop_on_signals(worker)
+worker.run()
+"""
+
+
 def worker(endpoint: str, data=None) -> subprocess.Popen:
-    cmd = [sys.executable, "-c", "from lodsprite.cli import main; main()", "render-worker",
-           "--connect", endpoint, *(["--data", str(data)] if data else [])]
+    """A worker process with its own data folder (local workers share the server's:
+    here two see different ones), stopped by SIGTERM or SIGINT."""
+    cmd = [sys.executable, "-c", WORKER, endpoint, str(data) if data else ""]
     return subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True)
 
 
@@ -70,13 +81,13 @@ def stopped(proc: subprocess.Popen, signum: int) -> str:
 
 @pytest.fixture
 def broker():
-    b = Broker(bind="tcp://127.0.0.1:*")
+    b = Broker()
     yield b
     b.close()
 
 
 def test_a_worker_stopped_idle_or_mid_job_leaves_the_pool_cleanly(broker: Broker) -> None:
-    a, b = worker(broker.endpoints[1]), worker(broker.endpoints[1])
+    a, b = worker(broker.local_endpoint), worker(broker.local_endpoint)
     try:
         a_id, b_id = pid_of(broker, a), pid_of(broker, b)
         broker.submit(job(1))
@@ -95,7 +106,7 @@ def test_a_worker_stopped_idle_or_mid_job_leaves_the_pool_cleanly(broker: Broker
         after = broker.stats()
         assert after["dead"] == before["dead"]  # both said disconnect: none went silent
         assert after["requeued"] == before["requeued"] + 1  # job 3 back in the queue
-        c = worker(broker.endpoints[1])  # another worker does it
+        c = worker(broker.local_endpoint)  # another worker does it
         try:
             r = results(broker, 1, DEADLINE_S)[3]
             assert r.ok and r.worker == pid_of(broker, c), r.error
@@ -114,7 +125,7 @@ def test_a_job_a_worker_refuses_is_done_by_one_that_can(broker: Broker, tmp_path
     empty.mkdir()
     np.save(full / "hill.npy", load_scene("fractal:64:5", "terrain", 64, 1.0).hf.heights)
     hill = msgspec.structs.replace(SCENE, terrain="hill.npy")
-    has, lacks = worker(broker.endpoints[1], full), worker(broker.endpoints[1], empty)
+    has, lacks = worker(broker.local_endpoint, full), worker(broker.local_endpoint, empty)
     try:
         has_id, _ = pid_of(broker, has), pid_of(broker, lacks)
         for i in range(4):  # two idle workers: the one that lacks the file gets some

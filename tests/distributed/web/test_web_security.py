@@ -108,7 +108,7 @@ def test_a_public_host_is_accepted_as_host_behind_a_proxy():
 def test_a_foreign_host_gets_421_on_every_route_even_bound_to_all_interfaces():
     """DNS rebinding: a page of rebind.example re-pointed at this machine sends its own
     name as Host.  Regression: bound to 0.0.0.0 the server accepted any Host."""
-    config = WebConfig(host="0.0.0.0", token=TOKEN, allow_remote=True)
+    config = WebConfig(host="0.0.0.0", token=TOKEN)
     evil, mine = {"Host": "rebind.example:8080"}, {"Host": "127.0.0.1"}
     ws = {"Connection": "Upgrade", "Upgrade": "websocket", "Sec-WebSocket-Version": "13",
           "Sec-WebSocket-Key": "dGhlIHNhbXBsZSBub25jZQ=="}

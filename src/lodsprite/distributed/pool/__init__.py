@@ -1,6 +1,7 @@
-"""The render pool (issue 24): a broker (:mod:`.broker`) handing keyframe jobs
-(:mod:`.jobs`) to render workers (:mod:`.render_worker`), local processes or other hosts, with
-the ZeroMQ guide's Paranoid Pirate heartbeats."""
+"""The render pools of ``serve --web``: the local pool (issue 24), a broker (:mod:`.broker`)
+handing keyframe jobs (:mod:`.jobs`) to local render worker processes
+(:mod:`.render_worker`) with the ZeroMQ guide's Paranoid Pirate heartbeats; and, with
+``--ray``, Ray actors on a cluster's machines (:mod:`.ray_pool`, imported only then)."""
 
 from lodsprite.distributed.pool.broker import MAX_TRIES, Broker, WorkerInfo
 from lodsprite.distributed.pool.jobs import HEARTBEAT_S, LIVENESS_S, Job, Result

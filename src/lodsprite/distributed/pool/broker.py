@@ -1,17 +1,25 @@
-"""The render pool's broker: the Paranoid Pirate queue of the ZeroMQ guide (Hintjens,
-*ZeroMQ*, ch. 4, "Robust Reliable Queuing") between a keyframe submitter (the web server)
-and render workers (:mod:`.worker`).
+"""The local render pool's broker: the embedded default of ``serve --web`` and of the
+notebook widgets, the renderers local processes of this machine.  The Paranoid Pirate
+queue of the ZeroMQ guide (Hintjens, *ZeroMQ*, ch. 4, "Robust Reliable Queuing") between
+a keyframe submitter (the web server) and render workers (:mod:`.render_worker`).
+
+Renderers on other machines are Ray actors (:mod:`.ray_pool`, ``--ray``): the broker
+no longer takes workers of other hosts (no TCP endpoint, no CURVE, no slow-link
+allowance).  What is kept, and why Ray does not do it: this pool runs where Ray is not
+installed (Ray is an extra; a lean install serves the page with local renderers), and
+starting a Ray instance (about 7 s and several processes here) for one machine's
+renderers is not what a notebook or a small server should pay.  Its heartbeats and
+re-queues are the local pool's liveness: a local worker can hang or die in its GL (a
+driver, the out-of-memory killer) without its process exiting on its own.
 
 A ROUTER socket, bound to a private ``ipc://`` endpoint for the workers this process
-starts (:meth:`Broker.spawn_local`) and, with ``bind``, to ``tcp://HOST:PORT`` for workers
-on other hosts (``lodsprite render-worker``; CURVE with ``curve`` keys: only workers whose
-public key file lies in the keys folder get in).  One thread owns the sockets:
+starts (:meth:`Broker.spawn_local`).  One thread owns the socket:
 
 * a worker says ``ready``; the broker heartbeats each :data:`~.jobs.HEARTBEAT_S`; a
-  worker silent for more than :data:`~.jobs.LIVENESS_S` (plus the transfer time of a
-  result it announced) is dead, its job re-queued (:mod:`.dispatch` holds the workers and
-  jobs and decides who gets what, who is lost and which jobs fail: declined by every
-  worker, or lost under :data:`~.dispatch.MAX_TRIES` workers);
+  worker silent for more than :data:`~.jobs.LIVENESS_S` is dead, its job re-queued
+  (:mod:`.dispatch` holds the workers and jobs and decides who gets what, who is lost
+  and which jobs fail: declined by every worker, or lost under
+  :data:`~.dispatch.MAX_TRIES` workers);
 * every message is received frame by frame with a cap (:mod:`..frames`), each frame under
   ``zmq.MAXMSGSIZE``, and validated (:func:`~.jobs.decode_pool`, a keyframe by
   :func:`~lodsprite.distributed.protocol.decode_keyframe`); a bad one is counted
@@ -37,8 +45,7 @@ from pathlib import Path
 import zmq
 
 from lodsprite.distributed.frames import check_frames, recv_frames
-from lodsprite.distributed.keys import ServerKeys
-from lodsprite.distributed.pool.dispatch import MAX_TRIES, JobTable, Key, Peer
+from lodsprite.distributed.pool.dispatch import MAX_TRIES, Key
 from lodsprite.distributed.pool.jobs import (
     HEARTBEAT_S,
     KEYFRAME_PARTS,
@@ -49,17 +56,15 @@ from lodsprite.distributed.pool.jobs import (
     Job,
     JobMessage,
     Ready,
-    Result,
     ResultMessage,
     WorkerInfo,
-    check_bind,
     check_job,
     decode_pool,
     encode_pool,
-    job_key,
 )
 from lodsprite.distributed.pool.render_worker import end_processes, spawn_workers
-from lodsprite.distributed.protocol import CODECS, ProtocolError, decode_keyframe
+from lodsprite.distributed.pool.results import PoolResults, drain, signal
+from lodsprite.distributed.protocol import CODECS, ProtocolError
 from lodsprite.errors import InputError, LodspriteError
 
 log = logging.getLogger("lodsprite.pool")
@@ -69,42 +74,31 @@ __all__ = ["JOB_TIMEOUT_S", "MAX_TRIES", "Broker", "WorkerInfo"]
 JOB_TIMEOUT_S = 120.0
 
 
-class Broker:
-    """The pool's broker.  ``bind``: ``tcp://HOST:PORT`` for remote workers (None: local
-    workers only); a host beyond loopback needs ``curve`` or ``allow_remote``.
-    ``curve``: the server's CURVE keys (:class:`~lodsprite.distributed.keys.ServerKeys`).
-    ``codec``: keyframe images ``raw`` or ``zlib``.  ``data_dir``: the data folder local
-    workers serve (the web server's ``--data``)."""
+class Broker(PoolResults):
+    """The local pool's broker.  ``codec``: keyframe images ``raw`` or ``zlib``.
+    ``data_dir``: the data folder local workers serve (the web server's ``--data``)."""
 
-    def __init__(self, bind: str | None = None, curve: ServerKeys | None = None,
-                 codec: str = "raw", data_dir: Path | str | None = None,
-                 allow_remote: bool = False, job_timeout_s: float = JOB_TIMEOUT_S) -> None:
+    def __init__(self, codec: str = "raw", data_dir: Path | str | None = None,
+                 job_timeout_s: float = JOB_TIMEOUT_S) -> None:
         if codec not in CODECS:
             raise InputError(f"unknown codec '{codec}': use {', '.join(CODECS)}")
-        if bind is not None:
-            check_bind(bind, curve is not None or allow_remote)
+        super().__init__(job_timeout_s)
         self.codec = codec
-        self.job_timeout_s = float(job_timeout_s)
         self.data_dir = None if data_dir is None else str(Path(data_dir).resolve())
-        self.curve = curve
         self._dir = tempfile.mkdtemp(prefix="lodsprite-pool-")
         self.local_endpoint = f"ipc://{self._dir}/workers"
         self.endpoints = [self.local_endpoint]
         self._ctx = zmq.Context()
-        self._auth = None
         self._socks: list[zmq.Socket] = []
         self._procs: list = []
         self._inbox: deque[Job] = deque()
-        self._snapshot: list[WorkerInfo] = []
         self._stop = threading.Event()
         self._wake_r, self._wake_w = os.pipe()
-        self._ready_r, self._ready_w = os.pipe()
-        for fd in (self._wake_r, self._wake_w, self._ready_r, self._ready_w):
+        for fd in (self._wake_r, self._wake_w):
             os.set_blocking(fd, False)
         self._closed = False
-        self.table = JobTable(job_timeout_s, lambda: _signal(self._ready_w))
         try:
-            self._open(bind)
+            self._socks.append(self._router(self.local_endpoint))
         except BaseException:
             self.close()
             raise
@@ -114,38 +108,7 @@ class Broker:
     def submit(self, job: Job) -> None:
         """Queue ``job`` (never blocks; thread-safe)."""
         self._inbox.append(check_job(job))
-        _signal(self._wake_w)
-
-    def poll(self) -> list[Result]:
-        """The results (successes and failures) since the last call; never blocks."""
-        _drain(self._ready_r)
-        done = self.table.done
-        return [done.popleft() for _ in range(len(done))]
-
-    def fileno(self) -> int:
-        """A descriptor readable while :meth:`poll` has results (level-triggered)."""
-        return self._ready_r
-
-    def workers(self) -> list[WorkerInfo]:
-        """The workers connected now."""
-        return list(self._snapshot)
-
-    def stats(self) -> dict[str, float]:
-        """Counts: jobs, results, failed, requeued (after a lost worker), declined
-        (results not ok, each retried elsewhere or failed), dead, rejected, ignored; and
-        the render capacity: ``busy_s`` (seconds workers spent on the jobs they answered,
-        dispatch to answer, all workers together: over a wall-clock window and the
-        worker count it gives their utilisation) and ``job_ms_p50``/``job_ms_p90`` (a
-        job's dispatch to answer, ms, over the last :data:`~.dispatch.JOB_TIMES`; None before
-        one)."""
-        return self.table.stats()
-
-    def wait_workers(self, n: int, timeout: float) -> bool:
-        """Wait until at least ``n`` workers are connected (at most ``timeout`` s)."""
-        deadline = time.monotonic() + timeout
-        while len(self._snapshot) < n and time.monotonic() < deadline:
-            time.sleep(0.02)
-        return len(self._snapshot) >= n
+        signal(self._wake_w)
 
     def spawn_local(self, n: int, cache: int = 2) -> list[int]:
         """Start ``n`` worker processes (multiprocessing spawn, each with its own GL
@@ -167,16 +130,15 @@ class Broker:
         self._stop.set()
         thread = getattr(self, "_thread", None)
         if thread is not None:
-            _signal(self._wake_w)
+            signal(self._wake_w)
             thread.join(timeout=5.0)
         for s in self._socks:
             s.close(linger=0)
-        if self._auth is not None:
-            self._auth.stop()
         self._ctx.term()
         end_processes(self._procs)
-        for fd in (self._wake_r, self._wake_w, self._ready_r, self._ready_w):
+        for fd in (self._wake_r, self._wake_w):
             os.close(fd)
+        self._close_results()
         shutil.rmtree(self._dir, ignore_errors=True)
 
     def __enter__(self) -> Broker:
@@ -187,25 +149,11 @@ class Broker:
 
     # ---------------------------------------------------------------------- sockets
 
-    def _open(self, bind: str | None) -> None:
-        self._socks.append(self._router(self.local_endpoint, None))
-        if bind is not None:
-            if self.curve is not None:
-                from zmq.auth.thread import ThreadAuthenticator
-
-                self._auth = ThreadAuthenticator(self._ctx)
-                self._auth.start()  # admits the public keys in the keys folder only
-                self._auth.configure_curve(domain="*", location=str(self.curve.clients_dir))
-            self._socks.append(self._router(bind, self.curve))
-            self.endpoints.append(self._socks[-1].getsockopt_string(zmq.LAST_ENDPOINT))
-
-    def _router(self, address: str, curve: ServerKeys | None) -> zmq.Socket:
+    def _router(self, address: str) -> zmq.Socket:
         sock = self._ctx.socket(zmq.ROUTER)
         sock.setsockopt(zmq.LINGER, 0)
         sock.setsockopt(zmq.MAXMSGSIZE, MAX_RESULT_FRAME_BYTES)
         sock.setsockopt(zmq.ROUTER_MANDATORY, 1)  # a departed worker: an error, not a drop
-        if curve is not None:
-            curve.apply(sock)
         try:
             sock.bind(address)
         except zmq.ZMQError as exc:
@@ -228,7 +176,7 @@ class Broker:
                     if s in events:
                         self._receive(i, s)
                 self.table.lose_unreachable()
-                _drain(self._wake_r)
+                drain(self._wake_r)
                 while self._inbox:
                     self.table.add(self._inbox.popleft())
                 now = time.monotonic()
@@ -237,7 +185,7 @@ class Broker:
                     self._broadcast(Heartbeat(POOL_VERSION))
                     beat = now + HEARTBEAT_S
                 self._dispatch(now)
-                self._snapshot = self.table.snapshot()
+                self._changed()
             except Exception as exc:  # noqa: BLE001 - a bug must not stop the pool
                 log.error("render pool broker: internal error %r", exc)
         self._broadcast(Disconnect(POOL_VERSION, "broker closing", stop=True))
@@ -276,35 +224,19 @@ class Broker:
             if not isinstance(msg, Disconnect):
                 self._send(key, Disconnect(POOL_VERSION, "unknown worker: say ready"))
             return
-        self.table.heard(peer, now, msg.sending if isinstance(msg, Heartbeat) else 0)
+        self.table.heard(peer, now)
         if isinstance(msg, Disconnect):
             self.table.lose(key, "disconnected")
         elif isinstance(msg, ResultMessage):
-            self._result(key, peer, msg, parts, now)
+            self._result(key, msg, parts, now)
 
-    def _result(self, key: Key, peer: Peer, msg: ResultMessage, parts: list,
-                now: float) -> None:
-        job = peer.job
-        if job is None or job.job != msg.job:
-            self.table.counts["ignored"] += 1
-            return
-        self.table.answered(peer, now)
-        if not msg.ok:
-            self.table.declined(key, self.table.release(peer, now), msg.error, msg.refused)
-            return
-        data = [bytes(p) for p in parts]
+    def _result(self, key: Key, msg: ResultMessage, parts: list, now: float) -> None:
         try:
-            kf = decode_keyframe(data)
-            if kf.seq != job.job:
-                raise ProtocolError(f"keyframe seq {kf.seq} for job {job.job}")
+            self.table.settle(key, msg, parts, now)
         except ProtocolError as exc:  # the worker is broken or hostile: the job goes on
             self._reject(exc)
             self._send(key, Disconnect(POOL_VERSION, "bad keyframe"))
             self.table.lose(key, "sent a bad keyframe")
-            return
-        self.table.release(peer, now)
-        peer.scenes.append(job_key(job.load))
-        self.table.finish(Result(job.job, job.session, True, "", data, key[1].hex()))
 
     def _purge(self, now: float) -> None:
         silent, late = self.table.expired(now)
@@ -334,17 +266,3 @@ class Broker:
         for key in list(self.table.peers):
             self._send(key, msg)
 
-
-def _signal(fd: int) -> None:
-    try:
-        os.write(fd, b"\x01")
-    except (BlockingIOError, OSError):
-        pass  # the pipe is full (a wake-up is pending anyway) or closed
-
-
-def _drain(fd: int) -> None:
-    try:
-        while os.read(fd, 4096):
-            pass
-    except (BlockingIOError, OSError):
-        pass

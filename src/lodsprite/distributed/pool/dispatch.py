@@ -20,14 +20,14 @@ from dataclasses import dataclass, field
 
 from lodsprite.distributed.pool.jobs import (
     LIVENESS_S,
-    MAX_GRACE_S,
-    MIN_LINK_BYTES_S,
     Job,
     Ready,
     Result,
+    ResultMessage,
     WorkerInfo,
     job_key,
 )
+from lodsprite.distributed.protocol import ProtocolError, decode_keyframe
 
 log = logging.getLogger("lodsprite.pool")
 
@@ -56,7 +56,7 @@ class QueuedJob:
 @dataclass
 class Peer:
     """A connected worker: what it said in ``ready``, when it was last heard (monotonic
-    s), the job it holds since when, the grace its announced result earns (s), when it
+    s), the job it holds since when, when it
     went idle, and the scenes it loaded last."""
 
     sock: int
@@ -65,7 +65,6 @@ class Peer:
     seen: float
     entry: QueuedJob | None = None
     since: float = 0.0
-    grace: float = 0.0
     idle_since: float = 0.0
     scenes: deque = field(default_factory=lambda: deque(maxlen=4))
 
@@ -92,6 +91,7 @@ class JobTable:
                                      "dead", "rejected", "ignored"), 0)
         self.busy_s = 0.0  # seconds workers spent on jobs they answered
         self.job_s: deque[float] = deque(maxlen=JOB_TIMES)  # dispatch -> answer, s
+        self.overhead_s: deque[float] = deque(maxlen=JOB_TIMES)  # that less the worker's own
 
     def add(self, job: Job) -> None:
         self.queue.append(QueuedJob(job))
@@ -102,19 +102,43 @@ class JobTable:
         if key not in self.peers and len(self.peers) < MAX_PEERS:
             self.peers[key] = Peer(key[0], key[1], info, now, idle_since=now)
 
-    def heard(self, peer: Peer, now: float, sending: int = 0) -> None:
-        """``peer`` spoke at ``now``; ``sending``: the bytes of a result it announced
-        (they earn it the time to transfer them, capped)."""
+    def heard(self, peer: Peer, now: float) -> None:
+        """``peer`` spoke at ``now``."""
         peer.seen = now
-        sending = sending if peer.job is not None else 0
-        peer.grace = min(sending / MIN_LINK_BYTES_S, MAX_GRACE_S) if sending else 0.0
 
-    def answered(self, peer: Peer, now: float) -> None:
+    def answered(self, peer: Peer, now: float, render_ms: float = 0.0) -> None:
         """``peer`` answered its job (a keyframe or a decline): its time, dispatch to
-        answer, counted."""
+        answer, counted, and the dispatch overhead (that time less the worker's own
+        ``render_ms``)."""
         took = max(0.0, now - peer.since)
         self.busy_s += took
         self.job_s.append(took)
+        self.overhead_s.append(max(0.0, took - 1e-3 * render_ms))
+
+    def settle(self, key: Key, msg: ResultMessage, parts: list, now: float) -> bool:
+        """Worker ``key``'s answer ``msg`` (with the keyframe's frames ``parts``): a
+        keyframe finishes its job, a decline puts it back for another worker (or fails
+        it); an answer to a job it does not hold is counted ``ignored``.  Raises
+        :class:`ProtocolError` for a keyframe that does not decode as its job's (the
+        caller then loses the worker, the job back in the queue); False when ignored."""
+        peer = self.peers.get(key)
+        job = None if peer is None else peer.job
+        if job is None or job.job != msg.job:
+            self.counts["ignored"] += 1
+            return False
+        self.answered(peer, now, msg.render_ms)
+        if not msg.ok:
+            self.declined(key, self.release(peer, now), msg.error, msg.refused)
+            return True
+        data = [bytes(p) for p in parts]
+        kf = decode_keyframe(data)
+        if kf.seq != job.job:
+            raise ProtocolError(f"keyframe seq {kf.seq} for job {job.job}")
+        self.release(peer, now)
+        peer.scenes.append(job_key(job.load))
+        self.finish(Result(job.job, job.session, True, "", data, key[1].hex(),
+                           render_ms=msg.render_ms))
+        return True
 
     def release(self, peer: Peer, now: float) -> QueuedJob:
         """``peer`` idle from ``now``; returns the job's entry it held."""
@@ -138,7 +162,7 @@ class JobTable:
 
     def expired(self, now: float) -> tuple[list[Key], list[Key]]:
         """The workers silent too long, and those holding a job past the job timeout."""
-        silent = [k for k, p in self.peers.items() if now - p.seen > LIVENESS_S + p.grace]
+        silent = [k for k, p in self.peers.items() if now - p.seen > LIVENESS_S]
         late = [k for k, p in self.peers.items()
                 if p.job is not None and now - p.since > self.job_timeout_s]
         return silent, late
@@ -211,20 +235,24 @@ class JobTable:
         read before it is lost)."""
         if self.unreachable:
             return 0.0
-        due = min((p.seen + LIVENESS_S + p.grace for p in self.peers.values()), default=beat)
+        due = min((p.seen + LIVENESS_S for p in self.peers.values()), default=beat)
         return min(beat, due + 1e-3)
 
     def snapshot(self) -> list[WorkerInfo]:
-        return [WorkerInfo(p.ident.hex(), p.info.pid, p.info.name, p.sock > 0,
-                           p.job and p.job.job) for p in self.peers.values()]
+        return [WorkerInfo(p.ident.hex(), p.info.pid, p.info.name, p.job and p.job.job)
+                for p in self.peers.values()]
 
     def stats(self) -> dict[str, float]:
-        """The counts, ``busy_s`` and ``job_ms_p50``/``job_ms_p90`` (None before one):
+        """The counts, ``busy_s``, ``job_ms_p50``/``job_ms_p90`` and the dispatch
+        overhead ``overhead_ms_p50``/``overhead_ms_p90`` (None before one):
         :meth:`lodsprite.distributed.pool.broker.Broker.stats`."""
-        times = sorted(self.job_s)
+        return {**self.counts, "busy_s": self.busy_s,
+                "job_ms_p50": _pct(self.job_s, 0.5), "job_ms_p90": _pct(self.job_s, 0.9),
+                "overhead_ms_p50": _pct(self.overhead_s, 0.5),
+                "overhead_ms_p90": _pct(self.overhead_s, 0.9)}
 
-        def pct(q: float) -> float | None:
-            return 1e3 * times[min(len(times) - 1, int(q * len(times)))] if times else None
 
-        return {**self.counts, "busy_s": self.busy_s, "job_ms_p50": pct(0.5),
-                "job_ms_p90": pct(0.9)}
+def _pct(seconds: deque, q: float) -> float | None:
+    """The ``q`` quantile of ``seconds``, in ms (None when empty)."""
+    times = sorted(seconds)
+    return 1e3 * times[min(len(times) - 1, int(q * len(times)))] if times else None

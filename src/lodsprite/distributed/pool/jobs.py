@@ -12,15 +12,17 @@ kind        direction               fields                                      
 ready       worker -> broker        ``pid``, ``name``, ``cache`` (scenes it keeps)  0
 heartbeat   both                    none                                            0
 job         broker -> worker        ``job`` (:class:`Job`), ``codec``               0
-result      worker -> broker        ``job`` id, ``ok``, ``error``, ``refused``; on  0 or 3
-                                    success the keyframe message's frames
+result      worker -> broker        ``job`` id, ``ok``, ``error``, ``refused``,     0 or 3
+                                    ``render_ms``; on success the keyframe
+                                    message's frames
                                     (:func:`~lodsprite.distributed.protocol.
                                     encode_keyframe`)
 disconnect  both                    ``reason``                                      0
 ==========  ======================  ==============================================  =======
 
-The public :class:`Job` and :class:`Result` are what :class:`~.broker.Broker` takes and
-gives (the web server's interface, issue 24's contract).
+The public :class:`Job` and :class:`Result` are what the pools take and give (the web
+server's interface, issue 24's contract): :class:`~.broker.Broker` and
+:class:`~.ray_pool.RayPool`, whose actors answer with the same ``result`` frames.
 """
 
 from __future__ import annotations
@@ -33,7 +35,6 @@ from msgspec import Meta, Struct, field
 
 from lodsprite.distributed.messages import (
     CODECS,
-    LOOPBACK_HOSTS,
     MAX_KEYFRAME_FRAME_BYTES,
     LoadArgs,
     ProtocolError,
@@ -43,22 +44,18 @@ from lodsprite.distributed.messages import (
 )
 from lodsprite.errors import InputError
 
-__all__ = ["HEARTBEAT_S", "LIVENESS_S", "MAX_GRACE_S", "MAX_JOB_BYTES", "MAX_RESULT_FRAME_BYTES",
-           "MIN_LINK_BYTES_S",
+__all__ = ["HEARTBEAT_S", "LIVENESS_S", "MAX_JOB_BYTES", "MAX_RESULT_FRAME_BYTES",
            "POOL_VERSION", "Disconnect", "Heartbeat", "Job", "JobMessage", "PoolMessage",
-           "Ready", "Result", "ResultMessage", "WorkerInfo", "check_bind", "check_job",
-           "decode_pool", "encode_pool", "job_key"]
+           "Ready", "Result", "ResultMessage", "WorkerInfo", "check_job", "decode_pool",
+           "encode_pool", "job_key"]
 
-POOL_VERSION = 2
-"""2: ``result`` says whether the worker ``refused`` the job."""
+POOL_VERSION = 4
+"""2: ``result`` says whether the worker ``refused`` the job; 3: and how long the worker
+took (``render_ms``); 4: local workers only, ``heartbeat`` announces no result size."""
 HEARTBEAT_S = 0.25
 """Seconds between heartbeats, each way."""
 LIVENESS_S = 1.0
 """Seconds of silence after which a peer is dead (four heartbeats missed)."""
-MIN_LINK_BYTES_S = 1_000_000
-"""The slowest link (bytes/s, 8 Mbit/s) a result announced by a heartbeat is given time
-for, beyond :data:`LIVENESS_S`, up to :data:`MAX_GRACE_S`."""
-MAX_GRACE_S = 60.0
 MAX_JOB_BYTES = 64 * 1024
 """Largest frame a worker accepts (a job header; the broker sends nothing bigger)."""
 MAX_RESULT_FRAME_BYTES = MAX_KEYFRAME_FRAME_BYTES
@@ -91,7 +88,8 @@ class Result(Struct):
     failure: ``refused`` (every worker that tried refused it: a dataset its ``--data``
     lacks, a scene its machine cannot hold), ``failed`` (a worker's render failed) or
     ``lost`` (its workers died); ``worker``: the hex id of the worker that answered (""
-    when none did)."""
+    when none did); ``render_ms``: that worker's own time on the job (ms; the rest of
+    the round trip is the pool's dispatch overhead)."""
 
     job: int
     session: str
@@ -100,6 +98,7 @@ class Result(Struct):
     parts: list[bytes] = field(default_factory=list)
     worker: str = ""
     code: Literal["", "refused", "failed", "lost"] = ""
+    render_ms: float = 0.0
 
 
 class PoolMessage(Struct, forbid_unknown_fields=True, omit_defaults=True, tag_field="kind"):
@@ -113,11 +112,7 @@ class Ready(PoolMessage, tag="ready"):
 
 
 class Heartbeat(PoolMessage, tag="heartbeat"):
-    """``sending``: the bytes of a result the worker sends next (0: none).  ZeroMQ
-    delivers a message whole, so its heartbeats wait behind a large keyframe on a slow
-    link: the broker allows the transfer :data:`MIN_LINK_BYTES_S` more time."""
-
-    sending: Annotated[int, Meta(ge=0, le=2**40)] = 0
+    """Either side is alive."""
 
 
 class JobMessage(PoolMessage, tag="job"):
@@ -127,12 +122,15 @@ class JobMessage(PoolMessage, tag="job"):
 
 class ResultMessage(PoolMessage, tag="result"):
     """``refused``: not ok because this worker cannot take the job (its data rule or its
-    memory), not because a render failed."""
+    memory), not because a render failed.  ``render_ms``: the worker's own time on the
+    job (decode, scene load, render with the read-back, encode), ms; the rest of a job's
+    dispatch-to-answer time is the pool's dispatch overhead."""
 
     job: Seq
     ok: bool
     error: Text = ""
     refused: bool = False
+    render_ms: Annotated[float, Meta(ge=0.0, le=1e9)] = 0.0
 
 
 class Disconnect(PoolMessage, tag="disconnect"):
@@ -197,26 +195,14 @@ _job_encoder = msgspec.msgpack.Encoder()
 
 
 
-def check_bind(bind: str, protected: bool) -> None:
-    """Refuse a workers bind that is not ``tcp://`` or, unless ``protected`` (CURVE or
-    explicitly allowed), one beyond loopback; raises :class:`InputError`."""
-    if not bind.startswith("tcp://"):
-        raise InputError(f"workers bind must be tcp://HOST:PORT, got {bind!r}")
-    host = bind[len("tcp://"):].rpartition(":")[0]
-    if host not in LOOPBACK_HOSTS and not protected:
-        raise InputError(f"binding {bind} lets any host join as a render worker: give "
-                         "CURVE keys (--keys) or allow it explicitly")
-
-
 @dataclass(frozen=True)
 class WorkerInfo:
-    """A connected worker: ``id`` (hex routing id), ``pid``, ``name``, ``remote`` (came in
-    over ``tcp://``), ``job`` (the job id it renders, or None)."""
+    """A connected worker: ``id`` (hex id), ``pid``, ``name``, ``job`` (the job id it
+    renders, or None)."""
 
     id: str
     pid: int
     name: str
-    remote: bool
     job: int | None
 
 

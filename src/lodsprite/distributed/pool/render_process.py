@@ -25,6 +25,7 @@ dropped first, all sharing the process's one GL context.
 from __future__ import annotations
 
 import os
+import time
 from collections import OrderedDict
 from collections.abc import Callable
 from pathlib import Path
@@ -92,24 +93,30 @@ class SceneCache:
         self.gl = None
 
     def render(self, msg: JobMessage) -> list:
-        """The result frames of one job; never raises."""
+        """The result frames of one job, with the time it took (``render_ms``); never
+        raises."""
         from lodsprite.distributed.protocol import encode_keyframe, viewpoint_from_wire
         from lodsprite.errors import InputError
 
+        start = time.perf_counter()
         job = msg.job
         key = job_key(job.load)
         try:
             r = self._scene(key, job.load)
-            kf = r.render(viewpoint_from_wire(job.viewpoint), job.job, job.t)
+            kf = r.render(viewpoint_from_wire(job.viewpoint), job.job, job.t)  # read back
             frames = encode_keyframe(kf, msg.codec)
-            return encode_pool(ResultMessage(POOL_VERSION, job.job, True), *frames)
+            took = 1e3 * (time.perf_counter() - start)
+            return encode_pool(ResultMessage(POOL_VERSION, job.job, True, render_ms=took),
+                               *frames)
         except Exception as exc:  # noqa: BLE001 - MemoryError, GL errors: reported, not fatal
             dropped = self.scenes.pop(key, None)
             if dropped is not None:
                 dropped.release()
             error = f"{type(exc).__name__}: {exc}"[:4000]
+            took = 1e3 * (time.perf_counter() - start)
             return encode_pool(ResultMessage(POOL_VERSION, job.job, False, error,
-                                             refused=isinstance(exc, InputError)))
+                                             refused=isinstance(exc, InputError),
+                                             render_ms=took))
 
     def _scene(self, key: bytes, load: LoadArgs):
         from lodsprite.distributed.render import KeyframeService

@@ -1,5 +1,8 @@
-"""A render worker: the Paranoid Pirate worker of the ZeroMQ guide (Hintjens, *ZeroMQ*,
-ch. 4) rendering keyframes for a :class:`~.broker.Broker`.
+"""A local render worker: the Paranoid Pirate worker of the ZeroMQ guide (Hintjens,
+*ZeroMQ*, ch. 4) rendering keyframes for a :class:`~.broker.Broker`, a process the broker's
+process starts (:meth:`~.broker.Broker.spawn_local`).  Renderers of other machines are
+Ray actors (:mod:`.ray_pool`); this worker is the local pool's, kept for where Ray is not
+installed (see :mod:`.broker`).
 
 A DEALER connects to the broker and says ``ready``.  Two threads: the I/O thread (here,
 :meth:`Worker.run`) owns the socket, sends a heartbeat every :data:`~.jobs.HEARTBEAT_S`,
@@ -49,7 +52,6 @@ import zmq
 
 from lodsprite.distributed.datasets import Datasets
 from lodsprite.distributed.frames import check_frames, recv_frames
-from lodsprite.distributed.keys import ClientKeys
 from lodsprite.distributed.pool.jobs import (
     HEARTBEAT_S,
     LIVENESS_S,
@@ -155,18 +157,15 @@ class _RenderThread(threading.Thread):
 
 
 class Worker:
-    """One render worker connecting to ``connect`` (``tcp://HOST:PORT`` or ``ipc://…``).
+    """One render worker connecting to ``connect`` (the broker's ``ipc://…`` endpoint).
 
-    ``keys``: CURVE keys (the worker's pair and the broker's public key; None: plain).
     ``data_dir``: the folder whose files jobs may name (None: built-ins only).  ``cache``:
     scenes kept loaded.  ``parent_pid``: exit when this process is no longer the parent
     (local workers never outlive their broker's process)."""
 
-    def __init__(self, connect: str, keys: ClientKeys | None = None,
-                 data_dir: Path | str | None = None, cache: int = 2, name: str = "",
-                 parent_pid: int | None = None) -> None:
+    def __init__(self, connect: str, data_dir: Path | str | None = None, cache: int = 2,
+                 name: str = "", parent_pid: int | None = None) -> None:
         self.connect = connect
-        self.keys = keys
         self.datasets = Datasets(data_dir)
         self.cache = max(1, min(int(cache), 64))
         self.name = name[:256]
@@ -213,8 +212,6 @@ class Worker:
         sock = zctx.socket(zmq.DEALER)
         sock.setsockopt(zmq.LINGER, 0)
         sock.setsockopt(zmq.MAXMSGSIZE, MAX_JOB_BYTES)
-        if self.keys is not None:
-            self.keys.apply(sock)
         sock.connect(self.connect)
         self.connections += 1
         renderer.drop_jobs()  # the last connection's jobs went back to the broker's queue
@@ -242,8 +239,6 @@ class Worker:
                     job = msgspec.msgpack.decode(frames[0].buffer, type=ResultMessage).job
                     if job in mine:
                         mine.discard(job)
-                        size = sum(len(f) for f in frames)
-                        sock.send_multipart(encode_pool(Heartbeat(POOL_VERSION, size)))
                         sock.send_multipart(frames, copy=False)
                 now = time.monotonic()
                 if now >= beat:
@@ -302,7 +297,7 @@ def run_local_worker(connect: str, data_dir: str | None, cache: int, parent_pid:
     ignored (the parent stops it), SIGTERM stops it."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     logging.basicConfig(level=logging.WARNING, format="lodsprite worker: %(message)s")
-    worker = Worker(connect, None, data_dir, cache, f"local-{os.getpid()}", parent_pid)
+    worker = Worker(connect, data_dir, cache, f"local-{os.getpid()}", parent_pid)
     stop_on_signals(worker, (signal.SIGTERM,))
     worker.run()
 

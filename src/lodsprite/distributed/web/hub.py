@@ -100,6 +100,9 @@ class Hub:
 
     def start(self) -> None:
         loop = asyncio.get_running_loop()
+        start = getattr(self.pool, "start", None)
+        if start is not None:  # a pool that can run on this loop (the Ray pool)
+            start(loop)
         loop.add_reader(self.pool.fileno(), self.drain)
         self._loop = loop
         self._ticker = loop.create_task(self._tick())

@@ -42,7 +42,7 @@ from lodsprite.distributed.web.wire import MAX_PAGE_MESSAGE
 
 log = logging.getLogger("lodsprite.web")
 
-__all__ = ["STATIC_DIR", "WebConfig", "WebServer", "serve_web"]
+__all__ = ["STATIC_DIR", "WebConfig", "WebServer", "make_pool", "serve_web"]
 
 STATIC_DIR = Path(__file__).parent / "static"
 HEARTBEAT_S = 20.0
@@ -85,10 +85,10 @@ class WebConfig:
     """What ``serve --web`` was given: ``host``/``port`` (0: any free port), the
     ``token``, ``data_dir``, ``renderers`` local renderer processes, per-session ``caps``,
     keyframe ``codec``, an optional TLS context, the ``public_hosts`` names a reverse
-    proxy serves the page under (accepted as ``Host``), and where render workers of other
-    hosts join the pool: ``workers_bind`` (``tcp://HOST:PORT``, None: local renderers
-    only) with CURVE ``worker_keys`` (:class:`~lodsprite.distributed.keys.ServerKeys`)
-    or ``allow_remote``."""
+    proxy serves the page under (accepted as ``Host``), and ``ray``, the address of a
+    Ray cluster whose actors are the ``renderers``
+    (:class:`~lodsprite.distributed.pool.ray_pool.RayPool`), each with
+    ``gpus_per_renderer`` GPUs (None: local renderer processes)."""
 
     host: str = "127.0.0.1"
     port: int = 0
@@ -99,28 +99,24 @@ class WebConfig:
     codec: str = "raw"
     tls: ssl.SSLContext | None = None
     public_hosts: tuple[str, ...] = ()
-    workers_bind: str | None = None
-    worker_keys: Any = None
-    allow_remote: bool = False
+    ray: str | None = None
+    gpus_per_renderer: float = 0.0
 
 
 class WebServer:
     """The aiohttp application, its hub and pool.  ``pool``: an object with the Broker's
-    interface (None: a :class:`~lodsprite.distributed.pool.Broker` with
-    ``config.renderers`` local renderer processes; raises
-    :class:`~lodsprite.errors.LodspriteError` when its endpoint cannot be bound)."""
+    interface (None: :func:`make_pool`, a :class:`~lodsprite.distributed.pool.Broker`
+    with ``config.renderers`` local renderer processes or, with ``config.ray``, a
+    :class:`~lodsprite.distributed.pool.ray_pool.RayPool`; raises
+    :class:`~lodsprite.errors.LodspriteError` when its endpoint cannot be bound or the
+    Ray cluster reached)."""
 
     def __init__(self, config: WebConfig, pool: Any = None) -> None:
+        """``pool``: see the class; None: :func:`make_pool`."""
         self.config = config
         self.datasets = Datasets(config.data_dir)
         self._own_pool = pool is None
-        if pool is None:
-            from lodsprite.distributed.pool import Broker
-
-            pool = Broker(config.workers_bind, config.worker_keys, config.codec,
-                          config.data_dir, config.allow_remote)
-            pool.spawn_local(config.renderers)
-        self.pool = pool
+        self.pool = make_pool(config) if pool is None else pool
         self.hub: Hub | None = None
         self._runner: web.AppRunner | None = None
         self._sockets: set[web.WebSocketResponse] = set()
@@ -221,6 +217,22 @@ class WebServer:
             with contextlib.suppress(asyncio.CancelledError, Exception):
                 await writer
         return ws
+
+
+def make_pool(config: WebConfig) -> Any:
+    """The render pool ``config`` asks for: ``config.renderers`` Ray actors with
+    ``config.ray`` (Ray imported only then), else a
+    :class:`~lodsprite.distributed.pool.Broker` with that many local renderer processes."""
+    if config.ray is not None:
+        from lodsprite.distributed.pool.ray_pool import RayPool
+
+        return RayPool(config.ray, config.renderers, config.data_dir, config.codec,
+                       config.gpus_per_renderer)
+    from lodsprite.distributed.pool import Broker
+
+    pool = Broker(config.codec, config.data_dir)
+    pool.spawn_local(config.renderers)
+    return pool
 
 
 async def _no_icon(request: web.Request) -> web.Response:
