@@ -4,6 +4,7 @@ relative link resolves, and every command's options are on its docs page."""
 
 from __future__ import annotations
 
+import ast
 import os
 import re
 import subprocess
@@ -129,7 +130,8 @@ def test_every_python_block_in_the_docs_compiles() -> None:
         blocks = re.findall(r"^```python\n(.*?)^```", md.read_text(encoding="utf-8"),
                             flags=re.MULTILINE | re.DOTALL)
         for i, block in enumerate(blocks):
-            compile(block, f"{md.relative_to(ROOT)} block {i}", "exec")
+            compile(block, f"{md.relative_to(ROOT)} block {i}", "exec",  # notebook cells
+                    flags=ast.PyCF_ALLOW_TOP_LEVEL_AWAIT)  # may await at the top level
 
 
 def cli_help(*commands: str) -> dict[str, str]:

@@ -4,7 +4,7 @@ The public API (see the README's "Python API" section):
 
 * scenes: :func:`load_scene` (terrain and texture specs) and :func:`open_scene` (any
   scene: a terrain, a lumigraph folder, a crowd) -> :class:`Scene`, which holds layers;
-* rendering: :class:`Renderer` (standalone headless context, or an application's
+* rendering: :class:`RenderActor` (standalone headless context, or an application's
   moderngl context for embedding), :meth:`Renderer.sprite` -> :class:`LodSprite`, the
   LOD-sprite engine frame by frame (keyframes inline, or from a worker process);
 * cameras and paths: :class:`Viewpoint`, :func:`look_at`, :class:`CameraPath`,

@@ -275,7 +275,7 @@ class Renderer:
 
 
 class LodSprite:
-    """LOD-sprite frame by frame on a :class:`Renderer` (made by :meth:`Renderer.sprite`).
+    """LOD-sprite frame by frame on a :class:`RenderActor` (made by :meth:`Renderer.sprite`).
 
     :meth:`frame` decides, renders and times one frame; :attr:`keyframes` lists every
     keyframe taken (:class:`~lodsprite.sprite.policy.KeyChoice`); :meth:`read_image` and

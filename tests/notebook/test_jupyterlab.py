@@ -75,7 +75,9 @@ def test_the_widget_plays_in_jupyterlab_and_the_kernel_reads_its_stats(tmp_path)
         finally:
             if driver is not None:
                 quit_browser(driver, profile)
-    assert stats["played"] > 0 and stats["frames"] >= 48, stats
+    assert stats["played"] >= 48, stats
+    # read at once after played(): the figures as the path ended, not a status before it
+    assert stats["frames"] >= stats["played"], stats
     assert stats["keyframes"] >= 1, stats
     assert stats["median_ms"] is not None and stats["error_px_mean"] is not None, stats
     shot = np.asarray(Image.open(BytesIO((tmp_path / "shot.png").read_bytes())).convert("RGB"))

@@ -69,7 +69,9 @@ async function render({ model, el }) {
   const app = startApp({ canvas, hud, transport, options, decoderUrl: urls['decode.js'], keyTarget: canvas });
   box.lodsprite = app;  // the view's client API, for tools and tests
   const failed = (e) => model.send({ kind: 'failed', view, error: String(e && e.message || e).slice(0, 2000) });
-  const played = () => app.finished.then((frames) => model.send({ kind: 'played', view, frames }));
+  const status = () => model.send({ kind: 'status', view, stats: app.stats(), camera: flat(app.viewpoint()), state: app.state() });
+  // The figures as the path ends go first: w.stats after `await w.played()` are the path's.
+  const played = () => app.finished.then((frames) => { status(); model.send({ kind: 'played', view, frames }); });
   app.ready.then(() => { if (options.path) played(); }, failed);
 
   const onCustom = (msg, buffers) => {
@@ -90,9 +92,7 @@ async function render({ model, el }) {
     }
   };
   model.on('msg:custom', onCustom);
-  const timer = setInterval(() => {
-    model.send({ kind: 'status', view, stats: app.stats(), camera: flat(app.viewpoint()), state: app.state() });
-  }, STATUS_MS);
+  const timer = setInterval(status, STATUS_MS);
 
   return () => {
     clearInterval(timer);

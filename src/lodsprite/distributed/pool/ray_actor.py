@@ -1,7 +1,7 @@
 """A renderer as a Ray actor (``serve --web --ray``): one process, one GL context, the
 scenes it has loaded.
 
-:class:`Renderer` is a plain class; :class:`~.ray_pool.RayPool` makes it an actor
+:class:`RenderActor` is a plain class; :class:`~.ray_pool.RayPool` makes it an actor
 (``ray.remote``) with one CPU, ``--gpus-per-renderer`` GPUs, restarts by Ray and no
 retries by Ray (the pool re-submits a job whose actor died, to whichever renderer is free
 first).  Its methods run one at a time on the actor's one thread (Ray's default for a
@@ -11,7 +11,7 @@ draws (moderngl holds the GIL through them).
 Where Ray assigns GPUs it sets ``CUDA_VISIBLE_DEVICES`` for the actor; the headless
 context is made on EGL's first device (glcontext's default, ``GLCONTEXT_DEVICE_INDEX``
 picks another), which is the assigned GPU where the driver's EGL device list follows
-``CUDA_VISIBLE_DEVICES`` (not verified here: no GPU).  :meth:`Renderer.ready` reports
+``CUDA_VISIBLE_DEVICES`` (not verified here: no GPU).  :meth:`RenderActor.ready` reports
 the GPU ids and the GL renderer string, so that a deployment can check.
 
 The job arrives as the pool's ``job`` message (msgpack bytes, :class:`~.jobs.JobMessage`),
@@ -30,10 +30,10 @@ import msgspec
 from lodsprite.distributed.pool.jobs import JobMessage
 from lodsprite.distributed.pool.render_process import SceneCache
 
-__all__ = ["Renderer"]
+__all__ = ["RenderActor"]
 
 
-class Renderer:
+class RenderActor:
     """One renderer: ``data_dir`` the folder whose files jobs may name (on the node the
     actor runs on; None: built-ins only), ``cache`` scenes kept loaded (least recently
     used dropped)."""

@@ -1,5 +1,5 @@
 """The render pool on Ray (``serve --web --ray ADDRESS``): renderers as Ray actors
-(:class:`~.ray_actor.Renderer`) on the machines of a Ray cluster, behind the interface
+(:class:`~.ray_actor.RenderActor`) on the machines of a Ray cluster, behind the interface
 of the local pool (:class:`~.broker.Broker`: :meth:`RayPool.submit`, :meth:`RayPool.poll`,
 :meth:`RayPool.fileno`, :meth:`RayPool.workers`, :meth:`RayPool.stats`,
 :meth:`RayPool.close`), so the web hub keeps its policy (newest request wins, fairness
@@ -12,7 +12,7 @@ keyframes (megabytes: inline in the reply up to Ray's ``max_direct_call_object_s
 else through its object store), its dashboard and logs.  What stays here: the job of an
 actor that died goes back to the front of the queue (Ray's own task retries are off:
 they would wait for that actor's restart, where another renderer may be free now), the
-restarted actor joins again once it answers :meth:`~.ray_actor.Renderer.ready`, and a
+restarted actor joins again once it answers :meth:`~.ray_actor.RenderActor.ready`, and a
 job past ``job_timeout_s`` has its actor killed (Ray restarts it).
 
 An asyncio loop owns the table and awaits the actors' replies: the web hub's own loop
@@ -173,9 +173,9 @@ class RayPool(PoolResults):
 
     def _start_actors(self, n: int, data_dir: Path | str | None, cache: int,
                       gpus: float) -> list:
-        from lodsprite.distributed.pool.ray_actor import Renderer
+        from lodsprite.distributed.pool.ray_actor import RenderActor
 
-        actor = self._ray.remote(Renderer).options(
+        actor = self._ray.remote(RenderActor).options(
             num_cpus=1, num_gpus=gpus, max_restarts=-1, max_task_retries=0,
             max_concurrency=1)
         folder = None if data_dir is None else str(Path(data_dir).resolve())
