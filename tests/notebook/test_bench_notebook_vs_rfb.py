@@ -1,0 +1,55 @@
+"""benchmarks/notebook_vs_rfb.py: its arguments, its notebook's cells and the figures it
+derives from the page's and the kernel's logs (the benchmark itself runs JupyterLab and
+Chromium for minutes: it is run by hand, not here)."""
+
+import ast
+import importlib.util
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def bench():
+    spec = importlib.util.spec_from_file_location(
+        "notebook_vs_rfb", ROOT / "benchmarks" / "notebook_vs_rfb.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_defaults_quick_and_bad_arguments(bench, capsys):
+    args = bench.parse_args([])
+    assert args.latencies == [0.0, 50.0, 150.0] and args.size == (640, 480)
+    assert args.widgets == ["sprite", "rfb"] and args.path == "chen1999"
+    quick = bench.parse_args(["--quick"])
+    assert quick.latencies == [0.0, 150.0] and quick.frames < args.frames
+    for bad in (["--size", "10x10"], ["--size", "big"], ["--latencies", "-5"],
+                ["--widgets", "sprite,vnc"], ["--frames", "1"]):
+        with pytest.raises(SystemExit) as exc:
+            bench.parse_args(bad)
+        assert exc.value.code == 2
+    assert "error:" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("mode", ["sprite", "rfb"])
+def test_the_notebook_cells_are_python_a_kernel_runs(bench, mode):
+    cells = bench.cells(mode, bench.parse_args(["--quick"]))
+    for cell in cells:
+        compile(cell, "cell", "exec", flags=ast.PyCF_ALLOW_TOP_LEVEL_AWAIT)
+    assert f"stream={mode == 'rfb'}" in cells[0]
+    assert "ensure_future" in cells[1]  # the widgets play with the kernel idle
+
+
+def test_stream_frames_and_input_to_frame_from_the_logs(bench):
+    # frames 10..14 put on screen 100 ms apart (wall clock, s); the page's clock starts
+    # at origin_ms; a key pressed at 1.05 s (page clock) is in frame 12.
+    origin_ms = 1_000_000.0
+    shown = [(i, (origin_ms + 1000.0 + 100.0 * (i - 10)) / 1e3) for i in range(10, 15)]
+    result = {"i0": 10, "shown": shown, "inputs": [(1.05, 12), (9.0, 99)]}
+    assert bench.rfb_frames(result, 3) == pytest.approx([100.0, 100.0])  # frames 11..13
+    # frame 12 handed to the page at 1200 ms, loaded at 1203 ms, presented at 1216.7 ms
+    rec = {"load": [1103.0, 1203.0, 1303.0], "raf": [1200.0, 1216.7, 1233.4]}
+    assert bench.rfb_input_ms(result, origin_ms, rec) == pytest.approx([1216.7 - 1050.0])
