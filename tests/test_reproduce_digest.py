@@ -3,22 +3,19 @@ results, and its comparison of two digests (equal to the digit, or not)."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
 
 import pytest
+
+from benchmark_scripts import load_benchmark
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="module")
 def digest():
-    spec = importlib.util.spec_from_file_location(
-        "reproduce_digest", ROOT / "benchmarks" / "reproduce_digest.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_benchmark("reproduce_digest")
 
 
 def test_every_reproduction_has_a_run_and_a_selection(digest):

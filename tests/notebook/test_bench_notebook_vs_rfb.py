@@ -3,21 +3,18 @@ derives from the page's and the kernel's logs (the benchmark itself runs Jupyter
 Chromium for minutes: it is run by hand, not here)."""
 
 import ast
-import importlib.util
 from pathlib import Path
 
 import pytest
+
+from benchmark_scripts import load_benchmark
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")
 def bench():
-    spec = importlib.util.spec_from_file_location(
-        "notebook_vs_rfb", ROOT / "benchmarks" / "notebook_vs_rfb.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_benchmark("notebook_vs_rfb")
 
 
 def test_defaults_quick_and_bad_arguments(bench, capsys):
