@@ -194,3 +194,29 @@ def test_two_streams_in_one_kernel_each_draw_on_their_own_context(tmp_path):
         assert first.renderer is None and second.renderer is None
 
     asyncio.run(main())
+
+
+def test_hostile_input_events_are_dropped_and_the_camera_stays_finite():
+    async def main():
+        w = stream()
+        try:
+            w.get_frame()
+            before = w.camera
+            hostile = [{"type": "pointer_down", "x": "abc", "y": 1},
+                       {"type": "pointer_down", "x": float("nan"), "y": 0.0},
+                       {"type": "wheel", "dy": 1e300}, {"type": "wheel", "dy": True},
+                       {"type": "key_down", "key": "x" * 1000},
+                       {"type": "key_down", "key": ["w"]},
+                       {"type": "key_down", "key": "w", "timestamp": "soon"}]
+            for event in hostile:
+                w.handle_event(event)  # never raises
+            assert w.rejected == len(hostile)
+            for k in "abcdefghijkl":  # more keys than anyone holds
+                w.handle_event({"type": "key_down", "key": k, "timestamp": 1.0})
+            assert len(w.flight.keys) == 8 and w.rejected == len(hostile) + 4
+            w.get_frame()
+            assert np.all(np.isfinite(w.camera.o)) and np.all(np.isfinite(before.o))
+        finally:
+            w.close()
+
+    asyncio.run(main())

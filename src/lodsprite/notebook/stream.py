@@ -34,6 +34,28 @@ __all__ = ["StreamWidget"]
 
 KEEP = 2000
 MAX_INPUTS = 2000
+MAX_KEYS = 8
+"""Keys held at once; a key down beyond them is dropped."""
+MAX_COORD = 1e6
+"""Largest magnitude of an event's coordinate (pixels) or wheel step accepted."""
+
+
+def _number(event: dict, name: str, default: float = 0.0, limit: float = MAX_COORD) -> float:
+    """``event[name]`` as a finite float within +-``limit``; ValueError otherwise."""
+    value = event.get(name, default)
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ValueError(f"{name} is not a number")
+    value = float(value)
+    if not np.isfinite(value) or abs(value) > limit:
+        raise ValueError(f"{name} out of range")
+    return value
+
+
+def _key(event: dict) -> str:
+    key = event.get("key", "")
+    if not isinstance(key, str) or len(key) > 16:
+        raise ValueError("not a key name")
+    return key.lower()
 MAX_SPEC = 1024
 
 
@@ -111,6 +133,8 @@ class StreamWidget(RemoteFrameBuffer):
         """(browser event timestamp, index of the first frame rendered after it) for each
         key press, for input-to-frame measurements (the frame index is jupyter_rfb's)."""
         self._pending_inputs: list[float] = []
+        self.rejected = 0
+        """Input events from the page dropped as malformed (see :meth:`handle_event`)."""
         self.shown: deque[tuple[int, float]] = deque(maxlen=KEEP)
         """(jupyter_rfb frame index, browser wall-clock time in s) of each frame the page
         put on screen, from jupyter_rfb's frame feedback: frame times as the page shows
@@ -180,23 +204,36 @@ class StreamWidget(RemoteFrameBuffer):
             pass
 
     def handle_event(self, event: dict) -> None:
+        """One input event from the page (jupyter_rfb's): keys fly, a drag looks, the
+        wheel moves.  The page is untrusted: an event whose fields are not what they
+        should be (a coordinate not a finite number within :data:`MAX_COORD`, a key name
+        over 16 characters, more than :data:`MAX_KEYS` keys held) is dropped and
+        counted in ``rejected``."""
+        try:
+            self._handle(event)
+        except (TypeError, ValueError, AttributeError):
+            self.rejected += 1
+
+    def _handle(self, event: dict) -> None:
         kind = event.get("type") or event.get("event_type")
         if kind == "key_down":
-            key = str(event.get("key", "")).lower()[:16]
+            key, t = _key(event), _number(event, "timestamp", 0.0, 1e12)
+            if key not in self.flight.keys and len(self.flight.keys) >= MAX_KEYS:
+                raise ValueError("too many keys held")
             self.flight.keys.add(key)
-            self._pending_inputs.append(float(event.get("timestamp", 0.0) or 0.0))
+            self._pending_inputs.append(t)
         elif kind == "key_up":
-            self.flight.keys.discard(str(event.get("key", "")).lower()[:16])
+            self.flight.keys.discard(_key(event))
         elif kind == "pointer_down":
-            self._drag = (float(event.get("x", 0)), float(event.get("y", 0)))
+            self._drag = (_number(event, "x"), _number(event, "y"))
         elif kind == "pointer_up":
             self._drag = None
         elif kind == "pointer_move" and self._drag is not None:
-            x, y = float(event.get("x", 0)), float(event.get("y", 0))
+            x, y = _number(event, "x"), _number(event, "y")
             self.flight.drag(x - self._drag[0], y - self._drag[1])
             self._drag = (x, y)
         elif kind == "wheel":
-            self.flight.wheel(float(event.get("dy", 0.0)))
+            self.flight.wheel(_number(event, "dy"))
         else:
             return
         self._path = []  # input takes the camera from a path
