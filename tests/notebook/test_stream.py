@@ -22,6 +22,18 @@ def stream(**kw):
     return w
 
 
+def with_stream(body, **kw) -> None:
+    """Run ``await body(w)`` on a fresh stream ``w`` in an event loop; close it after."""
+    async def main():
+        w = stream(**kw)
+        try:
+            await body(w)
+        finally:
+            w.close()
+
+    asyncio.run(main())
+
+
 def test_a_path_plays_one_viewpoint_a_frame_and_resolves_played():
     async def main():
         w = stream(path="chen1999", frames=4)
@@ -197,26 +209,22 @@ def test_two_streams_in_one_kernel_each_draw_on_their_own_context(tmp_path):
 
 
 def test_hostile_input_events_are_dropped_and_the_camera_stays_finite():
-    async def main():
-        w = stream()
-        try:
-            w.get_frame()
-            before = w.camera
-            hostile = [{"type": "pointer_down", "x": "abc", "y": 1},
-                       {"type": "pointer_down", "x": float("nan"), "y": 0.0},
-                       {"type": "wheel", "dy": 1e300}, {"type": "wheel", "dy": True},
-                       {"type": "key_down", "key": "x" * 1000},
-                       {"type": "key_down", "key": ["w"]},
-                       {"type": "key_down", "key": "w", "timestamp": "soon"}]
-            for event in hostile:
-                w.handle_event(event)  # never raises
-            assert w.rejected == len(hostile)
-            for k in "abcdefghijkl":  # more keys than anyone holds
-                w.handle_event({"type": "key_down", "key": k, "timestamp": 1.0})
-            assert len(w.flight.keys) == 8 and w.rejected == len(hostile) + 4
-            w.get_frame()
-            assert np.all(np.isfinite(w.camera.o)) and np.all(np.isfinite(before.o))
-        finally:
-            w.close()
+    async def body(w):
+        w.get_frame()
+        before = w.camera
+        hostile = [{"type": "pointer_down", "x": "abc", "y": 1},
+                   {"type": "pointer_down", "x": float("nan"), "y": 0.0},
+                   {"type": "wheel", "dy": 1e300}, {"type": "wheel", "dy": True},
+                   {"type": "key_down", "key": "x" * 1000},
+                   {"type": "key_down", "key": ["w"]},
+                   {"type": "key_down", "key": "w", "timestamp": "soon"}]
+        for event in hostile:
+            w.handle_event(event)  # never raises
+        assert w.rejected == len(hostile)
+        for k in "abcdefghijkl":  # more keys than anyone holds
+            w.handle_event({"type": "key_down", "key": k, "timestamp": 1.0})
+        assert len(w.flight.keys) == 8 and w.rejected == len(hostile) + 4
+        w.get_frame()
+        assert np.all(np.isfinite(w.camera.o)) and np.all(np.isfinite(before.o))
 
-    asyncio.run(main())
+    with_stream(body)
