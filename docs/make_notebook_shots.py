@@ -7,7 +7,7 @@ in a temporary folder holding a copy of the notebook (without its closing cells,
 widgets still show) and ``battlefield.toml``; a last cell written here saves what the
 kernel read back (``w.stats`` of each widget, whether a front end showed them) to
 ``shots.json``, printed at the end.  Needs the ``notebook`` and ``test`` extras and
-Debian's chromium and chromium-driver.  About a minute on 2 CPU cores.  Usage::
+Debian's chromium and chromium-driver.  About 90 s on 2 CPU cores.  Usage::
 
     python3 docs/make_notebook_shots.py [--out docs/images]
 """
@@ -99,7 +99,7 @@ def run_in_lab(folder: Path, ids: list[str], out: Path) -> dict:
                     raise RuntimeError("the notebook did not finish: "
                                        + (folder / "jupyterlab.log").read_text()[-2000:])
                 time.sleep(0.5)
-            time.sleep(3.0)  # the last keyframe and frames delivered
+            time.sleep(20.0)  # the last keyframe shown; the streams (idle kernel) play
             cells = driver.find_elements(By.CSS_SELECTOR, ".jp-Notebook .jp-Cell")
             for name, cell_id in SHOTS.items():
                 area = cells[ids.index(cell_id)].find_element(By.CSS_SELECTOR,
