@@ -31,8 +31,11 @@ started again (``reset_stats``) and the path played again, timed:
   streaming draws the kernel's frame rendered after the press once it has loaded;
 * shown error (px, mean over the path's frames): the page's estimate for ``sprite``
   (parallax from the keyframe's viewpoint and the squares drawn from the fallback, the
-  HUD's figure); 0 for ``rfb``, whose every frame is the full-detail render of its own
-  viewpoint (its cost is the frame time and the input lag above; JPEG not counted).
+  HUD's figure); none for ``rfb`` ('-'), whose every frame is the full-detail render of
+  its own viewpoint (its cost is the frame time and the input lag above; JPEG not
+  counted).  The stream's input times are jupyter_rfb's handler's (``performance.now()``
+  as it runs), the sprite page's the key event's own ``timeStamp``: a bias towards the
+  stream of the event's wait on the page's main thread.
 
     python benchmarks/notebook_vs_rfb.py [--latencies 0,50,150] [--quick] [--json F]
 
@@ -122,6 +125,7 @@ def cells(mode: str, args) -> list[str]:
         "    await asyncio.sleep(1.0)  # the last frames' feedback\n"
         "    json.dump({'played': n, 'stats': stats, 'i0': i0,\n"
         "               'shown': list(getattr(w, 'shown', [])),\n"
+        "               'drawn': list(getattr(w, 'drawn', [])),\n"
         "               'inputs': list(getattr(w, 'inputs', []))}, open('result.json', 'w'))\n"
         "    w.close()\n\n"
         "def failed(task):\n"
@@ -151,9 +155,11 @@ def percentiles(values, ps=(50, 99)) -> list[float | None]:
 
 
 def rfb_frames(result: dict, frames: int) -> list[float]:
-    """The page's intervals (ms) between the timed path's frames put on screen."""
-    i0 = result["i0"]
-    times = sorted(t for i, t in result["shown"] if i0 < i <= i0 + frames)
+    """The page's intervals (ms) between the timed path's frames put on screen: the
+    frames the widget rendered (``drawn``), not jupyter_rfb's lossless re-sends of the
+    last one (a PNG 0.3 s after a JPEG when no frame follows), which take indices too."""
+    path = set(result["drawn"][:frames])
+    times = sorted(t for i, t in result["shown"] if i in path)
     return list(np.diff(np.asarray(times) * 1e3))
 
 
@@ -196,7 +202,7 @@ def figures(mode: str, result: dict, page: dict, args) -> dict:
     return {"frame_ms_median": med, "frame_ms_p99": p99, "frames": len(intervals) + 1,
             "keyframes": len(intervals) + 1, "keyframe_latency_ms": None,
             "input_to_frame_ms": imed, "input_to_frame_ms_p99": ip99,
-            "inputs": len(inputs), "error_px_mean": 0.0,
+            "inputs": len(inputs), "error_px_mean": None,  # full detail at its own viewpoint
             "kernel_render_ms": result["stats"].get("render_ms")}
 
 

@@ -45,8 +45,9 @@ def test_stream_frames_and_input_to_frame_from_the_logs(bench):
     # at origin_ms; a key pressed at 1.05 s (page clock) is in frame 12.
     origin_ms = 1_000_000.0
     shown = [(i, (origin_ms + 1000.0 + 100.0 * (i - 10)) / 1e3) for i in range(10, 15)]
-    result = {"i0": 10, "shown": shown, "inputs": [(1.05, 12), (9.0, 99)]}
-    assert bench.rfb_frames(result, 3) == pytest.approx([100.0, 100.0])  # frames 11..13
+    # frames 11..14 rendered; 12 was a lossless re-send of 11 (not drawn)
+    result = {"i0": 10, "shown": shown, "drawn": [11, 13, 14], "inputs": [(1.05, 12), (9.0, 99)]}
+    assert bench.rfb_frames(result, 2) == pytest.approx([200.0])  # frames 11 and 13
     # frame 12 handed to the page at 1200 ms, loaded at 1203 ms, presented at 1216.7 ms
     rec = {"load": [1103.0, 1203.0, 1303.0], "raf": [1200.0, 1216.7, 1233.4]}
     assert bench.rfb_input_ms(result, origin_ms, rec) == pytest.approx([1216.7 - 1050.0])

@@ -12,6 +12,7 @@ import pytest
 pytest.importorskip("jupyter_rfb", reason="the notebook extra")
 
 from lodsprite.errors import InputError, LodspriteError  # noqa: E402
+from lodsprite.notebook.stream import FIRST_STEP_S  # noqa: E402
 
 
 def stream(**kw):
@@ -60,28 +61,34 @@ def test_a_path_plays_one_viewpoint_a_frame_and_resolves_played():
 
 
 def test_keys_fly_the_camera_and_are_logged_for_input_to_frame():
-    async def main():
-        w = stream()
-        try:
-            w.get_frame()
-            before = w.camera
-            w.handle_event({"type": "key_down", "key": "W", "timestamp": 1234.5})
-            w._last -= 0.5  # half a second held
-            w.get_frame()
-            moved = w.camera.o - before.o
-            assert np.dot(moved, -before.z) > 0 and np.allclose(np.cross(moved, before.z), 0,
-                                                                 atol=1e-6 * np.linalg.norm(moved))
-            assert list(w.inputs) == [(1234.5, w._rfb_frame_index + 1)]
-            w.handle_event({"type": "key_up", "key": "w"})
-            assert not w.flight.keys
-            with pytest.raises(InputError):
-                w.camera = [0.0] * 12
-            with pytest.raises(InputError):
-                w.play("nowhere")
-        finally:
-            w.close()
+    async def body(w):
+        w.get_frame()
+        before = w.camera
+        time.sleep(0.3)  # a pause before the key: no flight, no frame interval
+        w.handle_event({"type": "key_down", "key": "W", "timestamp": 1234.5})
+        w.get_frame()
+        first = w.camera.o - before.o
+        assert np.linalg.norm(first) == pytest.approx(w.flight.speed * FIRST_STEP_S)
+        assert np.dot(first, -before.z) > 0 and np.allclose(
+            np.cross(first, before.z), 0, atol=1e-6 * np.linalg.norm(first))
+        assert list(w.inputs) == [(1234.5, w._rfb_frame_index + 1)]
+        assert not w._intervals
+        w._last -= 0.5  # the next frame half a second later, the key still held
+        at = w.camera.o
+        w.get_frame()
+        assert np.linalg.norm(w.camera.o - at) == pytest.approx(w.flight.speed * 0.5,
+                                                                 rel=0.05)
+        assert len(w._intervals) == 1
+        w.handle_event({"type": "key_up", "key": "w"})
+        assert not w.flight.keys
+        w.get_frame()
+        assert w._last is None  # nothing held: the run ends
+        with pytest.raises(InputError):
+            w.camera = [0.0] * 12
+        with pytest.raises(InputError):
+            w.play("nowhere")
 
-    asyncio.run(main())
+    with_stream(body)
 
 
 def test_screenshot_before_a_frame_says_why():
@@ -226,5 +233,45 @@ def test_hostile_input_events_are_dropped_and_the_camera_stays_finite():
         assert len(w.flight.keys) == 8 and w.rejected == len(hostile) + 4
         w.get_frame()
         assert np.all(np.isfinite(w.camera.o)) and np.all(np.isfinite(before.o))
+
+    with_stream(body)
+
+
+def test_stop_close_and_input_end_a_path_and_its_played():
+    async def body(w):
+        w.play("chen1999", frames=5)
+        w.get_frame()
+        w.stop()
+        with pytest.raises(LodspriteError, match="stopped"):
+            await w.played(timeout=1)
+        w.play("chen1999", frames=5)
+        w.get_frame()
+        w.handle_event({"type": "wheel", "dy": 1.0})
+        with pytest.raises(LodspriteError, match="input"):
+            await w.played(timeout=1)
+        w.play("chen1999", frames=5)
+        played = asyncio.ensure_future(w.played(timeout=5))
+        await asyncio.sleep(0)
+        w.close()
+        with pytest.raises(LodspriteError, match="closed"):
+            await played
+        assert w.get_frame() is None  # a draw asked for before the close draws nothing
+
+    with_stream(body)
+
+
+def test_page_messages_jupyter_rfb_would_choke_on_are_dropped():
+    async def body(w):
+        w._rfb_last_resize_event = None
+        for content in ([1, 2], {"type": 5}, {"type": "resize", "height": 10},
+                        {"type": "resize", "width": "1px' onerror='x", "height": 10},
+                        {"type": "pointer_down", "x": 1, "y": 1, "buttons": 5},
+                        {"type": "pointer_down", "x": 1, "y": 1, "modifiers": [None]},
+                        {"type": "key_down", "key": "w", "timestamp": float("inf")}):
+            w._rfb_handle_msg(w, content, [])  # never raises
+        assert w.rejected == 7
+        assert w._rfb_last_resize_event is None and not w.flight.keys
+        w._rfb_handle_msg(w, {"type": "resize", "width": 64, "height": 48, "ratio": 1.0}, [])
+        assert w._rfb_last_resize_event["width"] == 64 and w.rejected == 7
 
     with_stream(body)

@@ -26,7 +26,8 @@ from jupyter_rfb import RemoteFrameBuffer
 from lodsprite.camera import Viewpoint
 from lodsprite.errors import InputError, LodspriteError
 from lodsprite.gl.context import keep_current
-from lodsprite.notebook.flight import FlyCamera, look_along
+from lodsprite.notebook.events import MAX_KEYS, MAX_TIME, check_event, key, number
+from lodsprite.notebook.flight import MOVE_KEYS, FlyCamera, look_along
 from lodsprite.notebook.home import at_home, home_loop
 from lodsprite.notebook.source import check_path, path_played
 
@@ -34,28 +35,9 @@ __all__ = ["StreamWidget"]
 
 KEEP = 2000
 MAX_INPUTS = 2000
-MAX_KEYS = 8
-"""Keys held at once; a key down beyond them is dropped."""
-MAX_COORD = 1e6
-"""Largest magnitude of an event's coordinate (pixels) or wheel step accepted."""
-
-
-def _number(event: dict, name: str, default: float = 0.0, limit: float = MAX_COORD) -> float:
-    """``event[name]`` as a finite float within +-``limit``; ValueError otherwise."""
-    value = event.get(name, default)
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise ValueError(f"{name} is not a number")
-    value = float(value)
-    if not np.isfinite(value) or abs(value) > limit:
-        raise ValueError(f"{name} out of range")
-    return value
-
-
-def _key(event: dict) -> str:
-    key = event.get("key", "")
-    if not isinstance(key, str) or len(key) > 16:
-        raise ValueError("not a key name")
-    return key.lower()
+FIRST_STEP_S = 1 / 60
+"""The camera's step (seconds of flight) on the first frame of a key held: the frames
+after it step by the time between frames."""
 MAX_SPEC = 1024
 
 
@@ -100,6 +82,9 @@ class StreamWidget(RemoteFrameBuffer):
     """Frames of ``source`` rendered in the kernel, ``size`` (w, h) pixels; see the
     module."""
 
+    rejected: int = 0
+    """Messages and input events from the page dropped as malformed."""
+
     def __init__(self, source: str | Path = "jacksboro", *, path: str | None = None,
                  frames: int | None = None, size: tuple[int, int] = (640, 480),
                  fov_y_deg: float | None = None, quality: int = 80, **scene_options: Any
@@ -132,9 +117,10 @@ class StreamWidget(RemoteFrameBuffer):
         self.inputs: deque[tuple[float, int]] = deque(maxlen=MAX_INPUTS)
         """(browser event timestamp, index of the first frame rendered after it) for each
         key press, for input-to-frame measurements (the frame index is jupyter_rfb's)."""
-        self._pending_inputs: list[float] = []
-        self.rejected = 0
-        """Input events from the page dropped as malformed (see :meth:`handle_event`)."""
+        self._pending_inputs: deque[float] = deque(maxlen=MAX_INPUTS)
+        self.drawn: deque[int] = deque(maxlen=KEEP)
+        """jupyter_rfb's index of each frame :meth:`get_frame` rendered (not its lossless
+        re-sends of the last one), to tell the frames in ``shown`` apart."""
         self.shown: deque[tuple[int, float]] = deque(maxlen=KEEP)
         """(jupyter_rfb frame index, browser wall-clock time in s) of each frame the page
         put on screen, from jupyter_rfb's frame feedback: frame times as the page shows
@@ -148,24 +134,30 @@ class StreamWidget(RemoteFrameBuffer):
 
     # ------------------------------------------------------------------ rendering
 
-    def get_frame(self) -> np.ndarray:
-        """Render the next frame (the path's next viewpoint, or the flown camera)."""
+    def get_frame(self) -> np.ndarray | None:
+        """Render the next frame (the path's next viewpoint, or the flown camera); None
+        once closed."""
+        if self.renderer is None:
+            return None
         now = time.perf_counter()
-        dt = 0.0 if self._last is None else now - self._last
-        if self._last is not None:
+        if self._last is not None:  # the frame before asked for this one: in one run
+            dt = now - self._last
             self._intervals.append(dt * 1e3)
-        self._last = now
+        else:  # the first frame after a pause (a path, a key pressed, a draw asked for)
+            dt = FIRST_STEP_S
         more = False
         if self._path_index < len(self._path):
             vp = self._path[self._path_index]
             self._path_index += 1
             more = self._path_index < len(self._path)
             self.flight.viewpoint = vp
-            if not more and self._played is not None and not self._played.done():
-                self._played.set_result(self.frames + 1)
+            if not more:
+                self._settle(result=self.frames + 1)
         else:
-            more = self.flight.step(dt)
+            self.flight.step(dt)
+            more = bool(self.flight.keys & MOVE_KEYS)
             vp = self.flight.viewpoint
+        self._last = now if more else None
         t0 = time.perf_counter()
         with self.renderer.gl.mgl:  # its own context current (another widget's may be)
             self.renderer.draw(vp, t=now - self._started)
@@ -173,16 +165,30 @@ class StreamWidget(RemoteFrameBuffer):
         self._render_ms.append((time.perf_counter() - t0) * 1e3)
         self.frames += 1
         index = self._rfb_frame_index + 1  # the index jupyter_rfb gives this frame
+        self.drawn.append(index)
         self.inputs.extend((t, index) for t in self._pending_inputs)
-        self._pending_inputs = []
+        self._pending_inputs.clear()
         if more:
             self.request_draw()
         return image
+
+    def _settle(self, result: int | None = None, why: str | None = None) -> None:
+        """End a path's ``played()`` future: its frames, or an error saying ``why``."""
+        future = self._played  # kept: played() answers with it after the end too
+        if future is None or future.done():
+            return
+        if why is None:
+            future.set_result(result)
+        else:
+            future.set_exception(LodspriteError(why))
 
     # jupyter_rfb's front-end messages and draws, on the widget's home loop: messages may
     # arrive on a kernel subshell's thread (lodsprite.notebook.home)
 
     def _rfb_handle_msg(self, widget: Any, content: Any, buffers: list) -> None:
+        if not check_event(content):  # the page is untrusted (lodsprite.notebook.events)
+            self.rejected += 1
+            return
         at_home(getattr(self, "_home", None), super()._rfb_handle_msg, widget, content,
                 buffers)
 
@@ -217,27 +223,29 @@ class StreamWidget(RemoteFrameBuffer):
     def _handle(self, event: dict) -> None:
         kind = event.get("type") or event.get("event_type")
         if kind == "key_down":
-            key, t = _key(event), _number(event, "timestamp", 0.0, 1e12)
-            if key not in self.flight.keys and len(self.flight.keys) >= MAX_KEYS:
+            name, t = key(event), number(event, "timestamp", 0.0, MAX_TIME)
+            if name not in self.flight.keys and len(self.flight.keys) >= MAX_KEYS:
                 raise ValueError("too many keys held")
-            self.flight.keys.add(key)
+            self.flight.keys.add(name)
             self._pending_inputs.append(t)
         elif kind == "key_up":
-            self.flight.keys.discard(_key(event))
+            self.flight.keys.discard(key(event))
         elif kind == "pointer_down":
-            self._drag = (_number(event, "x"), _number(event, "y"))
+            self._drag = (number(event, "x"), number(event, "y"))
         elif kind == "pointer_up":
             self._drag = None
         elif kind == "pointer_move" and self._drag is not None:
-            x, y = _number(event, "x"), _number(event, "y")
+            x, y = number(event, "x"), number(event, "y")
             self.flight.drag(x - self._drag[0], y - self._drag[1])
             self._drag = (x, y)
         elif kind == "wheel":
-            self.flight.wheel(_number(event, "dy"))
+            self.flight.wheel(number(event, "dy"))
         else:
             return
-        self._path = []  # input takes the camera from a path
-        self._last = None if not self.flight.keys else self._last
+        if self._path:  # input takes the camera from a path
+            self._path = []
+            self._last = None
+            self._settle(why="the path was stopped by input in the view")
         self.request_draw()
 
     # ----------------------------------------------------------------------- API
@@ -257,10 +265,10 @@ class StreamWidget(RemoteFrameBuffer):
         except PathError as exc:
             raise InputError(str(exc)) from None
         self._path_index = 0
-        try:
-            self._played = asyncio.get_running_loop().create_future()
-        except RuntimeError:
-            self._played = None
+        self._last = None
+        self._settle(why="another path was played")
+        loop = self._home or home_loop()  # resolved where get_frame runs
+        self._played = None if loop is None else loop.create_future()
         self.request_draw()
 
     async def played(self, timeout: float = 120.0) -> int:
@@ -284,8 +292,11 @@ class StreamWidget(RemoteFrameBuffer):
             raise
 
     def stop(self) -> None:
-        """Stop a playing path where it is."""
-        self._path = []
+        """Stop a playing path where it is (its ``played()`` raises, saying so)."""
+        if self._path:
+            self._path = []
+            self._last = None
+            self._settle(why="the path was stopped")
 
     @property
     def camera(self) -> Viewpoint:
@@ -324,6 +335,8 @@ class StreamWidget(RemoteFrameBuffer):
             self._render_ms.clear()
             self.inputs.clear()
             self.shown.clear()
+            self.drawn.clear()
+            self._last = None
 
     async def screenshot(self, timeout: float = 10.0) -> bytes:
         """A PNG of the last frame sent to the browser (what it shows once delivered)."""
@@ -337,10 +350,16 @@ class StreamWidget(RemoteFrameBuffer):
         return out.getvalue()
 
     def close(self) -> None:
-        """Release the renderer (its GL context) and close the widget; idempotent."""
+        """Release the renderer (its GL context) and close the widget; idempotent.  A
+        path playing stops (its ``played()`` raises) and nothing more is drawn."""
+        self._path = []
+        self._settle(why="the widget was closed")
+        self._rfb_draw_requested = False
+        self._rfb_cancel_lossless_draw()
         renderer, self.renderer = getattr(self, "renderer", None), None
         if renderer is not None:
             with keep_current():  # its objects released on its own context
                 renderer.gl.mgl.__enter__()
                 renderer.release()
         super().close()
+        self._output_context.close()  # jupyter_rfb's Output widget

@@ -66,6 +66,8 @@ TICK_S = 0.25
 CONNECT_S = 5.0
 """How long a Ray head's address may take to accept a connection (s)."""
 REJOIN_S = 0.1
+REJOIN_DEADLINE_S = 120.0
+"""How long a renderer may take to come back from a restart before it is left out."""
 """Pause between ``ready`` calls to a restarting actor (s)."""
 
 
@@ -149,7 +151,13 @@ class RayPool(PoolResults):
         self.codec = codec
         self._closed = False
         self._of: dict[Key, int] = {}  # a joined renderer: its actor's index
-        self._actors = self._start_actors(renderers, data_dir, cache, gpus_per_renderer)
+        try:
+            self._actors = self._start_actors(renderers, data_dir, cache, gpus_per_renderer)
+        except BaseException:
+            self._close_results()
+            if self._joined:
+                self._ray.shutdown()
+            raise
         self._loop: asyncio.AbstractEventLoop | None = None
         self._thread: threading.Thread | None = None
         self._owner = 0  # the id of the thread running the pool's loop
@@ -277,13 +285,19 @@ class RayPool(PoolResults):
         """Wait for actor ``i`` to answer ``ready`` (through its restarts), then give it
         jobs; an actor Ray gave up on, or one without GL, is left out (logged)."""
         ray = self._ray
+        deadline = time.monotonic() + REJOIN_DEADLINE_S
         while True:
             try:
                 info = await self._actors[i].ready.remote()
                 break
-            except ray.exceptions.ActorUnavailableError:
-                await asyncio.sleep(REJOIN_S)  # restarting
-            except Exception as exc:  # noqa: BLE001 - dead for good, or no GL there
+            except (ray.exceptions.ActorUnavailableError, ray.exceptions.RayActorError) as exc:
+                # restarting (or the call reached the process being killed): Ray brings
+                # it back (max_restarts=-1); left out only past the deadline
+                if time.monotonic() > deadline:
+                    log.error("ray pool: renderer %d left out: %s", i, _first_line(exc))
+                    return
+                await asyncio.sleep(REJOIN_S)
+            except Exception as exc:  # noqa: BLE001 - no GL there, or Ray gone
                 log.error("ray pool: renderer %d left out: %s", i, _first_line(exc))
                 return
         key = (1, f"{i}:{info['pid']}".encode())
@@ -319,7 +333,11 @@ class RayPool(PoolResults):
             return
         self.table.lose(key, why)
         if restart:
-            self._ray.kill(self._actors[i], no_restart=False)
+            try:
+                self._ray.kill(self._actors[i], no_restart=False)
+            except Exception as exc:  # noqa: BLE001 - dead already, or Ray gone
+                log.warning("ray pool: could not restart renderer %d: %s", i,
+                            _first_line(exc))
         self._spawn(self._join(i))
 
     async def _tick(self) -> None:

@@ -24,7 +24,8 @@ class PoolResults:
         self._ready_r, self._ready_w = os.pipe()
         for fd in (self._ready_r, self._ready_w):
             os.set_blocking(fd, False)
-        self.table = JobTable(self.job_timeout_s, lambda: signal(self._ready_w))
+        self._results_closed = False
+        self.table = JobTable(self.job_timeout_s, self._signal)
         self._snapshot: list[WorkerInfo] = []
 
     def poll(self) -> list[Result]:
@@ -62,7 +63,12 @@ class PoolResults:
     def _changed(self) -> None:
         self._snapshot = self.table.snapshot()
 
+    def _signal(self) -> None:
+        if not self._results_closed:  # a descriptor closed may be another file's now
+            signal(self._ready_w)
+
     def _close_results(self) -> None:
+        self._results_closed = True
         for fd in (self._ready_r, self._ready_w):
             os.close(fd)
 
