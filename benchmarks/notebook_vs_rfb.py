@@ -231,7 +231,8 @@ def press(driver, mode: str, presses: int) -> None:
     time.sleep(1.5)  # the last press's frames
 
 
-def one_run(driver, base: str, token: str, root: Path, mode: str, args) -> dict:
+def one_run(driver, base: str, token: str, root: Path, mode: str, args,
+            raw: Path | None = None) -> dict:
     name = write_notebook(root, mode, args)
     for f in ("warm", "timed", "pressed", "result.json", "failed"):
         (root / f).unlink(missing_ok=True)
@@ -262,6 +263,8 @@ def one_run(driver, base: str, token: str, root: Path, mode: str, args) -> dict:
     wait_for(root / "result.json", deadline, "result", log)
     result = json.loads((root / "result.json").read_text())
     driver.execute_async_script(SHUTDOWN_JS)  # this run's kernel ends before the next
+    if raw is not None:  # the logs the figures come from, beside them
+        raw.write_text(json.dumps({"kernel": result, "page": page}))
     return figures(mode, result, page, args)
 
 
@@ -312,7 +315,8 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     ap.add_argument("--deadline", type=float, default=900.0, help="seconds for one run")
     ap.add_argument("--quick", action="store_true",
                     help="a small run: fractal:128, 320x240, 60 frames, 0 and 150 ms, 3 presses")
-    ap.add_argument("--json", type=Path, default=None, help="write the figures here")
+    ap.add_argument("--json", type=Path, default=None,
+                    help="write the figures here, and beside them each run's logs")
     ap.add_argument("--plot", type=Path, default=None, help="draw the figures here (PNG)")
     ap.add_argument("--role", choices=("main", "proxy"), default="main", help=argparse.SUPPRESS)
     ap.add_argument("--listen", type=int, help=argparse.SUPPRESS)
@@ -409,8 +413,10 @@ def main(argv: list[str] | None = None) -> None:
                     proxy = start_proxy(port, lab_port, rtt)
                     try:
                         for mode in args.widgets:
+                            raw = (None if args.json is None else args.json.with_name(
+                                f"{args.json.stem}_{mode}_{rtt:g}ms.json"))
                             fig = one_run(driver, f"http://127.0.0.1:{port}", token, root,
-                                          mode, args)
+                                          mode, args, raw)
                             rows.append({"rtt_ms": rtt, "widget": mode, **fig})
                             print(f"rtt {rtt:g} ms, {mode}: {json.dumps(fig)}", flush=True)
                     finally:
