@@ -181,15 +181,18 @@ async def pool_stats(url: str, token: str) -> dict:
 
 async def kill_renderer(server_pid: int, at_s: float) -> dict | None:
     """SIGKILL one Ray renderer actor of the server's process tree ``at_s`` seconds into
-    the play, one holding a job if there is one (its process title ``ray::Renderer.render``
+    the play, one holding a job if there is one (its process title ``ray::RenderActor.render``
     while it renders); its pid and whether it was rendering (None: none found)."""
     import psutil
 
+    from lodsprite.distributed.pool.ray_actor import RenderActor
+
+    title = f"ray::{RenderActor.__name__}"  # Ray names an actor's process by its class
     await asyncio.sleep(at_s)
     deadline = time.monotonic() + 2.0
     while True:
         found = [(p, cmd) for p in psutil.Process(server_pid).children(recursive=True)
-                 for cmd in [_cmdline(p)] if cmd.startswith("ray::Renderer")]
+                 for cmd in [_cmdline(p)] if cmd.startswith(title)]
         busy = [p for p, cmd in found if ".render" in cmd]
         if busy or (found and time.monotonic() > deadline):
             victim = (busy or [p for p, _ in found])[0]
