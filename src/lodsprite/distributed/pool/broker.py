@@ -87,7 +87,6 @@ class Broker(PoolResults):
         self.data_dir = None if data_dir is None else str(Path(data_dir).resolve())
         self._dir = tempfile.mkdtemp(prefix="lodsprite-pool-")
         self.local_endpoint = f"ipc://{self._dir}/workers"
-        self.endpoints = [self.local_endpoint]
         self._ctx = zmq.Context()
         self._socks: list[zmq.Socket] = []
         self._procs: list = []
