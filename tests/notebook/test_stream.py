@@ -73,8 +73,8 @@ def test_keys_fly_the_camera_and_are_logged_for_input_to_frame():
             np.cross(first, before.z), 0, atol=1e-6 * np.linalg.norm(first))
         assert list(w.inputs) == [(1234.5, w._rfb_frame_index + 1)]
         assert not w._intervals
-        w._last -= 0.5  # the next frame half a second later, the key still held
         at = w.camera.o
+        w._last = time.perf_counter() - 0.5  # the next frame half a second on, key held
         w.get_frame()
         assert np.linalg.norm(w.camera.o - at) == pytest.approx(w.flight.speed * 0.5,
                                                                  rel=0.05)

@@ -29,8 +29,9 @@ TOKEN = "test-token"
 #: A scene whose first keyframe takes an actor a while (it generates and uploads a
 #: 1025² height field first): long enough to kill the actor in the middle of it.
 HEAVY = {"terrain": "fractal:1024:3", "size": [256, 256], "lod": 16}
-#: A scene whose first keyframe takes many times the timeout below on any machine (it
-#: generates a 4097² height field first); SCENE's takes a small part of it.
+#: A scene whose first keyframe takes several times the timeout below (it generates a
+#: 4097² height field first, single-threaded numpy: 5 s on the 2-core machine here);
+#: SCENE's first keyframe, in a fresh actor, a small part of it.
 SLOW = LoadArgs(terrain="fractal:4096:3", size=(64, 64), lod=16)
 VP = {"x": [1.0, 0.0, 0.0], "y": [0.0, 0.6, 0.8], "z": [0.0, -0.8, 0.6],
       "o": [0.0, -1500.0, 1200.0]}
@@ -144,7 +145,7 @@ def test_pages_play_through_actors_and_a_killed_actor_costs_no_keyframe(cluster)
 def test_a_renderer_past_the_job_timeout_is_restarted_and_joins_again(cluster) -> None:
     """A job that outlasts the timeout has its actor killed and restarted by Ray: the job
     is tried again (and given up after its tries), the renderer joins again and serves."""
-    with RayPool("auto", 1, job_timeout_s=1.0) as p:
+    with RayPool("auto", 1, job_timeout_s=1.5) as p:
         assert p.wait_workers(1, DEADLINE_S), "the renderer actor joining"
         p.submit(Job(1, "s", SLOW, VIEW, 1.0))
         late = results(p, {1})[1]
