@@ -1,24 +1,26 @@
-"""The one reference image of a terrain: level 0's own samples at full resolution, a code
-path independent of every renderer under test (issues 22 and 30).
+"""The one reference image of a terrain: level 0 band-limited, drawn by a code path of
+its own (:mod:`lodsprite.gl.bandlimited`), independent of every renderer it judges.
 
-Every quality figure of a terrain store is taken against it: ``render --ground-truth``
-(:func:`lodsprite.run.make_reference`), the distributed replay
+Level 0 (of a :class:`~lodsprite.terrain.store.TerrainStore`, or an in-memory
+:class:`~lodsprite.terrain.heightfield.HeightField` at its full grid) is drawn at ``k x
+k`` samples a pixel (``samples``, 4 by default) and filtered down to the image size
+(:func:`lodsprite.bandlimit.resolve`: a box over each pixel's samples by default, in
+linear light).  Every quality figure is taken against it: ``render --ground-truth``,
+the played runs' display-time error, the distributed replay
 (:mod:`lodsprite.distributed.quality`), ``reproduce large``
-(:mod:`lodsprite.experiments.large.reference`).  Level 0 (of a
-:class:`~lodsprite.terrain.store.TerrainStore`, or an in-memory
-:class:`~lodsprite.terrain.heightfield.HeightField`) is drawn by the full-resolution
-:class:`~lodsprite.gl.terrain.TerrainDrawer`: whole when its longer side is at most
-``max_side`` samples (4097: a 4096-quad grid), beyond that the part of it in view: the
-frustum's ground footprint (:func:`lodsprite.camera.view_footprint`) widened by two
-samples (so that the per-pixel normals of the heights shading see the same neighbours as
-the whole level's), read with ``TerrainStore.read``, and drawn at its place (world
-coordinates of the adaptive renderer, :meth:`lodsprite.terrain.quadtree.Quadtree.world_xy`:
-level 0 centred on the origin, x east, y north, metres).  A footprint of more than
-``max_side`` samples a side is drawn tile by tile (:func:`tile_ranges`: tiles of at most
-``max_side`` samples a side sharing their edge samples, so no crack opens between them)
-into the same target, one depth buffer for all: every valid view gets an image.  At a
-tile's inner edge the per-pixel normals are one-sided (the tile's height texture ends
-there), a line one sample wide.
+(:mod:`lodsprite.experiments.large.reference`), ``reproduce timecritical``.
+
+Level 0 is drawn whole when its longer side is at most ``max_side`` samples (4097: a
+4096-quad grid); beyond that the part of it in view: the frustum's ground footprint
+(:func:`lodsprite.camera.view_footprint`) widened by two samples (so that the per-pixel
+normals of the heights shading see the same neighbours as the whole level's), read with
+``TerrainStore.read``, and drawn at its place (world coordinates of the adaptive
+renderer, :meth:`lodsprite.terrain.quadtree.Quadtree.world_xy`: level 0 centred on the
+origin, x east, y north, metres).  A footprint of more than ``max_side`` samples a side
+is drawn in patches (:func:`tile_ranges`: at most ``max_side`` samples a side sharing
+their edge samples, so no crack opens between them) into the same sample image, one
+depth buffer for all.  At a patch's inner edge the per-pixel normals are one-sided (its
+height texture ends there), a line one sample wide.
 
 Near and far planes are fitted as the adaptive renderer fits them (:meth:`Quadtree.box`,
 :meth:`Quadtree.ground_below`), and the height ramp of the shading spans level 0's range,
@@ -31,16 +33,18 @@ import math
 
 import numpy as np
 
+from lodsprite.bandlimit import check_filter, resolve
 from lodsprite.camera import Projection, Viewpoint, fitted_projection, view_footprint
 from lodsprite.errors import InputError
+from lodsprite.gl.bandlimited import HeightPatch, SupersampledTerrain
 from lodsprite.gl.context import GLContext
-from lodsprite.gl.terrain import TerrainDrawer, TerrainGeometry
 from lodsprite.terrain.heightfield import HeightField
 from lodsprite.terrain.pyramid import MemoryPyramid
 from lodsprite.terrain.quadtree import Quadtree
 
 MAX_SIDE = 4097  # level-0 samples a side drawn at once (a 4096-quad grid)
 MARGIN = 2       # samples around the footprint (central differences of its edge cells)
+SAMPLES = 4      # samples a pixel side of the reference, by default
 Window = tuple[int, int, int, int]  # level-0 samples r0, r1, c0, c1 (r1, c1 exclusive)
 
 
@@ -65,17 +69,22 @@ def tiles(win: Window, max_side: int) -> list[Window]:
 
 
 class LevelZeroReference:
-    """Reference frames of ``size = (w, h)`` pixels, vertical field of view ``fov_y_deg``,
-    coloured by ``shading`` (``heights``: terrain_shade with per-pixel normals; ``texture``:
-    ``texture (H, W, 3) uint8`` over level 0's extent, whole level only; ``auto``: heights
-    for a store, the texture for an in-memory field given one).  ``store_or_field``: a
+    """Band-limited reference frames of ``size = (w, h)`` pixels, vertical field of view
+    ``fov_y_deg``, ``samples`` x ``samples`` a pixel filtered by ``filter`` in colour
+    ``space`` (:mod:`lodsprite.bandlimit`), coloured by ``shading`` (``heights``:
+    terrain_shade with per-pixel normals; ``texture``: ``texture (H, W, 3) uint8`` over
+    level 0's extent, sampled at its base level, whole level only; ``auto``: heights for a
+    store, the texture for an in-memory field given one).  ``store_or_field``: a
     :class:`~lodsprite.terrain.store.TerrainStore` (exaggerated as opened) or a
     :class:`HeightField` (centred on the origin).  GPU objects live until :meth:`release`.
-    Raises :class:`InputError` for texture shading of a level 0 beyond ``max_side``."""
+    Raises :class:`InputError` for texture shading of a level 0 beyond ``max_side``, or a
+    sample count, filter or space not known."""
 
     def __init__(self, ctx: GLContext, store_or_field, size: tuple[int, int],
                  fov_y_deg: float = 45.0, shading: str = "heights",
-                 texture: np.ndarray | None = None, max_side: int = MAX_SIDE) -> None:
+                 texture: np.ndarray | None = None, max_side: int = MAX_SIDE,
+                 samples: int = SAMPLES, filter: str = "box", space: str = "linear") -> None:
+        check_filter(samples, filter, space)
         if shading == "auto":  # as --shading auto: heights for a store, else the texture
             texture_ok = texture is not None and isinstance(store_or_field, HeightField)
             shading = "texture" if texture_ok else "heights"
@@ -86,6 +95,7 @@ class LevelZeroReference:
             raise InputError("a texture-shaded reference needs the texture")
         self.ctx, self.size, self.fov = ctx, (int(size[0]), int(size[1])), float(fov_y_deg)
         self.shading, self.texture, self.max_side = shading, texture, int(max_side)
+        self.samples, self.filter, self.space = int(samples), filter, space
         field = store_or_field if isinstance(store_or_field, HeightField) else None
         self.pyramid = MemoryPyramid.from_heightfield(field) if field is not None \
             else store_or_field
@@ -98,9 +108,9 @@ class LevelZeroReference:
                              "heights (--shading heights), a texture needs it whole")
         self.height_range = self.tree.height_range()
         self._field = field
-        self._window: Window | None = None  # the window of the geometry kept
-        self._geometry: TerrainGeometry | None = None  # kept while the view needs one tile
-        self._drawer: TerrainDrawer | None = None
+        self._window: Window | None = None  # the window of the patch kept
+        self._patch: HeightPatch | None = None  # kept while the view needs one patch
+        self._drawer: SupersampledTerrain | None = None
         self._note = ""
 
     def projection(self, viewpoint: Viewpoint) -> Projection:
@@ -140,54 +150,58 @@ class LevelZeroReference:
         r0, c0 = min(r0, self.rows - 2), min(c0, self.cols - 2)
         return (r0, max(r1, r0 + 2), c0, max(c1, c0 + 2))
 
-    def image(self, viewpoint: Viewpoint, projection: Projection | None = None) -> np.ndarray:
-        """The reference frame ``(h, w, 3) uint8`` (row 0 at the top) at ``viewpoint``
-        through ``projection`` (default :meth:`projection`): level 0 whole, its window
-        under the view, or that window tile by tile into one colour and depth buffer."""
+    def samples_image(self, viewpoint: Viewpoint, projection: Projection | None = None
+                      ) -> np.ndarray:
+        """The unfiltered sample image ``(k h, k w, 3) uint8`` (row 0 at the top)."""
         projection = projection or self.projection(viewpoint)
         win = self._view_window(viewpoint, projection)
         parts = tiles(win, self.max_side)
-        if len(parts) > 1:
-            self._drop_geometry()
-        for k, part in enumerate(parts):
-            geometry = self._geometry_for(part) if len(parts) == 1 else self._make(part)
-            drawer = self._drawer_for(geometry)
-            drawer.render(viewpoint, None, projection, clear=k == 0)
+        view_proj = projection.matrix() @ viewpoint.view_matrix()
+        if len(parts) == 1:
+            patches = [self._patch_for(parts[0])]
+        else:
+            self._drop_patch()
+            patches = [self._make(part) for part in parts]
+        try:
+            samples = self._drawer_for().draw(patches, view_proj)
+        finally:
             if len(parts) > 1:
-                self.ctx.finish()  # drawn: its textures and meshes can go
-                geometry.release()
+                for p in patches:
+                    p.release()
         self._note = self._describe_window(win, len(parts))
-        self.ctx.finish()
-        return self._drawer.target.read_color()
+        return samples
 
-    def _make(self, win: Window) -> TerrainGeometry:
-        """The GPU geometry of level 0's window ``win`` at its place."""
+    def image(self, viewpoint: Viewpoint, projection: Projection | None = None) -> np.ndarray:
+        """The reference frame ``(h, w, 3) uint8`` (row 0 at the top) at ``viewpoint``
+        through ``projection`` (default :meth:`projection`): level 0 whole, its window
+        under the view, or that window in patches, at ``k x k`` samples a pixel, filtered."""
+        return resolve(self.samples_image(viewpoint, projection), self.samples, self.filter,
+                       self.space)
+
+    def _make(self, win: Window) -> HeightPatch:
+        """The GPU patch of level 0's window ``win`` at its place."""
         r0, r1, c0, c1 = win
         if self._field is not None:
             heights = self._field.heights[r0:r1, c0:c1]
         else:
             heights = self.pyramid.read(0, r0, r1, c0, c1)
-        hf = HeightField(heights, self.pyramid.dx, self.pyramid.dy, "level 0")
         x, y = self.tree.world_xy(0, np.array([r0]), np.array([c0]))
-        corner = None if self.whole else (float(x[0]), float(y[0]))
-        return TerrainGeometry(self.ctx, hf, self.texture, corner=corner,
-                               height_range=self.height_range)
+        return HeightPatch(self.ctx, heights, (float(x[0]), float(y[0])),
+                           (self.pyramid.dx, self.pyramid.dy))
 
-    def _geometry_for(self, win: Window) -> TerrainGeometry:
-        """The geometry of a one-tile view, kept while the window stays (level 0 whole:
+    def _patch_for(self, win: Window) -> HeightPatch:
+        """The patch of a one-patch view, kept while the window stays (level 0 whole:
         always)."""
-        if self._geometry is None or self._window != win:
-            self._drop_geometry()
-            self._geometry, self._window = self._make(win), win
-        return self._geometry
+        if self._patch is None or self._window != win:
+            self._drop_patch()
+            self._patch, self._window = self._make(win), win
+        return self._patch
 
-    def _drawer_for(self, geometry: TerrainGeometry) -> TerrainDrawer:
-        """The one full-resolution renderer (and target), drawing ``geometry``."""
+    def _drawer_for(self) -> SupersampledTerrain:
         if self._drawer is None:
-            self._drawer = TerrainDrawer(self.ctx, geometry, *self.size, self.fov)
-            self._drawer.shading = self.shading
-        elif self._drawer.geometry is not geometry:
-            self._drawer.set_geometry(geometry)
+            self._drawer = SupersampledTerrain(
+                self.ctx, self.size, self.samples, self.shading, self.height_range,
+                self.texture, (self.cols - 1, self.rows - 1))
         return self._drawer
 
     def _describe_window(self, win: Window, count: int) -> str:
@@ -201,20 +215,27 @@ class LevelZeroReference:
     def describe(self) -> str:
         """How the reference is made, and for the last view what was drawn."""
         how = ("level 0 whole" if self.whole else
-               f"level-0 windows cropped to the view's footprint, tiles of at most "
+               f"level-0 windows cropped to the view's footprint, patches of at most "
                f"{self.max_side} samples a side")
         last = f"; last view: {self._note}" if self._note else ""
-        return (f"full resolution, {how}, of {self.cols}x{self.rows} samples; "
-                f"{self.shading} shading; near/far fitted as the adaptive renderer's{last}")
+        return (f"level 0 band-limited: {self.samples}x{self.samples} samples a pixel, "
+                f"{self.filter} filter in {self.space} colour, by its own drawing path; "
+                f"{how}, of {self.cols}x{self.rows} samples; {self.shading} shading; "
+                f"near/far fitted as the adaptive renderer's{last}")
 
-    def _drop_geometry(self) -> None:
-        if self._geometry is not None:
-            self._geometry.release()
-        self._geometry, self._window = None, None
+    def key(self) -> tuple:
+        """What makes two references' images equal at one viewpoint (for caches)."""
+        return (id(self.pyramid), self.size, self.fov, self.shading, self.samples,
+                self.filter, self.space, self.max_side)
+
+    def _drop_patch(self) -> None:
+        if self._patch is not None:
+            self._patch.release()
+        self._patch, self._window = None, None
 
     def release(self) -> None:
-        """Free the GPU objects (the renderer's target, the geometry kept)."""
-        self._drop_geometry()
+        """Free the GPU objects (the drawer's target and programs, the patch kept)."""
+        self._drop_patch()
         if self._drawer is not None:
             self._drawer.release()
             self._drawer = None

@@ -9,6 +9,9 @@ as a *proxy mesh* instead (the level plus border ribbons, :mod:`lodsprite.terrai
 whose vertices carry world positions: its programs read ``PROXY_VERTEX_COMMON``.
 """
 
+#: The sky every terrain image is cleared to (linear 0..1 RGB, display-encoded as drawn).
+SKY_RGB = (0.62, 0.74, 0.86)
+
 # Shared by every terrain program: world position and texture coordinate of a grid vertex.
 TERRAIN_VERTEX_COMMON = """
 uniform sampler2D u_height;   // R32F, width = columns, height = rows (metres)

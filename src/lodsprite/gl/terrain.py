@@ -19,7 +19,13 @@ from lodsprite.camera import (
 )
 from lodsprite.errors import InputError
 from lodsprite.gl.context import GLContext, gl_draw_elements_instanced
-from lodsprite.gl.shaders import TERRAIN_FS, TERRAIN_HEIGHTS_FS, TERRAIN_VS, proxy_twin
+from lodsprite.gl.shaders import (  # SKY_RGB: re-exported, the sky every renderer clears to
+    SKY_RGB,
+    TERRAIN_FS,
+    TERRAIN_HEIGHTS_FS,
+    TERRAIN_VS,
+    proxy_twin,
+)
 from lodsprite.gl.target import RenderTarget
 from lodsprite.record import Frame
 from lodsprite.terrain.heightfield import HeightField
@@ -33,7 +39,6 @@ from lodsprite.terrain.lod import (
 )
 from lodsprite.terrain.proxy import proxy_mesh
 
-SKY_RGB = (0.62, 0.74, 0.86)
 SHADINGS = ("auto", "texture", "heights")  # auto: heights on a store, else the texture
 GL_UNSIGNED_INT = 0x1405
 
