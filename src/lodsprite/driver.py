@@ -47,7 +47,8 @@ class Measure:
 
     ``ground_truth``: quality (RMSE, PSNR, SSIM; FLIP with ``flip``) every
     ``quality_stride``-th frame of the untimed replay; ``save_frames``: PNG frames
-    (``frames/frame_NNNNN.png``, every ``save_every``-th); ``video``: an MP4 of the frames
+    (``frames/frame_NNNNN.png``, every ``save_every``-th; with ``ground_truth`` the
+    reference beside each, ``frames/ref_NNNNN.png``); ``video``: an MP4 of the frames
     shown (with ``ground_truth``: reference | technique | difference); ``keep``: frames
     whose images come back in :attr:`RunResult.images`; ``played``: the path played in
     time (:func:`lodsprite.playback.run_played`: frames as often as the technique draws
@@ -98,6 +99,10 @@ def _image_sink(measure: Measure, n: int, out_dir: Path | None, stack: ExitStack
     def on_image(i: int, image: np.ndarray, truth: np.ndarray | None) -> None:
         if i in saved:
             write_png(out_dir / "frames" / f"frame_{i:05d}.png", image)
+            if measure.ground_truth:  # the reference beside it
+                if truth is None:
+                    truth = reference(path.viewpoints[i])
+                write_png(out_dir / "frames" / f"ref_{i:05d}.png", truth)
         if i in keep:
             images[i] = image
         if writer is not None:

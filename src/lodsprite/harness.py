@@ -15,10 +15,10 @@ quality measured in a separate untimed replay.
    (:meth:`~lodsprite.techniques.Technique.decision`); nothing read back, nothing written;
 3. with ``ground_truth`` (or an ``on_image`` callback: saved frames, a video), a replay of
    the same decisions (:meth:`~lodsprite.techniques.Technique.replay`), untimed, each image
-   compared with a reference from an independent code path (default: the renderer's
-   full-resolution terrain; over a terrain store, callers pass :func:`scene_reference`,
-   level 0 of the store) every ``quality_stride``-th frame: ``rmse, psnr, ssim`` (and
-   ``flip``) per frame, their means in the summary.
+   compared with a reference from an independent code path (default: the technique's
+   own, else level 0 band-limited, :func:`scene_reference`) every
+   ``quality_stride``-th frame: ``rmse, psnr, ssim`` (and ``flip``) per frame, and
+   ``flicker`` on consecutive judged frames, their means in the summary.
 
 :func:`write_run` writes ``frames.csv`` (core columns :data:`CORE_COLUMNS`, then the
 technique's own, then quality) and ``summary.json`` (core keys :data:`CORE_KEYS`, then
@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Collection, Iterator, Sequence
-from contextlib import AbstractContextManager, contextmanager
+from contextlib import AbstractContextManager, ExitStack, contextmanager
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -52,7 +52,7 @@ if TYPE_CHECKING:
     from lodsprite.paths import CameraPath
     from lodsprite.progress import Progress
 
-QUALITY_COLUMNS = ("rmse", "psnr", "ssim", "flip")
+QUALITY_COLUMNS = ("rmse", "psnr", "ssim", "flip", "flicker")
 
 #: ``on_image(frame, image, reference)``: a replayed frame's image ``(h, w, 3) uint8`` and
 #: its reference (None without ``ground_truth`` or off the quality stride).
@@ -73,11 +73,14 @@ class RunResult:
     interrupted: bool = False  # stopped by Ctrl-C: the frames finished so far
     #: Replayed images a caller asked to keep, by frame (:class:`lodsprite.run.Measure`).
     images: dict[int, np.ndarray] = field(default_factory=dict)
+    #: A played run's display ticks judged (:func:`lodsprite.display.judge_display`).
+    ticks: list[dict] = field(default_factory=list)
 
 
 def full_resolution(renderer) -> Reference:
-    """The default reference: the renderer's full-resolution terrain at a viewpoint (level
-    0 of an in-memory field; a store's goes through :func:`scene_reference`)."""
+    """The renderer's own full-resolution terrain at a viewpoint, one sample a pixel: not
+    a reference (it is drawn by the renderers under test), kept for the comparisons that
+    ask for it by name."""
     def reference(viewpoint) -> np.ndarray:
         renderer.render(viewpoint, None)
         return renderer.read_color()
@@ -86,37 +89,41 @@ def full_resolution(renderer) -> Reference:
 
 
 def level_zero_reference(gl, scene, size: tuple[int, int], fov_y_deg: float,
-                         shading: str = "auto"):
-    """The one reference of a terrain store's quality figures: a
-    :class:`~lodsprite.gl.reference.LevelZeroReference` over the store ``scene`` names
-    (level 0 through the full-resolution renderer, exaggerated as the scene), frames of
-    ``size = (w, h)`` pixels and ``fov_y_deg`` degrees, coloured by ``shading`` as the run
-    (resolved for the scene); None for an in-memory field, whose full-resolution grid is
-    its level 0 (:func:`full_resolution`).  Release it after use."""
-    from lodsprite.gl.reference import LevelZeroReference
+                         shading: str = "auto", samples: int | None = None):
+    """The one reference of a terrain's quality figures: a band-limited
+    :class:`~lodsprite.gl.reference.LevelZeroReference` over level 0 of the store
+    ``scene`` names (exaggerated as the scene), or over the scene's in-memory field at its
+    full grid, frames of ``size = (w, h)`` pixels and ``fov_y_deg`` degrees, ``samples``
+    a pixel side (default :data:`~lodsprite.gl.reference.SAMPLES`), coloured by
+    ``shading`` as the run (resolved for the scene); None for a scene without terrain.
+    Release it after use."""
+    from lodsprite.gl.reference import SAMPLES, LevelZeroReference
     from lodsprite.techniques.adaptive import scene_pyramid
     from lodsprite.techniques.terrain import resolve_shading
     from lodsprite.terrain.store import is_store
 
-    if not (scene.terrain_spec and is_store(scene.terrain_spec)):
+    if scene.hf is None:
         return None
     shading = resolve_shading(scene, shading)
-    return LevelZeroReference(gl, scene_pyramid(scene), size, fov_y_deg, shading,
-                              scene.texture if shading == "texture" else None)
+    texture = scene.texture if shading == "texture" else None
+    field = (scene_pyramid(scene) if scene.terrain_spec and is_store(scene.terrain_spec)
+             else scene.hf)
+    return LevelZeroReference(gl, field, size, fov_y_deg, shading, texture,
+                              samples=SAMPLES if samples is None else samples)
 
 
 @contextmanager
-def scene_reference(renderer, shading: str = "auto") -> Iterator[Reference]:
+def scene_reference(renderer, shading: str = "auto", samples: int | None = None
+                    ) -> Iterator[Reference]:
     """The reference of a run on ``renderer`` (a :class:`~lodsprite.api.Renderer`) coloured
-    by ``shading``: level 0 of a store (:func:`level_zero_reference`: whole up to 4097
-    samples a side, the part in view beyond, tile by tile), else the renderer's
-    full-resolution terrain (:func:`full_resolution`); never the renderer under test's
-    working grid.  Its GPU objects are released on leaving."""
+    by ``shading``: level 0 band-limited (:func:`level_zero_reference`: a store's whole up
+    to 4097 samples a side, the part in view beyond, in patches; an in-memory field at its
+    full grid), drawn by its own code path, never by a renderer under test.  Its GPU
+    objects are released on leaving."""
     ref = level_zero_reference(renderer.gl, renderer.scene, renderer.size,
-                               renderer.fov_y_deg, shading)
+                               renderer.fov_y_deg, shading, samples)
     if ref is None:
-        yield full_resolution(renderer)
-        return
+        raise InputError("a scene without terrain has no level-0 reference")
     try:
         yield ref.image
     finally:
@@ -141,18 +148,20 @@ def technique_reference(technique: Technique, path: CameraPath
 
 def quality_summary(rows: list[dict]) -> dict[str, float]:
     """Means of the quality columns over the rows that have them: ``rmse_mean``,
-    ``ssim_mean`` (and ``flip_mean``), and ``psnr_mean`` from the mean squared error (a
-    keyframe equals its reference, whose own PSNR is infinite); a technique's extra
-    columns (``rmse_lod`` ...) the same way (``rmse_lod_mean`` ...); with a plain coarse
-    level beside it, ``rmse_ratio = rmse_mean / rmse_lod_mean``."""
+    ``ssim_mean`` (and ``flip_mean``, ``flicker_mean`` over the frames judged right after
+    a judged one), and ``psnr_mean`` from the mean squared error (an image equal to its
+    reference has an infinite PSNR); a technique's extra columns (``rmse_lod`` ...) the
+    same way (``rmse_lod_mean`` ...); with a plain coarse level beside it, ``rmse_ratio =
+    rmse_mean / rmse_lod_mean``."""
     rows = [r for r in rows if "rmse" in r]
     if not rows:
         return {}
     out: dict[str, float] = {"quality_frames": len(rows)}
-    for key in rows[0]:
+    keys = dict.fromkeys(k for r in rows for k in r)
+    for key in keys:
         if not key.startswith(QUALITY_COLUMNS) or key.startswith("psnr"):
             continue
-        v = np.array([r[key] for r in rows], dtype=np.float64)
+        v = np.array([r[key] for r in rows if key in r], dtype=np.float64)
         out[f"{key}_mean"] = float(v.mean())
         if key.startswith("rmse"):
             mse = float(np.mean(v ** 2))
@@ -214,6 +223,7 @@ def replay_frames(technique: Technique, drawn: Sequence[Viewpoint],
     played in time, the viewpoint of its display time); its quality columns go into
     ``rows[i]``.  A technique's baselines (:meth:`~lodsprite.techniques.Technique.
     quality_extra`) are drawn at ``drawn[i]`` too, so that they carry the same latency."""
+    last: tuple[int, np.ndarray, np.ndarray] | None = None  # the last judged frame
     for i, (vp, at, d) in enumerate(zip(drawn, judged, decisions, strict=True)):
         measured = reference is not None and i % stride == 0
         shown = on_image is not None and (image_frames is None or i in image_frames)
@@ -224,6 +234,11 @@ def replay_frames(technique: Technique, drawn: Sequence[Viewpoint],
         if measured:
             truth = reference(at)
             rows[i].update(_quality(image, truth, flip))
+            if last is not None and last[0] == i - 1:
+                from lodsprite.metrics import flicker
+
+                rows[i]["flicker"] = flicker(image, last[1], truth, last[2])
+            last = (i, np.array(image), truth)
             rows[i].update(technique.quality_extra(vp, d, truth))
         if shown:
             on_image(i, image, truth)
@@ -238,7 +253,7 @@ def run_path(technique: Technique, path: CameraPath, *, finish: Callable[[], Non
     """Run ``technique`` along ``path`` (module docstring).  ``finish``: the GL context's
     ``finish`` (default: the technique's renderer's); ``gl_renderer``: the driver's name for
     the summary (default: the renderer's); ``reference``: ``viewpoint -> image`` (default:
-    :func:`full_resolution`); ``on_image`` is called for the replayed frames
+    :func:`technique_reference`); ``on_image`` is called for the replayed frames
     ``image_frames`` (default: all).  Returns the frames, rows and summary (not written)."""
     if quality_stride < 1:
         raise InputError(f"quality stride must be >= 1, got {quality_stride}")
@@ -258,12 +273,13 @@ def run_path(technique: Technique, path: CameraPath, *, finish: Callable[[], Non
     frames, decisions, interrupted = _timed(technique, path, finish, progress)
     own = technique.summary(frames)  # the timed run's own figures, before any replay
     rows, columns = frame_rows(frames)
-    if ground_truth and reference is None:
-        reference = full_resolution(renderer)
     if (ground_truth or on_image) and not interrupted:
-        replay_frames(technique, path.viewpoints, path.viewpoints, decisions, rows,
-                      reference if ground_truth else None, quality_stride, flip, on_image,
-                      image_frames)
+        with ExitStack() as stack:
+            if ground_truth and reference is None:
+                reference = stack.enter_context(technique_reference(technique, path))
+            replay_frames(technique, path.viewpoints, path.viewpoints, decisions, rows,
+                          reference if ground_truth else None, quality_stride, flip,
+                          on_image, image_frames)
         columns += [c for c in quality_columns(rows) if c not in columns]
     summary = {**frames_summary(frames, technique.name, gl_renderer or (
         renderer.info.renderer if renderer else ""), first_ms), **own, **quality_summary(rows)}
@@ -288,6 +304,9 @@ def write_run(out_dir: Path, result: RunResult, summary: dict[str, Any] | None =
 
     out_dir = Path(out_dir)
     write_csv(out_dir / "frames.csv", result.rows, result.columns)
+    if result.ticks:
+        write_csv(out_dir / "ticks.csv", result.ticks,
+                  list(dict.fromkeys(k for t in result.ticks for k in t)))
     write_json(out_dir / "summary.json", result.summary if summary is None else summary)
 
 

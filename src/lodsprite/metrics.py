@@ -41,6 +41,19 @@ def ssim(image: np.ndarray, reference: np.ndarray) -> float:
     return float(structural_similarity(a, b, data_range=DATA_RANGE, channel_axis=-1))
 
 
+def flicker(image: np.ndarray, previous: np.ndarray, reference: np.ndarray,
+            previous_reference: np.ndarray) -> float:
+    """Temporal error between two consecutive displayed images, in grey levels: the RMS
+    over pixels and channels of ``(I_t - I_t-1) - (R_t - R_t-1)``, the change the viewer
+    sees less the change the reference makes.  Shimmer, popping and a held image the
+    camera has moved on from score; motion the reference shares does not."""
+    a, b = _check(image, previous)
+    r, q = _check(reference, previous_reference)
+    if a.shape != r.shape:
+        raise ValueError(f"image shapes differ: {a.shape} vs {r.shape}")
+    return float(np.sqrt(np.mean(((a - b) - (r - q)) ** 2)))
+
+
 def difference_image(image: np.ndarray, reference: np.ndarray, gain: float = 4.0) -> np.ndarray:
     """Absolute difference ``(H, W) uint8`` (mean over channels, scaled by ``gain``) to look at."""
     a, b = _check(image, reference)

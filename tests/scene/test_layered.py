@@ -302,21 +302,25 @@ def test_the_reference_is_the_scene_at_full_detail(gl, tmp_path):
     world = world_with(tmp_path, [([FRONT, BEHIND], 0.0), ([(60.0, -300.0)], 20.0)])
     path = CameraPath("t", tuple(look_at((x, -470.0, 40.0), (x, 0.0, 40.0))
                                  for x in (0.0, 20.0, 40.0)), 45.0)
+    runs = {}
     with Renderer(world, SIZE, 45.0, ctx=gl.mgl) as r:
-        truth, ref = reference(r, world, path)
-        runs = {}
-        try:
-            for exponent in (0.0, 8.0):  # full meshes, then the coarsest LODs
-                t = techniques.create("scene", r, world=world, terrain_mode="full",
-                                      exponent=exponent)
-                try:
-                    runs[exponent] = run_path(t, path, ground_truth=True, reference=truth)
-                finally:
-                    t.release()
-        finally:
-            ref.release()
-    assert runs[0.0].summary["rmse_mean"] == 0.0      # the same scene: no error at all
-    assert runs[8.0].summary["rmse_mean"] > 0.0       # coarse LODs differ from it
+        for samples in (1, 4):
+            truth, release = reference(r, world, path, samples=samples)
+            try:
+                for exponent in (0.0, 8.0):  # full meshes, then the coarsest LODs
+                    t = techniques.create("scene", r, world=world, terrain_mode="full",
+                                          exponent=exponent)
+                    try:
+                        runs[samples, exponent] = run_path(
+                            t, path, ground_truth=True, reference=truth).summary["rmse_mean"]
+                    finally:
+                        t.release()
+            finally:
+                release()
+    assert runs[1, 0.0] == 0.0      # one sample a pixel: the same scene drawn, no error
+    assert runs[1, 8.0] > 0.0       # coarse LODs differ from it
+    # band-limited (4x4 samples a pixel): full meshes alias a little, coarse LODs differ
+    assert 0.0 < runs[4, 0.0] < runs[4, 8.0]
 
 
 def test_the_cropped_reconstruction_matches_a_whole_frame_one(gl, tmp_path, lf_folder,

@@ -290,31 +290,50 @@ def _keyframed(renderer: Renderer, scene: Scene, mode: str, exponent: float,
                             int(lod or DEFAULT_COARSE), exponent)
 
 
-def reference(renderer: Renderer, scene: Scene, path: CameraPath, frame_s: float = FRAME_S
-              ) -> tuple[Callable[[Viewpoint], np.ndarray], LayeredTechnique]:
-    """The full-detail reference of a run along ``path``: ``(viewpoint -> image, the
-    reference technique)`` (release it after the run); a viewpoint's time is its index
-    along ``path`` (matched by identity) times ``frame_s``."""
-    ref = LayeredTechnique(renderer, scene, ground_truth=True, frame_s=frame_s)
-    ref.warm_up(path.viewpoints[0])
+def reference(renderer: Renderer, scene: Scene, path: CameraPath, frame_s: float = FRAME_S,
+              samples: int | None = None
+              ) -> tuple[Callable[[Viewpoint], np.ndarray], Callable[[], None]]:
+    """The full-detail reference of a run along ``path``, band-limited: ``(viewpoint ->
+    image, release)``.  The full-detail scene is drawn on the renderer's context at
+    ``samples`` x ``samples`` its size (default :data:`~lodsprite.gl.reference.SAMPLES`,
+    fewer where that passes 8192 pixels a side) and filtered down
+    (:func:`lodsprite.bandlimit.resolve`: a box a pixel, in linear light); a viewpoint's
+    time is its index along ``path`` (matched by identity) times ``frame_s``."""
+    from lodsprite.api import Renderer
+    from lodsprite.bandlimit import resolve
+    from lodsprite.gl.reference import SAMPLES
+
+    w, h = renderer.size
+    k = max(1, min(SAMPLES if samples is None else int(samples), 8192 // max(w, h)))
+    big = Renderer(scene, (k * w, k * h), renderer.fov_y_deg, ctx=renderer.gl.mgl)
+    try:
+        ref = LayeredTechnique(big, scene, ground_truth=True, frame_s=frame_s)
+        ref.warm_up(path.viewpoints[0])
+    except BaseException:
+        big.release()
+        raise
     index = {id(vp): i for i, vp in enumerate(path.viewpoints)}
 
     def image(viewpoint: Viewpoint) -> np.ndarray:
         ref.index = index.get(id(viewpoint), 0)
         ref.frame(viewpoint)
-        return ref.read_image()
+        return resolve(ref.read_image(), k)
 
-    return image, ref
+    def release() -> None:
+        ref.release()
+        big.release()
+
+    return image, release
 
 
 @contextmanager
 def _full_detail(renderer: Renderer, scene: Scene, path: CameraPath, frame_s: float
                  ) -> Iterator[Callable[[Viewpoint], np.ndarray]]:
-    image, ref = reference(renderer, scene, path, frame_s)
+    image, release = reference(renderer, scene, path, frame_s)
     try:
         yield image
     finally:
-        ref.release()
+        release()
 
 
 def create(renderer: Renderer, world: Scene | None = None, **options: Any

@@ -162,17 +162,22 @@ class LumigraphTechnique(Technique):
     def reference(self, path) -> AbstractContextManager[Callable]:
         """The ground truth: the object the lumigraph was captured from (its folder's
         ``object.npz``) drawn directly from the same eye, at the same projection
-        (:class:`~lodsprite.lumigraph.reference.ObjectReference`); a folder without it is
-        an :class:`~lodsprite.errors.InputError`."""
+        (:class:`~lodsprite.lumigraph.reference.ObjectReference`), band-limited (``k x k``
+        samples a pixel filtered by :func:`lodsprite.bandlimit.resolve`); a folder
+        without it is an :class:`~lodsprite.errors.InputError`."""
         return self._object_reference()
 
     @contextmanager
     def _object_reference(self) -> Iterator[Callable]:
+        from lodsprite.bandlimit import resolve
+        from lodsprite.gl.reference import SAMPLES
         from lodsprite.lumigraph.reference import object_reference
 
-        with object_reference(self.renderer.gl, self.lf.folder, self.renderer.size,
+        w, h = self.renderer.size
+        k = max(1, min(SAMPLES, 8192 // max(w, h)))  # band-limited: k x k a pixel, a box
+        with object_reference(self.renderer.gl, self.lf.folder, (k * w, k * h),
                               self.projection) as ref:
-            yield lambda viewpoint: ref(to_lumigraph(viewpoint))
+            yield lambda viewpoint: resolve(ref(to_lumigraph(viewpoint)), k)
 
     def draw_to(self, framebuffer=None) -> None:
         self.renderer.present(self.method.output.color, (0.0, 0.0, 1.0, 1.0), framebuffer)

@@ -166,12 +166,12 @@ class PathRuns:
         from lodsprite.layered.technique import reference
 
         self.renderer, self.world, self.cam, self.cfg = renderer, world, cam, cfg
-        image, ref = reference(renderer, world, cam)
+        image, release = reference(renderer, world, cam)
         try:
             self.images = {id(cam.viewpoints[i]): image(cam.viewpoints[i])
                            for i in cfg.sample_frames}
         finally:
-            ref.release()
+            release()
 
     def run(self, *, schedule: str = "none", target_fps: float | None = None,
             exponent: float | None = None, share: bool = True, quality: bool = True,
