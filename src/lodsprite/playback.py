@@ -23,6 +23,7 @@ it drew), ``shown_s`` and ``latency_ms`` (``shown_s - start_s``); the summary
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from contextlib import ExitStack
@@ -31,13 +32,12 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from lodsprite.display import judge_display, tick_hz
 from lodsprite.errors import InputError
 from lodsprite.harness import (
     Reference,
     RunResult,
-    quality_columns,
     quality_summary,
-    replay_frames,
     technique_reference,
     warm_up,
 )
@@ -56,22 +56,38 @@ if TYPE_CHECKING:
 
 
 def _played(technique: Technique, path: CameraPath, finish: Callable[[], None], fps: float,
-            rate: float | None, progress: Progress | None, max_frames: int
+            rate: float | None, progress: Progress | None, max_frames: int,
+            predict: bool = False
             ) -> tuple[list[Frame], list[dict], list[Viewpoint], np.ndarray, np.ndarray]:
     """The played loop: frames, decisions, the viewpoints drawn, their times (the path's
-    time each frame drew) and display times (seconds from the first frame's start); at
+    time each frame started) and display times (seconds from the first frame's start); at
     most ``max_frames`` frames.  A frame's ``ms`` is the technique's alone (its
-    ``frame()`` and ``ctx.finish()``), not the viewpoint's interpolation."""
+    ``frame()`` and ``ctx.finish()``), not the viewpoint's interpolation.
+
+    With a display ``rate`` the display shows a new image only on its slots (every
+    ``1 / rate`` seconds): a frame finished is shown at the next slot, and the next frame
+    starts there; a slot with no new frame keeps the previous image (a missed slot).
+    With ``predict`` each frame draws the viewpoint predicted for its display time (the
+    next slot, or the last frame's duration ahead without a rate) by the 2002 paper's
+    predictor (:class:`~lodsprite.sprite.predictors.DecayLinearPredictor`) from the
+    viewpoints sampled at the frames' starts; else the viewpoint at its start."""
+    from lodsprite.sprite.predictors import DecayLinearPredictor
+
     duration = path.duration_s(fps)
     at = path.sampler()
     frames, decisions, drawn, starts, shown = [], [], [], [], []
     period = None if rate is None else 1.0 / rate
+    predictor = DecayLinearPredictor() if predict else None
+    ahead = 0.0
     t0 = time.perf_counter()
     while True:
         start = time.perf_counter() - t0
         if start > duration or len(frames) == max_frames:
             break
         vp = at(start * fps)[0]
+        if predictor is not None:
+            predictor.observe(start, vp)
+            vp = predictor.predict(period if period is not None else ahead)
         begin = time.perf_counter()
         f = technique.frame(vp)
         finish()
@@ -80,14 +96,26 @@ def _played(technique: Technique, path: CameraPath, finish: Callable[[], None], 
         decisions.append(technique.decision())
         drawn.append(vp)
         starts.append(start)
-        shown.append(done - t0)
+        ahead = done - begin
         if progress:
             progress(min(round((done - t0) / duration * len(path)), len(path)), len(path))
-        if period is not None:  # a display rate: the next frame starts on its slot
-            wait = (len(frames) * period) - (time.perf_counter() - t0)
-            if wait > 0:
-                time.sleep(wait)
+        if period is None:
+            shown.append(done - t0)
+            continue
+        slot = math.ceil((done - t0) / period - 1e-9) * period  # shown on the next slot
+        shown.append(slot)
+        wait = slot - (time.perf_counter() - t0)
+        if wait > 0:
+            time.sleep(wait)
     return frames, decisions, drawn, np.array(starts), np.array(shown)
+
+
+def missed_slots(shown_s: np.ndarray, rate: float) -> float:
+    """The fraction of display slots from the first frame shown to the last that showed
+    no new frame (``shown_s`` on slots of ``1 / rate`` seconds)."""
+    slots = np.rint(np.asarray(shown_s) * rate)
+    total = slots[-1] - slots[0]
+    return float((total - (len(np.unique(slots)) - 1)) / total) if total > 0 else 0.0
 
 
 def run_played(technique: Technique, path: CameraPath, *, fps: float = NOMINAL_FPS,
@@ -95,7 +123,7 @@ def run_played(technique: Technique, path: CameraPath, *, fps: float = NOMINAL_F
                gl_renderer: str = "", progress: Progress | None = None,
                ground_truth: bool = False, reference: Reference | None = None,
                quality_stride: int = 1, flip: bool = False,
-               max_frames: int | None = None) -> RunResult:
+               max_frames: int | None = None, predict: bool = False) -> RunResult:
     """Play ``path`` in time with ``technique`` (module doc): its frames at ``fps`` frames
     a second of path, drawn as often as the technique can, or at most ``rate`` frames a
     second; with ``ground_truth`` each ``quality_stride``-th displayed frame compared, in
@@ -127,35 +155,48 @@ def run_played(technique: Technique, path: CameraPath, *, fps: float = NOMINAL_F
         return _run(technique, path, fps, rate, finish, gl_renderer, progress,
                     reference if ground_truth else None, quality_stride, flip,
                     FRAMES_PER_PATH_FRAME * len(path) if max_frames is None
-                    else int(max_frames))
+                    else int(max_frames), predict)
 
 
 def _run(technique, path, fps, rate, finish, gl_renderer, progress, reference,
-         quality_stride, flip, cap) -> RunResult:
+         quality_stride, flip, cap, predict) -> RunResult:
     renderer = technique.renderer
     finish = finish or renderer.gl.finish
-    technique.plan_replay(set(range(0, cap, quality_stride)) if reference else set())
+    technique.plan_replay(set(range(cap)) if reference else set())
     first_ms = warm_up(technique, path.viewpoints[0], finish)
     frames, decisions, drawn, starts, shown = _played(technique, path, finish, fps, rate,
-                                                      progress, cap)
+                                                      progress, cap, predict)
     own = technique.summary(frames)
     rows, columns = frame_rows(frames)
     for row, a, b in zip(rows, starts, shown, strict=True):
         row.update(start_s=float(a), shown_s=float(b), latency_ms=float(b - a) * 1e3)
     at = columns.index("ms") + 1
     columns[at:at] = ["start_s", "shown_s", "latency_ms"]
+    shown_summary: dict = {}
+    ticks: list[dict] = []
+    truncated = bool(len(frames) == cap and shown[-1] < path.duration_s(fps))
     if reference is not None:
-        judged = path.between(shown * fps)
-        replay_frames(technique, drawn, judged, decisions, rows, reference, quality_stride,
-                      flip, None, None)
-        columns += [c for c in quality_columns(rows) if c not in columns]
+        sampler = path.sampler()
+        end = float(shown[-1]) if truncated else path.duration_s(fps)
+        ticks, shown_summary = judge_display(
+            technique, drawn, decisions, shown, lambda t: sampler(t * fps), reference,
+            tick_hz(rate), end, quality_stride, flip)
+        per_frame: dict[int, list[float]] = {}
+        for t in ticks:
+            per_frame.setdefault(t["frame"], []).append(t["rmse"])
+        for k, v in per_frame.items():  # each frame: its ticks on screen, their mean error
+            rows[k].update(ticks=len(v), rmse=float(np.mean(v)))
+        columns += ["ticks", "rmse"]
     summary = {**frames_summary(frames, technique.name, gl_renderer or (
         renderer.info.renderer if renderer else ""), first_ms), **own,
-        **quality_summary(rows), "played_s": float(shown[-1]), "path_fps": float(fps),
+        **quality_summary(rows), **shown_summary,
+        "played_s": float(shown[-1]), "path_fps": float(fps),
         "display_rate": rate, "display_fps": len(frames) / float(shown[-1]),
         "latency_ms_mean": float(np.mean(shown - starts) * 1e3),
-        "truncated": bool(len(frames) == cap and shown[-1] < path.duration_s(fps))}
-    return RunResult(frames, decisions, rows, columns, summary)
+        "predicted": bool(predict), "truncated": truncated}
+    if rate is not None:
+        summary["missed_slots"] = missed_slots(shown, rate)
+    return RunResult(frames, decisions, rows, columns, summary, ticks=ticks)
 
 
-__all__ = ["FRAMES_PER_PATH_FRAME", "run_played"]
+__all__ = ["FRAMES_PER_PATH_FRAME", "missed_slots", "run_played"]
