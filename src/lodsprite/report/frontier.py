@@ -10,8 +10,9 @@ for an error level (:func:`time_at_error`) is interpolated between its two measu
 that bracket the level, linearly in error against log time, and never extrapolated: a
 level below the frontier's best error or above its worst has no time (None).
 :func:`frontier_speedup` is one frontier's time over another's at the same level (None
-where either has none).  :func:`plot_frontiers` draws error against time, one curve per
-technique.
+where either has none); where the faster frontier's fastest run is already below the
+level, :func:`speedup_lower_bound` gives "at least" that run's speedup.
+:func:`plot_frontiers` draws error against time, one curve per technique.
 
 Points are ``(time_ms, error)`` pairs, ``time_ms > 0`` (milliseconds) and ``error >= 0``
 (grey levels for RMSE, 0..1 for FLIP); non-finite points are left out.
@@ -82,6 +83,19 @@ def frontier_speedup(slower: Sequence[Point], faster: Sequence[Point],
     return None if a is None or b is None else a / b
 
 
+def speedup_lower_bound(slower: Sequence[Point], faster: Sequence[Point],
+                        error: float) -> float | None:
+    """Where ``faster``'s fastest run is already at or below ``error`` (its frontier starts
+    under the level, so no interpolation reaches it), the speedup is at least ``slower``'s
+    time at ``error`` over that run's time: this bound; None where ``faster``'s fastest
+    run is above ``error`` (the exact :func:`frontier_speedup` applies, or nothing) or
+    ``slower`` has no time there."""
+    if not faster or not math.isfinite(error) or faster[0][1] > error:
+        return None
+    a = time_at_error(slower, error)
+    return None if a is None else a / faster[0][0]
+
+
 def plot_frontiers(curves: Mapping[str, Iterable[Sequence[float]]], path: Path,
                    title: str = "", error_label: str = "RMSE (grey levels)",
                    time_label: str = "median frame time (ms)",
@@ -120,4 +134,5 @@ def plot_frontiers(curves: Mapping[str, Iterable[Sequence[float]]], path: Path,
     return save_figure(fig, Path(path))
 
 
-__all__ = ["frontier", "frontier_speedup", "plot_frontiers", "time_at_error"]
+__all__ = ["frontier", "frontier_speedup", "plot_frontiers", "speedup_lower_bound",
+           "time_at_error"]
