@@ -67,9 +67,11 @@ def test_sprite_mode_with_ground_truth_reports_quality(tmp_path):
     for key in ("error_px", "rmse", "psnr", "ssim", "rmse_lod"):
         assert key in rows[0]
     keyframes = [r for r in rows if r["kind"] == "keyframe"]
-    # A keyframe frame shows the keyframe's centre: the full-resolution frame, up to the
-    # rounding of a projection widened by the guard band (a few pixels off by one level).
-    assert all(float(r["rmse"]) < 0.1 for r in keyframes if float(r["error_px"]) == 0)
+    # A keyframe frame shows the keyframe's centre, the full-resolution frame: against the
+    # band-limited reference it is off by the one-sample aliasing only, far closer than
+    # the plain coarse level at the same frame.
+    exact = [r for r in keyframes if float(r["error_px"]) == 0]
+    assert exact and all(float(r["rmse"]) < float(r["rmse_lod"]) for r in exact)
     summary = json.loads((out / "summary.json").read_text())
     assert summary["keyframes"] == len(keyframes)
     for key in ("rmse_mean", "rmse_lod_mean", "psnr_mean", "psnr_lod_mean",

@@ -274,7 +274,8 @@ def test_a_registered_technique_is_a_render_mode_and_a_viewer_mode(tmp_path):
                                      frames=6, size=(32, 32), ground_truth=True), tmp_path)
         rows = list(csv.DictReader((tmp_path / "frames.csv").open()))
         assert [r["source"] for r in rows] == ["0", "0", "2", "2", "4", "4"]
-        assert [float(r["rmse"]) == 0 for r in rows] == [True, False] * 3
+        rmse = [float(r["rmse"]) for r in rows]  # a repeat shows the last frame's view
+        assert all(rmse[i] < rmse[i + 1] for i in (0, 2, 4)), rmse
         assert s["technique"] == "every-other" and s["rmse_mean"] > 0
     finally:
         techniques.unregister("every-other")

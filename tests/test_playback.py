@@ -1,6 +1,6 @@
-"""A path played in time (:mod:`lodsprite.playback`): each displayed frame is judged at the
-viewpoint of its display time, so a technique's latency costs it error.  A hand-made
-path and a technique with a known delay (it sleeps before drawing)."""
+"""A path played in time (:mod:`lodsprite.playback`): the image on screen is judged at each
+display tick against the viewpoint of that instant, so a technique's latency costs it
+error.  A hand-made path and a technique with a known delay (it sleeps before drawing)."""
 
 from __future__ import annotations
 
@@ -51,7 +51,7 @@ def scene():
     return load_scene("fractal:64:3", grid=64)
 
 
-def test_each_frame_is_judged_at_its_display_times_viewpoint(gl, scene):
+def test_each_tick_judges_the_frame_on_screen_at_that_instants_viewpoint(gl, scene):
     path = flight(scene, moving=True)
     judged = []
     with Renderer(scene, (64, 64), ctx=gl.mgl) as renderer:
@@ -67,22 +67,33 @@ def test_each_frame_is_judged_at_its_display_times_viewpoint(gl, scene):
     start = np.array([row["start_s"] for row in r.rows])
     assert (np.diff(start) > 0).all() and (shown - start >= DELAY_S).all()
     assert start[-1] <= path.duration_s(FPS) < shown[-1] + DELAY_S * 3
-    assert len(judged) == len(r.rows)
-    for row, vp in zip(r.rows, judged, strict=True):
-        np.testing.assert_allclose(vp.o, path.at_time(row["shown_s"], FPS).o, atol=1e-9)
-    # the camera moved on while each frame was drawn: full resolution, late, is not exact
-    # (a frame shown after the path's end is judged at its clamped end: left out)
-    inside = [row for row in r.rows if row["shown_s"] <= path.duration_s(FPS)]
-    assert inside and all(row["rmse"] > 0.5 for row in inside)
+    # one judgement a tick of 60 Hz, from the first frame shown to the path's end
+    assert len(judged) == len(r.ticks) == r.summary["ticks"]
+    assert r.summary["tick_hz"] == 60.0
+    for tick, vp in zip(r.ticks, judged, strict=True):
+        np.testing.assert_allclose(vp.o, path.at_time(tick["t_s"], FPS).o, atol=1e-9)
+        assert shown[tick["frame"]] <= tick["t_s"] + 1e-9   # shown by then ...
+        later = shown[tick["frame"] + 1:]
+        assert not len(later) or later[0] > tick["t_s"]       # ... and not yet replaced
+    # the camera moved on while each frame was drawn and shown: late, it is not exact
+    assert all(tick["rmse"] > 0.5 for tick in r.ticks)
+    held = [row["ticks"] for row in r.rows if "ticks" in row]
+    assert sum(held) == len(r.ticks)   # every tick counted once, on the frame shown then
+    assert r.summary["rmse_time_weighted"] == pytest.approx(
+        np.mean([t["rmse"] for t in r.ticks]))
     assert r.summary["latency_ms_mean"] >= DELAY_S * 1e3
 
 
 def test_a_still_camera_makes_latency_cost_nothing(gl, scene):
-    """The control: the same delay on a path that does not move gives the reference."""
+    """The control: the same delay on a path that does not move shows, at every tick, what
+    the same drawer draws there: no error and no flicker."""
+    from lodsprite.harness import full_resolution
+
     with Renderer(scene, (64, 64), ctx=gl.mgl) as renderer:
         r = run_played(Delayed(renderer, DELAY_S), flight(scene, moving=False), fps=FPS,
-                       ground_truth=True)
-    assert all(row["rmse"] == 0.0 for row in r.rows)
+                       ground_truth=True, reference=full_resolution(renderer))
+    assert r.ticks and all(t["rmse"] == 0.0 for t in r.ticks)
+    assert r.summary["flicker"] == 0.0 and r.summary["rmse_worst_second"] == 0.0
 
 
 def test_a_display_rate_spaces_the_frames(gl, scene):
@@ -125,3 +136,47 @@ def test_a_path_interpolates_between_its_frames_in_time(scene):
     mid = path.at_time(2.5 / FPS, FPS).o
     np.testing.assert_allclose(mid, (path.viewpoints[2].o + path.viewpoints[3].o) / 2)
     assert path.at_time(99.0, FPS) is path.viewpoints[-1]   # clamped to its end
+
+
+def test_at_a_display_rate_frames_are_shown_on_its_slots_and_missed_slots_counted(gl, scene):
+    """At 30 Hz a frame that takes 50 ms is shown on the slot after it ends, the next one
+    starts there, and every other slot keeps the previous image: about half missed."""
+    with Renderer(scene, (32, 32), ctx=gl.mgl) as renderer:
+        r = run_played(Delayed(renderer, DELAY_S), flight(scene, moving=True), fps=FPS,
+                       rate=30.0)
+    shown = np.array([row["shown_s"] for row in r.rows])
+    start = np.array([row["start_s"] for row in r.rows])
+    assert np.allclose(shown * 30, np.rint(shown * 30), atol=1e-6)   # on slots
+    assert (shown - start >= DELAY_S).all()
+    assert 0.3 <= r.summary["missed_slots"] <= 0.7, r.summary["missed_slots"]
+
+
+def test_with_prediction_a_frame_draws_the_viewpoint_predicted_for_its_display(gl, scene):
+    """On a straight flight at constant speed the 2002 paper's predictor, one slot ahead,
+    draws where the camera is when the frame is shown: closer to that viewpoint than the
+    viewpoint at the frame's start."""
+    hf = scene.hf
+    z = float(hf.heights.max()) + 0.2 * hf.width
+    path = CameraPath("straight", tuple(
+        look_at((-0.3 * hf.width + 0.02 * hf.width * i, -0.4 * hf.width, z),
+                (-0.3 * hf.width + 0.02 * hf.width * i, 0.0, 0.0)) for i in range(12)), 45.0)
+    drawn = []
+
+    class Recording(Delayed):
+        def frame(self, viewpoint):
+            drawn.append(viewpoint)
+            return super().frame(viewpoint)
+
+    with Renderer(scene, (32, 32), ctx=gl.mgl) as renderer:
+        r = run_played(Recording(renderer, 0.01), path, fps=FPS, rate=20.0, predict=True)
+    assert r.summary["predicted"] is True
+    drawn = drawn[1:]   # the warm-up's
+    rows = r.rows[2:]   # from the third frame the predictor has a velocity
+    at_start = [np.linalg.norm(path.at_time(row["start_s"], FPS).o
+                               - path.at_time(row["shown_s"], FPS).o) for row in rows]
+    predicted = [np.linalg.norm(vp.o - path.at_time(row["shown_s"], FPS).o)
+                 for vp, row in zip(drawn[2:], rows, strict=True)]
+    inside = [i for i, row in enumerate(rows) if row["shown_s"] < path.duration_s(FPS)]
+    assert inside
+    assert np.mean([predicted[i] for i in inside]) < 0.5 * np.mean([at_start[i]
+                                                                    for i in inside])

@@ -81,8 +81,9 @@ def test_results_hold_every_row_of_every_run_with_the_schemas_keys(large):
         a = res["adaptive"]
         assert a["first_frame_s"] > a["first_frame_s_technique"] > 0
         assert a["tiles_bad"] == 0 and a["reader_restarts"] == 0 and a["tiles_loaded"] > 0
-        # a 256² store on 48² pixels is level 0 wherever 1 px asks (measured 0.0 RMSE)
-        assert 0 <= a["rmse"] < 0.5 and 0 <= a["flip"] < 0.01
+        # a 256² store on 48² pixels is level 0 wherever 1 px asks: what is left is one
+        # sample a pixel against the band-limited reference (measured 5.6 RMSE)
+        assert 0 < a["rmse"] < 8 and 0 <= a["flip"] < 0.05
         assert 0 <= res["whole"][0]["rmse"] < 8 and 0 <= res["whole"][0]["flip"] < 0.05
 
 
@@ -93,12 +94,13 @@ def test_the_reference_of_each_side_is_named_and_its_stand_in_checked(large):
         assert d["level0_frames"] == 4 and "stand_in_frames" not in d
         assert "0.25 px" in d["stand_in"] and "validation only" in d["stand_in"]
         assert "level 0 whole" in d["level0"]
-        # the 0.25 px stand-in at 256² on 48² pixels is level 0 (measured 0.0, 0.0)
-        assert 0 <= d["stand_in_rmse"] < 0.5 and 0 <= d["stand_in_flip"] < 0.01
+        # the 0.25 px stand-in at 256² on 48² pixels is level 0 at one sample a pixel:
+        # its aliasing against the band-limited reference (measured 5.0)
+        assert 0 < d["stand_in_rmse"] < 8 and 0 <= d["stand_in_flip"] < 0.05
         # a side checked without timed runs (256 is timed: not checked twice)
         check = r["reference"]["128"][p]
         assert check["timed"] is False and check["level0_frames"] == 4
-        assert 0 <= check["stand_in_rmse"] < 0.5 and "timed" not in d
+        assert 0 < check["stand_in_rmse"] < 8 and "timed" not in d
     assert list(r["reference"]) == ["256", "128"] and "128" not in r["sizes"]
 
 

@@ -74,12 +74,13 @@ def test_render_writes_a_side_by_side_video_of_the_frames_shown(tmp_path):
     rows = list(csv.DictReader((out / "frames.csv").open()))
     video = iio.imread(out / "v.mp4")
     assert video.shape == (len(rows), 64, 192, 3)
-    for i in (0, 5, 11):  # the middle panel is the frame shown (saved as PNG too)
+    for i in (0, 5, 11):  # reference | frame shown | difference, both saved as PNG too
         png = iio.imread(out / "frames" / f"frame_{i:05d}.png").astype(float)
+        ref = iio.imread(out / "frames" / f"ref_{i:05d}.png").astype(float)
         assert np.abs(video[i, :, 64:128] - png).mean() < 6.0
-    # Where the frame shown equals full resolution (a keyframe) the difference is ~black.
-    key = next(i for i, r in enumerate(rows) if r["kind"] == "keyframe")
-    assert video[key, :, 128:].mean() < 8.0
+        assert np.abs(video[i, :, :64] - ref).mean() < 6.0
+        diff = np.clip(np.abs(ref - png) * DIFF_GAIN, 0, 255)
+        assert np.abs(video[i, :, 128:] - diff).mean() < 6.0
 
 
 def test_render_refuses_a_video_it_cannot_write(tmp_path, cli):

@@ -6,7 +6,9 @@ the height ramp and sun of ``TERRAIN_SHADE``, the per-pixel normals of
 ``HEIGHT_NORMAL``, the sky ``SKY_RGB``; a colour texture sampled at its base level,
 bilinear).  Its mesh is its own: no vertex or index buffer, each quad row of a patch is
 one triangle strip whose vertices come from ``gl_VertexID`` (``2j``: sample ``(col + j,
-row)``, ``2j + 1``: ``(col + j, row + 1)``) and a per-instance start sample, culled by
+row + 1)``, ``2j + 1``: ``(col + j, row)``, so that each quad is split along its
+north-west to south-east diagonal: the surface level 0's samples define, triangulated as
+everywhere in the project) and a per-instance start sample, culled by
 blocks of :data:`BLOCK` quads against the frustum; heights from an ``R32F`` texture by
 ``texelFetch``.  A bug in the renderers' chunk meshes, instancing or uniforms cannot
 reach it.
@@ -41,7 +43,7 @@ uniform mat4 u_mvp;
 in ivec2 in_strip;            // per instance: (col, row) of the strip's first sample
 out vec3 v_world;
 void main() {
-    ivec2 s = min(in_strip + ivec2(gl_VertexID >> 1, gl_VertexID & 1), u_last);
+    ivec2 s = min(in_strip + ivec2(gl_VertexID >> 1, 1 - (gl_VertexID & 1)), u_last);
     float h = texelFetch(u_height, s, 0).r;
     v_world = vec3(u_corner.x + float(s.x) * u_spacing.x,
                    u_corner.y - float(s.y) * u_spacing.y, h);

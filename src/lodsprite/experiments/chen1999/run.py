@@ -226,10 +226,25 @@ def _figure_images(pr: TerrainGL, scene: Scene, cfg: ReproduceConfig, path, fram
             for name, img in (("diff_lod", lod), ("diff_sprite", lsp)):
                 write_png(out_dir / f"{fig}_{name}.png", difference_image(img, full))
                 entry[name] = f"{fig}_{name}.png"
+            entry["reference"] = _reference_image(pr, scene, vp, out_dir / f"{fig}_reference.png")
         images[fig] = entry
         if texture is not None:
             pr.geometry.set_texture(scene.texture)
     return images
+
+
+def _reference_image(pr: TerrainGL, scene: Scene, vp, png: Path) -> str:
+    """The band-limited reference at ``vp`` (what every quality figure is judged
+    against), written to ``png``; its file name."""
+    from lodsprite.harness import level_zero_reference
+
+    w, h = pr.drawer.target.size
+    ref = level_zero_reference(pr.ctx, scene, (w, h), pr.drawer.fov_y_deg, "auto")
+    try:
+        write_png(png, ref.image(vp))
+    finally:
+        ref.release()
+    return png.name
 
 
 def reproduce_chen1999(cfg: ReproduceConfig, out_dir: Path,
