@@ -121,7 +121,11 @@ def test_render_with_worker_keyframes_plays_the_path_in_time(tmp_path, tiles):
     start = np.array([float(x["start_s"]) for x in got])
     assert (start >= np.arange(len(got)) / 40.0 - 1e-3).all()   # never before its slot
     assert (shown >= start).all() and s["display_rate"] == 40.0
-    assert all(x["rmse"] for x in got) and s["truncated"] is False
+    assert s["truncated"] is False
+    # the image on screen judged at each 60 Hz tick; each tick counted on the frame shown
+    ticks = list(csv.DictReader((out / "ticks.csv").open()))
+    assert len(ticks) == s["ticks"] > 0 and all(float(t["rmse"]) >= 0 for t in ticks)
+    assert sum(int(x["ticks"]) for x in got if x["ticks"]) == len(ticks)
     shown_keys = {int(x["keyframe"]) for x in got}
     assert len(json.loads((out / "keyframes.json").read_text())["keyframes"]) > max(shown_keys)
     # the keyframes the display showed, though none of its frames is one (was 0)

@@ -17,7 +17,7 @@ from lodsprite.experiments import Experiment, Options, Summary
 
 def test_every_reproduction_is_registered_under_its_name():
     assert experiments.names() == ("chen1999", "swan2002", "scoggins2000", "sloan1997",
-                                   "gumbau", "large", "battlefield")
+                                   "gumbau", "large", "battlefield", "timecritical")
     for name in experiments.names():
         e = experiments.get(name)
         assert e.name == name and e.default_out == Path("out") / name

@@ -151,10 +151,12 @@ def test_at_a_display_rate_frames_are_shown_on_its_slots_and_missed_slots_counte
     assert 0.3 <= r.summary["missed_slots"] <= 0.7, r.summary["missed_slots"]
 
 
-def test_with_prediction_a_frame_draws_the_viewpoint_predicted_for_its_display(gl, scene):
-    """On a straight flight at constant speed the 2002 paper's predictor, one slot ahead,
-    draws where the camera is when the frame is shown: closer to that viewpoint than the
-    viewpoint at the frame's start."""
+@pytest.mark.parametrize("predictor", ["kalman", "decay"])
+def test_with_prediction_a_frame_draws_the_viewpoint_predicted_for_its_display(
+        gl, scene, predictor):
+    """On a straight flight at constant speed a predictor, one slot ahead, draws where the
+    camera is when the frame is shown: closer to that viewpoint than the viewpoint at the
+    frame's start."""
     hf = scene.hf
     z = float(hf.heights.max()) + 0.2 * hf.width
     path = CameraPath("straight", tuple(
@@ -168,8 +170,8 @@ def test_with_prediction_a_frame_draws_the_viewpoint_predicted_for_its_display(g
             return super().frame(viewpoint)
 
     with Renderer(scene, (32, 32), ctx=gl.mgl) as renderer:
-        r = run_played(Recording(renderer, 0.01), path, fps=FPS, rate=20.0, predict=True)
-    assert r.summary["predicted"] is True
+        r = run_played(Recording(renderer, 0.01), path, fps=FPS, rate=20.0, predict=predictor)
+    assert r.summary["predictor"] == predictor
     drawn = drawn[1:]   # the warm-up's
     rows = r.rows[2:]   # from the third frame the predictor has a velocity
     at_start = [np.linalg.norm(path.at_time(row["start_s"], FPS).o

@@ -112,20 +112,24 @@ class ReferenceCache:
 def judge_display(technique: Technique, drawn: Sequence[Viewpoint], decisions: list[dict],
                   shown_s: np.ndarray, viewpoint_at: Callable[[np.ndarray], list],
                   reference: Callable[[Any], np.ndarray], hz: float, end_s: float,
-                  stride: int = 1, flip: bool = False) -> tuple[list[dict], dict]:
+                  stride: int = 1, flip: bool = False, flip_every: int = 1
+                  ) -> tuple[list[dict], dict]:
     """Judge a played run on ticks of ``hz`` (module doc): frame ``k``, drawn at
     ``drawn[k]`` with ``decisions[k]`` and shown at ``shown_s[k]`` seconds, replayed
     (:meth:`~lodsprite.techniques.Technique.replay`, in order, once) while it is on
     screen; the reference at ``viewpoint_at(ticks)`` (seconds of path time to
     viewpoints).  ``stride`` > 1 judges the pairs of ticks ``j, j + 1`` for ``j`` a
-    multiple of it.  Returns the tick rows (``tick``, ``t_s``, ``frame``, ``rmse``,
-    ``flip``, ``flicker``) and the summary keys."""
+    multiple of it; FLIP (with ``flip``) is taken on the first tick of every
+    ``flip_every``-th pair (FLIP costs far more than RMSE).  Pairs are counted from tick
+    0 of the path's time, so runs at rates whose ``stride / hz`` agree are judged at the
+    same instants (and share cached references).  Returns the tick rows (``tick``,
+    ``t_s``, ``frame``, ``rmse``, ``flip``, ``flicker``) and the summary keys."""
     from lodsprite import metrics
 
     shown_s = np.asarray(shown_s, dtype=np.float64)
     ticks = tick_times(float(shown_s[0]), end_s, hz)
     if stride > 1:
-        j = np.arange(len(ticks))
+        j = np.rint(ticks * hz).astype(np.int64)  # tick numbers from the path's start
         ticks = ticks[(j % stride == 0) | (j % stride == 1)]
     frames = on_screen(shown_s, ticks)
     views = viewpoint_at(ticks * 1.0) if len(ticks) else []
@@ -140,7 +144,9 @@ def judge_display(technique: Technique, drawn: Sequence[Viewpoint], decisions: l
         truth = reference(vp)
         row = {"tick": n, "t_s": float(t), "frame": int(k),
                "rmse": metrics.rmse(image, truth)}
-        if flip:
+        j = round(t * hz)
+        if flip and (stride == 1 and j % flip_every == 0
+                     or stride > 1 and j % (stride * flip_every) == 0):
             row["flip"] = metrics.flip(image, truth)
         if prev is not None and abs(t - prev[0] * step - step) < 1e-6:
             row["flicker"] = metrics.flicker(image, prev[1], truth, prev[2])
@@ -157,8 +163,9 @@ def display_summary(rows: list[dict], hz: float) -> dict:
     out: dict = {"ticks": len(rows), "tick_hz": hz,
                  "rmse_time_weighted": float(rmse.mean()),
                  "rmse_worst_second": worst_window(rmse, round(hz))}
-    if "flip" in rows[0]:
-        out["flip_time_weighted"] = float(np.mean([r["flip"] for r in rows]))
+    flips = [r["flip"] for r in rows if "flip" in r]
+    if flips:
+        out["flip_time_weighted"] = float(np.mean(flips))
     flick = [r["flicker"] for r in rows if "flicker" in r]
     if flick:
         out["flicker"] = float(np.mean(flick))

@@ -43,6 +43,10 @@ from lodsprite.harness import (
 )
 from lodsprite.paths.core import NOMINAL_FPS
 from lodsprite.record import Frame, frame_rows, frames_summary
+from lodsprite.sprite.predictors import DecayLinearPredictor, KalmanPredictor
+
+#: Viewpoint predictors a played run may draw for the display time with.
+PREDICTORS = {"kalman": KalmanPredictor, "decay": DecayLinearPredictor}
 
 #: The default cap on a played run's frames, per frame of the path (a display 16 times
 #: faster than the path's frame rate: 480 frames a second at 30).
@@ -57,7 +61,7 @@ if TYPE_CHECKING:
 
 def _played(technique: Technique, path: CameraPath, finish: Callable[[], None], fps: float,
             rate: float | None, progress: Progress | None, max_frames: int,
-            predict: bool = False
+            predict: str | None = None, control: Callable[[float], None] | None = None
             ) -> tuple[list[Frame], list[dict], list[Viewpoint], np.ndarray, np.ndarray]:
     """The played loop: frames, decisions, the viewpoints drawn, their times (the path's
     time each frame started) and display times (seconds from the first frame's start); at
@@ -68,16 +72,17 @@ def _played(technique: Technique, path: CameraPath, finish: Callable[[], None], 
     ``1 / rate`` seconds): a frame finished is shown at the next slot, and the next frame
     starts there; a slot with no new frame keeps the previous image (a missed slot).
     With ``predict`` each frame draws the viewpoint predicted for its display time (the
-    next slot, or the last frame's duration ahead without a rate) by the 2002 paper's
-    predictor (:class:`~lodsprite.sprite.predictors.DecayLinearPredictor`) from the
-    viewpoints sampled at the frames' starts; else the viewpoint at its start."""
-    from lodsprite.sprite.predictors import DecayLinearPredictor
-
+    next slot, or the last frame's duration ahead without a rate) from the viewpoints
+    sampled at the frames' starts by the predictor it names (:data:`PREDICTORS`:
+    ``kalman``, the eye and the orientation extrapolated; ``decay``, the 2002 paper's,
+    the eye only); else the viewpoint at its start.
+    ``control(ms)`` (a :class:`~lodsprite.feedback.KnobFeedback`'s ``after``) is told each
+    frame's time once the frame is done, outside its clock."""
     duration = path.duration_s(fps)
     at = path.sampler()
     frames, decisions, drawn, starts, shown = [], [], [], [], []
     period = None if rate is None else 1.0 / rate
-    predictor = DecayLinearPredictor() if predict else None
+    predictor = None if predict is None else PREDICTORS[predict]()
     ahead = 0.0
     t0 = time.perf_counter()
     while True:
@@ -97,6 +102,8 @@ def _played(technique: Technique, path: CameraPath, finish: Callable[[], None], 
         drawn.append(vp)
         starts.append(start)
         ahead = done - begin
+        if control is not None:
+            control(ahead * 1e3)
         if progress:
             progress(min(round((done - t0) / duration * len(path)), len(path)), len(path))
         if period is None:
@@ -123,7 +130,9 @@ def run_played(technique: Technique, path: CameraPath, *, fps: float = NOMINAL_F
                gl_renderer: str = "", progress: Progress | None = None,
                ground_truth: bool = False, reference: Reference | None = None,
                quality_stride: int = 1, flip: bool = False,
-               max_frames: int | None = None, predict: bool = False) -> RunResult:
+               max_frames: int | None = None, predict: str | None = None,
+               control: Callable[[float], None] | None = None,
+               judge_every_s: float | None = None, flip_every: int = 1) -> RunResult:
     """Play ``path`` in time with ``technique`` (module doc): its frames at ``fps`` frames
     a second of path, drawn as often as the technique can, or at most ``rate`` frames a
     second; with ``ground_truth`` each ``quality_stride``-th displayed frame compared, in
@@ -140,6 +149,8 @@ def run_played(technique: Technique, path: CameraPath, *, fps: float = NOMINAL_F
         raise InputError(f"a path's frame rate must be > 0, got {fps}")
     if rate is not None and not rate > 0:
         raise InputError(f"a display rate must be > 0, got {rate}")
+    if predict is not None and predict not in PREDICTORS:
+        raise InputError(f"a predictor is one of {', '.join(PREDICTORS)}, not {predict!r}")
     if quality_stride < 1:
         raise InputError(f"quality stride must be >= 1, got {quality_stride}")
     if len(path.viewpoints) < 2:
@@ -155,17 +166,18 @@ def run_played(technique: Technique, path: CameraPath, *, fps: float = NOMINAL_F
         return _run(technique, path, fps, rate, finish, gl_renderer, progress,
                     reference if ground_truth else None, quality_stride, flip,
                     FRAMES_PER_PATH_FRAME * len(path) if max_frames is None
-                    else int(max_frames), predict)
+                    else int(max_frames), predict, control, judge_every_s, flip_every)
 
 
 def _run(technique, path, fps, rate, finish, gl_renderer, progress, reference,
-         quality_stride, flip, cap, predict) -> RunResult:
+         quality_stride, flip, cap, predict, control, judge_every_s, flip_every
+         ) -> RunResult:
     renderer = technique.renderer
     finish = finish or renderer.gl.finish
     technique.plan_replay(set(range(cap)) if reference else set())
     first_ms = warm_up(technique, path.viewpoints[0], finish)
     frames, decisions, drawn, starts, shown = _played(technique, path, finish, fps, rate,
-                                                      progress, cap, predict)
+                                                      progress, cap, predict, control)
     own = technique.summary(frames)
     rows, columns = frame_rows(frames)
     for row, a, b in zip(rows, starts, shown, strict=True):
@@ -178,9 +190,11 @@ def _run(technique, path, fps, rate, finish, gl_renderer, progress, reference,
     if reference is not None:
         sampler = path.sampler()
         end = float(shown[-1]) if truncated else path.duration_s(fps)
+        hz = tick_hz(rate)
+        stride = quality_stride if judge_every_s is None else max(1, round(judge_every_s * hz))
         ticks, shown_summary = judge_display(
             technique, drawn, decisions, shown, lambda t: sampler(t * fps), reference,
-            tick_hz(rate), end, quality_stride, flip)
+            hz, end, stride, flip, flip_every)
         per_frame: dict[int, list[float]] = {}
         for t in ticks:
             per_frame.setdefault(t["frame"], []).append(t["rmse"])
@@ -193,10 +207,10 @@ def _run(technique, path, fps, rate, finish, gl_renderer, progress, reference,
         "played_s": float(shown[-1]), "path_fps": float(fps),
         "display_rate": rate, "display_fps": len(frames) / float(shown[-1]),
         "latency_ms_mean": float(np.mean(shown - starts) * 1e3),
-        "predicted": bool(predict), "truncated": truncated}
+        "predictor": predict, "truncated": truncated}
     if rate is not None:
         summary["missed_slots"] = missed_slots(shown, rate)
     return RunResult(frames, decisions, rows, columns, summary, ticks=ticks)
 
 
-__all__ = ["FRAMES_PER_PATH_FRAME", "missed_slots", "run_played"]
+__all__ = ["FRAMES_PER_PATH_FRAME", "PREDICTORS", "missed_slots", "run_played"]

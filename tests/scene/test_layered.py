@@ -570,7 +570,7 @@ def test_render_scene_saves_frames_and_strides_quality_as_render_does(tmp_path):
                 "--ground-truth", "--quality-stride", "2", "--save-frames", "--out", str(out))
     assert r.returncode == 0, r.stderr
     assert sorted(p.name for p in (out / "frames").iterdir()) == [
-        f"frame_{i:05d}.png" for i in range(4)]
+        *(f"frame_{i:05d}.png" for i in range(4)), *(f"ref_{i:05d}.png" for i in range(4))]
     with open(out / "frames.csv") as f:
         rows = list(csv.DictReader(f))
     assert [bool(row["rmse"]) for row in rows] == [True, False, True, False]

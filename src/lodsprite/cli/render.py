@@ -82,12 +82,21 @@ def _print_render(s: dict, out_dir: Path) -> None:
             out.print(line.format(**s))
         except (KeyError, ValueError, TypeError):  # a summary without those figures
             pass
-    if "rmse_mean" in s:
+    if "rmse_time_weighted" in s:  # played in time: what was on screen, tick by tick
+        flip = (f", FLIP {s['flip_time_weighted']:.4f}" if "flip_time_weighted" in s
+                else "")
+        flicker = f", flicker {s['flicker']:.2f}" if "flicker" in s else ""
+        out.print(f"RMSE over display time vs the band-limited reference (untimed replay, "
+                  f"{s['ticks']} ticks): {s['rmse_time_weighted']:.2f} grey levels, worst "
+                  f"second {s['rmse_worst_second']:.2f}{flicker}{flip}")
+    elif "rmse_mean" in s:
         plain = (f", plain {s['lod']}² {s['rmse_lod_mean']:.2f}" if "rmse_lod_mean" in s
                  else "")
         flip = f", FLIP {s['flip_mean']:.4f}" if "flip_mean" in s else ""
-        out.print(f"RMSE vs full resolution (untimed replay): {s['rmse_mean']:.2f}{plain} "
-                  f"grey levels, PSNR {s['psnr_mean']:.1f} dB, SSIM {s['ssim_mean']:.3f}{flip}")
+        flicker = f", flicker {s['flicker_mean']:.2f}" if "flicker_mean" in s else ""
+        out.print(f"RMSE vs the band-limited reference (untimed replay): "
+                  f"{s['rmse_mean']:.2f}{plain} grey levels, PSNR {s['psnr_mean']:.1f} dB, "
+                  f"SSIM {s['ssim_mean']:.3f}{flip}{flicker}")
     out.print(f"GL: {s['gl_renderer']}   wrote {out_dir / 'frames.csv'}, "
               f"{out_dir / 'summary.json'}")
 

@@ -39,6 +39,9 @@ def reproduce(
                           "a store (default jacksboro; battlefield: fractal:4096:1)")] = None,
     size: Annotated[int | None, typer.Option(
         "--size", help="image size in pixels (square; default 512, battlefield 256)")] = None,
+    path: Annotated[str | None, typer.Option(
+        "--path", help="timecritical: the camera path (chen1999 | swan2002 | flyover | bank "
+                       "| ... | FILE.json; default bank)")] = None,
     quick: Annotated[bool, typer.Option("--quick", help="a short run: 256², 115 frames, "
                                                         "fewer sweep points, quality on "
                                                         "every third frame")] = False,
@@ -77,7 +80,7 @@ def reproduce(
                       quick=quick, grid=grid, lod=lod,
                       epsilon=epsilon, visibility=visibility, border=border, guard=guard,
                       full_sample=full_sample, sweeps=sweeps, adopt=adopt, pace=pace,
-                      max_error=max_error, links=links, huge=huge, full=full)
+                      max_error=max_error, links=links, huge=huge, full=full, path=path)
     run_experiment(get(experiment), options, out_dir)
 
 

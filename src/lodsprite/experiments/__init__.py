@@ -2,8 +2,9 @@
 
 Each of :mod:`~lodsprite.experiments.chen1999`, :mod:`~lodsprite.experiments.swan2002`,
 :mod:`~lodsprite.experiments.scoggins2000`, :mod:`~lodsprite.experiments.sloan1997`,
-:mod:`~lodsprite.experiments.gumbau`, :mod:`~lodsprite.experiments.large` and
-:mod:`~lodsprite.experiments.battlefield` holds its
+:mod:`~lodsprite.experiments.gumbau`, :mod:`~lodsprite.experiments.large`,
+:mod:`~lodsprite.experiments.battlefield` and :mod:`~lodsprite.experiments.timecritical`
+holds its
 run (``run.py``), its report (``report.py``), its defaults and its summary table, and
 defines ``EXPERIMENT`` (an :class:`~lodsprite.experiments.base.Experiment`).  The papers'
 published numbers are kept once, in :mod:`lodsprite.experiments.paper_numbers`.
@@ -30,6 +31,7 @@ EXPERIMENTS: dict[str, str] = {
     "gumbau": "lodsprite.experiments.gumbau",
     "large": "lodsprite.experiments.large",
     "battlefield": "lodsprite.experiments.battlefield",
+    "timecritical": "lodsprite.experiments.timecritical",
 }
 
 

@@ -23,8 +23,9 @@ class Options:
 
     ``size`` is the square image side in pixels; ``max_error`` None is the client's
     default bound (swan2002); ``huge`` adds a 65536² store (large); ``full`` is the long
-    sweep (large); ``terrain_given`` and ``size_given`` say whether ``--terrain`` and
-    ``--size`` were given (battlefield has defaults of its own)."""
+    sweep (large); ``path`` the camera path (timecritical); ``terrain_given`` and
+    ``size_given`` say whether ``--terrain`` and ``--size`` were given (battlefield has
+    defaults of its own)."""
 
     terrain: str = "jacksboro"
     size: int = 512
@@ -43,6 +44,7 @@ class Options:
     links: bool = True
     huge: bool = False
     full: bool = False
+    path: str | None = None      # --path (timecritical; None: the experiment's own)
     terrain_given: bool = False  # --terrain given (battlefield: else its 4k² fractal store)
     size_given: bool = False     # --size given (battlefield: else its own 256²)
 

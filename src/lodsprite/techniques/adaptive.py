@@ -23,7 +23,7 @@ from lodsprite.techniques.adaptive_keys import (
     adaptive_keys,
 )
 from lodsprite.techniques.adaptive_terrain import ADAPTIVE_COLUMNS
-from lodsprite.techniques.base import Frame, Technique
+from lodsprite.techniques.base import Frame, Param, Technique
 from lodsprite.techniques.terrain import SpriteTechnique, resolve_shading, set_shading
 from lodsprite.workers import peak_rss_mb
 
@@ -187,6 +187,15 @@ class AdaptiveTechnique(Technique):
 
     def status(self) -> str:
         return f"sse {self.terrain.sse:g} px; {tile_status(self.terrain)}"
+
+    def params(self) -> dict[str, Param]:
+        """The tolerance, live: a key press or a frame-time controller turns it."""
+        return {"sse": Param("sse", self.terrain.sse, 0.125, 64.0, 1.25, "px")}
+
+    def set_param(self, name: str, value: float) -> None:
+        if name != "sse":
+            super().set_param(name, value)
+        self.terrain.set_sse(value)
 
     def outside_mb(self) -> float:
         return reader_mb(self.terrain)

@@ -92,10 +92,10 @@ class PathRuns:
 
     def played(self, variant: str, eps: float) -> dict:
         """A worker variant (:data:`~lodsprite.experiments.large.variants.PLAYED`) at
-        ``eps``: the path played in time with a display at the path's own rate, each
-        ``sample_every``-th displayed frame judged against level 0 at its display time's
-        viewpoint in the run's own replay (the harness's level-0 reference, the one this
-        experiment's reference is made with), split into halves as the sampled frames."""
+        ``eps``: the path played in time with a display at the path's own rate, the image
+        on screen judged at pairs of display ticks every ``sample_every``-th tick against
+        the band-limited level 0 at that instant's viewpoint, in the run's own replay
+        (:mod:`lodsprite.display`), split into halves as the sampled frames."""
         from lodsprite.paths.core import NOMINAL_FPS
 
         opts = dict(VARIANTS[variant])
@@ -136,15 +136,16 @@ def sampled_path(path, keep: list[int], file: Path) -> Path:
 
 
 def played_quality(folder: Path) -> tuple[tuple[float, float], tuple[float, float]]:
-    """``(reported, chosen)`` mean ``(rmse, flip)`` of a played run's judged rows
-    (``frames.csv`` rows with an ``rmse``): the halves of
-    :func:`~lodsprite.experiments.base.split_sampled` over the judged rows in order."""
+    """``(reported, chosen)`` mean ``(rmse, flip)`` of a played run's judged display ticks
+    (``ticks.csv`` rows with a ``flip``: each the image on screen then, against the
+    reference there), in the halves of :func:`~lodsprite.experiments.base.split_sampled`
+    over those ticks in order."""
     import csv
 
-    with open(Path(folder) / "frames.csv", newline="") as f:
+    with open(Path(folder) / "ticks.csv", newline="") as f:
         judged = [(float(r["rmse"]), float(r["flip"])) for r in csv.DictReader(f)
-                  if r.get("rmse")]
+                  if r.get("flip")]
     chosen, reported = split_sampled(judged)
     if not chosen or not reported:
-        raise InputError(f"a played run judged {len(judged)} frames: too few to split")
+        raise InputError(f"a played run judged {len(judged)} ticks: too few to split")
     return (tuple(np.mean(reported, axis=0)), tuple(np.mean(chosen, axis=0)))
