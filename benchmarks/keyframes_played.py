@@ -5,8 +5,9 @@ frontier.
 Both play the same path in time (:mod:`lodsprite.playback`: the camera moves at the
 path's nominal speed, the display draws as often as it can, or at ``--display-fps``), so
 a keyframe drawn inline costs the frame it is drawn in and one from the worker costs the
-error of arriving late; each displayed frame is judged at its display time's viewpoint in
-the untimed replay against full resolution.  The worker process shares this machine's
+error of arriving late; in the untimed replay the image on screen is judged at display
+ticks against the band-limited reference at each tick's viewpoint (error over display
+time, :mod:`lodsprite.display`).  The worker process shares this machine's
 cores with the display (Swan et al. 2002's shared set-up, not their second pipe).
 
 For each source, one run per ε of ``--eps``: a point (median and p99 display frame time,
@@ -47,8 +48,13 @@ SOURCES = ("inline", "worker")
 
 
 def judged(folder: Path) -> tuple[float, float]:
-    """Mean RMSE of the judged rows, ``(reported, chosen)`` halves."""
-    with open(folder / "frames.csv", newline="") as f:
+    """Mean RMSE of the judged display ticks (the image on screen at each, against the
+    band-limited reference there: error over display time), ``(reported, chosen)``
+    halves."""
+    ticks = folder / "ticks.csv"
+    if not ticks.exists():  # --quality-stride 0: times only
+        return float("nan"), float("nan")
+    with open(ticks, newline="") as f:
         e = [float(r["rmse"]) for r in csv.DictReader(f) if r.get("rmse")]
     if not e:  # --quality-stride 0: times only
         return float("nan"), float("nan")

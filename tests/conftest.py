@@ -34,6 +34,7 @@ HEAVY_FIRST = (
     "tests/terrain/test_storefield_nonblocking.py",
     "tests/sprite/test_worker_engine.py",
     "tests/test_reproduce_large.py",
+    "tests/test_reproduce_timecritical.py",
     "tests/viewer/test_window.py",
     "tests/distributed/test_client.py",
     "tests/distributed/pool/test_ray_pool.py",
