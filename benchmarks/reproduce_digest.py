@@ -67,6 +67,11 @@ RUNS: dict[str, list[str] | str] = {
               "get('large').run(replace(LargeConfig.quick(), sizes=(256,), variants=('whole',)), "
               "Path(sys.argv[1]), None)"),
     "battlefield": ["--quick"],
+    "timecritical": ("import sys; from pathlib import Path; from lodsprite.experiments import get; "
+                     "from lodsprite.experiments.timecritical.run import TimeCriticalConfig; "
+                     "get('timecritical').run(TimeCriticalConfig(terrain='fractal:64:3', "
+                     "path='chen1999', size=48, seconds=0.6, samples=2), Path(sys.argv[1]), "
+                     "None)"),
 }
 CLI = "from lodsprite.cli import main; main()"
 
@@ -89,6 +94,8 @@ NEVER = re.compile(r"^(config|paper_thresholds|huge)\.|(^|\.)(gl_renderer|gl_ver
 #: * gumbau: ``crowd_target`` (its LOD exponent is fed back from measured frame times);
 #: * battlefield: ``scheduler`` and ``independent`` (both hold a frame budget by measured
 #:   time), pooled or per path;
+#: * timecritical: every run (each is played in real time: what it shows follows the
+#:   clock); kept are the reference's description and how many reference images it drew;
 #: * large: the ``tiled`` and ``tiled+cache`` variants (their tiles are refreshed within
 #:   ``tile_budget_ms`` of measured time a frame) and ``equal_error_speedup`` (its best
 #:   row is the fastest; its other figures repeat the rows');
@@ -100,6 +107,7 @@ SELECT: dict[str, tuple[str, str]] = {
     "gumbau": (r".", r"^runs\.crowd_target\.|^frame_ms_|^target_fps$"),
     "large": (r".", r"^equal_error_speedup\.|^sizes\.\d+\.\w+\.tiled"),
     "battlefield": (r".", r"(^|\.)(scheduler|independent)\."),
+    "timecritical": (r"^(reference|reference_images|path|terrain)$", r"^$"),
 }
 #: Figures that differed between two runs of the same code (dropped from the digest):
 #: name -> figure names.  Measured by running the digest twice on one commit.

@@ -302,3 +302,23 @@ def test_the_technique_summary_is_of_the_timed_run_not_of_the_replay(gl):
     assert len(replayed) == 6  # every frame was replayed for its quality ...
     assert result.summary["replayed_before_summary"] == 0  # ... after the summary was read
     assert result.summary["frames_seen"] == 6 and "rmse_mean" in result.summary
+
+
+def test_a_quality_stride_judges_the_frame_after_each_for_its_flicker(gl):
+    """With a stride of 3 the replay judges frames 0, 3, 6 (every quality column) and
+    the frames after them, 1, 4 (the flicker against the judged frame before it only)."""
+    scene = load_scene("fractal:32", grid=32)
+    path = get_path("chen1999", scene.hf, 7)
+    with Renderer(scene, (32, 32), ctx=gl.mgl) as r:
+        t = techniques.create("lod", r, lod=8)
+        try:
+            result = run_path(t, path, ground_truth=True, quality_stride=3)
+        finally:
+            t.release()
+    rows = result.rows
+    assert [i for i, row in enumerate(rows) if "rmse" in row] == [0, 3, 6]
+    assert [i for i, row in enumerate(rows) if "flicker" in row] == [1, 4]
+    assert result.summary["quality_frames"] == 3
+    assert result.summary["flicker_mean"] == pytest.approx(
+        np.mean([rows[1]["flicker"], rows[4]["flicker"]]))
+    assert "flicker" in result.columns

@@ -65,8 +65,9 @@ def _layer_ms(columns: dict) -> np.ndarray:
 
 
 #: grey levels: the full-detail scene at one sample a pixel against its band-limited
-#: reference (its aliasing; measured 3.1 and 2.2 on the two sampled frames at 128²)
-FULL_DETAIL_RMSE = 5.0
+#: reference stays under this (its aliasing; measured 3.09 and 2.21 on the two sampled
+#: frames at 128², deterministic); every reduced-detail run scores above it (4.7 and more)
+FULL_DETAIL_RMSE = 3.5
 
 
 def test_the_reference_scores_the_full_detail_scene_as_the_same_image(battlefield, tmp_path,

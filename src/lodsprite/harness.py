@@ -18,7 +18,8 @@ quality measured in a separate untimed replay.
    compared with a reference from an independent code path (default: the technique's
    own, else level 0 band-limited, :func:`scene_reference`) every
    ``quality_stride``-th frame: ``rmse, psnr, ssim`` (and ``flip``) per frame, and
-   ``flicker`` on consecutive judged frames, their means in the summary.
+   ``flicker`` on consecutive frames (with a stride, the frame after each judged one is
+   replayed and judged for it too), their means in the summary.
 
 :func:`write_run` writes ``frames.csv`` (core columns :data:`CORE_COLUMNS`, then the
 technique's own, then quality) and ``summary.json`` (core keys :data:`CORE_KEYS`, then
@@ -105,7 +106,10 @@ def level_zero_reference(gl, scene, size: tuple[int, int], fov_y_deg: float,
     if scene.hf is None:
         return None
     shading = resolve_shading(scene, shading)
-    texture = scene.texture if shading == "texture" else None
+    texture = None
+    if shading == "texture":  # a scene loaded without one draws the renderers' plain grey
+        texture = scene.texture if scene.texture is not None else np.full((2, 2, 3), 160,
+                                                                          np.uint8)
     field = (scene_pyramid(scene) if scene.terrain_spec and is_store(scene.terrain_spec)
              else scene.hf)
     return LevelZeroReference(gl, field, size, fov_y_deg, shading, texture,
@@ -153,13 +157,16 @@ def quality_summary(rows: list[dict]) -> dict[str, float]:
     reference has an infinite PSNR); a technique's extra columns (``rmse_lod`` ...) the
     same way (``rmse_lod_mean`` ...); with a plain coarse level beside it, ``rmse_ratio =
     rmse_mean / rmse_lod_mean``."""
+    flickers = [r["flicker"] for r in rows if "flicker" in r]
     rows = [r for r in rows if "rmse" in r]
     if not rows:
         return {}
     out: dict[str, float] = {"quality_frames": len(rows)}
+    if flickers:  # judged on consecutive frames, those of the quality stride's or not
+        out["flicker_mean"] = float(np.mean(flickers))
     keys = dict.fromkeys(k for r in rows for k in r)
     for key in keys:
-        if not key.startswith(QUALITY_COLUMNS) or key.startswith("psnr"):
+        if not key.startswith(QUALITY_COLUMNS) or key.startswith(("psnr", "flicker")):
             continue
         v = np.array([r[key] for r in rows if key in r], dtype=np.float64)
         out[f"{key}_mean"] = float(v.mean())
@@ -223,25 +230,27 @@ def replay_frames(technique: Technique, drawn: Sequence[Viewpoint],
     played in time, the viewpoint of its display time); its quality columns go into
     ``rows[i]``.  A technique's baselines (:meth:`~lodsprite.techniques.Technique.
     quality_extra`) are drawn at ``drawn[i]`` too, so that they carry the same latency."""
+    from lodsprite.metrics import flicker
+
     last: tuple[int, np.ndarray, np.ndarray] | None = None  # the last judged frame
     for i, (vp, at, d) in enumerate(zip(drawn, judged, decisions, strict=True)):
         measured = reference is not None and i % stride == 0
+        follows = reference is not None and stride > 1 and i % stride == 1  # its flicker
         shown = on_image is not None and (image_frames is None or i in image_frames)
-        if not (measured or shown):
+        if not (measured or follows or shown):
             continue
         image = technique.replay(vp, d)
         truth = None
-        if measured:
+        if measured or follows:
             truth = reference(at)
-            rows[i].update(_quality(image, truth, flip))
             if last is not None and last[0] == i - 1:
-                from lodsprite.metrics import flicker
-
                 rows[i]["flicker"] = flicker(image, last[1], truth, last[2])
             last = (i, np.array(image), truth)
+        if measured:
+            rows[i].update(_quality(image, truth, flip))
             rows[i].update(technique.quality_extra(vp, d, truth))
         if shown:
-            on_image(i, image, truth)
+            on_image(i, image, truth if measured else None)
 
 
 def run_path(technique: Technique, path: CameraPath, *, finish: Callable[[], None] | None = None,
@@ -263,6 +272,8 @@ def run_path(technique: Technique, path: CameraPath, *, finish: Callable[[], Non
     finish = finish or renderer.gl.finish
     n = len(path.viewpoints)
     planned = set(range(0, n, quality_stride)) if ground_truth else set()
+    if quality_stride > 1:  # and the frame after each, for its flicker
+        planned |= {i + 1 for i in planned if i + 1 < n}
     if on_image is not None:
         planned |= set(range(n)) if image_frames is None else set(image_frames)
     if planned and not technique.replays:
@@ -292,7 +303,7 @@ def quality_columns(rows: list[dict]) -> list[str]:
     """The quality columns the rows have, in the order they first appear."""
     seen: dict[str, None] = {}
     for r in rows:
-        if "rmse" in r:
+        if "rmse" in r or "flicker" in r:
             seen.update(dict.fromkeys(k for k in r if k.startswith(QUALITY_COLUMNS)))
     return list(seen)
 

@@ -52,8 +52,9 @@ PaceOpt = Annotated[str, typer.Option(
 QualityStrideOpt = Annotated[int, typer.Option(
     "--quality-stride", help="with --ground-truth: measure every K-th frame")]
 GroundTruthOpt = Annotated[bool, typer.Option(
-    "--ground-truth", help="replay the run's decisions untimed against full "
-                           "resolution: RMSE/PSNR/SSIM per frame and their means")]
+    "--ground-truth", help="replay the run's decisions untimed against the band-limited "
+                           "level-0 reference: RMSE/PSNR/SSIM and flicker per frame and "
+                           "their means (played: over display time)")]
 MaxErrorOpt = Annotated[str | None, typer.Option(
     "--max-error", help="distributed: PX: the client renders its own keyframe when the shown "
                         "one's error reaches PX pixels and no better one has arrived | off: "

@@ -9,8 +9,9 @@ full-resolution terrain through the renderer's projection for that viewpoint, wi
 guard band) and every client frame is a spriteframe drawn from the keyframe it shows, so
 after the timed run the harness replays the recorded frames untimed, as for every other
 technique (:func:`lodsprite.harness.run_path`): RMSE, PSNR and SSIM against the one
-reference (level 0 of a store, the full-resolution grid of an in-memory field) on every
-``quality_stride``-th frame, beside the plain coarse level's (``rmse_lod`` ...).
+reference (level 0 band-limited, :mod:`lodsprite.gl.reference`: of a store, or the full
+grid of an in-memory field) on every ``quality_stride``-th frame, beside the plain
+coarse level's (``rmse_lod`` ...).
 
 Beside it, :func:`error_summary` gathers the LOD-sprite error metric (Chen, Swan &
 Kaufman 1999, Eq. 2: ``sqrt(mean θ²) / β``, pixels) of every frame against the keyframe

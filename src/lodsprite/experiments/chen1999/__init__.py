@@ -16,7 +16,8 @@ from lodsprite.experiments.base import Experiment, Options, StageProgress, Summa
 HEADLINE = ("keyframes", "mean time, keyframe (ms)", "mean time, first spriteframe (ms)",
             "mean time, spriteframe (ms)", "total, full resolution (s)",
             "total, LOD-sprite (s)", "speedup, full ÷ LOD-sprite (×)",
-            "RMSE, LOD-sprite vs full (mean)", "RMSE, plain LOD vs full (mean)",
+            "RMSE, LOD-sprite vs ref (mean)", "RMSE, plain LOD vs ref (mean)",
+            "flicker, LOD-sprite (mean over consecutive frames)",
             "RMSE ratio, LOD-sprite ÷ plain LOD")
 
 

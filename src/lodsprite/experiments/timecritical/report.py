@@ -28,6 +28,7 @@ def plot(r: dict, png: Path) -> Path:
     """Time-weighted RMSE against display rate, a curve per technique (bars: min-max over
     the repeats), per path."""
     from matplotlib.figure import Figure
+    from matplotlib.ticker import NullFormatter
 
     paths = r["timecritical"]
     fig = Figure(figsize=(6.4, 4.2 * len(paths)), dpi=120)
@@ -45,6 +46,7 @@ def plot(r: dict, png: Path) -> Path:
         ax.set_xscale("log")
         ax.set_xticks([float(k) for k in next(iter(techs.values()))])
         ax.set_xticklabels([k for k in next(iter(techs.values()))])
+        ax.xaxis.set_minor_formatter(NullFormatter())
         ax.set_xlabel("display rate (frames a second)")
         ax.set_ylabel("time-weighted RMSE (grey levels)")
         ax.set_title(f"{r['terrain']}, {path}: what the viewer sees")
@@ -73,7 +75,8 @@ def write_outputs(r: dict, out_dir: Path) -> Path:
              f"Each technique plays the path in real time at each display rate ({cfg['size']}² "
              f"pixels, {cfg['repeats']} runs each); a display slot it misses keeps the "
              "previous image; every frame is drawn for the viewpoint predicted at its "
-             "display time (the 2002 paper's predictor).  The image on screen is judged "
+             f"display time (one predictor for all: {cfg.get('predictor', 'kalman')}).  "
+             "The image on screen is judged "
              f"against the band-limited reference at pairs of display ticks every "
              f"{cfg['judge_every_s']:g} s of path time (RMSE, flicker; FLIP every "
              f"{cfg['flip_every']}th pair), so an image held long counts long.  Figures: "

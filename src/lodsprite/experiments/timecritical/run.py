@@ -143,13 +143,17 @@ def reproduce_timecritical(cfg: TimeCriticalConfig, out_dir: Path,
     table: dict[str, dict[str, dict]] = {}
     cache = None
     how = ""
+    # One path for every technique: a path that follows the terrain's heights is made
+    # from the scene loaded, and a coarse level's scene over a store is not the adaptive
+    # renderer's (up to 3 m apart along a flyover of a 4k² store)
+    path = prepare(_config(cfg, "adaptive"))[1]
+    if cfg.seconds is not None:  # the path's first seconds, at its own speed
+        n = max(2, min(len(path), int(cfg.seconds * NOMINAL_FPS) + 1))
+        path = CameraPath(path.name, path.viewpoints[:n], path.fov_y_deg)
     for name in cfg.techniques:
         config = _config(cfg, name)
-        scene, path = prepare(config)
+        scene = prepare(config)[0]
         fov = field_of_view(config, path)
-        if cfg.seconds is not None:  # the path's first seconds, at its own speed
-            n = max(2, min(len(path), int(cfg.seconds * NOMINAL_FPS) + 1))
-            path = CameraPath(path.name, path.viewpoints[:n], path.fov_y_deg)
         with Renderer(scene, (cfg.size, cfg.size), fov) as renderer:
             ref = level_zero_reference(renderer.gl, scene, renderer.size, fov, "auto",
                                        cfg.samples)
