@@ -105,3 +105,40 @@ def test_the_reference_cache_draws_each_viewpoint_once():
     cache(look_at((2, -10, 5), (0, 0, 0)))  # over 24 bytes: the least recently used goes
     cache(b)
     assert len(drawn) == 4
+
+
+def test_the_worst_second_is_over_path_time_whatever_the_stride():
+    """Pairs every 0.25 s (8 rows a second): the worst second's mean is over the rows of
+    one second of path time, not over 60 rows."""
+    from lodsprite.display import worst_second
+
+    t = np.array([(k // 2) * 0.25 + (k % 2) / 60 for k in range(40)])  # 5 s of pairs
+    v = np.where((t >= 2.0) & (t < 3.0), 10.0, 1.0)
+    assert worst_second(t, v) == pytest.approx(10.0)
+    assert worst_second(t[:6], v[:6]) == pytest.approx(v[:6].mean())  # under a second
+
+
+def test_flicker_is_over_one_sixtieth_of_a_second_at_every_rate():
+    """A held image (frame 0 on screen throughout) against a reference that changes every
+    tick: at 120 Hz the flicker compares ticks 1/60 s apart, as at 60 Hz, and the tick
+    numbers are the absolute ones of each rate."""
+    vps = [look_at((float(i), -10, 5), (0, 0, 0)) for i in range(40)]
+
+    def run(hz):
+        tech = Held([100])
+        ref_at = {}
+
+        def reference(vp):  # grey rises with the eye's x: 5 levels a 1/120 s
+            key = float(vp.o[0])
+            if key not in ref_at:
+                ref_at[key] = np.full((4, 4, 3), int(key * 5), np.uint8)
+            return ref_at[key]
+
+        return judge_display(tech, vps, [{"k": 0}], np.array([0.0]),
+                             lambda t: [vps[int(round(x * 120))] for x in t], reference,
+                             hz, 0.2)
+
+    rows60, s60 = run(60.0)
+    rows120, s120 = run(120.0)
+    assert [r["tick"] for r in rows120][:3] == [0, 1, 2]
+    assert s60["flicker"] == pytest.approx(10.0) and s120["flicker"] == pytest.approx(10.0)

@@ -8,17 +8,18 @@ seconds of path time (``hz`` = max(display rate, :data:`MIN_TICK_HZ`)): at each 
 image on screen (the last frame shown at or before it) is compared with the reference
 at that instant's viewpoint, so that an image held long counts long, and a frame the
 camera has moved on from costs what the viewer sees.  On consecutive ticks the flicker
-(:func:`lodsprite.metrics.flicker`) is taken too: a held image against a moving
-reference, shimmer and popping all score.
+(:func:`lodsprite.metrics.flicker`) is taken on ticks 1/60 s apart, the same interval
+at every display rate: a held image against a moving reference, shimmer and popping all
+score.
 
 The summary: ``rmse_time_weighted`` (the mean over ticks, i.e. each shown image's error
 weighted by its time on screen), ``flip_time_weighted`` (with FLIP), ``flicker`` (mean
-over consecutive tick pairs), ``rmse_worst_second`` (the worst mean over a window of one
-second of ticks), ``ticks`` and ``tick_hz``.
+over the tick pairs 1/60 s apart), ``rmse_worst_second`` (the worst mean over the ticks
+of one second of path time), ``ticks`` and ``tick_hz``.
 
-Reference images are cached (:class:`ReferenceCache`) by the reference's key (scene,
-size, samples, filter, shading) and the viewpoint, so techniques and display rates
-judged along one path share them.
+Reference images are cached (:class:`ReferenceCache`) by a key the caller gives (what
+makes two references' images equal: the terrain, size and samples) and the viewpoint, so
+techniques and display rates judged along one path share them.
 """
 
 from __future__ import annotations
@@ -77,6 +78,24 @@ def worst_window(values: np.ndarray, per_window: int) -> float:
     return float(np.max((c[n:] - c[:-n]) / n))
 
 
+def worst_second(times_s: np.ndarray, values: np.ndarray, window_s: float = 1.0) -> float:
+    """The largest mean of ``values`` over the samples whose ``times_s`` (ascending) fall in
+    a window ``[t, t + window_s)`` starting at a sample; the mean of all when the samples
+    span less than the window."""
+    t = np.asarray(times_s, dtype=np.float64)
+    v = np.asarray(values, dtype=np.float64)
+    if not len(v):
+        return float("nan")
+    if t[-1] - t[0] < window_s:
+        return float(v.mean())
+    c = np.concatenate([[0.0], np.cumsum(v)])
+    ends = np.searchsorted(t, t + window_s - 1e-9, side="left")
+    starts = np.arange(len(t))
+    full = t + window_s <= t[-1] + 1e-9  # windows wholly inside the judged span
+    means = (c[ends] - c[starts])[full] / (ends - starts)[full]
+    return float(means.max())
+
+
 class ReferenceCache:
     """Reference images by ``(key, viewpoint)``, least recently used dropped past
     ``max_bytes``; ``reference(viewpoint) -> (h, w, 3) uint8`` draws a missing one."""
@@ -118,39 +137,44 @@ def judge_display(technique: Technique, drawn: Sequence[Viewpoint], decisions: l
     ``drawn[k]`` with ``decisions[k]`` and shown at ``shown_s[k]`` seconds, replayed
     (:meth:`~lodsprite.techniques.Technique.replay`, in order, once) while it is on
     screen; the reference at ``viewpoint_at(ticks)`` (seconds of path time to
-    viewpoints).  ``stride`` > 1 judges the pairs of ticks ``j, j + 1`` for ``j`` a
-    multiple of it; FLIP (with ``flip``) is taken on the first tick of every
-    ``flip_every``-th pair (FLIP costs far more than RMSE).  Pairs are counted from tick
-    0 of the path's time, so runs at rates whose ``stride / hz`` agree are judged at the
-    same instants (and share cached references).  Returns the tick rows (``tick``,
-    ``t_s``, ``frame``, ``rmse``, ``flip``, ``flicker``) and the summary keys."""
+    viewpoints).  The flicker compares ticks 1/60 s apart (consecutive ticks at 60 Hz,
+    every other at 120: one interval at every rate).  ``stride`` > 1 judges the pairs of
+    ticks ``j, j + 1/60 s`` for ``j`` a multiple of it; FLIP (with ``flip``) is taken on
+    the first tick of every ``flip_every``-th pair (FLIP costs far more than RMSE).  Pairs
+    are counted from tick 0 of the path's time, so runs at rates whose ``stride / hz``
+    agree are judged at the same instants (and share cached references).  Returns the
+    tick rows (``tick``, the tick's number from the path's start at ``hz``, ``t_s``,
+    ``frame``, ``rmse``, ``flip``,
+    ``flicker``) and the summary keys."""
     from lodsprite import metrics
 
     shown_s = np.asarray(shown_s, dtype=np.float64)
     ticks = tick_times(float(shown_s[0]), end_s, hz)
+    gap = max(1, round(hz / MIN_TICK_HZ))  # ticks in 1/60 s: the flicker's interval
+    number = np.rint(ticks * hz).astype(np.int64)  # tick numbers from the path's start
     if stride > 1:
-        j = np.rint(ticks * hz).astype(np.int64)  # tick numbers from the path's start
-        ticks = ticks[(j % stride == 0) | (j % stride == 1)]
+        keep = (number % stride == 0) | (number % stride == gap % stride)
+        ticks, number = ticks[keep], number[keep]
     frames = on_screen(shown_s, ticks)
     views = viewpoint_at(ticks * 1.0) if len(ticks) else []
     rows: list[dict] = []
     current, image = -1, None
-    prev: tuple[int, np.ndarray, np.ndarray] | None = None
-    step = 1.0 / hz
-    for n, (t, k, vp) in enumerate(zip(ticks, frames, views, strict=True)):
+    judged: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # tick number -> (image, truth)
+    for t, j, k, vp in zip(ticks, number, frames, views, strict=True):
         if k != current:
             image = np.array(technique.replay(drawn[k], decisions[k]))
             current = k
         truth = reference(vp)
-        row = {"tick": n, "t_s": float(t), "frame": int(k),
+        row = {"tick": int(j), "t_s": float(t), "frame": int(k),
                "rmse": metrics.rmse(image, truth)}
-        j = round(t * hz)
         if flip and (stride == 1 and j % flip_every == 0
                      or stride > 1 and j % (stride * flip_every) == 0):
             row["flip"] = metrics.flip(image, truth)
-        if prev is not None and abs(t - prev[0] * step - step) < 1e-6:
-            row["flicker"] = metrics.flicker(image, prev[1], truth, prev[2])
-        prev = (round(t / step), image, truth)
+        before = judged.get(int(j) - gap)
+        if before is not None:
+            row["flicker"] = metrics.flicker(image, before[0], truth, before[1])
+        judged[int(j)] = (image, truth)
+        judged.pop(int(j) - 2 * gap, None)
         rows.append(row)
     return rows, display_summary(rows, hz)
 
@@ -162,7 +186,7 @@ def display_summary(rows: list[dict], hz: float) -> dict:
     rmse = np.array([r["rmse"] for r in rows])
     out: dict = {"ticks": len(rows), "tick_hz": hz,
                  "rmse_time_weighted": float(rmse.mean()),
-                 "rmse_worst_second": worst_window(rmse, round(hz))}
+                 "rmse_worst_second": worst_second([r["t_s"] for r in rows], rmse)}
     flips = [r["flip"] for r in rows if "flip" in r]
     if flips:
         out["flip_time_weighted"] = float(np.mean(flips))
@@ -173,4 +197,4 @@ def display_summary(rows: list[dict], hz: float) -> dict:
 
 
 __all__ = ["MIN_TICK_HZ", "ReferenceCache", "display_summary", "judge_display", "on_screen",
-           "tick_hz", "tick_times", "weights", "worst_window"]
+           "tick_hz", "tick_times", "weights", "worst_second", "worst_window"]

@@ -3,7 +3,7 @@ camera path through the harness (:func:`lodsprite.harness.run_path`: one untimed
 warm-up, per-frame time with ``ctx.finish()`` inside the clock, nothing read back in the
 timed loop), then its untimed replay for what :class:`Measure` asks (quality against the
 technique's :meth:`~lodsprite.techniques.Technique.reference`, by default the scene's
-terrain at full resolution; saved frames, a video, kept images), then the technique's
+terrain's level 0 band-limited; saved frames, a video, kept images), then the technique's
 own columns and files (:meth:`~lodsprite.techniques.Technique.outputs`), and writes
 ``frames.csv``, ``summary.json`` and those files.
 

@@ -226,10 +226,11 @@ def replay_frames(technique: Technique, drawn: Sequence[Viewpoint],
                   on_image: ImageCallback | None, image_frames) -> None:
     """The untimed replay: frame ``i``'s recorded decision drawn again at ``drawn[i]``
     (the viewpoint it was drawn for) and, every ``stride``-th frame, compared with the
-    reference at ``judged[i]`` (the viewpoint it is judged at: the same, or, in a run
-    played in time, the viewpoint of its display time); its quality columns go into
-    ``rows[i]``.  A technique's baselines (:meth:`~lodsprite.techniques.Technique.
-    quality_extra`) are drawn at ``drawn[i]`` too, so that they carry the same latency."""
+    reference at ``judged[i]`` (the viewpoint it is judged at); its quality columns go
+    into ``rows[i]``.  With a stride the frame after each judged one is replayed and
+    judged too, for its ``flicker`` only (consecutive frames: stride 1 has them all).  A
+    technique's baselines (:meth:`~lodsprite.techniques.Technique.quality_extra`) are
+    drawn at ``drawn[i]`` too, so that they carry the same latency."""
     from lodsprite.metrics import flicker
 
     last: tuple[int, np.ndarray, np.ndarray] | None = None  # the last judged frame

@@ -1,24 +1,30 @@
 """A camera path played in time: the path advances at its nominal speed in seconds, the
-display draws as often as it can (or at a target rate), and each displayed frame is judged
-at the viewpoint of its display time, so that latency costs error where it should.
+display draws as often as it can (or on the slots of a display rate), and the image on
+screen is judged over display time, so that latency costs error where it should.
 
 A timed run of the harness (:func:`lodsprite.harness.run_path`) draws every frame of a
 path, one after another, however long each takes: it measures frame times, not what a
 viewer sees.  Here (Swan et al. 2002 measure their client so: the camera moves while a
 keyframe is on its way) frame ``k`` starts at ``start_s[k]`` seconds after the first
 and draws the path's viewpoint at that time (:meth:`~lodsprite.paths.CameraPath.at_time`,
-frame ``i`` of the path at ``i / fps``); it is displayed when its ``ctx.finish()`` returns,
-``shown_s[k]``.  A frame that took long shows a viewpoint the camera has left; a keyframe
-from a worker shows a view placed ahead by prediction.  Quality, in the untimed replay
-(:func:`lodsprite.harness.replay_frames`), compares the frame as drawn with the reference
-at the viewpoint of ``shown_s[k]``.
+frame ``i`` of the path at ``i / fps``), or the one a predictor gives for its display
+time; it is displayed when its ``ctx.finish()`` returns, or at a display rate on the
+next slot after that, ``shown_s[k]``.  A frame that took long shows a viewpoint the
+camera has left; a keyframe from a worker shows a view placed ahead by prediction.
+Quality, in the untimed replay (:func:`lodsprite.display.judge_display`), compares the
+image on screen at each display tick with the band-limited reference at that instant's
+viewpoint, so an image counts for as long as it was shown.
 
 Every technique runs the same: the same untimed warm-up at the path's first viewpoint,
 the same clock (``ctx.finish()`` before it stops), nothing read back inside the played
 loop.  A frame's ``ms`` is the technique's alone; the rows get ``start_s`` (the path's time
-it drew), ``shown_s`` and ``latency_ms`` (``shown_s - start_s``); the summary
-``played_s``, ``path_fps``, ``display_rate``, ``display_fps`` (frames shown a second),
-``latency_ms_mean`` and ``truncated`` (stopped by the frame cap before the path's end).
+it drew), ``shown_s`` and ``latency_ms`` (``shown_s - start_s``), and judged, ``ticks``
+and ``rmse``; the summary ``played_s``, ``path_fps``, ``display_rate``, ``display_fps``
+(frames shown a second), ``missed_slots`` (at a display rate), ``latency_ms_mean``,
+``predictor``, ``truncated`` (stopped by the frame cap before the path's end) and the
+display-time figures (:func:`lodsprite.display.display_summary`).  Every frame up to the
+cap is planned for replay (:meth:`~lodsprite.techniques.Technique.plan_replay`): which
+ones will be on screen at a tick is known only after the run.
 """
 
 from __future__ import annotations
@@ -134,17 +140,19 @@ def run_played(technique: Technique, path: CameraPath, *, fps: float = NOMINAL_F
                control: Callable[[float], None] | None = None,
                judge_every_s: float | None = None, flip_every: int = 1) -> RunResult:
     """Play ``path`` in time with ``technique`` (module doc): its frames at ``fps`` frames
-    a second of path, drawn as often as the technique can, or at most ``rate`` frames a
-    second; with ``ground_truth`` each ``quality_stride``-th displayed frame compared, in
-    the untimed replay, with ``reference`` (default: the technique's
-    :meth:`~lodsprite.techniques.Technique.reference`, else the scene's terrain at full
-    resolution) at its display time's viewpoint.  ``max_frames`` (default
-    :data:`FRAMES_PER_PATH_FRAME` a path frame) caps the frames drawn, because the
-    replay's plan (:meth:`~lodsprite.techniques.Technique.plan_replay`) is made before the
-    run for every frame that may come; a run stopped by it before the path's end says
+    a second of path, drawn as often as the technique can, or on the slots of ``rate``
+    frames a second; with ``ground_truth`` the image on screen judged in the untimed
+    replay at ticks of max(rate, 60) Hz (``quality_stride``, or ``judge_every_s``
+    seconds: pairs of ticks that far apart; FLIP on every ``flip_every``-th) against
+    ``reference`` (default: the technique's own, else the band-limited level 0).
+    ``predict``: a :data:`PREDICTORS` name, each frame drawn for the viewpoint it predicts
+    at the frame's display time; ``control(ms)``: told each frame's time after it (a
+    frame-time controller).  ``max_frames`` (default :data:`FRAMES_PER_PATH_FRAME` a path
+    frame) caps the frames drawn, because the replay's plan is made before the run for
+    every frame that may come; a run stopped by it before the path's end says
     ``truncated`` in its summary.  A technique whose frames follow the frame count rather
     than the time (:attr:`~lodsprite.techniques.Technique.plays_in_time` False) is
-    refused.  Returns the frames, rows and summary (not written)."""
+    refused.  Returns the frames, rows, ticks and summary (not written)."""
     if not fps > 0:
         raise InputError(f"a path's frame rate must be > 0, got {fps}")
     if rate is not None and not rate > 0:

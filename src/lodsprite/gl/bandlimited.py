@@ -169,6 +169,8 @@ class SupersampledTerrain:
                  shading: str, height_range: tuple[float, float],
                  texture: np.ndarray | None = None,
                  quads: tuple[int, int] | None = None) -> None:
+        if shading == "texture" and (texture is None or quads is None):
+            raise InputError("a texture-shaded reference needs the texture and level 0's size")
         mgl = ctx.mgl
         self.ctx, self.samples = ctx, int(samples)
         self.full = (int(size[0]) * self.samples, int(size[1]) * self.samples)
@@ -184,9 +186,6 @@ class SupersampledTerrain:
         self.program = mgl.program(vertex_shader=_VS, fragment_shader=fs)
         self.texture = None
         if shading == "texture":
-            if texture is None or quads is None:
-                raise InputError("a texture-shaded reference needs the texture and level "
-                                 "0's size")
             t = np.ascontiguousarray(texture, dtype=np.uint8)
             self.texture = mgl.texture((t.shape[1], t.shape[0]), 3, t.tobytes(), alignment=1)
             self.texture.filter = (moderngl.LINEAR, moderngl.LINEAR)

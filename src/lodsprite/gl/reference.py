@@ -94,7 +94,9 @@ class LevelZeroReference:
         if shading == "texture" and texture is None:
             raise InputError("a texture-shaded reference needs the texture")
         self.ctx, self.size, self.fov = ctx, (int(size[0]), int(size[1])), float(fov_y_deg)
-        self.shading, self.texture, self.max_side = shading, texture, int(max_side)
+        # a patch is one height texture: never more samples a side than the GL allows
+        self.shading, self.texture = shading, texture
+        self.max_side = min(int(max_side), ctx.info.max_texture_size)
         self.samples, self.filter, self.space = int(samples), filter, space
         field = store_or_field if isinstance(store_or_field, HeightField) else None
         self.pyramid = MemoryPyramid.from_heightfield(field) if field is not None \
@@ -161,7 +163,14 @@ class LevelZeroReference:
             patches = [self._patch_for(parts[0])]
         else:
             self._drop_patch()
-            patches = [self._make(part) for part in parts]
+            patches = []
+            try:
+                for part in parts:
+                    patches.append(self._make(part))
+            except BaseException:
+                for p in patches:
+                    p.release()
+                raise
         try:
             samples = self._drawer_for().draw(patches, view_proj)
         finally:

@@ -137,10 +137,11 @@ class Technique:
     def reference(self, path: CameraPath) -> AbstractContextManager[Reference] | None:
         """The ground truth of a run along ``path``: a context manager giving
         ``viewpoint -> (h, w, 3) uint8`` from a code path independent of this technique
-        (its GPU objects released on leaving).  None, the default: the scene's terrain at
-        full resolution (level 0 of a store), coloured by :attr:`shading`
-        (:func:`lodsprite.harness.scene_reference`).  A technique whose scene holds more
-        than terrain gives its own (the object drawn directly, the full-detail scene)."""
+        (its GPU objects released on leaving).  None, the default: the scene's terrain's
+        level 0 band-limited (4x4 samples a pixel, its own drawing path), coloured by
+        :attr:`shading` (:func:`lodsprite.harness.scene_reference`).  A technique whose
+        scene holds more than terrain gives its own (the object drawn directly, the
+        full-detail scene)."""
         return None
 
     def outputs(self, result: RunResult, path: CameraPath) -> dict[str, Any]:

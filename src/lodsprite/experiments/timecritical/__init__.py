@@ -13,7 +13,7 @@ from lodsprite.experiments.base import Experiment, Options, StageProgress, Summa
 
 def configure(o: Options):
     """A :class:`~lodsprite.experiments.timecritical.run.TimeCriticalConfig` from
-    ``--terrain``, ``--path`` and ``--size`` (``--quick``: 256², 2 s of path)."""
+    ``--terrain``, ``--path`` and ``--size`` (``--quick``: 256², the path's first 3 s)."""
     from lodsprite.experiments.timecritical.run import TimeCriticalConfig
 
     cfg = TimeCriticalConfig.quick() if o.quick else TimeCriticalConfig()

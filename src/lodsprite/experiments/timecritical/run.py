@@ -88,7 +88,11 @@ def _config(cfg: TimeCriticalConfig, name: str):
 def _median_run(runs: list[dict]) -> dict:
     """The figures of the run whose time-weighted RMSE is the median, with each figure's
     spread (``min``, ``max`` over the runs) beside it."""
-    order = sorted(range(len(runs)), key=lambda i: runs[i]["rmse_time_weighted"])
+    def error(i: int) -> float:  # a run with no tick judged sorts last
+        v = runs[i].get("rmse_time_weighted")
+        return float("inf") if v is None else float(v)
+
+    order = sorted(range(len(runs)), key=error)
     mid = dict(runs[order[len(order) // 2]])
     for key in FIGURES:
         vals = [r[key] for r in runs if r.get(key) is not None and r[key] == r[key]]
