@@ -13,7 +13,7 @@ from lodsprite.display import (
     tick_hz,
     tick_times,
     weights,
-    worst_window,
+    worst_second,
 )
 from lodsprite.metrics import flicker
 from lodsprite.playback import missed_slots
@@ -62,10 +62,11 @@ def test_ticks_run_at_least_at_60_hz_and_at_the_display_rate_above():
                                                                   0.05])
 
 
-def test_worst_window_is_the_largest_mean_of_a_run_of_values():
+def test_the_worst_window_is_the_largest_mean_over_that_much_path_time():
     v = np.array([1, 1, 5, 5, 1, 1, 1], float)
-    assert worst_window(v, 2) == 5 and worst_window(v, 3) == pytest.approx(11 / 3)
-    assert worst_window(v, 100) == pytest.approx(v.mean())
+    t = np.arange(len(v), dtype=float)  # one value a second
+    assert worst_second(t, v, 2.0) == 5 and worst_second(t, v, 3.0) == pytest.approx(11 / 3)
+    assert worst_second(t, v, 100.0) == pytest.approx(v.mean())
 
 
 def test_flicker_of_a_jittered_static_scene_is_positive_and_zero_without_jitter(gl):
@@ -110,8 +111,6 @@ def test_the_reference_cache_draws_each_viewpoint_once():
 def test_the_worst_second_is_over_path_time_whatever_the_stride():
     """Pairs every 0.25 s (8 rows a second): the worst second's mean is over the rows of
     one second of path time, not over 60 rows."""
-    from lodsprite.display import worst_second
-
     t = np.array([(k // 2) * 0.25 + (k % 2) / 60 for k in range(40)])  # 5 s of pairs
     v = np.where((t >= 2.0) & (t < 3.0), 10.0, 1.0)
     assert worst_second(t, v) == pytest.approx(10.0)

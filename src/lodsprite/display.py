@@ -68,16 +68,6 @@ def weights(shown_s: np.ndarray, end_s: float, hz: float) -> np.ndarray:
     return np.bincount(idx[idx >= 0], minlength=len(shown_s))
 
 
-def worst_window(values: np.ndarray, per_window: int) -> float:
-    """The largest mean over ``per_window`` consecutive values (all of them when fewer)."""
-    v = np.asarray(values, dtype=np.float64)
-    if not len(v):
-        return float("nan")
-    n = max(1, min(int(per_window), len(v)))
-    c = np.concatenate([[0.0], np.cumsum(v)])
-    return float(np.max((c[n:] - c[:-n]) / n))
-
-
 def worst_second(times_s: np.ndarray, values: np.ndarray, window_s: float = 1.0) -> float:
     """The largest mean of ``values`` over the samples whose ``times_s`` (ascending) fall in
     a window ``[t, t + window_s)`` starting at a sample; the mean of all when the samples
@@ -197,4 +187,4 @@ def display_summary(rows: list[dict], hz: float) -> dict:
 
 
 __all__ = ["MIN_TICK_HZ", "ReferenceCache", "display_summary", "judge_display", "on_screen",
-           "tick_hz", "tick_times", "weights", "worst_second", "worst_window"]
+           "tick_hz", "tick_times", "weights", "worst_second"]

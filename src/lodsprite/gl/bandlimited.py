@@ -105,7 +105,6 @@ class HeightPatch:
         self.strips = [np.stack([np.full(min(BLOCK, rows - 1 - r), c, np.int32),
                                  np.arange(r, min(r + BLOCK, rows - 1), dtype=np.int32)],
                                 axis=1) for r in r0 for c in c0]
-        self.count = sum(len(s) for s in self.strips)
 
     def _boxes(self, h: np.ndarray, r0: np.ndarray, c0: np.ndarray
                ) -> tuple[np.ndarray, np.ndarray]:

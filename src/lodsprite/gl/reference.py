@@ -232,11 +232,6 @@ class LevelZeroReference:
                 f"{how}, of {self.cols}x{self.rows} samples; {self.shading} shading; "
                 f"near/far fitted as the adaptive renderer's{last}")
 
-    def key(self) -> tuple:
-        """What makes two references' images equal at one viewpoint (for caches)."""
-        return (id(self.pyramid), self.size, self.fov, self.shading, self.samples,
-                self.filter, self.space, self.max_side)
-
     def _drop_patch(self) -> None:
         if self._patch is not None:
             self._patch.release()
