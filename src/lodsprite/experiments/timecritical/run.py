@@ -9,9 +9,10 @@ shows a new image only on its slots, a slot a technique misses keeps the previou
 for its display time, by one predictor for all (``kalman``: the eye and the orientation
 extrapolated, :class:`~lodsprite.sprite.predictors.KalmanPredictor`; the 2002 paper's
 ``decay`` keeps the last orientation, which on a turning path is worse than none:
-measured on chen1999 over fractal:128 at 256², 30 Hz, a full-resolution frame drawn for
-the paper's prediction is RMSE 33 from the view at its display time, 9.8 for the
-viewpoint at its start, 5.5 for Kalman's, 5.8 for the exact one).  The techniques:
+``benchmarks/predictors_played.py`` on chen1999 over fractal:128 at 256², 30 Hz, 58
+slots: a full-resolution frame drawn for the paper's prediction is RMSE 30.2 from the
+view at its display time, 10.0 for the viewpoint at its start, 6.45 for Kalman's, 6.22
+for the exact one).  The techniques:
 
 * ``adaptive`` - the adaptive renderer with frame-time feedback on its tolerance
   (:class:`~lodsprite.feedback.KnobFeedback`, target 90 % of the display period);
