@@ -73,12 +73,15 @@ def point(args: argparse.Namespace, source: str, eps: float, out: Path) -> dict:
         cfg["display_fps"] = args.display_fps
     if args.tiles > 1:
         cfg["tiles"] = args.tiles
+    if args.vdp:
+        cfg["vdp_seconds"] = args.vdp
     s = render_in_child(cfg, out / f"{source}_eps{eps:g}")
     rmse, chosen = judged(out / f"{source}_eps{eps:g}")
     return {"source": source, "epsilon": eps, "median_ms": s["median_ms"],
             "p99_ms": s["p99_ms"], "rmse": rmse, "rmse_chosen": chosen,
             "keyframes": s.get("keyframes"), "frames": s.get("frames"),
-            "display_fps": s.get("display_fps"), "latency_ms_mean": s.get("latency_ms_mean")}
+            "display_fps": s.get("display_fps"), "latency_ms_mean": s.get("latency_ms_mean"),
+            "cvvdp_jod": s.get("cvvdp_jod")}
 
 
 def compare(points: list[dict], time: str) -> dict:
@@ -121,6 +124,8 @@ def main() -> None:
                     help="judge every n-th frame (0: times only, no reference)")
     ap.add_argument("--tiles", type=int, default=1,
                     help="tiles x tiles keyframe tiles, inline or from the worker")
+    ap.add_argument("--vdp", type=float, default=None,
+                    help="ColorVideoVDP over this many seconds of each run (the vdp extra)")
     ap.add_argument("--out", type=Path, default=None)
     ap.add_argument("--json", action="store_true", help="print the figures as JSON")
     args = ap.parse_args()
@@ -137,7 +142,8 @@ def main() -> None:
         print(f"{p['source']:6s} ε {p['epsilon']:<5g} median {p['median_ms']:7.2f} ms  p99 "
               f"{p['p99_ms']:7.2f} ms (p99/median {p['p99_ms'] / p['median_ms']:.2f})  "
               f"RMSE {p['rmse']:6.2f}  keyframes {p['keyframes']}  "
-              f"frames {p['frames']}  latency {p['latency_ms_mean']:.1f} ms")
+              f"frames {p['frames']}  latency {p['latency_ms_mean']:.1f} ms"
+              + ("" if p["cvvdp_jod"] is None else f"  ColorVideoVDP {p['cvvdp_jod']:.2f} JOD"))
     for key in ("worker_speedup_median", "worker_speedup_p99"):
         cells = ", ".join(f"RMSE {e}: " + ("none" if v is None else f"{v:.2f}x")
                           for e, v in result[key].items())

@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from lodsprite import vdp
 from lodsprite.errors import InputError
 
 if TYPE_CHECKING:
@@ -121,7 +122,8 @@ class ReferenceCache:
 def judge_display(technique: Technique, drawn: Sequence[Viewpoint], decisions: list[dict],
                   shown_s: np.ndarray, viewpoint_at: Callable[[np.ndarray], list],
                   reference: Callable[[Any], np.ndarray], hz: float, end_s: float,
-                  stride: int = 1, flip: bool = False, flip_every: int = 1
+                  stride: int = 1, flip: bool = False, flip_every: int = 1,
+                  video: tuple[float, float] | None = None, video_display: str | None = None
                   ) -> tuple[list[dict], dict]:
     """Judge a played run on ticks of ``hz`` (module doc): frame ``k``, drawn at
     ``drawn[k]`` with ``decisions[k]`` and shown at ``shown_s[k]`` seconds, replayed
@@ -135,26 +137,48 @@ def judge_display(technique: Technique, drawn: Sequence[Viewpoint], decisions: l
     agree are judged at the same instants (and share cached references).  Returns the
     tick rows (``tick``, the tick's number from the path's start at ``hz``, ``t_s``,
     ``frame``, ``rmse``, ``flip``,
-    ``flicker``) and the summary keys."""
+    ``flicker``) and the summary keys.  ``video`` (``(start_s, end_s)`` of path time):
+    every tick in it is also collected, the image on screen and the reference, and the
+    two sequences judged by ColorVideoVDP at ``hz`` frames a second
+    (:func:`lodsprite.vdp.jod`, on ``video_display``): ``cvvdp_jod``, ``cvvdp_window_s``
+    in the summary; those ticks add no rows."""
     from lodsprite import metrics
 
     shown_s = np.asarray(shown_s, dtype=np.float64)
     ticks = tick_times(float(shown_s[0]), end_s, hz)
     gap = max(1, round(hz / MIN_TICK_HZ))  # ticks in 1/60 s: the flicker's interval
     number = np.rint(ticks * hz).astype(np.int64)  # tick numbers from the path's start
+    judge = np.ones(len(ticks), dtype=bool)
     if stride > 1:
-        keep = (number % stride == 0) | (number % stride == gap % stride)
-        ticks, number = ticks[keep], number[keep]
+        judge = (number % stride == 0) | (number % stride == gap % stride)
+    filmed = np.zeros(len(ticks), dtype=bool)
+    if video is not None:
+        vdp.require()
+        filmed = (ticks >= video[0] - 1e-9) & (ticks <= video[1] + 1e-9)
+    keep = judge | filmed
+    ticks, number, judge, filmed = ticks[keep], number[keep], judge[keep], filmed[keep]
     frames = on_screen(shown_s, ticks)
     views = viewpoint_at(ticks * 1.0) if len(ticks) else []
     rows: list[dict] = []
     current, image = -1, None
     judged: dict[int, tuple[np.ndarray, np.ndarray]] = {}  # tick number -> (image, truth)
-    for t, j, k, vp in zip(ticks, number, frames, views, strict=True):
+    film: tuple[np.ndarray, np.ndarray] | None = None  # the window's (test, reference)
+    at = 0
+    for t, j, k, vp, row_here, film_here in zip(ticks, number, frames, views, judge,
+                                                 filmed, strict=True):
         if k != current:
             image = np.array(technique.replay(drawn[k], decisions[k]))
             current = k
         truth = reference(vp)
+        if film_here:
+            if film is None:
+                vdp.check_size(int(filmed.sum()), *image.shape[:2])
+                film = (np.empty((int(filmed.sum()), *image.shape), np.uint8),
+                        np.empty((int(filmed.sum()), *image.shape), np.uint8))
+            film[0][at], film[1][at] = image, truth
+            at += 1
+        if not row_here:
+            continue
         row = {"tick": int(j), "t_s": float(t), "frame": int(k),
                "rmse": metrics.rmse(image, truth)}
         if flip and (stride == 1 and j % flip_every == 0
@@ -166,7 +190,12 @@ def judge_display(technique: Technique, drawn: Sequence[Viewpoint], decisions: l
         judged[int(j)] = (image, truth)
         judged.pop(int(j) - 2 * gap, None)
         rows.append(row)
-    return rows, display_summary(rows, hz)
+    summary = display_summary(rows, hz)
+    if film is not None:
+        summary["cvvdp_jod"] = vdp.jod(film[0], film[1], hz, video_display or vdp.DISPLAY)
+        summary["cvvdp_window_s"] = [float(ticks[filmed][0]), float(ticks[filmed][-1])]
+        summary["cvvdp_display"] = video_display or vdp.DISPLAY
+    return rows, summary
 
 
 def display_summary(rows: list[dict], hz: float) -> dict:

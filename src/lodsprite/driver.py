@@ -53,7 +53,8 @@ class Measure:
     whose images come back in :attr:`RunResult.images`; ``played``: the path played in
     time (:func:`lodsprite.playback.run_played`: frames as often as the technique draws
     them, or at ``display_rate`` a second, each judged at its display time's viewpoint)
-    instead of frame after frame."""
+    instead of frame after frame; ``vdp_seconds``: a played run's ColorVideoVDP over that
+    much of it (:mod:`lodsprite.vdp`)."""
 
     ground_truth: bool = False
     quality_stride: int = 1
@@ -64,13 +65,14 @@ class Measure:
     keep: tuple[int, ...] = ()
     played: bool = False
     display_rate: float | None = None
+    vdp_seconds: float | None = None
 
     @classmethod
     def of(cls, config: RenderConfig, video: Path | None = None) -> Measure:
         """The measurement a :class:`RenderConfig` asks for."""
         return cls(config.ground_truth, config.quality_stride, config.flip,
                    config.save_frames, config.save_every, video, played=config.played,
-                   display_rate=config.display_fps)
+                   display_rate=config.display_fps, vdp_seconds=config.vdp_seconds)
 
     def check(self) -> None:
         if self.quality_stride < 1:
@@ -80,6 +82,10 @@ class Measure:
         if self.played and (self.save_frames or self.video is not None or self.keep):
             raise InputError("a run played in time keeps no images yet: no saved frames, "
                              "video or kept frames")
+        if self.vdp_seconds is not None and not (self.played and self.ground_truth
+                                                  and self.vdp_seconds > 0):
+            raise InputError("--vdp goes with --play and --ground-truth and is > 0 s, got "
+                             f"{self.vdp_seconds}")
 
 
 def _image_sink(measure: Measure, n: int, out_dir: Path | None, stack: ExitStack,
@@ -146,7 +152,8 @@ def drive(technique: Technique, path: CameraPath, out_dir: Path | None = None,
             result = run_played(technique, path, rate=measure.display_rate, finish=finish,
                                 gl_renderer=gl_renderer, progress=progress,
                                 ground_truth=measure.ground_truth, reference=reference,
-                                quality_stride=measure.quality_stride, flip=measure.flip)
+                                quality_stride=measure.quality_stride, flip=measure.flip,
+                                vdp_seconds=measure.vdp_seconds)
         else:
             if on_image is None:
                 on_image, image_frames = _image_sink(

@@ -38,6 +38,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from lodsprite import vdp
 from lodsprite.display import judge_display, tick_hz
 from lodsprite.errors import InputError
 from lodsprite.harness import (
@@ -138,13 +139,16 @@ def run_played(technique: Technique, path: CameraPath, *, fps: float = NOMINAL_F
                quality_stride: int = 1, flip: bool = False,
                max_frames: int | None = None, predict: str | None = None,
                control: Callable[[float], None] | None = None,
-               judge_every_s: float | None = None, flip_every: int = 1) -> RunResult:
+               judge_every_s: float | None = None, flip_every: int = 1,
+               vdp_seconds: float | None = None) -> RunResult:
     """Play ``path`` in time with ``technique`` (module doc): its frames at ``fps`` frames
     a second of path, drawn as often as the technique can, or on the slots of ``rate``
     frames a second; with ``ground_truth`` the image on screen judged in the untimed
     replay at ticks of max(rate, 60) Hz (``quality_stride``, or ``judge_every_s``
     seconds: pairs of ticks that far apart; FLIP on every ``flip_every``-th) against
-    ``reference`` (default: the technique's own, else the band-limited level 0).
+    ``reference`` (default: the technique's own, else the band-limited level 0), and with
+    ``vdp_seconds`` ColorVideoVDP over that much of the run, centred
+    (:func:`lodsprite.vdp.window`; the vdp extra).
     ``predict``: a :data:`PREDICTORS` name, each frame drawn for the viewpoint it predicts
     at the frame's display time; ``control(ms)``: told each frame's time after it (a
     frame-time controller).  ``max_frames`` (default :data:`FRAMES_PER_PATH_FRAME` a path
@@ -166,6 +170,12 @@ def run_played(technique: Technique, path: CameraPath, *, fps: float = NOMINAL_F
     if not technique.plays_in_time:
         raise InputError(f"{technique.name} cannot be played in time: its frames follow "
                          "the frame count, not the clock")
+    if vdp_seconds is not None:
+        if not ground_truth:
+            raise InputError("ColorVideoVDP judges against the reference: it needs "
+                             "ground truth")
+        vdp.window(0.0, 1.0, vdp_seconds)  # a bad length fails before the run
+        vdp.require()
     if ground_truth and not technique.replays:
         raise InputError(f"{technique.name} cannot replay its frames: no ground truth")
     with ExitStack() as stack:
@@ -174,12 +184,13 @@ def run_played(technique: Technique, path: CameraPath, *, fps: float = NOMINAL_F
         return _run(technique, path, fps, rate, finish, gl_renderer, progress,
                     reference if ground_truth else None, quality_stride, flip,
                     FRAMES_PER_PATH_FRAME * len(path) if max_frames is None
-                    else int(max_frames), predict, control, judge_every_s, flip_every)
+                    else int(max_frames), predict, control, judge_every_s, flip_every,
+                    vdp_seconds)
 
 
 def _run(technique, path, fps, rate, finish, gl_renderer, progress, reference,
-         quality_stride, flip, cap, predict, control, judge_every_s, flip_every
-         ) -> RunResult:
+         quality_stride, flip, cap, predict, control, judge_every_s, flip_every,
+         vdp_seconds=None) -> RunResult:
     renderer = technique.renderer
     finish = finish or renderer.gl.finish
     technique.plan_replay(set(range(cap)) if reference else set())
@@ -202,7 +213,8 @@ def _run(technique, path, fps, rate, finish, gl_renderer, progress, reference,
         stride = quality_stride if judge_every_s is None else max(1, round(judge_every_s * hz))
         ticks, shown_summary = judge_display(
             technique, drawn, decisions, shown, lambda t: sampler(t * fps), reference,
-            hz, end, stride, flip, flip_every)
+            hz, end, stride, flip, flip_every,
+            None if vdp_seconds is None else vdp.window(float(shown[0]), end, vdp_seconds))
         per_frame: dict[int, list[float]] = {}
         for t in ticks:
             per_frame.setdefault(t["frame"], []).append(t["rmse"])

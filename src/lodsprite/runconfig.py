@@ -65,6 +65,7 @@ class RenderConfig(TechniqueOptions):
     save_every: int = 1       # with save_frames: save every n-th frame of the replay only
     display_fps: float | None = None  # a run played in time: at most this many frames a s
     play: bool = False        # play the path in time (always so with worker keyframes)
+    vdp_seconds: float | None = None  # played, ground truth: ColorVideoVDP over this long
     options: dict = field(default_factory=dict)
 
     def resolved(self, store: bool | None = None) -> RenderConfig:
@@ -125,6 +126,10 @@ class RenderConfig(TechniqueOptions):
             raise InputError("--display-fps goes with --play or --keyframes worker and is "
                              "> 0, got "
                              f"{self.display_fps}")
+        if self.vdp_seconds is not None and not (self.played and self.ground_truth
+                                                  and self.vdp_seconds > 0):
+            raise InputError("--vdp goes with --play and --ground-truth and is > 0 s, got "
+                             f"{self.vdp_seconds}")
         spec, known = techniques.get(self.technique), techniques.all_options()
         for name, value in self.options.items():
             mine = [o for o in spec.options if o.name == name]

@@ -89,6 +89,10 @@ def _print_render(s: dict, out_dir: Path) -> None:
         out.print(f"RMSE over display time vs the band-limited reference (untimed replay, "
                   f"{s['ticks']} ticks): {s['rmse_time_weighted']:.2f} grey levels, worst "
                   f"second {s['rmse_worst_second']:.2f}{flicker}{flip}")
+        if "cvvdp_jod" in s:
+            a, b = s["cvvdp_window_s"]
+            out.print(f"ColorVideoVDP ({s['cvvdp_display']}, {a:.2f}-{b:.2f} s of the "
+                      f"path): {s['cvvdp_jod']:.2f} JOD (10: indistinguishable)")
     elif "rmse_mean" in s:
         plain = (f", plain {s['lod']}² {s['rmse_lod_mean']:.2f}" if "rmse_lod_mean" in s
                  else "")
@@ -142,6 +146,9 @@ def render(
     display_fps: Annotated[float | None, typer.Option(
         "--display-fps", help="with --play or --keyframes worker: draw at most this many "
                               "frames a second (default: as often as it can)")] = None,
+    vdp: Annotated[float | None, typer.Option(
+        "--vdp", help="with --play and --ground-truth: ColorVideoVDP (JOD) over this many "
+                      "seconds of the run, centred (needs the vdp extra)")] = None,
     scene: Annotated[str | None, typer.Option(
         "--scene", help="a scene instead of --terrain: a scene file (TOML: its terrain "
                         "drawn by --mode, objects and light fields composited by depth "
@@ -179,7 +186,8 @@ def render(
                           size=parse_size(size or "512x512"), frames=frames, grid=grid,
                           exaggeration=exaggeration, save_frames=save_frames,
                           ground_truth=ground_truth, quality_stride=quality_stride,
-                          flip=flip, display_fps=display_fps, play=play, options=options)
+                          flip=flip, display_fps=display_fps, play=play, vdp_seconds=vdp,
+                          options=options)
     with progress_bar(f"render {mode}") as update:
         if distributed:
             from lodsprite.distributed.run import parse_max_error, render_distributed

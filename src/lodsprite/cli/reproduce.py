@@ -42,6 +42,9 @@ def reproduce(
     path: Annotated[str | None, typer.Option(
         "--path", help="timecritical: the camera path (chen1999 | swan2002 | flyover | bank "
                        "| ... | FILE.json; default bank)")] = None,
+    vdp: Annotated[float | None, typer.Option(
+        "--vdp", help="timecritical, large: ColorVideoVDP (JOD) over this many seconds of "
+                      "each played run, centred (needs the vdp extra)")] = None,
     quick: Annotated[bool, typer.Option("--quick", help="a short run: 256², 115 frames, "
                                                         "fewer sweep points, quality on "
                                                         "every third frame")] = False,
@@ -80,7 +83,8 @@ def reproduce(
                       quick=quick, grid=grid, lod=lod,
                       epsilon=epsilon, visibility=visibility, border=border, guard=guard,
                       full_sample=full_sample, sweeps=sweeps, adopt=adopt, pace=pace,
-                      max_error=max_error, links=links, huge=huge, full=full, path=path)
+                      max_error=max_error, links=links, huge=huge, full=full, path=path,
+                      vdp=vdp)
     run_experiment(get(experiment), options, out_dir)
 
 

@@ -23,7 +23,8 @@ class Options:
 
     ``size`` is the square image side in pixels; ``max_error`` None is the client's
     default bound (swan2002); ``huge`` adds a 65536² store (large); ``full`` is the long
-    sweep (large); ``path`` the camera path (timecritical); ``terrain_given`` and
+    sweep (large); ``path`` the camera path (timecritical); ``vdp`` seconds of each
+    played run judged by ColorVideoVDP (timecritical, large); ``terrain_given`` and
     ``size_given`` say whether ``--terrain`` and ``--size`` were given (battlefield has
     defaults of its own)."""
 
@@ -45,6 +46,7 @@ class Options:
     huge: bool = False
     full: bool = False
     path: str | None = None      # --path (timecritical; None: the experiment's own)
+    vdp: float | None = None     # --vdp: ColorVideoVDP over this long of each played run
     terrain_given: bool = False  # --terrain given (battlefield: else its 4k² fractal store)
     size_given: bool = False     # --size given (battlefield: else its own 256²)
 

@@ -21,7 +21,8 @@ def configure(o: Options):
     if o.quick and o.full:
         raise InputError("--quick and --full exclude each other")
     cfg = LargeConfig.quick() if o.quick else LargeConfig.full() if o.full else LargeConfig()
-    return replace(cfg, huge=o.huge, terrains=() if o.terrain == "jacksboro" else (o.terrain,))
+    return replace(cfg, huge=o.huge, terrains=() if o.terrain == "jacksboro" else (o.terrain,),
+                   vdp_seconds=o.vdp)
 
 
 def run(cfg, out_dir: Path, progress: StageProgress | None = None) -> tuple[dict, Path]:

@@ -91,6 +91,7 @@ class LargeConfig(SplitSampled):
     quick_512: bool = False  # the jacksboro runs on ``frames`` frames, not the whole path
     jacksboro: bool = True   # the 512² jacksboro comparison (tests leave it out)
     terrains: tuple[str, ...] = ()  # more terrains: stores, or sources to tile first
+    vdp_seconds: float | None = None  # ColorVideoVDP over this long of each played run
 
     @classmethod
     def quick(cls) -> LargeConfig:

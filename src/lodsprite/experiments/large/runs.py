@@ -103,12 +103,14 @@ class PathRuns:
                              "key_sse": self.cfg.key_sse, "lod": sprite_lod(self.n),
                              "epsilon": eps, "ground_truth": True, "flip": True,
                              "quality_stride": self.cfg.sample_every,
-                             "display_fps": NOMINAL_FPS, **opts},
+                             "display_fps": NOMINAL_FPS, **opts,
+                             **({} if self.cfg.vdp_seconds is None
+                                else {"vdp_seconds": self.cfg.vdp_seconds})},
                             self.runs / run_folder(variant, eps))
         judged = played_quality(self.runs / run_folder(variant, eps))
         return {**row(s, judged[0], eps, chosen=judged[1], key_sse=self.cfg.key_sse),
                 "played": True, **{k: s.get(k) for k in ("display_fps", "latency_ms_mean",
-                                                           "truncated")}}
+                                                           "truncated", "cvvdp_jod")}}
 
     def full(self, path) -> dict:
         """Full resolution timed on the sampled frames (a path file of them), or why not."""

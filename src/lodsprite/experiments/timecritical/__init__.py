@@ -13,11 +13,12 @@ from lodsprite.experiments.base import Experiment, Options, StageProgress, Summa
 
 def configure(o: Options):
     """A :class:`~lodsprite.experiments.timecritical.run.TimeCriticalConfig` from
-    ``--terrain``, ``--path`` and ``--size`` (``--quick``: 256², the path's first 3 s)."""
+    ``--terrain``, ``--path``, ``--size`` and ``--vdp`` (``--quick``: 256², the path's
+    first 3 s)."""
     from lodsprite.experiments.timecritical.run import TimeCriticalConfig
 
     cfg = TimeCriticalConfig.quick() if o.quick else TimeCriticalConfig()
-    cfg = replace(cfg, terrain=o.terrain, path=o.path or cfg.path)
+    cfg = replace(cfg, terrain=o.terrain, path=o.path or cfg.path, vdp_seconds=o.vdp)
     return replace(cfg, size=o.size) if o.size_given or not o.quick else cfg
 
 

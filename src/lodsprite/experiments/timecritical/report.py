@@ -10,7 +10,7 @@ from lodsprite.files import atomic_write_bytes, save_figure, write_csv, write_js
 
 COLUMNS = ("path", "technique", "rate", "median_ms", "p99_ms", "rmse_time_weighted",
            "flip_time_weighted", "flicker", "rmse_worst_second", "missed_slots",
-           "display_fps", "latency_ms_mean", "frames", "runs")
+           "display_fps", "latency_ms_mean", "cvvdp_jod", "frames", "runs")
 
 
 def rows(r: dict) -> list[dict]:
@@ -83,8 +83,9 @@ def write_outputs(r: dict, out_dir: Path) -> Path:
              "the run of median time-weighted RMSE, (min–max) over the runs.", "",
              f"Reference: {r['reference']}; {r['reference_images']} reference images drawn.",
              "", "| technique | rate | frame ms median / p99 | missed slots | "
-             "time-weighted RMSE | FLIP | flicker | worst second RMSE |",
-             "|---|---|---|---|---|---|---|---|"]
+             "time-weighted RMSE | FLIP | flicker | worst second RMSE |"
+             + (" ColorVideoVDP (JOD) |" if cfg.get("vdp_seconds") else ""),
+             "|---|---|---|---|---|---|---|---|" + ("---|" if cfg.get("vdp_seconds") else "")]
     for row_ in rows(r):
         f = r["timecritical"][row_["path"]][row_["technique"]][row_["rate"]]
         lines.append(
@@ -92,7 +93,13 @@ def write_outputs(r: dict, out_dir: Path) -> Path:
             f"{_f(f['p99_ms'], 1)} | {_f(f['missed_slots'])} | "
             f"{_f(f['rmse_time_weighted'])}{_spread(f, 'rmse_time_weighted')} | "
             f"{_f(f.get('flip_time_weighted'), 3)} | {_f(f.get('flicker'))} | "
-            f"{_f(f.get('rmse_worst_second'))} |")
+            f"{_f(f.get('rmse_worst_second'))} |"
+            + (f" {_f(f.get('cvvdp_jod'))}{_spread(f, 'cvvdp_jod')} |"
+               if cfg.get("vdp_seconds") else ""))
+    if cfg.get("vdp_seconds"):
+        lines += ["", f"ColorVideoVDP: {cfg['vdp_seconds']:g} s of each run, centred, every "
+                  "display tick against the reference's, on cvvdp's standard_fhd display "
+                  "(JOD: 10 is indistinguishable from the reference)."]
     lines += ["", f"![time-weighted error against display rate]({png.name})", ""]
     report = out_dir / "report.md"
     atomic_write_bytes(report, "\n".join(lines).encode())

@@ -47,7 +47,7 @@ TECHNIQUES: dict[str, tuple[str, dict[str, Any], str | None]] = {
     "sprite-worker": ("sprite", {"keyframes": "worker"}, None),
 }
 FIGURES = ("median_ms", "p99_ms", "rmse_time_weighted", "flip_time_weighted", "flicker",
-           "rmse_worst_second", "missed_slots", "display_fps", "latency_ms_mean")
+           "rmse_worst_second", "missed_slots", "display_fps", "latency_ms_mean", "cvvdp_jod")
 TARGET_SHARE = 0.9  # the controller's target: this share of the display period
 
 
@@ -70,6 +70,7 @@ class TimeCriticalConfig:
     flip_every: int = 4
     samples: int = 4
     predictor: str = "kalman"
+    vdp_seconds: float | None = None  # ColorVideoVDP over this long of each run (vdp extra)
 
     @classmethod
     def quick(cls) -> TimeCriticalConfig:
@@ -119,7 +120,8 @@ def play_one(technique_name: str, renderer, path, rate: float, cache, cfg) -> tu
             t, knob, TARGET_SHARE * 1e3 / rate)
         r = run_played(t, path, rate=rate, ground_truth=True, reference=cache, flip=True,
                        predict=cfg.predictor, control=None if control is None else control.after,
-                       judge_every_s=cfg.judge_every_s, flip_every=cfg.flip_every)
+                       judge_every_s=cfg.judge_every_s, flip_every=cfg.flip_every,
+                       vdp_seconds=cfg.vdp_seconds)
     finally:
         t.release()
     s = r.summary
