@@ -31,11 +31,18 @@ started again (``reset_stats``) and the path played again, timed:
   streaming draws the kernel's frame rendered after the press once it has loaded;
 * shown error (px, mean over the path's frames): the page's estimate for ``sprite``
   (parallax from the keyframe's viewpoint and the squares drawn from the fallback, the
-  HUD's figure); none for ``rfb`` ('-'), whose every frame is the full-detail render of
-  its own viewpoint (its cost is the frame time and the input lag above; JPEG not
-  counted).  The stream's input times are jupyter_rfb's handler's (``performance.now()``
-  as it runs), the sprite page's the key event's own ``timeStamp``: a bias towards the
-  stream of the event's wait on the page's main thread.
+  HUD's figure); none for ``rfb``.  The stream's input times are jupyter_rfb's
+  handler's (``performance.now()`` as it runs), the sprite page's the key event's own
+  ``timeStamp``: a bias towards the stream of the event's wait on the page's main thread;
+* RMSE (grey levels) of the images each widget shows, against the band-limited
+  reference (:func:`lodsprite.harness.scene_reference`, level 0 at 4x4 samples a pixel)
+  at the viewpoint each shows: in a third, judged pass of the path (after the timed one,
+  its figures not timed), every ``--judge-every``-th path frame is kept as it is drawn:
+  the sprite page's canvas (``capture``: a readback in those frames, which the timed
+  pass never does) and the stream's frame as the kernel rendered it, then compressed
+  and decoded as jupyter_rfb sends it (JPEG at the widget's quality).  Both widgets play
+  a path one viewpoint a frame, so the frame shown for path index ``k`` is judged at
+  viewpoint ``k``; its mean over the kept frames is ``rmse_shown``.
 
     python benchmarks/notebook_vs_rfb.py [--latencies 0,50,150] [--quick] [--json F]
 
@@ -95,6 +102,7 @@ window.jupyterapp.serviceManager.sessions.shutdownAll().then(
   () => done(true), (e) => done(String(e)));
 """
 VIEW_CSS = {"sprite": ".lodsprite-widget canvas", "rfb": ".renderview-view"}
+API_JS = "document.querySelector('.lodsprite-widget').lodsprite"
 
 
 # ------------------------------------------------------------------ the notebook
@@ -109,6 +117,7 @@ def cells(mode: str, args) -> list[str]:
     if mode == "sprite":
         kw += f", epsilon={args.epsilon}" + (f", lod={args.lod}" if args.lod else "")
     play = f"w.play({args.path!r}, frames={args.frames}); n = await w.played(timeout=600)"
+    judged = list(range(0, args.frames, args.judge_every))
     return [
         "import asyncio, json, os, time\nimport lodsprite\n"
         f"w = lodsprite.widget({args.terrain!r}, stream={mode == 'rfb'}, {kw})\nw",
@@ -126,6 +135,27 @@ def cells(mode: str, args) -> list[str]:
         "               'shown': list(getattr(w, 'shown', [])),\n"
         "               'drawn': list(getattr(w, 'drawn', [])),\n"
         "               'inputs': list(getattr(w, 'inputs', []))}, open('result.json', 'w'))\n"
+        "    while not os.path.exists('judge'):  # the judged pass, untimed\n"
+        "        await asyncio.sleep(0.05)\n"
+        f"    keep, kept = set({judged!r}), {{}}\n"
+        "    if hasattr(w, 'get_frame'):  # the stream: each kept frame as rendered\n"
+        "        draw = w.get_frame\n"
+        "        def get_frame():\n"
+        "            i = w._path_index\n"
+        "            image = draw()\n"
+        "            if image is not None and i in keep and i < len(w._path):\n"
+        "                vp = w._path[i]\n"
+        "                kept[i] = (image.copy(), [*vp.x, *vp.y, *vp.z, *vp.o])\n"
+        "            return image\n"
+        "        w.get_frame = get_frame\n"
+        f"    {play}\n"
+        "    if kept:\n"
+        "        import numpy as np\n"
+        "        ks = sorted(kept)\n"
+        "        np.savez('judged.npz', index=np.array(ks),\n"
+        "                 images=np.stack([kept[k][0] for k in ks]),\n"
+        "                 vps=np.array([kept[k][1] for k in ks]), quality=w.quality)\n"
+        "    open('judged', 'w').write('1')\n"
         "    w.close()\n\n"
         "def failed(task):\n"
         "    if task.exception() is not None:\n"
@@ -205,6 +235,71 @@ def figures(mode: str, result: dict, page: dict, args) -> dict:
             "kernel_render_ms": result["stats"].get("render_ms")}
 
 
+# ------------------------------------------------------------------ shown images, judged
+
+def page_frames(captured: list[dict]) -> list[tuple[int, np.ndarray, np.ndarray]]:
+    """The sprite page's kept frames: (path index, viewpoint's 12 numbers, (h, w, 3) uint8
+    image top row first) from its ``captured()`` (RGBA rows bottom-up, base64)."""
+    import base64
+
+    out = []
+    for c in captured:
+        rgba = np.frombuffer(base64.b64decode(c["rgba"]), np.uint8)
+        image = rgba.reshape(c["height"], c["width"], 4)[::-1, :, :3]
+        vp = c["vp"]
+        out.append((int(c["index"]), np.array([*vp["x"], *vp["y"], *vp["z"], *vp["o"]]),
+                    np.ascontiguousarray(image)))
+    return out
+
+
+def stream_frames(npz: Path) -> list[tuple[int, np.ndarray, np.ndarray]]:
+    """The stream's kept frames as the page gets them: each compressed by jupyter_rfb at
+    the widget's quality (JPEG, PNG where no JPEG encoder is installed) and decoded."""
+    import imageio.v3 as iio
+    from jupyter_rfb._utils import array2compressed
+
+    data = np.load(npz)
+    out = []
+    for k, vp, image in zip(data["index"], data["vps"], data["images"], strict=True):
+        _, payload = array2compressed(image, quality=int(data["quality"]))
+        shown = np.asarray(iio.imread(payload))[..., :3]
+        out.append((int(k), vp, shown))
+    return out
+
+
+_REFERENCE: dict = {}
+
+
+def reference(args, vp12: np.ndarray) -> np.ndarray:
+    """The band-limited reference at a viewpoint (12 numbers) of the widgets' terrain,
+    size and field of view (45°, both widgets' default), drawn once per viewpoint."""
+    from lodsprite import Renderer, open_scene
+    from lodsprite.camera import Viewpoint
+    from lodsprite.harness import scene_reference
+
+    if "draw" not in _REFERENCE:
+        renderer = Renderer(open_scene(args.terrain), size=args.size, fov_y_deg=45.0)
+        ctx = scene_reference(renderer)
+        _REFERENCE.update(draw=ctx.__enter__(), ctx=ctx, images={})
+    key = np.round(np.asarray(vp12, np.float64), 6).tobytes()
+    images = _REFERENCE["images"]
+    if key not in images:
+        v = np.asarray(vp12, np.float64)
+        images[key] = _REFERENCE["draw"](Viewpoint(v[0:3], v[3:6], v[6:9], v[9:12]))
+    return images[key]
+
+
+def judge(shown: list[tuple[int, np.ndarray, np.ndarray]], args) -> dict:
+    """RMSE of each kept frame against the reference at its viewpoint: the mean and the
+    frames judged."""
+    from lodsprite.metrics import rmse
+
+    errors = [rmse(image, reference(args, vp)) for _, vp, image in shown]
+    return {"rmse_shown": float(np.mean(errors)) if errors else None,
+            "rmse_shown_max": float(np.max(errors)) if errors else None,
+            "judged_frames": len(errors)}
+
+
 # ------------------------------------------------------------------ one run
 
 def wait_for(path: Path, deadline: float, what: str, log) -> None:
@@ -233,7 +328,8 @@ def press(driver, mode: str, presses: int) -> None:
 def one_run(driver, base: str, token: str, root: Path, mode: str, args,
             raw: Path | None = None) -> dict:
     name = write_notebook(root, mode, args)
-    for f in ("warm", "timed", "pressed", "result.json", "failed"):
+    for f in ("warm", "timed", "pressed", "result.json", "failed", "judge", "judged",
+              "judged.npz"):
         (root / f).unlink(missing_ok=True)
     log = lambda: (root / "jupyterlab.log").read_text()[-3000:]  # noqa: E731
     deadline = time.monotonic() + args.deadline
@@ -261,10 +357,22 @@ def one_run(driver, base: str, token: str, root: Path, mode: str, args,
     (root / "pressed").write_text("1")
     wait_for(root / "result.json", deadline, "result", log)
     result = json.loads((root / "result.json").read_text())
+    if mode == "sprite":  # the judged pass: the page keeps the sampled frames' pixels
+        driver.execute_script(f"{API_JS}.capture(arguments[0]);",
+                              list(range(0, args.frames, args.judge_every)))
+    (root / "judge").write_text("1")
+    wait_for(root / "judged", deadline, "judged pass", log)
+    shown = (page_frames(driver.execute_script(f"return {API_JS}.captured();"))
+             if mode == "sprite" else stream_frames(root / "judged.npz"))
     driver.execute_async_script(SHUTDOWN_JS)  # this run's kernel ends before the next
     if raw is not None:  # the logs the figures come from, beside them
         raw.write_text(json.dumps({"kernel": result, "page": page}))
-    return figures(mode, result, page, args)
+    if raw is not None and shown:  # the middle judged frame: shown | reference
+        _, vp, image = shown[len(shown) // 2]
+        from lodsprite.files import write_png
+
+        write_png(raw.with_suffix(".png"), np.concatenate([image, reference(args, vp)], 1))
+    return {**figures(mode, result, page, args), **judge(shown, args)}
 
 
 def proxy_main(listen: int, target: int, delay_ms: float) -> None:
@@ -311,11 +419,14 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                     help="the sprite widget's error bound, pixels")
     ap.add_argument("--presses", type=int, default=8, help="key presses for input to frame")
     ap.add_argument("--widgets", default="sprite,rfb", help="which widgets, in this order")
+    ap.add_argument("--judge-every", type=int, default=8,
+                    help="judge the shown image of every n-th path frame (untimed pass)")
     ap.add_argument("--deadline", type=float, default=900.0, help="seconds for one run")
     ap.add_argument("--quick", action="store_true",
                     help="a small run: fractal:128, 320x240, 60 frames, 0 and 150 ms, 3 presses")
     ap.add_argument("--json", type=Path, default=None,
-                    help="write the figures here, and beside them each run's logs")
+                    help="write the figures here, and beside them each run's logs and "
+                         "its middle judged frame beside the reference (PNG)")
     ap.add_argument("--plot", type=Path, default=None, help="draw the figures here (PNG)")
     ap.add_argument("--role", choices=("main", "proxy"), default="main", help=argparse.SUPPRESS)
     ap.add_argument("--listen", type=int, help=argparse.SUPPRESS)
@@ -335,13 +446,13 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     args.widgets = [w for w in args.widgets.split(",") if w]
     if not args.widgets or set(args.widgets) - set(MODES):
         ap.error(f"--widgets is a comma-separated list of {', '.join(MODES)}")
-    if args.frames < 2 or args.presses < 1:
-        ap.error("--frames at least 2 and --presses at least 1")
+    if args.frames < 2 or args.presses < 1 or args.judge_every < 1:
+        ap.error("--frames at least 2, --presses and --judge-every at least 1")
     return args
 
 
 COLUMNS = ("frame_ms_median", "frame_ms_p99", "input_to_frame_ms", "input_to_frame_ms_p99",
-           "error_px_mean", "frames", "keyframes", "inputs")
+           "error_px_mean", "rmse_shown", "frames", "keyframes", "inputs", "judged_frames")
 
 
 def show(rows: list[dict]) -> None:

@@ -195,6 +195,35 @@ def test_the_page_plays_the_path_and_its_held_frame_matches_the_offscreen_render
     assert rmse(shown, first) > 3 * RMSE_TOL  # the comparison tells views apart
 
 
+def test_capture_keeps_the_chosen_path_frames_with_their_viewpoints(server, browser):
+    """capture(indices) then a path played: captured() gives those frames' pixels and the
+    viewpoint each was drawn at (the path's own), then forgets them."""
+    from lodsprite.paths import get_path
+    from lodsprite.scene import load_scene
+
+    got = play(browser, server)
+    assert "error" not in got, got
+    kept = browser.execute_async_script("""
+        const done = arguments[arguments.length - 1];
+        const api = window.lodsprite;
+        api.capture([0, arguments[0] - 1]);
+        api.play('chen1999', arguments[0]).then(() => api.finished).then(
+            () => done({kept: api.captured(), again: api.captured()}),
+            (e) => done({error: String(e)}));""", FRAMES)
+    assert "error" not in kept, kept
+    assert [c["index"] for c in kept["kept"]] == [0, FRAMES - 1] and kept["again"] == []
+    hf = load_scene(TERRAIN["terrain"], "terrain", TERRAIN["grid"], 1.0).hf
+    path = get_path("chen1999", hf, FRAMES)
+    images = []
+    for c, k in zip(kept["kept"], (0, FRAMES - 1), strict=True):
+        want = path.viewpoints[k]
+        for axis in "xyzo":
+            assert c["vp"][axis] == pytest.approx(getattr(want, axis), abs=1e-3)
+        assert (c["width"], c["height"]) == (SIZE, SIZE)
+        images.append(np.frombuffer(base64.b64decode(c["rgba"]), np.uint8))
+    assert rmse(images[0], images[1]) > 3 * RMSE_TOL  # two views, two images
+
+
 def test_the_page_flies_with_the_keyboard(server, browser):
     from selenium.webdriver.common.action_chains import ActionChains
 

@@ -16,6 +16,9 @@
 // The API (for tests, tools and the widget): ready (a Promise: scene loaded), finished()
 // (a Promise: the path played and the held view's keyframe shown), stats(), pixels(),
 // viewpoint(), pathIndex() (path viewpoints drawn so far: the one shown is pathIndex() - 1),
+// capture(indices) (keep the canvas's pixels and viewpoint as the frames of those path
+// indices are drawn: a readback in the frame, for untimed judged passes only), captured()
+// (those kept, {index, vp, width, height, rgba}, then forgotten),
 // serverStats() (a Promise: the `stats` op's reply data), decoded() (keyframes decoded by
 // the decode worker), play(spec, frames) (a Promise: the path's viewpoints arrived and
 // play), stop() (hold the view shown), setViewpoint(vp), screenshot() (a Promise: a PNG
@@ -104,6 +107,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
   transport.onclose(() => { state = 'disconnected'; });
 
   let renderer, metric, predictor, controls, path = null, pathIndex = 0, pathName = null;
+  let captures = null, captureSet = null;
   let shownVp = null, keyEye = null, keyViewProj = null, finishedResolve = () => {}, finished = null, lastFrame = null, lastSample = -Infinity;
   const newFinished = () => { finished = new Promise((r) => { finishedResolve = r; }); };
   newFinished();
@@ -166,8 +170,9 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
     lastFrame = now;
     for (const t of inputs.drawn) keep(inputs.ms, now - t);  // the drawn frame presented
     inputs.drawn = [];
-    let vp, resting;
+    let vp, resting, index = -1;
     if (playing()) {
+      index = pathIndex;
       vp = path[pathIndex++];
       resting = pathIndex === path.length;
       if (resting) { controls.set(vp); state = `${pathName} played: holding`; }
@@ -190,6 +195,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
       send({ kind: 'viewpoint', t: now / 1000, viewpoint: vp, shown });
     }
     renderer.draw(predictor.viewProj(vp));
+    if (captureSet && captureSet.has(index)) captures.push({ index, vp, ...renderer.pixels() });
     stats.error_px = predictor.errorPx(metric, keyEye, vp, keyViewProj);
     if (Number.isFinite(stats.error_px)) { stats.errorSum += stats.error_px; stats.errorFrames += 1; }
     stats.frames += 1;
@@ -217,6 +223,8 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
       inputs.ms = []; lastFrame = null;
     },
     pixels: () => renderer.pixels(),
+    capture(indices) { captureSet = new Set(indices); captures = []; },
+    captured() { const out = captures || []; captures = null; captureSet = null; return out; },
     viewpoint: () => controls && controls.vp,
     pathIndex: () => pathIndex,
     state: () => state,
