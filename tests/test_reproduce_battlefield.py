@@ -50,6 +50,9 @@ def test_results_hold_the_issues_keys_and_the_runs_own_figures(battlefield):
         # the reduced-detail run scores worse than the full-detail scene does against the
         # same reference (which scores it as the same image: see the test below)
         assert r[name]["rmse"] > FULL_DETAIL_RMSE and r[name]["flip"] > 0
+        # the flicker of frame 1 against frame 0 (the reported half), and of 4 against 3
+        assert run["flicker"] is not None and run["flicker_chosen"] is not None
+        assert run["flicker"] >= 0 and r[name]["flicker"] >= 0
         for layer in ("terrain", "objects", "lightfields"):  # every layer drew every frame
             assert len(run["columns"][f"ms_{layer}"]) == 6
     assert PVL_KEYS <= set(r["profile_vs_linear"])
@@ -143,6 +146,7 @@ def test_report_names_the_measured_figures_beside_the_targets(battlefield):
     assert (out / "profile_vs_linear.png").stat().st_size > 0
     # issue 32: reuse beside the scheduler, with the frontier plot of the three runs
     assert "## Reused static layers" in text and f"{r['reuse']['median_ms']:.1f}" in text
+    assert "| flicker |" in text and f"flicker {r['reuse']['flicker']:.2f}" in text
     assert (out / "frontier_0.png").stat().st_size > 0 and "frontier_0.png" in text
     assert r["paths"]["weave"]["reuse"]["keyframes_rendered"] >= 1
 

@@ -123,14 +123,19 @@ def _mean(rows: list[dict], key: str) -> float | None:
     return float(np.mean([r[key] for r in rows])) if rows and key in rows[0] else None
 
 
-def _halves(q: list[dict], chosen: set[int]) -> dict:
+def _halves(q: list[dict], chosen: set[int], flick: list[dict] = ()) -> dict:
     """Quality of the replayed rows ``q`` on the reported frames (``rmse``, ``flip``,
     ``triangles_objects_reported``) and on the frames ``chosen`` (their ``frame``
-    indices: ``rmse_chosen``, ``flip_chosen``, ``triangles_objects_chosen``)."""
+    indices: ``rmse_chosen``, ``flip_chosen``, ``triangles_objects_chosen``); ``flicker``
+    and ``flicker_chosen`` from the rows ``flick`` (the frame after a sampled one, in the
+    half of the sampled frame before it)."""
     out: dict = {}
     for half, rows in (("", [r for r in q if r["frame"] not in chosen]),
                        ("_chosen", [r for r in q if r["frame"] in chosen])):
         out[f"rmse{half}"], out[f"flip{half}"] = _mean(rows, "rmse"), _mean(rows, "flip")
+        out[f"flicker{half}"] = _mean(
+            [r for r in flick if (r["frame"] - 1 in chosen) == (half == "_chosen")],
+            "flicker")
         out[f"triangles_objects{half or '_reported'}"] = (
             float(np.mean([r.get("triangles_objects", 0) for r in rows])) if rows else None)
     out["quality_frames_reported"] = len(q) - sum(r["frame"] in chosen for r in q)
@@ -144,12 +149,13 @@ def _row(result, target_ms: float | None, chosen: set[int]) -> dict:
     rows = result.rows
     ms = np.array([r["ms"] for r in rows], np.float64)
     q = [r for r in rows if "rmse" in r]
+    flick = [r for r in rows if "flicker" in r]
     cols = {k: [r.get(k) for r in rows] for k in rows[0]
             if k.startswith(("ms_", "knob_", "triangles_")) or k in ("triangles", "extractions")}
     cols.update({k: [r.get(k) for r in rows] for k in ("rmse", "flip") if q})
     s = result.summary
     return {"target_ms": target_ms, **_stats(ms), "first_frame_ms": s["first_frame_ms"],
-            **_halves(q, chosen), "quality_frames": len(q),
+            **_halves(q, chosen, flick), "quality_frames": len(q),
             "triangles_mean": float(np.mean([r["triangles"] for r in rows])),
             "triangles_objects_mean": float(np.mean([r.get("triangles_objects", 0)
                                                      for r in rows])),
@@ -282,8 +288,8 @@ def pooled(per_path: dict, key: str) -> dict:
         return None if any(v is None for v in vals) else float(np.average(vals, weights=n))
 
     return {"target_ms": runs[0]["target_ms"], **_stats(ms), "rmse": mean("rmse"),
-            "flip": mean("flip"), "triangles_mean": float(np.mean([r["triangles_mean"]
-                                                                   for r in runs]))}
+            "flip": mean("flip"), "flicker": mean("flicker"),
+            "triangles_mean": float(np.mean([r["triangles_mean"] for r in runs]))}
 
 
 def run_path_set(renderer, world, spec: str, cfg: BattlefieldConfig,
