@@ -4,8 +4,6 @@ own verdicts on sequences whose order is known."""
 
 from __future__ import annotations
 
-import builtins
-
 import numpy as np
 import pytest
 
@@ -28,14 +26,7 @@ class Levels:
 
 
 def _no_cvvdp(monkeypatch):
-    real = builtins.__import__
-
-    def fake(name, *args, **kwargs):
-        if name == "pycvvdp" or name.startswith("pycvvdp."):
-            raise ImportError(name)
-        return real(name, *args, **kwargs)
-
-    monkeypatch.setattr(builtins, "__import__", fake)
+    monkeypatch.setattr(vdp, "_installed", lambda module: module != "pycvvdp")
 
 
 def test_without_the_extra_asking_for_it_is_an_input_error_naming_it(monkeypatch):
@@ -135,9 +126,28 @@ def test_colorvideovdp_scores_held_frames_worse_the_longer_they_are_held():
     (within 0.01); shown as a display that misses slots (each image held 2, 3, then 6
     frames of 30 a second) it scores less the longer each image is held, the way a
     played run that misses slots is seen (measured 9.69, 8.79, 5.49)."""
-    pytest.importorskip("pycvvdp")
+    if not vdp.available():
+        pytest.skip("the vdp extra (cvvdp, PyTorch) is not installed")
     ref = _moving_checker(30, 0.5)
     scores = [vdp.jod(ref[(np.arange(30) // hold) * hold], ref, 30.0)
               for hold in (1, 2, 3, 6)]
     assert scores[0] == pytest.approx(10.0, abs=0.01)
     assert all(a > b + 0.1 for a, b in zip(scores, scores[1:], strict=False)), scores
+
+
+def test_a_played_run_with_a_gl_context_is_judged_without_pytorch_beside_it(gl):
+    """Where the extra is installed: a GL context is current and a frame drawn, the metric
+    runs, and the GL process never imports PyTorch (a CUDA build of PyTorch imported
+    beside Mesa's EGL context crashed the process)."""
+    import sys
+
+    if not vdp.available():
+        pytest.skip("the vdp extra (cvvdp, PyTorch) is not installed")
+    ref = _moving_checker(20, 0.5, size=64)
+    assert vdp.jod(ref, ref, 60.0) == pytest.approx(10.0, abs=0.01)
+    assert "torch" not in sys.modules and "pycvvdp" not in sys.modules
+    fbo = gl.mgl.simple_framebuffer((8, 8))  # and GL still draws in this process
+    fbo.use()
+    fbo.clear(0.5, 0.25, 1.0)
+    assert np.frombuffer(fbo.read(), np.uint8)[:3].tolist() == [128, 64, 255]
+    fbo.release()

@@ -9,7 +9,10 @@ sees what flicker and held frames do to a viewer, weighted by the display's mode
 
 It is an optional extra (``pip install 'lodsprite[vdp]'``: cvvdp, PyTorch, torchvision);
 :func:`require` raises :class:`~lodsprite.errors.InputError` naming it when missing.
-Runs on the CPU here; on a CUDA machine PyTorch's device is used.
+The metric runs in a process of its own (spawned once, kept for the next call): PyTorch
+is never imported beside the GL context (a CUDA build of PyTorch imported into a process
+with a Mesa EGL context crashed it here), and its threads never share a process with the
+renderers.  Runs on the CPU here; on a CUDA machine PyTorch's device is used.
 
 The sequence judged is a window of the played run (:func:`window`): every display tick of
 ``seconds`` of path time centred in the run, the image on screen at each tick against
@@ -20,7 +23,11 @@ metric at the tick rate.  The display model is cvvdp's ``standard_fhd`` (a 24-in
 
 from __future__ import annotations
 
+import atexit
 import functools
+import importlib.util
+import multiprocessing
+from concurrent.futures import ProcessPoolExecutor
 from typing import Any
 
 import numpy as np
@@ -34,23 +41,22 @@ MAX_VIDEO_BYTES = 4 << 30
 allocated."""
 
 
+def _installed(module: str) -> bool:
+    return importlib.util.find_spec(module) is not None
+
+
 def available() -> bool:
-    """Whether the extra is installed (cvvdp imports)."""
-    try:
-        require()
-    except InputError:
-        return False
-    return True
+    """Whether the extra is installed (cvvdp, PyTorch and torchvision found; none of
+    them imported here)."""
+    return all(_installed(m) for m in ("pycvvdp", "torch", "torchvision"))
 
 
-def require() -> Any:
-    """The ``pycvvdp`` module, or :class:`InputError` naming the extra that installs it."""
-    try:
-        import pycvvdp
-    except ImportError:
+def require() -> None:
+    """:class:`InputError` naming the extra that installs ColorVideoVDP, where it is
+    missing."""
+    if not available():
         raise InputError("ColorVideoVDP needs the vdp extra (cvvdp, PyTorch): "
-                         f"pip install '{VDP_EXTRA}'") from None
-    return pycvvdp
+                         f"pip install '{VDP_EXTRA}'")
 
 
 def window(first_s: float, end_s: float, seconds: float) -> tuple[float, float]:
@@ -75,9 +81,31 @@ def check_size(frames: int, height: int, width: int) -> None:
 
 
 @functools.lru_cache(maxsize=2)
-def _metric(display: str) -> Any:
-    pycvvdp = require()
+def _metric(display: str) -> Any:  # in the metric's process
+    import pycvvdp
+
     return pycvvdp.cvvdp(display_name=display, quiet=True)
+
+
+def _jod(test: np.ndarray, reference: np.ndarray, fps: float, display: str) -> float:
+    import torch
+
+    with torch.no_grad():
+        q, _ = _metric(display).predict(test, reference, dim_order="FHWC",
+                                        frames_per_second=float(fps))
+    return float(q)
+
+
+_POOL: ProcessPoolExecutor | None = None
+
+
+def _pool() -> ProcessPoolExecutor:
+    """The metric's process (spawned, not forked: a fork would copy the GL context)."""
+    global _POOL
+    if _POOL is None:
+        _POOL = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"))
+        atexit.register(_POOL.shutdown)
+    return _POOL
 
 
 def jod(test: np.ndarray, reference: np.ndarray, fps: float, display: str = DISPLAY) -> float:
@@ -92,12 +120,8 @@ def jod(test: np.ndarray, reference: np.ndarray, fps: float, display: str = DISP
         raise InputError("ColorVideoVDP takes uint8 sRGB frames")
     if not fps > 0:
         raise InputError(f"a frame rate must be > 0, got {fps}")
-    import torch
-
-    metric = _metric(display)
-    with torch.no_grad():
-        q, _ = metric.predict(test, reference, dim_order="FHWC", frames_per_second=float(fps))
-    return float(q)
+    require()
+    return _pool().submit(_jod, test, reference, float(fps), display).result()
 
 
 __all__ = ["DISPLAY", "MAX_VIDEO_BYTES", "VDP_EXTRA", "available", "check_size", "jod",
