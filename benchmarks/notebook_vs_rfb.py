@@ -534,6 +534,8 @@ def main(argv: list[str] | None = None) -> None:
                         proxy.wait(timeout=10)
             finally:
                 quit_browser(driver, profile)
+                if "ctx" in _REFERENCE:  # the reference's GL objects released
+                    _REFERENCE.pop("ctx").__exit__(None, None, None)
     print(f"\n{args.terrain}, {args.size[0]}x{args.size[1]}, {args.path} "
           f"{args.frames} frames, epsilon {args.epsilon:g} px, {args.presses} presses")
     show(rows)

@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from lodsprite import vdp
 from lodsprite.errors import InputError
 from lodsprite.files import write_json, write_png
 from lodsprite.harness import (
@@ -82,10 +83,7 @@ class Measure:
         if self.played and (self.save_frames or self.video is not None or self.keep):
             raise InputError("a run played in time keeps no images yet: no saved frames, "
                              "video or kept frames")
-        if self.vdp_seconds is not None and not (self.played and self.ground_truth
-                                                  and self.vdp_seconds > 0):
-            raise InputError("--vdp goes with --play and --ground-truth and is > 0 s, got "
-                             f"{self.vdp_seconds}")
+        vdp.check_request(self.vdp_seconds, self.played, self.ground_truth)
 
 
 def _image_sink(measure: Measure, n: int, out_dir: Path | None, stack: ExitStack,

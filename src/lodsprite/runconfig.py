@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
 
+from lodsprite import vdp
 from lodsprite.errors import InputError
 from lodsprite.paths import CameraPath, get_path
 from lodsprite.scene import Scene, load_scene
@@ -126,10 +127,7 @@ class RenderConfig(TechniqueOptions):
             raise InputError("--display-fps goes with --play or --keyframes worker and is "
                              "> 0, got "
                              f"{self.display_fps}")
-        if self.vdp_seconds is not None and not (self.played and self.ground_truth
-                                                  and self.vdp_seconds > 0):
-            raise InputError("--vdp goes with --play and --ground-truth and is > 0 s, got "
-                             f"{self.vdp_seconds}")
+        vdp.check_request(self.vdp_seconds, self.played, self.ground_truth)
         spec, known = techniques.get(self.technique), techniques.all_options()
         for name, value in self.options.items():
             mine = [o for o in spec.options if o.name == name]

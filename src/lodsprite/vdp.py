@@ -70,6 +70,14 @@ def window(first_s: float, end_s: float, seconds: float) -> tuple[float, float]:
     return float(a), float(a + seconds)
 
 
+def check_request(seconds: float | None, played: bool, ground_truth: bool) -> None:
+    """:class:`InputError` unless ``seconds`` (None: not asked for) goes with a run played
+    in time and judged against the reference, and is > 0."""
+    if seconds is not None and not (played and ground_truth and seconds > 0):
+        raise InputError(f"--vdp goes with --play and --ground-truth and is > 0 s, got "
+                         f"{seconds}")
+
+
 def check_size(frames: int, height: int, width: int) -> None:
     """:class:`InputError` when a window's two uint8 sequences would exceed
     :data:`MAX_VIDEO_BYTES`."""
@@ -124,5 +132,5 @@ def jod(test: np.ndarray, reference: np.ndarray, fps: float, display: str = DISP
     return _pool().submit(_jod, test, reference, float(fps), display).result()
 
 
-__all__ = ["DISPLAY", "MAX_VIDEO_BYTES", "VDP_EXTRA", "available", "check_size", "jod",
-           "require", "window"]
+__all__ = ["DISPLAY", "MAX_VIDEO_BYTES", "VDP_EXTRA", "available", "check_request",
+           "check_size", "jod", "require", "window"]
