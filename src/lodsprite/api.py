@@ -193,7 +193,8 @@ class Renderer:
                threaded: bool = False, visibility: str = DEFAULT_VISIBILITY,
                guard_px: int = DEFAULT_GUARD_PX, border: bool = True, cache_mb: float = 0.0,
                cache_policy: str = DEFAULT_POLICY, metric: str = "warp",
-               store=None) -> LodSprite:
+               store=None, depth_stride: int | None = None,
+               key_scale: float = 1.0) -> LodSprite:
         """A LOD-sprite engine on this renderer: error threshold ``epsilon_px`` pixels,
         coarse level ``lod`` quads per side.  ``threaded=True`` renders keyframes in a
         worker process with its own context (:mod:`lodsprite.sprite.worker_engine`); otherwise a
@@ -203,7 +204,10 @@ class Renderer:
         keyframes only).  ``metric``: ``"warp"`` (Eq. 1-2) or ``"resample"`` (adds the
         keyframe image's resampling error, :mod:`lodsprite.sprite.resampling`).  ``store``:
         the worker's keyframes over a terrain store, drawn adaptively
-        (:class:`~lodsprite.sprite.keyframe_worker.StoreKeys`; threaded only)."""
+        (:class:`~lodsprite.sprite.keyframe_worker.StoreKeys`; threaded only).
+        ``depth_stride``: spriteframes draw a mesh from the keyframe's own depth, a vertex
+        every that many keyframe texels (None: the coarse level); ``key_scale``: keyframe
+        texels a display pixel side (:class:`~lodsprite.gl.sprite.SpriteDrawer`)."""
         if not epsilon_px > 0:
             raise InputError(f"epsilon must be > 0 pixels, got {epsilon_px}")
         if not cache_mb >= 0:
@@ -212,7 +216,7 @@ class Renderer:
             raise InputError("the keyframe cache needs inline keyframes "
                              "(--inline-keyframes)")
         sprite = LodSprite(self, epsilon_px, lod, threaded, visibility, guard_px, border,
-                           cache_mb, cache_policy, metric, store)
+                           cache_mb, cache_policy, metric, store, depth_stride, key_scale)
         self._sprites.append(sprite)
         return sprite
 
@@ -285,11 +289,13 @@ class LodSprite:
     def __init__(self, renderer: Renderer, epsilon_px: float, lod: int, threaded: bool,
                  visibility: str, guard_px: int, border: bool, cache_mb: float = 0.0,
                  cache_policy: str = DEFAULT_POLICY, metric: str = "warp",
-                 store=None) -> None:
+                 store=None, depth_stride: int | None = None,
+                 key_scale: float = 1.0) -> None:
         self.renderer = renderer
         self.threaded = threaded
         self.sprite = SpriteDrawer(renderer.terrain_gl.drawer, lod, visibility, border=border,
-                                     guard_px=guard_px)
+                                   guard_px=guard_px, depth_stride=depth_stride,
+                                   key_scale=key_scale)
         try:
             self.engine: LodSpriteEngine | WorkerLodSpriteEngine = (
                 WorkerLodSpriteEngine(self.sprite, renderer.scene, renderer.fov_y_deg,

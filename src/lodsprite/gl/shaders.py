@@ -272,6 +272,13 @@ SPRITE_DERIVATIVES = """
     n = n.z < 0.0 ? -n : n;
 """
 
+# Linear light to display encoding (IEC 61966-2-1), for sRGB textures sampled.
+SRGB_ENCODE = """
+vec3 srgb_encode(vec3 c) {
+    return mix(c * 12.92, 1.055 * pow(c, vec3(1.0 / 2.4)) - 0.055, step(vec3(0.0031308), c));
+}
+"""
+
 SPRITE_FS = (    "#version 330\n"
     + _LINEAR_DEPTH
     + TERRAIN_SHADE
@@ -286,12 +293,14 @@ uniform float u_coarse_tol;
 uniform int u_color_levels;     // mipmap levels of u_color
 uniform vec4 u_fallback_tint;   // mixed into fallback fragments by its alpha (0: none)
 uniform int u_shading;          // fallback colour: 0 the terrain texture, 1 terrain_shade
+uniform int u_sprite_linear;    // 1: the sprite is an sRGB texture (sampled in linear light)
 in vec2 g_uv;
 in vec4 g_key;
 in vec3 g_world;
 flat in int g_sprite;
 out vec4 f_color;
 """
+    + SRGB_ENCODE
     + SPRITE_FRAGMENT_COMMON
     + """
 void main() {
@@ -307,8 +316,9 @@ void main() {
     } else {
         sprite = seen_by_keyframe(g_key, u_key_coarse, u_coarse_tol) > 0.5;
     }
-    vec3 rgb = sprite ? textureGrad(u_sprite, key_uv, key_dx, key_dy).rgb
-                      : fallback_rgb(level, n);
+    vec3 key = textureGrad(u_sprite, key_uv, key_dx, key_dy).rgb;
+    if (u_sprite_linear == 1) key = srgb_encode(key);
+    vec3 rgb = sprite ? key : fallback_rgb(level, n);
     f_color = vec4(rgb, 1.0);
 }
 """

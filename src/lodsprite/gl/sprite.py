@@ -20,6 +20,7 @@ import numpy as np
 from lodsprite.camera import Projection, Viewpoint, widened
 from lodsprite.errors import InputError
 from lodsprite.gl.context import GLContext
+from lodsprite.gl.depth_mesh import DEFAULT_CUT_DEG, DepthMesh
 from lodsprite.gl.shaders import (
     PROXY_VERTEX_COMMON,
     SPRITE_FS,
@@ -31,6 +32,8 @@ from lodsprite.gl.target import RenderTarget
 from lodsprite.gl.terrain import SKY_RGB, TerrainDrawer, draw_stats, mat_bytes
 from lodsprite.record import Frame
 
+SRGB8 = 0x8C41  # GL internal format of uploaded keyframes drawn on the depth mesh
+
 DEFAULT_VERTEX_TOL = 0.01
 DEFAULT_FRAGMENT_TOL = 0.03
 DEFAULT_COARSE_TOL = 0.002
@@ -38,6 +41,8 @@ VISIBILITY_MODES = {"triangle": 0, "fragment": 1, "coarse": 2}
 DEFAULT_VISIBILITY = "coarse"
 DEFAULT_GUARD_PX = 32
 DEFAULT_SPRITE_MIPMAPS = False  # benchmarks/sprite_mipmaps.py: see SpriteDrawer
+KEY_SCALES = (1.0, 1.5, 2.0)  # keyframe texels a display pixel side
+COVER_MARGIN_PX = 8  # a frame's corners this far inside the keyframe: no fallback pass
 
 # The coarse z-buffer: a proxy's depth alone, from the keyframe's view.
 PROXY_DEPTH_VS = "#version 330\n" + PROXY_VERTEX_COMMON + """
@@ -128,6 +133,19 @@ class SpriteDrawer:
     ``proxy`` is the geometry spriteframes and coarse z-buffers draw (a proxy geometry
     object, :class:`UniformProxy`; default: the uniform coarse level of ``coarse_quads``
     with its border ribbons); :meth:`set_proxy` changes it.
+
+    ``key_scale`` (:data:`KEY_SCALES`): keyframe texels a display pixel side.  A keyframe
+    is rendered at ``key_scale`` times the frame's size (guard band included), through
+    the same projection: at 2, 4 samples a display pixel, 4x the memory of a slot
+    (:meth:`keyframe_bytes`).  A keyframe at a scale other than 1 is never shown as it
+    is: its frame is a spriteframe drawn from it (:attr:`keyframe_is_frame`).
+
+    ``depth_stride`` (None: the proxy geometry): spriteframes draw the keyframe's own
+    depth as a mesh (:class:`~lodsprite.gl.depth_mesh.DepthMesh`, a vertex every
+    ``depth_stride`` keyframe texels, rubber sheets at ``depth_cut_deg``); the proxy
+    geometry's spriteframe is drawn under it only where the frame's corners leave the
+    keyframe (more than ``COVER_MARGIN_PX`` short of its edge), and shows only where the
+    mesh does not reach.
     """
 
     def __init__(self, terrain: TerrainDrawer, coarse_quads: int = 16,
@@ -135,12 +153,17 @@ class SpriteDrawer:
                  fragment_tol: float = DEFAULT_FRAGMENT_TOL,
                  coarse_tol: float = DEFAULT_COARSE_TOL, border: bool = True,
                  guard_px: int = DEFAULT_GUARD_PX,
-                 mipmaps: bool = DEFAULT_SPRITE_MIPMAPS, proxy=None) -> None:
+                 mipmaps: bool = DEFAULT_SPRITE_MIPMAPS, proxy=None,
+                 key_scale: float = 1.0, depth_stride: int | None = None,
+                 depth_cut_deg: float = DEFAULT_CUT_DEG) -> None:
         if visibility not in VISIBILITY_MODES:
             raise InputError(f"visibility must be one of {', '.join(VISIBILITY_MODES)}, "
                              f"got {visibility!r}")
         if not (isinstance(guard_px, int) and guard_px >= 0):
             raise InputError(f"guard band must be a whole number of pixels >= 0, got {guard_px}")
+        if float(key_scale) not in KEY_SCALES:
+            raise InputError(f"the keyframe scale is one of {', '.join(map(str, KEY_SCALES))}"
+                             f", not {key_scale!r}")
         self.terrain = terrain
         self.ctx: GLContext = terrain.ctx
         self.coarse_quads = coarse_quads
@@ -155,7 +178,12 @@ class SpriteDrawer:
         self.program = self._program(visibility, self._tols)
         self.depth_program = self.ctx.mgl.program(vertex_shader=PROXY_DEPTH_VS,
                                                   fragment_shader=PROXY_DEPTH_FS)
-        self.key_size: tuple[int, int] = tuple(n + 2 * guard_px for n in terrain.target.size)
+        self.key_scale = float(key_scale)
+        self.key_size: tuple[int, int] = tuple(
+            int(round(self.key_scale * (n + 2 * guard_px))) for n in terrain.target.size)
+        self.depth_mesh = (None if depth_stride is None
+                           else DepthMesh(self.ctx, depth_stride, depth_cut_deg))
+        self.fallback_passes = 0  # spriteframes that drew the proxy under the depth mesh
         self._slots: list[tuple[RenderTarget, RenderTarget]] = []  # (keyframe, coarse z)
         self._kept: dict[int, GLKeyframe] = {}  # slot -> the keyframe it holds
         self._shown = -1  # the slot of the keyframe shown
@@ -165,6 +193,11 @@ class SpriteDrawer:
         # Mixed by its alpha into fragments that fell back to the terrain texture (the
         # viewer's tint toggle); alpha 0 draws them as they are.
         self.fallback_tint: tuple[float, float, float, float] = (1.0, 0.0, 1.0, 0.0)
+
+    @property
+    def keyframe_is_frame(self) -> bool:
+        """Whether a keyframe can be shown as it is (its scale is 1)."""
+        return self.key_scale == 1.0
 
     def keyframe_bytes(self) -> int:
         """GPU bytes of one keyframe slot: RGBA8 colour (4 B/texel, a third more with
@@ -183,7 +216,8 @@ class SpriteDrawer:
         """Slot ``i``'s targets, made (with every slot below it) when first asked for."""
         while len(self._slots) <= i:
             w, h = self.key_size
-            pair = (RenderTarget(self.ctx, w, h), RenderTarget(self.ctx, w, h, color=False))
+            pair = (RenderTarget(self.ctx, w, h, srgb=self.depth_mesh is not None),
+                    RenderTarget(self.ctx, w, h, color=False))
             for t in pair:
                 t.depth.compare_func = ""  # sample raw depth values, no shadow comparison
                 # Window depth is affine across a triangle in screen space, so bilinear
@@ -324,22 +358,24 @@ class SpriteDrawer:
         slot = self._free_slot(None)
         target, coarse = self._slots[slot]
         if not self._uploads:
-            self._uploads = [self.ctx.mgl.texture((w, h), 3, alignment=1) for _ in range(2)]
+            srgb = SRGB8 if self.depth_mesh is not None else None  # as the slots' colour
+            self._uploads = [self.ctx.mgl.texture((w, h), 3, alignment=1,
+                                                  internal_format=srgb) for _ in range(2)]
             for tex in self._uploads:
                 tex.repeat_x = tex.repeat_y = False
         tex = self._uploads[slot]
         tex.write(np.ascontiguousarray(color[::-1], dtype=np.uint8))  # GL rows: bottom-up
-        if zbuffer == "coarse" or self.visibility != "coarse":  # else it is never read
+        if zbuffer == "coarse" or self.visibility != "coarse" or self.depth_mesh is not None:
             rows = np.ascontiguousarray(depth[::-1], dtype=np.float32)
             (coarse if zbuffer == "coarse" else target).depth.write(rows)
         self._keep(slot, viewpoint, projection, t0, tex, zbuffer == "coarse")
 
     def keyframe_color(self) -> np.ndarray:
         """The current keyframe's colour without its guard band: ``(H, W, 3) uint8``, the
-        frame size, row 0 at the top."""
+        frame size times :attr:`key_scale`, row 0 at the top."""
         if self.keyframe is None:
             raise RuntimeError("no keyframe yet")
-        g = self.guard_px
+        g = int(round(self.guard_px * self.key_scale))
         tex = self.keyframe.color
         w, h = tex.size
         data = np.frombuffer(tex.read(alignment=1), np.uint8).reshape(h, w, tex.components)
@@ -356,6 +392,43 @@ class SpriteDrawer:
         projection = projection or self.terrain.projection(viewpoint)
         self.target.use(SKY_RGB)
         self.ctx.mgl.enable(moderngl.DEPTH_TEST)
+        if self.depth_mesh is None:
+            return self._draw_proxy(key, viewpoint, projection)
+        tris = 0
+        if not self.covers(viewpoint, projection):
+            tris = self._draw_proxy(key, viewpoint, projection).triangles
+            self._clear_depth()
+            self.fallback_passes += 1
+        tris += self.depth_mesh.draw(key, viewpoint, projection, self.fallback_tint)
+        return draw_stats(tris, 1, projection)
+
+    def _clear_depth(self) -> None:
+        fbo = self.target.fbo
+        fbo.color_mask = (False, False, False, False)
+        try:
+            fbo.clear(depth=1.0)  # glClear honours the colour mask: depth alone
+        finally:
+            fbo.color_mask = (True, True, True, True)
+
+    def covers(self, viewpoint: Viewpoint, projection: Projection) -> bool:
+        """Whether every corner direction of the frame lies inside the current keyframe,
+        at least ``COVER_MARGIN_PX`` display pixels from its edge."""
+        key = self.keyframe
+        corners = np.array([[x, y, 1.0, 1.0] for x in (-1, 1) for y in (-1, 1)])
+        inv = np.linalg.inv(projection.matrix() @ viewpoint.view_matrix())
+        far = corners @ inv.T
+        d = far[:, :3] / far[:, 3:] - viewpoint.o
+        k = np.c_[d, np.zeros(4)] @ key.view_proj.T
+        if np.any(k[:, 3] <= 0.0):
+            return False
+        ndc = k[:, :2] / k[:, 3:]
+        w, h = self.key_size
+        m = 2.0 * COVER_MARGIN_PX * self.key_scale / np.array([w, h])
+        return bool(np.all(np.abs(ndc) <= 1.0 - m))
+
+    def _draw_proxy(self, key: GLKeyframe, viewpoint: Viewpoint,
+                    projection: Projection) -> Frame:
+        """The proxy geometry textured from ``key`` into the bound target."""
         self.terrain.geometry.color_tex.use(0)
         key.color.use(2)
         key.target.depth.use(3)
@@ -365,6 +438,7 @@ class SpriteDrawer:
         prog["u_key_near_far"].value = (key.projection.near, key.projection.far)
         prog["u_color_levels"].value = self.terrain.geometry.color_tex_levels
         prog["u_fallback_tint"].value = self.fallback_tint
+        prog["u_sprite_linear"].value = int(self.depth_mesh is not None)
         # fragments the keyframe did not see: the terrain texture or terrain_shade
         for name, value in (("u_shading", int(self.terrain.shading == "heights")),
                             ("u_range", self.terrain.geometry.height_range)):
@@ -375,6 +449,8 @@ class SpriteDrawer:
         return draw_stats(tris, 1, projection)
 
     def release(self) -> None:
+        if self.depth_mesh is not None:
+            self.depth_mesh.release()
         self._default_proxy.release()
         self.program.release()
         self.depth_program.release()

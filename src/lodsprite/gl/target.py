@@ -8,6 +8,8 @@ import numpy as np
 from lodsprite.errors import InputError
 from lodsprite.gl.context import GLContext
 
+SRGB8_ALPHA8 = 0x8C43  # GL internal format
+
 
 class RenderTarget:
     """``width x height`` RGBA8 colour texture (unless ``color=False``) plus depth texture,
@@ -17,13 +19,17 @@ class RenderTarget:
     rendering into a target never needs a copy.
     """
 
-    def __init__(self, ctx: GLContext, width: int, height: int, color: bool = True) -> None:
+    def __init__(self, ctx: GLContext, width: int, height: int, color: bool = True,
+                 srgb: bool = False) -> None:
         mgl = ctx.mgl
         self.ctx = ctx
         self.external = False
         self._copy: tuple | None = None
         self.size = (int(width), int(height))
-        self.color = mgl.texture(self.size, 4) if color else None
+        # srgb: stored as written (GL_FRAMEBUFFER_SRGB stays off), decoded to linear light
+        # when sampled, so that filtering it averages light
+        self.color = (mgl.texture(self.size, 4, internal_format=SRGB8_ALPHA8 if srgb else None)
+                      if color else None)
         if self.color is not None:
             self.color.repeat_x = self.color.repeat_y = False
         self.depth = mgl.depth_texture(self.size)

@@ -131,14 +131,15 @@ class LodSpriteEngine:
             self.keyframes.append(d.key)
         elif d.slot is not None:
             self.sprite.show(d.slot)  # a cached keyframe (binding only, no GL work)
-        if not d.shows_keyframe:
+        shows = d.shows_keyframe and self.sprite.keyframe_is_frame
+        if not shows:
             key_stats = stats
             stats = self.sprite.render_spriteframe(viewpoint, d.projection)
             if key_stats is not None:
                 stats = replace(stats, triangles=stats.triangles + key_stats.triangles)
         if d.key is None and self.between_keyframes is not None:
             self.between_keyframes()  # e.g. streaming for the next keyframe, timed here
-        self._shows_keyframe = d.shows_keyframe
+        self._shows_keyframe = shows
         self.sprite.terrain.ctx.finish()
         ms = (time.perf_counter() - t0) * 1e3
         if d.key is not None:

@@ -243,7 +243,9 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
                  border: bool = True, shading: str = "auto", tiles: int = 1,
                  tile_budget_ms: float = 8.0, cache_mb: float = 0.0,
                  cache_policy: str = "lru", metric: str = "warp",
-                 proxy_sse: float | None = None, keyframes: str = "inline") -> None:
+                 proxy_sse: float | None = None, keyframes: str = "inline",
+                 proxy: str = "geometry", depth_stride: int = 2,
+                 key_scale: float = 1.0) -> None:
         from lodsprite.sprite.keyframe_worker import StoreKeys
         from lodsprite.terrain.store import TerrainStore
         from lodsprite.terrain.storefield import store_field
@@ -268,7 +270,9 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
                 super().__init__(renderer, lod, epsilon, keyframes, visibility, guard_px,
                                  border, shading=shading, tiles=tiles,
                                  tile_budget_ms=tile_budget_ms, cache_mb=cache_mb,
-                                 cache_policy=cache_policy, metric=metric, store=store)
+                                 cache_policy=cache_policy, metric=metric, store=store,
+                                 proxy=proxy, depth_stride=depth_stride,
+                                 key_scale=key_scale)
         except BaseException:
             self.adaptive.release()
             if field is not None:

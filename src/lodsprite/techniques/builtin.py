@@ -62,8 +62,19 @@ SHADING = Option("shading", str, "auto", "terrain colour: auto (heights on a sto
                  "texture) | texture | heights", choices=("auto", "texture", "heights"))
 GRID = Option("grid", int, 64, "adaptive: node grid, quads a side",
               choices=(16, 32, 64, 128), flag="node-grid")
+PROXY = Option("proxy", str, "geometry", "LOD-sprite: what spriteframes draw the keyframe "
+               "on: its proxy geometry (the --lod level, or the adaptive mesh at "
+               "--proxy-sse) or a mesh from the keyframe's own depth",
+               choices=("geometry", "depth"))
+DEPTH_STRIDE = Option("depth_stride", int, 2, "LOD-sprite with --proxy depth: keyframe "
+                      "texels between the depth mesh's vertices", min=1, max=16,
+                      unit="texels")
+KEY_SCALE = Option("key_scale", float, 1.0, "LOD-sprite: keyframe texels a display pixel "
+                   "side (2: four samples a pixel, four times the memory)",
+                   choices=(1.0, 1.5, 2.0))
 SPRITE_OPTIONS = (LOD, EPSILON, KEYFRAMES, VISIBILITY, GUARD, BORDER, SHADING, TILES,
-                  TILE_BUDGET, CACHE_MB, CACHE_POLICY, METRIC)
+                  TILE_BUDGET, CACHE_MB, CACHE_POLICY, METRIC, PROXY, DEPTH_STRIDE,
+                  KEY_SCALE)
 SPRITE_SUMMARY = ("keyframes: {keyframes} of {frames}; mean ms keyframe "
                   "{mean_ms_keyframe:.1f}, first spriteframe {mean_ms_first_sprite:.1f}, "
                   "spriteframe {mean_ms_sprite:.1f}",)
@@ -128,7 +139,8 @@ ADAPTIVE = TechniqueSpec("adaptive", adaptive, (SSE, GPU_MB, HOST_MB, SHADING, G
 SPRITE_ADAPTIVE = TechniqueSpec(
     "sprite-adaptive", sprite_adaptive,
     (LOD, EPSILON, KEY_SSE, KEYFRAMES, GPU_MB, HOST_MB, VISIBILITY, GUARD, BORDER, SHADING,
-     TILES, TILE_BUDGET, CACHE_MB, CACHE_POLICY, METRIC, PROXY_SSE),
+     TILES, TILE_BUDGET, CACHE_MB, CACHE_POLICY, METRIC, PROXY_SSE, PROXY, DEPTH_STRIDE,
+     KEY_SCALE),
     ("terrain",), "LOD-sprite with keyframes by the adaptive renderer (render: --mode "
     "sprite --key-sse)", order=50, light=True, batch=False, knob="epsilon",
     summary=SPRITE_SUMMARY)

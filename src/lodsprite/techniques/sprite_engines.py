@@ -366,7 +366,8 @@ class WorkerTiledKeyframes(TiledKeyframes):
 def sprite_engine(renderer: Renderer, epsilon: float, lod: int, threaded: bool,
                   visibility: str, guard_px: int, border: bool, tiles: int,
                   tile_budget_ms: float, cache_mb: float, cache_policy: str,
-                  metric: str, store=None) -> SpriteEngine:
+                  metric: str, store=None, depth_stride: int | None = None,
+                  key_scale: float = 1.0) -> SpriteEngine:
     """The engine the options ask for, chosen once: for ``tiles > 1``
     :class:`TiledKeyframes` (inline) or :class:`WorkerTiledKeyframes` (``threaded``),
     else :class:`WorkerKeyframes` or :class:`WholeKeyframes`
@@ -381,7 +382,8 @@ def sprite_engine(renderer: Renderer, epsilon: float, lod: int, threaded: bool,
         epsilon, lod, threaded=threaded and tiles == 1, visibility=visibility,
         guard_px=guard_px,
         border=border, cache_mb=0.0 if tiles > 1 else cache_mb, cache_policy=cache_policy,
-        metric=metric, store=store if tiles == 1 else None)  # tiles: the tiled engine's
+        metric=metric, store=store if tiles == 1 else None,  # tiles: the tiled engine's
+        depth_stride=depth_stride, key_scale=key_scale)
     if tiles == 1:
         return (WorkerKeyframes(sprite) if threaded
                 else WholeKeyframes(sprite, renderer, cache_mb))

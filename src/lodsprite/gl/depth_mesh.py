@@ -1,0 +1,209 @@
+"""The keyframe's own depth as the sprite proxy: a mesh over the keyframe image whose
+vertices are unprojected from the keyframe's z-buffer (textured depth meshes, Jeschke &
+Wimmer 2002; post-rendering 3D warping, Mark, McMillan & Bishop 1997).
+
+One vertex every ``stride`` keyframe texels (at texel centres, the last row and column
+always included), two triangles a cell.  The vertex shader reads the texel's window depth
+(``texelFetch``: the nearest sample, never a blend of sky and ground), turns it into the
+eye distance ``d = 2nf / (f + n - (2z - 1)(f - n))`` and the eye-space point
+``d (x tan(fx/2), y tan(fy/2), -1)`` of the keyframe's symmetric frustum, all relative to
+the keyframe's eye (float32 stays precise far away); a texel that saw sky (``z = 1``)
+becomes a point at infinity in its direction (``w = 0``), drawn on the far plane.  Each
+spriteframe fragment takes the keyframe's colour where its world point projects into
+the keyframe (projective texturing, exact at the keyframe's own view for any mesh): so the
+keyframe's silhouettes are kept to the texel and parallax errs only inside cells.
+
+A triangle across a depth discontinuity (or between sky and ground) is a *rubber sheet*:
+its normal is nearly perpendicular to the keyframe's ray through it (``|cos| < cut``).
+Rubber sheets are drawn behind every other triangle, whatever their depth (window depth
+in [0.5, 1] against [0, 0.5]: the geometry shader remaps clip z), so they fill only what
+no triangle of the keyframe covers: at the keyframe's view they are exactly the keyframe's
+pixels; in motion they fill disocclusions with a stretch of their edges' colours.
+"""
+
+from __future__ import annotations
+
+import math
+
+import moderngl
+import numpy as np
+
+from lodsprite.camera import Projection, Viewpoint
+from lodsprite.errors import InputError
+from lodsprite.gl.context import GLContext
+from lodsprite.gl.shaders import SRGB_ENCODE
+from lodsprite.gl.terrain import mat_bytes
+
+DEFAULT_STRIDE = 2       # keyframe texels between vertices
+DEFAULT_CUT_DEG = 2.0    # a triangle this close to its keyframe ray (degrees) is a sheet
+SKY_DEPTH = 0.999999     # window depth of points at infinity (inside the far plane)
+
+DEPTH_MESH_VS = """#version 330
+uniform sampler2D u_key_depth;   // the keyframe's z-buffer (window depth)
+uniform vec2 u_key_near_far;     // its near and far planes (metres)
+uniform vec2 u_key_tan;          // tan of its half-angles, x and y
+uniform mat3 u_key_axes;         // its eye axes x, y, z as columns (eye -> world rotation)
+uniform mat4 u_mvp_rel;          // the frame's projection x view x translate(key eye)
+uniform mat4 u_key_proj;         // the keyframe's projection
+in ivec2 in_px;                  // the vertex's keyframe texel
+out vec3 v_rel;                  // world offset from the keyframe's eye (w 0: direction)
+out vec4 v_key;                  // keyframe clip coordinates
+out float v_sky;
+void main() {
+    ivec2 size = textureSize(u_key_depth, 0);
+    ivec2 p = clamp(in_px, ivec2(0), size - 1);
+    float z = texelFetch(u_key_depth, p, 0).r;
+    vec2 ndc = (vec2(p) + 0.5) / vec2(size) * 2.0 - 1.0;
+    vec3 ray = vec3(ndc * u_key_tan, -1.0);   // eye space, at unit distance
+    float n = u_key_near_far.x, f = u_key_near_far.y;
+    vec4 eye;
+    if (z >= 1.0) {
+        eye = vec4(normalize(ray), 0.0);
+        v_sky = 1.0;
+    } else {
+        float d = 2.0 * n * f / (f + n - (2.0 * z - 1.0) * (f - n));
+        eye = vec4(ray * d, 1.0);
+        v_sky = 0.0;
+    }
+    v_rel = u_key_axes * eye.xyz;
+    v_key = u_key_proj * eye;
+    vec4 c = u_mvp_rel * vec4(v_rel, eye.w);
+    // beyond the frame's far plane (sky, or ground its fit left out): on it, not clipped
+    if (z >= 1.0 || c.z > c.w) c.z = c.w * 0.999999;
+    gl_Position = c;
+}
+"""
+
+DEPTH_MESH_GS = """#version 330
+layout(triangles) in;
+layout(triangle_strip, max_vertices = 3) out;
+uniform float u_cut;      // |cos(normal, ray)| below which a triangle is a rubber sheet
+in vec3 v_rel[];
+in vec4 v_key[];
+in float v_sky[];
+out vec4 g_key;
+flat out int g_rubber;
+void main() {
+    float sky = v_sky[0] + v_sky[1] + v_sky[2];
+    bool rubber;
+    if (sky > 2.5) {
+        rubber = false;
+    } else if (sky > 0.5) {
+        rubber = true;
+    } else {
+        vec3 a = v_rel[0], b = v_rel[1], c = v_rel[2];
+        vec3 nrm = cross(b - a, c - a);
+        vec3 ray = (a + b + c) / 3.0;
+        rubber = abs(dot(nrm, ray)) < u_cut * length(nrm) * length(ray);
+    }
+    for (int i = 0; i < 3; ++i) {
+        vec4 p = gl_in[i].gl_Position;
+        p.z = 0.5 * (p.z + (rubber ? p.w : -p.w));   // sheets behind everything else
+        gl_Position = p;
+        g_key = v_key[i];
+        g_rubber = rubber ? 1 : 0;
+        EmitVertex();
+    }
+    EndPrimitive();
+}
+"""
+
+DEPTH_MESH_FS = """#version 330
+""" + SRGB_ENCODE + """
+uniform sampler2D u_sprite;      // the keyframe's colour
+uniform vec4 u_fallback_tint;    // mixed into rubber sheets by its alpha (0: none)
+in vec4 g_key;
+flat in int g_rubber;
+out vec4 f_color;
+void main() {
+    // an sRGB texture: filtered in linear light, encoded again
+    vec3 rgb = srgb_encode(texture(u_sprite, g_key.xy / g_key.w * 0.5 + 0.5).rgb);
+    if (g_rubber == 1) rgb = mix(rgb, u_fallback_tint.rgb, u_fallback_tint.a);
+    f_color = vec4(rgb, 1.0);
+}
+"""
+
+
+def grid_vertices(width: int, height: int, stride: int) -> tuple[np.ndarray, np.ndarray]:
+    """The mesh over a ``width x height`` keyframe: vertices ``(N, 2) int32`` (texel
+    column, row; every ``stride``-th, the last always) and triangles ``(M, 3) int32``."""
+    xs = np.unique(np.r_[np.arange(0, width, stride), width - 1]).astype(np.int32)
+    ys = np.unique(np.r_[np.arange(0, height, stride), height - 1]).astype(np.int32)
+    gx, gy = np.meshgrid(xs, ys)
+    verts = np.stack([gx.ravel(), gy.ravel()], axis=1).astype(np.int32)
+    nx = len(xs)
+    i = (np.arange(len(ys) - 1)[:, None] * nx + np.arange(nx - 1)[None, :]).ravel()
+    tris = np.concatenate([np.stack([i, i + 1, i + nx + 1], 1),
+                           np.stack([i, i + nx + 1, i + nx], 1)]).astype(np.int32)
+    return verts, tris
+
+
+def rel_matrix(view_proj: np.ndarray, eye: np.ndarray) -> np.ndarray:
+    """``view_proj @ translate(eye)``: the matrix of points given relative to ``eye``."""
+    t = np.eye(4)
+    t[:3, 3] = eye
+    return view_proj @ t
+
+
+class DepthMesh:
+    """Draws keyframes as meshes from their own depth (module doc) into the bound
+    framebuffer: ``stride`` keyframe texels between vertices, ``cut_deg`` the rubber-sheet
+    angle.  GPU objects (one mesh a keyframe size) live until :meth:`release`."""
+
+    def __init__(self, ctx: GLContext, stride: int = DEFAULT_STRIDE,
+                 cut_deg: float = DEFAULT_CUT_DEG) -> None:
+        if not (isinstance(stride, int | np.integer) and 1 <= int(stride) <= 16):
+            raise InputError(f"the depth mesh's stride is 1 to 16 keyframe texels, not "
+                             f"{stride!r}")
+        if not 0.0 <= float(cut_deg) < 90.0:
+            raise InputError(f"the rubber-sheet angle is in [0, 90) degrees, not {cut_deg!r}")
+        self.ctx, self.stride, self.cut_deg = ctx, int(stride), float(cut_deg)
+        self.program = ctx.mgl.program(vertex_shader=DEPTH_MESH_VS,
+                                       geometry_shader=DEPTH_MESH_GS,
+                                       fragment_shader=DEPTH_MESH_FS)
+        self.program["u_key_depth"].value = 3
+        self.program["u_sprite"].value = 2
+        self.program["u_cut"].value = math.sin(math.radians(self.cut_deg))
+        self._meshes: dict[tuple[int, int], tuple] = {}  # key size -> (vao, bufs, tris)
+
+    def _mesh(self, size: tuple[int, int]) -> tuple:
+        if size not in self._meshes:
+            verts, tris = grid_vertices(size[0], size[1], self.stride)
+            vbo = self.ctx.mgl.buffer(verts.tobytes())
+            ibo = self.ctx.mgl.buffer(tris.tobytes())
+            vao = self.ctx.mgl.vertex_array(self.program, [(vbo, "2i", "in_px")], ibo)
+            self._meshes[size] = (vao, vbo, ibo, len(tris))
+        return self._meshes[size]
+
+    def draw(self, key, viewpoint: Viewpoint, projection: Projection,
+             tint: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)) -> int:
+        """Draw keyframe ``key`` (a :class:`~lodsprite.gl.sprite.GLKeyframe`: colour,
+        depth, view, projection) as seen from ``viewpoint`` through ``projection`` into
+        the bound framebuffer, depth-tested; returns the triangles drawn."""
+        prog = self.program
+        kp = key.projection
+        ty = math.tan(math.radians(kp.fov_y_deg) / 2.0)
+        vp = key.viewpoint
+        prog["u_key_near_far"].value = (kp.near, kp.far)
+        prog["u_key_tan"].value = (kp.aspect * ty, ty)
+        prog["u_key_axes"].write(np.stack([vp.x, vp.y, vp.z], axis=1)
+                                 .astype("f4").T.tobytes())
+        mvp = projection.matrix() @ viewpoint.view_matrix()
+        prog["u_mvp_rel"].write(mat_bytes(rel_matrix(mvp, vp.o)))
+        prog["u_key_proj"].write(mat_bytes(kp.matrix()))
+        prog["u_fallback_tint"].value = tint
+        key.color.use(2)
+        key.target.depth.use(3)
+        vao, _, _, tris = self._mesh(key.target.size)
+        self.ctx.mgl.enable(moderngl.DEPTH_TEST)
+        self.ctx.mgl.disable(moderngl.CULL_FACE)
+        vao.render(moderngl.TRIANGLES)
+        return tris
+
+    def release(self) -> None:
+        for vao, vbo, ibo, _ in self._meshes.values():
+            vao.release()
+            vbo.release()
+            ibo.release()
+        self._meshes.clear()
+        self.program.release()
