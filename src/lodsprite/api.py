@@ -194,7 +194,7 @@ class Renderer:
                guard_px: int = DEFAULT_GUARD_PX, border: bool = True, cache_mb: float = 0.0,
                cache_policy: str = DEFAULT_POLICY, metric: str = "warp",
                store=None, depth_stride: int | None = None,
-               key_scale: float = 1.0) -> LodSprite:
+               key_scale: float = 1.0, pair: bool = False) -> LodSprite:
         """A LOD-sprite engine on this renderer: error threshold ``epsilon_px`` pixels,
         coarse level ``lod`` quads per side.  ``threaded=True`` renders keyframes in a
         worker process with its own context (:mod:`lodsprite.sprite.worker_engine`); otherwise a
@@ -207,7 +207,8 @@ class Renderer:
         (:class:`~lodsprite.sprite.keyframe_worker.StoreKeys`; threaded only).
         ``depth_stride``: spriteframes draw a mesh from the keyframe's own depth, a vertex
         every that many keyframe texels (None: the coarse level); ``key_scale``: keyframe
-        texels a display pixel side (:class:`~lodsprite.gl.sprite.SpriteDrawer`)."""
+        texels a display pixel side; ``pair``: the keyframe before the current one drawn
+        too, composited by depth (:class:`~lodsprite.gl.sprite.SpriteDrawer`)."""
         if not epsilon_px > 0:
             raise InputError(f"epsilon must be > 0 pixels, got {epsilon_px}")
         if not cache_mb >= 0:
@@ -216,7 +217,8 @@ class Renderer:
             raise InputError("the keyframe cache needs inline keyframes "
                              "(--inline-keyframes)")
         sprite = LodSprite(self, epsilon_px, lod, threaded, visibility, guard_px, border,
-                           cache_mb, cache_policy, metric, store, depth_stride, key_scale)
+                           cache_mb, cache_policy, metric, store, depth_stride, key_scale,
+                           pair)
         self._sprites.append(sprite)
         return sprite
 
@@ -290,12 +292,12 @@ class LodSprite:
                  visibility: str, guard_px: int, border: bool, cache_mb: float = 0.0,
                  cache_policy: str = DEFAULT_POLICY, metric: str = "warp",
                  store=None, depth_stride: int | None = None,
-                 key_scale: float = 1.0) -> None:
+                 key_scale: float = 1.0, pair: bool = False) -> None:
         self.renderer = renderer
         self.threaded = threaded
         self.sprite = SpriteDrawer(renderer.terrain_gl.drawer, lod, visibility, border=border,
                                    guard_px=guard_px, depth_stride=depth_stride,
-                                   key_scale=key_scale)
+                                   key_scale=key_scale, pair=pair)
         try:
             self.engine: LodSpriteEngine | WorkerLodSpriteEngine = (
                 WorkerLodSpriteEngine(self.sprite, renderer.scene, renderer.fov_y_deg,

@@ -16,8 +16,8 @@ keyframe's silhouettes are kept to the texel and parallax errs only inside cells
 A triangle across a depth discontinuity (or between sky and ground) is a *rubber sheet*:
 its normal is nearly perpendicular to the keyframe's ray through it (``|cos| < cut``).
 Rubber sheets are drawn behind every other triangle, whatever their depth (window depth
-in [0.5, 1] against [0, 0.5]: the geometry shader remaps clip z), so they fill only what
-no triangle of the keyframe covers: at the keyframe's view they are exactly the keyframe's
+in [0.5, 0.75], or [0.75, 1] for the older keyframe of a pair, against [0, 0.45]: the
+geometry shader remaps clip z), so they fill only what no triangle covers: at the keyframe's view they are exactly the keyframe's
 pixels; in motion they fill disocclusions with a stretch of their edges' colours.
 """
 
@@ -78,6 +78,7 @@ DEPTH_MESH_GS = """#version 330
 layout(triangles) in;
 layout(triangle_strip, max_vertices = 3) out;
 uniform float u_cut;      // |cos(normal, ray)| below which a triangle is a rubber sheet
+uniform float u_sheet;    // window depth where this keyframe's rubber sheets start
 in vec3 v_rel[];
 in vec4 v_key[];
 in float v_sky[];
@@ -98,7 +99,9 @@ void main() {
     }
     for (int i = 0; i < 3; ++i) {
         vec4 p = gl_in[i].gl_Position;
-        p.z = 0.5 * (p.z + (rubber ? p.w : -p.w));   // sheets behind everything else
+        // window depth: triangles in [0, 0.45], rubber sheets in [u_sheet, u_sheet + 0.25]
+        // (the gap keeps a pair's polygon offset from reaching the sheets)
+        p.z = rubber ? 0.25 * p.z + (2.0 * u_sheet - 0.75) * p.w : 0.45 * p.z - 0.55 * p.w;
         gl_Position = p;
         g_key = v_key[i];
         g_rubber = rubber ? 1 : 0;
@@ -176,10 +179,12 @@ class DepthMesh:
         return self._meshes[size]
 
     def draw(self, key, viewpoint: Viewpoint, projection: Projection,
-             tint: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)) -> int:
+             tint: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0),
+             older: bool = False) -> int:
         """Draw keyframe ``key`` (a :class:`~lodsprite.gl.sprite.GLKeyframe`: colour,
         depth, view, projection) as seen from ``viewpoint`` through ``projection`` into
-        the bound framebuffer, depth-tested; returns the triangles drawn."""
+        the bound framebuffer, depth-tested; returns the triangles drawn.  ``older``: the
+        older keyframe of a pair, whose rubber sheets go behind the newer one's."""
         prog = self.program
         kp = key.projection
         ty = math.tan(math.radians(kp.fov_y_deg) / 2.0)
@@ -192,6 +197,7 @@ class DepthMesh:
         prog["u_mvp_rel"].write(mat_bytes(rel_matrix(mvp, vp.o)))
         prog["u_key_proj"].write(mat_bytes(kp.matrix()))
         prog["u_fallback_tint"].value = tint
+        prog["u_sheet"].value = 0.75 if older else 0.5
         key.color.use(2)
         key.target.depth.use(3)
         vao, _, _, tris = self._mesh(key.target.size)

@@ -43,6 +43,7 @@ DEFAULT_GUARD_PX = 32
 DEFAULT_SPRITE_MIPMAPS = False  # benchmarks/sprite_mipmaps.py: see SpriteDrawer
 KEY_SCALES = (1.0, 1.5, 2.0)  # keyframe texels a display pixel side
 COVER_MARGIN_PX = 8  # a frame's corners this far inside the keyframe: no fallback pass
+PAIR_OFFSET = (1.0, 16.0)  # glPolygonOffset of the older keyframe of a pair
 
 # The coarse z-buffer: a proxy's depth alone, from the keyframe's view.
 PROXY_DEPTH_VS = "#version 330\n" + PROXY_VERTEX_COMMON + """
@@ -145,7 +146,10 @@ class SpriteDrawer:
     ``depth_stride`` keyframe texels, rubber sheets at ``depth_cut_deg``); the proxy
     geometry's spriteframe is drawn under it only where the frame's corners leave the
     keyframe (more than ``COVER_MARGIN_PX`` short of its edge), and shows only where the
-    mesh does not reach.
+    mesh does not reach.  ``pair`` (with the depth mesh): the keyframe shown before the
+    current one (:attr:`previous`) is drawn too, composited by depth: the nearer surface
+    wins, the newer keyframe where both see the same one (a polygon offset), and its
+    rubber sheets fill only what neither keyframe saw.
     """
 
     def __init__(self, terrain: TerrainDrawer, coarse_quads: int = 16,
@@ -155,7 +159,7 @@ class SpriteDrawer:
                  guard_px: int = DEFAULT_GUARD_PX,
                  mipmaps: bool = DEFAULT_SPRITE_MIPMAPS, proxy=None,
                  key_scale: float = 1.0, depth_stride: int | None = None,
-                 depth_cut_deg: float = DEFAULT_CUT_DEG) -> None:
+                 depth_cut_deg: float = DEFAULT_CUT_DEG, pair: bool = False) -> None:
         if visibility not in VISIBILITY_MODES:
             raise InputError(f"visibility must be one of {', '.join(VISIBILITY_MODES)}, "
                              f"got {visibility!r}")
@@ -187,6 +191,8 @@ class SpriteDrawer:
         self._slots: list[tuple[RenderTarget, RenderTarget]] = []  # (keyframe, coarse z)
         self._kept: dict[int, GLKeyframe] = {}  # slot -> the keyframe it holds
         self._shown = -1  # the slot of the keyframe shown
+        self._previous: tuple[int, GLKeyframe] | None = None  # (slot, keyframe) shown before
+        self.pair = bool(pair) and self.depth_mesh is not None
         self.slot_targets(0), self.slot_targets(1)  # the two alternating slots, made up front
         self.keyframe: GLKeyframe | None = None
         self._uploads: list[moderngl.Texture] = []  # RGB sprite textures of uploaded keyframes
@@ -236,8 +242,19 @@ class SpriteDrawer:
         return slot
 
     def show(self, slot: int) -> None:
-        """Make the keyframe kept in ``slot`` the one spriteframes are drawn from."""
+        """Make the keyframe kept in ``slot`` the one spriteframes are drawn from (the one
+        shown until now becomes :attr:`previous`)."""
+        if self._shown >= 0 and self._shown != slot:
+            self._previous = self._shown, self.keyframe
         self.keyframe, self._shown = self._kept[slot], slot
+
+    @property
+    def previous(self) -> GLKeyframe | None:
+        """The keyframe shown before the current one, while its slot still holds it."""
+        if self._previous is None:
+            return None
+        slot, key = self._previous
+        return key if self._kept.get(slot) is key and slot != self._shown else None
     def set_proxy(self, proxy) -> None:
         """Draw spriteframes and coarse z-buffers with ``proxy`` (a proxy geometry object,
         :class:`UniformProxy`; None: the uniform coarse level again), from the next
@@ -400,6 +417,14 @@ class SpriteDrawer:
             self._clear_depth()
             self.fallback_passes += 1
         tris += self.depth_mesh.draw(key, viewpoint, projection, self.fallback_tint)
+        prev = self.previous if self.pair else None
+        if prev is not None:  # where both see a surface, the newer keyframe's wins
+            self.ctx.mgl.polygon_offset = PAIR_OFFSET
+            try:
+                tris += self.depth_mesh.draw(prev, viewpoint, projection, self.fallback_tint,
+                                             older=True)
+            finally:
+                self.ctx.mgl.polygon_offset = (0.0, 0.0)
         return draw_stats(tris, 1, projection)
 
     def _clear_depth(self) -> None:
@@ -409,6 +434,7 @@ class SpriteDrawer:
             fbo.clear(depth=1.0)  # glClear honours the colour mask: depth alone
         finally:
             fbo.color_mask = (True, True, True, True)
+            fbo.use()  # the mask reaches GL when the framebuffer is bound
 
     def covers(self, viewpoint: Viewpoint, projection: Projection) -> bool:
         """Whether every corner direction of the frame lies inside the current keyframe,

@@ -245,7 +245,7 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
                  cache_policy: str = "lru", metric: str = "warp",
                  proxy_sse: float | None = None, keyframes: str = "inline",
                  proxy: str = "geometry", depth_stride: int = 2,
-                 key_scale: float = 1.0) -> None:
+                 key_scale: float = 1.0, pair: bool = False) -> None:
         from lodsprite.sprite.keyframe_worker import StoreKeys
         from lodsprite.terrain.store import TerrainStore
         from lodsprite.terrain.storefield import store_field
@@ -272,7 +272,7 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
                                  tile_budget_ms=tile_budget_ms, cache_mb=cache_mb,
                                  cache_policy=cache_policy, metric=metric, store=store,
                                  proxy=proxy, depth_stride=depth_stride,
-                                 key_scale=key_scale)
+                                 key_scale=key_scale, pair=pair)
         except BaseException:
             self.adaptive.release()
             if field is not None:

@@ -72,9 +72,12 @@ DEPTH_STRIDE = Option("depth_stride", int, 2, "LOD-sprite with --proxy depth: ke
 KEY_SCALE = Option("key_scale", float, 1.0, "LOD-sprite: keyframe texels a display pixel "
                    "side (2: four samples a pixel, four times the memory)",
                    choices=(1.0, 1.5, 2.0))
+PAIR = Option("pair", bool, False, "LOD-sprite with --proxy depth: draw the keyframe shown "
+              "before the current one too, composited by depth (what one keyframe missed "
+              "the other may have seen)")
 SPRITE_OPTIONS = (LOD, EPSILON, KEYFRAMES, VISIBILITY, GUARD, BORDER, SHADING, TILES,
                   TILE_BUDGET, CACHE_MB, CACHE_POLICY, METRIC, PROXY, DEPTH_STRIDE,
-                  KEY_SCALE)
+                  KEY_SCALE, PAIR)
 SPRITE_SUMMARY = ("keyframes: {keyframes} of {frames}; mean ms keyframe "
                   "{mean_ms_keyframe:.1f}, first spriteframe {mean_ms_first_sprite:.1f}, "
                   "spriteframe {mean_ms_sprite:.1f}",)
@@ -140,7 +143,7 @@ SPRITE_ADAPTIVE = TechniqueSpec(
     "sprite-adaptive", sprite_adaptive,
     (LOD, EPSILON, KEY_SSE, KEYFRAMES, GPU_MB, HOST_MB, VISIBILITY, GUARD, BORDER, SHADING,
      TILES, TILE_BUDGET, CACHE_MB, CACHE_POLICY, METRIC, PROXY_SSE, PROXY, DEPTH_STRIDE,
-     KEY_SCALE),
+     KEY_SCALE, PAIR),
     ("terrain",), "LOD-sprite with keyframes by the adaptive renderer (render: --mode "
     "sprite --key-sse)", order=50, light=True, batch=False, knob="epsilon",
     summary=SPRITE_SUMMARY)

@@ -367,7 +367,7 @@ def sprite_engine(renderer: Renderer, epsilon: float, lod: int, threaded: bool,
                   visibility: str, guard_px: int, border: bool, tiles: int,
                   tile_budget_ms: float, cache_mb: float, cache_policy: str,
                   metric: str, store=None, depth_stride: int | None = None,
-                  key_scale: float = 1.0) -> SpriteEngine:
+                  key_scale: float = 1.0, pair: bool = False) -> SpriteEngine:
     """The engine the options ask for, chosen once: for ``tiles > 1``
     :class:`TiledKeyframes` (inline) or :class:`WorkerTiledKeyframes` (``threaded``),
     else :class:`WorkerKeyframes` or :class:`WholeKeyframes`
@@ -383,7 +383,7 @@ def sprite_engine(renderer: Renderer, epsilon: float, lod: int, threaded: bool,
         guard_px=guard_px,
         border=border, cache_mb=0.0 if tiles > 1 else cache_mb, cache_policy=cache_policy,
         metric=metric, store=store if tiles == 1 else None,  # tiles: the tiled engine's
-        depth_stride=depth_stride, key_scale=key_scale)
+        depth_stride=depth_stride, key_scale=key_scale, pair=pair)
     if tiles == 1:
         return (WorkerKeyframes(sprite) if threaded
                 else WholeKeyframes(sprite, renderer, cache_mb))

@@ -170,7 +170,7 @@ class SpriteTechnique(Technique):
                  tile_budget_ms: float = DEFAULT_TILE_BUDGET_MS, cache_mb: float = 0.0,
                  cache_policy: str = "lru", metric: str = "warp", store=None,
                  proxy: str = "geometry", depth_stride: int = 2,
-                 key_scale: float = 1.0) -> None:
+                 key_scale: float = 1.0, pair: bool = False) -> None:
         super().__init__(renderer)
         from lodsprite.gl.sprite import DEFAULT_GUARD_PX, DEFAULT_VISIBILITY
 
@@ -181,7 +181,7 @@ class SpriteTechnique(Technique):
             renderer, epsilon, lod, keyframes == "worker", visibility or DEFAULT_VISIBILITY,
             DEFAULT_GUARD_PX if guard_px is None else guard_px, border, tiles,
             tile_budget_ms, cache_mb, cache_policy, metric, store,
-            depth_stride if proxy == "depth" else None, key_scale)
+            depth_stride if proxy == "depth" else None, key_scale, pair)
         self.sprite: LodSprite = self.engine.sprite
         self.heights = level0_reader(renderer.terrain_gl.geometry, lod, border)
 
