@@ -33,7 +33,8 @@ from lodsprite.report.frontier import frontier, frontier_speedup, speedup_lower_
 
 VARIANTS = {
     "geometry k1": {},
-    "depth k2": {"proxy": "depth", "key_scale": 2.0},
+    "depth k2": {"proxy": "depth", "key_scale": 2.0, "depth_stride": 8},
+    "depth k2 pair": {"proxy": "depth", "key_scale": 2.0, "depth_stride": 8, "pair": True},
 }
 
 

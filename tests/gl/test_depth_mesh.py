@@ -236,7 +236,34 @@ def test_a_frame_leaving_the_keyframe_still_draws_the_mesh_over_the_fallback(ter
             sp.render_keyframe(vp, 0.0)
             sp.render_spriteframe(v)
             err[depth] = rmse(sp.target.read_color()[inside], truth[inside])
-            assert depth is None or sp.fallback_passes == 1
+            assert depth is None or sp.fallback_passes == 1  # the proxy under the mesh
         finally:
             sp.release()
     assert err[2] < 0.7 * err[None]  # measured 0.56; with the colour masked, 1.0
+
+
+def test_the_depth_later_layers_test_is_the_keyframes_own_at_its_view(terrain):
+    # A scene's walkers are depth-tested against what the sprite shows: with the depth
+    # mesh, at the keyframe's own view, the depth pass gives the keyframe's z-buffer
+    # (its centre, the frame), within 1e-4 of window depth where the keyframe saw ground,
+    # but where rubber sheets (left out of the depth) are the only surface.
+    from lodsprite.gl.key_depth import KeyDepthPass
+
+    tr = terrain(make_field(64, kind="ridges", relief=150.0))
+    vp = look_at((0.0, -1800.0, 900.0), (0.0, 0.0, 0.0))
+    sp = SpriteDrawer(tr, 8, depth_stride=1)
+    depth = KeyDepthPass(sp)
+    try:
+        sp.render_keyframe(vp, 0.0)
+        g = sp.guard_px
+        key = sp.keyframe.target.read_depth()[g:-g, g:-g]
+        sp.render_spriteframe(vp)
+        depth.draw(vp, tr.projection(vp))
+        shown = sp.target.read_depth()
+    finally:
+        depth.release()
+        sp.release()
+    ground = key < 1.0
+    assert ground.mean() > 0.5
+    close = np.abs(shown - key)[ground] < 1e-4
+    assert close.mean() > 0.9  # measured 0.979: the rest lie under rubber sheets

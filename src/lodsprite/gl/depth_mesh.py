@@ -15,10 +15,15 @@ keyframe's silhouettes are kept to the texel and parallax errs only inside cells
 
 A triangle across a depth discontinuity (or between sky and ground) is a *rubber sheet*:
 its normal is nearly perpendicular to the keyframe's ray through it (``|cos| < cut``).
-Rubber sheets are drawn behind every other triangle, whatever their depth (window depth
-in [0.5, 0.75], or [0.75, 1] for the older keyframe of a pair, against [0, 0.45]: the
-geometry shader remaps clip z), so they fill only what no triangle covers: at the keyframe's view they are exactly the keyframe's
-pixels; in motion they fill disocclusions with a stretch of their edges' colours.
+Rubber sheets are drawn behind every other triangle of their keyframe, whatever their
+depth (the geometry shader remaps clip z to window depth [0, 0.25] for the triangles and
+[0.25, 0.5] for the sheets; the older keyframe of a pair [0.5, 0.75] and [0.75, 1], so
+that it shows only where the newer one drew nothing), so they fill only what no triangle covers: at the
+keyframe's view they are exactly the keyframe's pixels; in motion they fill small
+disocclusions with a stretch of their edges' colours.  A sheet whose pixel area has grown
+more than ``stretch`` times since the keyframe's view is left out: there the proxy
+geometry's spriteframe, drawn under the mesh, shows (the terrain's own texture or
+shading where the keyframe did not see it).
 """
 
 from __future__ import annotations
@@ -36,7 +41,7 @@ from lodsprite.gl.terrain import mat_bytes
 
 DEFAULT_STRIDE = 2       # keyframe texels between vertices
 DEFAULT_CUT_DEG = 2.0    # a triangle this close to its keyframe ray (degrees) is a sheet
-SKY_DEPTH = 0.999999     # window depth of points at infinity (inside the far plane)
+DEFAULT_STRETCH = 4.0    # a rubber sheet grown more than this (pixel area) is left out
 
 DEPTH_MESH_VS = """#version 330
 uniform sampler2D u_key_depth;   // the keyframe's z-buffer (window depth)
@@ -79,6 +84,19 @@ layout(triangles) in;
 layout(triangle_strip, max_vertices = 3) out;
 uniform float u_cut;      // |cos(normal, ray)| below which a triangle is a rubber sheet
 uniform float u_sheet;    // window depth where this keyframe's rubber sheets start
+uniform vec2 u_valid;     // window depth where its other triangles start, and their span
+                          // (sheets span 0.25)
+uniform int u_true;       // 1: true depth, no rubber sheets (what later layers test)
+uniform vec2 u_key_px;    // keyframe size, display pixels (texels / scale)
+uniform vec2 u_frame_px;  // frame size, pixels
+uniform float u_stretch;  // a rubber sheet grown more than this (area) is left out
+// twice the pixel area of a triangle given in clip coordinates (1e30: a vertex behind
+// the eye, the triangle stretched without bound)
+float area2(vec4 a, vec4 b, vec4 c, vec2 size) {
+    if (a.w <= 0.0 || b.w <= 0.0 || c.w <= 0.0) return 1e30;
+    vec2 p = a.xy / a.w * size, q = b.xy / b.w * size, r = c.xy / c.w * size;
+    return abs((q.x - p.x) * (r.y - p.y) - (q.y - p.y) * (r.x - p.x));
+}
 in vec3 v_rel[];
 in vec4 v_key[];
 in float v_sky[];
@@ -97,11 +115,26 @@ void main() {
         vec3 ray = (a + b + c) / 3.0;
         rubber = abs(dot(nrm, ray)) < u_cut * length(nrm) * length(ray);
     }
+    if (u_true == 1 && rubber) return;
+    if (rubber) {  // a sheet stretched over what the keyframe never saw: the fallback's
+        float key = area2(v_key[0], v_key[1], v_key[2], 0.5 * u_key_px);
+        float now = area2(gl_in[0].gl_Position, gl_in[1].gl_Position, gl_in[2].gl_Position,
+                          0.5 * u_frame_px);
+        if (!(now <= u_stretch * max(key, 0.5))) return;
+    }
     for (int i = 0; i < 3; ++i) {
         vec4 p = gl_in[i].gl_Position;
-        // window depth: triangles in [0, 0.45], rubber sheets in [u_sheet, u_sheet + 0.25]
-        // (the gap keeps a pair's polygon offset from reaching the sheets)
-        p.z = rubber ? 0.25 * p.z + (2.0 * u_sheet - 0.75) * p.w : 0.45 * p.z - 0.55 * p.w;
+        if (u_true == 1) {
+            gl_Position = p;
+            g_key = v_key[i];
+            g_rubber = 0;
+            EmitVertex();
+            continue;
+        }
+        // window depth: triangles in [u_valid.x, u_valid.x + u_valid.y], rubber sheets
+        // in [u_sheet, u_sheet + 0.25]
+        p.z = rubber ? 0.25 * p.z + (2.0 * u_sheet - 0.75) * p.w
+                     : u_valid.y * p.z + (2.0 * u_valid.x - 1.0 + u_valid.y) * p.w;
         gl_Position = p;
         g_key = v_key[i];
         g_rubber = rubber ? 1 : 0;
@@ -154,13 +187,14 @@ class DepthMesh:
     angle.  GPU objects (one mesh a keyframe size) live until :meth:`release`."""
 
     def __init__(self, ctx: GLContext, stride: int = DEFAULT_STRIDE,
-                 cut_deg: float = DEFAULT_CUT_DEG) -> None:
+                 cut_deg: float = DEFAULT_CUT_DEG, stretch: float = DEFAULT_STRETCH) -> None:
         if not (isinstance(stride, int | np.integer) and 1 <= int(stride) <= 16):
             raise InputError(f"the depth mesh's stride is 1 to 16 keyframe texels, not "
                              f"{stride!r}")
         if not 0.0 <= float(cut_deg) < 90.0:
             raise InputError(f"the rubber-sheet angle is in [0, 90) degrees, not {cut_deg!r}")
         self.ctx, self.stride, self.cut_deg = ctx, int(stride), float(cut_deg)
+        self.stretch = float(stretch)
         self.program = ctx.mgl.program(vertex_shader=DEPTH_MESH_VS,
                                        geometry_shader=DEPTH_MESH_GS,
                                        fragment_shader=DEPTH_MESH_FS)
@@ -180,11 +214,17 @@ class DepthMesh:
 
     def draw(self, key, viewpoint: Viewpoint, projection: Projection,
              tint: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0),
-             older: bool = False) -> int:
+             older: bool = False, true_depth: bool = False,
+             frame_px: tuple[int, int] = (1, 1), key_scale: float = 1.0) -> int:
         """Draw keyframe ``key`` (a :class:`~lodsprite.gl.sprite.GLKeyframe`: colour,
         depth, view, projection) as seen from ``viewpoint`` through ``projection`` into
         the bound framebuffer, depth-tested; returns the triangles drawn.  ``older``: the
-        older keyframe of a pair, whose rubber sheets go behind the newer one's."""
+        older keyframe of a pair, whose rubber sheets go behind the newer one's;
+        ``true_depth``: the surfaces' own window depth, rubber sheets left out (the depth
+        a scene's later layers are tested against; draw it with colour writes off).
+        ``frame_px``: the frame's size (pixels), ``key_scale``: the keyframe's texels a
+        display pixel side: a rubber sheet whose pixel area grew more than ``stretch``
+        times from the keyframe's view is left out (the fallback under the mesh shows)."""
         prog = self.program
         kp = key.projection
         ty = math.tan(math.radians(kp.fov_y_deg) / 2.0)
@@ -197,7 +237,12 @@ class DepthMesh:
         prog["u_mvp_rel"].write(mat_bytes(rel_matrix(mvp, vp.o)))
         prog["u_key_proj"].write(mat_bytes(kp.matrix()))
         prog["u_fallback_tint"].value = tint
-        prog["u_sheet"].value = 0.75 if older else 0.5
+        prog["u_sheet"].value = 0.75 if older else 0.25
+        prog["u_valid"].value = (0.5, 0.25) if older else (0.0, 0.25)
+        prog["u_true"].value = int(true_depth)
+        prog["u_stretch"].value = self.stretch
+        prog["u_key_px"].value = tuple(n / key_scale for n in key.target.size)
+        prog["u_frame_px"].value = tuple(float(n) for n in frame_px)
         key.color.use(2)
         key.target.depth.use(3)
         vao, _, _, tris = self._mesh(key.target.size)

@@ -91,6 +91,9 @@ class KeyDepthPass:
         key = self.sprite.keyframe
         if key is None:
             raise RuntimeError("the keyframe depth pass needs a keyframe")
+        if self.sprite.depth_mesh is not None:
+            self._mesh_depth(key, viewpoint, projection)
+            return
         proxy = key.proxy or self.sprite.proxy
         prog = self._program_for(proxy)
         fbo = self.sprite.target.fbo
@@ -111,6 +114,23 @@ class KeyDepthPass:
             proxy.draw(prog, mvp)
         finally:
             fbo.color_mask = (True, True, True, True)
+
+    def _mesh_depth(self, key, viewpoint: Viewpoint, projection: Projection) -> None:
+        """With the depth mesh: its surfaces' true depth (both keyframes of a pair),
+        rubber sheets left out (where only they are, later layers are drawn over)."""
+        fbo = self.sprite.target.fbo
+        fbo.use()
+        fbo.color_mask = (False, False, False, False)
+        try:
+            fbo.clear(depth=1.0)
+            fbo.use()
+            mesh = self.sprite.depth_mesh
+            for k in (key, self.sprite.previous if self.sprite.pair else None):
+                if k is not None:
+                    mesh.draw(k, viewpoint, projection, true_depth=True)
+        finally:
+            fbo.color_mask = (True, True, True, True)
+            fbo.use()
 
     def release(self) -> None:
         if self.program is not None:

@@ -42,8 +42,6 @@ DEFAULT_VISIBILITY = "coarse"
 DEFAULT_GUARD_PX = 32
 DEFAULT_SPRITE_MIPMAPS = False  # benchmarks/sprite_mipmaps.py: see SpriteDrawer
 KEY_SCALES = (1.0, 1.5, 2.0)  # keyframe texels a display pixel side
-COVER_MARGIN_PX = 8  # a frame's corners this far inside the keyframe: no fallback pass
-PAIR_OFFSET = (1.0, 16.0)  # glPolygonOffset of the older keyframe of a pair
 
 # The coarse z-buffer: a proxy's depth alone, from the keyframe's view.
 PROXY_DEPTH_VS = "#version 330\n" + PROXY_VERTEX_COMMON + """
@@ -144,12 +142,11 @@ class SpriteDrawer:
     ``depth_stride`` (None: the proxy geometry): spriteframes draw the keyframe's own
     depth as a mesh (:class:`~lodsprite.gl.depth_mesh.DepthMesh`, a vertex every
     ``depth_stride`` keyframe texels, rubber sheets at ``depth_cut_deg``); the proxy
-    geometry's spriteframe is drawn under it only where the frame's corners leave the
-    keyframe (more than ``COVER_MARGIN_PX`` short of its edge), and shows only where the
-    mesh does not reach.  ``pair`` (with the depth mesh): the keyframe shown before the
-    current one (:attr:`previous`) is drawn too, composited by depth: the nearer surface
-    wins, the newer keyframe where both see the same one (a polygon offset), and its
-    rubber sheets fill only what neither keyframe saw.
+    geometry's spriteframe is drawn under it and shows where the mesh does not reach
+    (outside the keyframe, and where a rubber sheet would stretch too far).  ``pair`` (with the depth mesh): the keyframe shown before the
+    current one (:attr:`previous`) is drawn too, by priority: the older keyframe shows
+    only where the newer drew nothing (outside it, or where its rubber sheets stretched
+    too far to be drawn).
     """
 
     def __init__(self, terrain: TerrainDrawer, coarse_quads: int = 16,
@@ -411,20 +408,17 @@ class SpriteDrawer:
         self.ctx.mgl.enable(moderngl.DEPTH_TEST)
         if self.depth_mesh is None:
             return self._draw_proxy(key, viewpoint, projection)
-        tris = 0
-        if not self.covers(viewpoint, projection):
-            tris = self._draw_proxy(key, viewpoint, projection).triangles
-            self._clear_depth()
-            self.fallback_passes += 1
-        tris += self.depth_mesh.draw(key, viewpoint, projection, self.fallback_tint)
+        # the proxy geometry's spriteframe under the mesh: where it does not reach
+        tris = self._draw_proxy(key, viewpoint, projection).triangles
+        self._clear_depth()
+        self.fallback_passes += 1
+        size = self.target.size
+        tris += self.depth_mesh.draw(key, viewpoint, projection, self.fallback_tint,
+                                     frame_px=size, key_scale=self.key_scale)
         prev = self.previous if self.pair else None
         if prev is not None:  # where both see a surface, the newer keyframe's wins
-            self.ctx.mgl.polygon_offset = PAIR_OFFSET
-            try:
-                tris += self.depth_mesh.draw(prev, viewpoint, projection, self.fallback_tint,
-                                             older=True)
-            finally:
-                self.ctx.mgl.polygon_offset = (0.0, 0.0)
+            tris += self.depth_mesh.draw(prev, viewpoint, projection, self.fallback_tint,
+                                         older=True, frame_px=size, key_scale=self.key_scale)
         return draw_stats(tris, 1, projection)
 
     def _clear_depth(self) -> None:
@@ -435,22 +429,6 @@ class SpriteDrawer:
         finally:
             fbo.color_mask = (True, True, True, True)
             fbo.use()  # the mask reaches GL when the framebuffer is bound
-
-    def covers(self, viewpoint: Viewpoint, projection: Projection) -> bool:
-        """Whether every corner direction of the frame lies inside the current keyframe,
-        at least ``COVER_MARGIN_PX`` display pixels from its edge."""
-        key = self.keyframe
-        corners = np.array([[x, y, 1.0, 1.0] for x in (-1, 1) for y in (-1, 1)])
-        inv = np.linalg.inv(projection.matrix() @ viewpoint.view_matrix())
-        far = corners @ inv.T
-        d = far[:, :3] / far[:, 3:] - viewpoint.o
-        k = np.c_[d, np.zeros(4)] @ key.view_proj.T
-        if np.any(k[:, 3] <= 0.0):
-            return False
-        ndc = k[:, :2] / k[:, 3:]
-        w, h = self.key_size
-        m = 2.0 * COVER_MARGIN_PX * self.key_scale / np.array([w, h])
-        return bool(np.all(np.abs(ndc) <= 1.0 - m))
 
     def _draw_proxy(self, key: GLKeyframe, viewpoint: Viewpoint,
                     projection: Projection) -> Frame:

@@ -66,18 +66,21 @@ def full_depth(sprite, key) -> None:
 
 class KeyframedTerrain(Layer):
     """The terrain and static objects from the scene's keyframe worker (module doc),
-    spriteframes of ``lod`` quads drawn on ``renderer``; ``epsilon`` the starting ε (its
-    setting's tolerance with it)."""
+    spriteframes of ``lod`` quads drawn on ``renderer`` (or, with ``depth_stride``, on the
+    keyframe's own depth, ``pair`` with the keyframe before it); ``epsilon`` the starting
+    ε (its setting's tolerance with it)."""
 
     name = "terrain"
 
     def __init__(self, renderer: Renderer, keys: SceneKeys, epsilon: float = 1.0,
-                 lod: int = 16, exponent: float = 1.0) -> None:
+                 lod: int = 16, exponent: float = 1.0, depth_stride: int | None = None,
+                 pair: bool = False) -> None:
         from lodsprite.gl.key_depth import KeyDepthPass
         from lodsprite.gl.sprite import DEFAULT_VISIBILITY, SpriteDrawer
 
         self.renderer, self.mode = renderer, "sprite"
-        self.sprite = SpriteDrawer(renderer.terrain_gl.drawer, lod, DEFAULT_VISIBILITY)
+        self.sprite = SpriteDrawer(renderer.terrain_gl.drawer, lod, DEFAULT_VISIBILITY,
+                                   depth_stride=depth_stride, pair=pair)
         try:
             self.engine = SceneKeyEngine(self.sprite, renderer.scene, renderer.fov_y_deg,
                                          epsilon, keys)

@@ -286,8 +286,13 @@ def _keyframed(renderer: Renderer, scene: Scene, mode: str, exponent: float,
                      {k: v for k, v in options.items()
                       if adaptive and k in own and v is not None})
     epsilon, lod = options.get("epsilon"), options.get("lod")  # None: the defaults
+    if options.get("key_scale") not in (None, 1.0):
+        raise InputError("a scene's keyframe worker renders at keyframe scale 1: "
+                         "--key-scale needs --keyframes inline in a scene")
+    stride = options.get("depth_stride") or 2 if options.get("proxy") == "depth" else None
     return KeyframedTerrain(renderer, keys, float(epsilon or DEFAULT_EPSILON_PX),
-                            int(lod or DEFAULT_COARSE), exponent)
+                            int(lod or DEFAULT_COARSE), exponent, depth_stride=stride,
+                            pair=bool(options.get("pair")))
 
 
 def reference(renderer: Renderer, scene: Scene, path: CameraPath, frame_s: float = FRAME_S,

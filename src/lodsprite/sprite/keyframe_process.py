@@ -101,7 +101,7 @@ class _WorkerGL:
             made.append(TerrainDrawer(self.ctx, made[-1], s.size[0], s.size[1], s.fov_y_deg))
             self.terrain = made[-1]
             self.sprite = SpriteDrawer(self.terrain, s.lod, s.visibility, border=s.border,
-                                         guard_px=s.guard_px)
+                                       guard_px=s.guard_px, key_scale=s.key_scale)
             made.append(self.sprite)
             self.tiled = None if s.tiles <= 1 else tiled_drawer(self.sprite, s.tiles)
         except BaseException:  # released in the order made, backwards
@@ -109,7 +109,7 @@ class _WorkerGL:
                 obj.release()
             raise
         self.metric = ErrorMetric.for_level(hf, s.lod, s.resampling)
-        self.zbuffer = "coarse" if s.visibility == "coarse" else "full"
+        self.zbuffer = s.zbuffer
 
     def render(self, vp: Viewpoint, predicted: bool, asked: float) -> tuple[bytes, bytes]:
         t0 = time.perf_counter()

@@ -112,7 +112,9 @@ class WorkerSettings:
     keyframes' ``C'`` are for the resampling metric (their matrix and size attached);
     ``store``: keyframes over a store by the adaptive renderer (None: in-memory terrain,
     full resolution); ``tiles``: the keyframe split into ``tiles x tiles`` tiles, each
-    request naming those to render (1: whole keyframes)."""
+    request naming those to render (1: whole keyframes); ``key_scale``: keyframe texels a
+    display pixel side; ``depth``: keyframes ship the full-resolution z-buffer (the
+    drawing side draws them on their own depth), else the ``coarse`` rule's coarse one."""
 
     size: tuple[int, int]
     fov_y_deg: float
@@ -125,11 +127,19 @@ class WorkerSettings:
     resampling: bool = False
     store: StoreKeys | None = None
     tiles: int = 1
+    key_scale: float = 1.0
+    depth: bool = False
 
     @property
     def key_size(self) -> tuple[int, int]:
-        """A keyframe's ``(w, h)`` pixels: the image plus the guard band on every side."""
-        return self.size[0] + 2 * self.guard_px, self.size[1] + 2 * self.guard_px
+        """A keyframe's ``(w, h)`` texels: the image plus the guard band on every side,
+        times the keyframe scale (as :attr:`lodsprite.gl.sprite.SpriteDrawer.key_size`)."""
+        return tuple(int(round(self.key_scale * (n + 2 * self.guard_px))) for n in self.size)
+
+    @property
+    def zbuffer(self) -> str:
+        """Whose z-buffer a keyframe ships: ``full`` or ``coarse``."""
+        return "coarse" if self.visibility == "coarse" and not self.depth else "full"
 
     @property
     def answer_bytes(self) -> int:

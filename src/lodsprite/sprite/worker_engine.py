@@ -86,7 +86,8 @@ class WorkerLodSpriteEngine:
         # make_worker(scene, settings): another client end (a scene's); default the terrain's
         self.worker = (make_worker or KeyframeWorker)(scene, WorkerSettings(
             sprite.target.size, fov_y_deg, sprite.coarse_quads, sprite.visibility,
-            sprite.border, sprite.guard_px, predictor, resampling=resampling, store=store))
+            sprite.border, sprite.guard_px, predictor, resampling=resampling, store=store,
+            key_scale=sprite.key_scale, depth=sprite.depth_mesh is not None))
         self.keyframes: list[KeyChoice] = []
         # per adopted keyframe, over a store: the adaptive selection it was drawn with
         self.selections: list[tuple | None] = []

@@ -108,7 +108,8 @@ class StoreKeyframes:
             # coarse level held whole (no level-0 chunk read), as sprite-adaptive's setup
             with nullcontext() if field is None else field.heights.from_coarse():
                 self.sprite = SpriteDrawer(self.terrain, s.lod, s.visibility,
-                                           border=s.border, guard_px=s.guard_px)
+                                           border=s.border, guard_px=s.guard_px,
+                                           key_scale=s.key_scale)
                 made.append(self.sprite)
                 self.metric = ErrorMetric.for_level(geometry.full, s.lod, s.resampling)
                 if field is not None:
@@ -123,7 +124,7 @@ class StoreKeyframes:
         if self.heights is not None:  # C: the surface each keyframe draws
             self.metric = replace(self.metric, surface=DrawnSurface(self.adaptive).heights)
         self.sprite.keyframe_drawer = self.adaptive.render_into
-        self.zbuffer = "coarse" if s.visibility == "coarse" else "full"
+        self.zbuffer = s.zbuffer
         self.key_size = s.key_size
         self.filled = False
         self._drawn: list[tuple] = []  # the update's tiles: (selection, deficit) each
