@@ -18,12 +18,12 @@ its normal is nearly perpendicular to the keyframe's ray through it (``|cos| < c
 Rubber sheets are drawn behind every other triangle of their keyframe, whatever their
 depth (the geometry shader remaps clip z to window depth [0, 0.25] for the triangles and
 [0.25, 0.5] for the sheets; the older keyframe of a pair [0.5, 0.75] and [0.75, 1], so
-that it shows only where the newer one drew nothing), so they fill only what no triangle covers: at the
-keyframe's view they are exactly the keyframe's pixels; in motion they fill small
-disocclusions with a stretch of their edges' colours.  A sheet whose pixel area has grown
-more than ``stretch`` times since the keyframe's view is left out: there the proxy
-geometry's spriteframe, drawn under the mesh, shows (the terrain's own texture or
-shading where the keyframe did not see it).
+that it shows only where the newer one drew nothing), so they fill only what no triangle
+covers: at the keyframe's view they are exactly the keyframe's pixels; in motion they fill
+small disocclusions with a stretch of their edges' colours. A sheet whose pixel area has
+grown more than ``stretch`` times since the keyframe's view is left out: there the proxy
+geometry's spriteframe, drawn under the mesh, shows (the terrain's own texture or shading
+where the keyframe did not see it).
 """
 
 from __future__ import annotations

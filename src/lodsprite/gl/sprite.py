@@ -139,14 +139,14 @@ class SpriteDrawer:
     (:meth:`keyframe_bytes`).  A keyframe at a scale other than 1 is never shown as it
     is: its frame is a spriteframe drawn from it (:attr:`keyframe_is_frame`).
 
-    ``depth_stride`` (None: the proxy geometry): spriteframes draw the keyframe's own
-    depth as a mesh (:class:`~lodsprite.gl.depth_mesh.DepthMesh`, a vertex every
-    ``depth_stride`` keyframe texels, rubber sheets at ``depth_cut_deg``); the proxy
-    geometry's spriteframe is drawn under it and shows where the mesh does not reach
-    (outside the keyframe, and where a rubber sheet would stretch too far).  ``pair`` (with the depth mesh): the keyframe shown before the
-    current one (:attr:`previous`) is drawn too, by priority: the older keyframe shows
-    only where the newer drew nothing (outside it, or where its rubber sheets stretched
-    too far to be drawn).
+    ``depth_stride`` (None: the proxy geometry): spriteframes draw the keyframe's own depth
+    as a mesh (:class:`~lodsprite.gl.depth_mesh.DepthMesh`, a vertex every ``depth_stride``
+    keyframe texels, rubber sheets at ``depth_cut_deg``); the proxy geometry's spriteframe
+    is drawn under it and shows where the mesh does not reach (outside the keyframe, and
+    where a rubber sheet would stretch too far). ``pair`` (with the depth mesh): the
+    keyframe shown before the current one (:attr:`previous`) is drawn too, by priority: the
+    older keyframe shows only where the newer drew nothing (outside it, or where its rubber
+    sheets stretched too far to be drawn).
     """
 
     def __init__(self, terrain: TerrainDrawer, coarse_quads: int = 16,
