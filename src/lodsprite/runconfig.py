@@ -78,6 +78,14 @@ class RenderConfig(TechniqueOptions):
         from lodsprite.techniques.defaults import DEFAULTED, fill_defaults
 
         given = {k: self.options.get(k) for k in DEFAULTED}
+        if self.mode != "sprite":  # only what the mode's technique takes
+            from lodsprite import techniques
+
+            try:
+                takes = {o.name for o in techniques.get(self.mode).options}
+            except InputError:  # not a technique's name: validate says so
+                takes = set(given)
+            given = {k: v for k, v in given.items() if k in takes or k in self.options}
         if all(v is not None for k, v in given.items() if k not in ("key_sse", "proxy_sse")) \
                 and ("key_sse" in self.options or self.mode != "sprite" or store is False):
             return self  # nothing to fill
@@ -107,9 +115,11 @@ class RenderConfig(TechniqueOptions):
     def validate(self) -> None:
         """Raise :class:`InputError` for a bad option (checked with the defaults filled):
         each option's value by its declaration (:meth:`Option.check`), then what goes
-        with what."""
+        with what.  An option given that the technique does not take is refused, never
+        ignored."""
         from lodsprite import techniques
 
+        given = set(self.options)
         self = self.resolved()
         modes = render_modes()
         if self.mode not in modes:
@@ -129,6 +139,13 @@ class RenderConfig(TechniqueOptions):
                              f"{self.display_fps}")
         vdp.check_request(self.vdp_seconds, self.played, self.ground_truth)
         spec, known = techniques.get(self.technique), techniques.all_options()
+        takes = {o.name for o in spec.options}
+        foreign = sorted(given - takes)
+        if foreign:
+            flags = ", ".join(known[n].cli if n in known else n for n in foreign)
+            raise InputError(f"{flags} does not go with --mode {self.mode} (the "
+                             f"{spec.name} technique); its options: "
+                             f"{', '.join(sorted(known[n].cli for n in takes if n in known))}")
         for name, value in self.options.items():
             mine = [o for o in spec.options if o.name == name]
             (mine[0] if mine else known[name]).check(value)

@@ -152,11 +152,11 @@ def test_sprite_adaptive_reads_no_store_inside_its_frames_and_converges(gl, flig
     (fewer than 4 centres in view) takes level-0 heights inside frames (its candidates'
     view test; their C is the keyframe's drawn surface); none is read in this process
     while a frame runs, and once the reader is idle they are exact."""
-    from lodsprite import techniques
     from lodsprite.api import Renderer
     from lodsprite.paths import get_path
     from lodsprite.scene import load_scene
     from lodsprite.sprite import metric
+    from lodsprite.techniques.adaptive import SpriteAdaptiveTechnique
 
     store, level0 = flight
     scene = load_scene(str(store), grid=64)
@@ -169,8 +169,9 @@ def test_sprite_adaptive_reads_no_store_inside_its_frames_and_converges(gl, flig
         return theta(self, *args, **kwargs)
 
     with Renderer(scene, (64, 64), ctx=gl.mgl) as renderer:
-        t = techniques.create("sprite-adaptive", renderer, **techniques.get(
-            "sprite-adaptive").bind({"lod": 8, "epsilon": 1.0, "key_sse": 1.0}))
+        # the class itself: the uniform coarse level and the warp metric (the store's
+        # defaults, which techniques.create fills, draw on the adaptive proxy)
+        t = SpriteAdaptiveTechnique(renderer, lod=8, epsilon=1.0, key_sse=1.0)
         h = t.heights
         pid = h.reader.worker.pid
         monkeypatch.setattr(metric.ErrorMetric, "fallback_sample", counted)
@@ -215,13 +216,16 @@ def test_a_sprite_made_over_the_same_level_0_keeps_the_reader_until_it_is_releas
     from lodsprite.paths import get_path
     from lodsprite.scene import load_scene
 
+    from lodsprite.techniques.terrain import SpriteTechnique
+
     scene = load_scene(str(flight[0]), grid=64)
     path = get_path("flyover:100", scene.hf, 8)
     with Renderer(scene, (64, 64), ctx=gl.mgl) as renderer:
         first = techniques.create("sprite-adaptive", renderer, lod=8, key_sse=1.0)
         h = first.heights
         pid = h.reader.worker.pid
-        second = techniques.create("sprite", renderer, lod=8)
+        # the class itself: techniques.create("sprite") over a store is sprite-adaptive
+        second = SpriteTechnique(renderer, lod=8)
         first.release()
         try:
             assert second.heights is h and not h.blocking and _running(pid)

@@ -198,6 +198,14 @@ class SpriteDrawer:
         self.fallback_tint: tuple[float, float, float, float] = (1.0, 0.0, 1.0, 0.0)
 
     @property
+    def key_px(self) -> tuple[int, int]:
+        """A keyframe's size in display pixels, guard band included (:attr:`key_size`
+        over the keyframe scale): what the error metric's resampling term sees, since a
+        keyframe at scale k sampled with k x k texels a pixel matches the reference's
+        filter, no loss at an identity warp."""
+        return tuple(n + 2 * self.guard_px for n in self.terrain.target.size)
+
+    @property
     def keyframe_is_frame(self) -> bool:
         """Whether a keyframe can be shown as it is (its scale is 1)."""
         return self.key_scale == 1.0

@@ -79,7 +79,7 @@ class LodSpriteEngine:
         self.policy = KeyframePolicy(
             ErrorMetric.for_level(hf, sprite.coarse_quads, resampling_metric(metric)), hf,
             epsilon_px, sprite.target.height, sprite.terrain.projection,
-            sprite.key_projection, predict, cache, key_size=sprite.key_size)
+            sprite.key_projection, predict, cache, key_size=sprite.key_px)
         self._shows_keyframe = True
         # Called in every frame that draws no keyframe, inside its clock (None: nothing).
         self.between_keyframes = None

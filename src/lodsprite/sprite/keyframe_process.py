@@ -118,7 +118,7 @@ class _WorkerGL:
         self.ctx.finish()
         key = self.sprite.keyframe
         c_prime = self.metric.reproject(vp.o, key.projection.matrix() @ vp.view_matrix(),
-                                        key.target.size)
+                                        self.sprite.key_px)
         return keyframe_answer(self.sprite, self.zbuffer, {
             "viewpoint": vp, "frame_projection": frame_projection, "c_prime": c_prime,
             "requested_at": asked, "predicted": predicted}, t0)

@@ -137,6 +137,12 @@ class WorkerSettings:
         return tuple(int(round(self.key_scale * (n + 2 * self.guard_px))) for n in self.size)
 
     @property
+    def sprite_px(self) -> tuple[int, int]:
+        """A keyframe's size in display pixels, guard band included (the error metric's
+        keyframe size, :attr:`lodsprite.gl.sprite.SpriteDrawer.key_px`)."""
+        return self.size[0] + 2 * self.guard_px, self.size[1] + 2 * self.guard_px
+
+    @property
     def zbuffer(self) -> str:
         """Whose z-buffer a keyframe ships: ``full`` or ``coarse``."""
         return "coarse" if self.visibility == "coarse" and not self.depth else "full"

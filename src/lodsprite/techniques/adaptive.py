@@ -24,6 +24,7 @@ from lodsprite.techniques.adaptive_keys import (
 )
 from lodsprite.techniques.adaptive_terrain import ADAPTIVE_COLUMNS
 from lodsprite.techniques.base import Frame, Param, Technique
+from lodsprite.techniques.defaults import MEMORY_DEFAULTS
 from lodsprite.techniques.terrain import SpriteTechnique, resolve_shading, set_shading
 from lodsprite.workers import peak_rss_mb
 
@@ -244,8 +245,10 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
                  tile_budget_ms: float = 8.0, cache_mb: float = 0.0,
                  cache_policy: str = "lru", metric: str = "warp",
                  proxy_sse: float | None = None, keyframes: str = "inline",
-                 proxy: str = "geometry", depth_stride: int = 2,
-                 key_scale: float = 1.0, pair: bool = False) -> None:
+                 proxy: str = MEMORY_DEFAULTS["proxy"],
+                 depth_stride: int = MEMORY_DEFAULTS["depth_stride"],
+                 key_scale: float = MEMORY_DEFAULTS["key_scale"],
+                 pair: bool = MEMORY_DEFAULTS["pair"]) -> None:
         from lodsprite.sprite.keyframe_worker import StoreKeys
         from lodsprite.terrain.store import TerrainStore
         from lodsprite.terrain.storefield import store_field

@@ -125,7 +125,7 @@ class StoreKeyframes:
             self.metric = replace(self.metric, surface=DrawnSurface(self.adaptive).heights)
         self.sprite.keyframe_drawer = self.adaptive.render_into
         self.zbuffer = s.zbuffer
-        self.key_size = s.key_size
+        self.key_size = s.sprite_px  # the metric's keyframe size, display pixels
         self.filled = False
         self._drawn: list[tuple] = []  # the update's tiles: (selection, deficit) each
 

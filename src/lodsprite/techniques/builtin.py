@@ -65,16 +65,16 @@ GRID = Option("grid", int, 64, "adaptive: node grid, quads a side",
 PROXY = Option("proxy", str, "geometry", "LOD-sprite: what spriteframes draw the keyframe "
                "on: its proxy geometry (the --lod level, or the adaptive mesh at "
                "--proxy-sse) or a mesh from the keyframe's own depth",
-               choices=("geometry", "depth"))
-DEPTH_STRIDE = Option("depth_stride", int, 2, "LOD-sprite with --proxy depth: keyframe "
+               choices=("geometry", "depth"), none=_TERRAIN)
+DEPTH_STRIDE = Option("depth_stride", int, None, "LOD-sprite with --proxy depth: keyframe "
                       "texels between the depth mesh's vertices", min=1, max=16,
-                      unit="texels")
-KEY_SCALE = Option("key_scale", float, 1.0, "LOD-sprite: keyframe texels a display pixel "
+                      unit="texels", none=_TERRAIN)
+KEY_SCALE = Option("key_scale", float, None, "LOD-sprite: keyframe texels a display pixel "
                    "side (2: four samples a pixel, four times the memory)",
-                   choices=(1.0, 1.5, 2.0))
-PAIR = Option("pair", bool, False, "LOD-sprite with --proxy depth: draw the keyframe shown "
-              "before the current one too, composited by depth (what one keyframe missed "
-              "the other may have seen)")
+                   choices=(1.0, 1.5, 2.0), none=_TERRAIN)
+PAIR = Option("pair", bool, None, "LOD-sprite with --proxy depth: draw the keyframe shown "
+              "before the current one too, where the current one drew nothing",
+              none=_TERRAIN)
 SPRITE_OPTIONS = (LOD, EPSILON, KEYFRAMES, VISIBILITY, GUARD, BORDER, SHADING, TILES,
                   TILE_BUDGET, CACHE_MB, CACHE_POLICY, METRIC, PROXY, DEPTH_STRIDE,
                   KEY_SCALE, PAIR)
@@ -85,12 +85,21 @@ SPRITE_SUMMARY = ("keyframes: {keyframes} of {frames}; mean ms keyframe "
 
 def with_terrain_defaults(renderer: Any, options: dict[str, Any]) -> dict[str, Any]:
     """``options`` with those left ``None`` that have a terrain default filled with the
-    1999 algorithm's (:data:`lodsprite.techniques.defaults.MEMORY_DEFAULTS`), as the
-    Python API has always made them; ``render`` and ``view`` fill a store's own before
+    terrain's own (:mod:`lodsprite.techniques.defaults`: a store's, or the 1999
+    algorithm's in memory), as ``render`` and ``view`` fill them
     (:meth:`lodsprite.run.RenderConfig.resolved`)."""
     from lodsprite.techniques.defaults import fill_defaults
 
-    return fill_defaults(renderer.scene.terrain_spec, options, store=False)
+    return fill_defaults(renderer.scene.terrain_spec, options,
+                         worker=options.get("keyframes") == "worker")
+
+
+def on_store(renderer: Any) -> bool:
+    """Whether ``renderer``'s scene flies a terrain store."""
+    from lodsprite.terrain.store import is_store
+
+    spec = renderer.scene.terrain_spec
+    return bool(spec) and is_store(spec)
 
 
 def full(renderer: Any, **options: Any) -> Any:
@@ -106,8 +115,14 @@ def lod(renderer: Any, **options: Any) -> Any:
 
 
 def sprite(renderer: Any, **options: Any) -> Any:
+    """LOD-sprite; over a store with adaptive keyframes, as ``render --mode sprite`` draws
+    a store (its working grid would be a resampled copy)."""
     from lodsprite.techniques.terrain import SpriteTechnique
 
+    if on_store(renderer):  # every terrain default the store has, as render fills them
+        from lodsprite.techniques.defaults import DEFAULTED
+
+        return sprite_adaptive(renderer, **{**dict.fromkeys(DEFAULTED), **options})
     return SpriteTechnique(renderer, **with_terrain_defaults(renderer, options))
 
 

@@ -32,7 +32,8 @@ from lodsprite.sprite.tiled_engine import DEFAULT_TILE_BUDGET_MS
 from lodsprite.terrain.lod import DEFAULT_COARSE
 
 #: The options whose default depends on the terrain (``None`` in a config: not given).
-DEFAULTED = ("lod", "key_sse", "proxy_sse", "tiles", "tile_budget_ms", "cache_mb", "metric")
+DEFAULTED = ("lod", "key_sse", "proxy_sse", "tiles", "tile_budget_ms", "cache_mb", "metric",
+             "proxy", "depth_stride", "key_scale", "pair")
 
 #: LOD-sprite on a terrain store.  ``key_sse``: keyframes drawn by the adaptive renderer
 #: from the store at this tolerance, pixels (on a store, sprite mode means adaptive
@@ -41,6 +42,7 @@ DEFAULTED = ("lod", "key_sse", "proxy_sse", "tiles", "tile_budget_ms", "cache_mb
 STORE_DEFAULTS: dict[str, Any] = {
     "lod": DEFAULT_COARSE, "key_sse": 0.5, "proxy_sse": 8.0, "tiles": 1,
     "tile_budget_ms": DEFAULT_TILE_BUDGET_MS, "cache_mb": 0.0, "metric": "resample",
+    "proxy": "geometry", "depth_stride": 8, "key_scale": 1.0, "pair": False,
 }
 
 #: LOD-sprite on an in-memory terrain (a DEM file, ``fractal:N``, ``jacksboro``): the
@@ -48,6 +50,7 @@ STORE_DEFAULTS: dict[str, Any] = {
 MEMORY_DEFAULTS: dict[str, Any] = {
     "lod": DEFAULT_COARSE, "key_sse": None, "proxy_sse": None, "tiles": 1,
     "tile_budget_ms": DEFAULT_TILE_BUDGET_MS, "cache_mb": 0.0, "metric": "warp",
+    "proxy": "geometry", "depth_stride": 4, "key_scale": 1.0, "pair": False,
 }
 
 

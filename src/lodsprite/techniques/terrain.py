@@ -16,6 +16,7 @@ import numpy as np
 from lodsprite.sprite.engine import DEFAULT_EPSILON_PX, FRAME_TYPES, KEYFRAME
 from lodsprite.sprite.tiled_engine import DEFAULT_TILE_BUDGET_MS
 from lodsprite.techniques.base import FALLBACK_TINT, Frame, Param, Technique
+from lodsprite.techniques.defaults import MEMORY_DEFAULTS
 from lodsprite.techniques.sprite_engines import SpriteEngine, sprite_engine
 from lodsprite.terrain.lod import DEFAULT_COARSE, level_step
 
@@ -169,8 +170,10 @@ class SpriteTechnique(Technique):
                  border: bool = True, shading: str = "auto", tiles: int = 1,
                  tile_budget_ms: float = DEFAULT_TILE_BUDGET_MS, cache_mb: float = 0.0,
                  cache_policy: str = "lru", metric: str = "warp", store=None,
-                 proxy: str = "geometry", depth_stride: int = 2,
-                 key_scale: float = 1.0, pair: bool = False) -> None:
+                 proxy: str = MEMORY_DEFAULTS["proxy"],
+                 depth_stride: int = MEMORY_DEFAULTS["depth_stride"],
+                 key_scale: float = MEMORY_DEFAULTS["key_scale"],
+                 pair: bool = MEMORY_DEFAULTS["pair"]) -> None:
         super().__init__(renderer)
         from lodsprite.gl.sprite import DEFAULT_GUARD_PX, DEFAULT_VISIBILITY
 
@@ -243,11 +246,16 @@ class SpriteTechnique(Technique):
 
     def summary(self, frames: list[Frame]) -> dict[str, Any]:
         """Keyframe count and fraction, the engine's work (tiles rendered), mean time per
-        frame kind (ms), mean error (px), the cache's counts."""
+        frame kind (ms), mean error (px), the cache's counts, how spriteframes are drawn."""
+        d = self.sprite.sprite
         out: dict[str, Any] = {"lod": self.sprite.lod, "epsilon": self.sprite.epsilon_px,
                                "visibility": self.sprite.sprite.visibility,
                                "shading": self.shading,
                                "metric": self.metric,
+                               "proxy": "geometry" if d.depth_mesh is None else "depth",
+                               "depth_stride": None if d.depth_mesh is None
+                               else d.depth_mesh.stride,
+                               "key_scale": d.key_scale, "pair": d.pair,
                                "keyframes": sum(f.kind == KEYFRAME for f in frames),
                                **self.engine.work_summary(frames)}
         for t in FRAME_TYPES:
