@@ -215,7 +215,6 @@ def test_a_sprite_made_over_the_same_level_0_keeps_the_reader_until_it_is_releas
     from lodsprite.api import Renderer
     from lodsprite.paths import get_path
     from lodsprite.scene import load_scene
-
     from lodsprite.techniques.terrain import SpriteTechnique
 
     scene = load_scene(str(flight[0]), grid=64)
