@@ -24,6 +24,13 @@ small disocclusions with a stretch of their edges' colours. A sheet whose pixel 
 grown more than ``stretch`` times since the keyframe's view is left out: there the proxy
 geometry's spriteframe, drawn under the mesh, shows (the terrain's own texture or shading
 where the keyframe did not see it).
+
+Sky is not drawn: a triangle of sky alone is the cleared colour, or, where the proxy's
+spriteframe under the mesh reaches, the keyframe's colour on the proxy; drawn at infinity it
+would hide ground the keyframe never saw (a terrain's outline, seen turning). A sheet
+between ground and sky is drawn only while the eye has moved less than half a pixel of
+parallax at the keyframe's near plane: its far end does not move with the eye, so it
+sweeps over the terrain as soon as the eye does.
 """
 
 from __future__ import annotations
@@ -90,6 +97,7 @@ uniform int u_true;       // 1: true depth, no rubber sheets (what later layers 
 uniform vec2 u_key_px;    // keyframe size, display pixels (texels / scale)
 uniform vec2 u_frame_px;  // frame size, pixels
 uniform float u_stretch;  // a rubber sheet grown more than this (area) is left out
+uniform int u_sky_sheets; // 0: sheets between ground and sky left out (the eye moved)
 // twice the pixel area of a triangle given in clip coordinates (1e30: a vertex behind
 // the eye, the triangle stretched without bound)
 float area2(vec4 a, vec4 b, vec4 c, vec2 size) {
@@ -116,6 +124,10 @@ void main() {
         rubber = abs(dot(nrm, ray)) < u_cut * length(nrm) * length(ray);
     }
     if (u_true == 1 && rubber) return;
+    if (u_sky_sheets == 0 && sky > 0.5 && sky < 2.5) return;
+    // sky alone: the cleared colour, or where the proxy under the mesh reaches, the
+    // keyframe's colour on it; drawn, it would hide ground the keyframe never saw
+    if (sky > 2.5) return;
     if (rubber) {  // a sheet stretched over what the keyframe never saw: the fallback's
         float key = area2(v_key[0], v_key[1], v_key[2], 0.5 * u_key_px);
         float now = area2(gl_in[0].gl_Position, gl_in[1].gl_Position, gl_in[2].gl_Position,
@@ -241,6 +253,13 @@ class DepthMesh:
         prog["u_valid"].value = (0.5, 0.25) if older else (0.0, 0.25)
         prog["u_true"].value = int(true_depth)
         prog["u_stretch"].value = self.stretch
+        # a sheet from the ground to a point at infinity sweeps over the terrain as soon as
+        # the eye moves (its far end has no parallax): kept only while the eye's move
+        # shifts the nearest surface by under half a pixel
+        moved = float(np.linalg.norm(np.asarray(viewpoint.o) - vp.o))
+        parallax_px = moved / max(kp.near, 1e-9) / kp.pixel_angle_rad(
+            int(round(key.target.size[1] / key_scale)))
+        prog["u_sky_sheets"].value = int(parallax_px < 0.5)
         prog["u_key_px"].value = tuple(n / key_scale for n in key.target.size)
         prog["u_frame_px"].value = tuple(float(n) for n in frame_px)
         key.color.use(2)

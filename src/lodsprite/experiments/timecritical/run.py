@@ -18,7 +18,9 @@ for the exact one).  The techniques:
   (:class:`~lodsprite.feedback.KnobFeedback`, target 90 % of the display period);
 * ``lod`` - one uniform coarse level;
 * ``sprite-inline`` - LOD-sprite, keyframes drawn in the frame that needs them;
-* ``sprite-worker`` - LOD-sprite, keyframes from the worker process beside the display.
+* ``sprite-worker`` - LOD-sprite, keyframes from the worker process beside the display;
+* ``depth-inline``, ``depth-worker`` - the same on the keyframe's own depth
+  (:mod:`lodsprite.gl.depth_mesh`), inline keyframes at scale 2, the worker's paired.
 
 Every run gets the same untimed warm-up; nothing is read back while it plays.  Then the
 image on screen is judged at instants of path time against the band-limited reference
@@ -45,6 +47,12 @@ TECHNIQUES: dict[str, tuple[str, dict[str, Any], str | None]] = {
     "lod": ("lod", {}, None),
     "sprite-inline": ("sprite", {"keyframes": "inline"}, None),
     "sprite-worker": ("sprite", {"keyframes": "worker"}, None),
+    # spriteframes on the keyframe's own depth, keyframes at scale 2 (the worker: scale 1,
+    # its keyframes crossing the process boundary at 4x the bytes otherwise)
+    "depth-inline": ("sprite", {"keyframes": "inline", "proxy": "depth", "key_scale": 2.0,
+                                "depth_stride": 8}, None),
+    "depth-worker": ("sprite", {"keyframes": "worker", "proxy": "depth", "pair": True,
+                                "depth_stride": 4}, None),
 }
 FIGURES = ("median_ms", "p99_ms", "rmse_time_weighted", "flip_time_weighted", "flicker",
            "rmse_worst_second", "missed_slots", "display_fps", "latency_ms_mean", "cvvdp_jod")
