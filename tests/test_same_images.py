@@ -14,6 +14,7 @@ from lodsprite import techniques
 from lodsprite.api import Renderer, read_image
 from lodsprite.errors import InputError
 from lodsprite.run import RenderConfig, prepare, render_path
+from lodsprite.techniques.defaults import MEMORY_DEFAULTS
 from lodsprite.terrain.store import build_store
 
 SIZE = (64, 64)
@@ -39,7 +40,7 @@ def test_the_api_and_render_draw_an_in_memory_terrain_alike(tmp_path, options):
     cfg = RenderConfig(terrain="fractal:128:2", mode="sprite", frames=FRAMES, size=SIZE,
                        save_frames=True, **options)
     scene, path = prepare(cfg)
-    stride = 2 if options.get("proxy") == "depth" else None
+    stride = MEMORY_DEFAULTS["depth_stride"] if options.get("proxy") == "depth" else None
     low = api_frames(scene, path, lambda r: r.sprite(
         depth_stride=stride, key_scale=options.get("key_scale", 1.0)))
     made = api_frames(scene, path, lambda r: techniques.create("sprite", r, **options))
