@@ -23,8 +23,10 @@ def timecritical(tmp_path_factory):
     )
 
     out = tmp_path_factory.mktemp("tc")
+    # the four kinds of technique (the depth proxy's two rows play as the sprite rows do)
     cfg = TimeCriticalConfig(terrain="fractal:64:3", path="chen1999", size=48, seconds=0.4,
-                             rates=RATES, samples=2, judge_every_s=0.1, flip_every=2)
+                             rates=RATES, samples=2, judge_every_s=0.1, flip_every=2,
+                             techniques=("adaptive", "lod", "sprite-inline", "sprite-worker"))
     r = reproduce_timecritical(cfg, out)
     write_outputs(r, out)
     return out, r

@@ -31,8 +31,9 @@ def views(store512):
 
 def sprite_adaptive(renderer, **options):
     spec = techniques.get("sprite-adaptive")
+    # keyframes at scale 1: held still, what is shown is then the adaptive image itself
     return techniques.create("sprite-adaptive", renderer, **spec.bind(
-        {"lod": 8, "key_sse": KEY_SSE, "epsilon": EPSILON, **options}))
+        {"lod": 8, "key_sse": KEY_SSE, "epsilon": EPSILON, "key_scale": 1.0, **options}))
 
 
 def settled_adaptive(renderer, viewpoint):

@@ -62,7 +62,7 @@ SHADING = Option("shading", str, "auto", "terrain colour: auto (heights on a sto
                  "texture) | texture | heights", choices=("auto", "texture", "heights"))
 GRID = Option("grid", int, 64, "adaptive: node grid, quads a side",
               choices=(16, 32, 64, 128), flag="node-grid")
-PROXY = Option("proxy", str, "geometry", "LOD-sprite: what spriteframes draw the keyframe "
+PROXY = Option("proxy", str, None, "LOD-sprite: what spriteframes draw the keyframe "
                "on: its proxy geometry (the --lod level, or the adaptive mesh at "
                "--proxy-sse) or a mesh from the keyframe's own depth",
                choices=("geometry", "depth"), none=_TERRAIN)

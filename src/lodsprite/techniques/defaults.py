@@ -22,6 +22,16 @@ on the flyover, 0.82× on chen1999) and at 16k² along chen1999 (ε 0.25, 0.42×
 on the 16k² flyover (ε 0.25, 0.81×).  So a store gets whole keyframes drawn by the
 adaptive renderer at 0.5 px, spriteframes on the proxy at 8 px, the resampling metric, no
 cache; ε stays the user's (1 px unless given).
+
+Set on 2026-12-05 from ``benchmarks/sprite_frontier.py`` (4k² store, flyover and
+chen1999, 120 frames at 256²; figures in ``docs/figures.md``): spriteframes on the
+keyframe's own depth with keyframes at scale 2 (every 8th texel a vertex) reached
+adaptive's RMSE at 1 px on the flyover (3.7x its speed by the median frame, 1.6x by the
+path's time), where the proxy geometry at scale 1 never reached it; along chen1999 they
+reached adaptive's error at 2.5x by the median and 1.05x by the path's time, the proxy
+geometry at 4.4x and 0.99x.  So a store's spriteframes draw ``proxy`` depth at ``key_scale`` 2;
+no pair (it changed RMSE by under 0.1 there, at 5-10 % more time).  In memory the 1999
+algorithm stays.
 """
 
 from __future__ import annotations
@@ -42,7 +52,7 @@ DEFAULTED = ("lod", "key_sse", "proxy_sse", "tiles", "tile_budget_ms", "cache_mb
 STORE_DEFAULTS: dict[str, Any] = {
     "lod": DEFAULT_COARSE, "key_sse": 0.5, "proxy_sse": 8.0, "tiles": 1,
     "tile_budget_ms": DEFAULT_TILE_BUDGET_MS, "cache_mb": 0.0, "metric": "resample",
-    "proxy": "geometry", "depth_stride": 8, "key_scale": 1.0, "pair": False,
+    "proxy": "depth", "depth_stride": 8, "key_scale": 2.0, "pair": False,
 }
 
 #: LOD-sprite on an in-memory terrain (a DEM file, ``fractal:N``, ``jacksboro``): the
@@ -73,6 +83,9 @@ def fill_defaults(terrain: str, options: dict[str, Any],
     defaults = terrain_defaults(terrain, store)
     if worker:
         defaults["proxy_sse"] = None
+    tiles = options.get("tiles")
+    if (defaults["tiles"] if tiles is None else tiles) > 1:  # tile updates: scale 1, proxy
+        defaults.update(proxy="geometry", key_scale=1.0)
     return {**options, **{k: defaults[k] for k in DEFAULTED
                           if k in options and options[k] is None}}
 
