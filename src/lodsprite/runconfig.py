@@ -143,7 +143,8 @@ class RenderConfig(TechniqueOptions):
         foreign = sorted(given - takes)
         if foreign:
             flags = ", ".join(known[n].cli if n in known else n for n in foreign)
-            raise InputError(f"{flags} does not go with --mode {self.mode} (the "
+            verb = "does" if len(foreign) == 1 else "do"
+            raise InputError(f"{flags} {verb} not go with --mode {self.mode} (the "
                              f"{spec.name} technique); its options: "
                              f"{', '.join(sorted(known[n].cli for n in takes if n in known))}")
         for name, value in self.options.items():

@@ -406,8 +406,9 @@ class SpriteDrawer:
 
     def render_spriteframe(self, viewpoint: Viewpoint,
                            projection: Projection | None = None) -> Frame:
-        """Render the coarse level (and its border ribbon) textured from the current
-        keyframe into :attr:`target`."""
+        """Render the proxy geometry (the coarse level and its border ribbons, or the
+        proxy set) textured from the current keyframe into :attr:`target`; with the depth
+        mesh, that under the keyframe's mesh (and the previous keyframe's, paired)."""
         key = self.keyframe
         if key is None:
             raise RuntimeError("render_spriteframe needs a keyframe first")
@@ -424,7 +425,7 @@ class SpriteDrawer:
         tris += self.depth_mesh.draw(key, viewpoint, projection, self.fallback_tint,
                                      frame_px=size, key_scale=self.key_scale)
         prev = self.previous if self.pair else None
-        if prev is not None:  # where both see a surface, the newer keyframe's wins
+        if prev is not None:  # shown only where the newer keyframe drew nothing
             tris += self.depth_mesh.draw(prev, viewpoint, projection, self.fallback_tint,
                                          older=True, frame_px=size, key_scale=self.key_scale)
         return draw_stats(tris, 1, projection)
