@@ -28,9 +28,9 @@ where the keyframe did not see it).
 Sky is not drawn: a triangle of sky alone is the cleared colour, or, where the proxy's
 spriteframe under the mesh reaches, the keyframe's colour on the proxy; drawn at infinity it
 would hide ground the keyframe never saw (a terrain's outline, seen turning). A sheet
-between ground and sky is drawn only while the eye has moved less than half a pixel of
-parallax at the keyframe's near plane: its far end does not move with the eye, so it
-sweeps over the terrain as soon as the eye does.
+between ground and sky is drawn only while its ground end has moved less than
+``SKY_SHEET_PX`` pixels: its far end does not move with the eye, so it sweeps over the
+terrain as the eye moves.
 """
 
 from __future__ import annotations
@@ -49,6 +49,7 @@ from lodsprite.gl.terrain import mat_bytes
 DEFAULT_STRIDE = 2       # keyframe texels between vertices
 DEFAULT_CUT_DEG = 2.0    # a triangle this close to its keyframe ray (degrees) is a sheet
 DEFAULT_STRETCH = 4.0    # a rubber sheet grown more than this (pixel area) is left out
+SKY_SHEET_PX = 8.0       # a sheet from ground to sky: kept while its ground moved less (px)
 
 DEPTH_MESH_VS = """#version 330
 uniform sampler2D u_key_depth;   // the keyframe's z-buffer (window depth)
@@ -87,6 +88,7 @@ void main() {
 """
 
 DEPTH_MESH_GS = """#version 330
+#define SKY_SHEET_PX """ + f"{SKY_SHEET_PX:.1f}" + """
 layout(triangles) in;
 layout(triangle_strip, max_vertices = 3) out;
 uniform float u_cut;      // |cos(normal, ray)| below which a triangle is a rubber sheet
@@ -97,7 +99,7 @@ uniform int u_true;       // 1: true depth, no rubber sheets (what later layers 
 uniform vec2 u_key_px;    // keyframe size, display pixels (texels / scale)
 uniform vec2 u_frame_px;  // frame size, pixels
 uniform float u_stretch;  // a rubber sheet grown more than this (area) is left out
-uniform int u_sky_sheets; // 0: sheets between ground and sky left out (the eye moved)
+uniform float u_moved;    // the eye's move from the keyframe's over the pixel angle (m)
 // twice the pixel area of a triangle given in clip coordinates (1e30: a vertex behind
 // the eye, the triangle stretched without bound)
 float area2(vec4 a, vec4 b, vec4 c, vec2 size) {
@@ -124,7 +126,11 @@ void main() {
         rubber = abs(dot(nrm, ray)) < u_cut * length(nrm) * length(ray);
     }
     if (u_true == 1 && rubber) return;
-    if (u_sky_sheets == 0 && sky > 0.5 && sky < 2.5) return;
+    if (sky > 0.5 && sky < 2.5) {  // ground to sky: its ground end's parallax, pixels
+        float d = 1e30;
+        for (int i = 0; i < 3; ++i) if (v_sky[i] < 0.5) d = min(d, length(v_rel[i]));
+        if (!(u_moved / d < SKY_SHEET_PX)) return;
+    }
     // sky alone: the cleared colour, or where the proxy under the mesh reaches, the
     // keyframe's colour on it; drawn, it would hide ground the keyframe never saw
     if (sky > 2.5) return;
@@ -253,13 +259,12 @@ class DepthMesh:
         prog["u_valid"].value = (0.5, 0.25) if older else (0.0, 0.25)
         prog["u_true"].value = int(true_depth)
         prog["u_stretch"].value = self.stretch
-        # a sheet from the ground to a point at infinity sweeps over the terrain as soon as
-        # the eye moves (its far end has no parallax): kept only while the eye's move
-        # shifts the nearest surface by under half a pixel
+        # a sheet from the ground to a point at infinity sweeps over the terrain as the eye
+        # moves (its far end has no parallax): kept while its ground end has moved less
+        # than SKY_SHEET_PX pixels
         moved = float(np.linalg.norm(np.asarray(viewpoint.o) - vp.o))
-        parallax_px = moved / max(kp.near, 1e-9) / kp.pixel_angle_rad(
+        prog["u_moved"].value = moved / kp.pixel_angle_rad(
             int(round(key.target.size[1] / key_scale)))
-        prog["u_sky_sheets"].value = int(parallax_px < 0.5)
         prog["u_key_px"].value = tuple(n / key_scale for n in key.target.size)
         prog["u_frame_px"].value = tuple(float(n) for n in frame_px)
         key.color.use(2)
