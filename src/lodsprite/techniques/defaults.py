@@ -25,9 +25,10 @@ cache; ε stays the user's (1 px unless given).
 
 Set on 2026-12-05 from ``benchmarks/sprite_frontier.py`` (4k² store, flyover and
 chen1999, 120 frames at 256²; figures in ``docs/figures.md``): spriteframes on the
-keyframe's own depth with keyframes at scale 2 (every 8th texel a vertex) reached
-adaptive's RMSE at 1 px on the flyover (3.7x its speed by the median frame, 1.6x by the
-path's time), where the proxy geometry at scale 1 never reached it; along chen1999 they
+keyframe's own depth with keyframes at scale 2 (every 8th texel a vertex) stayed under
+adaptive's RMSE at 0.5 px on the flyover at every ε (at least 4.7x adaptive's speed at
+1 px by the median frame, 2.1x by the path's time), where the proxy geometry at scale 1
+never reached adaptive's error; along chen1999 they
 reached adaptive's error at 2.5x by the median and 1.05x by the path's time, the proxy
 geometry at 4.4x and 0.99x.  So a store's spriteframes draw ``proxy`` depth at ``key_scale`` 2;
 no pair (it changed RMSE by under 0.1 there, at 5-10 % more time).  In memory the 1999
