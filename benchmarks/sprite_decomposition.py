@@ -43,7 +43,7 @@ import numpy as np
 from lodsprite import techniques
 from lodsprite.api import Renderer
 from lodsprite.bandlimit import downsample
-from lodsprite.camera import Viewpoint
+from lodsprite.camera import Viewpoint, turned
 from lodsprite.experiments.large.runs import sprite_lod
 from lodsprite.gl.reference import LevelZeroReference
 from lodsprite.gl.sprite import DEFAULT_COARSE_TOL
@@ -55,15 +55,6 @@ from lodsprite.techniques.defaults import STORE_DEFAULTS
 TURNS = (0.25, 0.5, 1.0, 2.0, 3.0)  # pixels at the image centre
 MOVES = (1, 2, 4, 8)               # frames of the path's travel
 DEFAULT_VARIANTS = ("today:", "fullproxy:proxy_sse=KEY")
-
-
-def turned(vp: Viewpoint, pixels: float, height: int, fov_y_deg: float) -> Viewpoint:
-    """``vp`` turned about its own vertical axis so that the image centre moves
-    ``pixels`` pixels sideways."""
-    f = 0.5 * height / np.tan(np.radians(fov_y_deg) / 2)
-    a = np.arctan(pixels / f)
-    c, s = np.cos(a), np.sin(a)
-    return Viewpoint(c * vp.x + s * vp.z, vp.y, -s * vp.x + c * vp.z, vp.o)
 
 
 def moved(vp: Viewpoint, step: np.ndarray) -> Viewpoint:

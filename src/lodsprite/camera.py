@@ -106,6 +106,16 @@ def rotated_viewpoint(rotation: Rotation, eye) -> Viewpoint:
     return Viewpoint(m[:, 0], m[:, 1], m[:, 2], np.asarray(eye, dtype=np.float64))
 
 
+def turned(viewpoint: Viewpoint, pixels: float, height: int, fov_y_deg: float) -> Viewpoint:
+    """``viewpoint`` turned about its own vertical axis (``y``) so that the image centre of
+    a ``height``-pixel image with vertical field of view ``fov_y_deg`` moves ``pixels``
+    pixels sideways: a pure rotation, no parallax."""
+    a = math.atan(pixels / (0.5 * height / math.tan(math.radians(fov_y_deg) / 2.0)))
+    c, s = math.cos(a), math.sin(a)
+    vp = viewpoint
+    return Viewpoint(c * vp.x + s * vp.z, vp.y, -s * vp.x + c * vp.z, vp.o)
+
+
 def look_at(eye, target, up=(0.0, 0.0, 1.0)) -> Viewpoint:
     """Viewpoint at ``eye`` looking at ``target`` with ``up`` as the screen-up hint.
 

@@ -6,7 +6,7 @@ import pytest
 
 from conftest import make_field
 from lodsprite.bandlimit import downsample
-from lodsprite.camera import Viewpoint, look_at
+from lodsprite.camera import look_at, turned
 from lodsprite.errors import InputError
 from lodsprite.gl.depth_mesh import DepthMesh, grid_vertices
 from lodsprite.gl.reference import LevelZeroReference
@@ -18,13 +18,6 @@ from lodsprite.terrain.generators import fractal
 from lodsprite.terrain.heightfield import HeightField
 
 FOV = 45.0
-
-
-def turned(vp: Viewpoint, pixels: float, height: int) -> Viewpoint:
-    """``vp`` turned about its vertical axis so that the image centre moves ``pixels``."""
-    a = np.arctan(pixels / (0.5 * height / np.tan(np.radians(FOV) / 2)))
-    c, s = np.cos(a), np.sin(a)
-    return Viewpoint(c * vp.x + s * vp.z, vp.y, -s * vp.x + c * vp.z, vp.o)
 
 
 @pytest.fixture
@@ -130,7 +123,7 @@ def test_a_pure_rotation_at_scale_2_reproduces_the_reference(gl, terrain):
                 base = rmse(key if k == 1.0 else downsample(key, 2), ref.image(vp))
                 turns = []
                 for d in (0.5, 1.0, 1.5):
-                    v = turned(vp, d, 128)
+                    v = turned(vp, d, 128, FOV)
                     sp.render_spriteframe(v)
                     turns.append(rmse(sp.target.read_color(), ref.image(v)))
                 errors[k] = (base, max(turns))
@@ -225,7 +218,7 @@ def test_a_frame_leaving_the_keyframe_still_draws_the_mesh_over_the_fallback(ter
     # the mesh errs by resampling alone, the coarse proxy at the ridges' silhouettes too.
     tr = terrain(make_field(64, kind="ridges", relief=150.0))
     vp = look_at((0.0, -2500.0, 420.0), (0.0, 0.0, 0.0))
-    v = turned(vp, 20.0, 128)
+    v = turned(vp, 20.0, 128, FOV)
     tr.render(v)
     truth = tr.target.read_color()
     inside = np.s_[:, :100]  # the frame's left part, which the keyframe saw
