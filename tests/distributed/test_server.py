@@ -442,10 +442,19 @@ def test_the_renderer_survives_a_keyframe_that_fails_to_render(live, monkeypatch
 def test_a_failed_scene_holds_no_memory_in_the_servers_accounting(live, monkeypatch):
     """Regression: the estimate of a scene that failed stayed credited as held, so the
     next load's memory check counted memory nobody held."""
-    monkeypatch.setattr(producer_module, "KeyframeService",
-                        _fail_for("fractal:32:9", MemoryError()))
+    release = threading.Event()
+    fail = _fail_for("fractal:32:9", MemoryError())
+
+    def held_then_failed(args):
+        assert release.wait(30.0)  # hold the load until the figure was read
+        return fail(args)
+
+    monkeypatch.setattr(producer_module, "KeyframeService", held_then_failed)
     assert live.control("load", {**SMALL, "terrain": "fractal:32:9"})["ok"]
-    assert live.server._producer.scene_bytes > 0  # asked for, not yet loaded
+    try:
+        assert live.server._producer.scene_bytes > 0  # asked for, not yet loaded
+    finally:
+        release.set()
     live.wait_state({"failed"})
     assert live.server._producer.scene_bytes == 0
     assert live.control("load", SMALL)["ok"]

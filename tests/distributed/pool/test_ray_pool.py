@@ -20,6 +20,7 @@ from lodsprite.distributed.protocol import LoadArgs, WireViewpoint, decode_keyfr
 
 ray = pytest.importorskip("ray")
 
+from lodsprite.distributed.pool import dispatch  # noqa: E402
 from lodsprite.distributed.pool.ray_pool import INLINE_BYTES, RayPool  # noqa: E402
 
 SCENE = LoadArgs(terrain="fractal:64:1", size=(64, 64), lod=16)
@@ -142,9 +143,12 @@ def test_pages_play_through_actors_and_a_killed_actor_costs_no_keyframe(cluster)
     asyncio.run(asyncio.wait_for(main(), 3 * DEADLINE_S))
 
 
-def test_a_renderer_past_the_job_timeout_is_restarted_and_joins_again(cluster) -> None:
+def test_a_renderer_past_the_job_timeout_is_restarted_and_joins_again(cluster,
+                                                                      monkeypatch) -> None:
     """A job that outlasts the timeout has its actor killed and restarted by Ray: the job
-    is tried again (and given up after its tries), the renderer joins again and serves."""
+    is tried again (and given up after its tries, two here), the renderer joins again and
+    serves."""
+    monkeypatch.setattr(dispatch, "MAX_TRIES", 2)
     with RayPool("auto", 1, job_timeout_s=1.5) as p:
         assert p.wait_workers(1, DEADLINE_S), "the renderer actor joining"
         p.submit(Job(1, "s", SLOW, VIEW, 1.0))
