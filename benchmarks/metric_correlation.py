@@ -34,19 +34,23 @@ from scipy import stats
 from lodsprite.api import Renderer
 from lodsprite.camera import widened
 from lodsprite.run import RenderConfig, field_of_view, parse_size, prepare, run_technique
+from lodsprite.sprite.depth_metric import DepthEstimate
 from lodsprite.sprite.metric import ErrorMetric, in_view
-from lodsprite.sprite.policy import KEYFRAME, keyframe_error_px
+from lodsprite.sprite.policy import KEYFRAME, KeyframePolicy, keyframe_error_px
 from lodsprite.sprite.raycast import coarse_normals
 from lodsprite.sprite.resampling import singular_values, texel_jacobian
 from lodsprite.terrain.store import build_store
 
 METRICS = ("warp", "resample")
+JUDGED = (*METRICS, "depth", "decided")  # the depth estimate, the deciding metric's figure
 MEASURES = ("rmse", "flip")
 
 
-def predicted(renderer: Renderer, config: RenderConfig, path, log, rows) -> list[dict]:
-    """Both metrics' errors (px) of each measured spriteframe of ``rows`` against the
-    keyframe it showed (``log``: the engine's keyframes), with its RMSE and FLIP."""
+def predicted(renderer: Renderer, config: RenderConfig, path, log, rows,
+              estimates: dict) -> list[dict]:
+    """Each metric's error (px) of each measured spriteframe of ``rows`` against the
+    keyframe it showed (``log``: the engine's keyframes; ``estimates``: the depth estimate
+    of each, by its viewpoint's id), with its RMSE and FLIP."""
     tr = renderer.terrain_gl.drawer
     hf = tr.geometry.full  # what the engine's metric was built on
     w, h = config.size
@@ -68,6 +72,10 @@ def predicted(renderer: Renderer, config: RenderConfig, path, log, rows) -> list
                                                 (w + 2 * g, h + 2 * g))
             rec[f"{name}_px"] = keyframe_error_px(metric, cps[name, k], vp, tr.projection(vp),
                                                   h)
+        est = estimates.get(id(key.viewpoint))
+        proj = tr.projection(vp)
+        rec["depth_px"] = (float("nan") if est is None else est.error_px(
+            vp.o, proj.matrix() @ vp.view_matrix(), proj.pixel_angle_rad(h), (w, h)))
         rec.update(terms(metrics["resample"], cps["resample", k], vp, tr.projection(vp),
                          config.size))
         out.append(rec)
@@ -95,15 +103,23 @@ def terms(metric: ErrorMetric, cp, vp, projection, size) -> dict[str, float]:
 
 
 def run_case(terrain: str, path_spec: str, args) -> list[dict]:
+    extra = {k: v for k, v in (("proxy", args.proxy), ("key_scale", args.key_scale))
+             if v is not None}
     config = RenderConfig(terrain=terrain, path=path_spec, mode="sprite",
                           size=parse_size(args.size), frames=args.frames,
                           epsilon=args.epsilon, ground_truth=True, flip=True,
-                          quality_stride=args.stride, metric=args.decide, lod=args.lod)
+                          quality_stride=args.stride, metric=args.decide, lod=args.lod,
+                          **extra)
     scene, path = prepare(config)
     log: list = []
-    with Renderer(scene, config.size, field_of_view(config, path)) as renderer:
-        result = run_technique(renderer, path, config, keyframes=log)
-        recs = predicted(renderer, config, path, log, result.rows)
+    opts = config.technique_options()
+    estimates = capture_depth(opts.get("depth_stride") or 8, opts.get("key_scale") or 1.0)
+    try:
+        with Renderer(scene, config.size, field_of_view(config, path)) as renderer:
+            result = run_technique(renderer, path, config, keyframes=log)
+            recs = predicted(renderer, config, path, log, result.rows, estimates)
+    finally:
+        KeyframePolicy.keyframe_drawn = KEYFRAME_DRAWN
     decided = {r["frame"]: r["error_px"] for r in
                ({"frame": i, **row} for i, row in enumerate(result.rows))}
     for r in recs:  # the deciding metric's own figure, as logged in the timed run
@@ -112,9 +128,26 @@ def run_case(terrain: str, path_spec: str, args) -> list[dict]:
     return recs
 
 
+KEYFRAME_DRAWN = KeyframePolicy.keyframe_drawn
+
+
+def capture_depth(stride: int, key_scale: float) -> dict:
+    """Every keyframe's depth estimate (:mod:`lodsprite.sprite.depth_metric`), by its
+    viewpoint's id, whatever metric decides: each keyframe's depth is read back once
+    drawn (a cost in its frame; this benchmark times nothing)."""
+    out: dict = {}
+
+    def drawn(policy, depth, key, projection):
+        out[id(key)] = DepthEstimate(depth(), key, projection, stride, key_scale)
+        KEYFRAME_DRAWN(policy, depth, key, projection)
+
+    KeyframePolicy.keyframe_drawn = drawn
+    return out
+
+
 def correlations(recs: list[dict]) -> dict[str, float]:
     out: dict[str, float] = {"n": 0}
-    for m in METRICS:
+    for m in JUDGED:
         for q in MEASURES:
             x = np.array([r[f"{m}_px"] for r in recs])
             y = np.array([r[q] for r in recs])
@@ -131,11 +164,11 @@ def correlations(recs: list[dict]) -> dict[str, float]:
 def print_table(results: dict[tuple[str, str], dict[str, float]]) -> None:
     head = "  ".join(f"{c:>15}" for c in
                      [f"{k} {q} {m}" for q in MEASURES for k in ("r", "rho") for m in
-                      ("warp", "res")])
+                      ("warp", "res", "depth", "dec")])
     print(f"{'terrain':>10} {'path':>9} {'n':>4}  {head}")
     for (terrain, path), c in results.items():
         vals = "  ".join(f"{c[f'{k}_{m}_{q}']:>15.3f}" for q in MEASURES
-                         for k in ("pearson", "spearman") for m in METRICS)
+                         for k in ("pearson", "spearman") for m in JUDGED)
         print(f"{terrain[-10:]:>10} {path:>9} {c['n']:>4}  {vals}")
 
 
@@ -145,9 +178,9 @@ def scatter(recs: list[dict], png: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(2, 2, figsize=(10, 8))
+    fig, axes = plt.subplots(2, 4, figsize=(20, 8))
     cases = sorted({(r["terrain"], r["path"]) for r in recs})
-    for (a, q), ax in zip([(m, q) for q in MEASURES for m in METRICS], axes.ravel(),
+    for (a, q), ax in zip([(m, q) for q in MEASURES for m in JUDGED], axes.ravel(),
                           strict=True):
         for case in cases:
             sel = [r for r in recs if (r["terrain"], r["path"]) == case]
@@ -170,7 +203,11 @@ def main() -> None:
     ap.add_argument("--lod", type=int, default=16)
     ap.add_argument("--terrains", default="jacksboro,store")
     ap.add_argument("--paths", default="chen1999,flyover,bank")
-    ap.add_argument("--decide", choices=METRICS, default="warp")
+    ap.add_argument("--decide", choices=(*METRICS, "depth"), default="warp",
+                    help="the metric the run decides keyframes by (its own figure is "
+                         "the decided column; depth needs --proxy depth)")
+    ap.add_argument("--proxy", choices=("geometry", "depth"), default=None)
+    ap.add_argument("--key-scale", type=float, default=None)
     ap.add_argument("--store", default="fractal:1024:7", help="the store's source")
     ap.add_argument("--out", type=Path, default=Path("out/metric_correlation"))
     args = ap.parse_args()
@@ -190,7 +227,7 @@ def main() -> None:
                 recs += case
                 results[name, p] = correlations(case)
     cols = ["terrain", "path", "frame", "kind", "keyframe", "decided_px", "warp_px",
-            "resample_px", "blur_px", "alias_px", "aniso", "rmse", "flip"]
+            "resample_px", "depth_px", "blur_px", "alias_px", "aniso", "rmse", "flip"]
     with open(args.out / "metric_correlation.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=cols)
         w.writeheader()

@@ -44,6 +44,8 @@ VARIANTS = {
     "geometry k1": {"proxy": "geometry", "key_scale": 1.0},
     "depth k2": {"proxy": "depth", "key_scale": 2.0, "depth_stride": 8},
     "depth k2 pair": {"proxy": "depth", "key_scale": 2.0, "depth_stride": 8, "pair": True},
+    "depth k2 estimate": {"proxy": "depth", "key_scale": 2.0, "depth_stride": 8,
+                          "metric": "depth"},
 }
 
 

@@ -86,3 +86,11 @@ def test_an_option_the_technique_does_not_take_is_refused(tmp_path):
                 "--frames", "3", "--size", "32x32", "--out", str(tmp_path / "x"))
     assert r.returncode == 2 and "--epsilon does not go with --mode full" in r.stderr
     assert r.stderr.strip().count("\n") == 0 and not (tmp_path / "x").exists()
+
+
+def test_the_depth_metric_without_the_depth_proxy_is_refused(tmp_path):
+    r = run_cli("render", "--terrain", "fractal:64", "--mode", "sprite", "--metric", "depth",
+                "--proxy", "geometry", "--frames", "2", "--size", "32x32",
+                "--out", str(tmp_path / "x"))
+    assert r.returncode == 2 and "--proxy depth" in r.stderr
+    assert r.stderr.strip().count("\n") == 0 and not (tmp_path / "x").exists()

@@ -201,8 +201,10 @@ class Renderer:
         keyframe is rendered inline in the frame that needs it (the 1999 algorithm).
         ``cache_mb > 0`` keeps keyframes in a GPU cache of that many MB replaced by
         ``cache_policy`` (``lru`` | ``benefit``; :mod:`lodsprite.sprite.cache`; inline
-        keyframes only).  ``metric``: ``"warp"`` (Eq. 1-2) or ``"resample"`` (adds the
-        keyframe image's resampling error, :mod:`lodsprite.sprite.resampling`).  ``store``:
+        keyframes only).  ``metric``: ``"warp"`` (Eq. 1-2), ``"resample"`` (adds the
+        keyframe image's resampling error, :mod:`lodsprite.sprite.resampling`) or
+        ``"depth"`` (the estimate on each keyframe's own depth, with ``depth_stride``:
+        :mod:`lodsprite.sprite.depth_metric`).  ``store``:
         the worker's keyframes over a terrain store, drawn adaptively
         (:class:`~lodsprite.sprite.keyframe_worker.StoreKeys`; threaded only).
         ``depth_stride``: spriteframes draw a mesh from the keyframe's own depth, a vertex

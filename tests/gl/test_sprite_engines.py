@@ -54,3 +54,38 @@ def test_what_worker_tiles_cannot_do_is_an_input_error(gl):
                               cache_mb=8.0)
         with pytest.raises(InputError, match="--tiles"):
             techniques.create("sprite", renderer, lod=8, tiles=0, keyframes="worker")
+
+
+@pytest.mark.parametrize("threaded", [False, True], ids=["inline", "worker"])
+def test_the_depth_estimate_judges_inline_and_worker_keyframes(gl, threaded):
+    """With ``metric="depth"`` each keyframe, drawn here or shipped by the worker, is
+    judged on its own depth: at its own viewpoint the estimate is the phase term of a
+    scale-2 keyframe (0.204 px) over the samples that saw ground (sky counts 0); the
+    frames' errors are finite."""
+    from lodsprite.sprite.depth_metric import DepthReprojection
+
+    scene = load_scene("fractal:64:3", grid=64)
+    path = get_path("chen1999", scene.hf, 6)
+    with Renderer(scene, (SIZE, SIZE), ctx=gl.mgl) as renderer:
+        sprite = renderer.sprite(1.0, 8, threaded=threaded, depth_stride=4, key_scale=2.0,
+                                 metric="depth")
+        try:
+            errors = [sprite.frame(vp).error_px for vp in path.viewpoints]
+            engine = sprite.engine
+            c_prime = engine._c_prime if threaded else engine.policy.c_prime
+            assert isinstance(c_prime, DepthReprojection) and c_prime.estimate is not None
+            key = engine.keyframes[-1]
+            proj = renderer.terrain_gl.drawer.projection(key.viewpoint)
+            est = c_prime.estimate
+            m = proj.matrix() @ key.viewpoint.view_matrix()
+            own = est.error_px(key.viewpoint.o, m, proj.pixel_angle_rad(SIZE), (SIZE, SIZE))
+            clip = est.samples_h @ m.T
+            seen = (clip[:, 3] > 0) & np.all(np.abs(clip[:, :2]) <= clip[:, 3:], axis=1)
+            ground = est.ground[seen].mean()  # sky samples count 0
+            assert 0.2 < ground <= 1.0
+            assert own == pytest.approx(np.sqrt(2 * (1 / 12 - 1 / 16) * ground), abs=1e-3)
+            assert all(np.isfinite(errors[1:])), errors
+        finally:
+            sprite.release()
+        with pytest.raises(InputError, match="--proxy depth"):
+            renderer.sprite(1.0, 8, threaded=threaded, metric="depth")

@@ -25,12 +25,18 @@ grown more than ``stretch`` times since the keyframe's view is left out: there t
 geometry's spriteframe, drawn under the mesh, shows (the terrain's own texture or shading
 where the keyframe did not see it).
 
-Sky is not drawn: a triangle of sky alone is the cleared colour, or, where the proxy's
-spriteframe under the mesh reaches, the keyframe's colour on the proxy; drawn at infinity it
-would hide ground the keyframe never saw (a terrain's outline, seen turning). A sheet
-between ground and sky is drawn only while its ground end has moved less than
-``SKY_SHEET_PX`` pixels: its far end does not move with the eye, so it sweeps over the
-terrain as the eye moves.
+A sky vertex beside ground (one of its eight neighbours at ``stride`` texels sees ground)
+takes its farthest ground neighbour's depth: the cells along a silhouette then move with
+the ground they hold, carrying their sky texels with it, instead of becoming sheets from
+the ground to infinity (which, dropped once they swept too far, took thin peaks and the
+silhouette's last texels with them: a 6-frame-late keyframe over a ridge line measured
+RMSE 11.3 against 7.6 with the dilation).  Sky is not drawn: a triangle of sky alone is
+the cleared colour, or, where the proxy's spriteframe under the mesh reaches, the
+keyframe's colour on it; drawn at infinity it would hide ground the keyframe never saw (a
+terrain's outline, seen turning).  A sheet between ground and sky that remains (at the
+keyframe's last row or column, where the neighbours are nearer than ``stride``) is drawn
+only while its ground end has moved less than ``SKY_SHEET_PX`` pixels: its far end does
+not move with the eye, so it sweeps over the terrain as the eye moves.
 """
 
 from __future__ import annotations
@@ -58,6 +64,7 @@ uniform vec2 u_key_tan;          // tan of its half-angles, x and y
 uniform mat3 u_key_axes;         // its eye axes x, y, z as columns (eye -> world rotation)
 uniform mat4 u_mvp_rel;          // the frame's projection x view x translate(key eye)
 uniform mat4 u_key_proj;         // the keyframe's projection
+uniform int u_stride;            // texels between vertices
 in ivec2 in_px;                  // the vertex's keyframe texel
 out vec3 v_rel;                  // world offset from the keyframe's eye (w 0: direction)
 out vec4 v_key;                  // keyframe clip coordinates
@@ -66,6 +73,17 @@ void main() {
     ivec2 size = textureSize(u_key_depth, 0);
     ivec2 p = clamp(in_px, ivec2(0), size - 1);
     float z = texelFetch(u_key_depth, p, 0).r;
+    if (z >= 1.0) {  // sky beside ground: at the farthest ground neighbour's depth
+        float g = 0.0;
+        for (int j = -1; j <= 1; ++j)
+            for (int i = -1; i <= 1; ++i) {
+                float zn = texelFetch(u_key_depth,
+                                      clamp(p + ivec2(i, j) * u_stride, ivec2(0), size - 1),
+                                      0).r;
+                if (zn < 1.0) g = max(g, zn);
+            }
+        if (g > 0.0) z = g;
+    }
     vec2 ndc = (vec2(p) + 0.5) / vec2(size) * 2.0 - 1.0;
     vec3 ray = vec3(ndc * u_key_tan, -1.0);   // eye space, at unit distance
     float n = u_key_near_far.x, f = u_key_near_far.y;
@@ -258,6 +276,7 @@ class DepthMesh:
         prog["u_sheet"].value = 0.75 if older else 0.25
         prog["u_valid"].value = (0.5, 0.25) if older else (0.0, 0.25)
         prog["u_true"].value = int(true_depth)
+        prog["u_stride"].value = self.stride
         prog["u_stretch"].value = self.stretch
         # a sheet from the ground to a point at infinity sweeps over the terrain as the eye
         # moves (its far end has no parallax): kept while its ground end has moved less

@@ -392,6 +392,14 @@ class SpriteDrawer:
             (coarse if zbuffer == "coarse" else target).depth.write(rows)
         self._keep(slot, viewpoint, projection, t0, tex, zbuffer == "coarse")
 
+    def keyframe_depth(self) -> np.ndarray:
+        """The current keyframe's window depth ``(h, w) float32`` with its guard band, at
+        its own scale, row 0 at the top (a read-back: once a keyframe, for its error
+        estimate)."""
+        if self.keyframe is None:
+            raise RuntimeError("no keyframe yet")
+        return self.keyframe.target.read_depth(copy=False)
+
     def keyframe_color(self) -> np.ndarray:
         """The current keyframe's colour without its guard band: ``(H, W, 3) uint8``, the
         frame size times :attr:`key_scale`, row 0 at the top."""

@@ -32,6 +32,7 @@ from dataclasses import replace
 import numpy as np
 
 from lodsprite.camera import Viewpoint
+from lodsprite.errors import InputError
 from lodsprite.gl.sprite import SpriteDrawer
 from lodsprite.record import Frame
 from lodsprite.sprite.cache import DEFAULT_POLICY, KeyframeCache
@@ -80,6 +81,11 @@ class LodSpriteEngine:
             ErrorMetric.for_level(hf, sprite.coarse_quads, resampling_metric(metric)), hf,
             epsilon_px, sprite.target.height, sprite.terrain.projection,
             sprite.key_projection, predict, cache, key_size=sprite.key_px)
+        if metric == "depth":
+            if sprite.depth_mesh is None:
+                raise InputError("the depth metric judges the keyframe's own depth mesh: "
+                                 "it needs --proxy depth")
+            self.policy.depth = (sprite.depth_mesh.stride, sprite.key_scale)
         self._shows_keyframe = True
         # Called in every frame that draws no keyframe, inside its clock (None: nothing).
         self.between_keyframes = None
@@ -128,6 +134,8 @@ class LodSpriteEngine:
         stats = None
         if d.key is not None:
             stats = self.sprite.render_keyframe(d.key.viewpoint, t0, d.key.projection, d.slot)
+            self.policy.keyframe_drawn(self.sprite.keyframe_depth, d.key.viewpoint,
+                                       self.sprite.keyframe.projection)
             self.keyframes.append(d.key)
         elif d.slot is not None:
             self.sprite.show(d.slot)  # a cached keyframe (binding only, no GL work)

@@ -54,6 +54,7 @@ from lodsprite.sprite.cache import (
     KeyframeCache,
     far_error_px,
 )
+from lodsprite.sprite.depth_metric import UNCOVERED_PX, DepthEstimate, DepthReprojection
 from lodsprite.sprite.metric import ErrorMetric
 from lodsprite.sprite.predict import extrapolate
 from lodsprite.terrain.heightfield import HeightField
@@ -61,7 +62,7 @@ from lodsprite.terrain.heightfield import HeightField
 KEYFRAME, FIRST_SPRITE, SPRITE = "keyframe", "first_sprite", "sprite"
 FRAME_TYPES = (KEYFRAME, FIRST_SPRITE, SPRITE)
 DEFAULT_EPSILON_PX = 1.0
-METRICS = ("warp", "resample")  # the technique option ``metric``
+METRICS = ("warp", "resample", "depth")  # the technique option ``metric``
 PREDICT_MARGIN = 0.9   # of ε: a look-ahead keyframe must serve the current frame under this
 LOOKAHEAD_AIM = 0.95   # aim a rescaled look-ahead at this fraction of the margin
 LOOKAHEAD_TRIES = 4
@@ -82,6 +83,11 @@ def keyframe_error_px(metric: ErrorMetric, c_prime: np.ndarray, viewpoint: Viewp
     view_proj = projection.matrix() @ viewpoint.view_matrix()
     beta = projection.pixel_angle_rad(height_px)
     lacks = float(getattr(c_prime, "deficit_px", 0.0))
+    if isinstance(c_prime, DepthReprojection):  # the depth estimate, once it is drawn
+        if c_prime.estimate is not None:
+            size = (max(1, round(projection.aspect * height_px)), int(height_px))
+            return lacks + c_prime.estimate.error_px(viewpoint.o, view_proj, beta, size)
+        c_prime = c_prime.base
     if not getattr(metric, "resampling", False):  # the 1999 metric (or a stand-in)
         return lacks + metric.error_px(c_prime, viewpoint.o, view_proj, beta)
     size = (max(1, round(projection.aspect * height_px)), int(height_px))
@@ -90,7 +96,9 @@ def keyframe_error_px(metric: ErrorMetric, c_prime: np.ndarray, viewpoint: Viewp
 
 def resampling_metric(metric: str) -> bool:
     """Whether the technique option ``metric`` (one of :data:`METRICS`: ``"warp"``, the 1999
-    Eq. 1-2 metric, or ``"resample"``, which adds the resampling term) asks for the
+    Eq. 1-2 metric, ``"resample"``, which adds the resampling term, or ``"depth"``, the
+    estimate on each keyframe's own depth, :mod:`lodsprite.sprite.depth_metric`, whose
+    keyframes not drawn yet are judged by the warp metric) asks for the coarse metric's
     resampling term; :class:`~lodsprite.errors.InputError` for any other value."""
     if metric not in METRICS:
         raise InputError(f"metric must be one of {', '.join(METRICS)}, got {metric!r}")
@@ -238,9 +246,25 @@ class KeyframePolicy:
         key_proj = self.key_projection(projection)
         key_view_proj = key_proj.matrix() @ key.view_matrix()
         if not getattr(self.metric, "resampling", False):  # the 1999 metric needs the eye only
-            return self.metric.reproject(key.o, key_view_proj=key_view_proj)
-        size = self.key_size or key_image_size(projection, key_proj, self.height_px)
-        return self.metric.reproject(key.o, key_view_proj, size)
+            c_prime = self.metric.reproject(key.o, key_view_proj=key_view_proj)
+        else:
+            size = self.key_size or key_image_size(projection, key_proj, self.height_px)
+            c_prime = self.metric.reproject(key.o, key_view_proj, size)
+        return DepthReprojection(c_prime) if self.depth is not None else c_prime
+
+    #: ``(stride, key_scale)`` of the depth mesh whose keyframes the estimate on their own
+    #: depth judges (:mod:`lodsprite.sprite.depth_metric`; None: the metric's own ``C'``).
+    depth: tuple[int, float] | None = None
+
+    def keyframe_drawn(self, depth: Callable[[], np.ndarray], key: Viewpoint,
+                       projection: Projection) -> None:
+        """The current keyframe was drawn at ``key`` through ``projection`` (guard band
+        included): under the depth estimate, bind it from the keyframe's window depth
+        (``depth()``, read only then)."""
+        if self.depth is None or not isinstance(self.c_prime, DepthReprojection):
+            return
+        stride, scale = self.depth
+        self.c_prime.estimate = DepthEstimate(depth(), key, projection, stride, scale)
 
     def lookahead(self, viewpoint: Viewpoint,
                   projection: Projection) -> tuple[KeyChoice, np.ndarray, float] | None:
@@ -269,12 +293,26 @@ class KeyframePolicy:
                 steps *= 0.5
                 continue
             c_prime = self.reproject(ahead, key_proj)
-            err = self.error_px(c_prime, viewpoint, projection)
+            err = self.uncovered_by(ahead, key_proj, viewpoint, projection,
+                                    self.error_px(c_prime, viewpoint, projection))
             if not keyframe_due(err, limit):
                 return KeyChoice(ahead, key_proj, True), c_prime, err
             # inf or NaN (nothing measurable from here): no shorter look-ahead can tell
             steps = steps * min(LOOKAHEAD_AIM * limit / err, 0.75) if err < math.inf else 0.0
         return None
+
+    def uncovered_by(self, ahead: Viewpoint, key_proj: Projection, viewpoint: Viewpoint,
+                     projection: Projection, error_px: float) -> float:
+        """``error_px`` of a look-ahead candidate at ``ahead`` (frame projection
+        ``key_proj``) seen from ``viewpoint``, with, under the depth estimate, the share of
+        the view it would leave uncovered (as the current keyframe's depth tells) counted
+        as the estimate counts it."""
+        est = getattr(self.c_prime, "estimate", None)
+        if est is None or not math.isfinite(error_px):
+            return error_px
+        u = est.outside(projection.matrix() @ viewpoint.view_matrix(),
+                        self.key_projection(key_proj).matrix() @ ahead.view_matrix())
+        return math.sqrt(error_px ** 2 + u * UNCOVERED_PX ** 2)
 
     def above_ground(self, viewpoint: Viewpoint) -> bool:
         """Whether the eye of ``viewpoint`` is above the terrain surface below it."""

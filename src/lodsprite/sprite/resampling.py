@@ -113,6 +113,14 @@ def texel_jacobian(points: np.ndarray, normals: np.ndarray, key_view_proj: np.nd
     t1, t2 = tangent_basis(np.asarray(normals).reshape(-1, 3))
     a, cw = pixel_derivatives(points, t1, t2, view_proj, size)
     b, kw = pixel_derivatives(points, t1, t2, key_view_proj, key_size)
+    return jacobian(a, cw, b, kw)
+
+
+def jacobian(a: np.ndarray, cw: np.ndarray, b: np.ndarray,
+             kw: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(J = B A^-1, ok)`` from the current and keyframe pixel derivatives ``a, b (K, 2,
+    2)`` and clip ``w`` values ``cw, kw (K,)`` (:func:`pixel_derivatives`; a keyframe's
+    ``b`` computed once serves every frame)."""
     det = a[:, 0, 0] * a[:, 1, 1] - a[:, 0, 1] * a[:, 1, 0]
     scale = (a * a).sum(axis=(1, 2))
     ok = (cw > 0) & (kw > 0) & (np.abs(det) > 1e-12 * np.maximum(scale, 1e-300))

@@ -29,14 +29,16 @@ not drop.  :class:`~lodsprite.sprite.engine.LodSpriteEngine` is the inline alter
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from lodsprite.camera import Viewpoint
-from lodsprite.errors import LodspriteError
+from lodsprite.errors import InputError, LodspriteError
 from lodsprite.gl.sprite import SpriteDrawer
 from lodsprite.record import Frame
+from lodsprite.sprite.depth_metric import DepthEstimate, DepthReprojection
 from lodsprite.sprite.engine import sprite_frame
 from lodsprite.sprite.keyframe_worker import (
     KeyframeImage,
@@ -88,6 +90,12 @@ class WorkerLodSpriteEngine:
             sprite.target.size, fov_y_deg, sprite.coarse_quads, sprite.visibility,
             sprite.border, sprite.guard_px, predictor, resampling=resampling, store=store,
             key_scale=sprite.key_scale, depth=sprite.depth_mesh is not None))
+        self.depth = None  # (stride, key scale) when the estimate on keyframe depth decides
+        if metric == "depth":
+            if sprite.depth_mesh is None:
+                raise InputError("the depth metric judges the keyframe's own depth mesh: "
+                                 "it needs --proxy depth")
+            self.depth = (sprite.depth_mesh.stride, sprite.key_scale)
         self.keyframes: list[KeyChoice] = []
         # per adopted keyframe, over a store: the adaptive selection it was drawn with
         self.selections: list[tuple | None] = []
@@ -102,6 +110,17 @@ class WorkerLodSpriteEngine:
             return float("inf")
         return keyframe_error_px(self.metric, self._c_prime, viewpoint, projection,
                                  self.sprite.target.height)
+
+    def judged(self, key: KeyframeImage) -> KeyframeImage:
+        """``key`` with its ``C'`` the estimate on its own (shipped) depth when that
+        decides (:mod:`lodsprite.sprite.depth_metric`; built here, once a keyframe)."""
+        if self.depth is None or key.zbuffer != "full":
+            return key
+        c_prime = DepthReprojection(key.c_prime)
+        c_prime.estimate = DepthEstimate(key.depth, key.viewpoint, key.projection,
+                                         *self.depth)
+        c_prime.deficit_px = getattr(key.c_prime, "deficit_px", 0.0)
+        return replace(key, c_prime=c_prime)
 
     def _adopt(self, key: KeyframeImage, now: float) -> None:
         self.sprite.upload_keyframe(key.viewpoint, key.projection, key.color, key.depth, now,
@@ -120,11 +139,12 @@ class WorkerLodSpriteEngine:
         kind = SPRITE
         if self._c_prime is None:  # start-up: the first keyframe is waited for
             self.worker.request()
-            self._adopt(self.worker.wait(), t0)
+            self._adopt(self.judged(self.worker.wait()), t0)
             kind = KEYFRAME
         error = self.error_px(viewpoint, projection)
         new = None if kind == KEYFRAME else self.worker.poll()
         if new is not None:
+            new = self.judged(new)
             self.worker.measure_lead(new.requested_at, t0)
             new_error = keyframe_error_px(self.metric, new.c_prime, viewpoint, projection,
                                           self.sprite.target.height)

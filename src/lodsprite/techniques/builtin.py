@@ -33,8 +33,10 @@ CACHE_MB = Option("cache_mb", float, None, "LOD-sprite: keep keyframes in a GPU 
 CACHE_POLICY = Option("cache_policy", str, "lru", "LOD-sprite: keyframe cache replacement",
                       choices=("lru", "benefit"))
 METRIC = Option("metric", str, None, "LOD-sprite: the keyframe error metric: warp (Chen et "
-                "al. Eq. 1-2) or resample (adds the keyframe image's resampling error)",
-                choices=("warp", "resample"), none=_TERRAIN)
+                "al. Eq. 1-2), resample (adds the keyframe image's resampling error) or "
+                "depth (Eq. 1-2 on the keyframe's own depth mesh, with resampling and the "
+                "uncovered area; needs --proxy depth)",
+                choices=("warp", "resample", "depth"), none=_TERRAIN)
 KEYFRAMES = Option("keyframes", str, "inline", "LOD-sprite: where keyframes are rendered: "
                    "in the frame that needs them (inline, the 1999 algorithm) or by a worker "
                    "process beside the display (worker: render plays the path in time; the "
