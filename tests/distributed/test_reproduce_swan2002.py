@@ -2,23 +2,23 @@
 the longest test, run beside the other distributed tests by the suite's second worker)."""
 
 import json
-import subprocess
-import sys
 
 from lodsprite.distributed.client import DEFAULT_MAX_ERROR
-from lodsprite.experiments.swan2002.run import LINK_SETUPS, SETUPS
+from lodsprite.experiments.swan2002.run import LINK_SETUPS, SETUPS, SwanConfig
 
 
-def test_reproduce_swan2002_quick_writes_all_setups(tmp_path):
+def test_reproduce_swan2002_quick_writes_all_setups(tmp_path, cli, monkeypatch):
+    # The command in this process (its set-ups' clients and servers are processes of their
+    # own), its --quick shortened for the suite: 30 frames.
+    quick = SwanConfig.quick
+    monkeypatch.setattr(SwanConfig, "quick", classmethod(lambda cls, **kw: quick(
+        **{"frames": 30, **kw})))
     out = tmp_path / "s"
-    proc = subprocess.run([sys.executable, "-c", "from lodsprite.cli import main; main()",
-                           "reproduce", "swan2002", "--quick", "--size", "64", "--terrain",
-                           "fractal:64:2", "--no-links", "--out", str(out)],
-                          capture_output=True, text=True,
-                          timeout=300)
+    proc = cli("reproduce", "swan2002", "--quick", "--size", "64", "--terrain",
+               "fractal:64:2", "--no-links", "--out", str(out))
     assert proc.returncode == 0, proc.stderr
     results = json.loads((out / "results.json").read_text())
-    assert results["config"]["size"] == 64 and results["config"]["frames"] == 60
+    assert results["config"]["size"] == 64 and results["config"]["frames"] == 30
     for setup in SETUPS:
         r = results[setup]
         if "skipped" in r:

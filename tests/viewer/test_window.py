@@ -161,3 +161,24 @@ def test_the_embedding_example_runs_in_a_window(display):
                           timeout=120)
     assert proc.returncode == 0, proc.stderr
     assert "5 frames" in proc.stdout
+
+
+def test_view_and_render_draw_the_same_frames(display, tmp_path):
+    """The window and ``render`` give the same images for the same scene and options
+    (inline keyframes, no frame-rate cap: every frame decided alike): LOD-sprite on the
+    keyframe's own depth at scale 2, within 1 grey level (the same driver through GLX and
+    EGL)."""
+    options = ["--mode", "sprite", "--proxy", "depth", "--key-scale", "2", "--frames", "8",
+               "--size", "64x64"]
+    shots = tmp_path / "shots"
+    proc = lodsprite("view", "fractal:128:2", "--play", "chen1999", "--screenshots",
+                     str(shots), "--exit", "--inline-keyframes", "--fps", "0", *options,
+                     env=display)
+    assert proc.returncode == 0, proc.stderr
+    proc = lodsprite("render", "--terrain", "fractal:128:2", "--path", "chen1999",
+                     "--save-frames", "--out", str(tmp_path / "r"), *options)
+    assert proc.returncode == 0, proc.stderr
+    for i in range(8):
+        shown = read_image(shots / f"frame_{i:05d}.png").astype(int)
+        saved = read_image(tmp_path / "r" / "frames" / f"frame_{i:05d}.png")
+        assert np.abs(shown - saved).max() <= 1, i
