@@ -53,6 +53,10 @@ TECHNIQUES: dict[str, tuple[str, dict[str, Any], str | None]] = {
                                 "depth_stride": 8}, None),
     "depth-worker": ("sprite", {"keyframes": "worker", "proxy": "depth", "pair": True,
                                 "depth_stride": 4}, None),
+    # the same, asking for keyframes by the estimate on each keyframe's own depth
+    "depth-worker-estimate": ("sprite", {"keyframes": "worker", "proxy": "depth",
+                                         "pair": True, "depth_stride": 4,
+                                         "metric": "depth"}, None),
 }
 FIGURES = ("median_ms", "p99_ms", "rmse_time_weighted", "flip_time_weighted", "flicker",
            "rmse_worst_second", "missed_slots", "display_fps", "latency_ms_mean", "cvvdp_jod")
