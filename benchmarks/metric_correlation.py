@@ -42,7 +42,8 @@ from lodsprite.sprite.resampling import singular_values, texel_jacobian
 from lodsprite.terrain.store import build_store
 
 METRICS = ("warp", "resample")
-JUDGED = (*METRICS, "depth", "decided")  # the depth estimate, the deciding metric's figure
+JUDGED = (*METRICS, "depth", "contrast", "decided")  # the depth estimate (plain, weighted
+# by the keyframe's contrast), the deciding metric's own figure
 MEASURES = ("rmse", "flip")
 
 
@@ -72,10 +73,11 @@ def predicted(renderer: Renderer, config: RenderConfig, path, log, rows,
                                                 (w + 2 * g, h + 2 * g))
             rec[f"{name}_px"] = keyframe_error_px(metric, cps[name, k], vp, tr.projection(vp),
                                                   h)
-        est = estimates.get(id(key.viewpoint))
         proj = tr.projection(vp)
-        rec["depth_px"] = (float("nan") if est is None else est.error_px(
-            vp.o, proj.matrix() @ vp.view_matrix(), proj.pixel_angle_rad(h), (w, h)))
+        for name, est in zip(("depth", "contrast"), estimates.get(id(key.viewpoint),
+                                                              (None, None)), strict=True):
+            rec[f"{name}_px"] = (float("nan") if est is None else est.error_px(
+                vp.o, proj.matrix() @ vp.view_matrix(), proj.pixel_angle_rad(h), (w, h)))
         rec.update(terms(metrics["resample"], cps["resample", k], vp, tr.projection(vp),
                          config.size))
         out.append(rec)
@@ -132,14 +134,19 @@ KEYFRAME_DRAWN = KeyframePolicy.keyframe_drawn
 
 
 def capture_depth(stride: int, key_scale: float) -> dict:
-    """Every keyframe's depth estimate (:mod:`lodsprite.sprite.depth_metric`), by its
-    viewpoint's id, whatever metric decides: each keyframe's depth is read back once
-    drawn (a cost in its frame; this benchmark times nothing)."""
+    """Every keyframe's depth estimate (:mod:`lodsprite.sprite.depth_metric`), plain and
+    weighted by the keyframe's contrast, by its viewpoint's id, whatever metric decides:
+    each keyframe's depth and colour are read back once drawn (a cost in its frame; this
+    benchmark times nothing)."""
     out: dict = {}
 
-    def drawn(policy, depth, key, projection):
-        out[id(key)] = DepthEstimate(depth(), key, projection, stride, key_scale)
-        KEYFRAME_DRAWN(policy, depth, key, projection)
+    def drawn(policy, depth, key, projection, color=None):
+        z = depth()
+        plain = DepthEstimate(z, key, projection, stride, key_scale)
+        weighted = DepthEstimate(z, key, projection, stride, key_scale)
+        weighted.weigh_by(depth.__self__.keyframe_image())
+        out[id(key)] = (plain, weighted)
+        KEYFRAME_DRAWN(policy, depth, key, projection, color)
 
     KeyframePolicy.keyframe_drawn = drawn
     return out
@@ -164,7 +171,7 @@ def correlations(recs: list[dict]) -> dict[str, float]:
 def print_table(results: dict[tuple[str, str], dict[str, float]]) -> None:
     head = "  ".join(f"{c:>15}" for c in
                      [f"{k} {q} {m}" for q in MEASURES for k in ("r", "rho") for m in
-                      ("warp", "res", "depth", "dec")])
+                      ("warp", "res", "depth", "con", "dec")])
     print(f"{'terrain':>10} {'path':>9} {'n':>4}  {head}")
     for (terrain, path), c in results.items():
         vals = "  ".join(f"{c[f'{k}_{m}_{q}']:>15.3f}" for q in MEASURES
@@ -178,7 +185,7 @@ def scatter(recs: list[dict], png: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(2, 4, figsize=(20, 8))
+    fig, axes = plt.subplots(2, 5, figsize=(24, 8))
     cases = sorted({(r["terrain"], r["path"]) for r in recs})
     for (a, q), ax in zip([(m, q) for q in MEASURES for m in JUDGED], axes.ravel(),
                           strict=True):
@@ -227,7 +234,8 @@ def main() -> None:
                 recs += case
                 results[name, p] = correlations(case)
     cols = ["terrain", "path", "frame", "kind", "keyframe", "decided_px", "warp_px",
-            "resample_px", "depth_px", "blur_px", "alias_px", "aniso", "rmse", "flip"]
+            "resample_px", "depth_px", "contrast_px", "blur_px", "alias_px", "aniso",
+            "rmse", "flip"]
     with open(args.out / "metric_correlation.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=cols)
         w.writeheader()

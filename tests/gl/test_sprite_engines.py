@@ -60,8 +60,8 @@ def test_what_worker_tiles_cannot_do_is_an_input_error(gl):
 def test_the_depth_estimate_judges_inline_and_worker_keyframes(gl, threaded):
     """With ``metric="depth"`` each keyframe, drawn here or shipped by the worker, is
     judged on its own depth: at its own viewpoint the estimate is the phase term of a
-    scale-2 keyframe (0.204 px) over the samples that saw ground (sky counts 0); the
-    frames' errors are finite."""
+    scale-2 keyframe (0.204 px) over the samples that saw ground (sky counts 0), each
+    weighted by the keyframe's contrast; the frames' errors are finite."""
     from lodsprite.sprite.depth_metric import DepthReprojection
 
     scene = load_scene("fractal:64:3", grid=64)
@@ -81,8 +81,9 @@ def test_the_depth_estimate_judges_inline_and_worker_keyframes(gl, threaded):
             own = est.error_px(key.viewpoint.o, m, proj.pixel_angle_rad(SIZE), (SIZE, SIZE))
             clip = est.samples_h @ m.T
             seen = (clip[:, 3] > 0) & np.all(np.abs(clip[:, :2]) <= clip[:, 3:], axis=1)
-            ground = est.ground[seen].mean()  # sky samples count 0
-            assert 0.2 < ground <= 1.0
+            wts = est.weights[seen]  # by the keyframe's contrast; sky samples count 0
+            ground = wts[est.ground[seen]].sum() / wts.sum()
+            assert 0.2 < ground <= 1.0 and np.ptp(wts) > 0
             assert own == pytest.approx(np.sqrt(2 * (1 / 12 - 1 / 16) * ground), abs=1e-3)
             assert all(np.isfinite(errors[1:])), errors
         finally:

@@ -400,6 +400,18 @@ class SpriteDrawer:
             raise RuntimeError("no keyframe yet")
         return self.keyframe.target.read_depth(copy=False)
 
+    def keyframe_image(self) -> np.ndarray:
+        """The current keyframe's colour ``(h, w, 3) uint8`` with its guard band, at its
+        own scale, row 0 at the top (a read-back: once a keyframe, for its error
+        estimate)."""
+        if self.keyframe is None:
+            raise RuntimeError("no keyframe yet")
+        if self.keyframe.color is not self.keyframe.target.color:  # uploaded
+            raw = self.keyframe.color.read(alignment=1)
+            w, h = self.keyframe.color.size
+            return np.frombuffer(raw, np.uint8).reshape(h, w, -1)[::-1, :, :3]
+        return self.keyframe.target.read_color(copy=False)
+
     def keyframe_color(self) -> np.ndarray:
         """The current keyframe's colour without its guard band: ``(H, W, 3) uint8``, the
         frame size times :attr:`key_scale`, row 0 at the top."""

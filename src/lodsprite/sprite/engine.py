@@ -135,7 +135,8 @@ class LodSpriteEngine:
         if d.key is not None:
             stats = self.sprite.render_keyframe(d.key.viewpoint, t0, d.key.projection, d.slot)
             self.policy.keyframe_drawn(self.sprite.keyframe_depth, d.key.viewpoint,
-                                       self.sprite.keyframe.projection)
+                                       self.sprite.keyframe.projection,
+                                       self.sprite.keyframe_image)
             self.keyframes.append(d.key)
         elif d.slot is not None:
             self.sprite.show(d.slot)  # a cached keyframe (binding only, no GL work)

@@ -257,14 +257,19 @@ class KeyframePolicy:
     depth: tuple[int, float] | None = None
 
     def keyframe_drawn(self, depth: Callable[[], np.ndarray], key: Viewpoint,
-                       projection: Projection) -> None:
+                       projection: Projection,
+                       color: Callable[[], np.ndarray] | None = None) -> None:
         """The current keyframe was drawn at ``key`` through ``projection`` (guard band
         included): under the depth estimate, bind it from the keyframe's window depth
-        (``depth()``, read only then)."""
+        (``depth()``, read only then), its samples weighted by the keyframe's contrast
+        (``color()``, likewise) when given."""
         if self.depth is None or not isinstance(self.c_prime, DepthReprojection):
             return
         stride, scale = self.depth
-        self.c_prime.estimate = DepthEstimate(depth(), key, projection, stride, scale)
+        est = DepthEstimate(depth(), key, projection, stride, scale)
+        if color is not None:
+            est.weigh_by(color())
+        self.c_prime.estimate = est
 
     def lookahead(self, viewpoint: Viewpoint,
                   projection: Projection) -> tuple[KeyChoice, np.ndarray, float] | None:

@@ -112,13 +112,15 @@ class WorkerLodSpriteEngine:
                                  self.sprite.target.height)
 
     def judged(self, key: KeyframeImage) -> KeyframeImage:
-        """``key`` with its ``C'`` the estimate on its own (shipped) depth when that
-        decides (:mod:`lodsprite.sprite.depth_metric`; built here, once a keyframe)."""
+        """``key`` with its ``C'`` the estimate on its own (shipped) depth, weighted by
+        its colour's contrast, when that decides (:mod:`lodsprite.sprite.depth_metric`;
+        built here, once a keyframe)."""
         if self.depth is None or key.zbuffer != "full":
             return key
         c_prime = DepthReprojection(key.c_prime)
         c_prime.estimate = DepthEstimate(key.depth, key.viewpoint, key.projection,
                                          *self.depth)
+        c_prime.estimate.weigh_by(key.color)
         c_prime.deficit_px = getattr(key.c_prime, "deficit_px", 0.0)
         return replace(key, c_prime=c_prime)
 
