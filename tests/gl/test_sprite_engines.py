@@ -57,11 +57,12 @@ def test_what_worker_tiles_cannot_do_is_an_input_error(gl):
 
 
 @pytest.mark.parametrize("threaded", [False, True], ids=["inline", "worker"])
-def test_the_depth_estimate_judges_inline_and_worker_keyframes(gl, threaded):
+def test_the_depth_estimate_judges_inline_and_worker_keyframes(gl, threaded, monkeypatch):
     """With ``metric="depth"`` each keyframe, drawn here or shipped by the worker, is
     judged on its own depth: at its own viewpoint the estimate is the phase term of a
     scale-2 keyframe (0.204 px) over the samples that saw ground (sky counts 0), each
     weighted by the keyframe's contrast; the frames' errors are finite."""
+    from lodsprite.sprite import worker_engine
     from lodsprite.sprite.depth_metric import DepthReprojection
 
     scene = load_scene("fractal:64:3", grid=64)
@@ -88,5 +89,8 @@ def test_the_depth_estimate_judges_inline_and_worker_keyframes(gl, threaded):
             assert all(np.isfinite(errors[1:])), errors
         finally:
             sprite.release()
+        started: list = []  # refused before a keyframe worker process starts
+        monkeypatch.setattr(worker_engine, "KeyframeWorker", lambda *a: started.append(a))
         with pytest.raises(InputError, match="--proxy depth"):
             renderer.sprite(1.0, 8, threaded=threaded, metric="depth")
+        assert started == []

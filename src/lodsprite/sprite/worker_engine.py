@@ -83,6 +83,12 @@ class WorkerLodSpriteEngine:
         self.epsilon_px = float(epsilon_px)
         self.request_fraction = float(request_fraction)
         resampling = resampling_metric(metric)
+        self.depth = None  # (stride, key scale) when the estimate on keyframe depth decides
+        if metric == "depth":  # refused before the worker process starts
+            if sprite.depth_mesh is None:
+                raise InputError("the depth metric judges the keyframe's own depth mesh: "
+                                 "it needs --proxy depth")
+            self.depth = (sprite.depth_mesh.stride, sprite.key_scale)
         hf = sprite.terrain.geometry.full  # the terrain, or a store's level 0
         self.metric = ErrorMetric.for_level(hf, sprite.coarse_quads, resampling)
         # make_worker(scene, settings): another client end (a scene's); default the terrain's
@@ -90,12 +96,6 @@ class WorkerLodSpriteEngine:
             sprite.target.size, fov_y_deg, sprite.coarse_quads, sprite.visibility,
             sprite.border, sprite.guard_px, predictor, resampling=resampling, store=store,
             key_scale=sprite.key_scale, depth=sprite.depth_mesh is not None))
-        self.depth = None  # (stride, key scale) when the estimate on keyframe depth decides
-        if metric == "depth":
-            if sprite.depth_mesh is None:
-                raise InputError("the depth metric judges the keyframe's own depth mesh: "
-                                 "it needs --proxy depth")
-            self.depth = (sprite.depth_mesh.stride, sprite.key_scale)
         self.keyframes: list[KeyChoice] = []
         # per adopted keyframe, over a store: the adaptive selection it was drawn with
         self.selections: list[tuple | None] = []
