@@ -146,15 +146,14 @@ def test_pages_play_through_actors_and_a_killed_actor_costs_no_keyframe(cluster)
 def test_a_renderer_past_the_job_timeout_is_restarted_and_joins_again(cluster,
                                                                       monkeypatch) -> None:
     """A job that outlasts the timeout has its actor killed and restarted by Ray: the job
-    is tried again (and given up after its tries, two here), the renderer joins again and
-    serves."""
-    monkeypatch.setattr(dispatch, "MAX_TRIES", 2)
+    is given up after its tries (one here: a job requeued after its actor died is the
+    killed-actor test's, and the dispatcher's own), the renderer joins again and serves."""
+    monkeypatch.setattr(dispatch, "MAX_TRIES", 1)
     with RayPool("auto", 1, job_timeout_s=1.5) as p:
         assert p.wait_workers(1, DEADLINE_S), "the renderer actor joining"
         p.submit(Job(1, "s", SLOW, VIEW, 1.0))
         late = results(p, {1})[1]
         assert not late.ok, "a job past the timeout every try is given up"
-        assert p.stats()["requeued"] >= 1
         assert p.wait_workers(1, DEADLINE_S), "the restarted renderer joining again"
         p.submit(Job(2, "s", SCENE, VIEW, 2.0))
         served = results(p, {2})[2]
