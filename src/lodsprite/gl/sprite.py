@@ -402,14 +402,10 @@ class SpriteDrawer:
 
     def keyframe_image(self) -> np.ndarray:
         """The current keyframe's colour ``(h, w, 3) uint8`` with its guard band, at its
-        own scale, row 0 at the top (a read-back: once a keyframe, for its error
-        estimate)."""
+        own scale, row 0 at the top, as rendered here (a read-back: once a keyframe, for
+        its error estimate; an uploaded keyframe's colour is the caller's already)."""
         if self.keyframe is None:
             raise RuntimeError("no keyframe yet")
-        if self.keyframe.color is not self.keyframe.target.color:  # uploaded
-            raw = self.keyframe.color.read(alignment=1)
-            w, h = self.keyframe.color.size
-            return np.frombuffer(raw, np.uint8).reshape(h, w, -1)[::-1, :, :3]
         return self.keyframe.target.read_color(copy=False)
 
     def keyframe_color(self) -> np.ndarray:
