@@ -281,15 +281,23 @@ class RayPool(PoolResults):
             self._spawn(self._render(key, entry.job))
         self._changed()
 
-    async def _join(self, i: int) -> None:
+    async def _join(self, i: int, killed: int | None = None) -> None:
         """Wait for actor ``i`` to answer ``ready`` (through its restarts), then give it
-        jobs; an actor Ray gave up on, or one without GL, is left out (logged)."""
+        jobs; an actor Ray gave up on, or one without GL, is left out (logged).
+
+        ``killed``: the pid of the process just killed; a ``ready`` it still answers (the
+        kill is asynchronous) is not a join, or the next job would be lost with it."""
         ray = self._ray
         deadline = time.monotonic() + REJOIN_DEADLINE_S
         while True:
             try:
                 info = await self._actors[i].ready.remote()
-                break
+                if killed is None or info["pid"] != killed:
+                    break
+                if time.monotonic() > deadline:
+                    log.error("ray pool: renderer %d left out: not restarted", i)
+                    return
+                await asyncio.sleep(REJOIN_S)
             except (ray.exceptions.ActorUnavailableError, ray.exceptions.RayActorError) as exc:
                 # restarting (or the call reached the process being killed): Ray brings
                 # it back (max_restarts=-1); left out only past the deadline
@@ -332,13 +340,14 @@ class RayPool(PoolResults):
         if i is None or self._closed:
             return
         self.table.lose(key, why)
+        killed = int(key[1].decode().split(":")[1]) if restart else None
         if restart:
             try:
                 self._ray.kill(self._actors[i], no_restart=False)
             except Exception as exc:  # noqa: BLE001 - dead already, or Ray gone
                 log.warning("ray pool: could not restart renderer %d: %s", i,
                             _first_line(exc))
-        self._spawn(self._join(i))
+        self._spawn(self._join(i, killed))
 
     async def _tick(self) -> None:
         while True:
