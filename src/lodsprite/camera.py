@@ -172,18 +172,37 @@ class Projection:
         return math.radians(self.fov_y_deg) / float(height_px)
 
 
-def widened(projection: Projection, width: int, height: int, margin_px: int) -> Projection:
+def widened(projection: Projection, width: int, height: int, margin_px: int,
+            spread: float = 1.0) -> Projection:
     """``projection`` grown by a guard band of ``margin_px`` pixels on every side of a
     ``width x height`` image: the ``(width + 2m) x (height + 2m)`` image of the result holds
-    the original image, pixel for pixel, at offset ``(m, m)``."""
+    the original image, pixel for pixel, at offset ``(m, m)``.
+
+    ``spread >= 1`` widens that image's view ``spread`` times more, aspect kept: the same
+    ``(width + 2m) x (height + 2m)`` pixels then see ``spread`` display pixels each (a
+    wider guard band at the same memory, sampled ``1/spread`` as finely)."""
     if margin_px < 0:
         raise InputError(f"guard band must be >= 0 pixels, got {margin_px}")
-    if margin_px == 0:
+    if not (math.isfinite(spread) and spread >= 1.0):
+        raise InputError(f"a guard band's spread must be >= 1, got {spread}")
+    if margin_px == 0 and spread == 1.0:
         return projection
-    half = math.tan(math.radians(projection.fov_y_deg) / 2.0) * (height + 2 * margin_px) / height
+    half = (math.tan(math.radians(projection.fov_y_deg) / 2.0)
+            * (height + 2 * margin_px) * spread / height)
     return Projection(math.degrees(2.0 * math.atan(half)),
                       (width + 2 * margin_px) / (height + 2 * margin_px),
                       projection.near, projection.far)
+
+
+def texels_per_pixel(key_fov_y_deg: float, frame_fov_y_deg: float, key_rows: int,
+                     frame_rows: int) -> float:
+    """Texels a display pixel side (at the image centre) of a ``key_rows``-row image
+    seeing ``key_fov_y_deg`` (a widened projection, :func:`widened`) for a
+    ``frame_rows``-row frame seeing ``frame_fov_y_deg``: the keyframe scale, less where the
+    keyframe was spread wider than its guard band."""
+    frame_half = math.tan(math.radians(frame_fov_y_deg) / 2.0)
+    key_half = math.tan(math.radians(key_fov_y_deg) / 2.0)
+    return key_rows / (frame_rows * key_half / frame_half)
 
 
 def fit_near_far(

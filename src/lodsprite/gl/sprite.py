@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import moderngl
 import numpy as np
 
-from lodsprite.camera import Projection, Viewpoint, widened
+from lodsprite.camera import Projection, Viewpoint, texels_per_pixel, widened
 from lodsprite.errors import InputError
 from lodsprite.gl.context import GLContext
 from lodsprite.gl.depth_mesh import DEFAULT_CUT_DEG, DepthMesh
@@ -295,10 +295,18 @@ class SpriteDrawer:
         """Where spriteframes are drawn."""
         return self.terrain.target
 
-    def key_projection(self, projection: Projection) -> Projection:
-        """The keyframe's projection for a frame projection: widened by the guard band."""
+    def key_projection(self, projection: Projection, spread: float = 1.0) -> Projection:
+        """The keyframe's projection for a frame projection: widened by the guard band
+        (``spread`` times wider again at the same texels, :func:`~lodsprite.camera.widened`)."""
         w, h = self.target.size
-        return widened(projection, w, h, self.guard_px)
+        return widened(projection, w, h, self.guard_px, spread)
+
+    def texel_scale(self, key: GLKeyframe) -> float:
+        """Keyframe texels a display pixel side for ``key``: :attr:`key_scale`, less where
+        the keyframe was spread wider than its guard band (worker keyframes whose guard
+        band follows the predictor's error)."""
+        return texels_per_pixel(key.projection.fov_y_deg, self.terrain.fov_y_deg,
+                                key.target.size[1], self.target.size[1])
 
     def _keep(self, slot: int, viewpoint: Viewpoint, projection: Projection, t0: float,
               color: moderngl.Texture | None = None, coarse_ready: bool = False) -> None:
@@ -328,17 +336,19 @@ class SpriteDrawer:
 
     def render_keyframe(self, viewpoint: Viewpoint, t0: float,
                         projection: Projection | None = None,
-                        slot: int | None = None) -> Frame:
+                        slot: int | None = None, spread: float = 1.0) -> Frame:
         """Render the full-resolution terrain into keyframe slot ``slot`` (None: the one of
         the two alternating slots not shown; never the slot shown) and show it.
 
         ``projection`` is the frame's; the keyframe is rendered through it widened by the
-        guard band (``guard_px`` pixels on every side, same pixel angle), so that frames
-        turning away from the keyframe still find their borders in the sprite.
+        guard band (``guard_px`` pixels on every side, same pixel angle; ``spread`` times
+        wider at the same texels, :meth:`key_projection`), so that frames turning away from
+        the keyframe still find their borders in the sprite.
         """
         slot = self._free_slot(slot)
         target = self.slot_targets(slot)[0]
-        projection = self.key_projection(projection or self.terrain.projection(viewpoint))
+        projection = self.key_projection(projection or self.terrain.projection(viewpoint),
+                                         spread)
         if self.keyframe_drawer is not None:
             stats = self.keyframe_drawer(viewpoint, projection, target)
         else:
@@ -439,11 +449,12 @@ class SpriteDrawer:
         self.fallback_passes += 1
         size = self.target.size
         tris += self.depth_mesh.draw(key, viewpoint, projection, self.fallback_tint,
-                                     frame_px=size, key_scale=self.key_scale)
+                                     frame_px=size, key_scale=self.texel_scale(key))
         prev = self.previous if self.pair else None
         if prev is not None:  # shown only where the newer keyframe drew nothing
             tris += self.depth_mesh.draw(prev, viewpoint, projection, self.fallback_tint,
-                                         older=True, frame_px=size, key_scale=self.key_scale)
+                                         older=True, frame_px=size,
+                                         key_scale=self.texel_scale(prev))
         return draw_stats(tris, 1, projection)
 
     def _clear_depth(self) -> None:

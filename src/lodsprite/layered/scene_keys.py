@@ -28,7 +28,12 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from lodsprite.errors import InputError
-from lodsprite.sprite.keyframe_process import copy_shared, keyframe_answer, lower_priority
+from lodsprite.sprite.keyframe_process import (
+    checked_spread,
+    copy_shared,
+    keyframe_answer,
+    lower_priority,
+)
 from lodsprite.sprite.keyframe_worker import (
     KeyframeWorker,
     WorkerSettings,
@@ -150,8 +155,9 @@ def scene_key_handler(keys: SceneKeys, settings: WorkerSettings, shm_name: str,
     gl = _SceneKeysGL(received_scene(shm_name, layout, rest), keys, settings)
 
     def answer(meta: bytes, data: bytes) -> tuple[bytes, bytes]:
-        vp, predicted, asked, tolerance, exponent = pickle.loads(meta)
-        return gl.render(vp, predicted, asked, float(tolerance), float(exponent))
+        vp, predicted, asked, spread, tolerance, exponent = pickle.loads(meta)
+        return gl.render(vp, predicted, asked, float(tolerance), float(exponent),
+                         checked_spread(spread))
 
     return answer
 
@@ -187,7 +193,7 @@ class _SceneKeysGL:
         self.objects.draw_static(viewpoint, projection.matrix(), target.fbo)
 
     def render(self, vp: Viewpoint, predicted: bool, asked: float, tolerance: float,
-               exponent: float) -> tuple[bytes, bytes]:
+               exponent: float, spread: float = 1.0) -> tuple[bytes, bytes]:
         t0 = time.perf_counter()
         if self.terrain is not None:
             if not self._warm:  # the first view's tiles resident (as a run's warm-up)
@@ -198,7 +204,7 @@ class _SceneKeysGL:
             self.objects.set_exponent(exponent)
         self._warm = True
         frame_projection = self.renderer.projection(vp)
-        self.sprite.render_keyframe(vp, t0, frame_projection)
+        self.sprite.render_keyframe(vp, t0, frame_projection, spread=spread)
         self.renderer.gl.finish()
         key = self.sprite.keyframe
         c_prime = self.metric.reproject(vp.o, key.projection.matrix() @ vp.view_matrix(),

@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from lodsprite.camera import Viewpoint
+from lodsprite.sprite.guard import MAX_SPREAD
 from lodsprite.sprite.metric import ErrorMetric
 
 if TYPE_CHECKING:
@@ -63,12 +64,21 @@ def serve(make, shm_name: str, layout: dict, field: tuple, settings: WorkerSetti
               settings)
 
     def answer(meta: bytes, data: bytes) -> tuple[bytes, bytes]:
-        vp, predicted, asked, *tiles = pickle.loads(meta)
+        vp, predicted, asked, spread, *tiles = pickle.loads(meta)
         if settings.tiles > 1:
             return gl.render_tiles(vp, predicted, asked, checked_tiles(tiles, gl.tiled.count))
-        return gl.render(vp, predicted, asked)
+        return gl.render(vp, predicted, asked, checked_spread(spread))
 
     return answer
+
+
+def checked_spread(spread) -> float:
+    """A request's guard band spread (:class:`~lodsprite.sprite.guard.GuardBand`): a
+    number from 1 to :data:`~lodsprite.sprite.guard.MAX_SPREAD`; raises ValueError
+    otherwise (the request is answered with the error, the process goes on)."""
+    if not isinstance(spread, float) or not 1.0 <= spread <= MAX_SPREAD:
+        raise ValueError(f"a guard band spread is a number from 1 to {MAX_SPREAD:g}")
+    return spread
 
 
 def checked_tiles(rest: list, count: int) -> tuple[int, ...]:
@@ -111,10 +121,11 @@ class _WorkerGL:
         self.metric = ErrorMetric.for_level(hf, s.lod, s.resampling)
         self.zbuffer = s.zbuffer
 
-    def render(self, vp: Viewpoint, predicted: bool, asked: float) -> tuple[bytes, bytes]:
+    def render(self, vp: Viewpoint, predicted: bool, asked: float,
+               spread: float = 1.0) -> tuple[bytes, bytes]:
         t0 = time.perf_counter()
         frame_projection = self.terrain.projection(vp)
-        self.sprite.render_keyframe(vp, t0, frame_projection)
+        self.sprite.render_keyframe(vp, t0, frame_projection, spread=spread)
         self.ctx.finish()
         key = self.sprite.keyframe
         c_prime = self.metric.reproject(vp.o, key.projection.matrix() @ vp.view_matrix(),

@@ -45,6 +45,7 @@ import numpy as np
 from lodsprite.camera import Projection, Viewpoint
 from lodsprite.errors import LodspriteError
 from lodsprite.procs import WorkerDied, WorkerError, WorkerUnavailable
+from lodsprite.sprite.guard import GuardBand
 from lodsprite.sprite.predictors import PREDICTORS
 from lodsprite.workers import ProcessWorker
 
@@ -161,7 +162,10 @@ class KeyframeWorker:
     The drawing loop calls :meth:`observe` every frame (cheap), :meth:`request` when a
     keyframe is wanted (the viewpoint is predicted there) and :meth:`poll` for a finished
     one; none of them waits, only :meth:`wait` does (start-up, with a deadline).
-    :attr:`lead_s` is how far ahead keyframes are placed; :attr:`render_ms` lists the
+    :attr:`lead_s` is how far ahead keyframes are placed; :attr:`guard` widens whole
+    keyframes' guard band by the predictor's measured error
+    (:class:`~lodsprite.sprite.guard.GuardBand`; set it to None for the fixed guard band
+    the slots hold); :attr:`render_ms` lists the
     process's time for each keyframe delivered (ms, the first one included).  A process
     that fails to start raises :class:`~lodsprite.procs.WorkerUnavailable` here; one that
     dies or fails to render sets :attr:`error` (a :class:`~lodsprite.procs.WorkerError`):
@@ -186,6 +190,10 @@ class KeyframeWorker:
         self._fed = -np.inf
         self._wanted: float | None = None  # request time of the keyframe asked for
         self._closed = False
+        # whole keyframes: the guard band widened by the predictor's error (None: fixed)
+        self.guard: GuardBand | None = (
+            GuardBand(settings.guard_px, settings.size, settings.fov_y_deg)
+            if settings.tiles <= 1 else None)
         self.request_extra: tuple = ()  # appended to each request (another handler's)
         # ``start(scene, settings, ready_s)``: another handler's process (a scene's)
         self._proc = (start or _start)(scene, settings, ready_s)
@@ -198,6 +206,8 @@ class KeyframeWorker:
     def observe(self, t: float, viewpoint: Viewpoint) -> None:
         """A viewpoint sample at ``t`` seconds (``time.perf_counter``)."""
         self._samples.append((t, viewpoint))
+        if self.guard is not None:
+            self.guard.observe(t, viewpoint)
 
     @property
     def busy(self) -> bool:
@@ -226,8 +236,12 @@ class KeyframeWorker:
         now = time.perf_counter()
         vp, predicted = self._target(now)
         self._wanted = now
+        spread = 1.0
+        if self.guard is not None:
+            spread = self.guard.spread()
+            self.guard.aim(now + self.lead_s, vp)  # shown from about then
         extra = self.request_extra if tiles is None else (tuple(int(t) for t in tiles),)
-        self._proc.submit(now, pickle.dumps((vp, predicted, now, *extra)))
+        self._proc.submit(now, pickle.dumps((vp, predicted, now, spread, *extra)))
         return True
 
     def poll(self) -> KeyframeImage | None:

@@ -34,7 +34,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from lodsprite.camera import Viewpoint
+from lodsprite.camera import Viewpoint, texels_per_pixel
 from lodsprite.errors import InputError, LodspriteError
 from lodsprite.gl.sprite import SpriteDrawer
 from lodsprite.record import Frame
@@ -118,8 +118,10 @@ class WorkerLodSpriteEngine:
         if self.depth is None or key.zbuffer != "full":
             return key
         c_prime = DepthReprojection(key.c_prime)
+        scale = texels_per_pixel(key.projection.fov_y_deg, key.frame_projection.fov_y_deg,
+                                 key.depth.shape[0], self.sprite.target.size[1])
         c_prime.estimate = DepthEstimate(key.depth, key.viewpoint, key.projection,
-                                         *self.depth)
+                                         self.depth[0], scale)  # less where spread wider
         c_prime.estimate.weigh_by(key.color)
         c_prime.deficit_px = getattr(key.c_prime, "deficit_px", 0.0)
         return replace(key, c_prime=c_prime)

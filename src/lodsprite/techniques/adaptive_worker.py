@@ -174,16 +174,18 @@ class StoreKeyframes:
             "selections": tuple(d[0] for d in self._drawn),
             "deficits": tuple(d[1] for d in self._drawn)})
 
-    def render(self, vp: Viewpoint, predicted: bool, asked: float) -> tuple[bytes, bytes]:
-        """The keyframe at ``vp`` drawn adaptively, as an answer (module docstring)."""
+    def render(self, vp: Viewpoint, predicted: bool, asked: float,
+               spread: float = 1.0) -> tuple[bytes, bytes]:
+        """The keyframe at ``vp`` drawn adaptively (its guard band ``spread``), as an
+        answer (module docstring)."""
         t0 = time.perf_counter()
         s, adaptive = self.sprite, self.adaptive
         frame_projection = self.terrain.projection(vp)
-        key_projection = s.key_projection(frame_projection)
+        key_projection = s.key_projection(frame_projection, spread)
         self._ready(vp, key_projection)
         c_prime = self.metric.reproject(vp.o, key_projection.matrix() @ vp.view_matrix(),
                                         self.key_size)
-        s.render_keyframe(vp, t0, frame_projection)
+        s.render_keyframe(vp, t0, frame_projection, spread=spread)
         self.ctx.finish()
         return keyframe_answer(s, self.zbuffer, {
             "viewpoint": vp, "frame_projection": frame_projection, "c_prime": c_prime,

@@ -20,7 +20,10 @@ for the exact one).  The techniques:
 * ``sprite-inline`` - LOD-sprite, keyframes drawn in the frame that needs them;
 * ``sprite-worker`` - LOD-sprite, keyframes from the worker process beside the display;
 * ``depth-inline``, ``depth-worker`` - the same on the keyframe's own depth
-  (:mod:`lodsprite.gl.depth_mesh`), inline keyframes at scale 2, the worker's paired.
+  (:mod:`lodsprite.gl.depth_mesh`), inline keyframes at scale 2, the worker's paired;
+  ``depth-worker-estimate`` asks for keyframes by the estimate on their own depth,
+  ``depth-worker-fixed-guard`` keeps the worker keyframes' guard band at the slots' (the
+  control for the band sized to the predictor's error, :mod:`lodsprite.sprite.guard`).
 
 Every run gets the same untimed warm-up; nothing is read back while it plays.  Then the
 image on screen is judged at instants of path time against the band-limited reference
@@ -52,12 +55,24 @@ TECHNIQUES: dict[str, tuple[str, dict[str, Any], str | None]] = {
     "depth-inline": ("sprite", {"keyframes": "inline", "proxy": "depth", "key_scale": 2.0,
                                 "depth_stride": 8}, None),
     "depth-worker": ("sprite", {"keyframes": "worker", "proxy": "depth", "pair": True,
-                                "depth_stride": 4}, None),
+                                "depth_stride": 8}, None),
     # the same, asking for keyframes by the estimate on each keyframe's own depth
     "depth-worker-estimate": ("sprite", {"keyframes": "worker", "proxy": "depth",
-                                         "pair": True, "depth_stride": 4,
+                                         "pair": True, "depth_stride": 8,
                                          "metric": "depth"}, None),
+    # depth-worker with its guard band fixed at the slots' (the control for the guard
+    # band that follows the predictor's error, lodsprite.sprite.guard)
+    "depth-worker-fixed-guard": ("sprite", {"keyframes": "worker", "proxy": "depth",
+                                            "pair": True, "depth_stride": 8}, None),
 }
+
+
+def _fixed_guard(technique) -> None:
+    technique.engine.sprite.engine.worker.guard = None
+
+
+#: name -> what is changed on the technique once made (before its warm-up)
+ADJUST = {"depth-worker-fixed-guard": _fixed_guard}
 FIGURES = ("median_ms", "p99_ms", "rmse_time_weighted", "flip_time_weighted", "flicker",
            "rmse_worst_second", "missed_slots", "display_fps", "latency_ms_mean", "cvvdp_jod")
 TARGET_SHARE = 0.9  # the controller's target: this share of the display period
@@ -127,6 +142,8 @@ def play_one(technique_name: str, renderer, path, rate: float, cache, cfg) -> tu
     options = techniques.get(config.technique).bind(config.technique_options())
     t = techniques.create(config.technique, renderer, **options)
     try:
+        if technique_name in ADJUST:
+            ADJUST[technique_name](t)
         knob = TECHNIQUES[technique_name][2]
         control = None if knob is None else KnobFeedback(
             t, knob, TARGET_SHARE * 1e3 / rate)
