@@ -35,14 +35,23 @@ def api_frames(scene, path, make) -> list[np.ndarray]:
     return out
 
 
-@pytest.mark.parametrize("options", [{}, {"proxy": "depth", "key_scale": 2.0}])
+def low_level(r, options):
+    """The API's LOD-sprite with ``options`` (technique options) by hand."""
+    depth = options.get("proxy") in ("depth", "search")
+    sprite = r.sprite(depth_stride=MEMORY_DEFAULTS["depth_stride"] if depth else None,
+                      key_scale=options.get("key_scale", 1.0))
+    if options.get("proxy") == "search":
+        sprite.sprite.use_search()
+    return sprite
+
+
+@pytest.mark.parametrize("options", [{}, {"proxy": "depth", "key_scale": 2.0},
+                                     {"proxy": "search"}])
 def test_the_api_and_render_draw_an_in_memory_terrain_alike(tmp_path, options):
     cfg = RenderConfig(terrain="fractal:128:2", mode="sprite", frames=FRAMES, size=SIZE,
                        save_frames=True, **options)
     scene, path = prepare(cfg)
-    stride = MEMORY_DEFAULTS["depth_stride"] if options.get("proxy") == "depth" else None
-    low = api_frames(scene, path, lambda r: r.sprite(
-        depth_stride=stride, key_scale=options.get("key_scale", 1.0)))
+    low = api_frames(scene, path, lambda r: low_level(r, options))
     made = api_frames(scene, path, lambda r: techniques.create("sprite", r, **options))
     render_path(cfg, tmp_path)
     saved = [read_image(tmp_path / "frames" / f"frame_{i:05d}.png") for i in range(FRAMES)]

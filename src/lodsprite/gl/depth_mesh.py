@@ -222,6 +222,8 @@ class DepthMesh:
     framebuffer: ``stride`` keyframe texels between vertices, ``cut_deg`` the rubber-sheet
     angle.  GPU objects (one mesh a keyframe size) live until :meth:`release`."""
 
+    kind = "depth"  # the --proxy choice it draws
+
     def __init__(self, ctx: GLContext, stride: int = DEFAULT_STRIDE,
                  cut_deg: float = DEFAULT_CUT_DEG, stretch: float = DEFAULT_STRETCH) -> None:
         if not (isinstance(stride, int | np.integer) and 1 <= int(stride) <= 16):

@@ -197,6 +197,20 @@ class SpriteDrawer:
         # viewer's tint toggle); alpha 0 draws them as they are.
         self.fallback_tint: tuple[float, float, float, float] = (1.0, 0.0, 1.0, 0.0)
 
+    def use_search(self, steps: int | None = None) -> None:
+        """Draw spriteframes by a search per fragment through the keyframe's depth
+        (:class:`~lodsprite.gl.depth_search.DepthSearch`) instead of the depth mesh (the
+        mesh's stride kept for the depth estimate's samples).  Needs ``depth_stride``."""
+        from lodsprite.gl.depth_search import DEFAULT_STEPS, DepthSearch
+
+        if self.depth_mesh is None:
+            raise InputError("the depth search draws the keyframe's own depth: it needs "
+                             "a depth stride (--proxy search sets one)")
+        search = DepthSearch(self.ctx, self.depth_mesh.stride,
+                             DEFAULT_STEPS if steps is None else steps)
+        self.depth_mesh.release()
+        self.depth_mesh = search
+
     @property
     def key_px(self) -> tuple[int, int]:
         """A keyframe's size in display pixels, guard band included (:attr:`key_size`

@@ -276,6 +276,7 @@ def _keyframed(renderer: Renderer, scene: Scene, mode: str, exponent: float,
     from lodsprite.layered.reuse import KeyframedTerrain
     from lodsprite.layered.scene_keys import SceneKeys
     from lodsprite.sprite.policy import DEFAULT_EPSILON_PX
+    from lodsprite.techniques.defaults import terrain_defaults
     from lodsprite.terrain.lod import DEFAULT_COARSE
 
     if scene.source is None or not Path(scene.source).is_file():
@@ -289,10 +290,16 @@ def _keyframed(renderer: Renderer, scene: Scene, mode: str, exponent: float,
     if options.get("key_scale") not in (None, 1.0):
         raise InputError("a scene's keyframe worker renders at keyframe scale 1: "
                          "--key-scale needs --keyframes inline in a scene")
-    stride = options.get("depth_stride") or 2 if options.get("proxy") == "depth" else None
-    return KeyframedTerrain(renderer, keys, float(epsilon or DEFAULT_EPSILON_PX),
-                            int(lod or DEFAULT_COARSE), exponent, depth_stride=stride,
-                            pair=bool(options.get("pair")))
+    stride = None
+    if options.get("proxy") in ("depth", "search"):  # the stride given, or the default
+        stride = (options.get("depth_stride")
+                  or terrain_defaults(scene.terrain_spec)["depth_stride"])
+    layer = KeyframedTerrain(renderer, keys, float(epsilon or DEFAULT_EPSILON_PX),
+                             int(lod or DEFAULT_COARSE), exponent, depth_stride=stride,
+                             pair=bool(options.get("pair")))
+    if options.get("proxy") == "search":
+        layer.sprite.use_search()
+    return layer
 
 
 def reference(renderer: Renderer, scene: Scene, path: CameraPath, frame_s: float = FRAME_S,

@@ -66,8 +66,8 @@ GRID = Option("grid", int, 64, "adaptive: node grid, quads a side",
               choices=(16, 32, 64, 128), flag="node-grid")
 PROXY = Option("proxy", str, None, "LOD-sprite: what spriteframes draw the keyframe "
                "on: its proxy geometry (the --lod level, or the adaptive mesh at "
-               "--proxy-sse) or a mesh from the keyframe's own depth",
-               choices=("geometry", "depth"), none=_TERRAIN)
+               "--proxy-sse), a mesh from the keyframe's own depth, or a search per "
+               "pixel through it", choices=("geometry", "depth", "search"), none=_TERRAIN)
 DEPTH_STRIDE = Option("depth_stride", int, None, "LOD-sprite with --proxy depth: keyframe "
                       "texels between the depth mesh's vertices", min=1, max=16,
                       unit="texels", none=_TERRAIN)

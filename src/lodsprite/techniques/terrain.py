@@ -184,8 +184,10 @@ class SpriteTechnique(Technique):
             renderer, epsilon, lod, keyframes == "worker", visibility or DEFAULT_VISIBILITY,
             DEFAULT_GUARD_PX if guard_px is None else guard_px, border, tiles,
             tile_budget_ms, cache_mb, cache_policy, metric, store,
-            depth_stride if proxy == "depth" else None, key_scale, pair)
+            depth_stride if proxy in ("depth", "search") else None, key_scale, pair)
         self.sprite: LodSprite = self.engine.sprite
+        if proxy == "search":  # the keyframe's depth searched per fragment, not meshed
+            self.sprite.sprite.use_search()
         self.heights = level0_reader(renderer.terrain_gl.geometry, lod, border)
 
     @property
@@ -252,7 +254,7 @@ class SpriteTechnique(Technique):
                                "visibility": self.sprite.sprite.visibility,
                                "shading": self.shading,
                                "metric": self.metric,
-                               "proxy": "geometry" if d.depth_mesh is None else "depth",
+                               "proxy": proxy_name(d),
                                "depth_stride": None if d.depth_mesh is None
                                else d.depth_mesh.stride,
                                "key_scale": d.key_scale, "pair": d.pair,
@@ -288,3 +290,9 @@ class SpriteTechnique(Technique):
         if self.heights is not None:
             self.heights.close()
             self.heights = None
+
+
+def proxy_name(drawer) -> str:
+    """What ``drawer`` (a :class:`~lodsprite.gl.sprite.SpriteDrawer`) draws spriteframes
+    on: the proxy ``geometry``, the keyframe's ``depth`` mesh or its depth ``search``."""
+    return "geometry" if drawer.depth_mesh is None else drawer.depth_mesh.kind

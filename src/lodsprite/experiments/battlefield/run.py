@@ -99,6 +99,7 @@ class BattlefieldConfig(SplitSampled):
     match_steps: int = 4        # linear runs at most, matching the profile run's triangles
     reuse_mode: str = "sprite-adaptive"  # reuse: keyframes by the adaptive renderer, worker
     reuse_fps: float = 15.0     # reuse: its own target, 3x the scheduler's (issue 32)
+    reuse_proxy: str = "geometry"  # reuse: what spriteframes draw the keyframes on
 
     @classmethod
     def quick(cls, **kw) -> BattlefieldConfig:
@@ -185,9 +186,10 @@ class PathRuns:
     def run(self, *, schedule: str = "none", target_fps: float | None = None,
             exponent: float | None = None, share: bool = True, quality: bool = True,
             sampled: bool = False, first: int | None = None, keyframes: str = "inline",
-            terrain_mode: str | None = None) -> dict:
+            terrain_mode: str | None = None, **terrain_options) -> dict:
         """One run of the ``scene`` technique (see the module doc); ``sampled``: the
-        sampled frames only, each at its own time; ``first``: the first frames only."""
+        sampled frames only, each at its own time; ``first``: the first frames only;
+        ``terrain_options``: the terrain layer's (reuse: ``proxy``, ``pair``)."""
         from lodsprite.harness import run_path
         from lodsprite.layered.technique import ACTIVE, FRAME_S, LayeredTechnique
         from lodsprite.paths import CameraPath
@@ -215,7 +217,7 @@ class PathRuns:
                              frame_s=frame_s, grid=cfg.terrain_grid,
                              # the sampled frames are 30 apart: every object's LOD is
                              # brought to its choice each frame, not 300 of them
-                             active=None if sampled else ACTIVE)
+                             active=None if sampled else ACTIVE, **terrain_options)
         hooked = False
         try:
             if t.objects is not None:  # the layer wires profile LOD for lod = "profile"
@@ -300,7 +302,8 @@ def run_path_set(renderer, world, spec: str, cfg: BattlefieldConfig,
     out: dict = {"path": cam.name}
     for name, kw in (("scheduler", {"schedule": "scheduler", "target_fps": cfg.target_fps}),
                      ("reuse", {"schedule": "scheduler", "target_fps": cfg.reuse_fps,
-                                "keyframes": "worker", "terrain_mode": cfg.reuse_mode}),
+                                "keyframes": "worker", "terrain_mode": cfg.reuse_mode,
+                                "proxy": cfg.reuse_proxy}),
                      ("independent", {"schedule": "independent",
                                       "target_fps": cfg.target_fps}),
                      ("manager", {"quality": False, "first": cfg.extraction_frames}),
