@@ -64,7 +64,10 @@ def main() -> None:
               f"{r['flicker']:8.2f}")
     (out / "battlefield_reuse.json").write_text(json.dumps(
         {"config": {k: (list(v) if isinstance(v, tuple) else v)
-                    for k, v in cfg.__dict__.items()}, "pooled": table}, indent=1))
+                    for k, v in cfg.__dict__.items()}, "pooled": table,
+         "paths": {spec: {name: {k: v for k, v in run.items() if k != "columns"}
+                          for name, run in runs.items()}
+                   for spec, runs in per_path.items()}}, indent=1, default=str))
     print(f"wrote {out / 'battlefield_reuse.json'}")
 
 

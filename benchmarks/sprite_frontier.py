@@ -43,6 +43,8 @@ TIME_KEYS = ("total_s", "median_ms", "p99_ms")
 VARIANTS = {
     "geometry k1": {"proxy": "geometry", "key_scale": 1.0},
     "depth k2": {"proxy": "depth", "key_scale": 2.0, "depth_stride": 8},
+    "refined k2": {"proxy": "depth-refined", "key_scale": 2.0, "depth_stride": 8},
+    "search k2": {"proxy": "search", "key_scale": 2.0, "depth_stride": 8},
     "depth k2 pair": {"proxy": "depth", "key_scale": 2.0, "depth_stride": 8, "pair": True},
     "depth k2 estimate": {"proxy": "depth", "key_scale": 2.0, "depth_stride": 8,
                           "metric": "depth"},

@@ -438,3 +438,37 @@ def test_the_depth_search_needs_the_keyframes_depth(terrain):
             sp.use_search()
     finally:
         sp.release()
+
+
+def test_a_refined_mesh_splits_only_where_depth_is_not_planar(terrain):
+    # Every 8th texel a vertex, refined (a triangle whose texels leave its plane by more
+    # than 1 % in inverse depth drawn as 4 x 4): over rough ridges seen from a moved eye it
+    # comes closer to the mesh of every texel than the plain mesh does (measured: mean
+    # difference 1.76 against 2.39 grey levels); over a plane nothing is split, so
+    # the image is the plain mesh's, pixel for pixel.
+    vp = look_at((0.0, -2500.0, 420.0), (0.0, 0.0, 0.0))
+    moved = look_at((-120.0, -2400.0, 400.0), (30.0, 0.0, 0.0))
+    shown = {}
+    for kind in ("ridges", "plane"):
+        hf = (make_field(64, kind="ridges", relief=150.0) if kind == "ridges"
+              else HeightField(np.zeros((65, 65), np.float32), 62.5, 62.5))
+        tr = terrain(hf, size=(128, 128))
+        for name, stride, refine in (("fine", 1, False), ("plain", 8, False),
+                                     ("refined", 8, True)):
+            sp = SpriteDrawer(tr, 8, guard_px=8, depth_stride=stride)
+            try:
+                if refine:
+                    sp.depth_mesh.refine()
+                sp.render_keyframe(vp, 0.0)
+                sp.render_spriteframe(moved)
+                shown[kind, name] = sp.target.read_color().astype(int)
+            finally:
+                sp.release()
+
+    def off(kind, name):
+        return np.abs(shown[kind, name] - shown[kind, "fine"]).mean()
+
+    assert off("ridges", "refined") < 0.8 * off("ridges", "plain")
+    assert np.array_equal(shown["plane", "refined"], shown["plane", "plain"])
+    with pytest.raises(InputError, match="planarity"):
+        DepthMesh(terrain(make_field(16)).ctx, 8).refine(0.0)

@@ -56,6 +56,9 @@ DEFAULT_STRIDE = 2       # keyframe texels between vertices
 DEFAULT_CUT_DEG = 2.0    # a triangle this close to its keyframe ray (degrees) is a sheet
 DEFAULT_STRETCH = 4.0    # a rubber sheet grown more than this (pixel area) is left out
 SKY_SHEET_PX = 8.0       # a sheet from ground to sky: kept while its ground moved less (px)
+REFINE_SPLIT = 4         # a triangle that is not planar is drawn as 4 x 4 triangles
+REFINE_PLANAR = 0.01     # :meth:`DepthMesh.refine`'s relative inverse-depth deviation
+DEFAULT_PLANAR = 0.0     # no refinement unless asked for
 
 DEPTH_MESH_VS = """#version 330
 uniform sampler2D u_key_depth;   // the keyframe's z-buffer (window depth)
@@ -66,12 +69,14 @@ uniform mat4 u_mvp_rel;          // the frame's projection x view x translate(ke
 uniform mat4 u_key_proj;         // the keyframe's projection
 uniform int u_stride;            // texels between vertices
 in ivec2 in_px;                  // the vertex's keyframe texel
+out vec2 v_px;                   // the texel (for the geometry shader's refinement)
 out vec3 v_rel;                  // world offset from the keyframe's eye (w 0: direction)
 out vec4 v_key;                  // keyframe clip coordinates
 out float v_sky;
 void main() {
     ivec2 size = textureSize(u_key_depth, 0);
     ivec2 p = clamp(in_px, ivec2(0), size - 1);
+    v_px = vec2(p);
     float z = texelFetch(u_key_depth, p, 0).r;
     if (z >= 1.0) {  // sky beside ground: at the farthest ground neighbour's depth
         float g = 0.0;
@@ -107,8 +112,17 @@ void main() {
 
 DEPTH_MESH_GS = """#version 330
 #define SKY_SHEET_PX """ + f"{SKY_SHEET_PX:.1f}" + """
+#define SUB """ + str(REFINE_SPLIT) + """
 layout(triangles) in;
-layout(triangle_strip, max_vertices = 3) out;
+layout(triangle_strip, max_vertices = """ + str(3 * REFINE_SPLIT ** 2) + """) out;
+uniform sampler2D u_key_depth;
+uniform vec2 u_key_near_far;
+uniform vec2 u_key_tan;
+uniform mat3 u_key_axes;
+uniform mat4 u_mvp_rel;
+uniform mat4 u_key_proj;
+uniform float u_planar;   // 0: no refinement; else the relative deviation of a texel's
+                          // inverse depth from its triangle's plane that splits it
 uniform float u_cut;      // |cos(normal, ray)| below which a triangle is a rubber sheet
 uniform float u_sheet;    // window depth where this keyframe's rubber sheets start
 uniform vec2 u_valid;     // window depth where its other triangles start, and their span
@@ -125,11 +139,103 @@ float area2(vec4 a, vec4 b, vec4 c, vec2 size) {
     vec2 p = a.xy / a.w * size, q = b.xy / b.w * size, r = c.xy / c.w * size;
     return abs((q.x - p.x) * (r.y - p.y) - (q.y - p.y) * (r.x - p.x));
 }
+in vec2 v_px[];
 in vec3 v_rel[];
 in vec4 v_key[];
 in float v_sky[];
 out vec4 g_key;
 flat out int g_rubber;
+
+float inv_depth(vec2 px) {  // 1 / eye depth of the keyframe texel nearest px (0: sky)
+    ivec2 size = textureSize(u_key_depth, 0);
+    float z = texelFetch(u_key_depth, clamp(ivec2(px + 0.5), ivec2(0), size - 1), 0).r;
+    if (z >= 1.0) return 0.0;
+    float n = u_key_near_far.x, f = u_key_near_far.y;
+    return (f + n - (2.0 * z - 1.0) * (f - n)) / (2.0 * n * f);
+}
+
+bool is_rubber(vec3 a, vec3 b, vec3 c) {
+    vec3 nrm = cross(b - a, c - a);
+    vec3 ray = (a + b + c) / 3.0;
+    return abs(dot(nrm, ray)) < u_cut * length(nrm) * length(ray);
+}
+
+void emit(vec4 k0, vec4 k1, vec4 k2, vec4 c0, vec4 c1, vec4 c2, bool rubber) {
+    if (u_true == 1 && rubber) return;
+    if (rubber) {  // a sheet stretched over what the keyframe never saw: the fallback's
+        float key = area2(k0, k1, k2, 0.5 * u_key_px);
+        float now = area2(c0, c1, c2, 0.5 * u_frame_px);
+        if (!(now <= u_stretch * max(key, 0.5))) return;
+    }
+    vec4 ks[3] = vec4[3](k0, k1, k2);
+    vec4 cs[3] = vec4[3](c0, c1, c2);
+    for (int i = 0; i < 3; ++i) {
+        vec4 p = cs[i];
+        if (u_true == 0)  // window depth: triangles in [u_valid.x, u_valid.x +
+                          // u_valid.y], rubber sheets in [u_sheet, u_sheet + 0.25]
+            p.z = rubber ? 0.25 * p.z + (2.0 * u_sheet - 0.75) * p.w
+                         : u_valid.y * p.z + (2.0 * u_valid.x - 1.0 + u_valid.y) * p.w;
+        gl_Position = p;
+        g_key = ks[i];
+        g_rubber = rubber ? 1 : 0;
+        EmitVertex();
+    }
+    EndPrimitive();
+}
+
+// A triangle whose texels leave its plane (its corners' inverse depth, affine in the
+// image on a plane) by more than u_planar is drawn as SUB x SUB triangles, each vertex
+// from its own texel: finer where depth is not planar.  Not where any of those texels
+// saw sky.  Returns whether it was.
+bool refined() {
+    const int N = (SUB + 1) * (SUB + 1);
+    float inv[N];
+    float i0 = inv_depth(v_px[0]), i1 = inv_depth(v_px[1]), i2 = inv_depth(v_px[2]);
+    if (i0 <= 0.0 || i1 <= 0.0 || i2 <= 0.0) return false;
+    bool flat_ = true;
+    for (int i = 0; i <= SUB; ++i)
+        for (int j = 0; i + j <= SUB; ++j) {
+            float a = float(i) / float(SUB), b = float(j) / float(SUB);
+            vec2 px = v_px[0] + a * (v_px[1] - v_px[0]) + b * (v_px[2] - v_px[0]);
+            float v = inv_depth(px);
+            if (v <= 0.0) return false;
+            float plane = (1.0 - a - b) * i0 + a * i1 + b * i2;
+            if (abs(v - plane) > u_planar * plane) flat_ = false;
+            inv[i * (SUB + 1) + j] = v;
+        }
+    if (flat_) return false;
+    vec3 rel[N];
+    vec4 key[N];
+    vec4 clip[N];
+    ivec2 size = textureSize(u_key_depth, 0);
+    for (int i = 0; i <= SUB; ++i)
+        for (int j = 0; i + j <= SUB; ++j) {
+            int k = i * (SUB + 1) + j;
+            float a = float(i) / float(SUB), b = float(j) / float(SUB);
+            vec2 px = floor(v_px[0] + a * (v_px[1] - v_px[0]) + b * (v_px[2] - v_px[0])
+                            + 0.5);
+            vec2 ndc = (px + 0.5) / vec2(size) * 2.0 - 1.0;
+            vec3 eye = vec3(ndc * u_key_tan, -1.0) / inv[k];
+            rel[k] = u_key_axes * eye;
+            key[k] = u_key_proj * vec4(eye, 1.0);
+            vec4 c = u_mvp_rel * vec4(rel[k], 1.0);
+            if (c.z > c.w) c.z = c.w * 0.999999;
+            clip[k] = c;
+        }
+    for (int i = 0; i < SUB; ++i)
+        for (int j = 0; i + j < SUB; ++j) {
+            int a = i * (SUB + 1) + j, b = (i + 1) * (SUB + 1) + j, c = a + 1;
+            emit(key[a], key[b], key[c], clip[a], clip[b], clip[c],
+                 is_rubber(rel[a], rel[b], rel[c]));
+            if (i + j < SUB - 1) {
+                int d = b + 1;
+                emit(key[b], key[d], key[c], clip[b], clip[d], clip[c],
+                     is_rubber(rel[b], rel[d], rel[c]));
+            }
+        }
+    return true;
+}
+
 void main() {
     float sky = v_sky[0] + v_sky[1] + v_sky[2];
     bool rubber;
@@ -138,10 +244,8 @@ void main() {
     } else if (sky > 0.5) {
         rubber = true;
     } else {
-        vec3 a = v_rel[0], b = v_rel[1], c = v_rel[2];
-        vec3 nrm = cross(b - a, c - a);
-        vec3 ray = (a + b + c) / 3.0;
-        rubber = abs(dot(nrm, ray)) < u_cut * length(nrm) * length(ray);
+        if (u_planar > 0.0 && refined()) return;
+        rubber = is_rubber(v_rel[0], v_rel[1], v_rel[2]);
     }
     if (u_true == 1 && rubber) return;
     if (sky > 0.5 && sky < 2.5) {  // ground to sky: its ground end's parallax, pixels
@@ -152,31 +256,8 @@ void main() {
     // sky alone: the cleared colour, or where the proxy under the mesh reaches, the
     // keyframe's colour on it; drawn, it would hide ground the keyframe never saw
     if (sky > 2.5) return;
-    if (rubber) {  // a sheet stretched over what the keyframe never saw: the fallback's
-        float key = area2(v_key[0], v_key[1], v_key[2], 0.5 * u_key_px);
-        float now = area2(gl_in[0].gl_Position, gl_in[1].gl_Position, gl_in[2].gl_Position,
-                          0.5 * u_frame_px);
-        if (!(now <= u_stretch * max(key, 0.5))) return;
-    }
-    for (int i = 0; i < 3; ++i) {
-        vec4 p = gl_in[i].gl_Position;
-        if (u_true == 1) {
-            gl_Position = p;
-            g_key = v_key[i];
-            g_rubber = 0;
-            EmitVertex();
-            continue;
-        }
-        // window depth: triangles in [u_valid.x, u_valid.x + u_valid.y], rubber sheets
-        // in [u_sheet, u_sheet + 0.25]
-        p.z = rubber ? 0.25 * p.z + (2.0 * u_sheet - 0.75) * p.w
-                     : u_valid.y * p.z + (2.0 * u_valid.x - 1.0 + u_valid.y) * p.w;
-        gl_Position = p;
-        g_key = v_key[i];
-        g_rubber = rubber ? 1 : 0;
-        EmitVertex();
-    }
-    EndPrimitive();
+    emit(v_key[0], v_key[1], v_key[2], gl_in[0].gl_Position, gl_in[1].gl_Position,
+         gl_in[2].gl_Position, rubber);
 }
 """
 
@@ -225,14 +306,18 @@ class DepthMesh:
     kind = "depth"  # the --proxy choice it draws
 
     def __init__(self, ctx: GLContext, stride: int = DEFAULT_STRIDE,
-                 cut_deg: float = DEFAULT_CUT_DEG, stretch: float = DEFAULT_STRETCH) -> None:
+                 cut_deg: float = DEFAULT_CUT_DEG, stretch: float = DEFAULT_STRETCH,
+                 planar: float = DEFAULT_PLANAR) -> None:
         if not (isinstance(stride, int | np.integer) and 1 <= int(stride) <= 16):
             raise InputError(f"the depth mesh's stride is 1 to 16 keyframe texels, not "
                              f"{stride!r}")
         if not 0.0 <= float(cut_deg) < 90.0:
             raise InputError(f"the rubber-sheet angle is in [0, 90) degrees, not {cut_deg!r}")
+        if not 0.0 <= float(planar) < 1.0:
+            raise InputError(f"the planarity tolerance is in [0, 1), not {planar!r}")
         self.ctx, self.stride, self.cut_deg = ctx, int(stride), float(cut_deg)
         self.stretch = float(stretch)
+        self.planar = float(planar)  # 0: no refinement (read at each draw)
         self.program = ctx.mgl.program(vertex_shader=DEPTH_MESH_VS,
                                        geometry_shader=DEPTH_MESH_GS,
                                        fragment_shader=DEPTH_MESH_FS)
@@ -240,6 +325,13 @@ class DepthMesh:
         self.program["u_sprite"].value = 2
         self.program["u_cut"].value = math.sin(math.radians(self.cut_deg))
         self._meshes: dict[tuple[int, int], tuple] = {}  # key size -> (vao, bufs, tris)
+
+    def refine(self, planar: float = REFINE_PLANAR) -> None:
+        """Split each triangle whose texels leave its plane by more than ``planar`` (their
+        inverse depth, relative) into 4 x 4 triangles, each vertex from its own texel."""
+        if not 0.0 < float(planar) < 1.0:
+            raise InputError(f"the planarity tolerance is in (0, 1), not {planar!r}")
+        self.planar = float(planar)
 
     def _mesh(self, size: tuple[int, int]) -> tuple:
         if size not in self._meshes:
@@ -280,6 +372,7 @@ class DepthMesh:
         prog["u_true"].value = int(true_depth)
         prog["u_stride"].value = self.stride
         prog["u_stretch"].value = self.stretch
+        prog["u_planar"].value = self.planar
         # a sheet from the ground to a point at infinity sweeps over the terrain as the eye
         # moves (its far end has no parallax): kept while its ground end has moved less
         # than SKY_SHEET_PX pixels

@@ -291,7 +291,7 @@ def _keyframed(renderer: Renderer, scene: Scene, mode: str, exponent: float,
         raise InputError("a scene's keyframe worker renders at keyframe scale 1: "
                          "--key-scale needs --keyframes inline in a scene")
     stride = None
-    if options.get("proxy") in ("depth", "search"):  # the stride given, or the default
+    if options.get("proxy") not in (None, "geometry"):  # the stride given, or the default
         stride = (options.get("depth_stride")
                   or terrain_defaults(scene.terrain_spec)["depth_stride"])
     layer = KeyframedTerrain(renderer, keys, float(epsilon or DEFAULT_EPSILON_PX),
@@ -299,6 +299,8 @@ def _keyframed(renderer: Renderer, scene: Scene, mode: str, exponent: float,
                              pair=bool(options.get("pair")))
     if options.get("proxy") == "search":
         layer.sprite.use_search()
+    elif options.get("proxy") == "depth-refined":
+        layer.sprite.depth_mesh.refine()
     return layer
 
 

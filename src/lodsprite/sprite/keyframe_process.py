@@ -120,6 +120,7 @@ class _WorkerGL:
             raise
         self.metric = ErrorMetric.for_level(hf, s.lod, s.resampling)
         self.zbuffer = s.zbuffer
+        self.estimate_stride = s.estimate_stride
 
     def render(self, vp: Viewpoint, predicted: bool, asked: float,
                spread: float = 1.0) -> tuple[bytes, bytes]:
@@ -132,7 +133,7 @@ class _WorkerGL:
                                         self.sprite.key_px)
         return keyframe_answer(self.sprite, self.zbuffer, {
             "viewpoint": vp, "frame_projection": frame_projection, "c_prime": c_prime,
-            "requested_at": asked, "predicted": predicted}, t0)
+            "requested_at": asked, "predicted": predicted}, t0, self.estimate_stride)
 
 
     def render_tiles(self, vp: Viewpoint, predicted: bool, asked: float,
@@ -195,14 +196,25 @@ def tiles_answer(tiled, tiles: tuple[int, ...], t0: float, fields: dict
     return pickle.dumps(fields), b"".join(b for part in parts for b in part)
 
 
-def keyframe_answer(sprite, zbuffer: str, fields: dict, t0: float) -> tuple[bytes, bytes]:
+def keyframe_answer(sprite, zbuffer: str, fields: dict, t0: float,
+                    estimate_stride: int | None = None) -> tuple[bytes, bytes]:
     """The answer for the keyframe ``sprite`` (a :class:`~lodsprite.gl.sprite.SpriteDrawer`)
     shows: meta ``fields`` with its projection, z-buffer kind, size and ``render_ms``
     (since ``t0``, ``time.perf_counter`` seconds) pickled; data its depth (``zbuffer``:
-    "coarse" or "full") then colour bytes."""
+    "coarse" or "full") then colour bytes.  ``estimate_stride``: the error estimate on
+    the keyframe's own depth (:class:`~lodsprite.sprite.depth_metric.DepthEstimate`,
+    that many texels between samples, weighted by its colour's contrast) built here and
+    shipped as ``estimate``, so that the drawing loop does not build it on its clock."""
     key = sprite.keyframe
     color = key.target.read_color()
     depth = (key.coarse if zbuffer == "coarse" else key.target).read_depth()
+    if estimate_stride is not None and zbuffer == "full":
+        from lodsprite.sprite.depth_metric import DepthEstimate
+
+        estimate = DepthEstimate(depth, key.viewpoint, key.projection, estimate_stride,
+                                 sprite.texel_scale(key))
+        estimate.weigh_by(color)
+        fields = {**fields, "estimate": estimate}
     fields = {**fields, "projection": key.projection, "zbuffer": zbuffer,
               "render_ms": (time.perf_counter() - t0) * 1e3, "key_size": key.target.size}
     return pickle.dumps(fields), b"".join((np.ascontiguousarray(depth, np.float32).data,

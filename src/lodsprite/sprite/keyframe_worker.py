@@ -51,6 +51,7 @@ from lodsprite.workers import ProcessWorker
 
 if TYPE_CHECKING:  # the scene is passed in
     from lodsprite.scene import Scene
+    from lodsprite.sprite.depth_metric import DepthEstimate
 
 log = logging.getLogger(__name__)
 
@@ -72,7 +73,8 @@ class KeyframeImage:
     frame projection at its viewpoint; ``c_prime (n*n, 3)`` metres (a
     :class:`~lodsprite.sprite.raycast.Reprojection`); ``requested_at``
     (``time.perf_counter`` seconds of the drawing process); ``render_ms``: the worker's
-    time for it; ``predicted``: placed ahead of the latest viewpoint sample."""
+    time for it; ``predicted``: placed ahead of the latest viewpoint sample;
+    ``estimate``: the error estimate on its own depth, when the worker built it."""
 
     viewpoint: Viewpoint
     projection: Projection
@@ -86,6 +88,7 @@ class KeyframeImage:
     predicted: bool
     deficit_px: float = 0.0
     selection: tuple | None = None
+    estimate: DepthEstimate | None = None
 
 
 @dataclass(frozen=True)
@@ -115,7 +118,9 @@ class WorkerSettings:
     full resolution); ``tiles``: the keyframe split into ``tiles x tiles`` tiles, each
     request naming those to render (1: whole keyframes); ``key_scale``: keyframe texels a
     display pixel side; ``depth``: keyframes ship the full-resolution z-buffer (the
-    drawing side draws them on their own depth), else the ``coarse`` rule's coarse one."""
+    drawing side draws them on their own depth), else the ``coarse`` rule's coarse one;
+    ``estimate_stride``: each keyframe ships the error estimate on its own depth, built
+    by the worker with that many texels between samples (None: none)."""
 
     size: tuple[int, int]
     fov_y_deg: float
@@ -130,6 +135,7 @@ class WorkerSettings:
     tiles: int = 1
     key_scale: float = 1.0
     depth: bool = False
+    estimate_stride: int | None = None
 
     @property
     def key_size(self) -> tuple[int, int]:

@@ -95,7 +95,8 @@ class WorkerLodSpriteEngine:
         self.worker = (make_worker or KeyframeWorker)(scene, WorkerSettings(
             sprite.target.size, fov_y_deg, sprite.coarse_quads, sprite.visibility,
             sprite.border, sprite.guard_px, predictor, resampling=resampling, store=store,
-            key_scale=sprite.key_scale, depth=sprite.depth_mesh is not None))
+            key_scale=sprite.key_scale, depth=sprite.depth_mesh is not None,
+            estimate_stride=None if self.depth is None else self.depth[0]))
         self.keyframes: list[KeyChoice] = []
         # per adopted keyframe, over a store: the adaptive selection it was drawn with
         self.selections: list[tuple | None] = []
@@ -114,15 +115,18 @@ class WorkerLodSpriteEngine:
     def judged(self, key: KeyframeImage) -> KeyframeImage:
         """``key`` with its ``C'`` the estimate on its own (shipped) depth, weighted by
         its colour's contrast, when that decides (:mod:`lodsprite.sprite.depth_metric`;
-        built here, once a keyframe)."""
+        the worker's when it shipped one, else built here, once a keyframe)."""
         if self.depth is None or key.zbuffer != "full":
             return key
         c_prime = DepthReprojection(key.c_prime)
-        scale = texels_per_pixel(key.projection.fov_y_deg, key.frame_projection.fov_y_deg,
-                                 key.depth.shape[0], self.sprite.target.size[1])
-        c_prime.estimate = DepthEstimate(key.depth, key.viewpoint, key.projection,
-                                         self.depth[0], scale)  # less where spread wider
-        c_prime.estimate.weigh_by(key.color)
+        c_prime.estimate = key.estimate  # built by the worker, off this loop's clock
+        if c_prime.estimate is None:
+            scale = texels_per_pixel(key.projection.fov_y_deg,
+                                     key.frame_projection.fov_y_deg, key.depth.shape[0],
+                                     self.sprite.target.size[1])
+            c_prime.estimate = DepthEstimate(key.depth, key.viewpoint, key.projection,
+                                             self.depth[0], scale)  # less where spread
+            c_prime.estimate.weigh_by(key.color)
         c_prime.deficit_px = getattr(key.c_prime, "deficit_px", 0.0)
         return replace(key, c_prime=c_prime)
 

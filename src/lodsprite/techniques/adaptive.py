@@ -24,7 +24,7 @@ from lodsprite.techniques.adaptive_keys import (
 )
 from lodsprite.techniques.adaptive_terrain import ADAPTIVE_COLUMNS
 from lodsprite.techniques.base import Frame, Param, Technique
-from lodsprite.techniques.defaults import MEMORY_DEFAULTS
+from lodsprite.techniques.defaults import MEMORY_DEFAULTS, STORE_DEFAULTS
 from lodsprite.techniques.terrain import SpriteTechnique, resolve_shading, set_shading
 from lodsprite.workers import peak_rss_mb
 
@@ -239,7 +239,8 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
     name = "sprite-adaptive"
 
     def __init__(self, renderer: Renderer, lod: int = 16, epsilon: float = 1.0,
-                 key_sse: float = 1.0, gpu_mb: float = 256.0, host_mb: float = 512.0,
+                 key_sse: float = STORE_DEFAULTS["key_sse"], gpu_mb: float = 256.0,
+                 host_mb: float = 512.0,
                  visibility: str | None = None, guard_px: int | None = None,
                  border: bool = True, shading: str = "auto", tiles: int = 1,
                  tile_budget_ms: float = 8.0, cache_mb: float = 0.0,

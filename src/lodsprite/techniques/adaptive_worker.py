@@ -125,6 +125,7 @@ class StoreKeyframes:
             self.metric = replace(self.metric, surface=DrawnSurface(self.adaptive).heights)
         self.sprite.keyframe_drawer = self.adaptive.render_into
         self.zbuffer = s.zbuffer
+        self.estimate_stride = s.estimate_stride
         self.key_size = s.sprite_px  # the metric's keyframe size, display pixels
         self.filled = False
         self._drawn: list[tuple] = []  # the update's tiles: (selection, deficit) each
@@ -191,4 +192,5 @@ class StoreKeyframes:
             "viewpoint": vp, "frame_projection": frame_projection, "c_prime": c_prime,
             "requested_at": asked, "predicted": predicted,
             "points": getattr(c_prime, "points", None), "deficit_px": adaptive.deficit_px(),
-            "selection": (tuple(adaptive.last_draw), adaptive.last_morphed)}, t0)
+            "selection": (tuple(adaptive.last_draw), adaptive.last_morphed)}, t0,
+            self.estimate_stride)

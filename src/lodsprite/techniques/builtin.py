@@ -51,8 +51,8 @@ SSE = Option("sse", float, 1.0, "adaptive: screen-space error tolerance", min=0,
              above=True, unit="px")
 KEY_SSE = Option("key_sse", float, None, "LOD-sprite: keyframes by the adaptive renderer at "
                  "this tolerance", min=0, above=True, unit="px",
-                 none="the terrain's: 0.5 on a store; in memory none for sprite, 1 for "
-                      "sprite-adaptive")
+                 none="the terrain's: 0.5 on a store; in memory none for sprite, 0.5 "
+                      "for sprite-adaptive")
 PROXY_SSE = Option("proxy_sse", float, None, "LOD-sprite with adaptive keyframes: "
                    "spriteframes draw the adaptive mesh at this tolerance instead of the "
                    "uniform --lod level", min=0, above=True, unit="px", none=_TERRAIN)
@@ -66,8 +66,9 @@ GRID = Option("grid", int, 64, "adaptive: node grid, quads a side",
               choices=(16, 32, 64, 128), flag="node-grid")
 PROXY = Option("proxy", str, None, "LOD-sprite: what spriteframes draw the keyframe "
                "on: its proxy geometry (the --lod level, or the adaptive mesh at "
-               "--proxy-sse), a mesh from the keyframe's own depth, or a search per "
-               "pixel through it", choices=("geometry", "depth", "search"), none=_TERRAIN)
+               "--proxy-sse), a mesh from the keyframe's own depth (refined: split "
+               "finer where it is not planar), or a search per pixel through it",
+               choices=("geometry", "depth", "depth-refined", "search"), none=_TERRAIN)
 DEPTH_STRIDE = Option("depth_stride", int, None, "LOD-sprite with --proxy depth: keyframe "
                       "texels between the depth mesh's vertices", min=1, max=16,
                       unit="texels", none=_TERRAIN)
