@@ -382,3 +382,29 @@ def test_tile_updates_keep_a_fresh_proxy_and_freeze_a_stale_one_again(gl):
             assert eng.hold.reasons[-1] in (REGION, ERROR) and calls["freeze"] == frozen + 1
         finally:
             t.release()
+
+
+@pytest.mark.parametrize("threaded", [False, True], ids=["inline", "worker"])
+def test_tiles_at_keyframe_scale_2_draw_what_a_whole_keyframe_draws(gl, threaded):
+    """Tiles rendered at twice the display's resolution (inline, or by the worker, which
+    renders its tiles at the same scale) make the keyframe a whole keyframe at scale 2
+    is: the frame drawn from them is the whole keyframe's spriteframe at the same view
+    (within 1 grey level; measured identical), never the keyframe shown as it is."""
+    from lodsprite import Renderer, get_path, load_scene, techniques
+
+    scene = load_scene("fractal:64:3", grid=64)
+    vp = get_path("chen1999", scene.hf, 4).viewpoints[0]
+    shown = {}
+    with Renderer(scene, (64, 64), ctx=gl.mgl) as renderer:
+        for tiles in (1, 2):
+            t = techniques.create("sprite", renderer, lod=8, key_scale=2.0, tiles=tiles,
+                                  tile_budget_ms=0.0, keyframes="worker"
+                                  if threaded and tiles > 1 else "inline")
+            try:
+                t.warm_up(vp)
+                t.frame(vp)
+                assert not t.decision()["shows_keyframe"]
+                shown[tiles] = t.read_image().astype(int)
+            finally:
+                t.release()
+    assert np.abs(shown[1] - shown[2]).max() <= 1

@@ -269,9 +269,9 @@ class TiledSpriteDrawer:
         self.set_tile(tile, viewpoint, projection)
 
     def keyframe_color(self) -> np.ndarray:
-        """The tiled keyframe image without its guard band, ``(H, W, 3) uint8``, row 0 at
-        the top."""
-        g = self.sprite.guard_px
+        """The tiled keyframe image without its guard band, ``(H, W, 3) uint8`` at the
+        keyframe scale, row 0 at the top."""
+        g = int(round(self.sprite.guard_px * self.sprite.key_scale))
         w, h = self.target.size
         img = self.target.read_color(copy=False)
         return (img[g:h - g, g:w - g] if g else img).copy()

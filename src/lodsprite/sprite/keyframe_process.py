@@ -178,7 +178,7 @@ def tile_c_prime(metric, tiled, tiles: tuple[int, ...], vp: Viewpoint, key_vp: n
     (:func:`~lodsprite.sprite.tiled.reproject_in_key_view`)."""
     from lodsprite.sprite.tiled import reproject_in_key_view, tiles_frustum
 
-    return reproject_in_key_view(metric, vp.o, key_vp, tiled.target.size,
+    return reproject_in_key_view(metric, vp.o, key_vp, tiled.sprite.key_px,
                                  tiles_frustum(key_vp, tiled.ndc, tiles))
 
 

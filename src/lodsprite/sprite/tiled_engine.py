@@ -179,7 +179,7 @@ class TiledSpriteEngine:
             # tiles; a fresh one is kept (lodsprite.sprite.proxy_hold)
             key_vp = key_proj.matrix() @ viewpoint.view_matrix()
             why = self._refreeze(viewpoint, key_proj)
-            c_prime = reproject_in_key_view(self.metric, viewpoint.o, key_vp, s.key_size,
+            c_prime = reproject_in_key_view(self.metric, viewpoint.o, key_vp, s.key_px,
                                             tiles_frustum(key_vp, self.tiled.ndc, chosen))
             tris += self.render_tiles(chosen, key, freeze=key if why else None)
             if why and self.hold is not None:
@@ -197,8 +197,8 @@ class TiledSpriteEngine:
         self.last_tiles = tuple(int(i) for i in chosen)
         self.cache_tiles = int(np.sum(self.mosaic != self.newest))
         whole = len(chosen) == self.tiled.count
-        self._shows_keyframe = whole
-        if not whole:
+        self._shows_keyframe = whole and s.keyframe_is_frame  # else drawn from the tiles
+        if not self._shows_keyframe:
             tris += self.tiled.render_spriteframe(viewpoint, projection).triangles
         kind = KEYFRAME if whole else (TILES if len(chosen) else SPRITE)
         shown = 0.0 if whole else combined_error(errors, served)

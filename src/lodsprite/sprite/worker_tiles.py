@@ -89,7 +89,8 @@ class WorkerTiledEngine(TiledSpriteEngine):
             self.worker = (make_worker or KeyframeWorker)(scene, WorkerSettings(
                 sprite.target.size, fov_y_deg, sprite.coarse_quads, sprite.visibility,
                 sprite.border, sprite.guard_px, predictor,
-                resampling=resampling_metric(metric), store=store, tiles=tiles))
+                resampling=resampling_metric(metric), store=store, tiles=tiles,
+                key_scale=sprite.key_scale))
         except BaseException:
             self.tiled.release()
             raise

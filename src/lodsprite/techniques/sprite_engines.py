@@ -376,9 +376,9 @@ def sprite_engine(renderer: Renderer, epsilon: float, lod: int, threaded: bool,
     :class:`~lodsprite.errors.InputError` for a bad ``tiles``."""
     if not (isinstance(tiles, int) and tiles >= 1):
         raise InputError(f"--tiles must be a whole number >= 1, got {tiles}")
-    if tiles > 1 and (depth_stride is not None or key_scale != 1.0):
-        raise InputError("tile updates draw on the proxy geometry at keyframe scale 1: "
-                         "--proxy depth and --key-scale need --tiles 1")
+    if tiles > 1 and depth_stride is not None:
+        raise InputError("tile updates draw on the proxy geometry: --proxy depth and "
+                         "search need --tiles 1")
     if tiles > 1 and threaded and cache_mb > 0:
         raise InputError("tiles from the keyframe worker keep no cache (--cache-mb)")
     sprite = renderer.sprite(
