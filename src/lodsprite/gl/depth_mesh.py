@@ -37,6 +37,11 @@ terrain's outline, seen turning).  A sheet between ground and sky that remains (
 keyframe's last row or column, where the neighbours are nearer than ``stride``) is drawn
 only while its ground end has moved less than ``SKY_SHEET_PX`` pixels: its far end does
 not move with the eye, so it sweeps over the terrain as the eye moves.
+
+Refined (:meth:`DepthMesh.refine`): the geometry shader splits a triangle whose texels
+leave its plane (inverse depth is affine in the image on a plane) into ``REFINE_SPLIT``
+squared triangles, each vertex from its own texel and each a rubber sheet or not on its
+own: finer where depth is not planar, the fixed stride elsewhere.
 """
 
 from __future__ import annotations
