@@ -187,6 +187,7 @@ class _SceneKeysGL:
             self.release()
             raise
         self.metric = ErrorMetric.for_level(scene.hf, s.lod, s.resampling)
+        self.estimate_stride = s.estimate_stride
         self._warm = False
 
     def _static(self, viewpoint: Viewpoint, projection: Projection, target) -> None:
@@ -211,7 +212,7 @@ class _SceneKeysGL:
                                         key.target.size)
         return keyframe_answer(self.sprite, "full", {
             "viewpoint": vp, "frame_projection": frame_projection, "c_prime": c_prime,
-            "requested_at": asked, "predicted": predicted}, t0)
+            "requested_at": asked, "predicted": predicted}, t0, self.estimate_stride)
 
     def release(self) -> None:
         for part in (self.objects, self.terrain):

@@ -34,11 +34,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from lodsprite.camera import Viewpoint, texels_per_pixel
+from lodsprite.camera import Viewpoint
 from lodsprite.errors import InputError, LodspriteError
 from lodsprite.gl.sprite import SpriteDrawer
 from lodsprite.record import Frame
-from lodsprite.sprite.depth_metric import DepthEstimate, DepthReprojection
+from lodsprite.sprite.depth_metric import DepthReprojection
 from lodsprite.sprite.engine import sprite_frame
 from lodsprite.sprite.keyframe_worker import (
     KeyframeImage,
@@ -115,18 +115,13 @@ class WorkerLodSpriteEngine:
     def judged(self, key: KeyframeImage) -> KeyframeImage:
         """``key`` with its ``C'`` the estimate on its own (shipped) depth, weighted by
         its colour's contrast, when that decides (:mod:`lodsprite.sprite.depth_metric`;
-        the worker's when it shipped one, else built here, once a keyframe)."""
+        built by the worker and shipped with the keyframe)."""
         if self.depth is None or key.zbuffer != "full":
             return key
+        if key.estimate is None:
+            raise LodspriteError("the keyframe worker shipped no depth estimate")
         c_prime = DepthReprojection(key.c_prime)
         c_prime.estimate = key.estimate  # built by the worker, off this loop's clock
-        if c_prime.estimate is None:
-            scale = texels_per_pixel(key.projection.fov_y_deg,
-                                     key.frame_projection.fov_y_deg, key.depth.shape[0],
-                                     self.sprite.target.size[1])
-            c_prime.estimate = DepthEstimate(key.depth, key.viewpoint, key.projection,
-                                             self.depth[0], scale)  # less where spread
-            c_prime.estimate.weigh_by(key.color)
         c_prime.deficit_px = getattr(key.c_prime, "deficit_px", 0.0)
         return replace(key, c_prime=c_prime)
 
