@@ -30,6 +30,8 @@ CASES = {
                                         "depth_stride": 4},
     "depth, every 8th texel, scale 2, paired": {"proxy": "depth", "key_scale": 2.0,
                                                 "depth_stride": 8, "pair": True},
+    "depth, every 8th texel, scale 2, refined": {"proxy": "depth-refined",
+                                                 "key_scale": 2.0, "depth_stride": 8},
     "depth searched per pixel, scale 2": {"proxy": "search", "key_scale": 2.0,
                                           "depth_stride": 8},
 }

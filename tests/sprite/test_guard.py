@@ -68,3 +68,8 @@ def test_the_guard_band_grows_with_the_misses_and_stops_at_its_cap():
     band.aim(10.0, VP)
     band.observe(10.0, turned(VP, 400.0, H, FOV))
     assert band.spread() == pytest.approx(MAX_SPREAD)
+    assert band.summary()["guard_misses"] == 6
+    assert band.summary()["guard_miss_max_px"] == pytest.approx(
+        overshoot_px(turned(VP, 400.0, H, FOV), VP, FOV, (W, H)))
+    assert band.aim(11.0, VP) == pytest.approx(MAX_SPREAD)
+    assert band.summary()["guard_spread_max"] == pytest.approx(MAX_SPREAD)

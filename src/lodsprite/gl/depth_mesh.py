@@ -118,8 +118,9 @@ void main() {
 DEPTH_MESH_GS = """#version 330
 #define SKY_SHEET_PX """ + f"{SKY_SHEET_PX:.1f}" + """
 #define SUB """ + str(REFINE_SPLIT) + """
+#define REFINE @REFINE@
 layout(triangles) in;
-layout(triangle_strip, max_vertices = """ + str(3 * REFINE_SPLIT ** 2) + """) out;
+layout(triangle_strip, max_vertices = @MAX_VERTICES@) out;
 uniform sampler2D u_key_depth;
 uniform vec2 u_key_near_far;
 uniform vec2 u_key_tan;
@@ -188,6 +189,7 @@ void emit(vec4 k0, vec4 k1, vec4 k2, vec4 c0, vec4 c1, vec4 c2, bool rubber) {
     EndPrimitive();
 }
 
+#if REFINE
 // A triangle whose texels leave its plane (its corners' inverse depth, affine in the
 // image on a plane) by more than u_planar is drawn as SUB x SUB triangles, each vertex
 // from its own texel: finer where depth is not planar.  Not where any of those texels
@@ -240,6 +242,7 @@ bool refined() {
         }
     return true;
 }
+#endif
 
 void main() {
     float sky = v_sky[0] + v_sky[1] + v_sky[2];
@@ -249,7 +252,9 @@ void main() {
     } else if (sky > 0.5) {
         rubber = true;
     } else {
-        if (u_planar > 0.0 && refined()) return;
+#if REFINE
+        if (refined()) return;
+#endif
         rubber = is_rubber(v_rel[0], v_rel[1], v_rel[2]);
     }
     if (u_true == 1 && rubber) return;
@@ -308,7 +313,6 @@ class DepthMesh:
     framebuffer: ``stride`` keyframe texels between vertices, ``cut_deg`` the rubber-sheet
     angle.  GPU objects (one mesh a keyframe size) live until :meth:`release`."""
 
-    kind = "depth"  # the --proxy choice it draws
 
     def __init__(self, ctx: GLContext, stride: int = DEFAULT_STRIDE,
                  cut_deg: float = DEFAULT_CUT_DEG, stretch: float = DEFAULT_STRETCH,
@@ -322,14 +326,28 @@ class DepthMesh:
             raise InputError(f"the planarity tolerance is in [0, 1), not {planar!r}")
         self.ctx, self.stride, self.cut_deg = ctx, int(stride), float(cut_deg)
         self.stretch = float(stretch)
-        self.planar = float(planar)  # 0: no refinement (read at each draw)
-        self.program = ctx.mgl.program(vertex_shader=DEPTH_MESH_VS,
-                                       geometry_shader=DEPTH_MESH_GS,
-                                       fragment_shader=DEPTH_MESH_FS)
-        self.program["u_key_depth"].value = 3
-        self.program["u_sprite"].value = 2
-        self.program["u_cut"].value = math.sin(math.radians(self.cut_deg))
+        self.planar = float(planar)  # 0: no refinement
+        self.program = self._program()
         self._meshes: dict[tuple[int, int], tuple] = {}  # key size -> (vao, bufs, tris)
+
+    @property
+    def kind(self) -> str:
+        """The ``--proxy`` choice this mesh draws."""
+        return "depth-refined" if self.planar else "depth"
+
+    def _program(self) -> moderngl.Program:
+        """The mesh's program; its geometry shader emits 3 vertices a triangle, or (when
+        refined) up to ``3 REFINE_SPLIT²``, which costs the plain mesh's draws time on
+        llvmpipe even where nothing is split: two programs, not one."""
+        refine = self.planar > 0
+        gs = (DEPTH_MESH_GS.replace("@REFINE@", str(int(refine)))
+              .replace("@MAX_VERTICES@", str(3 * REFINE_SPLIT ** 2 if refine else 3)))
+        prog = self.ctx.mgl.program(vertex_shader=DEPTH_MESH_VS, geometry_shader=gs,
+                                    fragment_shader=DEPTH_MESH_FS)
+        prog["u_key_depth"].value = 3
+        prog["u_sprite"].value = 2
+        prog["u_cut"].value = math.sin(math.radians(self.cut_deg))
+        return prog
 
     def refine(self, planar: float = REFINE_PLANAR) -> None:
         """Split each triangle whose texels leave its plane by more than ``planar`` (their
@@ -337,6 +355,9 @@ class DepthMesh:
         if not 0.0 < float(planar) < 1.0:
             raise InputError(f"the planarity tolerance is in (0, 1), not {planar!r}")
         self.planar = float(planar)
+        self._release_meshes()  # their vertex arrays belong to the program replaced
+        self.program.release()
+        self.program = self._program()
 
     def _mesh(self, size: tuple[int, int]) -> tuple:
         if size not in self._meshes:
@@ -377,7 +398,8 @@ class DepthMesh:
         prog["u_true"].value = int(true_depth)
         prog["u_stride"].value = self.stride
         prog["u_stretch"].value = self.stretch
-        prog["u_planar"].value = self.planar
+        if self.planar:
+            prog["u_planar"].value = self.planar
         # a sheet from the ground to a point at infinity sweeps over the terrain as the eye
         # moves (its far end has no parallax): kept while its ground end has moved less
         # than SKY_SHEET_PX pixels
@@ -394,10 +416,13 @@ class DepthMesh:
         vao.render(moderngl.TRIANGLES)
         return tris
 
-    def release(self) -> None:
+    def _release_meshes(self) -> None:
         for vao, vbo, ibo, _ in self._meshes.values():
             vao.release()
             vbo.release()
             ibo.release()
         self._meshes.clear()
+
+    def release(self) -> None:
+        self._release_meshes()
         self.program.release()

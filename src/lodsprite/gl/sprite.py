@@ -197,6 +197,17 @@ class SpriteDrawer:
         # viewer's tint toggle); alpha 0 draws them as they are.
         self.fallback_tint: tuple[float, float, float, float] = (1.0, 0.0, 1.0, 0.0)
 
+    def use_depth_proxy(self, proxy: str) -> None:
+        """Draw spriteframes as the ``--proxy`` choice says: ``geometry`` and ``depth``
+        as made, ``depth-refined`` the depth mesh refined where depth is not planar,
+        ``search`` the search per fragment (both need ``depth_stride``)."""
+        if proxy == "search":
+            self.use_search()
+        elif proxy == "depth-refined":
+            if self.depth_mesh is None:
+                raise InputError("the refined depth mesh needs a depth stride")
+            self.depth_mesh.refine()
+
     def use_search(self, steps: int | None = None) -> None:
         """Draw spriteframes by a search per fragment through the keyframe's depth
         (:class:`~lodsprite.gl.depth_search.DepthSearch`) instead of the depth mesh (the

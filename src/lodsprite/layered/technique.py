@@ -297,10 +297,7 @@ def _keyframed(renderer: Renderer, scene: Scene, mode: str, exponent: float,
     layer = KeyframedTerrain(renderer, keys, float(epsilon or DEFAULT_EPSILON_PX),
                              int(lod or DEFAULT_COARSE), exponent, depth_stride=stride,
                              pair=bool(options.get("pair")))
-    if options.get("proxy") == "search":
-        layer.sprite.use_search()
-    elif options.get("proxy") == "depth-refined":
-        layer.sprite.depth_mesh.refine()
+    layer.sprite.use_depth_proxy(options.get("proxy") or "geometry")
     return layer
 
 

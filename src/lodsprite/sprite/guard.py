@@ -68,19 +68,35 @@ class GuardBand:
         self.size = (int(size[0]), int(size[1]))
         self.fov_y_deg = float(fov_y_deg)
         self.misses: deque[float] = deque(maxlen=MISSES_KEPT)
+        self.measured = 0        # misses measured in all
+        self.worst_px = 0.0      # the largest of them (pixels)
+        self.widest = 1.0        # the largest spread asked for
         self._aim: tuple[float, Viewpoint] | None = None
 
-    def aim(self, t: float, viewpoint: Viewpoint) -> None:
-        """A keyframe was asked for at ``viewpoint``, meant to be shown at ``t`` seconds
-        (the request's time plus the measured latency)."""
+    def aim(self, t: float, viewpoint: Viewpoint) -> float:
+        """A keyframe is asked for at ``viewpoint``, meant to be shown at ``t`` seconds
+        (the request's time plus the measured latency); returns the spread it is asked
+        with (:meth:`spread`, from the misses measured before it)."""
+        spread = self.spread()
+        self.widest = max(self.widest, spread)
         self._aim = (float(t), viewpoint)
+        return spread
+
+    def summary(self) -> dict[str, float]:
+        """What the band did over a run: misses measured, the largest (pixels), the
+        90th percentile of the last :data:`MISSES_KEPT` and the widest spread asked."""
+        recent = float(np.quantile(self.misses, MISS_QUANTILE)) if self.misses else 0.0
+        return {"guard_misses": self.measured, "guard_miss_max_px": self.worst_px,
+                "guard_miss_p90_px": recent, "guard_spread_max": self.widest}
 
     def observe(self, t: float, viewpoint: Viewpoint) -> None:
         """The frame shown at ``t``: the miss of the aimed keyframe, once ``t`` reaches
         its time."""
         if self._aim is not None and t >= self._aim[0]:
-            self.misses.append(overshoot_px(viewpoint, self._aim[1], self.fov_y_deg,
-                                            self.size))
+            miss = overshoot_px(viewpoint, self._aim[1], self.fov_y_deg, self.size)
+            self.misses.append(miss)
+            self.measured += 1
+            self.worst_px = max(self.worst_px, miss)
             self._aim = None
 
     @property

@@ -242,10 +242,7 @@ class KeyframeWorker:
         now = time.perf_counter()
         vp, predicted = self._target(now)
         self._wanted = now
-        spread = 1.0
-        if self.guard is not None:
-            spread = self.guard.spread()
-            self.guard.aim(now + self.lead_s, vp)  # shown from about then
+        spread = 1.0 if self.guard is None else self.guard.aim(now + self.lead_s, vp)
         extra = self.request_extra if tiles is None else (tuple(int(t) for t in tiles),)
         self._proc.submit(now, pickle.dumps((vp, predicted, now, spread, *extra)))
         return True

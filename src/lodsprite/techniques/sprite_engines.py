@@ -191,6 +191,12 @@ class WorkerKeyframes(_Whole):
         return {"keyframe": self._last.keyframe, "kind": self._last.type,
                 "shows_keyframe": False}
 
+    def work_summary(self, frames: list[Frame]) -> dict[str, Any]:
+        """The keyframes, and what the guard band that follows the predictor did
+        (:meth:`lodsprite.sprite.guard.GuardBand.summary`; none when it is fixed)."""
+        guard = self.sprite.engine.worker.guard
+        return {**super().work_summary(frames), **({} if guard is None else guard.summary())}
+
     def cache_summary(self, frames: list[Frame]) -> dict[str, Any]:
         """No frame here is a keyframe: ``keyframes`` counts the worker's keyframes the
         frames showed, ``keyframes_rendered`` all it rendered (``keyframes_discarded``:

@@ -184,13 +184,9 @@ class SpriteTechnique(Technique):
             renderer, epsilon, lod, keyframes == "worker", visibility or DEFAULT_VISIBILITY,
             DEFAULT_GUARD_PX if guard_px is None else guard_px, border, tiles,
             tile_budget_ms, cache_mb, cache_policy, metric, store,
-            depth_stride if proxy in ("depth", "depth-refined", "search") else None,
-            key_scale, pair)
+            None if proxy == "geometry" else depth_stride, key_scale, pair)
         self.sprite: LodSprite = self.engine.sprite
-        if proxy == "search":  # the keyframe's depth searched per fragment, not meshed
-            self.sprite.sprite.use_search()
-        elif proxy == "depth-refined":  # finer where depth is not planar
-            self.sprite.sprite.depth_mesh.refine()
+        self.sprite.sprite.use_depth_proxy(proxy)
         self.heights = level0_reader(renderer.terrain_gl.geometry, lod, border)
 
     @property
@@ -299,7 +295,4 @@ def proxy_name(drawer) -> str:
     """What ``drawer`` (a :class:`~lodsprite.gl.sprite.SpriteDrawer`) draws spriteframes
     on: the proxy ``geometry``, the keyframe's ``depth`` mesh (``depth-refined``) or its
     depth ``search``."""
-    if drawer.depth_mesh is None:
-        return "geometry"
-    return drawer.depth_mesh.kind + ("-refined" if getattr(drawer.depth_mesh, "planar", 0)
-                                     else "")
+    return "geometry" if drawer.depth_mesh is None else drawer.depth_mesh.kind
