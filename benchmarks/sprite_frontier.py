@@ -16,6 +16,10 @@ p99 (each its own frontier).
 
     python benchmarks/sprite_frontier.py --terrain STORE [--path flyover] [--frames 120]
         [--size 256] [--sse 0.5 1 2 4] [--eps 0.5 1 2] [--out DIR]
+        [--reference-cache DIR]
+
+Every run is judged against the same reference frames: they are drawn once and kept in
+``--reference-cache`` (default ``OUT/references``; :mod:`lodsprite.reference_cache`).
 
 Writes ``frontier.json`` (every run, the speedups) and ``frontier.png`` to ``--out``.
 """
@@ -25,6 +29,7 @@ from __future__ import annotations
 import argparse
 import csv
 import json
+import os
 import tempfile
 from pathlib import Path
 
@@ -32,6 +37,7 @@ import numpy as np
 
 from lodsprite.experiments.base import split_sampled
 from lodsprite.experiments.large.child import render_in_child
+from lodsprite.reference_cache import ENV
 from lodsprite.report.frontier import (
     frontier,
     frontier_speedup,
@@ -95,9 +101,11 @@ def main() -> None:
     ap.add_argument("--quality-stride", type=int, default=4)
     ap.add_argument("--variant", action="append", choices=sorted(VARIANTS))
     ap.add_argument("--out", type=Path)
+    ap.add_argument("--reference-cache", type=Path)
     args = ap.parse_args()
     variants = args.variant or list(VARIANTS)
     out = args.out or Path(tempfile.mkdtemp(prefix="sprite-frontier-"))
+    os.environ[ENV] = str(args.reference_cache or out / "references")  # the children's too
     rows: dict[str, list[dict]] = {"adaptive": [], **{v: [] for v in variants}}
     turns = max(len(args.sse), len(args.eps))
     for i in range(turns):

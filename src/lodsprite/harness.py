@@ -123,13 +123,17 @@ def scene_reference(renderer, shading: str = "auto", samples: int | None = None
     by ``shading``: level 0 band-limited (:func:`level_zero_reference`: a store's whole up
     to 4097 samples a side, the part in view beyond, in patches; an in-memory field at its
     full grid), drawn by its own code path, never by a renderer under test.  Its GPU
-    objects are released on leaving."""
+    objects are released on leaving.  With ``LODSPRITE_REFERENCE_CACHE`` set, frames are
+    read from and kept in that folder (:mod:`lodsprite.reference_cache`)."""
+    from lodsprite.reference_cache import cache_folder, cached_images
+
     ref = level_zero_reference(renderer.gl, renderer.scene, renderer.size,
                                renderer.fov_y_deg, shading, samples)
     if ref is None:
         raise InputError("a scene without terrain has no level-0 reference")
+    folder = cache_folder()
     try:
-        yield ref.image
+        yield ref.image if folder is None else cached_images(ref, folder)
     finally:
         ref.release()
 

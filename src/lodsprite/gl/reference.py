@@ -29,6 +29,7 @@ so that the same viewpoint gives the same projection and colours in both.
 
 from __future__ import annotations
 
+import hashlib
 import math
 
 import numpy as np
@@ -220,6 +221,24 @@ class LevelZeroReference:
         how = f"in {count} tiles" if count > 1 else "in one piece"
         return (f"level-0 window rows {r0}:{r1}, columns {c0}:{c1} of {self.cols}x{self.rows} "
                 f"samples (the view's footprint), drawn {how}")
+
+    def identity(self) -> str:
+        """Everything that decides this reference's frames besides the view, as text: the
+        level 0 (a store's resolved path, header bytes and exaggeration; an in-memory
+        field's SHA-256 and spacings) and the settings (size, field of view, samples,
+        filter, colour space, shading, texture's SHA-256, patch side)."""
+        if self._field is not None:
+            src = (f"field {hashlib.sha256(np.ascontiguousarray(self._field.heights)).hexdigest()}"
+                   f" {self.pyramid.dx!r} {self.pyramid.dy!r}")
+        else:
+            store = self.pyramid
+            header = hashlib.sha256((store.path / "zarr.json").read_bytes()).hexdigest()
+            src = f"store {store.path.resolve()} {header} {store.exaggeration!r}"
+        tex = ("none" if self.texture is None else
+               hashlib.sha256(np.ascontiguousarray(self.texture)).hexdigest())
+        return (f"lodsprite level-0 reference 1; {src}; size {self.size}; fov {self.fov!r}; "
+                f"samples {self.samples}; {self.filter}; {self.space}; {self.shading}; "
+                f"texture {tex}; max side {self.max_side}")
 
     def describe(self) -> str:
         """How the reference is made, and for the last view what was drawn."""
