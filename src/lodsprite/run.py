@@ -80,18 +80,10 @@ def run_scene(scene: Scene, mode: str, options: Mapping[str, Any], path: CameraP
 
 
 def technique_for(scene: Scene, mode: str | None):
-    """The registry's spec that ``mode`` names (its name or short name; default: the
-    scene's own ``mode``) among the batch techniques that draw ``scene``'s layers; else an
-    :class:`~lodsprite.errors.InputError` naming the choices."""
+    """:func:`lodsprite.techniques.for_scene`: the spec ``mode`` names for ``scene``."""
     from lodsprite import techniques
 
-    mode = mode or scene.mode
-    usable = [s for s in techniques.specs(scene.layers) if s.batch]
-    for spec in usable:
-        if mode in (spec.name, spec.short):
-            return spec
-    raise InputError(f"unknown mode '{mode}' for {scene.name} ({', '.join(scene.layers)}): "
-                     f"use one of {', '.join(s.short for s in usable) or 'none'}")
+    return techniques.for_scene(scene, mode)
 
 
 def render_spec(spec: str, out_dir: Path, mode: str | None = None,

@@ -29,6 +29,7 @@ from lodsprite.techniques.registry import (
     create,
     discover,
     factories,
+    for_scene,
     get,
     names,
     register,
@@ -38,4 +39,4 @@ from lodsprite.techniques.registry import (
 
 __all__ = ["FALLBACK_TINT", "GROUP", "LAYERS", "Frame", "FrameInfo", "Option", "Param",
            "Technique", "TechniqueFactory", "TechniqueSpec", "all_options", "create",
-           "discover", "factories", "get", "names", "register", "specs", "unregister"]
+           "discover", "factories", "for_scene", "get", "names", "register", "specs", "unregister"]

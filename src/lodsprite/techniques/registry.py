@@ -24,6 +24,7 @@ from lodsprite.techniques.options import Option, merge
 
 if TYPE_CHECKING:
     from lodsprite.api import Renderer
+    from lodsprite.scene import Scene
     from lodsprite.techniques.base import Technique, TechniqueFactory
 
 #: The scene layers techniques draw (:mod:`lodsprite.scene`).
@@ -174,6 +175,20 @@ def specs(layers: Iterable[str] | None = None) -> list[TechniqueSpec]:
         return ordered
     have = set(layers)
     return [s for s in ordered if set(s.layers) <= have]
+
+
+def for_scene(scene: Scene, mode: str | None = None) -> TechniqueSpec:
+    """The spec that ``mode`` names (its name or short name; default: the scene's own
+    ``mode``) among the batch techniques that draw ``scene``'s layers: the one ``render``,
+    the window and the served surfaces draw ``scene`` with; else an
+    :class:`~lodsprite.errors.InputError` naming the choices."""
+    mode = mode or scene.mode
+    usable = [s for s in specs(scene.layers) if s.batch]
+    for spec in usable:
+        if mode in (spec.name, spec.short):
+            return spec
+    raise InputError(f"unknown mode '{mode}' for {scene.name} ({', '.join(scene.layers)}): "
+                     f"use one of {', '.join(s.short for s in usable) or 'none'}")
 
 
 def names(layers: Iterable[str] | None = None) -> tuple[str, ...]:
