@@ -14,6 +14,14 @@ component, or resolves (through symlinks) to a place outside DIR is refused; so 
 holding any symlink, and every file name when the server has no data folder.
 The client loads the same name itself (its coarse model and fallback texture), as in
 Swan et al. 2002 where both hosts hold the dataset.
+
+A scene (:meth:`Datasets.scene`) is any of those terrains, ``crowd[:OBJECTS[:TREES]]``
+(at most :data:`MAX_SESSION_OBJECTS` in all), or a scene file, a light-field folder or a
+plug-in kind's folder under the data folder.  A scene file and every file it names must
+lie inside the data folder, symlinks followed (:mod:`lodsprite.scene.confine`); its
+instances, light fields and built-in terrain are held to a session's caps.  A kind is
+served only when it is among the server's ``kinds`` (the project's own by default:
+:data:`SERVED_KINDS`); a plug-in's must be listed.  A URL is never a name.
 """
 
 from __future__ import annotations
@@ -33,6 +41,12 @@ MAX_FRACTAL_SIZE = 4096
 MAX_SOURCE_SIDE = 16384
 """Largest side (samples or texels) of a terrain or texture file a server reads."""
 JACKSBORO_SHAPE = (344, 403)
+MAX_SESSION_OBJECTS = 20_000
+"""Most objects (a crowd's members and trees, a scene file's instances) a session loads."""
+MAX_SESSION_LIGHTFIELDS = 4
+"""Most light fields a session's scene holds."""
+SERVED_KINDS = ("scene-file", "crowd", "lumigraph")
+"""The scene kinds a server serves unless told otherwise: the project's own."""
 
 
 @dataclass(frozen=True)
@@ -46,10 +60,26 @@ class Dataset:
     builtin: bool
 
 
-class Datasets:
-    """The names a server serves: built-ins, and files under ``data_dir`` (None: none)."""
+@dataclass(frozen=True)
+class SceneName:
+    """A resolved scene name: ``spec`` for :func:`lodsprite.scene.open_scene` (a built-in
+    or an absolute path inside the data folder), its ``kind`` (None: a terrain, whose
+    :class:`Dataset` is ``terrain``) and ``root``, the folder every file it names lies in
+    (pass it to ``open_scene``)."""
 
-    def __init__(self, data_dir: Path | str | None = None) -> None:
+    spec: str
+    kind: str | None
+    root: Path | None
+    terrain: Dataset | None = None
+
+
+class Datasets:
+    """The names a server serves: built-ins, and files under ``data_dir`` (None: none);
+    of the scene kinds, those in ``kinds``."""
+
+    def __init__(self, data_dir: Path | str | None = None,
+                 kinds: tuple[str, ...] = SERVED_KINDS) -> None:
+        self.kinds = tuple(kinds)
         self.data_dir: Path | None = None
         if data_dir is not None:
             root = Path(data_dir).expanduser()
@@ -72,6 +102,70 @@ class Datasets:
         path = self._file(name, "terrain", stores=True)
         return Dataset(str(path), _peek_shape(path), False)
 
+    def scene(self, name: str) -> SceneName:
+        """The scene named ``name``: a terrain (:meth:`terrain`), a crowd, or a scene file,
+        light field or plug-in kind's folder under the data folder, checked against the
+        session's caps; raises :class:`InputError` with the reason, before anything of it
+        is opened beyond its header."""
+        from lodsprite.scene.confine import check_tree, is_url
+        from lodsprite.scene.kinds import scene_kind
+
+        name = _clean(name, "scene")
+        if is_url(name):
+            raise InputError(f"scene {name!r}: a URL is refused; name a scene this server "
+                             "serves")
+        low = name.lower()
+        if low == "crowd" or low.startswith("crowd:"):
+            self._served("crowd", name)
+            from lodsprite.manager.technique import parse_crowd
+
+            objects, trees = parse_crowd(low)
+            if not (1 <= objects and 0 <= trees and objects + trees <= MAX_SESSION_OBJECTS):
+                raise InputError(f"scene {name!r}: a crowd of 1..{MAX_SESSION_OBJECTS} "
+                                 "objects (members and trees) in all")
+            return SceneName(low, "crowd", None)
+        if low == "jacksboro" or parse_fractal_spec(name) is not None:
+            return SceneName(name, None, None, self.terrain(name))
+        path = self._file(name, "scene", stores=True, folders=True)
+        kind = scene_kind(str(path))  # on a path inside the data folder only
+        if kind is None:
+            return SceneName(str(path), None, self.data_dir, self.terrain(name))
+        self._served(kind, name)
+        if kind == "scene-file":
+            self._check_scene_file(path, name)
+        else:
+            check_tree(path, f"scene {name!r}")
+        return SceneName(str(path), kind, self.data_dir)
+
+    def _served(self, kind: str, name: str) -> None:
+        if kind not in self.kinds:
+            raise InputError(f"scene {name!r}: this server does not serve {kind} scenes "
+                             f"(it serves {', '.join(self.kinds) or 'terrains only'})")
+
+    def _check_scene_file(self, path: Path, name: str) -> None:
+        """The scene file read confined to the data folder, and held to the session's
+        caps (objects, light fields, a built-in terrain's size)."""
+        from lodsprite.scene.file import read_scene_file
+
+        sf = read_scene_file(path, root=self.data_dir)
+        objects = 0
+        for o in sf.objects:  # a points file's lines bound its rows
+            if o.count is not None:
+                objects += o.count
+            elif o.points is not None:
+                objects += Path(o.points).read_bytes().count(b"\n") + 1
+            if objects > MAX_SESSION_OBJECTS:
+                break
+        if objects > MAX_SESSION_OBJECTS:
+            raise InputError(f"scene {name!r}: {objects} objects, more than a session's "
+                             f"{MAX_SESSION_OBJECTS}")
+        if len(sf.lightfields) > MAX_SESSION_LIGHTFIELDS:
+            raise InputError(f"scene {name!r}: {len(sf.lightfields)} light fields, more "
+                             f"than a session's {MAX_SESSION_LIGHTFIELDS}")
+        source = sf.terrain.source
+        if not Path(source).is_absolute():  # a built-in: the terrain rules apply
+            self.terrain(source)
+
     def texture(self, name: str) -> Dataset:
         """The texture named ``name``; raises :class:`InputError` with the reason."""
         name = _clean(name, "texture")
@@ -87,7 +181,8 @@ class Datasets:
         path = self._file(name, "texture")
         return Dataset(str(path), _peek_shape(path), False)
 
-    def _file(self, name: str, what: str, stores: bool = False) -> Path:
+    def _file(self, name: str, what: str, stores: bool = False,
+              folders: bool = False) -> Path:
         if self.data_dir is None:
             raise InputError(f"{what} {name!r} is not a built-in, and this server serves no "
                              "files (start it with --data DIR)")
@@ -105,6 +200,8 @@ class Datasets:
             raise InputError(f"{what} {name!r} leads outside the data folder")
         if stores and is_store(path):
             _check_store(path, name)
+        elif folders and path.is_dir():
+            return path
         elif not path.is_file():
             raise InputError(f"{what} {name!r} is not a file")
         shape = _peek_shape(path)

@@ -37,7 +37,7 @@ from typing import Literal, NoReturn
 
 import msgspec
 
-from lodsprite.errors import SceneFileError
+from lodsprite.errors import InputError, SceneFileError
 
 #: Caps on what a scene file may ask for (documented in docs/scenes.md).
 MAX_FILE_BYTES = 1 << 20
@@ -129,11 +129,19 @@ def builtin_meshes() -> tuple[str, ...]:
     return tuple(sorted({ep.name for ep in entry_points(group=MESH_GROUP)}))
 
 
-def read_scene_file(path: str | os.PathLike) -> SceneFile:
+def read_scene_file(path: str | os.PathLike, root: str | os.PathLike | None = None
+                    ) -> SceneFile:
     """Read, validate and resolve the scene file at ``path``; raises
-    :class:`~lodsprite.errors.SceneFileError` (one line naming the field)."""
+    :class:`~lodsprite.errors.SceneFileError` (one line naming the field).  With ``root``
+    (a server's data folder) the file and every file it refers to must resolve, symlinks
+    followed, inside ``root``: relative names only, no URL, no symlink inside a store or
+    a light field, a glTF's external files inside too (:mod:`lodsprite.scene.confine`)."""
     label = os.fspath(path)
     p = Path(path).expanduser()
+    if root is not None:
+        root = Path(root).resolve()
+        if not p.resolve().is_relative_to(root):
+            raise SceneFileError(f"{label}: the scene file lies outside the data folder")
     if not p.is_file():
         raise SceneFileError(f"{label}: no such scene file")
     if p.stat().st_size > MAX_FILE_BYTES:
@@ -152,7 +160,7 @@ def read_scene_file(path: str | os.PathLike) -> SceneFile:
         raise SceneFileError(f"{label}: {_field_message(str(exc))}") from None
     except (RecursionError, MemoryError):
         raise SceneFileError(f"{label}: nested too deeply (or too large) to read") from None
-    _Checker(label, p.resolve().parent).check(scene)
+    _Checker(label, p.resolve().parent, root).check(scene)
     return scene
 
 
@@ -194,20 +202,40 @@ class _Checker:
     """The checks :func:`read_scene_file` makes after the types, section by section; each
     ``fail`` is one line ``LABEL: FIELD: what``."""
 
-    def __init__(self, label: str, folder: Path) -> None:
-        self.label, self.folder = label, folder
+    def __init__(self, label: str, folder: Path, root: Path | None = None) -> None:
+        self.label, self.folder, self.root = label, folder, root
 
     def fail(self, field: str, what: str) -> NoReturn:
         raise SceneFileError(f"{self.label}: {field}: {what}")
 
     def file(self, value: str, field: str, max_bytes: int | None = None,
              folder_ok: bool = False) -> str:
-        p = resolve_path(value, self.folder, field, self.label)
+        if self.root is None:
+            p = resolve_path(value, self.folder, field, self.label)
+        else:
+            p = self.confined(value, field)
         if not (p.is_file() or (folder_ok and p.is_dir())):
             self.fail(field, f"no such file: {p}")
         if max_bytes is not None and p.is_file() and p.stat().st_size > max_bytes:
             self.fail(field, f"{p.name} is over {max_bytes} bytes")
         return str(p)
+
+    def confined(self, value: str, field: str) -> Path:
+        """``value`` inside the root, a folder there free of symlinks, a glTF's external
+        files inside too."""
+        from lodsprite.scene import confine
+
+        assert self.root is not None
+        try:
+            p = confine.confined(value, self.folder, self.root, field)
+            confine.check_tree(p, field)
+            if p.is_file() and p.suffix.lower() in (".gltf", ".glb"):
+                confine.check_gltf(p, self.root, field)
+        except SceneFileError:
+            raise
+        except InputError as exc:
+            raise SceneFileError(f"{self.label}: {exc}") from None
+        return p
 
     def positive(self, value: float | None, field: str, cap: float) -> None:
         if value is not None and not 0 < value <= cap:
@@ -255,7 +283,6 @@ class _Checker:
         """``mode`` a terrain technique of the registry, ``options`` its own, each value
         parsed and checked by its declaration (:class:`~lodsprite.techniques.Option`)."""
         from lodsprite import techniques
-        from lodsprite.errors import InputError
 
         modes = techniques.names(("terrain",))
         if t.mode is not None and t.mode not in modes:

@@ -36,11 +36,12 @@ class SceneKind:
     open: Callable[..., Scene]
 
 
-def _open_scene_file(spec: str, **_: Any) -> Scene:
-    """A scene file's scene (its own ``[terrain]`` values; the command's are ignored)."""
+def _open_scene_file(spec: str, root: str | None = None, **_: Any) -> Scene:
+    """A scene file's scene (its own ``[terrain]`` values; the command's are ignored);
+    ``root``: the folder every file it names must lie in (a server's data folder)."""
     from lodsprite.scene.world import load_scene_file
 
-    return load_scene_file(spec)
+    return load_scene_file(spec, root)
 
 
 SCENE_FILE = SceneKind("scene-file", lambda spec: spec.lower().endswith(".toml"),

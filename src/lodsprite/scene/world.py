@@ -162,17 +162,20 @@ def _lightfields_line(lights: tuple[LightField, ...]) -> str:
     return f"lightfields: {len(lights)}" + (f" ({each})" if lights else "")
 
 
-def load_scene_file(path: str | os.PathLike, **scene_options: Any) -> Scene:
+def load_scene_file(path: str | os.PathLike, root: str | os.PathLike | None = None,
+                    **scene_options: Any) -> Scene:
     """Read the scene file at ``path`` and build its scene: the terrain, the object set
     (a :class:`World`, empty without ``[[objects]]``), the light fields, the ``[view]``
     section; the ``scene`` technique to start with.
 
     ``scene_options`` go to :func:`~lodsprite.scene.load_scene` over the file's
     ``[terrain]`` values (``grid``, ``exaggeration``, ``texture``, ``light``,
-    ``textured``).  Raises :class:`~lodsprite.errors.SceneFileError`.
+    ``textured``).  ``root``: every file the scene names must lie inside it
+    (:func:`~lodsprite.scene.file.read_scene_file`).  Raises
+    :class:`~lodsprite.errors.SceneFileError`.
     """
     label = os.fspath(path)
-    sf = read_scene_file(path)
+    sf = read_scene_file(path, root)
     t = sf.terrain
     options = {"texture": t.texture, "grid": t.grid, "exaggeration": t.exaggeration,
                **scene_options}
