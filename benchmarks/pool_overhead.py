@@ -1,5 +1,5 @@
 """Dispatch overhead per keyframe of the two render pools, apart from the load: one job at
-a time through the local pool (:class:`~lodsprite.distributed.pool.Broker`, a local
+a time through the local pool (:class:`~lodsprite.distributed.pool.LocalPool`, a
 renderer process) and through Ray (:class:`~lodsprite.distributed.pool.ray_pool.RayPool`,
 a renderer actor on a local Ray instance), each driven as the web hub drives it (an
 asyncio loop woken by the pool's descriptor; the Ray pool on that loop).
@@ -26,7 +26,7 @@ import time
 import numpy as np
 
 from lodsprite.camera import look_at
-from lodsprite.distributed.pool import Broker, Job
+from lodsprite.distributed.pool import Job, LocalPool
 from lodsprite.distributed.protocol import LoadArgs, WireViewpoint
 
 
@@ -107,7 +107,7 @@ def main() -> None:
                  else {})
         pools = {"ray" if inline else "ray_object_store": RayPool("auto", 1)}
         if inline:
-            pools = {"local": Broker(), **pools}
+            pools = {"local": LocalPool(), **pools}
             pools["local"].spawn_local(1)
         try:
             got.update(asyncio.run(rounds(pools, load, args.jobs, args.warm, args.rounds)))

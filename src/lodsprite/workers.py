@@ -218,6 +218,11 @@ class ProcessWorker:
         return self._child.pid if self._child is not None else None
 
     @property
+    def child(self) -> Child | None:
+        """The process now (``pid``, ``is_alive()``); None while none runs."""
+        return self._child
+
+    @property
     def pending(self) -> list[Hashable]:
         """The keys of the requests in flight, oldest first."""
         return [k for k, _, _, _ in self._sent]

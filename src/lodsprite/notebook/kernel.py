@@ -2,7 +2,7 @@
 the widget's messages instead of WebSockets.
 
 One :class:`WidgetCore` per widget.  It owns a render pool of local renderer processes
-(:class:`~lodsprite.distributed.pool.Broker`: keyframes are rendered in the kernel's
+(:class:`~lodsprite.distributed.pool.LocalPool`: keyframes are rendered in the kernel's
 process tree, never in the kernel's own thread, so the kernel stays responsive) and a
 :class:`~lodsprite.distributed.web.hub.Hub` on the kernel's event loop.  Each view of the
 widget (each output showing it) is one :class:`~lodsprite.distributed.web.sessions.Session`,
@@ -69,7 +69,7 @@ class WidgetCore:
 
     def __init__(self, named: LoadArgs, data_dir: Any, send: Callable[[dict, list], None],
                  codec: str = "zlib", renderers: int = 1, caps: Caps | None = None) -> None:
-        from lodsprite.distributed.pool import Broker
+        from lodsprite.distributed.pool import LocalPool
 
         try:
             self.loop = asyncio.get_running_loop()
@@ -77,7 +77,7 @@ class WidgetCore:
             raise LodspriteError("a lodsprite widget runs in a Jupyter kernel (or inside a "
                                  "running asyncio event loop)") from None
         self.send = send
-        self.pool = Broker(codec, data_dir)
+        self.pool = LocalPool(codec, data_dir)
         try:
             self.pool.spawn_local(renderers)
             self.hub = WidgetHub(self.pool, Datasets(data_dir), named,

@@ -1,12 +1,12 @@
-"""The render pools of ``serve --web``: the local pool (issue 24), a broker (:mod:`.broker`)
-handing keyframe jobs (:mod:`.jobs`) to local render worker processes
-(:mod:`.render_worker`) with the ZeroMQ guide's Paranoid Pirate heartbeats; and, with
-``--ray``, Ray actors on a cluster's machines (:mod:`.ray_pool`, imported only then)."""
+"""The render pools of ``serve --web`` and the notebook widgets: the local pool
+(:mod:`.local_pool`, one renderer a process of this machine) and, with ``--ray``, Ray
+actors on a cluster's machines (:mod:`.ray_pool`, imported only then); both keep their
+jobs in :mod:`.dispatch`'s table and render with :mod:`.render_process`."""
 
-from lodsprite.distributed.pool.broker import MAX_TRIES, Broker, WorkerInfo
-from lodsprite.distributed.pool.jobs import HEARTBEAT_S, LIVENESS_S, Job, Result
+from lodsprite.distributed.pool.dispatch import JOB_TIMEOUT_S, MAX_TRIES
+from lodsprite.distributed.pool.jobs import Job, Result, WorkerInfo
+from lodsprite.distributed.pool.local_pool import LocalPool
 from lodsprite.distributed.pool.render_process import resolve_load
-from lodsprite.distributed.pool.render_worker import Worker
 
-__all__ = ["HEARTBEAT_S", "LIVENESS_S", "MAX_TRIES", "Broker", "Job", "Result", "Worker",
-           "WorkerInfo", "resolve_load"]
+__all__ = ["JOB_TIMEOUT_S", "MAX_TRIES", "Job", "LocalPool", "Result", "WorkerInfo",
+           "resolve_load"]

@@ -1,9 +1,9 @@
-"""The render pool's bookkeeping and dispatch policy, without sockets: the workers
-connected, the jobs queued, who declined what, the results ready, and which idle worker
-gets which job.  The broker (:mod:`.broker`) owns the sockets and the thread and tells
-:class:`JobTable` what it received; everything here runs on the broker's thread.
+"""The render pool's bookkeeping and dispatch policy, without processes: the workers
+ready, the jobs queued, who declined what, the results ready, and which idle worker gets
+which job.  A pool (:mod:`.local_pool`, :mod:`.ray_pool`) owns the renderers and a thread
+and tells :class:`JobTable` what it received; everything here runs on that thread.
 
-* a worker lost (silent, timed out, unreachable, or gone) puts its job back at the front
+* a worker lost (died, timed out, or sent a bad keyframe) puts its job back at the front
   of the queue; a job whose workers died :data:`MAX_TRIES` times fails (``lost``);
 * a job declined by :data:`MAX_TRIES` workers, or by every worker connected, fails with
   :attr:`~.jobs.Result.code` ``refused`` (all refusals) or ``failed``;
@@ -19,7 +19,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from lodsprite.distributed.pool.jobs import (
-    LIVENESS_S,
     Job,
     Ready,
     Result,
@@ -31,6 +30,8 @@ from lodsprite.distributed.protocol import ProtocolError, decode_keyframe
 
 log = logging.getLogger("lodsprite.pool")
 
+JOB_TIMEOUT_S = 120.0
+"""A job's longest time on a renderer before the renderer counts as hung."""
 JOB_TIMES = 1000
 """Jobs whose dispatch-to-answer time :meth:`JobTable.stats` keeps."""
 MAX_TRIES = 3
@@ -39,12 +40,12 @@ MAX_PEERS = 4096
 """Workers the table holds at most (a ``ready`` beyond them is ignored)."""
 
 Key = tuple[int, bytes]
-"""A worker: the index of the socket it came on and its ROUTER identity."""
+"""A worker: a number of the pool's and its identity (the local pool's holds its pid)."""
 
 
 @dataclass(eq=False)  # queued entries are told apart by identity
 class QueuedJob:
-    """A job in the broker's hands: ``tries`` workers lost under it, the workers that
+    """A job in the pool's hands: ``tries`` workers lost under it, the workers that
     declined it (their key: their reason) and whether each of those refused it."""
 
     job: Job
@@ -55,9 +56,8 @@ class QueuedJob:
 
 @dataclass
 class Peer:
-    """A connected worker: what it said in ``ready``, when it was last heard (monotonic
-    s), the job it holds since when, when it
-    went idle, and the scenes it loaded last."""
+    """A worker ready: what it said in ``ready``, when it joined (monotonic s), the job
+    it holds since when, when it went idle, and the scenes it loaded last."""
 
     sock: int
     ident: bytes
@@ -86,7 +86,6 @@ class JobTable:
         self.peers: dict[Key, Peer] = {}
         self.queue: deque[QueuedJob] = deque()
         self.done: deque[Result] = deque()
-        self.unreachable: set[Key] = set()  # a send failed: lose after the next receive
         self.counts = dict.fromkeys(("jobs", "results", "failed", "requeued", "declined",
                                      "dead", "rejected", "ignored"), 0)
         self.busy_s = 0.0  # seconds workers spent on jobs they answered
@@ -101,10 +100,6 @@ class JobTable:
         """A worker said ``ready`` (a second ``ready`` from it changes nothing)."""
         if key not in self.peers and len(self.peers) < MAX_PEERS:
             self.peers[key] = Peer(key[0], key[1], info, now, idle_since=now)
-
-    def heard(self, peer: Peer, now: float) -> None:
-        """``peer`` spoke at ``now``."""
-        peer.seen = now
 
     def answered(self, peer: Peer, now: float, render_ms: float = 0.0) -> None:
         """``peer`` answered its job (a keyframe or a decline): its time, dispatch to
@@ -160,19 +155,17 @@ class JobTable:
         self.done.append(result)
         self.notify()
 
-    def expired(self, now: float) -> tuple[list[Key], list[Key]]:
-        """The workers silent too long, and those holding a job past the job timeout."""
-        silent = [k for k, p in self.peers.items() if now - p.seen > LIVENESS_S]
-        late = [k for k, p in self.peers.items()
+    def expired(self, now: float) -> list[Key]:
+        """The workers holding a job past the job timeout."""
+        return [k for k, p in self.peers.items()
                 if p.job is not None and now - p.since > self.job_timeout_s]
-        return silent, late
 
     def lose(self, key: Key, why: str) -> None:
         """Forget a worker; its job goes back to the front of the queue."""
         peer = self.peers.pop(key, None)
         if peer is None:
             return
-        self.counts["dead"] += why != "disconnected"
+        self.counts["dead"] += 1
         log.info("render pool: worker %s (pid %d) %s", key[1].hex(), peer.info.pid, why)
         entry = peer.entry
         if entry is not None:
@@ -187,13 +180,6 @@ class JobTable:
         for waiting in [q for q in self.queue if q.declined]:  # their last hope gone?
             if self.fail_if_stuck(waiting):
                 self.queue.remove(waiting)
-
-    def lose_unreachable(self) -> None:
-        """Lose the workers a send failed to (their job back in front of the queue),
-        unless what was just received already let them go."""
-        gone, self.unreachable = self.unreachable, set()
-        for key in gone:
-            self.lose(key, "unreachable")
 
     def fail_if_stuck(self, entry: QueuedJob) -> bool:
         """Fail ``entry`` (and say True) if :data:`MAX_TRIES` workers declined it or
@@ -214,8 +200,7 @@ class JobTable:
         taken off the queue and held by its worker from ``now``."""
         out = []
         for entry in list(self.queue):
-            idle = [p for p in self.peers.values()
-                    if p.entry is None and p.key not in self.unreachable]
+            idle = [p for p in self.peers.values() if p.entry is None]
             if not idle:
                 break
             idle = [p for p in idle if p.key not in entry.declined]
@@ -229,15 +214,6 @@ class JobTable:
             out.append((peer.key, entry))
         return out
 
-    def next_due(self, beat: float) -> float:
-        """The monotonic time the loop must wake by: the next heartbeat ``beat`` or the
-        next worker's expiry (now, while a worker is unreachable: what it said last is
-        read before it is lost)."""
-        if self.unreachable:
-            return 0.0
-        due = min((p.seen + LIVENESS_S for p in self.peers.values()), default=beat)
-        return min(beat, due + 1e-3)
-
     def snapshot(self) -> list[WorkerInfo]:
         return [WorkerInfo(p.ident.hex(), p.info.pid, p.info.name, p.job and p.job.job)
                 for p in self.peers.values()]
@@ -245,7 +221,7 @@ class JobTable:
     def stats(self) -> dict[str, float]:
         """The counts, ``busy_s``, ``job_ms_p50``/``job_ms_p90`` and the dispatch
         overhead ``overhead_ms_p50``/``overhead_ms_p90`` (None before one):
-        :meth:`lodsprite.distributed.pool.broker.Broker.stats`."""
+        :meth:`lodsprite.distributed.pool.results.PoolResults.stats`."""
         return {**self.counts, "busy_s": self.busy_s,
                 "job_ms_p50": _pct(self.job_s, 0.5), "job_ms_p90": _pct(self.job_s, 0.9),
                 "overhead_ms_p50": _pct(self.overhead_s, 0.5),

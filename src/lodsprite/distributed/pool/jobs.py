@@ -1,28 +1,23 @@
-"""The render pool's messages: what the broker and its workers say to each other.
+"""The render pool's messages: what a pool and its renderers say to each other.
 
-The pool follows the ZeroMQ guide's Paranoid Pirate pattern (Hintjens, *ZeroMQ*, ch. 4,
-"Robust Reliable Queuing"): a ROUTER broker, DEALER workers, a worker announces itself
-with ``ready``, both sides send a ``heartbeat`` every :data:`HEARTBEAT_S` and count the
-other dead after :data:`LIVENESS_S` of silence.  Every header is a :class:`msgspec.Struct`
-tagged by ``kind`` (msgpack), validated here by :func:`decode_pool` and nothing else:
+Every header is a :class:`msgspec.Struct` tagged by ``kind`` (msgpack), validated here by
+:func:`decode_pool` and nothing else:
 
 ==========  ======================  ==============================================  =======
 kind        direction               fields                                          buffers
 ==========  ======================  ==============================================  =======
-ready       worker -> broker        ``pid``, ``name``, ``cache`` (scenes it keeps)  0
-heartbeat   both                    none                                            0
-job         broker -> worker        ``job`` (:class:`Job`), ``codec``               0
-result      worker -> broker        ``job`` id, ``ok``, ``error``, ``refused``,     0 or 3
+ready       renderer -> pool        ``pid``, ``name``, ``cache`` (scenes it keeps)  0
+job         pool -> renderer        ``job`` (:class:`Job`), ``codec``               0
+result      renderer -> pool        ``job`` id, ``ok``, ``error``, ``refused``,     0 or 3
                                     ``render_ms``; on success the keyframe
                                     message's frames
                                     (:func:`~lodsprite.distributed.protocol.
                                     encode_keyframe`)
-disconnect  both                    ``reason``                                      0
 ==========  ======================  ==============================================  =======
 
 The public :class:`Job` and :class:`Result` are what the pools take and give (the web
-server's interface, issue 24's contract): :class:`~.broker.Broker` and
-:class:`~.ray_pool.RayPool`, whose actors answer with the same ``result`` frames.
+server's interface): :class:`~.local_pool.LocalPool` and :class:`~.ray_pool.RayPool`,
+whose renderers answer with the same ``result`` frames.
 """
 
 from __future__ import annotations
@@ -44,22 +39,19 @@ from lodsprite.distributed.messages import (
 )
 from lodsprite.errors import InputError
 
-__all__ = ["HEARTBEAT_S", "LIVENESS_S", "MAX_JOB_BYTES", "MAX_RESULT_FRAME_BYTES",
-           "POOL_VERSION", "Disconnect", "Heartbeat", "Job", "JobMessage", "PoolMessage",
+__all__ = ["MAX_JOB_BYTES", "MAX_RESULT_FRAME_BYTES",
+           "POOL_VERSION", "Job", "JobMessage", "PoolMessage",
            "Ready", "Result", "ResultMessage", "WorkerInfo", "check_job", "decode_pool",
            "encode_pool", "job_key"]
 
-POOL_VERSION = 4
+POOL_VERSION = 5
 """2: ``result`` says whether the worker ``refused`` the job; 3: and how long the worker
-took (``render_ms``); 4: local workers only, ``heartbeat`` announces no result size."""
-HEARTBEAT_S = 0.25
-"""Seconds between heartbeats, each way."""
-LIVENESS_S = 1.0
-"""Seconds of silence after which a peer is dead (four heartbeats missed)."""
+took (``render_ms``); 5: no heartbeats and no disconnect (renderers are child processes
+or Ray actors, whose deaths their pool sees)."""
 MAX_JOB_BYTES = 64 * 1024
-"""Largest frame a worker accepts (a job header; the broker sends nothing bigger)."""
+"""Largest job header a renderer accepts."""
 MAX_RESULT_FRAME_BYTES = MAX_KEYFRAME_FRAME_BYTES
-"""Largest frame the broker accepts (a keyframe image)."""
+"""Largest frame of a result a pool accepts (a keyframe image)."""
 KEYFRAME_PARTS = 3
 """Frames of an encoded keyframe: header, colour, depth."""
 
@@ -111,10 +103,6 @@ class Ready(PoolMessage, tag="ready"):
     cache: Annotated[int, Meta(ge=1, le=64)] = 1
 
 
-class Heartbeat(PoolMessage, tag="heartbeat"):
-    """Either side is alive."""
-
-
 class JobMessage(PoolMessage, tag="job"):
     job: Job
     codec: Literal[CODECS] = "raw"  # type: ignore[valid-type]
@@ -133,15 +121,7 @@ class ResultMessage(PoolMessage, tag="result"):
     render_ms: Annotated[float, Meta(ge=0.0, le=1e9)] = 0.0
 
 
-class Disconnect(PoolMessage, tag="disconnect"):
-    """``reason``; ``stop``: the broker is closing for good (its local workers exit,
-    remote ones keep trying to reconnect)."""
-
-    reason: Text = ""
-    stop: bool = False
-
-
-ANY_POOL = Ready | Heartbeat | JobMessage | ResultMessage | Disconnect
+ANY_POOL = Ready | JobMessage | ResultMessage
 _decoder = msgspec.msgpack.Decoder(ANY_POOL)
 _encoder = msgspec.msgpack.Encoder()
 

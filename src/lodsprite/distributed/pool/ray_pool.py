@@ -1,6 +1,6 @@
 """The render pool on Ray (``serve --web --ray ADDRESS``): renderers as Ray actors
 (:class:`~.ray_actor.RenderActor`) on the machines of a Ray cluster, behind the interface
-of the local pool (:class:`~.broker.Broker`: :meth:`RayPool.submit`, :meth:`RayPool.poll`,
+of the local pool (:class:`~.local_pool.LocalPool`: :meth:`RayPool.submit`, :meth:`RayPool.poll`,
 :meth:`RayPool.fileno`, :meth:`RayPool.workers`, :meth:`RayPool.stats`,
 :meth:`RayPool.close`), so the web hub keeps its policy (newest request wins, fairness
 among sessions) and the pool keeps the dispatch one (:class:`~.dispatch.JobTable`: scene
@@ -19,7 +19,7 @@ An asyncio loop owns the table and awaits the actors' replies: the web hub's own
 (:meth:`RayPool.start`, called by the hub: a job goes from the hub to Ray and its
 keyframe back with no hop between threads of the server process, each of which waits
 for the GIL under load), else a thread of the pool's own.  :meth:`RayPool.submit` and
-:meth:`RayPool.poll` never block (a pipe wakes the caller's loop, as the Broker's).
+:meth:`RayPool.poll` never block (a pipe wakes the caller's loop, as the local pool's).
 Ray is imported here only when a pool is made: :func:`require_ray` names the ``ray``
 extra in one line where it is not installed.
 """
@@ -36,8 +36,7 @@ from typing import Any
 
 import msgspec
 
-from lodsprite.distributed.pool.broker import JOB_TIMEOUT_S
-from lodsprite.distributed.pool.dispatch import Key
+from lodsprite.distributed.pool.dispatch import JOB_TIMEOUT_S, Key
 from lodsprite.distributed.pool.jobs import (
     POOL_VERSION,
     Job,
@@ -129,7 +128,7 @@ def _check_reachable(address: str) -> None:
 
 
 class RayPool(PoolResults):
-    """``renderers`` Ray actors rendering keyframes, with the Broker's interface.
+    """``renderers`` Ray actors rendering keyframes, with the local pool's interface.
 
     ``address``: see :func:`connect` (ignored when this process already joined Ray).
     ``data_dir``: the folder jobs may name, the same path on every node (None: built-ins
@@ -352,7 +351,7 @@ class RayPool(PoolResults):
     async def _tick(self) -> None:
         while True:
             await asyncio.sleep(TICK_S)
-            _, late = self.table.expired(time.monotonic())
+            late = self.table.expired(time.monotonic())
             for key in late:  # a renderer stuck on a job: restarted by Ray
                 self._lose(key, "timed out", restart=True)
             if late:

@@ -1,18 +1,12 @@
-"""A render worker's GL, in a process of its own (a :class:`~lodsprite.workers.ProcessWorker`).
+"""A renderer: the GL in a process of its own (a :class:`~lodsprite.workers.ProcessWorker`
+the local pool (:mod:`.local_pool`) starts, one a renderer).
 
-Why a process: the worker's liveness is its heartbeats, sent by its I/O thread every
-:data:`~.jobs.HEARTBEAT_S`; the broker counts it dead after :data:`~.jobs.LIVENESS_S`
-of silence.  A thread beside the GL cannot promise that: moderngl holds the GIL through
-each call, and a 4096² scene holds it for long stretches (its colour texture's upload and
-mipmaps: up to 1.3 s measured on a loaded 2-core machine, beside draws of 33 M
-triangles that llvmpipe shades for seconds on the calling thread; drawn through moderngl
-the broker declared the worker dead and re-queued its job).  Releasing the GIL around
-the draws (the project's unlocked draws, which :class:`~..render.KeyframeService` uses)
-covers the draws only; a separate process covers every GL call, the scene's loading,
-and a driver crash too (the job fails, the worker lives on).  libzmq's own ZMTP
-heartbeats would be answered without the GIL as well, but the broker could not tell
-which worker a dropped connection was (a ROUTER reports no per-peer disconnect), and
-the pool's liveness is the guide's Paranoid Pirate, by messages.
+Why a process: moderngl holds the GIL through each call, and a large scene holds it for
+long stretches (a 4096² scene's colour texture upload and mipmaps: up to 1.3 s measured on
+a loaded 2-core machine, beside draws of 33 M triangles); the pool's thread, the web
+server's event loop and the kernel beside it must not wait on that.  A process also
+contains a driver crash: the pool sees its pipe end, puts its job back in the queue and
+starts another.
 
 :func:`handler` is the process's factory: the request's meta is a
 :class:`~.jobs.JobMessage` (msgpack), the answer's meta the lengths of the result's

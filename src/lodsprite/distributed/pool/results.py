@@ -1,4 +1,4 @@
-"""What both render pools (:class:`~.broker.Broker`, local processes;
+"""What both render pools (:class:`~.local_pool.LocalPool`, local processes;
 :class:`~.ray_pool.RayPool`, Ray actors) share: the job table
 (:class:`~.dispatch.JobTable`) and the side of their interface the web hub reads, the
 results and a pipe that is readable while some wait (``loop.add_reader``)."""
@@ -39,7 +39,7 @@ class PoolResults:
         return self._ready_r
 
     def workers(self) -> list[WorkerInfo]:
-        """The workers connected now."""
+        """The workers ready now."""
         return list(self._snapshot)
 
     def stats(self) -> dict[str, float]:
@@ -54,7 +54,7 @@ class PoolResults:
         return self.table.stats()
 
     def wait_workers(self, n: int, timeout: float) -> bool:
-        """Wait until at least ``n`` workers are connected (at most ``timeout`` s)."""
+        """Wait until at least ``n`` workers are ready (at most ``timeout`` s)."""
         deadline = time.monotonic() + timeout
         while len(self._snapshot) < n and time.monotonic() < deadline:
             time.sleep(0.02)

@@ -11,7 +11,7 @@ render pool.
 * Scheduling: round robin over the sessions with waiting requests and fewer than
   ``session_jobs`` in flight, one job per live worker at a time, so that a session asking
   often gets no more renders than one asking when it needs to.  The pool owns the job
-  timeout (the broker's ``job_timeout_s``: it re-queues a job whose worker is silent or too
+  timeout (the pool's ``job_timeout_s``: it re-queues a job whose worker died or is too
   slow, and fails it after ``MAX_TRIES`` workers; a job a worker declines goes to another
   worker, up to ``MAX_TRIES`` of them); the hub forgets a job (counted ``failed``) only
   after all those tries and :data:`JOB_GRACE_S` more, as a backstop against a pool that
@@ -45,7 +45,7 @@ import msgspec
 
 from lodsprite.distributed.datasets import Datasets
 from lodsprite.distributed.pool import Job
-from lodsprite.distributed.pool.broker import JOB_TIMEOUT_S, MAX_TRIES
+from lodsprite.distributed.pool.dispatch import JOB_TIMEOUT_S, MAX_TRIES
 from lodsprite.distributed.protocol import (
     MAX_SCENE_COARSE,
     KeyframeMessage,
@@ -74,7 +74,7 @@ TICK_S = 0.05
 
 
 class Hub:
-    """Sessions and the pool (Broker interface: submit, poll, fileno, workers).  Start
+    """Sessions and the pool (the pool interface: submit, poll, fileno, workers).  Start
     with :meth:`start` inside the running event loop; :meth:`stop` ends its tasks."""
 
     def __init__(self, pool: Any, datasets: Datasets, caps: Caps | None = None,
@@ -93,7 +93,7 @@ class Hub:
         self._tasks: set[asyncio.Task] = set()
         self._ticker: asyncio.Task | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
-        timeout = getattr(pool, "job_timeout_s", JOB_TIMEOUT_S)  # the broker's: one timeout
+        timeout = getattr(pool, "job_timeout_s", JOB_TIMEOUT_S)  # the pool's: one timeout
         self.job_timeout_s = timeout * POOL_TRIES + JOB_GRACE_S
 
     # ------------------------------------------------------------------- lifetime
@@ -142,7 +142,7 @@ class Hub:
 
     def summary(self) -> dict:
         """Server-wide figures: sessions, workers, jobs in flight, the pool's counts
-        (Broker.stats: jobs, results, failed, requeued, dead workers, ...) and each
+        (the pool's stats: jobs, results, failed, requeued, dead workers, ...) and each
         session's keyframes sent and dropped."""
         pool_stats = getattr(self.pool, "stats", None)
         return {"sessions": len(self.sessions), "workers": self.workers_count(),

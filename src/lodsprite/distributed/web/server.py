@@ -104,8 +104,8 @@ class WebConfig:
 
 
 class WebServer:
-    """The aiohttp application, its hub and pool.  ``pool``: an object with the Broker's
-    interface (None: :func:`make_pool`, a :class:`~lodsprite.distributed.pool.Broker`
+    """The aiohttp application, its hub and pool.  ``pool``: an object with the local pool's
+    interface (None: :func:`make_pool`, a :class:`~lodsprite.distributed.pool.LocalPool`
     with ``config.renderers`` local renderer processes or, with ``config.ray``, a
     :class:`~lodsprite.distributed.pool.ray_pool.RayPool`; raises
     :class:`~lodsprite.errors.LodspriteError` when its endpoint cannot be bound or the
@@ -222,15 +222,15 @@ class WebServer:
 def make_pool(config: WebConfig) -> Any:
     """The render pool ``config`` asks for: ``config.renderers`` Ray actors with
     ``config.ray`` (Ray imported only then), else a
-    :class:`~lodsprite.distributed.pool.Broker` with that many local renderer processes."""
+    :class:`~lodsprite.distributed.pool.LocalPool` with that many renderer processes."""
     if config.ray is not None:
         from lodsprite.distributed.pool.ray_pool import RayPool
 
         return RayPool(config.ray, config.renderers, config.data_dir, config.codec,
                        config.gpus_per_renderer)
-    from lodsprite.distributed.pool import Broker
+    from lodsprite.distributed.pool import LocalPool
 
-    pool = Broker(config.codec, config.data_dir)
+    pool = LocalPool(config.codec, config.data_dir)
     pool.spawn_local(config.renderers)
     return pool
 

@@ -1,0 +1,256 @@
+"""The local render pool: the embedded default of ``serve --web`` and of the notebook
+widgets, one renderer a process of this machine (:class:`~lodsprite.workers.ProcessWorker`
+running :mod:`.render_process`), behind the interface :class:`~.ray_pool.RayPool`
+implements for renderers across machines (``--ray``).
+
+No broker and no heartbeats: a renderer is a child process whose answer pipe this
+process reads, so its death is seen at once (the pipe ends), and a renderer that hangs is
+seen by its job's timeout.  One thread waits on every renderer's pipe and a wake-up pipe
+(``multiprocessing.connection.wait``) and keeps the job table (:class:`~.dispatch.JobTable`:
+fairness in submission order, scene affinity, declines, :data:`~.dispatch.MAX_TRIES`):
+
+* a renderer joins the table when its process says ready, under a key holding its pid,
+  so that nothing a killed process said can be taken for its successor's;
+* a renderer that dies puts its job back in front of the queue (a try counted) and is
+  started again after a backoff (0.25 s doubling to 4 s, reset by its first keyframe);
+* a job past ``job_timeout_s`` kills its renderer (the same as a death, at once);
+* an answer that does not decode as its job's keyframe loses the renderer, killed.
+
+Keyframes come back through shared memory (one slot a renderer,
+:data:`SLOT_BYTES`), the pipe carrying their header.  :meth:`LocalPool.submit` and
+:meth:`LocalPool.poll` never block; :meth:`LocalPool.fileno` is readable while results
+wait.  :meth:`LocalPool.close` ends every renderer; they also end when this process does
+(their request pipe closes).
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass
+from multiprocessing.connection import wait
+from pathlib import Path
+
+import msgspec
+
+from lodsprite.distributed.pool.dispatch import JOB_TIMEOUT_S, Key
+from lodsprite.distributed.pool.jobs import (
+    MAX_JOB_BYTES,
+    POOL_VERSION,
+    Job,
+    JobMessage,
+    Ready,
+    ResultMessage,
+    check_job,
+    decode_pool,
+)
+from lodsprite.distributed.pool.results import PoolResults, drain, signal
+from lodsprite.distributed.protocol import CODECS, ProtocolError
+from lodsprite.errors import InputError
+
+log = logging.getLogger("lodsprite.pool")
+
+__all__ = ["BACKOFF_MAX_S", "BACKOFF_S", "SLOT_BYTES", "LocalPool"]
+
+BACKOFF_S = 0.25
+BACKOFF_MAX_S = 4.0
+SLOT_BYTES = 32 << 20
+"""Shared memory a renderer answers in (a keyframe's frames; a larger one takes the pipe)."""
+MAX_CACHE = 64
+
+
+@dataclass(eq=False)
+class _Renderer:
+    """One renderer slot: its process (None while it waits to start again), its key in
+    the job table once ready, and when it may start again."""
+
+    index: int
+    worker: object | None = None
+    child: object | None = None  # its last process, kept after it ends
+    key: Key | None = None
+    start_at: float = 0.0
+    backoff: float = BACKOFF_S
+
+
+class LocalPool(PoolResults):
+    """Renderers in processes of this machine.  ``codec``: keyframe images ``raw`` or
+    ``zlib``; ``data_dir``: the folder whose files jobs may name (the web server's
+    ``--data``); ``job_timeout_s``: a job's longest render before its renderer is killed."""
+
+    def __init__(self, codec: str = "raw", data_dir: Path | str | None = None,
+                 job_timeout_s: float = JOB_TIMEOUT_S) -> None:
+        if codec not in CODECS:
+            raise InputError(f"unknown codec '{codec}': use {', '.join(CODECS)}")
+        super().__init__(job_timeout_s)
+        self.codec = codec
+        self.data_dir = None if data_dir is None else str(Path(data_dir).resolve())
+        self.cache = 2
+        self._renderers: list[_Renderer] = []
+        self._inbox: deque[Job] = deque()
+        self._stop = threading.Event()
+        self._lock = threading.Lock()  # the renderer list: spawn_local beside the thread
+        self._wake_r, self._wake_w = os.pipe()
+        for fd in (self._wake_r, self._wake_w):
+            os.set_blocking(fd, False)
+        self._closed = False
+        self._thread = threading.Thread(target=self._run, daemon=True, name="pool-local")
+        self._thread.start()
+
+    def submit(self, job: Job) -> None:
+        """Queue ``job`` (never blocks; thread-safe)."""
+        self._inbox.append(check_job(job))
+        signal(self._wake_w)
+
+    def spawn_local(self, n: int, cache: int = 2) -> list[int]:
+        """Start ``n`` renderers (each a spawned process with its own GL context, keeping
+        ``cache`` scenes); their pids."""
+        self.cache = max(1, min(int(cache), MAX_CACHE))
+        with self._lock:
+            new = [_Renderer(len(self._renderers) + i) for i in range(int(n))]
+            for r in new:
+                self._start(r)
+            self._renderers += new
+        signal(self._wake_w)
+        return [r.worker.pid for r in new if r.worker is not None and r.worker.pid]
+
+    def local_processes(self) -> list:
+        """Each renderer's last process (``pid``, ``is_alive()``), ended or not."""
+        with self._lock:
+            return [r.child for r in self._renderers if r.child is not None]
+
+    def close(self) -> None:
+        """Stop the thread and end every renderer (a render in progress is cut off).
+        Idempotent."""
+        if self._closed:
+            return
+        self._closed = True
+        self._stop.set()
+        signal(self._wake_w)
+        self._thread.join(timeout=10.0)
+        with self._lock:
+            for r in self._renderers:
+                if r.worker is not None:
+                    r.worker.close()
+                    r.worker = None
+        for fd in (self._wake_r, self._wake_w):
+            os.close(fd)
+        self._close_results()
+
+    def __enter__(self) -> LocalPool:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # ----------------------------------------------------------------- renderers
+
+    def _start(self, r: _Renderer) -> None:
+        from lodsprite.distributed.pool.render_process import FACTORY
+        from lodsprite.workers import ProcessWorker
+
+        r.worker = ProcessWorker(FACTORY, {"data_dir": self.data_dir, "cache": self.cache},
+                                 in_flight=1, restarts=0, name="render",
+                                 slot_bytes=SLOT_BYTES, max_request=MAX_JOB_BYTES)
+        r.key, r.child = None, r.worker.child
+
+    def _end(self, r: _Renderer, why: str, now: float, backoff: bool = True) -> None:
+        """Kill ``r``'s process; its job back in the queue; started again after the
+        backoff (at once with ``backoff=False``: a timeout, not a crash)."""
+        if r.worker is not None:
+            r.worker.close()
+            r.worker = None
+        if r.key is not None:
+            self.table.lose(r.key, why)
+            r.key = None
+        r.start_at = now + (r.backoff if backoff else 0.0)
+        if backoff:
+            r.backoff = min(2 * r.backoff, BACKOFF_MAX_S)
+
+    # -------------------------------------------------------------------- thread
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            try:
+                wait([self._wake_r, *self._pipes()], timeout=self._timeout())
+                drain(self._wake_r)
+                while self._inbox:
+                    self.table.add(self._inbox.popleft())
+                now = time.monotonic()
+                with self._lock:
+                    for r in self._renderers:
+                        self._service(r, now)
+                    self._expire(now)
+                    self._dispatch(now)
+                self._changed()
+            except Exception as exc:  # noqa: BLE001 - a bug must not stop the pool
+                log.error("render pool: internal error %r", exc)
+                self._stop.wait(0.05)
+
+    def _pipes(self) -> list[int]:
+        with self._lock:
+            return [r.worker.fileno() for r in self._renderers
+                    if r.worker is not None and r.worker.alive]
+
+    def _timeout(self) -> float:
+        """Seconds until a renderer is due to start, a job to time out, or 1 s."""
+        now = time.monotonic()
+        due = [now + 1.0]
+        with self._lock:
+            due += [r.start_at for r in self._renderers if r.worker is None]
+        due += [p.since + self.job_timeout_s for p in self.table.peers.values()
+                if p.entry is not None]
+        return max(0.0, min(due) - now) + 1e-3
+
+    def _service(self, r: _Renderer, now: float) -> None:
+        """``r``'s answers settled, its readiness registered, its death handled, or its
+        start when due."""
+        if r.worker is None:
+            if now >= r.start_at:
+                self._start(r)
+            return
+        answers = r.worker.poll()
+        if r.key is None and r.worker.ready and r.worker.alive:
+            pid = r.worker.pid or 0
+            r.key = (0, f"{r.index}:{pid}".encode())
+            self.table.ready(r.key, Ready(POOL_VERSION, pid, f"local-{pid}", self.cache), now)
+        for _, answer in answers:
+            if isinstance(answer, tuple) and r.key is not None:
+                self._answer(r, answer, now)
+        if r.worker is not None and not r.worker.alive:
+            self._end(r, f"died ({r.worker.gone})", now)
+
+    def _answer(self, r: _Renderer, answer: tuple, now: float) -> None:
+        from lodsprite.distributed.pool.render_process import unpack
+
+        try:
+            msg, parts = decode_pool(unpack(*answer))
+            if not isinstance(msg, ResultMessage):
+                raise ProtocolError(f"a {type(msg).__name__} where a result belongs")
+            self.table.settle(r.key, msg, parts, now)
+        except (ProtocolError, msgspec.DecodeError, ValueError) as exc:
+            self.table.counts["rejected"] += 1
+            log.warning("render pool: a bad answer from renderer %d: %s", r.index, exc)
+            self._end(r, "sent a bad keyframe", now)
+            return
+        if msg.ok:
+            r.backoff = BACKOFF_S
+
+    def _expire(self, now: float) -> None:
+        for key in self.table.expired(now):
+            for r in self._renderers:
+                if r.key == key:
+                    self._end(r, "timed out", now, backoff=False)
+
+    def _dispatch(self, now: float) -> None:
+        by_key = {r.key: r for r in self._renderers if r.key is not None}
+        for key, entry in self.table.assign(now):
+            r = by_key[key]
+            msg = JobMessage(POOL_VERSION, entry.job, self.codec)
+            try:
+                r.worker.submit(entry.job.job, msgspec.msgpack.encode(msg))
+            except ValueError as exc:  # larger than a job may be: declined, not fatal
+                self.table.settle(key, ResultMessage(POOL_VERSION, entry.job.job, False,
+                                                     str(exc)), [], now)
