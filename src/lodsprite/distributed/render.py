@@ -1,10 +1,17 @@
-"""GL work of the distributed programs: the server's keyframe service.
+"""GL work of the distributed programs: the servers' keyframe services.
 
-The server renders the full-resolution terrain from the predicted viewpoint and reads
-the colour back, so the keyframe can cross the network as plain arrays.  For the
-default ``coarse`` visibility rule it sends the coarse level's z-buffer from the same
-view (all that rule reads) instead of the full one, so the client only uploads.
-Images are read in OpenGL's bottom-up row order and sent as they are.
+A keyframe is rendered from the predicted viewpoint and its colour read back, so that it
+can cross the network as plain arrays.  For the default ``coarse`` visibility rule it
+carries the coarse level's z-buffer from the same view (all that rule reads) instead of
+the full one, so the client only uploads.  Images are read in OpenGL's bottom-up row
+order and sent as they are.
+
+Two services draw them: :class:`KeyframeService` the working grid whole at full
+resolution (a small in-memory terrain), :class:`AdaptiveKeyframeService` the adaptive
+renderer at ``key_sse`` over a terrain store's level 0, or over an in-memory grid of more
+than :data:`ADAPTIVE_ABOVE` quads a side as a pyramid (what the window's
+``sprite-adaptive`` keyframes are): level-0 detail where it shows, never tens of millions
+of triangles a keyframe.  :func:`keyframe_service` picks one.
 """
 
 from __future__ import annotations
@@ -18,9 +25,14 @@ from lodsprite.gl.terrain_gl import TerrainGL
 from lodsprite.scene.spec import SceneSpec, open_spec
 from lodsprite.terrain.heightfield import DEFAULT_GRID
 
-__all__ = ["MEMORY_FRACTION", "KeyframeService", "check_load_args", "check_scene_memory",
-           "estimate_scene_bytes", "memory_available", "scene_args"]
+__all__ = ["ADAPTIVE_ABOVE", "MEMORY_FRACTION", "AdaptiveKeyframeService", "KeyframeService",
+           "check_load_args", "check_scene_memory",
+           "estimate_scene_bytes", "keyframe_service", "memory_available", "scene_args"]
 
+ADAPTIVE_ABOVE = 1024
+"""Working grids (quads a side) above which an in-memory terrain's keyframes are drawn
+adaptively (a 1024² grid drawn whole is 2.1 M triangles; 4096² is 33.5 M, about 6 s a
+keyframe on llvmpipe)."""
 MEMORY_FRACTION = 0.8
 """Share of the available memory a scene may take (its estimate)."""
 
@@ -152,3 +164,70 @@ class KeyframeService:
         if self.coarse is not None:
             self.coarse.release()
         self.terrain_gl.release()
+
+
+class AdaptiveKeyframeService:
+    """Keyframes of one terrain drawn by the adaptive renderer at ``key_sse`` pixels
+    (:class:`~lodsprite.techniques.adaptive_worker.StoreKeyframes`, the window's worker
+    keyframes over a store): a store's level 0 streamed through its caches (``gpu_mb``,
+    ``host_mb``: held between keyframes), an in-memory grid as a pyramid.  The first
+    keyframe waits for its view's tiles; later ones use what has arrived and say what they
+    lack (:attr:`deficit_px`, pixels of error beyond ``key_sse``).  Same interface as
+    :class:`KeyframeService`; ``ctx`` shared as there."""
+
+    def __init__(self, args: LoadArgs | dict, ctx: GLContext | None = None,
+                 key_sse: float | None = None, gpu_mb: float | None = None,
+                 host_mb: float | None = None) -> None:
+        from lodsprite.scene.model import load_scene
+        from lodsprite.sprite.keyframe_worker import StoreKeys, WorkerSettings
+        from lodsprite.techniques.adaptive_worker import StoreKeyframes
+        from lodsprite.techniques.builtin import GPU_MB, HOST_MB
+        from lodsprite.techniques.defaults import STORE_DEFAULTS
+        from lodsprite.terrain.store import is_store
+
+        args = check_load_args(args)
+        # as the window's shading "auto": a store's terrain texture is its level 0's own
+        # heights shaded; an in-memory grid keeps its texture
+        heights = args.texture == "terrain" and is_store(args.terrain)
+        scene = load_scene(args.terrain, args.texture, args.grid, args.exaggeration,
+                           light=True, textured=not heights)
+        keys = StoreKeys("", args.terrain,
+                         STORE_DEFAULTS["key_sse"] if key_sse is None else key_sse,
+                         GPU_MB.default if gpu_mb is None else gpu_mb,
+                         HOST_MB.default if host_mb is None else host_mb, heights)
+        settings = WorkerSettings(tuple(args.size), args.fov_y_deg, args.lod,
+                                  args.visibility, args.border, 0, store=keys)
+        self.keys = StoreKeyframes(scene.hf, scene.texture, settings, ctx)
+        self.lod, self.deficit_px = args.lod, 0.0
+
+    def projection(self, viewpoint: Viewpoint):
+        return self.keys.terrain.projection(viewpoint)
+
+    def render(self, viewpoint: Viewpoint, seq: int, t0: float) -> Keyframe:
+        """The keyframe of ``viewpoint`` (as :meth:`KeyframeService.render`); what it lacks
+        while tiles stream in :attr:`deficit_px`."""
+        import pickle
+
+        import numpy as np
+
+        meta, data = self.keys.render(viewpoint, False, t0)
+        fields = pickle.loads(meta)  # made by this process's own renderer just now
+        w, h = fields["key_size"]
+        depth = np.frombuffer(data, np.float32, w * h).reshape(h, w)
+        color = np.frombuffer(data, np.uint8, 3 * w * h, 4 * w * h).reshape(h, w, 3)
+        self.deficit_px = float(fields["deficit_px"])
+        return Keyframe(seq, t0, viewpoint, fields["projection"], color, depth,
+                        fields["zbuffer"])
+
+    def release(self) -> None:
+        self.keys.release()
+
+
+def keyframe_service(args: LoadArgs, ctx: GLContext | None = None):
+    """The service that draws ``args``' keyframes (module doc): adaptive over a store or
+    a working grid above :data:`ADAPTIVE_ABOVE`, else the grid whole."""
+    from lodsprite.terrain.store import is_store
+
+    if is_store(args.terrain) or working_grid(args) > ADAPTIVE_ABOVE:
+        return AdaptiveKeyframeService(args, ctx)
+    return KeyframeService(args, ctx)

@@ -73,7 +73,7 @@ class StoreKeyframes:
     it draws."""
 
     def __init__(self, hf: HeightField, texture: np.ndarray | None,
-                 s: WorkerSettings) -> None:
+                 s: WorkerSettings, ctx=None) -> None:
         from lodsprite.gl.context import GLContext
         from lodsprite.gl.sprite import SpriteDrawer
         from lodsprite.gl.terrain import TerrainDrawer, TerrainGeometry
@@ -84,8 +84,8 @@ class StoreKeyframes:
         from lodsprite.terrain.storefield import store_field
 
         keys = s.store
-        self.ctx = GLContext()
-        made: list = [self.ctx]
+        self.ctx = GLContext() if ctx is None else ctx  # given: shared, not released here
+        made: list = [self.ctx] if ctx is None else []
         self.heights = None
         try:
             geometry = TerrainGeometry(self.ctx, hf, texture)
@@ -121,6 +121,7 @@ class StoreKeyframes:
             for obj in reversed(made):
                 obj.release()
             raise
+        self._made = made
         if self.heights is not None:  # C: the surface each keyframe draws
             self.metric = replace(self.metric, surface=DrawnSurface(self.adaptive).heights)
         self.sprite.keyframe_drawer = self.adaptive.render_into
@@ -129,6 +130,17 @@ class StoreKeyframes:
         self.key_size = s.sprite_px  # the metric's keyframe size, display pixels
         self.filled = False
         self._drawn: list[tuple] = []  # the update's tiles: (selection, deficit) each
+
+    def release(self) -> None:
+        """The level-0 reader stopped, the GL objects released, the context too when it
+        is this object's own (a worker process ends with it; a renderer that keeps
+        several scenes on one context releases them one by one).  Idempotent."""
+        if self.heights is not None:
+            self.heights.close()
+            self.heights = None
+        made, self._made = self._made, []
+        for obj in reversed(made):
+            obj.release()
 
     def _ready(self, vp: Viewpoint, key_projection) -> None:
         """Before a keyframe or tile update: the first one's view resident (waited for,

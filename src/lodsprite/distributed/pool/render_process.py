@@ -113,7 +113,7 @@ class SceneCache:
                                              render_ms=took))
 
     def _scene(self, key: bytes, load: LoadArgs):
-        from lodsprite.distributed.render import KeyframeService
+        from lodsprite.distributed.render import keyframe_service
         from lodsprite.gl.context import GLContext
 
         r = self.scenes.pop(key, None)
@@ -126,7 +126,7 @@ class SceneCache:
             # A pool worker renders what it is asked for and never paces: the submitter
             # decides when a keyframe is due, so the pacer's per-keyframe reprojection
             # (the exact metric's C', ~20% of a 256² keyframe's time) is not computed.
-            r = KeyframeService(msgspec.structs.replace(resolved, pace="continuous"), self.gl)
+            r = keyframe_service(msgspec.structs.replace(resolved, pace="continuous"), self.gl)
         self.scenes[key] = r  # most recently used last
         return r
 
