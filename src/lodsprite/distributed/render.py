@@ -26,8 +26,8 @@ from lodsprite.scene.spec import SceneSpec, open_spec
 from lodsprite.terrain.heightfield import DEFAULT_GRID
 
 __all__ = ["ADAPTIVE_ABOVE", "MEMORY_FRACTION", "AdaptiveKeyframeService", "KeyframeService",
-           "check_load_args", "check_scene_memory",
-           "estimate_scene_bytes", "keyframe_service", "memory_available", "scene_args"]
+           "check_load_args", "check_scene_memory", "estimate_scene_bytes", "keyframe_kind",
+           "keyframe_service", "memory_available", "scene_args"]
 
 ADAPTIVE_ABOVE = 1024
 """Working grids (quads a side) above which an in-memory terrain's keyframes are drawn
@@ -223,11 +223,17 @@ class AdaptiveKeyframeService:
         self.keys.release()
 
 
-def keyframe_service(args: LoadArgs, ctx: GLContext | None = None):
-    """The service that draws ``args``' keyframes (module doc): adaptive over a store or
-    a working grid above :data:`ADAPTIVE_ABOVE`, else the grid whole."""
+def keyframe_kind(args: LoadArgs) -> str:
+    """How ``args``' keyframes are drawn (module doc): ``adaptive`` over a store or a
+    working grid above :data:`ADAPTIVE_ABOVE`, else ``whole``."""
     from lodsprite.terrain.store import is_store
 
-    if is_store(args.terrain) or working_grid(args) > ADAPTIVE_ABOVE:
+    return ("adaptive" if is_store(args.terrain) or working_grid(args) > ADAPTIVE_ABOVE
+            else "whole")
+
+
+def keyframe_service(args: LoadArgs, ctx: GLContext | None = None):
+    """The service that draws ``args``' keyframes, as :func:`keyframe_kind` says."""
+    if keyframe_kind(args) == "adaptive":
         return AdaptiveKeyframeService(args, ctx)
     return KeyframeService(args, ctx)

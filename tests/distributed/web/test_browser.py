@@ -256,6 +256,30 @@ def test_a_page_asking_for_an_unknown_terrain_says_why(server, browser):
     assert "failed" in browser.find_element("id", "hud").text
 
 
+def page_error(browser) -> str:
+    """The page's ``ready`` rejection, '' when it loads."""
+    return browser.execute_async_script("""
+        const done = arguments[arguments.length - 1];
+        const wait = () => window.lodsprite ? window.lodsprite.ready.then(
+            () => done(''), (e) => done(String(e))) : setTimeout(wait, 20);
+        wait();""")
+
+
+def test_an_unknown_query_parameter_stops_the_page_and_scene_names_the_scene(server,
+                                                                            browser):
+    browser.get(page_url(server, query=QUERY.replace("lod=8", "lod=8&lodd=4")))
+    error = page_error(browser)
+    assert "unknown query parameter 'lodd'" in error, error
+    assert "failed" in browser.find_element("id", "hud").text
+    browser.get(page_url(server, query="scene=fractal:64:1&terrain=jacksboro&size=32x32"))
+    assert "not both" in page_error(browser)
+    browser.get(page_url(server, query=QUERY.replace("terrain=", "scene=").split("&path=")[0]))
+    assert page_error(browser) == ""
+    session = browser.execute_async_script(
+        "window.lodsprite.serverStats().then(arguments[arguments.length - 1])")["session"]
+    assert session["scene"] == TERRAIN["terrain"], session
+
+
 def test_after_a_live_fuzz_a_page_still_plays(server, browser):
     import aiohttp
 

@@ -144,6 +144,9 @@ def test_load_gives_the_scene_and_a_request_a_keyframe(server):
     assert kf.color.shape == (64, 64, 3) and kf.depth.shape == (64, 64)
     assert kf.color.std() > 1.0 and 0.0 <= kf.depth.min() <= kf.depth.max() <= 1.0
     assert stats["session"]["keyframes_sent"] == 1 and stats["server"]["workers"] == 1
+    # the scene the session loaded, by the name the page gave, and how its keyframes are drawn
+    assert (stats["session"]["scene"], stats["session"]["keyframes"]) == ("fractal:64:1", "whole")
+    assert stats["server"]["per_session"][0]["scene"] == "fractal:64:1"
 
 
 def test_sessions_do_not_see_each_other_s_scene(server):

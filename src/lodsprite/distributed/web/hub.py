@@ -147,7 +147,9 @@ class Hub:
         pool_stats = getattr(self.pool, "stats", None)
         return {"sessions": len(self.sessions), "workers": self.workers_count(),
                 "inflight": len(self.jobs), "pool": pool_stats() if pool_stats else {},
-                "per_session": [{"session": s.id, "keyframes_sent": s.counts["keyframes_sent"],
+                "per_session": [{"session": s.id,
+                                 "scene": s.named.terrain if s.named is not None else None,
+                                 "keyframes_sent": s.counts["keyframes_sent"],
                                  "keyframes_dropped": s.counts["keyframes_dropped"],
                                  "requests": s.counts["requests"]}
                                 for s in self.sessions.values()]}

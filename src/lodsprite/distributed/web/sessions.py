@@ -242,10 +242,16 @@ class Session:
 
     def stats(self) -> dict:
         """Counts (:data:`COUNTS`), keyframe latency (request in -> keyframe sent, ms:
-        median and p99 of the last 1000), requests waiting and in flight."""
+        median and p99 of the last 1000), requests waiting and in flight, the scene loaded
+        (``scene``: its name as the page gave it; ``keyframes``: drawn ``adaptive`` or
+        ``whole``; None before a load)."""
+        from lodsprite.distributed.render import keyframe_kind
+
         lat = np.asarray(self.latencies, dtype=np.float64)
         return {**self.counts, "pending": len(self.pending), "inflight": len(self.inflight),
                 "queued": len(self._keyframes), "loaded": self.load is not None,
+                "scene": self.named.terrain if self.named is not None else None,
+                "keyframes": keyframe_kind(self.load) if self.load is not None else None,
                 "latency_ms_p50": float(np.median(lat)) if lat.size else None,
                 "latency_ms_p99": float(np.percentile(lat, 99)) if lat.size else None}
 

@@ -1,22 +1,35 @@
 // The lodsprite web page: the client of app.js over a WebSocket to `lodsprite serve --web`.
 //
-// Query string: token (required), terrain (a name as a ZeroMQ client gives it; default
-// jacksboro), path (a built-in path: chen1999, swan2002, flyover..., played one viewpoint
-// a frame, then held), frames (the path's viewpoints), size (WxH keyframe and canvas
-// pixels; 512x512), grid (working grid), and the technique options the server declares
-// at /options.json (lod: coarse quads a side, epsilon: pixels, visibility: the load's
-// rule, coarse or fragment/triangle: the full z-buffer), each parsed and checked by its
-// declaration: a bad one stops the page with the option's one-line error.  For tests and
-// tools: window.lodsprite, the client's API (app.js).
+// Query string: token (required), scene (a name the server serves: a terrain, a store,
+// fractal:N...; terrain= is the same, kept for older links; default jacksboro), path (a
+// built-in path: chen1999, swan2002, flyover..., played one viewpoint a frame, then held),
+// frames (the path's viewpoints), size (WxH keyframe and canvas pixels; 512x512), grid
+// (working grid), and the technique options the server declares at /options.json (lod:
+// coarse quads a side, epsilon: pixels, visibility: the load's rule, coarse or
+// fragment/triangle: the full z-buffer), each parsed and checked by its declaration: a bad
+// one stops the page with the option's one-line error, and so does a parameter that is
+// none of these (a misspelt option is not ignored).  For tests and tools:
+// window.lodsprite, the client's API (app.js).
 
 import { startApp } from './app.js';
 
 const q = new URLSearchParams(location.search);
 const int = (name, fallback) => (q.has(name) ? parseInt(q.get(name), 10) : fallback);
 
-// The query's technique options by their declarations (lodsprite.techniques.Option).
+// The page's own query parameters (the options the server declares come beside them).
+const PAGE_KEYS = ['token', 'scene', 'terrain', 'path', 'frames', 'size', 'grid'];
+
+// The query's technique options by their declarations (lodsprite.techniques.Option); a
+// parameter neither the page's nor a declared option's is an error.
 async function pageOptions() {
   const declared = await (await fetch('/options.json')).json();
+  const known = new Set([...PAGE_KEYS, ...declared.map((o) => o.name)]);
+  for (const key of q.keys()) {
+    if (!known.has(key)) throw new Error(`unknown query parameter '${key}': use ${[...known].join(', ')}`);
+  }
+  if (q.has('scene') && q.has('terrain') && q.get('scene') !== q.get('terrain')) {
+    throw new Error("give scene or terrain (the same parameter), not both");
+  }
   const out = {};
   for (const o of declared) {
     if (!q.has(o.name)) { out[o.name] = o.default; continue; }
@@ -53,7 +66,7 @@ const canvas = document.getElementById('view');
 const hud = document.getElementById('hud');
 const [width, height] = (q.get('size') || '512x512').split('x').map((s) => parseInt(s, 10));
 const base = {
-  terrain: q.get('terrain') || 'jacksboro', path: q.get('path'), frames: int('frames', undefined),
+  terrain: q.get('scene') || q.get('terrain') || 'jacksboro', path: q.get('path'), frames: int('frames', undefined),
   grid: int('grid', undefined), size: [width, height],
 };
 
