@@ -40,6 +40,19 @@ def test_keyframe_round_trip_keeps_every_field(codec, zbuffer):
     assert len(buffers) == 2
 
 
+def test_a_keyframe_says_what_it_lacks_and_a_hostile_deficit_is_refused():
+    from dataclasses import replace
+
+    kf = replace(keyframe(), deficit_px=2.75)
+    assert decode_keyframe(encode_keyframe(kf)).deficit_px == 2.75
+    assert decode_keyframe(encode_keyframe(keyframe())).deficit_px == 0.0
+    header, buffers = decode(encode_keyframe(kf))
+    for bad in (-1.0, 1e9, "x"):
+        frames = encode({**header, "deficit_px": bad}, *buffers)
+        with pytest.raises(ProtocolError):
+            decode_keyframe(frames)
+
+
 def test_images_travel_raw_not_pickled_rows_bottom_up():
     kf = keyframe()
     frames = encode_keyframe(kf, "raw")

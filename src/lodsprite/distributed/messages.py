@@ -15,8 +15,9 @@ from lodsprite.scene.file import MAX_GRID as SCENE_MAX_GRID
 from lodsprite.scene.spec import MAX_NAME as SCENE_MAX_NAME
 from lodsprite.scene.spec import SceneSpec
 
-PROTOCOL_VERSION = 4
-"""4: the web wire's ``request`` and ``scene`` kinds (:mod:`lodsprite.distributed.web`)."""
+PROTOCOL_VERSION = 5
+"""4: the web wire's ``request`` and ``scene`` kinds (:mod:`lodsprite.distributed.web`);
+5: a keyframe says what it lacks while its terrain's tiles stream (``deficit_px``)."""
 KINDS = ("control", "reply", "viewpoint", "keyframe", "ack", "request", "scene")
 CONTROL_OPS = ("start", "stop", "load", "stats", "shutdown", "ping", "release", "path")
 LOOPBACK_HOSTS = ("127.0.0.1", "localhost", "::1", "[::1]")
@@ -189,6 +190,7 @@ class KeyframeMessage(Message, tag="keyframe"):
     zbuffer: Literal[ZBUFFERS]  # type: ignore[valid-type]
     color: ImageSpec
     depth: ImageSpec
+    deficit_px: Annotated[float, Meta(ge=0.0, le=1e6)] = 0.0
 
 
 class Ack(Message, tag="ack"):

@@ -254,6 +254,8 @@ class Keyframe:
     row 0 at the top of the image; ``t0`` in seconds on the server's clock.  ``zbuffer``
     says whose depth it is: ``full`` (the full-resolution terrain's) or ``coarse`` (the
     coarse level's, from the same view: all that the default visibility rule reads).
+    ``deficit_px``: what it lacks (pixels of error beyond its renderer's tolerance, from
+    tiles not yet arrived when it was drawn); a client asks again while it is above 0.
 
     Arrays that are ``[::-1]`` views of contiguous bottom-up rows (what
     :meth:`~lodsprite.gl.target.RenderTarget.read_color` gives with ``copy=False`` and what
@@ -267,6 +269,7 @@ class Keyframe:
     color: np.ndarray
     depth: np.ndarray
     zbuffer: str = "full"
+    deficit_px: float = 0.0
 
 
 def _image_spec(a: np.ndarray, codec: str) -> tuple[dict, object]:
@@ -292,7 +295,8 @@ def encode_keyframe(kf: Keyframe, codec: str = "raw") -> list:
               "view": kf.viewpoint.view_matrix().ravel().tolist(),
               "proj": p.matrix().ravel().tolist(),
               "fov": p.fov_y_deg, "aspect": p.aspect, "near": p.near, "far": p.far,
-              "zbuffer": kf.zbuffer, "color": color_spec, "depth": depth_spec}
+              "zbuffer": kf.zbuffer, "color": color_spec, "depth": depth_spec,
+              "deficit_px": float(kf.deficit_px)}
     return encode(header, color, depth)
 
 
@@ -349,7 +353,7 @@ def decode_keyframe(frames: list) -> Keyframe:
     depth = decode_image(msg.depth, buffers[1], "float32", None, "depth")
     if color.shape[:2] != depth.shape:
         raise ProtocolError("colour and depth sizes differ")
-    return Keyframe(msg.seq, msg.t0, vp, proj, color, depth, msg.zbuffer)
+    return Keyframe(msg.seq, msg.t0, vp, proj, color, depth, msg.zbuffer, msg.deficit_px)
 
 
 __all__ = ["ANY_MESSAGE", "Ack", "BUFFERS", "CODECS", "CONTROL_OPS", "ClientId", "Control",

@@ -217,7 +217,7 @@ class AdaptiveKeyframeService:
         color = np.frombuffer(data, np.uint8, 3 * w * h, 4 * w * h).reshape(h, w, 3)
         self.deficit_px = float(fields["deficit_px"])
         return Keyframe(seq, t0, viewpoint, fields["projection"], color, depth,
-                        fields["zbuffer"])
+                        fields["zbuffer"], self.deficit_px)
 
     def release(self) -> None:
         self.keys.release()

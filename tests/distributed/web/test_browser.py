@@ -356,6 +356,30 @@ def test_the_pages_error_estimate_is_the_python_sides(server, browser):
             assert g == pytest.approx(w, rel=1e-9, abs=1e-12)
 
 
+def test_a_page_at_rest_asks_again_while_its_keyframe_lacks_something(server, browser):
+    """The page adds a keyframe's ``deficit_px`` to its error estimate, and at rest asks
+    for the view again while the keyframe it shows lacks something (the renderer's tiles
+    still streaming), once it lacks nothing no more."""
+    browser.get(page_url(server, query=QUERY.split("&path=")[0]))
+    got = browser.execute_async_script("""
+        const done = arguments[arguments.length - 1];
+        import('/static/predictor.js').then((m) => {
+          const pred = new m.Predictor(1.0, 45, 1, 1, 1e5, 64);
+          const vp = {x: [1, 0, 0], y: [0, 0, 1], z: [0, -1, 0], o: [0, -900, 500]};
+          const metric = {errorPx: () => 0.25};
+          pred.sample(0.0, vp);
+          const asked = [];
+          for (const deficit of [0, 3, 3, 0, 0]) {
+            const want = pred.want(metric, vp.o, 1.0, true, null, deficit);
+            asked.push(want !== null);
+            if (want) { pred.sent(1.0, want); pred.arrived(1.0, 1.1); }
+          }
+          done({asked, error: pred.errorPx(metric, vp.o, vp, null, 3)});
+        }, (e) => done(String(e)));""")
+    assert got["asked"] == [False, True, True, False, False], got
+    assert got["error"] == pytest.approx(3.25)
+
+
 # RMSE (grey levels, 0..255, over RGB) between the page's spriteframe (gl.js on
 # SwiftShader) and lodsprite's own (gl.sprite.SpriteDrawer on llvmpipe, the distributed
 # client's drawer: coarse rule, border ribbons) of one server keyframe at a viewpoint 10

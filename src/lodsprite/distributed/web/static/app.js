@@ -108,7 +108,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
 
   let renderer, metric, predictor, controls, path = null, pathIndex = 0, pathName = null;
   let captures = null, captureSet = null;
-  let shownVp = null, keyEye = null, keyViewProj = null, finishedResolve = () => {}, finished = null, lastFrame = null, lastSample = -Infinity;
+  let shownVp = null, keyEye = null, keyViewProj = null, keyDeficit = 0, finishedResolve = () => {}, finished = null, lastFrame = null, lastSample = -Infinity;
   const newFinished = () => { finished = new Promise((r) => { finishedResolve = r; }); };
   newFinished();
 
@@ -158,6 +158,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
     renderer.useKeyframe(key);
     keyEye = header.viewpoint.o;
     keyViewProj = mul(header.proj, header.view);  // the estimate's keyframe frustum
+    keyDeficit = header.deficit_px || 0;  // what it lacks while the renderer's tiles stream
     stats.keyframes += 1;
     keep(stats.latencies, now - 1000 * header.t0);
     predictor.arrived(header.t0, now / 1000);
@@ -184,7 +185,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
     shownVp = vp;
     predictor.sample(now / 1000, vp);
     if (pendingKey) adopt(now);
-    const want = predictor.want(metric, keyEye, now / 1000, resting, keyViewProj);
+    const want = predictor.want(metric, keyEye, now / 1000, resting, keyViewProj, keyDeficit);
     if (want) {
       const t = now / 1000;
       const s = send({ kind: 'request', t, viewpoint: want });
@@ -196,7 +197,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
     }
     renderer.draw(predictor.viewProj(vp));
     if (captureSet && captureSet.has(index)) captures.push({ index, vp, ...renderer.pixels() });
-    stats.error_px = predictor.errorPx(metric, keyEye, vp, keyViewProj);
+    stats.error_px = predictor.errorPx(metric, keyEye, vp, keyViewProj, keyDeficit);
     if (Number.isFinite(stats.error_px)) { stats.errorSum += stats.error_px; stats.errorFrames += 1; }
     stats.frames += 1;
     if (path && pathIndex === path.length && keyEye && norm(sub(keyEye, vp.o)) <= 1e-6 * (1 + norm(vp.o))) {

@@ -225,24 +225,26 @@ export class Predictor {
   lead() { return Math.min(this.latency, MAX_AHEAD_S); }
   viewProj(vp) { return mul(this.proj, viewMatrix(vp)); }
   // `keyViewProj` (optional): the shown keyframe's view-projection, mul(header.proj,
-  // header.view) of its keyframe message (ErrorMetric.errorPx).
-  errorPx(metric, keyEye, vp, keyViewProj = null) {
-    return keyEye ? metric.errorPx(keyEye, vp, this.viewProj(vp), this.beta, keyViewProj) : Infinity;
+  // header.view) of its keyframe message (ErrorMetric.errorPx); `deficit`: what the
+  // keyframe lacks (its header's deficit_px), added to the estimate as the window adds it.
+  errorPx(metric, keyEye, vp, keyViewProj = null, deficit = 0) {
+    return keyEye ? metric.errorPx(keyEye, vp, this.viewProj(vp), this.beta, keyViewProj) + deficit : Infinity;
   }
   // What to request now (a viewpoint) or null; `keyEye`: the shown keyframe's eye
-  // (`keyViewProj`: as errorPx).
-  want(metric, keyEye, t, resting, keyViewProj = null) {
+  // (`keyViewProj`, `deficit`: as errorPx).  At rest a keyframe that lacks something is
+  // asked for again (one request in flight at a time) until it lacks nothing.
+  want(metric, keyEye, t, resting, keyViewProj = null, deficit = 0) {
     if (this.inflight && t - this.inflight.t > LOST_S) this.inflight = null;  // lost
     if (this.inflight) return null;
     const now = this.samples[this.samples.length - 1][1];
     if (resting) {
-      if (this.settled || (keyEye && norm(sub(keyEye, now.o)) === 0)) return null;
+      if (deficit <= 0 && (this.settled || (keyEye && norm(sub(keyEye, now.o)) === 0))) return null;
       this.settled = true;
       return now;
     }
     this.settled = false;
     const ahead = this.predict(t + this.lead());
-    return this.errorPx(metric, keyEye, ahead, keyViewProj) >= 0.5 * this.epsilon ? ahead : null;
+    return this.errorPx(metric, keyEye, ahead, keyViewProj, deficit) >= 0.5 * this.epsilon ? ahead : null;
   }
   sent(t, vp) { this.inflight = { t, vp }; }
   arrived(t0, now) {

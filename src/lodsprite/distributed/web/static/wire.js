@@ -3,7 +3,7 @@
 // rest raw buffers.  A small msgpack encoder and decoder: only what the headers use
 // (maps, arrays, strings, numbers, booleans, nil; the decoder also reads bin).
 
-export const PROTOCOL_VERSION = 4;
+export const PROTOCOL_VERSION = 5;
 const MAX_PARTS = 4;
 
 // ---------------------------------------------------------------- msgpack encoder
