@@ -232,8 +232,14 @@ def keyframe_kind(args: LoadArgs) -> str:
             else "whole")
 
 
-def keyframe_service(args: LoadArgs, ctx: GLContext | None = None):
-    """The service that draws ``args``' keyframes, as :func:`keyframe_kind` says."""
-    if keyframe_kind(args) == "adaptive":
+KEYFRAME_WAYS = ("auto", "adaptive", "whole")
+
+
+def keyframe_service(args: LoadArgs, ctx: GLContext | None = None, way: str = "auto"):
+    """The service that draws ``args``' keyframes: as :func:`keyframe_kind` says
+    (``way="auto"``), or ``adaptive`` / ``whole`` whatever the terrain (to compare them)."""
+    if way not in KEYFRAME_WAYS:
+        raise ValueError(f"keyframes are drawn {', '.join(KEYFRAME_WAYS)}, not {way!r}")
+    if (keyframe_kind(args) if way == "auto" else way) == "adaptive":
         return AdaptiveKeyframeService(args, ctx)
     return KeyframeService(args, ctx)

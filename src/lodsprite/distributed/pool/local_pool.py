@@ -78,13 +78,22 @@ class _Renderer:
 class LocalPool(PoolResults):
     """Renderers in processes of this machine.  ``codec``: keyframe images ``raw`` or
     ``zlib``; ``data_dir``: the folder whose files jobs may name (the web server's
-    ``--data``); ``job_timeout_s``: a job's longest render before its renderer is killed."""
+    ``--data``); ``job_timeout_s``: a job's longest render before its renderer is killed;
+    ``keyframes``: how they are drawn, ``auto`` (adaptive over a store or a large grid,
+    else whole), ``adaptive`` or ``whole`` (:func:`~lodsprite.distributed.render.
+    keyframe_service`; the benchmarks compare the two)."""
 
     def __init__(self, codec: str = "raw", data_dir: Path | str | None = None,
-                 job_timeout_s: float = JOB_TIMEOUT_S) -> None:
+                 job_timeout_s: float = JOB_TIMEOUT_S, keyframes: str = "auto") -> None:
+        from lodsprite.distributed.render import KEYFRAME_WAYS
+
         if codec not in CODECS:
             raise InputError(f"unknown codec '{codec}': use {', '.join(CODECS)}")
+        if keyframes not in KEYFRAME_WAYS:
+            raise InputError(f"keyframes are drawn {', '.join(KEYFRAME_WAYS)}, not "
+                             f"{keyframes!r}")
         super().__init__(job_timeout_s)
+        self.keyframes = keyframes
         self.codec = codec
         self.data_dir = None if data_dir is None else str(Path(data_dir).resolve())
         self.cache = 2
@@ -151,7 +160,8 @@ class LocalPool(PoolResults):
         from lodsprite.distributed.pool.render_process import FACTORY
         from lodsprite.workers import ProcessWorker
 
-        r.worker = ProcessWorker(FACTORY, {"data_dir": self.data_dir, "cache": self.cache},
+        r.worker = ProcessWorker(FACTORY, {"data_dir": self.data_dir, "cache": self.cache,
+                                           "keyframes": self.keyframes},
                                  in_flight=1, restarts=0, name="render",
                                  slot_bytes=SLOT_BYTES, max_request=MAX_JOB_BYTES)
         r.key, r.child = None, r.worker.child

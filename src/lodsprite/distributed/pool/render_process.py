@@ -80,8 +80,9 @@ def unpack(meta: bytes, data: bytes | memoryview) -> list[bytes]:
 class SceneCache:
     """The process's scenes (:class:`~..render.KeyframeService`) and GL context."""
 
-    def __init__(self, data_dir: str | None, cache: int) -> None:
+    def __init__(self, data_dir: str | None, cache: int, keyframes: str = "auto") -> None:
         self.datasets = Datasets(data_dir)
+        self.keyframes = keyframes
         self.cache = cache
         self.scenes: OrderedDict[bytes, object] = OrderedDict()
         self.gl = None
@@ -126,14 +127,19 @@ class SceneCache:
             # A pool worker renders what it is asked for and never paces: the submitter
             # decides when a keyframe is due, so the pacer's per-keyframe reprojection
             # (the exact metric's C', ~20% of a 256² keyframe's time) is not computed.
-            r = keyframe_service(msgspec.structs.replace(resolved, pace="continuous"), self.gl)
+            r = keyframe_service(msgspec.structs.replace(resolved, pace="continuous"), self.gl,
+                                 self.keyframes)
         self.scenes[key] = r  # most recently used last
         return r
 
 
-def handler(data_dir: str | None, cache: int) -> Callable[[bytes, bytes], tuple[bytes, bytes]]:
-    """The render process's request handler (:mod:`lodsprite.workers`' factory)."""
-    scenes = SceneCache(str(Path(data_dir)) if data_dir is not None else None, cache)
+def handler(data_dir: str | None, cache: int, keyframes: str = "auto"
+            ) -> Callable[[bytes, bytes], tuple[bytes, bytes]]:
+    """The render process's request handler (:mod:`lodsprite.workers`' factory);
+    ``keyframes``: how they are drawn (:func:`~lodsprite.distributed.render.
+    keyframe_service`)."""
+    scenes = SceneCache(str(Path(data_dir)) if data_dir is not None else None, cache,
+                        keyframes)
 
     def answer(meta: bytes, data: bytes) -> tuple[bytes, bytes]:
         return pack(scenes.render(msgspec.msgpack.decode(meta, type=JobMessage)))
