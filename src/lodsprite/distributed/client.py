@@ -90,14 +90,13 @@ from lodsprite.gl.sprite import SpriteDrawer
 from lodsprite.gl.terrain_gl import TerrainGL
 from lodsprite.record import Frame
 from lodsprite.scene import Scene
+from lodsprite.sprite.adoption import AdoptionRule
 from lodsprite.sprite.metric import ErrorMetric
 from lodsprite.sprite.policy import keyframe_due, keyframe_error_px
 from lodsprite.workers import ready
 
 log = logging.getLogger("lodsprite.client")
 
-ADOPT_MODES = ("needed", "newest", "better")
-ADOPT_FRACTION = 0.5
 #: The client's bound on the error of the frames it shows, pixels (None: no bound, the
 #: paper's client).  4 px, chosen from ``lodsprite reproduce swan2002`` and a sweep of
 #: bounds (README): the worst frame shows 4 px instead of the paper client's tens to
@@ -143,8 +142,6 @@ class LodClient:
                  border: bool = True, pace: str = DEFAULT_PACE,
                  max_error: float | None = DEFAULT_MAX_ERROR,
                  ctx: GLContext | None = None) -> None:
-        if adopt not in ADOPT_MODES:
-            raise InputError(f"adopt must be one of {', '.join(ADOPT_MODES)}, got {adopt!r}")
         if pace not in PACES:
             raise InputError(f"pace must be one of {', '.join(PACES)}, got {pace!r}")
         if not epsilon > 0:
@@ -152,6 +149,7 @@ class LodClient:
         self.adopt = adopt
         self.epsilon_px = float(epsilon)
         self.max_error = check_max_error(max_error)
+        self.rule = AdoptionRule(adopt, self.epsilon_px, self.max_error)
         # (server slot, keyframe, C' or None) received and not shown yet
         self._pending: tuple[int, Keyframe, np.ndarray | None] | None = None
         # C' of the shown keyframe (None: nothing shown yet, or a server keyframe whose
@@ -282,7 +280,7 @@ class LodClient:
         if self._arrived is not None:
             self._pending, self._arrived = self._arrived, None
         if self._pending is not None and self._pending[2] is None and (
-                self.adopt != "newest" or self.max_error is not None):
+                self.rule.compares):
             slot, kf, _ = self._pending  # C' for the rules that compare errors
             self._pending = (slot, kf, self.metric.reproject(kf.viewpoint.o))
         if self._pending is not None and self._should_adopt(viewpoint, projection,
@@ -349,25 +347,12 @@ class LodClient:
     def _should_adopt(self, viewpoint, projection, c_prime: np.ndarray | None) -> bool:
         """Whether to show the pending server keyframe (``C' = c_prime``) now.
 
-        With ``max_error``, never one whose error here is ``max_error`` or more (the
-        client's own keyframe would replace it at once).  Then ``newest`` (the paper):
-        take every newer keyframe; ``needed``: keep the current keyframe while its error
-        here stays under ``ADOPT_FRACTION`` ε, sparing the upload; ``better``: take the
-        newer keyframe once its error here is lower than the current one's.  The first
-        server keyframe is always taken (when it is within ``max_error``)."""
-        new = None
-        if self.max_error is not None:
-            new = self._error(c_prime, viewpoint, projection)
-            if keyframe_due(new, self.max_error):
-                return False
-        if self._current is None or self.adopt == "newest" or self._c_prime is None:
-            return True
-        err = self._error(self._c_prime, viewpoint, projection)
-        if self.adopt == "needed":
-            return keyframe_due(err, ADOPT_FRACTION * self.epsilon_px)
-        if new is None:
-            new = self._error(c_prime, viewpoint, projection)
-        return new < err
+        The rule of :class:`~lodsprite.sprite.adoption.AdoptionRule` (``adopt`` and
+        ``max_error``); the first server keyframe is always taken (when it is within
+        ``max_error``)."""
+        shown = (None if self._current is None or self._c_prime is None else
+                 lambda: self._error(self._c_prime, viewpoint, projection))
+        return self.rule.adopt(shown, lambda: self._error(c_prime, viewpoint, projection))
 
     def image(self):
         """The last frame's image, ``(H, W, 3) uint8``, row 0 at the top."""

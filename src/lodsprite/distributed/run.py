@@ -18,7 +18,6 @@ from dataclasses import replace
 from pathlib import Path
 
 from lodsprite.distributed.client import (
-    ADOPT_MODES,
     DEFAULT_MAX_ERROR,
     LodClient,
     check_max_error,
@@ -30,6 +29,7 @@ from lodsprite.errors import InputError, LodspriteError
 from lodsprite.progress import Progress
 from lodsprite.runconfig import RenderConfig, field_of_view, prepare
 from lodsprite.scene.spec import SceneSpec
+from lodsprite.sprite.adoption import ADOPT_MODES
 
 MAX_ERROR_OFF = ("off", "none")
 

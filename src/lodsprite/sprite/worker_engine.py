@@ -38,6 +38,7 @@ from lodsprite.camera import Viewpoint
 from lodsprite.errors import InputError, LodspriteError
 from lodsprite.gl.sprite import SpriteDrawer
 from lodsprite.record import Frame
+from lodsprite.sprite.adoption import AdoptionRule
 from lodsprite.sprite.depth_metric import DepthReprojection
 from lodsprite.sprite.engine import sprite_frame
 from lodsprite.sprite.keyframe_worker import (
@@ -61,6 +62,9 @@ if TYPE_CHECKING:  # the scene is passed in
     from lodsprite.scene import Scene
 
 DEFAULT_REQUEST_FRACTION = 0.5
+#: A worker keyframe replaces the shown one when its error at the viewpoint shown is lower
+#: (a late one, aimed where the viewer was going, can be worse).
+ADOPT_BETTER = AdoptionRule("better")
 
 
 class WorkerLodSpriteEngine:
@@ -151,7 +155,7 @@ class WorkerLodSpriteEngine:
             self.worker.measure_lead(new.requested_at, t0)
             new_error = keyframe_error_px(self.metric, new.c_prime, viewpoint, projection,
                                           self.sprite.target.height)
-            if new_error < error:
+            if ADOPT_BETTER.adopt(lambda: error, lambda: new_error):
                 self._adopt(new, t0)
                 kind, error = FIRST_SPRITE, new_error
             else:
