@@ -26,8 +26,9 @@ from lodsprite.scene.spec import SceneSpec, open_spec
 from lodsprite.terrain.heightfield import DEFAULT_GRID
 
 __all__ = ["ADAPTIVE_ABOVE", "MEMORY_FRACTION", "AdaptiveKeyframeService", "KeyframeService",
-           "check_load_args", "check_scene_memory", "estimate_scene_bytes", "keyframe_kind",
-           "keyframe_service", "memory_available", "scene_args"]
+           "adaptive_scene_bytes", "check_load_args", "check_scene_memory",
+           "estimate_scene_bytes", "keyframe_kind", "keyframe_scene_bytes", "keyframe_service",
+           "memory_available", "scene_args"]
 
 ADAPTIVE_ABOVE = 1024
 """Working grids (quads a side) above which an in-memory terrain's keyframes are drawn
@@ -77,6 +78,30 @@ def estimate_scene_bytes(args: LoadArgs, source: tuple[int, int] | None,
     texels = texture[0] * texture[1] if texture is not None else n * n
     pixels = args.size[0] * args.size[1]
     return 48 * src + 64 * n * n + 16 * texels + 48 * pixels + 64 * 2**20
+
+
+def adaptive_scene_bytes(args: LoadArgs) -> int:
+    """A generous estimate of what an :class:`AdaptiveKeyframeService` of ``args`` holds
+    (bytes): its tile caches (the declared ``gpu_mb`` and ``host_mb``: llvmpipe keeps GL
+    objects in host memory), 64 bytes a sample of the grid it keeps (a store's light grid,
+    an in-memory terrain's whole grid with its pyramid), 48 a pixel, 64 MiB besides."""
+    from lodsprite.scene.model import LIGHT_SIDE
+    from lodsprite.techniques.builtin import GPU_MB, HOST_MB
+    from lodsprite.terrain.store import is_store
+
+    n = max(LIGHT_SIDE, working_grid(args) + 1) if is_store(args.terrain) else (
+        working_grid(args) + 1)
+    caches = (GPU_MB.default + HOST_MB.default) * 2**20
+    return int(caches) + 64 * n * n + 48 * args.size[0] * args.size[1] + 64 * 2**20
+
+
+def keyframe_scene_bytes(args: LoadArgs, source: tuple[int, int] | None,
+                         texture: tuple[int, int] | None) -> int:
+    """What drawing ``args``' keyframes holds (bytes), as :func:`keyframe_kind` draws them:
+    :func:`adaptive_scene_bytes` or :func:`estimate_scene_bytes`."""
+    if keyframe_kind(args) == "adaptive":
+        return adaptive_scene_bytes(args)
+    return estimate_scene_bytes(args, source, texture)
 
 
 def memory_available() -> int | None:

@@ -213,3 +213,33 @@ def test_a_worker_renders_without_pacing_what_it_is_asked_for() -> None:
         for r in scenes.scenes.values():
             r.release()
         scenes.gl.release()
+
+
+def test_a_renderer_holds_its_scenes_within_its_cap_least_recently_used_dropped() -> None:
+    """Scenes are kept by their estimates (render.keyframe_scene_bytes) under the cap: a
+    third scene drops the least recently used, one over the cap alone is refused in one
+    line, and the renderer goes on rendering."""
+    from lodsprite.distributed.pool.jobs import JobMessage, decode_pool, job_key
+    from lodsprite.distributed.pool.render_process import SceneCache
+    from lodsprite.distributed.render import keyframe_scene_bytes
+
+    loads = [LoadArgs(terrain=f"fractal:64:{i}", size=(64, 64), lod=16) for i in (1, 2, 3)]
+    each = keyframe_scene_bytes(loads[0], (65, 65), None)
+    scenes = SceneCache(None, 8, max_mb=2.5 * each / 2**20)  # room for two
+    try:
+        for i, load in enumerate(loads):
+            msg, _ = decode_pool(scenes.render(JobMessage(POOL_VERSION, job(i, load), "raw")))
+            assert msg.ok, msg.error
+        assert list(scenes.scenes) == [job_key(loads[1]), job_key(loads[2])]
+        assert sum(scenes.bytes.values()) <= scenes.max_bytes
+        big = LoadArgs(terrain="fractal:1024:1", size=(64, 64), lod=16)
+        msg, _ = decode_pool(scenes.render(JobMessage(POOL_VERSION, job(9, big), "raw")))
+        assert not msg.ok and msg.refused and "a renderer holds at most" in msg.error
+        assert "\n" not in msg.error
+        msg, _ = decode_pool(scenes.render(JobMessage(POOL_VERSION, job(10), "raw")))
+        assert msg.ok, msg.error
+    finally:
+        for r in scenes.scenes.values():
+            r.release()
+        if scenes.gl is not None:
+            scenes.gl.release()

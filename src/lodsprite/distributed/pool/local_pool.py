@@ -81,10 +81,12 @@ class LocalPool(PoolResults):
     ``--data``); ``job_timeout_s``: a job's longest render before its renderer is killed;
     ``keyframes``: how they are drawn, ``auto`` (adaptive over a store or a large grid,
     else whole), ``adaptive`` or ``whole`` (:func:`~lodsprite.distributed.render.
-    keyframe_service`; the benchmarks compare the two)."""
+    keyframe_service`; the benchmarks compare the two); ``renderer_mb``: what a renderer's
+    scenes may hold together (:data:`~.render_process.RENDERER_MB`)."""
 
     def __init__(self, codec: str = "raw", data_dir: Path | str | None = None,
-                 job_timeout_s: float = JOB_TIMEOUT_S, keyframes: str = "auto") -> None:
+                 job_timeout_s: float = JOB_TIMEOUT_S, keyframes: str = "auto",
+                 renderer_mb: float | None = None) -> None:
         from lodsprite.distributed.render import KEYFRAME_WAYS
 
         if codec not in CODECS:
@@ -94,6 +96,7 @@ class LocalPool(PoolResults):
                              f"{keyframes!r}")
         super().__init__(job_timeout_s)
         self.keyframes = keyframes
+        self.renderer_mb = renderer_mb
         self.codec = codec
         self.data_dir = None if data_dir is None else str(Path(data_dir).resolve())
         self.cache = 2
@@ -160,8 +163,10 @@ class LocalPool(PoolResults):
         from lodsprite.distributed.pool.render_process import FACTORY
         from lodsprite.workers import ProcessWorker
 
-        r.worker = ProcessWorker(FACTORY, {"data_dir": self.data_dir, "cache": self.cache,
-                                           "keyframes": self.keyframes},
+        args = {"data_dir": self.data_dir, "cache": self.cache, "keyframes": self.keyframes}
+        if self.renderer_mb is not None:
+            args["max_mb"] = self.renderer_mb
+        r.worker = ProcessWorker(FACTORY, args,
                                  in_flight=1, restarts=0, name="render",
                                  slot_bytes=SLOT_BYTES, max_request=MAX_JOB_BYTES)
         r.key, r.child = None, r.worker.child

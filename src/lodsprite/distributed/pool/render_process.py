@@ -39,12 +39,19 @@ from lodsprite.distributed.protocol import LoadArgs
 FACTORY = "lodsprite.distributed.pool.render_process:handler"
 
 
-def resolve_load(load: LoadArgs, datasets: Datasets) -> LoadArgs:
+RENDERER_MB = 2048
+"""Memory a renderer's scenes may hold together (their estimates,
+:func:`~lodsprite.distributed.render.keyframe_scene_bytes`): the least recently used are
+dropped to make room, and a scene over it alone is refused."""
+
+
+def resolve_load(load: LoadArgs, datasets: Datasets, sizes: dict | None = None) -> LoadArgs:
     """``load`` with terrain and texture resolved to loader specs by ``datasets``' rule;
     raises :class:`~lodsprite.errors.InputError` for a name it refuses or a scene this
     machine cannot hold.  An absolute path inside the data folder is taken as the name
-    relative to it (and checked again, symlinks included)."""
-    from lodsprite.distributed.render import check_scene_memory
+    relative to it (and checked again, symlinks included).  ``sizes``: a dict given gets
+    ``bytes``, what drawing its keyframes holds (the estimate)."""
+    from lodsprite.distributed.render import check_scene_memory, keyframe_scene_bytes
     from lodsprite.errors import InputError
 
     def local(name: str) -> str:
@@ -59,6 +66,8 @@ def resolve_load(load: LoadArgs, datasets: Datasets) -> LoadArgs:
     reason = check_scene_memory(resolved, terrain.shape, texture.shape, who="this worker")
     if reason is not None:
         raise InputError(reason)
+    if sizes is not None:
+        sizes["bytes"] = keyframe_scene_bytes(resolved, terrain.shape, texture.shape)
     return resolved
 
 
@@ -78,14 +87,24 @@ def unpack(meta: bytes, data: bytes | memoryview) -> list[bytes]:
 
 
 class SceneCache:
-    """The process's scenes (:class:`~..render.KeyframeService`) and GL context."""
+    """The process's scenes (keyframe services, :func:`~..render.keyframe_service`) and GL
+    context: at most ``cache`` scenes and ``max_mb`` MB of them (their estimates), the
+    least recently used dropped first."""
 
-    def __init__(self, data_dir: str | None, cache: int, keyframes: str = "auto") -> None:
+    def __init__(self, data_dir: str | None, cache: int, keyframes: str = "auto",
+                 max_mb: float = RENDERER_MB) -> None:
         self.datasets = Datasets(data_dir)
         self.keyframes = keyframes
         self.cache = cache
+        self.max_bytes = int(max_mb * 2**20)
         self.scenes: OrderedDict[bytes, object] = OrderedDict()
+        self.bytes: dict[bytes, int] = {}  # each scene's estimate
         self.gl = None
+
+    def _drop_oldest(self) -> None:
+        key, r = self.scenes.popitem(last=False)
+        self.bytes.pop(key, None)
+        r.release()
 
     def render(self, msg: JobMessage) -> list:
         """The result frames of one job, with the time it took (``render_ms``); never
@@ -105,6 +124,7 @@ class SceneCache:
                                *frames)
         except Exception as exc:  # noqa: BLE001 - MemoryError, GL errors: reported, not fatal
             dropped = self.scenes.pop(key, None)
+            self.bytes.pop(key, None)
             if dropped is not None:
                 dropped.release()
             error = f"{type(exc).__name__}: {exc}"[:4000]
@@ -115,13 +135,21 @@ class SceneCache:
 
     def _scene(self, key: bytes, load: LoadArgs):
         from lodsprite.distributed.render import keyframe_service
+        from lodsprite.errors import InputError
         from lodsprite.gl.context import GLContext
 
         r = self.scenes.pop(key, None)
         if r is None:
-            resolved = resolve_load(load, self.datasets)
-            while len(self.scenes) >= self.cache:
-                self.scenes.popitem(last=False)[1].release()
+            sizes: dict = {}
+            resolved = resolve_load(load, self.datasets, sizes)
+            need = sizes["bytes"]
+            if need > self.max_bytes:
+                raise InputError(f"the scene needs about {need / 2**20:.0f} MiB, a renderer "
+                                 f"holds at most {self.max_bytes / 2**20:.0f} MiB")
+            while self.scenes and (len(self.scenes) >= self.cache or
+                                   sum(self.bytes.values()) + need > self.max_bytes):
+                self._drop_oldest()
+            self.bytes[key] = need
             if self.gl is None:
                 self.gl = GLContext()
             # A pool worker renders what it is asked for and never paces: the submitter
@@ -133,13 +161,13 @@ class SceneCache:
         return r
 
 
-def handler(data_dir: str | None, cache: int, keyframes: str = "auto"
-            ) -> Callable[[bytes, bytes], tuple[bytes, bytes]]:
+def handler(data_dir: str | None, cache: int, keyframes: str = "auto",
+            max_mb: float = RENDERER_MB) -> Callable[[bytes, bytes], tuple[bytes, bytes]]:
     """The render process's request handler (:mod:`lodsprite.workers`' factory);
     ``keyframes``: how they are drawn (:func:`~lodsprite.distributed.render.
-    keyframe_service`)."""
+    keyframe_service`); ``max_mb``: what its scenes may hold together."""
     scenes = SceneCache(str(Path(data_dir)) if data_dir is not None else None, cache,
-                        keyframes)
+                        keyframes, max_mb)
 
     def answer(meta: bytes, data: bytes) -> tuple[bytes, bytes]:
         return pack(scenes.render(msgspec.msgpack.decode(meta, type=JobMessage)))
