@@ -63,7 +63,7 @@ MAX_CACHE = 64
 
 
 @dataclass(eq=False)
-class _Renderer:
+class _Slot:
     """One renderer slot: its process (None while it waits to start again), its key in
     the job table once ready, and when it may start again."""
 
@@ -100,7 +100,7 @@ class LocalPool(PoolResults):
         self.codec = codec
         self.data_dir = None if data_dir is None else str(Path(data_dir).resolve())
         self.cache = 2
-        self._renderers: list[_Renderer] = []
+        self._renderers: list[_Slot] = []
         self._inbox: deque[Job] = deque()
         self._stop = threading.Event()
         self._lock = threading.Lock()  # the renderer list: spawn_local beside the thread
@@ -121,7 +121,7 @@ class LocalPool(PoolResults):
         ``cache`` scenes); their pids."""
         self.cache = max(1, min(int(cache), MAX_CACHE))
         with self._lock:
-            new = [_Renderer(len(self._renderers) + i) for i in range(int(n))]
+            new = [_Slot(len(self._renderers) + i) for i in range(int(n))]
             for r in new:
                 self._start(r)
             self._renderers += new
@@ -159,7 +159,7 @@ class LocalPool(PoolResults):
 
     # ----------------------------------------------------------------- renderers
 
-    def _start(self, r: _Renderer) -> None:
+    def _start(self, r: _Slot) -> None:
         from lodsprite.distributed.pool.render_process import FACTORY
         from lodsprite.workers import ProcessWorker
 
@@ -171,7 +171,7 @@ class LocalPool(PoolResults):
                                  slot_bytes=SLOT_BYTES, max_request=MAX_JOB_BYTES)
         r.key, r.child = None, r.worker.child
 
-    def _end(self, r: _Renderer, why: str, now: float, backoff: bool = True) -> None:
+    def _end(self, r: _Slot, why: str, now: float, backoff: bool = True) -> None:
         """Kill ``r``'s process; its job back in the queue; started again after the
         backoff (at once with ``backoff=False``: a timeout, not a crash)."""
         if r.worker is not None:
@@ -219,7 +219,7 @@ class LocalPool(PoolResults):
                 if p.entry is not None]
         return max(0.0, min(due) - now) + 1e-3
 
-    def _service(self, r: _Renderer, now: float) -> None:
+    def _service(self, r: _Slot, now: float) -> None:
         """``r``'s answers settled, its readiness registered, its death handled, or its
         start when due."""
         if r.worker is None:
@@ -237,7 +237,7 @@ class LocalPool(PoolResults):
         if r.worker is not None and not r.worker.alive:
             self._end(r, f"died ({r.worker.gone})", now)
 
-    def _answer(self, r: _Renderer, answer: tuple, now: float) -> None:
+    def _answer(self, r: _Slot, answer: tuple, now: float) -> None:
         from lodsprite.distributed.pool.render_process import unpack
 
         try:
