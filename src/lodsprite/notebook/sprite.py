@@ -70,10 +70,15 @@ class SpriteWidget(anywidget.AnyWidget):
                  path: str | None = None, frames: int | None = None,
                  size: tuple[int, int] = (640, 480), lod: int | None = None,
                  epsilon: float | None = None, visibility: str | None = None,
-                 grid: int | None = None, codec: str = "zlib", renderers: int = 1) -> None:
+                 proxy: str | None = None, grid: int | None = None, codec: str = "zlib",
+                 renderers: int = 1) -> None:
         from lodsprite.distributed.web.server import page_options
 
-        defaults = {o["name"]: o["default"] for o in page_options()}
+        declared = {o["name"]: o for o in page_options()}
+        defaults = {name: o["default"] for name, o in declared.items()}
+        proxy = proxy or defaults["proxy"]
+        if proxy not in declared["proxy"]["choices"]:
+            raise InputError(f"proxy: got {proxy!r}, allowed: {declared['proxy']['allowed']}")
         source = resolve_source(terrain, texture, size=size, grid=grid,
                                 lod=lod or defaults["lod"],
                                 epsilon=epsilon or defaults["epsilon"],
@@ -83,7 +88,7 @@ class SpriteWidget(anywidget.AnyWidget):
         a = source.load
         options = {"terrain": a.terrain, "texture": a.texture, "size": list(a.size),
                    "lod": a.lod, "epsilon": a.epsilon, "visibility": a.visibility,
-                   "grid": a.grid, "path": path, "frames": frames}
+                   "proxy": proxy, "grid": a.grid, "path": path, "frames": frames}
         super().__init__(options=options)
         self._core = WidgetCore(a, source.data_dir, self._to_front, codec, renderers)
         if path is not None:

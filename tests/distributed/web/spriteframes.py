@@ -39,6 +39,7 @@ const [doc, done] = arguments;
   const r = new g.SpriteDrawer(canvas);
   r.setScene(sc.header, heights, texture);
   r.fallbackTint = doc.tint;
+  r.proxy = doc.proxy;
   const out = [];
   for (const k of doc.keys) {
     const m = wire.unpack(bytes(k.msg));
@@ -47,7 +48,7 @@ const [doc, done] = arguments;
     const [h, w] = m.header.color.shape;
     const bitmap = await createImageBitmap(dec.rgbaImage(rgb, w, h), dec.BITMAP_OPTIONS);
     r.useKeyframe(r.prepareKeyframe(m.header, bitmap, z));
-    for (const vp of k.frames) { r.draw(vp); out.push(r.pixels().rgba); }
+    k.frames.forEach((vp, i) => { r.draw(vp, k.eyes[i]); out.push(r.pixels().rgba); });
   }
   done(out);
 })().catch((e) => done(String(e.stack || e)));
@@ -56,17 +57,22 @@ const [doc, done] = arguments;
 
 def page_spriteframes(browser, scene_parts: list, keys: list[tuple[Keyframe, list]],
                       size: tuple[int, int], old: bool = False,
-                      tint: tuple = (1.0, 0.0, 1.0, 0.0)) -> list[np.ndarray]:
+                      tint: tuple = (1.0, 0.0, 1.0, 0.0), proxy: str = "coarse",
+                      eyes: list[list] | None = None) -> list[np.ndarray]:
     """The page's spriteframes: for each ``(keyframe, [view_proj (4, 4)])`` of ``keys``
     the frames drawn from it, ``(H, W, 3) uint8`` rows bottom-up (readPixels), in order.
     ``browser`` is at a page of the server (its ``/static/`` modules); ``scene_parts``:
     the scene message (:func:`~lodsprite.distributed.web.scene.build_scene`); ``old``:
-    the page's first drawer (module comment); ``tint``: the drawer's ``fallbackTint``."""
+    the page's first drawer (module comment); ``tint``: the drawer's ``fallbackTint``;
+    ``proxy``: its ``proxy`` (``coarse`` or ``depth``), ``eyes``: per keyframe the eye of
+    each frame (for the depth mesh)."""
     doc = {"scene": base64.b64encode(pack(scene_parts)).decode(), "size": list(size),
-           "old": old, "tint": list(tint),
+           "old": old, "tint": list(tint), "proxy": proxy,
            "keys": [{"msg": base64.b64encode(pack(encode_keyframe(kf))).decode(),
-                     "frames": [np.asarray(m, float).ravel().tolist() for m in frames]}
-                    for kf, frames in keys]}
+                     "frames": [np.asarray(m, float).ravel().tolist() for m in frames],
+                     "eyes": ([None] * len(frames) if eyes is None else
+                              [np.asarray(e, float).tolist() for e in eyes[i]])}
+                    for i, (kf, frames) in enumerate(keys)]}
     got = browser.execute_async_script(DRAW, doc)
     assert isinstance(got, list), got
     w, h = size
@@ -74,14 +80,18 @@ def page_spriteframes(browser, scene_parts: list, keys: list[tuple[Keyframe, lis
 
 
 def offline_spriteframes(service, lod: int, keys: list[tuple[Keyframe, list]],
-                         projection: Projection) -> list[np.ndarray]:
+                         projection: Projection, depth_stride: int | None = None
+                         ) -> list[np.ndarray]:
     """lodsprite's own spriteframes of the same keyframes and viewpoints: the distributed
     client's drawer (:class:`~lodsprite.gl.sprite.SpriteDrawer`, coarse rule, border
-    ribbons, no guard band) in ``service``'s context, each keyframe uploaded as the client
+    ribbons, no guard band; with ``depth_stride``, the fragment rule and the keyframe's
+    own depth as the proxy) in ``service``'s context, each keyframe uploaded as the client
     uploads it; ``keys``: ``(keyframe, [viewpoint])``; rows bottom-up, as the page's."""
     from lodsprite.gl.sprite import SpriteDrawer
 
-    sprite = SpriteDrawer(service.terrain_gl.drawer, lod, "coarse", border=True, guard_px=0)
+    rule = "coarse" if depth_stride is None else "fragment"
+    sprite = SpriteDrawer(service.terrain_gl.drawer, lod, rule, border=True, guard_px=0,
+                          depth_stride=depth_stride)
     out = []
     try:
         for kf, viewpoints in keys:

@@ -422,3 +422,47 @@ def test_the_pages_spriteframes_in_motion_match_lodsprites_own(server, browser):
         assert rmse(o, k) > 3 * SPRITE_RMSE_TOL  # in motion: not the keyframe's view
         assert rmse(p, o) <= SPRITE_RMSE_TOL, rmse(p, o)
         assert rmse(f, o) > SPRITE_RMSE_TOL, rmse(f, o)  # the first drawer fails
+
+
+# The page's depth-mesh spriteframe (gl.js, proxy 'depth', a vertex every 8th texel) against
+# lodsprite's own (gl.depth_mesh over gl.sprite's proxy, the store default's mesh at
+# keyframe scale 1) of the same full-z-buffer keyframes, 10 and 20 flyover frames on:
+# 0.8-1.5 measured, where the page against lodsprite's coarse spriteframe is 7.1-9.2 and
+# lodsprite's two against each other 6.5-9.1.  What differs is the colour filtering
+# (lodsprite filters the keyframe in linear light, the page in sRGB), the rasterisers'
+# coverage, the coarse fallback under the mesh and the mesh's outer ring (on the image's
+# edges in the page, at texel centres in lodsprite).
+DEPTH_RMSE_TOL = 3.0
+
+
+def test_the_pages_depth_mesh_spriteframes_match_lodsprites_own(server, browser):
+    from spriteframes import offline_spriteframes, page_spriteframes
+
+    from lodsprite.camera import Projection
+    from lodsprite.distributed.protocol import LoadArgs
+    from lodsprite.distributed.render import KeyframeService
+    from lodsprite.distributed.web.scene import build_scene_field, decode_scene
+    from lodsprite.paths import get_path
+
+    args = LoadArgs(terrain="jacksboro", grid=256, lod=16, size=(128, 128),
+                    visibility="fragment")
+    parts, hf = build_scene_field(args)
+    h = decode_scene(parts).header
+    proj = Projection(h.fov, 1.0, h.near, h.far)
+    path = get_path("flyover", hf, 460).viewpoints
+    service = KeyframeService(args)
+    try:
+        keys = [(service.render(path[k], k, 0.0), [path[k + 10], path[k + 20]])
+                for k in (120, 300)]
+        assert all(kf.zbuffer == "full" for kf, _ in keys)
+        mesh = offline_spriteframes(service, args.lod, keys, proj, depth_stride=8)
+        coarse = offline_spriteframes(service, args.lod, keys, proj)
+    finally:
+        service.release()
+    drawn = [(kf, [proj.matrix() @ vp.view_matrix() for vp in vps]) for kf, vps in keys]
+    eyes = [[vp.o for vp in vps] for _, vps in keys]
+    browser.get(f"http://127.0.0.1:{server['port']}/static/hud.js")  # the page's origin
+    page = page_spriteframes(browser, parts, drawn, (128, 128), proxy="depth", eyes=eyes)
+    for p, m, c in zip(page, mesh, coarse, strict=True):
+        assert rmse(m, c) > DEPTH_RMSE_TOL  # the mesh draws what the coarse level does not
+        assert rmse(p, m) <= DEPTH_RMSE_TOL, (rmse(p, m), rmse(p, c))

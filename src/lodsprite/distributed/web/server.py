@@ -54,17 +54,27 @@ MAX_SESSIONS = 256
 """WebSockets served at once; one more is answered 503."""
 #: The technique options the page takes from its query string, each parsed and checked by
 #: its declaration (:class:`~lodsprite.techniques.Option`), served as ``/options.json``.
-PAGE_OPTIONS = ("lod", "epsilon", "visibility")
+PAGE_OPTIONS = ("lod", "epsilon", "visibility", "proxy")
+#: What the page draws of the ``proxy`` choices (WebGL2 has no geometry shader for the
+#: refined mesh; the search is not ported), and its default: the keyframe's own depth,
+#: as a store's spriteframes in the library.
+PAGE_PROXIES = ("geometry", "depth")
+PAGE_DEFAULTS = {"proxy": "depth"}
 
 
 def page_options() -> list[dict]:
-    """The declarations of :data:`PAGE_OPTIONS`; a default the terrain decides is the
+    """The declarations of :data:`PAGE_OPTIONS` (``proxy`` narrowed to
+    :data:`PAGE_PROXIES`); a default the terrain decides is :data:`PAGE_DEFAULTS`' or the
     in-memory terrain's (:data:`~lodsprite.techniques.defaults.MEMORY_DEFAULTS`)."""
+    from dataclasses import replace
+
     from lodsprite import techniques
     from lodsprite.techniques.defaults import MEMORY_DEFAULTS
 
     known = techniques.all_options(("terrain",))
-    return [known[n].declaration(MEMORY_DEFAULTS.get(n)) for n in PAGE_OPTIONS]
+    known["proxy"] = replace(known["proxy"], choices=PAGE_PROXIES)
+    return [known[n].declaration(PAGE_DEFAULTS.get(n, MEMORY_DEFAULTS.get(n)))
+            for n in PAGE_OPTIONS]
 
 
 async def _options(request: web.Request) -> web.StreamResponse:

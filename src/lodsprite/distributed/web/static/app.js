@@ -9,7 +9,7 @@
 // startApp({canvas, hud, transport, options, decoderUrl, keyTarget}) -> the client's API:
 //   transport: {opened: Promise, send(Uint8Array), onmessage(handler(ArrayBuffer)),
 //               onclose(handler())}: one web message (wire.js) each way a call;
-//   options: {terrain, size: [w, h], lod, epsilon, visibility, grid, path, frames}, and
+//   options: {terrain, size: [w, h], lod, epsilon, visibility, proxy, grid, path, frames}, and
 //   moreOptions (a Promise of more, merged before the load; a rejection fails `ready`);
 //   decoderUrl: decode.js's URL (a module Web Worker); keyTarget: the element whose key
 //   presses fly the camera (default: the window).
@@ -115,15 +115,20 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
   async function load() {
     if (moreOptions) Object.assign(options, await moreOptions);
     await transport.opened;
+    // the keyframe's own depth as the proxy needs the full z-buffer: the coarse rule's
+    // coarse one becomes the fragment rule's (the coarse spriteframe under the mesh)
+    const depth = (options.proxy ?? 'depth') === 'depth';
     const args = {
       terrain: options.terrain, size: [width, height], lod: options.lod, epsilon: options.epsilon,
-      grid: options.grid, visibility: options.visibility,
+      grid: options.grid,
+      visibility: depth && options.visibility === 'coarse' ? 'fragment' : options.visibility,
     };
     const reply = await call('load', args);
     if (!reply.ok) throw new Error(reply.error);
     const scene = await sceneArrived;
     const h = scene.header;
     renderer = new SpriteDrawer(canvas);
+    renderer.proxy = depth ? 'depth' : 'coarse';
     renderer.setScene(h, scene.heights, scene.texture);
     metric = new ErrorMetric(h, scene.heights);
     predictor = new Predictor(h.epsilon, h.fov, width / height, h.near, h.far, height);
@@ -195,7 +200,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
       const shown = keyEye ? { eye: keyEye, slot: 0 } : undefined;  // as the ZeroMQ client
       send({ kind: 'viewpoint', t: now / 1000, viewpoint: vp, shown });
     }
-    renderer.draw(predictor.viewProj(vp));
+    renderer.draw(predictor.viewProj(vp), vp.o);
     if (captureSet && captureSet.has(index)) captures.push({ index, vp, ...renderer.pixels() });
     stats.error_px = predictor.errorPx(metric, keyEye, vp, keyViewProj, keyDeficit);
     if (Number.isFinite(stats.error_px)) { stats.errorSum += stats.error_px; stats.errorFrames += 1; }

@@ -85,6 +85,144 @@ void main() {
   f_color = vec4(rgb, 1.0);
 }`;
 
+// The keyframe's own depth as the proxy (lodsprite.gl.depth_mesh, Jeschke & Wimmer 2002's
+// textured depth meshes): a mesh over the keyframe image, a vertex every `stride` texels
+// unprojected from the keyframe's full z-buffer, drawn over the coarse spriteframe.
+// WebGL2 has no geometry shader: each triangle's three vertices carry all three of its
+// texels, so that each vertex shader run sees the whole triangle and decides what the
+// geometry shader decides there: a triangle of sky alone is left out; a rubber sheet (a
+// triangle nearly along its keyframe ray: across a depth discontinuity, or from ground
+// to sky) goes behind every other triangle (window depth [0.25, 0.5] against [0, 0.25]),
+// and is left out once its pixel area grew more than STRETCH times, or, from ground to
+// sky, once its ground end moved SKY_SHEET_PX pixels; a sky texel beside ground takes its
+// farthest ground neighbour's depth.  A dropped triangle's three vertices meet at one
+// point outside the view.  Where nothing of the mesh is drawn the coarse spriteframe
+// under it shows.
+export const DEPTH_STRIDE = 8;      // lodsprite.techniques.defaults: every 8th texel
+export const CUT_DEG = 2.0;         // lodsprite.gl.depth_mesh.DEFAULT_CUT_DEG
+export const STRETCH = 4.0;         // DEFAULT_STRETCH
+export const SKY_SHEET_PX = 8.0;    // SKY_SHEET_PX
+
+const MESH_VS = `#version 300 es
+precision highp float;
+precision highp sampler2D;
+layout(location = 0) in vec4 a_t01;  // the triangle's texels 0 and 1 (column, row)
+layout(location = 1) in vec3 a_t2c;  // its texel 2, and which corner this vertex is
+uniform sampler2D u_key_depth;
+uniform vec2 u_key_near_far;
+uniform vec2 u_key_tan;     // tan of the keyframe's half-angles, x and y
+uniform mat3 u_key_axes;    // its eye axes as columns (eye -> world rotation)
+uniform mat4 u_mvp_rel;     // the frame's view-projection x translate(keyframe eye)
+uniform mat4 u_key_proj;
+uniform int u_stride;
+uniform float u_cut;        // sin of the rubber-sheet angle
+uniform vec2 u_key_px;      // keyframe size, pixels
+uniform vec2 u_frame_px;    // frame size, pixels
+uniform float u_stretch;
+uniform float u_moved;      // the eye's move from the keyframe's over its pixel angle (m)
+out vec4 v_key;
+flat out int v_rubber;
+struct Corner { vec3 rel; vec4 key; vec4 clip; float sky; };
+Corner corner(vec2 t) {
+  ivec2 size = textureSize(u_key_depth, 0);
+  ivec2 p = clamp(ivec2(t), ivec2(0), size - 1);
+  float z = texelFetch(u_key_depth, p, 0).r;
+  if (z >= 1.0) {  // sky beside ground: at the farthest ground neighbour's depth
+    float g = 0.0;
+    for (int j = -1; j <= 1; ++j) for (int i = -1; i <= 1; ++i) {
+      float zn = texelFetch(u_key_depth, clamp(p + ivec2(i, j) * u_stride, ivec2(0), size - 1), 0).r;
+      if (zn < 1.0) g = max(g, zn);
+    }
+    if (g > 0.0) z = g;
+  }
+  // texel centres; the outer ring on the image's edges, so that the mesh covers the
+  // frame's outer half-texel too (the coarse spriteframe under it showed there)
+  vec2 at = (vec2(p) + 0.5) / vec2(size);
+  if (p.x == 0) at.x = 0.0;
+  if (p.y == 0) at.y = 0.0;
+  if (p.x == size.x - 1) at.x = 1.0;
+  if (p.y == size.y - 1) at.y = 1.0;
+  vec2 ndc = at * 2.0 - 1.0;
+  vec3 ray = vec3(ndc * u_key_tan, -1.0);
+  float n = u_key_near_far.x, f = u_key_near_far.y;
+  vec4 eye;
+  Corner c;
+  if (z >= 1.0) { eye = vec4(normalize(ray), 0.0); c.sky = 1.0; }
+  else { eye = vec4(ray * (2.0 * n * f / (f + n - (2.0 * z - 1.0) * (f - n))), 1.0); c.sky = 0.0; }
+  c.rel = u_key_axes * eye.xyz;
+  c.key = u_key_proj * eye;
+  c.clip = u_mvp_rel * vec4(c.rel, eye.w);
+  if (z >= 1.0 || c.clip.z > c.clip.w) c.clip.z = c.clip.w * 0.999999;  // on the far plane
+  return c;
+}
+float area2(vec4 a, vec4 b, vec4 c, vec2 size) {  // twice the pixel area (1e30: behind)
+  if (a.w <= 0.0 || b.w <= 0.0 || c.w <= 0.0) return 1e30;
+  vec2 p = a.xy / a.w * size, q = b.xy / b.w * size, r = c.xy / c.w * size;
+  return abs((q.x - p.x) * (r.y - p.y) - (q.y - p.y) * (r.x - p.x));
+}
+void main() {
+  Corner c0 = corner(a_t01.xy), c1 = corner(a_t01.zw), c2 = corner(a_t2c.xy);
+  float sky = c0.sky + c1.sky + c2.sky;
+  bool rubber = false, drop = sky > 2.5;
+  if (!drop && sky > 0.5) {
+    rubber = true;
+    float d = 1e30;
+    if (c0.sky < 0.5) d = min(d, length(c0.rel));
+    if (c1.sky < 0.5) d = min(d, length(c1.rel));
+    if (c2.sky < 0.5) d = min(d, length(c2.rel));
+    drop = !(u_moved / d < ${SKY_SHEET_PX.toFixed(1)});
+  } else if (!drop) {
+    vec3 nrm = cross(c1.rel - c0.rel, c2.rel - c0.rel), ray = (c0.rel + c1.rel + c2.rel) / 3.0;
+    rubber = abs(dot(nrm, ray)) < u_cut * length(nrm) * length(ray);
+  }
+  if (!drop && rubber) {
+    float key = area2(c0.key, c1.key, c2.key, 0.5 * u_key_px);
+    float now = area2(c0.clip, c1.clip, c2.clip, 0.5 * u_frame_px);
+    drop = !(now <= u_stretch * max(key, 0.5));
+  }
+  int k = int(a_t2c.z + 0.5);
+  v_key = k == 0 ? c0.key : (k == 1 ? c1.key : c2.key);
+  v_rubber = rubber ? 1 : 0;
+  if (drop) { gl_Position = vec4(2.0, 2.0, 0.0, 1.0); return; }  // one point: nothing drawn
+  vec4 q = k == 0 ? c0.clip : (k == 1 ? c1.clip : c2.clip);
+  q.z = rubber ? 0.25 * q.z - 0.25 * q.w : 0.25 * q.z - 0.75 * q.w;
+  gl_Position = q;
+}`;
+
+const MESH_FS = `#version 300 es
+precision highp float;
+uniform sampler2D u_sprite;
+uniform vec4 u_fallback_tint;  // mixed into rubber sheets by its alpha (0: none)
+in vec4 v_key;
+flat in int v_rubber;
+out vec4 f_color;
+void main() {
+  vec3 rgb = texture(u_sprite, v_key.xy / v_key.w * 0.5 + 0.5).rgb;
+  if (v_rubber == 1) rgb = mix(rgb, u_fallback_tint.rgb, u_fallback_tint.a);
+  f_color = vec4(rgb, 1.0);
+}`;
+
+// The mesh over a (w, h) keyframe, as lodsprite.gl.depth_mesh.grid_vertices: a vertex every
+// `stride` texels (the last row and column always), two triangles a cell; each triangle's
+// vertices carry its three texels and their corner (7 floats a vertex).
+export function depthMeshVertices(w, h, stride) {
+  const axis = (n) => { const v = []; for (let i = 0; i < n; i += stride) v.push(i); if (v[v.length - 1] !== n - 1) v.push(n - 1); return v; };
+  const xs = axis(w), ys = axis(h), nx = xs.length;
+  const at = (k) => [xs[k % nx], ys[Math.floor(k / nx)]];
+  const tris = [];
+  for (let j = 0; j < ys.length - 1; j++) for (let i = 0; i < nx - 1; i++) {
+    const a = j * nx + i;
+    tris.push([a, a + 1, a + nx + 1], [a, a + nx + 1, a + nx]);
+  }
+  const out = new Float32Array(tris.length * 21);
+  let o = 0;
+  for (const t of tris) {
+    const [p0, p1, p2] = t.map(at);
+    for (let c = 0; c < 3; c++) { out.set([...p0, ...p1, ...p2, c], o); o += 7; }
+  }
+  return out;
+}
+
 function compile(gl, type, src) {
   const s = gl.createShader(type);
   gl.shaderSource(s, src); gl.compileShader(s);
@@ -173,9 +311,77 @@ export class SpriteDrawer {
       this.u[name] = gl.getUniformLocation(p, name);
     }
     this.key = null;
+    // 'coarse': the coarse level textured from the keyframe (the 1999 spriteframe);
+    // 'depth': the keyframe's own depth as the proxy over it, for keyframes that carry
+    // the full z-buffer (visibility fragment or triangle).
+    this.proxy = 'coarse';
+    this.stride = DEPTH_STRIDE;
+    this.meshes = new Map();  // keyframe size -> {vao, count}
     // Mixed by its alpha into fragments that fell back to the terrain texture (as
     // lodsprite.gl.sprite.SpriteDrawer.fallback_tint); alpha 0 draws them as they are.
     this.fallbackTint = [1, 0, 1, 0];
+  }
+
+  meshProgram() {
+    if (this.mesh) return this.mesh;
+    const gl = this.gl, p = gl.createProgram();
+    gl.attachShader(p, compile(gl, gl.VERTEX_SHADER, MESH_VS));
+    gl.attachShader(p, compile(gl, gl.FRAGMENT_SHADER, MESH_FS));
+    gl.linkProgram(p);
+    if (!gl.getProgramParameter(p, gl.LINK_STATUS)) throw new Error(gl.getProgramInfoLog(p));
+    const u = {};
+    for (const name of ['u_key_depth', 'u_key_near_far', 'u_key_tan', 'u_key_axes', 'u_mvp_rel', 'u_key_proj', 'u_stride', 'u_cut', 'u_key_px', 'u_frame_px', 'u_stretch', 'u_moved', 'u_sprite', 'u_fallback_tint']) {
+      u[name] = gl.getUniformLocation(p, name);
+    }
+    this.mesh = { program: p, u };
+    return this.mesh;
+  }
+
+  meshFor(w, h) {
+    const name = `${w}x${h}`;
+    if (!this.meshes.has(name)) {
+      const gl = this.gl, data = depthMeshVertices(w, h, this.stride);
+      const vao = gl.createVertexArray();
+      gl.bindVertexArray(vao);
+      const b = gl.createBuffer();
+      gl.bindBuffer(gl.ARRAY_BUFFER, b);
+      gl.bufferData(gl.ARRAY_BUFFER, data, gl.STATIC_DRAW);
+      gl.enableVertexAttribArray(0); gl.vertexAttribPointer(0, 4, gl.FLOAT, false, 28, 0);
+      gl.enableVertexAttribArray(1); gl.vertexAttribPointer(1, 3, gl.FLOAT, false, 28, 16);
+      gl.bindVertexArray(null);
+      this.meshes.set(name, { vao, count: data.length / 7 });
+    }
+    return this.meshes.get(name);
+  }
+
+  // The keyframe `key`'s mesh over what is drawn, seen through `viewProj` (row-major).
+  drawMesh(key, viewProj) {
+    const gl = this.gl, { program, u } = this.meshProgram();
+    const h = key.header, [kh, kw] = h.depth.shape;
+    const o = h.viewpoint.o, ty = Math.tan(h.fov * Math.PI / 360);
+    const translate = [1, 0, 0, o[0], 0, 1, 0, o[1], 0, 0, 1, o[2], 0, 0, 0, 1];
+    const moved = Math.hypot(...this.eye.map((v, i) => v - o[i]));
+    gl.useProgram(program);
+    gl.uniformMatrix4fv(u.u_mvp_rel, true, mul(viewProj, translate));
+    gl.uniformMatrix4fv(u.u_key_proj, true, h.proj);
+    gl.uniformMatrix3fv(u.u_key_axes, false, [...h.viewpoint.x, ...h.viewpoint.y, ...h.viewpoint.z]);
+    gl.uniform2fv(u.u_key_near_far, [h.near, h.far]);
+    gl.uniform2fv(u.u_key_tan, [h.aspect * ty, ty]);
+    gl.uniform1i(u.u_stride, this.stride);
+    gl.uniform1f(u.u_cut, Math.sin(CUT_DEG * Math.PI / 180));
+    gl.uniform2fv(u.u_key_px, [kw, kh]);
+    gl.uniform2fv(u.u_frame_px, [gl.drawingBufferWidth, gl.drawingBufferHeight]);
+    gl.uniform1f(u.u_stretch, STRETCH);
+    gl.uniform1f(u.u_moved, moved / ((h.fov * Math.PI / 180) / kh));
+    gl.uniform4fv(u.u_fallback_tint, this.fallbackTint);
+    gl.activeTexture(gl.TEXTURE1); gl.bindTexture(gl.TEXTURE_2D, key.sprite);
+    gl.activeTexture(gl.TEXTURE2); gl.bindTexture(gl.TEXTURE_2D, key.depth);
+    gl.uniform1i(u.u_sprite, 1); gl.uniform1i(u.u_key_depth, 2);
+    const mesh = this.meshFor(kw, kh);
+    gl.bindVertexArray(mesh.vao);
+    gl.drawArrays(gl.TRIANGLES, 0, mesh.count);
+    gl.bindVertexArray(null);
+    return mesh.count / 3;
   }
 
   // The scene message (header, heights Float32Array, texture Uint8Array).
@@ -213,6 +419,7 @@ export class SpriteDrawer {
       depth: texture(gl, 2, gl.R32F, gl.RED, gl.FLOAT, dw, dh, depth, gl.NEAREST),
       mvp: mul(header.proj, header.view),
       nearFar: [header.near, header.far],
+      header,
     };
     bitmap.close();
     return key;
@@ -226,8 +433,10 @@ export class SpriteDrawer {
 
   dropKeyframe(key) { this.gl.deleteTexture(key.sprite); this.gl.deleteTexture(key.depth); }
 
-  // Draw a spriteframe at view-projection `viewProj` (row-major) into the canvas.
-  draw(viewProj) {
+  // Draw a spriteframe at view-projection `viewProj` (row-major) into the canvas; `eye`
+  // (world metres, the viewpoint's o) for the depth mesh's sky sheets (default: the
+  // keyframe's own).
+  draw(viewProj, eye = null) {
     const gl = this.gl, u = this.u;
     gl.viewport(0, 0, gl.drawingBufferWidth, gl.drawingBufferHeight);
     gl.clearColor(...SKY_RGB, 1);
@@ -249,7 +458,11 @@ export class SpriteDrawer {
     gl.bindVertexArray(this.vao);
     gl.drawElements(gl.TRIANGLES, this.count, gl.UNSIGNED_INT, 0);
     gl.bindVertexArray(null);
-    return this.triangles;
+    if (this.proxy !== 'depth' || !key || key.header.zbuffer !== 'full') return this.triangles;
+    // the coarse spriteframe stays under the mesh, where the mesh draws nothing
+    gl.clear(gl.DEPTH_BUFFER_BIT);
+    this.eye = eye || key.header.viewpoint.o;
+    return this.triangles + this.drawMesh(key, viewProj);
   }
 
   // The canvas's pixels, RGBA rows bottom-up, base64 (for tests).
