@@ -90,7 +90,9 @@ def offline_spriteframes(service, lod: int, keys: list[tuple[Keyframe, list]],
     from lodsprite.gl.sprite import SpriteDrawer
 
     rule = "coarse" if depth_stride is None else "fragment"
-    sprite = SpriteDrawer(service.terrain_gl.drawer, lod, rule, border=True, guard_px=0,
+    drawer = (service.terrain_gl.drawer if hasattr(service, "terrain_gl")
+              else service.keys.terrain)  # an adaptive service's working-grid drawer
+    sprite = SpriteDrawer(drawer, lod, rule, border=True, guard_px=0,
                           depth_stride=depth_stride)
     out = []
     try:
