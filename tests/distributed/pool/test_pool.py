@@ -156,6 +156,21 @@ def test_a_renderer_killed_mid_keyframe_is_noticed_and_its_job_done_by_another(
     assert busy.pid not in {w.pid for w in broker.workers()}
 
 
+def test_a_scene_no_session_uses_is_dropped_by_the_renderers_that_held_it(
+        broker: LocalPool) -> None:
+    from lodsprite.distributed.pool.jobs import job_key
+
+    broker.submit(job(50, OTHER))
+    assert results(broker, 1)[50].ok
+    before = broker.stats()["released"]
+    broker.release(job_key(OTHER))
+    wait_until(lambda: broker.stats()["released"] == before + 1, 20.0, "the scene dropped")
+    broker.release(job_key(OTHER))  # held by none now: nothing more dropped
+    broker.submit(job(51))  # and the renderers go on
+    assert results(broker, 1)[51].ok
+    assert broker.stats()["released"] == before + 1
+
+
 def test_close_leaves_no_process(broker: LocalPool) -> None:
     pids = [p.pid for p in broker.local_processes()]
     assert len(pids) == 2

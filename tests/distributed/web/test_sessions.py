@@ -271,3 +271,36 @@ def test_a_request_superseded_before_its_render_is_never_rendered():
     pool, s = asyncio.run(run())
     assert [(j.session, j.t) for j in pool.submitted] == [("busy", 0.0), ("s", 1.2)]
     assert s.counts["superseded"] == 2 and not s.pending
+
+
+def test_a_scene_is_released_when_no_open_session_uses_it_any_more():
+    """Closing, the release op and a load of another scene each give the renderers the
+    old scene back, once no other open session uses it."""
+    from lodsprite.distributed.pool.jobs import job_key
+
+    class Releasing(FakePool):
+        def __init__(self):
+            super().__init__(1)
+            self.released = []
+
+        def release(self, key):
+            self.released.append(key)
+
+    async def run():
+        pool = Releasing()
+        hub = Hub(pool, datasets=None)
+        one, other = LoadArgs(terrain="fractal:64:1"), LoadArgs(terrain="fractal:64:2")
+        a, b, c = hub.open_session("a"), hub.open_session("b"), hub.open_session("c")
+        a.named = b.named = one
+        c.named = other
+        hub.close_session(a)
+        assert pool.released == []  # b still shows it
+        hub._apply(b, other, other, 1)  # b loads another scene: nobody uses one now
+        assert pool.released == [job_key(one)]
+        c.handle(pack(encode({"kind": "control", "seq": 1, "op": "release", "args": {}})))
+        assert pool.released == [job_key(one)]  # b shows other still
+        hub.close_session(b)
+        assert pool.released == [job_key(one), job_key(other)]
+        hub.close()
+
+    asyncio.run(run())

@@ -8,6 +8,7 @@ kind        direction               fields                                      
 ==========  ======================  ==============================================  =======
 ready       renderer -> pool        ``pid``, ``name``, ``cache`` (scenes it keeps)  0
 job         pool -> renderer        ``job`` (:class:`Job`), ``codec``               0
+release     pool -> renderer        ``key``: a scene's :func:`job_key` to drop      0
 result      renderer -> pool        ``job`` id, ``ok``, ``error``, ``refused``,     0 or 3
                                     ``render_ms``; on success the keyframe
                                     message's frames
@@ -39,10 +40,9 @@ from lodsprite.distributed.messages import (
 )
 from lodsprite.errors import InputError
 
-__all__ = ["MAX_JOB_BYTES", "MAX_RESULT_FRAME_BYTES",
-           "POOL_VERSION", "Job", "JobMessage", "PoolMessage",
-           "Ready", "Result", "ResultMessage", "WorkerInfo", "check_job", "decode_pool",
-           "encode_pool", "job_key"]
+__all__ = ["MAX_JOB_BYTES", "MAX_RESULT_FRAME_BYTES", "POOL_VERSION", "Job", "JobMessage",
+           "PoolMessage", "Ready", "ReleaseMessage", "Result", "ResultMessage", "WorkerInfo",
+           "check_job", "decode_pool", "encode_pool", "job_key"]
 
 POOL_VERSION = 5
 """2: ``result`` says whether the worker ``refused`` the job; 3: and how long the worker
@@ -121,7 +121,14 @@ class ResultMessage(PoolMessage, tag="result"):
     render_ms: Annotated[float, Meta(ge=0.0, le=1e9)] = 0.0
 
 
-ANY_POOL = Ready | JobMessage | ResultMessage
+class ReleaseMessage(PoolMessage, tag="release"):
+    """Drop the scene whose :func:`job_key` is ``key`` (no session uses it any more); the
+    renderer answers whether it held it (msgpack ``true`` or ``false``)."""
+
+    key: Annotated[bytes, Meta(max_length=MAX_JOB_BYTES)]
+
+
+ANY_POOL = Ready | JobMessage | ResultMessage | ReleaseMessage
 _decoder = msgspec.msgpack.Decoder(ANY_POOL)
 _encoder = msgspec.msgpack.Encoder()
 

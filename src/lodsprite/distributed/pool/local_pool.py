@@ -30,7 +30,7 @@ import os
 import threading
 import time
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from multiprocessing.connection import wait
 from pathlib import Path
 
@@ -43,6 +43,7 @@ from lodsprite.distributed.pool.jobs import (
     Job,
     JobMessage,
     Ready,
+    ReleaseMessage,
     ResultMessage,
     check_job,
     decode_pool,
@@ -73,6 +74,7 @@ class _Slot:
     key: Key | None = None
     start_at: float = 0.0
     backoff: float = BACKOFF_S
+    releases: list = field(default_factory=list)  # scene keys to drop, not yet sent
 
 
 class LocalPool(PoolResults):
@@ -102,6 +104,7 @@ class LocalPool(PoolResults):
         self.cache = 2
         self._renderers: list[_Slot] = []
         self._inbox: deque[Job] = deque()
+        self._releases: deque[bytes] = deque()  # scenes to drop, for every renderer
         self._stop = threading.Event()
         self._lock = threading.Lock()  # the renderer list: spawn_local beside the thread
         self._wake_r, self._wake_w = os.pipe()
@@ -114,6 +117,13 @@ class LocalPool(PoolResults):
     def submit(self, job: Job) -> None:
         """Queue ``job`` (never blocks; thread-safe)."""
         self._inbox.append(check_job(job))
+        signal(self._wake_w)
+
+    def release(self, key: bytes) -> None:
+        """Have every renderer drop the scene ``key`` (:func:`~.jobs.job_key` of its load:
+        no session uses it any more); counted ``released`` where one held it.  Never
+        blocks; thread-safe."""
+        self._releases.append(bytes(key))
         signal(self._wake_w)
 
     def spawn_local(self, n: int, cache: int = 2) -> list[int]:
@@ -166,8 +176,8 @@ class LocalPool(PoolResults):
         args = {"data_dir": self.data_dir, "cache": self.cache, "keyframes": self.keyframes}
         if self.renderer_mb is not None:
             args["max_mb"] = self.renderer_mb
-        r.worker = ProcessWorker(FACTORY, args,
-                                 in_flight=1, restarts=0, name="render",
+        r.worker = ProcessWorker(FACTORY, args,  # a job, and a release behind it
+                                 in_flight=2, restarts=0, name="render",
                                  slot_bytes=SLOT_BYTES, max_request=MAX_JOB_BYTES)
         r.key, r.child = None, r.worker.child
 
@@ -195,8 +205,13 @@ class LocalPool(PoolResults):
                     self.table.add(self._inbox.popleft())
                 now = time.monotonic()
                 with self._lock:
+                    while self._releases:
+                        key = self._releases.popleft()
+                        for r in self._renderers:
+                            r.releases.append(key)
                     for r in self._renderers:
                         self._service(r, now)
+                        self._send_releases(r)
                     self._expire(now)
                     self._dispatch(now)
                 self._changed()
@@ -231,8 +246,11 @@ class LocalPool(PoolResults):
             pid = r.worker.pid or 0
             r.key = (0, f"{r.index}:{pid}".encode())
             self.table.ready(r.key, Ready(POOL_VERSION, pid, f"local-{pid}", self.cache), now)
-        for _, answer in answers:
-            if isinstance(answer, tuple) and r.key is not None:
+        for key, answer in answers:
+            if isinstance(key, tuple):  # a release's answer: ok when it held the scene
+                if isinstance(answer, tuple) and self._released(answer):
+                    self.table.counts["released"] += 1
+            elif isinstance(answer, tuple) and r.key is not None:
                 self._answer(r, answer, now)
         if r.worker is not None and not r.worker.alive:
             self._end(r, f"died ({r.worker.gone})", now)
@@ -252,6 +270,29 @@ class LocalPool(PoolResults):
             return
         if msg.ok:
             r.backoff = BACKOFF_S
+
+    def _send_releases(self, r: _Slot) -> None:
+        """``r``'s next pending release, behind its job: one release in flight at most, so
+        that a job always finds room; the scene leaves its affinity at once."""
+        if r.worker is None or not r.worker.alive or not r.releases:
+            if r.worker is None:
+                r.releases.clear()  # a new process holds nothing
+            return
+        peer = self.table.peers.get(r.key) if r.key is not None else None
+        if not any(isinstance(k, tuple) for k in r.worker.pending) and not r.worker.full:
+            key = r.releases.pop(0)
+            if peer is not None and key in peer.scenes:
+                peer.scenes.remove(key)
+            r.worker.submit(("release", key), msgspec.msgpack.encode(
+                ReleaseMessage(POOL_VERSION, key)))
+
+    @staticmethod
+    def _released(answer: tuple) -> bool:
+        """Whether a release's answer (msgpack ``true`` or ``false``) says it held the scene."""
+        try:
+            return msgspec.msgpack.decode(answer[0], type=bool)
+        except (msgspec.DecodeError, msgspec.ValidationError):
+            return False
 
     def _expire(self, now: float) -> None:
         for key in self.table.expired(now):

@@ -30,6 +30,7 @@ from lodsprite.distributed.datasets import Datasets
 from lodsprite.distributed.pool.jobs import (
     POOL_VERSION,
     JobMessage,
+    ReleaseMessage,
     ResultMessage,
     encode_pool,
     job_key,
@@ -133,6 +134,14 @@ class SceneCache:
                                              refused=isinstance(exc, InputError),
                                              render_ms=took))
 
+    def release(self, key: bytes) -> bool:
+        """Drop the scene ``key`` (its GL objects and caches); whether it was held."""
+        r = self.scenes.pop(key, None)
+        self.bytes.pop(key, None)
+        if r is not None:
+            r.release()
+        return r is not None
+
     def _scene(self, key: bytes, load: LoadArgs):
         from lodsprite.distributed.render import keyframe_service
         from lodsprite.errors import InputError
@@ -170,6 +179,9 @@ def handler(data_dir: str | None, cache: int, keyframes: str = "auto",
                         keyframes, max_mb)
 
     def answer(meta: bytes, data: bytes) -> tuple[bytes, bytes]:
-        return pack(scenes.render(msgspec.msgpack.decode(meta, type=JobMessage)))
+        msg = msgspec.msgpack.decode(meta, type=JobMessage | ReleaseMessage)
+        if isinstance(msg, ReleaseMessage):  # answered: whether it held the scene
+            return msgspec.msgpack.encode(scenes.release(msg.key)), b""
+        return pack(scenes.render(msg))
 
     return answer

@@ -46,6 +46,7 @@ import msgspec
 from lodsprite.distributed.datasets import Datasets
 from lodsprite.distributed.pool import Job
 from lodsprite.distributed.pool.dispatch import JOB_TIMEOUT_S, MAX_TRIES
+from lodsprite.distributed.pool.jobs import job_key
 from lodsprite.distributed.protocol import (
     MAX_SCENE_COARSE,
     KeyframeMessage,
@@ -133,9 +134,25 @@ class Hub:
         return s
 
     def close_session(self, s: Session) -> None:
+        named = s.named
         s.close()
         self.sessions.pop(s.id, None)
         self._generation.pop(s.id, None)
+        self.forget(named)
+
+    def forget(self, named: LoadArgs | None) -> None:
+        """A session stopped using the scene ``named`` (it closed, released it or loaded
+        another): when no open session uses it, the pool's renderers drop it (a pool
+        without ``release``, Ray's, keeps it until its cache needs the room)."""
+        if named is None:
+            return
+        key = job_key(named)
+        if any(s.named is not None and job_key(s.named) == key
+               for s in self.sessions.values() if not s.closed):
+            return
+        release = getattr(self.pool, "release", None)
+        if release is not None:
+            release(key)
 
     def workers_count(self) -> int:
         return len(self.pool.workers())
@@ -200,8 +217,11 @@ class Hub:
         """Make ``resolved`` the session's scene (generation ``gen``): its waiting and
         in-flight requests, all of the old scene, are forgotten by the session (a worker
         still rendering one stays busy in :attr:`jobs`; its result is dropped)."""
+        old = session.named
         session.load = resolved
         session.named = named  # jobs carry the names: each worker resolves them by its --data
+        if old is not None and job_key(old) != job_key(named):
+            self.forget(old)
         session.generation = gen
         session.pending.clear()
         session.inflight.clear()

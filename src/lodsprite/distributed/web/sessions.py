@@ -177,7 +177,8 @@ class Session:
             if op in ("stop", "release"):
                 self.pending.clear()
             if op == "release":
-                self.load = self.named = None
+                named, self.load, self.named = self.named, None, None
+                self.hub.forget(named)
             self.reply(msg.seq, True)
 
     # ------------------------------------------------------------------------ out
