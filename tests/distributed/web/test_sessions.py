@@ -24,10 +24,13 @@ class FakeHub:
     """Records what a session asks of the hub."""
 
     def __init__(self):
-        self.loads, self.schedules = [], 0
+        self.loads, self.schedules, self.forgotten = [], 0, []
 
     def load(self, session, args, seq):
         self.loads.append((args, seq))
+
+    def forget(self, named):
+        self.forgotten.append(named)
 
     def schedule(self):
         self.schedules += 1
