@@ -45,6 +45,9 @@ VP = {"x": [1.0, 0.0, 0.0], "y": [0.0, 0.6, 0.8], "z": [0.0, -0.8, 0.6],
 def server(tmp_path_factory):
     data = tmp_path_factory.mktemp("data")
     np.save(data / "hill.npy", load_scene("fractal:64:5", "terrain", 64, 1.0).hf.heights)
+    (data.parent / "outside.off").write_text("OFF\n0 0 0\n")  # beside, not inside
+    (data / "walk.toml").write_text('[terrain]\nsource = "hill.npy"\n[[objects]]\n'
+                                    'mesh = "../outside.off"\nheight_m = 2.0\n')
     zport = free_ports()
     proc = subprocess.Popen(
         [sys.executable, "-c", "from lodsprite.cli import main; main()", "serve",
@@ -172,7 +175,8 @@ def test_pages_name_files_by_the_data_rule(server):
         async with aiohttp.ClientSession() as http:
             page = await connect(http, server)
             refused = []
-            for name in ("../hill.npy", "/etc/passwd", "missing.npy"):
+            for name in ("../hill.npy", "/etc/passwd", "missing.npy", "crowd:10",
+                         "crowd:100000000", "http://example.com/dem.tif", "walk.toml"):
                 with pytest.raises(ProtocolError) as err:
                     await page.load({**LOAD, "terrain": name})
                 refused.append(str(err.value))
@@ -180,7 +184,10 @@ def test_pages_name_files_by_the_data_rule(server):
                 await keyframe(page)
 
     refused, scene, kf = run(go())
-    assert all(r.startswith("load:") for r in refused), refused
+    assert all(r.startswith("load:") and "\n" not in r for r in refused), refused
+    assert "a page draws terrains" in refused[3] and "a crowd of" in refused[4]
+    assert "a URL is refused" in refused[5]
+    assert "leads outside the data folder" in refused[6]  # the scene file's mesh
     assert scene.heights.shape == (9, 9) and kf.color.std() > 1.0
 
 

@@ -256,8 +256,14 @@ class Hub:
 
     def _resolve(self, args: LoadArgs) -> LoadArgs:
         """``args`` with the terrain and texture resolved to loader specs; raises
-        :class:`InputError` for a name, a size or a scene this server refuses."""
-        terrain = self.datasets.terrain(args.terrain)
+        :class:`InputError` for a name, a size or a scene this server refuses, and for a
+        scene of another kind than a terrain (a scene file, a crowd, a light field: the
+        page draws terrains)."""
+        named = self.datasets.scene(args.terrain)  # confined to the data folder, capped
+        if named.kind is not None or named.terrain is None:
+            raise InputError(f"{args.terrain!r} is a {named.kind} scene: a page draws "
+                             "terrains (open it with lodsprite view or render)")
+        terrain = named.terrain
         texture = self.datasets.texture(args.texture)
         grid = working_grid(args)
         if args.lod > grid:
