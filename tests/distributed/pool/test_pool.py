@@ -123,7 +123,7 @@ def test_a_renderer_answering_garbage_is_killed_and_its_job_done_by_another(
 
 def test_a_hung_renderer_is_killed_at_the_job_timeout_and_replaced() -> None:
     """SIGSTOP: the process lives and its pipe stays open; only the job's timeout tells."""
-    with LocalPool(job_timeout_s=3.0) as pool:
+    with LocalPool(job_timeout_s=2.0) as pool:  # a warm 64² job takes tens of ms
         pool.spawn_local(1)
         wait_until(lambda: len(pool.workers()) == 1, 30.0, "one renderer ready")
         pool.submit(job(1))
@@ -152,8 +152,6 @@ def test_a_renderer_killed_mid_keyframe_is_noticed_and_its_job_done_by_another(
     assert r.worker != busy.id
     after = broker.stats()  # this test's own kill and re-queue, not an earlier test's
     assert grew(before, after, "dead") >= 1 and grew(before, after, "requeued") >= 1
-    wait_until(lambda: len(broker.workers()) == 2, 30.0, "a new renderer in its place")
-    assert busy.pid not in {w.pid for w in broker.workers()}
 
 
 def test_a_scene_no_session_uses_is_dropped_by_the_renderers_that_held_it(
