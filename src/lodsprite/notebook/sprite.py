@@ -63,7 +63,7 @@ class SpriteWidget(anywidget.AnyWidget):
     _esm = widget_esm()
     _css = widget_css()
     options = traitlets.Dict().tag(sync=True)
-    """What each view loads and plays (terrain name, size, lod, epsilon, visibility,
+    """What each view loads and plays (terrain name, size, lod, epsilon, visibility, proxy,
     grid, path, frames); set by the constructor and :meth:`play`."""
 
     def __init__(self, terrain: str | Path = "jacksboro", *, texture: str | Path = "terrain",

@@ -6,7 +6,8 @@
 // frames (the path's viewpoints), size (WxH keyframe and canvas pixels; 512x512), grid
 // (working grid), and the technique options the server declares at /options.json (lod:
 // coarse quads a side, epsilon: pixels, visibility: the load's rule, coarse or
-// fragment/triangle: the full z-buffer), each parsed and checked by its declaration: a bad
+// fragment/triangle: the full z-buffer, proxy: depth, the keyframe's own depth, or
+// geometry, the coarse mesh alone), each parsed and checked by its declaration: a bad
 // one stops the page with the option's one-line error, and so does a parameter that is
 // none of these (a misspelt option is not ignored).  For tests and tools:
 // window.lodsprite, the client's API (app.js).
