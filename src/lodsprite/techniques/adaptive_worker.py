@@ -131,6 +131,19 @@ class StoreKeyframes:
         self.filled = False
         self._drawn: list[tuple] = []  # the update's tiles: (selection, deficit) each
 
+    def keyframe(self, vp: Viewpoint):
+        """The keyframe at ``vp`` drawn adaptively and finished, without its ``C'`` (a
+        server's renderer that never paces); the :class:`~lodsprite.gl.sprite.GLKeyframe`
+        shown, read it back as :func:`keyframe_answer` does."""
+        frame_projection = self.terrain.projection(vp)
+        self._ready(vp, self.sprite.key_projection(frame_projection))
+        self._draw(vp, time.perf_counter(), frame_projection, 1.0)
+        return self.sprite.keyframe
+
+    def _draw(self, vp: Viewpoint, t0: float, frame_projection, spread: float) -> None:
+        self.sprite.render_keyframe(vp, t0, frame_projection, spread=spread)
+        self.ctx.finish()
+
     def release(self) -> None:
         """The level-0 reader stopped, the GL objects released, the context too when it
         is this object's own (a worker process ends with it; a renderer that keeps
@@ -198,8 +211,7 @@ class StoreKeyframes:
         self._ready(vp, key_projection)
         c_prime = self.metric.reproject(vp.o, key_projection.matrix() @ vp.view_matrix(),
                                         self.key_size)
-        s.render_keyframe(vp, t0, frame_projection, spread=spread)
-        self.ctx.finish()
+        self._draw(vp, t0, frame_projection, spread)
         return keyframe_answer(s, self.zbuffer, {
             "viewpoint": vp, "frame_projection": frame_projection, "c_prime": c_prime,
             "requested_at": asked, "predicted": predicted,
