@@ -99,8 +99,8 @@ class Datasets:
                 raise InputError(f"fractal size {size} is not a power of two in "
                                  f"16..{MAX_FRACTAL_SIZE}")
             return Dataset(name, (size + 1, size + 1), True)
-        path = self._file(name, "terrain", stores=True)
-        return Dataset(str(path), _peek_shape(path), False)
+        path, shape = self._file(name, "terrain", stores=True)
+        return Dataset(str(path), shape, False)
 
     def scene(self, name: str) -> SceneName:
         """The scene named ``name``: a terrain (:meth:`terrain`), a crowd, or a scene file,
@@ -126,10 +126,12 @@ class Datasets:
             return SceneName(low, "crowd", None)
         if low == "jacksboro" or parse_fractal_spec(name) is not None:
             return SceneName(name, None, None, self.terrain(name))
-        path = self._file(name, "scene", stores=True, folders=True)
+        path, shape = self._file(name, "scene", stores=True, folders=True)
         kind = scene_kind(str(path))  # on a path inside the data folder only
-        if kind is None:
-            return SceneName(str(path), None, self.data_dir, self.terrain(name))
+        if kind is None:  # a terrain: a store or a file, checked once by _file
+            if path.is_dir() and not is_store(path):
+                raise InputError(f"terrain {name!r} is not a file")
+            return SceneName(str(path), None, self.data_dir, Dataset(str(path), shape, False))
         self._served(kind, name)
         if kind == "scene-file":
             self._check_scene_file(path, name)
@@ -178,11 +180,13 @@ class Datasets:
                 raise InputError(f"checker squares must be an integer in 1..{CHECKER_SIZE}, "
                                  f"got {k!r}")
             return Dataset(name, (CHECKER_SIZE, CHECKER_SIZE), True)
-        path = self._file(name, "texture")
-        return Dataset(str(path), _peek_shape(path), False)
+        path, shape = self._file(name, "texture")
+        return Dataset(str(path), shape, False)
 
     def _file(self, name: str, what: str, stores: bool = False,
-              folders: bool = False) -> Path:
+              folders: bool = False) -> tuple[Path, tuple[int, int] | None]:
+        """The file (or store, or with ``folders`` any folder) ``name`` names inside the
+        data folder, checked, and its shape (:func:`_peek_shape`; None for a folder)."""
         if self.data_dir is None:
             raise InputError(f"{what} {name!r} is not a built-in, and this server serves no "
                              "files (start it with --data DIR)")
@@ -201,14 +205,14 @@ class Datasets:
         if stores and is_store(path):
             _check_store(path, name)
         elif folders and path.is_dir():
-            return path
+            return path, None
         elif not path.is_file():
             raise InputError(f"{what} {name!r} is not a file")
         shape = _peek_shape(path)
         if shape is not None and max(shape) > MAX_SOURCE_SIDE:
             raise InputError(f"{what} {name!r} is {shape[1]}x{shape[0]}: more than "
                              f"{MAX_SOURCE_SIDE} a side")
-        return path
+        return path, shape
 
 
 def _clean(name: str, what: str) -> str:

@@ -56,13 +56,12 @@ class QueuedJob:
 
 @dataclass
 class Peer:
-    """A worker ready: what it said in ``ready``, when it joined (monotonic s), the job
-    it holds since when, when it went idle, and the scenes it loaded last."""
+    """A worker ready: what it said in ``ready``, the job it holds since when (monotonic
+    s), when it went idle, and the scenes it loaded last."""
 
     sock: int
     ident: bytes
     info: Ready
-    seen: float
     entry: QueuedJob | None = None
     since: float = 0.0
     idle_since: float = 0.0
@@ -99,7 +98,7 @@ class JobTable:
     def ready(self, key: Key, info: Ready, now: float) -> None:
         """A worker said ``ready`` (a second ``ready`` from it changes nothing)."""
         if key not in self.peers and len(self.peers) < MAX_PEERS:
-            self.peers[key] = Peer(key[0], key[1], info, now, idle_since=now)
+            self.peers[key] = Peer(key[0], key[1], info, idle_since=now)
 
     def answered(self, peer: Peer, now: float, render_ms: float = 0.0) -> None:
         """``peer`` answered its job (a keyframe or a decline): its time, dispatch to
