@@ -26,12 +26,13 @@ served only when it is among the server's ``kinds`` (the project's own by defaul
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 
 import numpy as np
 
-from lodsprite.errors import InputError, TerrainError
+from lodsprite.errors import InputError, LodspriteError, TerrainError
 from lodsprite.terrain.loaders import parse_fractal_spec
 from lodsprite.terrain.store import is_store
 from lodsprite.terrain.textures import CHECKER_SIZE
@@ -149,7 +150,10 @@ class Datasets:
         caps (objects, light fields, a built-in terrain's size)."""
         from lodsprite.scene.file import read_scene_file
 
-        sf = read_scene_file(path, root=self.data_dir)
+        try:
+            sf = read_scene_file(path, root=self.data_dir)
+        except LodspriteError as exc:  # named as the page named it: no server path shown
+            raise InputError(self.local_message(str(exc), path, name)) from None
         objects = 0
         for o in sf.objects:  # a points file's lines bound its rows
             if o.count is not None:
@@ -167,6 +171,15 @@ class Datasets:
         source = sf.terrain.source
         if not Path(source).is_absolute():  # a built-in: the terrain rules apply
             self.terrain(source)
+
+    def local_message(self, message: str, path: Path, name: str) -> str:
+        """``message`` with the server's paths put as a page names them: ``path`` as
+        ``name``, the data folder's other files relative to it."""
+        message = message.replace(str(path), name)
+        if self.data_dir is not None:
+            message = message.replace(f"{self.data_dir}{os.sep}", "").replace(
+                str(self.data_dir), "the data folder")
+        return message
 
     def texture(self, name: str) -> Dataset:
         """The texture named ``name``; raises :class:`InputError` with the reason."""

@@ -54,10 +54,24 @@ MAX_RIBBON_VERTICES = 8 * (MAX_GRID + 1)
 """Most border ribbon vertices a ``scene`` message carries (two a border sample)."""
 MAX_RIBBON_TRIANGLES = 8 * MAX_GRID
 """Most border ribbon triangles a ``scene`` message carries (two a border quad)."""
+MAX_WALKERS = 20_000
+"""Most walkers a ``scene`` message carries (a session's objects cap)."""
+MAX_WALKER_TYPES = 32
+MAX_WALKER_LEVELS = 8
+MAX_WALKER_VERTICES = 2**18
+"""Most vertices of one walker type (its finest LOD's vertex buffer)."""
+MAX_WALKER_TRIANGLES = 2**19
+"""Most triangles of one LOD level of one walker type."""
+MAX_GROUND_SIDE = 1025
+"""Largest side of the ground heights a ``scene`` message carries for its walkers."""
+MAX_WALKER_BYTES = (MAX_WALKER_TYPES * (36 * MAX_WALKER_VERTICES
+                                        + MAX_WALKER_LEVELS * 12 * MAX_WALKER_TRIANGLES)
+                    + 74 * MAX_WALKERS + 4 * MAX_GROUND_SIDE**2)
 MAX_SCENE_BYTES = ((MAX_IMAGE_SIDE**2 * 3 + (MAX_SCENE_COARSE + 1) ** 2 * 4) * 102 // 100
-                   + 12 * (MAX_RIBBON_VERTICES + MAX_RIBBON_TRIANGLES) + 65536)
+                   + 12 * (MAX_RIBBON_VERTICES + MAX_RIBBON_TRIANGLES) + MAX_WALKER_BYTES
+                   + 65536)
 """Largest ``scene`` message: the texture at the largest side (RGB) and the coarse heights,
-with zlib's worst-case expansion, the border ribbon and the header."""
+with zlib's worst-case expansion, the border ribbon, the walkers and the header."""
 
 
 class ProtocolError(LodspriteError, ValueError):
@@ -206,6 +220,47 @@ class Request(Message, tag="request"):
     client: ClientId = ""
 
 
+class WalkerLevel(Struct, forbid_unknown_fields=True):
+    """One LOD of a walker type: ``fraction`` of its triangles (0: its floor) and its
+    triangles' vertex indices, ``(T, 3) uint32`` little-endian bytes."""
+
+    fraction: Annotated[float, Meta(ge=0.0, le=1.0)]
+    indices: Annotated[bytes, Meta(max_length=12 * MAX_WALKER_TRIANGLES)]
+
+
+class WalkerType(Struct, forbid_unknown_fields=True):
+    """A walker type in its own frame (z up, base at 0): ``vertices (V, 9) float32``
+    (position metres, normal, colour 0..1) and its LOD ``levels``, finest first."""
+
+    name: Annotated[str, Meta(max_length=256)]
+    vertices: Annotated[bytes, Meta(max_length=36 * MAX_WALKER_VERTICES)]
+    levels: Annotated[list[WalkerLevel], Meta(min_length=1, max_length=MAX_WALKER_LEVELS)]
+
+
+class WalkerSet(Struct, forbid_unknown_fields=True):
+    """A scene's moving objects, which the page draws each frame
+    (:mod:`lodsprite.distributed.web.walkers`): ``count`` walkers' start ``xy0 (K, 2)``
+    metres, ``heading (K,)`` radians, ``speed (K,)`` m/s, walking rectangle ``box (K, 4)``
+    (x0, y0, x1, y1; float64 each) and ``type (K,) uint16``; the ground heights
+    ``ground_shape`` (rows, cols) float32, row 0 north, ``ground_dx``/``ground_dy``
+    metres apart, centred on the origin; the LOD range ``near``/``far`` metres."""
+
+    types: Annotated[list[WalkerType], Meta(min_length=1, max_length=MAX_WALKER_TYPES)]
+    count: Annotated[int, Meta(ge=1, le=MAX_WALKERS)]
+    xy0: Annotated[bytes, Meta(max_length=16 * MAX_WALKERS)]
+    heading: Annotated[bytes, Meta(max_length=8 * MAX_WALKERS)]
+    speed: Annotated[bytes, Meta(max_length=8 * MAX_WALKERS)]
+    box: Annotated[bytes, Meta(max_length=32 * MAX_WALKERS)]
+    type: Annotated[bytes, Meta(max_length=2 * MAX_WALKERS)]
+    ground: Annotated[bytes, Meta(max_length=4 * MAX_GROUND_SIDE**2)]
+    ground_shape: tuple[Annotated[int, Meta(ge=2, le=MAX_GROUND_SIDE)],
+                        Annotated[int, Meta(ge=2, le=MAX_GROUND_SIDE)]]
+    ground_dx: Annotated[float, Meta(gt=0.0, le=MAX_COORD)]
+    ground_dy: Annotated[float, Meta(gt=0.0, le=MAX_COORD)]
+    near: Annotated[float, Meta(ge=0.0, le=MAX_COORD)]
+    far: Annotated[float, Meta(gt=0.0, le=MAX_COORD)]
+
+
 class SceneMessage(Message, tag="scene"):
     """What a web page draws spriteframes from, after its ``load``: the coarse level
     (``coarse`` quads a side) as heights ``(coarse+1, coarse+1) float32`` (world z,
@@ -218,7 +273,8 @@ class SceneMessage(Message, tag="scene"):
     ``ribbon`` and ``ribbon_tris``: the border ribbons of the coarse level
     (:func:`lodsprite.terrain.proxy.border_ribbon`; empty when the load asked for none),
     vertices ``(V, 3) float32`` world metres and triangles ``(T, 3) uint32`` indices into
-    them, little-endian bytes: what the keyframe's coarse z-buffer was drawn with."""
+    them, little-endian bytes: what the keyframe's coarse z-buffer was drawn with.
+    ``walkers``: a scene file's moving objects (:class:`WalkerSet`), None without."""
 
     coarse: Annotated[int, Meta(ge=1, le=MAX_SCENE_COARSE)]
     origin: tuple[Coord, Coord]
@@ -235,6 +291,7 @@ class SceneMessage(Message, tag="scene"):
     relief: Annotated[float, Meta(ge=0.0, le=MAX_COORD)] = 0.0
     ribbon: Annotated[bytes, Meta(max_length=12 * MAX_RIBBON_VERTICES)] = b""
     ribbon_tris: Annotated[bytes, Meta(max_length=12 * MAX_RIBBON_TRIANGLES)] = b""
+    walkers: WalkerSet | None = None
 
 
 ANY_MESSAGE = (Control | Reply | ViewpointMessage | KeyframeMessage | Ack | Request

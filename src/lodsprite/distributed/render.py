@@ -26,9 +26,10 @@ from lodsprite.scene.spec import SceneSpec, open_spec
 from lodsprite.terrain.heightfield import DEFAULT_GRID
 
 __all__ = ["ADAPTIVE_ABOVE", "MEMORY_FRACTION", "AdaptiveKeyframeService", "KeyframeService",
-           "adaptive_scene_bytes", "check_load_args", "check_scene_memory",
-           "estimate_scene_bytes", "keyframe_kind", "keyframe_scene_bytes", "keyframe_service",
-           "memory_available", "scene_args"]
+           "SceneKeyframeService", "adaptive_scene_bytes", "check_load_args",
+           "check_scene_memory", "estimate_scene_bytes", "is_scene_file", "keyframe_kind",
+           "keyframe_scene_bytes", "keyframe_service", "memory_available", "scene_args",
+           "scene_file_bytes"]
 
 ADAPTIVE_ABOVE = 1024
 """Working grids (quads a side) above which an in-memory terrain's keyframes are drawn
@@ -95,11 +96,26 @@ def adaptive_scene_bytes(args: LoadArgs) -> int:
     return int(caches) + 64 * n * n + 48 * args.size[0] * args.size[1] + 64 * 2**20
 
 
+def scene_file_bytes(args: LoadArgs) -> int:
+    """A generous estimate of what a :class:`SceneKeyframeService` holds (bytes): the
+    adaptive terrain's caches, a working grid of the default size, 48 bytes a pixel,
+    128 MiB for the objects' meshes, LOD buffers and the GL state (the session caps bound
+    the objects a scene file may hold)."""
+    from lodsprite.techniques.builtin import GPU_MB, HOST_MB
+
+    caches = (GPU_MB.default + HOST_MB.default) * 2**20
+    n = DEFAULT_GRID + 1
+    return int(caches) + 64 * n * n + 48 * args.size[0] * args.size[1] + 128 * 2**20
+
+
 def keyframe_scene_bytes(args: LoadArgs, source: tuple[int, int] | None,
                          texture: tuple[int, int] | None) -> int:
     """What drawing ``args``' keyframes holds (bytes), as :func:`keyframe_kind` draws them:
     :func:`adaptive_scene_bytes` or :func:`estimate_scene_bytes`."""
-    if keyframe_kind(args) == "adaptive":
+    kind = keyframe_kind(args)
+    if kind == "scene":
+        return scene_file_bytes(args)
+    if kind == "adaptive":
         return adaptive_scene_bytes(args)
     return estimate_scene_bytes(args, source, texture)
 
@@ -244,10 +260,64 @@ class AdaptiveKeyframeService:
         self.keys.release()
 
 
+class SceneKeyframeService:
+    """Keyframes of a scene file's static layers (its terrain and standing objects) with
+    their full z-buffer (:class:`~lodsprite.layered.scene_keys.SceneKeyframes`, what the
+    window's scene worker draws): the moving objects are the page's to draw, depth tested
+    against the keyframe's surface.  The terrain is drawn adaptively at ``key_sse`` over a
+    store or a grid above :data:`ADAPTIVE_ABOVE`, else whole; a scene file opens confined
+    to ``root`` (the data folder).  Same interface as :class:`KeyframeService`."""
+
+    def __init__(self, args: LoadArgs | dict, ctx: GLContext | None = None,
+                 root: str | None = None, key_sse: float | None = None) -> None:
+        from lodsprite.layered.scene_keys import SceneKeyframes, SceneKeys
+        from lodsprite.scene.kinds import open_scene
+        from lodsprite.sprite.keyframe_worker import WorkerSettings
+        from lodsprite.techniques.defaults import STORE_DEFAULTS
+        from lodsprite.terrain.store import is_store
+
+        args = check_load_args(args)
+        scene = open_scene(args.terrain, light=True, root=root)
+        hf = scene.hf
+        adaptive = hf is not None and (is_store(scene.terrain_spec) or hf.quads > ADAPTIVE_ABOVE)
+        keys = SceneKeys(str(scene.source or args.terrain), "adaptive" if adaptive else "full",
+                         {"sse": STORE_DEFAULTS["key_sse"] if key_sse is None else key_sse}
+                         if adaptive else {})
+        settings = WorkerSettings(tuple(args.size), args.fov_y_deg, args.lod, "fragment",
+                                  args.border, 0)  # the full z-buffer: any rule but coarse
+        self.keys = SceneKeyframes(scene, keys, settings, None if ctx is None else ctx.mgl)
+        self.lod, self.deficit_px = args.lod, 0.0
+
+    def projection(self, viewpoint: Viewpoint):
+        return self.keys.renderer.projection(viewpoint)
+
+    def render(self, viewpoint: Viewpoint, seq: int, t0: float) -> Keyframe:
+        """The keyframe of ``viewpoint``: colour and its full z-buffer (rows bottom-up),
+        what the adaptive terrain lacks in :attr:`deficit_px`."""
+        key, _ = self.keys.keyframe(viewpoint)
+        color = key.target.read_color(copy=False)
+        depth = key.target.read_depth(copy=False)
+        self.deficit_px = self.keys.deficit_px()
+        return Keyframe(seq, t0, viewpoint, key.projection, color, depth, "full",
+                        self.deficit_px)
+
+    def release(self) -> None:
+        self.keys.release()
+
+
+def is_scene_file(spec: str) -> bool:
+    """Whether the resolved terrain name of a ``load`` is a scene file."""
+    return spec.lower().endswith(".toml")
+
+
 def keyframe_kind(args: LoadArgs) -> str:
-    """How ``args``' keyframes are drawn (module doc): ``adaptive`` over a store or a
-    working grid above :data:`ADAPTIVE_ABOVE`, else ``whole``."""
+    """How ``args``' keyframes are drawn (module doc): ``scene`` (a scene file's static
+    layers), ``adaptive`` over a store or a working grid above :data:`ADAPTIVE_ABOVE`,
+    else ``whole``."""
     from lodsprite.terrain.store import is_store
+
+    if is_scene_file(args.terrain):
+        return "scene"
 
     return ("adaptive" if is_store(args.terrain) or working_grid(args) > ADAPTIVE_ABOVE
             else "whole")
@@ -256,11 +326,16 @@ def keyframe_kind(args: LoadArgs) -> str:
 KEYFRAME_WAYS = ("auto", "adaptive", "whole")
 
 
-def keyframe_service(args: LoadArgs, ctx: GLContext | None = None, way: str = "auto"):
-    """The service that draws ``args``' keyframes: as :func:`keyframe_kind` says
-    (``way="auto"``), or ``adaptive`` / ``whole`` whatever the terrain (to compare them)."""
+def keyframe_service(args: LoadArgs, ctx: GLContext | None = None, way: str = "auto",
+                     root: str | None = None):
+    """The service that draws ``args``' keyframes: a scene file's static layers
+    (:class:`SceneKeyframeService`, opened confined to ``root``), else as
+    :func:`keyframe_kind` says (``way="auto"``), or ``adaptive`` / ``whole`` whatever the
+    terrain (to compare them)."""
     if way not in KEYFRAME_WAYS:
         raise ValueError(f"keyframes are drawn {', '.join(KEYFRAME_WAYS)}, not {way!r}")
+    if is_scene_file(args.terrain):
+        return SceneKeyframeService(args, ctx, root)
     if (keyframe_kind(args) if way == "auto" else way) == "adaptive":
         return AdaptiveKeyframeService(args, ctx)
     return KeyframeService(args, ctx)

@@ -162,18 +162,21 @@ def scene_key_handler(keys: SceneKeys, settings: WorkerSettings, shm_name: str,
     return answer
 
 
-class _SceneKeysGL:
-    """The process's renderer, keyframe slots, terrain and static objects."""
+class SceneKeyframes:
+    """A scene's static layers drawn into LOD-sprite keyframes (module doc): a renderer of
+    the keyframe ``settings``' size and field of view over ``scene`` (on ``ctx``, a
+    moderngl context to share, or its own), the terrain (full resolution, or adaptive at
+    the tolerance each keyframe asks), the static objects at the LOD exponent asked.
+    Used by the window's scene worker and by a server's renderers."""
 
-    def __init__(self, scene: Scene, keys: SceneKeys, s: WorkerSettings) -> None:
+    def __init__(self, scene: Scene, keys: SceneKeys, s: WorkerSettings, ctx=None) -> None:
         from lodsprite.api import Renderer
         from lodsprite.gl.sprite import SpriteDrawer
         from lodsprite.layered.layers import TerrainLayer
         from lodsprite.layered.objects import ObjectsLayer
-        from lodsprite.sprite.metric import ErrorMetric
 
-        self.renderer = Renderer(scene, s.size, s.fov_y_deg)
-        self.terrain = self.objects = None
+        self.renderer = Renderer(scene, s.size, s.fov_y_deg, ctx)
+        self.terrain = self.objects = self.sprite = None
         try:
             self.sprite = SpriteDrawer(self.renderer.terrain_gl.drawer, s.lod, s.visibility,
                                        border=s.border, guard_px=s.guard_px)
@@ -186,20 +189,22 @@ class _SceneKeysGL:
         except BaseException:
             self.release()
             raise
-        self.metric = ErrorMetric.for_level(scene.hf, s.lod, s.resampling)
-        self.estimate_stride = s.estimate_stride
         self._warm = False
 
     def _static(self, viewpoint: Viewpoint, projection: Projection, target) -> None:
         self.objects.draw_static(viewpoint, projection.matrix(), target.fbo)
 
-    def render(self, vp: Viewpoint, predicted: bool, asked: float, tolerance: float,
-               exponent: float, spread: float = 1.0) -> tuple[bytes, bytes]:
-        t0 = time.perf_counter()
+    def keyframe(self, vp: Viewpoint, tolerance: float | None = None, exponent: float = 1.0,
+                 spread: float = 1.0, t0: float | None = None):
+        """The keyframe at ``vp`` drawn and finished: the terrain (adaptive at
+        ``tolerance`` px, None: its own default), the static objects at LOD exponent
+        ``exponent``; returns ``(GLKeyframe, frame projection)``."""
+        t0 = time.perf_counter() if t0 is None else t0
         if self.terrain is not None:
             if not self._warm:  # the first view's tiles resident (as a run's warm-up)
                 self.terrain.technique.warm_up(vp)
-            self.terrain.technique.terrain.set_sse(tolerance)
+            if tolerance is not None:
+                self.terrain.technique.terrain.set_sse(tolerance)
             self.terrain.technique.terrain.prefetch()
         if self.objects is not None:
             self.objects.set_exponent(exponent)
@@ -207,17 +212,42 @@ class _SceneKeysGL:
         frame_projection = self.renderer.projection(vp)
         self.sprite.render_keyframe(vp, t0, frame_projection, spread=spread)
         self.renderer.gl.finish()
-        key = self.sprite.keyframe
-        c_prime = self.metric.reproject(vp.o, key.projection.matrix() @ vp.view_matrix(),
-                                        key.target.size)
-        return keyframe_answer(self.sprite, "full", {
-            "viewpoint": vp, "frame_projection": frame_projection, "c_prime": c_prime,
-            "requested_at": asked, "predicted": predicted}, t0, self.estimate_stride)
+        return self.sprite.keyframe, frame_projection
+
+    def deficit_px(self) -> float:
+        """Pixels of error the adaptive terrain lacks while its tiles stream (0 drawn
+        at full resolution)."""
+        if self.terrain is None:
+            return 0.0
+        return float(self.terrain.technique.terrain.deficit_px())
 
     def release(self) -> None:
         for part in (self.objects, self.terrain):
             if part is not None:
                 part.release()
-        if getattr(self, "sprite", None) is not None:
+        self.objects = self.terrain = None
+        if self.sprite is not None:
             self.sprite.release()
+            self.sprite = None
         self.renderer.release()
+
+
+class _SceneKeysGL(SceneKeyframes):
+    """The worker process's keyframes, answered with the display's ``C'``."""
+
+    def __init__(self, scene: Scene, keys: SceneKeys, s: WorkerSettings) -> None:
+        from lodsprite.sprite.metric import ErrorMetric
+
+        super().__init__(scene, keys, s)
+        self.metric = ErrorMetric.for_level(scene.hf, s.lod, s.resampling)
+        self.estimate_stride = s.estimate_stride
+
+    def render(self, vp: Viewpoint, predicted: bool, asked: float, tolerance: float,
+               exponent: float, spread: float = 1.0) -> tuple[bytes, bytes]:
+        t0 = time.perf_counter()
+        key, frame_projection = self.keyframe(vp, tolerance, exponent, spread, t0)
+        c_prime = self.metric.reproject(vp.o, key.projection.matrix() @ vp.view_matrix(),
+                                        key.target.size)
+        return keyframe_answer(self.sprite, "full", {
+            "viewpoint": vp, "frame_projection": frame_projection, "c_prime": c_prime,
+            "requested_at": asked, "predicted": predicted}, t0, self.estimate_stride)

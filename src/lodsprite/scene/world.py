@@ -118,7 +118,7 @@ class World:
         xy0 = np.concatenate([i.xy for i in self.instances])
         yaw0 = np.concatenate([i.yaw for i in self.instances])
         speed = np.concatenate([np.full(len(i), i.walk_mps) for i in self.instances])
-        lo, hi = self._bounds()
+        lo, hi = self.walk_bounds()
         xy, yaw = walk(xy0, yaw0, speed, t, lo, hi)
         out = np.empty((len(xy), 4), np.float32)
         out[:, :2] = xy
@@ -126,7 +126,7 @@ class World:
         out[:, 3] = yaw
         return out
 
-    def _bounds(self) -> tuple[np.ndarray, np.ndarray]:
+    def walk_bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Each instance's walking rectangle ``lo, hi (count, 2)`` (or the terrain's
         ``(2,)`` when no section has an area)."""
         lo, hi = self.extent

@@ -18,7 +18,7 @@ def fake_scene(monkeypatch, built: list) -> None:
     large buffer (the cached object a queued scene must share, not copy)."""
     from lodsprite.distributed.web import hub as hub_module
 
-    def build(args, codec):
+    def build(args, codec, root=None):
         built.append(args.terrain)
         return encode({"kind": "reply", "seq": 0, "ok": True}, np.zeros(2**20, np.uint8)), (
             f"hf of {args.terrain}")
@@ -139,7 +139,7 @@ def test_one_path_at_a_time_per_session_from_the_cached_height_field(monkeypatch
     fake_scene(monkeypatch, [])
     fields = []
     monkeypatch.setattr(hub_module, "path_data",
-                        lambda load, args, hf: fields.append(hf) or {"viewpoints": []})
+                        lambda load, args, hf, root=None: fields.append(hf) or {"viewpoints": []})
 
     async def run():
         hub = Hub(FakePool(1), Datasets(None))

@@ -221,7 +221,7 @@ def test_loads_superseded_while_waiting_build_nothing(monkeypatch):
 
     built = []
     monkeypatch.setattr(hub_module, "build_scene_field",
-                        lambda args, codec: built.append(args.terrain) or (encode(
+                        lambda args, codec, root=None: built.append(args.terrain) or (encode(
                             {"kind": "reply", "seq": 0, "ok": True}), None))
 
     async def run():

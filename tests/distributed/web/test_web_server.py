@@ -4,6 +4,7 @@ each other's scene, a stalled page that does not stall another, a live fuzz afte
 page still gets keyframes, and the ZeroMQ client's server in the same process."""
 
 import asyncio
+import json
 import os
 import queue
 import socket
@@ -48,6 +49,24 @@ def server(tmp_path_factory):
     (data.parent / "outside.off").write_text("OFF\n0 0 0\n")  # beside, not inside
     (data / "walk.toml").write_text('[terrain]\nsource = "hill.npy"\n[[objects]]\n'
                                     'mesh = "../outside.off"\nheight_m = 2.0\n')
+    # hostile scene files: an absolute mesh, a symlink out, a glTF whose buffer lies out
+    (data / "abs.toml").write_text('[terrain]\nsource = "hill.npy"\n[[objects]]\n'
+                                   'mesh = "/etc/passwd"\nheight_m = 2.0\n')
+    os.symlink(data.parent / "outside.off", data / "link.off")
+    (data / "link.toml").write_text('[terrain]\nsource = "hill.npy"\n[[objects]]\n'
+                                    'mesh = "link.off"\nheight_m = 2.0\n')
+    (data / "ext.gltf").write_text(json.dumps({"asset": {"version": "2.0"},
+                                               "buffers": [{"uri": "../secret.bin",
+                                                            "byteLength": 4}]}))
+    (data / "ext.toml").write_text('[terrain]\nsource = "hill.npy"\n[[objects]]\n'
+                                   'mesh = "ext.gltf"\n')
+    (data.parent / "secret.bin").write_bytes(b"\0" * 4)
+    (data.parent / "out.toml").write_text('[terrain]\nsource = "fractal:64:1"\n')
+    # a scene file the page draws: walkers over hill.npy among standing trees
+    (data / "crowd.toml").write_text(
+        '[terrain]\nsource = "hill.npy"\n[[objects]]\nmesh = "ogre"\nheight_m = 20.0\n'
+        'count = 30\nwalk_mps = 5.0\n[[objects]]\nmesh = "tree"\nheight_m = 30.0\n'
+        'count = 5\n')
     zport = free_ports()
     proc = subprocess.Popen(
         [sys.executable, "-c", "from lodsprite.cli import main; main()", "serve",
@@ -176,7 +195,8 @@ def test_pages_name_files_by_the_data_rule(server):
             page = await connect(http, server)
             refused = []
             for name in ("../hill.npy", "/etc/passwd", "missing.npy", "crowd:10",
-                         "crowd:100000000", "http://example.com/dem.tif", "walk.toml"):
+                         "crowd:100000000", "http://example.com/dem.tif", "walk.toml",
+                         "abs.toml", "link.toml", "ext.toml", "../out.toml"):
                 with pytest.raises(ProtocolError) as err:
                     await page.load({**LOAD, "terrain": name})
                 refused.append(str(err.value))
@@ -185,10 +205,39 @@ def test_pages_name_files_by_the_data_rule(server):
 
     refused, scene, kf = run(go())
     assert all(r.startswith("load:") and "\n" not in r for r in refused), refused
+    assert not any("/tmp" in r or "pytest" in r for r in refused), refused  # no server path
     assert "a page draws terrains" in refused[3] and "a crowd of" in refused[4]
     assert "a URL is refused" in refused[5]
     assert "leads outside the data folder" in refused[6]  # the scene file's mesh
+    assert "absolute paths are refused" in refused[7]
+    assert "outside the data folder" in refused[8]  # the symlink's target
+    assert "outside the data folder" in refused[9]  # the glTF's buffer
+    assert "outside the data folder" in refused[10] or "'..'" in refused[10], refused[10]
     assert scene.heights.shape == (9, 9) and kf.color.std() > 1.0
+    assert server["proc"].poll() is None  # still serving
+
+
+def test_a_page_loads_a_scene_file_with_its_walkers_and_gets_its_static_layers(server):
+    """A scene file over the wire: the scene message carries its walkers (the moving
+    ones only), its keyframes the static layers with their full z-buffer, and the
+    session's figures name the scene."""
+    async def go():
+        async with aiohttp.ClientSession() as http:
+            page = await connect(http, server)
+            scene = await loaded(page, {"terrain": "crowd.toml", "size": [64, 64],
+                                        "lod": 8, "visibility": "fragment"})
+            return scene, await keyframe(page), await page.stats()
+
+    scene, kf, stats = run(go())
+    w = scene.walkers
+    assert w is not None and len(w["xy0"]) == 30 and set(w["type"].tolist()) == {0}
+    assert [t["name"] for t in w["types"]] == ["ogre"]  # the trees stand: in the keyframe
+    levels = w["types"][0]["levels"]
+    assert len(levels) >= 2 and len(levels[0][1]) > len(levels[-1][1])  # finest first
+    assert w["ground"].shape == (513, 513) and (w["speed"] == 5.0).all()  # the working grid
+    assert kf.zbuffer == "full" and kf.depth.shape == (64, 64) and kf.color.std() > 1.0
+    assert stats["session"]["scene"] == "crowd.toml"
+    assert stats["session"]["keyframes"] == "scene"
 
 
 def stalled_page(port: int, stop: threading.Event) -> socket.socket:

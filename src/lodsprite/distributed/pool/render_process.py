@@ -61,7 +61,17 @@ def resolve_load(load: LoadArgs, datasets: Datasets, sizes: dict | None = None) 
             return Path(name).relative_to(root).as_posix()
         return name
 
-    terrain = datasets.terrain(local(load.terrain))
+    named = datasets.scene(local(load.terrain))  # confined to the data folder, capped
+    if named.kind == "scene-file":
+        from lodsprite.distributed.render import scene_file_bytes
+
+        if sizes is not None:
+            sizes["bytes"] = scene_file_bytes(load)
+        return msgspec.structs.replace(load, terrain=named.spec)
+    if named.terrain is None:
+        raise InputError(f"{load.terrain!r} is a {named.kind} scene: renderers draw "
+                         "terrains and scene files")
+    terrain = named.terrain
     texture = datasets.texture(local(load.texture))
     resolved = msgspec.structs.replace(load, terrain=terrain.spec, texture=texture.spec)
     reason = check_scene_memory(resolved, terrain.shape, texture.shape, who="this worker")
@@ -165,7 +175,7 @@ class SceneCache:
             # decides when a keyframe is due, so the pacer's per-keyframe reprojection
             # (the exact metric's C', ~20% of a 256² keyframe's time) is not computed.
             r = keyframe_service(msgspec.structs.replace(resolved, pace="continuous"), self.gl,
-                                 self.keyframes)
+                                 self.keyframes, self.datasets.data_dir)
         self.scenes[key] = r  # most recently used last
         return r
 

@@ -190,8 +190,10 @@ class Hub:
                 async with self._builds:  # one scene built at a time
                     if session.closed or self._generation.get(session.id) != gen:
                         return  # superseded while waiting: build nothing for it
+                    root = self.datasets.data_dir
                     cached = self._scenes.get(key) or await asyncio.to_thread(
-                        build_scene_field, resolved, self.codec)
+                        build_scene_field, resolved, self.codec,
+                        None if root is None else str(root))
                 self._scenes[key] = cached
                 while len(self._scenes) > SCENES_CACHED:
                     self._scenes.popitem(last=False)
@@ -245,7 +247,9 @@ class Hub:
             async with self._builds:  # server-wide: as scene builds
                 cached = self._scenes.get(scene_key(load))
                 hf = cached[1] if cached is not None else None
-                data = await asyncio.to_thread(path_data, load, args, hf)
+                root = self.datasets.data_dir
+                data = await asyncio.to_thread(path_data, load, args, hf,
+                                               None if root is None else str(root))
         except (LodspriteError, MemoryError, OSError, ValueError) as exc:
             session.reply(seq, False, f"path: {exc}")
             return
@@ -260,9 +264,14 @@ class Hub:
         scene of another kind than a terrain (a scene file, a crowd, a light field: the
         page draws terrains)."""
         named = self.datasets.scene(args.terrain)  # confined to the data folder, capped
+        if named.kind == "scene-file":
+            if args.lod > MAX_SCENE_COARSE:
+                raise InputError(f"lod {args.lod}: at most {MAX_SCENE_COARSE} for a web page")
+            return msgspec.structs.replace(args, terrain=named.spec)
         if named.kind is not None or named.terrain is None:
             raise InputError(f"{args.terrain!r} is a {named.kind} scene: a page draws "
-                             "terrains (open it with lodsprite view or render)")
+                             "terrains and scene files (open it with lodsprite view or "
+                             "render)")
         terrain = named.terrain
         texture = self.datasets.texture(args.texture)
         grid = working_grid(args)

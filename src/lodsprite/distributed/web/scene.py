@@ -86,15 +86,26 @@ def build_scene(args: LoadArgs, codec: str = "raw") -> list:
     return build_scene_field(args, codec)[0]
 
 
-def build_scene_field(args: LoadArgs, codec: str = "raw") -> tuple[list, Any]:
+def build_scene_field(args: LoadArgs, codec: str = "raw",
+                      root: str | None = None) -> tuple[list, Any]:
     """:func:`build_scene`'s parts and the working height field they came from
-    (:class:`~lodsprite.terrain.HeightField`, kept for :func:`path_data`)."""
+    (:class:`~lodsprite.terrain.HeightField`, kept for :func:`path_data`).  A scene file
+    (resolved: an absolute path) opens confined to ``root`` (the data folder), its
+    walkers in the message (:mod:`.walkers`)."""
     from lodsprite.errors import InputError
     from lodsprite.scene.spec import open_spec
 
     if args.lod > MAX_SCENE_COARSE:
         raise InputError(f"lod {args.lod}: a web page's coarse level is at most "
                          f"{MAX_SCENE_COARSE} quads a side")
+    if args.terrain.lower().endswith(".toml"):
+        from lodsprite.scene.kinds import open_scene
+
+        scene = open_scene(args.terrain, light=True, root=root)
+        if scene.hf is not None and args.lod > scene.hf.quads:
+            raise InputError(f"lod {args.lod} exceeds the scene's terrain grid "
+                             f"{scene.hf.quads}")
+        return scene_parts(scene, args, codec), scene.hf
     scene = open_spec(args)  # the load's scene description (a SceneSpec)
     return scene_parts(scene, args, codec), scene.hf
 
@@ -128,6 +139,14 @@ def scene_parts(scene: Scene, args: LoadArgs, codec: str = "raw") -> list:
               "visibility": "coarse" if args.visibility == "coarse" else "full",
               "heights": h_spec, "texture": t_spec,
               "relief": relief(hf.heights, step)}
+    from lodsprite.scene.world import World
+
+    if isinstance(scene.objects, World):
+        from lodsprite.distributed.web.walkers import walker_header
+
+        walkers = walker_header(scene.objects)
+        if walkers is not None:
+            header["walkers"] = walkers
     if args.border:
         rib = border_ribbon(hf, args.lod)
         header["ribbon"] = rib.positions.astype("<f4").tobytes()
@@ -139,7 +158,8 @@ class SceneData:
     """A decoded scene message: ``header`` (:class:`SceneMessage`), ``heights``
     ``(n+1, n+1) float32`` (row 0 south), ``texture (H, W, 3) uint8`` (row 0 south) and
     the border ribbon, ``ribbon (V, 3) float32`` metres and ``ribbon_tris (T, 3) uint32``
-    (empty without one)."""
+    (empty without one); ``walkers`` a scene file's moving objects
+    (:func:`~.walkers.decode_walkers`) or None."""
 
     def __init__(self, header: SceneMessage, heights: np.ndarray, texture: np.ndarray,
                  ribbon: np.ndarray | None = None,
@@ -149,6 +169,7 @@ class SceneData:
         self.texture = texture
         self.ribbon = np.zeros((0, 3), np.float32) if ribbon is None else ribbon
         self.ribbon_tris = np.zeros((0, 3), np.uint32) if ribbon_tris is None else ribbon_tris
+        self.walkers: dict | None = None  # decoded walkers (.walkers.decode_walkers)
 
 
 def decode_ribbon(msg: SceneMessage) -> tuple[np.ndarray, np.ndarray]:
@@ -175,21 +196,32 @@ def decode_scene(parts: list) -> SceneData:
     if heights.shape != (n, n):
         raise ProtocolError(f"heights: shape {heights.shape}, expected {(n, n)}")
     texture = decode_image(msg.texture, buffers[1], "uint8", 3, "texture", False)
-    return SceneData(msg, heights, texture, *decode_ribbon(msg))
+    data = SceneData(msg, heights, texture, *decode_ribbon(msg))
+    if msg.walkers is not None:
+        from lodsprite.distributed.web.walkers import decode_walkers
+
+        data.walkers = decode_walkers(msg.walkers)
+    return data
 
 
-def path_data(load: LoadArgs, args: PathArgs, hf: Any = None) -> dict:
+def path_data(load: LoadArgs, args: PathArgs, hf: Any = None, root: str | None = None
+              ) -> dict:
     """The reply data of ``path`` for a session whose resolved ``load`` is ``load``
     (terrain as a loader spec), over ``hf`` (its working height field, None: loaded
-    here); raises :class:`~lodsprite.errors.LodspriteError` for a path the terrain
-    cannot give."""
+    here); a scene file's path is its scene's own (opened confined to ``root``); raises
+    :class:`~lodsprite.errors.LodspriteError` for a path the terrain cannot give."""
     from lodsprite.paths import get_path
 
-    if hf is None:
-        from lodsprite.scene.spec import open_spec
+    if load.terrain.lower().endswith(".toml"):
+        from lodsprite.scene.kinds import open_scene
 
-        hf = open_spec(load).hf
-    path = get_path(args.spec, hf, args.frames)
+        path = open_scene(load.terrain, light=True, root=root).path(args.spec, args.frames)
+    else:
+        if hf is None:
+            from lodsprite.scene.spec import open_spec
+
+            hf = open_spec(load).hf
+        path = get_path(args.spec, hf, args.frames)
     rows = np.array([np.concatenate([vp.x, vp.y, vp.z, vp.o]) for vp in path.viewpoints],
                     dtype=np.float64)
     return {"viewpoints": rows.tolist(), "fov": float(path.fov_y_deg)}

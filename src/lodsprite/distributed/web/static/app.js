@@ -16,9 +16,10 @@
 // The API (for tests, tools and the widget): ready (a Promise: scene loaded), finished()
 // (a Promise: the path played and the held view's keyframe shown), stats(), pixels(),
 // viewpoint(), pathIndex() (path viewpoints drawn so far: the one shown is pathIndex() - 1),
-// capture(indices) (keep the canvas's pixels and viewpoint as the frames of those path
+// setWalkTime(t) (a scene's walkers held at t seconds; null: their clock, seconds since the
+// first frame), capture(indices) (keep the canvas's pixels, viewpoint and walkers' time as the frames of those path
 // indices are drawn: a readback in the frame, for untimed judged passes only), captured()
-// (those kept, {index, vp, width, height, rgba}, then forgotten),
+// (those kept, {index, vp, t, width, height, rgba}, then forgotten),
 // serverStats() (a Promise: the `stats` op's reply data), decoded() (keyframes decoded by
 // the decode worker), play(spec, frames) (a Promise: the path's viewpoints arrived and
 // play), stop() (hold the view shown), setViewpoint(vp), screenshot() (a Promise: a PNG
@@ -33,6 +34,7 @@ import { SpriteDrawer } from './gl.js';
 import { FlyControls, lookAt, mul, norm, sub } from './camera.js';
 import { ErrorMetric, Predictor } from './predictor.js';
 import { Hud } from './hud.js';
+import { WalkerDrawer, walkerData } from './walkers.js';
 
 const RESTING_MS = 250;   // no input this long: the viewer rests (one exact keyframe)
 const VIEWPOINT_MS = 33;  // viewpoint samples to the server at most this often
@@ -107,8 +109,9 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
   transport.onclose(() => { state = 'disconnected'; });
 
   let renderer, metric, predictor, controls, path = null, pathIndex = 0, pathName = null;
+  let walkers = null, walkStart = null, walkFixed = null;  // a scene's walkers, their clock (s)
   let captures = null, captureSet = null;
-  let shownVp = null, keyEye = null, keyViewProj = null, keyDeficit = 0, finishedResolve = () => {}, finished = null, lastFrame = null, lastSample = -Infinity;
+  let shownVp = null, keyEye = null, keyDir = null, keyViewProj = null, keyDeficit = 0, finishedResolve = () => {}, finished = null, lastFrame = null, lastSample = -Infinity;
   const newFinished = () => { finished = new Promise((r) => { finishedResolve = r; }); };
   newFinished();
 
@@ -130,6 +133,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
     renderer = new SpriteDrawer(canvas);
     renderer.proxy = depth ? 'depth' : 'coarse';
     renderer.setScene(h, scene.heights, scene.texture);
+    if (h.walkers) walkers = new WalkerDrawer(renderer.gl, walkerData(h.walkers));
     metric = new ErrorMetric(h, scene.heights);
     predictor = new Predictor(h.epsilon, h.fov, width / height, h.near, h.far, height);
     predictor.failed = (s) => { if (predictor.inflight && predictor.inflight.seq === s) predictor.inflight = null; };
@@ -162,6 +166,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
     pendingKey = null;
     renderer.useKeyframe(key);
     keyEye = header.viewpoint.o;
+    keyDir = header.viewpoint.z;
     keyViewProj = mul(header.proj, header.view);  // the estimate's keyframe frustum
     keyDeficit = header.deficit_px || 0;  // what it lacks while the renderer's tiles stream
     stats.keyframes += 1;
@@ -190,7 +195,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
     shownVp = vp;
     predictor.sample(now / 1000, vp);
     if (pendingKey) adopt(now);
-    const want = predictor.want(metric, keyEye, now / 1000, resting, keyViewProj, keyDeficit);
+    const want = predictor.want(metric, keyEye, now / 1000, resting, keyViewProj, keyDeficit, keyDir);
     if (want) {
       const t = now / 1000;
       const s = send({ kind: 'request', t, viewpoint: want });
@@ -200,8 +205,12 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
       const shown = keyEye ? { eye: keyEye, slot: 0 } : undefined;  // as the ZeroMQ client
       send({ kind: 'viewpoint', t: now / 1000, viewpoint: vp, shown });
     }
-    renderer.draw(predictor.viewProj(vp), vp.o);
-    if (captureSet && captureSet.has(index)) captures.push({ index, vp, ...renderer.pixels() });
+    const viewProj = predictor.viewProj(vp);
+    renderer.draw(viewProj, vp.o);
+    if (walkStart === null) walkStart = now;
+    const walkT = walkFixed ?? (now - walkStart) / 1000;
+    if (walkers) walkers.draw(viewProj, vp.o, walkT, renderer.meshDrawn);
+    if (captureSet && captureSet.has(index)) captures.push({ index, vp, t: walkT, ...renderer.pixels() });
     stats.error_px = predictor.errorPx(metric, keyEye, vp, keyViewProj, keyDeficit);
     if (Number.isFinite(stats.error_px)) { stats.errorSum += stats.error_px; stats.errorFrames += 1; }
     stats.frames += 1;
@@ -222,6 +231,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
         latency_ms: percentile(stats.latencies, 0.5),
         input_ms: percentile(inputs.ms, 0.5), input_ms_p99: percentile(inputs.ms, 0.99),
         inputs: inputs.ms.length,
+        walkers: walkers ? walkers.d.count : 0, walker_triangles: walkers ? walkers.triangles : 0,
       };
     },
     resetStats() {
@@ -233,6 +243,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
     captured() { const out = captures || []; captures = null; captureSet = null; return out; },
     viewpoint: () => controls && controls.vp,
     pathIndex: () => pathIndex,
+    setWalkTime(t) { walkFixed = t; },  // walkers held at t seconds (null: their own clock)
     state: () => state,
     serverStats: () => call('stats').then((r) => r.data),
     decoded: () => decoded,

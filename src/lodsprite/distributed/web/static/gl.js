@@ -230,6 +230,19 @@ function compile(gl, type, src) {
   return s;
 }
 
+// A linked program of vertex and fragment sources and the locations of its `uniforms`
+// (names): {program, u}.  Throws with the compiler's or linker's log.
+export function linkProgram(gl, vs, fs, uniforms) {
+  const p = gl.createProgram();
+  gl.attachShader(p, compile(gl, gl.VERTEX_SHADER, vs));
+  gl.attachShader(p, compile(gl, gl.FRAGMENT_SHADER, fs));
+  gl.linkProgram(p);
+  if (!gl.getProgramParameter(p, gl.LINK_STATUS)) throw new Error(gl.getProgramInfoLog(p));
+  const u = {};
+  for (const name of uniforms) u[name] = gl.getUniformLocation(p, name);
+  return { program: p, u };
+}
+
 function texture(gl, unit, internal, format, type, w, h, data, filter, mipmaps = false) {
   const t = gl.createTexture();
   gl.activeTexture(gl.TEXTURE0 + unit);
@@ -300,16 +313,9 @@ export class SpriteDrawer {
     const gl = canvas.getContext('webgl2', { antialias: false, preserveDrawingBuffer: true });
     if (!gl) throw new Error('this browser has no WebGL2');
     this.gl = gl;
-    const p = gl.createProgram();
-    gl.attachShader(p, compile(gl, gl.VERTEX_SHADER, VS));
-    gl.attachShader(p, compile(gl, gl.FRAGMENT_SHADER, FS));
-    gl.linkProgram(p);
-    if (!gl.getProgramParameter(p, gl.LINK_STATUS)) throw new Error(gl.getProgramInfoLog(p));
-    this.program = p;
-    this.u = {};
-    for (const name of ['u_mvp', 'u_key_mvp', 'u_color', 'u_sprite', 'u_key_depth', 'u_has_key', 'u_tol', 'u_key_near_far', 'u_fallback_tint']) {
-      this.u[name] = gl.getUniformLocation(p, name);
-    }
+    const { program, u } = linkProgram(gl, VS, FS, ['u_mvp', 'u_key_mvp', 'u_color', 'u_sprite', 'u_key_depth', 'u_has_key', 'u_tol', 'u_key_near_far', 'u_fallback_tint']);
+    this.program = program;
+    this.u = u;
     this.key = null;
     // 'coarse': the coarse level textured from the keyframe (the 1999 spriteframe);
     // 'depth': the keyframe's own depth as the proxy over it, for keyframes that carry
@@ -324,15 +330,7 @@ export class SpriteDrawer {
 
   meshProgram() {
     if (this.mesh) return this.mesh;
-    const gl = this.gl, p = gl.createProgram();
-    gl.attachShader(p, compile(gl, gl.VERTEX_SHADER, MESH_VS));
-    gl.attachShader(p, compile(gl, gl.FRAGMENT_SHADER, MESH_FS));
-    gl.linkProgram(p);
-    if (!gl.getProgramParameter(p, gl.LINK_STATUS)) throw new Error(gl.getProgramInfoLog(p));
-    const u = {};
-    for (const name of ['u_key_depth', 'u_key_near_far', 'u_key_tan', 'u_key_axes', 'u_mvp_rel', 'u_key_proj', 'u_stride', 'u_cut', 'u_key_px', 'u_frame_px', 'u_stretch', 'u_moved', 'u_sprite', 'u_fallback_tint']) {
-      u[name] = gl.getUniformLocation(p, name);
-    }
+    const { program: p, u } = linkProgram(this.gl, MESH_VS, MESH_FS, ['u_key_depth', 'u_key_near_far', 'u_key_tan', 'u_key_axes', 'u_mvp_rel', 'u_key_proj', 'u_stride', 'u_cut', 'u_key_px', 'u_frame_px', 'u_stretch', 'u_moved', 'u_sprite', 'u_fallback_tint']);
     this.mesh = { program: p, u };
     return this.mesh;
   }
@@ -458,9 +456,11 @@ export class SpriteDrawer {
     gl.bindVertexArray(this.vao);
     gl.drawElements(gl.TRIANGLES, this.count, gl.UNSIGNED_INT, 0);
     gl.bindVertexArray(null);
+    this.meshDrawn = false;
     if (this.proxy !== 'depth' || !key || key.header.zbuffer !== 'full') return this.triangles;
     // the coarse spriteframe stays under the mesh, where the mesh draws nothing
     gl.clear(gl.DEPTH_BUFFER_BIT);
+    this.meshDrawn = true;  // the depth buffer holds the mesh's (its own depth range)
     this.eye = eye || key.header.viewpoint.o;
     return this.triangles + this.drawMesh(key, viewProj);
   }

@@ -233,16 +233,20 @@ export class Predictor {
   // What to request now (a viewpoint) or null; `keyEye`: the shown keyframe's eye
   // (`keyViewProj`, `deficit`: as errorPx).  At rest a keyframe that lacks something is
   // asked for again (one request in flight at a time) until it lacks nothing.
-  want(metric, keyEye, t, resting, keyViewProj = null, deficit = 0) {
+  // `keyDir`: the shown keyframe's view axis (its viewpoint's z): at rest the view is the
+  // keyframe's only where both eye and axis are (a still eye turned is another view).
+  want(metric, keyEye, t, resting, keyViewProj = null, deficit = 0, keyDir = null) {
     if (this.inflight && t - this.inflight.t > LOST_S) this.inflight = null;  // lost
+    // moving (even while a keyframe is in flight): the view at rest is asked for anew
+    if (!resting) this.settled = false;
     if (this.inflight) return null;
     const now = this.samples[this.samples.length - 1][1];
     if (resting) {
-      if (deficit <= 0 && (this.settled || (keyEye && norm(sub(keyEye, now.o)) === 0))) return null;
+      const same = keyEye && norm(sub(keyEye, now.o)) === 0 && (!keyDir || norm(sub(keyDir, now.z)) === 0);
+      if (deficit <= 0 && (this.settled || same)) return null;
       this.settled = true;
       return now;
     }
-    this.settled = false;
     const ahead = this.predict(t + this.lead());
     return this.errorPx(metric, keyEye, ahead, keyViewProj, deficit) >= 0.5 * this.epsilon ? ahead : null;
   }

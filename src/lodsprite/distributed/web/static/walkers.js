@@ -1,0 +1,178 @@
+// A scene's walkers drawn by the page each frame (lodsprite.distributed.web.walkers): the
+// closed-form walk (lodsprite.scene.walk.walk: straight lines at constant speed, reflected
+// at the walking rectangle's edges by the triangle wave) on the ground (HeightField.
+// height_at: bilinear, clamped), each walker's LOD by its distance (Gumbau et al. §4.2:
+// 1 - (d - near) / (far - near), clamped, rounded up to the finest shipped level at or
+// above it), each (type, level) one instanced draw, shaded as lodsprite.gl.crowd, depth
+// tested against what the spriteframe drew (the keyframe's own surface).  walk() and
+// groundAt() are cross-checked with the Python ones (relative 1e-9).
+
+import { linkProgram } from './gl.js';
+
+const LIGHT = (() => { const l = [0.3, -0.4, 0.87], n = Math.hypot(...l); return l.map((x) => x / n); })();
+
+const VS = `#version 300 es
+layout(location = 0) in vec3 a_pos;
+layout(location = 1) in vec3 a_normal;
+layout(location = 2) in vec3 a_color;
+layout(location = 3) in vec4 a_inst;  // x, y, z, yaw
+uniform mat4 u_view_proj;
+uniform int u_remap;  // the depth mesh's depth range (gl.js MESH_VS): non-rubber surfaces'
+out vec3 v_color;
+out vec3 v_normal;
+void main() {
+  float c = cos(a_inst.w), s = sin(a_inst.w);
+  mat2 r = mat2(c, s, -s, c);
+  vec3 p = vec3(r * a_pos.xy, a_pos.z) + a_inst.xyz;
+  v_normal = vec3(r * a_normal.xy, a_normal.z);
+  v_color = a_color;
+  vec4 q = u_view_proj * vec4(p, 1.0);
+  if (u_remap == 1) q.z = 0.25 * q.z - 0.75 * q.w;
+  gl_Position = q;
+}`;
+
+const FS = `#version 300 es
+precision highp float;
+uniform vec3 u_light;
+in vec3 v_color;
+in vec3 v_normal;
+out vec4 f_color;
+void main() {
+  float lit = 0.35 + 0.65 * max(dot(normalize(v_normal), u_light), 0.0);
+  f_color = vec4(v_color * lit, 1.0);
+}`;
+
+// An aligned typed array over a copy of little-endian bytes (msgpack bin: a Uint8Array).
+function typed(Type, bytes) { return new Type(new Uint8Array(bytes).buffer); }
+
+// The walkers' arrays of a scene header's `walkers` entry.
+export function walkerData(w) {
+  return {
+    count: w.count, near: w.near, far: w.far,
+    xy0: typed(Float64Array, w.xy0), heading: typed(Float64Array, w.heading),
+    speed: typed(Float64Array, w.speed), box: typed(Float64Array, w.box),
+    type: typed(Uint16Array, w.type),
+    ground: typed(Float32Array, w.ground), rows: w.ground_shape[0], cols: w.ground_shape[1],
+    dx: w.ground_dx, dy: w.ground_dy,
+    types: w.types.map((t) => ({
+      name: t.name, vertices: typed(Float32Array, t.vertices),
+      levels: t.levels.map((l) => ({ fraction: l.fraction, indices: typed(Uint32Array, l.indices) })),
+    })),
+  };
+}
+
+// Positions and headings of every walker at time t seconds (lodsprite.scene.walk.walk):
+// out.xy (2K) and out.yaw (K), Float64Arrays.
+export function walk(d, t, out = { xy: new Float64Array(2 * d.count), yaw: new Float64Array(d.count) }) {
+  for (let k = 0; k < d.count; k++) {
+    const h = d.heading[k], dir = [Math.cos(h), Math.sin(h)], turned = [0, 0];
+    for (let a = 0; a < 2; a++) {
+      const lo = d.box[4 * k + a], hi = d.box[4 * k + 2 + a];
+      const span = Math.max(hi - lo, 1e-12), period = 2 * span;
+      let u = (d.xy0[2 * k + a] - lo) + dir[a] * (d.speed[k] * t);
+      u -= period * Math.floor(u / period);  // numpy's mod: the divisor's sign
+      const back = u > span;
+      out.xy[2 * k + a] = lo + (back ? period - u : u);
+      turned[a] = back ? -dir[a] : dir[a];
+    }
+    out.yaw[k] = Math.atan2(turned[1], turned[0]);
+  }
+  return out;
+}
+
+// Ground height (metres) at world (x, y): HeightField.height_at over the shipped heights
+// (row 0 north, centred on the origin), bilinear, clamped at the edges.
+export function groundAt(d, x, y) {
+  const rows = d.rows, cols = d.cols;
+  const width = (cols - 1) * d.dx, depth = (rows - 1) * d.dy;
+  const r = Math.min(Math.max((depth / 2 - y) / d.dy, 0), rows - 1);
+  const c = Math.min(Math.max((x + width / 2) / d.dx, 0), cols - 1);
+  const r0 = Math.min(Math.floor(r), rows - 2), c0 = Math.min(Math.floor(c), cols - 2);
+  const fr = r - r0, fc = c - c0, g = d.ground, i = r0 * cols + c0;
+  const top = g[i] * (1 - fc) + g[i + 1] * fc;
+  const bot = g[i + cols] * (1 - fc) + g[i + cols + 1] * fc;
+  return top * (1 - fr) + bot * fr;
+}
+
+// The shipped level (index) a walker at distance `dist` draws: the coarsest whose fraction
+// is at or above the desired LOD (levels finest first).
+export function levelFor(levels, near, far, dist) {
+  const want = Math.min(Math.max(1 - (dist - near) / (far - near), 0), 1);
+  let pick = 0;
+  for (let i = 0; i < levels.length; i++) if (levels[i].fraction >= want) pick = i;
+  return pick;
+}
+
+export class WalkerDrawer {
+  constructor(gl, data) {
+    this.gl = gl; this.d = data;
+    const { program, u } = linkProgram(gl, VS, FS, ['u_view_proj', 'u_light', 'u_remap']);
+    this.program = program;
+    this.u = { viewProj: u.u_view_proj, light: u.u_light, remap: u.u_remap };
+    this.out = { xy: new Float64Array(2 * data.count), yaw: new Float64Array(data.count) };
+    this.buckets = [];  // per type, per level: {vao, count (indices), inst buffer, data, n}
+    for (const t of data.types) {
+      const vbo = gl.createBuffer();
+      gl.bindBuffer(gl.ARRAY_BUFFER, vbo);
+      gl.bufferData(gl.ARRAY_BUFFER, t.vertices, gl.STATIC_DRAW);
+      const perType = [];
+      for (const level of t.levels) {
+        const vao = gl.createVertexArray();
+        gl.bindVertexArray(vao);
+        gl.bindBuffer(gl.ARRAY_BUFFER, vbo);
+        for (let a = 0; a < 3; a++) {
+          gl.enableVertexAttribArray(a);
+          gl.vertexAttribPointer(a, 3, gl.FLOAT, false, 36, 12 * a);
+        }
+        const inst = gl.createBuffer();
+        gl.bindBuffer(gl.ARRAY_BUFFER, inst);
+        gl.bufferData(gl.ARRAY_BUFFER, 16 * data.count, gl.DYNAMIC_DRAW);
+        gl.enableVertexAttribArray(3);
+        gl.vertexAttribPointer(3, 4, gl.FLOAT, false, 0, 0);
+        gl.vertexAttribDivisor(3, 1);
+        const ibo = gl.createBuffer();
+        gl.bindBuffer(gl.ELEMENT_ARRAY_BUFFER, ibo);
+        gl.bufferData(gl.ELEMENT_ARRAY_BUFFER, level.indices, gl.STATIC_DRAW);
+        gl.bindVertexArray(null);
+        perType.push({ vao, count: level.indices.length, inst, data: new Float32Array(4 * data.count), n: 0 });
+      }
+      this.buckets.push(perType);
+    }
+    this.triangles = 0;
+  }
+
+  // Draw every walker at time t seconds from eye (world metres) with viewProj (row-major),
+  // over what the canvas holds (its depth buffer tested; `meshDepth`: the spriteframe drew
+  // the keyframe's depth mesh, whose depth range the walkers then share).  Returns the
+  // triangles drawn.
+  draw(viewProj, eye, t, meshDepth = false) {
+    const gl = this.gl, d = this.d, { xy, yaw } = walk(d, t, this.out);
+    for (const perType of this.buckets) for (const b of perType) b.n = 0;
+    for (let k = 0; k < d.count; k++) {
+      const x = xy[2 * k], y = xy[2 * k + 1], z = groundAt(d, x, y);
+      const dist = Math.hypot(x - eye[0], y - eye[1], z - eye[2]);
+      const type = d.type[k];
+      const b = this.buckets[type][levelFor(d.types[type].levels, d.near, d.far, dist)];
+      b.data.set([x, y, z, yaw[k]], 4 * b.n); b.n += 1;
+    }
+    gl.enable(gl.DEPTH_TEST);
+    gl.useProgram(this.program);
+    gl.uniformMatrix4fv(this.u.viewProj, true, viewProj);
+    gl.uniform3fv(this.u.light, LIGHT);
+    gl.uniform1i(this.u.remap, meshDepth ? 1 : 0);
+    let tris = 0;
+    for (const perType of this.buckets) {
+      for (const b of perType) {
+        if (!b.n) continue;
+        gl.bindBuffer(gl.ARRAY_BUFFER, b.inst);
+        gl.bufferSubData(gl.ARRAY_BUFFER, 0, b.data, 0, 4 * b.n);
+        gl.bindVertexArray(b.vao);
+        gl.drawElementsInstanced(gl.TRIANGLES, b.count, gl.UNSIGNED_INT, 0, b.n);
+        tris += (b.count / 3) * b.n;
+      }
+    }
+    gl.bindVertexArray(null);
+    this.triangles = tris;
+    return tris;
+  }
+}
