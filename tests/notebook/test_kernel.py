@@ -234,3 +234,44 @@ def test_messages_from_a_subshell_thread_are_handled_on_the_widgets_own_loop():
             w.close()
 
     asyncio.run(main())
+
+
+def test_a_scene_file_widget_draws_spriteframes_unless_asked_to_stream(tmp_path):
+    """A scene file is a sprite widget (its walkers in the scene message, keyframes of
+    what stands); with ``stream=True`` a stream widget (the comparison)."""
+    import lodsprite
+    from lodsprite.notebook.sprite import SpriteWidget
+
+    scene = tmp_path / "few.toml"
+    scene.write_text('[terrain]\nsource = "fractal:64:4"\n[[objects]]\nmesh = "ogre"\n'
+                     'height_m = 40.0\ncount = 12\nwalk_mps = 3.0\n')
+
+    async def main():
+        w = lodsprite.widget(scene, lod=8, size=(96, 96))
+        assert isinstance(w, SpriteWidget)
+        sent = []
+        w._core.send = lambda content, buffers: sent.append((content, buffers))
+        try:
+            w._on_front(w, {"kind": "wire", "view": VIEW}, [pack_message(
+                {"kind": "control", "seq": 1, "op": "load",
+                 "args": {"terrain": "few.toml", "size": [96, 96], "lod": 8,
+                          "visibility": "fragment"}})])
+            await wait_for(lambda: any(h["kind"] == "scene" for h, _ in replies(sent)))
+            header = next(h for h, _ in replies(sent) if h["kind"] == "scene")
+            assert header["walkers"]["count"] == 12
+            vp = {"x": [1.0, 0.0, 0.0], "y": [0.0, 0.6, 0.8], "z": [0.0, -0.8, 0.6],
+                  "o": [0.0, -1500.0, 2600.0]}
+            w._on_front(w, {"kind": "wire", "view": VIEW}, [pack_message(
+                {"kind": "request", "seq": 2, "t": 0.5, "viewpoint": vp})])
+            await wait_for(lambda: any(h["kind"] == "keyframe" for h, _ in replies(sent)))
+            key = next(h for h, _ in replies(sent) if h["kind"] == "keyframe")
+            assert key["zbuffer"] == "full"
+        finally:
+            w.close()
+
+    asyncio.run(main())
+    streamed = lodsprite.widget(scene, stream=True)
+    try:
+        assert type(streamed).__name__ == "StreamWidget"
+    finally:
+        streamed.close()

@@ -1,6 +1,7 @@
 """lodsprite in a notebook: :func:`widget` (anywidget; the ``notebook`` extra installs
-what it needs).  :class:`~lodsprite.notebook.sprite.SpriteWidget` flies a terrain with
-spriteframes drawn in the browser and keyframes from the kernel's renderer processes;
+what it needs).  :class:`~lodsprite.notebook.sprite.SpriteWidget` flies a terrain or a
+scene file with spriteframes drawn in the browser and keyframes from the kernel's renderer
+processes;
 :class:`~lodsprite.notebook.stream.StreamWidget` streams every frame rendered in the
 kernel (jupyter_rfb), for scenes the browser does not draw and for comparison."""
 
@@ -16,11 +17,13 @@ def widget(source: str | Path = "jacksboro", *, stream: bool = False, **kwargs: 
     """A widget for ``source``, displayed as a cell's value.
 
     A terrain (a DEM file, a terrain store folder, a built-in such as ``jacksboro`` or
-    ``fractal:N``) gives a :class:`~lodsprite.notebook.sprite.SpriteWidget`: spriteframes
-    drawn in the browser, keyframes from the kernel's renderer processes (see it for the
-    keyword arguments).  A scene the browser does not draw (a scene file, a light field,
-    a crowd), or any scene with ``stream=True``, gives a
-    :class:`~lodsprite.notebook.stream.StreamWidget`: every frame rendered in the kernel.
+    ``fractal:N``) or a scene file gives a :class:`~lodsprite.notebook.sprite.SpriteWidget`:
+    spriteframes drawn in the browser, keyframes from the kernel's renderer processes (a
+    scene file's standing layers; its walkers drawn in the browser each frame; see it for
+    the keyword arguments).  A scene the browser does not draw (a light field, a crowd, a
+    plug-in's kind), or any scene with ``stream=True``, gives a
+    :class:`~lodsprite.notebook.stream.StreamWidget`: every frame rendered in the kernel
+    (the fallback, and the comparison).
     Raises :class:`~lodsprite.errors.InputError` (one line) for a bad argument, and
     :class:`~lodsprite.errors.LodspriteError` naming the ``notebook`` extra when its
     packages are not installed."""
@@ -41,10 +44,11 @@ def widget(source: str | Path = "jacksboro", *, stream: bool = False, **kwargs: 
 
 
 def _scene_kind(spec: str) -> bool:
-    """Whether a scene kind (a scene file, a crowd, a light field) claims ``spec``."""
-    from lodsprite.scene.kinds import scene_kinds
+    """Whether a scene kind the browser does not draw (a crowd, a light field, a
+    plug-in's) claims ``spec`` (a terrain or a scene file: False)."""
+    from lodsprite.scene.kinds import scene_kind
 
-    return any(kind.claims(spec) for kind in scene_kinds())
+    return scene_kind(spec) not in (None, "scene-file")
 
 
 def one_line_errors() -> None:

@@ -1,7 +1,7 @@
-"""What a notebook widget shows: a terrain named as the web server names one, resolved
-in the kernel before anything starts.
+"""What a notebook widget shows: a terrain or a scene file named as the web server names
+one, resolved in the kernel before anything starts.
 
-The user's own Python names the terrain (a file or a store folder, or a built-in); the
+The user's own Python names it (a file, a store folder or a scene file, or a built-in); the
 widget serves that one name from the file's folder, by the web server's rules
 (:class:`~lodsprite.distributed.datasets.Datasets`: no path outside the folder, stores
 without symlinks, size caps), and a ``load`` from the browser that names anything else is
@@ -80,7 +80,10 @@ def resolve_source(terrain: str | Path, texture: str | Path = "terrain",
     except (msgspec.ValidationError, ValueError) as exc:
         raise InputError(f"widget: {str(exc).splitlines()[0]}") from None
     datasets = Datasets(folder)
-    datasets.terrain(args.terrain)  # the server's checks, here first
+    named = datasets.scene(args.terrain)  # the server's checks, here first
+    if named.kind not in (None, "scene-file"):
+        raise InputError(f"widget: {terrain} is a {named.kind} scene: the sprite widget "
+                         "draws terrains and scene files (stream=True shows any scene)")
     datasets.texture(args.texture)
     return WidgetSource(args, folder)
 
