@@ -57,6 +57,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
   canvas.width = width; canvas.height = height;
   const hud = hudEl ? new Hud(hudEl) : null;
   const stats = { frames: 0, keyframes: 0, intervals: [], latencies: [], error_px: null, errorSum: 0, errorFrames: 0 };
+  let loadAt = null, firstKeyMs = null;  // the load sent; the first keyframe drawn, ms after it
   // Input to pixels: a key press's event time to the display frame after the first frame
   // drawn from a camera that includes it (the flying camera's; a path ignores keys).
   const inputs = { pending: [], drawn: [], ms: [] };
@@ -126,6 +127,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
       grid: options.grid,
       visibility: depth && options.visibility === 'coarse' ? 'fragment' : options.visibility,
     };
+    loadAt = performance.now();
     const reply = await call('load', args);
     if (!reply.ok) throw new Error(reply.error);
     const scene = await sceneArrived;
@@ -170,6 +172,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
     keyViewProj = mul(header.proj, header.view);  // the estimate's keyframe frustum
     keyDeficit = header.deficit_px || 0;  // what it lacks while the renderer's tiles stream
     stats.keyframes += 1;
+    if (firstKeyMs === null && loadAt !== null) firstKeyMs = now - loadAt;
     keep(stats.latencies, now - 1000 * header.t0);
     predictor.arrived(header.t0, now / 1000);
   }
@@ -228,7 +231,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
         median_ms: percentile(stats.intervals, 0.5), p99_ms: percentile(stats.intervals, 0.99),
         error_px: Number.isFinite(stats.error_px) ? stats.error_px : null,
         error_px_mean: stats.errorFrames ? stats.errorSum / stats.errorFrames : null,
-        latency_ms: percentile(stats.latencies, 0.5),
+        latency_ms: percentile(stats.latencies, 0.5), first_keyframe_ms: firstKeyMs,
         input_ms: percentile(inputs.ms, 0.5), input_ms_p99: percentile(inputs.ms, 0.99),
         inputs: inputs.ms.length,
         walkers: walkers ? walkers.d.count : 0, walker_triangles: walkers ? walkers.triangles : 0,
