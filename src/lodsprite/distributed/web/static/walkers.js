@@ -4,7 +4,8 @@
 // height_at: bilinear, clamped), each walker's LOD by its distance (Gumbau et al. §4.2:
 // 1 - (d - near) / (far - near), clamped, rounded up to the finest shipped level at or
 // above it), each (type, level) one instanced draw, shaded as lodsprite.gl.crowd, depth
-// tested against what the spriteframe drew (the keyframe's own surface).  walk() and
+// tested against what the spriteframe drew (the keyframe's own surface).  Walkers outside
+// the view frustum (by a bounding sphere about the type's base) are not drawn.  walk() and
 // groundAt() are cross-checked with the Python ones (relative 1e-9).
 
 import { linkProgram } from './gl.js';
@@ -54,11 +55,30 @@ export function walkerData(w) {
     type: typed(Uint16Array, w.type),
     ground: typed(Float32Array, w.ground), rows: w.ground_shape[0], cols: w.ground_shape[1],
     dx: w.ground_dx, dy: w.ground_dy,
-    types: w.types.map((t) => ({
-      name: t.name, vertices: typed(Float32Array, t.vertices),
-      levels: t.levels.map((l) => ({ fraction: l.fraction, indices: typed(Uint32Array, l.indices) })),
-    })),
+    types: w.types.map((t) => {
+      const vertices = typed(Float32Array, t.vertices);
+      let r2 = 0;  // the type's bounding radius about its base (metres), for culling
+      for (let i = 0; i < vertices.length; i += 9) {
+        r2 = Math.max(r2, vertices[i] ** 2 + vertices[i + 1] ** 2 + vertices[i + 2] ** 2);
+      }
+      return {
+        name: t.name, vertices, radius: Math.sqrt(r2),
+        levels: t.levels.map((l) => ({ fraction: l.fraction, indices: typed(Uint32Array, l.indices) })),
+      };
+    }),
   };
+}
+
+// The six planes (a, b, c, d; inside: a x + b y + c z + d >= 0, normalised) of a row-major
+// view-projection's frustum (Gribb & Hartmann).
+export function frustumPlanes(m) {
+  const row = (i) => m.slice(4 * i, 4 * i + 4);
+  const [r0, r1, r2, r3] = [row(0), row(1), row(2), row(3)];
+  return [[r3, r0, 1], [r3, r0, -1], [r3, r1, 1], [r3, r1, -1], [r3, r2, 1], [r3, r2, -1]].map(([a, b, k]) => {
+    const p = a.map((v, i) => v + k * b[i]);
+    const n = Math.hypot(p[0], p[1], p[2]);
+    return p.map((v) => v / n);
+  });
 }
 
 // Positions and headings of every walker at time t seconds (lodsprite.scene.walk.walk):
@@ -148,10 +168,14 @@ export class WalkerDrawer {
   draw(viewProj, eye, t, meshDepth = false) {
     const gl = this.gl, d = this.d, { xy, yaw } = walk(d, t, this.out);
     for (const perType of this.buckets) for (const b of perType) b.n = 0;
+    const planes = frustumPlanes(viewProj);
+    this.culled = 0;
     for (let k = 0; k < d.count; k++) {
       const x = xy[2 * k], y = xy[2 * k + 1], z = groundAt(d, x, y);
+      const type = d.type[k], r = d.types[type].radius;
+      // outside the view (its bounding sphere about its base, radius its farthest vertex)
+      if (planes.some((p) => p[0] * x + p[1] * y + p[2] * z + p[3] < -r)) { this.culled += 1; continue; }
       const dist = Math.hypot(x - eye[0], y - eye[1], z - eye[2]);
-      const type = d.type[k];
       const b = this.buckets[type][levelFor(d.types[type].levels, d.near, d.far, dist)];
       b.data.set([x, y, z, yaw[k]], 4 * b.n); b.n += 1;
     }
