@@ -7,6 +7,7 @@ from lodsprite.distributed.protocol import (
     PROTOCOL_VERSION,
     Keyframe,
     ProtocolError,
+    check_load_args,
     decode,
     decode_keyframe,
     encode,
@@ -271,3 +272,20 @@ def test_every_link_socket_caps_its_message_size():
     finally:
         link.close()
         ctx.destroy(linger=0)
+
+
+def test_a_load_asks_for_a_keyframe_scale_the_sprite_drawer_knows_within_the_image_cap():
+    import msgspec
+
+    from lodsprite.distributed.messages import KEY_SCALES, LoadArgs
+    from lodsprite.distributed.render import key_size
+    from lodsprite.gl.sprite import KEY_SCALES as DRAWER_SCALES
+
+    assert KEY_SCALES == DRAWER_SCALES
+    args = msgspec.convert({"size": [640, 480], "key_scale": 1.5}, LoadArgs)
+    assert key_size(args) == (960, 720)
+    for bad in ({"size": [640, 480], "key_scale": 1.25},  # not one of the scales
+                {"size": [3000, 480], "key_scale": 1.5},  # 4500 px: over the image cap
+                {"size": [640, 480], "key_scale": 3}):
+        with pytest.raises(ProtocolError):
+            check_load_args(bad)

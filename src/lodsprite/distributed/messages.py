@@ -108,13 +108,18 @@ class Shown(Struct, forbid_unknown_fields=True):
     slot: Slot
 
 
+KEY_SCALES = (1.0, 1.5, 2.0)
+"""Keyframe texels a frame pixel side a ``load`` may ask for (``lodsprite.gl.sprite``'s)."""
+
+
 class LoadArgs(SceneSpec, forbid_unknown_fields=True, omit_defaults=True):
     """Arguments of ``load``: the scene's description (:class:`~lodsprite.scene.spec.
     SceneSpec`: terrain and texture names, working grid in quads, vertical exaggeration,
     with the scene files' caps), keyframe size ``(width, height)`` px, vertical field of
     view in degrees, the client's sprite settings (coarse level in quads, visibility
-    rule, border ribbons, ε in pixels, pace) and its place among its servers (slot of
-    slots)."""
+    rule, border ribbons, ε in pixels, pace), its place among its servers (slot of
+    slots) and ``key_scale``, keyframe texels a frame pixel side (keyframes are rendered
+    at ``key_scale`` times ``size``, at most :data:`MAX_IMAGE_SIDE` a side)."""
 
     size: tuple[Side, Side] = (512, 512)
     fov_y_deg: Annotated[float, Meta(ge=1.0, le=179.0)] = 45.0
@@ -125,9 +130,17 @@ class LoadArgs(SceneSpec, forbid_unknown_fields=True, omit_defaults=True):
     pace: Literal[PACE_NAMES] = DEFAULT_PACE  # type: ignore[valid-type]
     slot: Slot = 0
     slots: Annotated[int, Meta(ge=1, le=MAX_SLOTS)] = 1
+    key_scale: Annotated[float, Meta(ge=1.0, le=2.0)] = 1.0
 
     def __post_init__(self) -> None:
         super().__post_init__()
+        if self.key_scale not in KEY_SCALES:
+            raise ValueError(f"key_scale {self.key_scale:g} is not one of "
+                             f"{', '.join(f'{k:g}' for k in KEY_SCALES)}")
+        side = round(self.key_scale * max(self.size))
+        if side > MAX_IMAGE_SIDE:
+            raise ValueError(f"key_scale {self.key_scale:g} makes keyframes {side} pixels a "
+                             f"side, more than {MAX_IMAGE_SIDE}")
         if self.lod & (self.lod - 1):
             raise ValueError(f"lod {self.lod} is not a power of two")
         if self.grid is not None and self.lod > self.grid:

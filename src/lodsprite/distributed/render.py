@@ -27,9 +27,9 @@ from lodsprite.terrain.heightfield import DEFAULT_GRID
 
 __all__ = ["ADAPTIVE_ABOVE", "MEMORY_FRACTION", "AdaptiveKeyframeService", "KeyframeService",
            "SceneKeyframeService", "adaptive_scene_bytes", "check_load_args",
-           "check_scene_memory", "estimate_scene_bytes", "is_scene_file", "keyframe_kind",
-           "keyframe_scene_bytes", "keyframe_service", "memory_available", "scene_args",
-           "scene_file_bytes"]
+           "check_scene_memory", "estimate_scene_bytes", "is_scene_file", "key_size",
+           "keyframe_kind", "keyframe_scene_bytes", "keyframe_service", "memory_available",
+           "scene_args", "scene_file_bytes"]
 
 ADAPTIVE_ABOVE = 1024
 """Working grids (quads a side) above which an in-memory terrain's keyframes are drawn
@@ -49,6 +49,12 @@ def scene_args(scene: SceneSpec, size: tuple[int, int], fov_y_deg: float = 45.0)
     ``SPRITE_KEYS``: coarse level, visibility rule, border ribbons, ε in pixels, pace)."""
     return {"terrain": scene.terrain, "texture": scene.texture, "grid": scene.grid,
             "exaggeration": scene.exaggeration, "size": list(size), "fov_y_deg": fov_y_deg}
+
+
+def key_size(args: LoadArgs) -> tuple[int, int]:
+    """The keyframe's size ``(w, h)`` pixels: ``size`` times ``key_scale`` (as
+    :attr:`lodsprite.gl.sprite.SpriteDrawer.key_size` without a guard band)."""
+    return tuple(int(round(args.key_scale * n)) for n in args.size)
 
 
 def working_grid(args: LoadArgs) -> int:
@@ -77,7 +83,8 @@ def estimate_scene_bytes(args: LoadArgs, source: tuple[int, int] | None,
     n = working_grid(args) + 1
     src = source[0] * source[1] if source is not None else n * n
     texels = texture[0] * texture[1] if texture is not None else n * n
-    pixels = args.size[0] * args.size[1]
+    w, h = key_size(args)
+    pixels = w * h
     return 48 * src + 64 * n * n + 16 * texels + 48 * pixels + 64 * 2**20
 
 
@@ -93,7 +100,8 @@ def adaptive_scene_bytes(args: LoadArgs) -> int:
     n = max(LIGHT_SIDE, working_grid(args) + 1) if is_store(args.terrain) else (
         working_grid(args) + 1)
     caches = (GPU_MB.default + HOST_MB.default) * 2**20
-    return int(caches) + 64 * n * n + 48 * args.size[0] * args.size[1] + 64 * 2**20
+    w, h = key_size(args)
+    return int(caches) + 64 * n * n + 48 * w * h + 64 * 2**20
 
 
 def scene_file_bytes(args: LoadArgs) -> int:
@@ -105,7 +113,8 @@ def scene_file_bytes(args: LoadArgs) -> int:
 
     caches = (GPU_MB.default + HOST_MB.default) * 2**20
     n = DEFAULT_GRID + 1
-    return int(caches) + 64 * n * n + 48 * args.size[0] * args.size[1] + 128 * 2**20
+    w, h = key_size(args)
+    return int(caches) + 64 * n * n + 48 * w * h + 128 * 2**20
 
 
 def keyframe_scene_bytes(args: LoadArgs, source: tuple[int, int] | None,
@@ -165,7 +174,7 @@ class KeyframeService:
         with two the older would draw into the newer's (render workers keep a few)."""
         args = check_load_args(args)
         scene = open_spec(args)  # the load's scene description (a SceneSpec)
-        size = tuple(args.size)
+        size = key_size(args)
         self.terrain_gl = TerrainGL(scene, size, args.fov_y_deg, ctx)
         self.terrain_gl.drawer.unlocked_draws = True  # the threads beside it run meanwhile
         try:
@@ -237,7 +246,8 @@ class AdaptiveKeyframeService:
                          GPU_MB.default if gpu_mb is None else gpu_mb,
                          HOST_MB.default if host_mb is None else host_mb, heights)
         settings = WorkerSettings(tuple(args.size), args.fov_y_deg, args.lod,
-                                  args.visibility, args.border, 0, store=keys)
+                                  args.visibility, args.border, 0, store=keys,
+                                  key_scale=args.key_scale)
         self.keys = StoreKeyframes(scene.hf, scene.texture, settings, ctx)
         self.lod, self.deficit_px = args.lod, 0.0
 
@@ -284,7 +294,8 @@ class SceneKeyframeService:
                          {"sse": STORE_DEFAULTS["key_sse"] if key_sse is None else key_sse}
                          if adaptive else {})
         settings = WorkerSettings(tuple(args.size), args.fov_y_deg, args.lod, "fragment",
-                                  args.border, 0)  # the full z-buffer: any rule but coarse
+                                  args.border, 0,  # the full z-buffer: any rule but coarse
+                                  key_scale=args.key_scale)
         self.keys = SceneKeyframes(scene, keys, settings, None if ctx is None else ctx.mgl)
         self.lod, self.deficit_px = args.lod, 0.0
 

@@ -179,7 +179,8 @@ class SceneKeyframes:
         self.terrain = self.objects = self.sprite = None
         try:
             self.sprite = SpriteDrawer(self.renderer.terrain_gl.drawer, s.lod, s.visibility,
-                                       border=s.border, guard_px=s.guard_px)
+                                       border=s.border, guard_px=s.guard_px,
+                                       key_scale=s.key_scale)
             if keys.terrain == "adaptive":
                 self.terrain = TerrainLayer(self.renderer, "adaptive", **keys.terrain_options)
                 self.sprite.keyframe_drawer = self.terrain.technique.terrain.render_into

@@ -42,8 +42,10 @@ SIZE = 96
 TERRAIN = {"terrain": "fractal:64:4", "grid": 64, "lod": 8}
 # (seed 4: chen1999's last eye is above the ground with a clear line to the target; on
 # seed 1 it is under a hill and the frame shows the terrain's underside)
+# (keyscale=1: one keyframe texel a pixel, so that the held frame is the offscreen render's
+# pixels; the keyframe scale has its own test)
 QUERY = (f"terrain={TERRAIN['terrain']}&grid=64&lod=8&size={SIZE}x{SIZE}&path=chen1999"
-         f"&frames={FRAMES}")
+         f"&frames={FRAMES}&keyscale=1")
 # RMSE (grey levels, 0..255, over RGB) between the held frame and the offscreen render of
 # its viewpoint.  The held frame is a spriteframe of a keyframe rendered at that very
 # viewpoint, so what differs is only the page's resampling: the keyframe texture sampled
@@ -566,7 +568,7 @@ def test_the_page_plays_a_scene_file_and_its_walkers_stand_where_lodsprite_draws
     ground = float(scene.hf.height_at(np.array([0.0]), np.array([0.0]))[0])
     top = float(scene.hf.heights.max())  # above every hill: nothing hides the crowd
     vp = look_at([0.0, -700.0, top + 600.0], [0.0, 0.0, ground])
-    browser.get(page_url(server, query=f"scene=walk.toml&lod=8&size={SIZE}x{SIZE}"))
+    browser.get(page_url(server, query=f"scene=walk.toml&lod=8&size={SIZE}x{SIZE}&keyscale=1"))
     wait_for(browser, "window.lodsprite && window.lodsprite.state() === 'flying'")
     browser.execute_script("window.lodsprite.setWalkTime(arguments[0]);"
                            "window.lodsprite.setViewpoint(arguments[1]);", WALK_T,
@@ -594,3 +596,50 @@ def test_the_page_plays_a_scene_file_and_its_walkers_stand_where_lodsprite_draws
     same, later = (rmse(shown, f) for f in frames)
     assert same <= SCENE_RMSE_TOL, (same, later)
     assert later > 1.5 * same, (same, later)  # the walkers are what tells them apart
+
+
+def test_the_keyframe_scale_follows_the_texture_limit_and_the_downlink(server, browser):
+    """``chooseKeyScale``: the largest scale whose keyframes fit the browser's texture
+    side and the image cap, lowered until its raw keyframes at 4 a second fit the
+    downlink when the browser gives one; an asked scale as asked."""
+    browser.get(f"http://127.0.0.1:{server['port']}/static/hud.js")  # the page's origin
+    got = browser.execute_async_script("""
+        const done = arguments[arguments.length - 1];
+        import('/static/gl.js').then((m) => done([
+          m.chooseKeyScale('auto', 640, 480, 16384, null),
+          m.chooseKeyScale('auto', 3000, 2000, 16384, null),
+          m.chooseKeyScale('auto', 640, 480, 1000, null),
+          m.chooseKeyScale('auto', 640, 480, 16384, 200),
+          m.chooseKeyScale('auto', 640, 480, 16384, 10),
+          m.chooseKeyScale('1.5', 640, 480, 16384, 10),
+        ]), (e) => done(String(e)));""")
+    assert [g["scale"] for g in got] == [2, 1, 1.5, 1.5, 1, 1.5], got
+    # 640 x 480 x 7 bytes x 4 a second: 1x needs 69 Mbit/s, 1.5x 155, 2x 275
+    assert "downlink" in got[3]["why"] and got[5]["why"] == "asked"
+
+
+def test_a_page_asking_for_supersampled_keyframes_gets_them(server, browser):
+    """keyscale=2: keyframes of twice the canvas side, drawn down to it (the held frame
+    close to the offscreen render of its viewpoint at one sample a pixel)."""
+    from lodsprite.paths import get_path
+    from lodsprite.scene import load_scene
+
+    browser.get(page_url(server, query=QUERY.replace("keyscale=1", "keyscale=2")))
+    got = browser.execute_async_script("""
+        const done = arguments[arguments.length - 1];
+        const wait = () => window.lodsprite ? window.lodsprite.ready.then(
+            () => window.lodsprite.finished).then(() => done({stats: window.lodsprite.stats(),
+            pixels: window.lodsprite.pixels()}), (e) => done({error: String(e)}))
+            : setTimeout(wait, 20);
+        wait();""")
+    assert "error" not in got, got
+    assert got["stats"]["key_scale"] == 2 and got["stats"]["key_scale_why"] == "asked"
+    p = got["pixels"]
+    shown = np.frombuffer(base64.b64decode(p["rgba"]), np.uint8)
+    shown = shown.reshape(p["height"], p["width"], 4)[..., :3]
+    hf = load_scene(TERRAIN["terrain"], "terrain", TERRAIN["grid"], 1.0).hf
+    path = get_path("chen1999", hf, FRAMES)
+    last, first = offscreen([path.viewpoints[-1], path.viewpoints[0]])
+    assert shown.shape == last.shape == (SIZE, SIZE, 3)
+    assert rmse(shown, last) <= RMSE_TOL, rmse(shown, last)  # 0.54 measured here
+    assert rmse(shown, first) > 3 * RMSE_TOL

@@ -9,7 +9,8 @@
 // startApp({canvas, hud, transport, options, decoderUrl, keyTarget}) -> the client's API:
 //   transport: {opened: Promise, send(Uint8Array), onmessage(handler(ArrayBuffer)),
 //               onclose(handler())}: one web message (wire.js) each way a call;
-//   options: {terrain, size: [w, h], lod, epsilon, visibility, proxy, grid, path, frames}, and
+//   options: {terrain, size: [w, h], lod, epsilon, visibility, proxy, grid, path, frames,
+//   keyscale ('auto' or 1, 1.5, 2: gl.js chooseKeyScale)}, and
 //   moreOptions (a Promise of more, merged before the load; a rejection fails `ready`);
 //   decoderUrl: decode.js's URL (a module Web Worker); keyTarget: the element whose key
 //   presses fly the camera (default: the window).
@@ -30,7 +31,7 @@
 // uploaded, so it never waits for a decode or an upload.
 
 import { pack, unpack, image } from './wire.js';
-import { SpriteDrawer } from './gl.js';
+import { SpriteDrawer, chooseKeyScale } from './gl.js';
 import { FlyControls, lookAt, mul, norm, sub } from './camera.js';
 import { ErrorMetric, Predictor } from './predictor.js';
 import { Hud } from './hud.js';
@@ -57,7 +58,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
   canvas.width = width; canvas.height = height;
   const hud = hudEl ? new Hud(hudEl) : null;
   const stats = { frames: 0, keyframes: 0, intervals: [], latencies: [], error_px: null, errorSum: 0, errorFrames: 0 };
-  let loadAt = null, firstKeyMs = null;  // the load sent; the first keyframe drawn, ms after it
+  let loadAt = null, firstKeyMs = null, keyScale = { scale: 1, why: null };  // the load sent; the first keyframe drawn, ms after it
   // Input to pixels: a key press's event time to the display frame after the first frame
   // drawn from a camera that includes it (the flying camera's; a path ignores keys).
   const inputs = { pending: [], drawn: [], ms: [] };
@@ -122,9 +123,13 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
     // the keyframe's own depth as the proxy needs the full z-buffer: the coarse rule's
     // coarse one becomes the fragment rule's (the coarse spriteframe under the mesh)
     const depth = (options.proxy ?? 'depth') === 'depth';
+    renderer = new SpriteDrawer(canvas);  // the GL context: its texture limit
+    const gl = renderer.gl;
+    keyScale = chooseKeyScale(options.keyscale ?? 'auto', width, height,
+      gl.getParameter(gl.MAX_TEXTURE_SIZE), globalThis.navigator?.connection?.downlink ?? null);
     const args = {
       terrain: options.terrain, size: [width, height], lod: options.lod, epsilon: options.epsilon,
-      grid: options.grid,
+      grid: options.grid, key_scale: keyScale.scale,
       visibility: depth && options.visibility === 'coarse' ? 'fragment' : options.visibility,
     };
     loadAt = performance.now();
@@ -132,7 +137,6 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
     if (!reply.ok) throw new Error(reply.error);
     const scene = await sceneArrived;
     const h = scene.header;
-    renderer = new SpriteDrawer(canvas);
     renderer.proxy = depth ? 'depth' : 'coarse';
     renderer.setScene(h, scene.heights, scene.texture);
     if (h.walkers) walkers = new WalkerDrawer(renderer.gl, walkerData(h.walkers));
@@ -232,6 +236,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
         error_px: Number.isFinite(stats.error_px) ? stats.error_px : null,
         error_px_mean: stats.errorFrames ? stats.errorSum / stats.errorFrames : null,
         latency_ms: percentile(stats.latencies, 0.5), first_keyframe_ms: firstKeyMs,
+        key_scale: keyScale.scale, key_scale_why: keyScale.why,
         input_ms: percentile(inputs.ms, 0.5), input_ms_p99: percentile(inputs.ms, 0.99),
         inputs: inputs.ms.length,
         walkers: walkers ? walkers.d.count : 0, walker_triangles: walkers ? walkers.triangles : 0,

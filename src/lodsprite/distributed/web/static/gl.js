@@ -23,6 +23,31 @@
 import { mul } from './camera.js';
 
 export const SKY_RGB = [0.62, 0.74, 0.86];  // lodsprite.gl.terrain.SKY_RGB
+export const KEY_SCALES = [1, 1.5, 2];       // lodsprite.distributed.messages.KEY_SCALES
+export const MAX_IMAGE_SIDE = 4096;          // lodsprite.distributed.messages.MAX_IMAGE_SIDE
+export const KEYFRAMES_PER_S = 4;            // the keyframe rate a link is budgeted for
+const KEY_BYTES_PER_TEXEL = 7;               // RGB colour and float32 depth, raw
+
+// The keyframe scale a page asks for (keyframe texels a canvas pixel side) and why:
+// `asked` ('auto' or one of KEY_SCALES), the canvas (w, h), the browser's largest texture
+// side and the link's downlink estimate in Mbit/s (navigator.connection.downlink; null:
+// none given).  Auto: the largest scale whose keyframes fit the texture limit and the
+// image cap, and whose raw bytes at KEYFRAMES_PER_S fit the downlink when one is given.
+export function chooseKeyScale(asked, w, h, maxTexture, downlinkMbit = null) {
+  if (asked !== 'auto') return { scale: Number(asked), why: 'asked' };
+  const side = Math.min(maxTexture, MAX_IMAGE_SIDE);
+  let scale = 1, why = 'texture limit';
+  for (const k of KEY_SCALES) if (k * Math.max(w, h) <= side) scale = k;
+  if (scale === KEY_SCALES[KEY_SCALES.length - 1]) why = 'largest';
+  if (downlinkMbit) {
+    const budget = downlinkMbit * 125000 / KEYFRAMES_PER_S;  // bytes a keyframe
+    while (scale > 1 && scale * scale * w * h * KEY_BYTES_PER_TEXEL > budget) {
+      scale = KEY_SCALES[KEY_SCALES.indexOf(scale) - 1];
+      why = `downlink ${downlinkMbit} Mbit/s`;
+    }
+  }
+  return { scale, why };
+}
 export const TOLERANCE = { coarse: 0.002, full: 0.03 };
 
 const VS = `#version 300 es

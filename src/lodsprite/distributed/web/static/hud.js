@@ -1,5 +1,6 @@
 // The heads-up display: frames per second, frame time, keyframes shown, the shown
-// keyframe's error in pixels and the keyframe latency (request sent -> keyframe shown).
+// keyframe's error in pixels, the keyframe scale and why, and the keyframe latency (request
+// sent -> keyframe shown).
 
 export class Hud {
   constructor(el) { this.el = el; this.last = 0; }
@@ -12,7 +13,7 @@ export class Hud {
     const fps = s.median_ms ? 1000 / s.median_ms : null;
     this.el.textContent = [
       `${f(fps, 0)} fps   frame ${f(s.median_ms)} ms (p99 ${f(s.p99_ms)})`,
-      `keyframes ${s.keyframes}   error ${f(s.error_px, 2)} px   latency ${f(s.latency_ms, 0)} ms`,
+      `keyframes ${s.keyframes} at ${f(s.key_scale)}x (${s.key_scale_why || '–'})   error ${f(s.error_px, 2)} px   latency ${f(s.latency_ms, 0)} ms`,
       state,
     ].join('\n');
   }

@@ -3,7 +3,8 @@
 // Query string: token (required), scene (a name the server serves: a terrain, a store,
 // fractal:N...; terrain= is the same, kept for older links; default jacksboro), path (a
 // built-in path: chen1999, swan2002, flyover..., played one viewpoint a frame, then held),
-// frames (the path's viewpoints), size (WxH keyframe and canvas pixels; 512x512), grid
+// frames (the path's viewpoints), size (WxH keyframe and canvas pixels; 512x512), keyscale
+// (keyframe texels a canvas pixel side: auto, 1, 1.5 or 2; gl.js chooseKeyScale), grid
 // (working grid), and the technique options the server declares at /options.json (lod:
 // coarse quads a side, epsilon: pixels, visibility: the load's rule, coarse or
 // fragment/triangle: the full z-buffer, proxy: depth, the keyframe's own depth, or
@@ -18,7 +19,7 @@ const q = new URLSearchParams(location.search);
 const int = (name, fallback) => (q.has(name) ? parseInt(q.get(name), 10) : fallback);
 
 // The page's own query parameters (the options the server declares come beside them).
-const PAGE_KEYS = ['token', 'scene', 'terrain', 'path', 'frames', 'size', 'grid'];
+const PAGE_KEYS = ['token', 'scene', 'terrain', 'path', 'frames', 'size', 'grid', 'keyscale'];
 
 // The query's technique options by their declarations (lodsprite.techniques.Option); a
 // parameter neither the page's nor a declared option's is an error.
@@ -27,6 +28,9 @@ async function pageOptions() {
   const known = new Set([...PAGE_KEYS, ...declared.map((o) => o.name)]);
   for (const key of q.keys()) {
     if (!known.has(key)) throw new Error(`unknown query parameter '${key}': use ${[...known].join(', ')}`);
+  }
+  if (q.has('keyscale') && !['auto', '1', '1.5', '2'].includes(q.get('keyscale'))) {
+    throw new Error(`keyscale '${q.get('keyscale')}': auto, 1, 1.5 or 2`);
   }
   if (q.has('scene') && q.has('terrain') && q.get('scene') !== q.get('terrain')) {
     throw new Error("give scene or terrain (the same parameter), not both");
@@ -68,8 +72,9 @@ const hud = document.getElementById('hud');
 const [width, height] = (q.get('size') || '512x512').split('x').map((s) => parseInt(s, 10));
 const base = {
   terrain: q.get('scene') || q.get('terrain') || 'jacksboro', path: q.get('path'), frames: int('frames', undefined),
-  grid: int('grid', undefined), size: [width, height],
+  grid: int('grid', undefined), size: [width, height], keyscale: q.get('keyscale') || 'auto',
 };
+
 
 const app = startApp({
   canvas, hud, transport, options: base, moreOptions: pageOptions(),
