@@ -40,6 +40,7 @@ const [doc, done] = arguments;
   r.setScene(sc.header, heights, texture);
   r.fallbackTint = doc.tint;
   r.proxy = doc.proxy;
+  r.pair = doc.pair;
   const out = [];
   for (const k of doc.keys) {
     const m = wire.unpack(bytes(k.msg));
@@ -58,16 +59,17 @@ const [doc, done] = arguments;
 def page_spriteframes(browser, scene_parts: list, keys: list[tuple[Keyframe, list]],
                       size: tuple[int, int], old: bool = False,
                       tint: tuple = (1.0, 0.0, 1.0, 0.0), proxy: str = "coarse",
-                      eyes: list[list] | None = None) -> list[np.ndarray]:
+                      eyes: list[list] | None = None, pair: bool = False) -> list[np.ndarray]:
     """The page's spriteframes: for each ``(keyframe, [view_proj (4, 4)])`` of ``keys``
     the frames drawn from it, ``(H, W, 3) uint8`` rows bottom-up (readPixels), in order.
     ``browser`` is at a page of the server (its ``/static/`` modules); ``scene_parts``:
     the scene message (:func:`~lodsprite.distributed.web.scene.build_scene`); ``old``:
     the page's first drawer (module comment); ``tint``: the drawer's ``fallbackTint``;
     ``proxy``: its ``proxy`` (``coarse`` or ``depth``), ``eyes``: per keyframe the eye of
-    each frame (for the depth mesh)."""
+    each frame (for the depth mesh); ``pair``: the drawer's ``pair`` (the keyframe before
+    drawn where the current one drew nothing)."""
     doc = {"scene": base64.b64encode(pack(scene_parts)).decode(), "size": list(size),
-           "old": old, "tint": list(tint), "proxy": proxy,
+           "old": old, "tint": list(tint), "proxy": proxy, "pair": pair,
            "keys": [{"msg": base64.b64encode(pack(encode_keyframe(kf))).decode(),
                      "frames": [np.asarray(m, float).ravel().tolist() for m in frames],
                      "eyes": ([None] * len(frames) if eyes is None else
@@ -80,20 +82,21 @@ def page_spriteframes(browser, scene_parts: list, keys: list[tuple[Keyframe, lis
 
 
 def offline_spriteframes(service, lod: int, keys: list[tuple[Keyframe, list]],
-                         projection: Projection, depth_stride: int | None = None
-                         ) -> list[np.ndarray]:
+                         projection: Projection, depth_stride: int | None = None,
+                         pair: bool = False) -> list[np.ndarray]:
     """lodsprite's own spriteframes of the same keyframes and viewpoints: the distributed
     client's drawer (:class:`~lodsprite.gl.sprite.SpriteDrawer`, coarse rule, border
     ribbons, no guard band; with ``depth_stride``, the fragment rule and the keyframe's
     own depth as the proxy) in ``service``'s context, each keyframe uploaded as the client
-    uploads it; ``keys``: ``(keyframe, [viewpoint])``; rows bottom-up, as the page's."""
+    uploads it; ``keys``: ``(keyframe, [viewpoint])``; ``pair``: the drawer's; rows
+    bottom-up, as the page's."""
     from lodsprite.gl.sprite import SpriteDrawer
 
     rule = "coarse" if depth_stride is None else "fragment"
     drawer = (service.terrain_gl.drawer if hasattr(service, "terrain_gl")
               else service.keys.terrain)  # an adaptive service's working-grid drawer
     sprite = SpriteDrawer(drawer, lod, rule, border=True, guard_px=0,
-                          depth_stride=depth_stride)
+                          depth_stride=depth_stride, pair=pair)
     out = []
     try:
         for kf, viewpoints in keys:

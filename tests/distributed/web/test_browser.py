@@ -466,11 +466,13 @@ def test_the_pages_spriteframes_in_motion_match_lodsprites_own(server, browser):
 DEPTH_RMSE_TOL = 3.0
 
 
-@pytest.mark.parametrize("terrain", ["jacksboro", "store"])
+@pytest.mark.parametrize("terrain, pair", [("jacksboro", False), ("store", False),
+                                           ("jacksboro", True)])
 def test_the_pages_depth_mesh_spriteframes_match_lodsprites_own(server, browser, store512,
-                                                               terrain):
+                                                               terrain, pair):
     """Over Jacksboro (keyframes of the working grid drawn whole) and over a store
-    (keyframes drawn adaptively from its level 0, as the renderers draw them)."""
+    (keyframes drawn adaptively from its level 0, as the renderers draw them); and paired
+    (the keyframe before drawn where the current one drew nothing)."""
     from spriteframes import offline_spriteframes, page_spriteframes
 
     from lodsprite.camera import Projection
@@ -487,17 +489,31 @@ def test_the_pages_depth_mesh_spriteframes_match_lodsprites_own(server, browser,
     path = get_path("flyover", hf, 460).viewpoints
     service = (AdaptiveKeyframeService if terrain == "store" else KeyframeService)(args)
     try:
-        keys = [(service.render(path[k], k, 0.0), [path[k + 10], path[k + 20]])
-                for k in (120, 300)]
+        # paired: frames between two keyframes, the newer ahead of them along the path
+        # (what it does not see there, the older does)
+        plan = ([(100, (110,)), (130, (112, 118))] if pair else
+                [(k, (k + 10, k + 20)) for k in (120, 300)])
+        keys = [(service.render(path[k], k, 0.0), [path[f] for f in frames])
+                for k, frames in plan]
         assert all(kf.zbuffer == "full" for kf, _ in keys)
-        mesh = offline_spriteframes(service, args.lod, keys, proj, depth_stride=8)
+        mesh = offline_spriteframes(service, args.lod, keys, proj, depth_stride=8, pair=pair)
         coarse = offline_spriteframes(service, args.lod, keys, proj)
+        single = (offline_spriteframes(service, args.lod, keys, proj, depth_stride=8)
+                  if pair else None)
     finally:
         service.release()
     drawn = [(kf, [proj.matrix() @ vp.view_matrix() for vp in vps]) for kf, vps in keys]
     eyes = [[vp.o for vp in vps] for _, vps in keys]
     browser.get(f"http://127.0.0.1:{server['port']}/static/hud.js")  # the page's origin
-    page = page_spriteframes(browser, parts, drawn, (128, 128), proxy="depth", eyes=eyes)
+    page = page_spriteframes(browser, parts, drawn, (128, 128), proxy="depth", eyes=eyes,
+                             pair=pair)
+    if pair:  # the older keyframe shows in the newer one's frames (3.3 and 4.1 here),
+        # and the page's frames are the paired ones, not the single keyframe's
+        apart = [k for k, (m, o) in enumerate(zip(mesh, single, strict=True))
+                 if rmse(m, o) > DEPTH_RMSE_TOL]
+        assert apart, [rmse(m, o) for m, o in zip(mesh, single, strict=True)]
+        for k in apart:
+            assert rmse(page[k], mesh[k]) < rmse(page[k], single[k])
     for p, m, c in zip(page, mesh, coarse, strict=True):
         assert rmse(m, c) > DEPTH_RMSE_TOL  # the mesh draws what the coarse level does not
         assert rmse(p, m) <= DEPTH_RMSE_TOL, (rmse(p, m), rmse(p, c))

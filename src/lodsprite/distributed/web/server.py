@@ -54,12 +54,12 @@ MAX_SESSIONS = 256
 """WebSockets served at once; one more is answered 503."""
 #: The technique options the page takes from its query string, each parsed and checked by
 #: its declaration (:class:`~lodsprite.techniques.Option`), served as ``/options.json``.
-PAGE_OPTIONS = ("lod", "epsilon", "visibility", "proxy")
+PAGE_OPTIONS = ("lod", "epsilon", "visibility", "proxy", "pair")
 #: What the page draws of the ``proxy`` choices (WebGL2 has no geometry shader for the
 #: refined mesh; the search is not ported), and its default: the keyframe's own depth,
 #: as a store's spriteframes in the library.
 PAGE_PROXIES = ("geometry", "depth")
-PAGE_DEFAULTS = {"proxy": "depth"}
+PAGE_DEFAULTS = {"proxy": "depth", "pair": False}
 
 
 def page_options() -> list[dict]:

@@ -9,7 +9,7 @@
 // startApp({canvas, hud, transport, options, decoderUrl, keyTarget}) -> the client's API:
 //   transport: {opened: Promise, send(Uint8Array), onmessage(handler(ArrayBuffer)),
 //               onclose(handler())}: one web message (wire.js) each way a call;
-//   options: {terrain, size: [w, h], lod, epsilon, visibility, proxy, grid, path, frames,
+//   options: {terrain, size: [w, h], lod, epsilon, visibility, proxy, pair, grid, path, frames,
 //   keyscale ('auto' or 1, 1.5, 2: gl.js chooseKeyScale)}, and
 //   moreOptions (a Promise of more, merged before the load; a rejection fails `ready`);
 //   decoderUrl: decode.js's URL (a module Web Worker); keyTarget: the element whose key
@@ -138,6 +138,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
     const scene = await sceneArrived;
     const h = scene.header;
     renderer.proxy = depth ? 'depth' : 'coarse';
+    renderer.pair = depth && options.pair === true;
     renderer.setScene(h, scene.heights, scene.texture);
     if (h.walkers) walkers = new WalkerDrawer(renderer.gl, walkerData(h.walkers));
     metric = new ErrorMetric(h, scene.heights);

@@ -145,6 +145,8 @@ uniform vec2 u_key_px;      // keyframe size, pixels
 uniform vec2 u_frame_px;    // frame size, pixels
 uniform float u_stretch;
 uniform float u_moved;      // the eye's move from the keyframe's over its pixel angle (m)
+uniform vec2 u_valid;       // window depth of its triangles: [x, x + y]
+uniform float u_sheet;      // of its rubber sheets: [u_sheet, u_sheet + 0.25]
 out vec4 v_key;
 flat out int v_rubber;
 struct Corner { vec3 rel; vec4 key; vec4 clip; float sky; };
@@ -210,7 +212,11 @@ void main() {
   v_rubber = rubber ? 1 : 0;
   if (drop) { gl_Position = vec4(2.0, 2.0, 0.0, 1.0); return; }  // one point: nothing drawn
   vec4 q = k == 0 ? c0.clip : (k == 1 ? c1.clip : c2.clip);
-  q.z = rubber ? 0.25 * q.z - 0.25 * q.w : 0.25 * q.z - 0.75 * q.w;
+  // window depth (lodsprite.gl.depth_mesh): triangles in [u_valid.x, u_valid.x +
+  // u_valid.y], sheets in [u_sheet, u_sheet + 0.25]; the newer keyframe of a pair takes
+  // [0, 0.25] and [0.25, 0.5], the older [0.5, 0.75] and [0.75, 1]
+  q.z = rubber ? 0.25 * q.z + (2.0 * u_sheet - 0.75) * q.w
+               : u_valid.y * q.z + (2.0 * u_valid.x - 1.0 + u_valid.y) * q.w;
   gl_Position = q;
 }`;
 
@@ -348,6 +354,10 @@ export class SpriteDrawer {
     this.proxy = 'coarse';
     this.stride = DEPTH_STRIDE;
     this.meshes = new Map();  // keyframe size -> {vao, count}
+    // With the depth mesh, draw the keyframe shown before the current one too, where the
+    // current one drew nothing (lodsprite's `pair`; the store default: off).
+    this.pair = false;
+    this.previous = null;
     // Mixed by its alpha into fragments that fell back to the terrain texture (as
     // lodsprite.gl.sprite.SpriteDrawer.fallback_tint); alpha 0 draws them as they are.
     this.fallbackTint = [1, 0, 1, 0];
@@ -355,7 +365,7 @@ export class SpriteDrawer {
 
   meshProgram() {
     if (this.mesh) return this.mesh;
-    const { program: p, u } = linkProgram(this.gl, MESH_VS, MESH_FS, ['u_key_depth', 'u_key_near_far', 'u_key_tan', 'u_key_axes', 'u_mvp_rel', 'u_key_proj', 'u_stride', 'u_cut', 'u_key_px', 'u_frame_px', 'u_stretch', 'u_moved', 'u_sprite', 'u_fallback_tint']);
+    const { program: p, u } = linkProgram(this.gl, MESH_VS, MESH_FS, ['u_key_depth', 'u_key_near_far', 'u_key_tan', 'u_key_axes', 'u_mvp_rel', 'u_key_proj', 'u_stride', 'u_cut', 'u_key_px', 'u_frame_px', 'u_stretch', 'u_moved', 'u_sprite', 'u_fallback_tint', 'u_valid', 'u_sheet']);
     this.mesh = { program: p, u };
     return this.mesh;
   }
@@ -377,8 +387,9 @@ export class SpriteDrawer {
     return this.meshes.get(name);
   }
 
-  // The keyframe `key`'s mesh over what is drawn, seen through `viewProj` (row-major).
-  drawMesh(key, viewProj) {
+  // The keyframe `key`'s mesh over what is drawn, seen through `viewProj` (row-major);
+  // `older`: the older keyframe of a pair (drawn where the newer drew nothing).
+  drawMesh(key, viewProj, older = false) {
     const gl = this.gl, { program, u } = this.meshProgram();
     const h = key.header, [kh, kw] = h.depth.shape;
     const o = h.viewpoint.o, ty = Math.tan(h.fov * Math.PI / 360);
@@ -397,6 +408,8 @@ export class SpriteDrawer {
     gl.uniform1f(u.u_stretch, STRETCH);
     gl.uniform1f(u.u_moved, moved / ((h.fov * Math.PI / 180) / kh));
     gl.uniform4fv(u.u_fallback_tint, this.fallbackTint);
+    gl.uniform2fv(u.u_valid, older ? [0.5, 0.25] : [0.0, 0.25]);
+    gl.uniform1f(u.u_sheet, older ? 0.75 : 0.25);
     gl.activeTexture(gl.TEXTURE1); gl.bindTexture(gl.TEXTURE_2D, key.sprite);
     gl.activeTexture(gl.TEXTURE2); gl.bindTexture(gl.TEXTURE_2D, key.depth);
     gl.uniform1i(u.u_sprite, 1); gl.uniform1i(u.u_key_depth, 2);
@@ -448,9 +461,14 @@ export class SpriteDrawer {
     return key;
   }
 
-  // Draw the prepared keyframe `key` from now on (the previous one's textures deleted).
+  // Draw the prepared keyframe `key` from now on; the one it replaces kept as the older
+  // of the pair when `this.pair` (the one before deleted), else deleted.
   useKeyframe(key) {
-    if (this.key) this.dropKeyframe(this.key);
+    if (this.previous) this.dropKeyframe(this.previous);
+    this.previous = null;
+    if (this.key) {
+      if (this.pair) this.previous = this.key; else this.dropKeyframe(this.key);
+    }
     this.key = key;
   }
 
@@ -487,7 +505,10 @@ export class SpriteDrawer {
     gl.clear(gl.DEPTH_BUFFER_BIT);
     this.meshDrawn = true;  // the depth buffer holds the mesh's (its own depth range)
     this.eye = eye || key.header.viewpoint.o;
-    return this.triangles + this.drawMesh(key, viewProj);
+    let tris = this.triangles + this.drawMesh(key, viewProj);
+    const prev = this.previous;
+    if (this.pair && prev && prev.header.zbuffer === 'full') tris += this.drawMesh(prev, viewProj, true);
+    return tris;
   }
 
   // The canvas's pixels, RGBA rows bottom-up, base64 (for tests).

@@ -40,8 +40,10 @@ async function pageOptions() {
     if (!q.has(o.name)) { out[o.name] = o.default; continue; }
     const text = q.get(o.name).trim();
     const number = o.type === 'int' || o.type === 'float';
-    const v = number ? Number(text) : text;
+    const flag = o.type === 'bool';
+    const v = number ? Number(text) : (flag ? text === 'true' || text === '1' : text);
     const bad = (number && (text === '' || !Number.isFinite(v)))
+      || (flag && !['true', 'false', '1', '0'].includes(text))
       || (o.type === 'int' && !Number.isInteger(v))
       || (o.choices.length > 0 && !o.choices.includes(v))
       || (o.min !== null && (o.above ? v <= o.min : v < o.min))
