@@ -29,8 +29,9 @@ pool's figure) and the set-up.
 With ``--ray`` the same load runs twice in one invocation, on the local pool and then on
 Ray actors (the server started with ``--ray local``: a Ray instance of this machine's
 cores, started by the server), and ``results.json`` holds both (``local``, ``ray``).
-``--kill-renderer-at S`` kills a renderer actor (SIGKILL, one rendering if any) S seconds
-into the Ray run's play: ``killed_renderer`` and the pool's ``pool_dead``,
+``--kill-renderer-at S`` kills a renderer (SIGKILL, one rendering if any: a local pool's
+renderer process, a Ray actor) S seconds into each run's play: ``killed_renderer``,
+``latency_ms_max`` (what the kill cost the request it held) and the pool's ``pool_dead``,
 ``pool_requeued`` and ``pool_failed`` over the play say what became of its job.
 
     python benchmarks/web_load.py --clients 16 --renderers 2 --out out/web_load
@@ -179,16 +180,32 @@ async def pool_stats(url: str, token: str) -> dict:
             await page.close()
 
 
-async def kill_renderer(server_pid: int, at_s: float) -> dict | None:
-    """SIGKILL one Ray renderer actor of the server's process tree ``at_s`` seconds into
-    the play, one holding a job if there is one (its process title ``ray::RenderActor.render``
-    while it renders); its pid and whether it was rendering (None: none found)."""
+async def kill_renderer(server_pid: int, at_s: float, pool: str = "ray") -> dict | None:
+    """SIGKILL one renderer of the server's process tree ``at_s`` seconds into the play,
+    one holding a job if there is one: a Ray actor (its process title
+    ``ray::RenderActor.render`` while it renders), or one of the local pool's renderer
+    processes (the server's ``multiprocessing`` children; the one that took the most CPU
+    over 50 ms: the one rendering); its pid and whether it was rendering (None: none
+    found)."""
     import psutil
 
     from lodsprite.distributed.pool.ray_actor import RenderActor
 
-    title = f"ray::{RenderActor.__name__}"  # Ray names an actor's process by its class
     await asyncio.sleep(at_s)
+    if pool == "local":
+        found = [p for p in psutil.Process(server_pid).children(recursive=True)
+                 if "multiprocessing" in _cmdline(p)]
+        if not found:
+            return None
+        for p in found:
+            p.cpu_percent(None)
+        await asyncio.sleep(0.05)
+        usage = {p.pid: p.cpu_percent(None) for p in found}
+        victim = max(found, key=lambda p: usage[p.pid])
+        victim.kill()
+        return {"pid": victim.pid, "rendering": usage[victim.pid] > 20.0, "at_s": at_s,
+                "cpu_percent": usage[victim.pid]}
+    title = f"ray::{RenderActor.__name__}"  # Ray names an actor's process by its class
     deadline = time.monotonic() + 2.0
     while True:
         found = [(p, cmd) for p in psutil.Process(server_pid).children(recursive=True)
@@ -305,8 +322,8 @@ async def run(args, pool: str = "local") -> dict:
         own0 = pages_cpu_s(proc.pid)
         t0 = time.monotonic()
         start.set()
-        killer = (asyncio.create_task(kill_renderer(proc.pid, args.kill_renderer_at))
-                  if pool == "ray" and args.kill_renderer_at is not None else None)
+        killer = (asyncio.create_task(kill_renderer(proc.pid, args.kill_renderer_at, pool))
+                  if args.kill_renderer_at is not None else None)
         got = await asyncio.gather(*tasks)
         killed = await killer if killer is not None else None
         wall = time.monotonic() - t0
@@ -337,6 +354,7 @@ async def run(args, pool: str = "local") -> dict:
             "most_over_least": max(per) / max(1, min(per)),
             "latency_ms_p50": float(np.percentile(lat, 50)) if len(lat) else None,
             "latency_ms_p99": float(np.percentile(lat, 99)) if len(lat) else None,
+            "latency_ms_max": float(lat.max()) if len(lat) else None,
             "error_px_mean": float(shown.mean()) if len(shown) else None,
             "frames_without_estimate": int((~np.isfinite(err)).sum()),
             "error_px_exact_mean": _finite_mean(exact_all),
