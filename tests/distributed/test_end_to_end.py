@@ -9,7 +9,7 @@ import time
 import numpy as np
 import pytest
 
-from conftest import wait_until
+from conftest import run_cli, wait_until
 from lodsprite.distributed.client import DEFAULT_MAX_ERROR, LodClient
 from lodsprite.distributed.render import scene_args
 from lodsprite.distributed.run import free_ports
@@ -52,11 +52,10 @@ def wait_for(client, vp, kind="keyframe", timeout=20.0):
 
 def test_render_mode_distributed_writes_frames_and_server_statistics(tmp_path):
     out = tmp_path / "d"
-    proc = subprocess.run([sys.executable, "-c", "from lodsprite.cli import main; main()",
-                           "render", "--mode", "distributed", "--terrain", "fractal:64:2",
-                           "--size", "64x64", "--lod", "8", "--frames", "30", "--out", str(out),
-                           "--ground-truth", "--quality-stride", "10"],
-                          capture_output=True, text=True, timeout=120)
+    # the client in this process (its server is a process of its own, started by render)
+    proc = run_cli("render", "--mode", "distributed", "--terrain", "fractal:64:2",
+                   "--size", "64x64", "--lod", "8", "--frames", "30", "--out", str(out),
+                   "--ground-truth", "--quality-stride", "10")
     assert proc.returncode == 0, proc.stderr
     rows = list(csv.DictReader((out / "frames.csv").open()))
     assert len(rows) == 30
@@ -213,10 +212,8 @@ def test_server_rejects_garbage_and_keeps_serving(scene):
         stop(server)
 
 
-def test_serve_refuses_non_loopback_without_flag():
-    proc = subprocess.run([sys.executable, "-c", "from lodsprite.cli import main; main()",
-                           "serve", "--bind", "0.0.0.0:5999"], capture_output=True, text=True,
-                          timeout=60)
+def test_serve_refuses_non_loopback_without_flag(cli):
+    proc = cli("serve", "--bind", "0.0.0.0:5999")  # refused before any work
     assert proc.returncode == 2 and "--allow-remote" in proc.stderr
     assert len(proc.stderr.strip().splitlines()) == 1
 
