@@ -17,6 +17,8 @@
 // The API (for tests, tools and the widget): ready (a Promise: scene loaded), finished()
 // (a Promise: the path played and the held view's keyframe shown), stats(), pixels(),
 // viewpoint(), pathIndex() (path viewpoints drawn so far: the one shown is pathIndex() - 1),
+// keyScale() ({scale, why}: the keyframe scale asked for and why; stats() has its number:
+// stats() holds numbers only, what the widget's status message carries),
 // setWalkTime(t) (a scene's walkers held at t seconds; null: their clock, seconds since the
 // first frame), capture(indices) (keep the canvas's pixels, viewpoint and walkers' time as the frames of those path
 // indices are drawn: a readback in the frame, for untimed judged passes only), captured()
@@ -225,7 +227,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
     if (path && pathIndex === path.length && keyEye && norm(sub(keyEye, vp.o)) <= 1e-6 * (1 + norm(vp.o))) {
       finishedResolve(stats.frames);
     }
-    if (hud) hud.update(now, api.stats, state);
+    if (hud) hud.update(now, api.stats, state, keyScale.why);
     requestAnimationFrame(frame);
   }
 
@@ -237,7 +239,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
         error_px: Number.isFinite(stats.error_px) ? stats.error_px : null,
         error_px_mean: stats.errorFrames ? stats.errorSum / stats.errorFrames : null,
         latency_ms: percentile(stats.latencies, 0.5), first_keyframe_ms: firstKeyMs,
-        key_scale: keyScale.scale, key_scale_why: keyScale.why,
+        key_scale: keyScale.scale,
         input_ms: percentile(inputs.ms, 0.5), input_ms_p99: percentile(inputs.ms, 0.99),
         inputs: inputs.ms.length,
         walkers: walkers ? walkers.d.count : 0, walker_triangles: walkers ? walkers.triangles : 0,
@@ -252,6 +254,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
     captured() { const out = captures || []; captures = null; captureSet = null; return out; },
     viewpoint: () => controls && controls.vp,
     pathIndex: () => pathIndex,
+    keyScale: () => ({ ...keyScale }),  // {scale, why}: the keyframe scale asked for, and why
     setWalkTime(t) { walkFixed = t; },  // walkers held at t seconds (null: their own clock)
     state: () => state,
     serverStats: () => call('stats').then((r) => r.data),

@@ -5,7 +5,7 @@
 export class Hud {
   constructor(el) { this.el = el; this.last = 0; }
   // Update at most four times a second from stats() (see main.js), called only then.
-  update(now, stats, state) {
+  update(now, stats, state, keyScaleWhy = null) {
     if (now - this.last < 250) return;
     this.last = now;
     const s = stats();
@@ -13,7 +13,7 @@ export class Hud {
     const fps = s.median_ms ? 1000 / s.median_ms : null;
     this.el.textContent = [
       `${f(fps, 0)} fps   frame ${f(s.median_ms)} ms (p99 ${f(s.p99_ms)})`,
-      `keyframes ${s.keyframes} at ${f(s.key_scale)}x (${s.key_scale_why || '–'})   error ${f(s.error_px, 2)} px   latency ${f(s.latency_ms, 0)} ms`,
+      `keyframes ${s.keyframes} at ${f(s.key_scale)}x (${keyScaleWhy || '–'})   error ${f(s.error_px, 2)} px   latency ${f(s.latency_ms, 0)} ms`,
       state,
     ].join('\n');
   }
