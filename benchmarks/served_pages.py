@@ -82,7 +82,7 @@ def play(driver, port: int, args) -> dict:
     played and its held view's keyframe shown; the page's and the server's figures."""
     w, h = args.size
     query = (f"token={TOKEN}&scene={args.scene}&size={w}x{h}&path={args.path}"
-             f"&frames={args.frames}&lod={args.lod}")
+             f"&frames={args.frames}&lod={args.lod}{'&' + args.query if args.query else ''}")
     driver.get(f"http://127.0.0.1:{port}/?{query}")
     picks = list(range(args.judge // 2, args.frames, args.judge))
     return driver.execute_async_script("""
@@ -123,7 +123,8 @@ def judge(args, frames: list) -> dict:
     from lodsprite.harness import scene_reference
     from lodsprite.scene.kinds import open_scene
 
-    spec = str(args.data / args.scene)
+    local = args.data / args.scene  # a file or store under --data, else a built-in
+    spec = str(local) if local.exists() else args.scene
     scene = open_scene(spec, light=True, root=args.data)
     size = tuple(args.size)
     out: dict = {"frames": [f[0] for f in frames]}
@@ -168,6 +169,8 @@ def main() -> None:
     ap.add_argument("--frames", type=int, default=240)
     ap.add_argument("--lod", type=int, default=16)
     ap.add_argument("--judge", type=int, default=40, help="judge every N-th path frame")
+    ap.add_argument("--query", default="", help="more of the page's query string, e.g. "
+                                                "proxy=geometry&keyscale=1")
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args()
     args.size = [int(v) for v in args.size.split("x")]
@@ -192,8 +195,9 @@ def main() -> None:
     s, server = got["stats"], got["server"]
     frames = frames_of(got["captured"])
     judged = judge(args, frames)
-    record = {"scene": args.scene, "size": args.size, "renderers": args.renderers,
-              "path": args.path, "frames": args.frames, "lod": args.lod, "wall_s": wall,
+    record = {"scene": args.scene, "query": args.query, "size": args.size,
+              "renderers": args.renderers, "path": args.path, "frames": args.frames,
+              "lod": args.lod, "wall_s": wall,
               "page": s, "session": server["session"], "pool": server["server"]["pool"],
               "judged": judged}
     (out / "pages.json").write_text(json.dumps(record, indent=1))

@@ -113,7 +113,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
   transport.onclose(() => { state = 'disconnected'; });
 
   let renderer, metric, predictor, controls, path = null, pathIndex = 0, pathName = null;
-  let walkers = null, walkStart = null, walkFixed = null;  // a scene's walkers, their clock (s)
+  let walkers = null, walkStart = null, walkFixed = null, focal = 1;  // a scene's walkers, their clock (s)
   let captures = null, captureSet = null;
   let shownVp = null, keyEye = null, keyDir = null, keyViewProj = null, keyDeficit = 0, finishedResolve = () => {}, finished = null, lastFrame = null, lastSample = -Infinity;
   const newFinished = () => { finished = new Promise((r) => { finishedResolve = r; }); };
@@ -143,6 +143,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
     renderer.pair = depth && options.pair === true;
     renderer.setScene(h, scene.heights, scene.texture);
     if (h.walkers) walkers = new WalkerDrawer(renderer.gl, walkerData(h.walkers));
+    focal = height / (2 * Math.tan(h.fov * Math.PI / 360));  // pixels a metre at unit depth
     metric = new ErrorMetric(h, scene.heights);
     predictor = new Predictor(h.epsilon, h.fov, width / height, h.near, h.far, height);
     predictor.failed = (s) => { if (predictor.inflight && predictor.inflight.seq === s) predictor.inflight = null; };
@@ -219,7 +220,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
     renderer.draw(viewProj, vp.o);
     if (walkStart === null) walkStart = now;
     const walkT = walkFixed ?? (now - walkStart) / 1000;
-    if (walkers) walkers.draw(viewProj, vp.o, walkT, renderer.meshDrawn);
+    if (walkers) walkers.draw(viewProj, vp.o, walkT, renderer.meshDrawn, focal);
     if (captureSet && captureSet.has(index)) captures.push({ index, vp, t: walkT, ...renderer.pixels() });
     stats.error_px = predictor.errorPx(metric, keyEye, vp, keyViewProj, keyDeficit);
     if (Number.isFinite(stats.error_px)) { stats.errorSum += stats.error_px; stats.errorFrames += 1; }
@@ -243,6 +244,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
         input_ms: percentile(inputs.ms, 0.5), input_ms_p99: percentile(inputs.ms, 0.99),
         inputs: inputs.ms.length,
         walkers: walkers ? walkers.d.count : 0, walker_triangles: walkers ? walkers.triangles : 0,
+        walker_points: walkers ? walkers.pointsDrawn : 0,
       };
     },
     resetStats() {

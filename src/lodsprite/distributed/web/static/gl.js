@@ -133,9 +133,8 @@ precision highp float;
 precision highp sampler2D;
 layout(location = 0) in vec4 a_t01;  // the triangle's texels 0 and 1 (column, row)
 layout(location = 1) in vec3 a_t2c;  // its texel 2, and which corner this vertex is
-uniform sampler2D u_key_depth;
-uniform vec2 u_key_near_far;
-uniform vec2 u_key_tan;     // tan of the keyframe's half-angles, x and y
+uniform sampler2D u_corners;  // the keyframe's grid vertices (keyCorners), RGBA32F
+uniform ivec2 u_key_size;   // the keyframe's size, texels
 uniform mat3 u_key_axes;    // its eye axes as columns (eye -> world rotation)
 uniform mat4 u_mvp_rel;     // the frame's view-projection x translate(keyframe eye)
 uniform mat4 u_key_proj;
@@ -151,35 +150,20 @@ out vec4 v_key;
 flat out int v_rubber;
 struct Corner { vec3 rel; vec4 key; vec4 clip; float sky; };
 Corner corner(vec2 t) {
-  ivec2 size = textureSize(u_key_depth, 0);
-  ivec2 p = clamp(ivec2(t), ivec2(0), size - 1);
-  float z = texelFetch(u_key_depth, p, 0).r;
-  if (z >= 1.0) {  // sky beside ground: at the farthest ground neighbour's depth
-    float g = 0.0;
-    for (int j = -1; j <= 1; ++j) for (int i = -1; i <= 1; ++i) {
-      float zn = texelFetch(u_key_depth, clamp(p + ivec2(i, j) * u_stride, ivec2(0), size - 1), 0).r;
-      if (zn < 1.0) g = max(g, zn);
-    }
-    if (g > 0.0) z = g;
-  }
-  // texel centres; the outer ring on the image's edges, so that the mesh covers the
-  // frame's outer half-texel too (the coarse spriteframe under it showed there)
-  vec2 at = (vec2(p) + 0.5) / vec2(size);
-  if (p.x == 0) at.x = 0.0;
-  if (p.y == 0) at.y = 0.0;
-  if (p.x == size.x - 1) at.x = 1.0;
-  if (p.y == size.y - 1) at.y = 1.0;
-  vec2 ndc = at * 2.0 - 1.0;
-  vec3 ray = vec3(ndc * u_key_tan, -1.0);
-  float n = u_key_near_far.x, f = u_key_near_far.y;
-  vec4 eye;
+  // the keyframe's grid vertex at texel t, unprojected once a keyframe (keyCorners):
+  // its eye-space point (w 1) or, for sky, its ray's direction (w 0)
+  ivec2 grid = textureSize(u_corners, 0);
+  ivec2 p = clamp(ivec2(t), ivec2(0), u_key_size - 1);
+  ivec2 g = ivec2(p.x == u_key_size.x - 1 ? grid.x - 1 : p.x / u_stride,
+                  p.y == u_key_size.y - 1 ? grid.y - 1 : p.y / u_stride);
+  vec4 e = texelFetch(u_corners, g, 0);
+  vec4 eye = vec4(e.xyz, 1.0 - e.w);
   Corner c;
-  if (z >= 1.0) { eye = vec4(normalize(ray), 0.0); c.sky = 1.0; }
-  else { eye = vec4(ray * (2.0 * n * f / (f + n - (2.0 * z - 1.0) * (f - n))), 1.0); c.sky = 0.0; }
+  c.sky = e.w;
   c.rel = u_key_axes * eye.xyz;
   c.key = u_key_proj * eye;
   c.clip = u_mvp_rel * vec4(c.rel, eye.w);
-  if (z >= 1.0 || c.clip.z > c.clip.w) c.clip.z = c.clip.w * 0.999999;  // on the far plane
+  if (c.sky > 0.5 || c.clip.z > c.clip.w) c.clip.z = c.clip.w * 0.999999;  // on the far plane
   return c;
 }
 float area2(vec4 a, vec4 b, vec4 c, vec2 size) {  // twice the pixel area (1e30: behind)
@@ -236,6 +220,45 @@ void main() {
 // The mesh over a (w, h) keyframe, as lodsprite.gl.depth_mesh.grid_vertices: a vertex every
 // `stride` texels (the last row and column always), two triangles a cell; each triangle's
 // vertices carry its three texels and their corner (7 floats a vertex).
+// The keyframe's depth-mesh vertices in its eye space, once a keyframe (what the mesh's
+// vertex shader reads, three texels a vertex instead of a depth search each frame): for
+// the grid texels (every `stride`-th, the last row and column too) of the (dw, dh) window
+// depth `depth` (rows bottom-up), its point (x, y, z, 0) or, for sky, its ray's direction
+// (x, y, z, 1).  A sky texel beside ground (one of its 8 neighbours `stride` texels away
+// is not sky) takes its farthest ground neighbour's depth; texel centres, the outer ring
+// on the image's edges (as lodsprite.gl.depth_mesh).  {data Float32Array, nx, ny}.
+export function keyCorners(depth, dw, dh, stride, near, far, tanX, tanY) {
+  const axis = (n) => { const v = []; for (let i = 0; i < n; i += stride) v.push(i); if (v[v.length - 1] !== n - 1) v.push(n - 1); return v; };
+  const xs = axis(dw), ys = axis(dh), nx = xs.length, ny = ys.length;
+  const data = new Float32Array(nx * ny * 4);
+  const at = (x, y) => depth[Math.min(Math.max(y, 0), dh - 1) * dw + Math.min(Math.max(x, 0), dw - 1)];
+  for (let j = 0; j < ny; j++) for (let i = 0; i < nx; i++) {
+    const px = xs[i], py = ys[j];
+    let z = at(px, py);
+    if (z >= 1) {  // sky beside ground: at the farthest ground neighbour's depth
+      let g = 0;
+      for (let b = -1; b <= 1; b++) for (let a = -1; a <= 1; a++) {
+        const zn = at(px + a * stride, py + b * stride);
+        if (zn < 1) g = Math.max(g, zn);
+      }
+      if (g > 0) z = g;
+    }
+    let ux = (px + 0.5) / dw, uy = (py + 0.5) / dh;
+    if (px === 0) ux = 0; if (py === 0) uy = 0;
+    if (px === dw - 1) ux = 1; if (py === dh - 1) uy = 1;
+    const ray = [(ux * 2 - 1) * tanX, (uy * 2 - 1) * tanY, -1];
+    const o = 4 * (j * nx + i);
+    if (z >= 1) {
+      const n = Math.hypot(...ray);
+      data.set([ray[0] / n, ray[1] / n, ray[2] / n, 1], o);
+    } else {
+      const d = 2 * near * far / (far + near - (2 * z - 1) * (far - near));
+      data.set([ray[0] * d, ray[1] * d, ray[2] * d, 0], o);
+    }
+  }
+  return { data, nx, ny };
+}
+
 export function depthMeshVertices(w, h, stride) {
   const axis = (n) => { const v = []; for (let i = 0; i < n; i += stride) v.push(i); if (v[v.length - 1] !== n - 1) v.push(n - 1); return v; };
   const xs = axis(w), ys = axis(h), nx = xs.length;
@@ -365,7 +388,7 @@ export class SpriteDrawer {
 
   meshProgram() {
     if (this.mesh) return this.mesh;
-    const { program: p, u } = linkProgram(this.gl, MESH_VS, MESH_FS, ['u_key_depth', 'u_key_near_far', 'u_key_tan', 'u_key_axes', 'u_mvp_rel', 'u_key_proj', 'u_stride', 'u_cut', 'u_key_px', 'u_frame_px', 'u_stretch', 'u_moved', 'u_sprite', 'u_fallback_tint', 'u_valid', 'u_sheet']);
+    const { program: p, u } = linkProgram(this.gl, MESH_VS, MESH_FS, ['u_corners', 'u_key_size', 'u_key_axes', 'u_mvp_rel', 'u_key_proj', 'u_stride', 'u_cut', 'u_key_px', 'u_frame_px', 'u_stretch', 'u_moved', 'u_sprite', 'u_fallback_tint', 'u_valid', 'u_sheet']);
     this.mesh = { program: p, u };
     return this.mesh;
   }
@@ -391,17 +414,16 @@ export class SpriteDrawer {
   // `older`: the older keyframe of a pair (drawn where the newer drew nothing).
   drawMesh(key, viewProj, older = false) {
     const gl = this.gl, { program, u } = this.meshProgram();
-    const h = key.header, [kh, kw] = h.depth.shape;
-    const o = h.viewpoint.o, ty = Math.tan(h.fov * Math.PI / 360);
+    const h = key.header, [kh, kw] = h.depth.shape, corners = this.cornersOf(key);
+    const o = h.viewpoint.o;
     const translate = [1, 0, 0, o[0], 0, 1, 0, o[1], 0, 0, 1, o[2], 0, 0, 0, 1];
     const moved = Math.hypot(...this.eye.map((v, i) => v - o[i]));
     gl.useProgram(program);
     gl.uniformMatrix4fv(u.u_mvp_rel, true, mul(viewProj, translate));
     gl.uniformMatrix4fv(u.u_key_proj, true, h.proj);
     gl.uniformMatrix3fv(u.u_key_axes, false, [...h.viewpoint.x, ...h.viewpoint.y, ...h.viewpoint.z]);
-    gl.uniform2fv(u.u_key_near_far, [h.near, h.far]);
-    gl.uniform2fv(u.u_key_tan, [h.aspect * ty, ty]);
-    gl.uniform1i(u.u_stride, this.stride);
+    gl.uniform2i(u.u_key_size, kw, kh);
+    gl.uniform1i(u.u_stride, key.cornerStride);
     gl.uniform1f(u.u_cut, Math.sin(CUT_DEG * Math.PI / 180));
     gl.uniform2fv(u.u_key_px, [kw, kh]);
     gl.uniform2fv(u.u_frame_px, [gl.drawingBufferWidth, gl.drawingBufferHeight]);
@@ -411,8 +433,8 @@ export class SpriteDrawer {
     gl.uniform2fv(u.u_valid, older ? [0.5, 0.25] : [0.0, 0.25]);
     gl.uniform1f(u.u_sheet, older ? 0.75 : 0.25);
     gl.activeTexture(gl.TEXTURE1); gl.bindTexture(gl.TEXTURE_2D, key.sprite);
-    gl.activeTexture(gl.TEXTURE2); gl.bindTexture(gl.TEXTURE_2D, key.depth);
-    gl.uniform1i(u.u_sprite, 1); gl.uniform1i(u.u_key_depth, 2);
+    gl.activeTexture(gl.TEXTURE3); gl.bindTexture(gl.TEXTURE_2D, corners);
+    gl.uniform1i(u.u_sprite, 1); gl.uniform1i(u.u_corners, 3);
     const mesh = this.meshFor(kw, kh);
     gl.bindVertexArray(mesh.vao);
     gl.drawArrays(gl.TRIANGLES, 0, mesh.count);
@@ -444,6 +466,18 @@ export class SpriteDrawer {
   // (view, proj row-major; near, far), colour an ImageBitmap of its (H, W) RGBA rows
   // bottom-up (decode.js; closed here) and depth (H, W) float32 rows bottom-up, as WebGL's
   // textures want them.  Drawn once adopted (useKeyframe) or dropped (dropKeyframe).
+  // The keyframe's depth-mesh vertices (keyCorners) as an RGBA32F texture, made once.
+  cornersOf(key) {
+    if (!key.corners || key.cornerStride !== this.stride) {
+      const h = key.header, [dh, dw] = h.depth.shape, ty = Math.tan(h.fov * Math.PI / 360);
+      const c = keyCorners(key.depthData, dw, dh, this.stride, h.near, h.far, h.aspect * ty, ty);
+      if (key.corners) this.gl.deleteTexture(key.corners);
+      key.corners = texture(this.gl, 3, this.gl.RGBA32F, this.gl.RGBA, this.gl.FLOAT, c.nx, c.ny, c.data, this.gl.NEAREST);
+      key.cornerStride = this.stride;
+    }
+    return key.corners;
+  }
+
   prepareKeyframe(header, bitmap, depth) {
     const gl = this.gl;
     const [dh, dw] = header.depth.shape;
@@ -456,6 +490,9 @@ export class SpriteDrawer {
       mvp: mul(header.proj, header.view),
       nearFar: [header.near, header.far],
       header,
+      depthData: depth,  // for its mesh's vertices, made when first drawn (cornersOf)
+      corners: null,
+      cornerStride: 0,
     };
     bitmap.close();
     return key;
@@ -472,7 +509,10 @@ export class SpriteDrawer {
     this.key = key;
   }
 
-  dropKeyframe(key) { this.gl.deleteTexture(key.sprite); this.gl.deleteTexture(key.depth); }
+  dropKeyframe(key) {
+    this.gl.deleteTexture(key.sprite); this.gl.deleteTexture(key.depth);
+    if (key.corners) this.gl.deleteTexture(key.corners);
+  }
 
   // Draw a spriteframe at view-projection `viewProj` (row-major) into the canvas; `eye`
   // (world metres, the viewpoint's o) for the depth mesh's sky sheets (default: the

@@ -43,6 +43,32 @@ void main() {
   f_color = vec4(v_color * lit, 1.0);
 }`;
 
+// A walker smaller than POINT_PX pixels tall is drawn as one point of its type's lit
+// colour, the side of the square of its silhouette's area (a 200-triangle mesh on a pixel
+// or two is mostly vertex work for nothing).
+export const POINT_PX = 2.0;
+
+const POINT_VS = `#version 300 es
+layout(location = 0) in vec3 a_pos;    // its middle (x, y, ground + height / 2)
+layout(location = 1) in vec4 a_col;    // lit colour, side in metres
+uniform mat4 u_view_proj;
+uniform float u_focal;  // pixels a metre at unit depth
+uniform int u_remap;
+out vec3 v_color;
+void main() {
+  vec4 q = u_view_proj * vec4(a_pos, 1.0);
+  gl_PointSize = max(1.0, a_col.w * u_focal / max(q.w, 1e-6));
+  if (u_remap == 1) q.z = 0.25 * q.z - 0.75 * q.w;
+  v_color = a_col.rgb;
+  gl_Position = q;
+}`;
+
+const POINT_FS = `#version 300 es
+precision highp float;
+in vec3 v_color;
+out vec4 f_color;
+void main() { f_color = vec4(v_color, 1.0); }`;
+
 // An aligned typed array over a copy of little-endian bytes (msgpack bin: a Uint8Array).
 function typed(Type, bytes) { return new Type(new Uint8Array(bytes).buffer); }
 
@@ -57,12 +83,19 @@ export function walkerData(w) {
     dx: w.ground_dx, dy: w.ground_dy,
     types: w.types.map((t) => {
       const vertices = typed(Float32Array, t.vertices);
-      let r2 = 0;  // the type's bounding radius about its base (metres), for culling
+      let r2 = 0, top = 0, side = 0;  // bounding radius about the base, height, half width
+      const colour = [0, 0, 0];  // its lit colour, averaged over its vertices
+      const n = vertices.length / 9;
       for (let i = 0; i < vertices.length; i += 9) {
-        r2 = Math.max(r2, vertices[i] ** 2 + vertices[i + 1] ** 2 + vertices[i + 2] ** 2);
+        const [x, y, z] = [vertices[i], vertices[i + 1], vertices[i + 2]];
+        r2 = Math.max(r2, x * x + y * y + z * z);
+        top = Math.max(top, z); side = Math.max(side, Math.abs(x), Math.abs(y));
+        const lit = 0.35 + 0.65 * Math.max(vertices[i + 3] * LIGHT[0] + vertices[i + 4] * LIGHT[1] + vertices[i + 5] * LIGHT[2], 0);
+        for (let c = 0; c < 3; c++) colour[c] += (vertices[i + 6 + c] * lit) / n;
       }
       return {
-        name: t.name, vertices, radius: Math.sqrt(r2),
+        name: t.name, vertices, radius: Math.sqrt(r2), height: top, colour,
+        pointScale: Math.sqrt(Math.min(1, (2 * side) / Math.max(top, 1e-9))),  // area-true side
         levels: t.levels.map((l) => ({ fraction: l.fraction, indices: typed(Uint32Array, l.indices) })),
       };
     }),
@@ -84,18 +117,19 @@ export function frustumPlanes(m) {
 // Positions and headings of every walker at time t seconds (lodsprite.scene.walk.walk):
 // out.xy (2K) and out.yaw (K), Float64Arrays.
 export function walk(d, t, out = { xy: new Float64Array(2 * d.count), yaw: new Float64Array(d.count) }) {
+  const axis = (k, a, dir) => {  // the folded coordinate on axis a; its sign of dir
+    const lo = d.box[4 * k + a], hi = d.box[4 * k + 2 + a];
+    const span = Math.max(hi - lo, 1e-12), period = 2 * span;
+    let u = (d.xy0[2 * k + a] - lo) + dir * (d.speed[k] * t);
+    u -= period * Math.floor(u / period);  // numpy's mod: the divisor's sign
+    const back = u > span;
+    out.xy[2 * k + a] = lo + (back ? period - u : u);
+    return back ? -dir : dir;
+  };
   for (let k = 0; k < d.count; k++) {
-    const h = d.heading[k], dir = [Math.cos(h), Math.sin(h)], turned = [0, 0];
-    for (let a = 0; a < 2; a++) {
-      const lo = d.box[4 * k + a], hi = d.box[4 * k + 2 + a];
-      const span = Math.max(hi - lo, 1e-12), period = 2 * span;
-      let u = (d.xy0[2 * k + a] - lo) + dir[a] * (d.speed[k] * t);
-      u -= period * Math.floor(u / period);  // numpy's mod: the divisor's sign
-      const back = u > span;
-      out.xy[2 * k + a] = lo + (back ? period - u : u);
-      turned[a] = back ? -dir[a] : dir[a];
-    }
-    out.yaw[k] = Math.atan2(turned[1], turned[0]);
+    const h = d.heading[k];
+    const tx = axis(k, 0, Math.cos(h)), ty = axis(k, 1, Math.sin(h));
+    out.yaw[k] = Math.atan2(ty, tx);
   }
   return out;
 }
@@ -158,26 +192,52 @@ export class WalkerDrawer {
       }
       this.buckets.push(perType);
     }
+    const pts = linkProgram(gl, POINT_VS, POINT_FS, ['u_view_proj', 'u_focal', 'u_remap']);
+    this.points = { program: pts.program, u: pts.u, vao: gl.createVertexArray(), buffer: gl.createBuffer(), data: new Float32Array(7 * data.count), n: 0 };
+    gl.bindVertexArray(this.points.vao);
+    gl.bindBuffer(gl.ARRAY_BUFFER, this.points.buffer);
+    gl.bufferData(gl.ARRAY_BUFFER, this.points.data.byteLength, gl.DYNAMIC_DRAW);
+    gl.enableVertexAttribArray(0); gl.vertexAttribPointer(0, 3, gl.FLOAT, false, 28, 0);
+    gl.enableVertexAttribArray(1); gl.vertexAttribPointer(1, 4, gl.FLOAT, false, 28, 12);
+    gl.bindVertexArray(null);
     this.triangles = 0;
   }
 
   // Draw every walker at time t seconds from eye (world metres) with viewProj (row-major),
   // over what the canvas holds (its depth buffer tested; `meshDepth`: the spriteframe drew
-  // the keyframe's depth mesh, whose depth range the walkers then share).  Returns the
-  // triangles drawn.
-  draw(viewProj, eye, t, meshDepth = false) {
+  // the keyframe's depth mesh, whose depth range the walkers then share); `focal`: pixels
+  // a metre at unit depth (the canvas height over 2 tan(fov / 2)).  Returns the triangles
+  // drawn (points: this.pointsDrawn).
+  draw(viewProj, eye, t, meshDepth = false, focal = 500) {
     const gl = this.gl, d = this.d, { xy, yaw } = walk(d, t, this.out);
     for (const perType of this.buckets) for (const b of perType) b.n = 0;
+    this.points.n = 0;
     const planes = frustumPlanes(viewProj);
     this.culled = 0;
     for (let k = 0; k < d.count; k++) {
       const x = xy[2 * k], y = xy[2 * k + 1], z = groundAt(d, x, y);
       const type = d.type[k], r = d.types[type].radius;
       // outside the view (its bounding sphere about its base, radius its farthest vertex)
-      if (planes.some((p) => p[0] * x + p[1] * y + p[2] * z + p[3] < -r)) { this.culled += 1; continue; }
+      let outside = false;
+      for (let i = 0; i < 6 && !outside; i++) {
+        const p = planes[i];
+        outside = p[0] * x + p[1] * y + p[2] * z + p[3] < -r;
+      }
+      if (outside) { this.culled += 1; continue; }
       const dist = Math.hypot(x - eye[0], y - eye[1], z - eye[2]);
-      const b = this.buckets[type][levelFor(d.types[type].levels, d.near, d.far, dist)];
-      b.data.set([x, y, z, yaw[k]], 4 * b.n); b.n += 1;
+      const tp = d.types[type];
+      if (tp.height * focal < POINT_PX * dist) {  // under POINT_PX tall: a point
+        const P = this.points, o = 7 * P.n;
+        P.data[o] = x; P.data[o + 1] = y; P.data[o + 2] = z + 0.5 * tp.height;
+        P.data[o + 3] = tp.colour[0]; P.data[o + 4] = tp.colour[1]; P.data[o + 5] = tp.colour[2];
+        P.data[o + 6] = tp.height * tp.pointScale;
+        P.n += 1;
+        continue;
+      }
+      const b = this.buckets[type][levelFor(tp.levels, d.near, d.far, dist)];
+      const o = 4 * b.n;
+      b.data[o] = x; b.data[o + 1] = y; b.data[o + 2] = z; b.data[o + 3] = yaw[k];
+      b.n += 1;
     }
     gl.enable(gl.DEPTH_TEST);
     gl.useProgram(this.program);
@@ -195,8 +255,20 @@ export class WalkerDrawer {
         tris += (b.count / 3) * b.n;
       }
     }
+    const P = this.points;
+    if (P.n) {
+      gl.useProgram(P.program);
+      gl.uniformMatrix4fv(P.u.u_view_proj, true, viewProj);
+      gl.uniform1f(P.u.u_focal, focal);
+      gl.uniform1i(P.u.u_remap, meshDepth ? 1 : 0);
+      gl.bindBuffer(gl.ARRAY_BUFFER, P.buffer);
+      gl.bufferSubData(gl.ARRAY_BUFFER, 0, P.data, 0, 7 * P.n);
+      gl.bindVertexArray(P.vao);
+      gl.drawArrays(gl.POINTS, 0, P.n);
+    }
     gl.bindVertexArray(null);
     this.triangles = tris;
+    this.pointsDrawn = P.n;
     return tris;
   }
 }
