@@ -21,7 +21,8 @@ page as it drew them (``capture``), against a reference of the same viewpoint:
     python benchmarks/served_pages.py --data /tmp/data --scene f16k.zarr --size 640x480 \\
         --renderers 2 --path chen1999 --frames 240 [--judge 40] [--out DIR]
 
-Writes ``pages.json`` to ``--out`` (default a temporary folder) and prints the figures.
+Writes ``pages.json`` and each judged frame beside its reference (``frame_K.png``) to
+``--out`` (default a temporary folder) and prints the figures.
 """
 
 from __future__ import annotations
@@ -116,8 +117,15 @@ def rmse(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.sqrt(np.mean((a.astype(np.float64) - b.astype(np.float64)) ** 2)))
 
 
-def judge(args, frames: list) -> dict:
-    """The captured frames' RMSE against the reference (module doc), untimed."""
+def judge(args, frames: list, out: Path | None = None) -> dict:
+    """The captured frames' RMSE against the reference (module doc), untimed; with
+    ``out``, each page frame beside its reference as ``frame_K.png``."""
+    import imageio.v3 as iio
+
+    def keep(k: int, image: np.ndarray, ref: np.ndarray) -> None:
+        if out is not None:
+            iio.imwrite(out / f"frame_{k}.png", np.concatenate([image, ref], axis=1))
+
     from lodsprite import techniques
     from lodsprite.api import Renderer
     from lodsprite.harness import scene_reference
@@ -127,16 +135,18 @@ def judge(args, frames: list) -> dict:
     spec = str(local) if local.exists() else args.scene
     scene = open_scene(spec, light=True, root=args.data)
     size = tuple(args.size)
-    out: dict = {"frames": [f[0] for f in frames]}
+    res: dict = {"frames": [f[0] for f in frames]}
     r = Renderer(scene, size, 45.0)  # the page's field of view (the load's default)
     try:
         if spec.endswith(".toml"):
             page = []
-            for _, vp, t, image in frames:
+            for k, vp, t, image in frames:
                 r.draw(vp, t)
-                page.append(rmse(image, r.read_color()))
-            out.update(reference="full-detail render (Renderer.draw)", page_rmse=page)
-            return out
+                ref = r.read_color()
+                keep(k, image, ref)
+                page.append(rmse(image, ref))
+            res.update(reference="full-detail render (Renderer.draw)", page_rmse=page)
+            return res
         with scene_reference(r) as reference:
             refs = [reference(vp) for _, vp, _, _ in frames]
         adaptive = techniques.create("adaptive", r)
@@ -149,11 +159,14 @@ def judge(args, frames: list) -> dict:
                 own.append(rmse(r.read_color(), ref))
         finally:
             adaptive.release()
-        page = [rmse(image, ref) for (_, _, _, image), ref in zip(frames, refs, strict=True)]
-        out.update(reference="band-limited level 0 (harness.scene_reference)",
+        page = []
+        for (k, _, _, image), ref in zip(frames, refs, strict=True):
+            keep(k, image, ref)
+            page.append(rmse(image, ref))
+        res.update(reference="band-limited level 0 (harness.scene_reference)",
                    page_rmse=page, adaptive_rmse=own,
                    page_over_adaptive=float(np.mean(page) / np.mean(own)))
-        return out
+        return res
     finally:
         r.release()
 
@@ -194,7 +207,7 @@ def main() -> None:
         raise SystemExit(f"the page failed: {got['error']}")
     s, server = got["stats"], got["server"]
     frames = frames_of(got["captured"])
-    judged = judge(args, frames)
+    judged = judge(args, frames, out)
     record = {"scene": args.scene, "query": args.query, "size": args.size,
               "renderers": args.renderers, "path": args.path, "frames": args.frames,
               "lod": args.lod, "wall_s": wall,
