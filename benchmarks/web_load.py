@@ -184,7 +184,7 @@ async def kill_renderer(server_pid: int, at_s: float, pool: str = "ray") -> dict
     """SIGKILL one renderer of the server's process tree ``at_s`` seconds into the play,
     one holding a job if there is one: a Ray actor (its process title
     ``ray::RenderActor.render`` while it renders), or one of the local pool's renderer
-    processes (the server's ``multiprocessing`` children; the one that took the most CPU
+    processes (the server's ``multiprocessing`` spawned children; the one that took the most CPU
     over 50 ms: the one rendering); its pid and whether it was rendering (None: none
     found)."""
     import psutil
@@ -194,7 +194,7 @@ async def kill_renderer(server_pid: int, at_s: float, pool: str = "ray") -> dict
     await asyncio.sleep(at_s)
     if pool == "local":
         found = [p for p in psutil.Process(server_pid).children(recursive=True)
-                 if "multiprocessing" in _cmdline(p)]
+                 if "spawn_main" in _cmdline(p)]  # not the resource tracker
         if not found:
             return None
         for p in found:
