@@ -171,6 +171,26 @@ def test_a_scene_no_session_uses_is_dropped_by_the_renderers_that_held_it(
     assert broker.stats()["released"] == before + 1
 
 
+def test_a_prepared_scene_is_opened_by_one_renderer_which_then_takes_its_first_job(
+        broker: LocalPool) -> None:
+    """``prepare``: one idle renderer opens the scene (counted ``prepared``); the first
+    job of that scene goes to it; a scene a renderer holds already is not prepared again."""
+    from lodsprite.distributed.pool.jobs import job_key
+
+    fresh = LoadArgs(terrain="fractal:64:7", size=(64, 64), lod=16)
+    before = broker.stats()["prepared"]
+    broker.prepare(fresh)
+    wait_until(lambda: broker.stats()["prepared"] == before + 1, 30.0, "the scene opened")
+    holders = [k for k, p in broker.table.peers.items() if job_key(fresh) in p.scenes]
+    assert len(holders) == 1
+    broker.submit(job(60, fresh))
+    assert results(broker, 1)[60].worker == holders[0][1].hex()
+    broker.prepare(fresh)  # held already: nothing opened again
+    broker.submit(job(61))
+    assert results(broker, 1)[61].ok
+    assert broker.stats()["prepared"] == before + 1
+
+
 def test_close_leaves_no_process(broker: LocalPool) -> None:
     pids = [p.pid for p in broker.local_processes()]
     assert len(pids) == 2

@@ -86,7 +86,8 @@ class JobTable:
         self.queue: deque[QueuedJob] = deque()
         self.done: deque[Result] = deque()
         self.counts = dict.fromkeys(("jobs", "results", "failed", "requeued", "declined",
-                                     "dead", "rejected", "ignored", "released"), 0)
+                                     "dead", "rejected", "ignored", "released",
+                                     "prepared"), 0)
         self.busy_s = 0.0  # seconds workers spent on jobs they answered
         self.job_s: deque[float] = deque(maxlen=JOB_TIMES)  # dispatch -> answer, s
         self.overhead_s: deque[float] = deque(maxlen=JOB_TIMES)  # that less the worker's own

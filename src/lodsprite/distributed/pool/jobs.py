@@ -128,7 +128,15 @@ class ReleaseMessage(PoolMessage, tag="release"):
     key: Annotated[bytes, Meta(max_length=MAX_JOB_BYTES)]
 
 
-ANY_POOL = Ready | JobMessage | ResultMessage | ReleaseMessage
+class PrepareMessage(PoolMessage, tag="prepare"):
+    """Open the scene of ``load`` (its keyframe source, caches and GL objects) without
+    drawing, so that the job that follows finds it open; the renderer answers whether it
+    opened it (msgpack ``true`` or ``false``: refused or failed, which the job will say)."""
+
+    load: LoadArgs
+
+
+ANY_POOL = Ready | JobMessage | ResultMessage | ReleaseMessage | PrepareMessage
 _decoder = msgspec.msgpack.Decoder(ANY_POOL)
 _encoder = msgspec.msgpack.Encoder()
 

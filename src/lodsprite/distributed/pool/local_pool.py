@@ -42,14 +42,16 @@ from lodsprite.distributed.pool.jobs import (
     POOL_VERSION,
     Job,
     JobMessage,
+    PrepareMessage,
     Ready,
     ReleaseMessage,
     ResultMessage,
     check_job,
     decode_pool,
+    job_key,
 )
 from lodsprite.distributed.pool.results import PoolResults, drain, signal
-from lodsprite.distributed.protocol import CODECS, ProtocolError
+from lodsprite.distributed.protocol import CODECS, LoadArgs, ProtocolError
 from lodsprite.errors import InputError
 
 log = logging.getLogger("lodsprite.pool")
@@ -105,6 +107,7 @@ class LocalPool(PoolResults):
         self._renderers: list[_Slot] = []
         self._inbox: deque[Job] = deque()
         self._releases: deque[bytes] = deque()  # scenes to drop, for every renderer
+        self._prepares: deque[LoadArgs] = deque()  # scenes to open, on one renderer
         self._stop = threading.Event()
         self._lock = threading.Lock()  # the renderer list: spawn_local beside the thread
         self._wake_r, self._wake_w = os.pipe()
@@ -124,6 +127,15 @@ class LocalPool(PoolResults):
         no session uses it any more); counted ``released`` where one held it.  Never
         blocks; thread-safe."""
         self._releases.append(bytes(key))
+        signal(self._wake_w)
+
+    def prepare(self, load: LoadArgs) -> None:
+        """Have one renderer open the scene of ``load`` now (a page loaded it; its first
+        request follows once the page has the scene message): the idle renderer idle
+        longest, unless one holds it already; it counts as holding the scene from now, so
+        the first job goes to it, behind the opening.  Counted ``prepared``.  Never
+        blocks; thread-safe."""
+        self._prepares.append(load)
         signal(self._wake_w)
 
     def spawn_local(self, n: int, cache: int = 2) -> list[int]:
@@ -212,6 +224,8 @@ class LocalPool(PoolResults):
                     for r in self._renderers:
                         self._service(r, now)
                         self._send_releases(r)
+                    while self._prepares:
+                        self._send_prepare(self._prepares.popleft())
                     self._expire(now)
                     self._dispatch(now)
                 self._changed()
@@ -247,9 +261,14 @@ class LocalPool(PoolResults):
             r.key = (0, f"{r.index}:{pid}".encode())
             self.table.ready(r.key, Ready(POOL_VERSION, pid, f"local-{pid}", self.cache), now)
         for key, answer in answers:
-            if isinstance(key, tuple):  # a release's answer: ok when it held the scene
-                if isinstance(answer, tuple) and self._released(answer):
-                    self.table.counts["released"] += 1
+            if isinstance(key, tuple):  # a release's or prepare's answer: true or false
+                done = isinstance(answer, tuple) and self._released(answer)
+                if done:
+                    self.table.counts["released" if key[0] == "release" else "prepared"] += 1
+                elif key[0] == "prepare":  # not opened: no affinity for it
+                    peer = self.table.peers.get(r.key) if r.key is not None else None
+                    if peer is not None and key[1] in peer.scenes:
+                        peer.scenes.remove(key[1])
             elif isinstance(answer, tuple) and r.key is not None:
                 self._answer(r, answer, now)
         if r.worker is not None and not r.worker.alive:
@@ -285,6 +304,22 @@ class LocalPool(PoolResults):
                 peer.scenes.remove(key)
             r.worker.submit(("release", key), msgspec.msgpack.encode(
                 ReleaseMessage(POOL_VERSION, key)))
+
+    def _send_prepare(self, load: LoadArgs) -> None:
+        """The prepare of ``load`` to the idle renderer idle longest (none: dropped), unless
+        one holds the scene already; that renderer holds it from now (dispatch's affinity)."""
+        key = job_key(load)
+        peers = self.table.peers
+        if any(key in p.scenes for p in peers.values()):
+            return
+        idle = [r for r in self._renderers if r.key in peers and peers[r.key].entry is None
+                and r.worker is not None and r.worker.alive and not r.worker.pending]
+        if not idle:
+            return
+        r = min(idle, key=lambda r: peers[r.key].idle_since)
+        r.worker.submit(("prepare", key), msgspec.msgpack.encode(
+            PrepareMessage(POOL_VERSION, load)))
+        peers[r.key].scenes.append(key)
 
     @staticmethod
     def _released(answer: tuple) -> bool:

@@ -30,6 +30,7 @@ from lodsprite.distributed.datasets import Datasets
 from lodsprite.distributed.pool.jobs import (
     POOL_VERSION,
     JobMessage,
+    PrepareMessage,
     ReleaseMessage,
     ResultMessage,
     encode_pool,
@@ -144,6 +145,20 @@ class SceneCache:
                                              refused=isinstance(exc, InputError),
                                              render_ms=took))
 
+    def prepare(self, load: LoadArgs) -> bool:
+        """Open the scene of ``load`` (held as a job's would be) without drawing; whether
+        it did (a scene refused or failing here is the job's to report)."""
+        key = job_key(load)
+        try:
+            self._scene(key, load)
+        except Exception:  # noqa: BLE001 - the job that follows says why
+            dropped = self.scenes.pop(key, None)
+            self.bytes.pop(key, None)
+            if dropped is not None:
+                dropped.release()
+            return False
+        return True
+
     def release(self, key: bytes) -> bool:
         """Drop the scene ``key`` (its GL objects and caches); whether it was held."""
         r = self.scenes.pop(key, None)
@@ -189,9 +204,11 @@ def handler(data_dir: str | None, cache: int, keyframes: str = "auto",
                         keyframes, max_mb)
 
     def answer(meta: bytes, data: bytes) -> tuple[bytes, bytes]:
-        msg = msgspec.msgpack.decode(meta, type=JobMessage | ReleaseMessage)
+        msg = msgspec.msgpack.decode(meta, type=JobMessage | ReleaseMessage | PrepareMessage)
         if isinstance(msg, ReleaseMessage):  # answered: whether it held the scene
             return msgspec.msgpack.encode(scenes.release(msg.key)), b""
+        if isinstance(msg, PrepareMessage):  # answered: whether it opened the scene
+            return msgspec.msgpack.encode(scenes.prepare(msg.load)), b""
         return pack(scenes.render(msg))
 
     return answer

@@ -6,7 +6,9 @@ render pool.
   before anything is allocated (:func:`~lodsprite.distributed.render.estimate_scene_bytes`
   against ``MemAvailable``); the ``scene`` message is built in a thread of the server
   process (GL-free, :mod:`.scene`), cached by its arguments, and sent, then the reply.
-  Only the session's newest ``load`` takes effect; one session's load never changes
+  Meanwhile a pool that can (the local pool's ``prepare``) has one renderer open the
+  scene, which the page's first request then goes to.  Only the session's newest
+  ``load`` takes effect; one session's load never changes
   another's (jobs carry their session's arguments; renderers cache scenes by them).
 * Scheduling: round robin over the sessions with waiting requests and fewer than
   ``session_jobs`` in flight, one job per live worker at a time, so that a session asking
@@ -184,6 +186,9 @@ class Hub:
     async def _load(self, session: Session, args: LoadArgs, seq: int, gen: int) -> None:
         try:
             resolved = await asyncio.to_thread(self._resolve, args)  # opens files: not here
+            prepare = getattr(self.pool, "prepare", None)
+            if prepare is not None:  # a renderer opens the scene while its message is built
+                prepare(args)
             key = scene_key(resolved)
             cached = self._scenes.get(key)
             if cached is None:
