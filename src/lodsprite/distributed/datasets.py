@@ -134,20 +134,22 @@ class Datasets:
                 raise InputError(f"terrain {name!r} is not a file")
             return SceneName(str(path), None, self.data_dir, Dataset(str(path), shape, False))
         self._served(kind, name)
+        terrain = None
         if kind == "scene-file":
-            self._check_scene_file(path, name)
+            terrain = self._check_scene_file(path, name)
         else:
             check_tree(path, f"scene {name!r}")
-        return SceneName(str(path), kind, self.data_dir)
+        return SceneName(str(path), kind, self.data_dir, terrain)
 
     def _served(self, kind: str, name: str) -> None:
         if kind not in self.kinds:
             raise InputError(f"scene {name!r}: this server does not serve {kind} scenes "
                              f"(it serves {', '.join(self.kinds) or 'terrains only'})")
 
-    def _check_scene_file(self, path: Path, name: str) -> None:
+    def _check_scene_file(self, path: Path, name: str) -> Dataset:
         """The scene file read confined to the data folder, and held to the session's
-        caps (objects, light fields, a built-in terrain's size)."""
+        caps (objects, light fields, its terrain's size); its terrain (a built-in, or a
+        file or store under the data folder, checked by :meth:`terrain`'s rule)."""
         from lodsprite.scene.file import read_scene_file
 
         try:
@@ -170,7 +172,12 @@ class Datasets:
                              f"than a session's {MAX_SESSION_LIGHTFIELDS}")
         source = sf.terrain.source
         if not Path(source).is_absolute():  # a built-in: the terrain rules apply
-            self.terrain(source)
+            return self.terrain(source)
+        try:  # a file under the data folder (read_scene_file resolved it there)
+            return self.terrain(Path(source).relative_to(self.data_dir).as_posix())
+        except (InputError, ValueError) as exc:
+            raise InputError(self.local_message(f"scene {name!r}: {exc}", path, name)
+                             ) from None
 
     def local_message(self, message: str, path: Path, name: str) -> str:
         """``message`` with the server's paths put as a page names them: ``path`` as

@@ -183,7 +183,8 @@ class KeyframeService:
             self.coarse_z = args.visibility == "coarse"
             self.coarse = (RenderTarget(self.terrain_gl.ctx, *size, color=False) if self.coarse_z
                            else None)
-            self.pacer = KeyframePacer(scene.hf, self.lod, args.epsilon, size[1], args.pace)
+            # ε in display pixels: the frame's height, not the keyframe's texels
+            self.pacer = KeyframePacer(scene.hf, self.lod, args.epsilon, args.size[1], args.pace)
         except BaseException:
             self.terrain_gl.release()
             raise

@@ -189,6 +189,15 @@ def test_a_prepared_scene_is_opened_by_one_renderer_which_then_takes_its_first_j
     broker.submit(job(61))
     assert results(broker, 1)[61].ok
     assert broker.stats()["prepared"] == before + 1
+    assert not any(("prepare", job_key(fresh)) in r.worker.pending  # nor on its way
+                   for r in broker._renderers if r.worker is not None)
+    # a renderer opening a scene is the last choice for another scene's job
+    slow = LoadArgs(terrain="fractal:1024:5", size=(64, 64), lod=16)
+    broker.prepare(slow)
+    broker.submit(job(62, LoadArgs(terrain="fractal:64:9", size=(64, 64), lod=16)))
+    opener = wait_until(lambda: [k for k, p in broker.table.peers.items()
+                                 if job_key(slow) in p.scenes], 10.0, "the prepare sent")[0]
+    assert results(broker, 1, 60.0)[62].worker != opener[1].hex()
 
 
 def test_close_leaves_no_process(broker: LocalPool) -> None:

@@ -61,6 +61,8 @@ def server(tmp_path_factory):
     (data / "ext.toml").write_text('[terrain]\nsource = "hill.npy"\n[[objects]]\n'
                                    'mesh = "ext.gltf"\n')
     (data.parent / "secret.bin").write_bytes(b"\0" * 4)
+    (data / "bad.npy").write_bytes(b"not a NumPy file")  # a scene file's broken terrain
+    (data / "badterrain.toml").write_text('[terrain]\nsource = "bad.npy"\n')
     (data.parent / "out.toml").write_text('[terrain]\nsource = "fractal:64:1"\n')
     # a scene file the page draws: walkers over hill.npy among standing trees
     (data / "crowd.toml").write_text(
@@ -196,7 +198,8 @@ def test_pages_name_files_by_the_data_rule(server):
             refused = []
             for name in ("../hill.npy", "/etc/passwd", "missing.npy", "crowd:10",
                          "crowd:100000000", "http://example.com/dem.tif", "walk.toml",
-                         "abs.toml", "link.toml", "ext.toml", "../out.toml"):
+                         "abs.toml", "link.toml", "ext.toml", "../out.toml",
+                         "badterrain.toml"):
                 with pytest.raises(ProtocolError) as err:
                     await page.load({**LOAD, "terrain": name})
                 refused.append(str(err.value))

@@ -320,6 +320,9 @@ class LocalPool(PoolResults):
         r.worker.submit(("prepare", key), msgspec.msgpack.encode(
             PrepareMessage(POOL_VERSION, load)))
         peers[r.key].scenes.append(key)
+        # idle from now: the last choice for a job of another scene (which would wait
+        # behind the opening), the first for this scene's (affinity)
+        peers[r.key].idle_since = time.monotonic()
 
     @staticmethod
     def _released(answer: tuple) -> bool:

@@ -39,6 +39,7 @@ from __future__ import annotations
 import asyncio
 import itertools
 import logging
+import os
 import time
 from collections import OrderedDict
 from typing import Any
@@ -187,8 +188,9 @@ class Hub:
         try:
             resolved = await asyncio.to_thread(self._resolve, args)  # opens files: not here
             prepare = getattr(self.pool, "prepare", None)
-            if prepare is not None:  # a renderer opens the scene while its message is built
-                prepare(args)
+            if prepare is not None and not session.closed and (
+                    self._generation.get(session.id) == gen):  # still the newest load:
+                prepare(args)  # a renderer opens the scene while its message is built
             key = scene_key(resolved)
             cached = self._scenes.get(key)
             if cached is None:
@@ -210,7 +212,7 @@ class Hub:
             if self._generation.get(session.id) == gen:
                 reason = exc if isinstance(exc, LodspriteError | OSError | ValueError) else (
                     f"internal error: {type(exc).__name__}")
-                session.reply(seq, False, f"load: {reason}")
+                session.reply(seq, False, self._local(f"load: {reason}"))
             return
         if session.closed or self._generation.get(session.id) != gen:
             return  # a newer load of this session, or a closed one: this one is moot
@@ -219,6 +221,14 @@ class Hub:
         header = msgspec.msgpack.decode(parts[0])
         session.push_scene(encode({**header, "seq": seq}, *parts[1:]))  # the cached buffers
         session.reply(seq, True, data={"coarse": resolved.lod, "size": list(resolved.size)})
+
+    def _local(self, message: str) -> str:
+        """``message`` as a page may read it: the data folder's files named relative to it,
+        the folder itself as "the data folder" (never the server's paths)."""
+        root = getattr(self.datasets, "data_dir", None)
+        if root is None:
+            return message
+        return message.replace(f"{root}{os.sep}", "").replace(str(root), "the data folder")
 
     def _apply(self, session: Session, named: LoadArgs, resolved: LoadArgs, gen: int) -> None:
         """Make ``resolved`` the session's scene (generation ``gen``): its waiting and
@@ -256,7 +266,7 @@ class Hub:
                 data = await asyncio.to_thread(path_data, load, args, hf,
                                                None if root is None else str(root))
         except (LodspriteError, MemoryError, OSError, ValueError) as exc:
-            session.reply(seq, False, f"path: {exc}")
+            session.reply(seq, False, self._local(f"path: {exc}"))
             return
         finally:
             session.path_busy = False
@@ -264,15 +274,23 @@ class Hub:
             session.reply(seq, True, data=data)
 
     def _resolve(self, args: LoadArgs) -> LoadArgs:
-        """``args`` with the terrain and texture resolved to loader specs; raises
-        :class:`InputError` for a name, a size or a scene this server refuses, and for a
-        scene of another kind than a terrain (a scene file, a crowd, a light field: the
-        page draws terrains)."""
+        """``args`` with the terrain and texture resolved to loader specs (a scene file:
+        its absolute path inside the data folder); raises :class:`InputError` for a name,
+        a size or a scene this server refuses, and for a scene of a kind the page does not
+        draw (a crowd, a light field, a plug-in's: the page draws terrains and scene
+        files)."""
         named = self.datasets.scene(args.terrain)  # confined to the data folder, capped
         if named.kind == "scene-file":
             if args.lod > MAX_SCENE_COARSE:
                 raise InputError(f"lod {args.lod}: at most {MAX_SCENE_COARSE} for a web page")
-            return msgspec.structs.replace(args, terrain=named.spec)
+            resolved = msgspec.structs.replace(args, terrain=named.spec)
+            if named.terrain is not None:  # its terrain held to this machine's memory
+                reason = check_scene_memory(
+                    msgspec.structs.replace(args, terrain=named.terrain.spec),
+                    named.terrain.shape, None)
+                if reason is not None:
+                    raise InputError(reason)
+            return resolved
         if named.kind is not None or named.terrain is None:
             raise InputError(f"{args.terrain!r} is a {named.kind} scene: a page draws "
                              "terrains and scene files (open it with lodsprite view or "
@@ -339,14 +357,14 @@ class Hub:
                 continue
             if not r.ok:
                 s.counts["failed"] += 1
-                s.reply(p.seq, False, f"render: {r.error}",
+                s.reply(p.seq, False, self._local(f"render: {r.error}"),
                         {"code": r.code or "failed"})
                 continue
             try:
                 s.push_keyframe(_restamp(r.parts, p), p)
             except ProtocolError as exc:
                 s.counts["failed"] += 1
-                s.reply(p.seq, False, f"render: {exc}")
+                s.reply(p.seq, False, self._local(f"render: {exc}"))
         self.schedule()
 
     def _expire(self) -> None:

@@ -6,7 +6,8 @@ draws them (``static/walkers.js``): each frame it places every walker with the c
 walk (:func:`lodsprite.scene.walk.walk`, ported, cross-checked to 1e-9) on the ground
 (:meth:`~lodsprite.terrain.HeightField.height_at`, ported), picks each walker's LOD by
 its distance (Gumbau et al. §4.2, :func:`lodsprite.manager.core.desired_lod`: linear
-between ``near`` and ``far``, rounded up to the finest shipped level at or above it) and
+between ``near`` and ``far``; the coarsest shipped level whose share of the triangles is
+at or above it) and
 draws each (type, level) as one instanced draw, depth tested against the spriteframe's
 depth mesh (the keyframe's own surface).
 
@@ -16,8 +17,8 @@ depth mesh (the keyframe's own surface).
 triangles (its LOD model's own ``extract``), then per walker its start ``xy0``, heading,
 speed, walking rectangle and type, and the ground heights (at most
 :data:`~lodsprite.distributed.messages.MAX_GROUND_SIDE` a side: a larger terrain's are
-subsampled by a power of two, its walkers then standing on a coarser ground than
-lodsprite's own).  Little-endian bytes.
+sampled bilinearly on a coarser grid over the same extent, its walkers then standing on a
+coarser ground than lodsprite's own).  Little-endian bytes.
 """
 
 from __future__ import annotations
@@ -91,16 +92,21 @@ def walker_header(world: World) -> dict[str, Any] | None:
         types.append({"name": world.types[t].name, "vertices": _f32(vertices),
                       "levels": levels})
     hf = world.ground_field
-    k = 1  # a power of two: a 2^n + 1 grid keeps its edges
-    while (max(hf.rows, hf.cols) - 1) // k + 1 > MAX_GROUND_SIDE:
-        k *= 2
-    ground = hf.heights[::k, ::k]
+    ground, gdx, gdy = hf.heights, hf.dx, hf.dy
+    if max(hf.rows, hf.cols) > MAX_GROUND_SIDE:  # sampled over the whole extent, edges kept
+        k = (max(hf.rows, hf.cols) - 1) / (MAX_GROUND_SIDE - 1)
+        rows, cols = (max(2, int((n - 1) / k) + 1) for n in (hf.rows, hf.cols))
+        xs = np.linspace(-hf.width / 2, hf.width / 2, cols)
+        ys = np.linspace(hf.depth / 2, -hf.depth / 2, rows)  # row 0 north
+        gx, gy = np.meshgrid(xs, ys)
+        ground = hf.height_at(gx, gy).astype(np.float32)
+        gdx, gdy = hf.width / (cols - 1), hf.depth / (rows - 1)
     height = max(float(t.height_m) for t in world.types)
     return {"types": types, "count": int(moving.sum()),
             "xy0": _f64(a["xy0"]), "heading": _f64(a["heading"]), "speed": _f64(a["speed"]),
             "box": _f64(a["box"]), "type": remap[type_of].astype("<u2").tobytes(),
             "ground": _f32(ground), "ground_shape": [int(ground.shape[0]), int(ground.shape[1])],
-            "ground_dx": float(hf.dx * k), "ground_dy": float(hf.dy * k),
+            "ground_dx": float(gdx), "ground_dy": float(gdy),
             "near": NEAR_HEIGHTS * height, "far": FAR_HEIGHTS * height}
 
 

@@ -217,9 +217,6 @@ void main() {
   f_color = vec4(rgb, 1.0);
 }`;
 
-// The mesh over a (w, h) keyframe, as lodsprite.gl.depth_mesh.grid_vertices: a vertex every
-// `stride` texels (the last row and column always), two triangles a cell; each triangle's
-// vertices carry its three texels and their corner (7 floats a vertex).
 // The keyframe's depth-mesh vertices in its eye space, once a keyframe (what the mesh's
 // vertex shader reads, three texels a vertex instead of a depth search each frame): for
 // the grid texels (every `stride`-th, the last row and column too) of the (dw, dh) window
@@ -259,6 +256,9 @@ export function keyCorners(depth, dw, dh, stride, near, far, tanX, tanY) {
   return { data, nx, ny };
 }
 
+// The mesh over a (w, h) keyframe, as lodsprite.gl.depth_mesh.grid_vertices: a vertex every
+// `stride` texels (the last row and column always), two triangles a cell; each triangle's
+// vertices carry its three texels and their corner (7 floats a vertex).
 export function depthMeshVertices(w, h, stride) {
   const axis = (n) => { const v = []; for (let i = 0; i < n; i += stride) v.push(i); if (v[v.length - 1] !== n - 1) v.push(n - 1); return v; };
   const xs = axis(w), ys = axis(h), nx = xs.length;
@@ -462,10 +462,6 @@ export class SpriteDrawer {
     this.triangles = this.count / 3;
   }
 
-  // A keyframe's textures, uploaded now (when its decode resolves, not in a frame): header
-  // (view, proj row-major; near, far), colour an ImageBitmap of its (H, W) RGBA rows
-  // bottom-up (decode.js; closed here) and depth (H, W) float32 rows bottom-up, as WebGL's
-  // textures want them.  Drawn once adopted (useKeyframe) or dropped (dropKeyframe).
   // The keyframe's depth-mesh vertices (keyCorners) as an RGBA32F texture, made once.
   cornersOf(key) {
     if (!key.corners || key.cornerStride !== this.stride) {
@@ -478,6 +474,10 @@ export class SpriteDrawer {
     return key.corners;
   }
 
+  // A keyframe's textures, uploaded now (when its decode resolves, not in a frame): header
+  // (view, proj row-major; near, far), colour an ImageBitmap of its (H, W) RGBA rows
+  // bottom-up (decode.js; closed here) and depth (H, W) float32 rows bottom-up, as WebGL's
+  // textures want them.  Drawn once adopted (useKeyframe) or dropped (dropKeyframe).
   prepareKeyframe(header, bitmap, depth) {
     const gl = this.gl;
     const [dh, dw] = header.depth.shape;

@@ -2,8 +2,8 @@
 // closed-form walk (lodsprite.scene.walk.walk: straight lines at constant speed, reflected
 // at the walking rectangle's edges by the triangle wave) on the ground (HeightField.
 // height_at: bilinear, clamped), each walker's LOD by its distance (Gumbau et al. §4.2:
-// 1 - (d - near) / (far - near), clamped, rounded up to the finest shipped level at or
-// above it), each (type, level) one instanced draw, shaded as lodsprite.gl.crowd, depth
+// 1 - (d - near) / (far - near), clamped; the coarsest shipped level whose share of the
+// triangles is at or above it), each (type, level) one instanced draw, shaded as lodsprite.gl.crowd, depth
 // tested against what the spriteframe drew (the keyframe's own surface).  Walkers outside
 // the view frustum (by a bounding sphere about the type's base) are not drawn.  walk() and
 // groundAt() are cross-checked with the Python ones (relative 1e-9).
