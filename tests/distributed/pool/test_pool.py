@@ -191,8 +191,9 @@ def test_a_prepared_scene_is_opened_by_one_renderer_which_then_takes_its_first_j
     assert broker.stats()["prepared"] == before + 1
     assert not any(("prepare", job_key(fresh)) in r.worker.pending  # nor on its way
                    for r in broker._renderers if r.worker is not None)
-    # a renderer opening a scene is the last choice for another scene's job
-    slow = LoadArgs(terrain="fractal:1024:5", size=(64, 64), lod=16)
+    # a renderer opening a scene is the last choice for another scene's job (chosen by
+    # when it was last idle, not by how long the opening takes)
+    slow = LoadArgs(terrain="fractal:64:5", size=(64, 64), lod=16)
     broker.prepare(slow)
     broker.submit(job(62, LoadArgs(terrain="fractal:64:9", size=(64, 64), lod=16)))
     opener = wait_until(lambda: [k for k, p in broker.table.peers.items()
