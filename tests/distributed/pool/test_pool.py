@@ -178,6 +178,7 @@ def test_a_prepared_scene_is_opened_by_one_renderer_which_then_takes_its_first_j
     from lodsprite.distributed.pool.jobs import job_key
 
     fresh = LoadArgs(terrain="fractal:64:7", size=(64, 64), lod=16)
+    wait_until(lambda: len(broker.workers()) == 2, 30.0, "both renderers serving")
     before = broker.stats()["prepared"]
     broker.prepare(fresh)
     wait_until(lambda: broker.stats()["prepared"] == before + 1, 30.0, "the scene opened")
@@ -199,6 +200,27 @@ def test_a_prepared_scene_is_opened_by_one_renderer_which_then_takes_its_first_j
     opener = wait_until(lambda: [k for k, p in broker.table.peers.items()
                                  if job_key(slow) in p.scenes], 10.0, "the prepare sent")[0]
     assert results(broker, 1, 60.0)[62].worker != opener[1].hex()
+
+
+def test_a_replacement_renderer_opens_what_the_lost_one_held_before_it_takes_jobs(
+        broker: LocalPool) -> None:
+    """A renderer SIGKILLed: its replacement joins only after opening the scenes the lost
+    one held (counted ``prepared``), so that no job waits behind a cold opening."""
+    from lodsprite.distributed.pool.jobs import job_key
+
+    held = LoadArgs(terrain="fractal:64:11", size=(64, 64), lod=16)
+    wait_until(lambda: len(broker.workers()) == 2, 30.0, "both renderers serving")
+    broker.submit(job(70, held))
+    victim = results(broker, 1)[70].worker
+    before, ids = broker.stats()["prepared"], {w.id for w in broker.workers()}
+    os.kill(next(w.pid for w in broker.workers() if w.id == victim), signal.SIGKILL)
+    wait_until(lambda: victim not in {w.id for w in broker.workers()}, NOTICED_S,
+               "the killed renderer noticed")
+    wait_until(lambda: len(broker.workers()) == 2, 60.0, "its replacement serving")
+    (new,) = {w.id for w in broker.workers()} - ids
+    peer = next(p for k, p in broker.table.peers.items() if k[1].hex() == new)
+    assert job_key(held) in peer.scenes  # opened before it joined
+    assert broker.stats()["prepared"] >= before + 1
 
 
 def test_close_leaves_no_process(broker: LocalPool) -> None:

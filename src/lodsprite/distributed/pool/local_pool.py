@@ -56,6 +56,9 @@ from lodsprite.errors import InputError
 
 log = logging.getLogger("lodsprite.pool")
 
+MAX_LOADS_KEPT = 256
+"""Loads remembered by their scene key (what a replacement renderer opens again)."""
+
 __all__ = ["BACKOFF_MAX_S", "BACKOFF_S", "SLOT_BYTES", "LocalPool"]
 
 BACKOFF_S = 0.25
@@ -77,6 +80,10 @@ class _Slot:
     start_at: float = 0.0
     backoff: float = BACKOFF_S
     releases: list = field(default_factory=list)  # scene keys to drop, not yet sent
+    reopen: list = field(default_factory=list)  # the scenes its last process held (loads)
+    reopening: int = 0  # of those, openings in flight: it joins when they are answered
+    reopened: list = field(default_factory=list)  # the scene keys it opened again
+    reopen_since: float = 0.0
 
 
 class LocalPool(PoolResults):
@@ -108,6 +115,7 @@ class LocalPool(PoolResults):
         self._inbox: deque[Job] = deque()
         self._releases: deque[bytes] = deque()  # scenes to drop, for every renderer
         self._prepares: deque[LoadArgs] = deque()  # scenes to open, on one renderer
+        self._loads: dict[bytes, LoadArgs] = {}  # the loads of the scenes renderers hold
         self._stop = threading.Event()
         self._lock = threading.Lock()  # the renderer list: spawn_local beside the thread
         self._wake_r, self._wake_w = os.pipe()
@@ -200,8 +208,12 @@ class LocalPool(PoolResults):
             r.worker.close()
             r.worker = None
         if r.key is not None:
+            peer = self.table.peers.get(r.key)
+            held = list(dict.fromkeys(peer.scenes)) if peer is not None else []
+            r.reopen = [self._loads[k] for k in held[-self.cache:] if k in self._loads]
             self.table.lose(r.key, why)
             r.key = None
+        r.reopening = 0
         r.start_at = now + (r.backoff if backoff else 0.0)
         if backoff:
             r.backoff = min(2 * r.backoff, BACKOFF_MAX_S)
@@ -256,13 +268,32 @@ class LocalPool(PoolResults):
                 self._start(r)
             return
         answers = r.worker.poll()
-        if r.key is None and r.worker.ready and r.worker.alive:
+        if r.key is None and r.worker.ready and r.worker.alive and r.reopen:
+            # a replacement: it opens what the lost one held before it takes jobs, so
+            # that none waits behind a cold opening while the others serve
+            for load in r.reopen[:2]:  # in flight at once: the worker's two slots
+                r.worker.submit(("reopen", job_key(load)), msgspec.msgpack.encode(
+                    PrepareMessage(POOL_VERSION, load)))
+            r.reopening, r.reopen, r.reopen_since = len(r.reopen[:2]), [], now
+        if r.key is None and r.reopening and now - r.reopen_since > self.job_timeout_s:
+            self._end(r, "hung opening the scenes it replaces", now, backoff=False)
+            r.reopen = []  # started again plain
+            return
+        if r.key is None and r.worker.ready and r.worker.alive and not r.reopening:
             pid = r.worker.pid or 0
             r.key = (0, f"{r.index}:{pid}".encode())
             self.table.ready(r.key, Ready(POOL_VERSION, pid, f"local-{pid}", self.cache), now)
+            peer = self.table.peers.get(r.key)
+            if peer is not None:
+                peer.scenes.extend(r.reopened)
+            r.reopened = []
         for key, answer in answers:
             if isinstance(key, tuple):  # a release's or prepare's answer: true or false
                 done = isinstance(answer, tuple) and self._released(answer)
+                if key[0] == "reopen":
+                    r.reopening = max(0, r.reopening - 1)
+                    if done:
+                        r.reopened.append(key[1])
                 if done:
                     self.table.counts["released" if key[0] == "release" else "prepared"] += 1
                 elif key[0] == "prepare":  # not opened: no affinity for it
@@ -317,6 +348,7 @@ class LocalPool(PoolResults):
         if not idle:
             return
         r = min(idle, key=lambda r: peers[r.key].idle_since)
+        self._loads[key] = load
         r.worker.submit(("prepare", key), msgspec.msgpack.encode(
             PrepareMessage(POOL_VERSION, load)))
         peers[r.key].scenes.append(key)
@@ -342,6 +374,10 @@ class LocalPool(PoolResults):
         by_key = {r.key: r for r in self._renderers if r.key is not None}
         for key, entry in self.table.assign(now):
             r = by_key[key]
+            load = entry.job.load
+            self._loads[job_key(load)] = load
+            while len(self._loads) > MAX_LOADS_KEPT:
+                self._loads.pop(next(iter(self._loads)))
             msg = JobMessage(POOL_VERSION, entry.job, self.codec)
             try:
                 r.worker.submit(entry.job.job, msgspec.msgpack.encode(msg))
