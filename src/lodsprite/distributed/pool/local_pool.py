@@ -279,14 +279,7 @@ class LocalPool(PoolResults):
             self._end(r, "hung opening the scenes it replaces", now, backoff=False)
             r.reopen = []  # started again plain
             return
-        if r.key is None and r.worker.ready and r.worker.alive and not r.reopening:
-            pid = r.worker.pid or 0
-            r.key = (0, f"{r.index}:{pid}".encode())
-            self.table.ready(r.key, Ready(POOL_VERSION, pid, f"local-{pid}", self.cache), now)
-            peer = self.table.peers.get(r.key)
-            if peer is not None:
-                peer.scenes.extend(r.reopened)
-            r.reopened = []
+        self._join(r, now)
         for key, answer in answers:
             if isinstance(key, tuple):  # a release's or prepare's answer: true or false
                 done = isinstance(answer, tuple) and self._released(answer)
@@ -302,8 +295,22 @@ class LocalPool(PoolResults):
                         peer.scenes.remove(key[1])
             elif isinstance(answer, tuple) and r.key is not None:
                 self._answer(r, answer, now)
+        self._join(r, now)  # its last reopening answered just now
         if r.worker is not None and not r.worker.alive:
             self._end(r, f"died ({r.worker.gone})", now)
+
+    def _join(self, r: _Slot, now: float) -> None:
+        """``r`` into the job table once its process is ready and has opened again what
+        the renderer it replaces held (those scenes its own from the start)."""
+        if r.key is None and r.worker is not None and r.worker.ready and r.worker.alive \
+                and not r.reopening:
+            pid = r.worker.pid or 0
+            r.key = (0, f"{r.index}:{pid}".encode())
+            self.table.ready(r.key, Ready(POOL_VERSION, pid, f"local-{pid}", self.cache), now)
+            peer = self.table.peers.get(r.key)
+            if peer is not None:
+                peer.scenes.extend(r.reopened)
+            r.reopened = []
 
     def _answer(self, r: _Slot, answer: tuple, now: float) -> None:
         from lodsprite.distributed.pool.render_process import unpack
@@ -375,6 +382,7 @@ class LocalPool(PoolResults):
         for key, entry in self.table.assign(now):
             r = by_key[key]
             load = entry.job.load
+            self._loads.pop(job_key(load), None)  # most recently used last
             self._loads[job_key(load)] = load
             while len(self._loads) > MAX_LOADS_KEPT:
                 self._loads.pop(next(iter(self._loads)))
