@@ -51,6 +51,7 @@ from __future__ import annotations
 import numpy as np
 
 from lodsprite.camera import Projection, Viewpoint
+from lodsprite.sprite.metric import angles_at_eye
 from lodsprite.sprite.raycast import ray_triangle_t
 
 __all__ = ["LATENCY_START_S", "LOST_S", "MAX_AHEAD_S", "MAX_CENTRES", "TOLERANCE",
@@ -252,9 +253,9 @@ class ErrorMetric:
         misses = int((inside & ~unseen & rep.missed).sum())
         if not hit.any():
             return float("inf")
-        theta = _angles(vp.o, c[hit], rep.c_prime[hit])
+        theta = angles_at_eye(vp.o, c[hit], rep.c_prime[hit])  # Eq. 1's θ, lodsprite's own
         worst = theta.max()
-        fallback = np.maximum(_angles(vp.o, c[shown], f[shown]), worst)
+        fallback = np.maximum(angles_at_eye(vp.o, c[shown], f[shown]), worst)
         total = (theta**2).sum() + misses * worst**2 + (fallback**2).sum()
         return float(np.sqrt(total / (hit.sum() + misses + len(shown))) / beta)
 
@@ -264,12 +265,6 @@ def _in_view(p: np.ndarray, view_proj: np.ndarray) -> np.ndarray:
     k = np.c_[p, np.ones(len(p))] @ np.asarray(view_proj, np.float64).T
     w = k[:, 3]
     return (w > 0) & (np.abs(k[:, :3]) <= w[:, None]).all(1)
-
-
-def _angles(eye: np.ndarray, p: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """Angles (radians) at ``eye`` between points ``p (K, 3)`` and ``q (K, 3)``."""
-    a, b = _unit(p - eye), _unit(q - eye)
-    return np.arctan2(np.linalg.norm(np.cross(a, b), axis=1), (a * b).sum(1))
 
 
 def _hits(o: np.ndarray, d: np.ndarray, tris: np.ndarray) -> np.ndarray:
