@@ -41,7 +41,6 @@ from pathlib import Path
 
 import numpy as np
 
-CHROMIUM, CHROMEDRIVER = "/usr/bin/chromium", "/usr/bin/chromedriver"
 TOKEN = "served-pages-benchmark"
 
 
@@ -62,18 +61,11 @@ def start_server(args) -> tuple[subprocess.Popen, int]:
 
 
 def start_browser():
-    from selenium import webdriver
-    from selenium.webdriver.chrome.service import Service
+    """The headless Chromium the browser benchmarks share (``web_vs_streaming.browser``),
+    with room for a long path."""
+    from web_vs_streaming import browser
 
-    options = webdriver.ChromeOptions()
-    options.binary_location = CHROMIUM
-    profile = tempfile.mkdtemp(prefix="lodsprite-bench-")
-    for arg in ("--headless=new", "--no-sandbox", "--use-angle=swiftshader",
-                "--enable-unsafe-swiftshader", "--disable-background-networking",
-                "--disable-component-update", "--no-first-run", "--window-size=1280,1024",
-                f"--user-data-dir={profile}"):
-        options.add_argument(arg)
-    driver = webdriver.Chrome(service=Service(executable_path=CHROMEDRIVER), options=options)
+    driver, profile = browser()
     driver.set_script_timeout(1800)
     return driver, profile
 

@@ -179,10 +179,12 @@ class Datasets:
             raise InputError(self.local_message(f"scene {name!r}: {exc}", path, name)
                              ) from None
 
-    def local_message(self, message: str, path: Path, name: str) -> str:
-        """``message`` with the server's paths put as a page names them: ``path`` as
-        ``name``, the data folder's other files relative to it."""
-        message = message.replace(str(path), name)
+    def local_message(self, message: str, path: Path | None = None, name: str = "") -> str:
+        """``message`` with the server's paths put as a page names them: ``path`` (when
+        given) as ``name``, the data folder's other files relative to it, the folder
+        itself as "the data folder"."""
+        if path is not None:
+            message = message.replace(str(path), name)
         if self.data_dir is not None:
             message = message.replace(f"{self.data_dir}{os.sep}", "").replace(
                 str(self.data_dir), "the data folder")

@@ -22,12 +22,13 @@ from lodsprite.distributed.protocol import Keyframe, LoadArgs, check_load_args
 from lodsprite.gl.context import GLContext
 from lodsprite.gl.target import RenderTarget
 from lodsprite.gl.terrain_gl import TerrainGL
+from lodsprite.scene.kinds import is_scene_file
 from lodsprite.scene.spec import SceneSpec, open_spec
 from lodsprite.terrain.heightfield import DEFAULT_GRID
 
 __all__ = ["ADAPTIVE_ABOVE", "MEMORY_FRACTION", "AdaptiveKeyframeService", "KeyframeService",
            "SceneKeyframeService", "adaptive_scene_bytes", "check_load_args",
-           "check_scene_memory", "estimate_scene_bytes", "is_scene_file", "key_size",
+           "check_scene_memory", "estimate_scene_bytes", "key_size",
            "keyframe_kind", "keyframe_scene_bytes", "keyframe_service", "memory_available",
            "scene_args", "scene_file_bytes"]
 
@@ -315,11 +316,6 @@ class SceneKeyframeService:
 
     def release(self) -> None:
         self.keys.release()
-
-
-def is_scene_file(spec: str) -> bool:
-    """Whether the resolved terrain name of a ``load`` is a scene file."""
-    return spec.lower().endswith(".toml")
 
 
 def keyframe_kind(args: LoadArgs) -> str:

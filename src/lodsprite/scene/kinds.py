@@ -48,6 +48,11 @@ SCENE_FILE = SceneKind("scene-file", lambda spec: spec.lower().endswith(".toml")
                        _open_scene_file)
 
 
+def is_scene_file(spec: str) -> bool:
+    """Whether ``spec`` names a scene file (what :data:`SCENE_FILE` claims)."""
+    return SCENE_FILE.claims(spec)
+
+
 def scene_kinds() -> tuple[SceneKind, ...]:
     """Every kind, in the order they are asked: the scene file, then the entry points'
     (by name); a terrain is what none claims.  An entry point that does not load, or names

@@ -13,15 +13,12 @@ still play."""
 import asyncio
 import base64
 import queue
-import shutil
 import subprocess
 import sys
-import tempfile
 import threading
 import time
 import urllib.error
 import urllib.request
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -29,11 +26,9 @@ import pytest
 webdriver = pytest.importorskip("selenium.webdriver", reason="selenium (the test extra) "
                                 "drives the browser")
 
-CHROMIUM, CHROMEDRIVER = Path("/usr/bin/chromium"), Path("/usr/bin/chromedriver")
-pytestmark = pytest.mark.skipif(
-    not (CHROMIUM.exists() and CHROMEDRIVER.exists()),
-    reason="needs Debian's chromium and chromium-driver (apt-get install chromium "
-           "chromium-driver; .ci/run installs them)")
+from browsers import HAVE_CHROMIUM, NO_CHROMIUM, quit_browser, start_browser  # noqa: E402
+
+pytestmark = pytest.mark.skipif(not HAVE_CHROMIUM, reason=NO_CHROMIUM)
 
 TOKEN = "browser-test-token"
 DEADLINE_S = 30.0
@@ -57,24 +52,6 @@ QUERY = (f"terrain={TERRAIN['terrain']}&grid=64&lod=8&size={SIZE}x{SIZE}&path=ch
 # did the page's first version, whose coarse squares were split along the other diagonal
 # than the server's coarse z-buffer (3.5: slivers of fallback texture).
 RMSE_TOL = 4.0
-
-
-def start_browser():
-    """Headless chromium through the system chromedriver; (driver, profile folder)."""
-    from selenium.webdriver.chrome.service import Service
-
-    options = webdriver.ChromeOptions()
-    options.binary_location = str(CHROMIUM)
-    profile = tempfile.mkdtemp(prefix="lodsprite-chromium-")
-    for arg in ("--headless=new", "--no-sandbox", "--use-angle=swiftshader",
-                "--enable-unsafe-swiftshader", "--disable-background-networking",
-                "--disable-component-update", "--disable-sync", "--no-first-run",
-                f"--user-data-dir={profile}"):
-        options.add_argument(arg)
-    driver = webdriver.Chrome(service=Service(executable_path=str(CHROMEDRIVER)),
-                              options=options)
-    driver.set_script_timeout(DEADLINE_S)
-    return driver, profile
 
 
 # A scene file the server serves from its data folder: a crowd walking on TERRAIN among
@@ -120,14 +97,13 @@ def stack(data_dir):
     threading.Thread(target=lambda: [lines.put(x) for x in proc.stdout], daemon=True).start()
     driver = profile = None
     try:
-        driver, profile = start_browser()
+        driver, profile = start_browser(DEADLINE_S)
         line = lines.get(timeout=DEADLINE_S)
         assert line.startswith("web page: http://127.0.0.1:"), line
         yield {"port": int(line.split(":")[3].split("/")[0]), "proc": proc}, driver
     finally:
         if driver is not None:
-            driver.quit()
-            shutil.rmtree(profile, ignore_errors=True)
+            quit_browser(driver, profile)
         proc.terminate()
         proc.wait(timeout=15)
 

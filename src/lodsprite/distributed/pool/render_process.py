@@ -135,10 +135,7 @@ class SceneCache:
             return encode_pool(ResultMessage(POOL_VERSION, job.job, True, render_ms=took),
                                *frames)
         except Exception as exc:  # noqa: BLE001 - MemoryError, GL errors: reported, not fatal
-            dropped = self.scenes.pop(key, None)
-            self.bytes.pop(key, None)
-            if dropped is not None:
-                dropped.release()
+            self.release(key)
             error = f"{type(exc).__name__}: {exc}"[:4000]
             took = 1e3 * (time.perf_counter() - start)
             return encode_pool(ResultMessage(POOL_VERSION, job.job, False, error,
@@ -152,10 +149,7 @@ class SceneCache:
         try:
             self._scene(key, load)
         except Exception:  # noqa: BLE001 - the job that follows says why
-            dropped = self.scenes.pop(key, None)
-            self.bytes.pop(key, None)
-            if dropped is not None:
-                dropped.release()
+            self.release(key)
             return False
         return True
 

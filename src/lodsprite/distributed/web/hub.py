@@ -39,7 +39,6 @@ from __future__ import annotations
 import asyncio
 import itertools
 import logging
-import os
 import time
 from collections import OrderedDict
 from typing import Any
@@ -223,12 +222,9 @@ class Hub:
         session.reply(seq, True, data={"coarse": resolved.lod, "size": list(resolved.size)})
 
     def _local(self, message: str) -> str:
-        """``message`` as a page may read it: the data folder's files named relative to it,
-        the folder itself as "the data folder" (never the server's paths)."""
-        root = getattr(self.datasets, "data_dir", None)
-        if root is None:
-            return message
-        return message.replace(f"{root}{os.sep}", "").replace(str(root), "the data folder")
+        """``message`` as a page may read it (never the server's paths:
+        :meth:`~lodsprite.distributed.datasets.Datasets.local_message`)."""
+        return message if self.datasets is None else self.datasets.local_message(message)
 
     def _apply(self, session: Session, named: LoadArgs, resolved: LoadArgs, gen: int) -> None:
         """Make ``resolved`` the session's scene (generation ``gen``): its waiting and

@@ -98,9 +98,9 @@ def build_scene_field(args: LoadArgs, codec: str = "raw",
     if args.lod > MAX_SCENE_COARSE:
         raise InputError(f"lod {args.lod}: a web page's coarse level is at most "
                          f"{MAX_SCENE_COARSE} quads a side")
-    if args.terrain.lower().endswith(".toml"):
-        from lodsprite.scene.kinds import open_scene
+    from lodsprite.scene.kinds import is_scene_file, open_scene
 
+    if is_scene_file(args.terrain):
         scene = open_scene(args.terrain, light=True, root=root)
         if scene.hf is not None and args.lod > scene.hf.quads:
             raise InputError(f"lod {args.lod} exceeds the scene's terrain grid "
@@ -211,10 +211,9 @@ def path_data(load: LoadArgs, args: PathArgs, hf: Any = None, root: str | None =
     here); a scene file's path is its scene's own (opened confined to ``root``); raises
     :class:`~lodsprite.errors.LodspriteError` for a path the terrain cannot give."""
     from lodsprite.paths import get_path
+    from lodsprite.scene.kinds import is_scene_file, open_scene
 
-    if load.terrain.lower().endswith(".toml"):
-        from lodsprite.scene.kinds import open_scene
-
+    if is_scene_file(load.terrain):
         path = open_scene(load.terrain, light=True, root=root).path(args.spec, args.frames)
     else:
         if hf is None:

@@ -12,13 +12,17 @@ import { linkProgram } from './gl.js';
 
 const LIGHT = (() => { const l = [0.3, -0.4, 0.87], n = Math.hypot(...l); return l.map((x) => x / n); })();
 
+// The depth mesh's window depth of a keyframe's surfaces (gl.js MESH_VS, the newer
+// keyframe's triangles: [0, 0.25]), for walkers drawn over the mesh (u_remap 1).
+const REMAP = 'if (u_remap == 1) q.z = 0.25 * q.z - 0.75 * q.w;';
+
 const VS = `#version 300 es
 layout(location = 0) in vec3 a_pos;
 layout(location = 1) in vec3 a_normal;
 layout(location = 2) in vec3 a_color;
 layout(location = 3) in vec4 a_inst;  // x, y, z, yaw
 uniform mat4 u_view_proj;
-uniform int u_remap;  // the depth mesh's depth range (gl.js MESH_VS): non-rubber surfaces'
+uniform int u_remap;
 out vec3 v_color;
 out vec3 v_normal;
 void main() {
@@ -28,7 +32,7 @@ void main() {
   v_normal = vec3(r * a_normal.xy, a_normal.z);
   v_color = a_color;
   vec4 q = u_view_proj * vec4(p, 1.0);
-  if (u_remap == 1) q.z = 0.25 * q.z - 0.75 * q.w;
+  ${REMAP}
   gl_Position = q;
 }`;
 
@@ -58,7 +62,7 @@ out vec3 v_color;
 void main() {
   vec4 q = u_view_proj * vec4(a_pos, 1.0);
   gl_PointSize = max(1.0, a_col.w * u_focal / max(q.w, 1e-6));
-  if (u_remap == 1) q.z = 0.25 * q.z - 0.75 * q.w;
+  ${REMAP}
   v_color = a_col.rgb;
   gl_Position = q;
 }`;
@@ -213,7 +217,6 @@ export class WalkerDrawer {
     for (const perType of this.buckets) for (const b of perType) b.n = 0;
     this.points.n = 0;
     const planes = frustumPlanes(viewProj);
-    this.culled = 0;
     for (let k = 0; k < d.count; k++) {
       const x = xy[2 * k], y = xy[2 * k + 1], z = groundAt(d, x, y);
       const type = d.type[k], r = d.types[type].radius;
@@ -223,7 +226,7 @@ export class WalkerDrawer {
         const p = planes[i];
         outside = p[0] * x + p[1] * y + p[2] * z + p[3] < -r;
       }
-      if (outside) { this.culled += 1; continue; }
+      if (outside) continue;
       const dist = Math.hypot(x - eye[0], y - eye[1], z - eye[2]);
       const tp = d.types[type];
       if (tp.height * focal < POINT_PX * dist) {  // under POINT_PX tall: a point
