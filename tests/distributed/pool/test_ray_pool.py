@@ -155,6 +155,9 @@ def test_a_renderer_past_the_job_timeout_is_restarted_and_joins_again(cluster,
         late = results(p, {1})[1]
         assert not late.ok, "a job past the timeout every try is given up"
         assert p.wait_workers(1, DEADLINE_S), "the restarted renderer joining again"
+        # the restarted actor's first job is a cold one (shaders, the scene); on a loaded
+        # machine it may itself outlast 1.5 s, which is not what this test asks about
+        p.table.job_timeout_s = DEADLINE_S
         p.submit(Job(2, "s", SCENE, VIEW, 2.0))
         served = results(p, {2})[2]
         assert served.ok, served.error
