@@ -120,17 +120,20 @@ def judge(args, frames: list, out: Path | None = None) -> dict:
 
     from lodsprite import techniques
     from lodsprite.api import Renderer
+    from lodsprite.distributed.served import is_object_scene, open_object_scene
     from lodsprite.harness import scene_reference
     from lodsprite.scene.kinds import open_scene
 
     local = args.data / args.scene  # a file or store under --data, else a built-in
     spec = str(local) if local.exists() else args.scene
-    scene = open_scene(spec, light=True, root=args.data)
+    objects = is_object_scene(spec)  # a scene file or a crowd: judged by Renderer.draw
+    scene = (open_object_scene(spec, str(args.data)) if objects else
+             open_scene(spec, light=True, root=args.data))
     size = tuple(args.size)
     res: dict = {"frames": [f[0] for f in frames]}
     r = Renderer(scene, size, 45.0)  # the page's field of view (the load's default)
     try:
-        if spec.endswith(".toml"):
+        if objects:
             page = []
             for k, vp, t, image in frames:
                 r.draw(vp, t)
@@ -167,7 +170,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--data", type=Path, required=True, help="the server's --data folder")
     ap.add_argument("--scene", required=True, help="a name under --data: a store, a DEM, "
-                                                   "a scene file")
+                                                   "a scene file; or crowd:N")
     ap.add_argument("--size", default="640x480")
     ap.add_argument("--renderers", type=int, default=2)
     ap.add_argument("--path", default="chen1999")

@@ -275,3 +275,26 @@ def test_a_scene_file_widget_draws_spriteframes_unless_asked_to_stream(tmp_path)
         assert type(streamed).__name__ == "StreamWidget"
     finally:
         streamed.close()
+
+
+def test_a_crowd_widget_draws_spriteframes_and_a_light_field_streams(tmp_path):
+    """``crowd:N`` is a sprite widget (the crowd's world on its ground, in keyframes);
+    a light field's folder, which the page does not draw, a stream widget."""
+    import lodsprite
+    from lodsprite.notebook import _scene_kind
+    from lodsprite.notebook.sprite import SpriteWidget
+
+    async def main():
+        w = lodsprite.widget("crowd:40:4", lod=8, size=(64, 64))
+        try:
+            assert isinstance(w, SpriteWidget)
+            assert w.options["terrain"] == "crowd:40:4"
+        finally:
+            w.close()
+
+    asyncio.run(main())
+    lf = tmp_path / "lf"
+    lf.mkdir()
+    (lf / "lumigraph.json").write_text("{}")
+    assert _scene_kind(str(lf)) and not _scene_kind("crowd:40") and not _scene_kind(
+        "fractal:64")

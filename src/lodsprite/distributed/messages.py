@@ -151,8 +151,9 @@ class LoadArgs(SceneSpec, forbid_unknown_fields=True, omit_defaults=True):
 
 MAX_PATH_FRAMES = 20000
 """Most viewpoints a ``path`` reply carries."""
-PATH_SPEC = r"^(?:chen1999|swan2002|(?:flyover|patrol|bank)(?::[0-9.]{1,12}){0,3})$"
-"""The paths a web page may ask for: the built-in ones (never a file: a page names none)."""
+PATH_SPEC = r"^(?:chen1999|swan2002|walk|(?:flyover|patrol|bank)(?::[0-9.]{1,12}){0,3})$"
+"""The paths a web page may ask for: the built-in ones (``walk``: a crowd's walkthrough;
+never a file: a page names none)."""
 
 
 class PathArgs(Struct, forbid_unknown_fields=True):

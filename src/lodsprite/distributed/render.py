@@ -19,10 +19,10 @@ from __future__ import annotations
 from lodsprite.camera import Viewpoint
 from lodsprite.distributed.pacing import KeyframePacer
 from lodsprite.distributed.protocol import Keyframe, LoadArgs, check_load_args
+from lodsprite.distributed.served import is_object_scene
 from lodsprite.gl.context import GLContext
 from lodsprite.gl.target import RenderTarget
 from lodsprite.gl.terrain_gl import TerrainGL
-from lodsprite.scene.kinds import is_scene_file
 from lodsprite.scene.spec import SceneSpec, open_spec
 from lodsprite.terrain.heightfield import DEFAULT_GRID
 
@@ -282,14 +282,14 @@ class SceneKeyframeService:
 
     def __init__(self, args: LoadArgs | dict, ctx: GLContext | None = None,
                  root: str | None = None, key_sse: float | None = None) -> None:
+        from lodsprite.distributed.served import open_object_scene
         from lodsprite.layered.scene_keys import SceneKeyframes, SceneKeys
-        from lodsprite.scene.kinds import open_scene
         from lodsprite.sprite.keyframe_worker import WorkerSettings
         from lodsprite.techniques.defaults import STORE_DEFAULTS
         from lodsprite.terrain.store import is_store
 
         args = check_load_args(args)
-        scene = open_scene(args.terrain, light=True, root=root)
+        scene = open_object_scene(args.terrain, root)
         hf = scene.hf
         adaptive = hf is not None and (is_store(scene.terrain_spec) or hf.quads > ADAPTIVE_ABOVE)
         keys = SceneKeys(str(scene.source or args.terrain), "adaptive" if adaptive else "full",
@@ -324,7 +324,7 @@ def keyframe_kind(args: LoadArgs) -> str:
     else ``whole``."""
     from lodsprite.terrain.store import is_store
 
-    if is_scene_file(args.terrain):
+    if is_object_scene(args.terrain):
         return "scene"
 
     return ("adaptive" if is_store(args.terrain) or working_grid(args) > ADAPTIVE_ABOVE
@@ -342,7 +342,7 @@ def keyframe_service(args: LoadArgs, ctx: GLContext | None = None, way: str = "a
     terrain (to compare them)."""
     if way not in KEYFRAME_WAYS:
         raise ValueError(f"keyframes are drawn {', '.join(KEYFRAME_WAYS)}, not {way!r}")
-    if is_scene_file(args.terrain):
+    if is_object_scene(args.terrain):
         return SceneKeyframeService(args, ctx, root)
     if (keyframe_kind(args) if way == "auto" else way) == "adaptive":
         return AdaptiveKeyframeService(args, ctx)

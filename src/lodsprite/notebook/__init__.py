@@ -44,11 +44,13 @@ def widget(source: str | Path = "jacksboro", *, stream: bool = False, **kwargs: 
 
 
 def _scene_kind(spec: str) -> bool:
-    """Whether a scene kind the browser does not draw (a crowd, a light field, a
-    plug-in's) claims ``spec`` (a terrain or a scene file: False)."""
+    """Whether a scene kind the browser does not draw (a light field, a plug-in's)
+    claims ``spec`` (a terrain, a scene file or a crowd: False)."""
+    from lodsprite.distributed.served import OBJECT_KINDS
     from lodsprite.scene.kinds import scene_kind
 
-    return scene_kind(spec) not in (None, "scene-file")
+    kind = scene_kind(spec)
+    return kind is not None and kind not in OBJECT_KINDS
 
 
 def one_line_errors() -> None:

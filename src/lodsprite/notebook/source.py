@@ -1,5 +1,5 @@
-"""What a notebook widget shows: a terrain or a scene file named as the web server names
-one, resolved in the kernel before anything starts.
+"""What a notebook widget shows: a terrain, a scene file or a crowd named as the web
+server names one, resolved in the kernel before anything starts.
 
 The user's own Python names it (a file, a store folder or a scene file, or a built-in); the
 widget serves that one name from the file's folder, by the web server's rules
@@ -20,6 +20,7 @@ import msgspec
 
 from lodsprite.distributed.datasets import Datasets
 from lodsprite.distributed.protocol import MAX_IMAGE_SIDE, LoadArgs, PathArgs
+from lodsprite.distributed.served import OBJECT_KINDS
 from lodsprite.errors import InputError, LodspriteError
 
 __all__ = ["MIN_SIDE", "WidgetSource", "check_path", "path_played", "resolve_source"]
@@ -42,8 +43,8 @@ def _name_in(value: str | Path, kind: str, folder: Path | None) -> tuple[str, Pa
     built-in); a file outside ``folder`` (when given) is refused."""
     text = str(value)
     probe = Datasets(None)
-    try:  # a built-in name (jacksboro, fractal:N[:S], terrain, checker[:K])
-        getattr(probe, kind)(text)
+    try:  # a built-in name (jacksboro, fractal:N[:S], crowd:N, terrain, checker[:K])
+        (probe.scene if kind == "terrain" else probe.texture)(text)
         return text, None
     except InputError as exc:
         builtin_error = exc
@@ -81,9 +82,10 @@ def resolve_source(terrain: str | Path, texture: str | Path = "terrain",
         raise InputError(f"widget: {str(exc).splitlines()[0]}") from None
     datasets = Datasets(folder)
     named = datasets.scene(args.terrain)  # the server's checks, here first
-    if named.kind not in (None, "scene-file"):
+    if named.kind is not None and named.kind not in OBJECT_KINDS:
         raise InputError(f"widget: {terrain} is a {named.kind} scene: the sprite widget "
-                         "draws terrains and scene files (stream=True shows any scene)")
+                         "draws terrains, scene files and crowds (stream=True shows any "
+                         "scene)")
     datasets.texture(args.texture)
     return WidgetSource(args, folder)
 

@@ -63,6 +63,8 @@ def server(tmp_path_factory):
     (data.parent / "secret.bin").write_bytes(b"\0" * 4)
     (data / "bad.npy").write_bytes(b"not a NumPy file")  # a scene file's broken terrain
     (data / "badterrain.toml").write_text('[terrain]\nsource = "bad.npy"\n')
+    (data / "lf").mkdir()  # a light field's folder: a kind the page does not draw
+    (data / "lf" / "lumigraph.json").write_text("{}")
     (data.parent / "out.toml").write_text('[terrain]\nsource = "fractal:64:1"\n')
     # a scene file the page draws: walkers over hill.npy among standing trees
     (data / "crowd.toml").write_text(
@@ -196,7 +198,7 @@ def test_pages_name_files_by_the_data_rule(server):
         async with aiohttp.ClientSession() as http:
             page = await connect(http, server)
             refused = []
-            for name in ("../hill.npy", "/etc/passwd", "missing.npy", "crowd:10",
+            for name in ("../hill.npy", "/etc/passwd", "missing.npy", "lf",
                          "crowd:100000000", "http://example.com/dem.tif", "walk.toml",
                          "abs.toml", "link.toml", "ext.toml", "../out.toml",
                          "badterrain.toml"):
@@ -241,6 +243,24 @@ def test_a_page_loads_a_scene_file_with_its_walkers_and_gets_its_static_layers(s
     assert kf.zbuffer == "full" and kf.depth.shape == (64, 64) and kf.color.std() > 1.0
     assert stats["session"]["scene"] == "crowd.toml"
     assert stats["session"]["keyframes"] == "scene"
+
+
+def test_a_page_loads_a_crowd_as_its_world_on_the_ground(server):
+    """``crowd:N`` over the wire: the crowd's flat ground in the scene message (no
+    walkers: a crowd stands), its members in the keyframes with their full z-buffer."""
+    async def go():
+        async with aiohttp.ClientSession() as http:
+            page = await connect(http, server)
+            scene = await loaded(page, {"terrain": "crowd:50:5", "size": [64, 64],
+                                        "lod": 8})
+            return scene, await keyframe(page), await page.stats()
+
+    scene, kf, stats = run(go())
+    assert scene.walkers is None and scene.heights.shape == (9, 9)
+    assert not scene.heights.any()  # flat
+    assert kf.zbuffer == "full" and kf.color.std() > 1.0
+    assert 0.0 < kf.depth.min() < kf.depth.max()  # members nearer than the ground's far side
+    assert stats["session"]["scene"] == "crowd:50:5"
 
 
 def stalled_page(port: int, stop: threading.Event) -> socket.socket:

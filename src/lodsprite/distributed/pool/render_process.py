@@ -37,6 +37,7 @@ from lodsprite.distributed.pool.jobs import (
     job_key,
 )
 from lodsprite.distributed.protocol import LoadArgs
+from lodsprite.distributed.served import OBJECT_KINDS
 
 FACTORY = "lodsprite.distributed.pool.render_process:handler"
 
@@ -63,7 +64,7 @@ def resolve_load(load: LoadArgs, datasets: Datasets, sizes: dict | None = None) 
         return name
 
     named = datasets.scene(local(load.terrain))  # confined to the data folder, capped
-    if named.kind == "scene-file":
+    if named.kind in OBJECT_KINDS:
         from lodsprite.distributed.render import scene_file_bytes
 
         if sizes is not None:
@@ -71,7 +72,7 @@ def resolve_load(load: LoadArgs, datasets: Datasets, sizes: dict | None = None) 
         return msgspec.structs.replace(load, terrain=named.spec)
     if named.terrain is None:
         raise InputError(f"{load.terrain!r} is a {named.kind} scene: renderers draw "
-                         "terrains and scene files")
+                         "terrains, scene files and crowds")
     terrain = named.terrain
     texture = datasets.texture(local(load.texture))
     resolved = msgspec.structs.replace(load, terrain=terrain.spec, texture=texture.spec)

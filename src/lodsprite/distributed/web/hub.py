@@ -59,6 +59,7 @@ from lodsprite.distributed.protocol import (
     encode,
 )
 from lodsprite.distributed.render import working_grid
+from lodsprite.distributed.served import OBJECT_KINDS
 from lodsprite.distributed.server import check_scene_memory
 from lodsprite.distributed.web.scene import build_scene_field, path_data, scene_key
 from lodsprite.distributed.web.sessions import Caps, Pending, Session
@@ -273,10 +274,10 @@ class Hub:
         """``args`` with the terrain and texture resolved to loader specs (a scene file:
         its absolute path inside the data folder); raises :class:`InputError` for a name,
         a size or a scene this server refuses, and for a scene of a kind the page does not
-        draw (a crowd, a light field, a plug-in's: the page draws terrains and scene
-        files)."""
+        draw (a light field, a plug-in's: the page draws terrains, scene files and
+        crowds)."""
         named = self.datasets.scene(args.terrain)  # confined to the data folder, capped
-        if named.kind == "scene-file":
+        if named.kind in OBJECT_KINDS:
             if args.lod > MAX_SCENE_COARSE:
                 raise InputError(f"lod {args.lod}: at most {MAX_SCENE_COARSE} for a web page")
             resolved = msgspec.structs.replace(args, terrain=named.spec)
@@ -289,8 +290,8 @@ class Hub:
             return resolved
         if named.kind is not None or named.terrain is None:
             raise InputError(f"{args.terrain!r} is a {named.kind} scene: a page draws "
-                             "terrains and scene files (open it with lodsprite view or "
-                             "render)")
+                             "terrains, scene files and crowds (open it with lodsprite "
+                             "view or render)")
         terrain = named.terrain
         texture = self.datasets.texture(args.texture)
         grid = working_grid(args)

@@ -98,10 +98,10 @@ def build_scene_field(args: LoadArgs, codec: str = "raw",
     if args.lod > MAX_SCENE_COARSE:
         raise InputError(f"lod {args.lod}: a web page's coarse level is at most "
                          f"{MAX_SCENE_COARSE} quads a side")
-    from lodsprite.scene.kinds import is_scene_file, open_scene
+    from lodsprite.distributed.served import is_object_scene, open_object_scene
 
-    if is_scene_file(args.terrain):
-        scene = open_scene(args.terrain, light=True, root=root)
+    if is_object_scene(args.terrain):
+        scene = open_object_scene(args.terrain, root)
         if scene.hf is not None and args.lod > scene.hf.quads:
             raise InputError(f"lod {args.lod} exceeds the scene's terrain grid "
                              f"{scene.hf.quads}")
@@ -210,11 +210,11 @@ def path_data(load: LoadArgs, args: PathArgs, hf: Any = None, root: str | None =
     (terrain as a loader spec), over ``hf`` (its working height field, None: loaded
     here); a scene file's path is its scene's own (opened confined to ``root``); raises
     :class:`~lodsprite.errors.LodspriteError` for a path the terrain cannot give."""
+    from lodsprite.distributed.served import is_object_scene, open_object_scene
     from lodsprite.paths import get_path
-    from lodsprite.scene.kinds import is_scene_file, open_scene
 
-    if is_scene_file(load.terrain):
-        path = open_scene(load.terrain, light=True, root=root).path(args.spec, args.frames)
+    if is_object_scene(load.terrain):
+        path = open_object_scene(load.terrain, root).path(args.spec, args.frames)
     else:
         if hf is None:
             from lodsprite.scene.spec import open_spec
