@@ -1,6 +1,6 @@
 """The notebook widget's front end: the web page's own ES modules
-(``lodsprite/distributed/web/static``: wire, decode, gl, camera, predictor, walkers, hud,
-app),
+(``lodsprite/distributed/web/static``: wire, decode, gl, camera, predictor,
+depth_estimate, walkers, hud, app),
 linked in the browser, not copied.
 
 anywidget loads one ES module (``_esm``) from a string, where relative imports have no
@@ -25,8 +25,8 @@ from lodsprite.errors import LodspriteError
 __all__ = ["MODULES", "import_order", "widget_css", "widget_esm"]
 
 STATIC = Path(__file__).resolve().parents[1] / "distributed" / "web" / "static"
-MODULES = ("app.js", "camera.js", "decode.js", "gl.js", "hud.js", "predictor.js", "walkers.js",
-           "wire.js")
+MODULES = ("app.js", "camera.js", "decode.js", "depth_estimate.js", "gl.js", "hud.js",
+           "predictor.js", "walkers.js", "wire.js")
 """The page's modules the widget runs (main.js, the page's WebSocket transport, is not)."""
 _IMPORT = re.compile(r"""\bfrom\s+['"]\./([\w.-]+\.js)['"]""")
 

@@ -16,7 +16,7 @@
 //   presses fly the camera (default: the window).
 // The API (for tests, tools and the widget): ready (a Promise: scene loaded), finished()
 // (a Promise: the path played and the held view's keyframe shown), stats(), pixels(),
-// viewpoint(), pathIndex() (path viewpoints drawn so far: the one shown is pathIndex() - 1),
+// viewpoint(), keyViewpoint() (the shown keyframe's, null before the first), pathIndex() (path viewpoints drawn so far: the one shown is pathIndex() - 1),
 // keyScale() ({scale, why}: the keyframe scale asked for and why; stats() has its number:
 // stats() holds numbers only, what the widget's status message carries),
 // setWalkTime(t) (a scene's walkers held at t seconds; null: their clock, seconds since the
@@ -36,6 +36,7 @@ import { pack, unpack, image } from './wire.js';
 import { SpriteDrawer, chooseKeyScale } from './gl.js';
 import { FlyControls, lookAt, mul, norm, sub } from './camera.js';
 import { ErrorMetric, Predictor } from './predictor.js';
+import { DepthEstimate } from './depth_estimate.js';
 import { Hud } from './hud.js';
 import { WalkerDrawer, walkerData } from './walkers.js';
 
@@ -84,7 +85,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
     newestDecoded = data.id;
     const key = renderer.prepareKeyframe(header, data.bitmap, data.depth);
     if (pendingKey) renderer.dropKeyframe(pendingKey.key);  // superseded before a frame drew it
-    pendingKey = { header, key };
+    pendingKey = { header, key, estimate: data.estimate };
   };
   decoder.onerror = (e) => { state = `keyframe decoder: ${e.message}`; };
 
@@ -107,15 +108,19 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
     } else if (header.kind === 'keyframe') {
       keyframesIn += 1;
       keyframeHeaders.set(keyframesIn, header);
-      decoder.postMessage({ id: keyframesIn, header, color: buffers[0], depth: buffers[1] }, [data]);
+      const estimate = renderer && renderer.proxy === 'depth' && header.zbuffer === 'full'
+        ? { stride: renderer.stride, keyScale: keyScale.scale } : null;
+      decoder.postMessage({ id: keyframesIn, header, color: buffers[0], depth: buffers[1], estimate }, [data]);
     }
   });
   transport.onclose(() => { state = 'disconnected'; });
 
-  let renderer, metric, predictor, controls, path = null, pathIndex = 0, pathName = null;
+  let renderer, metric, coarseMetric, predictor, controls, path = null, pathIndex = 0, pathName = null;
+  // A keyframe's DepthEstimate as the predictor's metric (its errorPx's arguments).
+  const depthMetric = (est) => ({ errorPx: (keyEye, vp, viewProj, beta) => est.errorPx(vp.o, viewProj, beta, width, height) });
   let walkers = null, walkStart = null, walkFixed = null, focal = 1;  // a scene's walkers, their clock (s)
   let captures = null, captureSet = null;
-  let shownVp = null, keyEye = null, keyDir = null, keyViewProj = null, keyDeficit = 0, finishedResolve = () => {}, finished = null, lastFrame = null, lastSample = -Infinity;
+  let shownVp = null, keyVp = null, keyEye = null, keyDir = null, keyViewProj = null, keyDeficit = 0, finishedResolve = () => {}, finished = null, lastFrame = null, lastSample = -Infinity;
   const newFinished = () => { finished = new Promise((r) => { finishedResolve = r; }); };
   newFinished();
 
@@ -144,7 +149,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
     renderer.setScene(h, scene.heights, scene.texture);
     if (h.walkers) walkers = new WalkerDrawer(renderer.gl, walkerData(h.walkers));
     focal = height / (2 * Math.tan(h.fov * Math.PI / 360));  // pixels a metre at unit depth
-    metric = new ErrorMetric(h, scene.heights);
+    metric = coarseMetric = new ErrorMetric(h, scene.heights);
     predictor = new Predictor(h.epsilon, h.fov, width / height, h.near, h.far, height);
     predictor.failed = (s) => { if (predictor.inflight && predictor.inflight.seq === s) predictor.inflight = null; };
     const extent = h.coarse * h.spacing;
@@ -172,10 +177,12 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
   }
 
   function adopt(now) {
-    const { header, key } = pendingKey;
+    const { header, key, estimate } = pendingKey;
     pendingKey = null;
     renderer.useKeyframe(key);
-    keyEye = header.viewpoint.o;
+    // the error on this keyframe's own depth (what the depth mesh shows), else the coarse level's
+    metric = estimate ? depthMetric(new DepthEstimate(estimate)) : coarseMetric;
+    keyEye = header.viewpoint.o; keyVp = header.viewpoint;
     keyDir = header.viewpoint.z;
     keyViewProj = mul(header.proj, header.view);  // the estimate's keyframe frustum
     keyDeficit = header.deficit_px || 0;  // what it lacks while the renderer's tiles stream
@@ -255,6 +262,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
     capture(indices) { captureSet = new Set(indices); captures = []; },
     captured() { const out = captures || []; captures = null; captureSet = null; return out; },
     viewpoint: () => controls && controls.vp,
+    keyViewpoint: () => keyVp,
     pathIndex: () => pathIndex,
     keyScale: () => ({ ...keyScale }),  // {scale, why}: the keyframe scale asked for, and why
     setWalkTime(t) { walkFixed = t; },  // walkers held at t seconds (null: their own clock)

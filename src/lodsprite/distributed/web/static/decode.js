@@ -7,9 +7,15 @@
 // as it did the bytes: row 0 of the buffer is row 0 of the texture.  The depth, (H, W)
 // float32, comes back as its Float32Array (ImageBitmaps hold 8-bit colour only).
 //
-// In: {id, header, color, depth} (the two image buffers as the wire gave them).
-// Out: {id, bitmap, depth} (both transferred) or {id, error}.
+// With `estimate` ({stride, keyScale}: the page's depth mesh and keyframe scale) it also
+// builds the keyframe's error estimate on its own depth (depth_estimate.js), here, off
+// the page's thread: its state's typed arrays come back transferred.
+//
+// In: {id, header, color, depth, estimate} (the two image buffers as the wire gave them).
+// Out: {id, bitmap, depth, estimate} (transferred) or {id, error}.
 
+import { mul } from './camera.js';
+import { buildEstimate } from './depth_estimate.js';
 import { image } from './wire.js';
 
 export const BITMAP_OPTIONS = { imageOrientation: 'none', premultiplyAlpha: 'none', colorSpaceConversion: 'none' };
@@ -25,13 +31,21 @@ export function rgbaImage(rgb, w, h) {
 
 if (typeof WorkerGlobalScope !== 'undefined' && self instanceof WorkerGlobalScope) {
   self.onmessage = async ({ data }) => {
-    const { id, header, color, depth } = data;
+    const { id, header, color, depth, estimate } = data;
     try {
       const [rgb, z] = await Promise.all([image(header.color, color), image(header.depth, depth)]);
       const [h, w, c] = header.color.shape;
       if (c !== 3) throw new Error(`keyframe colour of ${c} channels`);
+      const [dh, dw] = header.depth.shape;
+      let est = null;
+      if (estimate && dh === h && dw === w) {
+        est = buildEstimate(z, w, h, header.viewpoint, header.fov, header.aspect, header.near, header.far,
+          mul(header.proj, header.view), estimate.stride, estimate.keyScale, rgb);
+      }
       const bitmap = await createImageBitmap(rgbaImage(rgb, w, h), BITMAP_OPTIONS);
-      self.postMessage({ id, bitmap, depth: z }, [bitmap, z.buffer]);
+      const moved = [bitmap, z.buffer];
+      if (est) for (const v of Object.values(est)) if (ArrayBuffer.isView(v)) moved.push(v.buffer);
+      self.postMessage({ id, bitmap, depth: z, estimate: est }, moved);
     } catch (e) {
       self.postMessage({ id, error: String(e.message || e) });
     }
