@@ -1,5 +1,5 @@
-"""The code's shape, for the closing notes of redesigns: import cycles (lazy imports
-counted), long modules and long functions.
+"""The code's shape, for the closing notes of redesigns: import cycles (lazy imports and
+type hints counted), long modules and long functions.
 
     python benchmarks/code_shape.py [--limit 400]
 
@@ -22,8 +22,8 @@ def main() -> None:
     parser.add_argument("--limit", type=int, default=400, help="module length that counts as long")
     args = parser.parse_args()
     edges = g.imports()
-    modules = g.strongly_connected(g.runtime_graph(edges))
-    packages = g.strongly_connected(g.runtime_graph(edges, packages=True))
+    modules = g.strongly_connected(g.import_graph(edges))
+    packages = g.strongly_connected(g.import_graph(edges, packages=True))
     print(f"module cycles: {len(modules)}")
     for cycle in modules:
         print("  " + " <-> ".join(cycle))

@@ -235,9 +235,17 @@ def strongly_connected(graph: dict[str, set[str]]) -> list[list[str]]:
 def runtime_graph(edges: Iterable[Import], packages: bool = False) -> dict[str, set[str]]:
     """Module (or, with ``packages``, package) graph of the imports that run, lazy ones
     included, inside the package only; the facade ``lodsprite`` itself is no node."""
+    return import_graph(edges, packages, type_only=False)
+
+
+def import_graph(edges: Iterable[Import], packages: bool = False,
+                 type_only: bool = True) -> dict[str, set[str]]:
+    """:func:`runtime_graph` with the imports under ``TYPE_CHECKING`` too (``type_only``):
+    a hint names the module it imports, so a layer's hints point down as its imports do."""
     graph: dict[str, set[str]] = defaultdict(set)
     for e in edges:
-        if e.type_only or e.target.split(".")[0] != PACKAGE or PACKAGE in (e.source, e.target):
+        if ((e.type_only and not type_only) or e.target.split(".")[0] != PACKAGE
+                or PACKAGE in (e.source, e.target)):
             continue
         a, b = (unit(e.source), unit(e.target)) if packages else (e.source, e.target)
         if a != b:

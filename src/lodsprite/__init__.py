@@ -44,7 +44,7 @@ _LAZY = {
     "Technique": "lodsprite.techniques", "terrain_techniques": "lodsprite.technique",
     "Frame": "lodsprite.techniques", "TechniqueSpec": "lodsprite.techniques",
     "Option": "lodsprite.techniques", "register": "lodsprite.techniques",
-    "run_path": "lodsprite.harness", "open_scene": "lodsprite.scene",
+    "run_path": "lodsprite.harness", "open_scene": "lodsprite.techniques.scenes",
     "view_scene": "lodsprite.viewer.app", "widget": "lodsprite.notebook",
 }
 
@@ -56,7 +56,7 @@ if TYPE_CHECKING:
     from lodsprite.paths import CameraPath, get_path, load_path_json
     from lodsprite.run import render_path
     from lodsprite.runconfig import RenderConfig
-    from lodsprite.scene import Scene, load_scene, open_scene
+    from lodsprite.scene import Scene, load_scene
     from lodsprite.sprite.engine import SpriteFrame
     from lodsprite.technique import terrain_techniques
     from lodsprite.techniques import (
@@ -68,6 +68,7 @@ if TYPE_CHECKING:
         TechniqueSpec,
         register,
     )
+    from lodsprite.techniques.scenes import open_scene
     from lodsprite.viewer.app import view_scene
 
 

@@ -206,7 +206,7 @@ class Renderer:
         ``"depth"`` (the estimate on each keyframe's own depth, with ``depth_stride``:
         :mod:`lodsprite.sprite.depth_metric`).  ``store``:
         the worker's keyframes over a terrain store, drawn adaptively
-        (:class:`~lodsprite.sprite.keyframe_worker.StoreKeys`; threaded only).
+        (:class:`~lodsprite.sprite.worker_settings.StoreKeys`; threaded only).
         ``depth_stride``: spriteframes draw a mesh from the keyframe's own depth, a vertex
         every that many keyframe texels (None: the coarse level); ``key_scale``: keyframe
         texels a display pixel side; ``pair``: the keyframe before the current one drawn

@@ -31,7 +31,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Collection, Iterator, Sequence
 from contextlib import AbstractContextManager, ExitStack, contextmanager
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -42,6 +42,8 @@ from lodsprite.record import (  # the record's rows and summary, here too
     CORE_COLUMNS,
     CORE_KEYS,
     Frame,
+    Reference,
+    RunResult,
     frame_rows,
     frames_summary,
     timing_summary,
@@ -58,26 +60,6 @@ QUALITY_COLUMNS = ("rmse", "psnr", "ssim", "flip", "flicker")
 #: ``on_image(frame, image, reference)``: a replayed frame's image ``(h, w, 3) uint8`` and
 #: its reference (None without ``ground_truth`` or off the quality stride).
 ImageCallback = Callable[[int, np.ndarray, "np.ndarray | None"], None]
-Reference = Callable[[Any], np.ndarray]
-
-
-@dataclass
-class RunResult:
-    """What :func:`run_path` measured: the frames (times from the harness's clock), the
-    decisions recorded, the rows of ``frames.csv`` with their column order, the summary."""
-
-    frames: list[Frame]
-    decisions: list[dict]
-    rows: list[dict]
-    columns: list[str]
-    summary: dict[str, Any] = field(default_factory=dict)
-    interrupted: bool = False  # stopped by Ctrl-C: the frames finished so far
-    #: Replayed images a caller asked to keep, by frame (:class:`lodsprite.run.Measure`).
-    images: dict[int, np.ndarray] = field(default_factory=dict)
-    #: A played run's display ticks judged (:func:`lodsprite.display.judge_display`).
-    ticks: list[dict] = field(default_factory=list)
-
-
 def full_resolution(renderer) -> Reference:
     """The renderer's own full-resolution terrain at a viewpoint, one sample a pixel: not
     a reference (it is drawn by the renderers under test), kept for the comparisons that

@@ -6,7 +6,9 @@ adaptive terrain renderer, the layers of a composed scene), return a :class:`Fra
 harness (:func:`lodsprite.harness.run_path`) and the window
 (:class:`~lodsprite.viewer.core.ViewerCore`) write their ``frames.csv`` rows from it
 (:func:`frame_rows`) and the core keys of their ``summary.json`` (:func:`frames_summary`),
-so that ``ms`` and every core column mean the same whoever drove the run.  An engine's
+so that ``ms`` and every core column mean the same whoever drove the run; what a run
+hands back (:class:`RunResult`) and what judges it (:data:`Reference`) are here too, so a
+technique names them without the harness.  An engine's
 own figures go in :attr:`Frame.extra` (each key a column of ``frames.csv``).  This module
 imports nothing of the package but its errors, so that every layer can hand one back.
 """
@@ -15,6 +17,7 @@ from __future__ import annotations
 
 import math
 import platform
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -99,3 +102,25 @@ def frame_rows(frames: list[Frame]) -> tuple[list[dict], list[str]]:
                      "error_px": f.error_px, **f.extra})
         extra.update(dict.fromkeys(f.extra))
     return rows, [*CORE_COLUMNS, *(k for k in extra if k not in CORE_COLUMNS)]
+
+
+#: A reference image maker: a viewpoint to its reference image ``(h, w, 3) uint8``
+#: (:func:`lodsprite.harness.scene_reference`).
+Reference = Callable[[Any], np.ndarray]
+
+
+@dataclass
+class RunResult:
+    """What :func:`run_path` measured: the frames (times from the harness's clock), the
+    decisions recorded, the rows of ``frames.csv`` with their column order, the summary."""
+
+    frames: list[Frame]
+    decisions: list[dict]
+    rows: list[dict]
+    columns: list[str]
+    summary: dict[str, Any] = field(default_factory=dict)
+    interrupted: bool = False  # stopped by Ctrl-C: the frames finished so far
+    #: Replayed images a caller asked to keep, by frame (:class:`lodsprite.run.Measure`).
+    images: dict[int, np.ndarray] = field(default_factory=dict)
+    #: A played run's display ticks judged (:func:`lodsprite.display.judge_display`).
+    ticks: list[dict] = field(default_factory=list)

@@ -96,7 +96,7 @@ def render_spec(spec: str, out_dir: Path, mode: str | None = None,
     ``path`` (default: the scene's own, e.g. a crowd's ``walk``, a lumigraph's ``arc``) of
     ``frames``, through :func:`run_scene`; writes the run to ``out_dir``, returns the
     summary."""
-    from lodsprite.scene import open_scene
+    from lodsprite.techniques.scenes import open_scene
 
     if measure is not None:
         measure.check()  # before the scene is opened

@@ -21,8 +21,9 @@ from lodsprite.metrics import rmse
 from lodsprite.procs import WorkerDied, WorkerUnavailable
 from lodsprite.scene import Scene
 from lodsprite.sprite.engine import KEYFRAME, LodSpriteEngine
-from lodsprite.sprite.keyframe_worker import KeyframeWorker, WorkerSettings
+from lodsprite.sprite.keyframe_worker import KeyframeWorker
 from lodsprite.sprite.worker_engine import WorkerLodSpriteEngine
+from lodsprite.sprite.worker_settings import WorkerSettings
 
 SIZE = worker_fixtures.SIZE
 scene, sprite = worker_fixtures.scene, worker_fixtures.sprite  # the fixtures

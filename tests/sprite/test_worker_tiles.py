@@ -15,10 +15,10 @@ from lodsprite.camera import look_at
 from lodsprite.errors import InputError
 from lodsprite.metrics import rmse
 from lodsprite.sprite.keyframe_process import checked_tiles
-from lodsprite.sprite.keyframe_worker import WorkerSettings
 from lodsprite.sprite.policy import KEYFRAME, KeyChoice
 from lodsprite.sprite.tiled import TILES
 from lodsprite.sprite.tiled_engine import TiledSpriteEngine
+from lodsprite.sprite.worker_settings import WorkerSettings
 from lodsprite.sprite.worker_tiles import WorkerTiledEngine, adopted
 
 SIZE = worker_fixtures.SIZE

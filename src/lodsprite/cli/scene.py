@@ -23,6 +23,7 @@ def scene_check(
     """Read and validate a scene file, build its world (terrain, meshes, placement) and
     print one line per layer; a bad file is one line naming the field, exit code 2."""
     from lodsprite.scene.world import load_scene_file, summary
+    from lodsprite.techniques.scenes import checked
 
-    for line in summary(load_scene_file(file, light=light, textured=False)):
+    for line in summary(checked(load_scene_file(file, light=light, textured=False))):
         out.print(line, markup=False, highlight=False)

@@ -231,7 +231,7 @@ class AdaptiveKeyframeService:
                  key_sse: float | None = None, gpu_mb: float | None = None,
                  host_mb: float | None = None) -> None:
         from lodsprite.scene.model import load_scene
-        from lodsprite.sprite.keyframe_worker import StoreKeys, WorkerSettings
+        from lodsprite.sprite.worker_settings import StoreKeys, WorkerSettings
         from lodsprite.techniques.adaptive_worker import StoreKeyframes
         from lodsprite.techniques.builtin import GPU_MB, HOST_MB
         from lodsprite.techniques.defaults import STORE_DEFAULTS
@@ -284,7 +284,7 @@ class SceneKeyframeService:
                  root: str | None = None, key_sse: float | None = None) -> None:
         from lodsprite.distributed.served import open_object_scene
         from lodsprite.layered.scene_keys import SceneKeyframes, SceneKeys
-        from lodsprite.sprite.keyframe_worker import WorkerSettings
+        from lodsprite.sprite.worker_settings import WorkerSettings
         from lodsprite.techniques.defaults import STORE_DEFAULTS
         from lodsprite.terrain.store import is_store
 

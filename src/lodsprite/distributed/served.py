@@ -32,6 +32,6 @@ def open_object_scene(spec: str, root: str | None = None) -> Scene:
     """The scene ``spec`` names, of objects on a ground (a crowd as its world); a scene
     file opens confined to ``root`` (the data folder)."""
     from lodsprite.manager.world import world_scene
-    from lodsprite.scene.kinds import open_scene
+    from lodsprite.techniques.scenes import open_scene
 
     return world_scene(open_scene(spec, light=True, root=root))

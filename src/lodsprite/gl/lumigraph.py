@@ -22,7 +22,7 @@ the light field's data, passed in (gl/ imports no technique package).
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import Protocol
 
 import moderngl
 import numpy as np
@@ -30,9 +30,32 @@ import numpy as np
 from lodsprite.gl.context import GLContext
 from lodsprite.gl.terrain import mat_bytes
 
-if TYPE_CHECKING:
-    from lodsprite.lumigraph.geometry import Slab
-    from lodsprite.lumigraph.subsets import Draws
+
+class Slab(Protocol):
+    """What this module reads of a light slab (:class:`lodsprite.lumigraph.geometry.Slab`,
+    named by no import: the lumigraph package draws through this one)."""
+
+    frame: np.ndarray
+    uv_size: float
+    st_distance: float
+    n_st: int
+    n_uv: int
+
+    @property
+    def to_local(self) -> np.ndarray: ...
+    def node_local(self) -> np.ndarray: ...
+
+
+class Draws(Protocol):
+    """What this module reads of a frame's triangle draws
+    (:class:`lodsprite.lumigraph.subsets.Draws`)."""
+
+    corners: np.ndarray
+    node: np.ndarray
+    alpha: np.ndarray
+
+    @property
+    def nodes(self) -> np.ndarray: ...
 
 COLOR_MESH_VS = """#version 330
 uniform mat4 u_mvp;

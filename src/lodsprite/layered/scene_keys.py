@@ -34,12 +34,8 @@ from lodsprite.sprite.keyframe_process import (
     keyframe_answer,
     lower_priority,
 )
-from lodsprite.sprite.keyframe_worker import (
-    KeyframeWorker,
-    WorkerSettings,
-    share_arrays,
-    start_ready,
-)
+from lodsprite.sprite.keyframe_worker import KeyframeWorker, share_arrays, start_ready
+from lodsprite.sprite.worker_settings import WorkerSettings
 from lodsprite.workers import ProcessWorker
 
 if TYPE_CHECKING:

@@ -382,10 +382,11 @@ def render_scene(scene_file: str | os.PathLike, out_dir: str | os.PathLike,
     from lodsprite.driver import Measure
     from lodsprite.run import run_scene
     from lodsprite.scene.world import load_scene_file
+    from lodsprite.techniques.scenes import checked
 
     if target_fps is not None and not target_fps > 0:
         raise InputError(f"--target-fps must be > 0, got {target_fps}")
-    scene = load_scene_file(scene_file)  # the file read and checked once
+    scene = checked(load_scene_file(scene_file))  # the file read and checked once
     view = scene.view
     terrain_mode = terrain_mode or scene.terrain_mode or "adaptive"
     options = {**scene.terrain_options, **options}

@@ -280,26 +280,12 @@ class _Checker:
         self.technique(t)
 
     def technique(self, t: TerrainSection) -> None:
-        """``mode`` a terrain technique of the registry, ``options`` its own, each value
-        parsed and checked by its declaration (:class:`~lodsprite.techniques.Option`)."""
-        from lodsprite import techniques
-
-        modes = techniques.names(("terrain",))
-        if t.mode is not None and t.mode not in modes:
-            self.fail("terrain.mode", f"unknown technique {t.mode!r}: use one of "
-                      f"{', '.join(modes)}")
+        """``options``: at most :data:`MAX_TERRAIN_OPTIONS`, kept as written; which
+        technique ``mode`` names and what its options mean are the technique registry's
+        to check (:func:`lodsprite.techniques.scenes.checked`: the scene model knows no
+        technique)."""
         if len(t.options) > MAX_TERRAIN_OPTIONS:
             self.fail("terrain.options", f"at most {MAX_TERRAIN_OPTIONS} options")
-        declared = ({o.name: o for o in techniques.get(t.mode).options} if t.mode
-                    else techniques.all_options(("terrain",)))
-        for name, value in t.options.items():
-            if name not in declared or not declared[name].on_command_line:
-                self.fail(f"terrain.options.{name}", f"{t.mode or 'no terrain technique'} "
-                          f"takes no such option")
-            try:
-                t.options[name] = declared[name].parse(value)
-            except InputError as exc:
-                self.fail(f"terrain.options.{name}", str(exc))
 
     def objects(self, o: ObjectSection, at: str) -> None:
         if o.mesh.strip().lower() in builtin_meshes():  # built in (ogre, tree), not files

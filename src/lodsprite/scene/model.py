@@ -17,7 +17,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
@@ -33,14 +33,18 @@ from lodsprite.terrain.storefield import COARSE_SIDE
 
 if TYPE_CHECKING:
     from lodsprite.camera import Viewpoint
-    from lodsprite.manager.scene import Crowd
     from lodsprite.paths import CameraPath
     from lodsprite.scene.file import ViewSection
-    from lodsprite.scene.world import World
 
-    #: An object set: a scene file's world (types, instances walking on the terrain) or
-    #: the LODManager's crowd (LOD models standing on their own ground): a closed union.
-    ObjectSet = World | Crowd
+
+class ObjectSet(Protocol):
+    """An object set: a scene file's world (:class:`~lodsprite.scene.world.World`: types,
+    instances walking on the terrain) or the LODManager's crowd
+    (:class:`~lodsprite.manager.scene.Crowd`: LOD models standing on their own ground),
+    each a count of instances; what else a layer reads of one it tells apart by its
+    class.  A protocol, so the scene model names neither package it comes from."""
+
+    def __len__(self) -> int: ...
 
 
 @dataclass(frozen=True)

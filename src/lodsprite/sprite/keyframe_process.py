@@ -23,7 +23,7 @@ from lodsprite.sprite.guard import MAX_SPREAD
 from lodsprite.sprite.metric import ErrorMetric
 
 if TYPE_CHECKING:
-    from lodsprite.sprite.keyframe_worker import WorkerSettings
+    from lodsprite.sprite.worker_settings import WorkerSettings
     from lodsprite.terrain import HeightField
 
 log = logging.getLogger(__name__)

@@ -41,12 +41,7 @@ from lodsprite.record import Frame
 from lodsprite.sprite.adoption import AdoptionRule
 from lodsprite.sprite.depth_metric import DepthReprojection
 from lodsprite.sprite.engine import sprite_frame
-from lodsprite.sprite.keyframe_worker import (
-    KeyframeImage,
-    KeyframeWorker,
-    StoreKeys,
-    WorkerSettings,
-)
+from lodsprite.sprite.keyframe_worker import KeyframeImage, KeyframeWorker
 from lodsprite.sprite.metric import ErrorMetric
 from lodsprite.sprite.policy import (
     DEFAULT_EPSILON_PX,
@@ -57,6 +52,7 @@ from lodsprite.sprite.policy import (
     keyframe_error_px,
     resampling_metric,
 )
+from lodsprite.sprite.worker_settings import StoreKeys, WorkerSettings
 
 if TYPE_CHECKING:  # the scene is passed in
     from lodsprite.scene import Scene

@@ -1,7 +1,7 @@
 """Tiled keyframes from a worker process: Qu, Wan, Qin & Kaufman (2000)'s part of the
 image re-rendered, with Swan et al. (2002)'s split, the parts rendered beside the
 drawing loop (:class:`~lodsprite.sprite.keyframe_worker.KeyframeWorker` with
-:attr:`~lodsprite.sprite.keyframe_worker.WorkerSettings.tiles`).
+:attr:`~lodsprite.sprite.worker_settings.WorkerSettings.tiles`).
 
 Per frame, in the drawing loop (never waiting after the first update):
 
@@ -45,16 +45,12 @@ from lodsprite.errors import LodspriteError
 from lodsprite.gl.sprite import SpriteDrawer
 from lodsprite.record import Frame
 from lodsprite.sprite.engine import sprite_frame
-from lodsprite.sprite.keyframe_worker import (
-    KeyframeWorker,
-    StoreKeys,
-    TileUpdate,
-    WorkerSettings,
-)
+from lodsprite.sprite.keyframe_worker import KeyframeWorker, TileUpdate
 from lodsprite.sprite.policy import KEYFRAME, SPRITE, KeyChoice, resampling_metric
 from lodsprite.sprite.tiled import TILES, combined_error, tile_errors
 from lodsprite.sprite.tiled_engine import TiledSpriteEngine
 from lodsprite.sprite.worker_engine import DEFAULT_REQUEST_FRACTION
+from lodsprite.sprite.worker_settings import StoreKeys, WorkerSettings
 
 if TYPE_CHECKING:  # the scene is passed in
     from lodsprite.scene import Scene

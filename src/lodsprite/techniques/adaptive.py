@@ -29,8 +29,8 @@ from lodsprite.techniques.terrain import SpriteTechnique, resolve_shading, set_s
 from lodsprite.workers import peak_rss_mb
 
 if TYPE_CHECKING:
-    from lodsprite.api import Renderer
     from lodsprite.camera import Viewpoint
+    from lodsprite.techniques.base import RendererLike
 
 
 def scene_pyramid(scene):
@@ -54,7 +54,7 @@ WORKER_FACTORY = "lodsprite.techniques.adaptive_worker:store_keyframe_handler"
 GRIDS = (16, 32, 64, 128)
 
 
-def make_adaptive(renderer: Renderer, sse: float, gpu_mb: float, host_mb: float,
+def make_adaptive(renderer: RendererLike, sse: float, gpu_mb: float, host_mb: float,
                   shading: str = "auto", grid: int = 64):
     """An :class:`~lodsprite.techniques.adaptive_terrain.AdaptiveTerrain` on ``renderer``'s context
     and target, coloured with the scene's texture or shaded from its heights (``shading``,
@@ -148,7 +148,7 @@ class AdaptiveTechnique(Technique):
 
     name = "adaptive"
 
-    def __init__(self, renderer: Renderer, sse: float = 1.0, gpu_mb: float = 256.0,
+    def __init__(self, renderer: RendererLike, sse: float = 1.0, gpu_mb: float = 256.0,
                  host_mb: float = 512.0, shading: str = "auto", grid: int = 64) -> None:
         super().__init__(renderer)
         self._t0 = time.perf_counter()
@@ -238,7 +238,7 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
 
     name = "sprite-adaptive"
 
-    def __init__(self, renderer: Renderer, lod: int = 16, epsilon: float = 1.0,
+    def __init__(self, renderer: RendererLike, lod: int = 16, epsilon: float = 1.0,
                  key_sse: float = STORE_DEFAULTS["key_sse"], gpu_mb: float = 256.0,
                  host_mb: float = 512.0,
                  visibility: str | None = None, guard_px: int | None = None,
@@ -250,7 +250,7 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
                  depth_stride: int = MEMORY_DEFAULTS["depth_stride"],
                  key_scale: float = MEMORY_DEFAULTS["key_scale"],
                  pair: bool = MEMORY_DEFAULTS["pair"]) -> None:
-        from lodsprite.sprite.keyframe_worker import StoreKeys
+        from lodsprite.sprite.worker_settings import StoreKeys
         from lodsprite.terrain.store import TerrainStore
         from lodsprite.terrain.storefield import store_field
 
@@ -303,7 +303,7 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
         if self.heights is not None:
             self.heights.pump()
 
-    def _adaptive_proxy(self, renderer: Renderer, proxy_sse: float):
+    def _adaptive_proxy(self, renderer: RendererLike, proxy_sse: float):
         """Spriteframes, coarse z-buffers and the error metric on the adaptive mesh at
         ``proxy_sse`` px (:mod:`lodsprite.techniques.sprite_proxy`)."""
         from lodsprite.techniques.sprite_proxy import AdaptiveProxySource

@@ -23,7 +23,7 @@ with:
   replay draws again (:class:`~lodsprite.techniques.adaptive_keys.WorkerAdaptiveKeys`);
 * ``points`` — the keyframe's own ``C`` (pickling a ``C'`` drops them).
 
-With tiles (:attr:`~lodsprite.sprite.keyframe_worker.WorkerSettings.tiles`) a request
+With tiles (:attr:`~lodsprite.sprite.worker_settings.WorkerSettings.tiles`) a request
 names the tiles to draw: each is drawn adaptively, culled by its sub-frustum (the
 update's stream request is its tiles' selections gathered, as the inline
 ``TiledAdaptiveKeys`` does), and answered with its own selection and what it lacks
@@ -55,7 +55,7 @@ if TYPE_CHECKING:
     import numpy as np
 
     from lodsprite.camera import Viewpoint
-    from lodsprite.sprite.keyframe_worker import WorkerSettings
+    from lodsprite.sprite.worker_settings import WorkerSettings
     from lodsprite.terrain import HeightField
 
 

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
@@ -40,12 +40,54 @@ if TYPE_CHECKING:  # moderngl only under gl/ at run time
 
     import moderngl
 
-    from lodsprite.api import Renderer
     from lodsprite.camera import Projection, Viewpoint
-    from lodsprite.harness import Reference, RunResult
+    from lodsprite.gl.context import GLContext
+    from lodsprite.gl.terrain_gl import TerrainGL
     from lodsprite.paths import CameraPath
+    from lodsprite.record import Reference, RunResult
+    from lodsprite.scene import Scene
 
 FALLBACK_TINT = (1.0, 0.0, 1.0, 0.45)
+
+
+class SpriteLike(Protocol):
+    """What a technique reads of a LOD-sprite renderer it drives
+    (:class:`lodsprite.api.LodSprite`): a protocol, so the techniques name no facade."""
+
+    epsilon_px: float
+    engine: Any
+    sprite: Any
+
+    @property
+    def keyframes(self) -> list: ...
+    def frame(self, viewpoint: Viewpoint) -> Any: ...
+    def read_image(self) -> np.ndarray: ...
+    def key_view(self) -> tuple[Viewpoint, Projection] | None: ...
+    def draw_to(self, framebuffer: moderngl.Framebuffer | None = None) -> None: ...
+    def release(self) -> None: ...
+
+
+class RendererLike(Protocol):
+    """What a technique reads of the renderer it is given (:class:`lodsprite.api.
+    Renderer`, the only one): its scene, size and field of view, GL context, terrain
+    drawer and drawing calls.  A protocol, so the techniques, which the facade's
+    renderer creates, do not name it."""
+
+    scene: Scene
+    size: tuple[int, int]
+    fov_y_deg: float
+
+    @property
+    def gl(self) -> GLContext: ...
+    @property
+    def terrain_gl(self) -> TerrainGL: ...
+    def render(self, viewpoint: Viewpoint, lod: int | None = None) -> Frame: ...
+    def read_color(self) -> np.ndarray: ...
+    def projection(self, viewpoint: Viewpoint) -> Projection: ...
+    def draw_to(self, framebuffer: moderngl.Framebuffer | None = None) -> None: ...
+    def present(self, texture: moderngl.Texture, uv: tuple[float, float, float, float],
+                *args: Any, **kwargs: Any) -> None: ...
+    def sprite(self, *args: Any, **kwargs: Any) -> SpriteLike: ...
 
 
 @dataclass(frozen=True)
@@ -89,7 +131,7 @@ class Technique:
     #: (the ``scene`` technique's world advances one step a frame).
     plays_in_time = True
 
-    def __init__(self, renderer: Renderer) -> None:
+    def __init__(self, renderer: RendererLike) -> None:
         self.renderer = renderer
 
     # ------------------------------------------------------------ batch and window
@@ -190,4 +232,4 @@ class Technique:
         """Release what the technique made (never the renderer)."""
 
 
-TechniqueFactory = Callable[["Renderer"], Technique]
+TechniqueFactory = Callable[["RendererLike"], Technique]

@@ -23,9 +23,8 @@ from lodsprite.errors import InputError
 from lodsprite.techniques.options import Option, merge
 
 if TYPE_CHECKING:
-    from lodsprite.api import Renderer
     from lodsprite.scene import Scene
-    from lodsprite.techniques.base import Technique, TechniqueFactory
+    from lodsprite.techniques.base import RendererLike, Technique, TechniqueFactory
 
 #: The scene layers techniques draw (:mod:`lodsprite.scene`).
 LAYERS = ("terrain", "objects", "lightfield")
@@ -88,7 +87,7 @@ class TechniqueSpec:
                  if options.get(o.name) is not None}
         return {**self.defaults(), **given}
 
-    def create(self, renderer: Renderer, **options: Any) -> Technique:
+    def create(self, renderer: RendererLike, **options: Any) -> Technique:
         """Make the technique on ``renderer``; an unknown option or a bad value raises
         :class:`InputError` (one line naming the option)."""
         for name in options:
@@ -196,7 +195,7 @@ def names(layers: Iterable[str] | None = None) -> tuple[str, ...]:
     return tuple(s.name for s in specs(layers))
 
 
-def create(name: str, renderer: Renderer, **options: Any) -> Technique:
+def create(name: str, renderer: RendererLike, **options: Any) -> Technique:
     """Make technique ``name`` on ``renderer`` with ``options`` (checked by the spec's
     :class:`Option` declarations)."""
     return get(name).create(renderer, **options)

@@ -31,10 +31,10 @@ from lodsprite.sprite.tiled import TILES
 from lodsprite.techniques.base import Frame
 
 if TYPE_CHECKING:
-    from lodsprite.api import LodSprite, Renderer
     from lodsprite.camera import Projection, Viewpoint
-    from lodsprite.sprite.keyframe_worker import StoreKeys
     from lodsprite.sprite.tiled_engine import TiledSpriteEngine
+    from lodsprite.sprite.worker_settings import StoreKeys
+    from lodsprite.techniques.base import RendererLike, SpriteLike
 
 TileDrawerFor = Callable[[int, int], Callable | None]
 
@@ -46,7 +46,7 @@ class SpriteEngine(Protocol):
     spriteframes (and whole keyframes); ``keyframes``: every view keyframes (or tiles)
     were rendered from, in order, which a frame's ``keyframe`` column indexes."""
 
-    sprite: LodSprite
+    sprite: SpriteLike
 
     @property
     def keyframes(self) -> list: ...
@@ -88,7 +88,7 @@ class _Whole:
     """Whole keyframes on ``sprite`` (inline or from the worker): the frame, its decision and
     its untimed replay (the logged keyframe rendered again, then the spriteframe)."""
 
-    def __init__(self, sprite: LodSprite) -> None:
+    def __init__(self, sprite: SpriteLike) -> None:
         self.sprite = sprite
         self._last = None
         self._replayed: int | None = None
@@ -143,7 +143,7 @@ class WholeKeyframes(_Whole):
     (:class:`~lodsprite.sprite.engine.LodSpriteEngine`); with ``cache_mb > 0`` a frame
     may show an older keyframe from the cache."""
 
-    def __init__(self, sprite: LodSprite, renderer: Renderer, cache_mb: float) -> None:
+    def __init__(self, sprite: SpriteLike, renderer: RendererLike, cache_mb: float) -> None:
         super().__init__(sprite)
         self.renderer = renderer
         self.cache_mb = float(cache_mb)
@@ -223,7 +223,7 @@ class TiledKeyframes:
     frame's decision records its mosaic (per tile, the update it shows), which the replay
     brings the tiles to.  ``cache_mb > 0``: a cache of tile renders."""
 
-    def __init__(self, sprite: LodSprite, renderer: Renderer, epsilon: float, tiles: int,
+    def __init__(self, sprite: SpriteLike, renderer: RendererLike, epsilon: float, tiles: int,
                  tile_budget_ms: float, metric: str, cache_mb: float,
                  cache_policy: str) -> None:
         from lodsprite.sprite.tiled_engine import TiledSpriteEngine
@@ -331,7 +331,7 @@ class WorkerTiledKeyframes(TiledKeyframes):
     (:class:`~lodsprite.sprite.worker_tiles.WorkerTiledEngine`, :attr:`tiled`); every
     frame is a tiled spriteframe and never waits for a tile after the first update."""
 
-    def __init__(self, sprite: LodSprite, renderer: Renderer, epsilon: float, tiles: int,
+    def __init__(self, sprite: SpriteLike, renderer: RendererLike, epsilon: float, tiles: int,
                  metric: str, store: StoreKeys | None = None) -> None:
         from lodsprite.sprite.worker_tiles import WorkerTiledEngine
 
@@ -369,7 +369,7 @@ class WorkerTiledKeyframes(TiledKeyframes):
                 f"discarded, lead {w.lead_s * 1e3:.0f} ms")
 
 
-def sprite_engine(renderer: Renderer, epsilon: float, lod: int, threaded: bool,
+def sprite_engine(renderer: RendererLike, epsilon: float, lod: int, threaded: bool,
                   visibility: str, guard_px: int, border: bool, tiles: int,
                   tile_budget_ms: float, cache_mb: float, cache_policy: str,
                   metric: str, store=None, depth_stride: int | None = None,
@@ -378,7 +378,7 @@ def sprite_engine(renderer: Renderer, epsilon: float, lod: int, threaded: bool,
     :class:`TiledKeyframes` (inline) or :class:`WorkerTiledKeyframes` (``threaded``),
     else :class:`WorkerKeyframes` or :class:`WholeKeyframes`
     (``store``: the worker's keyframes over a terrain store,
-    :class:`~lodsprite.sprite.keyframe_worker.StoreKeys`).  Raises
+    :class:`~lodsprite.sprite.worker_settings.StoreKeys`).  Raises
     :class:`~lodsprite.errors.InputError` for a bad ``tiles``."""
     if not (isinstance(tiles, int) and tiles >= 1):
         raise InputError(f"--tiles must be a whole number >= 1, got {tiles}")

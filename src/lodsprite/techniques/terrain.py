@@ -23,10 +23,10 @@ from lodsprite.terrain.lod import DEFAULT_COARSE, level_step
 log = logging.getLogger(__name__)
 
 if TYPE_CHECKING:
-    from lodsprite.api import LodSprite, Renderer
     from lodsprite.camera import Projection, Viewpoint
-    from lodsprite.harness import RunResult
     from lodsprite.paths import CameraPath
+    from lodsprite.record import RunResult
+    from lodsprite.techniques.base import RendererLike, SpriteLike
 
 
 def resolve_shading(scene, shading: str = "auto") -> str:
@@ -44,7 +44,7 @@ def resolve_shading(scene, shading: str = "auto") -> str:
     return shading
 
 
-def set_shading(renderer: Renderer, shading: str) -> str:
+def set_shading(renderer: RendererLike, shading: str) -> str:
     """Colour ``renderer``'s terrain frames (full, levels, keyframes, LOD-sprite's
     fallback) by ``shading`` resolved for its scene; returns the resolved one."""
     resolved = resolve_shading(renderer.scene, shading)
@@ -57,7 +57,7 @@ class FullTechnique(Technique):
 
     name = "full"
 
-    def __init__(self, renderer: Renderer, shading: str = "auto") -> None:
+    def __init__(self, renderer: RendererLike, shading: str = "auto") -> None:
         super().__init__(renderer)
         self.shading = set_shading(renderer, shading)
 
@@ -75,7 +75,7 @@ class LodTechnique(Technique):
 
     name = "lod"
 
-    def __init__(self, renderer: Renderer, lod: int = DEFAULT_COARSE,
+    def __init__(self, renderer: RendererLike, lod: int = DEFAULT_COARSE,
                  shading: str = "auto") -> None:
         super().__init__(renderer)
         self.shading = set_shading(renderer, shading)
@@ -158,13 +158,13 @@ class SpriteTechnique(Technique):
     worker process (``keyframes="worker"``), or keyframes refreshed tile by tile within
     ``tile_budget_ms`` per frame (``tiles > 1``; from the worker too, without a budget).
     ``store``: the worker's keyframes drawn by the adaptive renderer (a
-    :class:`~lodsprite.sprite.keyframe_worker.StoreKeys`, given by ``sprite-adaptive``).
+    :class:`~lodsprite.sprite.worker_settings.StoreKeys`, given by ``sprite-adaptive``).
     Records per frame the keyframe (or tile mosaic) shown; its replay renders that from
     its logged viewpoints and projections, then the frame."""
 
     name = "sprite"
 
-    def __init__(self, renderer: Renderer, lod: int = DEFAULT_COARSE,
+    def __init__(self, renderer: RendererLike, lod: int = DEFAULT_COARSE,
                  epsilon: float = DEFAULT_EPSILON_PX, keyframes: str = "inline",
                  visibility: str | None = None, guard_px: int | None = None,
                  border: bool = True, shading: str = "auto", tiles: int = 1,
@@ -185,7 +185,7 @@ class SpriteTechnique(Technique):
             DEFAULT_GUARD_PX if guard_px is None else guard_px, border, tiles,
             tile_budget_ms, cache_mb, cache_policy, metric, store,
             None if proxy == "geometry" else depth_stride, key_scale, pair)
-        self.sprite: LodSprite = self.engine.sprite
+        self.sprite: SpriteLike = self.engine.sprite
         self.sprite.sprite.use_depth_proxy(proxy)
         self.heights = level0_reader(renderer.terrain_gl.geometry, lod, border)
 

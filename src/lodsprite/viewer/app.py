@@ -15,9 +15,10 @@ from pathlib import Path
 
 from lodsprite import techniques
 from lodsprite.errors import InputError
-from lodsprite.scene import Scene, open_scene
+from lodsprite.scene import Scene
 from lodsprite.techniques import TechniqueFactory
 from lodsprite.techniques.configs import TechniqueOptions, takes_options
+from lodsprite.techniques.scenes import open_scene
 from lodsprite.viewer.core import PlayPlan
 from lodsprite.viewer.window import WindowOptions, check_display, run_viewer
 

@@ -18,7 +18,7 @@ from lodsprite.experiments.large.reference import errors, saved_frames
 from lodsprite.experiments.large.variants import VARIANTS, row
 
 if TYPE_CHECKING:
-    from lodsprite.experiments.large.run import LargeConfig
+    from lodsprite.experiments.large.config import LargeConfig
 
 
 def sprite_lod(side: int) -> int:
