@@ -26,7 +26,8 @@ from lodsprite.gl.terrain_gl import TerrainGL
 from lodsprite.scene.spec import SceneSpec, open_spec
 from lodsprite.terrain.heightfield import DEFAULT_GRID
 
-__all__ = ["ADAPTIVE_ABOVE", "MEMORY_FRACTION", "AdaptiveKeyframeService", "KeyframeService",
+__all__ = ["ADAPTIVE_ABOVE", "LIGHTFIELD_NODES", "MEMORY_FRACTION", "AdaptiveKeyframeService",
+           "KeyframeService",
            "SceneKeyframeService", "adaptive_scene_bytes", "check_load_args",
            "check_scene_memory", "estimate_scene_bytes", "key_size",
            "keyframe_kind", "keyframe_scene_bytes", "keyframe_service", "memory_available",
@@ -36,6 +37,9 @@ ADAPTIVE_ABOVE = 1024
 """Working grids (quads a side) above which an in-memory terrain's keyframes are drawn
 adaptively (a 1024² grid drawn whole is 2.1 M triangles; 4096² is 33.5 M, about 6 s a
 keyframe on llvmpipe)."""
+LIGHTFIELD_NODES = 16
+"""Nodes each light field in a scene's keyframes is reconstructed from (the arbitrary
+method's largest budget, :data:`lodsprite.layered.lightfields.NODES`)."""
 MEMORY_FRACTION = 0.8
 """Share of the available memory a scene may take (its estimate)."""
 
@@ -273,10 +277,13 @@ class AdaptiveKeyframeService:
 
 
 class SceneKeyframeService:
-    """Keyframes of a scene file's static layers (its terrain and standing objects) with
-    their full z-buffer (:class:`~lodsprite.layered.scene_keys.SceneKeyframes`, what the
-    window's scene worker draws): the moving objects are the page's to draw, depth tested
-    against the keyframe's surface.  The terrain is drawn adaptively at ``key_sse`` over a
+    """Keyframes of a scene file's static layers (its terrain and standing objects) and
+    its light fields in view (from :data:`LIGHTFIELD_NODES` nodes each), with their full
+    z-buffer (:class:`~lodsprite.layered.scene_keys.SceneKeyframes`, what the window's
+    scene worker draws, light fields aside): the moving objects are the page's to draw,
+    depth tested against the keyframe's surface.  A light field is view dependent: the page
+    shows the keyframe's view of it through the keyframe's depth mesh until the next.
+    The terrain is drawn adaptively at ``key_sse`` over a
     store or a grid above :data:`ADAPTIVE_ABOVE`, else whole; a scene file opens confined
     to ``root`` (the data folder).  Same interface as :class:`KeyframeService`."""
 
@@ -294,7 +301,7 @@ class SceneKeyframeService:
         adaptive = hf is not None and (is_store(scene.terrain_spec) or hf.quads > ADAPTIVE_ABOVE)
         keys = SceneKeys(str(scene.source or args.terrain), "adaptive" if adaptive else "full",
                          {"sse": STORE_DEFAULTS["key_sse"] if key_sse is None else key_sse}
-                         if adaptive else {})
+                         if adaptive else {}, lightfields=LIGHTFIELD_NODES)
         settings = WorkerSettings(tuple(args.size), args.fov_y_deg, args.lod, "fragment",
                                   args.border, 0,  # the full z-buffer: any rule but coarse
                                   key_scale=args.key_scale)

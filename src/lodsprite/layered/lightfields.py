@@ -235,6 +235,11 @@ class LightFieldLayer(Layer):
 
     def draw(self, viewpoint: Viewpoint, t: float, projection: np.ndarray) -> Frame:
         """Reconstruct and composite every light field in view (the others cost nothing)."""
+        return self.draw_into(viewpoint, projection, self.fbo)
+
+    def draw_into(self, viewpoint: Viewpoint, projection: np.ndarray, fbo) -> Frame:
+        """:meth:`draw` into ``fbo`` (a keyframe's target: a server's keyframes hold the
+        light fields of their view, composited by depth with what stands)."""
         images = tris = 0
         self._drawn = self.in_view(viewpoint, projection)
         for item, shown in zip(self.items, self._drawn, strict=True):
@@ -243,7 +248,7 @@ class LightFieldLayer(Layer):
             self.set_nodes(self.nodes)  # a slab switch makes a new method
             f = item.reconstruct(viewpoint, projection)
             images += f.extra["images"]
-            tris += item.composite(projection, viewpoint, item.method.output.color, self.fbo)
+            tris += item.composite(projection, viewpoint, item.method.output.color, fbo)
         self._frame += 1
         return layer_frame(self.name, 0.0, tris, work=float(max(images, 1)),
                           extra={"lf_images": images, "lf_drawn": int(self._drawn.sum())})

@@ -15,7 +15,10 @@ at full resolution in memory (``terrain="full"``), then the static objects (``wa
 = 0``) by the LODManager engine at the LOD exponent ``exponent``.  It answers the
 keyframe's colour and its *full* z-buffer (terrain and static objects: what the display's
 moving layers are depth-tested against, :mod:`lodsprite.gl.key_depth`) and the error
-metric's ``C'`` of the display's coarse level (Chen et al. 1999 Eq. 2).
+metric's ``C'`` of the display's coarse level (Chen et al. 1999 Eq. 2).  A server's
+renderers (:class:`SceneKeyframes` with ``SceneKeys.lightfields``) draw the light fields
+in view into the keyframe too, composited by their proxies' depth: a web page draws none
+itself.
 """
 
 from __future__ import annotations
@@ -54,12 +57,16 @@ class SceneKeys:
     ``terrain`` (``full``:
     the in-memory terrain at full resolution; ``adaptive``: the adaptive renderer, over a
     store), ``terrain_options`` (the adaptive technique's own) and the objects' ``active``
-    count (None: every static object's LOD updated each keyframe)."""
+    count (None: every static object's LOD updated each keyframe); ``lightfields``: the light
+    fields in view drawn into each keyframe too, from that many nodes each (0: none, the
+    window's worker: the display draws them every frame; a server's renderers for a page,
+    which draws none itself)."""
 
     scene_file: str
     terrain: str = "full"
     terrain_options: dict[str, Any] = field(default_factory=dict)
     active: int | None = None
+    lightfields: int = 0
 
 
 def scene_starter(keys: SceneKeys):
@@ -172,7 +179,7 @@ class SceneKeyframes:
         from lodsprite.layered.objects import ObjectsLayer
 
         self.renderer = Renderer(scene, s.size, s.fov_y_deg, ctx)
-        self.terrain = self.objects = self.sprite = None
+        self.terrain = self.objects = self.sprite = self.lights = None
         try:
             self.sprite = SpriteDrawer(self.renderer.terrain_gl.drawer, s.lod, s.visibility,
                                        border=s.border, guard_px=s.guard_px,
@@ -182,6 +189,12 @@ class SceneKeyframes:
                 self.sprite.keyframe_drawer = self.terrain.technique.terrain.render_into
             if scene.objects is not None and not scene.objects.moving().all():
                 self.objects = ObjectsLayer(self.renderer, scene.objects, 1.0, keys.active)
+            if keys.lightfields and scene.lightfields:
+                from lodsprite.layered.lightfields import LightFieldLayer
+
+                self.lights = LightFieldLayer(self.renderer, scene.lightfields, scene.hf,
+                                              "arbitrary", keys.lightfields)
+            if self.objects is not None or self.lights is not None:
                 self.sprite.after_keyframe = self._static
         except BaseException:
             self.release()
@@ -189,7 +202,10 @@ class SceneKeyframes:
         self._warm = False
 
     def _static(self, viewpoint: Viewpoint, projection: Projection, target) -> None:
-        self.objects.draw_static(viewpoint, projection.matrix(), target.fbo)
+        if self.objects is not None:
+            self.objects.draw_static(viewpoint, projection.matrix(), target.fbo)
+        if self.lights is not None:
+            self.lights.draw_into(viewpoint, projection.matrix(), target.fbo)
 
     def keyframe(self, vp: Viewpoint, tolerance: float | None = None, exponent: float = 1.0,
                  spread: float = 1.0, t0: float | None = None):
@@ -219,10 +235,10 @@ class SceneKeyframes:
         return float(self.terrain.technique.terrain.deficit_px())
 
     def release(self) -> None:
-        for part in (self.objects, self.terrain):
+        for part in (self.lights, self.objects, self.terrain):
             if part is not None:
                 part.release()
-        self.objects = self.terrain = None
+        self.lights = self.objects = self.terrain = None
         if self.sprite is not None:
             self.sprite.release()
             self.sprite = None

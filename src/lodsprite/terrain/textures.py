@@ -76,6 +76,33 @@ def hillshade(heights: np.ndarray, dx: float, dy: float, azimuth_deg: float = 31
     return np.clip(shade, 0, 1).astype(np.float32, copy=False)
 
 
+#: The heights shading's sun (unit, towards it) and ramp colours (``gl.shaders``'
+#: TERRAIN_SHADE: the one shading of the terrain from its heights).
+SHADE_LIGHT = np.array([-0.450473, 0.450473, 0.770810])
+SHADE_LOW, SHADE_MID, SHADE_HIGH = (0.32, 0.45, 0.25), (0.55, 0.48, 0.34), (0.9, 0.9, 0.9)
+
+
+def height_shading(heights: np.ndarray, dx: float, dy: float, lo: float, hi: float
+                   ) -> np.ndarray:
+    """``(rows, cols, 3) uint8``: the terrain's heights shading at its samples, row 0
+    north, as the renderers colour a terrain store (``TERRAIN_SHADE`` of
+    :mod:`lodsprite.gl.shaders`: a height ramp over ``lo..hi`` metres, level 0's lowest
+    and highest, lit by one sun with 30 % ambient; the normal from central differences,
+    one-sided at the edges, as its ``height_normal`` at a sample).  What a web page shows
+    where no keyframe saw the surface, in the keyframes' colours."""
+    h = np.asarray(heights, np.float64)
+    if h.ndim != 2 or min(h.shape) < 2:
+        raise TerrainError(f"height shading needs a 2-D grid of at least 2x2, got {h.shape}")
+    g_row, g_col = np.gradient(h)                      # metres a row (south), a column (east)
+    n = np.stack([-g_col / dx, g_row / dy, np.ones_like(h)], axis=-1)
+    n /= np.linalg.norm(n, axis=-1, keepdims=True)
+    t = np.clip((h - lo) / max(hi - lo, 1e-3), 0.0, 1.0)[..., None]
+    low, mid, high = (np.asarray(c) for c in (SHADE_LOW, SHADE_MID, SHADE_HIGH))
+    c = np.where(t < 0.6, low + (mid - low) * (t / 0.6), mid + (high - mid) * ((t - 0.6) / 0.4))
+    lit = 0.3 + 0.7 * np.maximum(n @ SHADE_LIGHT, 0.0)
+    return np.clip(np.round(c * lit[..., None] * 255.0), 0, 255).astype(np.uint8)
+
+
 def make_texture(spec: str, hf: HeightField) -> np.ndarray:
     """The texture named by ``spec`` for ``hf``: ``(H, W, 3) uint8`` RGB, row 0 north.
 

@@ -72,3 +72,24 @@ def test_a_ribbon_over_the_cap_is_refused_by_the_schema():
 
     with pytest.raises(msgspec.ValidationError):
         _message(b"", bytes(12 * MAX_RIBBON_TRIANGLES + 12))
+
+
+def test_a_stores_scene_is_textured_in_its_keyframes_heights_shading(store512):
+    """A store's keyframes are shaded from its heights, so the scene message's texture (what
+    the page shows where no keyframe saw the surface) is that shading of the working grid,
+    not the terrain texture; an in-memory terrain keeps its texture."""
+    from lodsprite.distributed.protocol import LoadArgs
+    from lodsprite.scene import load_scene
+    from lodsprite.terrain.store import TerrainStore
+    from lodsprite.terrain.textures import height_shading
+
+    parts, hf = build_scene_field(LoadArgs(terrain=store512, size=(64, 64), lod=8))
+    got = decode_scene(parts).texture[::-1]  # the message's rows run south to north
+    mm = TerrainStore(store512).minmax(0)
+    want = height_shading(hf.heights, hf.dx, hf.dy, float(mm[..., 0].min()),
+                          float(mm[..., 1].max()))
+    np.testing.assert_array_equal(got, want)
+    memory = decode_scene(build_scene_field(LoadArgs(terrain="fractal:64:4", size=(64, 64),
+                                                     lod=8))[0]).texture[::-1]
+    own = load_scene("fractal:64:4", light=True).texture
+    assert memory.shape == own.shape and (memory == own).all()

@@ -40,13 +40,13 @@ from lodsprite.distributed.protocol import (
     decode_message,
     encode,
 )
+from lodsprite.terrain.store_format import is_store
 
 if TYPE_CHECKING:
     from lodsprite.scene import Scene
 
 __all__ = ["SceneData", "build_scene", "build_scene_field", "decode_ribbon", "decode_scene",
-           "path_data",
-           "relief", "scene_key", "scene_parts"]
+           "path_data", "relief", "scene_key", "scene_parts", "shaded_texture"]
 
 SCENE_FIELDS = ("terrain", "texture", "grid", "exaggeration", "lod", "size", "fov_y_deg",
                 "epsilon", "visibility", "border")
@@ -123,7 +123,7 @@ def scene_parts(scene: Scene, args: LoadArgs, codec: str = "raw") -> list:
         raise InputError(f"scene {scene.name!r}: a web page draws a textured terrain")
     step = hf.quads // args.lod
     heights = np.ascontiguousarray(hf.heights[::step, ::step][::-1], dtype=np.float32)
-    texture = scene.texture
+    texture = shaded_texture(scene) if is_store(scene.terrain_spec) else scene.texture
     k = -(-max(texture.shape[:2]) // MAX_IMAGE_SIDE)  # keep within the image side cap
     texture = np.ascontiguousarray(texture[::k, ::k][::-1], dtype=np.uint8)
     lo, hi = hf.bounds()
@@ -152,6 +152,20 @@ def scene_parts(scene: Scene, args: LoadArgs, codec: str = "raw") -> list:
         header["ribbon"] = rib.positions.astype("<f4").tobytes()
         header["ribbon_tris"] = rib.tris.astype("<u4").tobytes()
     return encode(header, h_data, t_data)
+
+
+def shaded_texture(scene: Scene) -> np.ndarray:
+    """``(rows, cols, 3) uint8``, row 0 north: a terrain store's working grid in the heights
+    shading its keyframes are drawn in (the ramp over level 0's lowest and highest
+    heights), so that where the page shows no keyframe it shows the keyframes' colours
+    (the terrain texture there read as another terrain)."""
+    from lodsprite.terrain.store import TerrainStore
+    from lodsprite.terrain.textures import height_shading
+
+    hf = scene.hf
+    mm = TerrainStore(scene.terrain_spec, float(hf.meta.get("exaggeration", 1.0))).minmax(0)
+    lo, hi = float(np.nanmin(mm[..., 0])), float(np.nanmax(mm[..., 1]))
+    return height_shading(hf.heights, hf.dx, hf.dy, lo, hi)
 
 
 class SceneData:

@@ -73,10 +73,15 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
   let sceneResolve;
   const sceneArrived = new Promise((r) => { sceneResolve = r; });
   let pendingKey = null;  // the newest keyframe uploaded, not yet drawn: {header, key}
-  let keyframesIn = 0, newestDecoded = 0, decoded = 0;
+  let keyframesIn = 0, newestDecoded = 0, decoded = 0, shownKeyId = 0;
   const keyframeHeaders = new Map();  // decode id -> header
   const decoder = new Worker(decoderUrl, { type: 'module' });
   decoder.onmessage = ({ data }) => {
+    if (data.estimate) {  // a keyframe's estimate, after it: its own, pending or shown, else dropped
+      if (pendingKey && pendingKey.id === data.id) pendingKey.estimate = data.estimate;
+      else if (shownKeyId === data.id) metric = depthMetric(new DepthEstimate(data.estimate));
+      return;
+    }
     const header = keyframeHeaders.get(data.id);
     keyframeHeaders.delete(data.id);
     if (data.error) { state = `bad keyframe: ${data.error}`; return; }
@@ -85,7 +90,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
     newestDecoded = data.id;
     const key = renderer.prepareKeyframe(header, data.bitmap, data.depth);
     if (pendingKey) renderer.dropKeyframe(pendingKey.key);  // superseded before a frame drew it
-    pendingKey = { header, key, estimate: data.estimate };
+    pendingKey = { header, key, id: data.id, estimate: null };
   };
   decoder.onerror = (e) => { state = `keyframe decoder: ${e.message}`; };
 
@@ -177,10 +182,12 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
   }
 
   function adopt(now) {
-    const { header, key, estimate } = pendingKey;
+    const { header, key, id, estimate } = pendingKey;
     pendingKey = null;
     renderer.useKeyframe(key);
-    // the error on this keyframe's own depth (what the depth mesh shows), else the coarse level's
+    shownKeyId = id;
+    // the error on this keyframe's own depth (what the depth mesh shows) once the decode
+    // worker has built it, the coarse level's until then
     metric = estimate ? depthMetric(new DepthEstimate(estimate)) : coarseMetric;
     keyEye = header.viewpoint.o; keyVp = header.viewpoint;
     keyDir = header.viewpoint.z;

@@ -7,12 +7,15 @@
 // as it did the bytes: row 0 of the buffer is row 0 of the texture.  The depth, (H, W)
 // float32, comes back as its Float32Array (ImageBitmaps hold 8-bit colour only).
 //
-// With `estimate` ({stride, keyScale}: the page's depth mesh and keyframe scale) it also
+// With `estimate` ({stride, keyScale}: the page's depth mesh and keyframe scale) it then
 // builds the keyframe's error estimate on its own depth (depth_estimate.js), here, off
-// the page's thread: its state's typed arrays come back transferred.
+// the page's thread, and sends it apart, after the keyframe (which the page may draw
+// meanwhile: a first build is some 100 ms of compiling): its state's typed arrays come
+// back transferred.
 //
 // In: {id, header, color, depth, estimate} (the two image buffers as the wire gave them).
-// Out: {id, bitmap, depth, estimate} (transferred) or {id, error}.
+// Out: {id, bitmap, depth} (transferred), then with `estimate` {id, estimate}; or
+// {id, error}.
 
 import { mul } from './camera.js';
 import { buildEstimate } from './depth_estimate.js';
@@ -37,15 +40,15 @@ if (typeof WorkerGlobalScope !== 'undefined' && self instanceof WorkerGlobalScop
       const [h, w, c] = header.color.shape;
       if (c !== 3) throw new Error(`keyframe colour of ${c} channels`);
       const [dh, dw] = header.depth.shape;
-      let est = null;
-      if (estimate && dh === h && dw === w) {
-        est = buildEstimate(z, w, h, header.viewpoint, header.fov, header.aspect, header.near, header.far,
-          mul(header.proj, header.view), estimate.stride, estimate.keyScale, rgb);
-      }
+      const keep = estimate && dh === h && dw === w ? z.slice() : null;  // z goes with the keyframe
       const bitmap = await createImageBitmap(rgbaImage(rgb, w, h), BITMAP_OPTIONS);
-      const moved = [bitmap, z.buffer];
-      if (est) for (const v of Object.values(est)) if (ArrayBuffer.isView(v)) moved.push(v.buffer);
-      self.postMessage({ id, bitmap, depth: z, estimate: est }, moved);
+      self.postMessage({ id, bitmap, depth: z }, [bitmap, z.buffer]);
+      if (keep) {
+        const est = buildEstimate(keep, w, h, header.viewpoint, header.fov, header.aspect, header.near,
+          header.far, mul(header.proj, header.view), estimate.stride, estimate.keyScale, rgb);
+        const moved = Object.values(est).filter((v) => ArrayBuffer.isView(v)).map((v) => v.buffer);
+        self.postMessage({ id, estimate: est }, moved);
+      }
     } catch (e) {
       self.postMessage({ id, error: String(e.message || e) });
     }
