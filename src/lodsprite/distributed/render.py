@@ -296,7 +296,7 @@ class SceneKeyframeService:
         from lodsprite.terrain.store import is_store
 
         args = check_load_args(args)
-        scene = open_object_scene(args.terrain, root)
+        scene = open_object_scene(args.terrain, root, keyframes=True)
         hf = scene.hf
         adaptive = hf is not None and (is_store(scene.terrain_spec) or hf.quads > ADAPTIVE_ABOVE)
         keys = SceneKeys(str(scene.source or args.terrain), "adaptive" if adaptive else "full",

@@ -246,8 +246,9 @@ def test_a_page_loads_a_scene_file_with_its_walkers_and_gets_its_static_layers(s
 
 
 def test_a_page_loads_a_crowd_as_its_world_on_the_ground(server):
-    """``crowd:N`` over the wire: the crowd's flat ground in the scene message (no
-    walkers: a crowd stands), its members in the keyframes with their full z-buffer."""
+    """``crowd:N`` over the wire: the crowd's flat ground in the scene message, every
+    member among its walkers at speed 0 (the page draws them each frame), the keyframes
+    the ground and the trees with their full z-buffer."""
     async def go():
         async with aiohttp.ClientSession() as http:
             page = await connect(http, server)
@@ -256,10 +257,11 @@ def test_a_page_loads_a_crowd_as_its_world_on_the_ground(server):
             return scene, await keyframe(page), await page.stats()
 
     scene, kf, stats = run(go())
-    assert scene.walkers is None and scene.heights.shape == (9, 9)
-    assert not scene.heights.any()  # flat
+    w = scene.walkers
+    assert w is not None and len(w["xy0"]) == 50 and (w["speed"] == 0).all()
+    assert [t["name"] for t in w["types"]] == ["ogre"]  # the trees stand in the keyframes
+    assert scene.heights.shape == (9, 9) and not scene.heights.any()  # flat
     assert kf.zbuffer == "full" and kf.color.std() > 1.0
-    assert 0.0 < kf.depth.min() < kf.depth.max()  # members nearer than the ground's far side
     assert stats["session"]["scene"] == "crowd:50:5"
 
 

@@ -142,9 +142,10 @@ def scene_parts(scene: Scene, args: LoadArgs, codec: str = "raw") -> list:
     from lodsprite.scene.world import World
 
     if isinstance(scene.objects, World):
+        from lodsprite.distributed.served import page_drawn
         from lodsprite.distributed.web.walkers import walker_header
 
-        walkers = walker_header(scene.objects)
+        walkers = walker_header(scene.objects, page_drawn(args.terrain, scene.objects))
         if walkers is not None:
             header["walkers"] = walkers
     if args.border:

@@ -48,12 +48,13 @@ def _f64(a: np.ndarray) -> bytes:
     return np.ascontiguousarray(a, "<f8").tobytes()
 
 
-def walker_arrays(world: World) -> dict[str, np.ndarray]:
-    """``world``'s moving instances as the page gets them: ``xy0 (K, 2)`` metres,
+def walker_arrays(world: World, drawn: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """``world``'s moving instances (``drawn``: those of that ``(count,) bool`` mask, the
+    standing ones at speed 0) as the page gets them: ``xy0 (K, 2)`` metres,
     ``heading (K,)`` radians, ``speed (K,)`` m/s, ``box (K, 4)`` their walking rectangles
     ``(x0, y0, x1, y1)`` (float64 each) and ``type (K,) intp`` (an index into
     ``world.types``), in :attr:`~lodsprite.scene.world.World.instances` order."""
-    moving = world.moving()
+    moving = world.moving() if drawn is None else drawn
     lo, hi = world.walk_bounds()
     box = np.concatenate([np.broadcast_to(lo, (len(moving), 2)),
                           np.broadcast_to(hi, (len(moving), 2))], axis=1)
@@ -64,16 +65,17 @@ def walker_arrays(world: World) -> dict[str, np.ndarray]:
             "box": box[moving], "type": world.type_indices()[moving]}
 
 
-def walker_header(world: World) -> dict[str, Any] | None:
+def walker_header(world: World, drawn: np.ndarray | None = None) -> dict[str, Any] | None:
     """The ``walkers`` entry of a scene message for ``world``'s moving instances (None:
-    none walks)."""
+    none walks); ``drawn``: the instances of that ``(count,) bool`` mask instead, the
+    standing ones at speed 0 (:func:`lodsprite.distributed.served.page_drawn`)."""
     from lodsprite.layered.objects import world_crowd
 
-    moving = world.moving()
+    moving = world.moving() if drawn is None else drawn
     if not moving.any():
         return None
     crowd = world_crowd(world)
-    a = walker_arrays(world)
+    a = walker_arrays(world, moving)
     type_of = a["type"]
     used = sorted(set(type_of.tolist()))
     remap = np.full(len(world.types), -1, np.int64)
