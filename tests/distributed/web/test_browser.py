@@ -745,6 +745,35 @@ def test_the_page_shows_a_scene_files_light_field_from_its_keyframes(server, bro
     assert without > 2 * same, (same, without)
 
 
+def test_the_pages_walkers_keep_to_the_frames_triangle_budget(server, browser):
+    """``walkers.js``' frame budget (Gumbau et al.'s, as their LOD manager's): under it
+    the distance rule's levels as they are; past it one scale on every walker's desired
+    LOD, the largest that fits (a little more does not), the nearer never coarser."""
+    browser.get(f"http://127.0.0.1:{server['port']}/static/hud.js")  # the page's origin
+    got = browser.execute_async_script("""
+        const done = arguments[arguments.length - 1];
+        import('/static/walkers.js').then((m) => {
+          const tris = [1000, 500, 250, 100];  // a type's levels, finest first
+          const d = {near: 2, far: 300, types: [{levels: [1, 0.5, 0.25, 0.1].map((f, i) =>
+            ({fraction: f, indices: {length: 3 * tris[i]}}))}]};
+          const n = 400, types = new Int32Array(n), dists = new Float64Array(n);
+          for (let i = 0; i < n; i++) dists[i] = 2 + 298 * i / n;
+          const sum = (scale) => { let t = 0; const lv = [];
+            for (let i = 0; i < n; i++) { const l = m.levelFor(d.types[0].levels, 2, 300,
+              dists[i], scale); lv.push(l); t += tris[l]; }
+            return [t, lv]; };
+          const free = m.budgetScale(d, types, dists, n, 1e9);
+          const budget = 60000, s = m.budgetScale(d, types, dists, n, budget);
+          const [t, lv] = sum(s), [more] = sum(Math.min(1, s * 1.02));
+          done({free, s, t, more, budget, monotonic: lv.every((l, i) => i === 0 || l >= lv[i - 1]),
+                rule: sum(1)[0]});
+        }, (e) => done(String(e)));""")
+    assert isinstance(got, dict), got
+    assert got["free"] == 1 and got["rule"] > got["budget"]  # the rule alone is past it
+    assert 0 < got["s"] < 1 and got["t"] <= got["budget"] < got["more"]
+    assert got["monotonic"]  # walkers by distance: levels never finer farther out
+
+
 def test_the_keyframe_scale_follows_the_texture_limit_and_the_downlink(server, browser):
     """``chooseKeyScale``: the largest scale whose keyframes fit the browser's texture
     side and the image cap, lowered until its raw keyframes at 4 a second fit the

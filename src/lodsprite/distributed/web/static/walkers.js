@@ -3,7 +3,8 @@
 // at the walking rectangle's edges by the triangle wave) on the ground (HeightField.
 // height_at: bilinear, clamped), each walker's LOD by its distance (Gumbau et al. §4.2:
 // 1 - (d - near) / (far - near), clamped; the coarsest shipped level whose share of the
-// triangles is at or above it), each (type, level) one instanced draw, shaded as lodsprite.gl.crowd, depth
+// triangles is at or above it; under a frame budget of triangles, TRIANGLE_BUDGET), each
+// (type, level) one instanced draw, shaded as lodsprite.gl.crowd, depth
 // tested against what the spriteframe drew (the keyframe's own surface).  Walkers outside
 // the view frustum (by a bounding sphere about the type's base) are not drawn.  walk() and
 // groundAt() are cross-checked with the Python ones (relative 1e-9).
@@ -153,12 +154,40 @@ export function groundAt(d, x, y) {
 }
 
 // The shipped level (index) a walker at distance `dist` draws: the coarsest whose fraction
-// is at or above the desired LOD (levels finest first).
-export function levelFor(levels, near, far, dist) {
-  const want = Math.min(Math.max(1 - (dist - near) / (far - near), 0), 1);
+// is at or above the desired LOD (levels finest first), that LOD scaled by `scale` (the
+// frame's budget, below; 1: the rule as it is).
+export function levelFor(levels, near, far, dist, scale = 1) {
+  const want = scale * Math.min(Math.max(1 - (dist - near) / (far - near), 0), 1);
   let pick = 0;
   for (let i = 0; i < levels.length; i++) if (levels[i].fraction >= want) pick = i;
   return pick;
+}
+
+// Most triangles the walkers of one frame draw (Gumbau et al.'s frame budget, as their
+// LOD manager holds one): past it, every walker's desired LOD is scaled by the one factor
+// that brings the frame under it (bisection), so the nearest stay the finest.  A crowd
+// seen from among it asks millions at the rule's own levels, which a software rasteriser
+// draws at a few frames a second.
+export const TRIANGLE_BUDGET = 300000;
+
+// The LOD scale in (0, 1] of the frame whose visible walkers are `n` entries of `types`
+// and `dists` (their type indices and distances): 1 when the rule's levels fit `budget`.
+export function budgetScale(d, types, dists, n, budget = TRIANGLE_BUDGET) {
+  const cost = (scale) => {
+    let tris = 0;
+    for (let i = 0; i < n; i++) {
+      const tp = d.types[types[i]];
+      tris += tp.levels[levelFor(tp.levels, d.near, d.far, dists[i], scale)].indices.length / 3;
+    }
+    return tris;
+  };
+  if (cost(1) <= budget) return 1;
+  let lo = 0, hi = 1;  // cost(lo) fits (the coarsest levels), cost(hi) does not
+  for (let it = 0; it < 12; it++) {
+    const mid = 0.5 * (lo + hi);
+    if (cost(mid) <= budget) lo = mid; else hi = mid;
+  }
+  return lo;
 }
 
 export class WalkerDrawer {
@@ -217,6 +246,9 @@ export class WalkerDrawer {
     for (const perType of this.buckets) for (const b of perType) b.n = 0;
     this.points.n = 0;
     const planes = frustumPlanes(viewProj);
+    const seen = this.seen || (this.seen = { k: new Int32Array(d.count), dist: new Float64Array(d.count),
+      type: new Int32Array(d.count), z: new Float64Array(d.count) });
+    let n = 0;
     for (let k = 0; k < d.count; k++) {
       const x = xy[2 * k], y = xy[2 * k + 1], z = groundAt(d, x, y);
       const type = d.type[k], r = d.types[type].radius;
@@ -237,9 +269,14 @@ export class WalkerDrawer {
         P.n += 1;
         continue;
       }
-      const b = this.buckets[type][levelFor(tp.levels, d.near, d.far, dist)];
+      seen.k[n] = k; seen.dist[n] = dist; seen.type[n] = type; seen.z[n] = z; n += 1;
+    }
+    this.scale = budgetScale(d, seen.type, seen.dist, n);
+    for (let i = 0; i < n; i++) {
+      const k = seen.k[i], tp = d.types[seen.type[i]];
+      const b = this.buckets[seen.type[i]][levelFor(tp.levels, d.near, d.far, seen.dist[i], this.scale)];
       const o = 4 * b.n;
-      b.data[o] = x; b.data[o + 1] = y; b.data[o + 2] = z; b.data[o + 3] = yaw[k];
+      b.data[o] = xy[2 * k]; b.data[o + 1] = xy[2 * k + 1]; b.data[o + 2] = seen.z[i]; b.data[o + 3] = yaw[k];
       b.n += 1;
     }
     gl.enable(gl.DEPTH_TEST);
