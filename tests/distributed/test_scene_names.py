@@ -135,3 +135,19 @@ def test_session_caps_of_a_scene_file(data: Path) -> None:
 def test_no_data_folder_serves_built_ins_only(data: Path) -> None:
     refused(Datasets(None), "ok.toml", "serves no files")
     assert Datasets(None).scene("jacksboro").kind is None
+
+
+@pytest.mark.parametrize("body, fragment", [
+    ('mode = "nonesuch"\n', "terrain.mode: unknown technique"),
+    ('mode = "adaptive"\n[terrain.options]\nbogus = 1\n', "terrain.options.bogus"),
+])
+def test_a_scene_files_technique_is_checked_before_anything_opens(
+        data: Path, body: str, fragment: str, monkeypatch) -> None:
+    """A scene file's ``[terrain] mode`` and options are the registry's to check: a page
+    naming one with a bad one is refused at ``load`` (one line naming the field, the file
+    as the page named it), nothing of it loaded."""
+    opened = []
+    monkeypatch.setattr(kinds, "load_scene", lambda *a, **k: opened.append(a))
+    (data / "tech.toml").write_text(TERRAIN.rstrip("\n") + "\n" + body)
+    refused(Datasets(data), "tech.toml", fragment)
+    assert opened == []

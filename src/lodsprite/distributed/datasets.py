@@ -151,9 +151,11 @@ class Datasets:
         caps (objects, light fields, its terrain's size); its terrain (a built-in, or a
         file or store under the data folder, checked by :meth:`terrain`'s rule)."""
         from lodsprite.scene.file import read_scene_file
+        from lodsprite.techniques.scenes import check_options
 
         try:
             sf = read_scene_file(path, root=self.data_dir)
+            check_options(str(path), sf.terrain.mode, sf.terrain.options)  # as opening will
         except LodspriteError as exc:  # named as the page named it: no server path shown
             raise InputError(self.local_message(str(exc), path, name)) from None
         objects = 0

@@ -19,7 +19,7 @@ from __future__ import annotations
 from lodsprite.camera import Viewpoint
 from lodsprite.distributed.pacing import KeyframePacer
 from lodsprite.distributed.protocol import Keyframe, LoadArgs, check_load_args
-from lodsprite.distributed.served import is_object_scene
+from lodsprite.distributed.served import heights_shaded, is_object_scene
 from lodsprite.gl.context import GLContext
 from lodsprite.gl.target import RenderTarget
 from lodsprite.gl.terrain_gl import TerrainGL
@@ -239,12 +239,11 @@ class AdaptiveKeyframeService:
         from lodsprite.techniques.adaptive_worker import StoreKeyframes
         from lodsprite.techniques.builtin import GPU_MB, HOST_MB
         from lodsprite.techniques.defaults import STORE_DEFAULTS
-        from lodsprite.terrain.store import is_store
 
         args = check_load_args(args)
         # as the window's shading "auto": a store's terrain texture is its level 0's own
         # heights shaded; an in-memory grid keeps its texture
-        heights = args.texture == "terrain" and is_store(args.terrain)
+        heights = heights_shaded(args.terrain, args.texture, args.terrain)
         scene = load_scene(args.terrain, args.texture, args.grid, args.exaggeration,
                            light=True, textured=not heights)
         keys = StoreKeys("", args.terrain,
@@ -298,7 +297,8 @@ class SceneKeyframeService:
         args = check_load_args(args)
         scene = open_object_scene(args.terrain, root, keyframes=True)
         hf = scene.hf
-        adaptive = hf is not None and (is_store(scene.terrain_spec) or hf.quads > ADAPTIVE_ABOVE)
+        adaptive = hf is not None and (bool(scene.terrain_spec) and is_store(scene.terrain_spec)
+                                       or hf.quads > ADAPTIVE_ABOVE)
         keys = SceneKeys(str(scene.source or args.terrain), "adaptive" if adaptive else "full",
                          {"sse": STORE_DEFAULTS["key_sse"] if key_sse is None else key_sse}
                          if adaptive else {}, lightfields=LIGHTFIELD_NODES)

@@ -3,8 +3,8 @@
 A page draws a terrain, or a scene of objects standing on a ground: a scene file
 (``scene-file``), or a crowd (``crowd[:OBJECTS[:TREES]]``, served as a world on the
 crowd's flat ground, :func:`lodsprite.manager.world.world_scene`).  The renderers draw
-such a scene's static layers into keyframes; the page draws its walkers (a crowd's
-members and trees, every one, standing: :func:`page_drawn`).  Other kinds (a
+such a scene's static layers into keyframes; the page draws its walkers and a crowd's
+members, standing (:func:`page_drawn`; a crowd's trees stay in the keyframes).  Other kinds (a
 light-field folder, a plug-in's) are refused by the page and shown by the stream widget.
 """
 
@@ -20,8 +20,8 @@ from lodsprite.scene.world import World
 if TYPE_CHECKING:
     from lodsprite.scene import Scene
 
-__all__ = ["OBJECT_KINDS", "is_object_scene", "keyframe_world", "open_object_scene",
-           "page_drawn"]
+__all__ = ["OBJECT_KINDS", "heights_shaded", "is_object_scene", "keyframe_world",
+           "open_object_scene", "page_drawn"]
 
 OBJECT_KINDS = ("scene-file", "crowd")
 """The kinds of scene of objects a page draws."""
@@ -33,6 +33,18 @@ def is_object_scene(spec: str) -> bool:
     from lodsprite.scene.kinds import is_scene_file
 
     return is_scene_file(spec) or CROWD.claims(spec)
+
+
+def heights_shaded(terrain: str, texture: str, terrain_spec: str) -> bool:
+    """Whether the keyframes of a load naming ``terrain`` with ``texture`` are the heights
+    shading of a terrain store (``terrain_spec``: the scene's terrain, a path): a store's
+    are, unless a terrain load asked for another texture; a scene file's or a crowd's
+    terrain is shaded as the window's ``auto`` shades it, a store from its heights."""
+    from lodsprite.terrain.store_format import is_store
+
+    if not terrain_spec or not is_store(terrain_spec):
+        return False
+    return is_object_scene(terrain) or texture == "terrain"
 
 
 def page_drawn(spec: str, world: World) -> np.ndarray:

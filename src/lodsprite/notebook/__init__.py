@@ -1,7 +1,7 @@
 """lodsprite in a notebook: :func:`widget` (anywidget; the ``notebook`` extra installs
-what it needs).  :class:`~lodsprite.notebook.sprite.SpriteWidget` flies a terrain or a
-scene file with spriteframes drawn in the browser and keyframes from the kernel's renderer
-processes;
+what it needs).  :class:`~lodsprite.notebook.sprite.SpriteWidget` flies a terrain, a
+scene file or a crowd with spriteframes drawn in the browser and keyframes from the
+kernel's renderer processes;
 :class:`~lodsprite.notebook.stream.StreamWidget` streams every frame rendered in the
 kernel (jupyter_rfb), for scenes the browser does not draw and for comparison."""
 
@@ -17,11 +17,13 @@ def widget(source: str | Path = "jacksboro", *, stream: bool = False, **kwargs: 
     """A widget for ``source``, displayed as a cell's value.
 
     A terrain (a DEM file, a terrain store folder, a built-in such as ``jacksboro`` or
-    ``fractal:N``) or a scene file gives a :class:`~lodsprite.notebook.sprite.SpriteWidget`:
-    spriteframes drawn in the browser, keyframes from the kernel's renderer processes (a
-    scene file's standing layers; its walkers drawn in the browser each frame; see it for
-    the keyword arguments).  A scene the browser does not draw (a light field, a crowd, a
-    plug-in's kind), or any scene with ``stream=True``, gives a
+    ``fractal:N``), a scene file or a crowd (``crowd:N``) gives a
+    :class:`~lodsprite.notebook.sprite.SpriteWidget`: spriteframes drawn in the browser,
+    keyframes from the kernel's renderer processes (a scene file's standing layers and
+    light fields, a crowd's ground and trees; its walkers and a crowd's members drawn in
+    the browser each frame; see it for the keyword arguments).  A scene the browser does
+    not draw (a light field alone, a plug-in's kind), or any scene with ``stream=True``,
+    gives a
     :class:`~lodsprite.notebook.stream.StreamWidget`: every frame rendered in the kernel
     (the fallback, and the comparison).
     Raises :class:`~lodsprite.errors.InputError` (one line) for a bad argument, and

@@ -92,7 +92,8 @@ def resolve_source(terrain: str | Path, texture: str | Path = "terrain",
 
 def check_path(spec: str, frames: int | None) -> PathArgs:
     """``spec`` and ``frames`` as the ``path`` op takes them (a built-in path: chen1999,
-    swan2002, flyover[:...], patrol[:...], bank[:...]); raises :class:`InputError`."""
+    swan2002, flyover[:...], patrol[:...], bank[:...], a crowd's walk); raises
+    :class:`InputError`."""
     try:
         return msgspec.convert({"spec": spec, "frames": frames}, PathArgs)
     except msgspec.ValidationError as exc:

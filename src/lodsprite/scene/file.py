@@ -17,8 +17,10 @@ A scene file puts a terrain, mesh objects and light fields in one world
     path = "flyover"
 
 :func:`read_scene_file` parses the file with :mod:`tomllib`, converts it into the
-msgspec structs below (unknown fields refused), checks every value and cap, and resolves
-every path (:func:`resolve_path`: relative to the file's folder, never out of it).
+msgspec structs below (unknown fields refused), checks every value and cap (but what a
+technique makes of ``[terrain] mode`` and its options: the technique registry's check,
+:func:`lodsprite.techniques.scenes.checked`, which :func:`lodsprite.open_scene` runs),
+and resolves every path (:func:`resolve_path`: relative to the file's folder, never out of it).
 Anything wrong is one :class:`~lodsprite.errors.SceneFileError` line naming the file and
 the field, e.g. ``scene.toml: objects[1].count: must be <= 200000``; a syntax error names
 the line and column.  What needs the terrain (points and positions inside its extent)
@@ -67,7 +69,8 @@ class TerrainSection(msgspec.Struct, forbid_unknown_fields=True):
     two), ``exaggeration`` and ``texture`` as the same options of ``lodsprite render``;
     ``mode``: the terrain technique that draws it (any of the registry's, ``lodsprite
     info``) and ``options``: that technique's options (``[terrain.options]``, name ->
-    value, checked by the technique's declarations)."""
+    value, as written: checked by the technique's declarations when the scene opens,
+    :func:`lodsprite.techniques.scenes.checked`)."""
 
     source: str
     grid: int | None = None

@@ -208,7 +208,7 @@ class DepthEstimate:
             raise ValueError(f"colour {rgb.shape} does not match the depth {self.size}")
         step = max(1, int(round(self.key_scale)))  # at the display's resolution
         c = rgb[::-1][::step, ::step].astype(np.float64)
-        # float64, one operation at a time: the page's port (predictor.js) gets the same bits
+        # float64, one operation at a time: the page's port (depth_estimate.js) gets the same bits
         lum = 0.2126 * c[..., 0] + 0.7152 * c[..., 1] + 0.0722 * c[..., 2]
         g2 = np.zeros_like(lum)
         g2[:, :-1] += np.diff(lum, axis=1) ** 2

@@ -18,18 +18,26 @@ from lodsprite.techniques.registry import all_options, get, names
 if TYPE_CHECKING:
     from lodsprite.scene import Scene
 
-__all__ = ["checked", "open_scene"]
+__all__ = ["check_options", "checked", "open_scene"]
 
 
 def checked(scene: Scene) -> Scene:
     """``scene`` with its scene file's ``[terrain.options]`` parsed by the declarations
-    of its ``[terrain] mode`` (any terrain technique's without one); raises
-    :class:`~lodsprite.errors.SceneFileError` naming the file and the field.  A scene
-    that is not a scene file's is returned as it is."""
+    of its ``[terrain] mode`` (:func:`check_options`).  A scene that is not a scene file's
+    is returned as it is."""
     if scene.source is None or scene.view is None:  # not a scene file's
         return scene
     label = scene.label or os.fspath(scene.source)
-    mode = scene.terrain_mode
+    return replace(scene, terrain_options=check_options(label, scene.terrain_mode,
+                                                        scene.terrain_options))
+
+
+def check_options(label: str, mode: str | None, options: dict[str, Any]) -> dict[str, Any]:
+    """A scene file's ``[terrain] mode`` and ``[terrain.options]`` (as read, before
+    anything of the scene loads) checked: the mode a terrain technique of the registry,
+    each option one it declares (any terrain technique's without a mode), each value
+    parsed by that declaration; the parsed options.  Raises
+    :class:`~lodsprite.errors.SceneFileError` naming the file (``label``) and the field."""
 
     def fail(field: str, what: str):
         raise SceneFileError(f"{label}: {field}: {what}")
@@ -40,7 +48,7 @@ def checked(scene: Scene) -> Scene:
     declared = ({o.name: o for o in get(mode).options} if mode
                 else all_options(("terrain",)))
     parsed: dict[str, Any] = {}
-    for name, value in scene.terrain_options.items():
+    for name, value in options.items():
         if name not in declared or not declared[name].on_command_line:
             fail(f"terrain.options.{name}", f"{mode or 'no terrain technique'} takes no "
                  "such option")
@@ -48,7 +56,7 @@ def checked(scene: Scene) -> Scene:
             parsed[name] = declared[name].parse(value)
         except InputError as exc:
             fail(f"terrain.options.{name}", str(exc))
-    return replace(scene, terrain_options=parsed)
+    return parsed
 
 
 def open_scene(spec: str, *args: Any, **options: Any) -> Scene:

@@ -90,16 +90,17 @@ def height_shading(heights: np.ndarray, dx: float, dy: float, lo: float, hi: flo
     and highest, lit by one sun with 30 % ambient; the normal from central differences,
     one-sided at the edges, as its ``height_normal`` at a sample).  What a web page shows
     where no keyframe saw the surface, in the keyframes' colours."""
-    h = np.asarray(heights, np.float64)
+    h = np.asarray(heights, np.float32)  # float32 as the shader: 4 bytes a sample an array
     if h.ndim != 2 or min(h.shape) < 2:
         raise TerrainError(f"height shading needs a 2-D grid of at least 2x2, got {h.shape}")
     g_row, g_col = np.gradient(h)                      # metres a row (south), a column (east)
-    n = np.stack([-g_col / dx, g_row / dy, np.ones_like(h)], axis=-1)
+    n = np.stack([-g_col / np.float32(dx), g_row / np.float32(dy), np.ones_like(h)], axis=-1)
     n /= np.linalg.norm(n, axis=-1, keepdims=True)
-    t = np.clip((h - lo) / max(hi - lo, 1e-3), 0.0, 1.0)[..., None]
-    low, mid, high = (np.asarray(c) for c in (SHADE_LOW, SHADE_MID, SHADE_HIGH))
-    c = np.where(t < 0.6, low + (mid - low) * (t / 0.6), mid + (high - mid) * ((t - 0.6) / 0.4))
-    lit = 0.3 + 0.7 * np.maximum(n @ SHADE_LIGHT, 0.0)
+    t = np.clip((h - np.float32(lo)) / np.float32(max(hi - lo, 1e-3)), 0.0, 1.0)[..., None]
+    low, mid, high = (np.asarray(c, np.float32) for c in (SHADE_LOW, SHADE_MID, SHADE_HIGH))
+    c = np.where(t < 0.6, low + (mid - low) * (t / np.float32(0.6)),
+                 mid + (high - mid) * ((t - np.float32(0.6)) / np.float32(0.4)))
+    lit = 0.3 + 0.7 * np.maximum(n @ SHADE_LIGHT.astype(np.float32), 0.0)
     return np.clip(np.round(c * lit[..., None] * 255.0), 0, 255).astype(np.uint8)
 
 

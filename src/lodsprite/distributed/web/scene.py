@@ -40,7 +40,6 @@ from lodsprite.distributed.protocol import (
     decode_message,
     encode,
 )
-from lodsprite.terrain.store_format import is_store
 
 if TYPE_CHECKING:
     from lodsprite.scene import Scene
@@ -123,7 +122,10 @@ def scene_parts(scene: Scene, args: LoadArgs, codec: str = "raw") -> list:
         raise InputError(f"scene {scene.name!r}: a web page draws a textured terrain")
     step = hf.quads // args.lod
     heights = np.ascontiguousarray(hf.heights[::step, ::step][::-1], dtype=np.float32)
-    texture = shaded_texture(scene) if is_store(scene.terrain_spec) else scene.texture
+    from lodsprite.distributed.served import heights_shaded
+
+    texture = (shaded_texture(scene) if heights_shaded(args.terrain, args.texture,
+                                                       scene.terrain_spec) else scene.texture)
     k = -(-max(texture.shape[:2]) // MAX_IMAGE_SIDE)  # keep within the image side cap
     texture = np.ascontiguousarray(texture[::k, ::k][::-1], dtype=np.uint8)
     lo, hi = hf.bounds()
@@ -166,7 +168,8 @@ def shaded_texture(scene: Scene) -> np.ndarray:
     hf = scene.hf
     mm = TerrainStore(scene.terrain_spec, float(hf.meta.get("exaggeration", 1.0))).minmax(0)
     lo, hi = float(np.nanmin(mm[..., 0])), float(np.nanmax(mm[..., 1]))
-    return height_shading(hf.heights, hf.dx, hf.dy, lo, hi)
+    k = -(-max(hf.heights.shape) // MAX_IMAGE_SIDE)  # thinned first: the image side cap
+    return height_shading(hf.heights[::k, ::k], hf.dx * k, hf.dy * k, lo, hi)
 
 
 class SceneData:

@@ -1,4 +1,6 @@
-"""The moving objects of a scene file, as a web page draws them itself each frame.
+"""The moving objects of a scene file (and a crowd's members, standing: see
+:func:`lodsprite.distributed.served.page_drawn`), as a web page draws them itself each
+frame.
 
 A scene's static layers (terrain, standing objects) reach the page as keyframes; its
 walkers move every frame, so a keyframe of them would be stale by its latency.  The page

@@ -14,8 +14,8 @@
 // back transferred.
 //
 // In: {id, header, color, depth, estimate} (the two image buffers as the wire gave them).
-// Out: {id, bitmap, depth} (transferred), then with `estimate` {id, estimate}; or
-// {id, error}.
+// Out: {id, bitmap, depth} (transferred), then with `estimate` {id, estimate} (or
+// {id, estimateError}); or {id, error}.
 
 import { mul } from './camera.js';
 import { buildEstimate } from './depth_estimate.js';
@@ -44,10 +44,14 @@ if (typeof WorkerGlobalScope !== 'undefined' && self instanceof WorkerGlobalScop
       const bitmap = await createImageBitmap(rgbaImage(rgb, w, h), BITMAP_OPTIONS);
       self.postMessage({ id, bitmap, depth: z }, [bitmap, z.buffer]);
       if (keep) {
-        const est = buildEstimate(keep, w, h, header.viewpoint, header.fov, header.aspect, header.near,
-          header.far, mul(header.proj, header.view), estimate.stride, estimate.keyScale, rgb);
-        const moved = Object.values(est).filter((v) => ArrayBuffer.isView(v)).map((v) => v.buffer);
-        self.postMessage({ id, estimate: est }, moved);
+        try {
+          const est = buildEstimate(keep, w, h, header.viewpoint, header.fov, header.aspect, header.near,
+            header.far, mul(header.proj, header.view), estimate.stride, estimate.keyScale, rgb);
+          const moved = Object.values(est).filter((v) => ArrayBuffer.isView(v)).map((v) => v.buffer);
+          self.postMessage({ id, estimate: est }, moved);
+        } catch (e) {  // the keyframe itself is fine: the page keeps the coarse estimate
+          self.postMessage({ id, estimateError: String(e.message || e) });
+        }
       }
     } catch (e) {
       self.postMessage({ id, error: String(e.message || e) });

@@ -3,7 +3,7 @@
 // Swan & Kaufman 1999's Eq. 1-2 with the depth mesh the page draws (gl.js, a vertex every
 // `stride` texels) as the proxy, in closed form, plus the keyframe image's resampling and
 // the view's uncovered area.  What the keyframe saw (terrain, a scene's standing objects)
-// is measured: a crowd's members parallax as the terrain does.
+// is measured: a scene's standing objects parallax as the terrain does.
 //
 // Built once a keyframe from its depth and colour (buildEstimate, in the decode worker:
 // off the page's thread), sent to the page as plain typed arrays (its `state`), and

@@ -170,8 +170,9 @@ export function levelFor(levels, near, far, dist, scale = 1) {
 // draws at a few frames a second.
 export const TRIANGLE_BUDGET = 300000;
 
-// The LOD scale in (0, 1] of the frame whose visible walkers are `n` entries of `types`
-// and `dists` (their type indices and distances): 1 when the rule's levels fit `budget`.
+// The LOD scale in [0, 1] of the frame whose visible walkers are `n` entries of `types`
+// and `dists` (their type indices and distances): 1 when the rule's levels fit `budget`;
+// 0 (every walker at its coarsest level, the frame over the budget) when even those do not.
 export function budgetScale(d, types, dists, n, budget = TRIANGLE_BUDGET) {
   const cost = (scale) => {
     let tris = 0;
@@ -182,7 +183,7 @@ export function budgetScale(d, types, dists, n, budget = TRIANGLE_BUDGET) {
     return tris;
   };
   if (cost(1) <= budget) return 1;
-  let lo = 0, hi = 1;  // cost(lo) fits (the coarsest levels), cost(hi) does not
+  let lo = 0, hi = 1;  // cost(hi) does not fit; cost(lo) fits unless lo is still 0
   for (let it = 0; it < 12; it++) {
     const mid = 0.5 * (lo + hi);
     if (cost(mid) <= budget) lo = mid; else hi = mid;
