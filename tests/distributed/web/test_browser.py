@@ -83,16 +83,17 @@ def data_dir(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def stack(data_dir):
-    """The server (a subprocess) and the browser, the browser started while the server
-    boots; ({port, proc}, driver)."""
+    """The server (a subprocess, its stderr kept in the data folder's parent) and the
+    browser, the browser started while the server boots; ({port, proc, stderr}, driver)."""
     from lodsprite.distributed.run import free_ports
 
+    stderr = data_dir.parent / "server.stderr"
     proc = subprocess.Popen(
         [sys.executable, "-c", "from lodsprite.cli import main; main()", "serve",
          "--web", "127.0.0.1:0", "--bind", f"127.0.0.1:{free_ports()}", "--token", TOKEN,
          "--rate", "100000", "--renderers", "1", "--codec", "zlib",  # the page inflates
          "--data", str(data_dir)],
-        stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+        stdout=subprocess.PIPE, stderr=stderr.open("w"), text=True)
     lines: queue.Queue = queue.Queue()
     threading.Thread(target=lambda: [lines.put(x) for x in proc.stdout], daemon=True).start()
     driver = profile = None
@@ -100,7 +101,8 @@ def stack(data_dir):
         driver, profile = start_browser(DEADLINE_S)
         line = lines.get(timeout=DEADLINE_S)
         assert line.startswith("web page: http://127.0.0.1:"), line
-        yield {"port": int(line.split(":")[3].split("/")[0]), "proc": proc}, driver
+        yield {"port": int(line.split(":")[3].split("/")[0]), "proc": proc,
+               "stderr": stderr}, driver
     finally:
         if driver is not None:
             quit_browser(driver, profile)
@@ -108,9 +110,15 @@ def stack(data_dir):
         proc.wait(timeout=15)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture
 def server(stack):
-    return stack[0]
+    """The module's server, alive: a test after it died fails saying so, with what it
+    wrote last (its stderr), not as a refused connection."""
+    s = stack[0]
+    if s["proc"].poll() is not None:
+        tail = s["stderr"].read_text(errors="replace")[-2000:]
+        pytest.fail(f"the module's server exited ({s['proc'].returncode}): {tail}")
+    return s
 
 
 @pytest.fixture(scope="module")
