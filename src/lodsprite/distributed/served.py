@@ -4,8 +4,9 @@ A page draws a terrain, or a scene of objects standing on a ground: a scene file
 (``scene-file``), or a crowd (``crowd[:OBJECTS[:TREES]]``, served as a world on the
 crowd's flat ground, :func:`lodsprite.manager.world.world_scene`).  The renderers draw
 such a scene's static layers into keyframes; the page draws its walkers and a crowd's
-members, standing (:func:`page_drawn`; a crowd's trees stay in the keyframes).  Other kinds (a
-light-field folder, a plug-in's) are refused by the page and shown by the stream widget.
+members, standing (:func:`page_drawn`; a crowd's trees stay in the keyframes).  Other
+kinds (a light-field folder alone, a plug-in's) are refused by the page and shown by the
+stream widget.
 """
 
 from __future__ import annotations

@@ -77,7 +77,10 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
   const keyframeHeaders = new Map();  // decode id -> header
   const decoder = new Worker(decoderUrl, { type: 'module' });
   decoder.onmessage = ({ data }) => {
-    if (data.estimateError) { state = `keyframe estimate: ${data.estimateError}`; return; }
+    if (data.estimateError) {  // the keyframe stands; its error stays the coarse level's
+      console.warn(`keyframe estimate: ${data.estimateError}`);
+      return;
+    }
     if (data.estimate) {  // a keyframe's estimate, after it: its own, pending or shown, else dropped
       if (pendingKey && pendingKey.id === data.id) pendingKey.estimate = data.estimate;
       else if (shownKeyId === data.id) metric = depthMetric(new DepthEstimate(data.estimate));
