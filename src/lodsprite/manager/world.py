@@ -64,19 +64,11 @@ def crowd_ground(crowd: Crowd) -> HeightField:
 
 def crowd_world(crowd: Crowd, ground: HeightField) -> World:
     """``crowd``'s members and trees as standing instances of its types on ``ground``."""
-    from lodsprite.scene.objects import ObjectType
+    from lodsprite.scene.objects import model_type
     from lodsprite.scene.world import Instances, World
 
-    types = []
-    for model in crowd.models:
-        faces = np.asarray(model.extract(1.0), np.int64).reshape(-1, 3)
-        used, inverse = np.unique(faces, return_inverse=True)
-        v = np.asarray(model.vertices, np.float64)
-        floor = model.triangles(0.0) / max(1, model.triangles(1.0))
-        types.append(ObjectType(model.name, v[used].astype(np.float32),
-                                inverse.reshape(-1, 3).astype(np.int32),
-                                np.asarray(model.colors, np.float32)[used],
-                                float(v[used, 2].max()), "linear", None, model, floor))
+    types = [model_type(m.name, m, "linear", m.triangles(0.0) / max(1, m.triangles(1.0)))
+             for m in crowd.models]
     instances = [Instances(t, crowd.positions[crowd.types == t, :2].astype(np.float64),
                            crowd.yaw[crowd.types == t].astype(np.float64))
                  for t in range(len(types)) if (crowd.types == t).any()]

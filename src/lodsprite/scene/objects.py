@@ -78,17 +78,26 @@ def builtin_type(name: str, height_m: float | None, lod: str, lod_floor: float =
                              f"{', '.join(builtin_meshes()) or 'none installed'})")
     model = found[0].load()(min_fraction=lod_floor)
     faces = np.asarray(model.extract(1.0), dtype=np.int64).reshape(-1, 3)
-    used, inverse = np.unique(faces, return_inverse=True)
     v = np.asarray(model.vertices, dtype=np.float64)
+    used = np.unique(faces)
     lo, hi = v[used].min(0), v[used].max(0)
     native = float(hi[2] - lo[2])
     scale = 1.0 if height_m is None else height_m / native
-    v = (v - [(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, lo[2]]) * scale
-    model.vertices = v                                    # the model in the type's frame
-    return ObjectType(name, v[used].astype(np.float32),
-                      inverse.reshape(-1, 3).astype(np.int32),
-                      np.asarray(model.colors, np.float32)[used], native * scale, lod,
-                      None, model, lod_floor)
+    model.vertices = (v - [(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, lo[2]]) * scale
+    return model_type(name, model, lod, lod_floor)  # the model in the type's frame
+
+
+def model_type(name: str, model: Any, lod: str, lod_floor: float) -> ObjectType:
+    """The type of an LOD ``model`` (a :class:`~lodsprite.manager.models.LodModel`)
+    already in a type's frame (base at z = 0): the vertices its finest level uses and
+    its faces over them, its height their z-range (metres), the model kept for its
+    LODs."""
+    faces = np.asarray(model.extract(1.0), dtype=np.int64).reshape(-1, 3)
+    used, inverse = np.unique(faces, return_inverse=True)
+    v = np.asarray(model.vertices, dtype=np.float64)[used]
+    return ObjectType(name, v.astype(np.float32), inverse.reshape(-1, 3).astype(np.int32),
+                      np.asarray(model.colors, np.float32)[used],
+                      float(v[:, 2].max() - v[:, 2].min()), lod, None, model, lod_floor)
 
 
 def load_group(path: str, height_m: float | None, lod: str, up: str | None,

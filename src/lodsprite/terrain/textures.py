@@ -76,9 +76,11 @@ def hillshade(heights: np.ndarray, dx: float, dy: float, azimuth_deg: float = 31
     return np.clip(shade, 0, 1).astype(np.float32, copy=False)
 
 
-#: The heights shading's sun (unit, towards it) and ramp colours (``gl.shaders``'
-#: TERRAIN_SHADE: the one shading of the terrain from its heights).
+#: The heights shading's sun (unit, towards it: the north-west, 50.4° up) and ramp colours
+#: (``gl.shaders``' TERRAIN_SHADE: the one shading of the terrain from its heights).
 SHADE_LIGHT = np.array([-0.450473, 0.450473, 0.770810])
+SHADE_AZIMUTH_DEG = 315.0
+SHADE_ALTITUDE_DEG = float(np.degrees(np.arcsin(SHADE_LIGHT[2])))
 SHADE_LOW, SHADE_MID, SHADE_HIGH = (0.32, 0.45, 0.25), (0.55, 0.48, 0.34), (0.9, 0.9, 0.9)
 
 
@@ -87,20 +89,17 @@ def height_shading(heights: np.ndarray, dx: float, dy: float, lo: float, hi: flo
     """``(rows, cols, 3) uint8``: the terrain's heights shading at its samples, row 0
     north, as the renderers colour a terrain store (``TERRAIN_SHADE`` of
     :mod:`lodsprite.gl.shaders`: a height ramp over ``lo..hi`` metres, level 0's lowest
-    and highest, lit by one sun with 30 % ambient; the normal from central differences,
-    one-sided at the edges, as its ``height_normal`` at a sample).  What a web page shows
-    where no keyframe saw the surface, in the keyframes' colours."""
+    and highest, lit by one sun with 30 % ambient: :func:`hillshade`, whose normals are
+    its ``height_normal``'s at a sample).  What a web page shows where no keyframe saw the
+    surface, in the keyframes' colours."""
     h = np.asarray(heights, np.float32)  # float32 as the shader: 4 bytes a sample an array
     if h.ndim != 2 or min(h.shape) < 2:
         raise TerrainError(f"height shading needs a 2-D grid of at least 2x2, got {h.shape}")
-    g_row, g_col = np.gradient(h)                      # metres a row (south), a column (east)
-    n = np.stack([-g_col / np.float32(dx), g_row / np.float32(dy), np.ones_like(h)], axis=-1)
-    n /= np.linalg.norm(n, axis=-1, keepdims=True)
     t = np.clip((h - np.float32(lo)) / np.float32(max(hi - lo, 1e-3)), 0.0, 1.0)[..., None]
     low, mid, high = (np.asarray(c, np.float32) for c in (SHADE_LOW, SHADE_MID, SHADE_HIGH))
     c = np.where(t < 0.6, low + (mid - low) * (t / np.float32(0.6)),
                  mid + (high - mid) * ((t - np.float32(0.6)) / np.float32(0.4)))
-    lit = 0.3 + 0.7 * np.maximum(n @ SHADE_LIGHT.astype(np.float32), 0.0)
+    lit = 0.3 + 0.7 * hillshade(h, dx, dy, SHADE_AZIMUTH_DEG, SHADE_ALTITUDE_DEG)
     return np.clip(np.round(c * lit[..., None] * 255.0), 0, 255).astype(np.uint8)
 
 

@@ -10,7 +10,7 @@
 // With `estimate` ({stride, keyScale}: the page's depth mesh and keyframe scale) it then
 // builds the keyframe's error estimate on its own depth (depth_estimate.js), here, off
 // the page's thread, and sends it apart, after the keyframe (which the page may draw
-// meanwhile: a first build is some 100 ms of compiling): its state's typed arrays come
+// meanwhile: a first build took about 100 ms in V8 here, most of it compiling): its state's typed arrays come
 // back transferred.
 //
 // In: {id, header, color, depth, estimate} (the two image buffers as the wire gave them).
