@@ -37,10 +37,13 @@ from __future__ import annotations
 
 import contextlib
 import importlib
+import logging
 import multiprocessing as mp
+import os
 import pickle
 import signal
 import sys
+import threading
 import time
 import types
 from collections.abc import Callable
@@ -49,6 +52,28 @@ from multiprocessing.util import Finalize
 from lodsprite.errors import LodspriteError
 
 STOP_S = 2.0  # a stopping process has this long to exit by itself
+
+log = logging.getLogger(__name__)
+
+
+def lower_priority(nice: int) -> None:
+    """Raise the nice value of every thread of this process by ``nice`` (Linux threads
+    have their own, and threads started later, a GL driver's included, inherit their
+    creator's): a child process drawing beside a display (a keyframe worker, a page's
+    renderer on the page's machine) yields the CPU to the frames shown.  Call it in the
+    child, never in a display's process.  Ignored where the platform has no per-thread
+    priority."""
+    if nice <= 0 or not hasattr(os, "setpriority"):
+        return
+    try:
+        tids = [int(t) for t in os.listdir("/proc/self/task")]
+    except OSError:
+        tids = [threading.get_native_id()]
+    for tid in tids:
+        try:
+            os.setpriority(os.PRIO_PROCESS, tid, os.getpriority(os.PRIO_PROCESS, tid) + nice)
+        except OSError as exc:  # a thread gone meanwhile, or not permitted
+            log.debug("could not lower thread %d's priority: %s", tid, exc)
 
 
 class WorkerError(LodspriteError, RuntimeError):

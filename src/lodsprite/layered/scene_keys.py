@@ -31,11 +31,11 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from lodsprite.errors import InputError
+from lodsprite.procs import lower_priority
 from lodsprite.sprite.keyframe_process import (
     checked_spread,
     copy_shared,
     keyframe_answer,
-    lower_priority,
 )
 from lodsprite.sprite.keyframe_worker import KeyframeWorker, share_arrays, start_ready
 from lodsprite.sprite.worker_settings import WorkerSettings

@@ -8,10 +8,7 @@ full-resolution keyframe rendered for each viewpoint sent, its colour, z-buffer 
 
 from __future__ import annotations
 
-import logging
-import os
 import pickle
-import threading
 import time
 from multiprocessing import shared_memory
 from typing import TYPE_CHECKING
@@ -19,6 +16,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from lodsprite.camera import Viewpoint
+from lodsprite.procs import lower_priority
 from lodsprite.sprite.guard import MAX_SPREAD
 from lodsprite.sprite.metric import ErrorMetric
 
@@ -26,7 +24,6 @@ if TYPE_CHECKING:
     from lodsprite.sprite.worker_settings import WorkerSettings
     from lodsprite.terrain import HeightField
 
-log = logging.getLogger(__name__)
 
 
 def copy_shared(shm_name: str, layout: dict[str, tuple]) -> dict[str, np.ndarray]:
@@ -219,15 +216,3 @@ def keyframe_answer(sprite, zbuffer: str, fields: dict, t0: float,
               "render_ms": (time.perf_counter() - t0) * 1e3, "key_size": key.target.size}
     return pickle.dumps(fields), b"".join((np.ascontiguousarray(depth, np.float32).data,
                                            np.ascontiguousarray(color, np.uint8).data))
-
-
-def lower_priority(nice: int) -> None:
-    """Raise this thread's nice value by ``nice`` (Linux threads have their own); threads
-    it starts later inherit it.  Ignored where the platform has no per-thread priority."""
-    if nice <= 0 or not hasattr(os, "setpriority"):
-        return
-    try:
-        tid = threading.get_native_id()
-        os.setpriority(os.PRIO_PROCESS, tid, os.getpriority(os.PRIO_PROCESS, tid) + nice)
-    except OSError as exc:
-        log.debug("could not lower the keyframe worker's priority: %s", exc)

@@ -81,6 +81,33 @@ def test_jobs_round_trip_through_two_local_workers(broker: LocalPool) -> None:
     assert after["job_ms_p90"] >= after["job_ms_p50"]
 
 
+def thread_nices(pid: int) -> list[int]:
+    """The nice value of every thread of process ``pid`` (Linux ``/proc``)."""
+    out = []
+    for tid in os.listdir(f"/proc/{pid}/task"):
+        with open(f"/proc/{pid}/task/{tid}/stat") as f:
+            fields = f.read().rsplit(")", 1)[1].split()
+        out.append(int(fields[16]))  # field 19 of stat; 3 is the first after the name
+    return out
+
+
+@pytest.mark.skipif(not os.path.isdir("/proc/self/task"), reason="Linux /proc")
+def test_renderers_draw_at_a_lower_priority_than_the_page_they_serve(
+        broker: LocalPool) -> None:
+    """Every thread of a renderer, the GL driver's started with its context included,
+    runs at the pool's nice (the page or notebook on the same machine keeps its frames);
+    this process keeps its own."""
+    broker.submit(job(50))
+    assert results(broker, 1)[50].ok
+    base = os.getpriority(os.PRIO_PROCESS, 0)
+    pids = [p.pid for p in broker.local_processes() if p.is_alive()]
+    assert pids
+    for pid in pids:
+        nices = thread_nices(pid)
+        assert len(nices) > 1 and min(nices) >= base + broker.nice, nices
+    assert broker.nice > 0 and os.getpriority(os.PRIO_PROCESS, 0) == base
+
+
 def test_workers_follow_the_data_rule_and_jobs_are_checked_on_submit(broker: LocalPool) -> None:
     import msgspec
 

@@ -53,6 +53,7 @@ from lodsprite.distributed.pool.jobs import (
 from lodsprite.distributed.pool.results import PoolResults, drain, signal
 from lodsprite.distributed.protocol import CODECS, LoadArgs, ProtocolError
 from lodsprite.errors import InputError
+from lodsprite.sprite.worker_settings import DEFAULT_WORKER_NICE
 
 log = logging.getLogger("lodsprite.pool")
 
@@ -93,11 +94,14 @@ class LocalPool(PoolResults):
     ``keyframes``: how they are drawn, ``auto`` (adaptive over a store or a large grid,
     else whole), ``adaptive`` or ``whole`` (:func:`~lodsprite.distributed.render.
     keyframe_service`; the benchmarks compare the two); ``renderer_mb``: what a renderer's
-    scenes may hold together (:data:`~.render_process.RENDERER_MB`)."""
+    scenes may hold together (:data:`~.render_process.RENDERER_MB`); ``nice``: how much
+    the renderers lower their priority (they draw beside a page or a notebook on this
+    machine, whose frames come first: a keyframe late by a few milliseconds costs less
+    than a frame dropped; 0 keeps it)."""
 
     def __init__(self, codec: str = "raw", data_dir: Path | str | None = None,
                  job_timeout_s: float = JOB_TIMEOUT_S, keyframes: str = "auto",
-                 renderer_mb: float | None = None) -> None:
+                 renderer_mb: float | None = None, nice: int = DEFAULT_WORKER_NICE) -> None:
         from lodsprite.distributed.render import KEYFRAME_WAYS
 
         if codec not in CODECS:
@@ -108,6 +112,7 @@ class LocalPool(PoolResults):
         super().__init__(job_timeout_s)
         self.keyframes = keyframes
         self.renderer_mb = renderer_mb
+        self.nice = int(nice)
         self.codec = codec
         self.data_dir = None if data_dir is None else str(Path(data_dir).resolve())
         self.cache = 2
@@ -193,7 +198,8 @@ class LocalPool(PoolResults):
         from lodsprite.distributed.pool.render_process import FACTORY
         from lodsprite.workers import ProcessWorker
 
-        args = {"data_dir": self.data_dir, "cache": self.cache, "keyframes": self.keyframes}
+        args = {"data_dir": self.data_dir, "cache": self.cache, "keyframes": self.keyframes,
+                "nice": self.nice}
         if self.renderer_mb is not None:
             args["max_mb"] = self.renderer_mb
         r.worker = ProcessWorker(FACTORY, args,  # a job, and a release behind it

@@ -38,6 +38,7 @@ from lodsprite.distributed.pool.jobs import (
 )
 from lodsprite.distributed.protocol import LoadArgs
 from lodsprite.distributed.served import OBJECT_KINDS
+from lodsprite.procs import lower_priority
 
 FACTORY = "lodsprite.distributed.pool.render_process:handler"
 
@@ -191,10 +192,13 @@ class SceneCache:
 
 
 def handler(data_dir: str | None, cache: int, keyframes: str = "auto",
-            max_mb: float = RENDERER_MB) -> Callable[[bytes, bytes], tuple[bytes, bytes]]:
+            max_mb: float = RENDERER_MB, nice: int = 0
+            ) -> Callable[[bytes, bytes], tuple[bytes, bytes]]:
     """The render process's request handler (:mod:`lodsprite.workers`' factory);
     ``keyframes``: how they are drawn (:func:`~lodsprite.distributed.render.
-    keyframe_service`); ``max_mb``: what its scenes may hold together."""
+    keyframe_service`); ``max_mb``: what its scenes may hold together; ``nice``: how
+    much it lowers its priority before it makes its GL context."""
+    lower_priority(nice)
     scenes = SceneCache(str(Path(data_dir)) if data_dir is not None else None, cache,
                         keyframes, max_mb)
 
