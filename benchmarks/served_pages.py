@@ -50,7 +50,8 @@ def start_server(args) -> tuple[subprocess.Popen, int]:
     proc = subprocess.Popen(
         [sys.executable, "-c", "from lodsprite.cli import main; main()", "serve", "--web",
          "127.0.0.1:0", "--bind", f"127.0.0.1:{free_ports()}", "--token", TOKEN,
-         "--rate", "100000", "--renderers", str(args.renderers), "--data", str(args.data)],
+         "--rate", "100000", "--renderers", str(args.renderers), "--data", str(args.data),
+         "--session-jobs", str(args.session_jobs)],
         stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     lines: queue.Queue = queue.Queue()
     threading.Thread(target=lambda: [lines.put(x) for x in proc.stdout], daemon=True).start()
@@ -173,6 +174,8 @@ def main() -> None:
                                                    "a scene file; or crowd:N")
     ap.add_argument("--size", default="640x480")
     ap.add_argument("--renderers", type=int, default=2)
+    ap.add_argument("--session-jobs", type=int, default=1,
+                    help="the server's --session-jobs: the page's requests in flight")
     ap.add_argument("--path", default="chen1999")
     ap.add_argument("--frames", type=int, default=240)
     ap.add_argument("--lod", type=int, default=16)

@@ -87,7 +87,7 @@ async def client(i: int, url: str, token: str, load: dict, path: list[Viewpoint]
     async with aiohttp.ClientSession() as http:
         page = await connect(http, url, token)
         scene = await page.load(load)
-        metric, pred = ErrorMetric(scene), Predictor(scene)
+        metric, pred = ErrorMetric(scene), Predictor(scene, page.jobs)
         if "pool" not in casts:  # the pages load one scene: one pool casts for all
             import multiprocessing as mp
             from concurrent.futures import ProcessPoolExecutor
@@ -103,7 +103,7 @@ async def client(i: int, url: str, token: str, load: dict, path: list[Viewpoint]
             ready.release()  # also on failure: gather() then reports it
         await start.wait()
         clock0 = time.monotonic()
-        state = {"eye": first.viewpoint.o, "keyframes": 0, "latencies": []}
+        state = {"eye": first.viewpoint.o, "keyframes": 0, "latencies": [], "t0": -np.inf}
         metric.keep(await loop.run_in_executor(casts["pool"], _cast, state["eye"]))
 
         async def reader() -> None:
@@ -112,6 +112,10 @@ async def client(i: int, url: str, token: str, load: dict, path: list[Viewpoint]
                 if header.__struct_config__.tag != "keyframe":
                     continue
                 now = time.monotonic() - clock0
+                if header.t0 < state["t0"]:  # came after a newer one: not shown
+                    pred.dropped(header.t0)
+                    continue
+                state["t0"] = header.t0
                 state["keyframes"] += 1
                 state["latencies"].append(1000.0 * (now - header.t0))
                 eye = state["eye"] = np.array(header.viewpoint.o, np.float64)

@@ -51,11 +51,11 @@ class HoldPredictor(Predictor):
         return min(self.latency + half, MAX_AHEAD_S)
 
     def arrived(self, t0: float, now: float) -> None:
-        if self.inflight == t0 and self.last is not None:
+        if t0 in self.inflight and self.last is not None:
             gap = now - self.last
             self.interval = gap if self.interval is None else (
                 self.interval + 0.3 * (gap - self.interval))
-        if self.inflight == t0:
+        if t0 in self.inflight:
             self.last = now
         super().arrived(t0, now)
 

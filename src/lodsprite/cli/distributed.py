@@ -61,8 +61,8 @@ def serve(
     key: Annotated[Path | None, typer.Option(
         "--key", help="TLS private key (PEM) matching --cert")] = None,
     session_jobs: Annotated[int, typer.Option(
-        "--session-jobs", help="keyframe renders in flight per web session", min=1,
-        max=16)] = 1,
+        "--session-jobs", help="keyframe renders in flight per web session (the page "
+                               "keeps as many requests in flight)", min=1, max=16)] = 1,
     session_queue: Annotated[int, typer.Option(
         "--session-queue", help="keyframes queued per web session; when full the oldest "
                                 "is dropped", min=1, max=64)] = 2,

@@ -497,6 +497,37 @@ def test_a_page_at_rest_asks_again_while_its_keyframe_lacks_something(server, br
     assert got["error"] == pytest.approx(3.25)
 
 
+def test_a_page_keeps_the_servers_jobs_in_flight_spread_over_its_latency(server, browser):
+    """With two renders in flight a session (the load reply's ``jobs``), the page's
+    predictor sends a second request while one is in flight, no sooner than half its
+    latency after the first, never a third; one that came after a newer keyframe frees
+    its place; a failed one too.  One job: never with one in flight (as before)."""
+    browser.get(page_url(server, query=QUERY.split("&path=")[0]))
+    got = browser.execute_async_script("""
+        const done = arguments[arguments.length - 1];
+        import('/static/predictor.js').then((m) => {
+          const run = (jobs) => {
+            const pred = new m.Predictor(1.0, 45, 1, 1, 1e5, 64, jobs);
+            pred.latency = 0.4;
+            const metric = {errorPx: () => 5};  // every view ahead is worth a keyframe
+            const asked = [];
+            const at = (t) => {
+              pred.sample(t, {x: [1, 0, 0], y: [0, 0, 1], z: [0, -1, 0], o: [30 * t, -900, 500]});
+              const want = pred.want(metric, [0, -900, 500], t, false);
+              asked.push(want !== null);
+              if (want) pred.sent(t, want).seq = asked.length;
+            };
+            at(0.0); at(0.1); at(0.21); at(0.5);  // sent at 0 and 0.21
+            pred.dropped(0.0); at(0.55);          // the first came late: a place again
+            pred.failed(5); at(0.6);              // the one sent at 0.55 failed
+            return asked;
+          };
+          done({two: run(2), one: run(1)});
+        }, (e) => done(String(e)));""")
+    assert got["two"] == [True, False, True, False, True, True], got
+    assert got["one"] == [True, False, False, False, True, True], got
+
+
 # RMSE (grey levels, 0..255, over RGB) between the page's spriteframe (gl.js on
 # SwiftShader) and lodsprite's own (gl.sprite.SpriteDrawer on llvmpipe, the distributed
 # client's drawer: coarse rule, border ribbons) of one server keyframe at a viewpoint 10

@@ -136,9 +136,35 @@ def test_the_predictor_asks_one_latency_ahead_and_never_with_a_request_in_flight
     pred.sent(1 / 30)
     assert pred.want(metric, key.o, 2 / 30) is None  # one in flight
     pred.arrived(1 / 30, 1 / 30 + 0.5)
-    assert pred.inflight is None and pred.latency == pytest.approx(0.1 + 0.3 * (0.5 - 0.1))
+    assert not pred.inflight and pred.latency == pytest.approx(0.1 + 0.3 * (0.5 - 0.1))
     pred.sent(1.0)
     assert pred.want(metric, key.o, 6.5) is not None  # given up after 5 s unanswered
+
+
+def test_with_two_jobs_the_predictor_staggers_its_requests_over_the_latency():
+    """Two renders a session in flight: a second request goes out while one is in flight,
+    but no sooner than half the latency after it, and never a third; a keyframe that came
+    after a newer one frees its place without counting its latency."""
+    scene = plane_scene(relief=40.0)
+    metric, pred = ErrorMetric(scene), Predictor(scene, jobs=2)
+    key = look_at((400.0, -500.0, 1500.0), (400.0, 400.0, 700.0))
+    step = np.array([30.0, 0.0, 0.0])
+    pred.latency = 0.4
+
+    def at(t: float) -> Viewpoint:
+        pred.sample(t, Viewpoint(key.x, key.y, key.z, key.o + step * 30 * t))
+        return pred.want(metric, key.o, t)
+
+    at(0.0)
+    assert at(1 / 30) is not None  # the error ahead reaches epsilon / 2
+    pred.sent(1 / 30)
+    assert at(2 / 30) is None  # within latency / 2 of the last request
+    assert at(1 / 30 + 0.21) is not None  # past it: a second in flight
+    pred.sent(1 / 30 + 0.21)
+    assert at(1 / 30 + 0.5) is None  # two in flight: no third
+    pred.dropped(1 / 30)  # the first came after the second's keyframe
+    assert pred.inflight == [1 / 30 + 0.21] and pred.latency == 0.4
+    assert at(1 / 30 + 0.5) is not None
 
 
 def ridge_scene():

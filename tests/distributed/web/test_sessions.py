@@ -86,7 +86,7 @@ def test_the_handler_never_raises_on_hostile_messages(seed):
 
 def test_a_valid_request_waits_and_a_request_before_load_is_refused():
     rng = np.random.default_rng(1)
-    s = Session(FakeHub(), Caps(rate=1e9))
+    s = Session(FakeHub(), Caps(session_jobs=1, rate=1e9))
     s.handle(pack(encode(valid_header("request", rng))))
     assert replies(s)[-1].ok is False and "load" in replies(s)[-1].error
     s.load = LoadArgs()

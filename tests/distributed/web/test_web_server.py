@@ -42,6 +42,10 @@ VP = {"x": [1.0, 0.0, 0.0], "y": [0.0, 0.6, 0.8], "z": [0.0, -0.8, 0.6],
       "o": [0.0, -1500.0, 1200.0]}
 
 
+SESSION_JOBS = 2
+"""The server's ``--session-jobs`` here (not the default: the load reply must carry it)."""
+
+
 @pytest.fixture(scope="module")
 def server(tmp_path_factory):
     data = tmp_path_factory.mktemp("data")
@@ -75,7 +79,8 @@ def server(tmp_path_factory):
     proc = subprocess.Popen(
         [sys.executable, "-c", "from lodsprite.cli import main; main()", "serve",
          "--web", "127.0.0.1:0", "--bind", f"127.0.0.1:{zport}", "--token", TOKEN,
-         "--rate", "100000", "--renderers", "1", "--data", str(data)],
+         "--rate", "100000", "--renderers", "1", "--data", str(data),
+         "--session-jobs", str(SESSION_JOBS)],
         stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     lines: queue.Queue = queue.Queue()
     threading.Thread(target=lambda: [lines.put(x) for x in proc.stdout], daemon=True).start()
@@ -104,6 +109,7 @@ async def connect(http, server, **kw) -> WebPage:
 async def loaded(page: WebPage, args: dict):
     scene = await page.load(args)
     assert scene.header.seq == page.seq
+    assert page.jobs == SESSION_JOBS  # the load reply says how many it may keep in flight
     return scene
 
 

@@ -42,6 +42,7 @@ class WebPage:
     def __init__(self, ws: aiohttp.ClientWebSocketResponse) -> None:
         self.ws = ws
         self.seq = 0
+        self.jobs = 1  # renders in flight the server allows this page (its load reply)
 
     async def send(self, header: dict, *buffers) -> int:
         """Send a message (``kind`` and fields; ``seq`` is numbered here); its ``seq``."""
@@ -72,14 +73,17 @@ class WebPage:
                 return reply
 
     async def load(self, args: dict) -> SceneData:
-        """``load`` ``args`` (LoadArgs fields); the scene that comes back."""
+        """``load`` ``args`` (LoadArgs fields); the scene that comes back (and in
+        :attr:`jobs`, the requests the server renders at once for this page)."""
         seq = await self.send({"kind": "control", "op": "load", "args": args})
         while True:
             header, parts = await self.recv()
             kind = header.__struct_config__.tag
             if kind == "scene" and header.seq == seq:
                 scene = decode_scene(parts)
-                await self.reply(seq)
+                reply = await self.reply(seq)
+                jobs = reply.data.get("jobs", 1)
+                self.jobs = jobs if isinstance(jobs, int) and 1 <= jobs <= 16 else 1
                 return scene
             if kind == "reply" and header.seq == seq and not header.ok:
                 raise ProtocolError(header.error)

@@ -289,9 +289,10 @@ def _unit(v: np.ndarray) -> np.ndarray:
 
 class Predictor:
     """The page's request logic for a scene (its ``header``: ``size``, ``fov``,
-    ``near``, ``far``, ``epsilon``)."""
+    ``near``, ``far``, ``epsilon``), with at most ``jobs`` requests in flight (the load
+    reply's ``jobs``), a new one no sooner than the latency over ``jobs`` after the last."""
 
-    def __init__(self, scene) -> None:
+    def __init__(self, scene, jobs: int = 1) -> None:
         hdr = scene.header
         w, h = hdr.size
         self.epsilon = float(hdr.epsilon)
@@ -299,7 +300,8 @@ class Predictor:
         self.beta = float(np.radians(hdr.fov) / h)
         self.samples: list[tuple[float, Viewpoint]] = []
         self.latency = LATENCY_START_S  # s, request to keyframe
-        self.inflight: float | None = None  # the request's t
+        self.jobs = max(1, int(jobs))
+        self.inflight: list[float] = []  # the requests' t, oldest first
 
     def sample(self, t: float, vp: Viewpoint) -> None:
         """The viewer is at ``vp`` at time ``t`` (s)."""
@@ -331,19 +333,24 @@ class Predictor:
         """What to request at time ``t`` (a viewpoint) or None (the page's moving case;
         a resting viewer's last request is the page's own); ``key_view_proj``: the shown
         keyframe's (:meth:`ErrorMetric.error_px`)."""
-        if self.inflight is not None and t - self.inflight > LOST_S:
-            self.inflight = None
-        if self.inflight is not None:
+        self.inflight = [r for r in self.inflight if t - r <= LOST_S]  # lost: given up
+        n = len(self.inflight)
+        if n >= self.jobs or (n and t - self.inflight[-1] < self.lead() / self.jobs):
             return None
         ahead = self.predict(t + self.lead())
         return (ahead if self.error_px(metric, key_eye, ahead, key_view_proj)
                 >= 0.5 * self.epsilon else None)
 
     def sent(self, t: float) -> None:
-        self.inflight = t
+        self.inflight.append(t)
+
+    def dropped(self, t0: float) -> None:
+        """The keyframe requested at ``t0`` came after a newer one: not in flight, its
+        latency not counted."""
+        self.inflight = [r for r in self.inflight if r != t0]
 
     def arrived(self, t0: float, now: float) -> None:
         """The keyframe requested at ``t0`` arrived at ``now`` (s)."""
-        if self.inflight == t0:
+        if t0 in self.inflight:
             self.latency += SMOOTHING * (max(0.0, now - t0) - self.latency)
-            self.inflight = None
+            self.inflight.remove(t0)

@@ -220,7 +220,8 @@ class Hub:
         parts = cached[0]
         header = msgspec.msgpack.decode(parts[0])
         session.push_scene(encode({**header, "seq": seq}, *parts[1:]))  # the cached buffers
-        session.reply(seq, True, data={"coarse": resolved.lod, "size": list(resolved.size)})
+        session.reply(seq, True, data={"coarse": resolved.lod, "size": list(resolved.size),
+                                       "jobs": self.caps.session_jobs})
 
     def _local(self, message: str) -> str:
         """``message`` as a page may read it (never the server's paths:

@@ -63,7 +63,8 @@ COUNTS = ("received", "rejected", "rate_dropped", "requests", "superseded", "key
 
 @dataclass(frozen=True)
 class Caps:
-    """Per-session limits: keyframe jobs in flight, keyframes queued out, messages/s."""
+    """Per-session limits: keyframe jobs in flight (the page keeps as many requests in
+    flight, spread over its latency), keyframes queued out, messages/s."""
 
     session_jobs: int = 1
     queue: int = 2

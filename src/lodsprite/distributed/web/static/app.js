@@ -73,7 +73,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
   let sceneResolve;
   const sceneArrived = new Promise((r) => { sceneResolve = r; });
   let pendingKey = null;  // the newest keyframe uploaded, not yet drawn: {header, key}
-  let keyframesIn = 0, newestDecoded = 0, decoded = 0, shownKeyId = 0;
+  let keyframesIn = 0, newestDecoded = 0, newestT0 = -Infinity, decoded = 0, shownKeyId = 0;
   const keyframeHeaders = new Map();  // decode id -> header
   const decoder = new Worker(decoderUrl, { type: 'module' });
   decoder.onmessage = ({ data }) => {
@@ -90,8 +90,14 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
     keyframeHeaders.delete(data.id);
     if (data.error) { state = `bad keyframe: ${data.error}`; return; }
     decoded += 1;
-    if (closed || !renderer || !header || data.id < newestDecoded) { data.bitmap.close(); return; }  // older than one uploaded
-    newestDecoded = data.id;
+    // older than one uploaded: by arrival, or (requests in flight together, renderers of
+    // different speeds) by the time it was asked for
+    if (closed || !renderer || !header || data.id < newestDecoded || header.t0 < newestT0) {
+      if (header) predictor?.dropped(header.t0);
+      data.bitmap.close();
+      return;
+    }
+    newestDecoded = data.id; newestT0 = header.t0;
     const key = renderer.prepareKeyframe(header, data.bitmap, data.depth);
     if (pendingKey) renderer.dropKeyframe(pendingKey.key);  // superseded before a frame drew it
     pendingKey = { header, key, id: data.id, estimate: null };
@@ -159,8 +165,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
     if (h.walkers) walkers = new WalkerDrawer(renderer.gl, walkerData(h.walkers));
     focal = height / (2 * Math.tan(h.fov * Math.PI / 360));  // pixels a metre at unit depth
     metric = coarseMetric = new ErrorMetric(h, scene.heights);
-    predictor = new Predictor(h.epsilon, h.fov, width / height, h.near, h.far, height);
-    predictor.failed = (s) => { if (predictor.inflight && predictor.inflight.seq === s) predictor.inflight = null; };
+    predictor = new Predictor(h.epsilon, h.fov, width / height, h.near, h.far, height, reply.data?.jobs ?? 1);
     const extent = h.coarse * h.spacing;
     const centre = [h.origin[0] + extent / 2, h.origin[1] + extent / 2, 0];
     controls = new FlyControls(canvas, lookAt([centre[0], centre[1] - 1.2 * extent, 0.6 * extent], centre), 0.25 * extent, keyTarget);
@@ -228,7 +233,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
     if (want) {
       const t = now / 1000;
       const s = send({ kind: 'request', t, viewpoint: want });
-      predictor.sent(t, want); predictor.inflight.seq = s;
+      predictor.sent(t, want).seq = s;
     } else if (now - lastSample > VIEWPOINT_MS) {
       lastSample = now;
       const shown = keyEye ? { eye: keyEye, slot: 0 } : undefined;  // as the ZeroMQ client

@@ -31,8 +31,12 @@
 // The linear predictor: the eye and the axes extrapolated linearly from the last two
 // samples (the axes re-orthonormalised).  A request goes out for the viewpoint the viewer
 // will be at one measured keyframe latency ahead (at most 1 s), when the shown keyframe's
-// error there reaches epsilon/2, and never with a request in flight; when the viewer
-// rests, one more request at the resting viewpoint makes the shown keyframe exact.
+// error there reaches epsilon/2.  At most `jobs` requests are in flight (the server's
+// renders in flight a session, its load reply's `jobs`: Swan et al.'s several servers
+// for one client), a new one no sooner than latency / jobs after the last, so that their
+// keyframes arrive spread over the latency rather than together; one in flight: never
+// with a request in flight.  When the viewer rests, one more request at the resting
+// viewpoint (with none in flight) makes the shown keyframe exact.
 //
 // lodsprite.distributed.web.estimate is this module in Python (the load benchmark's
 // pages); the two are one algorithm.
@@ -203,13 +207,14 @@ function orthonormal(x, y) {  // axes from approximate x, y (Gram-Schmidt; z = x
 }
 
 export class Predictor {
-  constructor(epsilon, fovDeg, aspect, near, far, heightPx) {
+  constructor(epsilon, fovDeg, aspect, near, far, heightPx, jobs = 1) {
     this.epsilon = epsilon;
     this.proj = perspective(fovDeg, aspect, near, far);
     this.beta = (fovDeg * Math.PI / 180) / heightPx;
     this.samples = [];   // [t seconds, viewpoint], the last two
     this.latency = 0.1;  // seconds, measured (an exponential mean of request -> keyframe)
-    this.inflight = null;
+    this.jobs = Math.max(1, Math.floor(jobs));  // requests in flight at most
+    this.inflight = [];  // {t, vp, seq}: the requests unanswered, oldest first
     this.settled = false;
   }
   sample(t, vp) { this.samples.push([t, vp]); if (this.samples.length > 2) this.samples.shift(); }
@@ -236,10 +241,11 @@ export class Predictor {
   // `keyDir`: the shown keyframe's view axis (its viewpoint's z): at rest the view is the
   // keyframe's only where both eye and axis are (a still eye turned is another view).
   want(metric, keyEye, t, resting, keyViewProj = null, deficit = 0, keyDir = null) {
-    if (this.inflight && t - this.inflight.t > LOST_S) this.inflight = null;  // lost
+    this.inflight = this.inflight.filter((r) => t - r.t <= LOST_S);  // lost: given up
     // moving (even while a keyframe is in flight): the view at rest is asked for anew
     if (!resting) this.settled = false;
-    if (this.inflight) return null;
+    const n = this.inflight.length;
+    if (n >= this.jobs || (resting && n)) return null;
     const now = this.samples[this.samples.length - 1][1];
     if (resting) {
       const same = keyEye && norm(sub(keyEye, now.o)) === 0 && (!keyDir || norm(sub(keyDir, now.z)) === 0);
@@ -247,14 +253,22 @@ export class Predictor {
       this.settled = true;
       return now;
     }
+    if (n && t - this.inflight[n - 1].t < this.lead() / this.jobs) return null;  // staggered
     const ahead = this.predict(t + this.lead());
     return this.errorPx(metric, keyEye, ahead, keyViewProj, deficit) >= 0.5 * this.epsilon ? ahead : null;
   }
-  sent(t, vp) { this.inflight = { t, vp }; }
+  // A request went out at t for vp; returns its entry (set its `seq` to match a failure).
+  sent(t, vp) { const r = { t, vp, seq: null }; this.inflight.push(r); return r; }
+  // The request whose message was `seq` failed: no longer in flight.
+  failed(seq) { this.inflight = this.inflight.filter((r) => r.seq !== seq); }
+  // The keyframe requested at t0 came after a newer one and is not shown: no longer in
+  // flight, its latency not counted.
+  dropped(t0) { this.inflight = this.inflight.filter((r) => r.t !== t0); }
   arrived(t0, now) {
-    if (this.inflight && this.inflight.t === t0) {
+    const i = this.inflight.findIndex((r) => r.t === t0);
+    if (i >= 0) {
       this.latency += SMOOTHING * (Math.max(0, now - t0) - this.latency);
-      this.inflight = null;
+      this.inflight.splice(i, 1);
     }
   }
 }
