@@ -229,6 +229,26 @@ def test_a_prepared_scene_is_opened_by_one_renderer_which_then_takes_its_first_j
     assert results(broker, 1, 60.0)[62].worker != opener[1].hex()
 
 
+def test_a_scene_prepared_as_python_builds_it_is_the_one_its_jobs_ask_for(
+        broker: LocalPool) -> None:
+    """A load built in Python with ``key_scale=2`` (an int) is prepared under the key its
+    jobs have once decoded (``2.0``): the first job goes to the renderer that opened it
+    (before, the two keys differed and the job opened the scene again elsewhere)."""
+    from lodsprite.distributed.pool.jobs import check_load, job_key
+
+    load = LoadArgs(terrain="fractal:64:11", size=(64, 64), lod=16, key_scale=2)
+    wait_until(lambda: len(broker.workers()) == 2, 30.0, "both renderers serving")
+    before = broker.stats()["prepared"]
+    broker.prepare(load)
+    wait_until(lambda: broker.stats()["prepared"] == before + 1, 30.0, "the scene opened")
+    holders = [k for k, p in broker.table.peers.items() if job_key(check_load(load)) in p.scenes]
+    assert len(holders) == 1
+    broker.submit(job(70, load))
+    assert results(broker, 1)[70].worker == holders[0][1].hex()
+    with pytest.raises(InputError):
+        broker.prepare({"terrain": "fractal:64:11"})  # not a load: refused, not queued
+
+
 def test_a_replacement_renderer_opens_what_the_lost_one_held_before_it_takes_jobs(
         broker: LocalPool) -> None:
     """A renderer SIGKILLed: its replacement joins only after opening the scenes the lost

@@ -169,8 +169,21 @@ def decode_pool(frames: list) -> tuple[PoolMessage, list]:
 
 
 def job_key(load: LoadArgs) -> bytes:
-    """A hashable key of a scene (Structs are not hashable): its msgpack encoding."""
+    """A hashable key of a scene (Structs are not hashable): its msgpack encoding.  Keys
+    of loads as a worker decodes them (:func:`check_job`, :func:`check_load`): a load
+    built in Python with ``key_scale=2`` encodes another key than its decoded ``2.0``."""
     return _encoder.encode(load)
+
+
+def check_load(load: LoadArgs) -> LoadArgs:
+    """``load`` validated and normalised as a worker will decode it (as
+    :func:`check_job` does a job's); raises :class:`InputError`."""
+    if not isinstance(load, LoadArgs):
+        raise InputError(f"a scene to open is a LoadArgs, got {type(load).__name__}")
+    try:
+        return _load_decoder.decode(_encoder.encode(load))
+    except (msgspec.ValidationError, msgspec.DecodeError) as exc:
+        raise InputError(f"bad load: {exc}") from None
 
 
 def check_job(job: Job) -> Job:
@@ -185,6 +198,7 @@ def check_job(job: Job) -> Job:
 
 
 _job_decoder = msgspec.msgpack.Decoder(Job)
+_load_decoder = msgspec.msgpack.Decoder(LoadArgs)
 _job_encoder = msgspec.msgpack.Encoder()
 
 

@@ -47,6 +47,7 @@ from lodsprite.distributed.pool.jobs import (
     ReleaseMessage,
     ResultMessage,
     check_job,
+    check_load,
     decode_pool,
     job_key,
 )
@@ -147,8 +148,9 @@ class LocalPool(PoolResults):
         request follows once the page has the scene message): the idle renderer idle
         longest, unless one holds it already; it counts as holding the scene from now, so
         the first job goes to it, behind the opening.  Counted ``prepared``.  Never
-        blocks; thread-safe."""
-        self._prepares.append(load)
+        blocks; thread-safe.  ``load`` is taken as a job's is decoded (its key is then a
+        job's); raises :class:`~lodsprite.errors.InputError` for one no job could carry."""
+        self._prepares.append(check_load(load))
         signal(self._wake_w)
 
     def spawn_local(self, n: int, cache: int = 2) -> list[int]:
