@@ -217,6 +217,9 @@ def main() -> None:
           f"{args.path} {args.frames} frames (Chromium, SwiftShader)")
     print(f"  first keyframe {s['first_keyframe_ms'] / 1e3:.2f} s after load; keyframe "
           f"latency median {s['latency_ms'] / 1e3:.2f} s; {s['keyframes']} keyframes shown")
+    way = [(k, s.get(f"first_{k}_ms")) for k in ("scene", "request", "arrived")]
+    print("    on the way: " + ", ".join(f"{k} {v / 1e3:.2f} s" for k, v in way if v is not None)
+          + f"; key scale {s.get('key_scale')}")
     print(f"  frames: median {s['median_ms']:.1f} ms ({fps:.1f} fps), p99 {s['p99_ms']:.1f} ms;"
           f" estimate mean {s['error_px_mean']:.2f} px")
     print(f"  renderers busy {server['server']['pool'].get('busy_s', float('nan')):.1f} s "

@@ -816,7 +816,9 @@ def test_the_pages_walkers_keep_to_the_frames_triangle_budget(server, browser):
 def test_the_keyframe_scale_follows_the_texture_limit_and_the_downlink(server, browser):
     """``chooseKeyScale``: the largest scale whose keyframes fit the browser's texture
     side and the image cap, lowered until its raw keyframes at 4 a second fit the
-    downlink when the browser gives one; an asked scale as asked."""
+    downlink when the browser gives one and the server is public; an asked scale as
+    asked.  The browser's downlink estimate leaves out private addresses: a server on
+    loopback or a private network is not held to it (``isPrivateHost``)."""
     browser.get(f"http://127.0.0.1:{server['port']}/static/hud.js")  # the page's origin
     got = browser.execute_async_script("""
         const done = arguments[arguments.length - 1];
@@ -827,10 +829,16 @@ def test_the_keyframe_scale_follows_the_texture_limit_and_the_downlink(server, b
           m.chooseKeyScale('auto', 640, 480, 16384, 200),
           m.chooseKeyScale('auto', 640, 480, 16384, 10),
           m.chooseKeyScale('1.5', 640, 480, 16384, 10),
+          m.chooseKeyScale('auto', 640, 480, 16384, 10, true),
+          ['127.0.0.1', 'localhost', '[::1]', '10.0.0.7', '172.20.1.1', '192.168.0.9',
+           'fd00::1', '172.32.0.1', '8.8.8.8', 'example.org', '2001:db8::1']
+            .map(m.isPrivateHost),
         ]), (e) => done(String(e)));""")
-    assert [g["scale"] for g in got] == [2, 1, 1.5, 1.5, 1, 1.5], got
+    assert [g["scale"] for g in got[:7]] == [2, 1, 1.5, 1.5, 1, 1.5, 2], got
     # 640 x 480 x 7 bytes x 4 a second: 1x needs 69 Mbit/s, 1.5x 155, 2x 275
     assert "downlink" in got[3]["why"] and got[5]["why"] == "asked"
+    assert got[6]["why"] == "largest"  # on loopback the 10 Mbit/s estimate is not the link's
+    assert got[7] == [True] * 7 + [False] * 4
 
 
 def test_a_page_asking_for_supersampled_keyframes_gets_them(server, browser):

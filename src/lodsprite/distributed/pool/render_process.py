@@ -191,14 +191,29 @@ class SceneCache:
         return r
 
 
+def warm_imports() -> None:
+    """Import the modules that open and draw a scene (keyframe services, the adaptive
+    renderer, terrain stores and Zarr, the scene model, the resampling)."""
+    import skimage.transform  # noqa: F401
+    import zarr  # noqa: F401
+
+    import lodsprite.distributed.render  # noqa: F401
+    import lodsprite.scene.model  # noqa: F401
+    import lodsprite.techniques.adaptive_worker  # noqa: F401
+    import lodsprite.terrain.store  # noqa: F401
+
+
 def handler(data_dir: str | None, cache: int, keyframes: str = "auto",
             max_mb: float = RENDERER_MB, nice: int = 0
             ) -> Callable[[bytes, bytes], tuple[bytes, bytes]]:
     """The render process's request handler (:mod:`lodsprite.workers`' factory);
     ``keyframes``: how they are drawn (:func:`~lodsprite.distributed.render.
     keyframe_service`); ``max_mb``: what its scenes may hold together; ``nice``: how
-    much it lowers its priority before it makes its GL context."""
+    much it lowers its priority before it makes its GL context.  It imports what opening a
+    scene needs now (the renderers start with the server, before any page: about 0.5 s of
+    a first keyframe here)."""
     lower_priority(nice)
+    warm_imports()
     scenes = SceneCache(str(Path(data_dir)) if data_dir is not None else None, cache,
                         keyframes, max_mb)
 

@@ -105,8 +105,26 @@ def build_scene_field(args: LoadArgs, codec: str = "raw",
             raise InputError(f"lod {args.lod} exceeds the scene's terrain grid "
                              f"{scene.hf.quads}")
         return scene_parts(scene, args, codec), scene.hf
-    scene = open_spec(args)  # the load's scene description (a SceneSpec)
+    # the load's scene description (a SceneSpec); a store's working grid as its renderers
+    # load it (light: from its finest level of at most 1025 a side, not up to 4096²:
+    # 2.9 s of a 16k² store's first keyframe here, and the same grid as the keyframes')
+    scene = open_spec(args, light=True)
     return scene_parts(scene, args, codec), scene.hf
+
+
+def warm_imports() -> None:
+    """Import what building a scene message and a path needs (the scene model, terrain
+    loaders and stores, SciPy's and scikit-image's resampling, the paths: about 1 s here),
+    so that a server's first page does not wait for them; a server calls it in a thread
+    once it serves."""
+    import scipy.ndimage  # noqa: F401
+    import skimage.transform  # noqa: F401
+
+    import lodsprite.paths  # noqa: F401
+    import lodsprite.scene.model  # noqa: F401
+    import lodsprite.terrain.store  # noqa: F401
+    import lodsprite.terrain.textures  # noqa: F401
+    from lodsprite.distributed import served  # noqa: F401
 
 
 def scene_parts(scene: Scene, args: LoadArgs, codec: str = "raw") -> list:
@@ -237,7 +255,7 @@ def path_data(load: LoadArgs, args: PathArgs, hf: Any = None, root: str | None =
         if hf is None:
             from lodsprite.scene.spec import open_spec
 
-            hf = open_spec(load).hf
+            hf = open_spec(load, light=True).hf  # as build_scene_field
         path = get_path(args.spec, hf, args.frames)
     rows = np.array([np.concatenate([vp.x, vp.y, vp.z, vp.o]) for vp in path.viewpoints],
                     dtype=np.float64)

@@ -278,6 +278,11 @@ async def _serve(config: WebConfig, on_url, stopped) -> None:
             loop.add_signal_handler(sig, stop.set)
     try:
         on_url(await server.start())
+        from lodsprite.distributed.web.scene import warm_imports
+
+        # the first page's imports, now (an error there is the first load's to report)
+        loop.run_in_executor(None, warm_imports).add_done_callback(
+            lambda f: f.cancelled() or f.exception())
         while not stopped():
             with contextlib.suppress(TimeoutError):
                 await asyncio.wait_for(stop.wait(), 0.2)

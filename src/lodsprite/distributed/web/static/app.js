@@ -33,7 +33,7 @@
 // uploaded, so it never waits for a decode or an upload.
 
 import { pack, unpack, image } from './wire.js';
-import { SpriteDrawer, chooseKeyScale } from './gl.js';
+import { SpriteDrawer, chooseKeyScale, isPrivateHost } from './gl.js';
 import { FlyControls, lookAt, mul, norm, sub } from './camera.js';
 import { ErrorMetric, Predictor } from './predictor.js';
 import { DepthEstimate } from './depth_estimate.js';
@@ -62,6 +62,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
   const hud = hudEl ? new Hud(hudEl) : null;
   const stats = { frames: 0, keyframes: 0, intervals: [], latencies: [], error_px: null, errorSum: 0, errorFrames: 0 };
   let loadAt = null, firstKeyMs = null, keyScale = { scale: 1, why: null };  // the load sent; the first keyframe drawn, ms after it
+  const firstMs = { scene: null, request: null, arrived: null };  // the way to it: ms after the load
   // Input to pixels: a key press's event time to the display frame after the first frame
   // drawn from a camera that includes it (the flying camera's; a path ignores keys).
   const inputs = { pending: [], drawn: [], ms: [] };
@@ -122,6 +123,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
       } catch (e) { state = `bad scene: ${e.message}`; }
     } else if (header.kind === 'keyframe') {
       keyframesIn += 1;
+      if (firstMs.arrived === null && loadAt !== null) firstMs.arrived = performance.now() - loadAt;
       keyframeHeaders.set(keyframesIn, header);
       const estimate = renderer && renderer.proxy === 'depth' && header.zbuffer === 'full'
         ? { stride: renderer.stride, keyScale: keyScale.scale } : null;
@@ -148,7 +150,8 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
     renderer = new SpriteDrawer(canvas);  // the GL context: its texture limit
     const gl = renderer.gl;
     keyScale = chooseKeyScale(options.keyscale ?? 'auto', width, height,
-      gl.getParameter(gl.MAX_TEXTURE_SIZE), globalThis.navigator?.connection?.downlink ?? null);
+      gl.getParameter(gl.MAX_TEXTURE_SIZE), globalThis.navigator?.connection?.downlink ?? null,
+      isPrivateHost(globalThis.location?.hostname ?? ''));
     const args = {
       terrain: options.terrain, size: [width, height], lod: options.lod, epsilon: options.epsilon,
       grid: options.grid, key_scale: keyScale.scale,
@@ -158,6 +161,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
     const reply = await call('load', args);
     if (!reply.ok) throw new Error(reply.error);
     const scene = await sceneArrived;
+    firstMs.scene = performance.now() - loadAt;
     const h = scene.header;
     renderer.proxy = depth ? 'depth' : 'coarse';
     renderer.pair = depth && options.pair === true;
@@ -233,6 +237,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
     if (want) {
       const t = now / 1000;
       const s = send({ kind: 'request', t, viewpoint: want });
+      if (firstMs.request === null && loadAt !== null) firstMs.request = now - loadAt;
       predictor.sent(t, want).seq = s;
     } else if (now - lastSample > VIEWPOINT_MS) {
       lastSample = now;
@@ -263,6 +268,10 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
         error_px: Number.isFinite(stats.error_px) ? stats.error_px : null,
         error_px_mean: stats.errorFrames ? stats.errorSum / stats.errorFrames : null,
         latency_ms: percentile(stats.latencies, 0.5), first_keyframe_ms: firstKeyMs,
+        // the way to the first keyframe: the scene message in, the first request out, the
+        // first keyframe message in (then decoded and drawn: first_keyframe_ms)
+        first_scene_ms: firstMs.scene, first_request_ms: firstMs.request,
+        first_arrived_ms: firstMs.arrived,
         key_scale: keyScale.scale,
         input_ms: percentile(inputs.ms, 0.5), input_ms_p99: percentile(inputs.ms, 0.99),
         inputs: inputs.ms.length,

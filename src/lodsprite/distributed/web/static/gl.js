@@ -28,18 +28,36 @@ export const MAX_IMAGE_SIDE = 4096;          // lodsprite.distributed.messages.M
 export const KEYFRAMES_PER_S = 4;            // the keyframe rate a link is budgeted for
 const KEY_BYTES_PER_TEXEL = 7;               // RGB colour and float32 depth, raw
 
+// Whether `host` (location.hostname) is loopback or a private network's address (RFC 1918,
+// RFC 4193, link-local, localhost): the browser's downlink estimate leaves out such
+// connections (Network Information API: "excluding connections made to a private
+// address space"), so it says nothing of the link to this server.
+export function isPrivateHost(host) {
+  const h = String(host).toLowerCase().replace(/^\[|\]$/g, '');
+  if (h === 'localhost' || h.endsWith('.localhost') || h === '::1') return true;
+  const v4 = h.match(/^(\d+)\.(\d+)\.\d+\.\d+$/);
+  if (v4) {
+    const [a, b] = [Number(v4[1]), Number(v4[2])];
+    return a === 127 || a === 10 || (a === 172 && b >= 16 && b <= 31) || (a === 192 && b === 168)
+      || (a === 169 && b === 254);
+  }
+  return /^f[cd][0-9a-f]{2}:/.test(h) || /^fe[89ab][0-9a-f]:/.test(h);
+}
+
 // The keyframe scale a page asks for (keyframe texels a canvas pixel side) and why:
 // `asked` ('auto' or one of KEY_SCALES), the canvas (w, h), the browser's largest texture
 // side and the link's downlink estimate in Mbit/s (navigator.connection.downlink; null:
-// none given).  Auto: the largest scale whose keyframes fit the texture limit and the
-// image cap, and whose raw bytes at KEYFRAMES_PER_S fit the downlink when one is given.
-export function chooseKeyScale(asked, w, h, maxTexture, downlinkMbit = null) {
+// none given); `privateHost`: the page's server is on loopback or a private network
+// (isPrivateHost), where that estimate is not this link's and is not used.  Auto: the
+// largest scale whose keyframes fit the texture limit and the image cap, and whose raw
+// bytes at KEYFRAMES_PER_S fit the downlink when one is given for a public server.
+export function chooseKeyScale(asked, w, h, maxTexture, downlinkMbit = null, privateHost = false) {
   if (asked !== 'auto') return { scale: Number(asked), why: 'asked' };
   const side = Math.min(maxTexture, MAX_IMAGE_SIDE);
   let scale = 1, why = 'texture limit';
   for (const k of KEY_SCALES) if (k * Math.max(w, h) <= side) scale = k;
   if (scale === KEY_SCALES[KEY_SCALES.length - 1]) why = 'largest';
-  if (downlinkMbit) {
+  if (downlinkMbit && !privateHost) {
     const budget = downlinkMbit * 125000 / KEYFRAMES_PER_S;  // bytes a keyframe
     while (scale > 1 && scale * scale * w * h * KEY_BYTES_PER_TEXEL > budget) {
       scale = KEY_SCALES[KEY_SCALES.indexOf(scale) - 1];
