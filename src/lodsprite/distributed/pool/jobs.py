@@ -178,28 +178,26 @@ def job_key(load: LoadArgs) -> bytes:
 def check_load(load: LoadArgs) -> LoadArgs:
     """``load`` validated and normalised as a worker will decode it (as
     :func:`check_job` does a job's); raises :class:`InputError`."""
-    if not isinstance(load, LoadArgs):
-        raise InputError(f"a scene to open is a LoadArgs, got {type(load).__name__}")
-    try:
-        return _load_decoder.decode(_encoder.encode(load))
-    except (msgspec.ValidationError, msgspec.DecodeError) as exc:
-        raise InputError(f"bad load: {exc}") from None
+    return _as_decoded(load, LoadArgs, "a scene to open is a LoadArgs", "bad load")
 
 
 def check_job(job: Job) -> Job:
     """``job`` validated as a worker will decode it (Structs check their constraints only
     when decoded); raises :class:`InputError`."""
-    if not isinstance(job, Job):
-        raise InputError(f"submit takes a Job, got {type(job).__name__}")
+    return _as_decoded(job, Job, "submit takes a Job", "bad job")
+
+
+def _as_decoded(obj, kind: type, wrong_type: str, bad: str):
+    """``obj`` (a ``kind``) encoded and decoded back, as a worker receives it."""
+    if not isinstance(obj, kind):
+        raise InputError(f"{wrong_type}, got {type(obj).__name__}")
     try:
-        return _job_decoder.decode(_job_encoder.encode(job))
+        return _decoders[kind].decode(_encoder.encode(obj))
     except (msgspec.ValidationError, msgspec.DecodeError) as exc:
-        raise InputError(f"bad job: {exc}") from None
+        raise InputError(f"{bad}: {exc}") from None
 
 
-_job_decoder = msgspec.msgpack.Decoder(Job)
-_load_decoder = msgspec.msgpack.Decoder(LoadArgs)
-_job_encoder = msgspec.msgpack.Encoder()
+_decoders = {Job: msgspec.msgpack.Decoder(Job), LoadArgs: msgspec.msgpack.Decoder(LoadArgs)}
 
 
 
