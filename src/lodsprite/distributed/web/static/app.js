@@ -100,7 +100,10 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
     }
     newestDecoded = data.id; newestT0 = header.t0;
     const key = renderer.prepareKeyframe(header, data.bitmap, data.depth);
-    if (pendingKey) renderer.dropKeyframe(pendingKey.key);  // superseded before a frame drew it
+    if (pendingKey) {  // superseded before a frame drew it: not shown, no longer in flight
+      renderer.dropKeyframe(pendingKey.key);
+      predictor?.dropped(pendingKey.header.t0);
+    }
     pendingKey = { header, key, id: data.id, estimate: null };
   };
   decoder.onerror = (e) => { state = `keyframe decoder: ${e.message}`; };
