@@ -2,8 +2,8 @@
 file is either complete or absent, never half-written.
 
 The base I/O of the package (runs, stores, tables, reports): it sits at the bottom,
-importing nothing of lodsprite, so that every level writes through it without reaching
-into :mod:`lodsprite.report`.
+importing nothing of lodsprite but its errors, so that every level writes through it
+without reaching into :mod:`lodsprite.report`.
 """
 
 from __future__ import annotations
@@ -20,8 +20,30 @@ from pathlib import Path
 import numpy as np
 from PIL import Image
 
+from lodsprite.errors import InputError
+
 #: Permissions of every file lodsprite writes (mkstemp's own are owner-only).
 FILE_MODE = 0o644
+
+
+def writable_folder(path: Path | str, option: str = "--out") -> Path:
+    """``path`` checked as a folder outputs can be written to, before any work; raises
+    :class:`~lodsprite.errors.InputError` (one line, naming ``option``) when it cannot
+    be: a file in the way (``FILE/sub``), a place that cannot hold a folder
+    (``/proc/x``), one this user may not write.  It makes nothing: a probe folder is made
+    and removed in the nearest part of ``path`` that exists (the writer makes the rest)."""
+    path = Path(path).expanduser()
+    p = path.absolute()
+    while not p.exists() and p != p.parent:
+        p = p.parent
+    if not p.is_dir():
+        raise InputError(f"{option} {path}: {p} is a file, not a folder")
+    try:
+        os.rmdir(tempfile.mkdtemp(dir=p, prefix=".lodsprite-probe-"))
+    except OSError as exc:
+        raise InputError(f"{option} {path}: cannot write in {p} "
+                         f"({exc.strerror or type(exc).__name__})") from None
+    return path
 
 
 def atomic_write_bytes(path: Path, data: bytes) -> None:

@@ -96,8 +96,10 @@ def render_spec(spec: str, out_dir: Path, mode: str | None = None,
     ``path`` (default: the scene's own, e.g. a crowd's ``walk``, a lumigraph's ``arc``) of
     ``frames``, through :func:`run_scene`; writes the run to ``out_dir``, returns the
     summary."""
+    from lodsprite.files import writable_folder
     from lodsprite.techniques.scenes import open_scene
 
+    writable_folder(out_dir)  # before the scene is opened
     if measure is not None:
         measure.check()  # before the scene is opened
     scene = open_scene(spec, light=True, **(options or {}))
@@ -155,9 +157,12 @@ def render_path(config: RenderConfig, out_dir: Path, progress: Progress | None =
     ``summary.json`` (and the technique's files: a LOD-sprite run's ``keyframes.json``,
     every keyframe rendered, indexed by the ``keyframe`` column) and optionally PNG frames
     and an MP4 ``video`` (with ``config.ground_truth`` each video frame is full
-    resolution | technique | difference) to ``out_dir``; returns the summary."""
+    resolution | technique | difference) to ``out_dir`` (checked first:
+    :func:`~lodsprite.files.writable_folder`); returns the summary."""
+    from lodsprite.files import writable_folder
     from lodsprite.report.video import check_video_path
 
+    writable_folder(out_dir)
     if video is not None:
         check_video_path(video)
     config = config.resolved()

@@ -37,9 +37,12 @@ def crowd(
     its options (--slots, --active, --target-fps, ...): the crowd techniques'
     declarations, under "Technique options"."""
     from lodsprite import techniques
+    from lodsprite.files import writable_folder
     from lodsprite.manager.run import CrowdConfig, run_crowd
     from lodsprite.paths import load_path_json
     from lodsprite.run import parse_size
+
+    writable_folder(out_dir)  # before any work: one line if it cannot be
 
     mode = "discrete" if discrete else ("manager" if manager else "independent")
     o = techniques.get(mode).bind(options or {})

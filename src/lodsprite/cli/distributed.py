@@ -180,6 +180,9 @@ def keys_command(
 ) -> None:
     """Make CURVE key pairs for a LOD server and a client (server.key*, client.key*)."""
     from lodsprite.distributed.keys import make_keys
+    from lodsprite.files import writable_folder
+
+    writable_folder(out_dir)  # before any work: one line if it cannot be
 
     for path in make_keys(out_dir):
         out.print(str(path))
@@ -217,8 +220,10 @@ def client(
 
     from lodsprite.distributed.keys import ClientKeys
     from lodsprite.distributed.run import check_client_options, parse_max_error, run_client
+    from lodsprite.files import writable_folder
     from lodsprite.run import RenderConfig, parse_size
 
+    writable_folder(out_dir)  # before any work: one line if it cannot be
     logging.basicConfig(level=logging.WARNING, format="lodsprite client: %(message)s")
     bound = check_client_options(pace, adopt, parse_max_error(max_error))
     config = RenderConfig(terrain=terrain, texture=texture, path=path, mode="sprite",

@@ -31,7 +31,10 @@ def lumigraph_capture(
     ] = 1,
 ) -> None:
     """Render a two-plane lumigraph of an object: one uv image per st node, compressed."""
+    from lodsprite.files import writable_folder
     from lodsprite.lumigraph.run import capture_lumigraph
+
+    writable_folder(out_dir)  # before any work: one line if it cannot be
 
     with progress_bar("capture") as update:
         s = capture_lumigraph(model, out_dir, st, uv, codec, quality, slabs=slabs,
@@ -52,7 +55,10 @@ def lumigraph_import(
         "--st-scale", help="scale of the camera grid against the image plane")] = 1.0,
 ) -> None:
     """Import a rectified light field of the Stanford archive as a lumigraph."""
+    from lodsprite.files import writable_folder
     from lodsprite.lumigraph.importer import import_stanford
+
+    writable_folder(out_dir)  # before any work: one line if it cannot be
 
     s = import_stanford(folder, out_dir, uv, codec, st_scale=st_scale)
     out.print(f"{s['nodes']} nodes ({s['grid']}x{s['grid']} cameras) of {s['uv']}²; "
@@ -82,9 +88,12 @@ def lumigraph_render(
 ) -> None:
     """Reconstruct a lumigraph along a path with one of the paper's methods (its options:
     the lumigraph techniques' declarations, under "Technique options")."""
+    from lodsprite.files import writable_folder
     from lodsprite.lumigraph.run import render_lumigraph
     from lodsprite.paths import load_path_json
     from lodsprite.run import parse_size
+
+    writable_folder(out_dir)  # before any work: one line if it cannot be
 
     cam = load_path_json(path) if path is not None else None
     opts = dict(options or {})

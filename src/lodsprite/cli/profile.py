@@ -34,6 +34,10 @@ def profile(
     """Compute a model's LOD error profile (Scoggins et al. 2000) and write its table."""
     from lodsprite.cluster import require_dask
     from lodsprite.errors import InputError
+    from lodsprite.files import writable_folder
+
+    if out_path is not None:  # before any work: the folder it goes in
+        writable_folder(out_path.expanduser().absolute().parent, "--out")
     from lodsprite.profiles.generate import ProfileSettings, generate_profile
     from lodsprite.profiles.models import get_model
 

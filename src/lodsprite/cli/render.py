@@ -162,8 +162,11 @@ def render(
     """Render a camera path; write DIR/frames.csv and DIR/summary.json (and PNG frames)."""
     from lodsprite import RenderConfig, render_path
     from lodsprite.driver import Measure
+    from lodsprite.files import writable_folder
     from lodsprite.run import parse_size
     from lodsprite.scene.kinds import scene_kind
+
+    writable_folder(out_dir)  # before any work: one line if it cannot be
 
     options = options or {}
     if scene is not None and scene_kind(scene) is None:  # a terrain, as --terrain
@@ -286,9 +289,13 @@ def view(
 ) -> None:
     """Fly through a terrain with live LOD-sprite, or round a lumigraph (WASD/QE, mouse, tab
     orbit)."""
+    from lodsprite.files import writable_folder
     from lodsprite.run import parse_size
     from lodsprite.viewer.app import ViewOptions
     from lodsprite.viewer.app import view as run_view
+
+    if out_dir is not None:
+        writable_folder(out_dir)  # before any work: one line if it cannot be
 
     opts = ViewOptions(terrain=terrain, texture=texture, grid=grid, mode=mode,
                        size=None if size is None else parse_size(size),

@@ -27,7 +27,10 @@ def tile(
                             "over (pip install 'lodsprite[cluster]')")] = None,
 ) -> None:
     """Build a Zarr v3 terrain pyramid from a DEM larger than memory (resumable)."""
+    from lodsprite.files import writable_folder
     from lodsprite.terrain.store import build_store
+
+    writable_folder(out_dir)  # before any work: one line if it cannot be
 
     with progress_bar("tiles") as update:
         s = build_store(source, out_dir, tile_size, chunk, encoding, scale, overwrite, update,

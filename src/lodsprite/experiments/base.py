@@ -86,9 +86,13 @@ class Experiment:
 
     def reproduce(self, options: Options, out_dir: Path | None = None,
                   progress: StageProgress | None = None) -> tuple[dict, Summary]:
-        """Configure, run (into ``out_dir``, default :attr:`default_out`) and summarise."""
+        """Configure, run (into ``out_dir``, default :attr:`default_out`: checked first,
+        :func:`~lodsprite.files.writable_folder`) and summarise."""
+        from lodsprite.files import writable_folder
+
+        out = writable_folder(Path(out_dir or self.default_out))
         config = self.configure(options)
-        results, report = self.run(config, Path(out_dir or self.default_out), progress)
+        results, report = self.run(config, out, progress)
         summary = self.summary(results)
         summary.report = report
         return results, summary
