@@ -28,9 +28,23 @@ from lodsprite.cli.common import (
 from lodsprite.terrain import DEFAULT_EXAGGERATION
 
 
-def info() -> None:
-    """Print the OpenGL renderer, version and maximum texture size, and the registered
-    techniques with their options."""
+def info(
+    dataset: Annotated[str | None, typer.Argument(
+        help="a GeoTIFF, a terrain store, fractal:N or jacksboro: its CRS, extent, "
+             "resolution, nodata and levels (without: this machine's GL and the "
+             "techniques)")] = None,
+) -> None:
+    """Print a dataset's CRS, extent, resolution, nodata and levels; without one, the
+    OpenGL renderer, version and maximum texture size, and the registered techniques with
+    their options."""
+    if dataset is not None:
+        from lodsprite.terrain.describe import describe
+
+        t = Table(show_header=False)
+        for k, v in describe(dataset).items():
+            t.add_row(k, v)
+        out.print(t)
+        return
     from lodsprite import techniques
     from lodsprite.gl.context import GLContext
 

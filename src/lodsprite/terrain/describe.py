@@ -1,0 +1,137 @@
+"""What a dataset is, as a GIS user asks (``lodsprite info DATASET``): a GeoTIFF's or a
+terrain store's CRS, extent, resolution, nodata, levels and size, read from its header
+only (a GeoTIFF's metadata through rasterio, a store's ``attrs``), never its samples.
+
+:func:`describe` returns an ordered ``{field: text}``; GL-free, imports nothing of the
+renderers.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from lodsprite.errors import TerrainError
+from lodsprite.terrain.rasters import first_line
+
+__all__ = ["describe"]
+
+
+def describe(spec: str | Path) -> dict[str, str]:
+    """The fields of dataset ``spec`` (a GeoTIFF, a terrain store, ``fractal:N``,
+    ``jacksboro``), as text, in the order a reader wants them; raises
+    :class:`~lodsprite.errors.TerrainError` for what is none of these or cannot be read."""
+    from lodsprite.terrain.loaders import parse_fractal_spec
+    from lodsprite.terrain.store import is_store
+
+    text = str(spec).strip()
+    parsed = parse_fractal_spec(text)
+    if parsed is not None:
+        n, seed = parsed
+        return {"dataset": text, "kind": "generated fractal (in memory)",
+                "samples": f"{n + 1} x {n + 1}", "seed": str(seed),
+                "CRS": "none (metres from the centre)",
+                "resolution": "30 x 30 m"}
+    path = Path(text).expanduser()
+    if is_store(path):
+        return _store(path)
+    if path.suffix.lower() in (".tif", ".tiff") and path.is_file():
+        return _geotiff(path)
+    if text.lower() == "jacksboro":
+        from lodsprite.terrain.loaders import load_heightfield
+
+        hf = load_heightfield("jacksboro")  # 344 x 403: the header is the array's
+        m = hf.meta
+        return {"dataset": "jacksboro", "kind": "matplotlib's sample DEM (int16 metres)",
+                "samples": f"{hf.rows} x {hf.cols}", "CRS": m["crs"],
+                "extent": (f"west {m['west']:.6g}, south {m['south']:.6g}, east "
+                           f"{m['east']:.6g}, north {m['north']:.6g}"),
+                "resolution": f"{_metres(hf.dx)} x {_metres(hf.dy)} m (3 arc-seconds)"}
+    if not path.exists():
+        raise TerrainError(f"no such dataset: {text}")
+    raise TerrainError(f"{text}: info describes a GeoTIFF, a terrain store or fractal:N")
+
+
+def _metres(v: float) -> str:
+    return f"{v:,.3f}".rstrip("0").rstrip(".")
+
+
+def _geotiff(path: Path) -> dict[str, str]:
+    import warnings
+
+    import rasterio
+    from rasterio.errors import NotGeoreferencedWarning
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", NotGeoreferencedWarning)
+            with rasterio.open(path) as ds:
+                b = ds.bounds
+                out = {"dataset": str(path), "kind": f"raster ({ds.driver})",
+                       "samples": f"{ds.height} x {ds.width}, {ds.count} band(s), "
+                                  f"{ds.dtypes[0]}",
+                       "CRS": _crs(ds.crs),
+                       "extent": (f"west {b.left:.6g}, south {b.bottom:.6g}, east "
+                                  f"{b.right:.6g}, north {b.top:.6g}"),
+                       "resolution": f"{abs(ds.res[0]):.6g} x {abs(ds.res[1]):.6g} "
+                                     f"{_units(ds.crs)}",
+                       "nodata": "none" if ds.nodata is None else f"{ds.nodata:g}",
+                       "overviews": ", ".join(str(f) for f in ds.overviews(1)) or "none",
+                       "tiling": ("tiled " + "x".join(str(s) for s in ds.block_shapes[0])
+                                  if ds.profile.get("tiled") else "striped"),
+                       "compression": str(ds.compression.value if ds.compression
+                                          else "none").lower()}
+    except Exception as exc:  # GDAL raises RasterioError or CPLE_* errors
+        raise TerrainError(f"cannot read {path}: {first_line(exc)}") from None
+    return out
+
+
+def _crs(crs) -> str:
+    if crs is None:
+        return "none (metres assumed)"
+    epsg = crs.to_epsg()
+    name = crs.to_dict().get("proj", "") if epsg is None else ""
+    return f"EPSG:{epsg}" if epsg is not None else (name or crs.to_string()[:80])
+
+
+def _units(crs) -> str:
+    if crs is None:
+        return "(no CRS)"
+    if crs.is_geographic:
+        return "degrees"
+    try:
+        return crs.linear_units_factor[0]
+    except Exception:  # noqa: BLE001 - a CRS without a linear unit
+        return "units"
+
+
+def _store(path: Path) -> dict[str, str]:
+    from lodsprite.errors import InputError
+    from lodsprite.terrain.store import TerrainStore
+
+    try:
+        st = TerrainStore(path)
+    except InputError as exc:
+        raise TerrainError(str(exc)) from None
+    h = st.header
+    levels = ", ".join("x".join(str(s) for s in st.shape(k)) for k in range(h.levels))
+    out = {"dataset": str(path), "kind": f"lodsprite terrain store (format {h.version})",
+           "source": h.source,
+           "samples": f"{h.rows} x {h.cols}, {h.encoding}" + (
+               f" (value x {h.scale:g} + {h.offset:g} m)" if h.encoding == "int16" else ""),
+           "CRS": h.crs or "none (metres from the centre)"}
+    if h.transform:
+        a, _, c, _, e, f = h.transform[:6]
+        w, s = c + a * h.cols, f + e * h.rows
+        out["extent"] = (f"west {min(c, w):.6g}, south {min(f, s):.6g}, east "
+                         f"{max(c, w):.6g}, north {max(f, s):.6g}")
+    else:
+        out["extent"] = (f"{_metres(h.dx * (h.cols - 1))} x {_metres(h.dy * (h.rows - 1))} m, "
+                         "centred on the origin")
+    out["resolution"] = f"{_metres(h.dx)} x {_metres(h.dy)} m"
+    out["levels"] = f"{h.levels}: {levels}"
+    if h.level_errors:
+        out["level errors"] = ", ".join(f"{e:.3g}" for e in h.level_errors) + " m"
+    out["tiles"] = f"{h.tile} a side, chunks of {h.chunk}"
+    out["complete"] = "yes" if h.complete else "no (resumable: tile it again)"
+    out["imagery"] = "none"
+    return out
