@@ -113,7 +113,7 @@ def get_path(spec: str | os.PathLike, hf: HeightField, frames: int | None = None
     if among is not None:
         return weave(hf, CHEN1999_FRAMES if frames is None else frames, *among)
     if Path(key).is_file() or key.lower().endswith(".json"):
-        path = load_path_json(key)
+        path = load_path_json(key, getattr(hf, "meta", None))
         return path if frames is None else path.resampled(frames)
     raise PathError(f"unknown path '{key}': use chen1999, swan2002, "
                     "flyover[:HEIGHT_M[:TRACK_M]], patrol[:HEIGHT_M[:TRACK_M[:PASSES]]], "

@@ -11,8 +11,16 @@ of this form::
       "name": "my-flight",             optional string (default: the file's stem)
       "fov_y_deg": 45.0,               optional number in (0, 180), degrees
                                        (default 45)
+      "coordinates": "world",          optional: "world" (default) or "dataset"
       "frames": [ FRAME, FRAME, ... ]  required, at least one frame
     }
+
+With ``"coordinates": "dataset"`` every frame is a look-at frame whose ``eye`` and
+``target`` are (easting, northing, height) in the terrain dataset's own CRS (its units;
+degrees east and north for a geographic one) and metres above its datum, as a GIS gives
+them; they are placed in the world (metres from the terrain's centre, heights times the
+vertical exaggeration) by :func:`dataset_to_world`, with the terrain the path is flown
+over (a georeferenced GeoTIFF or store; any other terrain refuses such a path).
 
 Each ``FRAME`` is an object in one of two forms (a file may mix them):
 
@@ -178,12 +186,13 @@ class CameraPath:
         }
 
     @classmethod
-    def from_dict(cls, doc: object, source: str = "<dict>", default_name: str = "path"
-                  ) -> CameraPath:
+    def from_dict(cls, doc: object, source: str = "<dict>", default_name: str = "path",
+                  terrain_meta: dict | None = None) -> CameraPath:
         """Parse a JSON document (see the module docstring); raises :class:`PathError`.
 
         ``source`` names the document in error messages; ``default_name`` is
-        used when the document has no ``"name"``.
+        used when the document has no ``"name"``; ``terrain_meta``: the terrain's meta,
+        for ``"coordinates": "dataset"`` (:func:`dataset_to_world`).
         """
         if not isinstance(doc, dict):
             raise PathError(f"{source}: a camera path must be a JSON object, "
@@ -207,6 +216,12 @@ class CameraPath:
             raise PathError(f"{source}: \"frames\" must be a list of frame objects")
         if not frames:
             raise PathError(f"{source}: \"frames\" is empty; a path needs at least one frame")
+        coords = doc.get("coordinates", "world")
+        if coords not in ("world", "dataset"):
+            raise PathError(f"{source}: \"coordinates\" must be \"world\" or \"dataset\", "
+                            f"got {coords!r}")
+        if coords == "dataset":
+            frames = [_placed(f, i, source, terrain_meta or {}) for i, f in enumerate(frames)]
         vps = tuple(_parse_frame(f, i, source) for i, f in enumerate(frames))
         return cls(name, vps, fov_f)
 
@@ -223,8 +238,29 @@ class CameraPath:
                             f"{exc.strerror or exc}") from exc
 
 
-def load_path_json(path_file: str | os.PathLike) -> CameraPath:
-    """Read a JSON camera path (format in the module docstring).
+def dataset_to_world(points: np.ndarray, meta: dict) -> np.ndarray:
+    """``points (N, 3)`` (easting, northing, height: the dataset's CRS units and metres)
+    as world points (metres from the terrain's centre; heights times its exaggeration),
+    by the terrain's ``meta`` (a :class:`~lodsprite.terrain.HeightField`'s: ``georef``,
+    :func:`~lodsprite.terrain.rasters.georef`, and ``exaggeration``).  The world's origin
+    is the centre of the dataset's bounds (its samples are the cells' centres, spaced
+    evenly about it); raises :class:`PathError` for a terrain without a georeference."""
+    ref = meta.get("georef")
+    if not ref:
+        raise PathError("a path in dataset coordinates needs a georeferenced terrain "
+                        "(a GeoTIFF or a store with a CRS)")
+    w, s, e, n = ref["bounds"]
+    fx, fy = ref["metres_per_unit"]
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    ex = float(meta.get("exaggeration", 1.0))
+    return np.stack([(p[:, 0] - 0.5 * (w + e)) * fx, (p[:, 1] - 0.5 * (s + n)) * fy,
+                     p[:, 2] * ex], axis=1)
+
+
+def load_path_json(path_file: str | os.PathLike, terrain_meta: dict | None = None
+                   ) -> CameraPath:
+    """Read a JSON camera path (format in the module docstring); ``terrain_meta``: the
+    meta of the terrain it is flown over, for a path in dataset coordinates.
 
     Raises :class:`PathError` with a one-line message for a missing or
     unreadable file, invalid JSON, a wrong ``format``/``version``, an empty
@@ -242,7 +278,8 @@ def load_path_json(path_file: str | os.PathLike) -> CameraPath:
     except json.JSONDecodeError as exc:
         raise PathError(f"{p}: invalid JSON at line {exc.lineno}, column {exc.colno}: "
                         f"{exc.msg}") from exc
-    return CameraPath.from_dict(doc, source=str(p), default_name=p.stem)
+    return CameraPath.from_dict(doc, source=str(p), default_name=p.stem,
+                                terrain_meta=terrain_meta)
 
 
 def _finite_float(v: object) -> float | None:
@@ -261,6 +298,20 @@ def _vec3(frame: dict, key: str, where: str) -> np.ndarray:
     if any(c is None for c in out):
         raise PathError(f"{where}: \"{key}\" must hold 3 finite numbers, got {v!r}")
     return np.array(out, dtype=np.float64)
+
+
+def _placed(frame: object, index: int, source: str, meta: dict) -> dict:
+    """A look-at frame in dataset coordinates with its eye and target in the world's."""
+    where = f"{source}: frame {index}"
+    if not isinstance(frame, dict) or not {"eye", "target"} <= set(frame):
+        raise PathError(f"{where}: a path in dataset coordinates has look-at frames "
+                        "(eye, target[, up])")
+    pts = np.stack([_vec3(frame, "eye", where), _vec3(frame, "target", where)])
+    try:
+        eye, target = dataset_to_world(pts, meta)
+    except PathError as exc:
+        raise PathError(f"{source}: {exc}") from None
+    return {**frame, "eye": eye.tolist(), "target": target.tolist()}
 
 
 def _parse_frame(frame: object, index: int, source: str) -> Viewpoint:

@@ -34,6 +34,7 @@ from lodsprite.terrain.heightfield import DEFAULT_GRID, HeightField
 from lodsprite.terrain.rasters import (
     DEFAULT_SPACING_M,
     first_line,
+    georef,
     geotiff_spacing,
     heightfield_from_array,
     metres_per_degree,
@@ -187,6 +188,9 @@ def _load_geotiff(path: Path) -> HeightField:
                 a = ds.read(1, masked=True)
                 transform = ds.transform
                 dx, dy, meta = geotiff_spacing(path, transform, ds.crs, ds.height)
+                if ds.crs is not None:  # where the dataset's own coordinates lie
+                    meta["georef"] = georef(ds.bounds, (dx / abs(transform.a),
+                                                        dy / abs(transform.e)))
     except TerrainError:
         raise
     except Exception as e:                      # GDAL raises RasterioError or CPLE_* errors

@@ -96,6 +96,16 @@ def _fill_holes(h: np.ndarray, valid: np.ndarray, name: str) -> float:
     return fraction
 
 
+def georef(bounds, metres_per_unit: tuple[float, float]) -> dict:
+    """Where a georeferenced dataset lies in its own CRS, for turning its coordinates into
+    the world's (metres from the terrain's centre, :func:`lodsprite.paths.core.
+    dataset_to_world`): ``bounds`` west, south, east, north (CRS units, the outer edges
+    of the cells) and the metres a CRS unit spans east and north there."""
+    w, s, e, n = (float(v) for v in bounds)
+    return {"bounds": [w, s, e, n], "metres_per_unit": [float(metres_per_unit[0]),
+                                                         float(metres_per_unit[1])]}
+
+
 def geotiff_spacing(path: Path, transform: Affine, crs: CRS | None,
                      height: int) -> tuple[float, float, dict]:
     """``dx, dy`` in metres and metadata from an affine ``transform`` and ``crs``."""

@@ -383,6 +383,13 @@ class TerrainStore:
         meta = {"source": str(self.path), "format": "lodsprite terrain store",
                 "level": k, "store_rows": self.header.rows, "store_cols": self.header.cols,
                 "crs": self.header.crs}
+        if h.crs and h.transform:  # where the dataset's own coordinates lie
+            from lodsprite.terrain.rasters import georef
+
+            sx, _, x0, _, sy, y0 = h.transform[:6]
+            x1, y1 = x0 + sx * h.cols, y0 + sy * h.rows
+            meta["georef"] = georef((min(x0, x1), min(y0, y1), max(x0, x1), max(y0, y1)),
+                                    (h.dx / abs(sx), h.dy / abs(sy)))
         dx = h.dx * (h.cols - 1) / max(c - 1, 1)
         dy = h.dy * (h.rows - 1) / max(r - 1, 1)
         return heightfield_from_array(a, dx, dy, self.path.name, meta)
