@@ -73,6 +73,17 @@ def test_an_eye_in_degrees_lands_over_its_cell(tmp_path):
         1000.0 * 20 + 17, abs=1e-3)
 
 
+def test_jacksboro_takes_a_path_in_degrees(tmp_path):
+    """The built-in DEM (EPSG:4326) places an eye given in degrees over its centre at the
+    world's origin."""
+    hf = load_heightfield("jacksboro")
+    m = hf.meta
+    lon, lat = 0.5 * (m["west"] + m["east"]), 0.5 * (m["south"] + m["north"])
+    vp = get_path(path_file(tmp_path, [{"eye": [lon, lat, 2000.0],
+                                        "target": [lon, lat + 0.01, 0.0]}]), hf).viewpoints[0]
+    np.testing.assert_allclose(vp.o, [0.0, 0.0, 2000.0], atol=1e-6)
+
+
 def test_the_store_tiled_from_it_places_the_same_eye(tmp_path):
     from lodsprite.terrain.store import build_store
 

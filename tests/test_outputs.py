@@ -58,6 +58,10 @@ def test_writable_folder_makes_nothing_and_names_what_is_in_the_way(tmp_path):
         writable_folder(tmp_path / "f")
     with pytest.raises(InputError, match="cannot write in /proc"):
         writable_folder("/proc/x/y")
+    (tmp_path / "dangling").symlink_to(tmp_path / "nowhere")
+    with pytest.raises(InputError, match="dangling is a broken link"):
+        writable_folder(tmp_path / "dangling" / "run")
+    (tmp_path / "dangling").unlink()
     deep = tmp_path / "new" / "deeper"
     assert writable_folder(deep) == deep and not (tmp_path / "new").exists()
     assert writable_folder(tmp_path) == tmp_path

@@ -34,13 +34,15 @@ def writable_folder(path: Path | str, option: str = "--out") -> Path:
     and removed in the nearest part of ``path`` that exists (the writer makes the rest)."""
     path = Path(path).expanduser()
     p = path.absolute()
-    while not p.exists() and p != p.parent:
-        p = p.parent
-    if not p.is_dir():
-        raise InputError(f"{option} {path}: {p} is a file, not a folder")
     try:
+        while not os.path.lexists(p) and p != p.parent:
+            p = p.parent
+        if os.path.islink(p) and not os.path.exists(p):
+            raise InputError(f"{option} {path}: {p} is a broken link")
+        if not os.path.isdir(p):
+            raise InputError(f"{option} {path}: {p} is a file, not a folder")
         os.rmdir(tempfile.mkdtemp(dir=p, prefix=".lodsprite-probe-"))
-    except OSError as exc:
+    except OSError as exc:  # a folder it may not enter, a read-only place, /proc
         raise InputError(f"{option} {path}: cannot write in {p} "
                          f"({exc.strerror or type(exc).__name__})") from None
     return path

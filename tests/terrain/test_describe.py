@@ -34,7 +34,7 @@ def test_a_geotiffs_header_is_described_as_written(utm_tif):
     d = describe(utm_tif)
     assert d["CRS"] == "EPSG:32614"
     assert d["samples"] == "600 x 520, 1 band(s), float32"
-    assert d["extent"] == "west 500000, south 4.082e+06, east 515600, north 4.1e+06"
+    assert d["extent"] == "west 500000, south 4082000, east 515600, north 4100000"
     assert d["resolution"] == "30 x 30 metre"
     assert d["nodata"] == "-9999" and d["overviews"] == "2, 4"
     assert d["tiling"] == "tiled 64x64"
@@ -52,8 +52,43 @@ def test_a_stores_header_gives_its_levels_crs_and_extent(utm_tif, tmp_path):
     assert d["resolution"] == "30 x 30 m"
     # halved until the longer side is at most 256 (rounded up)
     assert d["levels"] == "3: 600x520, 300x260, 150x130"
-    assert "west 500000" in d["extent"] and "north 4.1e+06" in d["extent"]
-    assert d["imagery"] == "none"
+    assert d["extent"] == "west 500000, south 4082000, east 515600, north 4100000"
+    assert d["imagery"].startswith("none")
+
+
+def test_a_south_up_raster_and_an_unfinished_store_are_described_as_they_are(tmp_path):
+    import rasterio
+    from rasterio.transform import Affine
+
+    from lodsprite.terrain.store import build_store
+
+    path = tmp_path / "south-up.tif"  # row 0 south: a positive y cell size
+    with rasterio.open(path, "w", driver="GTiff", height=300, width=280, count=1,
+                       dtype="float32", crs="EPSG:32614",
+                       transform=Affine(30.0, 0.0, 500000.0, 0.0, 30.0, 4091000.5)) as ds:
+        ds.write(np.ones((300, 280), np.float32), 1)
+    assert describe(path)["extent"] == ("west 500000, south 4091000.5, east 508400, "
+                                        "north 4100000.5")
+    store = tmp_path / "part.zarr"
+    build_store(str(path), store, tile=64, chunk=32, stop_after=1)  # interrupted
+    d = describe(store)
+    assert d["complete"].startswith("no (resumable")
+    assert d["levels"] == "2: 300x280, 150x140"
+
+
+def test_a_store_header_with_a_broken_transform_is_one_error(tmp_path):
+    import zarr
+
+    from lodsprite.terrain.store_format import read_header
+
+    g = zarr.open_group(str(tmp_path / "s.zarr"), mode="w")
+    base = {"format": "lodsprite-terrain", "version": 1, "source": "x", "rows": 4,
+            "cols": 4, "dx": 1.0, "dy": 1.0, "levels": 1, "tile": 64, "chunk": 32,
+            "encoding": "float32"}
+    for t in ([1.0, 0.0], [0.0, 0.0, 0.0, 0.0, -1.0, 0.0]):
+        g.attrs["lodsprite"] = {**base, "transform": t}
+        with pytest.raises(Exception, match="transform must be 6 finite numbers"):
+            read_header(g)
 
 
 def test_built_ins_and_refusals(tmp_path):

@@ -43,12 +43,18 @@ def describe(spec: str | Path) -> dict[str, str]:
         m = hf.meta
         return {"dataset": "jacksboro", "kind": "matplotlib's sample DEM (int16 metres)",
                 "samples": f"{hf.rows} x {hf.cols}", "CRS": m["crs"],
-                "extent": (f"west {m['west']:.6g}, south {m['south']:.6g}, east "
-                           f"{m['east']:.6g}, north {m['north']:.6g}"),
+                "extent": _extent(m["west"], m["south"], m["east"], m["north"]),
                 "resolution": f"{_metres(hf.dx)} x {_metres(hf.dy)} m (3 arc-seconds)"}
     if not path.exists():
         raise TerrainError(f"no such dataset: {text}")
     raise TerrainError(f"{text}: info describes a GeoTIFF, a terrain store or fractal:N")
+
+
+def _extent(x0: float, y0: float, x1: float, y1: float) -> str:
+    """West, south, east, north of two corners in any order (a south-up or east-to-west
+    raster's bounds come reversed), to a millimetre of a UTM northing."""
+    w, e, s, n = min(x0, x1), max(x0, x1), min(y0, y1), max(y0, y1)
+    return f"west {w:.10g}, south {s:.10g}, east {e:.10g}, north {n:.10g}"
 
 
 def _metres(v: float) -> str:
@@ -70,8 +76,7 @@ def _geotiff(path: Path) -> dict[str, str]:
                        "samples": f"{ds.height} x {ds.width}, {ds.count} band(s), "
                                   f"{ds.dtypes[0]}",
                        "CRS": _crs(ds.crs),
-                       "extent": (f"west {b.left:.6g}, south {b.bottom:.6g}, east "
-                                  f"{b.right:.6g}, north {b.top:.6g}"),
+                       "extent": _extent(b.left, b.bottom, b.right, b.top),
                        "resolution": f"{abs(ds.res[0]):.6g} x {abs(ds.res[1]):.6g} "
                                      f"{_units(ds.crs)}",
                        "nodata": "none" if ds.nodata is None else f"{ds.nodata:g}",
@@ -105,25 +110,29 @@ def _units(crs) -> str:
 
 
 def _store(path: Path) -> dict[str, str]:
+    """A store's header, read as it is (an unfinished build too, which
+    :class:`~lodsprite.terrain.store.TerrainStore` refuses to open)."""
+    import zarr
+
     from lodsprite.errors import InputError
-    from lodsprite.terrain.store import TerrainStore
+    from lodsprite.terrain.store_format import level_shape, read_header
 
     try:
-        st = TerrainStore(path)
+        h = read_header(zarr.open_group(str(path), mode="r"))
     except InputError as exc:
-        raise TerrainError(str(exc)) from None
-    h = st.header
-    levels = ", ".join("x".join(str(s) for s in st.shape(k)) for k in range(h.levels))
+        raise TerrainError(f"{path}: {exc}") from None
+    except Exception as exc:  # noqa: BLE001 - zarr raises many kinds on a damaged store
+        raise TerrainError(f"{path}: unreadable terrain store ({type(exc).__name__})") from None
+    levels = ", ".join("x".join(str(s) for s in level_shape(h.rows, h.cols, k))
+                       for k in range(h.levels))
     out = {"dataset": str(path), "kind": f"lodsprite terrain store (format {h.version})",
            "source": h.source,
            "samples": f"{h.rows} x {h.cols}, {h.encoding}" + (
                f" (value x {h.scale:g} + {h.offset:g} m)" if h.encoding == "int16" else ""),
-           "CRS": h.crs or "none (metres from the centre)"}
+           "CRS": (h.crs or "none (metres from the centre)")[:80]}
     if h.transform:
-        a, _, c, _, e, f = h.transform[:6]
-        w, s = c + a * h.cols, f + e * h.rows
-        out["extent"] = (f"west {min(c, w):.6g}, south {min(f, s):.6g}, east "
-                         f"{max(c, w):.6g}, north {max(f, s):.6g}")
+        a, _, c, _, e, f = h.transform
+        out["extent"] = _extent(c, f + e * h.rows, c + a * h.cols, f)
     else:
         out["extent"] = (f"{_metres(h.dx * (h.cols - 1))} x {_metres(h.dy * (h.rows - 1))} m, "
                          "centred on the origin")
@@ -133,5 +142,5 @@ def _store(path: Path) -> dict[str, str]:
         out["level errors"] = ", ".join(f"{e:.3g}" for e in h.level_errors) + " m"
     out["tiles"] = f"{h.tile} a side, chunks of {h.chunk}"
     out["complete"] = "yes" if h.complete else "no (resumable: tile it again)"
-    out["imagery"] = "none"
+    out["imagery"] = "none (this store format holds heights only)"
     return out

@@ -167,7 +167,8 @@ def _load_jacksboro() -> HeightField:
     per_lat, per_lon = metres_per_degree((north + south) / 2)
     meta = {"source": "jacksboro", "file": _JACKSBORO, "crs": "EPSG:4326",
             "north": north, "south": south, "west": d["xmin"], "east": d["xmax"],
-            "centre_lat": (north + south) / 2}
+            "centre_lat": (north + south) / 2,
+            "georef": georef((d["xmin"], south, d["xmax"], north), (per_lon, per_lat))}
     return heightfield_from_array(z, d["dx"] * per_lon, d["dy"] * per_lat, "jacksboro", meta)
 
 

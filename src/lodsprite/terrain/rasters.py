@@ -99,9 +99,11 @@ def _fill_holes(h: np.ndarray, valid: np.ndarray, name: str) -> float:
 def georef(bounds, metres_per_unit: tuple[float, float]) -> dict:
     """Where a georeferenced dataset lies in its own CRS, for turning its coordinates into
     the world's (metres from the terrain's centre, :func:`lodsprite.paths.core.
-    dataset_to_world`): ``bounds`` west, south, east, north (CRS units, the outer edges
-    of the cells) and the metres a CRS unit spans east and north there."""
-    w, s, e, n = (float(v) for v in bounds)
+    dataset_to_world`): ``bounds`` two opposite corners (x0, y0, x1, y1 in CRS units, the
+    outer edges of the cells; a south-up raster's come reversed), kept as west, south,
+    east, north, and the metres a CRS unit spans east and north there."""
+    x0, y0, x1, y1 = (float(v) for v in bounds)
+    w, s, e, n = min(x0, x1), min(y0, y1), max(x0, x1), max(y0, y1)
     return {"bounds": [w, s, e, n], "metres_per_unit": [float(metres_per_unit[0]),
                                                          float(metres_per_unit[1])]}
 

@@ -7,6 +7,7 @@ What :mod:`lodsprite.terrain.store` builds and reads (the layout is described th
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 from typing import Literal
 
@@ -88,9 +89,15 @@ def read_header(group) -> StoreHeader:
     if raw is None:
         raise InputError("not a lodsprite terrain store (no header)")
     try:
-        return msgspec.convert(raw, StoreHeader)
+        header = msgspec.convert(raw, StoreHeader)
     except msgspec.ValidationError as exc:
         raise InputError(f"malformed terrain store header: {exc}") from exc
+    t = header.transform
+    if t is not None and (len(t) != 6 or not all(math.isfinite(v) for v in t)
+                          or t[0] == 0 or t[4] == 0):
+        raise InputError("malformed terrain store header: the transform must be 6 finite "
+                         "numbers with non-zero cell sizes")
+    return header
 
 
 def is_store(path: str | Path) -> bool:

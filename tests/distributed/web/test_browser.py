@@ -501,7 +501,8 @@ def test_a_page_keeps_the_servers_jobs_in_flight_spread_over_its_latency(server,
     """With two renders in flight a session (the load reply's ``jobs``), the page's
     predictor sends a second request while one is in flight, no sooner than half its
     latency after the first, never a third; one that came after a newer keyframe frees
-    its place; a failed one too.  One job: never with one in flight (as before)."""
+    its place; a failed one too.  One job: never with one in flight (as before); a jobs
+    count that is not an integer from 1 to 16 is taken as one."""
     browser.get(page_url(server, query=QUERY.split("&path=")[0]))
     got = browser.execute_async_script("""
         const done = arguments[arguments.length - 1];
@@ -522,10 +523,11 @@ def test_a_page_keeps_the_servers_jobs_in_flight_spread_over_its_latency(server,
             pred.failed(5); at(0.6);              // the one sent at 0.55 failed
             return asked;
           };
-          done({two: run(2), one: run(1)});
+          done({two: run(2), one: run(1), bad: [run('x'), run(1e9), run(NaN), run(2.5)]});
         }, (e) => done(String(e)));""")
     assert got["two"] == [True, False, True, False, True, True], got
     assert got["one"] == [True, False, False, False, True, True], got
+    assert all(b == got["one"] for b in got["bad"]), got  # a reply's bad jobs count: one
 
 
 # RMSE (grey levels, 0..255, over RGB) between the page's spriteframe (gl.js on

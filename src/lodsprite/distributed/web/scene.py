@@ -105,8 +105,8 @@ def build_scene_field(args: LoadArgs, codec: str = "raw",
             raise InputError(f"lod {args.lod} exceeds the scene's terrain grid "
                              f"{scene.hf.quads}")
         return scene_parts(scene, args, codec), scene.hf
-    # the load's scene description (a SceneSpec); a store's working grid as its renderers
-    # load it (light: from its finest level of at most 1025 a side, not up to 4096²: a
+    # the load's scene description (a SceneSpec); a store's working grid as its adaptive
+    # renderers load it (light: from its finest level of at most 1025 a side, not up to 4096²: a
     # 16k² store's message in 0.8 s instead of 3.5 s here, from the keyframes' own grid)
     scene = open_spec(args, light=True)
     return scene_parts(scene, args, codec), scene.hf

@@ -172,7 +172,9 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
     if (h.walkers) walkers = new WalkerDrawer(renderer.gl, walkerData(h.walkers));
     focal = height / (2 * Math.tan(h.fov * Math.PI / 360));  // pixels a metre at unit depth
     metric = coarseMetric = new ErrorMetric(h, scene.heights);
-    predictor = new Predictor(h.epsilon, h.fov, width / height, h.near, h.far, height, reply.data?.jobs ?? 1);
+    const jobs = reply.data?.jobs;  // the server's renders in flight for this page: 1-16
+    predictor = new Predictor(h.epsilon, h.fov, width / height, h.near, h.far, height,
+      Number.isInteger(jobs) && jobs >= 1 && jobs <= 16 ? jobs : 1);
     const extent = h.coarse * h.spacing;
     const centre = [h.origin[0] + extent / 2, h.origin[1] + extent / 2, 0];
     controls = new FlyControls(canvas, lookAt([centre[0], centre[1] - 1.2 * extent, 0.6 * extent], centre), 0.25 * extent, keyTarget);

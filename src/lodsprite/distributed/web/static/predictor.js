@@ -213,7 +213,7 @@ export class Predictor {
     this.beta = (fovDeg * Math.PI / 180) / heightPx;
     this.samples = [];   // [t seconds, viewpoint], the last two
     this.latency = 0.1;  // seconds, measured (an exponential mean of request -> keyframe)
-    this.jobs = Math.max(1, Math.floor(jobs));  // requests in flight at most
+    this.jobs = Number.isInteger(jobs) && jobs >= 1 && jobs <= 16 ? jobs : 1;  // in flight at most
     this.inflight = [];  // {t, vp, seq}: the requests unanswered, oldest first
     this.settled = false;
   }
