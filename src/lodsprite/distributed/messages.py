@@ -275,6 +275,18 @@ class WalkerSet(Struct, forbid_unknown_fields=True):
     far: Annotated[float, Meta(gt=0.0, le=MAX_COORD)]
 
 
+class Georef(Struct, forbid_unknown_fields=True):
+    """Where the scene's terrain lies in its dataset's CRS (:func:`lodsprite.terrain.
+    rasters.georef`), for the page's cursor coordinates: ``crs`` (its name, e.g.
+    ``EPSG:32614``), ``bounds`` west, south, east, north (CRS units, the cells' outer
+    edges; the world's origin is their centre) and ``metres_per_unit`` east and north."""
+
+    crs: Annotated[str, Meta(max_length=200)]
+    bounds: tuple[Coord, Coord, Coord, Coord]
+    metres_per_unit: tuple[Annotated[float, Meta(gt=0.0, le=1e9)],
+                           Annotated[float, Meta(gt=0.0, le=1e9)]]
+
+
 class SceneMessage(Message, tag="scene"):
     """What a web page draws spriteframes from, after its ``load``: the coarse level
     (``coarse`` quads a side) as heights ``(coarse+1, coarse+1) float32`` (world z,
@@ -288,7 +300,9 @@ class SceneMessage(Message, tag="scene"):
     (:func:`lodsprite.terrain.proxy.border_ribbon`; empty when the load asked for none),
     vertices ``(V, 3) float32`` world metres and triangles ``(T, 3) uint32`` indices into
     them, little-endian bytes: what the keyframe's coarse z-buffer was drawn with.
-    ``walkers``: a scene file's moving objects (:class:`WalkerSet`), None without."""
+    ``walkers``: a scene file's moving objects (:class:`WalkerSet`), None without.
+    ``exaggeration``: the vertical exaggeration the heights carry; ``georef``: where the
+    terrain lies in its dataset's CRS (:class:`Georef`), None for a terrain without one."""
 
     coarse: Annotated[int, Meta(ge=1, le=MAX_SCENE_COARSE)]
     origin: tuple[Coord, Coord]
@@ -306,6 +320,8 @@ class SceneMessage(Message, tag="scene"):
     ribbon: Annotated[bytes, Meta(max_length=12 * MAX_RIBBON_VERTICES)] = b""
     ribbon_tris: Annotated[bytes, Meta(max_length=12 * MAX_RIBBON_TRIANGLES)] = b""
     walkers: WalkerSet | None = None
+    exaggeration: Annotated[float, Meta(gt=0.0, le=1000.0)] = 1.0
+    georef: Georef | None = None
 
 
 ANY_MESSAGE = (Control | Reply | ViewpointMessage | KeyframeMessage | Ack | Request

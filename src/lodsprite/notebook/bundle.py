@@ -25,7 +25,7 @@ from lodsprite.errors import LodspriteError
 __all__ = ["MODULES", "import_order", "widget_css", "widget_esm"]
 
 STATIC = Path(__file__).resolve().parents[1] / "distributed" / "web" / "static"
-MODULES = ("app.js", "camera.js", "decode.js", "depth_estimate.js", "gl.js", "hud.js",
+MODULES = ("app.js", "camera.js", "cursor.js", "decode.js", "depth_estimate.js", "gl.js", "hud.js",
            "predictor.js", "walkers.js", "wire.js")
 """The page's modules the widget runs (main.js, the page's WebSocket transport, is not)."""
 _IMPORT = re.compile(r"""\bfrom\s+['"]\./([\w.-]+\.js)['"]""")

@@ -78,7 +78,23 @@ area = [-600.0, -600.0, 600.0, 600.0]
 def data_dir(tmp_path_factory):
     data = tmp_path_factory.mktemp("data")
     (data / "walk.toml").write_text(SCENE_FILE)
+    write_flat_utm(data / "utm.tif")
     return data
+
+
+UTM_WEST, UTM_NORTH, UTM_RES, UTM_HEIGHT = 500000.0, 4100000.0, 30.0, 500.0
+
+
+def write_flat_utm(path) -> None:
+    """A flat DEM (500 m) of 65 x 65 cells of 30 m in UTM zone 14N, its north-west corner
+    at (500000, 4100000)."""
+    import rasterio
+    from rasterio.transform import from_origin
+
+    with rasterio.open(path, "w", driver="GTiff", height=65, width=65, count=1,
+                       dtype="float32", crs="EPSG:32614",
+                       transform=from_origin(UTM_WEST, UTM_NORTH, UTM_RES, UTM_RES)) as ds:
+        ds.write(np.full((65, 65), UTM_HEIGHT, np.float32), 1)
 
 
 @pytest.fixture(scope="module")
@@ -309,6 +325,46 @@ def test_a_page_asking_for_an_unknown_terrain_says_why(server, browser):
         wait();""")
     assert "load" in error and "no-such-terrain" in error, error
     assert "failed" in browser.find_element("id", "hud").text
+
+
+def test_the_cursor_reads_the_datasets_own_coordinates(server, browser):
+    """Over a flat DEM in UTM, the point under three canvas pixels is where the pixel's
+    ray (from the page's viewpoint, computed here in closed form) meets the ground, given
+    as easting, northing (EPSG:32614) and height above the datum; the HUD shows it and the
+    exaggeration."""
+    browser.get(page_url(server, query=f"terrain=utm.tif&grid=64&lod=8&size={SIZE}x{SIZE}"
+                                       "&keyscale=1"))
+    assert page_error(browser) == ""
+    got = browser.execute_script("""
+        const api = window.lodsprite, vp = api.viewpoint();
+        return {vp, at: [[32, 32], [10, 40], [50, 20]].map(([x, y]) => api.cursorAt(x, y))};""")
+    vp = {k: np.array(v, float) for k, v in got["vp"].items()}
+    t = np.tan(np.radians(45.0) / 2)
+    centre_e = UTM_WEST + 0.5 * 65 * UTM_RES
+    centre_n = UTM_NORTH - 0.5 * 65 * UTM_RES
+    for (px, py), c in zip([(32, 32), (10, 40), (50, 20)], got["at"], strict=True):
+        assert c is not None, got
+        d = (vp["x"] * (2 * (px + 0.5) / SIZE - 1) * t + vp["y"] * (1 - 2 * (py + 0.5) / SIZE) * t
+             - vp["z"])
+        hit = vp["o"] + d * (UTM_HEIGHT - vp["o"][2]) / d[2]  # the flat ground's plane
+        assert c["crs"] == "EPSG:32614"
+        assert c["e"] == pytest.approx(centre_e + hit[0], abs=0.01)
+        assert c["n"] == pytest.approx(centre_n + hit[1], abs=0.01)
+        assert c["h"] == pytest.approx(UTM_HEIGHT, abs=1e-3)
+    # the pointer over the image's pixel (32, 32) (the canvas element is the window, the
+    # image fitted inside it): the HUD reads that pixel's point
+    browser.execute_script("""
+        const [c, n] = [document.getElementById('view'), arguments[0]];
+        const r = c.getBoundingClientRect(), s = Math.min(r.width / n, r.height / n);
+        c.dispatchEvent(new PointerEvent('pointermove', {bubbles: true,
+          clientX: r.left + (r.width - n * s) / 2 + 32 * s,
+          clientY: r.top + (r.height - n * s) / 2 + 32 * s}));""", SIZE)
+    hud = wait_for(browser, "document.getElementById('hud').textContent.includes('cursor E')"
+                            " && document.getElementById('hud').textContent")
+    assert "(EPSG:32614)" in hud and "height 500.0 m" in hud and "exaggeration 1.00x" in hud
+    e, n = (float(hud.split(k)[1].split()[0]) for k in ("cursor E ", " N "))
+    assert e == pytest.approx(got["at"][0]["e"], abs=0.06)  # pixel (32, 32)'s point
+    assert n == pytest.approx(got["at"][0]["n"], abs=0.06)
 
 
 def page_error(browser) -> str:

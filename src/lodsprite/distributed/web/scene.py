@@ -158,7 +158,12 @@ def scene_parts(scene: Scene, args: LoadArgs, codec: str = "raw") -> list:
               "epsilon": args.epsilon,
               "visibility": "coarse" if args.visibility == "coarse" else "full",
               "heights": h_spec, "texture": t_spec,
-              "relief": relief(hf.heights, step)}
+              "relief": relief(hf.heights, step),
+              "exaggeration": float(hf.meta.get("exaggeration", 1.0))}
+    ref = hf.meta.get("georef")
+    if ref and hf.meta.get("crs"):  # the page's cursor in the dataset's own coordinates
+        header["georef"] = {"crs": str(hf.meta["crs"])[:200], "bounds": ref["bounds"],
+                            "metres_per_unit": ref["metres_per_unit"]}
     from lodsprite.scene.world import World
 
     if isinstance(scene.objects, World):

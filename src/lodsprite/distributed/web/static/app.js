@@ -37,6 +37,7 @@ import { SpriteDrawer, chooseKeyScale, isPrivateHost } from './gl.js';
 import { FlyControls, lookAt, mul, norm, sub } from './camera.js';
 import { ErrorMetric, Predictor } from './predictor.js';
 import { DepthEstimate } from './depth_estimate.js';
+import { cursorPoint } from './cursor.js';
 import { Hud } from './hud.js';
 import { WalkerDrawer, walkerData } from './walkers.js';
 
@@ -139,6 +140,29 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
   // A keyframe's DepthEstimate as the predictor's metric (its errorPx's arguments).
   const depthMetric = (est) => ({ errorPx: (keyEye, vp, viewProj, beta) => est.errorPx(vp.o, viewProj, beta, width, height) });
   let walkers = null, walkStart = null, walkFixed = null, focal = 1;  // a scene's walkers, their clock (s)
+  let sceneHeader = null, cursorPx = null;  // the scene message's header; the cursor on the canvas
+  canvas.addEventListener('pointermove', (e) => {  // CSS pixels -> the image's, whose box
+    const r = canvas.getBoundingClientRect();        // is fitted inside (object-fit: contain)
+    const s = Math.min(r.width / width, r.height / height) || 1;
+    cursorPx = [(e.clientX - r.left - 0.5 * (r.width - width * s)) / s,
+                (e.clientY - r.top - 0.5 * (r.height - height * s)) / s];
+  });
+  canvas.addEventListener('pointerleave', () => { cursorPx = null; });
+  // The point under canvas pixel (px, py) from the shown view ({world, e, n, h, crs}: the
+  // dataset's coordinates, cursor.js), or null.
+  const cursorAt = (px, py) => {
+    const vp = shownVp || (controls && controls.vp);
+    if (!sceneHeader || !coarseMetric || !vp) return null;
+    return cursorPoint(coarseMetric, vp, px, py, width, height, sceneHeader.fov, sceneHeader.georef ?? null, sceneHeader.exaggeration ?? 1);
+  };
+  const cursorLine = () => {
+    const ex = sceneHeader ? `exaggeration ${(sceneHeader.exaggeration ?? 1).toFixed(2)}x` : '';
+    const c = cursorPx && cursorAt(cursorPx[0], cursorPx[1]);
+    if (!c) return ex;
+    const d = c.crs ? (Math.abs(c.e) <= 360 && Math.abs(c.n) <= 90 && /4326|CRS84/.test(c.crs) ? 6 : 1) : 1;
+    const at = c.crs ? `E ${c.e.toFixed(d)} N ${c.n.toFixed(d)} (${c.crs})` : `x ${c.world[0].toFixed(1)} y ${c.world[1].toFixed(1)} m`;
+    return `cursor ${at} height ${c.h.toFixed(1)} m   ${ex}`;
+  };
   let captures = null, captureSet = null;
   let shownVp = null, keyVp = null, keyEye = null, keyDir = null, keyViewProj = null, keyDeficit = 0, finishedResolve = () => {}, finished = null, lastFrame = null, lastSample = -Infinity;
   const newFinished = () => { finished = new Promise((r) => { finishedResolve = r; }); };
@@ -166,6 +190,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
     const scene = await sceneArrived;
     firstMs.scene = performance.now() - loadAt;
     const h = scene.header;
+    sceneHeader = h;
     renderer.proxy = depth ? 'depth' : 'coarse';
     renderer.pair = depth && options.pair === true;
     renderer.setScene(h, scene.heights, scene.texture);
@@ -261,7 +286,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
     if (path && pathIndex === path.length && keyEye && norm(sub(keyEye, vp.o)) <= 1e-6 * (1 + norm(vp.o))) {
       finishedResolve(stats.frames);
     }
-    if (hud) hud.update(now, api.stats, state, keyScale.why);
+    if (hud) hud.update(now, api.stats, state, keyScale.why, cursorLine);
     requestAnimationFrame(frame);
   }
 
@@ -293,6 +318,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
     captured() { const out = captures || []; captures = null; captureSet = null; return out; },
     viewpoint: () => controls && controls.vp,
     keyViewpoint: () => keyVp,
+    cursorAt,  // (px, py) canvas pixels -> {world, e, n, h, crs} or null (cursor.js)
     pathIndex: () => pathIndex,
     keyScale: () => ({ ...keyScale }),  // {scale, why}: the keyframe scale asked for, and why
     setWalkTime(t) { walkFixed = t; },  // walkers held at t seconds (null: their own clock)
