@@ -283,8 +283,13 @@ class Georef(Struct, forbid_unknown_fields=True):
 
     crs: Annotated[str, Meta(max_length=200)]
     bounds: tuple[Coord, Coord, Coord, Coord]
-    metres_per_unit: tuple[Annotated[float, Meta(gt=0.0, le=1e9)],
-                           Annotated[float, Meta(gt=0.0, le=1e9)]]
+    metres_per_unit: tuple[Annotated[float, Meta(ge=1e-9, le=1e9)],
+                           Annotated[float, Meta(ge=1e-9, le=1e9)]]
+
+    def __post_init__(self) -> None:
+        w, s, e, n = self.bounds
+        if not (w < e and s < n):
+            raise ValueError("georef bounds must be west < east and south < north")
 
 
 class SceneMessage(Message, tag="scene"):

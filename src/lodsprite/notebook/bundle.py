@@ -1,5 +1,5 @@
 """The notebook widget's front end: the web page's own ES modules
-(``lodsprite/distributed/web/static``: wire, decode, gl, camera, predictor,
+(``lodsprite/distributed/web/static``: wire, decode, gl, camera, cursor, predictor,
 depth_estimate, walkers, hud, app),
 linked in the browser, not copied.
 

@@ -351,14 +351,14 @@ def test_the_cursor_reads_the_datasets_own_coordinates(server, browser):
         assert c["e"] == pytest.approx(centre_e + hit[0], abs=0.01)
         assert c["n"] == pytest.approx(centre_n + hit[1], abs=0.01)
         assert c["h"] == pytest.approx(UTM_HEIGHT, abs=1e-3)
-    # the pointer over the image's pixel (32, 32) (the canvas element is the window, the
-    # image fitted inside it): the HUD reads that pixel's point
+    # the pointer over the centre of the image's pixel (32, 32) (the canvas element is the
+    # window, the image fitted inside it): the HUD reads that pixel's point
     browser.execute_script("""
         const [c, n] = [document.getElementById('view'), arguments[0]];
         const r = c.getBoundingClientRect(), s = Math.min(r.width / n, r.height / n);
         c.dispatchEvent(new PointerEvent('pointermove', {bubbles: true,
-          clientX: r.left + (r.width - n * s) / 2 + 32 * s,
-          clientY: r.top + (r.height - n * s) / 2 + 32 * s}));""", SIZE)
+          clientX: r.left + (r.width - n * s) / 2 + 32.5 * s,
+          clientY: r.top + (r.height - n * s) / 2 + 32.5 * s}));""", SIZE)
     hud = wait_for(browser, "document.getElementById('hud').textContent.includes('cursor E')"
                             " && document.getElementById('hud').textContent")
     assert "(EPSG:32614)" in hud and "height 500.0 m" in hud and "exaggeration 1.00x" in hud

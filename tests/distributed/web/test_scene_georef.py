@@ -37,6 +37,7 @@ def test_a_terrain_without_a_crs_sends_none_and_a_hostile_one_is_refused():
     header = msgspec.msgpack.decode(parts[0])
     for bad in ({"crs": "x", "bounds": [0, 0, 1, float("nan")], "metres_per_unit": [1, 1]},
                 {"crs": "x", "bounds": [0, 0, 1, 1], "metres_per_unit": [0, 1]},
-                {"crs": "x" * 300, "bounds": [0, 0, 1, 1], "metres_per_unit": [1, 1]}):
+                {"crs": "x" * 300, "bounds": [0, 0, 1, 1], "metres_per_unit": [1, 1]},
+                {"crs": "x", "bounds": [1, 0, 0, 1], "metres_per_unit": [1, 1]}):
         with pytest.raises(ProtocolError):
             decode_scene(encode({**header, "georef": bad}, *parts[1:]))

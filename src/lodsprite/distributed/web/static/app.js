@@ -141,13 +141,14 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
   const depthMetric = (est) => ({ errorPx: (keyEye, vp, viewProj, beta) => est.errorPx(vp.o, viewProj, beta, width, height) });
   let walkers = null, walkStart = null, walkFixed = null, focal = 1;  // a scene's walkers, their clock (s)
   let sceneHeader = null, cursorPx = null;  // the scene message's header; the cursor on the canvas
-  canvas.addEventListener('pointermove', (e) => {  // CSS pixels -> the image's, whose box
-    const r = canvas.getBoundingClientRect();        // is fitted inside (object-fit: contain)
-    const s = Math.min(r.width / width, r.height / height) || 1;
-    cursorPx = [(e.clientX - r.left - 0.5 * (r.width - width * s)) / s,
-                (e.clientY - r.top - 0.5 * (r.height - height * s)) / s];
-  });
-  canvas.addEventListener('pointerleave', () => { cursorPx = null; });
+  const cursorEvents = new AbortController();  // removed by close()
+  canvas.addEventListener('pointermove', (e) => {  // CSS pixels -> the image's pixel (whose
+    const r = canvas.getBoundingClientRect();        // centre is +0.5), the image fitted
+    const s = Math.min(r.width / width, r.height / height) || 1;  // inside (object-fit: contain)
+    cursorPx = [(e.clientX - r.left - 0.5 * (r.width - width * s)) / s - 0.5,
+                (e.clientY - r.top - 0.5 * (r.height - height * s)) / s - 0.5];
+  }, { signal: cursorEvents.signal });
+  canvas.addEventListener('pointerleave', () => { cursorPx = null; }, { signal: cursorEvents.signal });
   // The point under canvas pixel (px, py) from the shown view ({world, e, n, h, crs}: the
   // dataset's coordinates, cursor.js), or null.
   const cursorAt = (px, py) => {
@@ -159,7 +160,9 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
     const ex = sceneHeader ? `exaggeration ${(sceneHeader.exaggeration ?? 1).toFixed(2)}x` : '';
     const c = cursorPx && cursorAt(cursorPx[0], cursorPx[1]);
     if (!c) return ex;
-    const d = c.crs ? (Math.abs(c.e) <= 360 && Math.abs(c.n) <= 90 && /4326|CRS84/.test(c.crs) ? 6 : 1) : 1;
+    // decimals to about 0.1 m: 1 for metres or feet, 6 for degrees (any geographic CRS)
+    const mpu = sceneHeader.georef ? sceneHeader.georef.metres_per_unit[0] : 1;
+    const d = Math.min(9, Math.max(1, Math.ceil(Math.log10(mpu)) + 1));
     const at = c.crs ? `E ${c.e.toFixed(d)} N ${c.n.toFixed(d)} (${c.crs})` : `x ${c.world[0].toFixed(1)} y ${c.world[1].toFixed(1)} m`;
     return `cursor ${at} height ${c.h.toFixed(1)} m   ${ex}`;
   };
@@ -333,6 +336,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
     close() {
       closed = true;
       keyTarget.removeEventListener('keydown', onKey);
+      cursorEvents.abort();
       if (controls) controls.detach();
       decoder.terminate();
       const gl = canvas.getContext('webgl2');  // the context the drawer made: lost, freed
