@@ -25,10 +25,7 @@ from lodsprite.experiments import Experiment, Options, get, names
 def run_experiment(experiment: Experiment, options: Options, out_dir: Path | None) -> None:
     """Run ``experiment`` under progress bars (into ``out_dir``, default its own
     ``out/NAME``) and print its summary table."""
-    from lodsprite.files import writable_folder
-
-    writable_folder(out_dir if out_dir is not None else Path("out"))  # before any work
-    with progress_bars() as update:
+    with progress_bars() as update:  # (Experiment.reproduce checks out_dir before any work)
         _, summary = experiment.reproduce(options, out_dir, update)
     print_summary(summary)
 

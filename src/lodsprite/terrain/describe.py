@@ -94,8 +94,7 @@ def _crs(crs) -> str:
     if crs is None:
         return "none (metres assumed)"
     epsg = crs.to_epsg()
-    name = crs.to_dict().get("proj", "") if epsg is None else ""
-    return f"EPSG:{epsg}" if epsg is not None else (name or crs.to_string()[:80])
+    return f"EPSG:{epsg}" if epsg is not None else crs.to_string()[:80]
 
 
 def _units(crs) -> str:
