@@ -25,8 +25,18 @@ def tile(
     scheduler: Annotated[str | None, typer.Option(
         "--scheduler", help="a Dask scheduler address (tcp://HOST:PORT) to spread the tiles "
                             "over (pip install 'lodsprite[cluster]')")] = None,
+    imagery: Annotated[list[str] | None, typer.Option(
+        "--imagery", help="an orthophoto (GeoTIFF/COG, any CRS) to drape; repeat to mosaic, "
+                          "later ones painted over earlier ones")] = None,
+    attribution: Annotated[str | None, typer.Option(
+        "--attribution", help="the imagery's licence and attribution line (default: from "
+                              "its metadata)")] = None,
+    imagery_refine: Annotated[int | None, typer.Option(
+        "--imagery-refine", help="imagery texels a height cell side, as a power of two "
+                                 "0..3 (default: the finest source's pixel)")] = None,
 ) -> None:
-    """Build a Zarr v3 terrain pyramid from a DEM larger than memory (resumable)."""
+    """Build a Zarr v3 terrain pyramid from a DEM larger than memory (resumable), with
+    orthophotos draped on it."""
     from lodsprite.files import writable_folder
     from lodsprite.terrain.store import build_store
 
@@ -34,7 +44,8 @@ def tile(
 
     with progress_bar("tiles") as update:
         s = build_store(source, out_dir, tile_size, chunk, encoding, scale, overwrite, update,
-                        scheduler=scheduler)
+                        scheduler=scheduler, imagery=imagery or (), attribution=attribution,
+                        imagery_refine=imagery_refine)
     if s.get("already"):
         out.print(f"{out_dir} is already built ({s['rows']}x{s['cols']}, {s['levels']} levels)")
         return

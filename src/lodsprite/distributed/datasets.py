@@ -196,8 +196,8 @@ class Datasets:
         """The texture named ``name``; raises :class:`InputError` with the reason."""
         name = _clean(name, "texture")
         low = name.lower()
-        if low == "terrain":
-            return Dataset("terrain", None, True)  # the working grid's size
+        if low in ("terrain", "imagery", "imagery+hillshade"):  # a store's own imagery, too
+            return Dataset(low, None, True)  # the working grid's size (or the imagery's)
         if low == "checker" or low.startswith("checker:"):
             _, _, k = low.partition(":")
             if k and not (k.isdigit() and 1 <= int(k) <= CHECKER_SIZE):

@@ -39,12 +39,14 @@ def is_object_scene(spec: str) -> bool:
 def heights_shaded(terrain: str, texture: str, terrain_spec: str) -> bool:
     """Whether the keyframes of a load naming ``terrain`` with ``texture`` are the heights
     shading of a terrain store (``terrain_spec``: the scene's terrain, a path): a store's
-    are, unless a terrain load asked for another texture; a scene file's or a crowd's
-    terrain is shaded as the window's ``auto`` shades it, a store from its heights."""
+    are, unless a terrain load asked for another texture or the store holds imagery (then
+    draped, as ``auto`` drapes it); a scene file's or a crowd's terrain is shaded as the
+    window's ``auto`` shades it, a store from its heights."""
+    from lodsprite.scene.model import store_imagery
     from lodsprite.terrain.store_format import is_store
 
-    if not terrain_spec or not is_store(terrain_spec):
-        return False
+    if not terrain_spec or not is_store(terrain_spec) or store_imagery(terrain_spec):
+        return False  # a store with imagery: draped, as auto drapes it
     return is_object_scene(terrain) or texture == "terrain"
 
 

@@ -39,7 +39,9 @@ from lodsprite.terrain.lod import (
 )
 from lodsprite.terrain.proxy import proxy_mesh
 
-SHADINGS = ("auto", "texture", "heights")  # auto: heights on a store, else the texture
+# auto: a store's imagery, else heights on a store, else the texture; imagery: a store's
+# imagery, which is the scene's texture (drawn as texture)
+SHADINGS = ("auto", "texture", "heights", "imagery")
 GL_UNSIGNED_INT = 0x1405
 
 

@@ -186,4 +186,41 @@ def load_scene(terrain: str = "jacksboro", texture: str = "terrain", grid: int |
     if light and is_store(terrain):
         side = max(LIGHT_SIDE, (DEFAULT_GRID if grid is None else grid) + 1)
     hf = load_terrain(terrain, grid=grid, exaggeration=exaggeration, store_side=side)
-    return Scene(hf, make_texture(texture, hf) if textured else None, terrain, texture)
+    return Scene(hf, scene_texture(terrain, texture, hf) if textured else None, terrain,
+                 texture)
+
+
+#: A terrain store's imagery is draped from its finest level of at most this many texels
+#: a side (one texture over the whole extent, mipmapped).
+IMAGERY_SIDE = 4096
+
+
+def store_imagery(terrain: str) -> bool:
+    """Whether ``terrain`` names a terrain store that holds imagery (its header read)."""
+    from lodsprite.terrain.store import is_store
+
+    if not terrain or not is_store(terrain):
+        return False
+    import zarr
+
+    from lodsprite.terrain.store_format import read_header
+
+    try:
+        return read_header(zarr.open_group(str(terrain), mode="r")).imagery is not None
+    except Exception:  # noqa: BLE001 - not a readable store: opening it says why
+        return False
+
+
+def scene_texture(terrain: str, texture: str, hf) -> np.ndarray:
+    """The terrain's texture: ``texture`` (:func:`~lodsprite.terrain.textures.
+    make_texture`), except on a terrain store tiled with imagery, where the default
+    ``terrain`` and ``imagery`` are its imagery draped (:func:`~lodsprite.terrain.
+    textures.drape`) and ``imagery+hillshade`` that with a hillshade over it."""
+    from lodsprite.terrain.store import TerrainStore
+    from lodsprite.terrain.textures import IMAGERY_SPECS, drape
+
+    name = texture.strip().lower() if isinstance(texture, str) else texture
+    if name not in ("terrain", *IMAGERY_SPECS) or not store_imagery(terrain):
+        return make_texture(texture, hf)
+    store = TerrainStore(terrain)
+    return drape(store.imagery_texture(IMAGERY_SIDE), hf, name == "imagery+hillshade")

@@ -60,8 +60,9 @@ GPU_MB = Option("gpu_mb", float, 256.0, "adaptive: GPU tile cache budget", min=0
                 above=True, unit="MB")
 HOST_MB = Option("host_mb", float, 512.0, "adaptive: host tile cache budget", min=0,
                  above=True, unit="MB")
-SHADING = Option("shading", str, "auto", "terrain colour: auto (heights on a store, else the "
-                 "texture) | texture | heights", choices=("auto", "texture", "heights"))
+SHADING = Option("shading", str, "auto", "terrain colour: auto (a store's imagery, else "
+                 "heights on a store, else the texture) | imagery | texture | heights",
+                 choices=("auto", "imagery", "texture", "heights"))
 GRID = Option("grid", int, 64, "adaptive: node grid, quads a side",
               choices=(16, 32, 64, 128), flag="node-grid")
 PROXY = Option("proxy", str, None, "LOD-sprite: what spriteframes draw the keyframe "

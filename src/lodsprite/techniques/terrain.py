@@ -31,16 +31,28 @@ if TYPE_CHECKING:
 
 def resolve_shading(scene, shading: str = "auto") -> str:
     """``texture`` or ``heights`` for a ``shading`` choice (:data:`~lodsprite.gl.terrain.
-    SHADINGS`): ``auto`` shades a terrain store from its heights (per-pixel normals, level-0
-    detail) and keeps any other scene's texture."""
+    SHADINGS`): ``auto`` drapes a terrain store's imagery where it has some, shades any
+    other store from its heights (per-pixel normals, level-0 detail) and keeps any other
+    scene's texture; ``imagery`` (a store's imagery, drawn as its texture: the scene's
+    texture is the imagery, :func:`lodsprite.scene.model.scene_texture`) is refused for a
+    scene without."""
     from lodsprite.errors import InputError
     from lodsprite.gl.terrain import SHADINGS
+    from lodsprite.scene.model import store_imagery
     from lodsprite.terrain.store import is_store
 
     if shading not in SHADINGS:
         raise InputError(f"unknown shading '{shading}': use one of {', '.join(SHADINGS)}")
+    spec = scene.terrain_spec
+    if shading == "imagery":
+        if not store_imagery(spec):
+            raise InputError(f"--shading imagery: {spec or 'this scene'} is not a terrain "
+                             "store tiled with --imagery")
+        return "texture"
     if shading == "auto":
-        return "heights" if scene.terrain_spec and is_store(scene.terrain_spec) else "texture"
+        if spec and is_store(spec):
+            return "texture" if store_imagery(spec) else "heights"
+        return "texture"
     return shading
 
 

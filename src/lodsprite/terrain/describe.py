@@ -141,5 +141,20 @@ def _store(path: Path) -> dict[str, str]:
         out["level errors"] = ", ".join(f"{e:.3g}" for e in h.level_errors) + " m"
     out["tiles"] = f"{h.tile} a side, chunks of {h.chunk}"
     out["complete"] = "yes" if h.complete else "no (resumable: tile it again)"
-    out["imagery"] = "none (this store format holds heights only)"
+    out["imagery"] = _imagery(h)
+    if h.imagery is not None and h.imagery.attribution:
+        out["attribution"] = h.imagery.attribution[:200]
     return out
+
+
+def _imagery(h) -> str:
+    """A store's imagery in a line: texels, refinement, levels, sources, state."""
+    im = h.imagery
+    if im is None:
+        return "none (tile it with --imagery ORTHO.tif to drape one)"
+    names = ", ".join(Path(s.path).name for s in im.sources[:4])
+    more = f" and {len(im.sources) - 4} more" if len(im.sources) > 4 else ""
+    state = "" if im.complete else ", unfinished"
+    return (f"{im.rows} x {im.cols} RGBA texels ({1 << im.refine} a height cell side), "
+            f"{im.levels} levels, sRGB filtered in linear light, lossless zstd, from "
+            f"{names}{more}{state}")

@@ -40,6 +40,7 @@ from lodsprite.terrain.store_format import (
     FORMAT,
     MIN_LEVEL_SIDE,
     VERSION,
+    VERSIONS,
     StoreHeader,
     coarse_error,
     decode,
@@ -60,13 +61,19 @@ Progress = Callable[[int, int], None]
 def build_store(source_spec: str, out: str | Path, tile: int = DEFAULT_TILE,
                 chunk: int = DEFAULT_CHUNK, encoding: str = "float32", scale: float = 0.25,
                 overwrite: bool = False, progress: Progress | None = None,
-                stop_after: int | None = None, scheduler: str | None = None) -> dict:
+                stop_after: int | None = None, scheduler: str | None = None,
+                imagery: list[str] | tuple[str, ...] = (), attribution: str | None = None,
+                imagery_refine: int | None = None) -> dict:
     """Build (or resume building) the pyramid of ``source_spec`` in ``out``; returns a
-    summary.  ``scheduler``: a Dask scheduler address to spread each level's tiles over
-    (the store and the source must be on storage the workers share).  ``stop_after``
-    stops after that many tiles (to test resuming)."""
-    import time
+    summary.  ``scheduler``: a Dask scheduler address to spread each level's height tiles
+    over (the store and the source must be on storage the workers share; imagery is built
+    here).  ``imagery``: orthophotos to drape (:mod:`lodsprite.terrain.store_imagery`),
+    painted in order; ``attribution`` their licence line (default: from their metadata);
+    ``imagery_refine`` texels a height cell side as a power of two (default: from the
+    finest source).  A complete store without imagery gains it.  ``stop_after`` stops
+    after that many tiles (to test resuming)."""
 
+    from lodsprite.terrain import store_imagery
     from lodsprite.terrain.tiled import open_source
 
     if encoding not in ("float32", "int16"):
@@ -84,13 +91,37 @@ def build_store(source_spec: str, out: str | Path, tile: int = DEFAULT_TILE,
                          float(src.dy), levels, tile, chunk, encoding,
                          float(scale) if encoding == "int16" else 1.0, float(offset),
                          src.crs, src.transform, False, [[] for _ in range(levels)])
-    group = _open_for_build(out, header, overwrite)
-    header = read_header(group)
-    if header.complete:
-        return {"store": str(out), "rows": src.rows, "cols": src.cols, "levels": levels,
-                "tiles_written": 0, "seconds": 0.0, "resumed": False, "already": True}
+    # GDAL's and PROJ's messages to logging, not the terminal (a failure is our one line)
+    with store_imagery.gdal_env():
+        sources = store_imagery.open_sources(list(imagery), header) if imagery else []
+        try:
+            if sources:
+                header.imagery = store_imagery.plan(sources, header, imagery_refine,
+                                                    attribution)
+            group = _open_for_build(out, header, overwrite)
+            header = read_header(group)
+            if header.complete:
+                return {"store": str(out), "rows": src.rows, "cols": src.cols,
+                        "levels": levels, "tiles_written": 0, "seconds": 0.0,
+                        "resumed": False, "already": True}
+            return _build(out, src, group, header, sources, progress, stop_after, scheduler)
+        finally:
+            for s in sources:
+                s.close()
+
+
+def _build(out: Path, src, group, header: StoreHeader, sources: list, progress, stop_after,
+           scheduler) -> dict:
+    import time
+
+    from lodsprite.terrain import store_imagery
+
+    levels, tile = header.levels, header.tile
     total = sum(len(tile_windows(level_shape(src.rows, src.cols, k), tile)) for k in range(levels))
     done_before = sum(len(d) for d in header.done)
+    if header.imagery is not None:
+        total += store_imagery.total_tiles(header)
+        done_before += sum(len(d) for d in header.imagery.done)
     written, t0, samples0 = 0, time.perf_counter(), 0
     client = _client(scheduler) if scheduler else None
     try:
@@ -116,7 +147,16 @@ def build_store(source_spec: str, out: str | Path, tile: int = DEFAULT_TILE,
     finally:
         if client is not None:
             client.close()
-    header.level_errors = level_errors(group, header)
+    if not header.level_errors:
+        header.level_errors = level_errors(group, header)
+        save_header(group, header)
+    if header.imagery is not None and not header.imagery.complete:
+        more = None if stop_after is None else max(0, stop_after - written)
+        n, finished = store_imagery.build(group, header, sources, progress,
+                                          done_before + written, total, more)
+        written += n
+        if not finished:
+            return {"store": str(out), "interrupted": True, "tiles_written": written}
     header.complete = True
     save_header(group, header)
     seconds = time.perf_counter() - t0
@@ -220,7 +260,9 @@ def _open_for_build(out: Path, header: StoreHeader, overwrite: bool):
             if not same:
                 raise InputError(f"{out} holds a store built with other parameters: pass "
                                  "--overwrite to rebuild it")
-            return zarr.open_group(str(out), mode="r+")
+            group = zarr.open_group(str(out), mode="r+")
+            _match_imagery(out, group, old, header)
+            return group
     elif need > free:
         raise InputError(f"the store needs up to {need / 2 ** 30:.1f} GB and the disk has "
                          f"{free / 2 ** 30:.1f} GB free")
@@ -238,8 +280,33 @@ def _open_for_build(out: Path, header: StoreHeader, overwrite: bool):
         group.create_array(f"minmax/{k}", shape=(cr, cc, 3),
                            chunks=(min(per, cr), min(per, cc), 3), dtype="float32",
                            fill_value=np.nan)
+    if header.imagery is not None:
+        from lodsprite.terrain.store_imagery import create_arrays
+
+        create_arrays(group, header)
     save_header(group, header)
     return group
+
+
+def _match_imagery(out: Path, group, old: StoreHeader, new: StoreHeader) -> None:
+    """Resume ``old``'s build with ``new``'s imagery: the same sources, or imagery added
+    to a store without any (its arrays made, the store incomplete until they are full)."""
+    from lodsprite.terrain.store_imagery import create_arrays
+
+    if new.imagery is None:
+        if old.imagery is not None and not old.complete:
+            raise InputError(f"{out} is being built with imagery: resume it with the same "
+                             "--imagery")
+        return
+    if old.imagery is None:
+        old.imagery, old.complete = new.imagery, False
+        create_arrays(group, old)
+        save_header(group, old)
+        return
+    was = ([s.path for s in old.imagery.sources], old.imagery.refine)
+    if was != ([s.path for s in new.imagery.sources], new.imagery.refine):
+        raise InputError(f"{out} holds imagery from other sources: pass --overwrite to "
+                         "rebuild it")
 
 
 def _existing_header(out: Path) -> StoreHeader | None:
@@ -316,11 +383,14 @@ class TerrainStore:
             raise InputError(f"{self.path}: unreadable terrain store "
                              f"({type(exc).__name__}: {exc})") from exc
         h = self.header
-        if h.format != FORMAT or h.version != VERSION:
-            raise InputError(f"{self.path}: not a {FORMAT} version {VERSION} store")
+        if h.format != FORMAT or h.version not in VERSIONS:
+            raise InputError(f"{self.path}: not a {FORMAT} store of version "
+                             f"{' or '.join(map(str, VERSIONS))}")
         if not h.complete:
+            more = "".join(f" --imagery {s.path}" for s in h.imagery.sources) \
+                if h.imagery else ""
             raise InputError(f"{self.path}: the build did not finish; run `lodsprite tile "
-                             f"{h.source} --out {self.path}` again to resume it")
+                             f"{h.source} --out {self.path}{more}` again to resume it")
         for k in range(h.levels):
             try:
                 shape = tuple(self.group[str(k)].shape)
@@ -329,6 +399,33 @@ class TerrainStore:
             if shape != level_shape(h.rows, h.cols, k):
                 raise InputError(f"{self.path}: level {k} is {shape}, the header says "
                                  f"{level_shape(h.rows, h.cols, k)}")
+        if h.imagery is not None:
+            from lodsprite.terrain.store_imagery import check_arrays
+
+            try:
+                check_arrays(self.group, h)
+            except InputError as exc:
+                raise InputError(f"{self.path}: {exc}") from exc
+
+    @property
+    def imagery(self):
+        """The imagery's header (:class:`~lodsprite.terrain.store_format.ImageryHeader`),
+        or None for a store without imagery."""
+        return self.header.imagery
+
+    def read_imagery(self, j: int, r0: int, r1: int, c0: int, c1: int) -> np.ndarray:
+        """Imagery level ``j`` over a window of its texels, ``(h, w, 4) uint8`` sRGB RGBA
+        (alpha 0: no source covers it)."""
+        from lodsprite.terrain import store_imagery
+
+        return store_imagery.read(self.group, self.header, j, r0, r1, c0, c1)
+
+    def imagery_texture(self, max_side: int) -> np.ndarray:
+        """The whole imagery at most ``max_side`` texels a side, ``(H, W, 4) uint8``
+        (:func:`lodsprite.terrain.store_imagery.texture`)."""
+        from lodsprite.terrain import store_imagery
+
+        return store_imagery.texture(self.group, self.header, max_side)
 
     @property
     def levels(self) -> int:

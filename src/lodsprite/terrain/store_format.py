@@ -17,10 +17,40 @@ import numpy as np
 from lodsprite.errors import InputError
 
 FORMAT = "lodsprite-terrain-pyramid"
-VERSION = 1
+VERSION = 2  # 2: imagery beside the heights; version 1 stores (no imagery) still open
+VERSIONS = (1, 2)
 DEFAULT_TILE = 1024
 DEFAULT_CHUNK = 256
 MIN_LEVEL_SIDE = 256
+
+
+class ImagerySourceHeader(msgspec.Struct, forbid_unknown_fields=True):
+    """One orthophoto the imagery was made from (:class:`~lodsprite.terrain.imagery.
+    SourceInfo`)."""
+
+    path: str
+    crs: str | None
+    bands: list[int]
+    stretch: list[list[float]] | None
+    pixel_m: float
+
+
+class ImageryHeader(msgspec.Struct, forbid_unknown_fields=True):
+    """The colour pyramid's part of the header: level 0 is ``rows x cols`` texels
+    (``(store rows - 1) 2^refine`` by ``(store cols - 1) 2^refine``), ``levels`` levels,
+    chunked and sharded as the heights; sRGB RGBA ``uint8`` filtered in linear light,
+    compressed by ``codec``."""
+
+    sources: list[ImagerySourceHeader]
+    refine: int
+    rows: int
+    cols: int
+    levels: int
+    colour_space: Literal["srgb-linear-filtered"] = "srgb-linear-filtered"
+    codec: Literal["zstd-3"] = "zstd-3"
+    attribution: str = ""
+    complete: bool = False
+    done: list[list[int]] = []
 
 
 class StoreHeader(msgspec.Struct, forbid_unknown_fields=True):
@@ -44,6 +74,7 @@ class StoreHeader(msgspec.Struct, forbid_unknown_fields=True):
     complete: bool = False
     done: list[list[int]] = []  # per level, the tiles written (row-major tile index)
     level_errors: list[float] = []  # per level, the geometric error bound (metres)
+    imagery: ImageryHeader | None = None
 
 
 def level_shape(rows: int, cols: int, k: int) -> tuple[int, int]:
@@ -92,12 +123,25 @@ def read_header(group) -> StoreHeader:
         header = msgspec.convert(raw, StoreHeader)
     except msgspec.ValidationError as exc:
         raise InputError(f"malformed terrain store header: {exc}") from exc
+    if header.imagery is not None:
+        _check_imagery(header)
     t = header.transform
     if t is not None and (len(t) != 6 or not all(math.isfinite(v) for v in t)
                           or t[0] == 0 or t[4] == 0):
         raise InputError("malformed terrain store header: the transform must be 6 finite "
                          "numbers with non-zero cell sizes")
     return header
+
+
+def _check_imagery(header: StoreHeader) -> None:
+    """An imagery header that matches its store's grid (nothing allocated from a bad one)."""
+    im = header.imagery
+    if not (0 <= im.refine <= 3 and (im.rows, im.cols) == ((header.rows - 1) << im.refine,
+                                                           (header.cols - 1) << im.refine)
+            and 1 <= im.levels <= 24 and len(im.done) in (0, im.levels)
+            and len(im.attribution) <= 1000):
+        raise InputError("malformed terrain store header: its imagery does not match its "
+                         "grid")
 
 
 def is_store(path: str | Path) -> bool:

@@ -103,6 +103,46 @@ def height_shading(heights: np.ndarray, dx: float, dy: float, lo: float, hi: flo
     return np.clip(np.round(c * lit[..., None] * 255.0), 0, 255).astype(np.uint8)
 
 
+IMAGERY_SPECS = ("imagery", "imagery+hillshade")
+"""Texture names of a terrain store's own imagery: as stored, or with a hillshade over it."""
+
+
+def drape(rgba: np.ndarray, hf: HeightField, hillshade: bool = False) -> np.ndarray:
+    """A store's imagery ``(H, W, 4) uint8`` (alpha: coverage) as the terrain's texture
+    ``(H, W, 3) uint8`` over ``hf`` (the same extent): where no source covers the ground,
+    the heights shading of ``hf`` shows through (blended by alpha).  ``hillshade``: the
+    colours times the heights shading's light (30 % ambient, the same sun), divided by a
+    flat ground's, so flat ground keeps the imagery's own colours and slopes facing away
+    from the sun darken."""
+    from PIL import Image
+
+    a = np.asarray(rgba)
+    if a.ndim != 3 or a.shape[2] != 4 or a.dtype != np.uint8:
+        raise TerrainError("imagery must be an (H, W, 4) uint8 array")
+    size = (a.shape[1], a.shape[0])
+    out = a[..., :3].astype(np.float32)
+    alpha = a[..., 3:4].astype(np.float32) / 255.0
+    h = np.asarray(hf.heights, np.float32)
+    if hillshade or (alpha < 1).any():
+        lo, hi = float(np.nanmin(h)), float(np.nanmax(h))
+        if (alpha < 1).any():
+            base = np.asarray(Image.fromarray(height_shading(h, hf.dx, hf.dy, lo, hi))
+                              .resize(size, Image.Resampling.BILINEAR), np.float32)
+            out = out * alpha + base * (1 - alpha)
+        if hillshade:
+            lit = 0.3 + 0.7 * hillshade_grid(h, hf)
+            flat = 0.3 + 0.7 * float(SHADE_LIGHT[2])
+            lit = np.asarray(Image.fromarray((lit / flat).astype(np.float32), "F")
+                             .resize(size, Image.Resampling.BILINEAR))
+            out *= lit[..., None]
+    return np.clip(np.rint(out), 0, 255).astype(np.uint8)
+
+
+def hillshade_grid(h: np.ndarray, hf: HeightField) -> np.ndarray:
+    """The heights shading's hillshade of ``h`` (``hf``'s spacing), ``float32`` [0, 1]."""
+    return hillshade(h, hf.dx, hf.dy, SHADE_AZIMUTH_DEG, SHADE_ALTITUDE_DEG)
+
+
 def make_texture(spec: str, hf: HeightField) -> np.ndarray:
     """The texture named by ``spec`` for ``hf``: ``(H, W, 3) uint8`` RGB, row 0 north.
 
@@ -118,6 +158,9 @@ def make_texture(spec: str, hf: HeightField) -> np.ndarray:
         return terrain_texture(hf)
     if name == "checker" or name.startswith("checker:"):
         return checker_texture(_checker_squares(spec))
+    if name in IMAGERY_SPECS:
+        raise TerrainError(f"texture {spec!r} is a terrain store's own imagery (tile the "
+                           "store with --imagery ORTHO.tif)")
     return image_texture(spec)
 
 

@@ -1,0 +1,208 @@
+"""The colour pyramid of a terrain store: built tile by tile beside the heights, resumable,
+and read back by level and window.
+
+Layout inside ``STORE.zarr`` (the grid and filtering are :mod:`lodsprite.terrain.imagery`'s)::
+
+    imagery/0, 1, ...   level j: ``ceil(R / 2^j) x ceil(C / 2^j) x 4`` sRGB RGBA uint8
+                        (``R x C`` the header's imagery texels), inner chunks of
+                        ``chunk² x 4`` in shards of ``tile² x 4``, Zstandard level 3
+
+Level 0 is warped from the sources one tile at a time; level ``j + 1`` is
+:func:`~lodsprite.terrain.imagery.downsample_rgba` of level ``j`` read back from the store,
+so memory holds a few tiles whatever the size.  The header's ``imagery.done`` records the
+tiles written: an interrupted build resumes where it stopped.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from lodsprite.errors import InputError
+from lodsprite.terrain.imagery import (
+    ImagerySource,
+    choose_refine,
+    downsample_rgba,
+    imagery_shape,
+    mosaic,
+)
+from lodsprite.terrain.store_format import (
+    MIN_LEVEL_SIDE,
+    ImageryHeader,
+    ImagerySourceHeader,
+    StoreHeader,
+    level_shape,
+    save_header,
+    tile_windows,
+)
+
+Progress = Callable[[int, int], None]
+CODEC_LEVEL = 3
+
+
+def gdal_env():
+    """A rasterio environment: GDAL's and PROJ's messages go to logging, not stderr."""
+    import rasterio
+
+    return rasterio.Env()
+
+
+def dem_bounds(header: StoreHeader) -> tuple[float, float, float, float] | None:
+    """The DEM's west, south, east, north cell edges in its CRS (None: no CRS)."""
+    t = header.transform
+    if not header.crs or not t:
+        return None
+    sx, _, x0, _, sy, y0 = t[:6]
+    x1, y1 = x0 + sx * header.cols, y0 + sy * header.rows
+    return min(x0, x1), min(y0, y1), max(x0, x1), max(y0, y1)
+
+
+def imagery_levels(rows: int, cols: int) -> int:
+    """Levels down to the first whose longer side is at most ``MIN_LEVEL_SIDE``."""
+    n = 1
+    while max(level_shape(rows, cols, n - 1)) > MIN_LEVEL_SIDE:
+        n += 1
+    return n
+
+
+def open_sources(paths: list[str], header: StoreHeader) -> list[ImagerySource]:
+    """The orthophotos ``paths`` placed over the store ``header`` describes (each checked:
+    readable, transformable, overlapping); closed again if one fails."""
+    bounds = dem_bounds(header)
+    sources: list[ImagerySource] = []
+    try:
+        for p in paths:
+            sources.append(ImagerySource(p, header.crs if bounds else None, bounds,
+                                         header.rows, header.cols, header.dx))
+    except BaseException:
+        for s in sources:
+            s.close()
+        raise
+    return sources
+
+
+def plan(sources: list[ImagerySource], header: StoreHeader, refine: int | None,
+         attribution: str | None) -> ImageryHeader:
+    """The imagery header for ``sources`` over ``header``'s grid (refinement chosen by
+    :func:`~lodsprite.terrain.imagery.choose_refine` unless given; the attribution given,
+    else the first one a source's metadata holds)."""
+    m = choose_refine(sources, header.rows, header.cols, header.dx, refine)
+    rows, cols = imagery_shape(header.rows, header.cols, m)
+    if attribution is None:
+        attribution = next((a for a in (s.attribution() for s in sources) if a), "")
+    if len(attribution) > 1000:
+        raise InputError("--attribution is longer than 1000 characters")
+    levels = imagery_levels(rows, cols)
+    infos = [ImagerySourceHeader(**vars(s.info())) for s in sources]
+    return ImageryHeader(infos, m, rows, cols, levels, attribution=attribution,
+                         done=[[] for _ in range(levels)])
+
+
+def create_arrays(group, header: StoreHeader) -> None:
+    """Make the empty imagery levels (zero: no data) in ``group``."""
+    from zarr.codecs import ZstdCodec
+
+    im = header.imagery
+    for j in range(im.levels):
+        shape = level_shape(im.rows, im.cols, j)
+        shard = tuple(min(header.tile, -(-s // header.chunk) * header.chunk) for s in shape)
+        group.create_array(f"imagery/{j}", shape=(*shape, 4),
+                           chunks=(header.chunk, header.chunk, 4), shards=(*shard, 4),
+                           dtype="uint8", fill_value=0, overwrite=True,
+                           compressors=ZstdCodec(level=CODEC_LEVEL))
+
+
+def tiles(header: StoreHeader, j: int) -> list[tuple[int, int, int, int]]:
+    im = header.imagery
+    return tile_windows(level_shape(im.rows, im.cols, j), header.tile)
+
+
+def total_tiles(header: StoreHeader) -> int:
+    return sum(len(tiles(header, j)) for j in range(header.imagery.levels))
+
+
+def build(group, header: StoreHeader, sources: list[ImagerySource],
+          progress: Progress | None = None, done_before: int = 0, total: int = 0,
+          stop_after: int | None = None) -> tuple[int, bool]:
+    """Write the imagery tiles not yet done; ``(tiles written, finished)``.  ``stop_after``
+    stops after that many tiles (to test resuming)."""
+    im = header.imagery
+    for s in sources:
+        s.warp(im.refine)
+    written = 0
+    for j in range(im.levels):
+        done = set(im.done[j])
+        for n, (r0, r1, c0, c1) in enumerate(tiles(header, j)):
+            if n in done:
+                continue
+            if stop_after is not None and written >= stop_after:
+                return written, False
+            if j == 0:
+                rgba = mosaic(sources, r0, r1, c0, c1)
+            else:
+                below = level_shape(im.rows, im.cols, j - 1)
+                rgba = downsample_rgba(np.asarray(group[f"imagery/{j - 1}"][
+                    2 * r0: min(below[0], 2 * r1), 2 * c0: min(below[1], 2 * c1)]))
+            group[f"imagery/{j}"][r0:r1, c0:c1] = rgba[: r1 - r0, : c1 - c0]
+            im.done[j].append(n)
+            save_header(group, header)
+            written += 1
+            if progress:
+                progress(done_before + written, total)
+    im.complete = True
+    return written, True
+
+
+def read(group, header: StoreHeader, j: int, r0: int, r1: int, c0: int, c1: int
+         ) -> np.ndarray:
+    """Level ``j``'s texels over a window, ``(h, w, 4) uint8`` sRGB RGBA.  A damaged chunk
+    raises :class:`InputError`."""
+    try:
+        return np.asarray(group[f"imagery/{j}"][r0:r1, c0:c1])
+    except Exception as exc:  # zarr and its codecs raise many kinds on damaged chunks
+        raise InputError(f"the store's imagery level {j} is damaged "
+                         f"({type(exc).__name__}: {exc})") from exc
+
+
+def check_arrays(group, header: StoreHeader) -> None:
+    """Every imagery level present with the shape the header gives (InputError)."""
+    im = header.imagery
+    for j in range(im.levels):
+        want = (*level_shape(im.rows, im.cols, j), 4)
+        try:
+            arr = group[f"imagery/{j}"]
+        except KeyError as exc:
+            raise InputError(f"imagery level {j} is missing") from exc
+        if tuple(arr.shape) != want or arr.dtype != np.uint8:
+            raise InputError(f"imagery level {j} is {tuple(arr.shape)} {arr.dtype}, the "
+                             f"header says {want} uint8")
+
+
+def level_for(header: StoreHeader, max_side: int) -> int:
+    """The finest imagery level whose longer side is at most ``max_side``."""
+    im = header.imagery
+    for j in range(im.levels):
+        if max(level_shape(im.rows, im.cols, j)) <= max_side:
+            return j
+    return im.levels - 1
+
+
+def texture(group, header: StoreHeader, max_side: int) -> np.ndarray:
+    """The whole imagery as one ``(H, W, 4) uint8`` texture of at most ``max_side`` a side,
+    spanning the store's extent exactly (``u = 0`` at sample column 0, ``1`` at the last):
+    the finest level that fits, its texels beyond the extent (a level's last texel may
+    reach past it) resampled away."""
+    from PIL import Image
+
+    im = header.imagery
+    j = level_for(header, max_side)
+    r, c = level_shape(im.rows, im.cols, j)
+    a = read(group, header, j, 0, r, 0, c)
+    exact_r, exact_c = im.rows / (1 << j), im.cols / (1 << j)
+    if (exact_r, exact_c) == (r, c):
+        return a
+    out_r, out_c = max(2, round(exact_r)), max(2, round(exact_c))
+    img = Image.fromarray(a, "RGBA").resize((out_c, out_r), Image.Resampling.BILINEAR,
+                                            box=(0.0, 0.0, exact_c, exact_r))
+    return np.asarray(img)
