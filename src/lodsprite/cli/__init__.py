@@ -13,6 +13,8 @@ either.
 from __future__ import annotations
 
 import sys
+from pathlib import Path
+from typing import Annotated
 
 import typer
 
@@ -38,6 +40,31 @@ for command in (render.info, with_technique_options(render.render),
                 with_technique_options(crowd.crowd, ("objects",)),
                 profile.profile, reproduce.reproduce, reproduce.demo, distributed.serve):
     app.command()(command)
+
+
+@app.callback()
+def _options(
+    http_cache: Annotated[Path | None, typer.Option(
+        "--http-cache", help="the folder of the HTTP block cache for http(s):// datasets "
+                             "(default ~/.cache/lodsprite/http; env LODSPRITE_HTTP_CACHE)")
+    ] = None,
+    http_cache_mb: Annotated[float | None, typer.Option(
+        "--http-cache-mb", help="its size cap in MB (default 2048; env "
+                                "LODSPRITE_HTTP_CACHE_MB)")] = None,
+) -> None:
+    """Options for every command, before its name: lodsprite --http-cache DIR render ..."""
+    import os
+
+    from lodsprite.errors import InputError
+
+    if http_cache is not None:  # the environment: render and reader processes inherit it
+        os.environ["LODSPRITE_HTTP_CACHE"] = str(http_cache.expanduser())
+    if http_cache_mb is not None:
+        if not http_cache_mb > 0:
+            raise InputError(f"--http-cache-mb must be positive, got {http_cache_mb}")
+        os.environ["LODSPRITE_HTTP_CACHE_MB"] = str(http_cache_mb)
+
+
 app.command(name="keys")(distributed.keys_command)
 app.command()(distributed.client)
 app.add_typer(lumigraph.lumigraph_app, name="lumigraph")

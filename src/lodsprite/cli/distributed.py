@@ -40,10 +40,11 @@ def serve(
     keys: Annotated[Path | None, typer.Option(
         "--keys", help="folder from `lodsprite keys`: encrypt with CURVE and accept only "
                        "clients whose public key is there")] = None,
-    data: Annotated[Path | None, typer.Option(
+    data: Annotated[str | None, typer.Option(
         "--data", help="folder whose terrain and texture files clients may name (relative "
-                       "to it); without it only built-ins (jacksboro, fractal:SIZE:SEED, "
-                       "terrain, checker) are served")] = None,
+                       "to it), or an http(s):// URL of one whose terrain stores (*.zarr) "
+                       "and COGs are read in place; without it only built-ins (jacksboro, "
+                       "fractal:SIZE:SEED, terrain, checker) are served")] = None,
     allow_shutdown: Annotated[bool, typer.Option(
         "--allow-shutdown", help="carry out a `shutdown` message from the client holding "
                                  "the server (refused otherwise)")] = False,

@@ -22,6 +22,10 @@ lie inside the data folder, symlinks followed (:mod:`lodsprite.scene.confine`); 
 instances, light fields and built-in terrain are held to a session's caps.  A kind is
 served only when it is among the server's ``kinds`` (the project's own by default:
 :data:`SERVED_KINDS`); a plug-in's must be listed.  A URL is never a name.
+
+The data folder may be an ``http(s)://`` URL (``serve --data URL``): names under it are
+terrain stores (``*.zarr``) and COGs, relative paths of plain characters, read through
+the HTTP block cache (:mod:`lodsprite.terrain.remote`); nothing else is served from it.
 """
 
 from __future__ import annotations
@@ -80,9 +84,14 @@ class Datasets:
 
     def __init__(self, data_dir: Path | str | None = None,
                  kinds: tuple[str, ...] = SERVED_KINDS) -> None:
+        from lodsprite.terrain.remote import is_url
+
         self.kinds = tuple(kinds)
         self.data_dir: Path | None = None
-        if data_dir is not None:
+        self.remote: str | None = None  # a data folder at an http(s):// URL
+        if data_dir is not None and is_url(str(data_dir)):
+            self.remote = str(data_dir).strip().rstrip("/")
+        elif data_dir is not None:
             root = Path(data_dir).expanduser()
             if not root.is_dir():
                 raise InputError(f"data folder not found: {data_dir}")
@@ -100,8 +109,45 @@ class Datasets:
                 raise InputError(f"fractal size {size} is not a power of two in "
                                  f"16..{MAX_FRACTAL_SIZE}")
             return Dataset(name, (size + 1, size + 1), True)
+        if self.remote is not None:
+            return self._remote_terrain(name)
         path, shape = self._file(name, "terrain", stores=True)
         return Dataset(str(path), shape, False)
+
+    def local_name(self, name: str) -> str:
+        """A resolved spec as the name it was resolved from: a path inside the data
+        folder, or a URL under the remote one, relative to it; any other as it is."""
+        root = self.data_dir
+        if root is not None and os.path.isabs(name) and Path(name).is_relative_to(root):
+            return Path(name).relative_to(root).as_posix()
+        if self.remote is not None and name.startswith(self.remote + "/"):
+            return name[len(self.remote) + 1:]
+        return name
+
+    def _remote_terrain(self, name: str) -> Dataset:
+        """A terrain store (``*.zarr``) or COG under the remote data folder: its URL, its
+        header read through the block cache (:mod:`lodsprite.terrain.remote`)."""
+        import re
+
+        from lodsprite.terrain.loaders import STORE_MAX_SIDE
+        from lodsprite.terrain.remote import open_raster
+        from lodsprite.terrain.store import TerrainStore
+
+        rel = PurePosixPath(name)
+        if (rel.is_absolute() or ".." in rel.parts
+                or not re.fullmatch(r"[A-Za-z0-9._\-/]{1,200}", name)):
+            raise InputError(f"terrain {name!r}: a name under the remote data folder is a "
+                             "relative path of letters, digits, '.', '_', '-' and '/'")
+        url = f"{self.remote}/{rel.as_posix()}"
+        if is_store(url):
+            st = TerrainStore(url)
+            return Dataset(url, st.shape(st.level_for(STORE_MAX_SIDE)), False)
+        if rel.suffix.lower() in (".tif", ".tiff"):
+            with open_raster(url) as ds:
+                shape = int(ds.height), int(ds.width)
+            return Dataset(url, shape, False)
+        raise InputError(f"terrain {name!r}: the remote data folder serves terrain stores "
+                         "(*.zarr) and COGs (*.tif)")
 
     def scene(self, name: str) -> SceneName:
         """The scene named ``name``: a terrain (:meth:`terrain`), a crowd, or a scene file,
@@ -127,6 +173,9 @@ class Datasets:
             return SceneName(low, "crowd", None)
         if low == "jacksboro" or parse_fractal_spec(name) is not None:
             return SceneName(name, None, None, self.terrain(name))
+        if self.remote is not None:  # a remote data folder serves terrains only
+            terrain = self._remote_terrain(name)
+            return SceneName(terrain.spec, None, None, terrain)
         path, shape = self._file(name, "scene", stores=True, folders=True)
         kind = scene_kind(str(path))  # on a path inside the data folder only
         if kind is None:  # a terrain: a store or a file, checked once by _file
@@ -212,8 +261,10 @@ class Datasets:
         """The file (or store, or with ``folders`` any folder) ``name`` names inside the
         data folder, checked, and its shape (:func:`_peek_shape`; None for a folder)."""
         if self.data_dir is None:
+            how = (" from its remote data folder but terrains" if self.remote else
+                   " (start it with --data DIR)")
             raise InputError(f"{what} {name!r} is not a built-in, and this server serves no "
-                             "files (start it with --data DIR)")
+                             f"files{how}")
         rel = PurePosixPath(name)
         if rel.is_absolute() or name.startswith("~"):
             raise InputError(f"{what} {name!r}: absolute paths are refused; name a file "

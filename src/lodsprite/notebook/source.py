@@ -35,12 +35,13 @@ class WidgetSource:
     them) and the folder they are served from (None: built-ins only)."""
 
     load: LoadArgs
-    data_dir: Path | None
+    data_dir: Path | str | None  # a str: an http(s):// folder of terrain stores and COGs
 
 
 def _name_in(value: str | Path, kind: str, folder: Path | None) -> tuple[str, Path | None]:
     """``value`` as a name the server resolves, and the folder it is in (None: a
-    built-in); a file outside ``folder`` (when given) is refused."""
+    built-in; a URL's folder for a terrain at an ``http(s)://`` URL); a file outside
+    ``folder`` (when given) is refused."""
     text = str(value)
     probe = Datasets(None)
     try:  # a built-in name (jacksboro, fractal:N[:S], crowd:N, terrain, checker[:K])
@@ -48,6 +49,11 @@ def _name_in(value: str | Path, kind: str, folder: Path | None) -> tuple[str, Pa
         return text, None
     except InputError as exc:
         builtin_error = exc
+    from lodsprite.terrain.remote import is_url
+
+    if is_url(text) and kind == "terrain":  # read in place: the URL's folder served
+        base, _, name = text.strip().rstrip("/").rpartition("/")
+        return name, base  # type: ignore[return-value]
     path = Path(text).expanduser()
     if not path.exists():
         if "/" in text or Path(text).suffix:

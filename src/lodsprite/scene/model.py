@@ -201,12 +201,10 @@ def store_imagery(terrain: str) -> bool:
 
     if not terrain or not is_store(terrain):
         return False
-    import zarr
-
-    from lodsprite.terrain.store_format import read_header
+    from lodsprite.terrain.store_format import open_read_only, read_header
 
     try:
-        return read_header(zarr.open_group(str(terrain), mode="r")).imagery is not None
+        return read_header(open_read_only(terrain)).imagery is not None
     except Exception:  # noqa: BLE001 - not a readable store: opening it says why
         return False
 

@@ -10,7 +10,6 @@ import time
 from collections.abc import Callable
 from contextlib import nullcontext
 from dataclasses import replace
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -38,10 +37,11 @@ def scene_pyramid(scene):
     spec names one, else its height field as an in-memory pyramid (the field full
     resolution draws)."""
     from lodsprite.terrain.pyramid import MemoryPyramid
+    from lodsprite.terrain.remote import location
     from lodsprite.terrain.store import TerrainStore, is_store
 
     if is_store(scene.terrain_spec):
-        return TerrainStore(Path(scene.terrain_spec).expanduser(),
+        return TerrainStore(location(scene.terrain_spec),
                             float(scene.hf.meta.get("exaggeration", 1.0)))
     return MemoryPyramid.from_heightfield(scene.hf)
 

@@ -38,7 +38,6 @@ from __future__ import annotations
 import time
 from contextlib import nullcontext
 from dataclasses import replace
-from pathlib import Path
 from typing import TYPE_CHECKING
 
 from lodsprite.sprite.keyframe_process import (
@@ -80,6 +79,7 @@ class StoreKeyframes:
         from lodsprite.techniques.adaptive_terrain import AdaptiveTerrain
         from lodsprite.techniques.drawn_surface import DrawnSurface
         from lodsprite.terrain.pyramid import MemoryPyramid
+        from lodsprite.terrain.remote import location
         from lodsprite.terrain.store import TerrainStore, is_store
         from lodsprite.terrain.storefield import store_field
 
@@ -93,7 +93,7 @@ class StoreKeyframes:
             self.terrain = TerrainDrawer(self.ctx, geometry, s.size[0], s.size[1],
                                          s.fov_y_deg)
             made.append(self.terrain)
-            pyramid = (TerrainStore(Path(keys.path).expanduser(),
+            pyramid = (TerrainStore(location(keys.path),
                                     float(hf.meta.get("exaggeration", 1.0)))
                        if is_store(keys.path) else MemoryPyramid.from_heightfield(hf))
             self.adaptive = AdaptiveTerrain(

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from lodsprite.errors import TerrainError
+from lodsprite.errors import InputError, TerrainError
 from lodsprite.terrain.rasters import first_line
 
 __all__ = ["describe"]
@@ -31,10 +31,13 @@ def describe(spec: str | Path) -> dict[str, str]:
                 "samples": f"{n + 1} x {n + 1}", "seed": str(seed),
                 "CRS": "none (metres from the centre)",
                 "resolution": "30 x 30 m"}
-    path = Path(text).expanduser()
+    from lodsprite.terrain.remote import Url, location
+
+    path = location(text)
     if is_store(path):
         return _store(path)
-    if path.suffix.lower() in (".tif", ".tiff") and path.is_file():
+    if Path(path.name).suffix.lower() in (".tif", ".tiff") and (
+            isinstance(path, Url) or path.is_file()):
         return _geotiff(path)
     if text.lower() == "jacksboro":
         from lodsprite.terrain.loaders import load_heightfield
@@ -45,7 +48,7 @@ def describe(spec: str | Path) -> dict[str, str]:
                 "samples": f"{hf.rows} x {hf.cols}", "CRS": m["crs"],
                 "extent": _extent(m["west"], m["south"], m["east"], m["north"]),
                 "resolution": f"{_metres(hf.dx)} x {_metres(hf.dy)} m (3 arc-seconds)"}
-    if not path.exists():
+    if not isinstance(path, Url) and not path.exists():
         raise TerrainError(f"no such dataset: {text}")
     raise TerrainError(f"{text}: info describes a GeoTIFF, a terrain store or fractal:N")
 
@@ -67,10 +70,13 @@ def _geotiff(path: Path) -> dict[str, str]:
     import rasterio
     from rasterio.errors import NotGeoreferencedWarning
 
+    from lodsprite.terrain.remote import Url, open_raster
+
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", NotGeoreferencedWarning)
-            with rasterio.open(path) as ds:
+            with rasterio.Env(), (open_raster(path) if isinstance(path, Url)
+                                  else rasterio.open(path)) as ds:
                 b = ds.bounds
                 out = {"dataset": str(path), "kind": f"raster ({ds.driver})",
                        "samples": f"{ds.height} x {ds.width}, {ds.count} band(s), "
@@ -85,6 +91,8 @@ def _geotiff(path: Path) -> dict[str, str]:
                                   if ds.profile.get("tiled") else "striped"),
                        "compression": str(ds.compression.value if ds.compression
                                           else "none").lower()}
+    except InputError as exc:  # a URL refused (no answer, no ranges): its own line
+        raise TerrainError(str(exc)) from None
     except Exception as exc:  # GDAL raises RasterioError or CPLE_* errors
         raise TerrainError(f"cannot read {path}: {first_line(exc)}") from None
     return out
@@ -111,13 +119,12 @@ def _units(crs) -> str:
 def _store(path: Path) -> dict[str, str]:
     """A store's header, read as it is (an unfinished build too, which
     :class:`~lodsprite.terrain.store.TerrainStore` refuses to open)."""
-    import zarr
 
     from lodsprite.errors import InputError
-    from lodsprite.terrain.store_format import level_shape, read_header
+    from lodsprite.terrain.store_format import level_shape, open_read_only, read_header
 
     try:
-        h = read_header(zarr.open_group(str(path), mode="r"))
+        h = read_header(open_read_only(path))
     except InputError as exc:
         raise TerrainError(f"{path}: {exc}") from None
     except Exception as exc:  # noqa: BLE001 - zarr raises many kinds on a damaged store

@@ -129,9 +129,12 @@ class ImagerySource:
         import rasterio
         from rasterio.enums import ColorInterp
 
+        from lodsprite.terrain.remote import is_url, open_raster
+
         self.path = str(path)
         try:
-            self.ds = rasterio.open(_gdal_path(self.path))
+            self.ds = (open_raster(self.path) if is_url(self.path)
+                       else rasterio.open(_local(self.path)))
         except (rasterio.errors.RasterioIOError, OSError) as exc:
             raise InputError(f"cannot read imagery {path}: {_line(exc)}") from exc
         ds = self.ds
@@ -289,8 +292,8 @@ def mosaic(sources: list[ImagerySource], r0: int, r1: int, c0: int, c1: int) -> 
     return out
 
 
-def _gdal_path(path: str) -> str:
-    """What GDAL opens for ``path``: a local file as is (checked to exist)."""
+def _local(path: str) -> str:
+    """A local imagery file (checked to exist)."""
     p = Path(path).expanduser()
     if not p.is_file():
         raise InputError(f"no such imagery file: {path}")

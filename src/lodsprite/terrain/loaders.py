@@ -73,11 +73,12 @@ def load_level0(spec: str | os.PathLike, exaggeration: float = 1.0,
     Raises :class:`InputError` when its longer side exceeds ``max_side`` samples (what full
     resolution draws whole; default :data:`STORE_MAX_SIDE` + 1) or ``spec`` is no store."""
     max_side = STORE_MAX_SIDE + 1 if max_side is None else max_side
+    from lodsprite.terrain.remote import location
     from lodsprite.terrain.store import TerrainStore, is_store
 
     if not is_store(spec):
         raise InputError(f"{spec}: not a terrain store")
-    store = TerrainStore(Path(spec).expanduser(), exaggeration)
+    store = TerrainStore(location(spec), exaggeration)
     rows, cols = store.shape(0)
     if max(rows, cols) > max_side:
         raise InputError(f"{spec}: level 0 is {cols}x{rows} samples, more than full resolution "
@@ -108,15 +109,21 @@ def load_heightfield(spec: str | os.PathLike,
     parsed = parse_fractal_spec(spec)
     if parsed is not None:
         return fractal(*parsed)
-    path = Path(spec).expanduser()
-    suffix = path.suffix.lower()
+    from lodsprite.terrain.remote import is_url, location
     from lodsprite.terrain.store import TerrainStore, is_store
 
+    path = location(spec)
+    suffix = Path(path.name).suffix.lower()
     if is_store(path):
         try:
             return TerrainStore(path).heightfield(store_side)
         except InputError as exc:
             raise TerrainError(str(exc)) from exc
+    if is_url(spec):
+        if suffix not in (".tif", ".tiff"):
+            raise TerrainError(f"{spec}: a URL names a (Cloud Optimized) GeoTIFF or a "
+                               "terrain store (*.zarr)")
+        return _load_geotiff(path, store_side)
     if not path.exists():
         if suffix in _FILE_TYPES:
             raise TerrainError(f"terrain file not found: {spec}")
@@ -172,28 +179,38 @@ def _load_jacksboro() -> HeightField:
     return heightfield_from_array(z, d["dx"] * per_lon, d["dy"] * per_lat, "jacksboro", meta)
 
 
-def _load_geotiff(path: Path) -> HeightField:
-    """Band 1 of a single-band GeoTIFF; nodata masked; rows re-ordered to north-up."""
+def _load_geotiff(path, max_side: int | None = None) -> HeightField:
+    """Band 1 of a single-band GeoTIFF; nodata masked; rows re-ordered to north-up.
+    ``max_side``: read at most this many samples a side (a remote COG: through its
+    overviews, only what that needs; its spacing widened to match)."""
     import rasterio
+    from rasterio.enums import Resampling
     from rasterio.errors import NotGeoreferencedWarning
 
+    from lodsprite.terrain.remote import Url, open_raster
+
     try:
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), rasterio.Env():
             warnings.simplefilter("ignore", NotGeoreferencedWarning)
-            with rasterio.open(path) as ds:
+            with (open_raster(path) if isinstance(path, Url) else rasterio.open(path)) as ds:
                 if ds.count != 1:
                     raise TerrainError(f"{path}: expected 1 band, found {ds.count}")
                 if not _is_real_dtype(ds.dtypes[0]):
                     raise TerrainError(f"{path}: heights must be real numbers, found "
                                        f"dtype {ds.dtypes[0]}")
-                a = ds.read(1, masked=True)
-                transform = ds.transform
-                dx, dy, meta = geotiff_spacing(path, transform, ds.crs, ds.height)
+                k = 1 if max_side is None else max(1, -(-max(ds.shape) // max_side))
+                a = ds.read(1, masked=True, out_shape=(-(-ds.height // k), -(-ds.width // k)),
+                            resampling=Resampling.average) if k > 1 else ds.read(1, masked=True)
+                transform = ds.transform * ds.transform.scale(ds.width / a.shape[1],
+                                                              ds.height / a.shape[0])
+                dx, dy, meta = geotiff_spacing(path, transform, ds.crs, a.shape[0])
                 if ds.crs is not None:  # where the dataset's own coordinates lie
                     meta["georef"] = georef(ds.bounds, (dx / abs(transform.a),
                                                         dy / abs(transform.e)))
     except TerrainError:
         raise
+    except InputError as e:  # a URL refused (no answer, no ranges): its own line
+        raise TerrainError(str(e)) from e
     except Exception as e:                      # GDAL raises RasterioError or CPLE_* errors
         raise TerrainError(f"cannot read GeoTIFF {path}: {first_line(e)}") from e
     if transform.e > 0 and not transform.is_identity:   # south-up raster: make row 0 north

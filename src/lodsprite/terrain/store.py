@@ -49,6 +49,7 @@ from lodsprite.terrain.store_format import (
     estimate_bytes,
     is_store,
     level_shape,
+    open_read_only,
     pyramid_levels,
     read_header,
     save_header,
@@ -366,16 +367,17 @@ class TerrainStore:
     errors, as ``--exaggeration`` does for in-memory terrains."""
 
     def __init__(self, path: str | Path, exaggeration: float = 1.0) -> None:
-        import zarr
 
         if not (exaggeration > 0 and np.isfinite(exaggeration)):
             raise InputError(f"vertical exaggeration must be positive, got {exaggeration}")
+        from lodsprite.terrain.remote import Url, is_url, location
+
         self.exaggeration = float(exaggeration)
-        self.path = Path(path)
-        if not (self.path / "zarr.json").is_file():
+        self.path = location(path) if is_url(path) else Path(path)
+        if not isinstance(self.path, Url) and not (self.path / "zarr.json").is_file():
             raise InputError(f"{self.path} is not a terrain store (no zarr.json)")
         try:
-            self.group = zarr.open_group(str(self.path), mode="r")
+            self.group = open_read_only(self.path)
             self.header = read_header(self.group)
         except InputError as exc:
             raise InputError(f"{self.path}: {exc}") from exc

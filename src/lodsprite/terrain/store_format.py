@@ -145,9 +145,25 @@ def _check_imagery(header: StoreHeader) -> None:
 
 
 def is_store(path: str | Path) -> bool:
-    """Whether ``path`` is a folder holding a Zarr group (a store to open and validate)."""
+    """Whether ``path`` is a folder holding a Zarr group (a store to open and validate),
+    or an ``http(s)://`` URL of one (named ``*.zarr``; validated when opened)."""
+    from lodsprite.terrain.remote import is_url
+
+    if is_url(path):
+        return str(path).strip().rstrip("/").lower().endswith(".zarr")
     p = Path(path).expanduser()
     return p.is_dir() and (p / "zarr.json").is_file()
+
+
+def open_read_only(path: str | Path):
+    """The Zarr v3 group of a store to read: a local folder, or a URL through the HTTP
+    block cache (:mod:`lodsprite.terrain.remote`)."""
+    import zarr
+
+    from lodsprite.terrain.remote import is_url, zarr_store
+
+    where = zarr_store(str(path)) if is_url(path) else str(path)
+    return zarr.open_group(where, mode="r", zarr_format=3)
 
 
 def save_header(group, header: StoreHeader) -> None:

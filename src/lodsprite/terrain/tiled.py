@@ -133,7 +133,7 @@ def parse_fractal(spec: str) -> FractalSource | None:
 class GeoTiffSource:
     """A GeoTIFF/COG read window by window (kept open)."""
 
-    path: Path
+    path: Path  # or a Url (lodsprite.terrain.remote): read through the block cache
     rows: int = field(init=False)
     cols: int = field(init=False)
 
@@ -142,20 +142,22 @@ class GeoTiffSource:
 
         from lodsprite.errors import TerrainError
         from lodsprite.terrain.rasters import geotiff_spacing
+        from lodsprite.terrain.remote import Url, open_raster
 
         try:
-            self.ds = rasterio.open(self.path)
+            self.ds = (open_raster(self.path) if isinstance(self.path, Url)
+                       else rasterio.open(self.path))
         except (rasterio.errors.RasterioIOError, OSError) as exc:
             raise InputError(f"cannot read {self.path}: {exc}") from exc
         self.rows, self.cols = self.ds.height, self.ds.width
         t = self.ds.transform
         try:
-            self.dx, self.dy, _ = geotiff_spacing(Path(self.path), t, self.ds.crs, self.rows)
+            self.dx, self.dy, _ = geotiff_spacing(self.path, t, self.ds.crs, self.rows)
         except TerrainError as exc:
             raise InputError(str(exc)) from exc
         # as the in-memory loader: row 0 north, column 0 west
         self.flip_rows, self.flip_cols = (t.e > 0 and not t.is_identity), t.a < 0
-        self.name = Path(self.path).stem
+        self.name = Path(self.path.name).stem
         self.crs = self.ds.crs.to_string() if self.ds.crs else None
         self.transform = list(self.ds.transform)[:6]
         self.nodata = self.ds.nodata
@@ -210,9 +212,15 @@ class GeoTiffSource:
 
 def open_source(spec: str):
     """The source of ``lodsprite tile SRC``: a fractal spec or a GeoTIFF file."""
+    from lodsprite.terrain.remote import is_url, location
+
     src = parse_fractal(spec)
     if src is not None:
         return src
+    if is_url(spec):
+        if not spec.lower().split("?")[0].endswith((".tif", ".tiff")):
+            raise InputError(f"{spec}: the tiler reads GeoTIFF/COG (.tif/.tiff) URLs")
+        return GeoTiffSource(location(spec))
     p = Path(spec)
     if not p.is_file():
         raise InputError(f"no such source: {spec} (a GeoTIFF/COG file or fractal:SIZE[:SEED])")

@@ -55,6 +55,7 @@ from lodsprite.distributed.pool.results import PoolResults, drain, signal
 from lodsprite.distributed.protocol import CODECS, LoadArgs, ProtocolError
 from lodsprite.errors import InputError
 from lodsprite.sprite.worker_settings import DEFAULT_WORKER_NICE
+from lodsprite.terrain.remote import data_root
 
 log = logging.getLogger("lodsprite.pool")
 
@@ -115,7 +116,7 @@ class LocalPool(PoolResults):
         self.renderer_mb = renderer_mb
         self.nice = int(nice)
         self.codec = codec
-        self.data_dir = None if data_dir is None else str(Path(data_dir).resolve())
+        self.data_dir = data_root(data_dir)
         self.cache = 2
         self._renderers: list[_Slot] = []
         self._inbox: deque[Job] = deque()

@@ -49,6 +49,7 @@ from lodsprite.distributed.pool.jobs import (
 from lodsprite.distributed.pool.results import PoolResults
 from lodsprite.distributed.protocol import CODECS, ProtocolError
 from lodsprite.errors import InputError, LodspriteError
+from lodsprite.terrain.remote import data_root
 
 log = logging.getLogger("lodsprite.pool")
 
@@ -185,7 +186,7 @@ class RayPool(PoolResults):
         actor = self._ray.remote(RenderActor).options(
             num_cpus=1, num_gpus=gpus, max_restarts=-1, max_task_retries=0,
             max_concurrency=1)
-        folder = None if data_dir is None else str(Path(data_dir).resolve())
+        folder = data_root(data_dir)
         return [actor.remote(folder, cache) for _ in range(n)]
 
     # ------------------------------------------------------------- the interface

@@ -18,7 +18,6 @@ dropped first, all sharing the process's one GL context.
 
 from __future__ import annotations
 
-import os
 import time
 from collections import OrderedDict
 from collections.abc import Callable
@@ -58,12 +57,7 @@ def resolve_load(load: LoadArgs, datasets: Datasets, sizes: dict | None = None) 
     from lodsprite.distributed.render import check_scene_memory, keyframe_scene_bytes
     from lodsprite.errors import InputError
 
-    def local(name: str) -> str:
-        root = datasets.data_dir
-        if root is not None and os.path.isabs(name) and Path(name).is_relative_to(root):
-            return Path(name).relative_to(root).as_posix()
-        return name
-
+    local = datasets.local_name
     named = datasets.scene(local(load.terrain))  # confined to the data folder, capped
     if named.kind in OBJECT_KINDS:
         from lodsprite.distributed.render import scene_file_bytes
