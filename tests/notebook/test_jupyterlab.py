@@ -1,7 +1,8 @@
 """The widget in a real notebook: JupyterLab 4 started by the test, headless Chromium
 opens a notebook and runs its cells; the widget plays chen1999 in the cell's output and
 the kernel reads back what the browser measured (``w.stats``) and showed
-(``await w.screenshot()``)."""
+(``await w.screenshot()``): a terrain store draped with an orthophoto, whose colours the
+screenshot shows."""
 
 import json
 import time
@@ -17,13 +18,14 @@ pytest.importorskip("selenium.webdriver", reason="the test extra")
 from lab_fixtures import jupyterlab  # noqa: E402
 
 from browsers import HAVE_CHROMIUM, NO_CHROMIUM, quit_browser, start_browser  # noqa: E402
+from draped import EAST_RGB, WEST_RGB, flat_dem, write_draped  # noqa: E402
 
 pytestmark = pytest.mark.skipif(not HAVE_CHROMIUM, reason=NO_CHROMIUM)
 DEADLINE_S = 90.0
 SIZE = 128
 CELLS = [
     "import lodsprite\n"
-    f"w = lodsprite.widget('fractal:64:4', grid=64, lod=8, size=({SIZE}, {SIZE}), "
+    f"w = lodsprite.widget('draped.zarr', grid=64, lod=8, size=({SIZE}, {SIZE}), "
     "path='chen1999', frames=48)\nw",
     "import json\nframes = await w.played(timeout=80)\n"
     "png = await w.screenshot()\nopen('shot.png', 'wb').write(png)\n"
@@ -50,6 +52,7 @@ def test_the_widget_plays_in_jupyterlab_and_the_kernel_reads_its_stats(tmp_path)
     nb.metadata["kernelspec"] = {"name": "python3", "display_name": "Python 3",
                                  "language": "python"}
     nbformat.write(nb, tmp_path / "fly.ipynb")
+    write_draped(flat_dem(tmp_path / "dem.tif"), tmp_path / "draped.zarr")
     driver = profile = None
     with jupyterlab(tmp_path, DEADLINE_S) as (base, token):
         try:
@@ -84,4 +87,8 @@ def test_the_widget_plays_in_jupyterlab_and_the_kernel_reads_its_stats(tmp_path)
     assert shot.shape == (SIZE, SIZE, 3)
     sky = np.all(np.abs(shot.astype(int) - [158, 189, 219]) <= 2, axis=-1)
     assert sky.mean() < 0.9, "the screenshot shows no terrain"
+    west = np.all(np.abs(shot.astype(int) - WEST_RGB) <= 12, axis=-1)
+    east = np.all(np.abs(shot.astype(int) - EAST_RGB) <= 12, axis=-1)
+    assert (west | east | sky).mean() > 0.95, "the widget does not show the imagery"
+    assert (west | east).mean() > 0.05
     assert closed == "False", "close() left the renderer process running"

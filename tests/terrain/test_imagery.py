@@ -141,6 +141,19 @@ def test_the_store_keeps_the_imagery_its_attribution_and_a_linear_light_pyramid(
     assert np.array_equal(a1, downsample_rgba(a0))
 
 
+def test_the_attribution_reaches_the_scene_the_page_and_the_window(draped):
+    from lodsprite.distributed.messages import SceneMessage
+    from lodsprite.scene import load_scene
+    from lodsprite.scene.model import scene_attribution
+    from lodsprite.viewer.hud import HudState
+
+    _, store, _ = draped
+    credit = scene_attribution(load_scene(str(store), "terrain", None, 1.0, light=True))
+    assert "CC-BY" in credit
+    assert f"imagery {credit}" in HudState(attribution=credit).lines()
+    assert "attribution" in SceneMessage.__struct_fields__
+
+
 def test_coarser_levels_are_filtered_in_linear_light_and_weighted_by_alpha():
     bw = np.zeros((2, 2, 4), np.uint8)
     bw[0, :, :3], bw[..., 3] = 255, 255

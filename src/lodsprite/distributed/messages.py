@@ -292,6 +292,10 @@ class Georef(Struct, forbid_unknown_fields=True):
             raise ValueError("georef bounds must be west < east and south < north")
 
 
+MAX_ATTRIBUTION = 1000
+"""Longest imagery attribution a scene message carries (characters)."""
+
+
 class SceneMessage(Message, tag="scene"):
     """What a web page draws spriteframes from, after its ``load``: the coarse level
     (``coarse`` quads a side) as heights ``(coarse+1, coarse+1) float32`` (world z,
@@ -307,7 +311,9 @@ class SceneMessage(Message, tag="scene"):
     them, little-endian bytes: what the keyframe's coarse z-buffer was drawn with.
     ``walkers``: a scene file's moving objects (:class:`WalkerSet`), None without.
     ``exaggeration``: the vertical exaggeration the heights carry; ``georef``: where the
-    terrain lies in its dataset's CRS (:class:`Georef`), None for a terrain without one."""
+    terrain lies in its dataset's CRS (:class:`Georef`), None for a terrain without one;
+    ``attribution``: the licence and attribution line of the imagery it drapes ("" for
+    none), which the page shows."""
 
     coarse: Annotated[int, Meta(ge=1, le=MAX_SCENE_COARSE)]
     origin: tuple[Coord, Coord]
@@ -327,6 +333,7 @@ class SceneMessage(Message, tag="scene"):
     walkers: WalkerSet | None = None
     exaggeration: Annotated[float, Meta(gt=0.0, le=1000.0)] = 1.0
     georef: Georef | None = None
+    attribution: Annotated[str, Meta(max_length=MAX_ATTRIBUTION)] = ""
 
 
 ANY_MESSAGE = (Control | Reply | ViewpointMessage | KeyframeMessage | Ack | Request

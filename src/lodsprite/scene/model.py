@@ -209,6 +209,20 @@ def store_imagery(terrain: str) -> bool:
         return False
 
 
+def scene_attribution(scene: Scene) -> str:
+    """The licence and attribution line of the imagery a scene's terrain drapes ("" for
+    none): a terrain store's, kept from ``--attribution`` or its sources' metadata."""
+    spec = scene.terrain_spec
+    if not store_imagery(spec):
+        return ""
+    from lodsprite.terrain.store_format import open_read_only, read_header
+
+    try:
+        return read_header(open_read_only(spec)).imagery.attribution
+    except Exception:  # noqa: BLE001 - unreadable now: the renderers say why
+        return ""
+
+
 def scene_texture(terrain: str, texture: str, hf) -> np.ndarray:
     """The terrain's texture: ``texture`` (:func:`~lodsprite.terrain.textures.
     make_texture`), except on a terrain store tiled with imagery, where the default

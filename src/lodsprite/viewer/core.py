@@ -30,8 +30,10 @@ from lodsprite.errors import LodspriteError
 from lodsprite.gl.overlay import HudLayer, LineOverlay, frustum_segments
 from lodsprite.paths import CameraPath
 from lodsprite.scene import Scene
+from lodsprite.scene.model import scene_attribution
 from lodsprite.techniques import Frame, Technique, TechniqueFactory
 from lodsprite.viewer.controls import CameraController, FlightRecorder
+from lodsprite.viewer.cursor import cursor_line
 from lodsprite.viewer.hud import PANEL_HZ, HudState, glyph_atlas, layout_text
 
 if TYPE_CHECKING:  # hints only: moderngl is imported under gl/
@@ -88,7 +90,10 @@ class ViewerCore:
         # With ``framebuffer`` (the window's), frames are drawn straight into it.
         self.framebuffer = framebuffer
         self.renderer = Renderer(scene, size, fov_y_deg, ctx=ctx, framebuffer=framebuffer)
-        self.hud = HudState(renderer=self.renderer.info.renderer)
+        self.hud = HudState(renderer=self.renderer.info.renderer,
+                            attribution=scene_attribution(scene))
+        self.pointer_px: tuple[float, float] | None = None  # the cursor, window pixels
+        self._shown_vp = None  # the last frame's viewpoint (the cursor's ray starts there)
         self._atlas = glyph_atlas(26 if max(size) >= 2000 else 13)  # HiDPI: twice the size
         self._hud_layer = HudLayer(self.renderer.gl, self._atlas.alpha)
         self._lines = LineOverlay(self.renderer.gl)
@@ -129,6 +134,10 @@ class ViewerCore:
             self.quit = True
         else:
             self.controller.key(name, pressed)
+
+    def pointer(self, x: float | None, y: float | None = None) -> None:
+        """The cursor moved to window pixel ``(x, y)`` (None: it left the window)."""
+        self.pointer_px = None if x is None else (float(x), float(y))
 
     def drag(self, dx: float, dy: float) -> None:
         """Mouse moved ``dx, dy`` framebuffer pixels with a button held."""
@@ -216,6 +225,7 @@ class ViewerCore:
         framebuffer.use()
         self.technique.draw_to(framebuffer)
         self._overlays(vp)
+        self._shown_vp = vp
         if self.record is not None:
             self.record.append(vp)
         presented = time.perf_counter()
@@ -300,12 +310,23 @@ class ViewerCore:
             h.toggles = "  ".join(k for k, on in self.toggles.items() if on and k != "hud")
             h.status = (self._message if now < self._message_until
                         else self.technique.status())
+            h.cursor = self._cursor_line()
             self._hud_layer.set_text(*layout_text(h.lines(), self._atlas))
         w, h = framebuffer.width, framebuffer.height
         ph = int(self._hud_layer.panel_height)
         ms = np.asarray(self.hud.frame_ms)
         top = max(33.4, float(np.percentile(ms, 99)) * 1.2) if len(ms) else 33.4
         self._hud_layer.draw((w, h), ms, (8, ph + 8, min(240, w - 16), 60), top)
+
+    def _cursor_line(self) -> str:
+        """The HUD's cursor line (:func:`~lodsprite.viewer.cursor.cursor_line`); the
+        exaggeration alone while the cursor is off the window or off the terrain."""
+        hf, vp = self.scene.hf, self._shown_vp
+        if hf is None or vp is None:
+            return ""
+        if self.pointer_px is None:
+            return f"exaggeration {float(hf.meta.get('exaggeration', 1.0)):.2f}x"
+        return cursor_line(hf, vp, *self.pointer_px, self.renderer.size, self.fov_y_deg)
 
     def _say(self, message: str) -> None:
         """Show ``message`` in the HUD's status line for ``MESSAGE_S`` seconds."""

@@ -31,6 +31,8 @@ class HudState:
     params: str = ""
     toggles: str = ""
     status: str = ""
+    cursor: str = ""       # the point under the cursor, in the dataset's CRS
+    attribution: str = ""  # the imagery's licence and attribution line
     frame_type: str = ""
     error_px: float = math.nan
     keyframes: int = 0
@@ -62,6 +64,10 @@ class HudState:
                f"frame {self.frame_type}   error {err}   keyframes {self.keyframes}",
                f"triangles {self.triangles:,}",
                f"GL {self.renderer}"]
+        if self.cursor:
+            out.append(self.cursor)
+        if self.attribution:
+            out.append(f"imagery {self.attribution}"[:120])
         if self.toggles:
             out.append(self.toggles)
         if self.status:

@@ -108,6 +108,7 @@ def run_viewer(scene: Scene, factories: dict[str, TechniqueFactory], mode: str,
     window.key_event_func = on_key
     window.mouse_drag_event_func = lambda x, y, dx, dy: core.drag(dx * ratio, dy * ratio)
     window.mouse_scroll_event_func = lambda dx, dy: core.scroll(dy)
+    window.mouse_position_event_func = lambda x, y, dx, dy: core.pointer(x * ratio, y * ratio)
     # A resize remakes the renderer (and a keyframe worker): dragging a window corner
     # sends dozens of events, so only the last size is applied, before the next frame.
     window.resize_func = lambda w, h: setattr(core, "pending_size", window.buffer_size)

@@ -27,6 +27,8 @@ webdriver = pytest.importorskip("selenium.webdriver", reason="selenium (the test
                                 "drives the browser")
 
 from browsers import HAVE_CHROMIUM, NO_CHROMIUM, quit_browser, start_browser  # noqa: E402
+from draped import EAST_RGB, IMAGERY_CREDIT, WEST_RGB, write_draped  # noqa: E402
+from lodsprite.gl.shaders import SKY_RGB  # noqa: E402
 
 pytestmark = pytest.mark.skipif(not HAVE_CHROMIUM, reason=NO_CHROMIUM)
 
@@ -79,7 +81,10 @@ def data_dir(tmp_path_factory):
     data = tmp_path_factory.mktemp("data")
     (data / "walk.toml").write_text(SCENE_FILE)
     write_flat_utm(data / "utm.tif")
+    write_draped(data / "utm.tif", data / "draped.zarr")
     return data
+
+
 
 
 UTM_WEST, UTM_NORTH, UTM_RES, UTM_HEIGHT = 500000.0, 4100000.0, 30.0, 500.0
@@ -365,6 +370,32 @@ def test_the_cursor_reads_the_datasets_own_coordinates(server, browser):
     e, n = (float(hud.split(k)[1].split()[0]) for k in ("cursor E ", " N "))
     assert e == pytest.approx(got["at"][0]["e"], abs=0.06)  # pixel (32, 32)'s point
     assert n == pytest.approx(got["at"][0]["n"], abs=0.06)
+
+
+def test_the_page_drapes_a_stores_imagery_and_credits_it(server, browser):
+    """A store tiled with an orthophoto (west half red, east half blue): the page's
+    keyframes and its fallback show the imagery's colours, not the heights shading, west
+    on the left of a view from the south; the HUD and the API give its credit."""
+    browser.get(page_url(server, query=f"terrain=draped.zarr&grid=64&lod=8&size={SIZE}x"
+                                       f"{SIZE}&keyscale=1"))
+    assert page_error(browser) == ""
+    wait_for(browser, "window.lodsprite.stats().keyframes >= 1")
+    got = browser.execute_async_script("""
+        const done = arguments[arguments.length - 1];
+        requestAnimationFrame(() => requestAnimationFrame(() => done({
+          pixels: window.lodsprite.pixels(), credit: window.lodsprite.attribution(),
+          hud: document.getElementById('hud').textContent})));""")
+    p = got["pixels"]
+    img = np.frombuffer(base64.b64decode(p["rgba"]), np.uint8).reshape(
+        p["height"], p["width"], 4)[..., :3].astype(int)
+    west = np.all(np.abs(img - WEST_RGB) <= 12, axis=-1)
+    east = np.all(np.abs(img - EAST_RGB) <= 12, axis=-1)
+    sky = np.all(np.abs(img - np.round(np.array(SKY_RGB) * 255)) <= 3, axis=-1)
+    assert (west | east | sky).mean() > 0.97, (west.mean(), east.mean(), sky.mean())
+    assert west.sum() > 200 and east.sum() > 200
+    cols = np.arange(img.shape[1])[None, :].repeat(img.shape[0], 0)
+    assert cols[west].mean() < cols[east].mean()  # from the south: west on the left
+    assert got["credit"] == IMAGERY_CREDIT and IMAGERY_CREDIT in got["hud"]
 
 
 def page_error(browser) -> str:

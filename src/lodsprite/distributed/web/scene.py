@@ -160,6 +160,11 @@ def scene_parts(scene: Scene, args: LoadArgs, codec: str = "raw") -> list:
               "heights": h_spec, "texture": t_spec,
               "relief": relief(hf.heights, step),
               "exaggeration": float(hf.meta.get("exaggeration", 1.0))}
+    from lodsprite.scene.model import scene_attribution
+
+    credit = scene_attribution(scene)
+    if credit:  # the imagery's licence, shown by the page and the widget
+        header["attribution"] = credit[:1000]
     ref = hf.meta.get("georef")
     if ref and hf.meta.get("crs"):  # the page's cursor in the dataset's own coordinates
         header["georef"] = {"crs": str(hf.meta["crs"])[:200], "bounds": ref["bounds"],

@@ -156,7 +156,10 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
     if (!sceneHeader || !coarseMetric || !vp) return null;
     return cursorPoint(coarseMetric, vp, px, py, width, height, sceneHeader.fov, sceneHeader.georef ?? null, sceneHeader.exaggeration ?? 1);
   };
-  const cursorLine = () => {
+  // the imagery's licence and attribution, on the HUD whenever the terrain drapes some
+  const credit = () => (sceneHeader && sceneHeader.attribution ? `\nimagery ${sceneHeader.attribution}` : '');
+  const cursorLine = () => cursorText() + credit();
+  const cursorText = () => {
     const ex = sceneHeader ? `exaggeration ${(sceneHeader.exaggeration ?? 1).toFixed(2)}x` : '';
     const c = cursorPx && cursorAt(cursorPx[0], cursorPx[1]);
     if (!c) return ex;
@@ -322,6 +325,7 @@ export function startApp({ canvas, hud: hudEl = null, transport, options, moreOp
     viewpoint: () => controls && controls.vp,
     keyViewpoint: () => keyVp,
     cursorAt,  // (px, py) canvas pixels -> {world, e, n, h, crs} or null (cursor.js)
+    attribution: () => (sceneHeader && sceneHeader.attribution) || '',  // the imagery's credit
     pathIndex: () => pathIndex,
     keyScale: () => ({ ...keyScale }),  // {scale, why}: the keyframe scale asked for, and why
     setWalkTime(t) { walkFixed = t; },  // walkers held at t seconds (null: their own clock)
