@@ -94,8 +94,34 @@ def level_zero_reference(gl, scene, size: tuple[int, int], fov_y_deg: float,
                                                                           np.uint8)
     field = (scene_pyramid(scene) if scene.terrain_spec and is_store(scene.terrain_spec)
              else scene.hf)
+    imagery = None
+    if shading == "texture" and is_store(scene.terrain_spec):
+        imagery = imagery_windows(field, scene.texture_spec, gl.info.max_texture_size)
     return LevelZeroReference(gl, field, size, fov_y_deg, shading, texture,
-                              samples=SAMPLES if samples is None else samples)
+                              samples=SAMPLES if samples is None else samples,
+                              imagery=imagery)
+
+
+def imagery_windows(store, texture_spec: str, max_side: int):
+    """For a reference drawn by windows of a store whose texture is its imagery (the
+    default texture, ``imagery`` or ``imagery+hillshade``): ``(r0, r1, c0, c1) -> (H, W, 3)
+    uint8``, the imagery over those level-0 samples read from the store at level 0's
+    detail (at most ``max_side`` texels a side), draped as the scene's texture is
+    (:func:`~lodsprite.terrain.textures.drape` over the window's heights); None for any
+    other texture."""
+    from lodsprite.terrain.heightfield import HeightField
+    from lodsprite.terrain.textures import IMAGERY_SPECS, drape
+
+    name = (texture_spec or "terrain").strip().lower()
+    if store.imagery is None or name not in ("terrain", *IMAGERY_SPECS):
+        return None
+
+    def window(r0: int, r1: int, c0: int, c1: int) -> np.ndarray:
+        rgba = store.imagery_window(r0, r1, c0, c1, max_side)
+        hf = HeightField(store.read(0, r0, r1, c0, c1), store.dx, store.dy, "window")
+        return drape(rgba, hf, name == "imagery+hillshade")
+
+    return window
 
 
 @contextmanager

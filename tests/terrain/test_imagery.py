@@ -266,3 +266,33 @@ def test_a_truncated_imagery_chunk_is_one_line_from_render(tmp_path, draped):
                 "--size", "64x64", "--out", str(tmp_path / "run"))
     assert r.returncode == 2 and "damaged" in r.stderr and "Traceback" not in r.stderr
     assert not (tmp_path / "run").exists()
+
+
+def test_the_reference_drawn_by_windows_reads_the_imagery_as_the_whole_one_shows(draped, gl):
+    """The band-limited reference of a store drawn in windows of at most 48 samples a side
+    (as a store beyond 4097 a side is), each coloured by the store's imagery read at level
+    0's detail, against the reference of the store whole with its whole imagery: the same
+    frame (RMSE < 2 grey levels), and not the heights shading (RMSE > 40 against it)."""
+    from lodsprite.camera import look_at
+    from lodsprite.gl.reference import LevelZeroReference
+    from lodsprite.harness import imagery_windows
+    from lodsprite.scene import load_scene
+    from lodsprite.terrain.textures import drape
+
+    _, store, _ = draped
+    st = TerrainStore(store)
+    hf = load_scene(str(store), "terrain", None, 1.0).hf
+    vp = look_at((-900.0, -2600.0, 2300.0), (200.0, 300.0, 300.0))
+    whole_tex = drape(st.imagery_texture(4096), hf)
+    refs = [LevelZeroReference(gl, st, (96, 72), 50.0, "texture", whole_tex, samples=2),
+            LevelZeroReference(gl, st, (96, 72), 50.0, "texture", None, max_side=48,
+                               samples=2, imagery=imagery_windows(st, "terrain", 4096)),
+            LevelZeroReference(gl, st, (96, 72), 50.0, "heights", samples=2)]
+    try:
+        whole, windows, heights = (r.image(vp).astype(float) for r in refs)
+        assert "windows" not in refs[0].identity() and "by window" in refs[1].identity()
+    finally:
+        for r in refs:
+            r.release()
+    assert np.sqrt(np.mean((whole - windows) ** 2)) < 2.0
+    assert np.sqrt(np.mean((whole - heights) ** 2)) > 40.0

@@ -98,6 +98,7 @@ class HeightPatch:
         self.spacing = (float(spacing[0]), float(spacing[1]))
         self.tex = ctx.mgl.texture((cols, rows), 1, h.tobytes(), dtype="f4")
         self.tex.filter = (moderngl.NEAREST, moderngl.NEAREST)
+        self.color = None  # the patch's own colour texture over its samples (set_color)
         r0 = np.arange(0, rows - 1, BLOCK)
         c0 = np.arange(0, cols - 1, BLOCK)
         self.mins, self.maxs = self._boxes(h, r0, c0)
@@ -127,6 +128,17 @@ class HeightPatch:
         maxs = np.stack([xx1.ravel(), yy1.ravel(), hi.ravel()], axis=1)
         return mins, maxs
 
+    def set_color(self, ctx: GLContext, rgb: np.ndarray) -> None:
+        """Colour this patch with its own texture ``(H, W, 3) uint8`` spanning exactly its
+        samples (``u = 0`` at its first column, ``1`` at its last; row 0 north)."""
+        t = np.ascontiguousarray(rgb, dtype=np.uint8)
+        if t.ndim != 3 or t.shape[2] != 3 or max(t.shape[:2]) > ctx.info.max_texture_size:
+            raise InputError(f"a patch texture must be (H, W, 3) uint8 within the GL's "
+                             f"texture size, not {t.shape}")
+        self.color = ctx.mgl.texture((t.shape[1], t.shape[0]), 3, t.tobytes(), alignment=1)
+        self.color.filter = (moderngl.LINEAR, moderngl.LINEAR)
+        self.color.repeat_x = self.color.repeat_y = False
+
     def visible_strips(self, view_proj: np.ndarray) -> np.ndarray:
         """``(N, 2) int32`` strips of the blocks in the frustum of ``view_proj``."""
         mask = boxes_in_frustum(frustum_planes(view_proj), self.mins, self.maxs)
@@ -135,6 +147,8 @@ class HeightPatch:
 
     def release(self) -> None:
         self.tex.release()
+        if self.color is not None:
+            self.color.release()
 
 
 def tile_matrix(full: tuple[int, int], tile: tuple[int, int, int, int]) -> np.ndarray:
@@ -162,14 +176,15 @@ class SupersampledTerrain:
     (module doc), coloured by ``shading``: ``heights`` (``TERRAIN_SHADE`` over the ramp
     ``height_range`` with per-pixel normals) or ``texture`` (``texture (H, W, 3) uint8``
     over level 0, whose sample ``(0, 0)`` is at ``corner`` and which has ``quads = (cols -
-    1, rows - 1)``).  GPU objects live until :meth:`release`."""
+    1, rows - 1)``; a patch with its own colour, :meth:`HeightPatch.set_color`, is drawn
+    with that instead).  GPU objects live until :meth:`release`."""
 
     def __init__(self, ctx: GLContext, size: tuple[int, int], samples: int,
                  shading: str, height_range: tuple[float, float],
                  texture: np.ndarray | None = None,
                  quads: tuple[int, int] | None = None) -> None:
-        if shading == "texture" and (texture is None or quads is None):
-            raise InputError("a texture-shaded reference needs the texture and level 0's size")
+        if shading == "texture" and quads is None:
+            raise InputError("a texture-shaded reference needs level 0's size")
         mgl = ctx.mgl
         self.ctx, self.samples = ctx, int(samples)
         self.full = (int(size[0]) * self.samples, int(size[1]) * self.samples)
@@ -184,13 +199,15 @@ class SupersampledTerrain:
         fs = _HEIGHTS_FS if shading == "heights" else _TEXTURE_FS
         self.program = mgl.program(vertex_shader=_VS, fragment_shader=fs)
         self.texture = None
-        if shading == "texture":
+        self.quads = None if quads is None else tuple(float(q) for q in quads)
+        if shading == "texture" and texture is not None:  # else each patch brings its own
             t = np.ascontiguousarray(texture, dtype=np.uint8)
             self.texture = mgl.texture((t.shape[1], t.shape[0]), 3, t.tobytes(), alignment=1)
             self.texture.filter = (moderngl.LINEAR, moderngl.LINEAR)
             self.texture.repeat_x = self.texture.repeat_y = False
             self.program["u_color"].value = 1
-            self.program["u_quads"].value = tuple(float(q) for q in quads)
+        elif shading == "texture":
+            self.program["u_color"].value = 1
         else:
             self.program["u_range"].value = tuple(float(v) for v in height_range)
         self.program["u_height"].value = 0
@@ -216,10 +233,14 @@ class SupersampledTerrain:
         prog["u_mvp"].write(_mat(mvp))
         prog["u_last"].value = (patch.cols - 1, patch.rows - 1)
         prog["u_spacing"].value = patch.spacing
-        prog["u_corner"].value = patch.corner  # texture shading: the patch is level 0 whole
+        prog["u_corner"].value = patch.corner
         patch.tex.use(0)
-        if self.texture is not None:
+        if patch.color is not None:  # its own texture, over its samples
+            patch.color.use(1)
+            prog["u_quads"].value = (patch.cols - 1.0, patch.rows - 1.0)
+        elif self.texture is not None:  # the one texture: the patch is level 0 whole
             self.texture.use(1)
+            prog["u_quads"].value = self.quads
         self.vao.render(moderngl.TRIANGLE_STRIP, vertices=2 * (BLOCK + 1),
                         instances=len(strips))
         return len(strips)

@@ -74,17 +74,22 @@ class LevelZeroReference:
     ``fov_y_deg``, ``samples`` x ``samples`` a pixel filtered by ``filter`` in colour
     ``space`` (:mod:`lodsprite.bandlimit`), coloured by ``shading`` (``heights``:
     terrain_shade with per-pixel normals; ``texture``: ``texture (H, W, 3) uint8`` over
-    level 0's extent, sampled at its base level, whole level only; ``auto``: heights for a
-    store, the texture for an in-memory field given one).  ``store_or_field``: a
+    level 0's extent, sampled at its base level, whole level only, unless ``imagery``
+    gives each window's texture; ``auto``: heights for a store, the texture for an
+    in-memory field given one).  ``store_or_field``: a
     :class:`~lodsprite.terrain.store.TerrainStore` (exaggerated as opened) or a
-    :class:`HeightField` (centred on the origin).  GPU objects live until :meth:`release`.
-    Raises :class:`InputError` for texture shading of a level 0 beyond ``max_side``, or a
-    sample count, filter or space not known."""
+    :class:`HeightField` (centred on the origin).  ``imagery``: ``(r0, r1, c0, c1) -> (H,
+    W, 3) uint8``, the texture over level 0's samples ``[r0, r1) x [c0, c1)`` (a store's
+    imagery read at level 0's detail), what a level 0 drawn by windows is coloured with.
+    GPU objects live until :meth:`release`.  Raises :class:`InputError` for texture
+    shading of a level 0 beyond ``max_side`` without ``imagery``, or a sample count,
+    filter or space not known."""
 
     def __init__(self, ctx: GLContext, store_or_field, size: tuple[int, int],
                  fov_y_deg: float = 45.0, shading: str = "heights",
                  texture: np.ndarray | None = None, max_side: int = MAX_SIDE,
-                 samples: int = SAMPLES, filter: str = "box", space: str = "linear") -> None:
+                 samples: int = SAMPLES, filter: str = "box", space: str = "linear",
+                 imagery=None) -> None:
         check_filter(samples, filter, space)
         if shading == "auto":  # as --shading auto: heights for a store, else the texture
             texture_ok = texture is not None and isinstance(store_or_field, HeightField)
@@ -92,8 +97,9 @@ class LevelZeroReference:
         if shading not in ("heights", "texture"):
             raise InputError(f"the reference shades by auto, heights or texture, not "
                              f"{shading!r}")
-        if shading == "texture" and texture is None:
+        if shading == "texture" and texture is None and imagery is None:
             raise InputError("a texture-shaded reference needs the texture")
+        self.imagery = imagery  # (r0, r1, c0, c1) -> the texture over that sample window
         self.ctx, self.size, self.fov = ctx, (int(size[0]), int(size[1])), float(fov_y_deg)
         # a patch is one height texture: never more samples a side than the GL allows
         self.shading, self.texture = shading, texture
@@ -105,7 +111,7 @@ class LevelZeroReference:
         self.tree = Quadtree(self.pyramid)
         self.rows, self.cols = self.tree.rows0, self.tree.cols0
         self.whole = max(self.rows, self.cols) <= self.max_side
-        if shading == "texture" and not self.whole:
+        if shading == "texture" and not self.whole and imagery is None:
             raise InputError(f"level 0 is {self.cols}x{self.rows} samples, more than "
                              f"{self.max_side} a side: its reference is shaded from the "
                              "heights (--shading heights), a texture needs it whole")
@@ -196,8 +202,15 @@ class LevelZeroReference:
         else:
             heights = self.pyramid.read(0, r0, r1, c0, c1)
         x, y = self.tree.world_xy(0, np.array([r0]), np.array([c0]))
-        return HeightPatch(self.ctx, heights, (float(x[0]), float(y[0])),
-                           (self.pyramid.dx, self.pyramid.dy))
+        patch = HeightPatch(self.ctx, heights, (float(x[0]), float(y[0])),
+                            (self.pyramid.dx, self.pyramid.dy))
+        if self.shading == "texture" and self.imagery is not None and not self.whole:
+            try:  # a store's imagery over this window, read here (level 0's detail)
+                patch.set_color(self.ctx, self.imagery(r0, r1, c0, c1))
+            except BaseException:
+                patch.release()
+                raise
+        return patch
 
     def _patch_for(self, win: Window) -> HeightPatch:
         """The patch of a one-patch view, kept while the window stays (level 0 whole:
@@ -236,6 +249,8 @@ class LevelZeroReference:
             src = f"store {store.path.resolve()} {header} {store.exaggeration!r}"
         tex = ("none" if self.texture is None else
                hashlib.sha256(np.ascontiguousarray(self.texture)).hexdigest())
+        if self.imagery is not None and not self.whole:
+            tex += "; the store's imagery by window"
         return (f"lodsprite level-0 reference 1; {src}; size {self.size}; fov {self.fov!r}; "
                 f"samples {self.samples}; {self.filter}; {self.space}; {self.shading}; "
                 f"texture {tex}; max side {self.max_side}")

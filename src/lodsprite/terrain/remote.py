@@ -14,6 +14,9 @@ Before a URL is opened the server is asked for one byte (``Range: bytes=0-0``): 
 other than ``206 Partial Content`` (a server that ignores ranges would send the whole
 file for every block) is refused in one line.
 
+``LODSPRITE_HTTP_TRACE=FILE`` appends each store read's URL and byte range to FILE (what
+the reads used, to set against what the server sent).
+
 The cache folder is ``LODSPRITE_HTTP_CACHE`` (default ``~/.cache/lodsprite/http``, under
 ``XDG_CACHE_HOME`` when set), capped at ``LODSPRITE_HTTP_CACHE_MB`` megabytes (default
 2048): when a URL is opened, the files cached longest ago are dropped until the folder is
@@ -187,7 +190,12 @@ def read_range(fs, path: str, start: int | None, end: int | None) -> bytes:
         a = 0 if start is None else (start if start >= 0 else max(0, size + start))
         b = size if end is None else min(size, end if end >= 0 else size + end)
         f.seek(a)
-        return f.read(max(0, b - a))
+        data = f.read(max(0, b - a))
+    trace = os.environ.get("LODSPRITE_HTTP_TRACE")
+    if trace:  # what the reads used, against what the server sent (benchmarks/geodata.py)
+        with open(trace, "a") as t:
+            t.write(f"{path}\t{a}\t{a + len(data)}\n")
+    return data
 
 
 def zarr_store(url: str):

@@ -422,6 +422,15 @@ class TerrainStore:
 
         return store_imagery.read(self.group, self.header, j, r0, r1, c0, c1)
 
+    def imagery_window(self, r0: int, r1: int, c0: int, c1: int, max_side: int
+                       ) -> np.ndarray:
+        """The imagery over level 0's samples ``[r0, r1) x [c0, c1)``, ``(H, W, 4) uint8``
+        (:func:`lodsprite.terrain.store_imagery.window_texture`)."""
+        from lodsprite.terrain import store_imagery
+
+        return store_imagery.window_texture(self.group, self.header, r0, r1, c0, c1,
+                                            max_side)
+
     def imagery_texture(self, max_side: int) -> np.ndarray:
         """The whole imagery at most ``max_side`` texels a side, ``(H, W, 4) uint8``
         (:func:`lodsprite.terrain.store_imagery.texture`)."""

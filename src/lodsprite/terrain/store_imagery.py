@@ -206,3 +206,30 @@ def texture(group, header: StoreHeader, max_side: int) -> np.ndarray:
     img = Image.fromarray(a, "RGBA").resize((out_c, out_r), Image.Resampling.BILINEAR,
                                             box=(0.0, 0.0, exact_c, exact_r))
     return np.asarray(img)
+
+
+def window_texture(group, header: StoreHeader, r0: int, r1: int, c0: int, c1: int,
+                   max_side: int) -> np.ndarray:
+    """The imagery over level 0's samples ``[r0, r1) x [c0, c1)`` as ``(H, W, 4) uint8``
+    spanning exactly from sample ``(r0, c0)`` to sample ``(r1 - 1, c1 - 1)``: level 0's
+    texels when they fit ``max_side`` a side, else the finest level that does (its
+    fractional edges resampled, as :func:`texture`)."""
+    from PIL import Image
+
+    im = header.imagery
+    t0r, t1r = r0 << im.refine, (r1 - 1) << im.refine  # texel span of the samples
+    t0c, t1c = c0 << im.refine, (c1 - 1) << im.refine
+    j = 0
+    while max(t1r - t0r, t1c - t0c) / (1 << j) > max_side and j < im.levels - 1:
+        j += 1
+    f = 1 << j
+    a0r, a0c = t0r // f, t0c // f
+    a1r, a1c = min(-(-t1r // f), level_shape(im.rows, im.cols, j)[0]), \
+        min(-(-t1c // f), level_shape(im.rows, im.cols, j)[1])
+    a = read(group, header, j, a0r, a1r, a0c, a1c)
+    box = (t0c / f - a0c, t0r / f - a0r, t1c / f - a0c, t1r / f - a0r)
+    if box == (0.0, 0.0, float(a.shape[1]), float(a.shape[0])):
+        return a
+    size = (max(2, round(box[2] - box[0])), max(2, round(box[3] - box[1])))
+    return np.asarray(Image.fromarray(a, "RGBA").resize(size, Image.Resampling.BILINEAR,
+                                                        box=box))
