@@ -138,7 +138,7 @@ def align(work: Path) -> dict:
     ground = eye + d * lo[:, None]
     found_e = W0 + CELL / 2 + half + ground[:, 0]
     found_n = N0 - CELL / 2 - half + ground[:, 1]
-    true_e, true_n = (np.asarray(v) for v in transform("EPSG:4326", UTM, *zip(*marks)))
+    true_e, true_n = (np.asarray(v) for v in transform("EPSG:4326", UTM, *zip(*marks, strict=True)))
     errs = [float(np.min(np.hypot(true_e - fe, true_n - fn)))
             for fe, fn in zip(found_e, found_n, strict=True)]
     return {"marks": len(marks), "found": int(count), "pixel_m": 2 * height *
