@@ -97,6 +97,50 @@ def large_terrain(work: Path, out: Path) -> None:
     save_png(strip([frames / f"frame_{i:05d}.png" for i in (8, 20, 44)]), out / "adaptive.png")
 
 
+def draped(work: Path, out: Path) -> None:
+    """jacksboro (a real DEM, matplotlib's, in degrees) with an orthophoto made from it in
+    a UTM zone (its heights' hypsometric tint and hillshade at twice the DEM's resolution,
+    with a field pattern), tiled with --imagery (reprojected by the tiler), flown."""
+    import rasterio
+    from rasterio.transform import from_bounds
+    from rasterio.warp import calculate_default_transform, reproject
+
+    from lodsprite.terrain import load_heightfield
+    from lodsprite.terrain.textures import terrain_texture
+
+    hf = load_heightfield("jacksboro")
+    m = hf.meta
+    bounds = (m["west"], m["south"], m["east"], m["north"])
+    dem = work / "jacksboro.tif"
+    with rasterio.open(dem, "w", driver="GTiff", width=hf.cols, height=hf.rows, count=1,
+                       dtype="float32", crs="EPSG:4326",
+                       transform=from_bounds(*bounds, hf.cols, hf.rows)) as f:
+        f.write(hf.heights.astype("float32"), 1)
+    rgb = np.repeat(np.repeat(terrain_texture(hf), 2, 0), 2, 1).astype(np.int16)
+    yy, xx = np.mgrid[0:rgb.shape[0], 0:rgb.shape[1]]
+    fields = ((xx // 23 + yy // 17) % 3 - 1) * 9 + (np.sin(xx / 3.0) * 4).astype(np.int16)
+    rgb = np.clip(rgb + fields[..., None], 0, 255).astype(np.uint8).transpose(2, 0, 1)
+    src_t = from_bounds(*bounds, rgb.shape[2], rgb.shape[1])
+    dst_t, w, h = calculate_default_transform("EPSG:4326", "EPSG:32614", rgb.shape[2],
+                                              rgb.shape[1], *bounds)
+    ortho = work / "ortho_utm.tif"
+    with rasterio.open(ortho, "w", driver="GTiff", width=w, height=h, count=3, dtype="uint8",
+                       crs="EPSG:32614", transform=dst_t, photometric="RGB", nodata=0) as f:
+        for b in range(3):
+            band = np.zeros((h, w), np.uint8)
+            reproject(rgb[b], band, src_transform=src_t, src_crs="EPSG:4326",
+                      dst_transform=dst_t, dst_crs="EPSG:32614", dst_nodata=0)
+            f.write(band, b + 1)
+    store = work / "jacksboro.zarr"
+    lodsprite("tile", str(dem), "--out", str(store), "--imagery", str(ortho), "--attribution",
+              "imagery made from the DEM by docs/make_gallery.py", "--overwrite")
+    lodsprite("render", "--terrain", str(store), "--mode", "adaptive", "--path", "chen1999",
+              "--frames", "46", "--size", SIZE, "--save-frames", "--out", str(work / "draped"))
+    frames = work / "draped" / "frames"
+    save_png(strip([frames / f"frame_{i:05d}.png" for i in (8, 20, 44)]), out / "draped.png",
+             colors=192)
+
+
 def distributed(work: Path, out: Path) -> None:
     """Frame times of inline LOD-sprite and of the distributed client, one path."""
     common = ["--path", "swan2002", "--frames", "300", "--size", SIZE]
@@ -199,7 +243,8 @@ def viewer_hud(work: Path, out: Path) -> None:
     save_png(last, out / "viewer.png", colors=192)
 
 
-STEPS = (lod_sprite, viewer_hud, large_terrain, distributed, profile, lumigraph, crowd)
+STEPS = (lod_sprite, viewer_hud, large_terrain, draped, distributed, profile, lumigraph,
+         crowd)
 
 
 def main() -> None:

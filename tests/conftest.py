@@ -44,6 +44,8 @@ HEAVY_FIRST = (
     "tests/test_readme.py",
     "tests/distributed/test_fuzz.py",
     "tests/terrain/test_pyramid_store.py",
+    "tests/terrain/test_imagery.py",
+    "tests/terrain/test_remote.py",
     "tests/distributed/test_long_renders.py",
     "tests/test_harness.py",
     "tests/distributed/web/test_web_server.py",

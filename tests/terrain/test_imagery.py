@@ -296,3 +296,34 @@ def test_the_reference_drawn_by_windows_reads_the_imagery_as_the_whole_one_shows
             r.release()
     assert np.sqrt(np.mean((whole - windows) ** 2)) < 2.0
     assert np.sqrt(np.mean((whole - heights) ** 2)) > 40.0
+
+
+@pytest.mark.parametrize("what", ["dem", "imagery"])
+def test_a_truncated_source_stops_the_build_in_one_line_and_it_stays_resumable(tmp_path,
+                                                                               draped, what):
+    """A COG cut in half (its header whole, its last tiles gone): tile stops at the first
+    read it cannot make, one line and exit 2: a DEM's before anything is written, an
+    orthophoto's with the tiles written kept (the store refused as unfinished, with the
+    command that resumes it)."""
+    folder, _, ortho = draped
+    dem_path = folder / "dem.tif"
+    with rasterio.open(dem_path if what == "dem" else ortho) as src:
+        profile = {k: v for k, v in src.profile.items()
+                   if k not in ("blockxsize", "blockysize", "tiled", "interleave")}
+        profile |= {"driver": "COG", "blocksize": 128, "compress": "deflate"}
+        cut = tmp_path / f"cut_{what}.tif"
+        with rasterio.open(cut, "w", **profile) as dst:
+            dst.write(src.read())
+    cut.write_bytes(cut.read_bytes()[: cut.stat().st_size // 2])
+    args = (cut, ortho) if what == "dem" else (dem_path, cut)
+    out = tmp_path / "s.zarr"
+    r = run_cli("tile", str(args[0]), "--out", str(out), "--tile", "64", "--chunk", "32",
+                "--imagery", str(args[1]))
+    assert r.returncode == 2 and "cannot read" in r.stderr and "Traceback" not in r.stderr
+    errors = [line for line in r.stderr.splitlines() if "error" in line]
+    assert len(errors) == 1 and errors[0].startswith("lodsprite: error: ")
+    if what == "dem":  # its decimated read, before anything is written, fails
+        assert not out.exists()
+        return
+    with pytest.raises(InputError, match="did not finish"):  # the heights kept
+        TerrainStore(out)

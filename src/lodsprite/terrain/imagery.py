@@ -207,18 +207,22 @@ class ImagerySource:
         from rasterio.windows import Window
 
         h, w = r1 - r0, c1 - c0
-        if self.vrt is not None:
-            win = Window(c0, r0, w, h)
-            data = self.vrt.read(self.bands, window=win)
-            mask = self.vrt.dataset_mask(window=win)
-        else:  # no CRS: the source stretched over the grid
-            H, W = self.shape
-            sh, sw = self.ds.height / H, self.ds.width / W
-            win = Window(c0 * sw, r0 * sh, w * sw, h * sh)
-            data = self.ds.read(self.bands, window=win, out_shape=(len(self.bands), h, w),
-                                resampling=Resampling.bilinear, boundless=True)
-            mask = self.ds.dataset_mask(window=win, out_shape=(h, w),
-                                        resampling=Resampling.nearest, boundless=True)
+        try:
+            if self.vrt is not None:
+                win = Window(c0, r0, w, h)
+                data = self.vrt.read(self.bands, window=win)
+                mask = self.vrt.dataset_mask(window=win)
+            else:  # no CRS: the source stretched over the grid
+                H, W = self.shape
+                sh, sw = self.ds.height / H, self.ds.width / W
+                win = Window(c0 * sw, r0 * sh, w * sw, h * sh)
+                data = self.ds.read(self.bands, window=win, out_shape=(len(self.bands), h, w),
+                                    resampling=Resampling.bilinear, boundless=True)
+                mask = self.ds.dataset_mask(window=win, out_shape=(h, w),
+                                            resampling=Resampling.nearest, boundless=True)
+        except Exception as exc:  # noqa: BLE001 - GDAL: RasterioIOError, CPLE_* (truncated)
+            raise InputError(f"imagery {self.path}: cannot read texels {r0}:{r1}, {c0}:{c1} "
+                             f"({_line(exc)}); the store keeps what was written") from None
         rgb = self._to_uint8(data)
         out = np.empty((h, w, 4), np.uint8)
         out[..., :3] = np.moveaxis(rgb, 0, -1) if rgb.shape[0] == 3 else rgb[0][..., None]
@@ -312,5 +316,6 @@ def _crs_name(crs) -> str:
 
 
 def _line(exc: BaseException) -> str:
-    text = str(exc).strip()
-    return text.splitlines()[0] if text else type(exc).__name__
+    from lodsprite.terrain.rasters import first_line
+
+    return first_line(exc)[:200]

@@ -169,7 +169,10 @@ class GeoTiffSource:
 
         k = max(1, math.ceil(max(self.rows, self.cols) / max_side))
         shape = (max(1, self.rows // k), max(1, self.cols // k))
-        a = self.ds.read(1, out_shape=shape, masked=True, resampling=Resampling.nearest)
+        try:
+            a = self.ds.read(1, out_shape=shape, masked=True, resampling=Resampling.nearest)
+        except Exception as exc:  # noqa: BLE001 - GDAL: RasterioIOError, CPLE_* (truncated)
+            raise InputError(f"{self.path}: cannot read it decimated ({_first(exc)})") from None
         return np.ma.filled(a.astype(np.float64), np.nan)
 
     def read(self, r0: int, r1: int, c0: int, c1: int) -> np.ndarray:
@@ -177,7 +180,11 @@ class GeoTiffSource:
 
         fr0, fr1 = (self.rows - r1, self.rows - r0) if self.flip_rows else (r0, r1)
         fc0, fc1 = (self.cols - c1, self.cols - c0) if self.flip_cols else (c0, c1)
-        a = self.ds.read(1, window=Window(fc0, fr0, fc1 - fc0, fr1 - fr0), masked=True)
+        try:
+            a = self.ds.read(1, window=Window(fc0, fr0, fc1 - fc0, fr1 - fr0), masked=True)
+        except Exception as exc:  # noqa: BLE001 - GDAL: RasterioIOError, CPLE_* (truncated)
+            raise InputError(f"{self.path}: cannot read rows {r0}:{r1}, columns {c0}:{c1} "
+                             f"({_first(exc)}); the store keeps what was written") from None
         h = np.ma.filled(a.astype(np.float64), np.nan)
         if self.flip_rows:
             h = h[::-1]
@@ -208,6 +215,12 @@ class GeoTiffSource:
 
     def close(self) -> None:
         self.ds.close()
+
+
+def _first(exc: BaseException) -> str:
+    from lodsprite.terrain.rasters import first_line
+
+    return first_line(exc)[:200]
 
 
 def open_source(spec: str):
