@@ -167,3 +167,14 @@ def test_a_remote_data_folder_serves_stores_and_cogs_under_it_only(served, cache
             d.scene(bad)
     with pytest.raises(InputError, match="serves no files"):
         d.texture("ortho.tif")
+
+
+def test_the_widget_takes_a_store_at_a_url(served, cache):
+    pytest.importorskip("anywidget", reason="the notebook extra")
+    from lodsprite.notebook.source import resolve_source
+
+    _, base = served
+    src = resolve_source(f"{base}/s.zarr", size=(64, 48))
+    assert src.load.terrain == "s.zarr" and src.data_dir == base
+    with pytest.raises(InputError, match="404"):
+        resolve_source(f"{base}/none.zarr")
