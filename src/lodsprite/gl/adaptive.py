@@ -19,6 +19,7 @@ import moderngl
 import numpy as np
 
 from lodsprite.camera import boxes_in_frustum, frustum_planes
+from lodsprite.gl.clipmap import CLIPMAP_FS
 from lodsprite.gl.context import GLContext
 from lodsprite.gl.shaders import HEIGHT_NORMAL, PROXY_VERTEX_COMMON, TERRAIN_SHADE
 from lodsprite.gl.terrain import SKY_RGB, mat_bytes
@@ -96,12 +97,12 @@ void main() {
 """
 )
 # Coloured by the terrain's texture (as full resolution draws a scene's texture) ...
-ADAPTIVE_TEXTURE_FS = """#version 330
+ADAPTIVE_TEXTURE_FS = "#version 330\n" + CLIPMAP_FS + """
 uniform sampler2D u_color;
 in vec2 v_uv;
 out vec4 f_color;
 void main() {
-    f_color = vec4(texture(u_color, v_uv).rgb, 1.0);
+    f_color = vec4(terrain_color(u_color, v_uv), 1.0);
 }
 """
 # ... or by terrain_shade, normals per pixel from the node's tile (gl.shaders.HEIGHT_NORMAL).
@@ -160,6 +161,9 @@ class AdaptiveDrawer:
             for name, prog in self.programs.items()}
         self.triangles = 0
         self._readback: moderngl.Framebuffer | None = None
+        from lodsprite.gl.clipmap import ClipmapGL
+
+        self._no_clip = ClipmapGL(ctx)  # what the texture program binds without a clipmap
 
     def upload(self, slot: int, heights: np.ndarray) -> None:
         """Node samples ``(rows, cols) float32`` (at most ``(G+1)²``) into ``slot``."""
@@ -171,11 +175,12 @@ class AdaptiveDrawer:
     def draw(self, fbo: moderngl.Framebuffer, view_proj: np.ndarray, eye: np.ndarray,
              instances: np.ndarray, height_range: tuple[float, float],
              extent: tuple[float, float, float, float] = (0.0, 0.0, 1.0, 1.0),
-             color: moderngl.Texture | None = None) -> None:
+             color: moderngl.Texture | None = None, clip=None) -> None:
         """Clear ``fbo`` and draw ``instances (N, 16) float32`` nodes, coloured by
         ``color`` (a texture over ``extent``: x of the west edge, y of the north edge,
         width, depth) or by ``terrain_shade`` (height ramp over ``height_range``, normals
-        per pixel from the node's tile)."""
+        per pixel from the node's tile); ``clip``: the imagery's clipmap
+        (:class:`~lodsprite.gl.clipmap.ClipmapGL`) with ``color``."""
         mgl = self.ctx.mgl
         fbo.use()
         fbo.clear(*SKY_RGB, 1.0, depth=1.0)  # the sky every renderer clears to
@@ -201,6 +206,7 @@ class AdaptiveDrawer:
             self.atlas.use(0)
             if color is not None:
                 color.use(1)
+                (clip or self._no_clip).bind(p)  # always bound: no sampler on a wrong unit
             self.vaos[shading].render(moderngl.TRIANGLES, vertices=self.index_count, instances=n)
         self.triangles = n * self.index_count // 3
         mgl.disable(moderngl.DEPTH_TEST)
@@ -219,7 +225,7 @@ class AdaptiveDrawer:
         if self._readback is not None:
             self._readback.release()
         for obj in (*self.vaos.values(), self.instances, self.ibo, self.vbo,
-                    *self.programs.values(), self.atlas):
+                    *self.programs.values(), self.atlas, self._no_clip):
             obj.release()
 
 

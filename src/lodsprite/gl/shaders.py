@@ -67,14 +67,20 @@ void main() {
 """
 )
 
-TERRAIN_FS = """#version 330
+def _terrain_fs() -> str:
+    from lodsprite.gl.clipmap import CLIPMAP_FS  # terrain_color: the texture and clipmap
+
+    return "#version 330\n" + CLIPMAP_FS + """
 uniform sampler2D u_color;
 in vec2 v_uv;
 out vec4 f_color;
 void main() {
-    f_color = vec4(texture(u_color, v_uv).rgb, 1.0);
+    f_color = vec4(terrain_color(u_color, v_uv), 1.0);
 }
 """
+
+
+TERRAIN_FS = _terrain_fs()
 
 # One shading of the terrain from its heights, shared by full resolution, the adaptive
 # renderer, LOD-sprite's fallback and the reference: a height ramp over ``u_range`` (lowest,

@@ -85,6 +85,9 @@ class TerrainGeometry:
         self.color_tex = None
         self.set_texture(np.full((2, 2, 3), 160, np.uint8) if texture_rgb is None
                          else texture_rgb)
+        from lodsprite.gl.clipmap import ClipmapGL
+
+        self.clip = ClipmapGL(ctx)  # imagery finer than the texture: none until use_clipmap
         self._meshes: dict[int, tuple[moderngl.Buffer, moderngl.Buffer, int]] = {}
         self._layouts: dict[int, ChunkLayout] = {}
         self._proxies: dict[tuple[int, bool], tuple[moderngl.Buffer, moderngl.Buffer, int]] = {}
@@ -110,6 +113,15 @@ class TerrainGeometry:
         tex.filter = (moderngl.LINEAR_MIPMAP_LINEAR, moderngl.LINEAR)
         self.color_tex = tex
         self.color_tex_levels = 1 + int(np.log2(max(tw, th)))
+
+    def use_clipmap(self, core) -> None:
+        """Drape imagery finer than the colour texture through ``core`` (a
+        :class:`~lodsprite.terrain.clipmap.Clipmap` over this terrain's extent; released
+        with the geometry)."""
+        from lodsprite.gl.clipmap import ClipmapGL
+
+        self.clip.release()
+        self.clip = ClipmapGL(self.ctx, core, (self.hf.width, self.hf.depth))
 
     def layout(self, level_quads: int) -> ChunkLayout:
         if level_quads not in self._layouts:
@@ -194,7 +206,7 @@ class TerrainGeometry:
             ibo.release()
         self._meshes.clear()
         self._proxies.clear()
-        for obj in (self.height_tex, self.color_tex, self.instances):
+        for obj in (self.height_tex, self.color_tex, self.instances, self.clip):
             obj.release()
 
 
@@ -303,6 +315,7 @@ class TerrainDrawer:
             return prog, cache
         prog = self.proxy_program if proxy else self.program
         prog["u_color"].value = 0
+        self.geometry.clip.bind(prog)
         return prog, self._proxy_vaos if proxy else self._vaos
 
     def _begin(self, target: RenderTarget | None, clear: bool = True) -> None:
@@ -325,6 +338,8 @@ class TerrainDrawer:
         of one image, :mod:`lodsprite.gl.reference`)."""
         level = self.geometry.hf.quads if level_quads is None else level_quads
         projection = projection or self.projection(viewpoint)
+        if self.shading == "texture":  # the imagery's clip levels follow the eye
+            self.geometry.clip.update(viewpoint.o)
         self._begin(target, clear)
         prog, cache = self.programs(proxy=False)
         prog["u_height"].value = 1

@@ -24,7 +24,12 @@ from lodsprite.techniques.adaptive_keys import (
 from lodsprite.techniques.adaptive_terrain import ADAPTIVE_COLUMNS
 from lodsprite.techniques.base import Frame, Param, Technique
 from lodsprite.techniques.defaults import MEMORY_DEFAULTS, STORE_DEFAULTS
-from lodsprite.techniques.terrain import SpriteTechnique, resolve_shading, set_shading
+from lodsprite.techniques.terrain import (
+    SpriteTechnique,
+    attach_clipmap,
+    resolve_shading,
+    set_shading,
+)
 from lodsprite.workers import peak_rss_mb
 
 if TYPE_CHECKING:
@@ -67,9 +72,12 @@ def make_adaptive(renderer: RendererLike, sse: float, gpu_mb: float, host_mb: fl
         raise InputError(f"grid must be one of {', '.join(map(str, GRIDS))} quads, got {grid}")
     pr = renderer.terrain_gl
     heights = resolve_shading(renderer.scene, shading) == "heights"
+    if not heights:
+        attach_clipmap(renderer)
     return AdaptiveTerrain(pr.ctx, scene_pyramid(renderer.scene), pr.drawer.target,
                            renderer.fov_y_deg, sse, grid=int(grid), gpu_mb=gpu_mb,
-                           host_mb=host_mb, color=None if heights else pr.geometry.color_tex)
+                           host_mb=host_mb, color=None if heights else pr.geometry.color_tex,
+                           clip=None if heights else pr.geometry.clip)
 
 
 def tile_status(terrain) -> str:

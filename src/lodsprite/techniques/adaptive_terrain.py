@@ -43,7 +43,7 @@ class AdaptiveTerrain:
 
     def __init__(self, gl, pyramid, target, fov_y_deg: float, sse_px: float = 1.0,
                  grid: int = DEFAULT_GRID, gpu_mb: float = 256.0, host_mb: float = 512.0,
-                 upload_budget: int = 16, color=None) -> None:
+                 upload_budget: int = 16, color=None, clip=None) -> None:
         from lodsprite.gl.adaptive import AdaptiveDrawer
 
         if not sse_px > 0:
@@ -66,6 +66,7 @@ class AdaptiveTerrain:
         x = np.array([self.bounds[0][0], self.bounds[1][0]])
         y = np.array([self.bounds[0][1], self.bounds[1][1]])
         self.color = color  # the terrain's colour texture (a moderngl texture) or None
+        self.clip = clip  # with it, the imagery's clipmap (gl.clipmap.ClipmapGL) or None
         self.extent = (float(x.min()), float(y.max()), float(x.max() - x.min()),
                        float(y.max() - y.min()))
         self._wanted: list[Node] = []
@@ -155,8 +156,10 @@ class AdaptiveTerrain:
         eye = np.asarray(viewpoint.o, dtype=np.float64)
         draw, uploaded = self._stream(eye, view_proj if cull is None else cull)
         self.last_draw, self._last_eye = draw, eye
+        if self.clip is not None and self.color is not None:
+            self.clip.update(eye)  # never waits: uploads what arrived
         self.drawer.draw(target.fbo, view_proj, eye, self._instances(draw),
-                           self.height_range, self.extent, self.color)
+                           self.height_range, self.extent, self.color, self.clip)
         if finish:
             self.gl.finish()
         return Frame("adaptive", (time.perf_counter() - t0) * 1e3, self.drawer.triangles,
@@ -270,8 +273,10 @@ class AdaptiveTerrain:
         view_proj = proj @ viewpoint.view_matrix()
         eye = np.asarray(viewpoint.o, dtype=np.float64)
         target = self.target if target is None else target
+        if self.clip is not None and self.color is not None:
+            self.clip.update(eye)
         self.drawer.draw(target.fbo, view_proj, eye, self._instances(list(draw), morphed),
-                           self.height_range, self.extent, self.color)
+                           self.height_range, self.extent, self.color, self.clip)
         self.gl.finish()
 
     def make_resident(self, need: list[Node]) -> None:

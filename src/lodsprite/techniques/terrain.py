@@ -61,7 +61,35 @@ def set_shading(renderer: RendererLike, shading: str) -> str:
     fallback) by ``shading`` resolved for its scene; returns the resolved one."""
     resolved = resolve_shading(renderer.scene, shading)
     renderer.terrain_gl.drawer.shading = resolved
+    if resolved == "texture":
+        attach_clipmap(renderer)
     return resolved
+
+
+def attach_clipmap(renderer: RendererLike) -> None:
+    """Stream the imagery finer than the scene's texture around the eye (a clipmap,
+    :mod:`lodsprite.terrain.clipmap`) when the scene's texture is a store's imagery
+    (the default texture or ``imagery``) of more than :data:`~lodsprite.scene.model.
+    IMAGERY_SIDE` texels a side; once per renderer.  ``imagery+hillshade`` keeps its one
+    texture (the clip levels hold the imagery without the hillshade)."""
+    from lodsprite.scene import model
+    from lodsprite.terrain.clipmap import Clipmap
+    from lodsprite.terrain.remote import location
+    from lodsprite.terrain.store import TerrainStore
+
+    geometry = renderer.terrain_gl.geometry
+    scene = renderer.scene
+    name = (scene.texture_spec or "terrain").strip().lower()
+    if (geometry.clip.core is not None or name not in ("terrain", "imagery")
+            or not model.store_imagery(scene.terrain_spec)):
+        return
+    store = TerrainStore(location(scene.terrain_spec),
+                         float(scene.hf.meta.get("exaggeration", 1.0)))
+    core = Clipmap(store, model.IMAGERY_SIDE)
+    if len(core):
+        geometry.use_clipmap(core)
+    else:
+        core.close()
 
 
 class FullTechnique(Technique):

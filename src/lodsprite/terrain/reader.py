@@ -10,7 +10,9 @@ one tile a frame.  So the reads run in a separate process (its own GIL), and the
 own thread sends requests and collects answers with non-blocking pipe I/O.
 
 A request's ``meta`` is five little-endian int64 ``k, r0, r1, c0, c1``; an answer's is two
-int64 ``a, b`` and its ``data`` the ``a * b`` float32 samples.
+int64 ``a, b`` and its ``data`` the ``a * b`` float32 samples.  A negative ``k`` asks for
+imagery level ``-1 - k`` (:func:`imagery_request`): its answer's ``data`` is ``a * b * 4``
+bytes of sRGB RGBA.
 """
 
 from __future__ import annotations
@@ -37,6 +39,11 @@ def tile_reader(path: str, exaggeration: float = 1.0):
         k, r0, r1, c0, c1 = _REQ.unpack(meta)
         if not (0 <= r0 <= r1 and 0 <= c0 <= c1 and (r1 - r0) * (c1 - c0) <= MAX_WINDOW):
             raise ValueError(f"bad window {r0}:{r1}, {c0}:{c1}")
+        if k < 0:  # imagery
+            if store.imagery is None or -1 - k >= store.imagery.levels:
+                raise ValueError(f"no imagery level {-1 - k}")
+            rgba = np.ascontiguousarray(store.read_imagery(-1 - k, r0, r1, c0, c1))
+            return _SHAPE.pack(*rgba.shape[:2]), rgba.tobytes()
         a = np.ascontiguousarray(store.read(k, r0, r1, c0, c1), np.float32)
         return _SHAPE.pack(*a.shape), a.tobytes()
 
@@ -62,3 +69,17 @@ def tile_answer(answer: tuple[bytes, bytes] | WorkerError) -> np.ndarray | str:
     meta, data = answer
     a, b = _SHAPE.unpack(meta)
     return np.frombuffer(data, np.float32).reshape(a, b)
+
+
+def imagery_request(j: int, r0: int, r1: int, c0: int, c1: int) -> bytes:
+    """A request for texels ``[r0:r1, c0:c1]`` of imagery level ``j``."""
+    return _REQ.pack(-1 - j, r0, r1, c0, c1)
+
+
+def imagery_answer(answer: tuple[bytes, bytes] | WorkerError) -> np.ndarray | str:
+    """An imagery answer as ``(a, b, 4) uint8`` RGBA, or the error text."""
+    if isinstance(answer, WorkerError):
+        return answer.text
+    meta, data = answer
+    a, b = _SHAPE.unpack(meta)
+    return np.frombuffer(data, np.uint8).reshape(a, b, 4)
