@@ -175,18 +175,20 @@ def make_ortho(path: Path, size: int) -> None:
                         window=((r0, r1), (c0, c1)))
 
 
-def scale(work: Path, size: int, frames: int, repeats: int) -> dict:
+def scale(work: Path, size: int, frames: int, repeats: int, retile: bool = True) -> dict:
     ortho = work / f"ortho{size}.tif"
     if not ortho.exists():
         t0 = time.perf_counter()
         make_ortho(ortho, size)
         print(f"  made the {size}² orthophoto in {time.perf_counter() - t0:.0f} s", flush=True)
     store = work / f"f{size}_img.zarr"
-    shutil.rmtree(store, ignore_errors=True)
-    wall, rss = sh("tile", f"fractal:{size}", "--out", str(store), "--imagery", str(ortho))
-    out = {"tile_s": wall, "tile_peak_rss_mb": rss,
-           "store_gb": sum(f.stat().st_size for f in store.rglob("*") if f.is_file()) / 2 ** 30}
-    print(f"  tiled in {wall:.0f} s, peak RSS {rss:.0f} MB", flush=True)
+    out: dict = {}
+    if retile or not store.exists():
+        shutil.rmtree(store, ignore_errors=True)
+        wall, rss = sh("tile", f"fractal:{size}", "--out", str(store), "--imagery", str(ortho))
+        out = {"tile_s": wall, "tile_peak_rss_mb": rss}
+        print(f"  tiled in {wall:.0f} s, peak RSS {rss:.0f} MB", flush=True)
+    out["store_gb"] = sum(f.stat().st_size for f in store.rglob("*") if f.is_file()) / 2 ** 30
     for mode, extra in (("adaptive", ()), ("sprite", ("--key-sse", "0.5"))):
         med = {"auto": [], "heights": []}
         for rep in range(repeats):
@@ -342,6 +344,8 @@ def main() -> None:
     ap.add_argument("--repeats", type=int, default=2)
     ap.add_argument("--cog-side", type=int, default=4096)
     ap.add_argument("--parts", nargs="+", default=["align", "scale", "remote", "codec"])
+    ap.add_argument("--keep-store", action="store_true",
+                    help="scale: fly the store already tiled in --work (no tiling figures)")
     a = ap.parse_args()
     work = a.work or Path(tempfile.mkdtemp(prefix="geodata-"))
     work.mkdir(parents=True, exist_ok=True)
@@ -356,7 +360,7 @@ def main() -> None:
         results["align"] = align(work)
         print("align:", json.dumps(results["align"]), flush=True)
     if "scale" in a.parts:
-        results["scale"] = scale(work, a.size, a.frames, a.repeats)
+        results["scale"] = scale(work, a.size, a.frames, a.repeats, not a.keep_store)
         print("scale:", json.dumps(results["scale"]), flush=True)
     if "remote" in a.parts:
         results["remote"] = remote(work, a.cog_side)

@@ -380,3 +380,45 @@ def test_the_clipmap_streams_imagery_finer_than_the_texture_around_the_eye(drape
     err_sharp = np.sqrt(np.mean((sharp - want) ** 2))
     err_blurred = np.sqrt(np.mean((blurred - want) ** 2))
     assert err_sharp < 3.0 and err_blurred > 4 * err_sharp, (err_sharp, err_blurred)
+
+
+def test_the_served_keyframes_stream_the_clipmap_too(draped, gl, monkeypatch):
+    """A page's renderer (the adaptive keyframe service) over the same store, texture held
+    to half the imagery's resolution: once its clip levels arrive its keyframe of the close
+    nadir view is the reference's level-0 imagery (RMSE under 3)."""
+    import time
+
+    from lodsprite.camera import look_at
+    from lodsprite.distributed.protocol import LoadArgs
+    from lodsprite.distributed.render import AdaptiveKeyframeService
+    from lodsprite.gl.reference import LevelZeroReference
+    from lodsprite.harness import imagery_windows
+    from lodsprite.scene import model
+
+    _, store, _ = draped
+    monkeypatch.setattr(model, "IMAGERY_SIDE", 256)
+    vp = look_at((150.0, -100.0, 720.0), (150.0, -100.0, 0.0), up=(0, 1, 0))
+    size = (128, 128)
+    service = AdaptiveKeyframeService(LoadArgs(terrain=str(store), size=size, lod=16,
+                                               grid=64, fov_y_deg=50.0), gl)
+    st = TerrainStore(store)
+    ref = LevelZeroReference(gl, st, size, 50.0, "texture", None, max_side=64, samples=2,
+                             imagery=imagery_windows(st, "terrain", 4096))
+    try:
+        clip = service.keys.adaptive.clip
+        assert clip is not None and clip.core is not None and clip.core.levels == [0]
+        end, seq = time.monotonic() + 30, 0
+        while True:
+            seq += 1
+            kf = service.render(vp, seq, 0.0)
+            if clip.core.idle() and clip.uploaded:
+                kf = service.render(vp, seq + 1, 0.0)
+                break
+            assert time.monotonic() < end, "the clip levels did not arrive"
+            time.sleep(0.01)
+        want = ref.image(vp, kf.projection).astype(float)
+        err = np.sqrt(np.mean((kf.color.astype(float) - want) ** 2))
+        assert err < 3.0, err
+    finally:
+        service.release()
+        ref.release()

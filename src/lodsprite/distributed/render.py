@@ -239,6 +239,7 @@ class AdaptiveKeyframeService:
         from lodsprite.techniques.adaptive_worker import StoreKeyframes
         from lodsprite.techniques.builtin import GPU_MB, HOST_MB
         from lodsprite.techniques.defaults import STORE_DEFAULTS
+        from lodsprite.techniques.terrain import clipped
 
         args = check_load_args(args)
         # as the window's shading "auto": a store's terrain texture is its level 0's own
@@ -249,7 +250,8 @@ class AdaptiveKeyframeService:
         keys = StoreKeys("", args.terrain,
                          STORE_DEFAULTS["key_sse"] if key_sse is None else key_sse,
                          GPU_MB.default if gpu_mb is None else gpu_mb,
-                         HOST_MB.default if host_mb is None else host_mb, heights)
+                         HOST_MB.default if host_mb is None else host_mb, heights,
+                         not heights and clipped(args.terrain, args.texture))
         settings = WorkerSettings(tuple(args.size), args.fov_y_deg, args.lod,
                                   args.visibility, args.border, 0, store=keys,
                                   key_scale=args.key_scale)

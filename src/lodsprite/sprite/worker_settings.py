@@ -23,7 +23,8 @@ class StoreKeys:
     (a store the worker process opens, as the drawing side opened it; any other terrain
     is drawn from the arrays handed over), the tolerance ``key_sse`` (pixels), the caches
     ``gpu_mb`` and ``host_mb`` and whether the terrain is shaded from its ``heights``
-    (else coloured with the texture)."""
+    (else coloured with the texture); ``clip``: the texture is the store's imagery, its
+    finer levels streamed as a clipmap (:mod:`lodsprite.terrain.clipmap`)."""
 
     factory: str
     path: str
@@ -31,6 +32,7 @@ class StoreKeys:
     gpu_mb: float
     host_mb: float
     heights: bool
+    clip: bool = False
 
 
 @dataclass(frozen=True)

@@ -27,6 +27,7 @@ from lodsprite.techniques.defaults import MEMORY_DEFAULTS, STORE_DEFAULTS
 from lodsprite.techniques.terrain import (
     SpriteTechnique,
     attach_clipmap,
+    clipped,
     resolve_shading,
     set_shading,
 )
@@ -267,8 +268,11 @@ class SpriteAdaptiveTechnique(SpriteTechnique):
             raise InputError("adaptive keyframes from the worker are drawn under the "
                              "uniform coarse level: no proxy_sse")
         heights = resolve_shading(renderer.scene, shading) == "heights"
-        store = StoreKeys(WORKER_FACTORY, renderer.scene.terrain_spec, key_sse, gpu_mb,
-                          host_mb, heights) if worker else None
+        scene = renderer.scene
+        store = StoreKeys(WORKER_FACTORY, scene.terrain_spec, key_sse, gpu_mb, host_mb,
+                          heights, not heights and clipped(scene.terrain_spec,
+                                                           scene.texture_spec)
+                          ) if worker else None
 
         self.adaptive = make_adaptive(renderer, key_sse, gpu_mb, host_mb, shading)
         field = None

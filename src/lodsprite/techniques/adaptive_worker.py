@@ -96,10 +96,15 @@ class StoreKeyframes:
             pyramid = (TerrainStore(location(keys.path),
                                     float(hf.meta.get("exaggeration", 1.0)))
                        if is_store(keys.path) else MemoryPyramid.from_heightfield(hf))
+            if keys.clip and isinstance(pyramid, TerrainStore):  # finer imagery, streamed
+                from lodsprite.techniques.terrain import use_clipmap
+
+                use_clipmap(geometry, pyramid)
             self.adaptive = AdaptiveTerrain(
                 self.ctx, pyramid, self.terrain.target, s.fov_y_deg, keys.key_sse,
                 gpu_mb=keys.gpu_mb, host_mb=keys.host_mb,
-                color=None if keys.heights else geometry.color_tex)
+                color=None if keys.heights else geometry.color_tex,
+                clip=None if keys.heights else geometry.clip)
             made.append(self.adaptive)
             field = store_field(pyramid) if isinstance(pyramid, TerrainStore) else None
             if field is not None:

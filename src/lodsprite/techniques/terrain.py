@@ -72,19 +72,34 @@ def attach_clipmap(renderer: RendererLike) -> None:
     (the default texture or ``imagery``) of more than :data:`~lodsprite.scene.model.
     IMAGERY_SIDE` texels a side; once per renderer.  ``imagery+hillshade`` keeps its one
     texture (the clip levels hold the imagery without the hillshade)."""
-    from lodsprite.scene import model
-    from lodsprite.terrain.clipmap import Clipmap
     from lodsprite.terrain.remote import location
     from lodsprite.terrain.store import TerrainStore
 
     geometry = renderer.terrain_gl.geometry
     scene = renderer.scene
-    name = (scene.texture_spec or "terrain").strip().lower()
-    if (geometry.clip.core is not None or name not in ("terrain", "imagery")
-            or not model.store_imagery(scene.terrain_spec)):
+    if geometry.clip.core is not None or not clipped(scene.terrain_spec, scene.texture_spec):
         return
     store = TerrainStore(location(scene.terrain_spec),
                          float(scene.hf.meta.get("exaggeration", 1.0)))
+    use_clipmap(geometry, store)
+
+
+def clipped(terrain_spec: str, texture_spec: str) -> bool:
+    """Whether a scene of ``terrain_spec`` textured by ``texture_spec`` drapes a store's
+    imagery that a clipmap refines (the default texture or ``imagery`` over a store with
+    imagery; whether it is finer than the texture is the clipmap's to say)."""
+    from lodsprite.scene import model
+
+    name = (texture_spec or "terrain").strip().lower()
+    return name in ("terrain", "imagery") and model.store_imagery(terrain_spec)
+
+
+def use_clipmap(geometry, store) -> None:
+    """Give ``geometry`` (a :class:`~lodsprite.gl.terrain.TerrainGeometry`) the clipmap
+    of ``store``'s imagery finer than the scene's texture, if it has any."""
+    from lodsprite.scene import model
+    from lodsprite.terrain.clipmap import Clipmap
+
     core = Clipmap(store, model.IMAGERY_SIDE)
     if len(core):
         geometry.use_clipmap(core)
