@@ -5,6 +5,7 @@ between tests."""
 from __future__ import annotations
 
 import os
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -16,6 +17,12 @@ from typing import TypeVar
 # with them and 62.4 s without (one run each, idle 2-core machine).  Draws still release
 # the GIL where the project draws unlocked: the tests of that hold either way.
 os.environ.setdefault("LP_NUM_THREADS", "0")
+# Bytecode caches kept (an environment may forbid them, PYTHONDONTWRITEBYTECODE=1): else
+# every xdist worker rewrites every test module's asserts again (collection 19.6 s against
+# 10.9 s with the cache) and every process the tests start (renderers, readers, the CLI)
+# compiles lodsprite from source again.
+os.environ.pop("PYTHONDONTWRITEBYTECODE", None)
+sys.dont_write_bytecode = False
 
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402

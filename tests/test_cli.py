@@ -126,10 +126,10 @@ def test_reproduce_quick_writes_results_plots_and_report(tmp_path, cli, monkeypa
     from lodsprite.experiments.chen1999.run import ReproduceConfig
 
     # The command in this process, its --quick shortened for the suite (the suite's
-    # slowest test at 256², 115 frames: 30 s): 128², 60 frames, quality every 3rd frame.
+    # slowest test at 256², 115 frames: 30 s): 96², 36 frames, quality every 3rd frame.
     quick = ReproduceConfig.quick
     monkeypatch.setattr(ReproduceConfig, "quick", classmethod(lambda cls, **kw: quick(
-        **{"size": 128, "frames": 60, "fig10_frames": (30, 60), **kw})))
+        **{"size": 96, "frames": 36, "fig10_frames": (18, 36), **kw})))
     out = tmp_path / "r"
     proc = cli("reproduce", "chen1999", "--quick", "--terrain", "fractal:64:1",
                "--out", str(out))

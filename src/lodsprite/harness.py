@@ -95,11 +95,12 @@ def level_zero_reference(gl, scene, size: tuple[int, int], fov_y_deg: float,
     field = (scene_pyramid(scene) if scene.terrain_spec and is_store(scene.terrain_spec)
              else scene.hf)
     imagery = None
-    if shading == "texture" and is_store(scene.terrain_spec):
-        imagery = imagery_windows(field, scene.texture_spec, gl.info.max_texture_size)
+    samples = SAMPLES if samples is None else samples
+    if shading == "texture" and is_store(scene.terrain_spec):  # texels: twice the samples'
+        side = min(gl.info.max_texture_size, 2 * samples * max(size))
+        imagery = imagery_windows(field, scene.texture_spec, side)
     return LevelZeroReference(gl, field, size, fov_y_deg, shading, texture,
-                              samples=SAMPLES if samples is None else samples,
-                              imagery=imagery)
+                              samples=samples, imagery=imagery)
 
 
 def imagery_windows(store, texture_spec: str, max_side: int):
@@ -115,11 +116,15 @@ def imagery_windows(store, texture_spec: str, max_side: int):
     name = (texture_spec or "terrain").strip().lower()
     if store.imagery is None or name not in ("terrain", *IMAGERY_SPECS):
         return None
+    mm = store.minmax(0)
+    span = (float(np.nanmin(mm[..., 0])), float(np.nanmax(mm[..., 1])))  # level 0's ramp
 
     def window(r0: int, r1: int, c0: int, c1: int) -> np.ndarray:
         rgba = store.imagery_window(r0, r1, c0, c1, max_side)
-        hf = HeightField(store.read(0, r0, r1, c0, c1), store.dx, store.dy, "window")
-        return drape(rgba, hf, name == "imagery+hillshade")
+        h = store.read(0, r0, r1, c0, c1)
+        h = np.where(np.isfinite(h), h, np.float32(span[0]))  # nodata: the lowest ground
+        hf = HeightField(h, store.dx, store.dy, "window")
+        return drape(rgba, hf, name == "imagery+hillshade", span)
 
     return window
 

@@ -9,16 +9,16 @@ from lodsprite.experiments.swan2002.run import LINK_SETUPS, SETUPS, SwanConfig
 
 def test_reproduce_swan2002_quick_writes_all_setups(tmp_path, cli, monkeypatch):
     # The command in this process (its set-ups' clients and servers are processes of their
-    # own), its --quick shortened for the suite: 30 frames.
+    # own), its --quick shortened for the suite: 20 frames.
     quick = SwanConfig.quick
     monkeypatch.setattr(SwanConfig, "quick", classmethod(lambda cls, **kw: quick(
-        **{"frames": 30, **kw})))
+        **{"frames": 20, **kw})))
     out = tmp_path / "s"
     proc = cli("reproduce", "swan2002", "--quick", "--size", "64", "--terrain",
                "fractal:64:2", "--no-links", "--out", str(out))
     assert proc.returncode == 0, proc.stderr
     results = json.loads((out / "results.json").read_text())
-    assert results["config"]["size"] == 64 and results["config"]["frames"] == 30
+    assert results["config"]["size"] == 64 and results["config"]["frames"] == 20
     for setup in SETUPS:
         r = results[setup]
         if "skipped" in r:

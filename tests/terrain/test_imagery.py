@@ -171,8 +171,7 @@ def test_an_interrupted_imagery_build_resumes_to_the_same_store(tmp_path, draped
     part = tmp_path / "part.zarr"
     s = build_store(str(d), part, tile=64, chunk=32, imagery=[str(ortho)], stop_after=9)
     assert s.get("interrupted")
-    with pytest.raises(InputError, match="--imagery"):
-        TerrainStore(part)  # unfinished: the message says how to resume
+    assert TerrainStore(part).imagery is None  # the heights are done: drawn without imagery
     s = build_store(str(d), part, tile=64, chunk=32, imagery=[str(ortho)], stop_after=40)
     assert s.get("interrupted")
     build_store(str(d), part, tile=64, chunk=32, imagery=[str(ortho)])
@@ -290,7 +289,7 @@ def test_the_reference_drawn_by_windows_reads_the_imagery_as_the_whole_one_shows
             LevelZeroReference(gl, st, (96, 72), 50.0, "heights", samples=2)]
     try:
         whole, windows, heights = (r.image(vp).astype(float) for r in refs)
-        assert "windows" not in refs[0].identity() and "by window" in refs[1].identity()
+        assert "by window" not in refs[0].identity() and "by window" in refs[1].identity()
     finally:
         for r in refs:
             r.release()
@@ -303,8 +302,8 @@ def test_a_truncated_source_stops_the_build_in_one_line_and_it_stays_resumable(t
                                                                                draped, what):
     """A COG cut in half (its header whole, its last tiles gone): tile stops at the first
     read it cannot make, one line and exit 2: a DEM's before anything is written, an
-    orthophoto's with the tiles written kept (the store refused as unfinished, with the
-    command that resumes it)."""
+    orthophoto's with the tiles written kept: the heights finished, the store opens
+    without its imagery, which info calls unfinished (tile it again to resume)."""
     folder, _, ortho = draped
     dem_path = folder / "dem.tif"
     with rasterio.open(dem_path if what == "dem" else ortho) as src:
@@ -325,8 +324,9 @@ def test_a_truncated_source_stops_the_build_in_one_line_and_it_stays_resumable(t
     if what == "dem":  # its decimated read, before anything is written, fails
         assert not out.exists()
         return
-    with pytest.raises(InputError, match="did not finish"):  # the heights kept
-        TerrainStore(out)
+    st = TerrainStore(out)  # the heights finished: the terrain opens, without its imagery
+    assert st.imagery is None and not st.header.complete
+    assert "unfinished" in run_cli("info", str(out)).stdout
 
 
 @pytest.mark.parametrize("mode", ["full", "adaptive"])
@@ -422,3 +422,16 @@ def test_the_served_keyframes_stream_the_clipmap_too(draped, gl, monkeypatch):
     finally:
         service.release()
         ref.release()
+
+
+def test_a_build_begun_with_a_refinement_resumes_without_repeating_it(tmp_path, draped):
+    folder, _, ortho = draped
+    out = tmp_path / "s.zarr"
+    args = (str(folder / "dem.tif"), out)
+    s = build_store(*args, tile=64, chunk=32, imagery=[str(ortho)], imagery_refine=1,
+                    stop_after=12)
+    assert s.get("interrupted")
+    build_store(*args, tile=64, chunk=32, imagery=[str(ortho)])  # as the hint says
+    assert TerrainStore(out).imagery.refine == 1
+    with pytest.raises(InputError, match="refined 1, not 2"):
+        build_store(*args, tile=64, chunk=32, imagery=[str(ortho)], imagery_refine=2)

@@ -60,8 +60,8 @@ def _options(
     if http_cache is not None:  # the environment: render and reader processes inherit it
         os.environ["LODSPRITE_HTTP_CACHE"] = str(http_cache.expanduser())
     if http_cache_mb is not None:
-        if not http_cache_mb > 0:
-            raise InputError(f"--http-cache-mb must be positive, got {http_cache_mb}")
+        if not (http_cache_mb > 0 and http_cache_mb < float("inf")):
+            raise InputError(f"--http-cache-mb must be a positive number, got {http_cache_mb}")
         os.environ["LODSPRITE_HTTP_CACHE_MB"] = str(http_cache_mb)
 
 

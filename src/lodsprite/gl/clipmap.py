@@ -6,10 +6,12 @@ the chunk each slot holds; :data:`CLIPMAP_FS` samples them per fragment.
 row 0, north; 1 at the last), ``whole`` the mipmapped texture of the whole imagery.  The
 level of detail is the texels' screen size at level 0 (``log2`` of the larger of the
 texel coordinates' screen derivatives); the finest clip level at or above it whose
-window holds the four texels of the bilinear footprint is sampled, blended towards the
-next coarser one by the fraction of the level of detail (no seam where levels meet), and
-over the whole texture by the imagery's alpha (where no source covers the ground, the
-whole texture's colour).  No clip level holds the point: the whole texture, mipmapped.
+window holds the four texels of the bilinear footprint (kept inside the level: no wrap
+at its edges) is sampled, blended towards the next coarser one by the fraction of the
+level of detail (no seam where levels meet), and over the whole texture by the
+imagery's alpha (premultiplied: no dark fringe where coverage ends; where no source
+covers the ground, the whole texture's colour).  No clip level holds the point: the
+whole texture, mipmapped.
 """
 
 from __future__ import annotations
@@ -34,13 +36,18 @@ bool clip_has(int li, vec2 t) {
     int held = texelFetch(u_clip_table, ivec3(c.x % n, c.y % n, li), 0).r;
     return held == c.y * 65536 + c.x + 1;
 }
+vec2 clip_clamp(int li, vec2 t) {  // the footprint inside the level: no wrap at its edges
+    vec2 size = ceil(u_clip_texels / float(1 << li));
+    return clamp(t, vec2(0.5), size - vec2(0.5));
+}
 bool clip_covers(int li, vec2 t) {
     return clip_has(li, t + vec2(-0.5, -0.5)) && clip_has(li, t + vec2(0.5, -0.5))
         && clip_has(li, t + vec2(-0.5, 0.5)) && clip_has(li, t + vec2(0.5, 0.5));
 }
-vec4 clip_sample(int li, vec2 t) {
+vec4 clip_sample(int li, vec2 t) {  // premultiplied: colour times alpha
     return textureLod(u_clip, vec3(t / float(u_clip_side), float(li)), 0.0);
 }
+vec3 over_base(vec3 base, vec4 c) { return c.rgb + base * (1.0 - c.a); }
 vec3 terrain_color(sampler2D whole, vec2 uv) {
     vec3 base = texture(whole, uv).rgb;
     if (u_clip_levels == 0) return base;
@@ -49,17 +56,17 @@ vec3 terrain_color(sampler2D whole, vec2 uv) {
     float lod = 0.5 * log2(max(max(dot(dx, dx), dot(dy, dy)), 1e-12));
     int first = max(0, int(floor(lod)));
     for (int li = first; li < u_clip_levels; li++) {
-        vec2 t = t0 / float(1 << li);
+        vec2 t = clip_clamp(li, t0 / float(1 << li));
         if (!clip_covers(li, t)) continue;
-        vec4 c = clip_sample(li, t);
+        vec3 c = over_base(base, clip_sample(li, t));
         float f = li == first ? clamp(lod - float(li), 0.0, 1.0) : 0.0;
         if (f > 0.0) {
-            vec2 t1 = t0 / float(2 << li);
+            vec2 t1 = clip_clamp(li + 1, t0 / float(2 << li));
             vec3 coarser = (li + 1 < u_clip_levels && clip_covers(li + 1, t1))
-                ? mix(base, clip_sample(li + 1, t1).rgb, clip_sample(li + 1, t1).a) : base;
-            return mix(mix(base, c.rgb, c.a), coarser, f);
+                ? over_base(base, clip_sample(li + 1, t1)) : base;
+            return mix(c, coarser, f);
         }
-        return mix(base, c.rgb, c.a);
+        return c;
     }
     return base;
 }

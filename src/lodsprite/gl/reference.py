@@ -80,7 +80,8 @@ class LevelZeroReference:
     :class:`~lodsprite.terrain.store.TerrainStore` (exaggerated as opened) or a
     :class:`HeightField` (centred on the origin).  ``imagery``: ``(r0, r1, c0, c1) -> (H,
     W, 3) uint8``, the texture over level 0's samples ``[r0, r1) x [c0, c1)`` (a store's
-    imagery read at level 0's detail), what a level 0 drawn by windows is coloured with.
+    imagery read at level 0's detail), what each patch, whole or a window, is coloured
+    with (finer than one texture of the whole imagery, as the renderers' clipmap).
     GPU objects live until :meth:`release`.  Raises :class:`InputError` for texture
     shading of a level 0 beyond ``max_side`` without ``imagery``, or a sample count,
     filter or space not known."""
@@ -204,7 +205,7 @@ class LevelZeroReference:
         x, y = self.tree.world_xy(0, np.array([r0]), np.array([c0]))
         patch = HeightPatch(self.ctx, heights, (float(x[0]), float(y[0])),
                             (self.pyramid.dx, self.pyramid.dy))
-        if self.shading == "texture" and self.imagery is not None and not self.whole:
+        if self.shading == "texture" and self.imagery is not None:
             try:  # a store's imagery over this window, read here (level 0's detail)
                 patch.set_color(self.ctx, self.imagery(r0, r1, c0, c1))
             except BaseException:
@@ -245,12 +246,19 @@ class LevelZeroReference:
                    f" {self.pyramid.dx!r} {self.pyramid.dy!r}")
         else:
             store = self.pyramid
-            header = hashlib.sha256((store.path / "zarr.json").read_bytes()).hexdigest()
-            src = f"store {store.path.resolve()} {header} {store.exaggeration!r}"
+            from lodsprite.terrain.remote import Url
+
+            if isinstance(store.path, Url):  # a store at a URL: its header as read
+                header = hashlib.sha256(repr(store.header).encode()).hexdigest()
+                where = str(store.path)
+            else:
+                header = hashlib.sha256((store.path / "zarr.json").read_bytes()).hexdigest()
+                where = str(store.path.resolve())
+            src = f"store {where} {header} {store.exaggeration!r}"
         tex = ("none" if self.texture is None else
                hashlib.sha256(np.ascontiguousarray(self.texture)).hexdigest())
-        if self.imagery is not None and not self.whole:
-            tex += "; the store's imagery by window"
+        if self.imagery is not None:
+            tex = "the store's imagery by window"
         return (f"lodsprite level-0 reference 1; {src}; size {self.size}; fov {self.fov!r}; "
                 f"samples {self.samples}; {self.filter}; {self.space}; {self.shading}; "
                 f"texture {tex}; max side {self.max_side}")

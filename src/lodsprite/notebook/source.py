@@ -52,6 +52,9 @@ def _name_in(value: str | Path, kind: str, folder: Path | None) -> tuple[str, Pa
     from lodsprite.terrain.remote import is_url
 
     if is_url(text) and kind == "terrain":  # read in place: the URL's folder served
+        if "?" in text or "#" in text:
+            raise InputError(f"terrain {text}: a widget's URL takes no query string or "
+                             "fragment")
         base, _, name = text.strip().rstrip("/").rpartition("/")
         return name, base  # type: ignore[return-value]
     path = Path(text).expanduser()

@@ -48,6 +48,10 @@ def resolve_shading(scene, shading: str = "auto") -> str:
         if not store_imagery(spec):
             raise InputError(f"--shading imagery: {spec or 'this scene'} is not a terrain "
                              "store tiled with --imagery")
+        name = (scene.texture_spec or "terrain").strip().lower()
+        if name not in ("terrain", "imagery", "imagery+hillshade"):
+            raise InputError(f"--shading imagery draws the store's imagery, not --texture "
+                             f"{scene.texture_spec}")
         return "texture"
     if shading == "auto":
         if spec and is_store(spec):

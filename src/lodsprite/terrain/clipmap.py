@@ -28,6 +28,17 @@ import numpy as np
 
 from lodsprite.terrain.store_format import level_shape
 
+
+def premultiplied(block: np.ndarray) -> np.ndarray:
+    """``(h, w, 4) uint8`` RGBA with its colour multiplied by its alpha (so that bilinear
+    filtering across a coverage edge does not darken it: the shader blends ``rgb + base *
+    (1 - a)``)."""
+    a = block[..., 3:4].astype(np.uint16)
+    out = block.copy()
+    out[..., :3] = (block[..., :3].astype(np.uint16) * a + 127) // 255
+    return out
+
+
 CLIP_SIDE = 1024  # texels a side of a clip level's window (a multiple of the chunk)
 IN_FLIGHT = 8
 
@@ -54,7 +65,7 @@ class Clipmap:
         # per clip level, slot (sr, sc) -> the chunk (cr, cc) it holds
         self.held: list[dict[tuple[int, int], tuple[int, int]]] = [{} for _ in self.levels]
         self.wishes: list[tuple[int, int, int]] = []  # (clip level, cr, cc)
-        self.bad = 0
+        self.failed: set[tuple[int, int, int]] = set()  # unreadable: never asked again
         if worker is None and self.levels:
             from lodsprite.terrain.reader import reader_worker
 
@@ -78,7 +89,8 @@ class Clipmap:
             held = self.held[li]
             for cr in range(cr0, min(n_r, cr0 + self.slots)):
                 for cc in range(cc0, min(n_c, cc0 + self.slots)):
-                    if held.get((cr % self.slots, cc % self.slots)) != (cr, cc):
+                    if (held.get((cr % self.slots, cc % self.slots)) != (cr, cc)
+                            and (li, cr, cc) not in self.failed):
                         d = math.hypot(cr + 0.5 - cr_c, cc + 0.5 - cc_c)
                         wishes.append((-li, d, li, cr, cc))
         wishes.sort()
@@ -86,8 +98,9 @@ class Clipmap:
 
     def pump(self) -> list[tuple[int, int, int, np.ndarray]]:
         """What arrived since the last call, ``(clip level, slot row, slot col, (h, w, 4)
-        uint8)`` each (recorded as held: upload them before drawing), and the next wishes
-        sent.  Never waits."""
+        uint8)`` each, premultiplied (recorded as held: upload them before drawing), and
+        the next wishes sent; a chunk the reader cannot read is never asked again.  Never
+        waits."""
         from lodsprite.terrain.reader import imagery_answer, imagery_request
 
         if self.worker is None:
@@ -95,12 +108,12 @@ class Clipmap:
         out = []
         for (li, cr, cc), answer in self.worker.poll():
             block = imagery_answer(answer)
-            if isinstance(block, str):
-                self.bad += 1
+            if isinstance(block, str):  # the coarser levels stand in for it
+                self.failed.add((li, cr, cc))
                 continue
             slot = (cr % self.slots, cc % self.slots)
             self.held[li][slot] = (cr, cc)
-            out.append((li, *slot, block))
+            out.append((li, *slot, premultiplied(block)))
         pending = set(self.worker.pending)
         while self.wishes and not self.worker.full:
             li, cr, cc = self.wishes.pop(0)
@@ -111,6 +124,11 @@ class Clipmap:
             self.worker.submit((li, cr, cc), imagery_request(
                 self.levels[li], r0, min(rows, r0 + self.chunk), c0, min(cols, c0 + self.chunk)))
         return out
+
+    @property
+    def bad(self) -> int:
+        """Chunks the reader could not read (drawn from coarser levels)."""
+        return len(self.failed)
 
     def idle(self) -> bool:
         """Nothing wished for and nothing in flight."""

@@ -127,7 +127,6 @@ class ImagerySource:
                  bounds: tuple[float, float, float, float] | None, rows: int, cols: int,
                  dx_m: float) -> None:
         import rasterio
-        from rasterio.enums import ColorInterp
 
         from lodsprite.terrain.remote import is_url, open_raster
 
@@ -137,6 +136,16 @@ class ImagerySource:
                        else rasterio.open(_local(self.path)))
         except (rasterio.errors.RasterioIOError, OSError) as exc:
             raise InputError(f"cannot read imagery {path}: {_line(exc)}") from exc
+        try:
+            self._check(path, rows, cols, dem_crs, bounds, dx_m)
+        except BaseException:
+            self.ds.close()
+            raise
+
+    def _check(self, path: str, rows: int, cols: int, dem_crs: str | None,
+               bounds: tuple[float, float, float, float] | None, dx_m: float) -> None:
+        from rasterio.enums import ColorInterp
+
         ds = self.ds
         if ds.count < 1:
             raise InputError(f"imagery {path} has no bands")

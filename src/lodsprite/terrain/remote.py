@@ -19,12 +19,13 @@ the reads used, to set against what the server sent).
 
 The cache folder is ``LODSPRITE_HTTP_CACHE`` (default ``~/.cache/lodsprite/http``, under
 ``XDG_CACHE_HOME`` when set), capped at ``LODSPRITE_HTTP_CACHE_MB`` megabytes (default
-2048): when a URL is opened, the files cached longest ago are dropped until the folder is
-under its cap.  The commands' ``--http-cache DIR`` sets the folder.
+2048): when a process tree first opens a URL, the files cached longest ago are dropped
+until the folder is under its cap.  The commands' ``--http-cache DIR`` sets the folder.
 """
 
 from __future__ import annotations
 
+import math
 import os
 import threading
 import urllib.error
@@ -51,7 +52,8 @@ class Url(str):
 
     @property
     def name(self) -> str:
-        return self.rstrip("/").rsplit("/", 1)[-1]
+        """The last segment of the URL's path (its query and fragment left out)."""
+        return self.split("#")[0].split("?")[0].rstrip("/").rsplit("/", 1)[-1]
 
     def expanduser(self) -> Url:
         return self
@@ -83,8 +85,8 @@ def cache_cap_bytes() -> int:
         mb = float(raw)
     except ValueError:
         raise InputError(f"LODSPRITE_HTTP_CACHE_MB must be a number, got {raw!r}") from None
-    if not mb > 0:
-        raise InputError(f"LODSPRITE_HTTP_CACHE_MB must be positive, got {raw!r}")
+    if not (mb > 0 and math.isfinite(mb)):
+        raise InputError(f"LODSPRITE_HTTP_CACHE_MB must be a positive number, got {raw!r}")
     return int(mb * 2 ** 20)
 
 
@@ -116,15 +118,23 @@ def _filesystem(folder: str):
                              check_files=False, target_options={"block_size": BLOCK})
 
 
+TRIMMED = "LODSPRITE_HTTP_CACHE_TRIMMED"  # set once trimmed: children inherit it
+
+
 def filesystem():
     """The cached HTTP filesystem (fsspec ``blockcache`` over ``http``) of the cache
-    folder, trimmed to its cap."""
+    folder.  The first process to open one trims the cache to its cap, before it has
+    opened any remote file; the processes it starts (renderers, readers) do not trim
+    again, so no file one of them holds open is dropped."""
     folder = cache_folder()
+    cap = cache_cap_bytes()
     try:
         fs = _filesystem(str(folder))
     except OSError as exc:
         raise InputError(f"the HTTP cache folder {folder} cannot be used: {exc}") from None
-    trim(fs, cache_cap_bytes())
+    if os.environ.get(TRIMMED) != str(folder):
+        trim(fs, cap)
+        os.environ[TRIMMED] = str(folder)
     return fs
 
 

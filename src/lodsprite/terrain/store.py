@@ -27,10 +27,12 @@ that finishes it.
 
 from __future__ import annotations
 
+import logging
 import shutil
 from collections.abc import Callable
 from pathlib import Path
 
+import msgspec
 import numpy as np
 
 from lodsprite.errors import InputError
@@ -57,6 +59,7 @@ from lodsprite.terrain.store_format import (
 )
 
 Progress = Callable[[int, int], None]
+log = logging.getLogger(__name__)
 
 
 def build_store(source_spec: str, out: str | Path, tile: int = DEFAULT_TILE,
@@ -92,6 +95,10 @@ def build_store(source_spec: str, out: str | Path, tile: int = DEFAULT_TILE,
                          float(src.dy), levels, tile, chunk, encoding,
                          float(scale) if encoding == "int16" else 1.0, float(offset),
                          src.crs, src.transform, False, [[] for _ in range(levels)])
+    if imagery and imagery_refine is None:  # resuming: the refinement it was begun with
+        old = _existing_header(out) if out.exists() and not overwrite else None
+        if old is not None and old.imagery is not None and not old.imagery.complete:
+            imagery_refine = old.imagery.refine
     # GDAL's and PROJ's messages to logging, not the terminal (a failure is our one line)
     with store_imagery.gdal_env():
         sources = store_imagery.open_sources(list(imagery), header) if imagery else []
@@ -240,8 +247,10 @@ def _check_source(src, encoding: str, scale: float) -> float:
 def _open_for_build(out: Path, header: StoreHeader, overwrite: bool):
     import zarr
 
+    from lodsprite.terrain.store_imagery import estimate_bytes as imagery_bytes
+
     free = shutil.disk_usage(out.parent if out.parent.exists() else Path.cwd()).free
-    need = estimate_bytes(header.rows, header.cols, header.encoding)
+    need = estimate_bytes(header.rows, header.cols, header.encoding) + imagery_bytes(header)
     if out.exists():
         old = _existing_header(out)
         if overwrite:
@@ -300,14 +309,30 @@ def _match_imagery(out: Path, group, old: StoreHeader, new: StoreHeader) -> None
                              "--imagery")
         return
     if old.imagery is None:
-        old.imagery, old.complete = new.imagery, False
+        _check_space(out, new)
+        old.imagery, old.complete, old.version = new.imagery, False, VERSION
         create_arrays(group, old)
         save_header(group, old)
         return
-    was = ([s.path for s in old.imagery.sources], old.imagery.refine)
-    if was != ([s.path for s in new.imagery.sources], new.imagery.refine):
-        raise InputError(f"{out} holds imagery from other sources: pass --overwrite to "
+    if [s.path for s in old.imagery.sources] != [s.path for s in new.imagery.sources]:
+        raise InputError(f"{out} holds imagery from other sources "
+                         f"({', '.join(s.path for s in old.imagery.sources)}): pass "
+                         "--overwrite to rebuild it")
+    if old.imagery.refine != new.imagery.refine:
+        raise InputError(f"{out} holds imagery refined {old.imagery.refine}, not "
+                         f"{new.imagery.refine} (--imagery-refine): pass --overwrite to "
                          "rebuild it")
+
+
+def _check_space(out: Path, header: StoreHeader) -> None:
+    """Refuse imagery the disk cannot hold (uncompressed, every level: an upper bound)."""
+    from lodsprite.terrain.store_imagery import estimate_bytes as imagery_bytes
+
+    free = shutil.disk_usage(out if out.exists() else out.parent).free
+    need = imagery_bytes(header)
+    if need > free:
+        raise InputError(f"the imagery needs up to {need / 2 ** 30:.1f} GB and the disk "
+                         f"has {free / 2 ** 30:.1f} GB free")
 
 
 def _existing_header(out: Path) -> StoreHeader | None:
@@ -388,9 +413,17 @@ class TerrainStore:
         if h.format != FORMAT or h.version not in VERSIONS:
             raise InputError(f"{self.path}: not a {FORMAT} store of version "
                              f"{' or '.join(map(str, VERSIONS))}")
-        if not h.complete:
-            more = "".join(f" --imagery {s.path}" for s in h.imagery.sources) \
-                if h.imagery else ""
+        if not h.complete and h.level_errors and h.imagery is not None:
+            # the heights finished, the imagery not: the terrain without its imagery
+            log.warning("%s: its imagery is unfinished (resume it with lodsprite tile "
+                        "--imagery); drawn without", self.path)
+            h = self.header = msgspec.structs.replace(h, imagery=None)
+        elif not h.complete:
+            if isinstance(self.path, Url):
+                raise InputError(f"{self.path}: the build did not finish; finish it where "
+                                 "it was built")
+            more = "".join(f" --imagery {s.path}" for s in h.imagery.sources) + (
+                f" --imagery-refine {h.imagery.refine}") if h.imagery else ""
             raise InputError(f"{self.path}: the build did not finish; run `lodsprite tile "
                              f"{h.source} --out {self.path}{more}` again to resume it")
         for k in range(h.levels):

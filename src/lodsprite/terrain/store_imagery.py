@@ -28,11 +28,11 @@ from lodsprite.terrain.imagery import (
     mosaic,
 )
 from lodsprite.terrain.store_format import (
-    MIN_LEVEL_SIDE,
     ImageryHeader,
     ImagerySourceHeader,
     StoreHeader,
     level_shape,
+    pyramid_levels,
     save_header,
     tile_windows,
 )
@@ -58,12 +58,10 @@ def dem_bounds(header: StoreHeader) -> tuple[float, float, float, float] | None:
     return min(x0, x1), min(y0, y1), max(x0, x1), max(y0, y1)
 
 
-def imagery_levels(rows: int, cols: int) -> int:
-    """Levels down to the first whose longer side is at most ``MIN_LEVEL_SIDE``."""
-    n = 1
-    while max(level_shape(rows, cols, n - 1)) > MIN_LEVEL_SIDE:
-        n += 1
-    return n
+def estimate_bytes(header: StoreHeader) -> int:
+    """An upper bound on the imagery's size (uncompressed RGBA, every level); 0 without."""
+    im = header.imagery
+    return 0 if im is None else int(im.rows * im.cols * 4 * 4 / 3) + (1 << 20)
 
 
 def open_sources(paths: list[str], header: StoreHeader) -> list[ImagerySource]:
@@ -93,7 +91,7 @@ def plan(sources: list[ImagerySource], header: StoreHeader, refine: int | None,
         attribution = next((a for a in (s.attribution() for s in sources) if a), "")
     if len(attribution) > 1000:
         raise InputError("--attribution is longer than 1000 characters")
-    levels = imagery_levels(rows, cols)
+    levels = pyramid_levels(rows, cols)  # as the heights: down to 256 a side
     infos = [ImagerySourceHeader(**vars(s.info())) for s in sources]
     return ImageryHeader(infos, m, rows, cols, levels, attribution=attribution,
                          done=[[] for _ in range(levels)])
@@ -160,9 +158,11 @@ def read(group, header: StoreHeader, j: int, r0: int, r1: int, c0: int, c1: int
     raises :class:`InputError`."""
     try:
         return np.asarray(group[f"imagery/{j}"][r0:r1, c0:c1])
-    except Exception as exc:  # zarr and its codecs raise many kinds on damaged chunks
-        raise InputError(f"the store's imagery level {j} is damaged "
-                         f"({type(exc).__name__}: {exc})") from exc
+    except InputError:
+        raise
+    except Exception as exc:  # zarr, its codecs and HTTP raise many kinds
+        raise InputError(f"the store's imagery level {j} cannot be read, damaged or "
+                         f"unreachable ({type(exc).__name__}: {str(exc)[:200]})") from exc
 
 
 def check_arrays(group, header: StoreHeader) -> None:

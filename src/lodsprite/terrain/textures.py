@@ -107,34 +107,41 @@ IMAGERY_SPECS = ("imagery", "imagery+hillshade")
 """Texture names of a terrain store's own imagery: as stored, or with a hillshade over it."""
 
 
-def drape(rgba: np.ndarray, hf: HeightField, hillshade: bool = False) -> np.ndarray:
+def drape(rgba: np.ndarray, hf: HeightField, hillshade: bool = False,
+          height_range: tuple[float, float] | None = None) -> np.ndarray:
     """A store's imagery ``(H, W, 4) uint8`` (alpha: coverage) as the terrain's texture
-    ``(H, W, 3) uint8`` over ``hf`` (the same extent): where no source covers the ground,
-    the heights shading of ``hf`` shows through (blended by alpha).  ``hillshade``: the
-    colours times the heights shading's light (30 % ambient, the same sun), divided by a
-    flat ground's, so flat ground keeps the imagery's own colours and slopes facing away
-    from the sun darken."""
+    ``(H, W, 3) uint8`` over ``hf`` (the same extent: texel centres spread from its first
+    sample to its last): where no source covers the ground, the heights shading of ``hf``
+    (its ramp over ``height_range``, default ``hf``'s own) shows through, blended by
+    alpha.  ``hillshade``: the colours times the heights shading's light (30 % ambient,
+    the same sun), divided by a flat ground's, so flat ground keeps the imagery's own
+    colours and slopes facing away from the sun darken."""
     from PIL import Image
 
     a = np.asarray(rgba)
     if a.ndim != 3 or a.shape[2] != 4 or a.dtype != np.uint8:
         raise TerrainError("imagery must be an (H, W, 4) uint8 array")
+    holes = bool((a[..., 3] < 255).any())
+    if not (holes or hillshade):
+        return np.ascontiguousarray(a[..., :3])
     size = (a.shape[1], a.shape[0])
+    rows, cols = hf.heights.shape
+    box = (0.5, 0.5, cols - 0.5, rows - 0.5)  # PIL's pixel centres onto the samples
+
+    def spread(img):
+        return np.asarray(img.resize(size, Image.Resampling.BILINEAR, box=box), np.float32)
+
     out = a[..., :3].astype(np.float32)
-    alpha = a[..., 3:4].astype(np.float32) / 255.0
     h = np.asarray(hf.heights, np.float32)
-    if hillshade or (alpha < 1).any():
-        lo, hi = float(np.nanmin(h)), float(np.nanmax(h))
-        if (alpha < 1).any():
-            base = np.asarray(Image.fromarray(height_shading(h, hf.dx, hf.dy, lo, hi))
-                              .resize(size, Image.Resampling.BILINEAR), np.float32)
-            out = out * alpha + base * (1 - alpha)
-        if hillshade:
-            lit = 0.3 + 0.7 * hillshade_grid(h, hf)
-            flat = 0.3 + 0.7 * float(SHADE_LIGHT[2])
-            lit = np.asarray(Image.fromarray((lit / flat).astype(np.float32), "F")
-                             .resize(size, Image.Resampling.BILINEAR))
-            out *= lit[..., None]
+    if holes:
+        lo, hi = height_range or (float(np.nanmin(h)), float(np.nanmax(h)))
+        alpha = a[..., 3:4].astype(np.float32) / 255.0
+        base = spread(Image.fromarray(height_shading(h, hf.dx, hf.dy, lo, hi)))
+        out = out * alpha + base * (1 - alpha)
+    if hillshade:
+        lit = 0.3 + 0.7 * hillshade_grid(h, hf)
+        flat = 0.3 + 0.7 * float(SHADE_LIGHT[2])
+        out *= spread(Image.fromarray((lit / flat).astype(np.float32), "F"))[..., None]
     return np.clip(np.rint(out), 0, 255).astype(np.uint8)
 
 
