@@ -46,6 +46,7 @@ from lodsprite.terrain.store_format import (
     StoreHeader,
     coarse_error,
     decode,
+    dem_bounds,
     downsample,
     encode,
     estimate_bytes,
@@ -524,13 +525,12 @@ class TerrainStore:
         meta = {"source": str(self.path), "format": "lodsprite terrain store",
                 "level": k, "store_rows": self.header.rows, "store_cols": self.header.cols,
                 "crs": self.header.crs}
-        if h.crs and h.transform:  # where the dataset's own coordinates lie
+        bounds = dem_bounds(h)
+        if bounds is not None:  # where the dataset's own coordinates lie
             from lodsprite.terrain.rasters import georef
 
-            sx, _, x0, _, sy, y0 = h.transform[:6]
-            x1, y1 = x0 + sx * h.cols, y0 + sy * h.rows
-            meta["georef"] = georef((min(x0, x1), min(y0, y1), max(x0, x1), max(y0, y1)),
-                                    (h.dx / abs(sx), h.dy / abs(sy)))
+            sx, sy = h.transform[0], h.transform[4]
+            meta["georef"] = georef(bounds, (h.dx / abs(sx), h.dy / abs(sy)))
         dx = h.dx * (h.cols - 1) / max(c - 1, 1)
         dy = h.dy * (h.rows - 1) / max(r - 1, 1)
         return heightfield_from_array(a, dx, dy, self.path.name, meta)

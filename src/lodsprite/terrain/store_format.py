@@ -77,6 +77,16 @@ class StoreHeader(msgspec.Struct, forbid_unknown_fields=True):
     imagery: ImageryHeader | None = None
 
 
+def dem_bounds(header: StoreHeader) -> tuple[float, float, float, float] | None:
+    """The DEM's west, south, east, north cell edges in its CRS (None: no CRS)."""
+    t = header.transform
+    if not header.crs or not t:
+        return None
+    sx, _, x0, _, sy, y0 = t[:6]
+    x1, y1 = x0 + sx * header.cols, y0 + sy * header.rows
+    return min(x0, x1), min(y0, y1), max(x0, x1), max(y0, y1)
+
+
 def level_shape(rows: int, cols: int, k: int) -> tuple[int, int]:
     """The shape of level ``k`` of a ``rows x cols`` pyramid: ``ceil(n / 2^k)`` a side."""
     return -(-rows // (1 << k)), -(-cols // (1 << k))

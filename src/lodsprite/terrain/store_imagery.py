@@ -31,6 +31,7 @@ from lodsprite.terrain.store_format import (
     ImageryHeader,
     ImagerySourceHeader,
     StoreHeader,
+    dem_bounds,
     level_shape,
     pyramid_levels,
     save_header,
@@ -46,16 +47,6 @@ def gdal_env():
     import rasterio
 
     return rasterio.Env()
-
-
-def dem_bounds(header: StoreHeader) -> tuple[float, float, float, float] | None:
-    """The DEM's west, south, east, north cell edges in its CRS (None: no CRS)."""
-    t = header.transform
-    if not header.crs or not t:
-        return None
-    sx, _, x0, _, sy, y0 = t[:6]
-    x1, y1 = x0 + sx * header.cols, y0 + sy * header.rows
-    return min(x0, x1), min(y0, y1), max(x0, x1), max(y0, y1)
 
 
 def estimate_bytes(header: StoreHeader) -> int:
