@@ -29,6 +29,23 @@ import pytest  # noqa: E402
 
 from lodsprite.terrain.heightfield import HeightField  # noqa: E402
 
+
+def needs(*modules: str, reason: str) -> pytest.MarkDecorator:
+    """A skip mark for a module whose tests need ``modules`` not installed, checked by
+    name only (``importlib.util.find_spec``): ``pytest.importorskip`` at a module's top
+    imports them while collecting, on every xdist worker (jupyterlab and nbclient cost
+    3 s of each worker's collection); the tests import them where they run."""
+    from importlib.util import find_spec
+
+    def absent(name: str) -> bool:
+        try:
+            return find_spec(name) is None
+        except ModuleNotFoundError:  # a dotted name whose parent is missing
+            return True
+
+    return pytest.mark.skipif(any(absent(m) for m in modules), reason=reason)
+
+
 #: The files that take longest (their tests' setup, call and teardown summed from
 #: ``--durations=0`` of the whole suite under ``-n 2 --dist loadfile``, 2026-12-05: every
 #: file of 4 s or more, longest first), collected first so that the two xdist workers

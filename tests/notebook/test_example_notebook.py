@@ -12,10 +12,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-pytest.importorskip("anywidget", reason="the notebook extra")
-pytest.importorskip("jupyter_rfb", reason="the notebook extra")
-nbclient = pytest.importorskip("nbclient", reason="the test extra")
-nbformat = pytest.importorskip("nbformat", reason="the test extra")
+from conftest import needs
+
+pytestmark = needs("anywidget", "jupyter_rfb", "nbclient", "nbformat",
+                   reason="the notebook and test extras")
 
 ROOT = Path(__file__).resolve().parents[2]
 NOTEBOOK = ROOT / "examples" / "notebook.ipynb"
@@ -26,6 +26,9 @@ TIMEOUT_S = 120  # a cell's deadline; the whole notebook runs in seconds
 @pytest.fixture(scope="module")
 def executed(tmp_path_factory):
     """The notebook after its run: cells by id."""
+    import nbclient
+    import nbformat
+
     nb = nbformat.read(NOTEBOOK, as_version=4)
     home = tmp_path_factory.mktemp("kernel")
     env = {**os.environ, "IPYTHONDIR": str(home / ".ipython"),
@@ -42,6 +45,8 @@ def outputs(cell, kind=None):
 
 
 def test_the_stored_notebook_has_no_outputs():
+    import nbformat
+
     nb = nbformat.read(NOTEBOOK, as_version=4)
     nbformat.validate(nb)
     assert all(not c.get("outputs") for c in nb.cells if c.cell_type == "code")

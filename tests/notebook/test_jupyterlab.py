@@ -10,17 +10,15 @@ from io import BytesIO
 
 import numpy as np
 import pytest
+from lab_fixtures import jupyterlab
 
-pytest.importorskip("anywidget", reason="the notebook extra")
-pytest.importorskip("jupyterlab", reason="the test extra")
-pytest.importorskip("selenium.webdriver", reason="the test extra")
+from browsers import HAVE_CHROMIUM, NO_CHROMIUM, quit_browser, start_browser
+from conftest import needs
+from draped import EAST_RGB, WEST_RGB, flat_dem, write_draped
 
-from lab_fixtures import jupyterlab  # noqa: E402
-
-from browsers import HAVE_CHROMIUM, NO_CHROMIUM, quit_browser, start_browser  # noqa: E402
-from draped import EAST_RGB, WEST_RGB, flat_dem, write_draped  # noqa: E402
-
-pytestmark = pytest.mark.skipif(not HAVE_CHROMIUM, reason=NO_CHROMIUM)
+pytestmark = [needs("anywidget", "jupyterlab", "selenium.webdriver",
+                    reason="the notebook and test extras"),
+              pytest.mark.skipif(not HAVE_CHROMIUM, reason=NO_CHROMIUM)]
 DEADLINE_S = 90.0
 SIZE = 128
 CELLS = [

@@ -10,18 +10,20 @@ import asyncio
 import os
 import signal
 import threading
+from typing import TYPE_CHECKING
 
 import pytest
 
-from conftest import wait_until
+from conftest import needs, wait_until
 from lodsprite.camera import look_at
-from lodsprite.distributed.pool import Job
+from lodsprite.distributed.pool import Job, dispatch
 from lodsprite.distributed.protocol import LoadArgs, WireViewpoint, decode_keyframe
 
-ray = pytest.importorskip("ray")
+if TYPE_CHECKING:
+    from lodsprite.distributed.pool.ray_pool import RayPool
 
-from lodsprite.distributed.pool import dispatch  # noqa: E402
-from lodsprite.distributed.pool.ray_pool import INLINE_BYTES, RayPool  # noqa: E402
+# Ray is imported where the tests run, not while every worker collects (1.9 s each)
+pytestmark = needs("ray", reason="the ray extra")
 
 SCENE = LoadArgs(terrain="fractal:64:1", size=(64, 64), lod=16)
 VIEW = WireViewpoint(**look_at((0.0, -900.0, 500.0), (0.0, 0.0, 0.0)).to_dict())
@@ -41,6 +43,10 @@ VP = {"x": [1.0, 0.0, 0.0], "y": [0.0, 0.6, 0.8], "z": [0.0, -0.8, 0.6],
 @pytest.fixture(scope="module")
 def cluster():
     """The module's Ray instance: two CPUs, one per renderer actor."""
+    import ray
+
+    from lodsprite.distributed.pool.ray_pool import INLINE_BYTES
+
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False,
              object_store_memory=100 * 2**20,  # lean: keyframes travel inline anyway
              _system_config={"max_direct_call_object_size": INLINE_BYTES})
@@ -52,6 +58,8 @@ def cluster():
 def pool(cluster):
     """Two renderer actors on a thread of the pool's own (a pool nobody starts on a
     loop); closing it kills them, freeing the CPUs for the next test's."""
+    from lodsprite.distributed.pool.ray_pool import RayPool
+
     with RayPool("auto", 2) as p:  # joins the instance above
         assert p.wait_workers(2, DEADLINE_S), "two renderer actors joining"
         yield p
@@ -103,7 +111,7 @@ def test_pages_play_through_actors_and_a_killed_actor_costs_no_keyframe(cluster)
     async def main() -> int:
         server = WebServer(WebConfig(token=TOKEN, renderers=2, ray="auto"))
         pool = out["pool"] = server.pool
-        assert isinstance(pool, RayPool)
+        assert type(pool).__name__ == "RayPool"
         url = await server.start()
         assert pool._owner == threading.get_ident()  # on this loop, not a thread of its own
         base = url.split("/?")[0]
@@ -148,6 +156,8 @@ def test_a_renderer_past_the_job_timeout_is_restarted_and_joins_again(cluster,
     """A job that outlasts the timeout has its actor killed and restarted by Ray: the job
     is given up after its tries (one here: a job requeued after its actor died is the
     killed-actor test's, and the dispatcher's own), the renderer joins again and serves."""
+    from lodsprite.distributed.pool.ray_pool import RayPool
+
     monkeypatch.setattr(dispatch, "MAX_TRIES", 1)
     with RayPool("auto", 1, job_timeout_s=1.5) as p:
         assert p.wait_workers(1, DEADLINE_S), "the renderer actor joining"
