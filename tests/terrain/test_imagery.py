@@ -433,5 +433,6 @@ def test_a_build_begun_with_a_refinement_resumes_without_repeating_it(tmp_path, 
     assert s.get("interrupted")
     build_store(*args, tile=64, chunk=32, imagery=[str(ortho)])  # as the hint says
     assert TerrainStore(out).imagery.refine == 1
+    assert build_store(*args, tile=64, chunk=32, imagery=[str(ortho)])["already"]
     with pytest.raises(InputError, match="refined 1, not 2"):
         build_store(*args, tile=64, chunk=32, imagery=[str(ortho)], imagery_refine=2)

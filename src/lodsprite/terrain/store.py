@@ -61,6 +61,7 @@ from lodsprite.terrain.store_format import (
 
 Progress = Callable[[int, int], None]
 log = logging.getLogger(__name__)
+_WARNED: set[str] = set()  # stores opened without their unfinished imagery, said once
 
 
 def build_store(source_spec: str, out: str | Path, tile: int = DEFAULT_TILE,
@@ -96,9 +97,9 @@ def build_store(source_spec: str, out: str | Path, tile: int = DEFAULT_TILE,
                          float(src.dy), levels, tile, chunk, encoding,
                          float(scale) if encoding == "int16" else 1.0, float(offset),
                          src.crs, src.transform, False, [[] for _ in range(levels)])
-    if imagery and imagery_refine is None:  # resuming: the refinement it was begun with
+    if imagery and imagery_refine is None:  # the refinement the store's imagery has
         old = _existing_header(out) if out.exists() and not overwrite else None
-        if old is not None and old.imagery is not None and not old.imagery.complete:
+        if old is not None and old.imagery is not None:
             imagery_refine = old.imagery.refine
     # GDAL's and PROJ's messages to logging, not the terminal (a failure is our one line)
     with store_imagery.gdal_env():
@@ -416,8 +417,10 @@ class TerrainStore:
                              f"{' or '.join(map(str, VERSIONS))}")
         if not h.complete and h.level_errors and h.imagery is not None:
             # the heights finished, the imagery not: the terrain without its imagery
-            log.warning("%s: its imagery is unfinished (resume it with lodsprite tile "
-                        "--imagery); drawn without", self.path)
+            if str(self.path) not in _WARNED:
+                _WARNED.add(str(self.path))
+                log.warning("%s: its imagery is unfinished (resume it with lodsprite tile "
+                            "--imagery); drawn without", self.path)
             h = self.header = msgspec.structs.replace(h, imagery=None)
         elif not h.complete:
             if isinstance(self.path, Url):
