@@ -19,9 +19,8 @@ import moderngl
 import numpy as np
 
 from lodsprite.camera import boxes_in_frustum, frustum_planes
-from lodsprite.gl.clipmap import CLIPMAP_FS
 from lodsprite.gl.context import GLContext
-from lodsprite.gl.shaders import HEIGHT_NORMAL, PROXY_VERTEX_COMMON, TERRAIN_SHADE
+from lodsprite.gl.shaders import CLIPMAP_FS, HEIGHT_NORMAL, PROXY_VERTEX_COMMON, TERRAIN_SHADE
 from lodsprite.gl.terrain import SKY_RGB, mat_bytes
 from lodsprite.terrain.lod import grid_mesh
 

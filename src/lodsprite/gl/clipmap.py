@@ -1,6 +1,6 @@
 """The imagery clipmap on the GPU (:mod:`lodsprite.terrain.clipmap` decides what it
 holds): a texture array of the clip levels' windows, addressed toroidally, and a table of
-the chunk each slot holds; :data:`CLIPMAP_FS` samples them per fragment.
+the chunk each slot holds; :data:`~lodsprite.gl.shaders.CLIPMAP_FS` samples them per fragment.
 
 ``terrain_color(whole, uv)`` (GLSL): ``uv`` over the terrain's extent (0 at column 0 and
 row 0, north; 1 at the last), ``whole`` the mipmapped texture of the whole imagery.  The
@@ -23,54 +23,6 @@ from lodsprite.gl.context import GLContext
 
 UNIT_LEVELS, UNIT_TABLE = 8, 9  # texture units of the clip levels and their table
 
-CLIPMAP_FS = """
-uniform sampler2DArray u_clip;         // clip levels' windows, RGBA8, toroidal
-uniform isampler2DArray u_clip_table;  // per slot: the chunk held, cr * 65536 + cc + 1
-uniform int u_clip_levels;             // clip levels (0: none), level li = imagery level li
-uniform vec2 u_clip_texels;            // level 0's texels (cols, rows)
-uniform int u_clip_chunk;              // texels a chunk side
-uniform int u_clip_side;               // texels a window side
-bool clip_has(int li, vec2 t) {
-    ivec2 c = ivec2(floor(max(t, vec2(0.0)) / float(u_clip_chunk)));
-    int n = u_clip_side / u_clip_chunk;
-    int held = texelFetch(u_clip_table, ivec3(c.x % n, c.y % n, li), 0).r;
-    return held == c.y * 65536 + c.x + 1;
-}
-vec2 clip_clamp(int li, vec2 t) {  // the footprint inside the level: no wrap at its edges
-    vec2 size = ceil(u_clip_texels / float(1 << li));
-    return clamp(t, vec2(0.5), size - vec2(0.5));
-}
-bool clip_covers(int li, vec2 t) {
-    return clip_has(li, t + vec2(-0.5, -0.5)) && clip_has(li, t + vec2(0.5, -0.5))
-        && clip_has(li, t + vec2(-0.5, 0.5)) && clip_has(li, t + vec2(0.5, 0.5));
-}
-vec4 clip_sample(int li, vec2 t) {  // premultiplied: colour times alpha
-    return textureLod(u_clip, vec3(t / float(u_clip_side), float(li)), 0.0);
-}
-vec3 over_base(vec3 base, vec4 c) { return c.rgb + base * (1.0 - c.a); }
-vec3 terrain_color(sampler2D whole, vec2 uv) {
-    vec3 base = texture(whole, uv).rgb;
-    if (u_clip_levels == 0) return base;
-    vec2 t0 = uv * u_clip_texels;
-    vec2 dx = dFdx(t0), dy = dFdy(t0);
-    float lod = 0.5 * log2(max(max(dot(dx, dx), dot(dy, dy)), 1e-12));
-    int first = max(0, int(floor(lod)));
-    for (int li = first; li < u_clip_levels; li++) {
-        vec2 t = clip_clamp(li, t0 / float(1 << li));
-        if (!clip_covers(li, t)) continue;
-        vec3 c = over_base(base, clip_sample(li, t));
-        float f = li == first ? clamp(lod - float(li), 0.0, 1.0) : 0.0;
-        if (f > 0.0) {
-            vec2 t1 = clip_clamp(li + 1, t0 / float(2 << li));
-            vec3 coarser = (li + 1 < u_clip_levels && clip_covers(li + 1, t1))
-                ? over_base(base, clip_sample(li + 1, t1)) : base;
-            return mix(c, coarser, f);
-        }
-        return c;
-    }
-    return base;
-}
-"""
 
 
 class ClipmapGL:

@@ -9,6 +9,58 @@ as a *proxy mesh* instead (the level plus border ribbons, :mod:`lodsprite.terrai
 whose vertices carry world positions: its programs read ``PROXY_VERTEX_COMMON``.
 """
 
+# terrain_color(whole, uv): the terrain's texture and, finer, the imagery's clip levels
+# (:mod:`lodsprite.gl.clipmap`: units, uniforms and the level-of-detail choice).
+CLIPMAP_FS = """
+uniform sampler2DArray u_clip;         // clip levels' windows, RGBA8, toroidal
+uniform isampler2DArray u_clip_table;  // per slot: the chunk held, cr * 65536 + cc + 1
+uniform int u_clip_levels;             // clip levels (0: none), level li = imagery level li
+uniform vec2 u_clip_texels;            // level 0's texels (cols, rows)
+uniform int u_clip_chunk;              // texels a chunk side
+uniform int u_clip_side;               // texels a window side
+bool clip_has(int li, vec2 t) {
+    ivec2 c = ivec2(floor(max(t, vec2(0.0)) / float(u_clip_chunk)));
+    int n = u_clip_side / u_clip_chunk;
+    int held = texelFetch(u_clip_table, ivec3(c.x % n, c.y % n, li), 0).r;
+    return held == c.y * 65536 + c.x + 1;
+}
+vec2 clip_clamp(int li, vec2 t) {  // the footprint inside the level: no wrap at its edges
+    vec2 size = ceil(u_clip_texels / float(1 << li));
+    return clamp(t, vec2(0.5), size - vec2(0.5));
+}
+bool clip_covers(int li, vec2 t) {
+    return clip_has(li, t + vec2(-0.5, -0.5)) && clip_has(li, t + vec2(0.5, -0.5))
+        && clip_has(li, t + vec2(-0.5, 0.5)) && clip_has(li, t + vec2(0.5, 0.5));
+}
+vec4 clip_sample(int li, vec2 t) {  // premultiplied: colour times alpha
+    return textureLod(u_clip, vec3(t / float(u_clip_side), float(li)), 0.0);
+}
+vec3 over_base(vec3 base, vec4 c) { return c.rgb + base * (1.0 - c.a); }
+vec3 terrain_color(sampler2D whole, vec2 uv) {
+    vec3 base = texture(whole, uv).rgb;
+    if (u_clip_levels == 0) return base;
+    vec2 t0 = uv * u_clip_texels;
+    vec2 dx = dFdx(t0), dy = dFdy(t0);
+    float lod = 0.5 * log2(max(max(dot(dx, dx), dot(dy, dy)), 1e-12));
+    int first = max(0, int(floor(lod)));
+    for (int li = first; li < u_clip_levels; li++) {
+        vec2 t = clip_clamp(li, t0 / float(1 << li));
+        if (!clip_covers(li, t)) continue;
+        vec3 c = over_base(base, clip_sample(li, t));
+        float f = li == first ? clamp(lod - float(li), 0.0, 1.0) : 0.0;
+        if (f > 0.0) {
+            vec2 t1 = clip_clamp(li + 1, t0 / float(2 << li));
+            vec3 coarser = (li + 1 < u_clip_levels && clip_covers(li + 1, t1))
+                ? over_base(base, clip_sample(li + 1, t1)) : base;
+            return mix(c, coarser, f);
+        }
+        return c;
+    }
+    return base;
+}
+"""
+
+
 #: The sky every terrain image is cleared to (linear 0..1 RGB, display-encoded as drawn).
 SKY_RGB = (0.62, 0.74, 0.86)
 
@@ -67,20 +119,14 @@ void main() {
 """
 )
 
-def _terrain_fs() -> str:
-    from lodsprite.gl.clipmap import CLIPMAP_FS  # terrain_color: the texture and clipmap
-
-    return "#version 330\n" + CLIPMAP_FS + """
+TERRAIN_FS = "#version 330\n" + CLIPMAP_FS + """
 uniform sampler2D u_color;
 in vec2 v_uv;
 out vec4 f_color;
 void main() {
-    f_color = vec4(terrain_color(u_color, v_uv), 1.0);
+    f_color = vec4(terrain_color(u_color, v_uv), 1.0);  // the texture and its clipmap
 }
 """
-
-
-TERRAIN_FS = _terrain_fs()
 
 # One shading of the terrain from its heights, shared by full resolution, the adaptive
 # renderer, LOD-sprite's fallback and the reference: a height ramp over ``u_range`` (lowest,

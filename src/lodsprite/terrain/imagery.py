@@ -26,12 +26,12 @@ heights, losslessly compressed (Zstandard level 3).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from lodsprite.errors import InputError
+from lodsprite.terrain.store_format import ImagerySourceHeader
 
 MAX_REFINE = 3  # at most 8 x 8 texels a height cell
 MAX_TEXELS_SIDE = 1 << 17  # an imagery level 0 of at most this many texels a side
@@ -101,18 +101,6 @@ def over(dst: np.ndarray, src: np.ndarray) -> None:
     rgb = src[..., :3] * a + dst[..., :3] * (1 - a)
     dst[..., :3] = np.clip(np.rint(rgb), 0, 255)
     dst[..., 3:4] = np.clip(np.rint(255.0 * (a + da * (1 - a))), 0, 255)
-
-
-@dataclass
-class SourceInfo:
-    """What the store keeps of one source: its name, CRS, bands read (1-based), stretch
-    (per band ``[lo, hi]``, None for 8-bit values kept) and the metres of its pixel."""
-
-    path: str
-    crs: str | None
-    bands: list[int]
-    stretch: list[list[float]] | None
-    pixel_m: float
 
 
 class ImagerySource:
@@ -264,9 +252,11 @@ class ImagerySource:
             out.append([float(lo), float(hi if hi > lo else lo + 1)])
         return out
 
-    def info(self) -> SourceInfo:
+    def info(self) -> ImagerySourceHeader:
+        """What the store's header keeps of this source."""
         crs = self.ds.crs.to_string() if self.ds.crs else None
-        return SourceInfo(self.path, crs, list(self.bands), self.stretch, float(self.pixel_m))
+        return ImagerySourceHeader(self.path, crs, list(self.bands), self.stretch,
+                                   float(self.pixel_m))
 
     def attribution(self) -> str:
         """A licence or copyright line from the file's metadata tags, if it has one."""

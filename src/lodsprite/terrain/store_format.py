@@ -25,8 +25,9 @@ MIN_LEVEL_SIDE = 256
 
 
 class ImagerySourceHeader(msgspec.Struct, forbid_unknown_fields=True):
-    """One orthophoto the imagery was made from (:class:`~lodsprite.terrain.imagery.
-    SourceInfo`)."""
+    """One orthophoto the imagery was made from: its name, CRS, bands read (1-based),
+    stretch (per band ``[lo, hi]``; None: 8-bit values kept) and the metres of its pixel
+    (:meth:`lodsprite.terrain.imagery.ImagerySource.info`)."""
 
     path: str
     crs: str | None

@@ -29,7 +29,6 @@ from lodsprite.terrain.imagery import (
 )
 from lodsprite.terrain.store_format import (
     ImageryHeader,
-    ImagerySourceHeader,
     StoreHeader,
     dem_bounds,
     level_shape,
@@ -83,7 +82,7 @@ def plan(sources: list[ImagerySource], header: StoreHeader, refine: int | None,
     if len(attribution) > 1000:
         raise InputError("--attribution is longer than 1000 characters")
     levels = pyramid_levels(rows, cols)  # as the heights: down to 256 a side
-    infos = [ImagerySourceHeader(**vars(s.info())) for s in sources]
+    infos = [s.info() for s in sources]
     return ImageryHeader(infos, m, rows, cols, levels, attribution=attribution,
                          done=[[] for _ in range(levels)])
 
